@@ -1,0 +1,1 @@
+//! One reader (and writer where users need one) per file format.

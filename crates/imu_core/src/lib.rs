@@ -1,0 +1,21 @@
+//! imu_core: the per-sample work of imu-learn, in pure Rust.
+//!
+//! Data flows one way: `io` (files → `ImuSamples` / `GroundTruth`) → `align` (→ `Sequence`s) →
+//! `labels` (Δq/Δβ/Δγ from ground truth) and `batch` (augmented training windows), with
+//! `integrate` (Δq/Δβ/Δγ from IMU samples) and `so3` as the shared maths. Nothing here knows
+//! Python; the bindings live in `python` behind the `python` feature.
+
+pub mod align;
+pub mod batch;
+pub mod error;
+pub mod integrate;
+pub mod io;
+pub mod labels;
+pub mod so3;
+pub mod types;
+
+#[cfg(feature = "python")]
+mod python;
+
+pub use error::{ImuError, Result};
+pub use types::{GroundTruth, ImuSamples, QuatWxyz, Sequence, Vec3, GRAVITY};

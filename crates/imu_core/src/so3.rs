@@ -1,0 +1,138 @@
+//! Rotation maths in one place: SO(3) exp/log on unit quaternions, and the single tested pair of
+//! functions that convert between quaternion orders at file boundaries.
+//!
+//! Convention: Hamilton quaternions, stored w,x,y,z (`QuatWxyz`) in the core.
+
+use nalgebra::{Quaternion, UnitQuaternion, Vector3};
+
+use crate::types::{QuatWxyz, Vec3};
+
+pub type Quat = UnitQuaternion<f64>;
+
+/// x,y,z,w (TUM, ROS, scipy) → w,x,y,z (core, ASL CSV, GTSAM).
+#[inline]
+pub fn xyzw_to_wxyz(q: [f64; 4]) -> QuatWxyz {
+    [q[3], q[0], q[1], q[2]]
+}
+
+/// w,x,y,z → x,y,z,w.
+#[inline]
+pub fn wxyz_to_xyzw(q: QuatWxyz) -> [f64; 4] {
+    [q[1], q[2], q[3], q[0]]
+}
+
+/// Array → unit quaternion, normalising (files carry 6–9 digits, so norms are off by ~1e-6).
+#[inline]
+pub fn quat_from_wxyz(q: QuatWxyz) -> Quat {
+    UnitQuaternion::from_quaternion(Quaternion::new(q[0], q[1], q[2], q[3]))
+}
+
+#[inline]
+pub fn quat_to_wxyz(q: &Quat) -> QuatWxyz {
+    let c = q.quaternion().coords; // nalgebra stores i, j, k, w
+    [c[3], c[0], c[1], c[2]]
+}
+
+/// Same rotation with w ≥ 0, so that equal rotations compare equal element-wise.
+#[inline]
+pub fn canonical_wxyz(q: QuatWxyz) -> QuatWxyz {
+    if q[0] < 0.0 {
+        [-q[0], -q[1], -q[2], -q[3]]
+    } else {
+        q
+    }
+}
+
+#[inline]
+pub fn v3(a: Vec3) -> Vector3<f64> {
+    Vector3::new(a[0], a[1], a[2])
+}
+
+#[inline]
+pub fn arr3(v: &Vector3<f64>) -> Vec3 {
+    [v[0], v[1], v[2]]
+}
+
+/// Exponential map so(3) → SO(3), exact for every angle (Taylor series near zero).
+#[inline]
+pub fn exp(phi: &Vector3<f64>) -> Quat {
+    let theta2 = phi.norm_squared();
+    let theta = theta2.sqrt();
+    // sin(θ/2)/θ; its series 1/2 − θ²/48 + θ⁴/3840 is exact to double precision below 1e-4.
+    let (s, c) = if theta < 1e-4 {
+        (0.5 - theta2 / 48.0 + theta2 * theta2 / 3840.0, 1.0 - theta2 / 8.0 + theta2 * theta2 / 384.0)
+    } else {
+        ((0.5 * theta).sin() / theta, (0.5 * theta).cos())
+    };
+    UnitQuaternion::new_unchecked(Quaternion::new(c, s * phi[0], s * phi[1], s * phi[2]))
+}
+
+/// Logarithm SO(3) → so(3), the rotation vector with angle in [0, π].
+#[inline]
+pub fn log(q: &Quat) -> Vector3<f64> {
+    let qq = q.quaternion();
+    let (w, xyz) = if qq.w < 0.0 { (-qq.w, -qq.imag()) } else { (qq.w, qq.imag()) };
+    let n = xyz.norm();
+    if n < 1e-8 {
+        // θ = 2 atan2(n, w) ≈ 2n/w (1 − n²/(3w²)); the factor θ/n follows.
+        return xyz * (2.0 / w) * (1.0 - n * n / (3.0 * w * w));
+    }
+    let theta = 2.0 * n.atan2(w);
+    xyz * (theta / n)
+}
+
+/// Spherical linear interpolation from `a` (s = 0) to `b` (s = 1) along the shorter arc.
+#[inline]
+pub fn slerp(a: &Quat, b: &Quat, s: f64) -> Quat {
+    let d = a.inverse() * b;
+    a * exp(&(log(&d) * s))
+}
+
+/// Angle [rad] of the rotation between two quaternions.
+#[inline]
+pub fn angle_between(a: &Quat, b: &Quat) -> f64 {
+    log(&(a.inverse() * b)).norm()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn order_conversions_round_trip_and_put_w_where_named() {
+        let xyzw = [0.1, 0.2, 0.3, 0.9];
+        let wxyz = xyzw_to_wxyz(xyzw);
+        assert_eq!(wxyz, [0.9, 0.1, 0.2, 0.3]);
+        assert_eq!(wxyz_to_xyzw(wxyz), xyzw);
+        let q = quat_from_wxyz([1.0, 0.0, 0.0, 0.0]);
+        assert_eq!(quat_to_wxyz(&q), [1.0, 0.0, 0.0, 0.0]);
+    }
+
+    #[test]
+    fn exp_of_rotation_about_z_matches_closed_form() {
+        let a: f64 = 0.7;
+        let q = exp(&Vector3::new(0.0, 0.0, a));
+        let w = quat_to_wxyz(&q);
+        assert!((w[0] - (a / 2.0).cos()).abs() < 1e-15);
+        assert!((w[3] - (a / 2.0).sin()).abs() < 1e-15);
+    }
+
+    #[test]
+    fn log_inverts_exp_for_small_medium_and_near_pi_angles() {
+        for &scale in &[1e-12, 1e-7, 1e-4 * 0.99, 1e-3, 0.5, 2.0, 3.1] {
+            let phi = Vector3::new(0.3, -0.5, 0.8).normalize() * scale;
+            let back = log(&exp(&phi));
+            assert!((back - phi).norm() <= 1e-14 * scale.max(1.0), "scale {scale}");
+        }
+    }
+
+    #[test]
+    fn slerp_hits_ends_and_midpoint() {
+        let a = exp(&Vector3::new(0.1, 0.0, 0.0));
+        let b = exp(&Vector3::new(0.1, 0.0, 1.0));
+        assert!(angle_between(&slerp(&a, &b, 0.0), &a) < 1e-14);
+        assert!(angle_between(&slerp(&a, &b, 1.0), &b) < 1e-14);
+        let m = slerp(&a, &b, 0.5);
+        assert!((angle_between(&a, &m) - angle_between(&m, &b)).abs() < 1e-14);
+    }
+}
