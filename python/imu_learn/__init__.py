@@ -1,4 +1,37 @@
-"""imu-learn: learn a low-cost IMU's error model from recordings with ground truth."""
-from imu_learn._imu_core import __version__
+"""imu-learn: learn a low-cost IMU's error model from recordings with ground truth.
 
-__all__ = ["__version__"]
+Public API (see README):
+    load_sequence, load_recording, read_imu, align, AlignOptions   -- data in
+    preintegrate, window_labels, integrate_windows                  -- increments
+    BatchConfig, AugmentConfig, BatchSampler, make_batch            -- training batches
+    errors: ImuError and its subclasses
+"""
+from imu_learn._imu_core import __version__
+from imu_learn.batches import AugmentConfig, Batch, BatchConfig, BatchSampler, make_batch
+from imu_learn.errors import (
+    AlignmentError,
+    CacheError,
+    ColumnCountError,
+    FloatTimestampError,
+    HeaderError,
+    ImuError,
+    InvalidInputError,
+    NonFiniteError,
+    NotNumericError,
+    ParseError,
+    TimestampError,
+)
+from imu_learn.integration import PAPER_FRACTIONS, Increments, WindowLabels, integrate_windows, preintegrate, window_labels
+from imu_learn.loading import AlignOptions, align, load_recording, load_sequence, read_imu
+from imu_learn.quat import wxyz_to_xyzw, xyzw_to_wxyz
+from imu_learn.types import GroundTruth, ImuData, Recording, Sequence
+
+__all__ = [
+    "__version__",
+    "AlignOptions", "align", "load_recording", "load_sequence", "read_imu",
+    "preintegrate", "window_labels", "integrate_windows", "Increments", "WindowLabels", "PAPER_FRACTIONS",
+    "AugmentConfig", "BatchConfig", "BatchSampler", "Batch", "make_batch",
+    "ImuData", "GroundTruth", "Sequence", "Recording", "wxyz_to_xyzw", "xyzw_to_wxyz",
+    "ImuError", "ParseError", "HeaderError", "ColumnCountError", "NotNumericError", "NonFiniteError",
+    "TimestampError", "FloatTimestampError", "AlignmentError", "InvalidInputError", "CacheError",
+]

@@ -1,0 +1,52 @@
+//! Core errors → Python exceptions. The classes live in `imu_learn.errors` (plain Python, so
+//! they can inherit from both `ImuError` and `ValueError`); each variant maps to its own class
+//! and carries path/line/column/field as attributes.
+
+use pyo3::exceptions::{PyFileNotFoundError, PyOSError, PyRuntimeError};
+use pyo3::prelude::*;
+use pyo3::types::PyDict;
+
+use crate::error::ImuError;
+
+/// Convert a core error, falling back to RuntimeError only if the errors module cannot load.
+pub fn to_py(err: ImuError) -> PyErr {
+    Python::with_gil(|py| build(py, &err).unwrap_or_else(|e| PyRuntimeError::new_err(format!("{err} ({e})"))))
+}
+
+fn build(py: Python<'_>, err: &ImuError) -> PyResult<PyErr> {
+    let msg = err.to_string();
+    let (class, path, line, column, field) = match err {
+        ImuError::NotFound { path } => {
+            return Ok(PyFileNotFoundError::new_err((2, "No such file or directory", path.display().to_string())))
+        }
+        ImuError::Io { .. } => return Ok(PyOSError::new_err(msg)),
+        ImuError::Header { path, line, .. } => ("HeaderError", Some(path), Some(*line), None, None),
+        ImuError::ColumnCount { path, line, .. } => ("ColumnCountError", Some(path), Some(*line), None, None),
+        ImuError::NotNumeric { path, line, column, field, .. } => {
+            ("NotNumericError", Some(path), Some(*line), Some(*column), Some(field.as_str()))
+        }
+        ImuError::NonFinite { path, line, column, field, .. } => {
+            ("NonFiniteError", Some(path), Some(*line), Some(*column), Some(field.as_str()))
+        }
+        ImuError::Timestamp { path, line, column, field, .. } => {
+            ("TimestampError", Some(path), Some(*line), Some(*column), Some(field.as_str()))
+        }
+        ImuError::FloatTimestamp { path, line, column, field, .. } => {
+            ("FloatTimestampError", Some(path), Some(*line), Some(*column), Some(field.as_str()))
+        }
+        ImuError::Alignment(_) => ("AlignmentError", None, None, None, None),
+        ImuError::InvalidInput(_) => ("InvalidInputError", None, None, None, None),
+    };
+    let cls = py.import("imu_learn.errors")?.getattr(class)?;
+    let value = if class.ends_with("Error") && path.is_some() {
+        let kw = PyDict::new(py);
+        kw.set_item("path", path.map(|p| p.display().to_string()))?;
+        kw.set_item("line", line)?;
+        kw.set_item("column", column)?;
+        kw.set_item("field", field)?;
+        cls.call((msg,), Some(&kw))?
+    } else {
+        cls.call1((msg,))?
+    };
+    Ok(PyErr::from_value(value))
+}

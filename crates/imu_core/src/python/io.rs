@@ -1,0 +1,128 @@
+//! File readers and writers.
+
+use std::path::PathBuf;
+
+use numpy::{PyArray1, PyArray2, PyReadonlyArray1, PyReadonlyArray2};
+use pyo3::prelude::*;
+use pyo3::types::PyDict;
+
+use crate::io::{asl, kaist, tum, ReadOptions};
+use crate::python::arrays::{out1, out2, rows, slice1};
+use crate::python::errors::to_py;
+use crate::types::{GroundTruth, ImuSamples};
+
+type ImuArrays<'py> = (Bound<'py, PyArray1<i64>>, Bound<'py, PyArray2<f64>>, Bound<'py, PyArray2<f64>>);
+
+fn opts(allow_float_timestamps: bool) -> ReadOptions {
+    ReadOptions { allow_float_timestamps, ..Default::default() }
+}
+
+fn imu_out(py: Python<'_>, s: ImuSamples) -> PyResult<ImuArrays<'_>> {
+    Ok((out1(py, s.t_ns), out2(py, s.gyro)?, out2(py, s.acc)?))
+}
+
+fn gt_out(py: Python<'_>, g: GroundTruth) -> PyResult<Bound<'_, PyDict>> {
+    let d = PyDict::new(py);
+    d.set_item("t_ns", out1(py, g.t_ns))?;
+    d.set_item("p", out2(py, g.p)?)?;
+    d.set_item("q_wxyz", out2(py, g.q_wxyz)?)?;
+    d.set_item("v", g.v.map(|v| out2(py, v)).transpose()?)?;
+    d.set_item("bias_gyro", g.bias_gyro.map(|v| out2(py, v)).transpose()?)?;
+    d.set_item("bias_acc", g.bias_acc.map(|v| out2(py, v)).transpose()?)?;
+    Ok(d)
+}
+
+#[pyfunction]
+#[pyo3(signature = (path, allow_float_timestamps=false))]
+fn read_asl_imu(py: Python<'_>, path: PathBuf, allow_float_timestamps: bool) -> PyResult<ImuArrays<'_>> {
+    let s = py.allow_threads(|| asl::read_imu(&path, &opts(allow_float_timestamps))).map_err(to_py)?;
+    imu_out(py, s)
+}
+
+#[pyfunction]
+fn read_asl_imu_header(py: Python<'_>, path: PathBuf) -> PyResult<String> {
+    py.allow_threads(|| asl::read_imu_header(&path)).map_err(to_py)
+}
+
+#[pyfunction]
+#[pyo3(signature = (path, t_ns, gyro, acc, header=None))]
+fn write_asl_imu(
+    py: Python<'_>,
+    path: PathBuf,
+    t_ns: PyReadonlyArray1<'_, i64>,
+    gyro: PyReadonlyArray2<'_, f64>,
+    acc: PyReadonlyArray2<'_, f64>,
+    header: Option<String>,
+) -> PyResult<()> {
+    let s = ImuSamples {
+        t_ns: slice1(&t_ns, "t_ns")?.to_vec(),
+        gyro: rows::<3>(&gyro, "gyro")?.to_vec(),
+        acc: rows::<3>(&acc, "acc")?.to_vec(),
+    };
+    py.allow_threads(|| asl::write_imu(&path, &s, header.as_deref())).map_err(to_py)
+}
+
+#[pyfunction]
+#[pyo3(signature = (path, allow_float_timestamps=false))]
+fn read_asl_state(py: Python<'_>, path: PathBuf, allow_float_timestamps: bool) -> PyResult<Bound<'_, PyDict>> {
+    let g = py.allow_threads(|| asl::read_state(&path, &opts(allow_float_timestamps))).map_err(to_py)?;
+    gt_out(py, g)
+}
+
+#[pyfunction]
+#[pyo3(signature = (path, allow_float_timestamps=false))]
+fn read_asl_pose(py: Python<'_>, path: PathBuf, allow_float_timestamps: bool) -> PyResult<Bound<'_, PyDict>> {
+    let g = py.allow_threads(|| asl::read_pose(&path, &opts(allow_float_timestamps))).map_err(to_py)?;
+    gt_out(py, g)
+}
+
+#[pyfunction]
+#[pyo3(signature = (path, allow_float_timestamps=false))]
+fn read_tum(py: Python<'_>, path: PathBuf, allow_float_timestamps: bool) -> PyResult<Bound<'_, PyDict>> {
+    let g = py.allow_threads(|| tum::read_tum(&path, &opts(allow_float_timestamps))).map_err(to_py)?;
+    gt_out(py, g)
+}
+
+#[pyfunction]
+fn write_tum(
+    py: Python<'_>,
+    path: PathBuf,
+    t_ns: PyReadonlyArray1<'_, i64>,
+    p: PyReadonlyArray2<'_, f64>,
+    q_wxyz: PyReadonlyArray2<'_, f64>,
+) -> PyResult<()> {
+    let g = GroundTruth {
+        t_ns: slice1(&t_ns, "t_ns")?.to_vec(),
+        p: rows::<3>(&p, "p")?.to_vec(),
+        q_wxyz: rows::<4>(&q_wxyz, "q_wxyz")?.to_vec(),
+        ..Default::default()
+    };
+    py.allow_threads(|| tum::write_tum(&path, &g)).map_err(to_py)
+}
+
+#[pyfunction]
+#[pyo3(signature = (path, allow_float_timestamps=false))]
+fn read_kaist_imu(py: Python<'_>, path: PathBuf, allow_float_timestamps: bool) -> PyResult<ImuArrays<'_>> {
+    let s = py.allow_threads(|| kaist::read_xsens_imu(&path, &opts(allow_float_timestamps))).map_err(to_py)?;
+    imu_out(py, s)
+}
+
+#[pyfunction]
+#[pyo3(signature = (path, allow_float_timestamps=false))]
+fn read_kaist_pose(py: Python<'_>, path: PathBuf, allow_float_timestamps: bool) -> PyResult<Bound<'_, PyDict>> {
+    let g = py.allow_threads(|| kaist::read_global_pose(&path, &opts(allow_float_timestamps))).map_err(to_py)?;
+    gt_out(py, g)
+}
+
+pub fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
+    m.add_function(wrap_pyfunction!(read_asl_imu, m)?)?;
+    m.add_function(wrap_pyfunction!(read_asl_imu_header, m)?)?;
+    m.add_function(wrap_pyfunction!(write_asl_imu, m)?)?;
+    m.add_function(wrap_pyfunction!(read_asl_state, m)?)?;
+    m.add_function(wrap_pyfunction!(read_asl_pose, m)?)?;
+    m.add_function(wrap_pyfunction!(read_tum, m)?)?;
+    m.add_function(wrap_pyfunction!(write_tum, m)?)?;
+    m.add_function(wrap_pyfunction!(read_kaist_imu, m)?)?;
+    m.add_function(wrap_pyfunction!(read_kaist_pose, m)?)?;
+    Ok(())
+}

@@ -1,0 +1,281 @@
+//! Alignment, integration, labels and batches.
+
+use numpy::{PyArray1, PyArray2, PyReadonlyArray1, PyReadonlyArray2};
+use pyo3::prelude::*;
+use pyo3::types::{PyDict, PyList};
+
+use crate::align::{self, AlignOptions};
+use crate::batch::{self, AugmentConfig, Batch, BatchConfig};
+use crate::error::ImuError;
+use crate::integrate;
+use crate::labels::{self, Labels};
+use crate::python::arrays::{out1, out2, out2_flat, out3, out3_flat, rows, slice1};
+use crate::python::errors::to_py;
+use crate::types::{GroundTruth, ImuSamples, Sequence};
+
+type Arr1<'py, T> = Bound<'py, PyArray1<T>>;
+type Arr2<'py> = Bound<'py, PyArray2<f64>>;
+
+fn seq_dict(py: Python<'_>, s: Sequence) -> PyResult<Bound<'_, PyDict>> {
+    let d = PyDict::new(py);
+    d.set_item("t_ns", out1(py, s.t_ns))?;
+    d.set_item("gyro", out2(py, s.gyro)?)?;
+    d.set_item("acc", out2(py, s.acc)?)?;
+    d.set_item("p", out2(py, s.p)?)?;
+    d.set_item("v", out2(py, s.v)?)?;
+    d.set_item("q_wxyz", out2(py, s.q_wxyz)?)?;
+    Ok(d)
+}
+
+#[pyfunction]
+#[allow(clippy::too_many_arguments)]
+#[pyo3(signature = (imu_t_ns, gyro, acc, gt_t_ns, p, q_wxyz, v, max_gap_ns, min_segment_samples, velocity_half_window))]
+fn align<'py>(
+    py: Python<'py>,
+    imu_t_ns: PyReadonlyArray1<'py, i64>,
+    gyro: PyReadonlyArray2<'py, f64>,
+    acc: PyReadonlyArray2<'py, f64>,
+    gt_t_ns: PyReadonlyArray1<'py, i64>,
+    p: PyReadonlyArray2<'py, f64>,
+    q_wxyz: PyReadonlyArray2<'py, f64>,
+    v: Option<PyReadonlyArray2<'py, f64>>,
+    max_gap_ns: i64,
+    min_segment_samples: usize,
+    velocity_half_window: usize,
+) -> PyResult<(Bound<'py, PyList>, Bound<'py, PyDict>)> {
+    let imu = ImuSamples {
+        t_ns: slice1(&imu_t_ns, "imu_t_ns")?.to_vec(),
+        gyro: rows::<3>(&gyro, "gyro")?.to_vec(),
+        acc: rows::<3>(&acc, "acc")?.to_vec(),
+    };
+    let gt = GroundTruth {
+        t_ns: slice1(&gt_t_ns, "gt_t_ns")?.to_vec(),
+        p: rows::<3>(&p, "p")?.to_vec(),
+        q_wxyz: rows::<4>(&q_wxyz, "q_wxyz")?.to_vec(),
+        v: v.as_ref().map(|v| rows::<3>(v, "v").map(|r| r.to_vec())).transpose()?,
+        ..Default::default()
+    };
+    let opts = AlignOptions { max_gap_ns, min_segment_samples, velocity_half_window };
+    let (seqs, report) = py.allow_threads(|| align::align(&imu, &gt, &opts)).map_err(to_py)?;
+    let list = PyList::empty(py);
+    for s in seqs {
+        list.append(seq_dict(py, s)?)?;
+    }
+    let r = PyDict::new(py);
+    r.set_item("imu_samples", report.imu_samples)?;
+    r.set_item("dropped_before", report.dropped_before)?;
+    r.set_item("dropped_after", report.dropped_after)?;
+    r.set_item("dropped_in_gaps", report.dropped_in_gaps)?;
+    r.set_item("dropped_short_segments", report.dropped_short_segments)?;
+    r.set_item("gaps_ns", report.gaps.clone())?;
+    r.set_item(
+        "segments_ns",
+        report.segments.iter().map(|s| (s.start_ns, s.end_ns, s.samples)).collect::<Vec<_>>(),
+    )?;
+    r.set_item("velocity_derived", report.velocity_derived)?;
+    Ok((list, r))
+}
+
+#[pyfunction]
+fn derive_velocity<'py>(
+    py: Python<'py>,
+    t_ns: PyReadonlyArray1<'py, i64>,
+    p: PyReadonlyArray2<'py, f64>,
+    half_window: usize,
+) -> PyResult<Arr2<'py>> {
+    let (t, p) = (slice1(&t_ns, "t_ns")?, rows::<3>(&p, "p")?);
+    if t.len() != p.len() {
+        return Err(to_py(ImuError::invalid("t_ns and p differ in length")));
+    }
+    let v = py.allow_threads(|| align::derive_velocity(t, p, half_window));
+    out2(py, v)
+}
+
+#[pyfunction]
+fn preintegrate<'py>(
+    py: Python<'py>,
+    t_ns: PyReadonlyArray1<'py, i64>,
+    gyro: PyReadonlyArray2<'py, f64>,
+    acc: PyReadonlyArray2<'py, f64>,
+) -> PyResult<(Arr2<'py>, Arr2<'py>, Arr2<'py>, Arr1<'py, f64>)> {
+    let (t, g, a) = (slice1(&t_ns, "t_ns")?, rows::<3>(&gyro, "gyro")?, rows::<3>(&acc, "acc")?);
+    let r = py.allow_threads(|| integrate::preintegrate(t, g, a)).map_err(to_py)?;
+    Ok((out2(py, r.dq_wxyz)?, out2(py, r.dv)?, out2(py, r.dp)?, out1(py, r.dt)))
+}
+
+fn labels_dict(py: Python<'_>, l: Labels) -> PyResult<Bound<'_, PyDict>> {
+    let (nw, nh) = (l.starts.len(), l.horizons.len());
+    let d = PyDict::new(py);
+    d.set_item("starts", out1(py, l.starts.iter().map(|&s| s as u64).collect::<Vec<u64>>()))?;
+    d.set_item("horizons", out1(py, l.horizons.iter().map(|&s| s as u64).collect::<Vec<u64>>()))?;
+    d.set_item("dq_wxyz", out3(py, l.dq_wxyz, nw, nh)?)?;
+    d.set_item("dv", out3(py, l.dv, nw, nh)?)?;
+    d.set_item("dp", out3(py, l.dp, nw, nh)?)?;
+    d.set_item("dt", out2_flat(py, l.dt, nw, nh)?)?;
+    Ok(d)
+}
+
+#[pyfunction]
+#[allow(clippy::too_many_arguments)]
+fn window_labels<'py>(
+    py: Python<'py>,
+    t_ns: PyReadonlyArray1<'py, i64>,
+    p: PyReadonlyArray2<'py, f64>,
+    v: PyReadonlyArray2<'py, f64>,
+    q_wxyz: PyReadonlyArray2<'py, f64>,
+    window: usize,
+    stride: usize,
+    fractions: Vec<f64>,
+    gravity: f64,
+) -> PyResult<Bound<'py, PyDict>> {
+    let t = slice1(&t_ns, "t_ns")?;
+    // Labels need ground truth only; the IMU fields of the sequence stay empty-length-checked.
+    let seq = Sequence {
+        t_ns: t.to_vec(),
+        gyro: vec![[0.0; 3]; t.len()],
+        acc: vec![[0.0; 3]; t.len()],
+        p: rows::<3>(&p, "p")?.to_vec(),
+        v: rows::<3>(&v, "v")?.to_vec(),
+        q_wxyz: rows::<4>(&q_wxyz, "q_wxyz")?.to_vec(),
+    };
+    let l = py
+        .allow_threads(|| labels::window_labels(&seq, window, stride, &fractions, gravity))
+        .map_err(to_py)?;
+    labels_dict(py, l)
+}
+
+#[pyfunction]
+fn integrate_windows<'py>(
+    py: Python<'py>,
+    t_ns: PyReadonlyArray1<'py, i64>,
+    gyro: PyReadonlyArray2<'py, f64>,
+    acc: PyReadonlyArray2<'py, f64>,
+    starts: PyReadonlyArray1<'py, u64>,
+    horizons: PyReadonlyArray1<'py, u64>,
+) -> PyResult<Bound<'py, PyDict>> {
+    let (t, g, a) = (slice1(&t_ns, "t_ns")?, rows::<3>(&gyro, "gyro")?, rows::<3>(&acc, "acc")?);
+    let starts: Vec<usize> = slice1(&starts, "starts")?.iter().map(|&s| s as usize).collect();
+    let horizons: Vec<usize> = slice1(&horizons, "horizons")?.iter().map(|&s| s as usize).collect();
+    let l = py
+        .allow_threads(|| integrate::integrate_windows(t, g, a, &starts, &horizons))
+        .map_err(to_py)?;
+    labels_dict(py, l)
+}
+
+/// Sequences held in Rust once, so each batch costs only the windows it draws.
+#[pyclass(module = "imu_learn._imu_core", frozen)]
+struct SequenceSet {
+    seqs: Vec<Sequence>,
+}
+
+type SeqTuple<'py> = (
+    PyReadonlyArray1<'py, i64>,
+    PyReadonlyArray2<'py, f64>,
+    PyReadonlyArray2<'py, f64>,
+    PyReadonlyArray2<'py, f64>,
+    PyReadonlyArray2<'py, f64>,
+    PyReadonlyArray2<'py, f64>,
+);
+
+fn batch_dict(py: Python<'_>, b: Batch, window: usize) -> PyResult<Bound<'_, PyDict>> {
+    let nb = b.seq_index.len();
+    let nh = b.horizons.len();
+    let d = PyDict::new(py);
+    d.set_item("imu", out3_flat(py, b.imu, nb, window, 6)?)?;
+    d.set_item("dt", out2_flat(py, b.dt, nb, window)?)?;
+    d.set_item("dq_wxyz", out3(py, b.dq_wxyz, nb, nh)?)?;
+    d.set_item("dv", out3(py, b.dv, nb, nh)?)?;
+    d.set_item("dp", out3(py, b.dp, nb, nh)?)?;
+    d.set_item("label_dt", out2_flat(py, b.label_dt, nb, nh)?)?;
+    d.set_item("bias", out3_flat(py, b.bias, nb, window, 6)?)?;
+    d.set_item("seq_index", out1(py, b.seq_index))?;
+    d.set_item("start", out1(py, b.start))?;
+    d.set_item("horizons", out1(py, b.horizons.iter().map(|&h| h as u64).collect::<Vec<u64>>()))?;
+    Ok(d)
+}
+
+#[pymethods]
+impl SequenceSet {
+    #[new]
+    fn new(parts: Vec<SeqTuple<'_>>) -> PyResult<Self> {
+        let mut seqs = Vec::with_capacity(parts.len());
+        for (i, (t, g, a, p, v, q)) in parts.iter().enumerate() {
+            let s = Sequence {
+                t_ns: slice1(t, "t_ns")?.to_vec(),
+                gyro: rows::<3>(g, "gyro")?.to_vec(),
+                acc: rows::<3>(a, "acc")?.to_vec(),
+                p: rows::<3>(p, "p")?.to_vec(),
+                v: rows::<3>(v, "v")?.to_vec(),
+                q_wxyz: rows::<4>(q, "q_wxyz")?.to_vec(),
+            };
+            labels::check_sequence(&s)
+                .map_err(|e| to_py(ImuError::invalid(format!("sequence {i}: {e}"))))?;
+            seqs.push(s);
+        }
+        Ok(SequenceSet { seqs })
+    }
+
+    fn __len__(&self) -> usize {
+        self.seqs.len()
+    }
+
+    #[allow(clippy::too_many_arguments)]
+    #[pyo3(signature = (window, batch_size, fractions, gravity, seed, gyro_noise_density=0.0, acc_noise_density=0.0,
+                        gyro_bias_max=0.0, acc_bias_max=0.0, gyro_bias_walk=0.0, acc_bias_walk=0.0))]
+    fn make_batch<'py>(
+        &self,
+        py: Python<'py>,
+        window: usize,
+        batch_size: usize,
+        fractions: Vec<f64>,
+        gravity: f64,
+        seed: u64,
+        gyro_noise_density: f64,
+        acc_noise_density: f64,
+        gyro_bias_max: f64,
+        acc_bias_max: f64,
+        gyro_bias_walk: f64,
+        acc_bias_walk: f64,
+    ) -> PyResult<Bound<'py, PyDict>> {
+        let cfg = BatchConfig {
+            window,
+            batch_size,
+            fractions,
+            gravity,
+            augment: AugmentConfig {
+                gyro_noise_density,
+                acc_noise_density,
+                gyro_bias_max,
+                acc_bias_max,
+                gyro_bias_walk,
+                acc_bias_walk,
+            },
+        };
+        let b = py.allow_threads(|| batch::make_batch(&self.seqs, &cfg, seed)).map_err(to_py)?;
+        batch_dict(py, b, window)
+    }
+
+    fn eval_windows<'py>(
+        &self,
+        py: Python<'py>,
+        window: usize,
+        stride: usize,
+        fractions: Vec<f64>,
+        gravity: f64,
+    ) -> PyResult<Bound<'py, PyDict>> {
+        let b = py
+            .allow_threads(|| batch::eval_windows(&self.seqs, window, stride, &fractions, gravity))
+            .map_err(to_py)?;
+        batch_dict(py, b, window)
+    }
+}
+
+pub fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
+    m.add_function(wrap_pyfunction!(align, m)?)?;
+    m.add_function(wrap_pyfunction!(derive_velocity, m)?)?;
+    m.add_function(wrap_pyfunction!(preintegrate, m)?)?;
+    m.add_function(wrap_pyfunction!(window_labels, m)?)?;
+    m.add_function(wrap_pyfunction!(integrate_windows, m)?)?;
+    m.add_class::<SequenceSet>()?;
+    Ok(())
+}

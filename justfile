@@ -1,0 +1,41 @@
+# imu-learn tasks. `just --list` shows them; recipes use .venv (made by scripts/bootstrap.sh).
+
+set shell := ["bash", "-euo", "pipefail", "-c"]
+set export
+
+py := justfile_directory() + "/.venv/bin/python"
+VIRTUAL_ENV := justfile_directory() + "/.venv"
+PATH := justfile_directory() + "/.venv/bin:" + env_var('PATH')
+# Two cores here: rayon and the test runner share them deliberately.
+RAYON_NUM_THREADS := env_var_or_default('RAYON_NUM_THREADS', '2')
+
+# List the recipes
+default:
+    @just --list
+
+# Create .venv, install every dependency, build the Rust extension (release)
+setup:
+    bash scripts/bootstrap.sh
+
+# Rebuild the Rust extension into .venv after a change to crates/ (release build)
+dev:
+    maturin develop --release --quiet
+
+# Run the whole test suite: Rust (no Python needed) then Python
+test:
+    cargo test --quiet
+    {{py}} -m pytest -q
+
+# Lint: rustfmt, clippy (no warnings), ruff
+lint:
+    cargo fmt --all --check
+    cargo clippy --all-targets --features python -- -D warnings
+    {{py}} -m ruff check python tests bench
+
+# Build the label cache of a dataset (euroc, tum-vi, blackbird, broad, kaist); root defaults to datasets/<name>
+labels dataset root="" *args="":
+    {{py}} -m imu_learn.labels {{dataset}} {{ if root == "" { "" } else { "--root " + root } }} {{args}}
+
+# Print throughput of imu_core against numpy, GTSAM and polars (measured now, on this machine)
+bench *args="":
+    {{py}} bench/bench_core.py {{args}}

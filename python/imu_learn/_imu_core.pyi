@@ -1,0 +1,80 @@
+"""Type stubs for the compiled core (crates/imu_core, feature "python").
+
+Arrays: ``t_ns`` int64 (N,); vectors float64 (N, 3); quaternions float64 (N, 4) in w,x,y,z order.
+Inputs must be C-contiguous; outputs are fresh arrays that own Rust's buffers (no copy).
+Errors: subclasses of imu_learn.errors.ImuError; a missing file raises FileNotFoundError.
+"""
+from os import PathLike
+from typing import Dict, List, Optional, Sequence, Tuple, Union
+
+import numpy as np
+import numpy.typing as npt
+
+__version__: str
+
+_Path = Union[str, PathLike]
+_I64 = npt.NDArray[np.int64]
+_U64 = npt.NDArray[np.uint64]
+_F64 = npt.NDArray[np.float64]
+
+def read_asl_imu(path: _Path, allow_float_timestamps: bool = False) -> Tuple[_I64, _F64, _F64]:
+    """ASL IMU CSV -> (t_ns, gyro, acc)."""
+
+def read_asl_imu_header(path: _Path) -> str:
+    """The file's first line, as written."""
+
+def write_asl_imu(path: _Path, t_ns: _I64, gyro: _F64, acc: _F64, header: Optional[str] = None) -> None:
+    """Write an ASL IMU CSV atomically (temp file + rename)."""
+
+def read_asl_state(path: _Path, allow_float_timestamps: bool = False) -> Dict[str, Optional[_F64]]:
+    """ASL state ground truth -> {t_ns, p, q_wxyz, v, bias_gyro, bias_acc}."""
+
+def read_asl_pose(path: _Path, allow_float_timestamps: bool = False) -> Dict[str, Optional[_F64]]:
+    """ASL pose ground truth (TUM-VI mocap0) -> {t_ns, p, q_wxyz, v=None, ...}."""
+
+def read_tum(path: _Path, allow_float_timestamps: bool = False) -> Dict[str, Optional[_F64]]:
+    """TUM trajectory (8 columns, or 11 with velocity) -> {t_ns, p, q_wxyz, v, ...}."""
+
+def write_tum(path: _Path, t_ns: _I64, p: _F64, q_wxyz: _F64) -> None:
+    """Write a TUM trajectory atomically."""
+
+def read_kaist_imu(path: _Path, allow_float_timestamps: bool = False) -> Tuple[_I64, _F64, _F64]:
+    """KAIST ``xsens_imu.csv`` -> (t_ns, gyro, acc)."""
+
+def read_kaist_pose(path: _Path, allow_float_timestamps: bool = False) -> Dict[str, Optional[_F64]]:
+    """KAIST ``global_pose.csv`` -> {t_ns, p, q_wxyz, v=None, ...}."""
+
+def align(
+    imu_t_ns: _I64, gyro: _F64, acc: _F64, gt_t_ns: _I64, p: _F64, q_wxyz: _F64, v: Optional[_F64],
+    max_gap_ns: int, min_segment_samples: int, velocity_half_window: int,
+) -> Tuple[List[Dict[str, np.ndarray]], Dict[str, object]]:
+    """Ground truth onto IMU stamps -> (segments as dicts of t_ns/gyro/acc/p/v/q_wxyz, report)."""
+
+def derive_velocity(t_ns: _I64, p: _F64, half_window: int) -> _F64:
+    """Velocity from positions by a local quadratic fit over +-half_window samples."""
+
+def preintegrate(t_ns: _I64, gyro: _F64, acc: _F64) -> Tuple[_F64, _F64, _F64, _F64]:
+    """Cumulative (dq_wxyz, dv, dp, dt); row j covers [t_0, t_j]."""
+
+def window_labels(
+    t_ns: _I64, p: _F64, v: _F64, q_wxyz: _F64, window: int, stride: int, fractions: Sequence[float], gravity: float
+) -> Dict[str, np.ndarray]:
+    """Ground-truth labels -> {starts (W,), horizons (H,), dq_wxyz (W,H,4), dv, dp (W,H,3), dt (W,H)}."""
+
+def integrate_windows(t_ns: _I64, gyro: _F64, acc: _F64, starts: _U64, horizons: _U64) -> Dict[str, np.ndarray]:
+    """IMU-side increments in the layout of window_labels."""
+
+class SequenceSet:
+    """Aligned sequences held in Rust: tuples (t_ns, gyro, acc, p, v, q_wxyz)."""
+
+    def __init__(self, parts: List[Tuple[_I64, _F64, _F64, _F64, _F64, _F64]]) -> None: ...
+    def __len__(self) -> int: ...
+    def make_batch(
+        self, window: int, batch_size: int, fractions: Sequence[float], gravity: float, seed: int,
+        gyro_noise_density: float = 0.0, acc_noise_density: float = 0.0, gyro_bias_max: float = 0.0,
+        acc_bias_max: float = 0.0, gyro_bias_walk: float = 0.0, acc_bias_walk: float = 0.0,
+    ) -> Dict[str, np.ndarray]:
+        """Augmented batch: imu (B,W,6), dt (B,W), dq_wxyz (B,H,4), dv/dp (B,H,3), label_dt (B,H),
+        bias (B,W,6), seq_index (B,), start (B,), horizons (H,)."""
+    def eval_windows(self, window: int, stride: int, fractions: Sequence[float], gravity: float) -> Dict[str, np.ndarray]:
+        """Every window at a fixed stride, no augmentation; layout of make_batch."""

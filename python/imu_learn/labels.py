@@ -1,0 +1,132 @@
+"""``python -m imu_learn.labels DATASET [--root DIR]``: build the label cache of a dataset.
+
+Reads every recording of the dataset, aligns ground truth to the IMU stamps, computes Δq/Δβ/Δγ
+labels for every window and writes them to ``cache/<dataset>`` (see imu_learn.cache for the
+format). Re-running is cheap: up-to-date recordings are skipped, stale ones rebuilt.
+"""
+from __future__ import annotations
+
+import argparse
+import sys
+import time
+from dataclasses import asdict
+from pathlib import Path
+from typing import List, Optional
+
+from imu_learn import __version__
+from imu_learn.cache import (
+    CACHE_VERSION,
+    MANIFEST,
+    fingerprint,
+    read_manifest,
+    write_manifest,
+    write_segment,
+)
+from imu_learn.datasets import DATASETS, find_recordings
+from imu_learn.errors import CacheError, ImuError
+from imu_learn.integration import PAPER_FRACTIONS, window_labels
+from imu_learn.loading import AlignOptions, load_recording
+
+
+def source_files(path: Path) -> List[Path]:
+    return [path] if path.is_file() else [p for p in path.rglob("*") if p.is_file()]
+
+
+def build_cache(
+    dataset: str,
+    root: Path,
+    out: Path,
+    window: int = 200,
+    stride: int = 10,
+    gravity: float = 9.81,
+    options: AlignOptions = AlignOptions(),
+    rebuild: bool = False,
+    progress: bool = True,
+) -> dict:
+    settings = {
+        "dataset": dataset, "window": window, "stride": stride, "fractions": list(PAPER_FRACTIONS),
+        "gravity": gravity, "align": asdict(options),
+    }
+    old = {}
+    if (out / MANIFEST).exists():
+        try:
+            old = {r["name"]: r for r in read_manifest(out)["recordings"]}
+        except CacheError:
+            if not rebuild:
+                raise
+    recordings = find_recordings(dataset, root)
+    manifest = {
+        "cache_version": CACHE_VERSION, "imu_learn_version": __version__, "settings": settings,
+        "source_root": str(root.resolve()), "recordings": [],
+    }
+    try:
+        from tqdm import tqdm
+        bar = tqdm(recordings, desc=f"labels {dataset}", unit="rec", disable=not progress, file=sys.stderr)
+    except ImportError:  # tqdm is a dependency, but a missing bar must not stop the job
+        bar = recordings
+    for name, path in bar:
+        fp = fingerprint(source_files(path), settings)
+        prev = old.get(name)
+        if (
+            not rebuild and prev is not None and prev.get("fingerprint") == fp
+            and all((out / s["file"]).exists() for s in prev["segments"])
+        ):
+            manifest["recordings"].append(prev)
+            continue
+        t0 = time.perf_counter()
+        rec = load_recording(path, format=dataset, options=options)
+        segments = []
+        for i, seq in enumerate(rec.segments):
+            lab = window_labels(seq, window, stride, PAPER_FRACTIONS, gravity)
+            fname = f"{name}__{i}.npz"
+            write_segment(out / fname, seq, lab.__dict__)
+            segments.append({"name": seq.name, "file": fname, "samples": len(seq), "windows": int(len(lab.starts))})
+        manifest["recordings"].append(
+            {"name": name, "path": str(path), "fingerprint": fp, "segments": segments, "report": rec.report,
+             "seconds": round(time.perf_counter() - t0, 3)}
+        )
+        # The manifest after each recording makes an interrupted run resumable.
+        write_manifest(out, manifest)
+    write_manifest(out, manifest)
+    return manifest
+
+
+def main(argv: Optional[List[str]] = None) -> int:
+    ap = argparse.ArgumentParser(prog="python -m imu_learn.labels", description=__doc__.splitlines()[0])
+    ap.add_argument("dataset", choices=DATASETS)
+    ap.add_argument("--root", type=Path, help="dataset folder (default datasets/<dataset>)")
+    ap.add_argument("--out", type=Path, help="cache folder (default cache/<dataset>)")
+    ap.add_argument("--window", type=int, default=200, help="window length in IMU samples")
+    ap.add_argument("--stride", type=int, default=10, help="step between window starts")
+    ap.add_argument("--gravity", type=float, default=9.81)
+    ap.add_argument("--max-gap", type=float, default=AlignOptions.max_gap_s, help="split at GT gaps longer than this [s]")
+    ap.add_argument("--rebuild", action="store_true", help="rebuild everything, even an incompatible cache")
+    ap.add_argument("--quiet", action="store_true")
+    a = ap.parse_args(argv)
+    root = a.root or Path("datasets") / a.dataset
+    out = a.out or Path("cache") / a.dataset
+    try:
+        m = build_cache(
+            a.dataset, root, out, a.window, a.stride, a.gravity, AlignOptions(max_gap_s=a.max_gap),
+            a.rebuild, not a.quiet,
+        )
+    except (ImuError, OSError) as e:
+        print(f"error: {e}", file=sys.stderr)
+        return 2
+    except KeyboardInterrupt:
+        print("interrupted: finished recordings are kept; run again to resume", file=sys.stderr)
+        return 130
+    for r in m["recordings"]:
+        rep = r["report"]
+        segs = ", ".join(f"{s['samples']} samples / {s['windows']} windows" for s in r["segments"])
+        print(
+            f"{r['name']}: {len(r['segments'])} segment(s) [{segs}]; dropped "
+            f"{rep.get('dropped_before', 0)} before, {rep.get('dropped_after', 0)} after, "
+            f"{rep.get('dropped_in_gaps', 0)} in gaps"
+        )
+    print(f"cache: {out} (format v{CACHE_VERSION})")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,88 @@
+"""Load a recording: read it (formats/), put ground truth on the IMU stamps (Rust), split at gaps."""
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+from typing import List, Optional, Union
+
+import numpy as np
+
+from imu_learn import _imu_core as core
+from imu_learn.formats import asl, read_recording
+from imu_learn.types import GroundTruth, ImuData, Recording, Sequence
+
+PathLike = Union[str, Path]
+
+
+@dataclass(frozen=True)
+class AlignOptions:
+    """How ground truth is put on IMU stamps.
+
+    max_gap_s: ground-truth stamps further apart than this split the recording into segments.
+    min_segment_s: shorter segments are dropped (too short to hold a training window).
+    velocity_half_window: pose-only ground truth gets velocity from a local quadratic fit over
+        +-this many poses (see crates/imu_core/src/align.rs for why).
+    """
+
+    max_gap_s: float = 0.05
+    min_segment_s: float = 1.0
+    velocity_half_window: int = 4
+
+
+def read_imu(path: PathLike, allow_float_timestamps: bool = False) -> ImuData:
+    """Read one ASL IMU CSV (``mav0/imu0/data.csv``, or the sequence folder holding it).
+
+    Raises the typed errors of :mod:`imu_learn.errors` naming file, line, column and field.
+    """
+    return asl.read_imu(Path(path), allow_float_timestamps)
+
+
+def align(imu: ImuData, gt: GroundTruth, options: AlignOptions = AlignOptions(), name: str = "") -> Recording:
+    """Interpolate ground truth onto the IMU stamps; one ``Sequence`` per gap-free segment."""
+    rate = (len(imu) - 1) / max((imu.t_ns[-1] - imu.t_ns[0]) * 1e-9, 1e-9) if len(imu) > 1 else 1.0
+    segs, report = core.align(
+        np.ascontiguousarray(imu.t_ns, dtype=np.int64),
+        np.ascontiguousarray(imu.gyro, dtype=np.float64),
+        np.ascontiguousarray(imu.acc, dtype=np.float64),
+        np.ascontiguousarray(gt.t_ns, dtype=np.int64),
+        np.ascontiguousarray(gt.p, dtype=np.float64),
+        np.ascontiguousarray(gt.q_wxyz, dtype=np.float64),
+        None if gt.v is None else np.ascontiguousarray(gt.v, dtype=np.float64),
+        int(round(options.max_gap_s * 1e9)),
+        max(2, int(round(options.min_segment_s * rate))),
+        int(options.velocity_half_window),
+    )
+    seqs = [
+        Sequence(name=f"{name}#{i}" if len(segs) > 1 else name, **seg)  # type: ignore[arg-type]
+        for i, seg in enumerate(segs)
+    ]
+    return Recording(name=name, segments=seqs, report=report)
+
+
+def load_recording(
+    path: PathLike,
+    format: str = "auto",
+    groundtruth: Optional[PathLike] = None,
+    options: AlignOptions = AlignOptions(),
+    allow_float_timestamps: bool = False,
+) -> Recording:
+    """Read and align a recording; keeps the alignment report (what was dropped, gaps)."""
+    path = Path(path)
+    imu, gt = read_recording(path, format, None if groundtruth is None else Path(groundtruth), allow_float_timestamps)
+    name = path.stem if path.suffix == ".mat" else path.name
+    return align(imu, gt, options, name=name)
+
+
+def load_sequence(
+    path: PathLike,
+    format: str = "auto",
+    groundtruth: Optional[PathLike] = None,
+    options: AlignOptions = AlignOptions(),
+    allow_float_timestamps: bool = False,
+) -> List[Sequence]:
+    """Load a recording as a list of aligned ``Sequence`` segments (one unless ground truth has gaps).
+
+    ``format``: "auto", "euroc", "tum-vi", "asl", "blackbird", "broad" or "kaist".
+    ``groundtruth``: a separate TUM (``t[s] tx ty tz qx qy qz qw``) or ASL ground-truth file.
+    """
+    return load_recording(path, format, groundtruth, options, allow_float_timestamps).segments
