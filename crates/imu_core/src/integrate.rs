@@ -285,10 +285,8 @@ mod tests {
         let a = [0.3, -1.2, 9.0];
         let p = preintegrate(&[0, 10_000_000], &[[5.0, -4.0, 3.0], [0.0; 3]], &[a, [0.0; 3]]).unwrap();
         let dt = 0.01;
-        for c in 0..3 {
-            assert_eq!(p.dv[1][c], a[c] * dt);
-            assert_eq!(p.dp[1][c], a[c] * (0.5 * dt * dt));
-        }
+        assert_eq!(p.dv[1], a.map(|x| x * dt));
+        assert_eq!(p.dp[1], a.map(|x| x * (0.5 * dt * dt)));
         let want = quat_to_wxyz(&so3::exp(&(Vector3::new(5.0, -4.0, 3.0) * dt)));
         assert_eq!(p.dq_wxyz[1], want);
         assert_eq!(p.dt[1], dt);
