@@ -90,8 +90,9 @@ pub fn window_starts(len: usize, window: usize, stride: usize) -> Result<Vec<usi
     if window == 0 {
         return Err(ImuError::invalid("window must be at least 1 sample"));
     }
-    // The window needs states k..=k+window.
-    if len < window + 1 {
+    // The window needs states k..=k+window; `len <= window` rather than `len < window + 1`, which
+    // overflows for a window of usize::MAX.
+    if len <= window {
         return Ok(Vec::new());
     }
     Ok((0..=len - window - 1).step_by(stride).collect())
