@@ -145,7 +145,14 @@ fn check_imu(t_ns: &[i64], gyro: &[Vec3], acc: &[Vec3]) -> Result<()> {
 
 /// Rows 0..=n of the integration that starts at sample `k`. The caller has checked the inputs
 /// and that k + n is a valid index.
-fn integrate_from(t_ns: &[i64], gyro: &[Vec3], acc: &[Vec3], k: usize, n: usize, mut row: impl FnMut(usize, Increment)) {
+fn integrate_from(
+    t_ns: &[i64],
+    gyro: &[Vec3],
+    acc: &[Vec3],
+    k: usize,
+    n: usize,
+    mut row: impl FnMut(usize, Increment),
+) {
     let mut d = Delta::identity();
     row(0, d.increment(0.0));
     for j in 1..=n {
@@ -216,10 +223,7 @@ pub fn integrate_windows(
     let per_window: Vec<Vec<Increment>> = starts
         .par_iter()
         .map(|&k| {
-            let mut incs = vec![
-                Increment { dq_wxyz: [1.0, 0.0, 0.0, 0.0], dv: [0.0; 3], dp: [0.0; 3], dt: 0.0 };
-                nh
-            ];
+            let mut incs = vec![Increment { dq_wxyz: [1.0, 0.0, 0.0, 0.0], dv: [0.0; 3], dp: [0.0; 3], dt: 0.0 }; nh];
             integrate_from(t_ns, gyro, acc, k, max_h, |j, inc| {
                 for &h in &wanted[j] {
                     incs[h] = inc;
@@ -272,10 +276,7 @@ mod tests {
     fn one_stamp_gives_the_identity_row_only() {
         let p = preintegrate(&[5], &[[1.0, 2.0, 3.0]], &[[4.0, 5.0, 6.0]]).unwrap();
         assert_eq!(p.len(), 1);
-        assert_eq!(
-            p.row(0).unwrap(),
-            Increment { dq_wxyz: [1.0, 0.0, 0.0, 0.0], dv: [0.0; 3], dp: [0.0; 3], dt: 0.0 }
-        );
+        assert_eq!(p.row(0).unwrap(), Increment { dq_wxyz: [1.0, 0.0, 0.0, 0.0], dv: [0.0; 3], dp: [0.0; 3], dt: 0.0 });
         assert!(p.row(1).is_none());
     }
 

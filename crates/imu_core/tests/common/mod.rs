@@ -81,7 +81,8 @@ pub fn synthetic_sequence(t_ns: &[i64], gravity: f64) -> Sequence {
         let w = c_m.transpose() * b_m.transpose() * Vector3::z() * alpha
             + c_m.transpose() * Vector3::x() * bd
             + Vector3::y() * cd;
-        let p = Vector3::new(2.0 * (0.7 * t).sin(), 1.5 * (0.5 * t).cos() + 0.2 * t, 0.3 * (1.1 * t).sin() + 0.05 * t * t);
+        let p =
+            Vector3::new(2.0 * (0.7 * t).sin(), 1.5 * (0.5 * t).cos() + 0.2 * t, 0.3 * (1.1 * t).sin() + 0.05 * t * t);
         let v = Vector3::new(1.4 * (0.7 * t).cos(), -0.75 * (0.5 * t).sin() + 0.2, 0.33 * (1.1 * t).cos() + 0.1 * t);
         let pdd = Vector3::new(-0.98 * (0.7 * t).sin(), -0.375 * (0.5 * t).cos(), -0.363 * (1.1 * t).sin() + 0.1);
         let acc = r.transpose() * (pdd - g);
