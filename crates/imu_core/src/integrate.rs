@@ -13,8 +13,8 @@
 //! a product of unit quaternions drifts in norm by ~1e-16 per step, far below anything measured.
 //!
 //! Sample i is held over [t_i, t_{i+1}) (zero-order hold), so row j of a preintegration over
-//! stamps t_0..t_{N-1} covers [t_0, t_j] and uses samples 0..j-1; the last sample only sets no
-//! increment of its own.
+//! stamps t_0..t_{N-1} covers [t_0, t_j] and uses samples 0..j-1. The last sample is held past
+//! the last stamp, so it enters no row (it is still validated).
 
 use nalgebra::Vector3;
 use rayon::prelude::*;
