@@ -1,1 +1,346 @@
-//! TODO: filled in by its own change.
+//! Δq/Δβ/Δγ from IMU samples: the preintegrated increments of paper Section III, with zero bias
+//! and no gravity (gravity enters only when the increments are turned into poses, see `labels`).
+//!
+//! The arithmetic is GTSAM's `ManifoldPreintegration` (`NavState::update` with zero bias): per
+//! sample, using the rotation from *before* the sample,
+//!
+//!   Δγ ← Δγ + Δβ·dt + ½·ΔR·a·dt²
+//!   Δβ ← Δβ + ΔR·a·dt
+//!   ΔR ← ΔR·Exp(ω·dt)
+//!
+//! so that results agree with `gtsam.PreintegratedImuMeasurementsManifold` to round-off. GTSAM
+//! never re-orthonormalises its rotation matrix, so we do not renormalise the quaternion either:
+//! a product of unit quaternions drifts in norm by ~1e-16 per step, far below anything measured.
+//!
+//! Sample i is held over [t_i, t_{i+1}) (zero-order hold), so row j of a preintegration over
+//! stamps t_0..t_{N-1} covers [t_0, t_j] and uses samples 0..j-1. The last sample is held past
+//! the last stamp, so it enters no row (it is still validated).
+
+use nalgebra::Vector3;
+use rayon::prelude::*;
+
+use crate::error::{ImuError, Result};
+use crate::labels::{Increment, Labels};
+use crate::so3::{self, arr3, quat_to_wxyz, v3, Quat};
+use crate::types::{QuatWxyz, Vec3};
+
+/// Cumulative increments, one row per stamp: row j covers [t_0, t_j]; row 0 is the identity.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct Preintegrated {
+    pub dq_wxyz: Vec<QuatWxyz>,
+    pub dv: Vec<Vec3>,
+    pub dp: Vec<Vec3>,
+    pub dt: Vec<f64>,
+}
+
+impl Preintegrated {
+    fn with_capacity(n: usize) -> Self {
+        Preintegrated {
+            dq_wxyz: Vec::with_capacity(n),
+            dv: Vec::with_capacity(n),
+            dp: Vec::with_capacity(n),
+            dt: Vec::with_capacity(n),
+        }
+    }
+
+    fn push(&mut self, inc: Increment) {
+        self.dq_wxyz.push(inc.dq_wxyz);
+        self.dv.push(inc.dv);
+        self.dp.push(inc.dp);
+        self.dt.push(inc.dt);
+    }
+
+    pub fn len(&self) -> usize {
+        self.dt.len()
+    }
+
+    pub fn is_empty(&self) -> bool {
+        self.dt.is_empty()
+    }
+
+    /// Row j as one increment (`None` past the end).
+    pub fn row(&self, j: usize) -> Option<Increment> {
+        Some(Increment {
+            dq_wxyz: *self.dq_wxyz.get(j)?,
+            dv: *self.dv.get(j)?,
+            dp: *self.dp.get(j)?,
+            dt: *self.dt.get(j)?,
+        })
+    }
+}
+
+/// The running state of one integration; `dt` is carried by the caller because it is computed
+/// differently from stamps (exactly, from integer nanoseconds) and from hold times (summed).
+#[derive(Clone, Copy, Debug)]
+struct Delta {
+    q: Quat,
+    v: Vector3<f64>,
+    p: Vector3<f64>,
+}
+
+impl Delta {
+    fn identity() -> Self {
+        Delta { q: Quat::identity(), v: Vector3::zeros(), p: Vector3::zeros() }
+    }
+
+    /// One zero-order-hold step, in GTSAM's order and with its grouping of terms.
+    #[inline]
+    fn step(&mut self, gyro: Vec3, acc: Vec3, dt: f64) {
+        let dt22 = 0.5 * dt * dt;
+        let a_nav = self.q * v3(acc);
+        self.p = self.p + self.v * dt + a_nav * dt22;
+        self.v += a_nav * dt;
+        self.q *= so3::exp(&(v3(gyro) * dt));
+    }
+
+    fn increment(&self, dt: f64) -> Increment {
+        Increment { dq_wxyz: quat_to_wxyz(&self.q), dv: arr3(&self.v), dp: arr3(&self.p), dt }
+    }
+}
+
+/// Seconds between two nanosecond stamps. The difference is taken in i128 because stamps from
+/// arbitrary epochs can be far enough apart to overflow i64.
+#[inline]
+fn seconds_between(t0: i64, t1: i64) -> f64 {
+    (t1 as i128 - t0 as i128) as f64 * 1e-9
+}
+
+fn check_lengths(what: &str, n: usize, gyro: &[Vec3], acc: &[Vec3]) -> Result<()> {
+    if gyro.len() != n || acc.len() != n {
+        return Err(ImuError::invalid(format!(
+            "{what} has {n} entries but gyro has {} and acc {}; they must be equal",
+            gyro.len(),
+            acc.len()
+        )));
+    }
+    Ok(())
+}
+
+fn check_finite(gyro: &[Vec3], acc: &[Vec3]) -> Result<()> {
+    for (name, rows) in [("gyro", gyro), ("acc", acc)] {
+        if let Some(i) = rows.iter().position(|r| r.iter().any(|x| !x.is_finite())) {
+            return Err(ImuError::invalid(format!("{name}[{i}] = {:?} is not finite", rows[i])));
+        }
+    }
+    Ok(())
+}
+
+fn check_stamps(t_ns: &[i64]) -> Result<()> {
+    if let Some(i) = t_ns.windows(2).position(|w| w[1] <= w[0]) {
+        return Err(ImuError::invalid(format!(
+            "t_ns[{}] = {} is not after t_ns[{i}] = {}; stamps must be strictly increasing",
+            i + 1,
+            t_ns[i + 1],
+            t_ns[i]
+        )));
+    }
+    Ok(())
+}
+
+fn check_imu(t_ns: &[i64], gyro: &[Vec3], acc: &[Vec3]) -> Result<()> {
+    check_lengths("t_ns", t_ns.len(), gyro, acc)?;
+    check_stamps(t_ns)?;
+    check_finite(gyro, acc)
+}
+
+/// Rows 0..=n of the integration that starts at sample `k`. The caller has checked the inputs
+/// and that k + n is a valid index.
+fn integrate_from(
+    t_ns: &[i64],
+    gyro: &[Vec3],
+    acc: &[Vec3],
+    k: usize,
+    n: usize,
+    mut row: impl FnMut(usize, Increment),
+) {
+    let mut d = Delta::identity();
+    row(0, d.increment(0.0));
+    for j in 1..=n {
+        let i = k + j - 1;
+        d.step(gyro[i], acc[i], seconds_between(t_ns[i], t_ns[i + 1]));
+        row(j, d.increment(seconds_between(t_ns[k], t_ns[k + j])));
+    }
+}
+
+/// Preintegrate samples on stamps `t_ns` [ns]: N stamps give N rows, row j covering [t_0, t_j]
+/// with samples 0..j-1. Row dt is computed from the integer stamps, so it carries no summed
+/// round-off and equals the ground-truth labels' Δt exactly.
+pub fn preintegrate(t_ns: &[i64], gyro: &[Vec3], acc: &[Vec3]) -> Result<Preintegrated> {
+    check_imu(t_ns, gyro, acc)?;
+    let mut out = Preintegrated::with_capacity(t_ns.len());
+    if let Some(last) = t_ns.len().checked_sub(1) {
+        integrate_from(t_ns, gyro, acc, 0, last, |_, inc| out.push(inc));
+    }
+    Ok(out)
+}
+
+/// Preintegrate samples given by hold times: `dt[i]` [s] is how long sample i is held. N samples
+/// give N + 1 rows (row 0 the identity, row N after every sample); row dt is the running sum,
+/// as GTSAM's `deltaTij`.
+pub fn preintegrate_dt(dt: &[f64], gyro: &[Vec3], acc: &[Vec3]) -> Result<Preintegrated> {
+    check_lengths("dt", dt.len(), gyro, acc)?;
+    if let Some(i) = dt.iter().position(|&h| !(h.is_finite() && h > 0.0)) {
+        return Err(ImuError::invalid(format!("dt[{i}] = {} is not a finite positive hold time", dt[i])));
+    }
+    check_finite(gyro, acc)?;
+    let mut out = Preintegrated::with_capacity(dt.len() + 1);
+    let mut d = Delta::identity();
+    let mut t = 0.0;
+    out.push(d.increment(t));
+    for ((&h, &w), &a) in dt.iter().zip(gyro).zip(acc) {
+        d.step(w, a, h);
+        t += h;
+        out.push(d.increment(t));
+    }
+    Ok(out)
+}
+
+/// IMU-side increments for many windows, laid out as `labels::labels_at` lays out the ground-truth
+/// ones (entry `w * horizons.len() + h` is window `w`, horizon `h`), so the two compare entry by
+/// entry. Window start k at horizon n integrates samples k..k+n-1 over [t_k, t_{k+n}], and equals
+/// row n of `preintegrate` on the stamps k..=k+n bit for bit. Windows run in parallel.
+pub fn integrate_windows(
+    t_ns: &[i64],
+    gyro: &[Vec3],
+    acc: &[Vec3],
+    starts: &[usize],
+    horizons: &[usize],
+) -> Result<Labels> {
+    check_imu(t_ns, gyro, acc)?;
+    let max_h = horizons.iter().copied().max().unwrap_or(0);
+    if let Some(&bad) = starts.iter().find(|&&k| k.checked_add(max_h).is_none_or(|e| e >= t_ns.len())) {
+        return Err(ImuError::invalid(format!(
+            "window start {bad} + horizon {max_h} is past the sequence end ({} samples)",
+            t_ns.len()
+        )));
+    }
+    // Horizon index for each row 0..=max_h that is asked for (several horizons may share a row).
+    let mut wanted: Vec<Vec<usize>> = vec![Vec::new(); max_h + 1];
+    for (h, &n) in horizons.iter().enumerate() {
+        wanted[n].push(h);
+    }
+    let nh = horizons.len();
+    let per_window: Vec<Vec<Increment>> = starts
+        .par_iter()
+        .map(|&k| {
+            let mut incs = vec![Increment { dq_wxyz: [1.0, 0.0, 0.0, 0.0], dv: [0.0; 3], dp: [0.0; 3], dt: 0.0 }; nh];
+            integrate_from(t_ns, gyro, acc, k, max_h, |j, inc| {
+                for &h in &wanted[j] {
+                    incs[h] = inc;
+                }
+            });
+            incs
+        })
+        .collect();
+    let total = starts.len() * nh;
+    let mut out = Labels {
+        starts: starts.to_vec(),
+        horizons: horizons.to_vec(),
+        dq_wxyz: Vec::with_capacity(total),
+        dv: Vec::with_capacity(total),
+        dp: Vec::with_capacity(total),
+        dt: Vec::with_capacity(total),
+    };
+    for inc in per_window.into_iter().flatten() {
+        out.dq_wxyz.push(inc.dq_wxyz);
+        out.dv.push(inc.dv);
+        out.dp.push(inc.dp);
+        out.dt.push(inc.dt);
+    }
+    Ok(out)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn is_invalid<T: std::fmt::Debug>(r: Result<T>, needle: &str) {
+        match r {
+            Err(ImuError::InvalidInput(msg)) => assert!(msg.contains(needle), "{msg:?} lacks {needle:?}"),
+            other => panic!("expected InvalidInput containing {needle:?}, got {other:?}"),
+        }
+    }
+
+    #[test]
+    fn empty_input_gives_empty_output() {
+        let p = preintegrate(&[], &[], &[]).unwrap();
+        assert!(p.is_empty());
+        let p = preintegrate_dt(&[], &[], &[]).unwrap();
+        assert_eq!(p.len(), 1);
+        assert_eq!(p.row(0).unwrap().dq_wxyz, [1.0, 0.0, 0.0, 0.0]);
+        let l = integrate_windows(&[], &[], &[], &[], &[1, 2]).unwrap();
+        assert!(l.dq_wxyz.is_empty());
+    }
+
+    #[test]
+    fn one_stamp_gives_the_identity_row_only() {
+        let p = preintegrate(&[5], &[[1.0, 2.0, 3.0]], &[[4.0, 5.0, 6.0]]).unwrap();
+        assert_eq!(p.len(), 1);
+        assert_eq!(p.row(0).unwrap(), Increment { dq_wxyz: [1.0, 0.0, 0.0, 0.0], dv: [0.0; 3], dp: [0.0; 3], dt: 0.0 });
+        assert!(p.row(1).is_none());
+    }
+
+    #[test]
+    fn first_step_uses_the_initial_rotation_for_velocity_and_position() {
+        // With ΔR = I before the first sample, Δβ = a·dt and Δγ = ½·a·dt² whatever the gyro says.
+        let a = [0.3, -1.2, 9.0];
+        let p = preintegrate(&[0, 10_000_000], &[[5.0, -4.0, 3.0], [0.0; 3]], &[a, [0.0; 3]]).unwrap();
+        let dt = 0.01;
+        assert_eq!(p.dv[1], a.map(|x| x * dt));
+        assert_eq!(p.dp[1], a.map(|x| x * (0.5 * dt * dt)));
+        let want = quat_to_wxyz(&so3::exp(&(Vector3::new(5.0, -4.0, 3.0) * dt)));
+        assert_eq!(p.dq_wxyz[1], want);
+        assert_eq!(p.dt[1], dt);
+    }
+
+    #[test]
+    fn rejects_bad_lengths_stamps_and_values() {
+        let z = [0.0; 3];
+        is_invalid(preintegrate(&[0, 1], &[z], &[z, z]), "gyro has 1");
+        is_invalid(preintegrate(&[0, 1, 1], &[z; 3], &[z; 3]), "t_ns[2] = 1 is not after t_ns[1]");
+        is_invalid(preintegrate(&[0, 2, 1], &[z; 3], &[z; 3]), "strictly increasing");
+        is_invalid(preintegrate(&[0, 1], &[z, [0.0, f64::NAN, 0.0]], &[z; 2]), "gyro[1]");
+        is_invalid(preintegrate(&[0, 1], &[z; 2], &[[f64::INFINITY, 0.0, 0.0], z]), "acc[0]");
+        is_invalid(preintegrate_dt(&[0.1], &[z; 2], &[z; 2]), "dt has 1");
+        is_invalid(preintegrate_dt(&[0.1, 0.0], &[z; 2], &[z; 2]), "dt[1]");
+        is_invalid(preintegrate_dt(&[-0.1], &[z], &[z]), "dt[0]");
+        is_invalid(preintegrate_dt(&[f64::NAN], &[z], &[z]), "dt[0]");
+        is_invalid(preintegrate_dt(&[0.1], &[z], &[[0.0, 0.0, f64::NEG_INFINITY]]), "acc[0]");
+    }
+
+    #[test]
+    fn window_ranges_are_checked_without_overflow() {
+        let z = [0.0; 3];
+        let t = [0, 1, 2, 3];
+        is_invalid(integrate_windows(&t, &[z; 4], &[z; 4], &[1], &[3]), "window start 1 + horizon 3");
+        is_invalid(integrate_windows(&t, &[z; 4], &[z; 4], &[usize::MAX], &[1]), "past the sequence end");
+        is_invalid(integrate_windows(&t, &[z; 4], &[z; 4], &[4], &[]), "window start 4");
+        assert!(integrate_windows(&t, &[z; 4], &[z; 4], &[0], &[3]).is_ok());
+    }
+
+    #[test]
+    fn extreme_stamps_do_not_overflow() {
+        let z = [0.0; 3];
+        let t = [i64::MIN, 0, i64::MAX];
+        let p = preintegrate(&t, &[z; 3], &[[1.0, 0.0, 0.0]; 3]).unwrap();
+        let total = (i64::MAX as f64 - i64::MIN as f64) * 1e-9;
+        assert!((p.dt[2] - total).abs() <= 1e-12 * total);
+    }
+
+    #[test]
+    fn horizons_in_any_order_and_repeated_land_in_their_own_columns() {
+        let t: Vec<i64> = (0..12).map(|i| i * 5_000_000 + (i * i) % 7 * 100_000).collect();
+        let gyro: Vec<Vec3> = (0..12).map(|i| [0.1 * i as f64, -0.2, 0.05]).collect();
+        let acc: Vec<Vec3> = (0..12).map(|i| [1.0, 0.1 * i as f64, 9.8]).collect();
+        let hs = [4, 0, 2, 4];
+        let l = integrate_windows(&t, &gyro, &acc, &[3, 0], &hs).unwrap();
+        for (w, &k) in [3usize, 0].iter().enumerate() {
+            let p = preintegrate(&t[k..], &gyro[k..], &acc[k..]).unwrap();
+            for (h, &n) in hs.iter().enumerate() {
+                let e = w * hs.len() + h;
+                let got = Increment { dq_wxyz: l.dq_wxyz[e], dv: l.dv[e], dp: l.dp[e], dt: l.dt[e] };
+                assert_eq!(Some(got), p.row(n));
+            }
+        }
+    }
+}

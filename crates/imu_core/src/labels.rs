@@ -42,11 +42,26 @@ pub fn horizons(window: usize, fractions: &[f64]) -> Result<Vec<usize>> {
         .collect()
 }
 
-/// Δq, Δβ, Δγ from ground truth between states k and k + n. Indices must be in range.
-pub fn increment(seq: &Sequence, k: usize, n: usize, gravity: f64) -> Increment {
-    let j = k + n;
+/// Δq, Δβ, Δγ from ground truth between states k and k + n.
+pub fn increment(seq: &Sequence, k: usize, n: usize, gravity: f64) -> Result<Increment> {
+    check_sequence(seq)?;
+    let j = match k.checked_add(n) {
+        Some(j) if j < seq.len() => j,
+        _ => {
+            return Err(ImuError::invalid(format!(
+                "state {k} + {n} is past the sequence end ({} samples)",
+                seq.len()
+            )))
+        }
+    };
+    Ok(increment_unchecked(seq, k, j, gravity))
+}
+
+/// `increment` for indices the caller has already checked (k ≤ j < len).
+fn increment_unchecked(seq: &Sequence, k: usize, j: usize, gravity: f64) -> Increment {
     let g = v3(gravity_vector(gravity));
-    let dt = (seq.t_ns[j] - seq.t_ns[k]) as f64 * 1e-9;
+    // i128: stamps from arbitrary epochs can be far enough apart to overflow i64.
+    let dt = (seq.t_ns[j] as i128 - seq.t_ns[k] as i128) as f64 * 1e-9;
     let qk = quat_from_wxyz(seq.q_wxyz[k]);
     let qj = quat_from_wxyz(seq.q_wxyz[j]);
     let rk_t = qk.inverse();
@@ -75,8 +90,9 @@ pub fn window_starts(len: usize, window: usize, stride: usize) -> Result<Vec<usi
     if window == 0 {
         return Err(ImuError::invalid("window must be at least 1 sample"));
     }
-    // The window needs states k..=k+window.
-    if len < window + 1 {
+    // The window needs states k..=k+window; `len <= window` rather than `len < window + 1`, which
+    // overflows for a window of usize::MAX.
+    if len <= window {
         return Ok(Vec::new());
     }
     Ok((0..=len - window - 1).step_by(stride).collect())
@@ -86,7 +102,7 @@ pub fn window_starts(len: usize, window: usize, stride: usize) -> Result<Vec<usi
 pub fn labels_at(seq: &Sequence, starts: &[usize], horizons: &[usize], gravity: f64) -> Result<Labels> {
     check_sequence(seq)?;
     let max_h = horizons.iter().copied().max().unwrap_or(0);
-    if let Some(&bad) = starts.iter().find(|&&k| k + max_h >= seq.len()) {
+    if let Some(&bad) = starts.iter().find(|&&k| k.checked_add(max_h).is_none_or(|e| e >= seq.len())) {
         return Err(ImuError::invalid(format!(
             "window start {bad} + horizon {max_h} is past the sequence end ({} samples)",
             seq.len()
@@ -95,7 +111,7 @@ pub fn labels_at(seq: &Sequence, starts: &[usize], horizons: &[usize], gravity: 
     let nh = horizons.len();
     let incs: Vec<Increment> = starts
         .par_iter()
-        .flat_map_iter(|&k| horizons.iter().map(move |&n| increment(seq, k, n, gravity)))
+        .flat_map_iter(|&k| horizons.iter().map(move |&n| increment_unchecked(seq, k, k + n, gravity)))
         .collect();
     let mut out = Labels {
         starts: starts.to_vec(),
