@@ -39,16 +39,38 @@ pub enum ImuError {
     },
 
     #[error("{}:{line}: header {found:?} is not the expected {expected:?}", path.display())]
-    Header { path: PathBuf, line: usize, expected: String, found: String },
+    Header {
+        path: PathBuf,
+        line: usize,
+        expected: String,
+        found: String,
+    },
 
     #[error("{}:{line}: expected {expected} columns, found {found}", path.display())]
-    ColumnCount { path: PathBuf, line: usize, expected: usize, found: usize },
+    ColumnCount {
+        path: PathBuf,
+        line: usize,
+        expected: usize,
+        found: usize,
+    },
 
     #[error("{}:{line}:{column}: field {field:?} = {value:?} is not a number", path.display())]
-    NotNumeric { path: PathBuf, line: usize, column: usize, field: String, value: String },
+    NotNumeric {
+        path: PathBuf,
+        line: usize,
+        column: usize,
+        field: String,
+        value: String,
+    },
 
     #[error("{}:{line}:{column}: field {field:?} = {value:?} is not finite (NaN or inf)", path.display())]
-    NonFinite { path: PathBuf, line: usize, column: usize, field: String, value: String },
+    NonFinite {
+        path: PathBuf,
+        line: usize,
+        column: usize,
+        field: String,
+        value: String,
+    },
 
     #[error(
         "{}:{line}:{column}: field {field:?} = {value} {problem} ({previous}); \
@@ -71,7 +93,13 @@ pub enum ImuError {
          nanoseconds, or read it with allow_float_timestamps=True to accept the rounded stamps",
         path.display()
     )]
-    FloatTimestamp { path: PathBuf, line: usize, column: usize, field: String, value: String },
+    FloatTimestamp {
+        path: PathBuf,
+        line: usize,
+        column: usize,
+        field: String,
+        value: String,
+    },
 
     /// Ground truth and IMU cannot be put on one time base (no overlap, too few poses, ...).
     #[error("{0}")]

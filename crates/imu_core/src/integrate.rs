@@ -80,7 +80,11 @@ struct Delta {
 
 impl Delta {
     fn identity() -> Self {
-        Delta { q: Quat::identity(), v: Vector3::zeros(), p: Vector3::zeros() }
+        Delta {
+            q: Quat::identity(),
+            v: Vector3::zeros(),
+            p: Vector3::zeros(),
+        }
     }
 
     /// One zero-order-hold step, in GTSAM's order and with its grouping of terms.
@@ -94,7 +98,12 @@ impl Delta {
     }
 
     fn increment(&self, dt: f64) -> Increment {
-        Increment { dq_wxyz: quat_to_wxyz(&self.q), dv: arr3(&self.v), dp: arr3(&self.p), dt }
+        Increment {
+            dq_wxyz: quat_to_wxyz(&self.q),
+            dv: arr3(&self.v),
+            dp: arr3(&self.p),
+            dt,
+        }
     }
 }
 
@@ -180,7 +189,10 @@ pub fn preintegrate(t_ns: &[i64], gyro: &[Vec3], acc: &[Vec3]) -> Result<Preinte
 pub fn preintegrate_dt(dt: &[f64], gyro: &[Vec3], acc: &[Vec3]) -> Result<Preintegrated> {
     check_lengths("dt", dt.len(), gyro, acc)?;
     if let Some(i) = dt.iter().position(|&h| !(h.is_finite() && h > 0.0)) {
-        return Err(ImuError::invalid(format!("dt[{i}] = {} is not a finite positive hold time", dt[i])));
+        return Err(ImuError::invalid(format!(
+            "dt[{i}] = {} is not a finite positive hold time",
+            dt[i]
+        )));
     }
     check_finite(gyro, acc)?;
     let mut out = Preintegrated::with_capacity(dt.len() + 1);
@@ -208,7 +220,10 @@ pub fn integrate_windows(
 ) -> Result<Labels> {
     check_imu(t_ns, gyro, acc)?;
     let max_h = horizons.iter().copied().max().unwrap_or(0);
-    if let Some(&bad) = starts.iter().find(|&&k| k.checked_add(max_h).is_none_or(|e| e >= t_ns.len())) {
+    if let Some(&bad) = starts
+        .iter()
+        .find(|&&k| k.checked_add(max_h).is_none_or(|e| e >= t_ns.len()))
+    {
         return Err(ImuError::invalid(format!(
             "window start {bad} + horizon {max_h} is past the sequence end ({} samples)",
             t_ns.len()
@@ -223,7 +238,15 @@ pub fn integrate_windows(
     let per_window: Vec<Vec<Increment>> = starts
         .par_iter()
         .map(|&k| {
-            let mut incs = vec![Increment { dq_wxyz: [1.0, 0.0, 0.0, 0.0], dv: [0.0; 3], dp: [0.0; 3], dt: 0.0 }; nh];
+            let mut incs = vec![
+                Increment {
+                    dq_wxyz: [1.0, 0.0, 0.0, 0.0],
+                    dv: [0.0; 3],
+                    dp: [0.0; 3],
+                    dt: 0.0
+                };
+                nh
+            ];
             integrate_from(t_ns, gyro, acc, k, max_h, |j, inc| {
                 for &h in &wanted[j] {
                     incs[h] = inc;
@@ -276,7 +299,15 @@ mod tests {
     fn one_stamp_gives_the_identity_row_only() {
         let p = preintegrate(&[5], &[[1.0, 2.0, 3.0]], &[[4.0, 5.0, 6.0]]).unwrap();
         assert_eq!(p.len(), 1);
-        assert_eq!(p.row(0).unwrap(), Increment { dq_wxyz: [1.0, 0.0, 0.0, 0.0], dv: [0.0; 3], dp: [0.0; 3], dt: 0.0 });
+        assert_eq!(
+            p.row(0).unwrap(),
+            Increment {
+                dq_wxyz: [1.0, 0.0, 0.0, 0.0],
+                dv: [0.0; 3],
+                dp: [0.0; 3],
+                dt: 0.0
+            }
+        );
         assert!(p.row(1).is_none());
     }
 
@@ -297,23 +328,38 @@ mod tests {
     fn rejects_bad_lengths_stamps_and_values() {
         let z = [0.0; 3];
         is_invalid(preintegrate(&[0, 1], &[z], &[z, z]), "gyro has 1");
-        is_invalid(preintegrate(&[0, 1, 1], &[z; 3], &[z; 3]), "t_ns[2] = 1 is not after t_ns[1]");
+        is_invalid(
+            preintegrate(&[0, 1, 1], &[z; 3], &[z; 3]),
+            "t_ns[2] = 1 is not after t_ns[1]",
+        );
         is_invalid(preintegrate(&[0, 2, 1], &[z; 3], &[z; 3]), "strictly increasing");
         is_invalid(preintegrate(&[0, 1], &[z, [0.0, f64::NAN, 0.0]], &[z; 2]), "gyro[1]");
-        is_invalid(preintegrate(&[0, 1], &[z; 2], &[[f64::INFINITY, 0.0, 0.0], z]), "acc[0]");
+        is_invalid(
+            preintegrate(&[0, 1], &[z; 2], &[[f64::INFINITY, 0.0, 0.0], z]),
+            "acc[0]",
+        );
         is_invalid(preintegrate_dt(&[0.1], &[z; 2], &[z; 2]), "dt has 1");
         is_invalid(preintegrate_dt(&[0.1, 0.0], &[z; 2], &[z; 2]), "dt[1]");
         is_invalid(preintegrate_dt(&[-0.1], &[z], &[z]), "dt[0]");
         is_invalid(preintegrate_dt(&[f64::NAN], &[z], &[z]), "dt[0]");
-        is_invalid(preintegrate_dt(&[0.1], &[z], &[[0.0, 0.0, f64::NEG_INFINITY]]), "acc[0]");
+        is_invalid(
+            preintegrate_dt(&[0.1], &[z], &[[0.0, 0.0, f64::NEG_INFINITY]]),
+            "acc[0]",
+        );
     }
 
     #[test]
     fn window_ranges_are_checked_without_overflow() {
         let z = [0.0; 3];
         let t = [0, 1, 2, 3];
-        is_invalid(integrate_windows(&t, &[z; 4], &[z; 4], &[1], &[3]), "window start 1 + horizon 3");
-        is_invalid(integrate_windows(&t, &[z; 4], &[z; 4], &[usize::MAX], &[1]), "past the sequence end");
+        is_invalid(
+            integrate_windows(&t, &[z; 4], &[z; 4], &[1], &[3]),
+            "window start 1 + horizon 3",
+        );
+        is_invalid(
+            integrate_windows(&t, &[z; 4], &[z; 4], &[usize::MAX], &[1]),
+            "past the sequence end",
+        );
         is_invalid(integrate_windows(&t, &[z; 4], &[z; 4], &[4], &[]), "window start 4");
         assert!(integrate_windows(&t, &[z; 4], &[z; 4], &[0], &[3]).is_ok());
     }
@@ -338,7 +384,12 @@ mod tests {
             let p = preintegrate(&t[k..], &gyro[k..], &acc[k..]).unwrap();
             for (h, &n) in hs.iter().enumerate() {
                 let e = w * hs.len() + h;
-                let got = Increment { dq_wxyz: l.dq_wxyz[e], dv: l.dv[e], dp: l.dp[e], dt: l.dt[e] };
+                let got = Increment {
+                    dq_wxyz: l.dq_wxyz[e],
+                    dv: l.dv[e],
+                    dp: l.dp[e],
+                    dt: l.dt[e],
+                };
                 assert_eq!(Some(got), p.row(n));
             }
         }

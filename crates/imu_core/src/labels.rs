@@ -68,7 +68,12 @@ fn increment_unchecked(seq: &Sequence, k: usize, j: usize, gravity: f64) -> Incr
     let (pk, pj, vk, vj) = (v3(seq.p[k]), v3(seq.p[j]), v3(seq.v[k]), v3(seq.v[j]));
     let dv = rk_t * (vj - vk - g * dt);
     let dp = rk_t * (pj - pk - vk * dt - g * (0.5 * dt * dt));
-    Increment { dq_wxyz: quat_to_wxyz(&(rk_t * qj)), dv: arr3(&dv), dp: arr3(&dp), dt }
+    Increment {
+        dq_wxyz: quat_to_wxyz(&(rk_t * qj)),
+        dv: arr3(&dv),
+        dp: arr3(&dp),
+        dt,
+    }
 }
 
 /// Labels of many windows, row-major: entry `w * horizons.len() + h` is window `w`, horizon `h`.
@@ -102,7 +107,10 @@ pub fn window_starts(len: usize, window: usize, stride: usize) -> Result<Vec<usi
 pub fn labels_at(seq: &Sequence, starts: &[usize], horizons: &[usize], gravity: f64) -> Result<Labels> {
     check_sequence(seq)?;
     let max_h = horizons.iter().copied().max().unwrap_or(0);
-    if let Some(&bad) = starts.iter().find(|&&k| k.checked_add(max_h).is_none_or(|e| e >= seq.len())) {
+    if let Some(&bad) = starts
+        .iter()
+        .find(|&&k| k.checked_add(max_h).is_none_or(|e| e >= seq.len()))
+    {
         return Err(ImuError::invalid(format!(
             "window start {bad} + horizon {max_h} is past the sequence end ({} samples)",
             seq.len()
@@ -111,7 +119,11 @@ pub fn labels_at(seq: &Sequence, starts: &[usize], horizons: &[usize], gravity: 
     let nh = horizons.len();
     let incs: Vec<Increment> = starts
         .par_iter()
-        .flat_map_iter(|&k| horizons.iter().map(move |&n| increment_unchecked(seq, k, k + n, gravity)))
+        .flat_map_iter(|&k| {
+            horizons
+                .iter()
+                .map(move |&n| increment_unchecked(seq, k, k + n, gravity))
+        })
         .collect();
     let mut out = Labels {
         starts: starts.to_vec(),
@@ -141,7 +153,13 @@ pub fn window_labels(seq: &Sequence, window: usize, stride: usize, fractions: &[
 /// All arrays of a sequence have its length.
 pub fn check_sequence(seq: &Sequence) -> Result<()> {
     let n = seq.t_ns.len();
-    let lens = [seq.gyro.len(), seq.acc.len(), seq.p.len(), seq.v.len(), seq.q_wxyz.len()];
+    let lens = [
+        seq.gyro.len(),
+        seq.acc.len(),
+        seq.p.len(),
+        seq.v.len(),
+        seq.q_wxyz.len(),
+    ];
     if lens.iter().any(|&l| l != n) {
         return Err(ImuError::invalid(format!(
             "sequence arrays differ in length: t_ns {n}, gyro/acc/p/v/q {lens:?}"

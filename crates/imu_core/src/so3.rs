@@ -60,7 +60,10 @@ pub fn exp(phi: &Vector3<f64>) -> Quat {
     let theta = theta2.sqrt();
     // sin(θ/2)/θ; its series 1/2 − θ²/48 + θ⁴/3840 is exact to double precision below 1e-4.
     let (s, c) = if theta < 1e-4 {
-        (0.5 - theta2 / 48.0 + theta2 * theta2 / 3840.0, 1.0 - theta2 / 8.0 + theta2 * theta2 / 384.0)
+        (
+            0.5 - theta2 / 48.0 + theta2 * theta2 / 3840.0,
+            1.0 - theta2 / 8.0 + theta2 * theta2 / 384.0,
+        )
     } else {
         ((0.5 * theta).sin() / theta, (0.5 * theta).cos())
     };
@@ -71,7 +74,11 @@ pub fn exp(phi: &Vector3<f64>) -> Quat {
 #[inline]
 pub fn log(q: &Quat) -> Vector3<f64> {
     let qq = q.quaternion();
-    let (w, xyz) = if qq.w < 0.0 { (-qq.w, -qq.imag()) } else { (qq.w, qq.imag()) };
+    let (w, xyz) = if qq.w < 0.0 {
+        (-qq.w, -qq.imag())
+    } else {
+        (qq.w, qq.imag())
+    };
     let n = xyz.norm();
     if n < 1e-8 {
         // θ = 2 atan2(n, w) ≈ 2n/w (1 − n²/(3w²)); the factor θ/n follows.

@@ -39,7 +39,10 @@ fn constant_force_without_rotation_is_exact_for_any_steps() {
         assert_eq!(p.dq_wxyz[j], [1.0, 0.0, 0.0, 0.0]);
         for (c, &ac) in a.iter().enumerate() {
             assert!((p.dv[j][c] - ac * s).abs() <= 1e-12 * ac.abs().max(1.0), "dv row {j}");
-            assert!((p.dp[j][c] - 0.5 * ac * s * s).abs() <= 1e-12 * ac.abs().max(1.0), "dp row {j}");
+            assert!(
+                (p.dp[j][c] - 0.5 * ac * s * s).abs() <= 1e-12 * ac.abs().max(1.0),
+                "dp row {j}"
+            );
         }
     }
 }
@@ -57,7 +60,10 @@ fn spin_z_discrete(w: f64, a: Vec3, dt: f64, n: usize) -> (Vec3, Vec3) {
     let sum_beta = ac * dt / (one - z) * (Complex::new(n as f64, 0.0) - (one - zn) / (one - z));
     let gamma = sum_beta * dt + beta * (0.5 * dt);
     let tt = n as f64 * dt;
-    ([beta.re, beta.im, a[2] * tt], [gamma.re, gamma.im, 0.5 * a[2] * tt * tt])
+    (
+        [beta.re, beta.im, a[2] * tt],
+        [gamma.re, gamma.im, 0.5 * a[2] * tt * tt],
+    )
 }
 
 /// The same in continuous time: Δβ(T) = a (e^{iwT} − 1)/(iw), Δγ(T) = a/(iw) ((e^{iwT} − 1)/(iw) − T).
@@ -67,7 +73,10 @@ fn spin_z_continuous(w: f64, a: Vec3, tt: f64) -> (Vec3, Vec3) {
     let e = (iw * tt).exp() - Complex::new(1.0, 0.0);
     let beta = ac * e / iw;
     let gamma = ac / iw * (e / iw - Complex::new(tt, 0.0));
-    ([beta.re, beta.im, a[2] * tt], [gamma.re, gamma.im, 0.5 * a[2] * tt * tt])
+    (
+        [beta.re, beta.im, a[2] * tt],
+        [gamma.re, gamma.im, 0.5 * a[2] * tt * tt],
+    )
 }
 
 #[test]
@@ -83,8 +92,16 @@ fn spin_about_z_with_constant_force_matches_the_geometric_sum_and_the_continuous
         let p = preintegrate(&t, &vec![[0.0, 0.0, w]; n + 1], &vec![a; n + 1]).unwrap();
         for j in (0..=n).step_by(n / 10) {
             let (db, dg) = spin_z_discrete(w, a, dt, j);
-            assert!(vec_err(p.dv[j], db) < 1e-11, "{rate} Hz row {j}: dv {:?} vs {db:?}", p.dv[j]);
-            assert!(vec_err(p.dp[j], dg) < 1e-11, "{rate} Hz row {j}: dp {:?} vs {dg:?}", p.dp[j]);
+            assert!(
+                vec_err(p.dv[j], db) < 1e-11,
+                "{rate} Hz row {j}: dv {:?} vs {db:?}",
+                p.dv[j]
+            );
+            assert!(
+                vec_err(p.dp[j], dg) < 1e-11,
+                "{rate} Hz row {j}: dp {:?} vs {dg:?}",
+                p.dp[j]
+            );
             let want_q = so3::exp(&Vector3::new(0.0, 0.0, w * j as f64 * dt));
             assert!(rot_err(p.dq_wxyz[j], quat_to_wxyz(&want_q)) < 1e-12);
         }
@@ -95,7 +112,10 @@ fn spin_about_z_with_constant_force_matches_the_geometric_sum_and_the_continuous
         cont_err.push(e);
     }
     let ratio = cont_err[0] / cont_err[1];
-    assert!((9.0..11.0).contains(&ratio), "error ratio 100 Hz / 1 kHz = {ratio}, expected ~10");
+    assert!(
+        (9.0..11.0).contains(&ratio),
+        "error ratio 100 Hz / 1 kHz = {ratio}, expected ~10"
+    );
 }
 
 #[test]
@@ -104,7 +124,15 @@ fn rows_cover_t0_to_tj_with_samples_before_j() {
     let (gyro, acc) = wiggly_imu(&t);
     let p = preintegrate(&t, &gyro, &acc).unwrap();
     assert_eq!(p.len(), t.len());
-    assert_eq!(row(&p, 0), Increment { dq_wxyz: [1.0, 0.0, 0.0, 0.0], dv: [0.0; 3], dp: [0.0; 3], dt: 0.0 });
+    assert_eq!(
+        row(&p, 0),
+        Increment {
+            dq_wxyz: [1.0, 0.0, 0.0, 0.0],
+            dv: [0.0; 3],
+            dp: [0.0; 3],
+            dt: 0.0
+        }
+    );
     for j in 1..t.len() {
         assert_eq!(p.dt[j], (t[j] - t[0]) as f64 * 1e-9);
         // Row j depends only on stamps ..=j and samples ..j: cut there and change the last sample.
@@ -150,7 +178,12 @@ fn windows_equal_preintegration_of_the_sliced_window() {
         let p = preintegrate(&t[k..=k + window], &gyro[k..=k + window], &acc[k..=k + window]).unwrap();
         for (h, &n) in hs.iter().enumerate() {
             let e = w * hs.len() + h;
-            let got = Increment { dq_wxyz: l.dq_wxyz[e], dv: l.dv[e], dp: l.dp[e], dt: l.dt[e] };
+            let got = Increment {
+                dq_wxyz: l.dq_wxyz[e],
+                dv: l.dv[e],
+                dp: l.dp[e],
+                dt: l.dt[e],
+            };
             assert_eq!(got, row(&p, n), "window {k} horizon {n}");
         }
     }
@@ -182,7 +215,11 @@ fn quaternion_norm_stays_at_one_without_renormalising() {
     let t: Vec<i64> = (0..n as i64).map(|i| i * 1_000_000).collect();
     let (gyro, acc) = wiggly_imu(&t);
     let p = preintegrate(&t, &gyro, &acc).unwrap();
-    let worst = p.dq_wxyz.iter().map(|q| (q.iter().map(|x| x * x).sum::<f64>().sqrt() - 1.0).abs()).fold(0.0, f64::max);
+    let worst = p
+        .dq_wxyz
+        .iter()
+        .map(|q| (q.iter().map(|x| x * x).sum::<f64>().sqrt() - 1.0).abs())
+        .fold(0.0, f64::max);
     assert!(worst < 1e-12, "norm drift {worst}");
 }
 
@@ -218,9 +255,15 @@ fn integrating_the_true_imu_signal_reproduces_the_labels() {
     assert!(fast.2 < 1.2e-3, "position {fast:?}");
     for (s, f) in [(slow.0, fast.0), (slow.1, fast.1), (slow.2, fast.2)] {
         let ratio = s / f;
-        assert!((9.0..11.0).contains(&ratio), "100 Hz / 1 kHz error ratio {ratio} ({slow:?} vs {fast:?})");
+        assert!(
+            (9.0..11.0).contains(&ratio),
+            "100 Hz / 1 kHz error ratio {ratio} ({slow:?} vs {fast:?})"
+        );
     }
     // Jittered stamps change nothing in the orders of magnitude.
     let jit = oracle_errors(1000, true);
-    assert!(jit.0 < 2.0 * fast.0 && jit.1 < 2.0 * fast.1 && jit.2 < 2.0 * fast.2, "{jit:?} vs {fast:?}");
+    assert!(
+        jit.0 < 2.0 * fast.0 && jit.1 < 2.0 * fast.1 && jit.2 < 2.0 * fast.2,
+        "{jit:?} vs {fast:?}"
+    );
 }

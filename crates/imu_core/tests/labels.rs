@@ -55,7 +55,10 @@ fn window_starts_cover_exactly_the_windows_that_fit() {
 fn labels_at_rejects_windows_past_the_end_without_overflowing() {
     let seq = small_seq(20);
     assert!(labels_at(&seq, &[0, 10], &[9], GRAVITY).is_ok());
-    invalid(labels_at(&seq, &[0, 10], &[10, 2], GRAVITY), "window start 10 + horizon 10");
+    invalid(
+        labels_at(&seq, &[0, 10], &[10, 2], GRAVITY),
+        "window start 10 + horizon 10",
+    );
     invalid(labels_at(&seq, &[usize::MAX], &[1], GRAVITY), "past the sequence end");
     invalid(labels_at(&seq, &[20], &[], GRAVITY), "window start 20");
     let empty = labels_at(&seq, &[], &[3], GRAVITY).unwrap();
@@ -115,7 +118,10 @@ fn window_labels_are_row_major_over_windows_and_horizons() {
         for (h, &n) in l.horizons.iter().enumerate() {
             let e = w * l.horizons.len() + h;
             let inc = increment(&seq, k, n, GRAVITY).unwrap();
-            assert_eq!((l.dq_wxyz[e], l.dv[e], l.dp[e], l.dt[e]), (inc.dq_wxyz, inc.dv, inc.dp, inc.dt));
+            assert_eq!(
+                (l.dq_wxyz[e], l.dv[e], l.dp[e], l.dt[e]),
+                (inc.dq_wxyz, inc.dv, inc.dp, inc.dt)
+            );
             assert_eq!(l.dt[e], (seq.t_ns[k + n] - seq.t_ns[k]) as f64 * 1e-9);
         }
     }

@@ -45,14 +45,24 @@ pub fn out2<'py, const K: usize>(py: Python<'py>, v: Vec<[f64; K]>) -> PyResult<
 }
 
 /// Flat buffer → (a, b), moving it.
-pub fn out2_flat<'py, T: numpy::Element>(py: Python<'py>, v: Vec<T>, a: usize, b: usize) -> PyResult<Bound<'py, PyArray2<T>>> {
+pub fn out2_flat<'py, T: numpy::Element>(
+    py: Python<'py>,
+    v: Vec<T>,
+    a: usize,
+    b: usize,
+) -> PyResult<Bound<'py, PyArray2<T>>> {
     Array2::from_shape_vec((a, b), v)
         .map(|x| x.into_pyarray(py))
         .map_err(|e| shape_err(e.to_string()))
 }
 
 /// Rows of K laid out as (a, b) → (a, b, K), moving the buffer.
-pub fn out3<'py, const K: usize>(py: Python<'py>, v: Vec<[f64; K]>, a: usize, b: usize) -> PyResult<Bound<'py, PyArray3<f64>>> {
+pub fn out3<'py, const K: usize>(
+    py: Python<'py>,
+    v: Vec<[f64; K]>,
+    a: usize,
+    b: usize,
+) -> PyResult<Bound<'py, PyArray3<f64>>> {
     let flat: Vec<f64> = v.into_flattened();
     Array3::from_shape_vec((a, b, K), flat)
         .map(|x| x.into_pyarray(py))
@@ -60,7 +70,13 @@ pub fn out3<'py, const K: usize>(py: Python<'py>, v: Vec<[f64; K]>, a: usize, b:
 }
 
 /// Flat buffer → (a, b, c), moving it.
-pub fn out3_flat<'py>(py: Python<'py>, v: Vec<f64>, a: usize, b: usize, c: usize) -> PyResult<Bound<'py, PyArray3<f64>>> {
+pub fn out3_flat<'py>(
+    py: Python<'py>,
+    v: Vec<f64>,
+    a: usize,
+    b: usize,
+    c: usize,
+) -> PyResult<Bound<'py, PyArray3<f64>>> {
     Array3::from_shape_vec((a, b, c), v)
         .map(|x| x.into_pyarray(py))
         .map_err(|e| shape_err(e.to_string()))

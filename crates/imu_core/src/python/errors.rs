@@ -17,23 +17,67 @@ fn build(py: Python<'_>, err: &ImuError) -> PyResult<PyErr> {
     let msg = err.to_string();
     let (class, path, line, column, field) = match err {
         ImuError::NotFound { path } => {
-            return Ok(PyFileNotFoundError::new_err((2, "No such file or directory", path.display().to_string())))
+            return Ok(PyFileNotFoundError::new_err((
+                2,
+                "No such file or directory",
+                path.display().to_string(),
+            )))
         }
         ImuError::Io { .. } => return Ok(PyOSError::new_err(msg)),
         ImuError::Header { path, line, .. } => ("HeaderError", Some(path), Some(*line), None, None),
         ImuError::ColumnCount { path, line, .. } => ("ColumnCountError", Some(path), Some(*line), None, None),
-        ImuError::NotNumeric { path, line, column, field, .. } => {
-            ("NotNumericError", Some(path), Some(*line), Some(*column), Some(field.as_str()))
-        }
-        ImuError::NonFinite { path, line, column, field, .. } => {
-            ("NonFiniteError", Some(path), Some(*line), Some(*column), Some(field.as_str()))
-        }
-        ImuError::Timestamp { path, line, column, field, .. } => {
-            ("TimestampError", Some(path), Some(*line), Some(*column), Some(field.as_str()))
-        }
-        ImuError::FloatTimestamp { path, line, column, field, .. } => {
-            ("FloatTimestampError", Some(path), Some(*line), Some(*column), Some(field.as_str()))
-        }
+        ImuError::NotNumeric {
+            path,
+            line,
+            column,
+            field,
+            ..
+        } => (
+            "NotNumericError",
+            Some(path),
+            Some(*line),
+            Some(*column),
+            Some(field.as_str()),
+        ),
+        ImuError::NonFinite {
+            path,
+            line,
+            column,
+            field,
+            ..
+        } => (
+            "NonFiniteError",
+            Some(path),
+            Some(*line),
+            Some(*column),
+            Some(field.as_str()),
+        ),
+        ImuError::Timestamp {
+            path,
+            line,
+            column,
+            field,
+            ..
+        } => (
+            "TimestampError",
+            Some(path),
+            Some(*line),
+            Some(*column),
+            Some(field.as_str()),
+        ),
+        ImuError::FloatTimestamp {
+            path,
+            line,
+            column,
+            field,
+            ..
+        } => (
+            "FloatTimestampError",
+            Some(path),
+            Some(*line),
+            Some(*column),
+            Some(field.as_str()),
+        ),
         ImuError::Alignment(_) => ("AlignmentError", None, None, None, None),
         ImuError::InvalidInput(_) => ("InvalidInputError", None, None, None, None),
     };

@@ -11,10 +11,17 @@ use crate::python::arrays::{out1, out2, rows, slice1};
 use crate::python::errors::to_py;
 use crate::types::{GroundTruth, ImuSamples};
 
-type ImuArrays<'py> = (Bound<'py, PyArray1<i64>>, Bound<'py, PyArray2<f64>>, Bound<'py, PyArray2<f64>>);
+type ImuArrays<'py> = (
+    Bound<'py, PyArray1<i64>>,
+    Bound<'py, PyArray2<f64>>,
+    Bound<'py, PyArray2<f64>>,
+);
 
 fn opts(allow_float_timestamps: bool) -> ReadOptions {
-    ReadOptions { allow_float_timestamps, ..Default::default() }
+    ReadOptions {
+        allow_float_timestamps,
+        ..Default::default()
+    }
 }
 
 fn imu_out(py: Python<'_>, s: ImuSamples) -> PyResult<ImuArrays<'_>> {
@@ -35,7 +42,9 @@ fn gt_out(py: Python<'_>, g: GroundTruth) -> PyResult<Bound<'_, PyDict>> {
 #[pyfunction]
 #[pyo3(signature = (path, allow_float_timestamps=false))]
 fn read_asl_imu(py: Python<'_>, path: PathBuf, allow_float_timestamps: bool) -> PyResult<ImuArrays<'_>> {
-    let s = py.allow_threads(|| asl::read_imu(&path, &opts(allow_float_timestamps))).map_err(to_py)?;
+    let s = py
+        .allow_threads(|| asl::read_imu(&path, &opts(allow_float_timestamps)))
+        .map_err(to_py)?;
     imu_out(py, s)
 }
 
@@ -59,27 +68,34 @@ fn write_asl_imu(
         gyro: rows::<3>(&gyro, "gyro")?.to_vec(),
         acc: rows::<3>(&acc, "acc")?.to_vec(),
     };
-    py.allow_threads(|| asl::write_imu(&path, &s, header.as_deref())).map_err(to_py)
+    py.allow_threads(|| asl::write_imu(&path, &s, header.as_deref()))
+        .map_err(to_py)
 }
 
 #[pyfunction]
 #[pyo3(signature = (path, allow_float_timestamps=false))]
 fn read_asl_state(py: Python<'_>, path: PathBuf, allow_float_timestamps: bool) -> PyResult<Bound<'_, PyDict>> {
-    let g = py.allow_threads(|| asl::read_state(&path, &opts(allow_float_timestamps))).map_err(to_py)?;
+    let g = py
+        .allow_threads(|| asl::read_state(&path, &opts(allow_float_timestamps)))
+        .map_err(to_py)?;
     gt_out(py, g)
 }
 
 #[pyfunction]
 #[pyo3(signature = (path, allow_float_timestamps=false))]
 fn read_asl_pose(py: Python<'_>, path: PathBuf, allow_float_timestamps: bool) -> PyResult<Bound<'_, PyDict>> {
-    let g = py.allow_threads(|| asl::read_pose(&path, &opts(allow_float_timestamps))).map_err(to_py)?;
+    let g = py
+        .allow_threads(|| asl::read_pose(&path, &opts(allow_float_timestamps)))
+        .map_err(to_py)?;
     gt_out(py, g)
 }
 
 #[pyfunction]
 #[pyo3(signature = (path, allow_float_timestamps=false))]
 fn read_tum(py: Python<'_>, path: PathBuf, allow_float_timestamps: bool) -> PyResult<Bound<'_, PyDict>> {
-    let g = py.allow_threads(|| tum::read_tum(&path, &opts(allow_float_timestamps))).map_err(to_py)?;
+    let g = py
+        .allow_threads(|| tum::read_tum(&path, &opts(allow_float_timestamps)))
+        .map_err(to_py)?;
     gt_out(py, g)
 }
 
@@ -103,14 +119,18 @@ fn write_tum(
 #[pyfunction]
 #[pyo3(signature = (path, allow_float_timestamps=false))]
 fn read_kaist_imu(py: Python<'_>, path: PathBuf, allow_float_timestamps: bool) -> PyResult<ImuArrays<'_>> {
-    let s = py.allow_threads(|| kaist::read_xsens_imu(&path, &opts(allow_float_timestamps))).map_err(to_py)?;
+    let s = py
+        .allow_threads(|| kaist::read_xsens_imu(&path, &opts(allow_float_timestamps)))
+        .map_err(to_py)?;
     imu_out(py, s)
 }
 
 #[pyfunction]
 #[pyo3(signature = (path, allow_float_timestamps=false))]
 fn read_kaist_pose(py: Python<'_>, path: PathBuf, allow_float_timestamps: bool) -> PyResult<Bound<'_, PyDict>> {
-    let g = py.allow_threads(|| kaist::read_global_pose(&path, &opts(allow_float_timestamps))).map_err(to_py)?;
+    let g = py
+        .allow_threads(|| kaist::read_global_pose(&path, &opts(allow_float_timestamps)))
+        .map_err(to_py)?;
     gt_out(py, g)
 }
 

@@ -55,7 +55,11 @@ fn align<'py>(
         v: v.as_ref().map(|v| rows::<3>(v, "v").map(|r| r.to_vec())).transpose()?,
         ..Default::default()
     };
-    let opts = AlignOptions { max_gap_ns, min_segment_samples, velocity_half_window };
+    let opts = AlignOptions {
+        max_gap_ns,
+        min_segment_samples,
+        velocity_half_window,
+    };
     let (seqs, report) = py.allow_threads(|| align::align(&imu, &gt, &opts)).map_err(to_py)?;
     let list = PyList::empty(py);
     for s in seqs {
@@ -70,7 +74,11 @@ fn align<'py>(
     r.set_item("gaps_ns", report.gaps.clone())?;
     r.set_item(
         "segments_ns",
-        report.segments.iter().map(|s| (s.start_ns, s.end_ns, s.samples)).collect::<Vec<_>>(),
+        report
+            .segments
+            .iter()
+            .map(|s| (s.start_ns, s.end_ns, s.samples))
+            .collect::<Vec<_>>(),
     )?;
     r.set_item("velocity_derived", report.velocity_derived)?;
     Ok((list, r))
@@ -98,7 +106,11 @@ fn preintegrate<'py>(
     gyro: PyReadonlyArray2<'py, f64>,
     acc: PyReadonlyArray2<'py, f64>,
 ) -> PyResult<(Arr2<'py>, Arr2<'py>, Arr2<'py>, Arr1<'py, f64>)> {
-    let (t, g, a) = (slice1(&t_ns, "t_ns")?, rows::<3>(&gyro, "gyro")?, rows::<3>(&acc, "acc")?);
+    let (t, g, a) = (
+        slice1(&t_ns, "t_ns")?,
+        rows::<3>(&gyro, "gyro")?,
+        rows::<3>(&acc, "acc")?,
+    );
     let r = py.allow_threads(|| integrate::preintegrate(t, g, a)).map_err(to_py)?;
     Ok((out2(py, r.dq_wxyz)?, out2(py, r.dv)?, out2(py, r.dp)?, out1(py, r.dt)))
 }
@@ -106,8 +118,14 @@ fn preintegrate<'py>(
 fn labels_dict(py: Python<'_>, l: Labels) -> PyResult<Bound<'_, PyDict>> {
     let (nw, nh) = (l.starts.len(), l.horizons.len());
     let d = PyDict::new(py);
-    d.set_item("starts", out1(py, l.starts.iter().map(|&s| s as u64).collect::<Vec<u64>>()))?;
-    d.set_item("horizons", out1(py, l.horizons.iter().map(|&s| s as u64).collect::<Vec<u64>>()))?;
+    d.set_item(
+        "starts",
+        out1(py, l.starts.iter().map(|&s| s as u64).collect::<Vec<u64>>()),
+    )?;
+    d.set_item(
+        "horizons",
+        out1(py, l.horizons.iter().map(|&s| s as u64).collect::<Vec<u64>>()),
+    )?;
     d.set_item("dq_wxyz", out3(py, l.dq_wxyz, nw, nh)?)?;
     d.set_item("dv", out3(py, l.dv, nw, nh)?)?;
     d.set_item("dp", out3(py, l.dp, nw, nh)?)?;
@@ -153,7 +171,11 @@ fn integrate_windows<'py>(
     starts: PyReadonlyArray1<'py, u64>,
     horizons: PyReadonlyArray1<'py, u64>,
 ) -> PyResult<Bound<'py, PyDict>> {
-    let (t, g, a) = (slice1(&t_ns, "t_ns")?, rows::<3>(&gyro, "gyro")?, rows::<3>(&acc, "acc")?);
+    let (t, g, a) = (
+        slice1(&t_ns, "t_ns")?,
+        rows::<3>(&gyro, "gyro")?,
+        rows::<3>(&acc, "acc")?,
+    );
     let starts: Vec<usize> = slice1(&starts, "starts")?.iter().map(|&s| s as usize).collect();
     let horizons: Vec<usize> = slice1(&horizons, "horizons")?.iter().map(|&s| s as usize).collect();
     let l = py
@@ -190,7 +212,10 @@ fn batch_dict(py: Python<'_>, b: Batch, window: usize) -> PyResult<Bound<'_, PyD
     d.set_item("bias", out3_flat(py, b.bias, nb, window, 6)?)?;
     d.set_item("seq_index", out1(py, b.seq_index))?;
     d.set_item("start", out1(py, b.start))?;
-    d.set_item("horizons", out1(py, b.horizons.iter().map(|&h| h as u64).collect::<Vec<u64>>()))?;
+    d.set_item(
+        "horizons",
+        out1(py, b.horizons.iter().map(|&h| h as u64).collect::<Vec<u64>>()),
+    )?;
     Ok(d)
 }
 
@@ -208,8 +233,7 @@ impl SequenceSet {
                 v: rows::<3>(v, "v")?.to_vec(),
                 q_wxyz: rows::<4>(q, "q_wxyz")?.to_vec(),
             };
-            labels::check_sequence(&s)
-                .map_err(|e| to_py(ImuError::invalid(format!("sequence {i}: {e}"))))?;
+            labels::check_sequence(&s).map_err(|e| to_py(ImuError::invalid(format!("sequence {i}: {e}"))))?;
             seqs.push(s);
         }
         Ok(SequenceSet { seqs })
@@ -251,7 +275,9 @@ impl SequenceSet {
                 acc_bias_walk,
             },
         };
-        let b = py.allow_threads(|| batch::make_batch(&self.seqs, &cfg, seed)).map_err(to_py)?;
+        let b = py
+            .allow_threads(|| batch::make_batch(&self.seqs, &cfg, seed))
+            .map_err(to_py)?;
         batch_dict(py, b, window)
     }
 
