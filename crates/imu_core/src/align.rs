@@ -124,7 +124,7 @@ pub fn derive_velocity(t_ns: &[i64], p: &[Vec3], half_window: usize) -> Vec<Vec3
                 if lo == 0 {
                     hi = 2;
                 } else {
-                    lo = hi - 2;
+                    lo = hi.saturating_sub(2);
                 }
             }
             fit_slope(&t_ns[lo..=hi], &p[lo..=hi], t_ns[i], p[i])
