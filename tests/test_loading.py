@@ -37,7 +37,7 @@ def test_full_euroc_with_separate_groundtruth(shared):
     # IMU rows before the first and after the last pose are dropped and counted.
     r = rec.report
     kept = sum(len(s) for s in rec.segments)
-    assert kept + r["dropped_before"] + r["dropped_after"] + r["dropped_in_gaps"] + r.get("dropped_short_segments", 0) == 29120
+    assert kept + r["dropped_before"] + r["dropped_after"] + r["dropped_in_gaps"] + r["dropped_short"] == 29120
 
 
 def test_blackbird_loads_with_its_own_velocity(shared):

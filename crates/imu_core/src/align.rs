@@ -60,7 +60,11 @@ impl Default for AlignOptions {
     ///   two error terms balance near this width; halving or doubling it makes one of them
     ///   dominate.
     fn default() -> Self {
-        AlignOptions { max_gap_ns: 50_000_000, min_segment_samples: 2, velocity_half_window: 4 }
+        AlignOptions {
+            max_gap_ns: 50_000_000,
+            min_segment_samples: 2,
+            velocity_half_window: 4,
+        }
     }
 }
 
@@ -207,7 +211,10 @@ pub fn align(imu: &ImuSamples, gt: &GroundTruth, opts: &AlignOptions) -> Result<
         )));
     }
 
-    let mut report = AlignReport { imu_samples: ti.len(), ..AlignReport::default() };
+    let mut report = AlignReport {
+        imu_samples: ti.len(),
+        ..AlignReport::default()
+    };
     report.dropped_before = ti.partition_point(|&t| t < g0);
     report.dropped_after = ti.len() - ti.partition_point(|&t| t <= g1);
 
@@ -244,7 +251,11 @@ pub fn align(imu: &ImuSamples, gt: &GroundTruth, opts: &AlignOptions) -> Result<
             None => derive_velocity(&tg[a..=b], &gt.p[a..=b], opts.velocity_half_window),
         };
         let seq = interpolate_segment(imu, lo, hi, &tg[a..=b], &gt.p[a..=b], &v_seg, &gt.q_wxyz[a..=b]);
-        report.segments.push(Segment { start_ns: ti[lo], end_ns: ti[hi - 1], samples: count });
+        report.segments.push(Segment {
+            start_ns: ti[lo],
+            end_ns: ti[hi - 1],
+            samples: count,
+        });
         seqs.push(seq);
     }
     report.dropped_in_gaps = ti.len() - report.dropped_before - report.dropped_after - covered;
@@ -269,7 +280,10 @@ pub fn align(imu: &ImuSamples, gt: &GroundTruth, opts: &AlignOptions) -> Result<
 
 fn check_inputs(imu: &ImuSamples, gt: &GroundTruth, opts: &AlignOptions) -> Result<()> {
     if opts.max_gap_ns <= 0 {
-        return Err(ImuError::invalid(format!("max_gap_ns must be positive, got {}", opts.max_gap_ns)));
+        return Err(ImuError::invalid(format!(
+            "max_gap_ns must be positive, got {}",
+            opts.max_gap_ns
+        )));
     }
     if opts.min_segment_samples < 2 {
         return Err(ImuError::invalid(format!(
@@ -354,10 +368,19 @@ fn interpolate_segment(
         // tg[j] < t < tg[j + 1]; j + 1 exists because t ≤ tg[last] and t ≠ tg[j].
         let k = (j + 1).min(tg.len() - 1);
         let h_ns = tg[k] - tg[j];
-        let s = if h_ns > 0 { (t - tg[j]) as f64 / h_ns as f64 } else { 0.0 };
+        let s = if h_ns > 0 {
+            (t - tg[j]) as f64 / h_ns as f64
+        } else {
+            0.0
+        };
         let h = h_ns as f64 * 1e-9;
         let (s2, s3) = (s * s, s * s * s);
-        let (h00, h10, h01, h11) = (2.0 * s3 - 3.0 * s2 + 1.0, s3 - 2.0 * s2 + s, 3.0 * s2 - 2.0 * s3, s3 - s2);
+        let (h00, h10, h01, h11) = (
+            2.0 * s3 - 3.0 * s2 + 1.0,
+            s3 - 2.0 * s2 + s,
+            3.0 * s2 - 2.0 * s3,
+            s3 - s2,
+        );
         let mut pi = [0.0; 3];
         let mut vi = [0.0; 3];
         for a in 0..3 {

@@ -20,7 +20,7 @@ use rand_distr::StandardNormal;
 use rayon::prelude::*;
 
 use crate::error::{ImuError, Result};
-use crate::labels::{check_sequence, horizons, increment, window_starts};
+use crate::labels::{check_sequence, horizons, increment_unchecked, window_starts};
 use crate::types::{QuatWxyz, Sequence, Vec3};
 
 /// Augmentation strengths. `Default` is all zero: no augmentation.
@@ -52,7 +52,9 @@ impl AugmentConfig {
         ];
         for (name, x) in fields {
             if !(x.is_finite() && x >= 0.0) {
-                return Err(ImuError::invalid(format!("augment.{name} = {x} must be finite and ≥ 0")));
+                return Err(ImuError::invalid(format!(
+                    "augment.{name} = {x} must be finite and ≥ 0"
+                )));
             }
         }
         Ok(())
@@ -134,11 +136,18 @@ pub fn make_batch(seqs: &[Sequence], cfg: &BatchConfig, seed: u64) -> Result<Bat
         return Err(too_short(seqs, w));
     }
     let mut out = Batch::alloc(cfg.batch_size, w, hs);
-    fill_all(&mut out, w, |_b, rng| {
-        let u = rng.random_range(0..total);
-        let s = cum.partition_point(|&c| c <= u).saturating_sub(1);
-        (s, (u - cum[s]) as usize)
-    }, seqs, cfg.gravity, Some((&cfg.augment, seed)));
+    fill_all(
+        &mut out,
+        w,
+        |_b, rng| {
+            let u = rng.random_range(0..total);
+            let s = cum.partition_point(|&c| c <= u).saturating_sub(1);
+            (s, (u - cum[s]) as usize)
+        },
+        seqs,
+        cfg.gravity,
+        Some((&cfg.augment, seed)),
+    );
     Ok(out)
 }
 
@@ -182,13 +191,18 @@ fn check_common(seqs: &[Sequence], window: usize, fractions: &[f64], gravity: f6
         return Err(ImuError::invalid("no sequences to draw windows from"));
     }
     if fractions.is_empty() {
-        return Err(ImuError::invalid("fractions is empty: at least one label horizon is needed"));
+        return Err(ImuError::invalid(
+            "fractions is empty: at least one label horizon is needed",
+        ));
     }
     if !gravity.is_finite() {
         return Err(ImuError::invalid(format!("gravity = {gravity} is not finite")));
     }
     if u32::try_from(seqs.len()).is_err() {
-        return Err(ImuError::invalid(format!("{} sequences is more than seq_index can hold", seqs.len())));
+        return Err(ImuError::invalid(format!(
+            "{} sequences is more than seq_index can hold",
+            seqs.len()
+        )));
     }
     let hs = horizons(window, fractions)?;
     for (i, s) in seqs.iter().enumerate() {
@@ -250,7 +264,8 @@ where
                 augment(imu, bias, dt, a, &mut rng);
             }
             for (j, &n) in hs.iter().enumerate() {
-                let inc = increment(seq, k, n, gravity);
+                // Ranges were checked when the sequences were validated and the start drawn.
+                let inc = increment_unchecked(seq, k, k + n, gravity);
                 dq[j] = inc.dq_wxyz;
                 dv[j] = inc.dv;
                 dp[j] = inc.dp;

@@ -58,7 +58,7 @@ pub fn increment(seq: &Sequence, k: usize, n: usize, gravity: f64) -> Result<Inc
 }
 
 /// `increment` for indices the caller has already checked (k ≤ j < len).
-fn increment_unchecked(seq: &Sequence, k: usize, j: usize, gravity: f64) -> Increment {
+pub(crate) fn increment_unchecked(seq: &Sequence, k: usize, j: usize, gravity: f64) -> Increment {
     let g = v3(gravity_vector(gravity));
     // i128: stamps from arbitrary epochs can be far enough apart to overflow i64.
     let dt = (seq.t_ns[j] as i128 - seq.t_ns[k] as i128) as f64 * 1e-9;

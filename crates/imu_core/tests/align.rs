@@ -76,11 +76,7 @@ fn imu_stamps_on_gt_stamps_reproduce_gt_exactly() {
         assert_eq!(rep.velocity_derived, !with_v);
         let v_ref = match &gt.v {
             Some(v) => v.clone(),
-            None => derive_velocity(
-                &gt.t_ns,
-                &gt.p,
-                AlignOptions::default().velocity_half_window,
-            ),
+            None => derive_velocity(&gt.t_ns, &gt.p, AlignOptions::default().velocity_half_window),
         };
         let s = &seqs[0];
         assert_eq!(s.t_ns, imu_t);
@@ -100,10 +96,7 @@ fn smooth_trajectory_is_interpolated_exactly_between_uneven_gt_stamps() {
     let gt = gt_on(&gt_t, true);
     // IMU at 4 ms from 1 ms after the first GT stamp: almost never on a GT stamp.
     let end = *gt_t.last().unwrap();
-    let imu_t: Vec<i64> = (0..)
-        .map(|i| T0 + MS + i * 4 * MS)
-        .take_while(|&t| t <= end)
-        .collect();
+    let imu_t: Vec<i64> = (0..).map(|i| T0 + MS + i * 4 * MS).take_while(|&t| t <= end).collect();
     let (seqs, rep) = align(&imu_on(&imu_t), &gt, &AlignOptions::default()).unwrap();
     assert_eq!(seqs.len(), 1);
     assert_eq!(rep.kept(), imu_t.len());
@@ -129,12 +122,7 @@ fn velocity_is_interpolated_linearly_not_by_the_hermite_derivative() {
         bias_gyro: None,
         bias_acc: None,
     };
-    let (seqs, _) = align(
-        &imu_on(&[T0, T0 + 5 * MS, T0 + 10 * MS]),
-        &gt,
-        &AlignOptions::default(),
-    )
-    .unwrap();
+    let (seqs, _) = align(&imu_on(&[T0, T0 + 5 * MS, T0 + 10 * MS]), &gt, &AlignOptions::default()).unwrap();
     assert_eq!(seqs[0].v[1], [1.0, 0.0, 0.0]);
 }
 
@@ -167,9 +155,7 @@ fn derive_velocity_smooths_position_noise() {
     let p: Vec<Vec3> = t
         .iter()
         .map(|_| {
-            x = x
-                .wrapping_mul(6364136223846793005)
-                .wrapping_add(1442695040888963407);
+            x = x.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
             let u = (x >> 11) as f64 / (1u64 << 53) as f64 - 0.5;
             [2e-4 * u, 0.0, 0.0]
         })
@@ -179,9 +165,7 @@ fn derive_velocity_smooths_position_noise() {
         (v[10..1990].iter().map(|v| v[0] * v[0]).sum::<f64>() / 1980.0).sqrt()
     };
     let (r1, r4) = (rms(1), rms(4));
-    println!(
-        "velocity noise from 0.1 mm position noise: ±1 sample {r1:.4} m/s, ±4 samples {r4:.4} m/s"
-    );
+    println!("velocity noise from 0.1 mm position noise: ±1 sample {r1:.4} m/s, ±4 samples {r4:.4} m/s");
     // Theory: 1/√2 vs 1/√60 times σ/Δt, a ratio of 5.5.
     assert!(r1 / r4 > 4.0, "{r1} vs {r4}");
 }
@@ -203,16 +187,10 @@ fn gaps_split_the_ground_truth_and_every_dropped_sample_is_counted() {
     assert_eq!(rep.dropped_short, 0);
     assert_eq!(
         rep.gaps,
-        vec![
-            (T0 + 1000 * MS, T0 + 1200 * MS),
-            (T0 + 2000 * MS, T0 + 2500 * MS)
-        ]
+        vec![(T0 + 1000 * MS, T0 + 1200 * MS), (T0 + 2000 * MS, T0 + 2500 * MS)]
     );
     assert_eq!(seqs.len(), 2);
-    assert_eq!(
-        (rep.segments[0].start_ns, rep.segments[0].end_ns),
-        (T0, T0 + 1000 * MS)
-    );
+    assert_eq!((rep.segments[0].start_ns, rep.segments[0].end_ns), (T0, T0 + 1000 * MS));
     assert_eq!(
         (rep.segments[1].start_ns, rep.segments[1].end_ns),
         (T0 + 1200 * MS, T0 + 2000 * MS)
@@ -276,10 +254,7 @@ fn unusable_inputs_give_clear_errors() {
     }
     let mut bad_imu = imu_on(&gt_t);
     bad_imu.acc.pop();
-    assert!(matches!(
-        align(&bad_imu, &gt, &opts),
-        Err(ImuError::InvalidInput(_))
-    ));
+    assert!(matches!(align(&bad_imu, &gt, &opts), Err(ImuError::InvalidInput(_))));
     let mut bad_gt = gt.clone();
     bad_gt.v.as_mut().unwrap().pop();
     assert!(matches!(
@@ -288,10 +263,7 @@ fn unusable_inputs_give_clear_errors() {
     ));
     let mut unsorted = imu_on(&gt_t);
     unsorted.t_ns.swap(3, 4);
-    assert!(matches!(
-        align(&unsorted, &gt, &opts),
-        Err(ImuError::InvalidInput(_))
-    ));
+    assert!(matches!(align(&unsorted, &gt, &opts), Err(ImuError::InvalidInput(_))));
     assert!(matches!(
         align(&imu_on(&[]), &gt, &opts),
         Err(ImuError::InvalidInput(_))
@@ -381,11 +353,7 @@ fn euroc_mh01_aligns_over_the_whole_ground_truth_span() {
     );
     assert!(rep.velocity_derived);
     assert_eq!(
-        rep.kept()
-            + rep.dropped_before
-            + rep.dropped_after
-            + rep.dropped_in_gaps
-            + rep.dropped_short,
+        rep.kept() + rep.dropped_before + rep.dropped_after + rep.dropped_in_gaps + rep.dropped_short,
         imu.len()
     );
     let (g0, g1) = (gt.t_ns[0], *gt.t_ns.last().unwrap());

@@ -20,14 +20,8 @@ fn sequence(n: usize, phase: f64) -> Sequence {
     }
     let s = |t: i64| (t - T0) as f64 * 1e-9;
     Sequence {
-        gyro: t_ns
-            .iter()
-            .map(|&t| [(s(t) + phase).sin(), 0.2, -0.1 * s(t)])
-            .collect(),
-        acc: t_ns
-            .iter()
-            .map(|&t| [0.3, (2.0 * s(t) + phase).cos(), 9.81])
-            .collect(),
+        gyro: t_ns.iter().map(|&t| [(s(t) + phase).sin(), 0.2, -0.1 * s(t)]).collect(),
+        acc: t_ns.iter().map(|&t| [0.3, (2.0 * s(t) + phase).cos(), 9.81]).collect(),
         p: t_ns.iter().map(|&t| [s(t) * s(t), phase, -s(t)]).collect(),
         v: t_ns.iter().map(|&t| [2.0 * s(t), 0.0, -1.0]).collect(),
         q_wxyz: t_ns
@@ -93,7 +87,7 @@ fn check_raw_and_labels(b: &Batch, seqs: &[Sequence], w: usize) {
             assert_eq!(b.dt[j * w + i], dt);
         }
         for (hh, &n) in b.horizons.iter().enumerate() {
-            let inc = increment(s, k, n, GRAVITY);
+            let inc = increment(s, k, n, GRAVITY).unwrap();
             assert_eq!(b.dq_wxyz[j * h + hh], inc.dq_wxyz);
             assert_eq!(b.dv[j * h + hh], inc.dv);
             assert_eq!(b.dp[j * h + hh], inc.dp);
@@ -133,10 +127,7 @@ fn without_augmentation_windows_are_the_raw_samples_with_gt_labels() {
         let s = &seqs[b.seq_index[j] as usize];
         let k = b.start[j] as usize;
         for i in 0..w {
-            assert_eq!(
-                b.imu[(j * w + i) * 6..(j * w + i) * 6 + 6],
-                raw_row(s, k + i)
-            );
+            assert_eq!(b.imu[(j * w + i) * 6..(j * w + i) * 6 + 6], raw_row(s, k + i));
         }
     }
     assert!(b.bias.iter().all(|&x| x == 0.0));
@@ -293,34 +284,19 @@ fn eval_windows_lists_every_strided_window_unaugmented() {
                 .map(|k| (i as u32, k as u64)),
         );
     }
-    let got: Vec<(u32, u64)> = b
-        .seq_index
-        .iter()
-        .copied()
-        .zip(b.start.iter().copied())
-        .collect();
+    let got: Vec<(u32, u64)> = b.seq_index.iter().copied().zip(b.start.iter().copied()).collect();
     assert_eq!(got, expect);
     for j in 0..b.len() {
         let s = &seqs[b.seq_index[j] as usize];
         let k = b.start[j] as usize;
         for i in 0..w {
-            assert_eq!(
-                b.imu[(j * w + i) * 6..(j * w + i) * 6 + 6],
-                raw_row(s, k + i)
-            );
+            assert_eq!(b.imu[(j * w + i) * 6..(j * w + i) * 6 + 6], raw_row(s, k + i));
         }
     }
     assert!(b.bias.iter().all(|&x| x == 0.0));
     check_raw_and_labels(&b, &seqs, w);
     assert_eq!(
-        in_pool(1, || eval_windows(
-            &seqs,
-            w,
-            stride,
-            &PAPER_FRACTIONS,
-            GRAVITY
-        ))
-        .unwrap(),
+        in_pool(1, || eval_windows(&seqs, w, stride, &PAPER_FRACTIONS, GRAVITY)).unwrap(),
         b
     );
 }

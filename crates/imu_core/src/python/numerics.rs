@@ -70,7 +70,7 @@ fn align<'py>(
     r.set_item("dropped_before", report.dropped_before)?;
     r.set_item("dropped_after", report.dropped_after)?;
     r.set_item("dropped_in_gaps", report.dropped_in_gaps)?;
-    r.set_item("dropped_short_segments", report.dropped_short_segments)?;
+    r.set_item("dropped_short", report.dropped_short)?;
     r.set_item("gaps_ns", report.gaps.clone())?;
     r.set_item(
         "segments_ns",
