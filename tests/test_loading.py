@@ -30,7 +30,12 @@ def test_shipped_euroc_crops_load(shipped, name):
 
 def test_full_euroc_with_separate_groundtruth(shared):
     root = shared / "euroc" / "V1_01_easy"
-    segs = il.load_sequence(root, format="euroc", groundtruth=root / "groundtruth_state_20hz.csv")
+    gt20 = root / "groundtruth_state_20hz.csv"
+    # 20 Hz poses are 50 ms apart: with the default 50 ms gap limit they split everywhere.
+    with pytest.raises(il.AlignmentError, match="gap"):
+        il.load_sequence(root, format="euroc", groundtruth=gt20)
+    segs = il.load_sequence(root, format="euroc", groundtruth=gt20, options=il.AlignOptions(max_gap_s=0.1))
+    assert len(segs) == 1
     check_sequence(segs[0])
     rec = il.load_recording(root / "mav0" / "imu0" / "data.csv", groundtruth=root / "groundtruth_pose.tum")
     check_sequence(rec.segments[0])

@@ -13,8 +13,8 @@ def test_order_conversion_moves_w_and_round_trips():
 def test_sequence_q_xyzw_matches_tum_file(shipped):
     import imu_learn as il
 
-    seq = il.load_sequence(shipped / "euroc" / "V1_01_easy")[0]
-    rows = np.loadtxt(shipped / "euroc" / "V1_01_easy" / "groundtruth_pose.tum")
+    seq = il.load_sequence(shipped / "euroc" / "MH_01_easy")[0]
+    rows = np.loadtxt(shipped / "euroc" / "MH_01_easy" / "groundtruth_pose.tum")
     t_ns = np.round(rows[:, 0] * 1e9).astype(np.int64)
     common, i_seq, i_gt = np.intersect1d(seq.t_ns, t_ns, return_indices=True)
     assert len(common) > 100

@@ -362,7 +362,8 @@ fn interpolate_segment(
         if tg[j] == t {
             seq.p.push(p[j]);
             seq.v.push(v[j]);
-            seq.q_wxyz.push(q[j]);
+            // Files carry 6-9 digits, so their quaternions are off unit by up to ~1e-5: store unit ones.
+            seq.q_wxyz.push(quat_to_wxyz(&quat_from_wxyz(q[j])));
             continue;
         }
         // tg[j] < t < tg[j + 1]; j + 1 exists because t ≤ tg[last] and t ≠ tg[j].

@@ -4,7 +4,7 @@ use numpy::{PyArray1, PyArray2, PyReadonlyArray1, PyReadonlyArray2};
 use pyo3::prelude::*;
 use pyo3::types::{PyDict, PyList};
 
-use crate::align::{self, AlignOptions};
+use crate::align::{self as core_align, AlignOptions};
 use crate::batch::{self, AugmentConfig, Batch, BatchConfig};
 use crate::error::ImuError;
 use crate::integrate;
@@ -60,7 +60,7 @@ fn align<'py>(
         min_segment_samples,
         velocity_half_window,
     };
-    let (seqs, report) = py.allow_threads(|| align::align(&imu, &gt, &opts)).map_err(to_py)?;
+    let (seqs, report) = py.allow_threads(|| core_align::align(&imu, &gt, &opts)).map_err(to_py)?;
     let list = PyList::empty(py);
     for s in seqs {
         list.append(seq_dict(py, s)?)?;
@@ -95,7 +95,7 @@ fn derive_velocity<'py>(
     if t.len() != p.len() {
         return Err(to_py(ImuError::invalid("t_ns and p differ in length")));
     }
-    let v = py.allow_threads(|| align::derive_velocity(t, p, half_window));
+    let v = py.allow_threads(|| core_align::derive_velocity(t, p, half_window));
     out2(py, v)
 }
 
