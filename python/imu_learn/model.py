@@ -1,0 +1,83 @@
+"""The paper's IMU model: stacked bidirectional LSTM joined by fully connected layers, mapping raw
+6-axis IMU windows to refined 6-axis measurements as a residual on the raw input.
+
+Input normalisation (per-channel mean and std of the training data) is stored in the model as
+buffers, so a checkpoint or an exported model needs nothing else to run. A causal variant
+(unidirectional LSTM) runs window by window or sample by sample with carried state, for online use.
+"""
+from __future__ import annotations
+
+from dataclasses import asdict, dataclass
+from typing import List, Optional, Tuple
+
+import torch
+from torch import nn
+
+Tensor = torch.Tensor
+State = List[Tuple[Tensor, Tensor]]
+
+
+@dataclass
+class ModelConfig:
+    hidden: int = 64  # LSTM hidden size per direction
+    layers: int = 2  # stacked LSTM blocks, each followed by a fully connected layer
+    fc: int = 64  # width of the fully connected layers between LSTM blocks
+    causal: bool = False  # unidirectional (online) variant
+    output_scale: float = 0.1  # correction = output_scale * input std * head output
+    dropout: float = 0.0
+
+
+class ImuRefiner(nn.Module):
+    """refined = raw + correction(normalised raw); correction is scaled per channel by the input's
+    std so that gyro and accelerometer corrections start on their own scales."""
+
+    def __init__(self, cfg: ModelConfig, mean: Optional[Tensor] = None, std: Optional[Tensor] = None) -> None:
+        super().__init__()
+        self.cfg = cfg
+        self.register_buffer("mean", torch.zeros(6) if mean is None else torch.as_tensor(mean, dtype=torch.float32))
+        self.register_buffer("std", torch.ones(6) if std is None else torch.as_tensor(std, dtype=torch.float32))
+        dirs = 1 if cfg.causal else 2
+        self.lstms = nn.ModuleList()
+        self.fcs = nn.ModuleList()
+        width = 6
+        for _ in range(cfg.layers):
+            self.lstms.append(nn.LSTM(width, cfg.hidden, batch_first=True, bidirectional=not cfg.causal))
+            self.fcs.append(nn.Sequential(nn.Linear(dirs * cfg.hidden, cfg.fc), nn.GELU(), nn.Dropout(cfg.dropout)))
+            width = cfg.fc
+        self.head = nn.Linear(width, 6)
+        # Start as the identity map: the regulariser and the paper both want training to begin
+        # from the raw IMU's quality, not from noise.
+        nn.init.zeros_(self.head.weight)
+        nn.init.zeros_(self.head.bias)
+
+    def forward(self, imu: Tensor, state: Optional[State] = None) -> Tensor:
+        """imu (B, W, 6) gyro then acc -> refined (B, W, 6), same dtype."""
+        out, _ = self.forward_with_state(imu, state)
+        return out
+
+    def forward_with_state(self, imu: Tensor, state: Optional[State] = None) -> Tuple[Tensor, State]:
+        if state is not None and not self.cfg.causal:
+            raise ValueError("carried state needs the causal model (bidirectional LSTMs see the future)")
+        mean = self.mean.to(imu.dtype)
+        std = self.std.to(imu.dtype)
+        x = (imu - mean) / std
+        new_state: State = []
+        for i, (lstm, fc) in enumerate(zip(self.lstms, self.fcs)):
+            s = None if state is None else state[i]
+            x, (h, c) = lstm(x, s)
+            new_state.append((h, c))
+            x = fc(x)
+        return imu + self.cfg.output_scale * std * self.head(x), new_state
+
+    @torch.no_grad()
+    def step(self, sample: Tensor, state: Optional[State] = None) -> Tuple[Tensor, State]:
+        """One sample (B, 6) -> refined (B, 6) and the state to pass to the next call (causal only)."""
+        if not self.cfg.causal:
+            raise ValueError("step() needs the causal model")
+        out, state = self.forward_with_state(sample[:, None, :], state)
+        return out[:, 0], state
+
+    def model_args(self) -> dict:
+        return asdict(self.cfg)
+
+
