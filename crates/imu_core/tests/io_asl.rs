@@ -32,6 +32,8 @@ fn reads_mh01_imu() {
     assert_eq!(imu.acc[36_819], [9.1365289167, -0.760015375, -2.770378625]);
 }
 
+// The literals are the file's text, digit for digit.
+#[allow(clippy::excessive_precision)]
 #[test]
 fn reads_v101_imu_full_precision() {
     let imu = read_imu(data(V101), &strict()).unwrap();
