@@ -94,7 +94,11 @@ pub fn read_imu(path: impl AsRef<Path>, opts: &ReadOptions) -> Result<ImuSamples
         gyro.push(v3(r, 0));
         acc.push(v3(r, 3));
     }
-    Ok(ImuSamples { t_ns: t.t_ns, gyro, acc })
+    Ok(ImuSamples {
+        t_ns: t.t_ns,
+        gyro,
+        acc,
+    })
 }
 
 /// The header line of an ASL IMU file exactly as written (without line ending), after checking
@@ -206,7 +210,12 @@ pub fn read_pose(path: impl AsRef<Path>, opts: &ReadOptions) -> Result<GroundTru
         p.push(v3(r, 0));
         q.push([r[3], r[4], r[5], r[6]]);
     }
-    Ok(GroundTruth { t_ns: t.t_ns, p, q_wxyz: q, ..GroundTruth::default() })
+    Ok(GroundTruth {
+        t_ns: t.t_ns,
+        p,
+        q_wxyz: q,
+        ..GroundTruth::default()
+    })
 }
 
 #[cfg(test)]
@@ -215,8 +224,14 @@ mod tests {
 
     #[test]
     fn header_comparison_ignores_units_hash_and_spaces() {
-        assert!(header_matches("# timestamp,w_RS_S_x,w_RS_S_y,w_RS_S_z,a_RS_S_x,a_RS_S_y,a_RS_S_z", IMU_HEADER));
-        assert!(!header_matches("#timestamp [ns],a_RS_S_x,a_RS_S_y,a_RS_S_z,w_RS_S_x,w_RS_S_y,w_RS_S_z", IMU_HEADER));
+        assert!(header_matches(
+            "# timestamp,w_RS_S_x,w_RS_S_y,w_RS_S_z,a_RS_S_x,a_RS_S_y,a_RS_S_z",
+            IMU_HEADER
+        ));
+        assert!(!header_matches(
+            "#timestamp [ns],a_RS_S_x,a_RS_S_y,a_RS_S_z,w_RS_S_x,w_RS_S_y,w_RS_S_z",
+            IMU_HEADER
+        ));
         assert!(header_matches(STATE_HEADER_SHORT, STATE_HEADER_SHORT));
         assert!(!header_matches(STATE_HEADER_SHORT, STATE_HEADER));
     }

@@ -23,12 +23,40 @@ use crate::so3::{canonical_wxyz, quat_from_wxyz, quat_to_wxyz};
 use crate::types::{GroundTruth, ImuSamples};
 
 pub const XSENS_FIELD_NAMES: [&str; 17] = [
-    "timestamp", "quat_x", "quat_y", "quat_z", "quat_w", "euler_x", "euler_y", "euler_z", "gyro_x",
-    "gyro_y", "gyro_z", "acc_x", "acc_y", "acc_z", "mag_x", "mag_y", "mag_z",
+    "timestamp",
+    "quat_x",
+    "quat_y",
+    "quat_z",
+    "quat_w",
+    "euler_x",
+    "euler_y",
+    "euler_z",
+    "gyro_x",
+    "gyro_y",
+    "gyro_z",
+    "acc_x",
+    "acc_y",
+    "acc_z",
+    "mag_x",
+    "mag_y",
+    "mag_z",
 ];
 
-pub const POSE_FIELD_NAMES: [&str; 13] =
-    ["timestamp", "r11", "r12", "r13", "tx", "r21", "r22", "r23", "ty", "r31", "r32", "r33", "tz"];
+pub const POSE_FIELD_NAMES: [&str; 13] = [
+    "timestamp",
+    "r11",
+    "r12",
+    "r13",
+    "tx",
+    "r21",
+    "r22",
+    "r23",
+    "ty",
+    "r31",
+    "r32",
+    "r33",
+    "tz",
+];
 
 /// Largest entry of |RᵀR − I| and |det R − 1| accepted as a rotation. The files print ~7
 /// significant digits, so a real rotation is off by ~1e-7; 1e-3 still rejects shifted columns
@@ -58,7 +86,11 @@ pub fn read_xsens_imu(path: impl AsRef<Path>, opts: &ReadOptions) -> Result<ImuS
         gyro.push([r[7], r[8], r[9]]);
         acc.push([r[10], r[11], r[12]]);
     }
-    Ok(ImuSamples { t_ns: t.t_ns, gyro, acc })
+    Ok(ImuSamples {
+        t_ns: t.t_ns,
+        gyro,
+        acc,
+    })
 }
 
 /// Reads `global_pose.csv`: stamp and a 3×4 [R|t] row-major (vehicle → world, t in UTM metres);
@@ -88,5 +120,10 @@ pub fn read_global_pose(path: impl AsRef<Path>, opts: &ReadOptions) -> Result<Gr
         q.push(canonical_wxyz(quat_to_wxyz(&quat_from_wxyz(quat_to_wxyz(&raw)))));
         p.push([r[3], r[7], r[11]]);
     }
-    Ok(GroundTruth { t_ns: t.t_ns, p, q_wxyz: q, ..GroundTruth::default() })
+    Ok(GroundTruth {
+        t_ns: t.t_ns,
+        p,
+        q_wxyz: q,
+        ..GroundTruth::default()
+    })
 }

@@ -168,7 +168,10 @@ pub fn parse_table(path: &Path, bytes: &[u8], spec: &TableSpec) -> Result<Table>
     let outs: Vec<ChunkOut> = if chunks.len() == 1 {
         vec![parse_chunk(body, &ctx)]
     } else {
-        chunks.par_iter().map(|&(a, b)| parse_chunk(&body[a..b], &ctx)).collect()
+        chunks
+            .par_iter()
+            .map(|&(a, b)| parse_chunk(&body[a..b], &ctx))
+            .collect()
     };
 
     let mut table = Table {
@@ -250,7 +253,12 @@ fn field_names(header: Option<&str>, spec: &TableSpec, n_columns: usize) -> Vec<
         }
     }
     (0..n_columns)
-        .map(|i| spec.names.get(i).cloned().unwrap_or_else(|| format!("column {}", i + 1)))
+        .map(|i| {
+            spec.names
+                .get(i)
+                .cloned()
+                .unwrap_or_else(|| format!("column {}", i + 1))
+        })
         .collect()
 }
 
@@ -289,7 +297,10 @@ fn is_comment(line: &[u8]) -> bool {
 
 fn trim_field(f: &[u8]) -> &[u8] {
     let start = f.iter().position(|&b| b != b' ' && b != b'\t').unwrap_or(f.len());
-    let end = f.iter().rposition(|&b| b != b' ' && b != b'\t').map_or(start, |i| i + 1);
+    let end = f
+        .iter()
+        .rposition(|&b| b != b' ' && b != b'\t')
+        .map_or(start, |i| i + 1);
     &f[start..end]
 }
 
@@ -343,7 +354,10 @@ fn parse_chunk(chunk: &[u8], ctx: &Ctx<'_>) -> ChunkOut {
         }
         if is_blank(line) {
             if out.pending.is_none() {
-                out.pending = Some(Bad { line: this, kind: BadKind::ColumnCount { found: 0 } });
+                out.pending = Some(Bad {
+                    line: this,
+                    kind: BadKind::ColumnCount { found: 0 },
+                });
             }
             continue;
         }
@@ -397,11 +411,17 @@ fn parse_row(fields: &[&[u8]], ctx: &Ctx<'_>, t: &mut Vec<i64>, v: &mut Vec<f64>
             Ok(x) if x.is_finite() => v.push(x),
             Ok(_) => {
                 v.truncate(start);
-                return Err(BadKind::NonFinite { col: i + 1, value: lossy(f) });
+                return Err(BadKind::NonFinite {
+                    col: i + 1,
+                    value: lossy(f),
+                });
             }
             Err(_) => {
                 v.truncate(start);
-                return Err(BadKind::NotNumeric { col: i + 1, value: lossy(f) });
+                return Err(BadKind::NotNumeric {
+                    col: i + 1,
+                    value: lossy(f),
+                });
             }
         }
     }
@@ -411,8 +431,14 @@ fn parse_row(fields: &[&[u8]], ctx: &Ctx<'_>, t: &mut Vec<i64>, v: &mut Vec<f64>
 
 fn not_a_stamp(f: &[u8]) -> BadKind {
     match fast_float2::parse::<f64, _>(f) {
-        Ok(x) if !x.is_finite() => BadKind::NonFinite { col: 1, value: lossy(f) },
-        _ => BadKind::NotNumeric { col: 1, value: lossy(f) },
+        Ok(x) if !x.is_finite() => BadKind::NonFinite {
+            col: 1,
+            value: lossy(f),
+        },
+        _ => BadKind::NotNumeric {
+            col: 1,
+            value: lossy(f),
+        },
     }
 }
 
@@ -422,12 +448,18 @@ fn parse_time(f: &[u8], spec: &TableSpec) -> Result<i64, BadKind> {
             // 19 digits always fit in u64, and cover every ns stamp up to year 2262.
             if !f.is_empty() && f.len() <= 19 && f.iter().all(u8::is_ascii_digit) {
                 let n = f.iter().fold(0u64, |acc, &d| acc * 10 + u64::from(d - b'0'));
-                return i64::try_from(n).map_err(|_| BadKind::NotNumeric { col: 1, value: lossy(f) });
+                return i64::try_from(n).map_err(|_| BadKind::NotNumeric {
+                    col: 1,
+                    value: lossy(f),
+                });
             }
             match parse_decimal(f, 0) {
                 Decimal::Int(n) => Ok(n),
                 Decimal::Frac(n) if spec.allow_float_timestamps => Ok(n),
-                Decimal::Frac(_) => Err(BadKind::FloatTimestamp { col: 1, value: lossy(f) }),
+                Decimal::Frac(_) => Err(BadKind::FloatTimestamp {
+                    col: 1,
+                    value: lossy(f),
+                }),
                 Decimal::Invalid | Decimal::OutOfRange => Err(not_a_stamp(f)),
             }
         }
@@ -568,18 +600,33 @@ fn to_error(path: &Path, names: &[String], n_columns: usize, bad: Bad) -> ImuErr
     let path = path.to_path_buf();
     let line = bad.line + 1;
     match bad.kind {
-        BadKind::ColumnCount { found } => {
-            ImuError::ColumnCount { path, line, expected: n_columns, found }
-        }
-        BadKind::NotNumeric { col, value } => {
-            ImuError::NotNumeric { path, line, column: col, field: field_name(names, col), value }
-        }
-        BadKind::NonFinite { col, value } => {
-            ImuError::NonFinite { path, line, column: col, field: field_name(names, col), value }
-        }
-        BadKind::FloatTimestamp { col, value } => {
-            ImuError::FloatTimestamp { path, line, column: col, field: field_name(names, col), value }
-        }
+        BadKind::ColumnCount { found } => ImuError::ColumnCount {
+            path,
+            line,
+            expected: n_columns,
+            found,
+        },
+        BadKind::NotNumeric { col, value } => ImuError::NotNumeric {
+            path,
+            line,
+            column: col,
+            field: field_name(names, col),
+            value,
+        },
+        BadKind::NonFinite { col, value } => ImuError::NonFinite {
+            path,
+            line,
+            column: col,
+            field: field_name(names, col),
+            value,
+        },
+        BadKind::FloatTimestamp { col, value } => ImuError::FloatTimestamp {
+            path,
+            line,
+            column: col,
+            field: field_name(names, col),
+            value,
+        },
     }
 }
 
@@ -612,9 +659,18 @@ mod tests {
 
     #[test]
     fn decimal_seconds_to_ns() {
-        assert_eq!(parse_decimal(b"1403636580.83856", 9), Decimal::Frac(1_403_636_580_838_560_000));
-        assert_eq!(parse_decimal(b"1525745925.001598119736", 9), Decimal::Frac(1_525_745_925_001_598_120));
-        assert_eq!(parse_decimal(b"1525745925.0015981194", 9), Decimal::Frac(1_525_745_925_001_598_119));
+        assert_eq!(
+            parse_decimal(b"1403636580.83856", 9),
+            Decimal::Frac(1_403_636_580_838_560_000)
+        );
+        assert_eq!(
+            parse_decimal(b"1525745925.001598119736", 9),
+            Decimal::Frac(1_525_745_925_001_598_120)
+        );
+        assert_eq!(
+            parse_decimal(b"1525745925.0015981194", 9),
+            Decimal::Frac(1_525_745_925_001_598_119)
+        );
         assert_eq!(parse_decimal(b"12", 9), Decimal::Int(12_000_000_000));
         assert_eq!(parse_decimal(b"-0.5", 9), Decimal::Frac(-500_000_000));
         assert_eq!(parse_decimal(b"-0.0000000005", 9), Decimal::Frac(-1));
@@ -625,14 +681,36 @@ mod tests {
 
     #[test]
     fn decimal_float_notation_ns_is_exact() {
-        assert_eq!(parse_decimal(b"1.40363657975856E+018", 0), Decimal::Frac(1_403_636_579_758_560_000));
-        assert_eq!(parse_decimal(b"1403636579758560000", 0), Decimal::Int(1_403_636_579_758_560_000));
+        assert_eq!(
+            parse_decimal(b"1.40363657975856E+018", 0),
+            Decimal::Frac(1_403_636_579_758_560_000)
+        );
+        assert_eq!(
+            parse_decimal(b"1403636579758560000", 0),
+            Decimal::Int(1_403_636_579_758_560_000)
+        );
     }
 
     #[test]
     fn decimal_rejects_garbage_and_overflow() {
-        for s in [&b""[..], b"-", b".", b"1e", b"1.2.3", b"abc", b"1 2", b"nan", b"inf", b"0x10"] {
-            assert_eq!(parse_decimal(s, 9), Decimal::Invalid, "{:?}", String::from_utf8_lossy(s));
+        for s in [
+            &b""[..],
+            b"-",
+            b".",
+            b"1e",
+            b"1.2.3",
+            b"abc",
+            b"1 2",
+            b"nan",
+            b"inf",
+            b"0x10",
+        ] {
+            assert_eq!(
+                parse_decimal(s, 9),
+                Decimal::Invalid,
+                "{:?}",
+                String::from_utf8_lossy(s)
+            );
         }
         assert_eq!(parse_decimal(b"1e30", 0), Decimal::OutOfRange);
         assert_eq!(parse_decimal(b"99999999999999999999", 0), Decimal::OutOfRange);

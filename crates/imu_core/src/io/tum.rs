@@ -42,7 +42,13 @@ pub fn read_tum(path: impl AsRef<Path>, opts: &ReadOptions) -> Result<GroundTrut
             v.push([r[7], r[8], r[9]]);
         }
     }
-    Ok(GroundTruth { t_ns: t.t_ns, p, q_wxyz: q, v: with_v.then_some(v), ..GroundTruth::default() })
+    Ok(GroundTruth {
+        t_ns: t.t_ns,
+        p,
+        q_wxyz: q,
+        v: with_v.then_some(v),
+        ..GroundTruth::default()
+    })
 }
 
 /// Exact decimal seconds with all 9 ns digits, so that `read_tum` gets the same stamp back.
@@ -77,7 +83,9 @@ pub fn write_tum(path: impl AsRef<Path>, gt: &GroundTruth) -> Result<()> {
         let v = gt.v.as_ref().and_then(|v| v.get(i).copied());
         let all = p.iter().chain(q.iter()).chain(v.iter().flatten());
         if let Some(x) = all.clone().find(|x| !x.is_finite()) {
-            return Err(ImuError::invalid(format!("ground truth row {i} holds a non-finite value {x}")));
+            return Err(ImuError::invalid(format!(
+                "ground truth row {i} holds a non-finite value {x}"
+            )));
         }
         write_seconds(&mut out, gt.t_ns[i]);
         for x in all {

@@ -60,7 +60,9 @@ fn align<'py>(
         min_segment_samples,
         velocity_half_window,
     };
-    let (seqs, report) = py.allow_threads(|| core_align::align(&imu, &gt, &opts)).map_err(to_py)?;
+    let (seqs, report) = py
+        .allow_threads(|| core_align::align(&imu, &gt, &opts))
+        .map_err(to_py)?;
     let list = PyList::empty(py);
     for s in seqs {
         list.append(seq_dict(py, s)?)?;
