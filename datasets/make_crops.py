@@ -14,13 +14,13 @@ from pathlib import Path
 
 def crop(src: Path, dst: Path, seconds: float) -> None:
     gt_lines = (src / "groundtruth_pose.tum").read_text().splitlines(keepends=True)
-    gt_header = [l for l in gt_lines if l.startswith("#")]
-    gt_rows = [l for l in gt_lines if l.strip() and not l.startswith("#")]
+    gt_header = [ln for ln in gt_lines if ln.startswith("#")]
+    gt_rows = [ln for ln in gt_lines if ln.strip() and not ln.startswith("#")]
     t0_ns = int(round(float(gt_rows[0].split()[0]) * 1e9))
     t1_ns = t0_ns + int(seconds * 1e9)
-    gt_keep = [l for l in gt_rows if int(round(float(l.split()[0]) * 1e9)) <= t1_ns]
+    gt_keep = [ln for ln in gt_rows if int(round(float(ln.split()[0]) * 1e9)) <= t1_ns]
     imu_lines = (src / "mav0/imu0/data.csv").read_text().splitlines(keepends=True)
-    imu_keep = [imu_lines[0]] + [l for l in imu_lines[1:] if t0_ns <= int(l.split(",")[0]) <= t1_ns]
+    imu_keep = [imu_lines[0]] + [ln for ln in imu_lines[1:] if t0_ns <= int(ln.split(",")[0]) <= t1_ns]
     (dst / "mav0/imu0").mkdir(parents=True, exist_ok=True)
     (dst / "mav0/imu0/data.csv").write_text("".join(imu_keep))
     (dst / "groundtruth_pose.tum").write_text("".join(gt_header + gt_keep))

@@ -1,9 +1,7 @@
 """Augmented batches: deterministic per seed whatever the thread count, labels as documented."""
-import json
 import os
 import subprocess
 import sys
-from pathlib import Path
 
 import numpy as np
 import pytest

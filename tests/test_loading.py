@@ -78,7 +78,8 @@ def write_kaist_recording(root: Path, seconds: float = 4.0):
     p = np.stack([r * np.cos(yaw), r * np.sin(yaw), np.zeros_like(t)], 1)
     acc_world = np.stack([-r * w * w * np.cos(yaw), -r * w * w * np.sin(yaw), np.zeros_like(t)], 1)
     c, s = np.cos(yaw), np.sin(yaw)
-    R = np.zeros((len(t), 3, 3)); R[:, 0, 0] = c; R[:, 0, 1] = -s; R[:, 1, 0] = s; R[:, 1, 1] = c; R[:, 2, 2] = 1
+    R = np.zeros((len(t), 3, 3))
+    R[:, 0, 0], R[:, 0, 1], R[:, 1, 0], R[:, 1, 1], R[:, 2, 2] = c, -s, s, c, 1
     f_body = np.einsum("nji,nj->ni", R, acc_world + [0, 0, 9.81])
     gyro = np.tile([0.0, 0.0, w], (len(t), 1))
     with open(root / "sensor_data" / "xsens_imu.csv", "w") as f:

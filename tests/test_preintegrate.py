@@ -16,7 +16,9 @@ def gtsam_manifold(t_ns, gyro, acc):
     params.setIntegrationCovariance(np.eye(3) * 1e-8)
     pim = gtsam.PreintegratedImuMeasurementsManifold(params, gtsam.imuBias.ConstantBias())
     n = len(t_ns)
-    R = np.zeros((n, 3, 3)); dv = np.zeros((n, 3)); dp = np.zeros((n, 3))
+    R = np.zeros((n, 3, 3))
+    dv = np.zeros((n, 3))
+    dp = np.zeros((n, 3))
     R[0] = np.eye(3)
     dts = np.diff(t_ns) * 1e-9
     for i in range(n - 1):

@@ -21,7 +21,14 @@ from imu_learn.errors import (
     ParseError,
     TimestampError,
 )
-from imu_learn.integration import PAPER_FRACTIONS, Increments, WindowLabels, integrate_windows, preintegrate, window_labels
+from imu_learn.integration import (
+    PAPER_FRACTIONS,
+    Increments,
+    WindowLabels,
+    integrate_windows,
+    preintegrate,
+    window_labels,
+)
 from imu_learn.loading import AlignOptions, align, load_recording, load_sequence, read_imu
 from imu_learn.quat import wxyz_to_xyzw, xyzw_to_wxyz
 from imu_learn.types import GroundTruth, ImuData, Recording, Sequence

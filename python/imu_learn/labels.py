@@ -99,7 +99,9 @@ def main(argv: Optional[List[str]] = None) -> int:
     ap.add_argument("--window", type=int, default=200, help="window length in IMU samples")
     ap.add_argument("--stride", type=int, default=10, help="step between window starts")
     ap.add_argument("--gravity", type=float, default=9.81)
-    ap.add_argument("--max-gap", type=float, default=AlignOptions.max_gap_s, help="split at GT gaps longer than this [s]")
+    ap.add_argument(
+        "--max-gap", type=float, default=AlignOptions.max_gap_s, help="split at GT gaps longer than this [s]"
+    )
     ap.add_argument("--rebuild", action="store_true", help="rebuild everything, even an incompatible cache")
     ap.add_argument("--quiet", action="store_true")
     a = ap.parse_args(argv)

@@ -17,7 +17,12 @@ const QUIRKS: &str = "quirks/MH_01_easy_imu0_spreadsheet_export.csv";
 fn assert_bits_eq(a: &ImuSamples, b: &ImuSamples) {
     assert_eq!(a.t_ns, b.t_ns);
     let bits = |s: &ImuSamples| -> Vec<u64> {
-        s.gyro.iter().chain(s.acc.iter()).flatten().map(|x| x.to_bits()).collect()
+        s.gyro
+            .iter()
+            .chain(s.acc.iter())
+            .flatten()
+            .map(|x| x.to_bits())
+            .collect()
     };
     assert_eq!(bits(a), bits(b));
 }
@@ -40,8 +45,14 @@ fn reads_v101_imu_full_precision() {
     let imu = read_imu(data(V101), &strict()).unwrap();
     assert_eq!(imu.len(), 29_120);
     assert_eq!(imu.t_ns[0], 1_403_715_273_262_142_976);
-    assert_eq!(imu.gyro[0], [-0.0020943951023931952, 0.017453292519943295, 0.07749261878854824]);
-    assert_eq!(imu.acc[0], [9.0874956666666655, 0.13075533333333333, -3.6938381666666662]);
+    assert_eq!(
+        imu.gyro[0],
+        [-0.0020943951023931952, 0.017453292519943295, 0.07749261878854824]
+    );
+    assert_eq!(
+        imu.acc[0],
+        [9.0874956666666655, 0.13075533333333333, -3.6938381666666662]
+    );
     assert_eq!(imu.t_ns[29_119], 1_403_715_418_857_143_040);
 }
 
@@ -50,15 +61,30 @@ fn quirks_file_needs_the_option_and_then_matches_the_clean_file() {
     let p = data(QUIRKS);
     let err = read_imu(&p, &strict()).unwrap_err();
     match &err {
-        ImuError::FloatTimestamp { path, line, column, field, value } => {
+        ImuError::FloatTimestamp {
+            path,
+            line,
+            column,
+            field,
+            value,
+        } => {
             assert_eq!((path, *line, *column), (&p, 2, 1));
-            assert_eq!((field.as_str(), value.as_str()), ("timestamp [ns]", "1.40363657975856E+018"));
+            assert_eq!(
+                (field.as_str(), value.as_str()),
+                ("timestamp [ns]", "1.40363657975856E+018")
+            );
         }
         e => panic!("{e:?}"),
     }
     assert_message(&err, &p, 2, Some("timestamp [ns]"));
 
-    let quirky = read_imu(&p, &ReadOptions { allow_float_timestamps: true }).unwrap();
+    let quirky = read_imu(
+        &p,
+        &ReadOptions {
+            allow_float_timestamps: true,
+        },
+    )
+    .unwrap();
     let clean = read_imu(data(MH01), &strict()).unwrap();
     assert_eq!(quirky.len(), 36_820);
     assert_bits_eq(&quirky, &clean);
@@ -73,7 +99,12 @@ fn imu_header_is_checked() {
     let p = write(&dir, "a.csv", &join(&l));
     let err = read_imu(&p, &strict()).unwrap_err();
     match &err {
-        ImuError::Header { path, line, expected, found } => {
+        ImuError::Header {
+            path,
+            line,
+            expected,
+            found,
+        } => {
             assert_eq!((path, *line), (&p, 1));
             assert_eq!(expected, LIB_IMU_HEADER);
             assert_eq!(found, swapped);
@@ -85,8 +116,14 @@ fn imu_header_is_checked() {
 
     // A missing header shows the data row it found instead.
     let p = write(&dir, "b.csv", &join(&imu_lines(2)[1..]));
-    assert!(matches!(read_imu(&p, &strict()).unwrap_err(), ImuError::Header { line: 1, .. }));
-    assert!(matches!(read_imu_header(&p).unwrap_err(), ImuError::Header { line: 1, .. }));
+    assert!(matches!(
+        read_imu(&p, &strict()).unwrap_err(),
+        ImuError::Header { line: 1, .. }
+    ));
+    assert!(matches!(
+        read_imu_header(&p).unwrap_err(),
+        ImuError::Header { line: 1, .. }
+    ));
 
     // Units, '#' and spaces are not part of a name.
     let mut l = imu_lines(2);
@@ -113,15 +150,26 @@ fn write_imu_round_trips_bit_for_bit() {
 
     let odd = ImuSamples {
         t_ns: vec![-5, 0, 1_700_000_000_000_000_000],
-        gyro: vec![[1.0 / 3.0, -0.0, 1e-300], [f64::MIN_POSITIVE, 5e-324, f64::MAX], [0.1, 0.2, 0.3]],
-        acc: vec![[9.81, -9.81, 1.2345678901234567e10], [0.0, 1.0, -1.0], [2.0f64.sqrt(), std::f64::consts::PI, 1e22]],
+        gyro: vec![
+            [1.0 / 3.0, -0.0, 1e-300],
+            [f64::MIN_POSITIVE, 5e-324, f64::MAX],
+            [0.1, 0.2, 0.3],
+        ],
+        acc: vec![
+            [9.81, -9.81, 1.2345678901234567e10],
+            [0.0, 1.0, -1.0],
+            [2.0f64.sqrt(), std::f64::consts::PI, 1e22],
+        ],
     };
     let custom = "# timestamp , w_RS_S_x,w_RS_S_y,w_RS_S_z,a_RS_S_x,a_RS_S_y,a_RS_S_z";
     write_imu(&out, &odd, Some(custom)).unwrap();
     assert_bits_eq(&read_imu(&out, &strict()).unwrap(), &odd);
     assert_eq!(read_imu_header(&out).unwrap(), custom);
     // Nothing but the target is left behind.
-    let names: Vec<_> = std::fs::read_dir(dir.path()).unwrap().map(|e| e.unwrap().file_name()).collect();
+    let names: Vec<_> = std::fs::read_dir(dir.path())
+        .unwrap()
+        .map(|e| e.unwrap().file_name())
+        .collect();
     assert_eq!(names, vec![std::ffi::OsString::from("imu0.csv")]);
 }
 
@@ -129,9 +177,19 @@ fn write_imu_round_trips_bit_for_bit() {
 fn write_imu_rejects_what_would_not_read_back() {
     let dir = tempfile::tempdir().unwrap();
     let out = dir.path().join("imu0.csv");
-    let good = ImuSamples { t_ns: vec![1, 2], gyro: vec![[0.0; 3]; 2], acc: vec![[0.0; 3]; 2] };
-    assert!(matches!(write_imu(&out, &good, Some("#t,a,b")), Err(ImuError::InvalidInput(_))));
-    assert!(matches!(write_imu(&out, &good, Some(&format!("{IMU_HEADER}\n1,2"))), Err(ImuError::InvalidInput(_))));
+    let good = ImuSamples {
+        t_ns: vec![1, 2],
+        gyro: vec![[0.0; 3]; 2],
+        acc: vec![[0.0; 3]; 2],
+    };
+    assert!(matches!(
+        write_imu(&out, &good, Some("#t,a,b")),
+        Err(ImuError::InvalidInput(_))
+    ));
+    assert!(matches!(
+        write_imu(&out, &good, Some(&format!("{IMU_HEADER}\n1,2"))),
+        Err(ImuError::InvalidInput(_))
+    ));
     let mut bad = good.clone();
     bad.gyro[1][2] = f64::NAN;
     assert!(matches!(write_imu(&out, &bad, None), Err(ImuError::InvalidInput(_))));
@@ -189,10 +247,16 @@ fn reads_all_official_state_files() {
 #[test]
 fn state_header_and_rows_are_checked() {
     let dir = tempfile::tempdir().unwrap();
-    let p = write(&dir, "s.csv", "#time(ns),px,py,pz,qx,qy,qz,qw,vx,vy,vz,bwx,bwy,bwz,bax,bay,baz\n");
+    let p = write(
+        &dir,
+        "s.csv",
+        "#time(ns),px,py,pz,qx,qy,qz,qw,vx,vy,vz,bwx,bwy,bwz,bax,bay,baz\n",
+    );
     let err = read_state(&p, &strict()).unwrap_err();
     match &err {
-        ImuError::Header { line, expected, found, .. } => {
+        ImuError::Header {
+            line, expected, found, ..
+        } => {
             assert_eq!(*line, 1);
             assert!(expected.contains("p_RS_R_x") && expected.contains("#time(ns),px"));
             assert!(found.starts_with("#time(ns),px,py,pz,qx"));
@@ -210,7 +274,9 @@ fn state_header_and_rows_are_checked() {
     );
     let err = read_state(&p, &strict()).unwrap_err();
     match &err {
-        ImuError::NotNumeric { line, column, field, .. } => assert_eq!((*line, *column, field.as_str()), (3, 14, "bwz")),
+        ImuError::NotNumeric {
+            line, column, field, ..
+        } => assert_eq!((*line, *column, field.as_str()), (3, 14, "bwz")),
         e => panic!("{e:?}"),
     }
     assert_message(&err, &p, 3, Some("bwz"));
@@ -234,7 +300,9 @@ fn reads_tum_vi_mocap_pose() {
     let p = write(&dir, "bad.csv", &format!("{header}\n1,0,0,0,1,0,0\n"));
     let err = read_pose(&p, &strict()).unwrap_err();
     match &err {
-        ImuError::ColumnCount { line, expected, found, .. } => assert_eq!((*line, *expected, *found), (2, 8, 7)),
+        ImuError::ColumnCount {
+            line, expected, found, ..
+        } => assert_eq!((*line, *expected, *found), (2, 8, 7)),
         e => panic!("{e:?}"),
     }
     assert_message(&err, &p, 2, None);
@@ -252,5 +320,8 @@ fn time_read_imu_mh01() {
         std::hint::black_box(read_imu(&p, &strict()).unwrap());
     }
     let per = start.elapsed() / n;
-    println!("read_imu MH_01 (36,820 rows, 3.3 MB): {per:?} per read, {} threads", rayon::current_num_threads());
+    println!(
+        "read_imu MH_01 (36,820 rows, 3.3 MB): {per:?} per read, {} threads",
+        rayon::current_num_threads()
+    );
 }

@@ -53,7 +53,13 @@ fn xsens_bad_rows_name_fixed_fields() {
     let p = write(&dir, "a.csv", &join(&l));
     let err = read_xsens_imu(&p, &strict()).unwrap_err();
     match &err {
-        ImuError::NotNumeric { line, column, field, value, .. } => {
+        ImuError::NotNumeric {
+            line,
+            column,
+            field,
+            value,
+            ..
+        } => {
             assert_eq!((*line, *column, field.as_str(), value.as_str()), (2, 10, "gyro_y", "?"));
         }
         e => panic!("{e:?}"),
@@ -64,7 +70,9 @@ fn xsens_bad_rows_name_fixed_fields() {
     let p = write(&dir, "b.csv", &join(&lines));
     let err = read_xsens_imu(&p, &strict()).unwrap_err();
     match &err {
-        ImuError::ColumnCount { line, expected, found, .. } => assert_eq!((*line, *expected, *found), (3, 17, 16)),
+        ImuError::ColumnCount {
+            line, expected, found, ..
+        } => assert_eq!((*line, *expected, *found), (3, 17, 16)),
         e => panic!("{e:?}"),
     }
     assert_message(&err, &p, 3, None);
@@ -89,12 +97,17 @@ fn global_pose_rejects_non_rotations() {
     }
     // A reflection is orthogonal but not a rotation.
     let p = write(&dir, "h.csv", "1,-1,0,0,0,0,1,0,0,0,0,1,0\n");
-    assert!(matches!(read_global_pose(&p, &strict()), Err(ImuError::InvalidInput(_))));
+    assert!(matches!(
+        read_global_pose(&p, &strict()),
+        Err(ImuError::InvalidInput(_))
+    ));
 
     let p = write(&dir, "i.csv", "1,1,0,0,0,0,1,0,0,0,0,1,inf\n");
     let err = read_global_pose(&p, &strict()).unwrap_err();
     match &err {
-        ImuError::NonFinite { line, column, field, .. } => assert_eq!((*line, *column, field.as_str()), (1, 13, "tz")),
+        ImuError::NonFinite {
+            line, column, field, ..
+        } => assert_eq!((*line, *column, field.as_str()), (1, 13, "tz")),
         e => panic!("{e:?}"),
     }
     assert_message(&err, &p, 1, Some("tz"));

@@ -18,7 +18,9 @@ fn strict() -> ReadOptions {
 }
 
 fn lenient() -> ReadOptions {
-    ReadOptions { allow_float_timestamps: true }
+    ReadOptions {
+        allow_float_timestamps: true,
+    }
 }
 
 #[test]
@@ -41,7 +43,12 @@ fn wrong_column_count() {
     let p = write(&dir, "a.csv", &join(&l));
     let err = read_imu(&p, &strict()).unwrap_err();
     match &err {
-        ImuError::ColumnCount { path, line, expected, found } => {
+        ImuError::ColumnCount {
+            path,
+            line,
+            expected,
+            found,
+        } => {
             assert_eq!((path, *line, *expected, *found), (&p, 4, 7, 6));
         }
         e => panic!("{e:?}"),
@@ -57,7 +64,13 @@ fn non_numeric_field() {
     let p = write(&dir, "a.csv", &join(&l));
     let err = read_imu(&p, &strict()).unwrap_err();
     match &err {
-        ImuError::NotNumeric { path, line, column, field, value } => {
+        ImuError::NotNumeric {
+            path,
+            line,
+            column,
+            field,
+            value,
+        } => {
             assert_eq!((path, *line, *column), (&p, 3, 4));
             assert_eq!(field, "w_RS_S_z [rad s^-1]");
             assert_eq!(value, "abc");
@@ -75,8 +88,17 @@ fn empty_field_is_not_numeric() {
     let p = write(&dir, "a.csv", &join(&l));
     let err = read_imu(&p, &strict()).unwrap_err();
     match &err {
-        ImuError::NotNumeric { line, column, field, value, .. } => {
-            assert_eq!((*line, *column, field.as_str(), value.as_str()), (6, 6, "a_RS_S_y [m s^-2]", ""));
+        ImuError::NotNumeric {
+            line,
+            column,
+            field,
+            value,
+            ..
+        } => {
+            assert_eq!(
+                (*line, *column, field.as_str(), value.as_str()),
+                (6, 6, "a_RS_S_y [m s^-2]", "")
+            );
         }
         e => panic!("{e:?}"),
     }
@@ -91,8 +113,17 @@ fn non_numeric_timestamp() {
     let p = write(&dir, "a.csv", &join(&l));
     let err = read_imu(&p, &strict()).unwrap_err();
     match &err {
-        ImuError::NotNumeric { line, column, field, value, .. } => {
-            assert_eq!((*line, *column, field.as_str(), value.as_str()), (3, 1, "timestamp [ns]", "12:00:01"));
+        ImuError::NotNumeric {
+            line,
+            column,
+            field,
+            value,
+            ..
+        } => {
+            assert_eq!(
+                (*line, *column, field.as_str(), value.as_str()),
+                (3, 1, "timestamp [ns]", "12:00:01")
+            );
         }
         e => panic!("{e:?}"),
     }
@@ -102,7 +133,11 @@ fn non_numeric_timestamp() {
 #[test]
 fn nan_and_inf_are_non_finite() {
     let dir = tempfile::tempdir().unwrap();
-    for (bad, col, field) in [("NaN", 2, "w_RS_S_x [rad s^-1]"), ("-inf", 7, "a_RS_S_z [m s^-2]"), ("nan", 1, "timestamp [ns]")] {
+    for (bad, col, field) in [
+        ("NaN", 2, "w_RS_S_x [rad s^-1]"),
+        ("-inf", 7, "a_RS_S_z [m s^-2]"),
+        ("nan", 1, "timestamp [ns]"),
+    ] {
         let mut l = imu_lines(4);
         let mut fields: Vec<String> = l[3].split(',').map(String::from).collect();
         fields[col - 1] = bad.into();
@@ -110,8 +145,17 @@ fn nan_and_inf_are_non_finite() {
         let p = write(&dir, "a.csv", &join(&l));
         let err = read_imu(&p, &strict()).unwrap_err();
         match &err {
-            ImuError::NonFinite { path, line, column, field: f, value } => {
-                assert_eq!((path, *line, *column, f.as_str(), value.as_str()), (&p, 4, col, field, bad));
+            ImuError::NonFinite {
+                path,
+                line,
+                column,
+                field: f,
+                value,
+            } => {
+                assert_eq!(
+                    (path, *line, *column, f.as_str(), value.as_str()),
+                    (&p, 4, col, field, bad)
+                );
             }
             e => panic!("{e:?}"),
         }
@@ -127,9 +171,18 @@ fn float_notation_timestamp_rejected_by_default_and_exact_with_option() {
     let p = write(&dir, "a.csv", &join(&l));
     let err = read_imu(&p, &strict()).unwrap_err();
     match &err {
-        ImuError::FloatTimestamp { path, line, column, field, value } => {
+        ImuError::FloatTimestamp {
+            path,
+            line,
+            column,
+            field,
+            value,
+        } => {
             assert_eq!((path, *line, *column), (&p, 3, 1));
-            assert_eq!((field.as_str(), value.as_str()), ("timestamp [ns]", "1.40363657976356E+018"));
+            assert_eq!(
+                (field.as_str(), value.as_str()),
+                ("timestamp [ns]", "1.40363657976356E+018")
+            );
         }
         e => panic!("{e:?}"),
     }
@@ -141,13 +194,24 @@ fn float_notation_timestamp_rejected_by_default_and_exact_with_option() {
 #[test]
 fn duplicate_and_decreasing_timestamps() {
     let dir = tempfile::tempdir().unwrap();
-    for (t, problem) in [(T0 + 5_000_000, TimestampProblem::Duplicate), (T0 + 1, TimestampProblem::NotIncreasing)] {
+    for (t, problem) in [
+        (T0 + 5_000_000, TimestampProblem::Duplicate),
+        (T0 + 1, TimestampProblem::NotIncreasing),
+    ] {
         let mut l = imu_lines(4);
         l[3] = imu_row(t);
         let p = write(&dir, "a.csv", &join(&l));
         let err = read_imu(&p, &strict()).unwrap_err();
         match &err {
-            ImuError::Timestamp { path, line, column, field, value, previous, problem: pr } => {
+            ImuError::Timestamp {
+                path,
+                line,
+                column,
+                field,
+                value,
+                previous,
+                problem: pr,
+            } => {
                 assert_eq!((path, *line, *column, field.as_str()), (&p, 4, 1, "timestamp [ns]"));
                 assert_eq!((*value, *previous, *pr), (t, T0 + 5_000_000, problem));
             }
@@ -175,7 +239,9 @@ fn blank_line_between_rows_is_an_error() {
     let p = write(&dir, "a.csv", &join(&l));
     let err = read_imu(&p, &strict()).unwrap_err();
     match &err {
-        ImuError::ColumnCount { line, expected, found, .. } => assert_eq!((*line, *expected, *found), (4, 7, 0)),
+        ImuError::ColumnCount {
+            line, expected, found, ..
+        } => assert_eq!((*line, *expected, *found), (4, 7, 0)),
         e => panic!("{e:?}"),
     }
     assert_message(&err, &p, 4, None);
@@ -189,8 +255,17 @@ fn trailing_junk_dropped_only_with_option() {
     let p = write(&dir, "a.csv", &join(&l));
     let err = read_imu(&p, &strict()).unwrap_err();
     match &err {
-        ImuError::NotNumeric { line, column, field, value, .. } => {
-            assert_eq!((*line, *column, field.as_str(), value.as_str()), (5, 1, "timestamp [ns]", ""));
+        ImuError::NotNumeric {
+            line,
+            column,
+            field,
+            value,
+            ..
+        } => {
+            assert_eq!(
+                (*line, *column, field.as_str(), value.as_str()),
+                (5, 1, "timestamp [ns]", "")
+            );
         }
         e => panic!("{e:?}"),
     }
@@ -262,7 +337,9 @@ fn table_api_headerless_whitespace_with_fixed_names() {
     };
     let err = read_table(&p, &spec).unwrap_err();
     match &err {
-        ImuError::NotNumeric { line, column, field, .. } => assert_eq!((*line, *column, field.as_str()), (3, 3, "b")),
+        ImuError::NotNumeric {
+            line, column, field, ..
+        } => assert_eq!((*line, *column, field.as_str()), (3, 3, "b")),
         e => panic!("{e:?}"),
     }
     assert_message(&err, &p, 3, Some("b"));

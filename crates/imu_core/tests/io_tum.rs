@@ -13,7 +13,12 @@ fn strict() -> ReadOptions {
 
 fn bits(gt: &GroundTruth) -> Vec<u64> {
     let v = gt.v.iter().flatten().flatten();
-    gt.p.iter().flatten().chain(gt.q_wxyz.iter().flatten()).chain(v).map(|x| x.to_bits()).collect()
+    gt.p.iter()
+        .flatten()
+        .chain(gt.q_wxyz.iter().flatten())
+        .chain(v)
+        .map(|x| x.to_bits())
+        .collect()
 }
 
 #[test]
@@ -36,9 +41,15 @@ fn reads_euroc_tum_ground_truth() {
 #[test]
 fn reads_blackbird_with_velocity_and_full_stamp_precision() {
     for split in ["train", "val"] {
-        let p = data(&format!("blackbird/clover_yawForward_maxSpeed5p0/{split}/stamped_groundtruth_imu.txt"));
+        let p = data(&format!(
+            "blackbird/clover_yawForward_maxSpeed5p0/{split}/stamped_groundtruth_imu.txt"
+        ));
         let gt = read_tum(&p, &strict()).unwrap();
-        let rows = std::fs::read_to_string(&p).unwrap().lines().filter(|l| !l.starts_with('#')).count();
+        let rows = std::fs::read_to_string(&p)
+            .unwrap()
+            .lines()
+            .filter(|l| !l.starts_with('#'))
+            .count();
         assert_eq!(gt.len(), rows);
         assert_eq!(gt.v.as_ref().unwrap().len(), rows);
     }
@@ -52,8 +63,14 @@ fn reads_blackbird_with_velocity_and_full_stamp_precision() {
     assert_eq!(gt.t_ns[0], 1_525_745_925_001_598_120);
     assert_eq!(gt.t_ns[1], 1_525_745_925_011_598_110);
     assert_eq!(gt.p[0], [-1.195960179995, 1.420202832248, 1.491985563428]);
-    assert_eq!(gt.q_wxyz[0], [-0.002783797821, 0.989693116041, 0.114948319089, -0.085361996628]);
-    assert_eq!(gt.v.as_ref().unwrap()[0], [-1.416452426075, 2.144184694651, -0.032295262630]);
+    assert_eq!(
+        gt.q_wxyz[0],
+        [-0.002783797821, 0.989693116041, 0.114948319089, -0.085361996628]
+    );
+    assert_eq!(
+        gt.v.as_ref().unwrap()[0],
+        [-1.416452426075, 2.144184694651, -0.032295262630]
+    );
 }
 
 #[test]
@@ -65,7 +82,14 @@ fn decimal_seconds_keep_every_ns() {
         "# t x y z qx qy qz qw\n1403636580.000000001 0 0 0 0 0 0 1\n# mid-file comment\n\t1403636580.000000002  0 0 0 0 0 0 1 \n1403636581 0 0 0 0 0 0 1\n",
     );
     let gt = read_tum(&p, &strict()).unwrap();
-    assert_eq!(gt.t_ns, vec![1_403_636_580_000_000_001, 1_403_636_580_000_000_002, 1_403_636_581_000_000_000]);
+    assert_eq!(
+        gt.t_ns,
+        vec![
+            1_403_636_580_000_000_001,
+            1_403_636_580_000_000_002,
+            1_403_636_581_000_000_000
+        ]
+    );
 }
 
 #[test]
@@ -75,7 +99,9 @@ fn wrong_column_counts() {
     let p = write(&dir, "a.tum", "# c\n1.0 0 0 0 0 0 0 1 7\n");
     let err = read_tum(&p, &strict()).unwrap_err();
     match &err {
-        ImuError::ColumnCount { line, expected, found, .. } => assert_eq!((*line, *expected, *found), (2, 8, 9)),
+        ImuError::ColumnCount {
+            line, expected, found, ..
+        } => assert_eq!((*line, *expected, *found), (2, 8, 9)),
         e => panic!("{e:?}"),
     }
     assert_message(&err, &p, 2, None);
@@ -83,7 +109,9 @@ fn wrong_column_counts() {
     let p = write(&dir, "b.tum", "1.0 0 0 0 0 0 0 1\n2.0 0 0 0 0 0 0 1 1 2 3\n");
     let err = read_tum(&p, &strict()).unwrap_err();
     match &err {
-        ImuError::ColumnCount { line, expected, found, .. } => assert_eq!((*line, *expected, *found), (2, 8, 11)),
+        ImuError::ColumnCount {
+            line, expected, found, ..
+        } => assert_eq!((*line, *expected, *found), (2, 8, 11)),
         e => panic!("{e:?}"),
     }
     assert_message(&err, &p, 2, None);
@@ -95,7 +123,13 @@ fn bad_fields_use_fixed_names() {
     let p = write(&dir, "a.tum", "# c\n1.0 0 0 0 0 0 0 1\n2.0 0 0 0 q 0 0 1\n");
     let err = read_tum(&p, &strict()).unwrap_err();
     match &err {
-        ImuError::NotNumeric { line, column, field, value, .. } => {
+        ImuError::NotNumeric {
+            line,
+            column,
+            field,
+            value,
+            ..
+        } => {
             assert_eq!((*line, *column, field.as_str(), value.as_str()), (3, 5, "qx", "q"));
         }
         e => panic!("{e:?}"),
@@ -105,7 +139,9 @@ fn bad_fields_use_fixed_names() {
     let p = write(&dir, "b.tum", "1.0 0 0 0 0 0 0 1 0 nan 0\n");
     let err = read_tum(&p, &strict()).unwrap_err();
     match &err {
-        ImuError::NonFinite { line, column, field, .. } => assert_eq!((*line, *column, field.as_str()), (1, 10, "vy")),
+        ImuError::NonFinite {
+            line, column, field, ..
+        } => assert_eq!((*line, *column, field.as_str()), (1, 10, "vy")),
         e => panic!("{e:?}"),
     }
     assert_message(&err, &p, 1, Some("vy"));
@@ -113,7 +149,9 @@ fn bad_fields_use_fixed_names() {
     let p = write(&dir, "c.tum", "1.0 0 0 0 0 0 0 1\n1,5 0 0 0 0 0 0 1\n");
     let err = read_tum(&p, &strict()).unwrap_err();
     match &err {
-        ImuError::NotNumeric { line, column, field, .. } => assert_eq!((*line, *column, field.as_str()), (2, 1, "timestamp")),
+        ImuError::NotNumeric {
+            line, column, field, ..
+        } => assert_eq!((*line, *column, field.as_str()), (2, 1, "timestamp")),
         e => panic!("{e:?}"),
     }
     assert_message(&err, &p, 2, Some("timestamp"));
@@ -125,9 +163,20 @@ fn duplicate_and_decreasing_stamps() {
     let p = write(&dir, "a.tum", "1.5 0 0 0 0 0 0 1\n1.500000000 0 0 0 0 0 0 1\n");
     let err = read_tum(&p, &strict()).unwrap_err();
     match &err {
-        ImuError::Timestamp { line, column, field, value, previous, problem, .. } => {
+        ImuError::Timestamp {
+            line,
+            column,
+            field,
+            value,
+            previous,
+            problem,
+            ..
+        } => {
             assert_eq!((*line, *column, field.as_str()), (2, 1, "timestamp"));
-            assert_eq!((*value, *previous, *problem), (1_500_000_000, 1_500_000_000, TimestampProblem::Duplicate));
+            assert_eq!(
+                (*value, *previous, *problem),
+                (1_500_000_000, 1_500_000_000, TimestampProblem::Duplicate)
+            );
         }
         e => panic!("{e:?}"),
     }
@@ -141,7 +190,10 @@ fn duplicate_and_decreasing_stamps() {
 
 #[test]
 fn missing_file_is_not_found() {
-    assert!(matches!(read_tum(data("nope.tum"), &strict()), Err(ImuError::NotFound { .. })));
+    assert!(matches!(
+        read_tum(data("nope.tum"), &strict()),
+        Err(ImuError::NotFound { .. })
+    ));
 }
 
 #[test]
@@ -164,15 +216,27 @@ fn write_tum_round_trips_bit_for_bit() {
 
     let odd = GroundTruth {
         t_ns: vec![-1_500_000_000, -1, 0, 1_403_636_580_838_560_001],
-        p: vec![[1.0 / 3.0, -0.0, 1e-300], [1e22, 5e-324, -1.0], [0.0; 3], [4.688319, -1.786938, 0.783338]],
-        q_wxyz: vec![[1.0, 0.0, 0.0, 0.0], [0.5, 0.5, -0.5, 0.5], [0.0, 0.0, 0.0, 1.0], [0.534108, -0.153029, -0.827383, -0.082152]],
+        p: vec![
+            [1.0 / 3.0, -0.0, 1e-300],
+            [1e22, 5e-324, -1.0],
+            [0.0; 3],
+            [4.688319, -1.786938, 0.783338],
+        ],
+        q_wxyz: vec![
+            [1.0, 0.0, 0.0, 0.0],
+            [0.5, 0.5, -0.5, 0.5],
+            [0.0, 0.0, 0.0, 1.0],
+            [0.534108, -0.153029, -0.827383, -0.082152],
+        ],
         ..GroundTruth::default()
     };
     write_tum(&out, &odd).unwrap();
     let back = read_tum(&out, &strict()).unwrap();
     assert_eq!(back.t_ns, odd.t_ns);
     assert_eq!(bits(&back), bits(&odd));
-    assert!(std::fs::read_to_string(&out).unwrap().starts_with("# timestamp(s) tx ty tz qx qy qz qw\n"));
+    assert!(std::fs::read_to_string(&out)
+        .unwrap()
+        .starts_with("# timestamp(s) tx ty tz qx qy qz qw\n"));
 
     let mut bad = odd.clone();
     bad.p[2][1] = f64::INFINITY;

@@ -37,7 +37,9 @@ def read_recording(
     p = np.asarray(m["opt_pos"], dtype=np.float64)
     n = len(gyro)
     if not (acc.shape == gyro.shape == (n, 3) and q.shape == (n, 4) and p.shape == (n, 3)):
-        raise InvalidInputError(f"{path}: array shapes disagree: gyr {gyro.shape} acc {acc.shape} quat {q.shape} pos {p.shape}")
+        raise InvalidInputError(
+            f"{path}: array shapes disagree: gyr {gyro.shape} acc {acc.shape} quat {q.shape} pos {p.shape}"
+        )
     # Integer-ns stamps from the nominal rate; rounding each stamp (not accumulating dt) keeps
     # them within 0.5 ns of i / fs.
     t_ns = np.round(np.arange(n, dtype=np.float64) * (1e9 / fs)).astype(np.int64)

@@ -20,7 +20,7 @@ def read_groundtruth(path: Path, allow_float_timestamps: bool = False) -> Ground
     path = Path(path)
     if path.suffix.lower() != ".csv":
         return _from_dict(core.read_tum(str(path), allow_float_timestamps))
-    with open(path, "r", encoding="utf-8", errors="replace") as f:
+    with open(path, encoding="utf-8", errors="replace") as f:
         header = f.readline()
     if header.count(",") + 1 == 8:
         return _from_dict(core.read_asl_pose(str(path), allow_float_timestamps))

@@ -18,10 +18,7 @@ type ImuArrays<'py> = (
 );
 
 fn opts(allow_float_timestamps: bool) -> ReadOptions {
-    ReadOptions {
-        allow_float_timestamps,
-        ..Default::default()
-    }
+    ReadOptions { allow_float_timestamps }
 }
 
 fn imu_out(py: Python<'_>, s: ImuSamples) -> PyResult<ImuArrays<'_>> {

@@ -20,7 +20,11 @@ pub fn vec_err(a: Vec3, b: Vec3) -> f64 {
 pub fn jittered_stamps(n: usize, period_ns: i64, jitter_ns: i64) -> Vec<i64> {
     (0..n as i64)
         .map(|i| {
-            let j = if jitter_ns == 0 { 0 } else { (i * 7919 + i * i * 104_729) % (2 * jitter_ns + 1) - jitter_ns };
+            let j = if jitter_ns == 0 {
+                0
+            } else {
+                (i * 7919 + i * i * 104_729) % (2 * jitter_ns + 1) - jitter_ns
+            };
             1_000_000 + i * period_ns + j
         })
         .collect()
@@ -32,14 +36,22 @@ pub fn wiggly_imu(t_ns: &[i64]) -> (Vec<Vec3>, Vec<Vec3>) {
         .iter()
         .map(|&t| {
             let s = t as f64 * 1e-9;
-            [0.9 * (1.7 * s).sin() + 0.2, -0.6 * (0.8 * s + 0.4).cos(), 1.1 * (0.5 * s).sin() - 0.3]
+            [
+                0.9 * (1.7 * s).sin() + 0.2,
+                -0.6 * (0.8 * s + 0.4).cos(),
+                1.1 * (0.5 * s).sin() - 0.3,
+            ]
         })
         .collect();
     let acc = t_ns
         .iter()
         .map(|&t| {
             let s = t as f64 * 1e-9;
-            [1.5 * (2.1 * s).cos(), 0.4 + 0.7 * (1.3 * s).sin(), 9.81 + 0.9 * (0.6 * s).sin()]
+            [
+                1.5 * (2.1 * s).cos(),
+                0.4 + 0.7 * (1.3 * s).sin(),
+                9.81 + 0.9 * (0.6 * s).sin(),
+            ]
         })
         .collect();
     (gyro, acc)
@@ -81,10 +93,21 @@ pub fn synthetic_sequence(t_ns: &[i64], gravity: f64) -> Sequence {
         let w = c_m.transpose() * b_m.transpose() * Vector3::z() * alpha
             + c_m.transpose() * Vector3::x() * bd
             + Vector3::y() * cd;
-        let p =
-            Vector3::new(2.0 * (0.7 * t).sin(), 1.5 * (0.5 * t).cos() + 0.2 * t, 0.3 * (1.1 * t).sin() + 0.05 * t * t);
-        let v = Vector3::new(1.4 * (0.7 * t).cos(), -0.75 * (0.5 * t).sin() + 0.2, 0.33 * (1.1 * t).cos() + 0.1 * t);
-        let pdd = Vector3::new(-0.98 * (0.7 * t).sin(), -0.375 * (0.5 * t).cos(), -0.363 * (1.1 * t).sin() + 0.1);
+        let p = Vector3::new(
+            2.0 * (0.7 * t).sin(),
+            1.5 * (0.5 * t).cos() + 0.2 * t,
+            0.3 * (1.1 * t).sin() + 0.05 * t * t,
+        );
+        let v = Vector3::new(
+            1.4 * (0.7 * t).cos(),
+            -0.75 * (0.5 * t).sin() + 0.2,
+            0.33 * (1.1 * t).cos() + 0.1 * t,
+        );
+        let pdd = Vector3::new(
+            -0.98 * (0.7 * t).sin(),
+            -0.375 * (0.5 * t).cos(),
+            -0.363 * (1.1 * t).sin() + 0.1,
+        );
         let acc = r.transpose() * (pdd - g);
         // Built from the same three elementary rotations, so that q and r agree to round-off.
         let q = so3::exp(&(Vector3::z() * (alpha * t))) * so3::exp(&(Vector3::x() * b)) * so3::exp(&(Vector3::y() * c));
