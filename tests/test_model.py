@@ -1,0 +1,104 @@
+"""ImuRefiner: identity at start, dtype follows the input, causal streaming equals the full window,
+state only for the causal variant, normalisation saved with the weights."""
+import pytest
+import torch
+
+from imu_learn.model import ImuRefiner, ModelConfig
+
+torch.set_num_threads(1)
+
+SMALL = dict(hidden=8, layers=2, fc=8)
+
+
+def imu_batch(B=2, W=30, dtype=torch.float32, seed=0):
+    g = torch.Generator().manual_seed(seed)
+    x = torch.randn(B, W, 6, generator=g, dtype=dtype)
+    x[..., :3] *= 0.5
+    x[..., 3:] = x[..., 3:] * 2 + torch.tensor([9.0, 0.2, -3.7], dtype=dtype)
+    return x
+
+
+def randomise_head(model, seed=1):
+    g = torch.Generator().manual_seed(seed)
+    with torch.no_grad():
+        model.head.weight.copy_(torch.randn(model.head.weight.shape, generator=g))
+        model.head.bias.copy_(torch.randn(model.head.bias.shape, generator=g))
+
+
+@pytest.mark.parametrize("causal", [False, True])
+def test_starts_as_identity(causal):
+    torch.manual_seed(0)
+    x = imu_batch()
+    model = ImuRefiner(ModelConfig(causal=causal, **SMALL), mean=x.mean((0, 1)), std=x.std((0, 1)))
+    assert torch.count_nonzero(model.head.weight) == 0 and torch.count_nonzero(model.head.bias) == 0
+    assert torch.equal(model(x), x)
+
+
+@pytest.mark.parametrize("causal", [False, True])
+def test_output_dtype_follows_input(causal):
+    torch.manual_seed(0)
+    model = ImuRefiner(ModelConfig(causal=causal, **SMALL))
+    randomise_head(model)
+    x32 = imu_batch()
+    out32 = model(x32)
+    assert out32.dtype == torch.float32 and out32.shape == x32.shape
+    model64 = model.double()
+    x64 = x32.double()
+    out64 = model64(x64)
+    assert out64.dtype == torch.float64
+    assert model64.mean.dtype == torch.float64 and model64.std.dtype == torch.float64
+    torch.testing.assert_close(out64.float(), out32, rtol=1e-4, atol=1e-4)
+    assert not torch.equal(out64, x64)  # the randomised head does change the signal
+
+
+def test_causal_step_by_step_equals_full_window():
+    torch.manual_seed(0)
+    x = imu_batch(B=3, W=25, dtype=torch.float64)
+    model = ImuRefiner(ModelConfig(causal=True, **SMALL), mean=x.mean((0, 1)), std=x.std((0, 1))).double()
+    randomise_head(model)
+    model.eval()
+    with torch.no_grad():
+        full = model(x)
+        state = None
+        steps = []
+        for i in range(x.shape[1]):
+            y, state = model.step(x[:, i], state)
+            steps.append(y)
+        torch.testing.assert_close(torch.stack(steps, 1), full, rtol=0, atol=1e-12)
+        # and in chunks with carried state
+        a, s = model.forward_with_state(x[:, :11])
+        b, _ = model.forward_with_state(x[:, 11:], s)
+        torch.testing.assert_close(torch.cat((a, b), 1), full, rtol=0, atol=1e-12)
+    # causal: the output at t does not depend on inputs after t
+    y = x.clone()
+    y[:, 15:] += 1.0
+    with torch.no_grad():
+        torch.testing.assert_close(model(y)[:, :15], full[:, :15], rtol=0, atol=0)
+
+
+def test_bidirectional_refuses_state():
+    model = ImuRefiner(ModelConfig(causal=False, **SMALL))
+    x = imu_batch()
+    _, state = model.forward_with_state(x)
+    with pytest.raises(ValueError):
+        model(x, state)
+    with pytest.raises(ValueError):
+        model.forward_with_state(x, state)
+    with pytest.raises(ValueError):
+        model.step(x[:, 0])
+
+
+def test_normalisation_buffers_in_state_dict():
+    mean = torch.tensor([0.01, -0.02, 0.03, 9.0, 0.2, -3.7])
+    std = torch.tensor([0.3, 0.2, 0.1, 1.0, 0.5, 0.7])
+    model = ImuRefiner(ModelConfig(**SMALL), mean=mean, std=std)
+    sd = model.state_dict()
+    assert torch.equal(sd["mean"], mean) and torch.equal(sd["std"], std)
+    # a fresh model picks them up from the state dict alone
+    fresh = ImuRefiner(ModelConfig(**SMALL))
+    fresh.load_state_dict(sd)
+    assert torch.equal(fresh.mean, mean) and torch.equal(fresh.std, std)
+    randomise_head(model)
+    fresh.load_state_dict(model.state_dict())
+    x = imu_batch()
+    torch.testing.assert_close(fresh(x), model(x), rtol=0, atol=0)
