@@ -36,6 +36,7 @@ lint:
 labels dataset root="" *args="":
     {{py}} -m imu_learn.labels {{dataset}} {{ if root == "" { "" } else { "--root " + root } }} {{args}}
 
-# Print throughput of imu_core against numpy, GTSAM and polars (measured now, on this machine)
+# Print measured throughput: imu_core vs numpy/GTSAM/polars, then training/refine/causal latency
 bench *args="":
     {{py}} bench/bench_core.py {{args}}
+    {{py}} bench/bench_learn.py

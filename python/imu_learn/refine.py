@@ -1,0 +1,447 @@
+"""Apply a trained refiner to a recording and write the refined IMU in the input's own format.
+
+    python -m imu_learn.refine --checkpoint CKPT --input IN --output OUT
+        [--format auto|asl|euroc|tum-vi|blackbird|broad|kaist] [--window 1000 --overlap 200]
+        [--device auto|cpu|cuda] [--batch 16] [--copy-folder] [--quiet]
+
+Only the IMU is read (no ground truth needed); timestamps and everything but gyro/acc are kept:
+
+- ASL (EuRoC, TUM-VI): IN is a sequence folder, its ``mav0`` or an IMU ``.csv``. OUT is a folder
+  (``OUT/mav0/imu0/data.csv`` is written) or a ``.csv`` path. The ORIGINAL header line and the
+  original integer-ns stamps are kept; values are written with the shortest text that reads back
+  to the same float64. ``--copy-folder`` first copies the whole input sequence folder to OUT.
+- KAIST: IN is the folder holding ``sensor_data/xsens_imu.csv`` (or that file). Same 17 columns,
+  only gyro (cols 8-10) and acc (cols 11-13, 0-based) replaced; OUT is a folder
+  (``OUT/sensor_data/xsens_imu.csv``) or a ``.csv`` path.
+- Blackbird: IN is the folder holding ``data.hdf5`` (or that file). OUT gets a copy of the file
+  with ``gyro_raw`` / ``accel_raw`` replaced (datasets keep their dtype, chunking, attributes).
+- BROAD: IN is a ``.mat`` trial. OUT (a ``.mat`` path, or a folder that gets the input's name)
+  gets every variable of the input with ``imu_gyr`` / ``imu_acc`` replaced.
+
+Every file is written to a temporary file beside its target and renamed into place. The input is
+never written: an OUT that resolves to the input file (or, with ``--copy-folder``, the input
+folder) is refused. Errors print one line and exit with status 2.
+
+Stitching rule (bidirectional model). A sequence of N samples is cut into windows of W samples
+starting every S = W - O samples (O the overlap); the last window is moved back to end at N so that
+every window is full length (N <= W: one window of N). Consecutive windows k, k+1 overlap on
+[s_{k+1}, e_k); sample i of the overlap is taken from window k if i < b = (s_{k+1} + e_k) // 2 and
+from window k+1 otherwise: each sample comes from the window in which it lies farthest from a
+window edge (a centre crop keeping ~O/2 samples of context on each side), and the first and last
+windows keep their outer edges, which are the sequence's own. The result therefore approximates
+running the model over the whole sequence at once; the difference is bounded by how much the LSTM
+remembers beyond O/2 samples (measured in tests/test_refine.py). For W >= N it is exact.
+
+Causal model: windows of W samples run one after the other with the LSTM state carried over, which
+is the whole-sequence causal forward exactly (no overlap, no stitching; ``overlap`` is unused).
+
+Precision: the network runs in float32; its correction (model output minus its float32 input) is
+added to the float64 raw samples, so a model whose correction is zero returns the input bit for bit.
+"""
+from __future__ import annotations
+
+import argparse
+import csv
+import os
+import shutil
+import sys
+import tempfile
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Callable, List, Optional, Tuple
+
+import numpy as np
+import torch
+
+from imu_learn import _imu_core as core
+from imu_learn.errors import InvalidInputError
+from imu_learn.model import ImuRefiner
+
+FORMATS = ("auto", "asl", "euroc", "tum-vi", "blackbird", "broad", "kaist")
+KAIST_GYRO_COLS = (8, 9, 10)  # 0-based columns of xsens_imu.csv (see crates/imu_core/src/io/kaist.rs)
+KAIST_ACC_COLS = (11, 12, 13)
+KAIST_COLUMNS = 17
+
+
+# --------------------------------------------------------------------------------------------
+# Windowing and the model
+# --------------------------------------------------------------------------------------------
+
+
+def window_plan(n: int, window: int, overlap: int) -> List[Tuple[int, int, int, int]]:
+    """The windows of the stitching rule: (start, end, keep_from, keep_to) per window, where the
+    window covers samples [start, end) and contributes samples [keep_from, keep_to) to the output.
+    The kept ranges tile [0, n) in order."""
+    if window < 1:
+        raise InvalidInputError(f"window must be >= 1, got {window}")
+    if not 0 <= overlap < window:
+        raise InvalidInputError(f"overlap must be in [0, window), got overlap {overlap} for window {window}")
+    if n <= window:
+        return [(0, n, 0, n)] if n > 0 else []
+    stride = window - overlap
+    starts = list(range(0, n - window + 1, stride))
+    if starts[-1] + window < n:
+        starts.append(n - window)
+    plan = []
+    for k, s in enumerate(starts):
+        e = s + window
+        keep_from = 0 if k == 0 else (s + starts[k - 1] + window) // 2
+        keep_to = n if k == len(starts) - 1 else (starts[k + 1] + e) // 2
+        plan.append((s, e, keep_from, keep_to))
+    return plan
+
+
+def _device_of(model: ImuRefiner) -> torch.device:
+    return next(iter(model.parameters())).device
+
+
+def _progress(total: int, enabled: bool, desc: str):
+    from tqdm import tqdm
+
+    return tqdm(total=total, disable=not enabled, desc=desc, unit="sample", unit_scale=True, file=sys.stderr)
+
+
+@torch.no_grad()
+def refine_corrections(
+    model: ImuRefiner,
+    imu32: np.ndarray,
+    window: int = 1000,
+    overlap: int = 200,
+    batch: int = 16,
+    progress: bool = False,
+) -> np.ndarray:
+    """Corrections (N, 6) float32 = model output - input, by the module's windowing rule."""
+    n = len(imu32)
+    out = np.zeros((n, 6), dtype=np.float32)
+    if n == 0:
+        return out
+    device = _device_of(model)
+    x_all = torch.from_numpy(np.ascontiguousarray(imu32, dtype=np.float32)).to(device)
+    was_training = model.training
+    model.eval()
+    try:
+        if model.cfg.causal:
+            state = None
+            with _progress(n, progress, "refine (causal)") as bar:
+                for s in range(0, n, window):
+                    x = x_all[None, s : s + window]
+                    y, state = model.forward_with_state(x, state)
+                    out[s : s + window] = (y - x)[0].float().cpu().numpy()
+                    bar.update(x.shape[1])
+            return out
+        plan = window_plan(n, window, overlap)
+        with _progress(n, progress, "refine") as bar:
+            for b0 in range(0, len(plan), max(1, batch)):
+                chunk = plan[b0 : b0 + max(1, batch)]
+                x = torch.stack([x_all[s:e] for s, e, _, _ in chunk])
+                corr = (model(x) - x).float().cpu().numpy()
+                for j, (s, _e, kf, kt) in enumerate(chunk):
+                    out[kf:kt] = corr[j, kf - s : kt - s]
+                bar.update(chunk[-1][3] - chunk[0][2])
+    finally:
+        model.train(was_training)
+    return out
+
+
+def refine_arrays(
+    model: ImuRefiner,
+    gyro: np.ndarray,
+    acc: np.ndarray,
+    window: int = 1000,
+    overlap: int = 200,
+    batch: int = 16,
+    progress: bool = False,
+) -> Tuple[np.ndarray, np.ndarray]:
+    """Refine raw gyro [rad/s] and acc [m/s^2] (N, 3) with ``model`` -> (gyro, acc) float64 (N, 3).
+
+    Bidirectional model: overlapping windows stitched by centre crop (see the module docstring);
+    causal model: sequential windows with carried state (exact). ``batch`` windows run at once.
+    """
+    gyro = np.asarray(gyro, dtype=np.float64)
+    acc = np.asarray(acc, dtype=np.float64)
+    if gyro.ndim != 2 or gyro.shape[1] != 3 or acc.shape != gyro.shape:
+        raise InvalidInputError(f"gyro and acc must both be (N, 3); got {gyro.shape} and {acc.shape}")
+    raw = np.concatenate([gyro, acc], axis=1)
+    if not np.isfinite(raw).all():
+        raise InvalidInputError(f"IMU row {int(np.flatnonzero(~np.isfinite(raw).all(1))[0])} is not finite")
+    x32 = raw.astype(np.float32)
+    corr = refine_corrections(model, x32, window, overlap, batch, progress)
+    refined = raw + corr.astype(np.float64)
+    return np.ascontiguousarray(refined[:, :3]), np.ascontiguousarray(refined[:, 3:])
+
+
+# --------------------------------------------------------------------------------------------
+# Formats: locate the IMU file, read it, write a refined copy
+# --------------------------------------------------------------------------------------------
+
+
+@dataclass
+class Source:
+    fmt: str  # asl, kaist, blackbird, broad
+    imu_file: Path  # the file that holds the IMU
+    root: Path  # the folder copied by --copy-folder
+    rel: Path  # imu_file relative to root (where it goes under OUT when OUT is a folder)
+    gyro: np.ndarray
+    acc: np.ndarray
+    write: Callable[[Path, np.ndarray, np.ndarray], None]  # (out file, gyro, acc)
+
+
+def _tmp_beside(path: Path) -> Path:
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
+    os.close(fd)
+    return Path(tmp)
+
+
+def _replace_atomically(path: Path, fill: Callable[[Path], None]) -> None:
+    tmp = _tmp_beside(path)
+    try:
+        fill(tmp)
+        os.replace(tmp, path)
+    except BaseException:
+        try:
+            os.unlink(tmp)
+        except FileNotFoundError:
+            pass
+        raise
+
+
+def detect(path: Path) -> str:
+    """Format of a recording path (folder or file)."""
+    if path.suffix.lower() == ".mat":
+        return "broad"
+    if path.suffix.lower() in (".hdf5", ".h5") or (path.is_dir() and (path / "data.hdf5").exists()):
+        return "blackbird"
+    if path.name == "xsens_imu.csv" or (path.is_dir() and (path / "sensor_data" / "xsens_imu.csv").exists()):
+        return "kaist"
+    if path.suffix.lower() == ".csv" or (path / "mav0").is_dir() or path.name == "mav0":
+        return "asl"
+    raise InvalidInputError(f"{path}: cannot tell the format from its layout; pass --format (one of {FORMATS[1:]})")
+
+
+def _asl_source(path: Path) -> Source:
+    from imu_learn.formats import asl
+
+    f = asl.imu_file(path)
+    header = core.read_asl_imu_header(str(f)).rstrip("\r\n")
+    t_ns, gyro, acc = core.read_asl_imu(str(f))
+    root = asl.sequence_root(f) if path.is_file() else (path.parent if path.name == "mav0" else path)
+    try:
+        rel = f.resolve().relative_to(root.resolve())
+    except ValueError:
+        root, rel = f.parent, Path(f.name)
+
+    def write(out: Path, g: np.ndarray, a: np.ndarray) -> None:
+        out.parent.mkdir(parents=True, exist_ok=True)
+        core.write_asl_imu(str(out), t_ns, np.ascontiguousarray(g), np.ascontiguousarray(a), header)
+
+    return Source("asl", f, root, rel, gyro, acc, write)
+
+
+def _kaist_source(path: Path) -> Source:
+    f = path if path.is_file() else path / "sensor_data" / "xsens_imu.csv"
+    if not f.exists():
+        raise FileNotFoundError(2, "No such file or directory", str(f))
+    _t, gyro, acc = core.read_kaist_imu(str(f))  # strict validation, and the arrays
+    root = f.parent.parent if f.parent.name == "sensor_data" else f.parent
+    rel = f.relative_to(root)
+
+    def write(out: Path, g: np.ndarray, a: np.ndarray) -> None:
+        with open(f, newline="") as src:
+            rows = list(csv.reader(src))
+        data_rows = [r for r in rows if r]
+        if len(data_rows) != len(g):
+            raise InvalidInputError(f"{f}: {len(data_rows)} non-empty rows but {len(g)} samples were read")
+
+        def fill(tmp: Path) -> None:
+            i = 0
+            with open(tmp, "w", newline="") as dst:
+                w = csv.writer(dst, lineterminator="\n")
+                for r in rows:
+                    if r:
+                        if len(r) != KAIST_COLUMNS:
+                            raise InvalidInputError(f"{f}: a row has {len(r)} columns, expected {KAIST_COLUMNS}")
+                        r = list(r)
+                        for c, v in zip(KAIST_GYRO_COLS + KAIST_ACC_COLS, (*g[i], *a[i])):
+                            r[c] = repr(float(v))
+                        i += 1
+                    w.writerow(r)
+
+        _replace_atomically(out, fill)
+
+    return Source("kaist", f, root, rel, gyro, acc, write)
+
+
+def _blackbird_source(path: Path) -> Source:
+    import h5py
+
+    from imu_learn.formats import blackbird
+
+    f = path if path.is_file() else path / "data.hdf5"
+    imu = blackbird.read_imu(f)
+
+    def write(out: Path, g: np.ndarray, a: np.ndarray) -> None:
+        def fill(tmp: Path) -> None:
+            shutil.copyfile(f, tmp)
+            with h5py.File(tmp, "r+") as h:
+                for name, arr in (("gyro_raw", g), ("accel_raw", a)):
+                    ds = h[name]
+                    ds[...] = arr.astype(ds.dtype).reshape(ds.shape)
+
+        _replace_atomically(out, fill)
+
+    return Source("blackbird", f, f.parent, Path(f.name), imu.gyro, imu.acc, write)
+
+
+def _broad_source(path: Path) -> Source:
+    import scipy.io
+
+    if not path.exists():
+        raise FileNotFoundError(2, "No such file or directory", str(path))
+    m = scipy.io.loadmat(str(path))
+    missing = [k for k in ("imu_gyr", "imu_acc") if k not in m]
+    if missing:
+        raise InvalidInputError(f"{path}: missing variable(s) {missing}")
+    gyro = np.ascontiguousarray(m["imu_gyr"], dtype=np.float64)
+    acc = np.ascontiguousarray(m["imu_acc"], dtype=np.float64)
+    if gyro.ndim != 2 or gyro.shape[1] != 3 or acc.shape != gyro.shape:
+        raise InvalidInputError(f"{path}: imu_gyr {gyro.shape} and imu_acc {acc.shape} must both be (N, 3)")
+
+    def write(out: Path, g: np.ndarray, a: np.ndarray) -> None:
+        data = {k: v for k, v in m.items() if not k.startswith("__")}
+        data["imu_gyr"] = g.astype(m["imu_gyr"].dtype)
+        data["imu_acc"] = a.astype(m["imu_acc"].dtype)
+
+        def fill(tmp: Path) -> None:
+            with open(tmp, "wb") as fh:
+                scipy.io.savemat(fh, data)
+
+        _replace_atomically(out, fill)
+
+    return Source("broad", path, path.parent, Path(path.name), gyro, acc, write)
+
+
+def open_source(path: Path, fmt: str = "auto") -> Source:
+    path = Path(path)
+    if not path.exists():
+        raise FileNotFoundError(2, "No such file or directory", str(path))
+    fmt = detect(path) if fmt == "auto" else fmt
+    if fmt in ("asl", "euroc", "tum-vi"):
+        return _asl_source(path)
+    if fmt == "kaist":
+        return _kaist_source(path)
+    if fmt == "blackbird":
+        return _blackbird_source(path)
+    if fmt == "broad":
+        return _broad_source(path)
+    raise InvalidInputError(f"unknown format {fmt!r}; known: {FORMATS}")
+
+
+def output_file(src: Source, out: Path) -> Path:
+    """The file to write for OUT: OUT itself when it names a file of the input's kind, else the
+    input's relative path under the folder OUT."""
+    if out.suffix.lower() == src.imu_file.suffix.lower() and not out.is_dir():
+        return out
+    return out / src.rel
+
+
+def _same(a: Path, b: Path) -> bool:
+    try:
+        if a.exists() and b.exists():
+            return os.path.samefile(a, b)
+    except OSError:
+        pass
+    return a.resolve() == b.resolve()
+
+
+def _inside(child: Path, parent: Path) -> bool:
+    try:
+        child.resolve().relative_to(parent.resolve())
+        return True
+    except ValueError:
+        return False
+
+
+def refine_recording(
+    model: ImuRefiner,
+    input: Path,
+    output: Path,
+    fmt: str = "auto",
+    window: int = 1000,
+    overlap: int = 200,
+    copy_folder: bool = False,
+    batch: int = 16,
+    progress: bool = False,
+) -> Path:
+    """Refine one recording; returns the file written."""
+    input, output = Path(input), Path(output)
+    src = open_source(input, fmt)
+    if copy_folder:
+        if output.suffix.lower() == src.imu_file.suffix.lower() and not output.is_dir():
+            raise InvalidInputError(f"--copy-folder needs OUT to be a folder, got {output}")
+        if _same(output, src.root) or _inside(output, src.root) or _inside(src.root, output):
+            raise InvalidInputError(f"--copy-folder: OUT {output} and the input folder {src.root} overlap")
+        if output.exists() and (not output.is_dir() or any(output.iterdir())):
+            raise InvalidInputError(f"--copy-folder: {output} exists and is not an empty folder")
+    target = output_file(src, output)
+    if _same(target, src.imu_file) or _same(output, input):
+        raise InvalidInputError(f"refusing to overwrite the input: OUT {output} is the input {input}")
+    gyro, acc = refine_arrays(model, src.gyro, src.acc, window, overlap, batch, progress)
+    if copy_folder:
+        shutil.copytree(src.root, output, dirs_exist_ok=True)
+    src.write(target, gyro, acc)
+    return target
+
+
+# --------------------------------------------------------------------------------------------
+# CLI
+# --------------------------------------------------------------------------------------------
+
+
+def pick_device(name: str) -> torch.device:
+    if name == "auto":
+        return torch.device("cuda" if torch.cuda.is_available() else "cpu")
+    return torch.device(name)
+
+
+def _parser() -> argparse.ArgumentParser:
+    p = argparse.ArgumentParser(
+        prog="python -m imu_learn.refine",
+        description="Write a recording's IMU refined by a trained model, in the input's own format.",
+    )
+    p.add_argument("--checkpoint", required=True, type=Path, help="imu_learn checkpoint (.pt)")
+    p.add_argument("--input", required=True, type=Path, help="recording folder or IMU file (never written)")
+    p.add_argument("--output", required=True, type=Path, help="folder, or a file of the input's kind")
+    p.add_argument("--format", default="auto", choices=FORMATS)
+    p.add_argument("--window", type=int, default=1000, help="samples per window (default 1000)")
+    p.add_argument("--overlap", type=int, default=200, help="overlap of consecutive windows (default 200)")
+    p.add_argument("--batch", type=int, default=16, help="windows run at once (default 16)")
+    p.add_argument("--device", default="auto", help="auto (cuda if available), cpu, cuda, cuda:1 ...")
+    p.add_argument("--copy-folder", action="store_true", help="copy the whole input folder to OUT first")
+    p.add_argument("--quiet", action="store_true", help="no progress bar, no summary")
+    return p
+
+
+def main(argv: Optional[List[str]] = None) -> int:
+    args = _parser().parse_args(argv)
+    try:
+        from imu_learn.checkpoint import load_model
+
+        device = pick_device(args.device)
+        model = load_model(args.checkpoint).to(device)
+        target = refine_recording(
+            model, args.input, args.output, args.format, args.window, args.overlap, args.copy_folder,
+            args.batch, progress=not args.quiet,
+        )
+    except Exception as e:  # every failure is one line and status 2
+        msg = " ".join(str(e).split()) or type(e).__name__
+        print(f"error: {type(e).__name__}: {msg}", file=sys.stderr)
+        return 2
+    if not args.quiet:
+        kind = "causal" if model.cfg.causal else f"window {args.window}, overlap {args.overlap}"
+        print(f"refined IMU ({kind}, {device}) written to {target}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

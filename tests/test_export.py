@@ -1,0 +1,92 @@
+"""imu_learn.export: TorchScript and ONNX reproduce the torch model on real IMU windows."""
+import json
+import warnings
+from pathlib import Path
+
+import numpy as np
+import pytest
+import torch
+
+from imu_learn import _imu_core as core
+from imu_learn.checkpoint import load_model, save_checkpoint
+from imu_learn.export import main
+from imu_learn.model import ImuRefiner, ModelConfig
+
+torch.set_num_threads(1)
+
+REPO = Path(__file__).resolve().parent.parent
+IMU = REPO / "datasets" / "euroc" / "V1_01_easy" / "mav0" / "imu0" / "data.csv"
+TRACE_W = 200
+
+
+@pytest.fixture(scope="module", params=[False, True], ids=["bidirectional", "causal"])
+def exported(request, tmp_path_factory):
+    causal = request.param
+    tmp = tmp_path_factory.mktemp("export_causal" if causal else "export_bi")
+    _t, g, a = core.read_asl_imu(str(IMU))
+    raw = np.c_[g, a]
+    torch.manual_seed(3)
+    m = ImuRefiner(ModelConfig(causal=causal), mean=torch.tensor(raw.mean(0)), std=torch.tensor(raw.std(0)))
+    with torch.no_grad():
+        torch.nn.init.normal_(m.head.weight, std=0.5)
+    ckpt = tmp / "ckpt.pt"
+    save_checkpoint(ckpt, m, {}, epoch=0, step=0, best_metric=None)
+    assert main(["--checkpoint", str(ckpt), "--out", str(tmp / "out"), "--window", str(TRACE_W)]) == 0
+    return load_model(ckpt), tmp / "out", raw.astype(np.float32)
+
+
+def windows(raw):
+    """Real windows: the trace length, a different length, and a batch of 3 of another length."""
+    return [raw[None, 1000 : 1000 + TRACE_W], raw[None, 5000 : 5000 + 517], np.stack([raw[i : i + 333] for i in (0, 4000, 9000)])]
+
+
+def reference(model, x):
+    with torch.no_grad():
+        y = model(torch.from_numpy(np.ascontiguousarray(x))).numpy()
+    assert np.abs(y - x).max() > 1e-4  # the head is non-zero: the check is not identity vs identity
+    return y
+
+
+def test_torchscript_reproduces_torch(exported):
+    model, out, raw = exported
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        ts = torch.jit.load(str(out / "model.ts"))
+    for x in windows(raw):
+        with torch.no_grad():
+            y = ts(torch.from_numpy(np.ascontiguousarray(x))).numpy()
+        np.testing.assert_allclose(y, reference(model, x), atol=1e-5, rtol=0)
+
+
+def test_onnx_reproduces_torch_with_dynamic_batch_and_time(exported):
+    ort = pytest.importorskip("onnxruntime")
+    model, out, raw = exported
+    sess = ort.InferenceSession(str(out / "model.onnx"), providers=["CPUExecutionProvider"])
+    assert [i.name for i in sess.get_inputs()] == ["imu"] and [o.name for o in sess.get_outputs()] == ["refined"]
+    shape = sess.get_inputs()[0].shape
+    assert isinstance(shape[0], str) and isinstance(shape[1], str) and shape[2] == 6  # dynamic batch and time
+    for x in windows(raw):
+        y = sess.run(["refined"], {"imu": np.ascontiguousarray(x)})[0]
+        np.testing.assert_allclose(y, reference(model, x), atol=1e-5, rtol=0)
+
+
+def test_card_describes_the_export(exported):
+    model, out, _raw = exported
+    card = json.loads((out / "model.json").read_text())
+    assert card["inputs"][0]["shape"] == ["batch", "time", 6] and card["inputs"][0]["dtype"] == "float32"
+    assert card["outputs"][0]["name"] == "refined"
+    np.testing.assert_allclose(card["normalisation"]["mean"], model.mean.numpy(), rtol=1e-6)
+    np.testing.assert_allclose(card["normalisation"]["std"], model.std.numpy(), rtol=1e-6)
+    assert card["model_args"] == model.model_args() and card["causal"] == model.cfg.causal
+    assert card["trace_window"] == TRACE_W
+    assert card["dynamic_axes"] == {"batch": True, "time": True}
+    for name in ("torchscript", "onnx"):
+        assert card["checks"][name]["max_abs_diff_other_shape"] < 1e-5
+
+
+def test_bad_checkpoint_is_one_line_exit_2(tmp_path, capsys):
+    bad = tmp_path / "bad.pt"
+    bad.write_bytes(b"garbage")
+    assert main(["--checkpoint", str(bad), "--out", str(tmp_path / "o")]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and err.startswith("error:")
