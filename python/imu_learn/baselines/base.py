@@ -1,0 +1,104 @@
+"""The interface every evaluated method implements, so evaluation treats them all alike.
+
+Protocol (README "Evaluation"): a method is fitted on the training split only (validation for its
+own model selection); at test time each window starts from the ground-truth state (p, v, R) at its
+first sample and the method sees only IMU samples from then on.
+
+Two kinds of method:
+- refiners return corrected IMU samples (``refine``); their poses come from integrating those
+  samples from the ground-truth start state (``predict`` below does that);
+- regressors (end-to-end learning) override ``predict`` and return poses directly.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Dict, List, Optional, Tuple
+
+import numpy as np
+
+from imu_learn.integration import integrate_windows
+from imu_learn.types import Sequence
+
+
+@dataclass(frozen=True)
+class FitSettings:
+    """Budget and data shape shared by the learned baselines (each may ignore what it does not use)."""
+
+    window: int = 200
+    batch_size: int = 32
+    steps: int = 2000
+    lr: float = 1e-3
+    seed: int = 0
+    device: str = "cpu"
+    threads: int = 2
+    gravity: float = 9.81
+
+
+@dataclass(frozen=True)
+class PosePrediction:
+    """End states of windows started at ground truth: ``q_wxyz`` (W, 4) world orientation,
+    ``p`` (W, 3) world position; ``p`` is None for rotation-only methods."""
+
+    q_wxyz: np.ndarray
+    p: Optional[np.ndarray]
+
+
+def quat_mul(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    aw, ax, ay, az = np.moveaxis(a, -1, 0)
+    bw, bx, by, bz = np.moveaxis(b, -1, 0)
+    return np.stack([aw * bw - ax * bx - ay * by - az * bz, aw * bx + ax * bw + ay * bz - az * by,
+                     aw * by - ax * bz + ay * bw + az * bx, aw * bz + ax * by - ay * bx + az * bw], -1)
+
+
+def quat_rotate(q: np.ndarray, v: np.ndarray) -> np.ndarray:
+    u, w = q[..., 1:], q[..., :1]
+    uv = np.cross(u, v)
+    return v + 2.0 * (w * uv + np.cross(u, uv))
+
+
+def poses_from_imu(
+    seq: Sequence, gyro: np.ndarray, acc: np.ndarray, starts: np.ndarray, n: int, gravity: float = 9.81
+) -> PosePrediction:
+    """Integrate (gyro, acc) for n samples from the ground-truth state at each start."""
+    s = Sequence(seq.name, seq.t_ns, np.ascontiguousarray(gyro), np.ascontiguousarray(acc), seq.p, seq.v, seq.q_wxyz)
+    inc = integrate_windows(s, np.asarray(starts, dtype=np.uint64), np.array([n], dtype=np.uint64))
+    k = np.asarray(starts, dtype=np.int64)
+    qk = seq.q_wxyz[k]
+    dt = inc.dt[:, 0, None]
+    g = np.array([0.0, 0.0, -gravity])
+    q_end = quat_mul(qk, inc.dq_wxyz[:, 0])
+    p_end = seq.p[k] + seq.v[k] * dt + 0.5 * g * dt**2 + quat_rotate(qk, inc.dp[:, 0])
+    return PosePrediction(q_wxyz=q_end, p=p_end)
+
+
+class Method:
+    """Base class: a refiner by default (identity = raw IMU)."""
+
+    name = "method"
+    rotation_only = False
+
+    def fit(self, train: List[Sequence], val: List[Sequence], settings: FitSettings = FitSettings()) -> Dict[str, list]:
+        """Fit on ``train`` (``val`` for model selection); returns a log, e.g. {"train_loss": [...]}."""
+        return {}
+
+    def refine(self, seq: Sequence) -> Tuple[np.ndarray, np.ndarray]:
+        """Corrected (gyro, acc), each (N, 3) float64."""
+        return seq.gyro, seq.acc
+
+    def predict(self, seq: Sequence, starts: np.ndarray, n: int, gravity: float = 9.81) -> PosePrediction:
+        gyro, acc = self.refine(seq)
+        pred = poses_from_imu(seq, gyro, acc, starts, n, gravity)
+        return PosePrediction(pred.q_wxyz, None if self.rotation_only else pred.p)
+
+    def save(self, path: Path) -> None:
+        """Persist what ``fit`` learned (weights_only-loadable torch file or npz)."""
+
+    def load(self, path: Path) -> Method:
+        return self
+
+
+class Raw(Method):
+    """The IMU as recorded."""
+
+    name = "raw"
