@@ -1,0 +1,245 @@
+"""The trainer, python -m imu_learn.fit: run folder, resume, Ctrl-C, corrupt checkpoints, config.
+
+Runs are tiny (1-layer model of width 8, window 50, 4 steps per epoch) so the file stays fast.
+"""
+import csv
+import json
+import os
+import shutil
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+import torch
+
+from imu_learn import fit
+from imu_learn.checkpoint import load_checkpoint
+from imu_learn.config import RunConfig, build_config, load_config, read_toml
+
+REPO = Path(__file__).resolve().parent.parent
+PY = sys.executable
+
+TINY = [
+    "--no-progress",
+    "--data.window", "50", "--data.batch_size", "8", "--data.val_stride", "200", "--data.eval_stride", "50",
+    "--model.hidden", "8", "--model.fc", "8", "--model.layers", "1",
+    "--optim.steps_per_epoch", "4", "--optim.lr", "1e-3", "--seed", "7", "--threads", "1",
+]
+
+
+def tiny(run_dir, epochs, *more):
+    return ["--run-dir", str(run_dir), *TINY, "--optim.epochs", str(epochs), *more]
+
+
+def rows(run_dir):
+    with open(Path(run_dir) / "metrics.csv") as f:
+        out = list(csv.DictReader(f))
+    for r in out:
+        r.pop("elapsed_s")
+    return out
+
+
+def weights(path):
+    return load_checkpoint(path)["model"]
+
+
+def snapshot(d):
+    return {p.name: p.read_bytes() for p in sorted(Path(d).iterdir()) if p.is_file()}
+
+
+@pytest.fixture(scope="module")
+def full_run(tmp_path_factory):
+    """An uninterrupted 3-epoch run, the reference for the resume tests."""
+    d = tmp_path_factory.mktemp("fit") / "full"
+    assert fit.main(tiny(d, 3)) == 0
+    return d
+
+
+def test_run_writes_run_folder(full_run):
+    for name in ("split.json", "metrics.csv", "best.pt", "last.pt", "results.json", "config.toml"):
+        assert (full_run / name).is_file(), name
+    r = rows(full_run)
+    assert [int(x["epoch"]) for x in r] == [1, 2, 3]
+    assert [int(x["step"]) for x in r] == [4, 8, 12]
+    assert {"train_total", "val_total", "val_q", "val_v", "val_p", "best_epoch"} <= set(r[0])
+
+    split = json.loads((full_run / "split.json").read_text())
+    assert [e["entry"] for e in split["train"]] == ["MH_01_easy[0:0.8]"]
+    assert [e["entry"] for e in split["val"]] == ["MH_01_easy[0.8:1]"]
+    assert [e["entry"] for e in split["test"]] == ["V1_01_easy"]
+    tr, va = split["train"][0]["segments"][0], split["val"][0]["segments"][0]
+    assert tr["t1_ns"] < va["t0_ns"]  # disjoint time blocks
+
+    last = load_checkpoint(full_run / "last.pt")
+    assert last["epoch"] == 3 and last["step"] == 12
+    assert last["config"]["optim"]["lr"] == 1e-3 and last["model_args"]["hidden"] == 8
+    assert last["optimizer"] is not None and last["code_version"]
+    assert torch.count_nonzero(last["model"]["std"] != 1.0) == 6  # training-set normalisation
+    best = load_checkpoint(full_run / "best.pt")
+    vals = [float(x["val_total"]) for x in r]
+    assert best["best_metric"] == pytest.approx(min(vals))
+    assert best["epoch"] == 1 + vals.index(min(vals))
+
+    res = json.loads((full_run / "results.json").read_text())
+    assert res["test_sequences"] == ["V1_01_easy"]
+    for row in ("raw", "model"):
+        for col in ("open_loop", "bias_removed"):
+            for n in ("10", "200"):
+                cell = res["table"][row][col][n]
+                assert cell["windows"] > 0 and cell["rot_deg"] > 0 and cell["trans_m"] > 0
+    # removing the start-up bias helps the raw EuRoC IMU a lot over 200 samples
+    assert res["table"]["raw"]["bias_removed"]["200"]["rot_deg"] < 0.5 * res["table"]["raw"]["open_loop"]["200"]["rot_deg"]
+
+
+def test_resume_in_new_process_matches_uninterrupted(tmp_path, full_run):
+    d = tmp_path / "resumed"
+    assert fit.main(tiny(d, 1)) == 0
+    assert len(rows(d)) == 1
+    p = subprocess.run([PY, "-m", "imu_learn.fit", "--resume", str(d), "--optim.epochs", "3", "--no-progress"],
+                       cwd=REPO, capture_output=True, text=True, timeout=120)
+    assert p.returncode == 0, p.stderr
+    assert rows(d) == rows(full_run)
+    for name in ("last.pt", "best.pt"):
+        a, b = weights(d / name), weights(full_run / name)
+        for k in a:
+            torch.testing.assert_close(a[k], b[k], rtol=1e-6, atol=1e-7)
+    assert load_checkpoint(d / "last.pt")["step"] == 12
+
+
+def test_ctrl_c_saves_last_and_exits_130(tmp_path, full_run, capsys):
+    d = tmp_path / "interrupted"
+
+    def hook(step, loss):
+        if step == 6:  # in the middle of epoch 2
+            raise KeyboardInterrupt
+
+    assert fit.main(tiny(d, 3), on_step=hook) == 130
+    err = capsys.readouterr().err.strip().splitlines()
+    assert "interrupted" in err[-1] and "--resume" in err[-1]
+    state = load_checkpoint(d / "last.pt")
+    assert state["step"] == 6 and state["epoch"] == 1
+    assert len(rows(d)) == 1
+    assert not (d / "results.json").exists()
+    # continuing mid-epoch reproduces the uninterrupted run
+    assert fit.main(["--resume", str(d), "--no-progress"]) == 0
+    assert rows(d) == rows(full_run)
+    a, b = weights(d / "last.pt"), weights(full_run / "last.pt")
+    for k in a:
+        torch.testing.assert_close(a[k], b[k], rtol=1e-6, atol=1e-7)
+
+
+def test_sigint_to_a_real_process(tmp_path):
+    d = tmp_path / "sigint"
+    proc = subprocess.Popen([PY, "-m", "imu_learn.fit", *tiny(d, 1000)], cwd=REPO,
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    try:
+        deadline = time.time() + 60
+        while not (d / "metrics.csv").exists() and time.time() < deadline and proc.poll() is None:
+            time.sleep(0.1)
+        assert proc.poll() is None, proc.communicate()[1]
+        proc.send_signal(signal.SIGINT)
+        out, err = proc.communicate(timeout=60)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+    assert proc.returncode == 130, err
+    assert err.strip().splitlines()[-1].startswith("imu_learn.fit: interrupted")
+    assert load_checkpoint(d / "last.pt")["step"] >= 4
+
+
+@pytest.mark.parametrize("damage", ["truncated", "garbage", "empty"])
+def test_corrupt_checkpoint_is_one_line_exit_2_and_nothing_changes(tmp_path, full_run, damage):
+    d = tmp_path / "corrupt"
+    shutil.copytree(full_run, d)
+    data = (d / "last.pt").read_bytes()
+    bad = {"truncated": data[: len(data) // 2], "garbage": os.urandom(4096), "empty": b""}[damage]
+    (d / "last.pt").write_bytes(bad)
+    before = snapshot(d)
+    p = subprocess.run([PY, "-m", "imu_learn.fit", "--resume", str(d), "--optim.epochs", "5"],
+                       cwd=REPO, capture_output=True, text=True, timeout=120)
+    assert p.returncode == 2
+    lines = p.stderr.strip().splitlines()
+    assert len(lines) == 1, p.stderr
+    assert lines[0].startswith("imu_learn.fit: error: CheckpointError:") and "last.pt" in lines[0]
+    assert snapshot(d) == before
+
+
+def test_resume_without_checkpoint(tmp_path, capsys):
+    (tmp_path / "empty").mkdir()
+    assert fit.main(["--resume", str(tmp_path / "empty")]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "last.pt" in err[0]
+    assert list((tmp_path / "empty").iterdir()) == []
+
+
+@pytest.mark.parametrize(
+    "args, key",
+    [
+        (["--optim.lr", "abc"], "optim.lr"),
+        (["--optim.lrr", "1e-3"], "optim.lrr"),
+        (["--data.window", "2.5"], "data.window"),
+        (["--model.causal", "maybe"], "model.causal"),
+        (["--data.augment.gyro_bias_max", "x"], "data.augment.gyro_bias_max"),
+        (["--optim.epochs"], "optim.epochs"),
+        (["--data.split.train", "[1, 2]"], "data.split.train"),
+        (["--optim.epochs", "0"], "optim.epochs"),
+    ],
+)
+def test_override_errors_name_the_key(tmp_path, capsys, args, key):
+    assert fit.main(["--run-dir", str(tmp_path / "x"), *args]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and key in err[0] and err[0].startswith("imu_learn.fit: error:")
+    assert not (tmp_path / "x").exists()
+
+
+def test_resume_refuses_changing_the_model(tmp_path, full_run, capsys):
+    d = tmp_path / "r"
+    shutil.copytree(full_run, d)
+    before = snapshot(d)
+    assert fit.main(["--resume", str(d), "--model.hidden", "16"]) == 2
+    assert "model.hidden" in capsys.readouterr().err
+    assert snapshot(d) == before
+
+
+def test_existing_run_is_not_overwritten(full_run, capsys):
+    before = snapshot(full_run)
+    assert fit.main(tiny(full_run, 3)) == 2
+    assert "--resume" in capsys.readouterr().err
+    assert snapshot(full_run) == before
+
+
+def test_bad_split_name(tmp_path, capsys):
+    assert fit.main(["--run-dir", str(tmp_path / "x"), "--data.split.test", "NoSuchSeq"]) == 2
+    err = capsys.readouterr().err
+    assert "data.split.test" in err and "NoSuchSeq" in err
+
+
+def test_overlapping_blocks_rejected(tmp_path, capsys):
+    assert fit.main(["--run-dir", str(tmp_path / "x"), "--data.split.val", "MH_01_easy[0.7:1]"]) == 2
+    assert "overlaps" in capsys.readouterr().err
+
+
+def test_config_files():
+    # no-args = configs/default.toml = the dataclass defaults
+    assert build_config(read_toml(REPO / "configs" / "default.toml"), {}) == RunConfig()
+    for name in ("euroc", "blackbird", "broad"):
+        cfg = load_config(REPO / "configs" / f"{name}.toml")
+        assert cfg.data.split.train and cfg.data.split.val and cfg.data.split.test
+        assert all(r.path.startswith("../shared/data/") for r in cfg.data.roots)
+    cfg = load_config(REPO / "configs" / "default.toml", ["--optim.lr", "3e-4", "--data.split.test", "A,B"])
+    assert cfg.optim.lr == 3e-4 and cfg.data.split.test == ["A", "B"]
+
+
+@pytest.mark.parametrize("name", ["euroc", "blackbird", "broad"])
+def test_shipped_configs_split_real_data(shared, name, monkeypatch):
+    from imu_learn.splits import make_split
+
+    monkeypatch.chdir(REPO)
+    cfg = load_config(REPO / "configs" / f"{name}.toml")
+    split = make_split(cfg.data)
+    names = {k: {s.name for s in split[k]} for k in ("train", "val", "test")}
+    assert split.train and split.val and split.test
+    assert not (names["train"] & names["test"]) and not (names["val"] & names["test"])
