@@ -174,8 +174,8 @@ def fit_startup_bias(
     bg = np.zeros(3)
     ba = np.zeros(3)
     for _ in range(iters):
-        bg = _gauss_newton(lambda x: _residuals(sub, starts, n, labels, x, ba)[0], bg, 1e-4, 10, 1e-9)
-        ba_new = _gauss_newton(lambda x: _residuals(sub, starts, n, labels, bg, x)[1], ba, 1e-3, 10, 1e-9)
+        bg = _gauss_newton(lambda x: _residuals(sub, starts, n, labels, x, ba)[0], bg, 1e-4, 10, 1e-9)  # noqa: B023 (called at once)
+        ba_new = _gauss_newton(lambda x: _residuals(sub, starts, n, labels, bg, x)[1], ba, 1e-3, 10, 1e-9)  # noqa: B023
         done = np.max(np.abs(ba_new - ba)) < 1e-9
         ba = ba_new
         if done:
