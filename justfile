@@ -32,6 +32,14 @@ lint:
     cargo clippy --all-targets --features python -- -D warnings
     {{py}} -m ruff check python tests bench
 
+# Train the paper's model (no args: the shipped crops, < 10 min on 2 CPU cores); e.g. just fit --config configs/euroc.toml
+fit *args="":
+    {{py}} -m imu_learn.fit {{args}}
+
+# Write refined IMU in the input's own format: just refine CKPT IN OUT
+refine checkpoint input output *args="":
+    {{py}} -m imu_learn.refine --checkpoint {{checkpoint}} --input {{input}} --output {{output}} {{args}}
+
 # Build the label cache of a dataset (euroc, tum-vi, blackbird, broad, kaist); root defaults to datasets/<name>
 labels dataset root="" *args="":
     {{py}} -m imu_learn.labels {{dataset}} {{ if root == "" { "" } else { "--root " + root } }} {{args}}
