@@ -20,7 +20,7 @@ use rand_distr::StandardNormal;
 use rayon::prelude::*;
 
 use crate::error::{ImuError, Result};
-use crate::labels::{check_sequence, horizons, increment_unchecked, window_starts};
+use crate::labels::{check_sequence, horizons, window_starts, Frame, GroundTruthView};
 use crate::types::{QuatWxyz, Sequence, Vec3};
 
 /// Augmentation strengths. `Default` is all zero: no augmentation.
@@ -118,37 +118,68 @@ impl Batch {
 /// start uniformly within it, so every valid window in the data is equally likely. Sequences
 /// shorter than a window are skipped; it is an error only if all are.
 pub fn make_batch(seqs: &[Sequence], cfg: &BatchConfig, seed: u64) -> Result<Batch> {
-    if cfg.batch_size == 0 {
-        return Err(ImuError::invalid("batch_size must be at least 1"));
-    }
-    cfg.augment.check()?;
-    let hs = check_common(seqs, cfg.window, &cfg.fractions, cfg.gravity)?;
-    let w = cfg.window;
-    // cum[i] = valid windows in seqs[..i]; a window at k needs k + w < len.
-    let mut cum = Vec::with_capacity(seqs.len() + 1);
-    cum.push(0u64);
-    for s in seqs {
-        let last = cum.last().copied().unwrap_or(0);
-        cum.push(last + s.len().saturating_sub(w) as u64);
-    }
-    let total = cum.last().copied().unwrap_or(0);
-    if total == 0 {
-        return Err(too_short(seqs, w));
-    }
-    let mut out = Batch::alloc(cfg.batch_size, w, hs);
-    fill_all(
-        &mut out,
-        w,
-        |_b, rng| {
-            let u = rng.random_range(0..total);
-            let s = cum.partition_point(|&c| c <= u).saturating_sub(1);
-            (s, (u - cum[s]) as usize)
-        },
-        seqs,
-        cfg.gravity,
-        Some((&cfg.augment, seed)),
-    );
+    let plan = BatchPlan::new(seqs, cfg)?;
+    let mut out = Batch::alloc(cfg.batch_size, cfg.window, plan.horizons.clone());
+    plan.fill(seqs, cfg, seed, out.as_mut())?;
     Ok(out)
+}
+
+/// The checked, seed-independent part of `make_batch`: the horizons (which size the label
+/// buffers) and the window counts that starts are drawn from. Build it, allocate a `BatchMut`
+/// of `cfg.batch_size` windows, then `fill` it (the Python binding fills numpy's own arrays).
+#[derive(Clone, Debug)]
+pub struct BatchPlan {
+    /// H: the horizons in samples.
+    pub horizons: Vec<usize>,
+    /// cum[i] = valid windows in seqs[..i].
+    cum: Vec<u64>,
+}
+
+impl BatchPlan {
+    /// Checks `seqs` and `cfg` (every error `make_batch` can give).
+    pub fn new(seqs: &[Sequence], cfg: &BatchConfig) -> Result<BatchPlan> {
+        if cfg.batch_size == 0 {
+            return Err(ImuError::invalid("batch_size must be at least 1"));
+        }
+        cfg.augment.check()?;
+        let horizons = check_common(seqs, cfg.window, &cfg.fractions, cfg.gravity)?;
+        let w = cfg.window;
+        // cum[i] = valid windows in seqs[..i]; a window at k needs k + w < len.
+        let mut cum = Vec::with_capacity(seqs.len() + 1);
+        cum.push(0u64);
+        for s in seqs {
+            let last = cum.last().copied().unwrap_or(0);
+            cum.push(last + s.len().saturating_sub(w) as u64);
+        }
+        if cum.last().copied().unwrap_or(0) == 0 {
+            return Err(too_short(seqs, w));
+        }
+        Ok(BatchPlan { horizons, cum })
+    }
+
+    /// Draws and fills `cfg.batch_size` windows into `out`, which must be sized for them
+    /// (`BatchMut::check`). `seqs` and `cfg` must be the ones the plan was made from.
+    pub fn fill(&self, seqs: &[Sequence], cfg: &BatchConfig, seed: u64, out: BatchMut<'_>) -> Result<()> {
+        out.check(cfg.batch_size, cfg.window, &self.horizons)?;
+        let (cum, total) = (&self.cum, self.cum.last().copied().unwrap_or(0));
+        if self.cum.len() != seqs.len() + 1 || total == 0 {
+            return Err(ImuError::invalid("batch plan does not belong to these sequences"));
+        }
+        fill_all(
+            out,
+            cfg.window,
+            &self.horizons,
+            |_b, rng| {
+                let u = rng.random_range(0..total);
+                let s = cum.partition_point(|&c| c <= u).saturating_sub(1);
+                (s, (u - cum[s]) as usize)
+            },
+            seqs,
+            cfg.gravity,
+            Some((&cfg.augment, seed)),
+        );
+        Ok(())
+    }
 }
 
 /// Every window of every sequence at starts 0, stride, 2·stride, …, in sequence order, with no
@@ -163,7 +194,8 @@ pub fn eval_windows(seqs: &[Sequence], window: usize, stride: usize, fractions: 
         return Err(too_short(seqs, window));
     }
     let mut out = Batch::alloc(picks.len(), window, hs);
-    fill_all(&mut out, window, |b, _| picks[b], seqs, gravity, None);
+    let hs = out.horizons.clone();
+    fill_all(out.as_mut(), window, &hs, |b, _| picks[b], seqs, gravity, None);
     Ok(out)
 }
 
@@ -182,6 +214,64 @@ impl Batch {
             start: vec![0; b],
             horizons,
         }
+    }
+
+    /// Mutable views of every per-window buffer.
+    pub fn as_mut(&mut self) -> BatchMut<'_> {
+        BatchMut {
+            imu: &mut self.imu,
+            dt: &mut self.dt,
+            dq_wxyz: &mut self.dq_wxyz,
+            dv: &mut self.dv,
+            dp: &mut self.dp,
+            label_dt: &mut self.label_dt,
+            bias: &mut self.bias,
+            seq_index: &mut self.seq_index,
+            start: &mut self.start,
+        }
+    }
+}
+
+/// Caller-owned buffers for B windows of W samples at H horizons, laid out as in `Batch`.
+pub struct BatchMut<'a> {
+    /// B×W×6.
+    pub imu: &'a mut [f64],
+    /// B×W.
+    pub dt: &'a mut [f64],
+    /// B×H.
+    pub dq_wxyz: &'a mut [QuatWxyz],
+    pub dv: &'a mut [Vec3],
+    pub dp: &'a mut [Vec3],
+    pub label_dt: &'a mut [f64],
+    /// B×W×6.
+    pub bias: &'a mut [f64],
+    /// B.
+    pub seq_index: &'a mut [u32],
+    pub start: &'a mut [u64],
+}
+
+impl BatchMut<'_> {
+    /// Every buffer has the size of `b` windows of `w` samples at `horizons`.
+    pub fn check(&self, b: usize, w: usize, horizons: &[usize]) -> Result<()> {
+        let h = horizons.len();
+        let got = [
+            self.imu.len(),
+            self.dt.len(),
+            self.dq_wxyz.len(),
+            self.dv.len(),
+            self.dp.len(),
+            self.label_dt.len(),
+            self.bias.len(),
+            self.seq_index.len(),
+            self.start.len(),
+        ];
+        let want = [b * w * 6, b * w, b * h, b * h, b * h, b * h, b * w * 6, b, b];
+        if got != want {
+            return Err(ImuError::invalid(format!(
+                "batch buffers have sizes {got:?}, {b} windows × {w} samples × {h} horizons need {want:?}"
+            )));
+        }
+        Ok(())
     }
 }
 
@@ -231,12 +321,21 @@ fn too_short(seqs: &[Sequence], window: usize) -> ImuError {
 
 /// Fill every window of `out` in parallel. `pick(b, rng)` gives (sequence, start) of window b;
 /// with augmentation, `rng` is window b's own stream and `pick` draws from it first.
-fn fill_all<P>(out: &mut Batch, w: usize, pick: P, seqs: &[Sequence], gravity: f64, aug: Option<(&AugmentConfig, u64)>)
-where
+fn fill_all<P>(
+    out: BatchMut<'_>,
+    w: usize,
+    hs: &[usize],
+    pick: P,
+    seqs: &[Sequence],
+    gravity: f64,
+    aug: Option<(&AugmentConfig, u64)>,
+) where
     P: Fn(usize, &mut ChaCha8Rng) -> (usize, usize) + Sync,
 {
-    let hs = out.horizons.clone();
     let h = hs.len();
+    if w == 0 || h == 0 {
+        return; // not reachable: check_common demands a window and a horizon
+    }
     out.imu
         .par_chunks_mut(w * 6)
         .zip(out.bias.par_chunks_mut(w * 6))
@@ -255,17 +354,22 @@ where
             let seq = &seqs[s];
             *si = s as u32; // checked against u32::MAX in check_common
             *st = k as u64;
-            for i in 0..w {
-                dt[i] = (seq.t_ns[k + i + 1] - seq.t_ns[k + i]) as f64 * 1e-9;
-                imu[i * 6..i * 6 + 3].copy_from_slice(&seq.gyro[k + i]);
-                imu[i * 6 + 3..i * 6 + 6].copy_from_slice(&seq.acc[k + i]);
+            let t = &seq.t_ns[k..=k + w];
+            for (d, p) in dt.iter_mut().zip(t.windows(2)) {
+                *d = (p[1] - p[0]) as f64 * 1e-9;
+            }
+            for ((row, g), a) in imu.chunks_exact_mut(6).zip(&seq.gyro[k..k + w]).zip(&seq.acc[k..k + w]) {
+                row[..3].copy_from_slice(g);
+                row[3..].copy_from_slice(a);
             }
             if let Some((a, _)) = aug {
                 augment(imu, bias, dt, a, &mut rng);
             }
+            // Ranges were checked when the sequences were validated and the start drawn.
+            let gt = GroundTruthView::of(seq);
+            let f = Frame::at(&gt, k, gravity);
             for (j, &n) in hs.iter().enumerate() {
-                // Ranges were checked when the sequences were validated and the start drawn.
-                let inc = increment_unchecked(seq, k, k + n, gravity);
+                let inc = f.to(&gt, k + n);
                 dq[j] = inc.dq_wxyz;
                 dv[j] = inc.dv;
                 dp[j] = inc.dp;
@@ -279,25 +383,29 @@ fn augment(imu: &mut [f64], bias: &mut [f64], dt: &[f64], a: &AugmentConfig, rng
     let per_axis = |gyro: f64, acc: f64| [gyro, gyro, gyro, acc, acc, acc];
     let bias_max = per_axis(a.gyro_bias_max, a.acc_bias_max);
     let walk = per_axis(a.gyro_bias_walk, a.acc_bias_walk);
-    let density = per_axis(a.gyro_noise_density, a.acc_noise_density);
     let has_walk = walk.iter().any(|&x| x > 0.0);
-    let has_noise = density.iter().any(|&x| x > 0.0);
+    let has_noise = a.gyro_noise_density > 0.0 || a.acc_noise_density > 0.0;
     let mut b = [0.0; 6];
     for (bc, &m) in b.iter_mut().zip(&bias_max) {
         let u: f64 = rng.random();
         *bc = (2.0 * u - 1.0) * m;
     }
-    for (i, &dti) in dt.iter().enumerate() {
-        let row = i * 6..i * 6 + 6;
-        bias[row.clone()].copy_from_slice(&b);
+    let rows = imu.chunks_exact_mut(6).zip(bias.chunks_exact_mut(6)).zip(dt);
+    for ((x, bias_row), &dti) in rows {
+        bias_row.copy_from_slice(&b);
         let sqrt_dt = dti.sqrt();
-        for c in 0..6 {
-            let mut x = imu[row.start + c] + b[c];
-            if has_noise {
+        if has_noise {
+            // density / √dt per sensor (two divisions, not six), noise drawn in axis order.
+            let (sg, sa) = (a.gyro_noise_density / sqrt_dt, a.acc_noise_density / sqrt_dt);
+            let scale = [sg, sg, sg, sa, sa, sa];
+            for c in 0..6 {
                 let n: f64 = rng.sample(StandardNormal);
-                x += density[c] / sqrt_dt * n;
+                x[c] = (x[c] + b[c]) + scale[c] * n;
             }
-            imu[row.start + c] = x;
+        } else {
+            for c in 0..6 {
+                x[c] += b[c];
+            }
         }
         // The walk step over sample i's interval moves the bias of the next sample.
         if has_walk {

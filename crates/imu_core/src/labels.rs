@@ -7,11 +7,14 @@
 //! A window of `window` IMU samples starting at k covers [t_k, t_{k+window}]: sample i is held over
 //! [t_i, t_{i+1}), so the state at index k + window must exist. Horizon n uses samples k..k+n-1,
 //! which is row n of `integrate::preintegrate` run on the window.
+//!
+//! Every increment goes through one kernel (`Frame`): the start state's quaternion is normalised
+//! and turned into R_kᵀ once per window, then reused for all of the window's horizons. `increment`,
+//! `labels_at`, `labels_into` and the batches all use it, so they agree bit for bit.
 
 use rayon::prelude::*;
 
 use crate::error::{ImuError, Result};
-use crate::so3::{arr3, quat_from_wxyz, quat_to_wxyz, v3};
 use crate::types::{gravity_vector, QuatWxyz, Sequence, Vec3};
 
 /// The paper's five horizons: 20/40/60/80/100 % of the window.
@@ -24,6 +27,48 @@ pub struct Increment {
     pub dv: Vec3,
     pub dp: Vec3,
     pub dt: f64,
+}
+
+/// Ground truth borrowed as slices: all that labels need (no IMU samples). Every slice must
+/// have the length of `t_ns` (`GroundTruthView::check`).
+#[derive(Clone, Copy, Debug)]
+pub struct GroundTruthView<'a> {
+    pub t_ns: &'a [i64],
+    pub p: &'a [Vec3],
+    pub v: &'a [Vec3],
+    pub q_wxyz: &'a [QuatWxyz],
+}
+
+impl<'a> GroundTruthView<'a> {
+    /// The ground-truth part of a sequence.
+    pub fn of(seq: &'a Sequence) -> Self {
+        GroundTruthView {
+            t_ns: &seq.t_ns,
+            p: &seq.p,
+            v: &seq.v,
+            q_wxyz: &seq.q_wxyz,
+        }
+    }
+
+    pub fn len(&self) -> usize {
+        self.t_ns.len()
+    }
+
+    pub fn is_empty(&self) -> bool {
+        self.t_ns.is_empty()
+    }
+
+    /// p, v and q have the length of t_ns.
+    pub fn check(&self) -> Result<()> {
+        let n = self.t_ns.len();
+        let lens = [self.p.len(), self.v.len(), self.q_wxyz.len()];
+        if lens.iter().any(|&l| l != n) {
+            return Err(ImuError::invalid(format!(
+                "ground-truth arrays differ in length: t_ns {n}, p/v/q {lens:?}"
+            )));
+        }
+        Ok(())
+    }
 }
 
 /// Horizons in samples for a window length and fractions of it (rounded, at least 1).
@@ -59,20 +104,94 @@ pub fn increment(seq: &Sequence, k: usize, n: usize, gravity: f64) -> Result<Inc
 
 /// `increment` for indices the caller has already checked (k ≤ j < len).
 pub(crate) fn increment_unchecked(seq: &Sequence, k: usize, j: usize, gravity: f64) -> Increment {
-    let g = v3(gravity_vector(gravity));
-    // i128: stamps from arbitrary epochs can be far enough apart to overflow i64.
-    let dt = (seq.t_ns[j] as i128 - seq.t_ns[k] as i128) as f64 * 1e-9;
-    let qk = quat_from_wxyz(seq.q_wxyz[k]);
-    let qj = quat_from_wxyz(seq.q_wxyz[j]);
-    let rk_t = qk.inverse();
-    let (pk, pj, vk, vj) = (v3(seq.p[k]), v3(seq.p[j]), v3(seq.v[k]), v3(seq.v[j]));
-    let dv = rk_t * (vj - vk - g * dt);
-    let dp = rk_t * (pj - pk - vk * dt - g * (0.5 * dt * dt));
-    Increment {
-        dq_wxyz: quat_to_wxyz(&(rk_t * qj)),
-        dv: arr3(&dv),
-        dp: arr3(&dp),
-        dt,
+    let gt = GroundTruthView::of(seq);
+    Frame::at(&gt, k, gravity).to(&gt, j)
+}
+
+/// Seconds between two nanosecond stamps. Stamps from arbitrary epochs can be far enough apart
+/// to overflow i64; only then is the (slow, software) i128 conversion needed, and it gives the
+/// same f64 as the i64 one whenever both exist.
+#[inline]
+pub(crate) fn seconds_between(t0: i64, t1: i64) -> f64 {
+    match t1.checked_sub(t0) {
+        Some(d) => d as f64 * 1e-9,
+        None => (t1 as i128 - t0 as i128) as f64 * 1e-9,
+    }
+}
+
+/// Unit quaternion w,x,y,z from a stored one (files carry 6–9 digits, so norms are off by ~1e-6).
+#[inline]
+fn normalized(q: QuatWxyz) -> QuatWxyz {
+    let inv = 1.0 / (q[0] * q[0] + q[1] * q[1] + q[2] * q[2] + q[3] * q[3]).sqrt();
+    [q[0] * inv, q[1] * inv, q[2] * inv, q[3] * inv]
+}
+
+/// The state at a window start k, prepared once for all of the window's horizons.
+pub(crate) struct Frame {
+    /// q_k⁻¹ (normalised, conjugated).
+    qi: QuatWxyz,
+    /// R_kᵀ, row-major.
+    rt: [[f64; 3]; 3],
+    p: Vec3,
+    v: Vec3,
+    t: i64,
+    g: Vec3,
+}
+
+impl Frame {
+    #[inline]
+    pub(crate) fn at(gt: &GroundTruthView<'_>, k: usize, gravity: f64) -> Frame {
+        let [w, x, y, z] = normalized(gt.q_wxyz[k]);
+        // R of the unit quaternion (body → world); its transpose maps world into body k.
+        let (xx, yy, zz) = (x * x, y * y, z * z);
+        let (xy, xz, yz) = (x * y, x * z, y * z);
+        let (wx, wy, wz) = (w * x, w * y, w * z);
+        let rt = [
+            [1.0 - 2.0 * (yy + zz), 2.0 * (xy + wz), 2.0 * (xz - wy)],
+            [2.0 * (xy - wz), 1.0 - 2.0 * (xx + zz), 2.0 * (yz + wx)],
+            [2.0 * (xz + wy), 2.0 * (yz - wx), 1.0 - 2.0 * (xx + yy)],
+        ];
+        Frame {
+            qi: [w, -x, -y, -z],
+            rt,
+            p: gt.p[k],
+            v: gt.v[k],
+            t: gt.t_ns[k],
+            g: gravity_vector(gravity),
+        }
+    }
+
+    #[inline]
+    fn rotate(&self, a: Vec3) -> Vec3 {
+        let r = &self.rt;
+        [
+            r[0][0] * a[0] + r[0][1] * a[1] + r[0][2] * a[2],
+            r[1][0] * a[0] + r[1][1] * a[1] + r[1][2] * a[2],
+            r[2][0] * a[0] + r[2][1] * a[1] + r[2][2] * a[2],
+        ]
+    }
+
+    /// The increment from this state to state j (j within the view).
+    #[inline]
+    pub(crate) fn to(&self, gt: &GroundTruthView<'_>, j: usize) -> Increment {
+        let dt = seconds_between(self.t, gt.t_ns[j]);
+        let (a, b) = (self.qi, normalized(gt.q_wxyz[j]));
+        let dq_wxyz = [
+            a[0] * b[0] - a[1] * b[1] - a[2] * b[2] - a[3] * b[3],
+            a[0] * b[1] + a[1] * b[0] + a[2] * b[3] - a[3] * b[2],
+            a[0] * b[2] - a[1] * b[3] + a[2] * b[0] + a[3] * b[1],
+            a[0] * b[3] + a[1] * b[2] - a[2] * b[1] + a[3] * b[0],
+        ];
+        let (pj, vj, g) = (gt.p[j], gt.v[j], self.g);
+        let half = 0.5 * dt * dt;
+        let dv = std::array::from_fn(|c| vj[c] - self.v[c] - g[c] * dt);
+        let dp = std::array::from_fn(|c| pj[c] - self.p[c] - self.v[c] * dt - g[c] * half);
+        Increment {
+            dq_wxyz,
+            dv: self.rotate(dv),
+            dp: self.rotate(dp),
+            dt,
+        }
     }
 }
 
@@ -85,6 +204,14 @@ pub struct Labels {
     pub dv: Vec<Vec3>,
     pub dp: Vec<Vec3>,
     pub dt: Vec<f64>,
+}
+
+/// Output buffers for `labels_into`, each `starts.len() * horizons.len()` entries, row-major.
+pub struct LabelsMut<'a> {
+    pub dq_wxyz: &'a mut [QuatWxyz],
+    pub dv: &'a mut [Vec3],
+    pub dp: &'a mut [Vec3],
+    pub dt: &'a mut [f64],
 }
 
 /// Window starts 0, stride, 2·stride, … for which the whole window fits in the sequence.
@@ -106,41 +233,80 @@ pub fn window_starts(len: usize, window: usize, stride: usize) -> Result<Vec<usi
 /// Labels at the given horizons for the given window starts, computed in parallel.
 pub fn labels_at(seq: &Sequence, starts: &[usize], horizons: &[usize], gravity: f64) -> Result<Labels> {
     check_sequence(seq)?;
-    let max_h = horizons.iter().copied().max().unwrap_or(0);
-    if let Some(&bad) = starts
-        .iter()
-        .find(|&&k| k.checked_add(max_h).is_none_or(|e| e >= seq.len()))
-    {
-        return Err(ImuError::invalid(format!(
-            "window start {bad} + horizon {max_h} is past the sequence end ({} samples)",
-            seq.len()
-        )));
-    }
-    let nh = horizons.len();
-    let incs: Vec<Increment> = starts
-        .par_iter()
-        .flat_map_iter(|&k| {
-            horizons
-                .iter()
-                .map(move |&n| increment_unchecked(seq, k, k + n, gravity))
-        })
-        .collect();
+    let total = starts.len() * horizons.len();
     let mut out = Labels {
         starts: starts.to_vec(),
         horizons: horizons.to_vec(),
-        dq_wxyz: Vec::with_capacity(incs.len()),
-        dv: Vec::with_capacity(incs.len()),
-        dp: Vec::with_capacity(incs.len()),
-        dt: Vec::with_capacity(incs.len()),
+        dq_wxyz: vec![[0.0; 4]; total],
+        dv: vec![[0.0; 3]; total],
+        dp: vec![[0.0; 3]; total],
+        dt: vec![0.0; total],
     };
-    debug_assert_eq!(incs.len(), starts.len() * nh);
-    for inc in incs {
-        out.dq_wxyz.push(inc.dq_wxyz);
-        out.dv.push(inc.dv);
-        out.dp.push(inc.dp);
-        out.dt.push(inc.dt);
-    }
+    labels_into(
+        GroundTruthView::of(seq),
+        starts,
+        horizons,
+        gravity,
+        LabelsMut {
+            dq_wxyz: &mut out.dq_wxyz,
+            dv: &mut out.dv,
+            dp: &mut out.dp,
+            dt: &mut out.dt,
+        },
+    )?;
     Ok(out)
+}
+
+/// `labels_at` on borrowed ground truth, writing into caller-owned buffers (the Python binding
+/// hands numpy's own arrays here, so nothing is copied afterwards). Windows run in parallel.
+pub fn labels_into(
+    gt: GroundTruthView<'_>,
+    starts: &[usize],
+    horizons: &[usize],
+    gravity: f64,
+    out: LabelsMut<'_>,
+) -> Result<()> {
+    gt.check()?;
+    let max_h = horizons.iter().copied().max().unwrap_or(0);
+    if let Some(&bad) = starts
+        .iter()
+        .find(|&&k| k.checked_add(max_h).is_none_or(|e| e >= gt.len()))
+    {
+        return Err(ImuError::invalid(format!(
+            "window start {bad} + horizon {max_h} is past the sequence end ({} samples)",
+            gt.len()
+        )));
+    }
+    let nh = horizons.len();
+    let total = starts.len() * nh;
+    let lens = [out.dq_wxyz.len(), out.dv.len(), out.dp.len(), out.dt.len()];
+    if lens.iter().any(|&l| l != total) {
+        return Err(ImuError::invalid(format!(
+            "label buffers hold {lens:?} entries, {} windows × {nh} horizons need {total}",
+            starts.len()
+        )));
+    }
+    if nh == 0 {
+        return Ok(());
+    }
+    out.dq_wxyz
+        .par_chunks_mut(nh)
+        .zip(out.dv.par_chunks_mut(nh))
+        .zip(out.dp.par_chunks_mut(nh))
+        .zip(out.dt.par_chunks_mut(nh))
+        .zip(starts.par_iter())
+        .with_min_len(256)
+        .for_each(|((((dq, dv), dp), dt), &k)| {
+            let f = Frame::at(&gt, k, gravity);
+            for (h, &n) in horizons.iter().enumerate() {
+                let inc = f.to(&gt, k + n);
+                dq[h] = inc.dq_wxyz;
+                dv[h] = inc.dv;
+                dp[h] = inc.dp;
+                dt[h] = inc.dt;
+            }
+        });
+    Ok(())
 }
 
 /// Every window of a sequence (start step `stride`) at `fractions` of `window`.

@@ -38,10 +38,13 @@ class FitSettings:
 @dataclass(frozen=True)
 class PosePrediction:
     """End states of windows started at ground truth: ``q_wxyz`` (W, 4) world orientation,
-    ``p`` (W, 3) world position; ``p`` is None for rotation-only methods."""
+    ``p`` (W, 3) world position; ``p`` is None for rotation-only methods. ``v`` (W, 3) world
+    velocity, optional: None where a method does not predict it (evaluation then reports no
+    velocity error for it)."""
 
     q_wxyz: np.ndarray
     p: Optional[np.ndarray]
+    v: Optional[np.ndarray] = None
 
 
 def quat_mul(a: np.ndarray, b: np.ndarray) -> np.ndarray:
@@ -60,7 +63,8 @@ def quat_rotate(q: np.ndarray, v: np.ndarray) -> np.ndarray:
 def poses_from_imu(
     seq: Sequence, gyro: np.ndarray, acc: np.ndarray, starts: np.ndarray, n: int, gravity: float = 9.81
 ) -> PosePrediction:
-    """Integrate (gyro, acc) for n samples from the ground-truth state at each start."""
+    """Integrate (gyro, acc) for n samples from the ground-truth state at each start (end
+    orientation, position and velocity)."""
     s = Sequence(seq.name, seq.t_ns, np.ascontiguousarray(gyro), np.ascontiguousarray(acc), seq.p, seq.v, seq.q_wxyz)
     inc = integrate_windows(s, np.asarray(starts, dtype=np.uint64), np.array([n], dtype=np.uint64))
     k = np.asarray(starts, dtype=np.int64)
@@ -69,7 +73,8 @@ def poses_from_imu(
     g = np.array([0.0, 0.0, -gravity])
     q_end = quat_mul(qk, inc.dq_wxyz[:, 0])
     p_end = seq.p[k] + seq.v[k] * dt + 0.5 * g * dt**2 + quat_rotate(qk, inc.dp[:, 0])
-    return PosePrediction(q_wxyz=q_end, p=p_end)
+    v_end = seq.v[k] + g * dt + quat_rotate(qk, inc.dv[:, 0])
+    return PosePrediction(q_wxyz=q_end, p=p_end, v=v_end)
 
 
 class Method:
@@ -89,7 +94,9 @@ class Method:
     def predict(self, seq: Sequence, starts: np.ndarray, n: int, gravity: float = 9.81) -> PosePrediction:
         gyro, acc = self.refine(seq)
         pred = poses_from_imu(seq, gyro, acc, starts, n, gravity)
-        return PosePrediction(pred.q_wxyz, None if self.rotation_only else pred.p)
+        if self.rotation_only:
+            return PosePrediction(pred.q_wxyz, None, None)
+        return PosePrediction(pred.q_wxyz, pred.p, pred.v)
 
     def save(self, path: Path) -> None:
         """Persist what ``fit`` learned (weights_only-loadable torch file or npz)."""

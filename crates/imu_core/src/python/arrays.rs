@@ -1,8 +1,11 @@
 //! numpy ↔ Rust without copies: inputs are borrowed as `&[[f64; 3]]` views of C-contiguous
 //! arrays; outputs move their `Vec` into numpy (`into_pyarray`), so nothing is copied either way.
 
-use numpy::ndarray::{Array1, Array2, Array3};
-use numpy::{IntoPyArray, PyArray1, PyArray2, PyArray3, PyReadonlyArray1, PyReadonlyArray2, PyUntypedArrayMethods};
+use numpy::ndarray::{Array1, Array2, Array3, Dimension, IntoDimension};
+use numpy::{
+    IntoPyArray, PyArray, PyArray1, PyArray2, PyArray3, PyReadonlyArray1, PyReadonlyArray2, PyReadwriteArray,
+    PyUntypedArrayMethods,
+};
 use pyo3::prelude::*;
 
 use crate::error::ImuError;
@@ -80,4 +83,31 @@ pub fn out3_flat<'py>(
     Array3::from_shape_vec((a, b, c), v)
         .map(|x| x.into_pyarray(py))
         .map_err(|e| shape_err(e.to_string()))
+}
+
+/// A zero-filled C-order array allocated by numpy, for a result the core writes in place. numpy
+/// asks the kernel for huge pages on large arrays, so filling one takes far fewer page faults
+/// than filling a fresh `Vec` and moving it (which is what dominated labels and batches).
+pub fn zeros<'py, T: numpy::Element, D: Dimension>(
+    py: Python<'py>,
+    dims: impl IntoDimension<Dim = D>,
+) -> Bound<'py, PyArray<T, D>> {
+    PyArray::zeros(py, dims, false)
+}
+
+/// A writable C-contiguous array's buffer (as made by `zeros`).
+pub fn flat_mut<'a, T: numpy::Element, D: Dimension>(a: &'a mut PyReadwriteArray<'_, T, D>) -> PyResult<&'a mut [T]> {
+    a.as_slice_mut()
+        .map_err(|_| shape_err("output array is not contiguous".to_string()))
+}
+
+/// A writable C-contiguous (..., K) float64 array as rows of K.
+pub fn rows_mut<'a, const K: usize, D: Dimension>(
+    a: &'a mut PyReadwriteArray<'_, f64, D>,
+) -> PyResult<&'a mut [[f64; K]]> {
+    let (chunks, rest) = flat_mut(a)?.as_chunks_mut::<K>();
+    if !rest.is_empty() {
+        return Err(shape_err(format!("output array does not hold whole rows of {K}")));
+    }
+    Ok(chunks)
 }

@@ -1,15 +1,15 @@
 //! Alignment, integration, labels and batches.
 
-use numpy::{PyArray1, PyArray2, PyReadonlyArray1, PyReadonlyArray2};
+use numpy::{PyArray1, PyArray2, PyArrayMethods, PyReadonlyArray1, PyReadonlyArray2};
 use pyo3::prelude::*;
 use pyo3::types::{PyDict, PyList};
 
 use crate::align::{self as core_align, AlignOptions};
-use crate::batch::{self, AugmentConfig, Batch, BatchConfig};
+use crate::batch::{self, AugmentConfig, Batch, BatchConfig, BatchMut, BatchPlan};
 use crate::error::ImuError;
-use crate::integrate;
-use crate::labels::{self, Labels};
-use crate::python::arrays::{out1, out2, out2_flat, out3, out3_flat, rows, slice1};
+use crate::integrate::{self, PreintegratedMut};
+use crate::labels::{self, GroundTruthView, Labels, LabelsMut};
+use crate::python::arrays::{flat_mut, out1, out2, out2_flat, out3, out3_flat, rows, rows_mut, slice1, zeros};
 use crate::python::errors::to_py;
 use crate::types::{GroundTruth, ImuSamples, Sequence};
 
@@ -113,8 +113,25 @@ fn preintegrate<'py>(
         rows::<3>(&gyro, "gyro")?,
         rows::<3>(&acc, "acc")?,
     );
-    let r = py.allow_threads(|| integrate::preintegrate(t, g, a)).map_err(to_py)?;
-    Ok((out2(py, r.dq_wxyz)?, out2(py, r.dv)?, out2(py, r.dp)?, out1(py, r.dt)))
+    let n = t.len();
+    let (dq, dv, dp, dt) = (
+        zeros::<f64, _>(py, [n, 4]),
+        zeros::<f64, _>(py, [n, 3]),
+        zeros::<f64, _>(py, [n, 3]),
+        zeros::<f64, _>(py, [n]),
+    );
+    {
+        let (mut dq_w, mut dv_w, mut dp_w, mut dt_w) = (dq.readwrite(), dv.readwrite(), dp.readwrite(), dt.readwrite());
+        let out = PreintegratedMut {
+            dq_wxyz: rows_mut::<4, _>(&mut dq_w)?,
+            dv: rows_mut::<3, _>(&mut dv_w)?,
+            dp: rows_mut::<3, _>(&mut dp_w)?,
+            dt: flat_mut(&mut dt_w)?,
+        };
+        py.allow_threads(|| integrate::preintegrate_into(t, g, a, out))
+            .map_err(to_py)?;
+    }
+    Ok((dq, dv, dp, dt))
 }
 
 fn labels_dict(py: Python<'_>, l: Labels) -> PyResult<Bound<'_, PyDict>> {
@@ -148,20 +165,45 @@ fn window_labels<'py>(
     fractions: Vec<f64>,
     gravity: f64,
 ) -> PyResult<Bound<'py, PyDict>> {
-    let t = slice1(&t_ns, "t_ns")?;
-    // Labels need ground truth only; the IMU fields of the sequence stay empty-length-checked.
-    let seq = Sequence {
-        t_ns: t.to_vec(),
-        gyro: vec![[0.0; 3]; t.len()],
-        acc: vec![[0.0; 3]; t.len()],
-        p: rows::<3>(&p, "p")?.to_vec(),
-        v: rows::<3>(&v, "v")?.to_vec(),
-        q_wxyz: rows::<4>(&q_wxyz, "q_wxyz")?.to_vec(),
+    // Labels need ground truth only: borrow it, and write into numpy's own output arrays.
+    let gt = GroundTruthView {
+        t_ns: slice1(&t_ns, "t_ns")?,
+        p: rows::<3>(&p, "p")?,
+        v: rows::<3>(&v, "v")?,
+        q_wxyz: rows::<4>(&q_wxyz, "q_wxyz")?,
     };
-    let l = py
-        .allow_threads(|| labels::window_labels(&seq, window, stride, &fractions, gravity))
+    // The checks (and so the errors) of labels::window_labels, in its order.
+    let (hs, starts) = labels::horizons(window, &fractions)
+        .and_then(|hs| Ok((hs, labels::window_starts(gt.len(), window, stride)?)))
+        .and_then(|x| gt.check().map(|()| x))
         .map_err(to_py)?;
-    labels_dict(py, l)
+    let (nw, nh) = (starts.len(), hs.len());
+    let dq = zeros::<f64, _>(py, [nw, nh, 4]);
+    let dv = zeros::<f64, _>(py, [nw, nh, 3]);
+    let dp = zeros::<f64, _>(py, [nw, nh, 3]);
+    let dt = zeros::<f64, _>(py, [nw, nh]);
+    {
+        let (mut dq_w, mut dv_w, mut dp_w, mut dt_w) = (dq.readwrite(), dv.readwrite(), dp.readwrite(), dt.readwrite());
+        let out = LabelsMut {
+            dq_wxyz: rows_mut::<4, _>(&mut dq_w)?,
+            dv: rows_mut::<3, _>(&mut dv_w)?,
+            dp: rows_mut::<3, _>(&mut dp_w)?,
+            dt: flat_mut(&mut dt_w)?,
+        };
+        py.allow_threads(|| labels::labels_into(gt, &starts, &hs, gravity, out))
+            .map_err(to_py)?;
+    }
+    let d = PyDict::new(py);
+    d.set_item(
+        "starts",
+        out1(py, starts.iter().map(|&s| s as u64).collect::<Vec<u64>>()),
+    )?;
+    d.set_item("horizons", out1(py, hs.iter().map(|&s| s as u64).collect::<Vec<u64>>()))?;
+    d.set_item("dq_wxyz", dq)?;
+    d.set_item("dv", dv)?;
+    d.set_item("dp", dp)?;
+    d.set_item("dt", dt)?;
+    Ok(d)
 }
 
 #[pyfunction]
@@ -277,10 +319,50 @@ impl SequenceSet {
                 acc_bias_walk,
             },
         };
-        let b = py
-            .allow_threads(|| batch::make_batch(&self.seqs, &cfg, seed))
-            .map_err(to_py)?;
-        batch_dict(py, b, window)
+        let plan = BatchPlan::new(&self.seqs, &cfg).map_err(to_py)?;
+        let (b, w, h) = (batch_size, window, plan.horizons.len());
+        let imu = zeros::<f64, _>(py, [b, w, 6]);
+        let dt = zeros::<f64, _>(py, [b, w]);
+        let dq = zeros::<f64, _>(py, [b, h, 4]);
+        let dv = zeros::<f64, _>(py, [b, h, 3]);
+        let dp = zeros::<f64, _>(py, [b, h, 3]);
+        let label_dt = zeros::<f64, _>(py, [b, h]);
+        let bias = zeros::<f64, _>(py, [b, w, 6]);
+        let seq_index = zeros::<u32, _>(py, [b]);
+        let start = zeros::<u64, _>(py, [b]);
+        {
+            let (mut imu_w, mut dt_w, mut bias_w) = (imu.readwrite(), dt.readwrite(), bias.readwrite());
+            let (mut dq_w, mut dv_w, mut dp_w) = (dq.readwrite(), dv.readwrite(), dp.readwrite());
+            let (mut ldt_w, mut si_w, mut st_w) = (label_dt.readwrite(), seq_index.readwrite(), start.readwrite());
+            let out = BatchMut {
+                imu: flat_mut(&mut imu_w)?,
+                dt: flat_mut(&mut dt_w)?,
+                dq_wxyz: rows_mut::<4, _>(&mut dq_w)?,
+                dv: rows_mut::<3, _>(&mut dv_w)?,
+                dp: rows_mut::<3, _>(&mut dp_w)?,
+                label_dt: flat_mut(&mut ldt_w)?,
+                bias: flat_mut(&mut bias_w)?,
+                seq_index: flat_mut(&mut si_w)?,
+                start: flat_mut(&mut st_w)?,
+            };
+            py.allow_threads(|| plan.fill(&self.seqs, &cfg, seed, out))
+                .map_err(to_py)?;
+        }
+        let d = PyDict::new(py);
+        d.set_item("imu", imu)?;
+        d.set_item("dt", dt)?;
+        d.set_item("dq_wxyz", dq)?;
+        d.set_item("dv", dv)?;
+        d.set_item("dp", dp)?;
+        d.set_item("label_dt", label_dt)?;
+        d.set_item("bias", bias)?;
+        d.set_item("seq_index", seq_index)?;
+        d.set_item("start", start)?;
+        d.set_item(
+            "horizons",
+            out1(py, plan.horizons.iter().map(|&h| h as u64).collect::<Vec<u64>>()),
+        )?;
+        Ok(d)
     }
 
     fn eval_windows<'py>(

@@ -1,0 +1,305 @@
+"""The end-to-end baseline: a network that regresses the pose change of a window directly from raw
+IMU, with no integration (IONet, Chen et al. AAAI 2018; Silva do Monte Lima et al., "End-to-end
+learning framework for IMU-based 6-DOF odometry", Sensors 2019).
+
+Model (:class:`EndToEndNet`): the same recurrent family as the proposed refiner, a stack of
+bidirectional LSTMs joined by fully connected layers, over a window of n raw samples (gyro then
+acc, normalised per channel with the training split's mean and std, stored as buffers). The final
+hidden states of the last LSTM (forward direction after sample n-1, backward after sample 0: both
+have seen the whole window) go through an FC head to six numbers::
+
+    φ̂  = μ_φ + σ_φ · head[:3]      Δq̂ = Exp(φ̂)         relative rotation, start body frame
+    Δp̂ = μ_p + σ_p · head[3:]                           Δp = R_kᵀ (p_{k+n} − p_k)
+
+(μ, σ: per-component mean and std of the training targets, buffers too; the head starts at zero so
+the untrained net predicts the training mean). Rotation is regressed as a rotation vector (so3 log)
+so that every output is unconstrained and the identity is the origin.
+
+Training: windows from the Rust :class:`~imu_learn.batches.BatchSampler` (``FitSettings.window``
+samples, no augmentation by default), targets from the ground truth of the training sequences
+looked up by each window's ``seq_index``/``start``: Δq = q_k⁻¹ ⊗ q_{k+n}, Δp = R_kᵀ(p_{k+n} − p_k).
+Loss: ``w_q`` Huber(|Log(Δq ⊗ Δq̂⁻¹)|, δ_q) + ``w_p`` Huber(|Δp − Δp̂|, δ_p), Huber on the norm of
+each 3-vector residual (:func:`imu_learn.losses.huber_norm`), batch mean. Adam at
+``FitSettings.lr`` for ``FitSettings.steps`` steps; with validation sequences the weights with the
+lowest loss on fixed validation windows (checked ``evals`` times) are kept.
+
+``multi_length`` (off by default): each step trains on a random prefix of the window, one of the
+label horizons (the paper's 20/40/60/80/100 % of it), so the net sees several lengths.
+
+Prediction (:meth:`EndToEnd.predict`): from the ground-truth state at each start k,
+q_end = q_k ⊗ Δq̂, p_end = p_k + R_k Δp̂ (no velocity). The net is trained on windows of
+``FitSettings.window`` samples but is evaluated at every requested n as well:
+
+- ``long_horizon="direct"`` (default): the n samples are fed as one sequence (an LSTM takes any
+  length). Away from the training length this extrapolates (an IONet-style regressor has no notion
+  of elapsed time beyond what it learned), which is part of what the comparison shows;
+- ``long_horizon="chain"``: for n above the training window the n samples are cut into consecutive
+  training-length segments (and a shorter remainder), each regressed on its own and composed, as
+  IONet chains its windows; n at or below the training window is fed directly.
+"""
+from __future__ import annotations
+
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+from typing import Dict, List, Optional, Tuple
+
+import numpy as np
+import torch
+from torch import nn
+
+from imu_learn.baselines.base import FitSettings, Method, PosePrediction, quat_mul, quat_rotate
+from imu_learn.batches import AugmentConfig, BatchConfig, BatchSampler
+from imu_learn.losses import huber_norm
+from imu_learn.torch_so3 import quat_conj, so3_exp, so3_log
+from imu_learn.torch_so3 import quat_mul as tquat_mul
+from imu_learn.types import Sequence
+
+Tensor = torch.Tensor
+FORMAT = "imu_learn.baselines.end_to_end.v1"
+
+
+@dataclass
+class EndToEndConfig:
+    hidden: int = 64  # LSTM hidden size per direction
+    layers: int = 2  # stacked bidirectional LSTMs, each followed by an FC layer
+    fc: int = 64  # width of the FC layers
+    dropout: float = 0.0
+    w_q: float = 1.0  # weight of the rotation term
+    w_p: float = 1.0  # weight of the translation term
+    huber_q: float = 0.05  # Huber delta on |Log(Δq Δq̂⁻¹)| [rad]
+    huber_p: float = 0.1  # Huber delta on |Δp − Δp̂| [m]
+    grad_clip: float = 1.0  # max gradient norm (0: none)
+    evals: int = 10  # validation checks over the run (best weights kept)
+    val_stride: int = 0  # validation window step [samples]; 0: window // 2
+    multi_length: bool = False  # train on random label-horizon prefixes of each window
+    long_horizon: str = "direct"  # "direct" or "chain" (see the module docstring)
+    predict_batch: int = 256  # windows per forward pass in predict
+    augment: AugmentConfig = field(default_factory=AugmentConfig)  # none by default
+
+
+class EndToEndNet(nn.Module):
+    """imu (B, n, 6) raw gyro then acc -> (φ̂ (B, 3) rotation vector, Δp̂ (B, 3) [m]), start body frame."""
+
+    def __init__(self, hidden: int = 64, layers: int = 2, fc: int = 64, dropout: float = 0.0) -> None:
+        super().__init__()
+        self.register_buffer("mean", torch.zeros(6))
+        self.register_buffer("std", torch.ones(6))
+        self.register_buffer("out_mean", torch.zeros(6))
+        self.register_buffer("out_std", torch.ones(6))
+        self.lstms = nn.ModuleList()
+        self.fcs = nn.ModuleList()
+        width = 6
+        for i in range(layers):
+            self.lstms.append(nn.LSTM(width, hidden, batch_first=True, bidirectional=True))
+            if i + 1 < layers:  # FC layers join consecutive LSTMs; the head reads the last one's states
+                self.fcs.append(nn.Sequential(nn.Linear(2 * hidden, fc), nn.GELU(), nn.Dropout(dropout)))
+            width = fc
+        self.head = nn.Sequential(nn.Linear(2 * hidden, fc), nn.GELU(), nn.Linear(fc, 6))
+        nn.init.zeros_(self.head[-1].weight)
+        nn.init.zeros_(self.head[-1].bias)
+
+    def forward(self, imu: Tensor) -> Tuple[Tensor, Tensor]:
+        x = (imu - self.mean.to(imu.dtype)) / self.std.to(imu.dtype)
+        h_n = None
+        for i, lstm in enumerate(self.lstms):
+            x, (h_n, _c) = lstm(x)
+            if i < len(self.fcs):
+                x = self.fcs[i](x)
+        feat = torch.cat((h_n[-2], h_n[-1]), dim=-1)  # forward after the last sample, backward after the first
+        out = self.out_mean.to(imu.dtype) + self.out_std.to(imu.dtype) * self.head(feat)
+        return out[:, :3], out[:, 3:]
+
+
+def _device(name: str) -> torch.device:
+    if name == "auto":
+        return torch.device("cuda" if torch.cuda.is_available() else "cpu")
+    return torch.device(name)
+
+
+def window_targets(seqs: List[Sequence], seq_index: np.ndarray, start: np.ndarray, n) -> Tuple[np.ndarray, np.ndarray]:
+    """Ground-truth (φ = Log(q_k⁻¹ q_{k+n}) (B, 3), Δp = R_kᵀ(p_{k+n} − p_k) (B, 3)); ``n`` int or (B,)."""
+    idx = np.asarray(seq_index, dtype=np.int64)
+    k = np.asarray(start, dtype=np.int64)
+    e = k + np.broadcast_to(np.asarray(n, dtype=np.int64), k.shape)
+    qk = np.stack([seqs[i].q_wxyz[j] for i, j in zip(idx, k)])
+    qe = np.stack([seqs[i].q_wxyz[j] for i, j in zip(idx, e)])
+    pk = np.stack([seqs[i].p[j] for i, j in zip(idx, k)])
+    pe = np.stack([seqs[i].p[j] for i, j in zip(idx, e)])
+    qk_inv = qk * np.array([1.0, -1.0, -1.0, -1.0])
+    dq = quat_mul(qk_inv, qe)
+    phi = so3_log(torch.from_numpy(dq)).numpy()
+    dp = quat_rotate(qk_inv, pe - pk)
+    return phi, dp
+
+
+class EndToEnd(Method):
+    """IONet-style direct regression of (Δq, Δp) per window (see the module docstring)."""
+
+    name = "end-to-end"
+    rotation_only = False
+    save_suffix = ".pt"
+
+    def __init__(self, config: Optional[EndToEndConfig] = None) -> None:
+        self.config = config or EndToEndConfig()
+        c = self.config
+        self.net = EndToEndNet(c.hidden, c.layers, c.fc, c.dropout)
+        self.window = 200  # the training window length (set by fit / load)
+        self.device = torch.device("cpu")
+
+    # ------------------------------------------------------------------ training
+
+    def _loss(self, imu: Tensor, phi: Tensor, dp: Tensor) -> Tensor:
+        c = self.config
+        phi_hat, dp_hat = self.net(imu)
+        r_q = so3_log(tquat_mul(so3_exp(phi), quat_conj(so3_exp(phi_hat))))
+        return c.w_q * huber_norm(r_q, c.huber_q).mean() + c.w_p * huber_norm(dp - dp_hat, c.huber_p).mean()
+
+    def fit(self, train: List[Sequence], val: List[Sequence], settings: FitSettings = FitSettings()) -> Dict[str, list]:
+        c = self.config
+        W = int(settings.window)
+        self.window = W
+        self.device = _device(settings.device)
+        train = [s for s in train if len(s) > W]
+        val = [s for s in (val or []) if len(s) > W]
+        if not train:
+            raise ValueError(f"end-to-end: no training sequence longer than the window ({W} samples)")
+        torch.manual_seed(settings.seed)
+        self.net = EndToEndNet(c.hidden, c.layers, c.fc, c.dropout)
+        raw = np.concatenate([np.c_[s.gyro, s.acc] for s in train])
+        self.net.mean.copy_(torch.as_tensor(raw.mean(0), dtype=torch.float32))
+        self.net.std.copy_(torch.as_tensor(np.maximum(raw.std(0), 1e-6), dtype=torch.float32))
+        bc = BatchConfig(window=W, batch_size=settings.batch_size, gravity=settings.gravity, augment=c.augment)
+        sampler = BatchSampler(train, bc)
+        # target statistics (output scaling) from every training window at a quarter-window step
+        ev = sampler.eval_windows(max(1, W // 4))
+        phi_all, dp_all = window_targets(train, ev.seq_index, ev.start, W)
+        tgt = np.c_[phi_all, dp_all]
+        self.net.out_mean.copy_(torch.as_tensor(tgt.mean(0), dtype=torch.float32))
+        self.net.out_std.copy_(torch.as_tensor(np.maximum(tgt.std(0), 1e-4), dtype=torch.float32))
+        self.net.to(self.device)
+
+        val_data = None
+        if val:
+            vb = BatchSampler(val, BatchConfig(window=W, batch_size=1, gravity=settings.gravity)).eval_windows(
+                c.val_stride or max(1, W // 2))
+            vphi, vdp = window_targets(val, vb.seq_index, vb.start, W)
+            val_data = tuple(torch.as_tensor(a, dtype=torch.float32, device=self.device) for a in (vb.imu, vphi, vdp))
+
+        opt = torch.optim.Adam(self.net.parameters(), lr=settings.lr)
+        rng = np.random.default_rng(settings.seed)
+        steps = int(settings.steps)
+        n_checks = max(1, c.evals)
+        checks = {max(1, round(i * steps / n_checks)) for i in range(1, n_checks + 1)}  # evenly spaced, the last step included
+        log: Dict[str, list] = {"train_loss": [], "val_loss": [], "val_step": []}
+        best, best_state = float("inf"), None
+        for step in range(steps):
+            b = sampler.sample(settings.seed * 1_000_003 + step)
+            n = W
+            if c.multi_length:
+                n = int(rng.choice(b.horizons))
+            phi, dp = window_targets(train, b.seq_index, b.start, n)
+            imu = torch.as_tensor(b.imu[:, :n], dtype=torch.float32, device=self.device)
+            self.net.train()
+            loss = self._loss(imu, torch.as_tensor(phi, dtype=torch.float32, device=self.device),
+                              torch.as_tensor(dp, dtype=torch.float32, device=self.device))
+            opt.zero_grad()
+            loss.backward()
+            if c.grad_clip > 0:
+                nn.utils.clip_grad_norm_(self.net.parameters(), c.grad_clip)
+            opt.step()
+            log["train_loss"].append(float(loss.detach()))
+            if val_data is not None and step + 1 in checks:
+                v = self._val_loss(*val_data)
+                log["val_loss"].append(v)
+                log["val_step"].append(step + 1)
+                if v < best:
+                    best = v
+                    best_state = {k: t.detach().clone() for k, t in self.net.state_dict().items()}
+        if best_state is not None:
+            self.net.load_state_dict(best_state)
+            log["best_step"] = [log["val_step"][int(np.argmin(log["val_loss"]))]]
+        self.net.eval()
+        return log
+
+    @torch.no_grad()
+    def _val_loss(self, imu: Tensor, phi: Tensor, dp: Tensor, chunk: int = 256) -> float:
+        self.net.eval()
+        tot = 0.0
+        for a in range(0, len(imu), chunk):
+            tot += float(self._loss(imu[a:a + chunk], phi[a:a + chunk], dp[a:a + chunk])) * len(imu[a:a + chunk])
+        return tot / max(1, len(imu))
+
+    # ------------------------------------------------------------------ inference
+
+    @torch.no_grad()
+    def regress(self, seq: Sequence, starts: np.ndarray, n: int) -> Tuple[np.ndarray, np.ndarray]:
+        """The net's (Δq̂ (S, 4) wxyz, Δp̂ (S, 3)) for the n samples from each start (start body frame),
+        composed from training-length segments when ``long_horizon == "chain"`` and n > window."""
+        starts = np.asarray(starts, dtype=np.int64)
+        n = int(n)
+        if self.config.long_horizon == "chain" and n > self.window:
+            segs = [(o, min(self.window, n - o)) for o in range(0, n, self.window)]
+        elif self.config.long_horizon in ("chain", "direct"):
+            segs = [(0, n)]
+        else:
+            raise ValueError(f"end-to-end: long_horizon must be 'direct' or 'chain', got {self.config.long_horizon!r}")
+        dq = np.zeros((len(starts), 4))
+        dq[:, 0] = 1.0
+        dp = np.zeros((len(starts), 3))
+        for off, length in segs:
+            q_s, p_s = self._regress_direct(seq, starts + off, length)
+            dp = dp + quat_rotate(dq, p_s)
+            dq = quat_mul(dq, q_s)
+        return dq, dp
+
+    @torch.no_grad()
+    def _regress_direct(self, seq: Sequence, starts: np.ndarray, n: int) -> Tuple[np.ndarray, np.ndarray]:
+        if len(starts) and (starts.min() < 0 or starts.max() + n > len(seq)):
+            raise ValueError(f"end-to-end: windows of {n} samples from the given starts leave the sequence ({len(seq)} samples)")
+        self.net.eval()
+        raw = np.c_[seq.gyro, seq.acc].astype(np.float32)
+        x_all = torch.from_numpy(raw).to(self.device)
+        cols = torch.arange(n, device=self.device)
+        qs, ps = [], []
+        bs = max(1, self.config.predict_batch)
+        for a in range(0, len(starts), bs):
+            st = torch.as_tensor(starts[a:a + bs], device=self.device)
+            x = x_all[st[:, None] + cols[None, :]]  # (b, n, 6)
+            phi, dp = self.net(x)
+            qs.append(so3_exp(phi.double()).cpu().numpy())
+            ps.append(dp.double().cpu().numpy())
+        if not qs:
+            return np.zeros((0, 4)), np.zeros((0, 3))
+        return np.concatenate(qs), np.concatenate(ps)
+
+    def predict(self, seq: Sequence, starts: np.ndarray, n: int, gravity: float = 9.81) -> PosePrediction:
+        k = np.asarray(starts, dtype=np.int64)
+        dq, dp = self.regress(seq, k, n)
+        qk = seq.q_wxyz[k]
+        q_end = quat_mul(qk, dq)
+        q_end = q_end / np.linalg.norm(q_end, axis=-1, keepdims=True)
+        p_end = seq.p[k] + quat_rotate(qk, dp)
+        return PosePrediction(q_wxyz=q_end, p=p_end, v=None)
+
+    # ------------------------------------------------------------------ persistence
+
+    def save(self, path: Path) -> None:
+        path = Path(path)
+        path.parent.mkdir(parents=True, exist_ok=True)
+        cfg = asdict(self.config)
+        torch.save({"format": FORMAT, "config": cfg, "window": int(self.window),
+                    "state": {k: v.detach().cpu() for k, v in self.net.state_dict().items()}}, path)
+
+    def load(self, path: Path) -> EndToEnd:
+        d = torch.load(Path(path), map_location="cpu", weights_only=True)
+        if not isinstance(d, dict) or d.get("format") != FORMAT:
+            raise ValueError(f"{path}: not an end-to-end baseline file ({FORMAT})")
+        cfg = dict(d["config"])
+        cfg["augment"] = AugmentConfig(**cfg.get("augment", {}))
+        self.config = EndToEndConfig(**cfg)
+        c = self.config
+        self.net = EndToEndNet(c.hidden, c.layers, c.fc, c.dropout)
+        self.net.load_state_dict(d["state"])
+        self.net.to(self.device).eval()
+        self.window = int(d["window"])
+        return self

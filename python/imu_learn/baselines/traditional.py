@@ -1,0 +1,436 @@
+"""The "traditional" baseline (the paper's "Tr." column, after Farrell 2008): a low-pass filter and
+an intrinsic calibration model per sensor, fitted against ground truth through the integration.
+
+Model (body frame, per sample)::
+
+    gyro   ω = M_g (LP_g(ω_m) − b_g) − G LP_g(a_m)      M_g 3×3 (scale factors + misalignment),
+                                                         b_g bias, G 3×3 g-sensitivity [rad/s per m/s²]
+    accel  a = M_a (LP_a(a_m) − b_a)                     M_a 3×3, b_a bias
+
+LP is a zero-phase Butterworth low-pass (``scipy.signal.sosfiltfilt`` on each axis, a separate cutoff
+per sensor, or none); the specific force that drives the g-sensitivity is the recorded one filtered
+with the gyro's cutoff.
+
+Fit (``fit``): nonlinear least squares *through the same zero-order-hold integration* that the
+evaluation uses (the scheme of :func:`imu_learn.torch_integration.integrate`, in float64; agrees with
+the core's ``integrate_windows`` to ~1e-15), on short windows of the
+training sequences (``window`` samples, labels at the paper's fractions of it):
+
+1. gyro: residuals Log(Δq_gt ⊗ Δq̂⁻¹) at every horizon of every window;
+2. accel, with the fitted gyro model fixed: residuals Δβ_gt − Δβ̂ and Δγ_gt − Δγ̂.
+
+Both are solved by Levenberg–Marquardt with Huber IRLS weights on the norm of each residual
+3-vector (``huber_rot`` rad, ``huber_vel``; ground-truth glitches pull only linearly), in torch
+float64. The Jacobian is taken by forward differences with every parameter perturbed in one batched
+evaluation: 21 (gyro) and 12 (accel) parameters, and the model is affine in them, so the problem is
+close to linear and converges in a few iterations. (Forward-mode autodiff, ``torch.func.jacfwd``,
+gave the same Jacobian ~90× slower than one forward pass here; the batched differences cost ~P
+forward passes.) The rotation residuals only need the products up to the horizons
+(:func:`rotation_increments`), and with the gyro fixed the accelerometer residuals are cumulative
+sums over fixed rotations (:class:`_VelResiduals`). A weak prior (``prior`` × (M − I), ``prior`` × G,
+as residuals) keeps directions the training motion does not excite at the identity.
+
+The cutoffs are chosen from a small grid (``cutoffs_hz``, ``None`` = no filter) on the *validation*
+sequences by the same residuals (RMS of |r| over windows and horizons, no prior): the gyro model is
+fitted at the grid's first cutoff, every cutoff of the grid is scored on the validation windows with
+that model, and the model is refitted (warm start) at the best one; then the same for the
+accelerometer with the chosen gyro model fixed. (Filter and model are both linear, so they nearly
+commute and the model barely depends on the cutoff; refitting per cutoff would cost a fit each.)
+Without validation sequences the training windows score the grid.
+"""
+from __future__ import annotations
+
+import json
+import math
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Callable, Dict, List, Optional, Tuple
+from typing import Sequence as Seq
+
+import numpy as np
+import torch
+from scipy.signal import butter, sosfiltfilt
+
+from imu_learn.baselines.base import FitSettings, Method
+from imu_learn.integration import PAPER_FRACTIONS, window_labels
+from imu_learn.torch_integration import prefix_quat_product
+from imu_learn.torch_so3 import quat_conj, quat_mul, quat_rotate, so3_exp, so3_log
+from imu_learn.types import Sequence
+
+Tensor = torch.Tensor
+
+DEFAULT_CUTOFFS: Tuple[Optional[float], ...] = (None, 40.0, 20.0, 10.0, 5.0)
+
+
+def sample_rate(seq: Sequence) -> float:
+    """Sampling rate [Hz] from the median sample period."""
+    return 1e9 / float(np.median(np.diff(np.asarray(seq.t_ns, dtype=np.int64))))
+
+
+def lowpass(x: np.ndarray, fs: float, cutoff_hz: Optional[float], order: int = 2) -> np.ndarray:
+    """Zero-phase Butterworth low-pass of each column of x (N, C); ``None`` (or a cutoff at or above
+    Nyquist, or a signal too short for the filter's padding) returns x unchanged."""
+    x = np.asarray(x, dtype=np.float64)
+    if cutoff_hz is None or cutoff_hz >= 0.5 * fs:
+        return x.copy()
+    sos = butter(order, cutoff_hz, btype="low", fs=fs, output="sos")
+    padlen = 3 * (2 * len(sos) + 1)
+    if len(x) <= padlen:
+        return x.copy()
+    return sosfiltfilt(sos, x, axis=0)
+
+
+@dataclass
+class TraditionalParams:
+    """Fitted parameters (float64 arrays) and the chosen cutoffs [Hz] (None: no filter)."""
+
+    M_g: np.ndarray
+    b_g: np.ndarray
+    G: np.ndarray
+    M_a: np.ndarray
+    b_a: np.ndarray
+    cutoff_gyro: Optional[float] = None
+    cutoff_acc: Optional[float] = None
+
+    @classmethod
+    def identity(cls) -> TraditionalParams:
+        return cls(np.eye(3), np.zeros(3), np.zeros((3, 3)), np.eye(3), np.zeros(3))
+
+    def gyro_vector(self) -> np.ndarray:
+        return np.concatenate([(self.M_g - np.eye(3)).ravel(), self.b_g, self.G.ravel()])
+
+    def acc_vector(self) -> np.ndarray:
+        return np.concatenate([(self.M_a - np.eye(3)).ravel(), self.b_a])
+
+
+def _gyro_model(theta: Tensor, g_m: Tensor, a_m: Tensor) -> Tensor:
+    """θ (..., 21) = (M_g − I, b_g, G) row-major; inputs (B, W, 3) -> (..., B, W, 3)."""
+    lead = theta.shape[:-1]
+    M = torch.eye(3, dtype=theta.dtype) + theta[..., :9].reshape(*lead, 3, 3)
+    b = theta[..., 9:12].reshape(*lead, 1, 1, 3)
+    G = theta[..., 12:21].reshape(*lead, 3, 3)
+    return torch.einsum("...ij,...bwj->...bwi", M, g_m - b) - torch.einsum("...ij,bwj->...bwi", G, a_m)
+
+
+def _acc_model(theta: Tensor, a_m: Tensor) -> Tensor:
+    """θ (..., 12) = (M_a − I, b_a); input (B, W, 3) -> (..., B, W, 3)."""
+    lead = theta.shape[:-1]
+    M = torch.eye(3, dtype=theta.dtype) + theta[..., :9].reshape(*lead, 3, 3)
+    b = theta[..., 9:12].reshape(*lead, 1, 1, 3)
+    return torch.einsum("...ij,...bwj->...bwi", M, a_m - b)
+
+
+@dataclass
+class _Windows:
+    """Training/validation windows of one or more sequences, gathered (all float64 tensors)."""
+
+    gyro: Tensor  # (B, W, 3) filtered with the gyro cutoff
+    acc_g: Tensor  # (B, W, 3) specific force filtered with the gyro cutoff (g-sensitivity input)
+    acc: Tensor  # (B, W, 3) filtered with the accel cutoff
+    dt: Tensor  # (B, W)
+    dq: Tensor  # (B, H, 4)
+    dv: Tensor  # (B, H, 3)
+    dp: Tensor  # (B, H, 3)
+    horizons: List[int]
+
+
+class _Data:
+    """Per-sequence raw arrays plus window labels, so windows can be re-gathered for any cutoff."""
+
+    def __init__(self, seqs: Seq[Sequence], window: int, max_windows: int, gravity: float, order: int = 2) -> None:
+        self.order = order
+        self.items = []
+        usable = [s for s in seqs if len(s) > window + 1]
+        total = sum(len(s) - window for s in usable)
+        stride = max(1, math.ceil(total / max_windows)) if max_windows > 0 else 1
+        self.stride = stride
+        for s in usable:
+            lab = window_labels(s, window, stride, PAPER_FRACTIONS, gravity)
+            if len(lab.starts) == 0:
+                continue
+            t = np.asarray(s.t_ns, dtype=np.int64)
+            dt = np.empty(len(t))
+            dt[:-1] = np.diff(t) * 1e-9
+            dt[-1] = dt[-2]
+            self.items.append((s, sample_rate(s), dt, lab))
+        self.horizons = [int(h) for h in self.items[0][3].horizons] if self.items else []
+        self.window = window
+        self._cache: Dict[Tuple[str, Optional[float]], List[np.ndarray]] = {}
+
+    def __len__(self) -> int:
+        return sum(len(it[3].starts) for it in self.items)
+
+    def _filtered(self, which: str, cutoff: Optional[float]) -> List[np.ndarray]:
+        key = (which, cutoff)
+        if key not in self._cache:
+            self._cache[key] = [lowpass(getattr(s, which), fs, cutoff, self.order) for s, fs, _, _ in self.items]
+        return self._cache[key]
+
+    def windows(self, cutoff_gyro: Optional[float], cutoff_acc: Optional[float]) -> _Windows:
+        g_f, ag_f, a_f = self._filtered("gyro", cutoff_gyro), self._filtered("acc", cutoff_gyro), self._filtered("acc", cutoff_acc)
+        parts: Dict[str, List[np.ndarray]] = {k: [] for k in ("gyro", "acc_g", "acc", "dt", "dq", "dv", "dp")}
+        ar = np.arange(self.window)
+        for i, (_s, _, dt, lab) in enumerate(self.items):
+            idx = lab.starts.astype(np.int64)[:, None] + ar
+            parts["gyro"].append(g_f[i][idx])
+            parts["acc_g"].append(ag_f[i][idx])
+            parts["acc"].append(a_f[i][idx])
+            parts["dt"].append(dt[idx])
+            parts["dq"].append(lab.dq_wxyz)
+            parts["dv"].append(lab.dv)
+            parts["dp"].append(lab.dp)
+        t = {k: torch.from_numpy(np.ascontiguousarray(np.concatenate(v), dtype=np.float64)) for k, v in parts.items()}
+        return _Windows(horizons=self.horizons, **t)
+
+
+def _tree_product(q: Tensor) -> Tensor:
+    """Ordered product q[..., 0, :] ⊗ q[..., 1, :] ⊗ ... along dim -2 by pairwise reduction."""
+    while q.shape[-2] > 1:
+        if q.shape[-2] % 2:
+            ident = torch.zeros_like(q[..., :1, :])
+            ident[..., 0] = 1.0
+            q = torch.cat((q, ident), dim=-2)
+        q = quat_mul(q[..., 0::2, :], q[..., 1::2, :])
+    return q[..., 0, :]
+
+
+def rotation_increments(gyro: Tensor, dt: Tensor, horizons: Seq[int]) -> Tensor:
+    """Δq (..., H, 4) after the first h samples, h in ``horizons`` (increasing): the same zero-order
+    hold as :func:`imu_learn.torch_integration.integrate`, but only the products up to the horizons
+    (pairwise within each segment between horizons, then chained), so about W quaternion products
+    instead of W·log2 W. gyro (..., W, 3), dt broadcastable to (..., W)."""
+    step = so3_exp(gyro * dt.unsqueeze(-1))
+    out, acc, prev = [], None, 0
+    for h in horizons:
+        seg = _tree_product(step[..., prev:h, :])
+        acc = seg if acc is None else quat_mul(acc, seg)
+        out.append(acc)
+        prev = h
+    return torch.stack(out, dim=-2)
+
+
+def _rot_residuals(theta: Tensor, w: _Windows) -> Tensor:
+    """θ (K, 21) -> (K, B·H·3) residuals Log(Δq_gt ⊗ Δq̂⁻¹)."""
+    dq = rotation_increments(_gyro_model(theta, w.gyro, w.acc_g), w.dt, w.horizons)
+    return so3_log(quat_mul(w.dq, quat_conj(dq))).reshape(theta.shape[0], -1)
+
+
+class _VelResiduals:
+    """Δβ/Δγ residuals for accelerometer parameters θ (K, 12) with the rotations fixed by the
+    (already calibrated) gyro: R_i from the same integration, then Δβ, Δγ are cumulative sums."""
+
+    def __init__(self, gyro: Tensor, w: _Windows) -> None:
+        step = so3_exp(gyro * w.dt.unsqueeze(-1))
+        incl = prefix_quat_product(step)
+        ident = torch.zeros_like(step[:, :1])
+        ident[..., 0] = 1.0
+        R = torch.cat((ident, incl[:, :-1]), dim=1)  # rotation in force for sample i
+        eye = torch.eye(3, dtype=R.dtype).expand(*R.shape[:-1], 3, 3)
+        self.Rm = quat_rotate(R.unsqueeze(-2).expand(*R.shape[:-1], 3, 4), eye.transpose(-1, -2)).transpose(-1, -2)
+        self.w = w
+        self.idx = torch.as_tensor([h - 1 for h in w.horizons], dtype=torch.long)
+
+    def __call__(self, theta: Tensor) -> Tensor:
+        w = self.w
+        dt3 = w.dt.unsqueeze(-1)
+        ra_dt = torch.einsum("bwij,kbwj->kbwi", self.Rm, _acc_model(theta, w.acc)) * dt3  # (K, B, W, 3)
+        dv_incl = torch.cumsum(ra_dt, dim=-2)
+        dv_excl = dv_incl - ra_dt
+        dp_incl = torch.cumsum(dv_excl * dt3 + 0.5 * ra_dt * dt3, dim=-2)
+        K = theta.shape[0]
+        r_v = (w.dv - dv_incl[:, :, self.idx]).reshape(K, -1)
+        r_p = (w.dp - dp_incl[:, :, self.idx]).reshape(K, -1)
+        return torch.cat((r_v, r_p), dim=1)
+
+
+def _rms(res: Callable[[Tensor], Tensor], theta: np.ndarray) -> float:
+    """RMS over windows and horizons of the norm of each 3-vector residual."""
+    with torch.no_grad():
+        r = res(torch.as_tensor(np.asarray(theta, dtype=np.float64))[None])[0].reshape(-1, 3)
+    return float(torch.sqrt((r * r).sum(-1).mean()))
+
+
+def _huber_weights(r: Tensor, delta: float) -> Tensor:
+    """IRLS weights of the Huber loss on the norm of each 3-vector of r (R,), repeated per component."""
+    n = r.reshape(-1, 3).norm(dim=-1)
+    wt = torch.where(n <= delta, torch.ones_like(n), delta / n.clamp_min(1e-300))
+    return wt.repeat_interleave(3)
+
+
+def _huber_cost(r: Tensor, delta: float) -> float:
+    n = r.reshape(-1, 3).norm(dim=-1)
+    return float(torch.where(n <= delta, 0.5 * n * n, delta * (n - 0.5 * delta)).sum())
+
+
+def _solve(
+    res: Callable[[Tensor], Tensor], x0: np.ndarray, prior_idx: np.ndarray, prior: float, delta: float,
+    max_iter: int, step: float = 1e-6, chunk: int = 8, tol: float = 1e-10,
+) -> np.ndarray:
+    """Levenberg–Marquardt with Huber IRLS weights on Σ ρ_δ(|r_j(θ)|) + ½ prior² |θ[prior_idx]|².
+
+    The Jacobian is taken by forward differences, all parameters perturbed in one batched
+    evaluation (``chunk`` candidates at a time). Everything stays in torch float64 (the normal
+    equations are P×P)."""
+    P = len(x0)
+    pmask = torch.zeros(P, dtype=torch.float64)
+    pmask[torch.as_tensor(prior_idx, dtype=torch.long)] = prior * prior
+
+    def batch(X: Tensor) -> Tensor:
+        return torch.cat([res(X[i:i + chunk]) for i in range(0, len(X), chunk)])
+
+    def cost(x: Tensor, r: Tensor) -> float:
+        return _huber_cost(r, delta) + 0.5 * float((pmask * x * x).sum())
+
+    with torch.no_grad():
+        x = torch.as_tensor(np.asarray(x0, dtype=np.float64)).clone()
+        r = batch(x[None])[0]
+        c = cost(x, r)
+        lam = 1e-3
+        for _ in range(max_iter):
+            J = ((batch(x[None] + step * torch.eye(P, dtype=torch.float64)) - r[None]) / step).T  # (R, P)
+            wt = _huber_weights(r, delta)
+            Jw = J * wt[:, None]
+            A = J.T @ Jw + torch.diag(pmask)
+            g = Jw.T @ r + pmask * x
+            improved = False
+            for _ in range(10):
+                d = torch.linalg.solve(A + lam * torch.diag(torch.diagonal(A)), -g)
+                xn = x + d
+                rn = batch(xn[None])[0]
+                cn = cost(xn, rn)
+                if cn < c:
+                    improved = True
+                    break
+                lam *= 10.0
+            if not improved:
+                break
+            small = float(d.norm()) <= tol * (1.0 + float(x.norm())) or (c - cn) <= tol * c
+            x, r, c = xn, rn, cn
+            lam = max(lam / 10.0, 1e-9)
+            if small:
+                break
+    return x.numpy().copy()
+
+
+class Traditional(Method):
+    """Low-pass filter + intrinsic model (scale, misalignment, bias, g-sensitivity) per sensor."""
+
+    name = "traditional"
+    rotation_only = False
+
+    def __init__(
+        self,
+        cutoffs_hz: Seq[Optional[float]] = DEFAULT_CUTOFFS,
+        filter_order: int = 2,
+        window: Optional[int] = None,
+        max_windows: int = 1000,
+        prior: float = 1e-3,
+        huber_rot: float = 0.01,
+        huber_vel: float = 0.1,
+        max_iter: int = 20,
+    ) -> None:
+        self.cutoffs_hz = tuple(cutoffs_hz)
+        self.filter_order = filter_order
+        self.window = window
+        self.max_windows = max_windows
+        self.prior = prior
+        self.huber_rot = huber_rot
+        self.huber_vel = huber_vel
+        self.max_iter = max_iter
+        self.params = TraditionalParams.identity()
+
+    # -- applying the model ---------------------------------------------------------------------
+
+    def refine(self, seq: Sequence) -> Tuple[np.ndarray, np.ndarray]:
+        p = self.params
+        fs = sample_rate(seq)
+        g_f = lowpass(seq.gyro, fs, p.cutoff_gyro, self.filter_order)
+        ag_f = lowpass(seq.acc, fs, p.cutoff_gyro, self.filter_order)
+        a_f = lowpass(seq.acc, fs, p.cutoff_acc, self.filter_order)
+        gyro = (g_f - p.b_g) @ p.M_g.T - ag_f @ p.G.T
+        acc = (a_f - p.b_a) @ p.M_a.T
+        return np.ascontiguousarray(gyro), np.ascontiguousarray(acc)
+
+    # -- fitting --------------------------------------------------------------------------------
+
+    def fit(self, train: List[Sequence], val: List[Sequence], settings: FitSettings = FitSettings()) -> Dict[str, list]:
+        torch.manual_seed(settings.seed)
+        window = int(self.window or settings.window)
+        tr = _Data(train, window, self.max_windows, settings.gravity, self.filter_order)
+        if len(tr) == 0:
+            raise ValueError(f"no training sequence is longer than the window ({window} samples)")
+        va = _Data(val, window, self.max_windows, settings.gravity, self.filter_order) if val else tr
+        if len(va) == 0:
+            va = tr
+        fs = min(it[1] for it in tr.items)
+        grid = [c for c in self.cutoffs_hz if c is None or c < 0.5 * fs] or [None]
+        first = grid[0]
+        g_idx, a_idx = np.r_[0:9, 12:21], np.r_[0:9]
+
+        # 1. gyro: fit at the first cutoff, score the grid on validation, refit at the chosen one.
+        def rot(w: _Windows) -> Callable[[Tensor], Tensor]:
+            return lambda th: _rot_residuals(th, w)
+
+        w0 = tr.windows(first, None)
+        theta_g = _solve(rot(w0), np.zeros(21), g_idx, self.prior, self.huber_rot, self.max_iter)
+        val_rot = [_rms(rot(va.windows(c, None)), theta_g) for c in grid]
+        c_g = grid[int(np.argmin(val_rot))]
+        wg = tr.windows(c_g, None)
+        if c_g != first:
+            theta_g = _solve(rot(wg), theta_g, g_idx, self.prior, self.huber_rot, self.max_iter)
+        g_before, g_after = _rms(rot(wg), np.zeros(21)), _rms(rot(wg), theta_g)
+
+        # 2. accel with the gyro model fixed: the same on velocity/position residuals.
+        def vel(w: _Windows) -> Callable[[Tensor], Tensor]:
+            with torch.no_grad():
+                return _VelResiduals(_gyro_model(torch.from_numpy(theta_g), w.gyro, w.acc_g), w)
+
+        w0 = tr.windows(c_g, first)
+        theta_a = _solve(vel(w0), np.zeros(12), a_idx, self.prior, self.huber_vel, self.max_iter)
+        val_vel = [_rms(vel(va.windows(c_g, c)), theta_a) for c in grid]
+        c_a = grid[int(np.argmin(val_vel))]
+        wa = tr.windows(c_g, c_a)
+        if c_a != first:
+            theta_a = _solve(vel(wa), theta_a, a_idx, self.prior, self.huber_vel, self.max_iter)
+        # "before" = raw IMU (identity model, no filter) on the same windows
+        raw = tr.windows(None, None)
+        ident = _gyro_model(torch.zeros(21, dtype=torch.float64), raw.gyro, raw.acc_g)
+        a_before = _rms(_VelResiduals(ident, raw), np.zeros(12))
+        a_after = _rms(vel(wa), theta_a)
+
+        self.params = TraditionalParams(
+            M_g=np.eye(3) + theta_g[:9].reshape(3, 3), b_g=theta_g[9:12].copy(), G=theta_g[12:21].reshape(3, 3).copy(),
+            M_a=np.eye(3) + theta_a[:9].reshape(3, 3), b_a=theta_a[9:12].copy(),
+            cutoff_gyro=c_g, cutoff_acc=c_a,
+        )
+        # Losses: RMS over the training windows/horizons of |residual| before (raw IMU) and after the
+        # fit, rotation [rad] and velocity+position [m/s, m]; train_loss adds the two (unitless sum).
+        log: Dict[str, list] = {
+            "cutoffs_hz": grid, "val_rot_rmse": val_rot, "val_vel_rmse": val_vel,
+            "gyro_loss": [g_before, g_after], "acc_loss": [a_before, a_after],
+            "train_loss": [g_before + a_before, g_after + a_after],
+            "cutoff_gyro": [c_g], "cutoff_acc": [c_a], "train_windows": [len(tr)], "stride": [tr.stride],
+        }
+        return log
+
+    # -- persistence ----------------------------------------------------------------------------
+
+    def to_dict(self) -> dict:
+        p = self.params
+        return {
+            "method": self.name, "M_g": p.M_g.tolist(), "b_g": p.b_g.tolist(), "G": p.G.tolist(),
+            "M_a": p.M_a.tolist(), "b_a": p.b_a.tolist(), "cutoff_gyro": p.cutoff_gyro, "cutoff_acc": p.cutoff_acc,
+            "filter_order": self.filter_order,
+        }
+
+    def save(self, path: Path) -> None:
+        Path(path).write_text(json.dumps(self.to_dict(), indent=2))
+
+    def load(self, path: Path) -> Traditional:
+        d = json.loads(Path(path).read_text())
+        if d.get("method") != self.name:
+            raise ValueError(f"{path} holds {d.get('method')!r} parameters, not {self.name!r}")
+        a = lambda k: np.asarray(d[k], dtype=np.float64)  # noqa: E731
+        self.filter_order = int(d.get("filter_order", self.filter_order))
+        self.params = TraditionalParams(a("M_g"), a("b_g"), a("G"), a("M_a"), a("b_a"), d["cutoff_gyro"], d["cutoff_acc"])
+        return self
