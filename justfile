@@ -36,6 +36,10 @@ lint:
 fit *args="":
     {{py}} -m imu_learn.fit {{args}}
 
+# Fit every method on the train split and evaluate on the test split; e.g. just evaluate --config configs/eval_euroc.toml
+evaluate *args="":
+    {{py}} -m imu_learn.evaluate {{args}}
+
 # Write refined IMU in the input's own format: just refine CKPT IN OUT
 refine checkpoint input output *args="":
     {{py}} -m imu_learn.refine --checkpoint {{checkpoint}} --input {{input}} --output {{output}} {{args}}

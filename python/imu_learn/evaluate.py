@@ -1,0 +1,726 @@
+"""Evaluate IMU methods on held-out sequences: ``python -m imu_learn.evaluate``.
+
+Reproduces the paper's Section V experiments (Table II: relative translation / rotation RMSE over
+ten IMU frames; the integration-error-against-horizon figure) for any set of methods, plus
+AirIMU's short-horizon figures, and writes a report folder.
+
+Usage::
+
+    python -m imu_learn.evaluate --config configs/eval_default.toml        # the shipped crops
+    python -m imu_learn.evaluate --config configs/eval_euroc.toml --methods raw,traditional
+    python -m imu_learn.evaluate --config configs/eval_euroc.toml --checkpoint runs/euroc/best.pt
+    python -m imu_learn.evaluate --config configs/eval_euroc.toml --reuse  # reuse fitted methods
+    python -m imu_learn.evaluate --config configs/eval_euroc.toml --fit.steps 100 --eval.stride 20 \\
+        --data.split.test '["V1_01_easy"]'                                  # dotted overrides
+
+Protocol
+--------
+* Data and split: the eval config names a fit config (``base``: data roots, by-sequence
+  train / val / test split, window, gravity); its ``[data]`` table may override any of it. Test
+  sequences are never seen in training or in model selection: every method is fitted on the
+  train split only, and uses the val split only for its own model selection. A ``--checkpoint``
+  whose training or validation split names a test recording is refused.
+* Fitting: each method gets the same budget (``[fit]``: a ``FitSettings`` with window, batch size,
+  steps, learning rate, device, threads; seed = the config's ``seed``, gravity = ``data.gravity``).
+  Fitted methods are saved in ``<report>/methods/<name>.*`` with a record of the settings and the
+  split (``<name>.record.json``); ``--reuse`` loads them instead of refitting when both match.
+* Prediction: every window starts from the ground-truth state (p, v, R) at its first sample k and
+  the method sees only the IMU samples k, k+1, ... from then on, never ground-truth biases or
+  later ground truth. Refiners (methods that correct IMU samples) have their corrected samples
+  integrated by the core's zero-order-hold integration (``integrate_windows``) to the state at
+  k + n; regressors (methods that predict poses directly) return the end pose themselves.
+* Two variants, side by side:
+  - open loop: the method's output as it is;
+  - start-up bias removed: a constant per-sequence gyro and accelerometer bias, fitted against
+    ground truth on the first ``startup_bias_s`` (10) seconds of that sequence
+    (``metrics.fit_startup_bias``), is subtracted — fitted on the method's own refined output for
+    refiners, on the raw input (which the regressor then sees) for regressors. This is the
+    initialisation an estimator would give; no ground truth after those seconds is used.
+  In both variants windows start from ``startup_bias_s`` seconds on (every ``stride`` samples, the
+  window's end inside the sequence), so no window is scored on data a bias was fitted on.
+* Errors, per window, at the end sample j = k + n: rotation = angle of R_jᵀ R̂ [rad, deg];
+  translation = |p̂ − p_j| [m]; velocity = |v̂ − v_j| [m/s] (only where the method predicts a
+  velocity; refiners always do). Each metric is the RMSE over the windows of a test recording
+  (the windows of all its gap-free segments pooled); "average" is the mean of the per-recording
+  RMSEs (as the paper's "Average" row).
+* Metrics: relative pose RMSE over n IMU samples for each n in ``eval.horizons`` (default 10, 50,
+  200; the paper's Table II uses n = 10); AirIMU's figures: rotation and position RMSE over 1 s,
+  position RMSE over 0.5, 1, 2, 3 s; integration error against horizon (``eval.curve_count``
+  log-spaced horizons from ``curve_min_s`` to ``curve_max_s``, default 12 from 0.05 s to 5 s):
+  RMSE of position, rotation and velocity (the paper's integration-error figure). Seconds are
+  turned into samples with the recording's median sample period.
+* Noise floor: where the test ground truth is pose-only (velocity derived from positions), a row
+  "ground truth (noise floor)" gives the same metrics for an IMU synthesised from the ground truth
+  itself (:mod:`imu_learn.noise_floor`), which integrates to exactly the ground truth for a
+  perfect label; what remains is label noise (``eval.noise_floor = "always"`` adds it for every
+  ground truth, ``"never"`` drops it).
+
+Output: ``<reports_dir>/<name>/`` (default ``reports/<config name>``) with ``report.md``, CSV
+tables, PNG plots and ``methods/``; a summary table on the terminal. Known errors (config, data,
+missing files, a method failing) print one line and exit with status 2.
+"""
+from __future__ import annotations
+
+import argparse
+import importlib
+import json
+import math
+import re
+import sys
+import time
+from dataclasses import asdict, dataclass, field, fields
+from pathlib import Path
+from typing import Any, Callable, Dict, List, Optional, Tuple, Union
+from typing import Sequence as Seq
+
+import numpy as np
+
+from imu_learn.baselines.base import FitSettings, Method, PosePrediction, poses_from_imu
+from imu_learn.config import (
+    ConfigError,
+    RunConfig,
+    _hints,
+    _merge,
+    build_config,
+    from_dict,
+    parse_overrides,
+    parse_value,
+    read_toml,
+)
+from imu_learn.errors import ImuError
+from imu_learn.metrics import fit_startup_bias, index_at, remove_bias, with_imu
+from imu_learn.types import Sequence
+
+PROG = "imu_learn.evaluate"
+EXIT_ERROR = 2
+VARIANTS = ("open_loop", "bias_removed")
+VARIANT_LABELS = {"open_loop": "open loop", "bias_removed": "start-up bias removed"}
+
+# Method name -> (module, class name or None = the Method subclass defined there whose ``name``
+# matches, else its only one), or a factory callable (tests register their own).
+MethodEntry = Union[Tuple[str, Optional[str]], Callable[[], Method]]
+REGISTRY: Dict[str, MethodEntry] = {
+    "raw": ("imu_learn.baselines.base", "Raw"),
+    "traditional": ("imu_learn.baselines.traditional", None),
+    "gyro-denoise": ("imu_learn.baselines.gyro_denoise", None),
+    "end-to-end": ("imu_learn.baselines.end_to_end", None),
+    "airimu-style": ("imu_learn.baselines.airimu_style", None),
+    "proposed": ("imu_learn.baselines.proposed", None),
+}
+DEFAULT_METHODS = list(REGISTRY)
+CHECKPOINT_NAME = "proposed (fit run)"  # the row of a --checkpoint
+
+
+class MethodError(ImuError):
+    """A method failed to fit, load or predict."""
+
+
+# ---------------------------------------------------------------------------------------------
+# configuration
+
+
+@dataclass
+class EvalSettings:
+    horizons: List[int] = field(default_factory=lambda: [10, 50, 200])  # relative pose over n samples
+    airimu_s: List[float] = field(default_factory=lambda: [0.5, 1.0, 2.0, 3.0])  # AirIMU's position horizons
+    curve_min_s: float = 0.05  # integration error against horizon: shortest, longest, how many
+    curve_max_s: float = 5.0
+    curve_count: int = 12
+    stride: int = 0  # window start step [samples]; 0: data.eval_stride
+    startup_bias_s: float = 0.0  # seconds the start-up bias is fitted on (windows start after); 0: data.startup_bias_s
+    noise_floor: str = "auto"  # auto (pose-only ground truth), always, never
+
+
+@dataclass
+class FitBudget:
+    """The FitSettings every method gets (seed: the config's seed; gravity: data.gravity)."""
+
+    window: int = 0  # 0: data.window
+    batch_size: int = 32
+    steps: int = 300
+    lr: float = 1e-3
+    device: str = "cpu"
+    threads: int = 2
+
+
+@dataclass
+class EvalConfig:
+    name: str = ""  # report folder name; default the config file's name without "eval_"
+    base: str = ""  # fit config with the data and split (relative to this file, else as given)
+    methods: List[str] = field(default_factory=lambda: list(DEFAULT_METHODS))
+    seed: int = 0
+    reports_dir: str = "reports"
+    eval: EvalSettings = field(default_factory=EvalSettings)
+    fit: FitBudget = field(default_factory=FitBudget)
+
+
+@dataclass
+class Resolved:
+    cfg: EvalConfig
+    run: RunConfig  # base fit config with [data] overrides: its .data is what is used
+    path: Optional[Path]
+    base_path: Optional[Path]
+
+    @property
+    def stride(self) -> int:
+        return self.cfg.eval.stride or self.run.data.eval_stride
+
+    @property
+    def startup_bias_s(self) -> float:
+        return self.cfg.eval.startup_bias_s or self.run.data.startup_bias_s
+
+    def fit_settings(self) -> FitSettings:
+        f = self.cfg.fit
+        return FitSettings(window=f.window or self.run.data.window, batch_size=f.batch_size, steps=f.steps, lr=f.lr,
+                           seed=self.cfg.seed, device=f.device, threads=f.threads, gravity=self.run.data.gravity)
+
+
+def _resolve_base(base: str, cfg_path: Optional[Path]) -> Path:
+    from imu_learn.splits import resolve_path
+
+    p = Path(base).expanduser()
+    if not p.is_absolute() and cfg_path is not None and (cfg_path.parent / p).exists():
+        return cfg_path.parent / p
+    return resolve_path(base)
+
+
+def _eval_field_type(key: str) -> Any:
+    cls: Any = EvalConfig
+    parts = key.split(".")
+    for i, part in enumerate(parts):
+        names = {f.name for f in fields(cls)} if hasattr(cls, "__dataclass_fields__") else set()
+        if part not in names:
+            where = ".".join(parts[:i]) or "top level"
+            raise ConfigError(f"--{key}: unknown key (known in {where}: {', '.join(sorted(names)) or 'none'})")
+        cls = _hints(cls)[part]
+    return cls
+
+
+def load_eval_config(path: Optional[Path] = None, overrides: Seq[str] = ()) -> Resolved:
+    """Defaults, then the eval TOML ``path``, then ``--key value`` overrides (``data.*`` go to the
+    fit config's data; the rest to :class:`EvalConfig`)."""
+    raw = dict(read_toml(Path(path))) if path else {}
+    data_over = raw.pop("data", {})
+    if not isinstance(data_over, dict):
+        raise ConfigError("data: expected a table")
+    args = list(overrides)
+    flat_data: List[str] = []
+    flat_eval: Dict[str, Any] = {}
+    i = 0
+    while i < len(args):
+        a = args[i]
+        if not a.startswith("--") or len(a) <= 2:
+            raise ConfigError(f"{a}: expected --key value")
+        if "=" in a:
+            key, text = a[2:].split("=", 1)
+            i += 1
+        else:
+            if i + 1 >= len(args):
+                raise ConfigError(f"{a}: missing value")
+            key, text = a[2:], args[i + 1]
+            i += 2
+        if key.startswith("data."):
+            flat_data += [f"--{key}", text]
+        else:
+            flat_eval[key] = parse_value(key, text, _eval_field_type(key))
+    nested: Dict[str, Any] = {}
+    for key, v in flat_eval.items():
+        d = nested
+        parts = key.split(".")
+        for p in parts[:-1]:
+            d = d.setdefault(p, {})
+        d[parts[-1]] = v
+    merged = _merge(raw, nested)
+    cfg = from_dict(EvalConfig, merged)
+    base_path = _resolve_base(cfg.base, Path(path) if path else None) if cfg.base else None
+    base = read_toml(base_path) if base_path is not None else {}
+    run = build_config(_merge(base, {"data": data_over}), parse_overrides(flat_data))
+    if not cfg.name:
+        stem = Path(path).stem if path else "default"
+        cfg.name = stem[5:] if stem.startswith("eval_") and len(stem) > 5 else stem
+    _validate(cfg)
+    return Resolved(cfg, run, Path(path) if path else None, base_path)
+
+
+def _validate(cfg: EvalConfig) -> None:
+    e, f = cfg.eval, cfg.fit
+
+    def need(ok: bool, key: str, what: str) -> None:
+        if not ok:
+            raise ConfigError(f"{key}: {what}")
+
+    need(len(cfg.methods) > 0, "methods", "give at least one method")
+    need(len(e.horizons) > 0 and all(n >= 1 for n in e.horizons), "eval.horizons", "must be >= 1 samples")
+    need(all(s > 0 for s in e.airimu_s), "eval.airimu_s", "must be positive")
+    need(0 < e.curve_min_s < e.curve_max_s, "eval.curve_min_s", "need 0 < curve_min_s < curve_max_s")
+    need(e.curve_count >= 2, "eval.curve_count", "must be at least 2")
+    need(e.stride >= 0, "eval.stride", "must be >= 0")
+    need(e.startup_bias_s >= 0, "eval.startup_bias_s", "must be >= 0")
+    need(e.noise_floor in ("auto", "always", "never"), "eval.noise_floor", f"expected auto, always or never, got {e.noise_floor!r}")
+    need(f.steps >= 0 and f.batch_size >= 1 and f.threads >= 1 and f.lr > 0 and f.window >= 0, "fit",
+         "steps >= 0, batch_size >= 1, threads >= 1, lr > 0, window >= 0")
+    need(re.fullmatch(r"[A-Za-z0-9_.\-]+", cfg.name) is not None, "name", f"{cfg.name!r}: use letters, digits, . _ -")
+
+
+# ---------------------------------------------------------------------------------------------
+# methods
+
+
+def safe_name(name: str) -> str:
+    return re.sub(r"[^A-Za-z0-9_.\-]+", "-", name).strip("-") or "method"
+
+
+def load_method_class(name: str) -> Optional[Callable[[], Method]]:
+    """A factory for method ``name``, or None (after a one-line warning) when its module is absent."""
+    if name not in REGISTRY:
+        raise ConfigError(f"methods: unknown method {name!r} (known: {', '.join(REGISTRY)})")
+    entry = REGISTRY[name]
+    if callable(entry):
+        return entry
+    module, cls_name = entry
+    try:
+        mod = importlib.import_module(module)
+    except ImportError as e:
+        missing = getattr(e, "name", None) or str(e)
+        why = "" if missing == module else f" (it needs {missing})"
+        print(f"{PROG}: skipping {name}: module {module} not available{why}", file=sys.stderr)
+        return None
+    if cls_name is not None:
+        return getattr(mod, cls_name)
+    cands = [c for c in vars(mod).values()
+             if isinstance(c, type) and issubclass(c, Method) and c.__module__ == mod.__name__]
+    named = [c for c in cands if getattr(c, "name", None) == name]
+    pick = named or cands
+    if len(pick) != 1:
+        raise ConfigError(f"methods: {module} defines {len(pick)} Method classes named {name!r}; cannot pick one")
+    return pick[0]
+
+
+class CheckpointRefiner(Method):
+    """The refiner trained by ``python -m imu_learn.fit``, from its checkpoint (``best.pt``)."""
+
+    name = "proposed"
+    rotation_only = False
+
+    def __init__(self, path: Path, device: str = "cpu") -> None:
+        import torch
+
+        from imu_learn.checkpoint import load_checkpoint, model_from_checkpoint
+
+        self.path = Path(path)
+        state = load_checkpoint(self.path, map_location=device)
+        self.config = state.get("config") or {}
+        self.device = torch.device(device)
+        self.model = model_from_checkpoint(state).to(self.device)
+        self.window = int(((self.config.get("data") or {}).get("window")) or 200)
+
+    def splits(self) -> Dict[str, List[str]]:
+        sp = (self.config.get("data") or {}).get("split") or {}
+        return {k: list(sp.get(k) or []) for k in ("train", "val", "test")}
+
+    def refine(self, seq: Sequence) -> Tuple[np.ndarray, np.ndarray]:
+        from imu_learn.fit import refine_sequence
+
+        s = refine_sequence(self.model, seq, self.window, self.device)
+        return s.gyro, s.acc
+
+
+def _recording(label: str) -> str:
+    from imu_learn.splits import parse_entry
+
+    return parse_entry(label).name
+
+
+def check_checkpoint_split(m: CheckpointRefiner, test_entries: List[str]) -> None:
+    seen = {_recording(e): k for k in ("train", "val") for e in m.splits()[k]}
+    for t in test_entries:
+        r = _recording(t)
+        if r in seen:
+            raise ConfigError(f"--checkpoint {m.path}: its {seen[r]} split uses {r}, a test recording here "
+                              "(test sequences must never be seen in training or selection)")
+
+
+# ---------------------------------------------------------------------------------------------
+# metrics
+
+
+def _qmul(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    aw, ax, ay, az = np.moveaxis(a, -1, 0)
+    bw, bx, by, bz = np.moveaxis(b, -1, 0)
+    return np.stack([aw * bw - ax * bx - ay * by - az * bz, aw * bx + ax * bw + ay * bz - az * by,
+                     aw * by - ax * bz + ay * bw + az * bx, aw * bz + ax * by - ay * bx + az * bw], -1)
+
+
+def rotation_angle(q_gt: np.ndarray, q_hat: np.ndarray) -> np.ndarray:
+    """Angle [rad] of q_gt⁻¹ q_hat (unit quaternions, w x y z)."""
+    e = _qmul(q_gt * np.array([1.0, -1.0, -1.0, -1.0]), q_hat)
+    return 2.0 * np.arctan2(np.linalg.norm(e[..., 1:], axis=-1), np.abs(e[..., 0]))
+
+
+def window_starts(seq: Sequence, n: int, stride: int, first: int) -> np.ndarray:
+    """Starts first, first+stride, ... with k + n <= len - 1 (the end state is a ground-truth sample)."""
+    return np.arange(int(first), len(seq) - int(n), int(stride), dtype=np.int64)
+
+
+def pose_errors(seq: Sequence, starts: np.ndarray, n: int, pred: PosePrediction) -> Dict[str, np.ndarray]:
+    """Per-window errors of ``pred`` (end states of windows of n samples) against the ground truth
+    of ``seq``: ``rot_rad``, ``trans_m`` (nan without p), ``vel_mps`` (nan without v)."""
+    j = np.asarray(starts, dtype=np.int64) + int(n)
+    rot = rotation_angle(seq.q_wxyz[j], np.asarray(pred.q_wxyz, dtype=np.float64))
+    nan = np.full(len(j), np.nan)
+    trans = nan if pred.p is None else np.linalg.norm(np.asarray(pred.p) - seq.p[j], axis=-1)
+    vel = nan if getattr(pred, "v", None) is None else np.linalg.norm(np.asarray(pred.v) - seq.v[j], axis=-1)
+    return {"rot_rad": rot, "trans_m": trans, "vel_mps": vel}
+
+
+def sample_rate(seq: Sequence) -> float:
+    return 1e9 / float(np.median(np.diff(np.asarray(seq.t_ns, dtype=np.int64))))
+
+
+def seconds_to_samples(seconds: float, rate: float) -> int:
+    return max(1, int(round(seconds * rate)))
+
+
+def curve_seconds(e: EvalSettings) -> List[float]:
+    return [float(x) for x in np.geomspace(e.curve_min_s, e.curve_max_s, e.curve_count)]
+
+
+def horizon_plan(seq: Sequence, e: EvalSettings) -> Dict[str, Any]:
+    """Horizons [samples] to evaluate on ``seq``: the table's n, and seconds -> samples."""
+    rate = sample_rate(seq)
+    secs = sorted(set([1.0] + list(e.airimu_s) + curve_seconds(e)))
+    by_s = {float(s): seconds_to_samples(s, rate) for s in secs}
+    return {"rate_hz": rate, "by_s": by_s, "n": sorted(set(int(n) for n in e.horizons) | set(by_s.values()))}
+
+
+def is_refiner(method: Method) -> bool:
+    return type(method).predict is Method.predict
+
+
+def evaluate_sequence(method: Method, seq: Sequence, horizons: Seq[int], stride: int, startup_bias_s: float,
+                      gravity: float = 9.81) -> Tuple[Dict[Tuple[str, int], Dict[str, np.ndarray]], Dict[str, Any]]:
+    """Errors of ``method`` on ``seq``: {(variant, n): per-window errors} and the fitted start-up bias.
+
+    Refiners: ``refine`` once; the bias is fitted on the refined samples and removed from them; both
+    variants are integrated from the ground-truth start state. Regressors: the bias is fitted on the
+    raw input and removed from it before ``predict``.
+    """
+    first = index_at(seq, startup_bias_s)
+    refiner = is_refiner(method)
+    if refiner:
+        gyro, acc = method.refine(seq)
+        base = with_imu(seq, gyro, acc)
+    else:
+        base = seq
+    bg, ba = fit_startup_bias(base, startup_bias_s, gravity=gravity)
+    inputs = {"open_loop": base, "bias_removed": remove_bias(base, bg, ba)}
+    out: Dict[Tuple[str, int], Dict[str, np.ndarray]] = {}
+    for variant, s in inputs.items():
+        for n in horizons:
+            starts = window_starts(seq, n, stride, first)
+            if starts.size == 0:
+                continue
+            if refiner:
+                pred = poses_from_imu(s, s.gyro, s.acc, starts.astype(np.uint64), int(n), gravity)
+                if method.rotation_only:
+                    pred = PosePrediction(pred.q_wxyz, None, None)
+            else:
+                pred = method.predict(s, starts.astype(np.uint64), int(n), gravity)
+            e = pose_errors(seq, starts, n, pred)
+            e["starts"] = starts
+            out[(variant, int(n))] = e
+    bias = {"gyro": bg.tolist(), "acc": ba.tolist(), "fitted_on": "refined output" if refiner else "raw input"}
+    return out, bias
+
+
+def rmse(x: np.ndarray) -> float:
+    x = np.asarray(x, dtype=np.float64)
+    return float(np.sqrt(np.mean(x * x))) if x.size else float("nan")
+
+
+# ---------------------------------------------------------------------------------------------
+# the run
+
+
+def _one_line(e: BaseException) -> str:
+    if isinstance(e, FileNotFoundError) and e.filename:
+        msg = f"{e.filename}: {e.strerror or 'not found'}"
+    else:
+        msg = str(e) or type(e).__name__
+        if isinstance(e, ImuError):
+            msg = f"{type(e).__name__}: {msg}"
+    return " ".join(msg.split())
+
+
+def _split_signature(split: Any) -> Dict[str, Any]:
+    return {k: [[(g["name"], g["samples"], g["t0_ns"], g["t1_ns"]) for g in e["segments"]] for e in split.record.get(k, [])]
+            for k in ("train", "val")}
+
+
+def _ground_truth_kinds(run: RunConfig, test_entries: List[str]) -> Dict[str, str]:
+    """Recording -> "pose-only (velocity derived)" or "with velocity", for the test recordings."""
+    from imu_learn.formats import read_recording
+    from imu_learn.splits import find_all, resolve_path
+
+    found = find_all(run.data.roots)
+    out = {}
+    for label in test_entries:
+        rec = _recording(label)
+        if rec in out or rec not in found:
+            continue
+        path, root = found[rec]
+        gt_path = resolve_path(root.groundtruth) if root.groundtruth else None
+        _, gt = read_recording(path, root.format, gt_path)
+        out[rec] = "pose-only (velocity derived)" if gt.v is None else "with velocity"
+    return out
+
+
+def _versions() -> Dict[str, str]:
+    import platform
+
+    import polars
+    import torch
+
+    import imu_learn
+
+    v = {"imu_learn": imu_learn.__version__, "torch": torch.__version__, "numpy": np.__version__,
+         "polars": polars.__version__, "python": platform.python_version()}
+    try:
+        import matplotlib
+
+        v["matplotlib"] = matplotlib.__version__
+    except ImportError:  # pragma: no cover
+        v["matplotlib"] = "not installed"
+    return v
+
+
+def _seed_all(seed: int) -> None:
+    import random
+
+    import torch
+
+    random.seed(seed)
+    np.random.seed(seed % (2**32))
+    torch.manual_seed(seed)
+
+
+def prepare_method(name: str, factory: Callable[[], Method], res: Resolved, split: Any, methods_dir: Path,
+                   settings: FitSettings, reuse: bool) -> Tuple[Method, Dict[str, Any]]:
+    """Fit ``name`` on the train split (or load it with ``reuse``); returns the method and its record."""
+    method = factory()
+    fname = safe_name(name)
+    rec_path = methods_dir / f"{fname}.record.json"  # not <name>.json: that is where e.g. traditional saves its fit
+    suffix = getattr(method, "save_suffix", None) or (".json" if name == "traditional" else ".pt")
+    file = methods_dir / f"{fname}{suffix}"
+    sig = {"fit_settings": asdict(settings), "split": _split_signature(split), "class": type(method).__qualname__}
+    if reuse and rec_path.exists():
+        old = json.loads(rec_path.read_text())
+        same = all(old.get(k) == json.loads(json.dumps(v)) for k, v in sig.items())
+        if same:
+            try:
+                if old.get("file") and Path(old["file"]).exists():
+                    method = method.load(Path(old["file"])) or method
+            except Exception as e:
+                raise MethodError(f"{name}: loading {old['file']}: {_one_line(e)}") from e
+            return method, {**old, "status": "reused"}
+        print(f"{PROG}: {name}: saved fit does not match the settings or split; refitting", file=sys.stderr)
+    _seed_all(settings.seed)
+    t0 = time.time()
+    try:
+        log = method.fit(list(split.train), list(split.val), settings) or {}
+    except (ValueError, RuntimeError, ImuError) as e:
+        raise MethodError(f"{name}: fit failed: {_one_line(e)}") from e
+    fit_s = time.time() - t0
+    method.save(file)
+    record = {**sig, "method": name, "fit_s": round(fit_s, 2), "file": str(file) if file.exists() else None,
+              "log": _summarise_log(log)}
+    methods_dir.mkdir(parents=True, exist_ok=True)
+    rec_path.write_text(json.dumps(record, indent=2, default=str))
+    return method, {**record, "status": "fitted"}
+
+
+def _summarise_log(log: Dict[str, Any]) -> Dict[str, Any]:
+    """First/last values of list entries (a fit log can be long)."""
+    out: Dict[str, Any] = {}
+    for k, v in dict(log).items():
+        if isinstance(v, (list, tuple)):
+            vals = [x for x in v if isinstance(x, (int, float, str, type(None)))]
+            out[k] = vals if len(vals) <= 6 else {"first": vals[0], "last": vals[-1], "count": len(vals)}
+        elif isinstance(v, (int, float, str, bool, type(None))):
+            out[k] = v
+    return out
+
+
+def run_evaluation(res: Resolved, methods: List[str], out_dir: Path, reuse: bool = False,
+                   checkpoint: Optional[Path] = None, progress: bool = True,
+                   t_start: Optional[float] = None) -> Dict[str, Any]:
+    """Fit (or reuse) the methods, evaluate them on the test split, write the report; returns the result.
+    ``t_start``: when the command started (wall time is measured from it; default now)."""
+    import torch
+    from tqdm import tqdm
+
+    from imu_learn import report
+    from imu_learn.noise_floor import NOISE_FLOOR_NAME, GroundTruthImu
+    from imu_learn.splits import make_split
+
+    t_start = time.time() if t_start is None else t_start
+    cfg, data = res.cfg, res.run.data
+    settings = res.fit_settings()
+    torch.set_num_threads(settings.threads)
+    split = make_split(data)
+    if not split.test:
+        raise ConfigError("data.split.test: no test sequence (of at least one window)")
+    test_entries = list(data.split.test)
+    out_dir.mkdir(parents=True, exist_ok=True)
+    methods_dir = out_dir / "methods"
+    methods_dir.mkdir(exist_ok=True)
+
+    # methods: resolve, then fit / load (train split only; val for their own selection)
+    prepared: List[Tuple[str, Method]] = []
+    records: Dict[str, Dict[str, Any]] = {}
+    skipped: List[str] = []
+    for name in methods:
+        factory = load_method_class(name)
+        if factory is None:
+            skipped.append(name)
+            continue
+        print(f"{PROG}: {name}: {'loading or ' if reuse else ''}fitting on the train split", file=sys.stderr)
+        m, rec = prepare_method(name, factory, res, split, methods_dir, settings, reuse)
+        prepared.append((name, m))
+        records[name] = rec
+    if checkpoint is not None:
+        # A full `imu_learn.fit` run, beside (not instead of) the same-budget "proposed" row.
+        ck = CheckpointRefiner(checkpoint, "cpu" if settings.device == "auto" else settings.device)
+        check_checkpoint_split(ck, test_entries)
+        prepared.append((CHECKPOINT_NAME, ck))
+        records[CHECKPOINT_NAME] = {"status": "checkpoint", "file": str(checkpoint), "checkpoint_split": ck.splits()}
+    gt_kinds = _ground_truth_kinds(res.run, test_entries)
+    nf = cfg.eval.noise_floor
+    if nf == "always" or (nf == "auto" and any(k.startswith("pose-only") for k in gt_kinds.values())):
+        prepared.append((NOISE_FLOOR_NAME, GroundTruthImu(data.gravity)))
+        records[NOISE_FLOOR_NAME] = {"status": "reference (synthesised from the test ground truth)"}
+
+    # evaluation
+    stride, bias_s = res.stride, res.startup_bias_s
+    plans = {s.name: horizon_plan(s, cfg.eval) for s in split.test}
+    errors: Dict[Tuple[str, str, str, int], List[Dict[str, np.ndarray]]] = {}
+    biases: List[Dict[str, Any]] = []
+    tasks = [(name, m, s) for name, m in prepared for s in split.test]
+    bar = tqdm(tasks, desc="evaluate", unit="seq", disable=not progress, dynamic_ncols=True, file=sys.stderr)
+    t_eval: Dict[str, float] = {}
+    for name, m, s in bar:
+        bar.set_postfix_str(f"{name} / {s.name}", refresh=True)
+        t0 = time.time()
+        try:
+            errs, bias = evaluate_sequence(m, s, plans[s.name]["n"], stride, bias_s, data.gravity)
+        except (ValueError, RuntimeError) as e:
+            raise MethodError(f"{name} on {s.name}: {_one_line(e)}") from e
+        t_eval[name] = t_eval.get(name, 0.0) + time.time() - t0
+        rec = s.name.split("#")[0]
+        for (variant, n), e in errs.items():
+            errors.setdefault((name, variant, rec, n), []).append(e)
+        biases.append({"method": name, "segment": s.name, "recording": rec, "fitted_on": bias["fitted_on"],
+                       **{f"gyro_bias_{a}": b for a, b in zip("xyz", bias["gyro"])},
+                       **{f"acc_bias_{a}": b for a, b in zip("xyz", bias["acc"])}})
+    bar.close()
+    for name in t_eval:
+        records.setdefault(name, {})["eval_s"] = round(t_eval[name], 2)
+
+    rows = []
+    rates = {}
+    for s in split.test:
+        rates.setdefault(s.name.split("#")[0], plans[s.name]["rate_hz"])
+    for (name, variant, rec, n), es in sorted(errors.items(), key=lambda kv: (kv[0][0], kv[0][1], kv[0][2], kv[0][3])):
+        cat = {k: np.concatenate([e[k] for e in es]) for k in ("rot_rad", "trans_m", "vel_mps")}
+        r = rmse(cat["rot_rad"])
+        rows.append({"method": name, "variant": variant, "sequence": rec, "n": n, "horizon_s": n / rates[rec],
+                     "rot_rad": r, "rot_deg": math.degrees(r), "trans_m": rmse(cat["trans_m"]),
+                     "vel_mps": rmse(cat["vel_mps"]), "windows": int(cat["rot_rad"].size)})
+    order = [n for n, _ in prepared]
+    by_s = {rec: {} for rec in rates}
+    for s in split.test:
+        by_s[s.name.split("#")[0]] = plans[s.name]["by_s"]
+    result = {
+        "config_name": cfg.name,
+        "config_path": str(res.path) if res.path else None,
+        "base_path": str(res.base_path) if res.base_path else None,
+        "eval": asdict(cfg.eval),
+        "stride": stride,
+        "startup_bias_s": bias_s,
+        "fit_settings": asdict(settings),
+        "seed": cfg.seed,
+        "methods": order,
+        "requested": list(methods),
+        "skipped": skipped,
+        "records": records,
+        "split": split.record,
+        "test_sequences": list(rates),
+        "test_segments": [{"name": s.name, "samples": len(s), "duration_s": round(s.duration_s, 3)} for s in split.test],
+        "ground_truth": gt_kinds,
+        "rates_hz": rates,
+        "horizons_by_s": by_s,
+        "curve_s": curve_seconds(cfg.eval),
+        "rows": rows,
+        "biases": biases,
+        "versions": _versions(),
+        "roots": [asdict(r) for r in data.roots],
+        "gravity": data.gravity,
+    }
+    result["wall_s"] = time.time() - t_start
+    report.write_report(out_dir, result)
+    result["wall_s"] = time.time() - t_start
+    return result
+
+
+# ---------------------------------------------------------------------------------------------
+# command line
+
+
+def _parser() -> argparse.ArgumentParser:
+    p = argparse.ArgumentParser(
+        prog=f"python -m {PROG}", allow_abbrev=False,
+        description="Fit methods on the train split and evaluate them on the held-out test split (paper Section V).",
+        epilog="Overrides: --fit.steps 100 --eval.stride 20 --eval.horizons '[10, 200]' --data.split.test '[\"V1_01_easy\"]'")
+    p.add_argument("--config", type=Path, help="eval TOML (configs/eval_*.toml); default: built-in defaults on the shipped crops")
+    p.add_argument("--methods", help=f"comma list (default: the config's; known: {', '.join(REGISTRY)})")
+    p.add_argument("--checkpoint", type=Path, help=f"also evaluate this imu_learn.fit checkpoint (best.pt), as the row {CHECKPOINT_NAME!r}")
+    p.add_argument("--out", type=Path, help="report folder (default <reports_dir>/<config name>)")
+    p.add_argument("--reuse", action="store_true", help="load fitted methods from the report folder when settings and split match")
+    p.add_argument("--no-progress", action="store_true", help="no progress bar")
+    p.add_argument("--traceback", action="store_true", help="show the full traceback of a known error")
+    return p
+
+
+def main(argv: Optional[Seq[str]] = None) -> int:
+    argv = list(sys.argv[1:] if argv is None else argv)
+    args, rest = _parser().parse_known_args(argv)
+    t0 = time.time()
+    try:
+        res = load_eval_config(args.config, rest)  # no --config: defaults, data = the fit defaults (crops)
+        methods = [m.strip() for m in args.methods.split(",") if m.strip()] if args.methods else list(res.cfg.methods)
+        for m in methods:
+            if m not in REGISTRY:
+                raise ConfigError(f"--methods: unknown method {m!r} (known: {', '.join(REGISTRY)})")
+        if args.checkpoint is not None and not args.checkpoint.exists():
+            raise FileNotFoundError(2, "No such file or directory", str(args.checkpoint))
+        out = args.out or Path(res.cfg.reports_dir) / res.cfg.name
+        result = run_evaluation(res, methods, out, reuse=args.reuse, checkpoint=args.checkpoint,
+                                progress=not args.no_progress, t_start=t0)
+    except KeyboardInterrupt:
+        print(f"{PROG}: interrupted", file=sys.stderr)
+        return 130
+    except (ImuError, FileNotFoundError) as e:
+        if args.traceback:
+            raise
+        print(f"{PROG}: error: {_one_line(e)}", file=sys.stderr)
+        return EXIT_ERROR
+    from imu_learn import report
+
+    print(report.summary_text(result))
+    print(f"report: {out / 'report.md'}")
+    print(f"total wall time: {time.time() - t0:.1f} s")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
