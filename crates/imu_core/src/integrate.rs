@@ -143,9 +143,15 @@ fn check_lengths(what: &str, n: usize, gyro: &[Vec3], acc: &[Vec3]) -> Result<()
 }
 
 fn check_finite(gyro: &[Vec3], acc: &[Vec3]) -> Result<()> {
-    // x·0 is 0 for every finite x and NaN for ±inf and NaN, so one branch-free sum answers
-    // "all finite?"; only a failure pays for finding the first bad row.
-    let all_finite = |rows: &[Vec3]| rows.as_flattened().iter().fold(0.0, |s, &x| s + x * 0.0) == 0.0;
+    // A float is ±inf or NaN exactly when its 11 exponent bits are all set. OR-ing that flag over
+    // every value is branch-free integer work the compiler vectorises (a floating-point sum would
+    // be one long chain of dependent adds); only a failure pays for finding the first bad row.
+    let all_finite = |rows: &[Vec3]| {
+        rows.as_flattened()
+            .iter()
+            .fold(0u64, |acc, &x| acc | u64::from((x.to_bits() >> 52) & 0x7ff == 0x7ff))
+            == 0
+    };
     if all_finite(gyro) && all_finite(acc) {
         return Ok(());
     }
