@@ -139,7 +139,11 @@ mod tests {
             assert!((w[0] - c).abs() <= 4e-16, "cos at {theta}: {} vs {c}", w[0]);
             for k in 0..3 {
                 let want = s * axis[k];
-                assert!((w[k + 1] - want).abs() <= 4e-16, "axis {k} at {theta}: {} vs {want}", w[k + 1]);
+                assert!(
+                    (w[k + 1] - want).abs() <= 4e-16,
+                    "axis {k} at {theta}: {} vs {want}",
+                    w[k + 1]
+                );
             }
         }
     }
