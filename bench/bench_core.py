@@ -181,7 +181,7 @@ def bench_integration(t, gyro, acc, have_core: bool, repeats: int, gtsam_repeats
         err = max(float(np.abs(a - b).max()) for a, b in zip((inc.dq_wxyz, inc.dv, inc.dp, inc.dt), ref))
         scale = max(float(np.abs(x).max()) for x in ref)
         m = measure(lambda: imu_learn.preintegrate(t, gyro, acc), repeats)
-        note = f"max |core - numpy| = {err:.1e} (largest entry {scale:.1e})"
+        note = f"max \\|core − numpy\\| = {err:.1e} (largest entry {scale:.1e})"
         rows.append(_row("integration", "imu_learn.preintegrate", m, n, "samples", note))
     for scan in ("doubling", "blocked"):
         m = measure(lambda scan=scan: nr.preintegrate(t, gyro, acc, scan), repeats)
@@ -211,7 +211,7 @@ def bench_integration(t, gyro, acc, have_core: bool, repeats: int, gtsam_repeats
     rows.append(
         _row(
             "integration", "GTSAM Manifold, Python loop", m, n, "samples",
-            f"integrateMeasurement per sample (also propagates the 9x9 covariance); final |gtsam - numpy| = {err:.1e}",
+            f"integrateMeasurement per sample (also propagates the 9x9 covariance); final \\|gtsam − numpy\\| = {err:.1e}",
         )
     )
     return rows
@@ -236,7 +236,7 @@ def bench_labels(seqs: List[tuple], have_core: bool, repeats: int) -> List[Row]:
             for k in ("dq_wxyz", "dv", "dp", "dt")
         )
         m = measure(run_core, repeats)
-        note = f"max |core - numpy| = {err:.1e}"
+        note = f"max \\|core − numpy\\| = {err:.1e}"
         rows.append(_row("labels", "imu_learn.window_labels", m, n_windows, "windows", note))
     m = measure(run_numpy, repeats)
     rows.append(_row("labels", "numpy (fancy indexing)", m, n_windows, "windows"))

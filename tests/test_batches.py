@@ -87,3 +87,35 @@ def test_eval_windows_cover_every_stride(seqs):
     b = s.eval_windows(stride=100)
     n = len(seqs[0])
     assert list(b.start) == list(range(0, n - 200, 100))
+
+
+FIELDS = ("imu", "dt", "dq_wxyz", "dv", "dp", "label_dt", "bias", "seq_index", "start")
+
+
+@pytest.mark.parametrize("aug", [AUG, il.AugmentConfig()], ids=["augmented", "plain"])
+def test_reused_batch_storage_holds_nothing_of_the_previous_batch(seqs, aug):
+    """Batches are carved from storage the sampler reuses once Python drops them: a batch built in
+    reused storage must equal the same seed's batch from a fresh sampler, element for element."""
+    cfg = il.BatchConfig(window=100, batch_size=16, augment=aug)
+    want = il.BatchSampler(seqs, cfg).sample(7)
+    sampler = il.BatchSampler(seqs, cfg)
+    first = sampler.sample(1)
+    first.imu[...] = np.nan  # poison the storage, then give it back
+    first.bias[...] = np.nan
+    del first
+    got = sampler.sample(7)
+    for f in FIELDS:
+        np.testing.assert_array_equal(getattr(got, f), getattr(want, f), err_msg=f)
+    if aug == il.AugmentConfig():
+        assert not got.bias.any()
+
+
+def test_batches_held_by_the_caller_are_never_overwritten(seqs):
+    sampler = il.BatchSampler(seqs, il.BatchConfig(window=100, batch_size=8, augment=AUG))
+    kept = [sampler.sample(s) for s in range(4)]
+    copies = [{f: getattr(b, f).copy() for f in FIELDS} for b in kept]
+    for s in range(4, 12):  # more batches, with and without dropping them
+        sampler.sample(s)
+    for b, c in zip(kept, copies):
+        for f in FIELDS:
+            np.testing.assert_array_equal(getattr(b, f), c[f], err_msg=f)

@@ -1,10 +1,12 @@
 //! numpy ↔ Rust without copies: inputs are borrowed as `&[[f64; 3]]` views of C-contiguous
 //! arrays; outputs move their `Vec` into numpy (`into_pyarray`), so nothing is copied either way.
 
-use numpy::ndarray::{Array1, Array2, Array3, Dimension, IntoDimension};
+use std::sync::{Arc, Mutex};
+
+use numpy::ndarray::{Array1, Array2, Array3, ArrayView, Dimension, IntoDimension, IxDyn};
 use numpy::{
-    IntoPyArray, PyArray, PyArray1, PyArray2, PyArray3, PyReadonlyArray1, PyReadonlyArray2, PyReadwriteArray,
-    PyUntypedArrayMethods,
+    IntoPyArray, PyArray, PyArray1, PyArray2, PyArray3, PyArrayDyn, PyReadonlyArray1, PyReadonlyArray2,
+    PyReadwriteArray, PyUntypedArrayMethods,
 };
 use pyo3::prelude::*;
 
@@ -93,6 +95,95 @@ pub fn zeros<'py, T: numpy::Element, D: Dimension>(
     dims: impl IntoDimension<Dim = D>,
 ) -> Bound<'py, PyArray<T, D>> {
     PyArray::zeros(py, dims, false)
+}
+
+/// Float64 storage that batch outputs are carved from, shared by a `SequenceSet` and the arrays
+/// it hands out. When Python drops the last array of a batch, its storage goes back here and the
+/// next batch of the same size reuses it: memory the process has already touched, so building a
+/// batch costs no page faults. (Fresh multi-MiB arrays cost one fault per 4 KiB page, which was
+/// most of the time of a batch on a 2-core VM; see README, Benchmarks.)
+pub type BufferPool = Arc<Mutex<Vec<Vec<f64>>>>;
+
+/// At most this many idle buffers are kept (a trainer holds one or two batches at a time; more
+/// would only pin memory).
+const POOL_KEEP: usize = 16;
+
+/// The owner of one pooled buffer: the numpy arrays of a batch are views with this as their base.
+#[pyclass(module = "imu_learn._imu_core", frozen)]
+pub struct PooledBuffer {
+    data: Vec<f64>,
+    pool: BufferPool,
+}
+
+impl Drop for PooledBuffer {
+    fn drop(&mut self) {
+        let data = std::mem::take(&mut self.data);
+        // A poisoned lock only means another thread panicked while holding it: drop the buffer.
+        if let Ok(mut idle) = self.pool.lock() {
+            if idle.len() < POOL_KEEP {
+                idle.push(data);
+            }
+        }
+    }
+}
+
+fn take_buffer(pool: &BufferPool, len: usize) -> Vec<f64> {
+    if let Ok(mut idle) = pool.lock() {
+        while let Some(v) = idle.pop() {
+            if v.len() == len {
+                return v;
+            }
+        }
+    }
+    vec![0.0; len]
+}
+
+/// Float64 arrays of the given C-order shapes, carved out of one pooled buffer. `fill` gets one
+/// mutable slice per shape, runs with the GIL released, and must write every element (a reused
+/// buffer still holds the previous batch). Python sees the arrays only after `fill` succeeded.
+pub fn pooled_arrays<'py, F>(
+    py: Python<'py>,
+    pool: &BufferPool,
+    shapes: &[&[usize]],
+    fill: F,
+) -> PyResult<Vec<Bound<'py, PyArrayDyn<f64>>>>
+where
+    F: FnOnce(Vec<&mut [f64]>) -> crate::error::Result<()> + Send,
+{
+    let sizes: Vec<usize> = shapes.iter().map(|s| s.iter().product()).collect();
+    let mut data = take_buffer(pool, sizes.iter().sum());
+    {
+        let mut parts = Vec::with_capacity(sizes.len());
+        let mut rest: &mut [f64] = &mut data;
+        for &n in &sizes {
+            let (part, tail) = std::mem::take(&mut rest).split_at_mut(n);
+            parts.push(part);
+            rest = tail;
+        }
+        py.allow_threads(|| fill(parts)).map_err(to_py)?;
+    }
+    // Moving the Vec into its owner moves only its header: the heap block the views point into
+    // stays where it is until the owner is dropped.
+    let ptr = data.as_ptr();
+    let owner = Bound::new(
+        py,
+        PooledBuffer {
+            data,
+            pool: Arc::clone(pool),
+        },
+    )?
+    .into_any();
+    let mut out = Vec::with_capacity(shapes.len());
+    let mut off = 0usize;
+    for (shape, n) in shapes.iter().zip(sizes) {
+        // SAFETY: [off, off + n) lies inside the owner's buffer (the sizes sum to its length); the
+        // buffer is neither reallocated nor freed while the owner lives, and every array made here
+        // holds a reference to the owner as its base.
+        let view = unsafe { ArrayView::from_shape_ptr(IxDyn(shape), ptr.add(off)) };
+        out.push(unsafe { PyArrayDyn::borrow_from_array(&view, owner.clone()) });
+        off += n;
+    }
+    Ok(out)
 }
 
 /// A writable C-contiguous array's buffer (as made by `zeros`).

@@ -1,6 +1,6 @@
 //! Alignment, integration, labels and batches.
 
-use numpy::{PyArray1, PyArray2, PyArrayMethods, PyReadonlyArray1, PyReadonlyArray2};
+use numpy::{PyArray1, PyArray2, PyArrayDyn, PyArrayMethods, PyReadonlyArray1, PyReadonlyArray2};
 use pyo3::prelude::*;
 use pyo3::types::{PyDict, PyList};
 
@@ -9,7 +9,9 @@ use crate::batch::{self, AugmentConfig, Batch, BatchConfig, BatchMut, BatchPlan}
 use crate::error::ImuError;
 use crate::integrate::{self, PreintegratedMut};
 use crate::labels::{self, GroundTruthView, Labels, LabelsMut};
-use crate::python::arrays::{flat_mut, out1, out2, out2_flat, out3, out3_flat, rows, rows_mut, slice1, zeros};
+use crate::python::arrays::{
+    flat_mut, out1, out2, out2_flat, out3, out3_flat, pooled_arrays, rows, rows_mut, slice1, zeros, BufferPool,
+};
 use crate::python::errors::to_py;
 use crate::types::{GroundTruth, ImuSamples, Sequence};
 
@@ -232,6 +234,8 @@ fn integrate_windows<'py>(
 #[pyclass(module = "imu_learn._imu_core", frozen)]
 struct SequenceSet {
     seqs: Vec<Sequence>,
+    /// Storage of returned batches, reused once Python has dropped them.
+    pool: BufferPool,
 }
 
 type SeqTuple<'py> = (
@@ -280,7 +284,10 @@ impl SequenceSet {
             labels::check_sequence(&s).map_err(|e| to_py(ImuError::invalid(format!("sequence {i}: {e}"))))?;
             seqs.push(s);
         }
-        Ok(SequenceSet { seqs })
+        Ok(SequenceSet {
+            seqs,
+            pool: BufferPool::default(),
+        })
     }
 
     fn __len__(&self) -> usize {
@@ -321,33 +328,51 @@ impl SequenceSet {
         };
         let plan = BatchPlan::new(&self.seqs, &cfg).map_err(to_py)?;
         let (b, w, h) = (batch_size, window, plan.horizons.len());
-        let imu = zeros::<f64, _>(py, [b, w, 6]);
-        let dt = zeros::<f64, _>(py, [b, w]);
-        let dq = zeros::<f64, _>(py, [b, h, 4]);
-        let dv = zeros::<f64, _>(py, [b, h, 3]);
-        let dp = zeros::<f64, _>(py, [b, h, 3]);
-        let label_dt = zeros::<f64, _>(py, [b, h]);
-        let bias = zeros::<f64, _>(py, [b, w, 6]);
         let seq_index = zeros::<u32, _>(py, [b]);
         let start = zeros::<u64, _>(py, [b]);
-        {
-            let (mut imu_w, mut dt_w, mut bias_w) = (imu.readwrite(), dt.readwrite(), bias.readwrite());
-            let (mut dq_w, mut dv_w, mut dp_w) = (dq.readwrite(), dv.readwrite(), dp.readwrite());
-            let (mut ldt_w, mut si_w, mut st_w) = (label_dt.readwrite(), seq_index.readwrite(), start.readwrite());
-            let out = BatchMut {
-                imu: flat_mut(&mut imu_w)?,
-                dt: flat_mut(&mut dt_w)?,
-                dq_wxyz: rows_mut::<4, _>(&mut dq_w)?,
-                dv: rows_mut::<3, _>(&mut dv_w)?,
-                dp: rows_mut::<3, _>(&mut dp_w)?,
-                label_dt: flat_mut(&mut ldt_w)?,
-                bias: flat_mut(&mut bias_w)?,
-                seq_index: flat_mut(&mut si_w)?,
-                start: flat_mut(&mut st_w)?,
-            };
-            py.allow_threads(|| plan.fill(&self.seqs, &cfg, seed, out))
-                .map_err(to_py)?;
-        }
+        let (seqs, plan_ref, cfg_ref) = (&self.seqs, &plan, &cfg);
+        let arrays = {
+            let (mut si_w, mut st_w) = (seq_index.readwrite(), start.readwrite());
+            let (si, st) = (flat_mut(&mut si_w)?, flat_mut(&mut st_w)?);
+            pooled_arrays(
+                py,
+                &self.pool,
+                &[
+                    &[b, w, 6],
+                    &[b, w],
+                    &[b, h, 4],
+                    &[b, h, 3],
+                    &[b, h, 3],
+                    &[b, h],
+                    &[b, w, 6],
+                ],
+                move |parts| {
+                    let [imu, dt, dq, dv, dp, label_dt, bias]: [&mut [f64]; 7] = parts
+                        .try_into()
+                        .map_err(|_| ImuError::invalid("internal: batch buffer has the wrong number of parts"))?;
+                    let out = BatchMut {
+                        imu,
+                        dt,
+                        dq_wxyz: dq.as_chunks_mut::<4>().0,
+                        dv: dv.as_chunks_mut::<3>().0,
+                        dp: dp.as_chunks_mut::<3>().0,
+                        label_dt,
+                        bias,
+                        seq_index: si,
+                        start: st,
+                    };
+                    // `fill` writes every element of every output (augment writes each bias row
+                    // even when the bias is zero), as `pooled_arrays` requires.
+                    plan_ref.fill(seqs, cfg_ref, seed, out)
+                },
+            )?
+        };
+        let [imu, dt, dq, dv, dp, label_dt, bias]: [Bound<'py, PyArrayDyn<f64>>; 7] =
+            arrays.try_into().map_err(|_| {
+                to_py(ImuError::invalid(
+                    "internal: batch arrays have the wrong number of parts",
+                ))
+            })?;
         let d = PyDict::new(py);
         d.set_item("imu", imu)?;
         d.set_item("dt", dt)?;
