@@ -69,9 +69,28 @@ pub fn exp(phi: &Vector3<f64>) -> Quat {
 #[inline(always)]
 pub fn exp_wxyz(phi: Vec3) -> QuatWxyz {
     let theta2 = phi[0] * phi[0] + phi[1] * phi[1] + phi[2] * phi[2];
-    // x = θ/2, y = x² = θ²/4: sin(x)/x = Σ (−y)^k/(2k+1)!, cos x = Σ (−y)^k/(2k)!, k ≤ 5, by
-    // Horner with the coefficients as constants (dividing by 6, 20, ... in the loop cost ten
-    // divisions per IMU step, most of the integration's time).
+    let (s, c) = if exp_series_holds(theta2) {
+        exp_series(theta2)
+    } else {
+        let theta = theta2.sqrt();
+        ((0.5 * theta).sin() / theta, (0.5 * theta).cos())
+    };
+    [c, s * phi[0], s * phi[1], s * phi[2]]
+}
+
+/// Where `exp_series` is exact to double precision: θ² < 0.01 (θ < 0.1 rad; 20 rad/s for 5 ms).
+#[inline(always)]
+pub fn exp_series_holds(theta2: f64) -> bool {
+    theta2 < 1e-2
+}
+
+/// (sin(θ/2)/θ, cos(θ/2)) from θ² by their Taylor series, valid where `exp_series_holds`.
+///
+/// x = θ/2, y = x² = θ²/4: sin(x)/x = Σ (−y)^k/(2k+1)!, cos x = Σ (−y)^k/(2k)!, k ≤ 5 (the next
+/// terms are below 1e-25 relative), by Horner with the coefficients as constants (dividing by
+/// 6, 20, ... instead cost ten divisions per IMU step, most of an integration's time).
+#[inline(always)]
+pub fn exp_series(theta2: f64) -> (f64, f64) {
     const SINC: [f64; 6] = [
         1.0,
         -1.0 / 6.0,
@@ -88,16 +107,10 @@ pub fn exp_wxyz(phi: Vec3) -> QuatWxyz {
         1.0 / 40320.0,
         -1.0 / 3628800.0,
     ];
-    let (s, c) = if theta2 < 1e-2 {
-        let y = 0.25 * theta2;
-        let sinc = SINC[0] + y * (SINC[1] + y * (SINC[2] + y * (SINC[3] + y * (SINC[4] + y * SINC[5]))));
-        let cos = COS[0] + y * (COS[1] + y * (COS[2] + y * (COS[3] + y * (COS[4] + y * COS[5]))));
-        (0.5 * sinc, cos)
-    } else {
-        let theta = theta2.sqrt();
-        ((0.5 * theta).sin() / theta, (0.5 * theta).cos())
-    };
-    [c, s * phi[0], s * phi[1], s * phi[2]]
+    let y = 0.25 * theta2;
+    let sinc = SINC[0] + y * (SINC[1] + y * (SINC[2] + y * (SINC[3] + y * (SINC[4] + y * SINC[5]))));
+    let cos = COS[0] + y * (COS[1] + y * (COS[2] + y * (COS[3] + y * (COS[4] + y * COS[5]))));
+    (0.5 * sinc, cos)
 }
 
 /// Logarithm SO(3) → so(3), the rotation vector with angle in [0, π].
