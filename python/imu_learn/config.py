@@ -251,15 +251,16 @@ def parse_value(key: str, text: str, tp: Any) -> Any:
     return _convert(f"--{key}", value, tp)
 
 
-def parse_overrides(args: Sequence[str]) -> Dict[str, Any]:
-    """``["--optim.lr", "3e-4", "--model.causal=true"]`` -> ``{"optim.lr": 3e-4, ...}``, type-checked."""
-    out: Dict[str, Any] = {}
+def split_overrides(args: Sequence[str], usage: str = "--key.sub value") -> List[Tuple[str, str]]:
+    """``["--optim.lr", "3e-4", "--model.causal=true"]`` -> ``[("optim.lr", "3e-4"), ...]``: the
+    command-line grammar shared by every entry point (values are parsed by the caller)."""
+    out: List[Tuple[str, str]] = []
     i = 0
     args = list(args)
     while i < len(args):
         a = args[i]
         if not a.startswith("--") or len(a) <= 2:
-            raise ConfigError(f"{a}: expected --key.sub value")
+            raise ConfigError(f"{a}: expected {usage}")
         if "=" in a:
             key, text = a[2:].split("=", 1)
             i += 1
@@ -269,9 +270,13 @@ def parse_overrides(args: Sequence[str]) -> Dict[str, Any]:
                 raise ConfigError(f"--{key}: missing value")
             text = args[i + 1]
             i += 2
-        tp = _field_type(key.split("."))
-        out[key] = parse_value(key, text, tp)
+        out.append((key, text))
     return out
+
+
+def parse_overrides(args: Sequence[str]) -> Dict[str, Any]:
+    """``["--optim.lr", "3e-4", "--model.causal=true"]`` -> ``{"optim.lr": 3e-4, ...}``, type-checked."""
+    return {key: parse_value(key, text, _field_type(key.split("."))) for key, text in split_overrides(args)}
 
 
 def _nest(flat: Dict[str, Any]) -> Dict[str, Any]:

@@ -80,3 +80,15 @@ __all__ = [
     "InvalidInputError",
     "CacheError",
 ]
+
+
+def one_line(e: BaseException) -> str:
+    """An error as the one line an entry point prints: ``path: reason`` for a missing file, the
+    class name before the message for imu_learn's own errors, whitespace collapsed."""
+    if isinstance(e, FileNotFoundError) and e.filename:
+        msg = f"{e.filename}: {e.strerror or 'not found'}"
+    else:
+        msg = str(e) or type(e).__name__
+        if isinstance(e, ImuError):
+            msg = f"{type(e).__name__}: {msg}"
+    return " ".join(msg.split())

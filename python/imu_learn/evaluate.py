@@ -81,14 +81,17 @@ from imu_learn.config import (
     RunConfig,
     _hints,
     _merge,
+    _nest,
     build_config,
     from_dict,
     parse_overrides,
     parse_value,
     read_toml,
+    split_overrides,
 )
-from imu_learn.errors import ImuError
+from imu_learn.errors import ImuError, one_line
 from imu_learn.metrics import fit_startup_bias, index_at, remove_bias, with_imu
+from imu_learn.quat import quat_conj, quat_mul
 from imu_learn.types import Sequence
 
 PROG = "imu_learn.evaluate"
@@ -203,33 +206,14 @@ def load_eval_config(path: Optional[Path] = None, overrides: Seq[str] = ()) -> R
     data_over = raw.pop("data", {})
     if not isinstance(data_over, dict):
         raise ConfigError("data: expected a table")
-    args = list(overrides)
     flat_data: List[str] = []
     flat_eval: Dict[str, Any] = {}
-    i = 0
-    while i < len(args):
-        a = args[i]
-        if not a.startswith("--") or len(a) <= 2:
-            raise ConfigError(f"{a}: expected --key value")
-        if "=" in a:
-            key, text = a[2:].split("=", 1)
-            i += 1
-        else:
-            if i + 1 >= len(args):
-                raise ConfigError(f"{a}: missing value")
-            key, text = a[2:], args[i + 1]
-            i += 2
+    for key, text in split_overrides(overrides, usage="--key value"):
         if key.startswith("data."):
             flat_data += [f"--{key}", text]
         else:
             flat_eval[key] = parse_value(key, text, _eval_field_type(key))
-    nested: Dict[str, Any] = {}
-    for key, v in flat_eval.items():
-        d = nested
-        parts = key.split(".")
-        for p in parts[:-1]:
-            d = d.setdefault(p, {})
-        d[parts[-1]] = v
+    nested = _nest(flat_eval)
     merged = _merge(raw, nested)
     cfg = from_dict(EvalConfig, merged)
     base_path = _resolve_base(cfg.base, Path(path) if path else None) if cfg.base else None
@@ -344,16 +328,9 @@ def check_checkpoint_split(m: CheckpointRefiner, test_entries: List[str]) -> Non
 # metrics
 
 
-def _qmul(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    aw, ax, ay, az = np.moveaxis(a, -1, 0)
-    bw, bx, by, bz = np.moveaxis(b, -1, 0)
-    return np.stack([aw * bw - ax * bx - ay * by - az * bz, aw * bx + ax * bw + ay * bz - az * by,
-                     aw * by - ax * bz + ay * bw + az * bx, aw * bz + ax * by - ay * bx + az * bw], -1)
-
-
 def rotation_angle(q_gt: np.ndarray, q_hat: np.ndarray) -> np.ndarray:
     """Angle [rad] of q_gt⁻¹ q_hat (unit quaternions, w x y z)."""
-    e = _qmul(q_gt * np.array([1.0, -1.0, -1.0, -1.0]), q_hat)
+    e = quat_mul(quat_conj(q_gt), q_hat)
     return 2.0 * np.arctan2(np.linalg.norm(e[..., 1:], axis=-1), np.abs(e[..., 0]))
 
 
@@ -442,16 +419,6 @@ def rmse(x: np.ndarray) -> float:
 # the run
 
 
-def _one_line(e: BaseException) -> str:
-    if isinstance(e, FileNotFoundError) and e.filename:
-        msg = f"{e.filename}: {e.strerror or 'not found'}"
-    else:
-        msg = str(e) or type(e).__name__
-        if isinstance(e, ImuError):
-            msg = f"{type(e).__name__}: {msg}"
-    return " ".join(msg.split())
-
-
 def _split_signature(split: Any) -> Dict[str, Any]:
     return {k: [[(g["name"], g["samples"], g["t0_ns"], g["t1_ns"]) for g in e["segments"]] for e in split.record.get(k, [])]
             for k in ("train", "val")}
@@ -521,7 +488,7 @@ def prepare_method(name: str, factory: Callable[[], Method], res: Resolved, spli
                 if old.get("file") and Path(old["file"]).exists():
                     method = method.load(Path(old["file"])) or method
             except Exception as e:
-                raise MethodError(f"{name}: loading {old['file']}: {_one_line(e)}") from e
+                raise MethodError(f"{name}: loading {old['file']}: {one_line(e)}") from e
             return method, {**old, "status": "reused"}
         print(f"{PROG}: {name}: saved fit does not match the settings or split; refitting", file=sys.stderr)
     _seed_all(settings.seed)
@@ -529,7 +496,7 @@ def prepare_method(name: str, factory: Callable[[], Method], res: Resolved, spli
     try:
         log = method.fit(list(split.train), list(split.val), settings) or {}
     except (ValueError, RuntimeError, ImuError) as e:
-        raise MethodError(f"{name}: fit failed: {_one_line(e)}") from e
+        raise MethodError(f"{name}: fit failed: {one_line(e)}") from e
     fit_s = time.time() - t0
     method.save(file)
     record = {**sig, "method": name, "fit_s": round(fit_s, 2), "file": str(file) if file.exists() else None,
@@ -614,7 +581,7 @@ def run_evaluation(res: Resolved, methods: List[str], out_dir: Path, reuse: bool
         try:
             errs, bias = evaluate_sequence(m, s, plans[s.name]["n"], stride, bias_s, data.gravity)
         except (ValueError, RuntimeError) as e:
-            raise MethodError(f"{name} on {s.name}: {_one_line(e)}") from e
+            raise MethodError(f"{name} on {s.name}: {one_line(e)}") from e
         t_eval[name] = t_eval.get(name, 0.0) + time.time() - t0
         rec = s.name.split("#")[0]
         for (variant, n), e in errs.items():
@@ -712,7 +679,7 @@ def main(argv: Optional[Seq[str]] = None) -> int:
     except (ImuError, FileNotFoundError) as e:
         if args.traceback:
             raise
-        print(f"{PROG}: error: {_one_line(e)}", file=sys.stderr)
+        print(f"{PROG}: error: {one_line(e)}", file=sys.stderr)
         return EXIT_ERROR
     from imu_learn import report
 

@@ -69,7 +69,7 @@ import torch
 from imu_learn.batches import Batch, BatchSampler
 from imu_learn.checkpoint import load_checkpoint, load_model, model_from_checkpoint, save_checkpoint
 from imu_learn.config import ConfigError, RunConfig, build_config, parse_overrides, read_toml, to_toml
-from imu_learn.errors import ImuError
+from imu_learn.errors import ImuError, one_line
 from imu_learn.losses import imu_loss
 from imu_learn.metrics import fit_startup_bias, relative_pose_rmse_many, remove_bias, with_imu
 from imu_learn.model import ImuRefiner
@@ -491,16 +491,6 @@ def _parser() -> argparse.ArgumentParser:
     return p
 
 
-def _one_line(e: BaseException) -> str:
-    if isinstance(e, FileNotFoundError) and e.filename:
-        msg = f"{e.filename}: {e.strerror or 'not found'}"
-    else:
-        msg = str(e) or type(e).__name__
-        if isinstance(e, ImuError):
-            msg = f"{type(e).__name__}: {msg}"
-    return " ".join(msg.split())
-
-
 def _segments(record: Dict[str, Any]) -> Dict[str, Any]:
     """What a split holds (segment names, sizes, stamps), not where it was read from."""
     return {k: [[(g["name"], g["samples"], g["t0_ns"], g["t1_ns"]) for g in e["segments"]] for e in record.get(k, [])]
@@ -562,7 +552,7 @@ def main(argv: Optional[Seq[str]] = None, on_step: Optional[StepHook] = None) ->
         print(f"{PROG}: interrupted{where}", file=sys.stderr)
         return EXIT_INTERRUPTED
     except (ImuError, FileNotFoundError) as e:
-        print(f"{PROG}: error: {_one_line(e)}", file=sys.stderr)
+        print(f"{PROG}: error: {one_line(e)}", file=sys.stderr)
         return EXIT_ERROR
 
 

@@ -35,26 +35,10 @@ import numpy as np
 
 from imu_learn.baselines.base import Method
 from imu_learn.errors import InvalidInputError
+from imu_learn.quat import quat_conj, quat_mul, quat_rotate
 from imu_learn.types import Sequence
 
 NOISE_FLOOR_NAME = "ground truth (noise floor)"
-
-
-def _conj(q: np.ndarray) -> np.ndarray:
-    return q * np.array([1.0, -1.0, -1.0, -1.0])
-
-
-def _mul(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    aw, ax, ay, az = np.moveaxis(a, -1, 0)
-    bw, bx, by, bz = np.moveaxis(b, -1, 0)
-    return np.stack([aw * bw - ax * bx - ay * by - az * bz, aw * bx + ax * bw + ay * bz - az * by,
-                     aw * by - ax * bz + ay * bw + az * bx, aw * bz + ax * by - ay * bx + az * bw], -1)
-
-
-def _rotate(q: np.ndarray, v: np.ndarray) -> np.ndarray:
-    u, w = q[..., 1:], q[..., :1]
-    uv = np.cross(u, v)
-    return v + 2.0 * (w * uv + np.cross(u, uv))
 
 
 def quat_log(q_wxyz: np.ndarray) -> np.ndarray:
@@ -80,14 +64,14 @@ def synthesize_imu(seq: Sequence, gravity: float = 9.81) -> Tuple[np.ndarray, np
         raise InvalidInputError(f"{seq.name}: timestamps must increase strictly")
     q = np.asarray(seq.q_wxyz, dtype=np.float64)
     q = q / np.linalg.norm(q, axis=-1, keepdims=True)
-    dq = _mul(_conj(q[:-1]), q[1:])
+    dq = quat_mul(quat_conj(q[:-1]), q[1:])
     gyro = np.empty((n, 3))
     gyro[:-1] = quat_log(dq) / dt[:, None]
     gyro[-1] = gyro[-2]
     g = np.array([0.0, 0.0, -gravity])
     world = (seq.v[1:] - seq.v[:-1]) / dt[:, None] - g[None]
     acc = np.empty((n, 3))
-    acc[:-1] = _rotate(_conj(q[:-1]), world)
+    acc[:-1] = quat_rotate(quat_conj(q[:-1]), world)
     acc[-1] = acc[-2]
     return gyro, acc
 

@@ -1,4 +1,5 @@
-"""Quaternion order conversions: the one place the project reorders quaternion components."""
+"""Quaternions in numpy: order conversions (the one place the project reorders quaternion
+components) and the Hamilton algebra on w,x,y,z arrays of shape (..., 4)."""
 from __future__ import annotations
 
 import numpy as np
@@ -14,3 +15,23 @@ def wxyz_to_xyzw(q_wxyz: np.ndarray) -> np.ndarray:
     """w,x,y,z -> x,y,z,w; works on (..., 4)."""
     q = np.asarray(q_wxyz)
     return np.concatenate([q[..., 1:4], q[..., 0:1]], axis=-1)
+
+
+def quat_conj(q_wxyz: np.ndarray) -> np.ndarray:
+    """Conjugate (the inverse of a unit quaternion); (..., 4)."""
+    return q_wxyz * np.array([1.0, -1.0, -1.0, -1.0])
+
+
+def quat_mul(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Hamilton product a ⊗ b of w,x,y,z quaternions; broadcasts over leading axes."""
+    aw, ax, ay, az = np.moveaxis(a, -1, 0)
+    bw, bx, by, bz = np.moveaxis(b, -1, 0)
+    return np.stack([aw * bw - ax * bx - ay * by - az * bz, aw * bx + ax * bw + ay * bz - az * by,
+                     aw * by - ax * bz + ay * bw + az * bx, aw * bz + ax * by - ay * bx + az * bw], -1)
+
+
+def quat_rotate(q: np.ndarray, v: np.ndarray) -> np.ndarray:
+    """v (..., 3) rotated by the unit quaternion q (..., 4), w,x,y,z."""
+    u, w = q[..., 1:], q[..., :1]
+    uv = np.cross(u, v)
+    return v + 2.0 * (w * uv + np.cross(u, uv))

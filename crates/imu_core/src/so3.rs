@@ -53,12 +53,8 @@ pub fn arr3(v: &Vector3<f64>) -> Vec3 {
     [v[0], v[1], v[2]]
 }
 
-/// Exponential map so(3) → SO(3), exact for every angle.
-///
-/// Below θ = 0.1 rad (20 rad/s held for 5 ms: every IMU step in practice) the half-angle sine and
-/// cosine come from their Taylor series in θ², truncated where the next term is below 1e-20
-/// relative, so the result is the correctly rounded one up to a few ulps, without two libm calls
-/// per sample (the bulk of a preintegration's time otherwise).
+/// Exponential map so(3) → SO(3), exact for every angle (see `exp_wxyz`: a Taylor series below
+/// θ = 0.1 rad, which is every IMU step in practice, so no libm call per sample).
 #[inline]
 pub fn exp(phi: &Vector3<f64>) -> Quat {
     let q = exp_wxyz([phi[0], phi[1], phi[2]]);

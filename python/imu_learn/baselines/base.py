@@ -18,6 +18,7 @@ from typing import Dict, List, Optional, Tuple
 import numpy as np
 
 from imu_learn.integration import integrate_windows
+from imu_learn.quat import quat_mul, quat_rotate  # noqa: F401  (re-exported: baselines use them from here)
 from imu_learn.types import Sequence
 
 
@@ -45,19 +46,6 @@ class PosePrediction:
     q_wxyz: np.ndarray
     p: Optional[np.ndarray]
     v: Optional[np.ndarray] = None
-
-
-def quat_mul(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    aw, ax, ay, az = np.moveaxis(a, -1, 0)
-    bw, bx, by, bz = np.moveaxis(b, -1, 0)
-    return np.stack([aw * bw - ax * bx - ay * by - az * bz, aw * bx + ax * bw + ay * bz - az * by,
-                     aw * by - ax * bz + ay * bw + az * bx, aw * bz + ax * by - ay * bx + az * bw], -1)
-
-
-def quat_rotate(q: np.ndarray, v: np.ndarray) -> np.ndarray:
-    u, w = q[..., 1:], q[..., :1]
-    uv = np.cross(u, v)
-    return v + 2.0 * (w * uv + np.cross(u, uv))
 
 
 def poses_from_imu(

@@ -47,9 +47,10 @@ import numpy as np
 import torch
 from torch import nn
 
-from imu_learn.baselines.base import FitSettings, Method, PosePrediction, quat_mul, quat_rotate
+from imu_learn.baselines.base import FitSettings, Method, PosePrediction
 from imu_learn.batches import AugmentConfig, BatchConfig, BatchSampler
 from imu_learn.losses import huber_norm
+from imu_learn.quat import quat_mul, quat_rotate
 from imu_learn.torch_so3 import quat_conj, so3_exp, so3_log
 from imu_learn.torch_so3 import quat_mul as tquat_mul
 from imu_learn.types import Sequence
