@@ -199,6 +199,11 @@ fn check_finite(gyro: &[Vec3], acc: &[Vec3]) -> Result<()> {
 }
 
 fn check_stamps(t_ns: &[i64]) -> Result<()> {
+    // Branch-free over all pairs first (the compiler vectorises it; an early-exit search does
+    // not), then look for the first bad pair only on failure.
+    if t_ns.windows(2).fold(true, |ok, w| ok & (w[1] > w[0])) {
+        return Ok(());
+    }
     if let Some(i) = t_ns.windows(2).position(|w| w[1] <= w[0]) {
         return Err(ImuError::invalid(format!(
             "t_ns[{}] = {} is not after t_ns[{i}] = {}; stamps must be strictly increasing",
@@ -285,8 +290,11 @@ const MIN_PIECE: usize = 8192;
 /// chained onto the end of the pieces before it, again in parallel. The first piece is
 /// bit-identical to the plain loop; later rows differ from it by round-off only (relative
 /// ~1e-16 per chaining, far below GTSAM agreement at 1e-9).
+///
+/// On error the buffers hold unspecified values.
 pub fn preintegrate_into(t_ns: &[i64], gyro: &[Vec3], acc: &[Vec3], out: PreintegratedMut<'_>) -> Result<()> {
-    check_imu(t_ns, gyro, acc)?;
+    check_lengths("t_ns", t_ns.len(), gyro, acc)?;
+    check_stamps(t_ns)?;
     let n = t_ns.len();
     let lens = [out.dq_wxyz.len(), out.dv.len(), out.dp.len(), out.dt.len()];
     if lens.iter().any(|&l| l != n) {
@@ -297,6 +305,36 @@ pub fn preintegrate_into(t_ns: &[i64], gyro: &[Vec3], acc: &[Vec3], out: Preinte
     if n == 0 {
         return Ok(());
     }
+    let PreintegratedMut { dq_wxyz, dv, dp, dt } = out;
+    integrate_pieces(
+        t_ns,
+        gyro,
+        acc,
+        PreintegratedMut {
+            dq_wxyz: &mut *dq_wxyz,
+            dv: &mut *dv,
+            dp: &mut *dp,
+            dt: &mut *dt,
+        },
+    );
+    // Values are checked after integrating rather than before: a separate pass over every input
+    // cost as much as a third of the integration. A non-finite sample cannot vanish from the
+    // result: it makes its Exp or ΔR·a non-finite, NaN and ±inf survive every later product and
+    // sum, so the last row is non-finite too. That row covers samples 0..n-1; the last sample
+    // (held past the last stamp, in no row) is checked directly. Only then is the full scan run,
+    // to name the first bad sample (it finds none if finite inputs overflowed: no error then).
+    let last = n - 1;
+    let finite = |x: &f64| x.is_finite();
+    let row_ok = dq_wxyz[last].iter().all(finite) && dv[last].iter().all(finite) && dp[last].iter().all(finite);
+    if !(row_ok && gyro[last].iter().all(finite) && acc[last].iter().all(finite)) {
+        check_finite(gyro, acc)?;
+    }
+    Ok(())
+}
+
+/// `preintegrate_into` once the inputs are checked and the buffers have one row per stamp (n ≥ 1).
+fn integrate_pieces(t_ns: &[i64], gyro: &[Vec3], acc: &[Vec3], out: PreintegratedMut<'_>) {
+    let n = t_ns.len();
     let pieces = (rayon::current_num_threads().min(n / MIN_PIECE)).max(1);
     // Piece c writes rows bounds[c]+1 ..= bounds[c+1] (row 0 is the identity).
     let bounds: Vec<usize> = (0..=pieces).map(|c| c * (n - 1) / pieces).collect();
@@ -316,7 +354,7 @@ pub fn preintegrate_into(t_ns: &[i64], gyro: &[Vec3], acc: &[Vec3], out: Preinte
             &mut dp[1..],
             &mut dt[1..],
         );
-        return Ok(());
+        return;
     }
     let mut parts = Vec::with_capacity(pieces);
     let (mut q_rest, mut v_rest, mut p_rest, mut t_rest) =
@@ -365,16 +403,10 @@ pub fn preintegrate_into(t_ns: &[i64], gyro: &[Vec3], acc: &[Vec3], out: Preinte
             t[i] = seconds_between(t_ns[0], t_ns[*row + i]);
         }
     });
-    Ok(())
 }
 
 /// Rows k+1 ..= k+len of the integration that starts at sample `k` from the identity, written to
 /// the buffers (of len rows each) with row Δt measured from t_k. The caller has checked inputs.
-///
-/// The same arithmetic as `Delta::step` (bit for bit), arranged for speed: per block of samples,
-/// first every Exp(ω·dt) (independent of the running state, so the compiler can overlap and
-/// vectorise them; stored component-wise), then the recursion, which is bound by the latency of
-/// one quaternion product per sample.
 #[allow(clippy::too_many_arguments)]
 fn integrate_rows(
     t_ns: &[i64],
@@ -387,73 +419,179 @@ fn integrate_rows(
     dt: &mut [f64],
 ) {
     let len = dt.len();
-    let t = &t_ns[k..=k + len];
+    let (t, g, a) = (&t_ns[k..=k + len], &gyro[k..k + len], &acc[k..k + len]);
+    let out = PreintegratedMut { dq_wxyz, dv, dp, dt };
+    #[cfg(target_arch = "x86_64")]
+    if std::arch::is_x86_feature_detected!("avx2") {
+        // SAFETY: the CPU supports AVX2, checked just above.
+        unsafe { rows_avx2(t, g, a, out) };
+        return;
+    }
+    rows(t, g, a, out);
+}
+
+/// `rows` compiled for AVX2: the vectorised passes run four lanes wide instead of SSE2's two
+/// (~15% faster). Results are bit-identical to `rows`: without FMA (not enabled, and Rust never
+/// fuses a multiply and an add by itself) every operation rounds exactly as in SSE2.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2")]
+fn rows_avx2(t: &[i64], g: &[Vec3], a: &[Vec3], out: PreintegratedMut<'_>) {
+    rows(t, g, a, out);
+}
+
+/// Rows 1..=g.len() over stamps `t` (one more than samples) into `out`.
+#[inline(always)]
+fn rows(t: &[i64], g: &[Vec3], a: &[Vec3], out: PreintegratedMut<'_>) {
+    let len = g.len();
     // Stamps are strictly increasing, so every difference is at most the whole span: if that fits
     // in i64, plain subtraction is exact everywhere (the common case, and branch-free).
     if t[len].checked_sub(t[0]).is_some() {
-        rows_kernel(t, &gyro[k..k + len], &acc[k..k + len], dq_wxyz, dv, dp, dt, |a, b| {
-            (b - a) as f64 * 1e-9
-        });
+        rows_kernel(t, g, a, out, |a, b| b.wrapping_sub(a) as f64 * 1e-9);
     } else {
-        rows_kernel(
-            t,
-            &gyro[k..k + len],
-            &acc[k..k + len],
-            dq_wxyz,
-            dv,
-            dp,
-            dt,
-            seconds_between,
-        );
+        rows_kernel(t, g, a, out, seconds_between);
     }
 }
 
-#[allow(clippy::too_many_arguments)]
+/// Samples per block of `rows_kernel`: its scratch (15 arrays of this many f64) stays in L1.
+const BLOCK: usize = 256;
+
+/// One block's intermediate results, stored component-wise so that the passes over them are
+/// plain loops over arrays (which the compiler vectorises).
+struct BlockScratch {
+    /// Hold time of each sample [s].
+    h: [f64; BLOCK],
+    /// Exp(ω·dt) of each sample, w, x, y, z.
+    e: [[f64; BLOCK]; 4],
+    /// Running rotation: `q[..][i]` before sample i of the block, `q[..][i + 1]` after it.
+    q: [[f64; BLOCK + 1]; 4],
+    /// Rotated specific force times dt and times ½dt², per axis.
+    a_dt: [[f64; BLOCK]; 3],
+    a_dt22: [[f64; BLOCK]; 3],
+}
+
+/// `Delta::step_exp` over rows, bit for bit, rearranged into passes per block of samples so that
+/// only the two true recursions run sample by sample:
+///
+/// 1. `exp_pass`: dt and Exp(ω·dt) of every sample (independent of the state: vectorised);
+/// 2. `rotation_pass`: ΔR ← ΔR·Exp(ω·dt), one quaternion product per sample (latency-bound);
+/// 3. `force_pass`: ΔR·a·dt and ΔR·a·½dt² of every sample, the Δq and Δt rows (vectorised);
+/// 4. `velocity_pass`: Δγ and Δβ, running sums of those (a few additions per sample).
+///
+/// In one fused loop the throughput work of 1 and 3 and the two recursions compete for the same
+/// execution ports, and the compiler half-vectorises the quaternion product with shuffles on its
+/// critical path; separate passes measured ~15% faster (12k EuRoC samples, SSE2).
 #[inline(always)]
-fn rows_kernel(
-    t: &[i64],
-    g: &[Vec3],
-    a: &[Vec3],
-    dq_wxyz: &mut [QuatWxyz],
-    dv: &mut [Vec3],
-    dp: &mut [Vec3],
-    dt: &mut [f64],
-    seconds: impl Fn(i64, i64) -> f64,
-) {
-    const BLOCK: usize = 64;
-    let len = dt.len();
+fn rows_kernel(t: &[i64], g: &[Vec3], a: &[Vec3], out: PreintegratedMut<'_>, seconds: impl Fn(i64, i64) -> f64) {
+    let mut s = BlockScratch {
+        h: [0.0; BLOCK],
+        e: [[0.0; BLOCK]; 4],
+        q: [[0.0; BLOCK + 1]; 4],
+        a_dt: [[0.0; BLOCK]; 3],
+        a_dt22: [[0.0; BLOCK]; 3],
+    };
     let mut d = Delta::identity();
-    let (mut ew, mut ex, mut ey, mut ez, mut holds) =
-        ([0.0; BLOCK], [0.0; BLOCK], [0.0; BLOCK], [0.0; BLOCK], [0.0; BLOCK]);
-    for b0 in (0..len).step_by(BLOCK) {
-        let m = BLOCK.min(len - b0);
-        let (tb, gb) = (&t[b0..=b0 + m], &g[b0..b0 + m]);
-        let mut large = false;
-        for i in 0..m {
-            let h = seconds(tb[i], tb[i + 1]);
-            let phi = [gb[i][0] * h, gb[i][1] * h, gb[i][2] * h];
-            // `so3::exp_wxyz`'s series branch, taken for every sample (so the loop has no branch);
-            // the rare large angles are redone below with the library's own function.
-            let (s, c) = so3::exp_series(phi[0] * phi[0] + phi[1] * phi[1] + phi[2] * phi[2]);
-            large |= !so3::exp_series_holds(phi[0] * phi[0] + phi[1] * phi[1] + phi[2] * phi[2]);
-            (holds[i], ew[i], ex[i], ey[i], ez[i]) = (h, c, s * phi[0], s * phi[1], s * phi[2]);
-        }
-        if large {
-            for i in 0..m {
-                let h = holds[i];
-                let e = so3::exp_wxyz([gb[i][0] * h, gb[i][1] * h, gb[i][2] * h]);
-                (ew[i], ex[i], ey[i], ez[i]) = (e[0], e[1], e[2], e[3]);
-            }
-        }
-        for i in 0..m {
-            let r = b0 + i;
-            d.step_exp(a[r], holds[i], [ew[i], ex[i], ey[i], ez[i]]);
-            dq_wxyz[r] = d.q;
-            dv[r] = d.v;
-            dp[r] = d.p;
-            dt[r] = seconds(t[0], t[r + 1]);
+    let t0 = t[0];
+    let PreintegratedMut { dq_wxyz, dv, dp, dt } = out;
+    let blocks = g
+        .chunks(BLOCK)
+        .zip(a.chunks(BLOCK))
+        .zip(dq_wxyz.chunks_mut(BLOCK))
+        .zip(dv.chunks_mut(BLOCK).zip(dp.chunks_mut(BLOCK)))
+        .zip(dt.chunks_mut(BLOCK));
+    for (b, ((((gb, ab), qb), (vb, pb)), tb)) in blocks.enumerate() {
+        let stamps = &t[b * BLOCK..=b * BLOCK + gb.len()];
+        exp_pass(&mut s, stamps, gb, &seconds);
+        rotation_pass(&mut s, gb.len(), &mut d.q);
+        force_pass(&mut s, ab, qb);
+        velocity_pass(&s, &mut d, vb, pb);
+        for (row, w) in tb.iter_mut().zip(stamps.windows(2)) {
+            *row = seconds(t0, w[1]);
         }
     }
+}
+
+/// Hold times and Exp(ω·dt) of a block; `t` has one stamp more than `g` has samples.
+#[inline(always)]
+#[allow(clippy::needless_range_loop)] // indexing pre-cut slices lets the compiler vectorise
+fn exp_pass(s: &mut BlockScratch, t: &[i64], g: &[Vec3], seconds: &impl Fn(i64, i64) -> f64) {
+    let m = g.len().min(BLOCK);
+    let (t, g) = (&t[..=m], &g[..m]);
+    let (h, [ew, ex, ey, ez]) = (&mut s.h[..m], &mut s.e);
+    let (ew, ex, ey, ez) = (&mut ew[..m], &mut ex[..m], &mut ey[..m], &mut ez[..m]);
+    let mut large = false;
+    for i in 0..m {
+        let hi = seconds(t[i], t[i + 1]);
+        let phi = [g[i][0] * hi, g[i][1] * hi, g[i][2] * hi];
+        let theta2 = phi[0] * phi[0] + phi[1] * phi[1] + phi[2] * phi[2];
+        // `so3::exp_wxyz`'s series branch, taken for every sample (so the loop has no branch);
+        // the rare large angles are redone below with the library's own function.
+        let (sinc, cos) = so3::exp_series(theta2);
+        large |= !so3::exp_series_holds(theta2);
+        (h[i], ew[i], ex[i], ey[i], ez[i]) = (hi, cos, sinc * phi[0], sinc * phi[1], sinc * phi[2]);
+    }
+    if large {
+        for i in 0..m {
+            let hi = h[i];
+            [ew[i], ex[i], ey[i], ez[i]] = so3::exp_wxyz([g[i][0] * hi, g[i][1] * hi, g[i][2] * hi]);
+        }
+    }
+}
+
+/// ΔR ← ΔR·Exp(ω·dt) over the first `m` samples of the block, recording ΔR before and after each.
+/// Stored component-wise: storing whole quaternions invites the compiler to pair up the product's
+/// components in vector registers, which puts shuffles on this latency-bound chain.
+#[inline(always)]
+fn rotation_pass(s: &mut BlockScratch, m: usize, q: &mut QuatWxyz) {
+    let [qw, qx, qy, qz] = &mut s.q;
+    let [ew, ex, ey, ez] = &s.e;
+    (qw[0], qx[0], qy[0], qz[0]) = (q[0], q[1], q[2], q[3]);
+    for i in 0..m.min(BLOCK) {
+        *q = qmul(*q, [ew[i], ex[i], ey[i], ez[i]]);
+        (qw[i + 1], qx[i + 1], qy[i + 1], qz[i + 1]) = (q[0], q[1], q[2], q[3]);
+    }
+}
+
+/// ΔR·a·dt and ΔR·a·½dt² with ΔR before each sample, and the Δq rows (ΔR after each sample).
+#[inline(always)]
+#[allow(clippy::needless_range_loop)] // indexing pre-cut slices lets the compiler vectorise
+fn force_pass(s: &mut BlockScratch, a: &[Vec3], dq_rows: &mut [QuatWxyz]) {
+    let m = a.len().min(dq_rows.len()).min(BLOCK);
+    let (a, dq_rows, h) = (&a[..m], &mut dq_rows[..m], &s.h[..m]);
+    let [qw, qx, qy, qz] = &s.q;
+    let (qw, qx, qy, qz) = (&qw[..=m], &qx[..=m], &qy[..=m], &qz[..=m]);
+    let ([ax, ay, az], [bx, by, bz]) = (&mut s.a_dt, &mut s.a_dt22);
+    let (ax, ay, az) = (&mut ax[..m], &mut ay[..m], &mut az[..m]);
+    let (bx, by, bz) = (&mut bx[..m], &mut by[..m], &mut bz[..m]);
+    for i in 0..m {
+        let dt22 = 0.5 * h[i] * h[i];
+        let r = rotate([qw[i], qx[i], qy[i], qz[i]], a[i]);
+        (ax[i], ay[i], az[i]) = (r[0] * h[i], r[1] * h[i], r[2] * h[i]);
+        (bx[i], by[i], bz[i]) = (r[0] * dt22, r[1] * dt22, r[2] * dt22);
+    }
+    for i in 0..m {
+        dq_rows[i] = [qw[i + 1], qx[i + 1], qy[i + 1], qz[i + 1]];
+    }
+}
+
+/// Δγ ← Δγ + Δβ·dt + ½·ΔR·a·dt², Δβ ← Δβ + ΔR·a·dt, as in `Delta::step_exp`, and their rows.
+#[inline(always)]
+#[allow(clippy::needless_range_loop)] // indexing pre-cut slices lets the compiler vectorise
+fn velocity_pass(s: &BlockScratch, d: &mut Delta, dv_rows: &mut [Vec3], dp_rows: &mut [Vec3]) {
+    let m = dv_rows.len().min(dp_rows.len()).min(BLOCK);
+    let (dv_rows, dp_rows, h) = (&mut dv_rows[..m], &mut dp_rows[..m], &s.h[..m]);
+    let ([ax, ay, az], [bx, by, bz]) = (&s.a_dt, &s.a_dt22);
+    let (ax, ay, az) = (&ax[..m], &ay[..m], &az[..m]);
+    let (bx, by, bz) = (&bx[..m], &by[..m], &bz[..m]);
+    let (mut v, mut p) = (d.v, d.p);
+    for i in 0..m {
+        let (a_dt, a_dt22) = ([ax[i], ay[i], az[i]], [bx[i], by[i], bz[i]]);
+        for c in 0..3 {
+            p[c] = p[c] + v[c] * h[i] + a_dt22[c];
+            v[c] += a_dt[c];
+        }
+        (dv_rows[i], dp_rows[i]) = (v, p);
+    }
+    (d.v, d.p) = (v, p);
 }
 
 /// Preintegrate samples given by hold times: `dt[i]` [s] is how long sample i is held. N samples
@@ -622,6 +760,26 @@ mod tests {
             preintegrate_dt(&[0.1], &[z], &[[0.0, 0.0, f64::NEG_INFINITY]]),
             "acc[0]",
         );
+    }
+
+    #[test]
+    fn non_finite_samples_anywhere_are_named_and_huge_finite_ones_are_not_errors() {
+        // Values are checked after integrating (see `preintegrate_into`): a bad sample deep inside
+        // a long input, in either array, must still be found and named.
+        let n = 1000;
+        let t: Vec<i64> = (0..n as i64).map(|i| i * 5_000_000).collect();
+        let (g, a) = (vec![[0.1, -0.2, 0.3]; n], vec![[0.5, 0.0, 9.81]; n]);
+        for (i, bad) in [(3, f64::NAN), (517, f64::INFINITY), (998, f64::NEG_INFINITY)] {
+            let mut gb = g.clone();
+            gb[i][1] = bad;
+            is_invalid(preintegrate(&t, &gb, &a), &format!("gyro[{i}]"));
+            let mut ab = a.clone();
+            ab[i][2] = bad;
+            is_invalid(preintegrate(&t, &g, &ab), &format!("acc[{i}]"));
+        }
+        // Finite inputs whose result overflows are not an input error.
+        let big = vec![[f64::MAX, f64::MAX, f64::MAX]; n];
+        assert!(preintegrate(&t, &g, &big).is_ok());
     }
 
     #[test]

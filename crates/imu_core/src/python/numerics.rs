@@ -1,6 +1,8 @@
 //! Alignment, integration, labels and batches.
 
-use numpy::{PyArray1, PyArray2, PyArrayDyn, PyArrayMethods, PyReadonlyArray1, PyReadonlyArray2};
+use numpy::{PyArray2, PyArrayDyn, PyArrayMethods, PyReadonlyArray1, PyReadonlyArray2};
+use std::sync::LazyLock;
+
 use pyo3::prelude::*;
 use pyo3::types::{PyDict, PyList};
 
@@ -15,8 +17,8 @@ use crate::python::arrays::{
 use crate::python::errors::to_py;
 use crate::types::{GroundTruth, ImuSamples, Sequence};
 
-type Arr1<'py, T> = Bound<'py, PyArray1<T>>;
 type Arr2<'py> = Bound<'py, PyArray2<f64>>;
+type ArrD<'py> = Bound<'py, PyArrayDyn<f64>>;
 
 fn seq_dict(py: Python<'_>, s: Sequence) -> PyResult<Bound<'_, PyDict>> {
     let d = PyDict::new(py);
@@ -103,36 +105,42 @@ fn derive_velocity<'py>(
     out2(py, v)
 }
 
+/// Storage for `preintegrate`'s outputs, reused across calls: a fresh zeroed megabyte per call
+/// (12k samples) cost about a fifth of the whole call in zeroing and page faults.
+static PREINTEGRATE_POOL: LazyLock<BufferPool> = LazyLock::new(BufferPool::default);
+
 #[pyfunction]
+#[allow(clippy::type_complexity)]
 fn preintegrate<'py>(
     py: Python<'py>,
     t_ns: PyReadonlyArray1<'py, i64>,
     gyro: PyReadonlyArray2<'py, f64>,
     acc: PyReadonlyArray2<'py, f64>,
-) -> PyResult<(Arr2<'py>, Arr2<'py>, Arr2<'py>, Arr1<'py, f64>)> {
+) -> PyResult<(ArrD<'py>, ArrD<'py>, ArrD<'py>, ArrD<'py>)> {
     let (t, g, a) = (
         slice1(&t_ns, "t_ns")?,
         rows::<3>(&gyro, "gyro")?,
         rows::<3>(&acc, "acc")?,
     );
     let n = t.len();
-    let (dq, dv, dp, dt) = (
-        zeros::<f64, _>(py, [n, 4]),
-        zeros::<f64, _>(py, [n, 3]),
-        zeros::<f64, _>(py, [n, 3]),
-        zeros::<f64, _>(py, [n]),
-    );
-    {
-        let (mut dq_w, mut dv_w, mut dp_w, mut dt_w) = (dq.readwrite(), dv.readwrite(), dp.readwrite(), dt.readwrite());
+    let arrays = pooled_arrays(py, &PREINTEGRATE_POOL, &[&[n, 4], &[n, 3], &[n, 3], &[n]], |parts| {
+        let [dq, dv, dp, dt]: [&mut [f64]; 4] = parts
+            .try_into()
+            .map_err(|_| ImuError::invalid("internal: preintegration buffer has the wrong number of parts"))?;
         let out = PreintegratedMut {
-            dq_wxyz: rows_mut::<4, _>(&mut dq_w)?,
-            dv: rows_mut::<3, _>(&mut dv_w)?,
-            dp: rows_mut::<3, _>(&mut dp_w)?,
-            dt: flat_mut(&mut dt_w)?,
+            dq_wxyz: dq.as_chunks_mut::<4>().0,
+            dv: dv.as_chunks_mut::<3>().0,
+            dp: dp.as_chunks_mut::<3>().0,
+            dt,
         };
-        py.allow_threads(|| integrate::preintegrate_into(t, g, a, out))
-            .map_err(to_py)?;
-    }
+        // Writes every row (row 0 included), as `pooled_arrays` requires.
+        integrate::preintegrate_into(t, g, a, out)
+    })?;
+    let [dq, dv, dp, dt]: [ArrD<'py>; 4] = arrays.try_into().map_err(|_| {
+        to_py(ImuError::invalid(
+            "internal: preintegration arrays have the wrong number of parts",
+        ))
+    })?;
     Ok((dq, dv, dp, dt))
 }
 
