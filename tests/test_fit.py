@@ -94,6 +94,47 @@ def test_run_writes_run_folder(full_run):
     assert res["table"]["raw"]["bias_removed"]["200"]["rot_deg"] < 0.5 * res["table"]["raw"]["open_loop"]["200"]["rot_deg"]
 
 
+def test_select_on_validation_pose(tmp_path, full_run):
+    """optim.select = "val_pose": best.pt is the epoch with the lowest bias-removed pose score on
+    the validation block, which can differ from the loss pick; the score is a ratio to raw IMU."""
+    d = tmp_path / "pose"
+    assert fit.main(tiny(d, 3, "--optim.select", "val_pose")) == 0
+    r = rows(d)
+    scores = [float(x["val_pose_score"]) for x in r]
+    assert all(0.0 < x < 10.0 for x in scores)
+    assert all(float(x["val_pose_rot_deg"]) > 0 and float(x["val_pose_trans_m"]) > 0 for x in r)
+    # same batches and weights as the loss-selected run: only the choice of best.pt differs
+    assert [x["val_total"] for x in r] == [x["val_total"] for x in rows(full_run)]
+    best = load_checkpoint(d / "best.pt")
+    assert best["best_metric"] == pytest.approx(min(scores))
+    assert best["epoch"] == 1 + scores.index(min(scores))
+    res = json.loads((d / "results.json").read_text())
+    assert res["selected_on"] == "val_pose" and res["best_metric"] == pytest.approx(min(scores))
+
+
+def test_bias_removed_pose_of_raw_matches_the_final_table_protocol():
+    """fit.bias_removed_pose is the final table's second protocol: a constant bias added to a
+    sequence changes its open-loop error but (almost) not the bias-removed one."""
+    import numpy as np
+
+    from imu_learn.metrics import relative_pose_rmse_many, simulate_sequence, with_imu
+
+    cfg = build_config({}, {"data.startup_bias_s": 5.0, "data.val_stride": 20})
+    rng = np.random.default_rng(3)
+    n = 6001  # 30 s at 200 Hz
+    t_ns = np.arange(n, dtype=np.int64) * 5_000_000
+    k = np.arange(n)[:, None] / 200.0
+    gyro = 0.5 * np.sin(k * rng.uniform(0.5, 2.0, 3) + rng.uniform(0, 6, 3))
+    acc = np.array([0.0, 0.0, 9.81]) + np.sin(k * rng.uniform(0.5, 2.0, 3))
+    s = simulate_sequence(t_ns, gyro, acc)  # ground truth whose exact IMU signal is gyro/acc
+    b = with_imu(s, s.gyro + np.array([0.01, -0.02, 0.03]), s.acc + np.array([0.1, 0.0, -0.1]))
+    biased = fit.bias_removed_pose([b], 200, cfg)
+    open_loop = relative_pose_rmse_many([b], 200, 20, first_s=5.0)
+    assert open_loop["rot_deg"] > 1.0 and open_loop["trans_m"] > 0.01
+    assert biased["rot_deg"] < 1e-6 and biased["trans_m"] < 1e-7
+    assert biased["windows"] == open_loop["windows"]
+
+
 def test_resume_in_new_process_matches_uninterrupted(tmp_path, full_run):
     d = tmp_path / "resumed"
     assert fit.main(tiny(d, 1)) == 0
@@ -186,6 +227,7 @@ def test_resume_without_checkpoint(tmp_path, capsys):
         (["--optim.epochs"], "optim.epochs"),
         (["--data.split.train", "[1, 2]"], "data.split.train"),
         (["--optim.epochs", "0"], "optim.epochs"),
+        (["--optim.select", "test_loss"], "optim.select"),
     ],
 )
 def test_override_errors_name_the_key(tmp_path, capsys, args, key):

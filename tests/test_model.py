@@ -102,3 +102,21 @@ def test_normalisation_buffers_in_state_dict():
     fresh.load_state_dict(model.state_dict())
     x = imu_batch()
     torch.testing.assert_close(fresh(x), model(x), rtol=0, atol=0)
+
+
+def test_gyro_only_refines_gyro_and_passes_acc_bit_for_bit():
+    """model.refine = "gyro": the accelerometer channels leave the model exactly as they came in,
+    the gyro channels are corrected; the choice is not saved as weights (older checkpoints load)."""
+    torch.manual_seed(0)
+    m = ImuRefiner(ModelConfig(refine="gyro", **SMALL))
+    randomise_head(m)
+    x = imu_batch()
+    y = m(x)
+    assert torch.equal(y[..., 3:], x[..., 3:])
+    assert (y[..., :3] - x[..., :3]).abs().max() > 1e-3
+    assert "channels" not in m.state_dict()
+    full = ImuRefiner(ModelConfig(**SMALL))
+    full.load_state_dict(m.state_dict())
+    assert not torch.equal(full(x)[..., 3:], x[..., 3:])
+    with pytest.raises(ValueError, match="model.refine"):
+        ImuRefiner(ModelConfig(refine="acc", **SMALL))

@@ -29,7 +29,7 @@ from imu_learn.batches import AugmentConfig, BatchConfig
 from imu_learn.errors import ImuError
 from imu_learn.integration import PAPER_FRACTIONS
 from imu_learn.losses import LossConfig
-from imu_learn.model import ModelConfig
+from imu_learn.model import REFINE_CHANNELS, ModelConfig
 
 if sys.version_info >= (3, 11):
     import tomllib
@@ -101,12 +101,20 @@ class DataConfig:
         return BatchConfig(self.window, self.batch_size, tuple(self.fractions), self.gravity, self.augment)
 
 
+SELECT_METRICS = ("val_loss", "val_pose")
+
+
 @dataclass
 class OptimConfig:
     lr: float = 1e-4  # paper: Adam, 1e-4
     epochs: int = 24  # paper: 700 on a GPU; sized so the default run fits 10 min on 2 CPU cores
     steps_per_epoch: int = 100
     grad_clip: float = 0.0  # max gradient norm; 0 = off
+    # What picks best.pt: "val_loss" (the training loss on fixed validation windows) or "val_pose"
+    # (relative pose RMSE over data.window samples on the validation sequences, each input's
+    # start-up bias removed as in the final table, the worse of rotation and translation as a ratio
+    # to raw IMU; see fit.ValidationPose).
+    select: str = "val_loss"
 
 
 @dataclass
@@ -341,10 +349,13 @@ def validate(cfg: RunConfig) -> None:
     need(o.epochs >= 1, "optim.epochs", f"must be at least 1, got {o.epochs}")
     need(o.steps_per_epoch >= 1, "optim.steps_per_epoch", f"must be at least 1, got {o.steps_per_epoch}")
     need(o.grad_clip >= 0, "optim.grad_clip", "must be >= 0")
+    need(o.select in SELECT_METRICS, "optim.select", f"must be one of {', '.join(SELECT_METRICS)}, got {o.select!r}")
     need(cfg.threads >= 1, "threads", "must be at least 1")
     need(cfg.device == "auto" or cfg.device == "cpu" or cfg.device.startswith("cuda"), "device",
          f"expected auto, cpu, cuda or cuda:N, got {cfg.device!r}")
     need(cfg.model.layers >= 1 and cfg.model.hidden >= 1 and cfg.model.fc >= 1, "model", "sizes must be >= 1")
+    need(cfg.model.refine in REFINE_CHANNELS, "model.refine",
+         f"must be one of {', '.join(REFINE_CHANNELS)}, got {cfg.model.refine!r}")
 
 
 def to_toml(cfg: RunConfig) -> str:

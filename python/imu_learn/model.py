@@ -17,6 +17,9 @@ Tensor = torch.Tensor
 State = List[Tuple[Tensor, Tensor]]
 
 
+REFINE_CHANNELS = {"imu": [1.0] * 6, "gyro": [1.0, 1.0, 1.0, 0.0, 0.0, 0.0]}
+
+
 @dataclass
 class ModelConfig:
     hidden: int = 64  # LSTM hidden size per direction
@@ -25,6 +28,10 @@ class ModelConfig:
     causal: bool = False  # unidirectional (online) variant
     output_scale: float = 0.1  # correction = output_scale * input std * head output
     dropout: float = 0.0
+    # Which channels the model corrects: "imu" (all six, the paper) or "gyro" (the accelerometer
+    # passes through unchanged, as in denoise-imu-gyro). On data where the accelerometer's
+    # corrections do not transfer, "gyro" still improves translation through better attitude.
+    refine: str = "imu"
 
 
 class ImuRefiner(nn.Module):
@@ -45,6 +52,10 @@ class ImuRefiner(nn.Module):
             self.fcs.append(nn.Sequential(nn.Linear(dirs * cfg.hidden, cfg.fc), nn.GELU(), nn.Dropout(cfg.dropout)))
             width = cfg.fc
         self.head = nn.Linear(width, 6)
+        if cfg.refine not in REFINE_CHANNELS:
+            raise ValueError(f"model.refine: must be one of {', '.join(REFINE_CHANNELS)}, got {cfg.refine!r}")
+        # Not persistent: derived from the config, so older checkpoints load unchanged.
+        self.register_buffer("channels", torch.tensor(REFINE_CHANNELS[cfg.refine], dtype=torch.float32), persistent=False)
         # Start as the identity map: the regulariser and the paper both want training to begin
         # from the raw IMU's quality, not from noise.
         nn.init.zeros_(self.head.weight)
@@ -67,7 +78,7 @@ class ImuRefiner(nn.Module):
             x, (h, c) = lstm(x, s)
             new_state.append((h, c))
             x = fc(x)
-        return imu + self.cfg.output_scale * std * self.head(x), new_state
+        return imu + self.cfg.output_scale * std * self.channels.to(imu.dtype) * self.head(x), new_state
 
     @torch.no_grad()
     def step(self, sample: Tensor, state: Optional[State] = None) -> Tuple[Tensor, State]:
