@@ -479,6 +479,9 @@ def train(
         tb.close()
 
     results: Dict[str, Any] = {}
+    if main and val_pose is not None and best is not None and best >= 1.0:
+        print(f"{PROG}: note: no epoch beat raw IMU on the validation sequences with the start-up bias removed "
+              f"(best score {best:.4f} at epoch {best_epoch}; below 1 means better on rotation and translation)")
     if main:
         results = final_evaluation(cfg, run_dir, split, device, best_epoch, best)
     dist.barrier()
