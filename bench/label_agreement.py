@@ -63,12 +63,19 @@ def main() -> None:
     ap.add_argument("--data", type=Path, default=Path("datasets/euroc"))
     a = ap.parse_args()
     for root in sorted(p.parent for p in a.data.glob("*/mav0")):
-        seq = il.load_sequence(root)[0]
+        # EuRoC's own ground truth (ASL state, IMU frame) where the folder has it: V1_01's
+        # groundtruth_pose.tum is ~5.5 deg off the IMU frame (README, "EuRoC ground truth").
+        state = root / "groundtruth_state_20hz.csv"
+        if state.is_file():
+            seq = il.load_sequence(root, groundtruth=state, options=il.AlignOptions(max_gap_s=0.06))[0]
+        else:
+            seq = il.load_sequence(root)[0]
+        gt_name = state.name if state.is_file() else "default ground truth"
         lab = il.window_labels(seq, window=200, stride=20)
         bg, ba = fit_constant_bias(seq)
         fixed = il.Sequence("c", seq.t_ns, seq.gyro - bg, seq.acc - ba, seq.p, seq.v, seq.q_wxyz)
         raw, cor = residuals(seq, lab), residuals(fixed, lab)
-        print(f"\n{root.name}: {len(seq)} samples, {len(lab.starts)} windows; fitted gyro bias "
+        print(f"\n{root.name} ({gt_name}): {len(seq)} samples, {len(lab.starts)} windows; fitted gyro bias "
               f"{np.array2string(bg, precision=4)} rad/s, accel bias {np.array2string(ba, precision=3)} m/s²")
         print("| horizon [s] | rot raw [rad] | rot bias-fit [rad] | vel raw [m/s] | vel bias-fit | pos raw [m] | pos bias-fit |")
         print("|---|---|---|---|---|---|---|")

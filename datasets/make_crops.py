@@ -3,7 +3,9 @@
     python datasets/make_crops.py ../shared/data/euroc datasets/euroc --seconds 60
 
 Copies, for each sequence, the IMU rows and ground-truth poses of ``--seconds`` starting at the
-first ground-truth stamp, byte for byte (lines are not reformatted), plus the sensor YAML files.
+first ground-truth stamp, byte for byte (lines are not reformatted), plus the sensor YAML files
+and, where the sequence has one, the rows of the ASL full-state ground truth
+(``groundtruth_state_20hz.csv``) in the same time span.
 """
 from __future__ import annotations
 
@@ -24,6 +26,14 @@ def crop(src: Path, dst: Path, seconds: float) -> None:
     (dst / "mav0/imu0").mkdir(parents=True, exist_ok=True)
     (dst / "mav0/imu0/data.csv").write_text("".join(imu_keep))
     (dst / "groundtruth_pose.tum").write_text("".join(gt_header + gt_keep))
+    state = src / "groundtruth_state_20hz.csv"
+    if state.exists():
+        lines = state.read_text().splitlines(keepends=True)
+        head = [ln for ln in lines if ln.startswith("#")]
+        rows = [ln for ln in lines if ln.strip() and not ln.startswith("#")]
+        keep = [ln for ln in rows if t0_ns <= int(ln.split(",")[0]) <= t1_ns]
+        (dst / state.name).write_text("".join(head + keep))
+        print(f"{dst / state.name}: {len(keep)} states")
     for y in ("mav0/imu0/sensor.yaml", "mav0/body.yaml"):
         if (src / y).exists():
             shutil.copy(src / y, dst / y)

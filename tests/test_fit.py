@@ -17,7 +17,7 @@ import torch
 
 from imu_learn import fit
 from imu_learn.checkpoint import load_checkpoint
-from imu_learn.config import RunConfig, build_config, load_config, read_toml
+from imu_learn.config import ConfigError, RunConfig, build_config, load_config, read_toml
 
 REPO = Path(__file__).resolve().parent.parent
 PY = sys.executable
@@ -275,6 +275,26 @@ def test_config_files():
         assert all(r.path.startswith("../shared/data/") for r in cfg.data.roots)
     cfg = load_config(REPO / "configs" / "default.toml", ["--optim.lr", "3e-4", "--data.split.test", "A,B"])
     assert cfg.optim.lr == 3e-4 and cfg.data.split.test == ["A", "B"]
+
+
+def test_root_max_gap_lets_sparse_ground_truth_through():
+    """The default run scores V1_01 against the shipped 20 Hz ASL state: with the root's
+    max_gap_s = 0.06 it is one segment over the whole crop; with the 50 ms default every 50 ms
+    step between states is a gap and no segment is long enough."""
+    from imu_learn.errors import AlignmentError
+    from imu_learn.splits import make_split
+
+    d = RunConfig().data
+    assert d.roots[1].groundtruth.endswith("groundtruth_state_20hz.csv") and d.roots[1].max_gap_s == 0.06
+    split = make_split(d)
+    (v1,) = split.test
+    assert v1.name.startswith("V1_01_easy") and len(v1) > 11_500
+    assert split.record["test"][0]["groundtruth"] == d.roots[1].groundtruth
+    d.roots[1].max_gap_s = 0.05
+    with pytest.raises(AlignmentError, match="gap"):
+        make_split(d)
+    with pytest.raises(ConfigError, match=r"data.roots\[1\].max_gap_s"):
+        build_config({}, {"data.roots": [{"path": "a"}, {"path": "b", "max_gap_s": 0.0}]})
 
 
 @pytest.mark.parametrize("name", ["euroc", "blackbird", "broad"])

@@ -29,7 +29,7 @@ import numpy as np
 
 from imu_learn.config import ConfigError, DataConfig, RootConfig
 from imu_learn.datasets import DATASETS, find_recordings
-from imu_learn.loading import load_sequence
+from imu_learn.loading import AlignOptions, load_sequence
 from imu_learn.types import Sequence
 
 SPLITS = ("train", "val", "test")
@@ -173,7 +173,7 @@ def make_split(data: DataConfig, min_len: Optional[int] = None) -> Split:
             path, root = found[e.name]
             if e.name not in cache:
                 gt = resolve_path(root.groundtruth) if root.groundtruth else None
-                cache[e.name] = load_sequence(path, root.format, gt)
+                cache[e.name] = load_sequence(path, root.format, gt, options=AlignOptions(max_gap_s=root.max_gap_s))
             parts = cut(cache[e.name], e.start, e.stop, e.name)
             kept = [s for s in parts if len(s) >= min_len]
             rows.append({
