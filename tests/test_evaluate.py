@@ -13,78 +13,25 @@ from imu_learn.baselines.base import Method, PosePrediction, Raw
 from imu_learn.checkpoint import save_checkpoint
 from imu_learn.config import ConfigError
 from imu_learn.errors import InvalidInputError
+from imu_learn.metrics import with_imu
 from imu_learn.model import ImuRefiner, ModelConfig
 from imu_learn.noise_floor import NOISE_FLOOR_NAME, synthesize_imu
 from imu_learn.types import Sequence
+from synthetic import AXIS, DT, G, axis_angle, moving, qmul, spin
 
 torch.set_num_threads(1)
 
 REPO = Path(__file__).resolve().parent.parent
 EVAL_DEFAULT = REPO / "configs" / "eval_default.toml"
-G = 9.81
-DT_NS = 5_000_000  # 200 Hz
-DT = DT_NS * 1e-9
 BIAS_S = 2.0  # start-up bias seconds in the synthetic cases
-AXIS = np.array([1.0, 2.0, 3.0]) / np.sqrt(14.0)
-
-
-def stamps(seconds: float) -> np.ndarray:
-    return 10**18 + np.arange(int(round(seconds * 200)) + 1, dtype=np.int64) * DT_NS
-
-
-def qconj(q):
-    return q * np.array([1.0, -1.0, -1.0, -1.0])
-
-
-def qmul(a, b):
-    aw, ax, ay, az = np.moveaxis(a, -1, 0)
-    bw, bx, by, bz = np.moveaxis(b, -1, 0)
-    return np.stack([aw * bw - ax * bx - ay * by - az * bz, aw * bx + ax * bw + ay * bz - az * by,
-                     aw * by - ax * bz + ay * bw + az * bx, aw * bz + ax * by - ay * bx + az * bw], -1)
-
-
-def rotate(q, v):
-    qv = np.concatenate([np.zeros(v.shape[:-1] + (1,)), v], -1)
-    return qmul(qmul(q, qv), qconj(q))[..., 1:]
-
-
-def axis_angle(axis, angle):
-    axis = np.asarray(axis, dtype=np.float64) / np.linalg.norm(axis)
-    angle = np.asarray(angle, dtype=np.float64)
-    return np.concatenate([np.cos(angle / 2)[..., None], np.sin(angle / 2)[..., None] * axis], -1)
-
-
-def spin(seconds=20.0, rate=0.7, axis=AXIS):
-    """Closed form, independent of noise_floor: constant body rate about a fixed axis, at rest at
-    the origin. Exact IMU under the zero-order hold: gyro = rate·axis, acc = Rᵀ [0, 0, g]."""
-    t_ns = stamps(seconds)
-    t = (t_ns - t_ns[0]) * 1e-9
-    axis = np.asarray(axis, dtype=np.float64) / np.linalg.norm(axis)
-    q = axis_angle(axis, rate * t)
-    z = np.zeros((len(t), 3))
-    gyro = np.tile(rate * axis, (len(t), 1))
-    acc = rotate(qconj(q), np.tile([0.0, 0.0, G], (len(t), 1)))
-    return Sequence("spin", t_ns, gyro, acc, z, z.copy(), q)
 
 
 def flying(seconds=20.0):
-    """Varying rotation and a smooth (quadratic, so trapezoid-consistent) position curve; the IMU is
-    synthesised from the ground truth (exact under the zero-order hold)."""
-    t_ns = stamps(seconds)
-    t = (t_ns - t_ns[0]) * 1e-9
-    q = qmul(axis_angle([0.0, 0.0, 1.0], 0.5 * t + 0.3 * np.sin(0.8 * t)),
-             axis_angle([1.0, -1.0, 0.0], 0.2 * np.sin(1.3 * t)))
-    tt = t[:, None]
-    p = np.array([1.0, -2.0, 0.5]) + np.array([0.3, 0.1, -0.2]) * tt + 0.5 * np.array([0.05, -0.08, 0.02]) * tt**2
-    v = np.array([0.3, 0.1, -0.2]) + np.array([0.05, -0.08, 0.02]) * tt
-    z = np.zeros((len(t), 3))
-    seq = Sequence("flying", t_ns, z, z.copy(), p, v, q)
+    """``synthetic.moving`` (quadratic position, so trapezoid-consistent) with the IMU synthesised
+    from its ground truth (exact under the zero-order hold)."""
+    seq = moving(seconds)
     gyro, acc = synthesize_imu(seq, G)
-    return Sequence("flying", t_ns, gyro, acc, p, v, q)
-
-
-def replace_imu(seq, gyro, acc):
-    return Sequence(seq.name, seq.t_ns, gyro, acc, seq.p, seq.v, seq.q_wxyz)
+    return with_imu(seq, gyro, acc, "flying")
 
 
 # ---------------------------------------------------------------------------------------------
@@ -206,7 +153,7 @@ def test_constant_gyro_bias_closed_form(rate):
     rotation error over n samples is exactly |b| n dt; with the start-up bias removed, ~0."""
     seq = spin(rate=rate)
     b = 0.013 * AXIS
-    biased = replace_imu(seq, seq.gyro + b, seq.acc)
+    biased = with_imu(seq, seq.gyro + b, seq.acc)
     horizons = [1, 10, 50, 200]
     out, bias = ev.evaluate_sequence(Raw(), biased, horizons, 10, BIAS_S, G)
     _check_windows(out, seq, horizons, 10)
@@ -228,7 +175,7 @@ def test_start_up_bias_uses_only_the_first_seconds():
     first = ev.index_at(seq, BIAS_S)
     gyro = seq.gyro.copy()
     gyro[first + 1:] += np.array([0.0, 0.02, 0.0])
-    out, bias = ev.evaluate_sequence(Raw(), replace_imu(seq, gyro, seq.acc), [10], 10, BIAS_S, G)
+    out, bias = ev.evaluate_sequence(Raw(), with_imu(seq, gyro, seq.acc), [10], 10, BIAS_S, G)
     assert np.abs(bias["gyro"]).max() < 1e-9
     np.testing.assert_allclose(out[("bias_removed", 10)]["rot_rad"], out[("open_loop", 10)]["rot_rad"], atol=1e-12)
     assert out[("open_loop", 10)]["rot_rad"].min() > 1e-4
@@ -237,7 +184,7 @@ def test_start_up_bias_uses_only_the_first_seconds():
 def test_accelerometer_bias_is_removed_in_the_bias_variant():
     seq = flying()
     ba = np.array([0.05, -0.03, 0.08])
-    out, bias = ev.evaluate_sequence(Raw(), replace_imu(seq, seq.gyro, seq.acc + ba), [200], 10, BIAS_S, G)
+    out, bias = ev.evaluate_sequence(Raw(), with_imu(seq, seq.gyro, seq.acc + ba), [200], 10, BIAS_S, G)
     np.testing.assert_allclose(bias["acc"], ba, atol=1e-7)
     np.testing.assert_allclose(bias["gyro"], 0.0, atol=1e-9)
     # open loop: a body-frame bias rotated into the world; |Δp| = |½ ba T²| for a pure
@@ -253,7 +200,7 @@ def test_accelerometer_bias_closed_form_without_rotation():
     ½ |a| (n dt)² of position error (zero-order hold, exact)."""
     seq = spin(rate=0.0)
     a = np.array([0.02, -0.04, 0.01])
-    out, _ = ev.evaluate_sequence(Raw(), replace_imu(seq, seq.gyro, seq.acc + a), [10, 200], 10, BIAS_S, G)
+    out, _ = ev.evaluate_sequence(Raw(), with_imu(seq, seq.gyro, seq.acc + a), [10, 200], 10, BIAS_S, G)
     for n in (10, 200):
         np.testing.assert_allclose(out[("open_loop", n)]["vel_mps"], np.linalg.norm(a) * n * DT, rtol=1e-9)
         np.testing.assert_allclose(out[("open_loop", n)]["trans_m"], 0.5 * np.linalg.norm(a) * (n * DT) ** 2, rtol=1e-9)
@@ -285,7 +232,7 @@ class _RotationOnly(Raw):
 def test_regressors_and_rotation_only_methods():
     seq = spin()
     b = 0.01 * AXIS
-    biased = replace_imu(seq, seq.gyro + b, seq.acc)
+    biased = with_imu(seq, seq.gyro + b, seq.acc)
     oracle = _Oracle()
     assert not ev.is_refiner(oracle) and ev.is_refiner(Raw()) and ev.is_refiner(_RotationOnly())
     out, bias = ev.evaluate_sequence(oracle, biased, [10], 10, BIAS_S, G)

@@ -8,76 +8,16 @@ from imu_learn.errors import InvalidInputError
 from imu_learn.evaluate import evaluate_sequence, pose_errors, window_starts
 from imu_learn.noise_floor import NOISE_FLOOR_NAME, GroundTruthImu, quat_log, synthesize_imu
 from imu_learn.types import Sequence
+from synthetic import AXIS, DT, G, axis_angle, moving, qconj, qmul, spin
 
 torch.set_num_threads(1)
 
-G = 9.81
-RATE = 200.0
-DT_NS = 5_000_000  # 200 Hz, exactly
-DT = DT_NS * 1e-9
-
-
-def stamps(seconds: float) -> np.ndarray:
-    n = int(round(seconds * RATE)) + 1
-    return 10**18 + np.arange(n, dtype=np.int64) * DT_NS
-
-
-def qconj(q: np.ndarray) -> np.ndarray:
-    return q * np.array([1.0, -1.0, -1.0, -1.0])
-
-
-def qmul(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    aw, ax, ay, az = np.moveaxis(a, -1, 0)
-    bw, bx, by, bz = np.moveaxis(b, -1, 0)
-    return np.stack([aw * bw - ax * bx - ay * by - az * bz, aw * bx + ax * bw + ay * bz - az * by,
-                     aw * by - ax * bz + ay * bw + az * bx, aw * bz + ax * by - ay * bx + az * bw], -1)
-
-
-def rotate(q: np.ndarray, v: np.ndarray) -> np.ndarray:
-    """R(q) v via the quaternion sandwich q (0, v) q*."""
-    qv = np.concatenate([np.zeros(v.shape[:-1] + (1,)), v], -1)
-    return qmul(qmul(q, qv), qconj(q))[..., 1:]
-
-
-def axis_angle(axis: np.ndarray, angle: np.ndarray) -> np.ndarray:
-    axis = np.asarray(axis, dtype=np.float64) / np.linalg.norm(axis)
-    angle = np.asarray(angle, dtype=np.float64)
-    return np.concatenate([np.cos(angle / 2)[..., None], np.sin(angle / 2)[..., None] * axis], -1)
-
-
-AXIS = np.array([1.0, 2.0, 3.0]) / np.sqrt(14.0)
 
 
 def spinning_in_place(seconds: float = 20.0, rate: float = 0.7):
-    """Constant body rate ``rate`` about the fixed axis AXIS, at rest at the origin; the closed-form
-    IMU: gyro = rate·AXIS, acc = Rᵀ [0, 0, g] (exact under the zero-order hold)."""
-    t_ns = stamps(seconds)
-    t = (t_ns - t_ns[0]) * 1e-9
-    q = axis_angle(AXIS, rate * t)
-    z = np.zeros((len(t), 3))
-    gyro = np.tile(rate * AXIS, (len(t), 1))
-    acc = rotate(qconj(q), np.tile([0.0, 0.0, G], (len(t), 1)))
-    return Sequence("spin", t_ns, gyro, acc, z, z.copy(), q), gyro, acc
-
-
-def moving(seconds: float = 20.0, cubic=(0.0, 0.0, 0.0)):
-    """Wobbling rotation about a drifting axis and a quadratic (+ optional cubic) position curve with
-    its exact derivative as velocity. No IMU yet (filled with zeros)."""
-    t_ns = stamps(seconds)
-    t = (t_ns - t_ns[0]) * 1e-9
-    q1 = axis_angle([0.0, 0.0, 1.0], 0.5 * t + 0.3 * np.sin(0.8 * t))
-    q2 = axis_angle([1.0, -1.0, 0.0], 0.2 * np.sin(1.3 * t))
-    q = qmul(q1, q2)
-    p0, v0, a0, c = np.array([1.0, -2.0, 0.5]), np.array([0.3, 0.1, -0.2]), np.array([0.05, -0.08, 0.02]), np.array(cubic)
-    tt = t[:, None]
-    p = p0 + v0 * tt + 0.5 * a0 * tt**2 + c * tt**3
-    v = v0 + a0 * tt + 3 * c * tt**2
-    z = np.zeros((len(t), 3))
-    return Sequence("moving", t_ns, z, z.copy(), p, v, q)
-
-
-def with_imu(seq: Sequence, gyro: np.ndarray, acc: np.ndarray) -> Sequence:
-    return Sequence(seq.name, seq.t_ns, gyro, acc, seq.p, seq.v, seq.q_wxyz)
+    """``synthetic.spin`` and its closed-form IMU."""
+    seq = spin(seconds, rate)
+    return seq, seq.gyro, seq.acc
 
 
 def integrate_from_start(seq: Sequence, gyro: np.ndarray, acc: np.ndarray):

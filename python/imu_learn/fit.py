@@ -60,7 +60,7 @@ import sys
 import time
 from datetime import datetime
 from pathlib import Path
-from typing import Any, Callable, Dict, List, Optional
+from typing import Any, Callable, Dict, List, Optional, Tuple
 from typing import Sequence as Seq
 
 import numpy as np
@@ -215,15 +215,24 @@ def validation_loss(model: ImuRefiner, batch: Batch, cfg: RunConfig, device: tor
     return {k: v / n_total for k, v in sums.items()}
 
 
+def without_startup_bias(seqs: Seq[Sequence], cfg: RunConfig) -> Tuple[List[Sequence], Dict[str, Any]]:
+    """Each sequence with its own start-up bias (fitted on its first ``data.startup_bias_s``
+    seconds against ground truth) subtracted, and the biases by sequence name."""
+    d = cfg.data
+    fixed, biases = [], {}
+    for s in seqs:
+        bg, ba = fit_startup_bias(s, d.startup_bias_s, gravity=d.gravity)
+        biases[s.name] = {"gyro": bg.tolist(), "acc": ba.tolist()}
+        fixed.append(remove_bias(s, bg, ba))
+    return fixed, biases
+
+
 def bias_removed_pose(seqs: Seq[Sequence], n: int, cfg: RunConfig) -> Dict[str, float]:
     """Relative pose RMSE over ``n`` samples with each sequence's start-up bias removed (the
     final table's second protocol); windows from ``data.startup_bias_s`` on when the sequence is
     long enough for that, else from its start (short validation blocks still get a score)."""
     d = cfg.data
-    fixed = []
-    for s in seqs:
-        bg, ba = fit_startup_bias(s, d.startup_bias_s, gravity=d.gravity)
-        fixed.append(remove_bias(s, bg, ba))
+    fixed, _ = without_startup_bias(seqs, cfg)
     long_enough = all(len(s) - index_at(s, d.startup_bias_s) > n for s in seqs)
     first = d.startup_bias_s if long_enough else 0.0
     return relative_pose_rmse_many(fixed, n, d.val_stride, d.gravity, first_s=first)
@@ -285,13 +294,7 @@ def evaluate_table(raw_seqs: List[Sequence], model_seqs: List[Sequence], cfg: Ru
     d = cfg.data
     out: Dict[str, Any] = {"rows": {}, "startup_bias": {}}
     for row, seqs in (("raw", raw_seqs), ("model", model_seqs)):
-        fixed = []
-        biases = {}
-        for s in seqs:
-            bg, ba = fit_startup_bias(s, d.startup_bias_s, gravity=d.gravity)
-            biases[s.name] = {"gyro": bg.tolist(), "acc": ba.tolist()}
-            fixed.append(remove_bias(s, bg, ba))
-        out["startup_bias"][row] = biases
+        fixed, out["startup_bias"][row] = without_startup_bias(seqs, cfg)
         cells: Dict[str, Any] = {}
         for col, ss in (("open_loop", seqs), ("bias_removed", fixed)):
             cells[col] = {

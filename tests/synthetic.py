@@ -1,0 +1,73 @@
+"""Closed-form trajectories and an independent quaternion oracle for the tests.
+
+Deliberately not imu_learn.quat: rotation here is the sandwich product q (0, v) q* built on a
+plain Hamilton product, so the tests do not check the package's algebra against itself.
+Quaternions are w,x,y,z; stamps are exact 200 Hz nanoseconds.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from imu_learn.types import Sequence
+
+G = 9.81
+RATE = 200.0
+DT_NS = 5_000_000  # 200 Hz, exactly
+DT = DT_NS * 1e-9
+AXIS = np.array([1.0, 2.0, 3.0]) / np.sqrt(14.0)
+
+
+def stamps(seconds: float) -> np.ndarray:
+    n = int(round(seconds * RATE)) + 1
+    return 10**18 + np.arange(n, dtype=np.int64) * DT_NS
+
+
+def qconj(q: np.ndarray) -> np.ndarray:
+    return q * np.array([1.0, -1.0, -1.0, -1.0])
+
+
+def qmul(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    aw, ax, ay, az = np.moveaxis(a, -1, 0)
+    bw, bx, by, bz = np.moveaxis(b, -1, 0)
+    return np.stack([aw * bw - ax * bx - ay * by - az * bz, aw * bx + ax * bw + ay * bz - az * by,
+                     aw * by - ax * bz + ay * bw + az * bx, aw * bz + ax * by - ay * bx + az * bw], -1)
+
+
+def rotate(q: np.ndarray, v: np.ndarray) -> np.ndarray:
+    """R(q) v via the quaternion sandwich q (0, v) q*."""
+    qv = np.concatenate([np.zeros(v.shape[:-1] + (1,)), v], -1)
+    return qmul(qmul(q, qv), qconj(q))[..., 1:]
+
+
+def axis_angle(axis, angle) -> np.ndarray:
+    axis = np.asarray(axis, dtype=np.float64) / np.linalg.norm(axis)
+    angle = np.asarray(angle, dtype=np.float64)
+    return np.concatenate([np.cos(angle / 2)[..., None], np.sin(angle / 2)[..., None] * axis], -1)
+
+
+def spin(seconds: float = 20.0, rate: float = 0.7, axis=AXIS) -> Sequence:
+    """Constant body rate ``rate`` about a fixed axis, at rest at the origin, with its closed-form
+    IMU: gyro = rate·axis, acc = Rᵀ [0, 0, g] (exact under the zero-order hold)."""
+    t_ns = stamps(seconds)
+    t = (t_ns - t_ns[0]) * 1e-9
+    axis = np.asarray(axis, dtype=np.float64) / np.linalg.norm(axis)
+    q = axis_angle(axis, rate * t)
+    z = np.zeros((len(t), 3))
+    gyro = np.tile(rate * axis, (len(t), 1))
+    acc = rotate(qconj(q), np.tile([0.0, 0.0, G], (len(t), 1)))
+    return Sequence("spin", t_ns, gyro, acc, z, z.copy(), q)
+
+
+def moving(seconds: float = 20.0, cubic=(0.0, 0.0, 0.0)) -> Sequence:
+    """Wobbling rotation about a drifting axis and a quadratic (+ optional cubic) position curve with
+    its exact derivative as velocity. No IMU (zeros): synthesise one to suit the test."""
+    t_ns = stamps(seconds)
+    t = (t_ns - t_ns[0]) * 1e-9
+    q = qmul(axis_angle([0.0, 0.0, 1.0], 0.5 * t + 0.3 * np.sin(0.8 * t)),
+             axis_angle([1.0, -1.0, 0.0], 0.2 * np.sin(1.3 * t)))
+    p0, v0, a0, c = np.array([1.0, -2.0, 0.5]), np.array([0.3, 0.1, -0.2]), np.array([0.05, -0.08, 0.02]), np.array(cubic)
+    tt = t[:, None]
+    p = p0 + v0 * tt + 0.5 * a0 * tt**2 + c * tt**3
+    v = v0 + a0 * tt + 3 * c * tt**2
+    z = np.zeros((len(t), 3))
+    return Sequence("moving", t_ns, z, z.copy(), p, v, q)
