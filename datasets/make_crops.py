@@ -1,17 +1,24 @@
-"""Regenerate the shipped EuRoC crops from full sequences (run from the repository root):
+"""Regenerate the shipped crops from full sequences (run from the repository root):
 
     python datasets/make_crops.py ../shared/data/euroc datasets/euroc --seconds 60
+    python datasets/make_crops.py --dataset tum-vi ../shared/data/tum-vi datasets/tum-vi --seconds 34
 
-Copies, for each sequence, the IMU rows and ground-truth poses of ``--seconds`` starting at the
-first ground-truth stamp, byte for byte (lines are not reformatted), plus the sensor YAML files
+EuRoC: copies, for each sequence, the IMU rows and ground-truth poses of ``--seconds`` starting at
+the first ground-truth stamp, byte for byte (lines are not reformatted), plus the sensor YAML files
 and, where the sequence has one, the rows of the ASL full-state ground truth
 (``groundtruth_state_20hz.csv``) in the same time span.
+
+TUM-VI (room2, a test room of the standard split): copies the ``mav0/imu0`` and ``mav0/mocap0``
+rows of ``--seconds`` byte for byte, from the start of the first stretch of motion capture with no
+gap above ``--max-gap-ms`` (50 ms: the loader's default, so the crop aligns as one segment) that is
+at least that long; the recording's start when its first stretch is long enough, else the next.
 """
 from __future__ import annotations
 
 import argparse
 import shutil
 from pathlib import Path
+from typing import List
 
 
 def crop(src: Path, dst: Path, seconds: float) -> None:
@@ -40,14 +47,61 @@ def crop(src: Path, dst: Path, seconds: float) -> None:
     print(f"{dst}: {len(imu_keep) - 1} IMU rows, {len(gt_keep)} poses")
 
 
+def _lines(path: Path) -> List[str]:
+    """The file's lines with their own line ends (bytes are written back unchanged)."""
+    return path.read_bytes().decode().splitlines(keepends=True)
+
+
+def _stamp(line: str) -> int:
+    return int(line.split(",")[0])
+
+
+def gap_free_start(stamps: List[int], seconds: float, max_gap_ns: int) -> int:
+    """Index of the first stamp that starts a run of ``seconds`` with no step above ``max_gap_ns``."""
+    span = int(seconds * 1e9)
+    start = 0
+    for i in range(1, len(stamps)):
+        if stamps[i] - stamps[i - 1] > max_gap_ns:
+            start = i
+        elif stamps[i] - stamps[start] >= span:
+            return start
+    raise SystemExit(f"no {seconds:g} s stretch without a ground-truth gap above {max_gap_ns / 1e6:g} ms")
+
+
+def crop_tumvi(src: Path, dst: Path, seconds: float, max_gap_ms: float = 50.0) -> None:
+    mocap_lines = _lines(src / "mav0/mocap0/data.csv")
+    mocap_head = [ln for ln in mocap_lines if ln.startswith("#")]
+    mocap_rows = [ln for ln in mocap_lines if ln.strip() and not ln.startswith("#")]
+    stamps = [_stamp(ln) for ln in mocap_rows]
+    k = gap_free_start(stamps, seconds, int(max_gap_ms * 1e6))
+    t0_ns = stamps[k]
+    t1_ns = t0_ns + int(seconds * 1e9)
+    mocap_keep = [ln for ln in mocap_rows if t0_ns <= _stamp(ln) <= t1_ns]
+    imu_lines = _lines(src / "mav0/imu0/data.csv")
+    imu_head = [ln for ln in imu_lines if ln.startswith("#")]
+    imu_keep = [ln for ln in imu_lines if ln.strip() and not ln.startswith("#") and t0_ns <= _stamp(ln) <= t1_ns]
+    for sub, head, rows in (("imu0", imu_head, imu_keep), ("mocap0", mocap_head, mocap_keep)):
+        (dst / "mav0" / sub).mkdir(parents=True, exist_ok=True)
+        (dst / "mav0" / sub / "data.csv").write_bytes("".join(head + rows).encode())
+    print(f"{dst}: {len(imu_keep)} IMU rows, {len(mocap_keep)} mocap poses, "
+          f"{(t0_ns - _stamp(imu_lines[1])) / 1e9:.3f} s to {(t1_ns - _stamp(imu_lines[1])) / 1e9:.3f} s "
+          f"of the recording")
+
+
 def main() -> None:
     ap = argparse.ArgumentParser()
-    ap.add_argument("src", type=Path)
+    ap.add_argument("src", type=Path, help="the folder holding the full sequences")
     ap.add_argument("dst", type=Path)
-    ap.add_argument("--seconds", type=float, default=60.0)
+    ap.add_argument("--dataset", choices=("euroc", "tum-vi"), default="euroc")
+    ap.add_argument("--seconds", type=float, help="length of each crop (default 60 EuRoC, 34 TUM-VI)")
+    ap.add_argument("--max-gap-ms", type=float, default=50.0, help="TUM-VI: largest mocap gap allowed")
     a = ap.parse_args()
-    for seq in ("MH_01_easy", "V1_01_easy"):
-        crop(a.src / seq, a.dst / seq, a.seconds)
+    if a.dataset == "euroc":
+        for seq in ("MH_01_easy", "V1_01_easy"):
+            crop(a.src / seq, a.dst / seq, a.seconds or 60.0)
+    else:
+        seq = "dataset-room2_512_16"
+        crop_tumvi(a.src / seq, a.dst / seq, a.seconds or 34.0, a.max_gap_ms)
 
 
 if __name__ == "__main__":

@@ -116,3 +116,45 @@ def test_too_short_training_data_is_an_error(data):
     train, _ = data
     with pytest.raises(ValueError):
         EndToEnd(EndToEndConfig(hidden=4, layers=1, fc=4)).fit([crop(train, 0, 40)], [], SETTINGS)
+
+
+def test_one_regressor_per_scored_horizon(data, monkeypatch, tmp_path):
+    """With FitSettings.horizons, each scored n is regressed by a net trained on n-sample windows:
+    the n = 10 predictions come from the net that saw only 10-sample windows in training."""
+    from imu_learn.baselines import end_to_end as e2e
+
+    train, val = data
+    seen = []  # (net, window length) of every training-mode forward pass
+    forward = e2e.EndToEndNet.forward
+
+    def spy(self, imu):
+        if self.training:
+            seen.append((self, imu.shape[1]))
+        return forward(self, imu)
+
+    monkeypatch.setattr(e2e.EndToEndNet, "forward", spy)
+    m = EndToEnd(EndToEndConfig(hidden=8, layers=1, fc=8, evals=2))
+    settings = FitSettings(window=W, batch_size=8, steps=6, lr=3e-3, seed=0, horizons=(W, 10))
+    log = m.fit([train], [val], settings)
+    assert m.horizons == [10, W] and log["horizons"] == [10, W]
+    assert len(log["n10.train_loss"]) == 6 and len(log[f"n{W}.train_loss"]) == 6
+    assert {n for net, n in seen if net is m.nets[10]} == {10}
+    assert {n for net, n in seen if net is m.nets[W]} == {W}
+    assert m.horizon_for(10) == 10 and m.horizon_for(W) == W and m.horizon_for(12) == 10 and m.horizon_for(400) == W
+
+    starts = np.arange(0, 600, 37)
+    p10 = m.predict(val, starts, 10)
+    q10, d10 = m._regress_direct(val, starts, 10, horizon=10)
+    q10_long, d10_long = m._regress_direct(val, starts, 10, horizon=W)
+    qk = val.q_wxyz[starts]
+    assert np.allclose(p10.q_wxyz, quat_mul(qk, q10) / np.linalg.norm(quat_mul(qk, q10), axis=1, keepdims=True))
+    from imu_learn.baselines.base import quat_rotate
+    assert np.allclose(p10.p, val.p[starts] + quat_rotate(qk, d10))
+    assert not np.allclose(d10, d10_long)  # not the W-sample net fed 10 samples
+
+    f = tmp_path / "e2e.pt"
+    m.save(f)
+    m2 = EndToEnd().load(f)
+    assert m2.horizons == [10, W] and m2.window == W
+    b = m2.predict(val, starts, 10)
+    assert np.array_equal(p10.q_wxyz, b.q_wxyz) and np.array_equal(p10.p, b.p)

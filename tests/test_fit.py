@@ -266,13 +266,18 @@ def test_overlapping_blocks_rejected(tmp_path, capsys):
     assert "overlaps" in capsys.readouterr().err
 
 
-def test_config_files():
+def test_config_files(monkeypatch):
+    monkeypatch.delenv("IMU_LEARN_DATA", raising=False)
     # no-args = configs/default.toml = the dataclass defaults
     assert build_config(read_toml(REPO / "configs" / "default.toml"), {}) == RunConfig()
-    for name in ("euroc", "blackbird", "broad"):
+    for name in ("euroc", "blackbird", "broad", "euroc_paper", "tumvi"):
         cfg = load_config(REPO / "configs" / f"{name}.toml")
         assert cfg.data.split.train and cfg.data.split.val and cfg.data.split.test
-        assert all(r.path.startswith("../shared/data/") for r in cfg.data.roots)
+        # real data: paths relative to the data root (IMU_LEARN_DATA / --data.data_root), none set here
+        assert cfg.data.data_root == ""
+        for r in cfg.data.roots:
+            for p in (r.path, r.groundtruth):
+                assert not Path(p).is_absolute() and not p.startswith(".."), (name, p)
     cfg = load_config(REPO / "configs" / "default.toml", ["--optim.lr", "3e-4", "--data.split.test", "A,B"])
     assert cfg.optim.lr == 3e-4 and cfg.data.split.test == ["A", "B"]
 
@@ -297,13 +302,16 @@ def test_root_max_gap_lets_sparse_ground_truth_through():
         build_config({}, {"data.roots": [{"path": "a"}, {"path": "b", "max_gap_s": 0.0}]})
 
 
-@pytest.mark.parametrize("name", ["euroc", "blackbird", "broad"])
+@pytest.mark.parametrize("name", ["euroc", "blackbird", "broad", "euroc_paper", "tumvi"])
 def test_shipped_configs_split_real_data(shared, name, monkeypatch):
     from imu_learn.splits import make_split
 
     monkeypatch.chdir(REPO)
+    monkeypatch.setenv("IMU_LEARN_DATA", str(shared))
     cfg = load_config(REPO / "configs" / f"{name}.toml")
+    assert Path(cfg.data.data_root) == shared
     split = make_split(cfg.data)
+    assert split.record["data_root"] == str(shared.absolute())
     names = {k: {s.name for s in split[k]} for k in ("train", "val", "test")}
     assert split.train and split.val and split.test
     assert not (names["train"] & names["test"]) and not (names["val"] & names["test"])

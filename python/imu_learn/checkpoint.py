@@ -6,13 +6,24 @@ args (so the model can be rebuilt), the model weights (normalisation buffers inc
 optimiser state, the full run config, epoch, step, best metric, and the code version.
 Writes go to a temporary file and are renamed into place, so a kill never leaves half a checkpoint
 over a good one.
+
+A checkpoint is self-contained for inference: ``python -m imu_learn.refine`` needs nothing from the
+run folder beside it (the normalisation is in the weights, the architecture in ``model_args``).
+A run's ``best.pt`` also carries the optimiser state and the metrics history; to ship a model, strip
+those (the result still loads everywhere a checkpoint does, but cannot be resumed)::
+
+    python -m imu_learn.checkpoint strip runs/NAME/best.pt models/NAME.pt
+    python -m imu_learn.checkpoint info models/NAME.pt      # what a checkpoint holds, for a model card
 """
 from __future__ import annotations
 
+import argparse
+import json
 import os
+import sys
 import tempfile
 from pathlib import Path
-from typing import Any, Dict, Optional
+from typing import Any, Dict, List, Optional
 
 import torch
 
@@ -21,6 +32,9 @@ from imu_learn.errors import ImuError
 from imu_learn.model import ImuRefiner, ModelConfig
 
 FORMAT = "imu_learn.checkpoint.v1"
+# What a stripped (shipped) checkpoint keeps: everything inference and a model card need.
+STRIPPED_KEYS = ("format", "code_version", "model_args", "model", "config", "epoch", "step", "best_metric")
+STRIPPED_EXTRA = ("best_epoch", "elapsed_s", "world_size")
 
 
 class CheckpointError(ImuError):
@@ -89,3 +103,78 @@ def model_from_checkpoint(state: Dict[str, Any]) -> ImuRefiner:
 def load_model(path: Path, map_location: str = "cpu") -> ImuRefiner:
     """The trained model of a checkpoint, in eval mode."""
     return model_from_checkpoint(load_checkpoint(path, map_location))
+
+
+def strip_checkpoint(src: Path, dst: Path) -> Dict[str, Any]:
+    """Write to ``dst`` (atomically) a copy of checkpoint ``src`` with only what inference needs:
+    model args, weights (normalisation buffers included), config, epoch, step, best metric, code
+    version, and from ``extra`` the best epoch, training time and world size. The optimiser state
+    and the metrics history are dropped; ``extra["stripped_from"]`` names the source
+    (``<run folder name>/<file>``). Weights are copied unchanged, so refining with the stripped
+    checkpoint gives bit-identical output. Returns the stripped state."""
+    from imu_learn.cache import atomic_write_bytes
+
+    src, dst = Path(src), Path(dst)
+    if src.exists() and dst.exists() and os.path.samefile(src, dst):
+        raise CheckpointError(f"{dst}: is the source checkpoint; write the stripped copy elsewhere")
+    state = load_checkpoint(src)
+    out: Dict[str, Any] = {k: state.get(k) for k in STRIPPED_KEYS}
+    out["model"] = {k: v.detach().cpu().clone() for k, v in state["model"].items()}
+    out["optimizer"] = None
+    extra = state.get("extra") or {}
+    out["extra"] = {k: extra[k] for k in STRIPPED_EXTRA if k in extra}
+    out["extra"]["stripped_from"] = f"{src.resolve().parent.name}/{src.name}"
+    model_from_checkpoint(out)  # refuse to write something that does not rebuild
+
+    atomic_write_bytes(dst, lambda f: torch.save(out, f))
+    return out
+
+
+def describe(state: Dict[str, Any]) -> Dict[str, Any]:
+    """A summary of a loaded checkpoint (plain values), as ``python -m imu_learn.checkpoint info`` prints."""
+    cfg = state.get("config") or {}
+    data = cfg.get("data") or {}
+    n_params = sum(int(v.numel()) for k, v in state["model"].items() if k not in ("mean", "std"))
+    return {
+        "format": state.get("format"),
+        "code_version": state.get("code_version"),
+        "model_args": state.get("model_args"),
+        "parameters": n_params,
+        "normalisation": {k: [float(x) for x in state["model"][k]] for k in ("mean", "std") if k in state["model"]},
+        "epoch": state.get("epoch"),
+        "step": state.get("step"),
+        "best_metric": state.get("best_metric"),
+        "selected_on": (cfg.get("optim") or {}).get("select"),
+        "has_optimizer": state.get("optimizer") is not None,
+        "split": data.get("split"),
+        "roots": [r.get("path") for r in data.get("roots") or []],
+        "window": data.get("window"),
+        "extra": {k: v for k, v in (state.get("extra") or {}).items() if k not in ("history", "partial")},
+    }
+
+
+def main(argv: Optional[List[str]] = None) -> int:
+    p = argparse.ArgumentParser(prog="python -m imu_learn.checkpoint",
+                                description="Inspect a checkpoint or write a small copy for shipping.")
+    sub = p.add_subparsers(dest="cmd", required=True)
+    ps = sub.add_parser("strip", help="copy a checkpoint keeping only what inference needs (no optimiser state)")
+    ps.add_argument("src", type=Path)
+    ps.add_argument("dst", type=Path)
+    pi = sub.add_parser("info", help="print what a checkpoint holds (JSON)")
+    pi.add_argument("path", type=Path)
+    args = p.parse_args(argv)
+    try:
+        if args.cmd == "strip":
+            strip_checkpoint(args.src, args.dst)
+            before, after = args.src.stat().st_size, args.dst.stat().st_size
+            print(f"{args.dst}: {after / 1e6:.3f} MB (from {before / 1e6:.3f} MB)")
+        else:
+            print(json.dumps(describe(load_checkpoint(args.path)), indent=2))
+    except (ImuError, OSError) as e:
+        print(f"error: {type(e).__name__}: {' '.join(str(e).split())}", file=sys.stderr)
+        return 2
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -20,8 +20,12 @@ Protocol
   sequences are never seen in training or in model selection: every method is fitted on the
   train split only, and uses the val split only for its own model selection. A ``--checkpoint``
   whose training or validation split names a test recording is refused.
+  Relative data paths are taken from the data root (``--data.data_root DIR``, else the environment
+  variable ``IMU_LEARN_DATA``, else the configs' ``data.data_root``; see :mod:`imu_learn.splits`).
 * Fitting: each method gets the same budget (``[fit]``: a ``FitSettings`` with window, batch size,
-  steps, learning rate, device, threads; seed = the config's ``seed``, gravity = ``data.gravity``).
+  steps, learning rate, device, threads; seed = the config's ``seed``, gravity = ``data.gravity``;
+  horizons = ``eval.horizons``, for which the end-to-end regressor trains one net each, so its row
+  at n comes from a net trained on n-sample windows).
   Fitted methods are saved in ``<report>/methods/<name>.*`` with a record of the settings and the
   split (``<name>.record.json``); ``--reuse`` loads them instead of refitting when both match.
 * Prediction: every window starts from the ground-truth state (p, v, R) at its first sample k and
@@ -175,7 +179,8 @@ class Resolved:
     def fit_settings(self) -> FitSettings:
         f = self.cfg.fit
         return FitSettings(window=f.window or self.run.data.window, batch_size=f.batch_size, steps=f.steps, lr=f.lr,
-                           seed=self.cfg.seed, device=f.device, threads=f.threads, gravity=self.run.data.gravity)
+                           seed=self.cfg.seed, device=f.device, threads=f.threads, gravity=self.run.data.gravity,
+                           horizons=tuple(sorted({int(n) for n in self.cfg.eval.horizons})))
 
 
 def _resolve_base(base: str, cfg_path: Optional[Path]) -> Path:
@@ -427,16 +432,18 @@ def _split_signature(split: Any) -> Dict[str, Any]:
 def _ground_truth_kinds(run: RunConfig, test_entries: List[str]) -> Dict[str, str]:
     """Recording -> "pose-only (velocity derived)" or "with velocity", for the test recordings."""
     from imu_learn.formats import read_recording
-    from imu_learn.splits import find_all, resolve_path
+    from imu_learn.splits import data_root_dir, find_all, resolve_data_path
 
-    found = find_all(run.data.roots)
+    root_dir = data_root_dir(run.data)
+    found = find_all(run.data.roots, root_dir)
     out = {}
     for label in test_entries:
         rec = _recording(label)
         if rec in out or rec not in found:
             continue
         path, root = found[rec]
-        gt_path = resolve_path(root.groundtruth) if root.groundtruth else None
+        i = next(j for j, r in enumerate(run.data.roots) if r is root)
+        gt_path = resolve_data_path(root.groundtruth, root_dir, f"data.roots[{i}].groundtruth") if root.groundtruth else None
         _, gt = read_recording(path, root.format, gt_path)
         out[rec] = "pose-only (velocity derived)" if gt.v is None else "with velocity"
     return out
@@ -631,6 +638,7 @@ def run_evaluation(res: Resolved, methods: List[str], out_dir: Path, reuse: bool
         "biases": biases,
         "versions": _versions(),
         "roots": [asdict(r) for r in data.roots],
+        "data_root": split.record.get("data_root"),
         "gravity": data.gravity,
     }
     result["wall_s"] = time.time() - t_start

@@ -277,7 +277,9 @@ def markdown(result: Dict[str, Any], rel: List[Dict[str, Any]], air: List[Dict[s
     L += ["## Data and split", "",
           f"Fit config: `{r.get('base_path') or 'built-in defaults'}`; gravity {r['gravity']} m/s²; "
           f"windows every {r['stride']} samples from {r['startup_bias_s']:g} s on; start-up bias fitted on the "
-          f"first {r['startup_bias_s']:g} s.", "", "Data roots:", ""]
+          f"first {r['startup_bias_s']:g} s.", "",
+          f"Data roots (relative paths from the data root `{r['data_root']}`):" if r.get("data_root")
+          else "Data roots:", ""]
     for root in r["roots"]:
         L.append(f"- `{root['path']}` ({root['format']}{', ground truth ' + root['groundtruth'] if root.get('groundtruth') else ''})")
     L.append("")

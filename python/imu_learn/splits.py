@@ -14,8 +14,16 @@ The default run has only the two shipped 60 s EuRoC crops, so:
                                 device, same day, same bias), so it is optimistic
     test  = V1_01_easy          another flight in another room, never seen in training or selection
 
-``split.json`` in the run folder lists, per split, each entry, the recording path and format, the
-time block, and the segments with their sample ranges and durations.
+``split.json`` in the run folder lists the data root used (``data_root``: absolute, or null),
+then, per split, each entry, the recording path and format, the time block, and the segments with
+their sample ranges and durations.
+
+Relative ``data.roots[i].path`` and ``.groundtruth`` are taken from the data root
+(``data.data_root``: ``--data.data_root DIR``, else the environment variable ``IMU_LEARN_DATA``,
+else the config file's value) when one is set, else (and for paths not under it) from the working
+directory, else from the repository root (the shipped crops of ``configs/default.toml``). A path
+found nowhere is a :class:`DataPathError` naming the config key, the paths tried and how to set the
+data root.
 """
 from __future__ import annotations
 
@@ -27,7 +35,7 @@ from typing import Dict, List, Optional, Tuple
 
 import numpy as np
 
-from imu_learn.config import ConfigError, DataConfig, RootConfig
+from imu_learn.config import DATA_ROOT_ENV, ConfigError, DataConfig, RootConfig
 from imu_learn.datasets import DATASETS, find_recordings
 from imu_learn.loading import AlignOptions, load_sequence
 from imu_learn.types import Sequence
@@ -88,6 +96,45 @@ def resolve_path(p: str) -> Path:
     return alt if alt.exists() else path
 
 
+class DataPathError(ConfigError, FileNotFoundError):
+    """A recording or ground-truth path of ``data.roots`` exists under none of the places tried."""
+
+    def __str__(self) -> str:  # FileNotFoundError's own str would show errno and filename
+        return str(self.args[0]) if self.args else ""
+
+
+def data_root_dir(data: DataConfig) -> Optional[Path]:
+    """The data root as an absolute folder (a relative one from the working directory, else the
+    repository root), or None when none is set."""
+    if not data.data_root:
+        return None
+    return resolve_path(data.data_root).resolve()
+
+
+def resolve_data_path(p: str, data_root: Optional[Path], key: str) -> Path:
+    """A ``data.roots`` path (``key`` names it in errors): absolute as given; relative, from the
+    data root when one is set, else (or when not there) the working directory, else the repo root."""
+    path = Path(p).expanduser()
+    if path.is_absolute():
+        tried = [path]
+    else:
+        tried = ([data_root / path] if data_root is not None else []) + [path, REPO_ROOT / path]
+    for cand in tried:
+        if cand.exists():
+            return cand
+    if data_root is None:
+        where = "no data root set"
+    elif not data_root.is_dir():
+        where = f"data root {data_root} is not a folder"
+    else:
+        where = f"data root {data_root}"
+    shown = ", ".join(str(c) for c in dict.fromkeys(tried))
+    raise DataPathError(
+        f"{key}: {p!r} not found (tried {shown}; {where}); set the data root with "
+        f"{DATA_ROOT_ENV}=DIR or --data.data_root DIR (see docs/datasets.md)"
+    )
+
+
 def _format_for(root: RootConfig) -> str:
     fmt = root.format
     if fmt not in DATASETS:
@@ -95,16 +142,15 @@ def _format_for(root: RootConfig) -> str:
     return fmt
 
 
-def find_all(roots: List[RootConfig]) -> Dict[str, Tuple[Path, RootConfig]]:
-    """Recording name -> (path, root) over all roots; duplicate names are an error."""
+def find_all(roots: List[RootConfig], data_root: Optional[Path] = None) -> Dict[str, Tuple[Path, RootConfig]]:
+    """Recording name -> (path, root) over all roots (relative paths from ``data_root``, see
+    :func:`resolve_data_path`); duplicate names are an error."""
     found: Dict[str, Tuple[Path, RootConfig]] = {}
     for i, root in enumerate(roots):
         fmt = _format_for(root)
-        path = resolve_path(root.path)
+        path = resolve_data_path(root.path, data_root, f"data.roots[{i}].path")
         if root.groundtruth:
             recs = [(path.stem if path.suffix == ".mat" else path.name, path)]
-            if not path.exists():
-                raise FileNotFoundError(2, "No such file or directory", str(path))
         else:
             recs = find_recordings(fmt, path)
         for name, p in recs:
@@ -156,11 +202,15 @@ def make_split(data: DataConfig, min_len: Optional[int] = None) -> Split:
     reported; a train or val split left empty is an error.
     """
     entries = parse_split(data)
-    found = find_all(data.roots)
+    root_dir = data_root_dir(data)
+    found = find_all(data.roots, root_dir)
+    gt_paths = {id(r): resolve_data_path(r.groundtruth, root_dir, f"data.roots[{i}].groundtruth")
+                for i, r in enumerate(data.roots) if r.groundtruth}
     min_len = data.window + 1 if min_len is None else min_len
     cache: Dict[str, List[Sequence]] = {}
     result: Dict[str, List[Sequence]] = {}
-    record: Dict[str, object] = {"rule": "by sequence; NAME[a:b] is a time block (fractions of the duration)"}
+    record: Dict[str, object] = {"rule": "by sequence; NAME[a:b] is a time block (fractions of the duration)",
+                                 "data_root": str(root_dir) if root_dir is not None else None}
     for split in SPLITS:
         seqs: List[Sequence] = []
         rows = []
@@ -172,7 +222,7 @@ def make_split(data: DataConfig, min_len: Optional[int] = None) -> Split:
                 )
             path, root = found[e.name]
             if e.name not in cache:
-                gt = resolve_path(root.groundtruth) if root.groundtruth else None
+                gt = gt_paths.get(id(root))
                 cache[e.name] = load_sequence(path, root.format, gt, options=AlignOptions(max_gap_s=root.max_gap_s))
             parts = cut(cache[e.name], e.start, e.stop, e.name)
             kept = [s for s in parts if len(s) >= min_len]
@@ -182,6 +232,7 @@ def make_split(data: DataConfig, min_len: Optional[int] = None) -> Split:
                 "path": str(path),
                 "format": root.format,
                 "groundtruth": root.groundtruth or None,
+                "groundtruth_path": str(gt_paths[id(root)]) if root.groundtruth else None,
                 "block": [e.start, e.stop],
                 "segments": [
                     {"name": s.name, "samples": len(s), "t0_ns": int(s.t_ns[0]), "t1_ns": int(s.t_ns[-1]),

@@ -34,6 +34,9 @@ class FitSettings:
     device: str = "cpu"
     threads: int = 2
     gravity: float = 9.81
+    # The horizons [IMU samples] the evaluation scores in its table (eval.horizons): a regressor
+    # may fit one model per horizon (the end-to-end baseline does); empty: ``window`` only.
+    horizons: Tuple[int, ...] = ()
 
 
 @dataclass(frozen=True)

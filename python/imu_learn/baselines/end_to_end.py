@@ -15,7 +15,13 @@ have seen the whole window) go through an FC head to six numbers::
 the untrained net predicts the training mean). Rotation is regressed as a rotation vector (so3 log)
 so that every output is unconstrained and the identity is the origin.
 
-Training: windows from the Rust :class:`~imu_learn.batches.BatchSampler` (``FitSettings.window``
+One regressor per scored horizon: ``fit`` trains a separate net for every n in
+``FitSettings.horizons`` (the evaluation passes its table's ``eval.horizons``; empty: the single
+``FitSettings.window``) on windows of exactly n samples, so the row for n = 10 comes from a net
+trained on 10-sample windows, not from a 200-sample net fed 10 samples. Each net gets the full
+budget (``FitSettings.steps``), so the fit time grows with the number of horizons (and with n).
+
+Training (per horizon n): windows from the Rust :class:`~imu_learn.batches.BatchSampler` (n
 samples, no augmentation by default), targets from the ground truth of the training sequences
 looked up by each window's ``seq_index``/``start``: Δq = q_k⁻¹ ⊗ q_{k+n}, Δp = R_kᵀ(p_{k+n} − p_k).
 Loss: ``w_q`` Huber(|Log(Δq ⊗ Δq̂⁻¹)|, δ_q) + ``w_p`` Huber(|Δp − Δp̂|, δ_p), Huber on the norm of
@@ -27,18 +33,20 @@ lowest loss on fixed validation windows (checked ``evals`` times) are kept.
 label horizons (the paper's 20/40/60/80/100 % of it), so the net sees several lengths.
 
 Prediction (:meth:`EndToEnd.predict`): from the ground-truth state at each start k,
-q_end = q_k ⊗ Δq̂, p_end = p_k + R_k Δp̂ (no velocity). The net is trained on windows of
-``FitSettings.window`` samples but is evaluated at every requested n as well:
+q_end = q_k ⊗ Δq̂, p_end = p_k + R_k Δp̂ (no velocity). A horizon n that a net was trained for
+uses that net. Other n (the evaluation's seconds-based horizons and curve) use the net trained
+for the nearest horizon h (by ratio, :meth:`EndToEnd.horizon_for`):
 
 - ``long_horizon="direct"`` (default): the n samples are fed as one sequence (an LSTM takes any
   length). Away from the training length this extrapolates (an IONet-style regressor has no notion
   of elapsed time beyond what it learned), which is part of what the comparison shows;
-- ``long_horizon="chain"``: for n above the training window the n samples are cut into consecutive
-  training-length segments (and a shorter remainder), each regressed on its own and composed, as
-  IONet chains its windows; n at or below the training window is fed directly.
+- ``long_horizon="chain"``: for n above h the n samples are cut into consecutive h-sample segments
+  (and a shorter remainder), each regressed on its own (by the net for its length) and composed,
+  as IONet chains its windows; n at or below h is fed directly.
 """
 from __future__ import annotations
 
+import sys
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Dict, List, Optional, Tuple
@@ -56,7 +64,8 @@ from imu_learn.torch_so3 import quat_mul as tquat_mul
 from imu_learn.types import Sequence
 
 Tensor = torch.Tensor
-FORMAT = "imu_learn.baselines.end_to_end.v1"
+FORMAT = "imu_learn.baselines.end_to_end.v2"  # one net per horizon
+FORMAT_V1 = "imu_learn.baselines.end_to_end.v1"  # one net (still read)
 
 
 @dataclass
@@ -143,41 +152,83 @@ class EndToEnd(Method):
     def __init__(self, config: Optional[EndToEndConfig] = None) -> None:
         self.config = config or EndToEndConfig()
         c = self.config
-        self.net = EndToEndNet(c.hidden, c.layers, c.fc, c.dropout)
-        self.window = 200  # the training window length (set by fit / load)
+        self.window = 200  # FitSettings.window of the fit (set by fit / load)
+        # horizon n [samples] -> the net trained on n-sample windows (set by fit / load)
+        self.nets: Dict[int, EndToEndNet] = {self.window: EndToEndNet(c.hidden, c.layers, c.fc, c.dropout)}
         self.device = torch.device("cpu")
+
+    @property
+    def horizons(self) -> List[int]:
+        """The window lengths [samples] the nets were trained on."""
+        return sorted(self.nets)
+
+    @property
+    def net(self) -> EndToEndNet:
+        """The net trained on ``window``-sample windows, else the one for the longest horizon."""
+        return self.nets.get(self.window) or self.nets[max(self.nets)]
+
+    def horizon_for(self, n: int) -> int:
+        """The trained horizon whose net regresses n samples: n itself when trained, else the
+        nearest by ratio (|log(n / h)|; a tie goes to the shorter)."""
+        n = int(n)
+        if n in self.nets:
+            return n
+        return min(self.nets, key=lambda h: (abs(np.log(n / h)), h))
 
     # ------------------------------------------------------------------ training
 
-    def _loss(self, imu: Tensor, phi: Tensor, dp: Tensor) -> Tensor:
+    def _loss(self, net: EndToEndNet, imu: Tensor, phi: Tensor, dp: Tensor) -> Tensor:
         c = self.config
-        phi_hat, dp_hat = self.net(imu)
+        phi_hat, dp_hat = net(imu)
         r_q = so3_log(tquat_mul(so3_exp(phi), quat_conj(so3_exp(phi_hat))))
         return c.w_q * huber_norm(r_q, c.huber_q).mean() + c.w_p * huber_norm(dp - dp_hat, c.huber_p).mean()
 
     def fit(self, train: List[Sequence], val: List[Sequence], settings: FitSettings = FitSettings()) -> Dict[str, list]:
-        c = self.config
-        W = int(settings.window)
-        self.window = W
+        """One net per horizon of ``settings.horizons`` (else ``settings.window``), each trained on
+        windows of exactly that many samples for ``settings.steps`` steps. Log keys: with one
+        horizon ``train_loss``, ``val_loss``, ``val_step``, ``best_step``; with several the same
+        prefixed ``n<h>.`` per horizon; ``horizons`` lists the trained ones."""
+        self.window = int(settings.window)
         self.device = _device(settings.device)
+        wanted = sorted({int(h) for h in settings.horizons}) or [self.window]
+        usable = [h for h in wanted if any(len(s) > h for s in train)]
+        if not usable:
+            raise ValueError(f"end-to-end: no training sequence longer than the window ({max(wanted)} samples)")
+        skipped = [h for h in wanted if h not in usable]
+        if skipped:
+            print(f"end-to-end: no training sequence longer than {skipped} samples: those horizons use the net "
+                  f"of the nearest trained one", file=sys.stderr)
+        nets: Dict[int, EndToEndNet] = {}
+        log: Dict[str, list] = {"horizons": list(usable)}
+        if skipped:
+            log["skipped_horizons"] = list(skipped)
+        for h in usable:
+            nets[h], one = self._fit_one(train, val, settings, h)
+            for k, v in one.items():
+                log[k if len(usable) == 1 else f"n{h}.{k}"] = v
+        self.nets = nets
+        return log
+
+    def _fit_one(self, train: List[Sequence], val: List[Sequence], settings: FitSettings,
+                 W: int) -> Tuple[EndToEndNet, Dict[str, list]]:
+        """A net trained on windows of W samples, and its log."""
+        c = self.config
         train = [s for s in train if len(s) > W]
         val = [s for s in (val or []) if len(s) > W]
-        if not train:
-            raise ValueError(f"end-to-end: no training sequence longer than the window ({W} samples)")
         torch.manual_seed(settings.seed)
-        self.net = EndToEndNet(c.hidden, c.layers, c.fc, c.dropout)
+        net = EndToEndNet(c.hidden, c.layers, c.fc, c.dropout)
         raw = np.concatenate([np.c_[s.gyro, s.acc] for s in train])
-        self.net.mean.copy_(torch.as_tensor(raw.mean(0), dtype=torch.float32))
-        self.net.std.copy_(torch.as_tensor(np.maximum(raw.std(0), 1e-6), dtype=torch.float32))
+        net.mean.copy_(torch.as_tensor(raw.mean(0), dtype=torch.float32))
+        net.std.copy_(torch.as_tensor(np.maximum(raw.std(0), 1e-6), dtype=torch.float32))
         bc = BatchConfig(window=W, batch_size=settings.batch_size, gravity=settings.gravity, augment=c.augment)
         sampler = BatchSampler(train, bc)
         # target statistics (output scaling) from every training window at a quarter-window step
         ev = sampler.eval_windows(max(1, W // 4))
         phi_all, dp_all = window_targets(train, ev.seq_index, ev.start, W)
         tgt = np.c_[phi_all, dp_all]
-        self.net.out_mean.copy_(torch.as_tensor(tgt.mean(0), dtype=torch.float32))
-        self.net.out_std.copy_(torch.as_tensor(np.maximum(tgt.std(0), 1e-4), dtype=torch.float32))
-        self.net.to(self.device)
+        net.out_mean.copy_(torch.as_tensor(tgt.mean(0), dtype=torch.float32))
+        net.out_std.copy_(torch.as_tensor(np.maximum(tgt.std(0), 1e-4), dtype=torch.float32))
+        net.to(self.device)
 
         val_data = None
         if val:
@@ -186,7 +237,7 @@ class EndToEnd(Method):
             vphi, vdp = window_targets(val, vb.seq_index, vb.start, W)
             val_data = tuple(torch.as_tensor(a, dtype=torch.float32, device=self.device) for a in (vb.imu, vphi, vdp))
 
-        opt = torch.optim.Adam(self.net.parameters(), lr=settings.lr)
+        opt = torch.optim.Adam(net.parameters(), lr=settings.lr)
         rng = np.random.default_rng(settings.seed)
         steps = int(settings.steps)
         n_checks = max(1, c.evals)
@@ -200,46 +251,48 @@ class EndToEnd(Method):
                 n = int(rng.choice(b.horizons))
             phi, dp = window_targets(train, b.seq_index, b.start, n)
             imu = torch.as_tensor(b.imu[:, :n], dtype=torch.float32, device=self.device)
-            self.net.train()
-            loss = self._loss(imu, torch.as_tensor(phi, dtype=torch.float32, device=self.device),
+            net.train()
+            loss = self._loss(net, imu, torch.as_tensor(phi, dtype=torch.float32, device=self.device),
                               torch.as_tensor(dp, dtype=torch.float32, device=self.device))
             opt.zero_grad()
             loss.backward()
             if c.grad_clip > 0:
-                nn.utils.clip_grad_norm_(self.net.parameters(), c.grad_clip)
+                nn.utils.clip_grad_norm_(net.parameters(), c.grad_clip)
             opt.step()
             log["train_loss"].append(float(loss.detach()))
             if val_data is not None and step + 1 in checks:
-                v = self._val_loss(*val_data)
+                v = self._val_loss(net, *val_data)
                 log["val_loss"].append(v)
                 log["val_step"].append(step + 1)
                 if v < best:
                     best = v
-                    best_state = {k: t.detach().clone() for k, t in self.net.state_dict().items()}
+                    best_state = {k: t.detach().clone() for k, t in net.state_dict().items()}
         if best_state is not None:
-            self.net.load_state_dict(best_state)
+            net.load_state_dict(best_state)
             log["best_step"] = [log["val_step"][int(np.argmin(log["val_loss"]))]]
-        self.net.eval()
-        return log
+        net.eval()
+        return net, log
 
     @torch.no_grad()
-    def _val_loss(self, imu: Tensor, phi: Tensor, dp: Tensor, chunk: int = 256) -> float:
-        self.net.eval()
+    def _val_loss(self, net: EndToEndNet, imu: Tensor, phi: Tensor, dp: Tensor, chunk: int = 256) -> float:
+        net.eval()
         tot = 0.0
         for a in range(0, len(imu), chunk):
-            tot += float(self._loss(imu[a:a + chunk], phi[a:a + chunk], dp[a:a + chunk])) * len(imu[a:a + chunk])
+            tot += float(self._loss(net, imu[a:a + chunk], phi[a:a + chunk], dp[a:a + chunk])) * len(imu[a:a + chunk])
         return tot / max(1, len(imu))
 
     # ------------------------------------------------------------------ inference
 
     @torch.no_grad()
     def regress(self, seq: Sequence, starts: np.ndarray, n: int) -> Tuple[np.ndarray, np.ndarray]:
-        """The net's (Δq̂ (S, 4) wxyz, Δp̂ (S, 3)) for the n samples from each start (start body frame),
-        composed from training-length segments when ``long_horizon == "chain"`` and n > window."""
+        """(Δq̂ (S, 4) wxyz, Δp̂ (S, 3)) for the n samples from each start (start body frame), by the
+        net of :meth:`horizon_for` (n); composed from segments of that net's length h when
+        ``long_horizon == "chain"`` and n > h."""
         starts = np.asarray(starts, dtype=np.int64)
         n = int(n)
-        if self.config.long_horizon == "chain" and n > self.window:
-            segs = [(o, min(self.window, n - o)) for o in range(0, n, self.window)]
+        h = self.horizon_for(n)
+        if self.config.long_horizon == "chain" and n > h:
+            segs = [(o, min(h, n - o)) for o in range(0, n, h)]
         elif self.config.long_horizon in ("chain", "direct"):
             segs = [(0, n)]
         else:
@@ -254,10 +307,13 @@ class EndToEnd(Method):
         return dq, dp
 
     @torch.no_grad()
-    def _regress_direct(self, seq: Sequence, starts: np.ndarray, n: int) -> Tuple[np.ndarray, np.ndarray]:
+    def _regress_direct(self, seq: Sequence, starts: np.ndarray, n: int,
+                        horizon: Optional[int] = None) -> Tuple[np.ndarray, np.ndarray]:
+        """n samples from each start fed to the net of ``horizon`` (default :meth:`horizon_for` (n))."""
         if len(starts) and (starts.min() < 0 or starts.max() + n > len(seq)):
             raise ValueError(f"end-to-end: windows of {n} samples from the given starts leave the sequence ({len(seq)} samples)")
-        self.net.eval()
+        net = self.nets[self.horizon_for(n) if horizon is None else int(horizon)]
+        net.eval()
         raw = np.c_[seq.gyro, seq.acc].astype(np.float32)
         x_all = torch.from_numpy(raw).to(self.device)
         cols = torch.arange(n, device=self.device)
@@ -266,7 +322,7 @@ class EndToEnd(Method):
         for a in range(0, len(starts), bs):
             st = torch.as_tensor(starts[a:a + bs], device=self.device)
             x = x_all[st[:, None] + cols[None, :]]  # (b, n, 6)
-            phi, dp = self.net(x)
+            phi, dp = net(x)
             qs.append(so3_exp(phi.double()).cpu().numpy())
             ps.append(dp.double().cpu().numpy())
         if not qs:
@@ -289,18 +345,22 @@ class EndToEnd(Method):
         path.parent.mkdir(parents=True, exist_ok=True)
         cfg = asdict(self.config)
         torch.save({"format": FORMAT, "config": cfg, "window": int(self.window),
-                    "state": {k: v.detach().cpu() for k, v in self.net.state_dict().items()}}, path)
+                    "nets": {int(h): {k: v.detach().cpu() for k, v in net.state_dict().items()}
+                             for h, net in self.nets.items()}}, path)
 
     def load(self, path: Path) -> EndToEnd:
         d = torch.load(Path(path), map_location="cpu", weights_only=True)
-        if not isinstance(d, dict) or d.get("format") != FORMAT:
+        if not isinstance(d, dict) or d.get("format") not in (FORMAT, FORMAT_V1):
             raise ValueError(f"{path}: not an end-to-end baseline file ({FORMAT})")
         cfg = dict(d["config"])
         cfg["augment"] = AugmentConfig(**cfg.get("augment", {}))
         self.config = EndToEndConfig(**cfg)
         c = self.config
-        self.net = EndToEndNet(c.hidden, c.layers, c.fc, c.dropout)
-        self.net.load_state_dict(d["state"])
-        self.net.to(self.device).eval()
         self.window = int(d["window"])
+        states = d["nets"] if d["format"] == FORMAT else {self.window: d["state"]}
+        self.nets = {}
+        for h, state in states.items():
+            net = EndToEndNet(c.hidden, c.layers, c.fc, c.dropout)
+            net.load_state_dict(state)
+            self.nets[int(h)] = net.to(self.device).eval()
         return self

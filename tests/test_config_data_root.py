@@ -1,0 +1,158 @@
+"""The data root: relative data.roots paths are taken from it; --data.data_root beats the
+environment variable IMU_LEARN_DATA, which beats the config file's value; a missing recording is a
+one-line error that says how to set it."""
+import json
+from pathlib import Path
+
+import pytest
+
+from imu_learn import evaluate as ev
+from imu_learn import fit
+from imu_learn.config import ConfigError, load_config
+from imu_learn.splits import DataPathError, make_split
+
+REPO = Path(__file__).resolve().parent.parent
+CROPS = REPO / "datasets" / "euroc"
+ENV = "IMU_LEARN_DATA"
+
+# The shipped crops, addressed relative to a data root (a folder that holds euroc/<SEQ>).
+CONFIG = """
+name = "dr"
+[data]
+{data_root}
+[[data.roots]]
+path = "euroc/MH_01_easy"
+[[data.roots]]
+path = "euroc/V1_01_easy"
+groundtruth = "euroc/V1_01_easy/groundtruth_state_20hz.csv"
+max_gap_s = 0.06
+[data.split]
+train = ["MH_01_easy[0:0.8]"]
+val = ["MH_01_easy[0.8:1]"]
+test = ["V1_01_easy"]
+"""
+
+
+def _root(base: Path) -> Path:
+    """A data root at ``base`` holding the shipped crops (symlinked)."""
+    (base / "euroc").mkdir(parents=True)
+    for seq in ("MH_01_easy", "V1_01_easy"):
+        (base / "euroc" / seq).symlink_to(CROPS / seq, target_is_directory=True)
+    return base
+
+
+@pytest.fixture
+def roots(tmp_path, monkeypatch):
+    """(good data root, a data root without the recordings, a config file without data_root);
+    the working directory is elsewhere, so nothing resolves from it or by accident."""
+    monkeypatch.delenv(ENV, raising=False)
+    good = _root(tmp_path / "data")
+    empty = tmp_path / "empty"
+    empty.mkdir()
+    work = tmp_path / "work"
+    work.mkdir()
+    monkeypatch.chdir(work)
+    cfg = tmp_path / "dr.toml"
+    cfg.write_text(CONFIG.format(data_root=""))
+    return good, empty, cfg
+
+
+def test_env_var_sets_the_data_root(roots, monkeypatch):
+    good, _, cfg = roots
+    with pytest.raises(DataPathError):  # without a data root the relative paths are found nowhere
+        make_split(load_config(cfg).data)
+    monkeypatch.setenv(ENV, str(good))
+    c = load_config(cfg)
+    assert c.data.data_root == str(good)
+    split = make_split(c.data)
+    assert [s.name.split("[")[0] for s in split.train] == ["MH_01_easy"] and split.test
+    assert split.record["data_root"] == str(good.resolve())
+    test_row = split.record["test"][0]
+    assert test_row["path"] == str(good.resolve() / "euroc" / "V1_01_easy")
+    assert test_row["groundtruth_path"] == str(good.resolve() / "euroc" / "V1_01_easy" / "groundtruth_state_20hz.csv")
+
+
+def test_cli_beats_env(roots, monkeypatch):
+    good, empty, cfg = roots
+    monkeypatch.setenv(ENV, str(empty))
+    with pytest.raises(DataPathError, match=str(empty)):
+        make_split(load_config(cfg).data)
+    c = load_config(cfg, ["--data.data_root", str(good)])
+    assert c.data.data_root == str(good)
+    assert make_split(c.data).record["data_root"] == str(good.resolve())
+    # the same in imu_learn.evaluate (its [data] goes to the same DataConfig)
+    ecfg = cfg.parent / "eval_dr.toml"
+    ecfg.write_text(f'base = "{cfg.name}"\nmethods = ["raw"]\n')
+    assert ev.load_eval_config(ecfg).run.data.data_root == str(empty)
+    assert ev.load_eval_config(ecfg, ["--data.data_root", str(good)]).run.data.data_root == str(good)
+
+
+def test_config_value_and_env_over_it(roots, monkeypatch):
+    good, empty, cfg = roots
+    cfg.write_text(CONFIG.format(data_root=f'data_root = "{good}"'))
+    c = load_config(cfg)
+    assert c.data.data_root == str(good)
+    assert make_split(c.data).record["data_root"] == str(good.resolve())
+    monkeypatch.setenv(ENV, str(empty))
+    assert load_config(cfg).data.data_root == str(empty)  # the environment beats the file
+    monkeypatch.setenv(ENV, "")  # empty: unset
+    assert load_config(cfg).data.data_root == str(good)
+
+
+def test_relative_data_root_from_the_working_directory(roots, monkeypatch):
+    good, _, cfg = roots
+    monkeypatch.chdir(good.parent)
+    c = load_config(cfg, ["--data.data_root", good.name])
+    assert make_split(c.data).record["data_root"] == str(good.resolve())
+
+
+def test_missing_recording_is_a_one_line_error(roots, monkeypatch, capsys):
+    good, empty, cfg = roots
+    monkeypatch.setenv(ENV, str(empty))
+    with pytest.raises(DataPathError) as ei:
+        make_split(load_config(cfg).data)
+    msg = str(ei.value)
+    assert isinstance(ei.value, ConfigError) and isinstance(ei.value, FileNotFoundError)
+    assert "\n" not in msg
+    assert msg.startswith("data.roots[0].path: 'euroc/MH_01_easy' not found")
+    assert str(empty.resolve() / "euroc" / "MH_01_easy") in msg  # the path tried under the data root
+    assert "IMU_LEARN_DATA" in msg and "--data.data_root" in msg
+    # no data root at all: the message says so
+    monkeypatch.delenv(ENV)
+    with pytest.raises(DataPathError, match=r"no data root set.*IMU_LEARN_DATA=DIR or --data.data_root DIR"):
+        make_split(load_config(cfg).data)
+    # a missing ground-truth file names its own key
+    monkeypatch.setenv(ENV, str(good))
+    c = load_config(cfg, ["--data.roots", '[{path = "euroc/MH_01_easy"}, '
+                          '{path = "euroc/V1_01_easy", groundtruth = "euroc/V1_01_easy/nope.csv"}]'])
+    with pytest.raises(DataPathError, match=r"^data\.roots\[1\]\.groundtruth: 'euroc/V1_01_easy/nope\.csv' not found"):
+        make_split(c.data)
+    # the command: exit status 2 and the one line
+    monkeypatch.setenv(ENV, str(empty))
+    capsys.readouterr()
+    assert fit.main(["--config", str(cfg), "--run-dir", str(good.parent / "run")]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "data.roots[0].path" in err[0] and "IMU_LEARN_DATA" in err[0], err
+
+
+def test_split_json_records_the_data_root(roots, monkeypatch):
+    from imu_learn.splits import write_split
+
+    good, _, cfg = roots
+    monkeypatch.setenv(ENV, str(good))
+    out = good.parent / "split.json"
+    write_split(make_split(load_config(cfg).data), out)
+    assert json.loads(out.read_text())["data_root"] == str(good.resolve())
+
+
+def test_default_config_keeps_working_with_a_data_root_set(roots, monkeypatch):
+    """The default run's crops (datasets/..., from the repository) still resolve when a data root
+    is set that does not hold them; with none set they resolve as before."""
+    good, _, _ = roots
+    monkeypatch.setenv(ENV, str(good))
+    c = load_config()
+    assert c.data.data_root == str(good)
+    split = make_split(c.data)
+    assert split.record["test"][0]["path"] == str(REPO / "datasets" / "euroc" / "V1_01_easy")
+    monkeypatch.delenv(ENV)
+    assert make_split(load_config().data).record["data_root"] is None

@@ -1,0 +1,271 @@
+"""The pretrained models in models/: every shipped checkpoint loads, refines the shipped crop of its
+device through the CLI, is small, has a complete model card, and does not make its test crop worse.
+
+The parametrised tests run over ``models/*.pt`` as found at collection time (none: no cases), and
+models/README.md is checked against the folder both ways, so a model it names cannot go missing
+silently. The same checks, and ``python -m imu_learn.checkpoint strip``, are exercised on a
+throwaway checkpoint from a few training steps on the crops, so they are tested before any model
+is shipped.
+"""
+import json
+import math
+import re
+import shutil
+from pathlib import Path
+
+import numpy as np
+import pytest
+import torch
+
+from imu_learn import _imu_core as core
+from imu_learn import fit, load_recording
+from imu_learn.checkpoint import CheckpointError, describe, load_checkpoint, load_model, strip_checkpoint
+from imu_learn.checkpoint import main as checkpoint_main
+from imu_learn.model_check import compare_with_raw, format_comparison
+from imu_learn.refine import main as refine_main
+
+torch.set_num_threads(1)
+
+REPO = Path(__file__).resolve().parent.parent
+MODELS = REPO / "models"
+CHECKPOINTS = sorted(MODELS.glob("*.pt"))
+IMU_REL = Path("mav0") / "imu0" / "data.csv"
+MAX_MODEL_BYTES = 5_000_000
+# A shipped model may not make its test crop worse: refined/raw relative pose RMSE (start-up bias
+# removed) at most this, at every horizon of its final table that fits the crop, for rotation and
+# translation (rotation only for a gyro-only model; see claimed()). The 1 % only absorbs figures
+# that are equal to print precision (e.g. TUM-VI over 10 samples, where the mocap's orientation
+# noise dominates); a model that helps is well below 1.
+NOT_WORSE = 1.01
+
+EUROC = REPO / "datasets" / "euroc" / "V1_01_easy"
+TUMVI = REPO / "datasets" / "tum-vi" / "dataset-room2_512_16"
+# Test crop per device: (recording, format, ground truth, max ground-truth gap [s]). V1_01 is a
+# test sequence of EuRoC's standard split, scored against its ASL full state (20 Hz) as the
+# default run does; room2 is a test room of TUM-VI's standard split.
+CROPS = {
+    "euroc": (EUROC, "euroc", EUROC / "groundtruth_state_20hz.csv", 0.06),
+    "tumvi": (TUMVI, "tum-vi", None, 0.05),
+}
+
+
+def device_of(ckpt: Path):
+    """'euroc', 'tumvi', or None (a model of another device: only the format round trip, on EuRoC)."""
+    for key in CROPS:
+        if ckpt.stem.startswith(key):
+            return key
+    return None
+
+
+def crop_of(ckpt: Path) -> Path:
+    key = device_of(ckpt)
+    return CROPS[key][0] if key else EUROC
+
+
+def card_sections(text: str):
+    return [ln.strip() for ln in text.splitlines() if ln.startswith("## ")]
+
+
+def refine_and_check_crop(ckpt: Path, crop: Path, out: Path) -> np.ndarray:
+    """Refine ``crop`` with ``ckpt`` through the CLI entry point; the output must be the input's ASL
+    format (same header, same stamps) with finite values. Returns the refined (N, 6)."""
+    assert refine_main(["--checkpoint", str(ckpt), "--input", str(crop), "--output", str(out), "--quiet"]) == 0
+    src, dst = crop / IMU_REL, out / IMU_REL
+    assert dst.is_file()
+    assert core.read_asl_imu_header(str(dst)) == core.read_asl_imu_header(str(src))
+    t_in, g_in, _a_in = core.read_asl_imu(str(src))
+    t_out, g_out, a_out = core.read_asl_imu(str(dst))
+    assert np.array_equal(t_out, t_in)
+    assert g_out.shape == g_in.shape and a_out.shape == g_in.shape
+    refined = np.c_[g_out, a_out]
+    assert np.isfinite(refined).all()
+    return refined
+
+
+def compare(ckpt: Path, horizons=(10, 200)):
+    rec, fmt, gt, gap = CROPS[device_of(ckpt) or "euroc"]
+    return compare_with_raw(ckpt, rec, fmt, groundtruth=gt, horizons=horizons, max_gap_s=gap)
+
+
+def claimed(state, t_ns: np.ndarray):
+    """What a model claims to improve, from its run config: the final table's horizons
+    (``data.eval_horizons``, default 10 and 200) that fit in the crop after the start-up bias
+    block, and rotation and translation, or rotation alone for a gyro-only model or one selected
+    on rotation only."""
+    cfg = state.get("config") or {}
+    data, optim = cfg.get("data") or {}, cfg.get("optim") or {}
+    first = int(np.searchsorted(t_ns, t_ns[0] + int(round(float(data.get("startup_bias_s", 10.0)) * 1e9))))
+    room = len(t_ns) - first
+    horizons = [int(n) for n in data.get("eval_horizons", (10, 200)) if int(n) < room]
+    gyro_only = state["model_args"].get("refine") == "gyro" or optim.get("select_terms") == "rot"
+    return horizons, ("rot",) if gyro_only else ("rot", "trans")
+
+
+# ---------------------------------------------------------------------------------------------
+# the shipped models (no cases until models/*.pt exist)
+
+
+@pytest.mark.parametrize("ckpt", CHECKPOINTS, ids=[c.name for c in CHECKPOINTS])
+def test_shipped_model_is_small_and_loads(ckpt):
+    assert ckpt.stat().st_size < MAX_MODEL_BYTES, f"{ckpt.name}: {ckpt.stat().st_size / 1e6:.2f} MB"
+    state = load_checkpoint(ckpt)
+    assert state["optimizer"] is None, f"{ckpt.name}: strip it (python -m imu_learn.checkpoint strip)"
+    load_model(ckpt)
+
+
+@pytest.mark.parametrize("ckpt", CHECKPOINTS, ids=[c.name for c in CHECKPOINTS])
+def test_shipped_model_refines_its_crop(ckpt, tmp_path):
+    refine_and_check_crop(ckpt, crop_of(ckpt), tmp_path / "out")
+
+
+@pytest.mark.parametrize("ckpt", CHECKPOINTS, ids=[c.name for c in CHECKPOINTS])
+def test_shipped_model_has_a_complete_card(ckpt):
+    card = ckpt.with_suffix(".md")
+    assert card.is_file(), f"{ckpt.name}: no model card {card.name} (copy models/CARD_TEMPLATE.md)"
+    text = card.read_text()
+    want = card_sections((MODELS / "CARD_TEMPLATE.md").read_text())
+    missing = [s for s in want if s not in card_sections(text)]
+    assert not missing, f"{card.name}: missing sections {missing}"
+    assert "TODO" not in text, f"{card.name}: still has TODO placeholders"
+
+
+IMPROVERS = [c for c in CHECKPOINTS if device_of(c)]
+
+
+@pytest.mark.parametrize("ckpt", IMPROVERS, ids=[c.name for c in IMPROVERS])
+def test_shipped_model_does_not_make_its_test_crop_worse(ckpt):
+    t_ns, _g, _a = core.read_asl_imu(str(crop_of(ckpt) / IMU_REL))
+    horizons, terms = claimed(load_checkpoint(ckpt), t_ns)
+    assert horizons, f"{ckpt.name}: no horizon of its config fits the crop"
+    res = compare(ckpt, horizons)
+    worse = {(n, k): round(r, 4) for n, rk in res["ratio"]["bias_removed"].items() for k, r in rk.items()
+             if k in terms and not r <= NOT_WORSE}
+    assert not worse, f"{ckpt.name} makes {res['recording']} worse (refined/raw): {worse}\n{format_comparison(res)}"
+
+
+def readme_checkpoints():
+    """The checkpoints of models/README.md's index table (first cell of a row: `name.pt`)."""
+    return sorted(set(re.findall(r"^\|\s*`([\w.-]+\.pt)`", (MODELS / "README.md").read_text(), re.MULTILINE)))
+
+
+@pytest.mark.xfail(not CHECKPOINTS, strict=True,
+                   reason="no model trained yet: models/README.md names checkpoints that are still to come")
+def test_readme_names_only_checkpoints_that_exist():
+    named = readme_checkpoints()
+    assert named, "models/README.md names no checkpoint"
+    missing = [n for n in named if not (MODELS / n).is_file()]
+    assert not missing, f"models/README.md names checkpoints that are not in models/: {missing}"
+
+
+def test_readme_indexes_every_shipped_checkpoint():
+    named = set(readme_checkpoints())
+    assert not [c.name for c in CHECKPOINTS if c.name not in named]
+    assert (MODELS / "CARD_TEMPLATE.md").is_file()
+
+
+# ---------------------------------------------------------------------------------------------
+# the shipped TUM-VI crop
+
+
+def test_tumvi_crop_loads_as_one_gap_free_segment():
+    files = [TUMVI / "mav0" / d / "data.csv" for d in ("imu0", "mocap0")]
+    assert sum(f.stat().st_size for f in files) < 1_500_000
+    rec = load_recording(TUMVI, "tum-vi")
+    assert len(rec.segments) == 1 and not rec.report["gaps_ns"]
+    seq = rec.segments[0]
+    assert 30.0 <= seq.duration_s <= 40.0
+    assert np.isfinite(seq.gyro).all() and np.isfinite(seq.p).all()
+
+
+# ---------------------------------------------------------------------------------------------
+# the same checks, and strip, on a throwaway checkpoint
+
+
+TINY = [
+    "--no-progress", "--data.window", "50", "--data.batch_size", "8", "--data.val_stride", "200",
+    "--data.eval_stride", "50", "--model.hidden", "8", "--model.fc", "8", "--model.layers", "1",
+    "--optim.steps_per_epoch", "2", "--optim.epochs", "1", "--optim.lr", "1e-3", "--seed", "7", "--threads", "1",
+]
+
+
+@pytest.fixture(scope="module")
+def run_dir(tmp_path_factory):
+    d = tmp_path_factory.mktemp("models") / "run"
+    assert fit.main(["--run-dir", str(d), *TINY]) == 0
+    return d
+
+
+def test_strip_keeps_what_inference_needs_and_refines_bit_identically(run_dir, tmp_path):
+    # the original, refined from the run folder
+    for name, crop in (("euroc", EUROC), ("tumvi", TUMVI)):
+        refine_and_check_crop(run_dir / "best.pt", crop, tmp_path / f"orig_{name}")
+    # a stripped copy, alone (the run folder gone), named like a shipped model
+    copy = tmp_path / "run_copy"
+    shutil.copytree(run_dir, copy)
+    shipped = tmp_path / "models" / "euroc_test.pt"
+    strip_checkpoint(copy / "best.pt", shipped)
+    shutil.rmtree(copy)
+
+    full, small = load_checkpoint(run_dir / "best.pt"), load_checkpoint(shipped)
+    assert small["optimizer"] is None and full["optimizer"] is not None
+    assert "history" not in small["extra"] and small["extra"]["stripped_from"] == "run_copy/best.pt"
+    for k in ("format", "code_version", "model_args", "config", "epoch", "step", "best_metric"):
+        assert small[k] == full[k], k
+    assert small["model"].keys() == full["model"].keys()
+    assert all(torch.equal(small["model"][k], full["model"][k]) for k in full["model"])
+    assert shipped.stat().st_size < (run_dir / "best.pt").stat().st_size
+    assert describe(small)["has_optimizer"] is False
+
+    for name, crop in (("euroc", EUROC), ("tumvi", TUMVI)):
+        refine_and_check_crop(shipped, crop, tmp_path / f"small_{name}")
+        assert (tmp_path / f"small_{name}" / IMU_REL).read_bytes() == (tmp_path / f"orig_{name}" / IMU_REL).read_bytes()
+
+
+def test_strip_cli(run_dir, tmp_path, capsys):
+    dst = tmp_path / "m.pt"
+    assert checkpoint_main(["strip", str(run_dir / "best.pt"), str(dst)]) == 0
+    assert "MB" in capsys.readouterr().out
+    assert load_checkpoint(dst)["optimizer"] is None
+    assert checkpoint_main(["info", str(dst)]) == 0
+    assert '"model_args"' in capsys.readouterr().out
+    # never over its own source, never from a missing or broken file; one line, status 2
+    assert checkpoint_main(["strip", str(dst), str(dst)]) == 2
+    assert checkpoint_main(["strip", str(tmp_path / "nope.pt"), str(tmp_path / "x.pt")]) == 2
+    (tmp_path / "bad.pt").write_bytes(b"not a checkpoint")
+    assert checkpoint_main(["strip", str(tmp_path / "bad.pt"), str(tmp_path / "x.pt")]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 3 and "CheckpointError" in err and not (tmp_path / "x.pt").exists()
+    with pytest.raises(CheckpointError):
+        strip_checkpoint(dst, dst)
+
+
+def test_compare_with_raw_matches_the_trainers_table(run_dir, tmp_path):
+    """compare_with_raw scores raw IMU exactly as the trainer's final table (same crop, settings
+    from the checkpoint's config); refined figures are finite and near (different windowing)."""
+    shipped = tmp_path / "euroc_test.pt"
+    strip_checkpoint(run_dir / "best.pt", shipped)
+    res = compare(shipped)
+    table = json.loads((run_dir / "results.json").read_text())["table"]
+    assert res["settings"]["stride"] == 50 and res["segments"] == ["V1_01_easy"]
+    for n in ("10", "200"):
+        for col in ("open_loop", "bias_removed"):
+            for key in ("rot_rad", "trans_m"):
+                assert res["raw"][col][n][key] == pytest.approx(table["raw"][col][n][key], rel=1e-12)
+                assert res["refined"][col][n][key] == pytest.approx(table["model"][col][n][key], rel=1e-2)
+            assert math.isfinite(res["ratio"][col][n]["rot"]) and math.isfinite(res["ratio"][col][n]["trans"])
+    assert "bias_removed n=200" in format_comparison(res)
+
+    shutil.copy(shipped, tmp_path / "tumvi_test.pt")
+    res = compare(tmp_path / "tumvi_test.pt")
+    assert res["segments"] == ["dataset-room2_512_16"] and res["raw"]["bias_removed"]["200"]["windows"] > 80
+    # a few steps from the identity start barely change the IMU: ratios near 1 either way
+    assert all(abs(r - 1) < 0.05 for rk in res["ratio"]["bias_removed"].values() for r in rk.values())
+
+
+def test_claimed_follows_the_models_config(run_dir):
+    state = load_checkpoint(run_dir / "best.pt")
+    t_ns, _g, _a = core.read_asl_imu(str(TUMVI / IMU_REL))  # 34 s at 200 Hz, 24 s after the bias block
+    assert claimed(state, t_ns) == ([10, 200], ("rot", "trans"))
+    state["config"]["data"]["eval_horizons"] = [10, 200, 1000, 4000, 5000]
+    state["model_args"]["refine"] = "gyro"
+    assert claimed(state, t_ns) == ([10, 200, 1000, 4000], ("rot",))
