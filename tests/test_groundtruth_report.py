@@ -1,0 +1,91 @@
+"""bench/groundtruth_report.py's fits on synthetic recordings with a known answer.
+
+The IMU is the exact, instantaneous angular rate (point samples at their stamps, plus a bias and a
+little noise) of a closed-form wobbling rotation; the ground truth is the same motion seen from a
+body frame rotated by R_off and stamped τ late: q_gt(t) = q_imu(t − τ) ⊗ q_off, so ω_imu = R_off ω_gt.
+"""
+from __future__ import annotations
+
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from imu_learn.types import Sequence
+from synthetic import G, axis_angle, qconj, qmul, rotate, stamps
+
+REPO = Path(__file__).resolve().parent.parent
+sys.path.insert(0, str(REPO / "bench"))
+
+import groundtruth_report as gr  # noqa: E402
+
+BIAS = np.array([0.01, -0.02, 0.03])
+OFF_AXIS, OFF_ANGLE = np.array([0.3, -1.0, 0.5]), np.radians(3.0)
+
+
+def motion(t: np.ndarray) -> np.ndarray:
+    """Orientation (w,x,y,z) at arbitrary times: yaw ramp plus wobbles about three axes."""
+    return qmul(qmul(axis_angle([0.0, 0.0, 1.0], 0.5 * t + 0.4 * np.sin(1.7 * t)),
+                     axis_angle([1.0, -1.0, 0.0], 0.3 * np.sin(2.3 * t + 0.4))),
+                axis_angle([1.0, 1.0, 0.5], 0.25 * np.sin(3.1 * t + 1.0)))
+
+
+def position(t: np.ndarray, deriv: int = 0) -> np.ndarray:
+    """IMU position (or its derivatives) in the world: a slow Lissajous curve."""
+    w = np.array([0.9, 1.3, 1.1])
+    amp = np.array([1.0, 0.7, 0.3])
+    return amp * w**deriv * np.sin(w * t[:, None] + deriv * np.pi / 2)
+
+
+def body_rate(t: np.ndarray, eps: float = 1e-5) -> np.ndarray:
+    """Instantaneous body angular rate by a central difference of the closed form."""
+    d = qmul(qconj(motion(t - eps)), motion(t + eps))
+    return 2 * d[:, 1:] * np.sign(d[:, :1]) / (2 * eps)
+
+
+def recording(tau_s: float, lever=(0.0, 0.0, 0.0), seconds: float = 30.0, seed: int = 0) -> Sequence:
+    t_ns = stamps(seconds)
+    t = (t_ns - t_ns[0]) * 1e-9
+    q_off = axis_angle(OFF_AXIS, OFF_ANGLE)
+    q_gt = qmul(motion(t - tau_s), np.broadcast_to(q_off, (len(t), 4)))
+    rng = np.random.default_rng(seed)
+    gyro = body_rate(t) + BIAS + 0.003 * rng.standard_normal((len(t), 3))
+    q = motion(t)
+    acc = rotate(qconj(q), position(t, 2) + np.array([0.0, 0.0, G]))
+    p_gt = position(t - tau_s) - rotate(q_gt, np.broadcast_to(np.asarray(lever, dtype=float), (len(t), 3)))
+    return Sequence("synthetic", t_ns, gyro, acc, p_gt, np.zeros_like(p_gt), q_gt)
+
+
+def rotation_matrix(q: np.ndarray) -> np.ndarray:
+    return np.stack([rotate(q, e) for e in np.eye(3)], axis=1)
+
+
+@pytest.mark.parametrize("tau_s", [0.0075, -0.0120, 0.0])
+def test_fit_offset_recovers_rotation_time_offset_and_bias(tau_s):
+    off = gr.fit_offset([recording(tau_s)])
+    truth = rotation_matrix(axis_angle(OFF_AXIS, OFF_ANGLE))
+    err_deg, _ = gr.angle_axis(off.r_off.T @ truth)
+    assert err_deg < 0.02
+    assert gr.angle_axis(off.r_off)[0] == pytest.approx(3.0, abs=0.02)
+    assert off.tau_s == pytest.approx(tau_s, abs=3e-4)
+    np.testing.assert_allclose(off.gyro_bias, BIAS, atol=5e-4)
+
+
+def test_fit_offset_sees_no_offset_where_there_is_none():
+    seq = recording(0.0)
+    seq = Sequence(seq.name, seq.t_ns, seq.gyro, seq.acc, seq.p, seq.v, motion((seq.t_ns - seq.t_ns[0]) * 1e-9))
+    off = gr.fit_offset([seq])
+    assert gr.angle_axis(off.r_off)[0] < 0.02
+    assert abs(off.tau_s) < 3e-4
+
+
+def test_fit_lever_arm_recovers_a_known_lever_arm():
+    lever = np.array([0.05, -0.03, 0.02])
+    seq = recording(0.0, lever=lever)
+    # IMU rotated into the GT body frame, as score_gt does with the fitted R_off
+    r = rotation_matrix(axis_angle(OFF_AXIS, OFF_ANGLE))
+    seq = Sequence(seq.name, seq.t_ns, seq.gyro @ r, seq.acc @ r, seq.p, seq.v, seq.q_wxyz)
+    est, se = gr.fit_lever_arm([seq], r.T @ BIAS)
+    np.testing.assert_allclose(est, lever, atol=2e-3)
+    assert np.all(se < 2e-3)
