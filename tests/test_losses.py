@@ -141,3 +141,36 @@ def test_loss_gradient_wrt_model_params_is_finite(real_windows, shipped):
     total.backward()
     assert all(torch.isfinite(p.grad).all() for p in model.parameters())
     assert model.head.weight.grad.abs().sum() > 0
+
+
+def test_inverse_horizon_scale_weighs_a_short_horizon_like_the_full_window():
+    """With horizon_scale = "inverse" a residual at a fifth of the window costs what a five times
+    larger residual at the full window does (quadratic branch); with "none" it costs 25x less."""
+    W = 200
+    t_ns, gyro, acc = closed_form_window(W)
+    inc = il.preintegrate(t_ns, gyro, acc)
+    dt = torch.from_numpy(np.diff(t_ns) * 1e-9)[None]
+    true = torch.from_numpy(np.concatenate([gyro[:W], acc[:W]], -1))[None]
+    off = {"w_q": 0.0, "w_v": 0.0, "w_reg": 0.0, "huber_p": 1e3}  # position term only, quadratic branch
+
+    def p_loss(h, scale, dp_err):
+        hs = np.array([h])
+        dp = inc.dp[hs][None] + dp_err
+        total, _ = imu_loss(true, true, dt, inc.dq_wxyz[hs][None], inc.dv[hs][None], dp, hs, None,
+                            LossConfig(bias_aware=False, horizon_scale=scale, **off))
+        return float(total)
+
+    e = np.array([[[1e-3, 0.0, 0.0]]])
+    # a single horizon is its own longest: scale 1
+    assert p_loss(40, "inverse", e) == pytest.approx(p_loss(40, "none", e), rel=1e-9)
+
+    def two(scale):
+        hs = np.array([40, 200])
+        dp = inc.dp[hs][None] + np.array([[[1e-3, 0, 0], [0, 0, 0]]])
+        total, _ = imu_loss(true, true, dt, inc.dq_wxyz[hs][None], inc.dv[hs][None], dp, hs, None,
+                            LossConfig(bias_aware=False, horizon_scale=scale, **off))
+        return float(total)
+
+    assert two("inverse") == pytest.approx(25.0 * two("none"), rel=1e-9)
+    with pytest.raises(ValueError, match="horizon_scale"):
+        two("sqrt")

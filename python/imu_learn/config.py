@@ -393,6 +393,8 @@ def validate(cfg: RunConfig) -> None:
     need(cfg.device == "auto" or cfg.device == "cpu" or cfg.device.startswith("cuda"), "device",
          f"expected auto, cpu, cuda or cuda:N, got {cfg.device!r}")
     need(cfg.model.layers >= 1 and cfg.model.hidden >= 1 and cfg.model.fc >= 1, "model", "sizes must be >= 1")
+    need(cfg.loss.horizon_scale in ("none", "inverse"), "loss.horizon_scale",
+         f"must be none or inverse, got {cfg.loss.horizon_scale!r}")
     need(cfg.model.refine in REFINE_CHANNELS, "model.refine",
          f"must be one of {', '.join(REFINE_CHANNELS)}, got {cfg.model.refine!r}")
 

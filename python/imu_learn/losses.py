@@ -53,6 +53,11 @@ class LossConfig:
     reg_gyro: float = 0.05  # λ for the gyro channels [rad/s]
     reg_acc: float = 0.5  # λ for the accelerometer channels [m/s²]
     bias_aware: bool = True  # the paper's bias-augmented loss: integrate (û − b)
+    # Residual scaling per horizon: "none" (the paper: every horizon's residual as it is, so the
+    # longest horizons, whose residuals are largest, dominate) or "inverse" (each residual divided
+    # by its horizon's fraction of the longest one, so a 10-sample horizon pulls as hard as the
+    # full window: for models scored over short horizons, e.g. the paper's Table II, n = 10).
+    horizon_scale: str = "none"
 
 
 def huber_norm(r: Tensor, delta: float) -> Tensor:
@@ -108,9 +113,16 @@ def imu_loss(
     inc = integrate(u[..., :3], u[..., 3:], dt_t, horizons)
 
     r_q = so3_log(quat_mul(dq_s, quat_conj(inc.dq_wxyz)))  # (B, H, 3)
+    r_v, r_p = dv_s - inc.dv, dp_s - inc.dp
+    if cfg.horizon_scale == "inverse":
+        h = torch.as_tensor([float(x) for x in horizons], dtype=r_q.dtype, device=r_q.device)
+        scale = (h.max() / h)[:, None]  # (H, 1)
+        r_q, r_v, r_p = r_q * scale, r_v * scale, r_p * scale
+    elif cfg.horizon_scale != "none":
+        raise ValueError(f"loss.horizon_scale: must be none or inverse, got {cfg.horizon_scale!r}")
     l_q = huber_norm(r_q, cfg.huber_q).sum(-1).mean()
-    l_v = huber_norm(dv_s - inc.dv, cfg.huber_v).sum(-1).mean()
-    l_p = huber_norm(dp_s - inc.dp, cfg.huber_p).sum(-1).mean()
+    l_v = huber_norm(r_v, cfg.huber_v).sum(-1).mean()
+    l_p = huber_norm(r_p, cfg.huber_p).sum(-1).mean()
 
     lam = refined.new_tensor([cfg.reg_gyro] * 3 + [cfg.reg_acc] * 3)
     l_reg = dead_zone(raw_t - refined, lam).sum(-1).mean()
