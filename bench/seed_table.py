@@ -46,6 +46,11 @@ def spread(xs: List[float]) -> str:
     return f"{statistics.mean(xs):.4g} ± {statistics.stdev(xs):.2g} ({min(xs):.4g}–{max(xs):.4g})"
 
 
+def cell_of(res: Dict[str, Any], rec: str, row: str, col: str, n: int, key: str) -> float:
+    src = res["rows"] if rec == "pooled" else res["per_recording"][rec]
+    return src[row][col][str(n)][key]
+
+
 def table(results: List[Dict[str, Any]], horizons: List[int]) -> str:
     recs = list(results[0]["per_recording"])
     lines = ["| recording | protocol | n | raw rot [deg] | model rot [deg] | ratio | raw trans [m] | model trans [m] | ratio |",
@@ -55,11 +60,8 @@ def table(results: List[Dict[str, Any]], horizons: List[int]) -> str:
             for n in horizons:
                 cell = []
                 for key in ("rot_deg", "trans_m"):
-                    def get(r, row):
-                        src = r["rows"] if rec == "pooled" else r["per_recording"][rec]
-                        return src[row][col][str(n)][key]
-                    raw = [get(r, "raw") for r in results]
-                    mod = [get(r, "model") for r in results]
+                    raw = [cell_of(r, rec, "raw", col, n, key) for r in results]
+                    mod = [cell_of(r, rec, "model", col, n, key) for r in results]
                     cell += [f"{raw[0]:.4g}", spread(mod), spread([m / a for m, a in zip(mod, raw)])]
                 lines.append(f"| {rec} | {col.replace('_', ' ')} | {n} | " + " | ".join(cell) + " |")
     return "\n".join(lines)
