@@ -64,6 +64,9 @@ class RootConfig:
     # Ground-truth stamps further apart than this split a recording (AlignOptions.max_gap_s);
     # raise it for sparse ground truth, e.g. 0.06 for EuRoC's 20 Hz ASL state files.
     max_gap_s: float = 0.05
+    # Added to the ground truth's stamps (AlignOptions.gt_time_offset_s) where its clock is measured
+    # to be off the IMU's (bench/groundtruth_report.py: a ground truth late by tau gets -tau).
+    gt_time_offset_s: float = 0.0
 
 
 @dataclass
@@ -142,6 +145,10 @@ class OptimConfig:
     # e.g. a gyro-only model). The score is the worst model/raw ratio over horizons and terms.
     select_horizons: List[int] = field(default_factory=list)
     select_terms: str = "rot+trans"
+    # How the validation recordings are combined per horizon and term: "pooled" (one RMSE over every
+    # window of every validation sequence) or "recordings" (the geometric mean over recordings of
+    # each one's model/raw ratio: every recording counts alike, as the paper's "Average" row).
+    select_average: str = "pooled"
 
 
 @dataclass
@@ -388,6 +395,8 @@ def validate(cfg: RunConfig) -> None:
     need(all(n >= 1 for n in o.select_horizons), "optim.select_horizons", "each horizon must be >= 1 sample")
     need(o.select_terms in SELECT_TERMS, "optim.select_terms",
          f"must be one of {', '.join(SELECT_TERMS)}, got {o.select_terms!r}")
+    need(o.select_average in ("pooled", "recordings"), "optim.select_average",
+         f"must be pooled or recordings, got {o.select_average!r}")
     need(o.select in SELECT_METRICS, "optim.select", f"must be one of {', '.join(SELECT_METRICS)}, got {o.select!r}")
     need(cfg.threads >= 1, "threads", "must be at least 1")
     need(cfg.device == "auto" or cfg.device == "cpu" or cfg.device.startswith("cuda"), "device",

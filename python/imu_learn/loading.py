@@ -27,6 +27,7 @@ class AlignOptions:
     max_gap_s: float = 0.05
     min_segment_s: float = 1.0
     velocity_half_window: int = 4
+    gt_time_offset_s: float = 0.0
 
 
 def read_imu(path: PathLike, allow_float_timestamps: bool = False) -> ImuData:
@@ -44,7 +45,7 @@ def align(imu: ImuData, gt: GroundTruth, options: AlignOptions = AlignOptions(),
         np.ascontiguousarray(imu.t_ns, dtype=np.int64),
         np.ascontiguousarray(imu.gyro, dtype=np.float64),
         np.ascontiguousarray(imu.acc, dtype=np.float64),
-        np.ascontiguousarray(gt.t_ns, dtype=np.int64),
+        np.ascontiguousarray(gt.t_ns, dtype=np.int64) + int(round(options.gt_time_offset_s * 1e9)),
         np.ascontiguousarray(gt.p, dtype=np.float64),
         np.ascontiguousarray(gt.q_wxyz, dtype=np.float64),
         None if gt.v is None else np.ascontiguousarray(gt.v, dtype=np.float64),

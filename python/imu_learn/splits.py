@@ -223,7 +223,7 @@ def make_split(data: DataConfig, min_len: Optional[int] = None) -> Split:
             path, root = found[e.name]
             if e.name not in cache:
                 gt = gt_paths.get(id(root))
-                cache[e.name] = load_sequence(path, root.format, gt, options=AlignOptions(max_gap_s=root.max_gap_s))
+                cache[e.name] = load_sequence(path, root.format, gt, options=AlignOptions(max_gap_s=root.max_gap_s, gt_time_offset_s=root.gt_time_offset_s))
             parts = cut(cache[e.name], e.start, e.stop, e.name)
             kept = [s for s in parts if len(s) >= min_len]
             rows.append({
