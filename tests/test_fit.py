@@ -137,6 +137,46 @@ def test_bias_removed_pose_of_raw_matches_the_final_table_protocol():
     assert biased["windows"] == open_loop["windows"]
 
 
+def test_select_combine_mean_is_the_geometric_mean_of_the_ratios(tmp_path):
+    """optim.select_combine: "max" is the worst model/raw ratio over horizons and terms, "mean"
+    their geometric mean; same batches and weights, so per epoch mean <= max, and the two agree
+    only when every ratio is the same."""
+    more = ["--optim.select", "val_pose", "--optim.select_horizons", "[10, 50]"]
+    assert fit.main(tiny(tmp_path / "max", 2, *more)) == 0
+    assert fit.main(tiny(tmp_path / "mean", 2, *more, "--optim.select_combine", "mean")) == 0
+    a, b = rows(tmp_path / "max"), rows(tmp_path / "mean")
+    assert [x["val_total"] for x in a] == [x["val_total"] for x in b]
+    for x, y in zip(a, b):
+        assert float(y["val_pose_score"]) < float(x["val_pose_score"])
+    with pytest.raises(ConfigError, match="optim.select_combine"):
+        build_config({}, {"optim.select_combine": "median"})
+
+
+def test_train_bias_remove_takes_a_constant_bias_out_of_train_and_val_only():
+    """data.train_bias = "remove": a constant bias added to exact IMU is fitted against ground truth
+    over the whole segment and subtracted from the train and val segments; test is untouched."""
+    import numpy as np
+
+    from imu_learn.metrics import simulate_sequence, with_imu
+    from imu_learn.splits import Split
+
+    rng = np.random.default_rng(5)
+    n = 4001  # 20 s at 200 Hz
+    t_ns = np.arange(n, dtype=np.int64) * 5_000_000
+    k = np.arange(n)[:, None] / 200.0
+    s = simulate_sequence(t_ns, 0.5 * np.sin(k * rng.uniform(0.5, 2.0, 3)),
+                          np.array([0.0, 0.0, 9.81]) + np.sin(k * rng.uniform(0.5, 2.0, 3)))
+    bg, ba = np.array([0.01, -0.02, 0.08]), np.array([0.1, 0.0, -0.1])
+    b = with_imu(s, s.gyro + bg, s.acc + ba)
+    cfg = build_config({}, {"data.train_bias": "remove"})
+    out = fit.without_device_bias(Split([b], [b], [b], {}), cfg)
+    for seq in (out.train[0], out.val[0]):
+        assert np.abs(seq.gyro - s.gyro).max() < 1e-6 and np.abs(seq.acc - s.acc).max() < 1e-5
+    assert out.test[0] is b
+    with pytest.raises(ConfigError, match="data.train_bias"):
+        build_config({}, {"data.train_bias": "drop"})
+
+
 def test_resume_in_new_process_matches_uninterrupted(tmp_path, full_run):
     d = tmp_path / "resumed"
     assert fit.main(tiny(d, 1)) == 0

@@ -120,3 +120,37 @@ def test_gyro_only_refines_gyro_and_passes_acc_bit_for_bit():
     assert not torch.equal(full(x)[..., 3:], x[..., 3:])
     with pytest.raises(ValueError, match="model.refine"):
         ImuRefiner(ModelConfig(refine="acc", **SMALL))
+
+
+def test_fir_branch_starts_at_zero_and_can_hold_the_half_sample_shift():
+    """model.fir_taps: a linear filter on the normalised input, zero at start (identity model);
+    taps [0, -1/2, 1/2] on each channel's own input make every sample the mean of it and the next
+    (the zero-order hold's half-sample shift), with the last sample unchanged (edge repeated)."""
+    torch.manual_seed(0)
+    x = imu_batch(dtype=torch.float64)
+    mean, std = x.mean((0, 1)), x.std((0, 1))
+    model = ImuRefiner(ModelConfig(fir_taps=3, **SMALL), mean=mean, std=std).double()
+    assert torch.equal(model(x), x)
+    from imu_learn.model import FIR_GAIN
+
+    with torch.no_grad():
+        w = torch.zeros(6, 6, 3, dtype=torch.float64)
+        for c in range(6):
+            w[c, c, 1], w[c, c, 2] = -0.5 / FIR_GAIN, 0.5 / FIR_GAIN
+        model.fir.weight.copy_(w)
+    out = model(x)
+    want = x.clone()
+    want[:, :-1] = 0.5 * (x[:, :-1] + x[:, 1:])
+    assert torch.allclose(out, want, atol=1e-12)
+    # gyro only: the accelerometer passes through even with the FIR on
+    g = ImuRefiner(ModelConfig(fir_taps=3, refine="gyro", **SMALL), mean=mean, std=std).double()
+    g.fir.weight.data.copy_(w)
+    out_g = g(x)
+    assert torch.equal(out_g[..., 3:], x[..., 3:])
+    assert torch.allclose(out_g[..., :3], want[..., :3], atol=1e-12)
+
+
+@pytest.mark.parametrize("kw", [dict(fir_taps=4), dict(fir_taps=-3), dict(fir_taps=3, causal=True)])
+def test_fir_taps_must_be_odd_and_bidirectional(kw):
+    with pytest.raises(ValueError, match="model.fir_taps"):
+        ImuRefiner(ModelConfig(**{**SMALL, **kw}))

@@ -120,6 +120,13 @@ class DataConfig:
     # 5 s and 20 s (1000, 4000 at 200 Hz): over short horizons its mocap orientation noise dominates.
     eval_horizons: List[int] = field(default_factory=lambda: [10, 200])
     augment: AugmentConfig = field(default_factory=_default_augment)
+    # The device's own constant bias in the training and validation recordings: "keep" (the paper:
+    # the labels then ask the model to remove it, so it learns the bias of the training flights) or
+    # "remove" (one constant gyro and accelerometer bias per segment, fitted against its ground
+    # truth over the whole segment, is subtracted before training: the model learns what is left,
+    # and a bias at run time is the estimator's job, as the paper's footnote asks). Test sequences
+    # are never changed.
+    train_bias: str = "keep"
 
     def batch_config(self) -> BatchConfig:
         return BatchConfig(self.window, self.batch_size, tuple(self.fractions), self.gravity, self.augment)
@@ -149,6 +156,10 @@ class OptimConfig:
     # window of every validation sequence) or "recordings" (the geometric mean over recordings of
     # each one's model/raw ratio: every recording counts alike, as the paper's "Average" row).
     select_average: str = "pooled"
+    # How the model/raw ratios over horizons and terms become one score: "max" (the worst ratio:
+    # below 1 only when every one beats raw) or "mean" (their geometric mean: a large gain on one
+    # term, e.g. rotation over 10 samples, counts even while another sits at raw's level).
+    select_combine: str = "max"
 
 
 @dataclass
@@ -397,6 +408,10 @@ def validate(cfg: RunConfig) -> None:
          f"must be one of {', '.join(SELECT_TERMS)}, got {o.select_terms!r}")
     need(o.select_average in ("pooled", "recordings"), "optim.select_average",
          f"must be pooled or recordings, got {o.select_average!r}")
+    need(cfg.data.train_bias in ("keep", "remove"), "data.train_bias",
+         f"must be keep or remove, got {cfg.data.train_bias!r}")
+    need(o.select_combine in ("max", "mean"), "optim.select_combine",
+         f"must be max or mean, got {o.select_combine!r}")
     need(o.select in SELECT_METRICS, "optim.select", f"must be one of {', '.join(SELECT_METRICS)}, got {o.select!r}")
     need(cfg.threads >= 1, "threads", "must be at least 1")
     need(cfg.device == "auto" or cfg.device == "cpu" or cfg.device.startswith("cuda"), "device",

@@ -17,6 +17,10 @@ Tensor = torch.Tensor
 State = List[Tuple[Tensor, Tensor]]
 
 
+# The FIR branch's output is its taps times this: Adam moves a weight by about lr per step, and
+# the taps that matter are O(1/2) (preconditioning, so they are reached in hundreds of steps).
+FIR_GAIN = 10.0
+
 REFINE_CHANNELS = {"imu": [1.0] * 6, "gyro": [1.0, 1.0, 1.0, 0.0, 0.0, 0.0]}
 
 
@@ -32,6 +36,12 @@ class ModelConfig:
     # passes through unchanged, as in denoise-imu-gyro). On data where the accelerometer's
     # corrections do not transfer, "gyro" still improves translation through better attitude.
     refine: str = "imu"
+    # Taps of an optional learned linear FIR filter over the normalised raw input, added to the
+    # LSTM's correction (0 = off; odd, centred, edges padded by repetition; bidirectional only).
+    # It holds what a linear filter says best and an LSTM learns slowly: low-pass smoothing and
+    # the half-sample shift between the integration's zero-order hold (sample k held over
+    # [t_k, t_k+1]) and when a sample was taken, which taps of [0, -1/2, 1/2] undo exactly.
+    fir_taps: int = 0
 
 
 class ImuRefiner(nn.Module):
@@ -52,6 +62,14 @@ class ImuRefiner(nn.Module):
             self.fcs.append(nn.Sequential(nn.Linear(dirs * cfg.hidden, cfg.fc), nn.GELU(), nn.Dropout(cfg.dropout)))
             width = cfg.fc
         self.head = nn.Linear(width, 6)
+        if cfg.fir_taps:
+            if cfg.causal or cfg.fir_taps < 0 or cfg.fir_taps % 2 == 0:
+                raise ValueError(f"model.fir_taps: an odd number of taps for the bidirectional model, got {cfg.fir_taps}"
+                                 + (" with model.causal = true" if cfg.causal else ""))
+            self.fir = nn.Conv1d(6, 6, cfg.fir_taps, bias=False)
+            nn.init.zeros_(self.fir.weight)
+        else:
+            self.fir = None
         if cfg.refine not in REFINE_CHANNELS:
             raise ValueError(f"model.refine: must be one of {', '.join(REFINE_CHANNELS)}, got {cfg.refine!r}")
         # Not persistent: derived from the config, so older checkpoints load unchanged.
@@ -72,13 +90,26 @@ class ImuRefiner(nn.Module):
         mean = self.mean.to(imu.dtype)
         std = self.std.to(imu.dtype)
         x = (imu - mean) / std
+        linear = self._fir(x)
         new_state: State = []
         for i, (lstm, fc) in enumerate(zip(self.lstms, self.fcs)):
             s = None if state is None else state[i]
             x, (h, c) = lstm(x, s)
             new_state.append((h, c))
             x = fc(x)
-        return imu + self.cfg.output_scale * std * self.channels.to(imu.dtype) * self.head(x), new_state
+        corr = self.cfg.output_scale * self.head(x)
+        if linear is not None:
+            corr = corr + linear
+        return imu + std * self.channels.to(imu.dtype) * corr, new_state
+
+    def _fir(self, x: Tensor) -> Optional[Tensor]:
+        """The FIR branch on normalised input (B, W, 6) -> (B, W, 6), or None when off. Not scaled
+        by output_scale: its response is O(1) (a half-sample shift is ±1/2)."""
+        if self.fir is None:
+            return None
+        k = self.cfg.fir_taps // 2
+        padded = nn.functional.pad(x.transpose(1, 2), (k, k), mode="replicate")
+        return FIR_GAIN * self.fir(padded).transpose(1, 2)
 
     @torch.no_grad()
     def step(self, sample: Tensor, state: Optional[State] = None) -> Tuple[Tensor, State]:
