@@ -134,10 +134,10 @@ def test_fir_branch_starts_at_zero_and_can_hold_the_half_sample_shift():
     from imu_learn.model import FIR_GAIN
 
     with torch.no_grad():
-        w = torch.zeros(6, 6, 3, dtype=torch.float64)
-        for c in range(6):
-            w[c, c, 1], w[c, c, 2] = -0.5 / FIR_GAIN, 0.5 / FIR_GAIN
-        model.fir.weight.copy_(w)
+        # one filter per channel (depthwise); a constant added to the taps is ignored (zero DC gain)
+        w = torch.zeros(6, 1, 3, dtype=torch.float64)
+        w[:, 0, 1], w[:, 0, 2] = -0.5 / FIR_GAIN, 0.5 / FIR_GAIN
+        model.fir.weight.copy_(w + 0.3)
     out = model(x)
     want = x.clone()
     want[:, :-1] = 0.5 * (x[:, :-1] + x[:, 1:])

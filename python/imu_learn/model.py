@@ -37,7 +37,8 @@ class ModelConfig:
     # corrections do not transfer, "gyro" still improves translation through better attitude.
     refine: str = "imu"
     # Taps of an optional learned linear FIR filter over the normalised raw input, added to the
-    # LSTM's correction (0 = off; odd, centred, edges padded by repetition; bidirectional only).
+    # LSTM's correction (0 = off; odd, centred, edges padded by repetition; bidirectional only;
+    # one filter per channel on its own input, with zero DC gain).
     # It holds what a linear filter says best and an LSTM learns slowly: low-pass smoothing and
     # the half-sample shift between the integration's zero-order hold (sample k held over
     # [t_k, t_k+1]) and when a sample was taken, which taps of [0, -1/2, 1/2] undo exactly.
@@ -66,7 +67,12 @@ class ImuRefiner(nn.Module):
             if cfg.causal or cfg.fir_taps < 0 or cfg.fir_taps % 2 == 0:
                 raise ValueError(f"model.fir_taps: an odd number of taps for the bidirectional model, got {cfg.fir_taps}"
                                  + (" with model.causal = true" if cfg.causal else ""))
-            self.fir = nn.Conv1d(6, 6, cfg.fir_taps, bias=False)
+            # One filter per channel on its own input (no cross-axis terms) with zero DC gain (the
+            # taps' mean is taken out in _fir): it can shape and shift a signal in time but cannot
+            # scale it or mix axes. A full 6x6 filter with DC gain was measured to learn scale and
+            # misalignment of the training flights that made the validation flights' rotation over
+            # 1 s worse (docs/learning.md).
+            self.fir = nn.Conv1d(6, 6, cfg.fir_taps, groups=6, bias=False)
             nn.init.zeros_(self.fir.weight)
         else:
             self.fir = None
@@ -109,7 +115,8 @@ class ImuRefiner(nn.Module):
             return None
         k = self.cfg.fir_taps // 2
         padded = nn.functional.pad(x.transpose(1, 2), (k, k), mode="replicate")
-        return FIR_GAIN * self.fir(padded).transpose(1, 2)
+        w = self.fir.weight - self.fir.weight.mean(dim=-1, keepdim=True)
+        return FIR_GAIN * nn.functional.conv1d(padded, w, groups=6).transpose(1, 2)
 
     @torch.no_grad()
     def step(self, sample: Tensor, state: Optional[State] = None) -> Tuple[Tensor, State]:
