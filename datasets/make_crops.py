@@ -8,6 +8,13 @@ the first ground-truth stamp, byte for byte (lines are not reformatted), plus th
 and, where the sequence has one, the rows of the ASL full-state ground truth
 (``groundtruth_state_20hz.csv``) in the same time span.
 
+EuRoC full state (MH_04_difficult, a test flight of the standard split with EuRoC's 200 Hz full-state
+ground truth; the check crop of the shipped EuRoC model): ``--dataset euroc-state`` copies the
+``mav0/imu0`` and ``mav0/state_groundtruth_estimate0`` rows of ``--seconds`` from ``--start-s`` after
+the first ground-truth stamp, byte for byte, and the sensor YAML files:
+
+    python datasets/make_crops.py --dataset euroc-state ../shared/data/euroc datasets/euroc --seconds 60 --start-s 20
+
 TUM-VI (room2, a test room of the standard split): copies the ``mav0/imu0`` and ``mav0/mocap0``
 rows of ``--seconds`` byte for byte, from the start of the first stretch of motion capture with no
 gap above ``--max-gap-ms`` (50 ms: the loader's default, so the crop aligns as one segment) that is
@@ -88,17 +95,41 @@ def crop_tumvi(src: Path, dst: Path, seconds: float, max_gap_ms: float = 50.0) -
           f"of the recording")
 
 
+def crop_asl_state(src: Path, dst: Path, seconds: float, start_s: float) -> None:
+    state_rel = "mav0/state_groundtruth_estimate0/data.csv"
+    gt_lines = _lines(src / state_rel)
+    gt_head = [ln for ln in gt_lines if ln.startswith("#")]
+    gt_rows = [ln for ln in gt_lines if ln.strip() and not ln.startswith("#")]
+    t0_ns = _stamp(gt_rows[0]) + int(start_s * 1e9)
+    t1_ns = t0_ns + int(seconds * 1e9)
+    gt_keep = [ln for ln in gt_rows if t0_ns <= _stamp(ln) <= t1_ns]
+    imu_lines = _lines(src / "mav0/imu0/data.csv")
+    imu_head = [ln for ln in imu_lines if ln.startswith("#")]
+    imu_keep = [ln for ln in imu_lines if ln.strip() and not ln.startswith("#") and t0_ns <= _stamp(ln) <= t1_ns]
+    for rel, head, rows in (("mav0/imu0/data.csv", imu_head, imu_keep), (state_rel, gt_head, gt_keep)):
+        (dst / rel).parent.mkdir(parents=True, exist_ok=True)
+        (dst / rel).write_bytes("".join(head + rows).encode())
+    for y in ("mav0/imu0/sensor.yaml", "mav0/body.yaml"):
+        if (src / y).exists():
+            shutil.copy(src / y, dst / y)
+    print(f"{dst}: {len(imu_keep)} IMU rows, {len(gt_keep)} states")
+
+
 def main() -> None:
     ap = argparse.ArgumentParser()
     ap.add_argument("src", type=Path, help="the folder holding the full sequences")
     ap.add_argument("dst", type=Path)
-    ap.add_argument("--dataset", choices=("euroc", "tum-vi"), default="euroc")
+    ap.add_argument("--dataset", choices=("euroc", "euroc-state", "tum-vi"), default="euroc")
     ap.add_argument("--seconds", type=float, help="length of each crop (default 60 EuRoC, 34 TUM-VI)")
+    ap.add_argument("--start-s", type=float, default=20.0, help="euroc-state: seconds skipped after the first state")
     ap.add_argument("--max-gap-ms", type=float, default=50.0, help="TUM-VI: largest mocap gap allowed")
     a = ap.parse_args()
     if a.dataset == "euroc":
         for seq in ("MH_01_easy", "V1_01_easy"):
             crop(a.src / seq, a.dst / seq, a.seconds or 60.0)
+    elif a.dataset == "euroc-state":
+        seq = "MH_04_difficult"
+        crop_asl_state(a.src / seq, a.dst / seq, a.seconds or 60.0, a.start_s)
     else:
         seq = "dataset-room2_512_16"
         crop_tumvi(a.src / seq, a.dst / seq, a.seconds or 34.0, a.max_gap_ms)
