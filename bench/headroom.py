@@ -36,22 +36,18 @@ from imu_learn.baselines.base import FitSettings
 from imu_learn.baselines.traditional import Traditional
 from imu_learn.config import load_config
 from imu_learn.fit import recording_of
-from imu_learn.metrics import fit_startup_bias, relative_pose_rmse_many, remove_bias, with_imu
+from imu_learn.metrics import relative_pose_rmse_many, with_imu, without_fitted_bias
 from imu_learn.noise_floor import synthesize_imu
 from imu_learn.splits import make_split
 from imu_learn.types import Sequence
 
 
 def startup_removed(seqs: List[Sequence], cfg, seconds: float) -> List[Sequence]:
-    out = []
-    for s in seqs:
-        bg, ba = fit_startup_bias(s, seconds, gravity=cfg.data.gravity)
-        out.append(remove_bias(s, bg, ba))
-    return out
+    return without_fitted_bias(seqs, seconds, cfg.data.gravity)[0]
 
 
 def oracle_bias(seqs: List[Sequence], cfg) -> List[Sequence]:
-    return startup_removed(seqs, cfg, seconds=max(s.duration_s for s in seqs) + 1.0)
+    return without_fitted_bias(seqs, None, cfg.data.gravity)[0]
 
 
 def midpoint(s: Sequence) -> Sequence:

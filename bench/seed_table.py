@@ -21,7 +21,7 @@ from typing import Any, Dict, List
 import torch
 
 from imu_learn.cache import atomic_write_bytes
-from imu_learn.checkpoint import load_model
+from imu_learn.checkpoint import load_checkpoint, model_from_checkpoint
 from imu_learn.config import load_config
 from imu_learn.fit import evaluate_table, refine_sequence
 from imu_learn.splits import make_split
@@ -29,9 +29,10 @@ from imu_learn.splits import make_split
 
 def score_run(run: Path, cfg, test) -> Dict[str, Any]:
     """The final table of one run's best.pt on ``test`` (a list of Sequence)."""
-    model = load_model(run / "best.pt", map_location="cpu")
+    state = load_checkpoint(run / "best.pt")  # read once: the model and the window it was trained on
+    model = model_from_checkpoint(state)
     saved = json.loads((run / "split.json").read_text()) if (run / "split.json").exists() else {}
-    window = int(torch.load(run / "best.pt", map_location="cpu", weights_only=True)["config"]["data"]["window"])
+    window = int(state["config"]["data"]["window"])
     refined = [refine_sequence(model, s, window, torch.device("cpu")) for s in test]
     res = evaluate_table(list(test), refined, cfg)
     res["run"], res["window"], res["train_entries"] = str(run), window, [r["entry"] for r in saved.get("train", [])]

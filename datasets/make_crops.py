@@ -25,7 +25,7 @@ from __future__ import annotations
 import argparse
 import shutil
 from pathlib import Path
-from typing import List
+from typing import List, Tuple
 
 
 def crop(src: Path, dst: Path, seconds: float) -> None:
@@ -63,6 +63,20 @@ def _stamp(line: str) -> int:
     return int(line.split(",")[0])
 
 
+def _header_and_rows(path: Path) -> Tuple[List[str], List[str]]:
+    lines = _lines(path)
+    return [ln for ln in lines if ln.startswith("#")], [ln for ln in lines if ln.strip() and not ln.startswith("#")]
+
+
+def _copy_rows(src: Path, dst: Path, t0_ns: int, t1_ns: int) -> int:
+    """The header and the rows stamped in [t0_ns, t1_ns] of ``src`` written to ``dst``, bytes unchanged."""
+    head, rows = _header_and_rows(src)
+    keep = [ln for ln in rows if t0_ns <= _stamp(ln) <= t1_ns]
+    dst.parent.mkdir(parents=True, exist_ok=True)
+    dst.write_bytes("".join(head + keep).encode())
+    return len(keep)
+
+
 def gap_free_start(stamps: List[int], seconds: float, max_gap_ns: int) -> int:
     """Index of the first stamp that starts a run of ``seconds`` with no step above ``max_gap_ns``."""
     span = int(seconds * 1e9)
@@ -76,43 +90,28 @@ def gap_free_start(stamps: List[int], seconds: float, max_gap_ns: int) -> int:
 
 
 def crop_tumvi(src: Path, dst: Path, seconds: float, max_gap_ms: float = 50.0) -> None:
-    mocap_lines = _lines(src / "mav0/mocap0/data.csv")
-    mocap_head = [ln for ln in mocap_lines if ln.startswith("#")]
-    mocap_rows = [ln for ln in mocap_lines if ln.strip() and not ln.startswith("#")]
-    stamps = [_stamp(ln) for ln in mocap_rows]
+    mocap = "mav0/mocap0/data.csv"
+    stamps = [_stamp(ln) for ln in _header_and_rows(src / mocap)[1]]
     k = gap_free_start(stamps, seconds, int(max_gap_ms * 1e6))
     t0_ns = stamps[k]
     t1_ns = t0_ns + int(seconds * 1e9)
-    mocap_keep = [ln for ln in mocap_rows if t0_ns <= _stamp(ln) <= t1_ns]
-    imu_lines = _lines(src / "mav0/imu0/data.csv")
-    imu_head = [ln for ln in imu_lines if ln.startswith("#")]
-    imu_keep = [ln for ln in imu_lines if ln.strip() and not ln.startswith("#") and t0_ns <= _stamp(ln) <= t1_ns]
-    for sub, head, rows in (("imu0", imu_head, imu_keep), ("mocap0", mocap_head, mocap_keep)):
-        (dst / "mav0" / sub).mkdir(parents=True, exist_ok=True)
-        (dst / "mav0" / sub / "data.csv").write_bytes("".join(head + rows).encode())
-    print(f"{dst}: {len(imu_keep)} IMU rows, {len(mocap_keep)} mocap poses, "
-          f"{(t0_ns - _stamp(imu_lines[1])) / 1e9:.3f} s to {(t1_ns - _stamp(imu_lines[1])) / 1e9:.3f} s "
-          f"of the recording")
+    n_imu = _copy_rows(src / "mav0/imu0/data.csv", dst / "mav0/imu0/data.csv", t0_ns, t1_ns)
+    n_mocap = _copy_rows(src / mocap, dst / mocap, t0_ns, t1_ns)
+    imu_t0 = _stamp(_header_and_rows(src / "mav0/imu0/data.csv")[1][0])
+    print(f"{dst}: {n_imu} IMU rows, {n_mocap} mocap poses, "
+          f"{(t0_ns - imu_t0) / 1e9:.3f} s to {(t1_ns - imu_t0) / 1e9:.3f} s of the recording")
 
 
 def crop_asl_state(src: Path, dst: Path, seconds: float, start_s: float) -> None:
-    state_rel = "mav0/state_groundtruth_estimate0/data.csv"
-    gt_lines = _lines(src / state_rel)
-    gt_head = [ln for ln in gt_lines if ln.startswith("#")]
-    gt_rows = [ln for ln in gt_lines if ln.strip() and not ln.startswith("#")]
-    t0_ns = _stamp(gt_rows[0]) + int(start_s * 1e9)
+    state = "mav0/state_groundtruth_estimate0/data.csv"
+    t0_ns = _stamp(_header_and_rows(src / state)[1][0]) + int(start_s * 1e9)
     t1_ns = t0_ns + int(seconds * 1e9)
-    gt_keep = [ln for ln in gt_rows if t0_ns <= _stamp(ln) <= t1_ns]
-    imu_lines = _lines(src / "mav0/imu0/data.csv")
-    imu_head = [ln for ln in imu_lines if ln.startswith("#")]
-    imu_keep = [ln for ln in imu_lines if ln.strip() and not ln.startswith("#") and t0_ns <= _stamp(ln) <= t1_ns]
-    for rel, head, rows in (("mav0/imu0/data.csv", imu_head, imu_keep), (state_rel, gt_head, gt_keep)):
-        (dst / rel).parent.mkdir(parents=True, exist_ok=True)
-        (dst / rel).write_bytes("".join(head + rows).encode())
+    n_imu = _copy_rows(src / "mav0/imu0/data.csv", dst / "mav0/imu0/data.csv", t0_ns, t1_ns)
+    n_gt = _copy_rows(src / state, dst / state, t0_ns, t1_ns)
     for y in ("mav0/imu0/sensor.yaml", "mav0/body.yaml"):
         if (src / y).exists():
             shutil.copy(src / y, dst / y)
-    print(f"{dst}: {len(imu_keep)} IMU rows, {len(gt_keep)} states")
+    print(f"{dst}: {n_imu} IMU rows, {n_gt} states")
 
 
 def main() -> None:

@@ -432,19 +432,18 @@ def _split_signature(split: Any) -> Dict[str, Any]:
 def _ground_truth_kinds(run: RunConfig, test_entries: List[str]) -> Dict[str, str]:
     """Recording -> "pose-only (velocity derived)" or "with velocity", for the test recordings."""
     from imu_learn.formats import read_recording
-    from imu_learn.splits import data_root_dir, find_all, resolve_data_path
+    from imu_learn.splits import data_root_dir, find_all, groundtruth_paths
 
     root_dir = data_root_dir(run.data)
     found = find_all(run.data.roots, root_dir)
+    gt_paths = groundtruth_paths(run.data.roots, root_dir)
     out = {}
     for label in test_entries:
         rec = _recording(label)
         if rec in out or rec not in found:
             continue
         path, root = found[rec]
-        i = next(j for j, r in enumerate(run.data.roots) if r is root)
-        gt_path = resolve_data_path(root.groundtruth, root_dir, f"data.roots[{i}].groundtruth") if root.groundtruth else None
-        _, gt = read_recording(path, root.format, gt_path)
+        _, gt = read_recording(path, root.format, gt_paths.get(id(root)))
         out[rec] = "pose-only (velocity derived)" if gt.v is None else "with velocity"
     return out
 

@@ -73,7 +73,7 @@ from imu_learn.checkpoint import load_checkpoint, load_model, model_from_checkpo
 from imu_learn.config import ConfigError, RunConfig, build_config, parse_overrides, read_toml, to_toml
 from imu_learn.errors import ImuError, one_line
 from imu_learn.losses import imu_loss
-from imu_learn.metrics import fit_startup_bias, index_at, relative_pose_rmse_many, remove_bias, with_imu
+from imu_learn.metrics import index_at, relative_pose_rmse_many, with_imu, without_fitted_bias
 from imu_learn.model import ImuRefiner
 from imu_learn.splits import Split, make_split, write_split
 from imu_learn.types import Sequence
@@ -219,27 +219,16 @@ def validation_loss(model: ImuRefiner, batch: Batch, cfg: RunConfig, device: tor
 def without_startup_bias(seqs: Seq[Sequence], cfg: RunConfig) -> Tuple[List[Sequence], Dict[str, Any]]:
     """Each sequence with its own start-up bias (fitted on its first ``data.startup_bias_s``
     seconds against ground truth) subtracted, and the biases by sequence name."""
-    d = cfg.data
-    fixed, biases = [], {}
-    for s in seqs:
-        bg, ba = fit_startup_bias(s, d.startup_bias_s, gravity=d.gravity)
-        biases[s.name] = {"gyro": bg.tolist(), "acc": ba.tolist()}
-        fixed.append(remove_bias(s, bg, ba))
-    return fixed, biases
+    return without_fitted_bias(seqs, cfg.data.startup_bias_s, cfg.data.gravity)
 
 
 def without_device_bias(split: Split, cfg: RunConfig) -> Split:
     """``data.train_bias = "remove"``: the training and validation segments, each with one constant
     gyro and accelerometer bias fitted against its ground truth over the whole segment subtracted
     (test segments unchanged)."""
-    def fixed(seqs: Seq[Sequence]) -> List[Sequence]:
-        out = []
-        for s in seqs:
-            bg, ba = fit_startup_bias(s, s.duration_s + 1.0, gravity=cfg.data.gravity)
-            out.append(remove_bias(s, bg, ba))
-        return out
-
-    return Split(fixed(split.train), fixed(split.val), split.test, split.record)
+    g = cfg.data.gravity
+    return Split(without_fitted_bias(split.train, None, g)[0], without_fitted_bias(split.val, None, g)[0],
+                 split.test, split.record)
 
 
 def bias_removed_pose(seqs: Seq[Sequence], n: int, cfg: RunConfig) -> Dict[str, float]:

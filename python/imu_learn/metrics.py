@@ -22,7 +22,7 @@ so the fit is consistent with it. Apply with :func:`remove_bias` (subtraction).
 from __future__ import annotations
 
 import math
-from typing import Dict, Optional, Tuple
+from typing import Dict, List, Optional, Tuple
 from typing import Sequence as Seq
 
 import numpy as np
@@ -185,6 +185,19 @@ def fit_startup_bias(
 
 # ---------------------------------------------------------------------------------------------
 # synthetic trajectories (tests, sanity checks)
+
+
+def without_fitted_bias(
+    seqs: Seq[Sequence], seconds: Optional[float] = None, gravity: float = GRAVITY,
+) -> Tuple[List[Sequence], Dict[str, Dict[str, list]]]:
+    """Each sequence with its own constant bias (:func:`fit_startup_bias` on its first ``seconds``;
+    None: the whole sequence) subtracted, and the biases by sequence name."""
+    fixed, biases = [], {}
+    for s in seqs:
+        bg, ba = fit_startup_bias(s, s.duration_s + 1.0 if seconds is None else seconds, gravity=gravity)
+        biases[s.name] = {"gyro": bg.tolist(), "acc": ba.tolist()}
+        fixed.append(remove_bias(s, bg, ba))
+    return fixed, biases
 
 
 def simulate_sequence(

@@ -28,7 +28,7 @@ import numpy as np
 from imu_learn.checkpoint import load_checkpoint, model_from_checkpoint
 from imu_learn.formats import read_recording
 from imu_learn.loading import AlignOptions, align
-from imu_learn.metrics import GRAVITY, fit_startup_bias, relative_pose_rmse_many, remove_bias
+from imu_learn.metrics import GRAVITY, relative_pose_rmse_many, without_fitted_bias
 from imu_learn.refine import pick_device, refine_arrays
 from imu_learn.types import ImuData
 from imu_learn.types import Sequence as Seq
@@ -39,10 +39,7 @@ PROTOCOLS = ("open_loop", "bias_removed")
 
 def _table(seqs: List[Seq], horizons: Sequence[int], stride: int, startup_bias_s: float,
            gravity: float) -> Dict[str, Any]:
-    fixed = []
-    for s in seqs:
-        bg, ba = fit_startup_bias(s, startup_bias_s, gravity=gravity)
-        fixed.append(remove_bias(s, bg, ba))
+    fixed, _ = without_fitted_bias(seqs, startup_bias_s, gravity)
     return {col: {str(n): relative_pose_rmse_many(ss, int(n), stride, gravity, first_s=startup_bias_s)
                   for n in horizons}
             for col, ss in (("open_loop", seqs), ("bias_removed", fixed))}

@@ -135,6 +135,12 @@ def resolve_data_path(p: str, data_root: Optional[Path], key: str) -> Path:
     )
 
 
+def groundtruth_paths(roots: List[RootConfig], data_root: Optional[Path]) -> Dict[int, Path]:
+    """``id(root)`` -> its resolved ``groundtruth`` file, for the roots that name one."""
+    return {id(r): resolve_data_path(r.groundtruth, data_root, f"data.roots[{i}].groundtruth")
+            for i, r in enumerate(roots) if r.groundtruth}
+
+
 def _format_for(root: RootConfig) -> str:
     fmt = root.format
     if fmt not in DATASETS:
@@ -204,8 +210,7 @@ def make_split(data: DataConfig, min_len: Optional[int] = None) -> Split:
     entries = parse_split(data)
     root_dir = data_root_dir(data)
     found = find_all(data.roots, root_dir)
-    gt_paths = {id(r): resolve_data_path(r.groundtruth, root_dir, f"data.roots[{i}].groundtruth")
-                for i, r in enumerate(data.roots) if r.groundtruth}
+    gt_paths = groundtruth_paths(data.roots, root_dir)
     min_len = data.window + 1 if min_len is None else min_len
     cache: Dict[str, List[Sequence]] = {}
     result: Dict[str, List[Sequence]] = {}
