@@ -32,6 +32,9 @@ def read_asl_state(path: _Path, allow_float_timestamps: bool = False) -> Dict[st
 def read_asl_pose(path: _Path, allow_float_timestamps: bool = False) -> Dict[str, Optional[_F64]]:
     """ASL pose ground truth (TUM-VI mocap0) -> {t_ns, p, q_wxyz, v=None, ...}."""
 
+def read_asl_position(path: _Path, allow_float_timestamps: bool = False) -> Tuple[_I64, _F64]:
+    """ASL position file (EuRoC leica0: t, p_RS_R) -> (t_ns (N,), p (N, 3))."""
+
 def read_tum(path: _Path, allow_float_timestamps: bool = False) -> Dict[str, Optional[_F64]]:
     """TUM trajectory (8 columns, or 11 with velocity) -> {t_ns, p, q_wxyz, v, ...}."""
 

@@ -62,3 +62,75 @@ def read_recording(
     imu = read_imu(path, allow_float_timestamps)
     gt_path = Path(groundtruth) if groundtruth is not None else find_groundtruth(sequence_root(Path(path)))
     return imu, read_groundtruth(gt_path, allow_float_timestamps)
+
+
+# --------------------------------------------------------------------------------------------
+# Sensor calibration files and the Leica laser tracker (aiding for imu_learn.fuse)
+# --------------------------------------------------------------------------------------------
+
+LEICA_FILE = Path("mav0") / "leica0" / "data.csv"
+
+
+def read_sensor_yaml(path: Path) -> dict:
+    """An ASL ``sensor.yaml``: its scalar ``key: value`` entries (numbers as float, the rest as
+    str) and ``T_BS`` as a 4x4 list of rows. Only the subset of YAML these files use (no YAML
+    library needed); a malformed ``T_BS`` is a :class:`ParseError` naming the file and line."""
+    from imu_learn.errors import ParseError
+
+    path = Path(path)
+    lines = path.read_text().splitlines()
+    out: dict = {}
+    i = 0
+    while i < len(lines):
+        raw = lines[i].split("#", 1)[0].rstrip()
+        i += 1
+        if not raw.strip() or raw.startswith((" ", "\t")) or ":" not in raw:
+            continue
+        key, _, value = raw.partition(":")
+        key, value = key.strip(), value.strip()
+        if key == "T_BS":
+            start = i
+            while i < len(lines) and "data:" not in lines[i]:
+                i += 1
+            text = ""
+            while i < len(lines):
+                text += lines[i].split("#", 1)[0]
+                i += 1
+                if "]" in text:
+                    break
+            body = text.partition("[")[2].partition("]")[0]
+            try:
+                vals = [float(x) for x in body.split(",") if x.strip()]
+            except ValueError:
+                vals = []
+            if len(vals) != 16:
+                raise ParseError(f"{path}:{start}: T_BS: expected 16 numbers in data: [...], got {body.strip()!r}",
+                                 str(path), start, None, "T_BS")
+            out["T_BS"] = [vals[r * 4:(r + 1) * 4] for r in range(4)]
+            continue
+        try:
+            out[key] = float(value)
+        except ValueError:
+            out[key] = value
+    return out
+
+
+def read_leica(path: Path):
+    """EuRoC's Leica MS50 positions (``mav0/leica0/data.csv`` of a sequence folder, or the CSV
+    itself) -> ``(t_ns (N,), p (N, 3), lever_arm (3,))``: ``p`` is the tracked prism in the world
+    frame, ``lever_arm`` the prism's position in the body frame (``T_BS`` translation of
+    ``leica0/sensor.yaml``; zeros when the file is absent). Strict parsing in the Rust core."""
+    import numpy as np
+
+    path = Path(path)
+    csv = path if path.is_file() else path / LEICA_FILE
+    if not csv.exists():
+        raise FileNotFoundError(2, "No such file or directory", str(csv))
+    t_ns, p = core.read_asl_position(str(csv))
+    yaml = csv.parent / "sensor.yaml"
+    lever = np.zeros(3)
+    if yaml.exists():
+        T = read_sensor_yaml(yaml).get("T_BS")
+        if T is not None:
+            lever = np.array([T[0][3], T[1][3], T[2][3]], dtype=np.float64)
+    return t_ns, p, lever

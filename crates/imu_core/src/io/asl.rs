@@ -31,6 +31,9 @@ pub const STATE_HEADER_SHORT: &str = "#time(ns),px,py,pz,qw,qx,qy,qz,vx,vy,vz,bw
 pub const POSE_HEADER: &str = "#timestamp [ns],p_RS_R_x [m],p_RS_R_y [m],p_RS_R_z [m],\
 q_RS_w [],q_RS_x [],q_RS_y [],q_RS_z []";
 
+/// EuRoC `mav0/leica0/data.csv`: the position of a tracked prism, no orientation.
+pub const POSITION_HEADER: &str = "#timestamp [ns],p_RS_R_x [m],p_RS_R_y [m],p_RS_R_z [m]";
+
 fn normalize_name(name: &str) -> String {
     let mut out = String::with_capacity(name.len());
     let mut depth = 0usize;
@@ -218,9 +221,43 @@ pub fn read_pose(path: impl AsRef<Path>, opts: &ReadOptions) -> Result<GroundTru
     })
 }
 
+/// Reads an ASL position file (EuRoC's Leica laser tracker, `mav0/leica0/data.csv`): t and p
+/// (4 columns), with the same strict parsing as every ASL file.
+pub fn read_position(path: impl AsRef<Path>, opts: &ReadOptions) -> Result<(Vec<i64>, Vec<Vec3>)> {
+    let t = read_checked(path.as_ref(), &[POSITION_HEADER], 4, opts)?;
+    let p = t.values.chunks_exact(3).map(|r| v3(r, 0)).collect();
+    Ok((t.t_ns, p))
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn position_file_reads_and_names_the_bad_cell() {
+        let dir = std::env::temp_dir().join(format!("imu_core_leica_{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let good = dir.join("good.csv");
+        std::fs::write(
+            &good,
+            format!("{POSITION_HEADER}\n1000,1.0,2.0,3.0\n2000,1.5,2.5,3.5\n"),
+        )
+        .unwrap();
+        let (t, p) = read_position(&good, &ReadOptions::default()).unwrap();
+        assert_eq!(t, vec![1000, 2000]);
+        assert_eq!(p[1], [1.5, 2.5, 3.5]);
+        let bad = dir.join("bad.csv");
+        std::fs::write(&bad, format!("{POSITION_HEADER}\n1000,1.0,2.0,3.0\n2000,1.5,x,3.5\n")).unwrap();
+        let msg = read_position(&bad, &ReadOptions::default()).unwrap_err().to_string();
+        assert!(msg.contains("bad.csv:3:3") && msg.contains("p_RS_R_y"), "{msg}");
+        let wrong = dir.join("imu.csv");
+        std::fs::write(&wrong, format!("{IMU_HEADER}\n1000,1,2,3,4,5,6\n")).unwrap();
+        assert!(matches!(
+            read_position(&wrong, &ReadOptions::default()),
+            Err(ImuError::Header { .. })
+        ));
+        std::fs::remove_dir_all(&dir).unwrap();
+    }
 
     #[test]
     fn header_comparison_ignores_units_hash_and_spaces() {

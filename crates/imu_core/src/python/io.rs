@@ -89,6 +89,19 @@ fn read_asl_pose(py: Python<'_>, path: PathBuf, allow_float_timestamps: bool) ->
 
 #[pyfunction]
 #[pyo3(signature = (path, allow_float_timestamps=false))]
+fn read_asl_position(
+    py: Python<'_>,
+    path: PathBuf,
+    allow_float_timestamps: bool,
+) -> PyResult<(Bound<'_, PyArray1<i64>>, Bound<'_, PyArray2<f64>>)> {
+    let (t, p) = py
+        .allow_threads(|| asl::read_position(&path, &opts(allow_float_timestamps)))
+        .map_err(to_py)?;
+    Ok((out1(py, t), out2(py, p)?))
+}
+
+#[pyfunction]
+#[pyo3(signature = (path, allow_float_timestamps=false))]
 fn read_tum(py: Python<'_>, path: PathBuf, allow_float_timestamps: bool) -> PyResult<Bound<'_, PyDict>> {
     let g = py
         .allow_threads(|| tum::read_tum(&path, &opts(allow_float_timestamps)))
@@ -137,6 +150,7 @@ pub fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(write_asl_imu, m)?)?;
     m.add_function(wrap_pyfunction!(read_asl_state, m)?)?;
     m.add_function(wrap_pyfunction!(read_asl_pose, m)?)?;
+    m.add_function(wrap_pyfunction!(read_asl_position, m)?)?;
     m.add_function(wrap_pyfunction!(read_tum, m)?)?;
     m.add_function(wrap_pyfunction!(write_tum, m)?)?;
     m.add_function(wrap_pyfunction!(read_kaist_imu, m)?)?;

@@ -1,0 +1,101 @@
+"""The fusion experiment's configuration (``configs/fuse_*.toml``): recordings x IMU inputs x
+aiding scenarios. Keys and value types are checked as for ``imu_learn.fit`` configs
+(:func:`imu_learn.config.from_dict`); paths of recordings are relative to the data root
+(``data_root``, else the environment variable ``IMU_LEARN_DATA``; ``--data-root`` beats both)."""
+from __future__ import annotations
+
+import os
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import List, Optional
+
+from imu_learn.config import DATA_ROOT_ENV, ConfigError, from_dict, read_toml
+
+INPUTS = ("raw", "proposed")
+KINDS = ("position", "relative_pose", "leica")
+
+
+@dataclass
+class RecordingSpec:
+    path: str = ""
+    format: str = "auto"
+    groundtruth: str = ""  # relative to the data root; empty: the layout's own
+    max_gap_s: float = 0.05
+
+
+@dataclass
+class ScenarioSpec:
+    """One aiding setting. ``position``: GNSS-like fixes simulated from ground truth;
+    ``relative_pose``: VO-like relative poses simulated from ground truth; ``leica``: the
+    recording's own Leica laser tracker (real; recordings without one are skipped).
+    ``outages``: [start_s, duration_s] windows (from the recording's first sample) without aiding."""
+
+    name: str = ""
+    kind: str = "position"
+    rate_hz: float = 1.0  # leica: 0 keeps every fix (20 Hz)
+    sigma_m: float = 0.1  # position / leica
+    sigma_rot_deg: float = 0.1  # relative_pose
+    sigma_trans_m: float = 0.01  # relative_pose
+    outages: List[List[float]] = field(default_factory=list)
+    time_offset_s: float = 0.0  # leica: added to the fixes' stamps (bench/leica_agreement.py measures it)
+
+
+@dataclass
+class NoiseSpec:
+    """``source = "sensor.yaml"``: the recording's ``mav0/imu0/sensor.yaml`` (else these values)."""
+
+    source: str = "sensor.yaml"
+    gyro_noise_density: float = 1.6968e-4
+    acc_noise_density: float = 2.0e-3
+    gyro_random_walk: float = 1.9393e-5
+    acc_random_walk: float = 3.0e-3
+
+
+@dataclass
+class FuseConfig:
+    name: str = "fuse"
+    data_root: str = ""
+    out_dir: str = "reports"
+    seed: int = 0
+    gravity: float = 9.81
+    keyframe_hz: float = 10.0
+    inputs: List[str] = field(default_factory=lambda: ["raw", "proposed"])
+    checkpoint: str = "models/euroc_adis16448.pt"  # for "proposed" (relative to the working directory)
+    recordings: List[RecordingSpec] = field(default_factory=list)
+    scenarios: List[ScenarioSpec] = field(default_factory=list)
+    noise: NoiseSpec = field(default_factory=NoiseSpec)
+
+    def root(self) -> Path:
+        return Path(self.data_root or os.environ.get(DATA_ROOT_ENV, "") or ".")
+
+
+def validate(cfg: FuseConfig) -> FuseConfig:
+    bad = [i for i in cfg.inputs if i not in INPUTS]
+    if bad:
+        raise ConfigError(f"inputs: unknown {bad} (known: {', '.join(INPUTS)})")
+    if not cfg.recordings:
+        raise ConfigError("recordings: none given ([[recordings]] path = ...)")
+    if not cfg.scenarios:
+        raise ConfigError("scenarios: none given ([[scenarios]] name = ..., kind = ...)")
+    if not cfg.keyframe_hz > 0:
+        raise ConfigError(f"keyframe_hz: must be > 0, got {cfg.keyframe_hz}")
+    names = [s.name for s in cfg.scenarios]
+    if len(set(names)) != len(names) or not all(names):
+        raise ConfigError(f"scenarios: names must be given and unique, got {names}")
+    for s in cfg.scenarios:
+        if s.kind not in KINDS:
+            raise ConfigError(f"scenarios.{s.name}.kind: must be one of {', '.join(KINDS)}, got {s.kind!r}")
+        if s.rate_hz < 0 or (s.kind != "leica" and s.rate_hz == 0):
+            raise ConfigError(f"scenarios.{s.name}.rate_hz: must be > 0, got {s.rate_hz}")
+        for o in s.outages:
+            if len(o) != 2 or o[1] <= 0:
+                raise ConfigError(f"scenarios.{s.name}.outages: each is [start_s, duration_s > 0], got {o}")
+    return cfg
+
+
+def load(path: Optional[Path], data_root: Optional[str] = None) -> FuseConfig:
+    d = read_toml(Path(path)) if path else {}
+    cfg = from_dict(FuseConfig, d)
+    if data_root:
+        cfg.data_root = data_root
+    return validate(cfg)

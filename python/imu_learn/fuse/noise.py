@@ -1,0 +1,62 @@
+"""The IMU noise model the factor graph assumes, and its GTSAM preintegration parameters.
+
+Densities are continuous-time, as in a Kalibr/ASL ``sensor.yaml``: white noise in rad/s/sqrt(Hz)
+and m/s^2/sqrt(Hz), bias random walk in rad/s^2/sqrt(Hz) and m/s^3/sqrt(Hz). GTSAM's
+``PreintegrationCombinedParams`` takes their squares as continuous-time covariances and
+discretises them itself over each sample's dt.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from imu_learn.errors import InvalidInputError
+
+SENSOR_KEYS = {
+    "gyro_noise_density": "gyroscope_noise_density",
+    "acc_noise_density": "accelerometer_noise_density",
+    "gyro_random_walk": "gyroscope_random_walk",
+    "acc_random_walk": "accelerometer_random_walk",
+}
+
+
+@dataclass(frozen=True)
+class ImuNoise:
+    gyro_noise_density: float = 1.6968e-4  # EuRoC ADIS16448 sensor.yaml
+    acc_noise_density: float = 2.0e-3
+    gyro_random_walk: float = 1.9393e-5
+    acc_random_walk: float = 3.0e-3
+    integration_sigma: float = 1e-4  # [m/s^2/sqrt(Hz)]-like slack on position integration (GTSAM's default style)
+    source: str = "EuRoC ADIS16448 sensor.yaml (built-in)"
+
+    def __post_init__(self) -> None:
+        for k in ("gyro_noise_density", "acc_noise_density", "gyro_random_walk", "acc_random_walk"):
+            v = getattr(self, k)
+            if not (np.isfinite(v) and v > 0):
+                raise InvalidInputError(f"noise.{k} must be a positive number, got {v!r}")
+
+    @classmethod
+    def from_sensor_yaml(cls, path: Path) -> ImuNoise:
+        """The four densities of an ASL ``mav0/imu0/sensor.yaml``."""
+        from imu_learn.formats.asl import read_sensor_yaml
+
+        y = read_sensor_yaml(Path(path))
+        missing = [v for v in SENSOR_KEYS.values() if not isinstance(y.get(v), float)]
+        if missing:
+            raise InvalidInputError(f"{path}: no numeric {', '.join(missing)}")
+        return cls(**{k: float(y[v]) for k, v in SENSOR_KEYS.items()}, source=str(path))
+
+    def gtsam_params(self, gravity: float):
+        """``PreintegrationCombinedParams`` for a z-up world with gravity ``gravity`` [m/s^2]."""
+        import gtsam
+
+        p = gtsam.PreintegrationCombinedParams.MakeSharedU(gravity)
+        eye = np.eye(3)
+        p.setGyroscopeCovariance(self.gyro_noise_density ** 2 * eye)
+        p.setAccelerometerCovariance(self.acc_noise_density ** 2 * eye)
+        p.setIntegrationCovariance(self.integration_sigma ** 2 * eye)
+        p.setBiasOmegaCovariance(self.gyro_random_walk ** 2 * eye)
+        p.setBiasAccCovariance(self.acc_random_walk ** 2 * eye)
+        return p

@@ -1,0 +1,47 @@
+"""Scores of a fused trajectory against ground truth at its keyframes: position RMSE [m], rotation
+RMSE [deg], and for each outage the RMSE and maximum of the position error inside it (how far the
+estimate coasts without aiding)."""
+from __future__ import annotations
+
+from typing import Dict, List, Tuple
+from typing import Sequence as Seq
+
+import numpy as np
+from scipy.spatial.transform import Rotation
+
+from imu_learn.quat import wxyz_to_xyzw
+
+from .aiding import outage_mask
+from .graph import FusionResult
+
+
+def rotation_errors_deg(R_est: np.ndarray, q_wxyz_gt: np.ndarray) -> np.ndarray:
+    R_gt = Rotation.from_quat(wxyz_to_xyzw(q_wxyz_gt))
+    return np.rad2deg((R_gt.inv() * Rotation.from_matrix(R_est)).magnitude())
+
+
+def _rmse(x: np.ndarray) -> float:
+    return float(np.sqrt(np.mean(np.square(x)))) if len(x) else float("nan")
+
+
+def score(res: FusionResult, t_ns: np.ndarray, p_gt: np.ndarray, q_wxyz_gt: np.ndarray,
+          outages: Seq[Tuple[float, float]] = ()) -> Dict[str, object]:
+    """``{causal|smoothed: {pos_rmse_m, rot_rmse_deg, outages: [{start_s, duration_s, rmse_m, max_m}]}}``."""
+    idx = res.kf_idx
+    inside = outage_mask(t_ns, outages)[idx] if outages else np.zeros(len(idx), bool)
+    rel_s = (t_ns[idx] - t_ns[0]) * 1e-9
+    out: Dict[str, object] = {}
+    for name, p, R in (("causal", res.causal_p, res.causal_R), ("smoothed", res.smoothed_p, res.smoothed_R)):
+        e = np.linalg.norm(p - p_gt[idx], axis=1)
+        per: List[Dict[str, float]] = []
+        for start, dur in outages:
+            m = (rel_s >= start) & (rel_s < start + dur)
+            per.append({"start_s": float(start), "duration_s": float(dur), "rmse_m": _rmse(e[m]),
+                        "max_m": float(e[m].max()) if m.any() else float("nan")})
+        out[name] = {
+            "pos_rmse_m": _rmse(e),
+            "pos_rmse_aided_m": _rmse(e[~inside]),
+            "rot_rmse_deg": _rmse(rotation_errors_deg(R, q_wxyz_gt[idx])),
+            "outages": per,
+        }
+    return out
