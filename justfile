@@ -40,6 +40,10 @@ fit *args="":
 evaluate *args="":
     {{py}} -m imu_learn.evaluate {{args}}
 
+# Fuse raw and refined IMU with aiding in a GTSAM factor graph; e.g. just fuse --config configs/fuse_euroc.toml
+fuse *args="":
+    {{py}} -m imu_learn.fuse {{args}}
+
 # Write refined IMU in the input's own format: just refine CKPT IN OUT
 refine checkpoint input output *args="":
     {{py}} -m imu_learn.refine --checkpoint {{checkpoint}} --input {{input}} --output {{output}} {{args}}
