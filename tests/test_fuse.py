@@ -199,4 +199,62 @@ def test_experiment_on_the_shipped_crop_writes_results_and_resumes(shipped, tmp_
     assert saved["runs"] == json.loads(json.dumps(res))
     logs.clear()
     run_experiment(cfg, tmp_path, logs.append)
-    assert any("resuming: 2 runs" in m for m in logs) and not any("position RMSE" in m for m in logs)
+    assert any("2 of 2 runs already" in m for m in logs) and not any("position RMSE" in m for m in logs)
+
+
+def test_a_changed_scenario_reruns_only_its_own_runs(shipped, tmp_path, monkeypatch):
+    import imu_learn.fuse.run as run_mod
+
+    rec = RecordingSpec(CROP, "euroc", CROP + "/mav0/state_groundtruth_estimate0/data.csv")
+    a, b = ScenarioSpec("a", "position", 1.0, 0.1), ScenarioSpec("b", "position", 0.5, 0.1)
+    cfg = validate(FuseConfig(name="t", data_root=str(shipped), inputs=["raw"], recordings=[rec], scenarios=[a, b]))
+    calls = []
+    real = run_mod.fuse
+    monkeypatch.setattr(run_mod, "fuse", lambda *x, **k: calls.append(1) or real(*x, **k))
+    run_experiment(cfg, tmp_path, lambda m: None)
+    assert len(calls) == 2
+    b.sigma_m = 0.2  # only b changes: a is kept
+    calls.clear()
+    res = run_experiment(cfg, tmp_path, lambda m: None)
+    assert len(calls) == 1 and set(res) == {"MH_04_difficult|a|raw", "MH_04_difficult|b|raw"}
+
+
+def test_a_graph_gtsam_cannot_solve_is_recorded_as_failed_and_the_rest_runs(shipped, tmp_path, monkeypatch):
+    import imu_learn.fuse.run as run_mod
+
+    real = run_mod.fuse
+
+    def flaky(*x, **k):
+        if len(x[4][0]) < 45:  # the 0.5 Hz scenario: 30 fixes in the 60 s crop, against 60 at 1 Hz
+            raise RuntimeError("Indeterminate linear system detected while working near variable x3")
+        return real(*x, **k)
+
+    monkeypatch.setattr(run_mod, "fuse", flaky)
+    rec = RecordingSpec(CROP, "euroc", CROP + "/mav0/state_groundtruth_estimate0/data.csv")
+    cfg = validate(FuseConfig(name="t", data_root=str(shipped), inputs=["raw"], recordings=[rec],
+                              scenarios=[ScenarioSpec("slow", "position", 0.5, 0.1), ScenarioSpec("fast", "position", 1.0, 0.1)]))
+    res = run_experiment(cfg, tmp_path, lambda m: None)
+    assert "Indeterminate" in res["MH_04_difficult|slow|raw"]["failed"]
+    assert res["MH_04_difficult|fast|raw"]["smoothed"]["pos_rmse_m"] < 0.3
+    assert "| failed | failed |" in (tmp_path / "table.md").read_text()
+
+
+def test_startup_bias_prior_and_traditional_input(shipped, tmp_path):
+    from imu_learn.baselines.traditional import Traditional, TraditionalParams
+
+    # A calibration that removes a known gyro offset: the start-up fit on its output must see ~0.
+    trad = Traditional()
+    trad.params = TraditionalParams(np.eye(3), np.array([0.0, 0.0, 0.01]), np.zeros((3, 3)), np.eye(3), np.zeros(3),
+                                    None, None)
+    trad.save(tmp_path / "trad.json")
+    rec = RecordingSpec(CROP, "euroc", CROP + "/mav0/state_groundtruth_estimate0/data.csv")
+    cfg = validate(FuseConfig(name="t", data_root=str(shipped), inputs=["raw", "traditional"],
+                              traditional=str(tmp_path / "trad.json"), recordings=[rec],
+                              scenarios=[ScenarioSpec("g", "position", 1.0, 0.1, bias_prior="startup")]))
+    res = run_experiment(cfg, tmp_path / "o", lambda m: None)
+    raw, tr = res["MH_04_difficult|g|raw"]["bias_prior"], res["MH_04_difficult|g|traditional"]["bias_prior"]
+    assert abs(raw[2] - tr[2] - 0.01) < 1e-4  # the calibration's offset, seen by the start-up fit
+    assert np.linalg.norm(raw[:3]) > 0.05  # EuRoC's ADIS16448 starts with ~0.08 rad/s of gyro bias
+    assert res["MH_04_difficult|g|traditional"]["smoothed"]["pos_rmse_m"] < 0.3
+    with pytest.raises(ConfigError, match="bias_prior"):
+        validate(FuseConfig(recordings=[rec], scenarios=[ScenarioSpec("a", bias_prior="oracle")]))

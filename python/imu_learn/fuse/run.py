@@ -1,16 +1,18 @@
 """The fusion experiment: every recording x IMU input x aiding scenario of a :class:`FuseConfig`,
 fused by :func:`imu_learn.fuse.graph.fuse` and scored against ground truth.
 
-Every input of a recording and scenario sees the same aiding (one seeded draw per recording and
-scenario), so rows differ only in the IMU. Results go to ``<out>/results.json`` after each run
-(atomically), so an interrupted experiment resumes where it stopped when its settings are
-unchanged; ``table.md`` and the trajectories (TUM files, causal and smoothed, at keyframes) are
-written beside it.
+Every input of a recording and scenario sees the same aiding (one draw seeded by the config's seed
+and the recording's and scenario's names), so rows differ only in the IMU. Results go to
+``<out>/results.json`` after each run (atomically), each with a hash of everything it depends on, so
+an interrupted or extended experiment reruns only what is missing or changed; a run whose graph GTSAM
+cannot solve is recorded as failed with its error and the experiment goes on. ``table.md`` and the
+trajectories (TUM files, causal and smoothed, at keyframes) are written beside it.
 """
 from __future__ import annotations
 
 import hashlib
 import json
+import zlib
 from dataclasses import asdict
 from pathlib import Path
 from typing import Callable, Dict, Tuple
@@ -29,12 +31,22 @@ from .noise import ImuNoise
 from .score import score
 
 
-def settings_hash(cfg: FuseConfig) -> str:
-    d = asdict(cfg)
-    d.pop("out_dir", None)
-    ck = Path(cfg.checkpoint)
-    d["checkpoint_bytes"] = hashlib.sha256(ck.read_bytes()).hexdigest() if "proposed" in cfg.inputs and ck.is_file() else ""
+def file_digest(path: str) -> str:
+    p = Path(path)
+    return hashlib.sha256(p.read_bytes()).hexdigest() if p.is_file() else ""
+
+
+def run_hash(cfg: FuseConfig, spec: RecordingSpec, scn: ScenarioSpec, name: str) -> str:
+    """Everything one run's result depends on (not the other recordings, scenarios or inputs)."""
+    artefact = {"proposed": cfg.checkpoint, "traditional": cfg.traditional}.get(name)
+    d = {"seed": cfg.seed, "gravity": cfg.gravity, "keyframe_hz": cfg.keyframe_hz, "noise": asdict(cfg.noise),
+         "recording": asdict(spec), "scenario": asdict(scn), "input": name,
+         "artefact": file_digest(artefact) if artefact else ""}
     return hashlib.sha256(json.dumps(d, sort_keys=True).encode()).hexdigest()[:16]
+
+
+def aiding_rng(cfg: FuseConfig, rname: str, scn: ScenarioSpec) -> np.random.Generator:
+    return np.random.default_rng([cfg.seed, zlib.crc32(rname.encode()), zlib.crc32(scn.name.encode())])
 
 
 def load_recording_for_fusion(cfg: FuseConfig, spec: RecordingSpec):
@@ -58,12 +70,42 @@ def load_recording_for_fusion(cfg: FuseConfig, spec: RecordingSpec):
     return seq, noise, leica
 
 
-def imu_input(name: str, seq, model) -> Tuple[np.ndarray, np.ndarray]:
+def load_inputs(cfg: FuseConfig) -> Dict[str, object]:
+    """The processors behind the inputs: the refiner for "proposed", the calibration for "traditional"."""
+    out: Dict[str, object] = {}
+    if "proposed" in cfg.inputs:
+        from imu_learn.checkpoint import load_model
+
+        out["proposed"] = load_model(Path(cfg.checkpoint))
+    if "traditional" in cfg.inputs:
+        from imu_learn.baselines.traditional import Traditional
+
+        if not Path(cfg.traditional).is_file():
+            raise FileNotFoundError(f"traditional: {cfg.traditional} not found (python -m imu_learn.evaluate with "
+                                    "the 'traditional' method writes it to <report>/methods/traditional.json)")
+        out["traditional"] = Traditional().load(Path(cfg.traditional))
+    return out
+
+
+def imu_input(name: str, seq, processors: Dict[str, object]) -> Tuple[np.ndarray, np.ndarray]:
     if name == "raw":
         return seq.gyro, seq.acc
+    if name == "traditional":
+        return processors["traditional"].refine(seq)
     from imu_learn.refine import refine_arrays
 
-    return refine_arrays(model, seq.gyro, seq.acc)
+    return refine_arrays(processors["proposed"], seq.gyro, seq.acc)
+
+
+def bias_prior_mean(scn: ScenarioSpec, seq, gyro: np.ndarray, acc: np.ndarray, gravity: float):
+    if scn.bias_prior == "zero":
+        return None
+    from imu_learn.metrics import fit_startup_bias
+    from imu_learn.types import Sequence
+
+    bg, ba = fit_startup_bias(Sequence(seq.name, seq.t_ns, gyro, acc, seq.p, seq.v, seq.q_wxyz),
+                              scn.startup_bias_s, gravity=gravity)
+    return np.r_[bg, ba]
 
 
 def make_aiding(scn: ScenarioSpec, seq, leica, rng: np.random.Generator):
@@ -90,52 +132,69 @@ def write_trajectory(path: Path, t_ns: np.ndarray, p: np.ndarray, R: np.ndarray)
 def run_experiment(cfg: FuseConfig, out: Path, log: Callable[[str], None] = print) -> Dict[str, dict]:
     out.mkdir(parents=True, exist_ok=True)
     res_path = out / "results.json"
-    settings = settings_hash(cfg)
     results: Dict[str, dict] = {}
     if res_path.exists():
-        old = json.loads(res_path.read_text())
-        if old.get("settings") == settings:
-            results = old.get("runs", {})
-            if results:
-                log(f"imu_learn.fuse: resuming: {len(results)} runs already in {res_path}")
-    model = None
-    if "proposed" in cfg.inputs:
-        from imu_learn.checkpoint import load_model
-
-        model = load_model(Path(cfg.checkpoint))
+        results = json.loads(res_path.read_text()).get("runs", {})
+    processors = load_inputs(cfg)
     total = len(cfg.recordings) * len(cfg.scenarios) * len(cfg.inputs)
+    wanted = {}
+    for spec in cfg.recordings:
+        for scn in cfg.scenarios:
+            for name in cfg.inputs:
+                wanted[f"{Path(spec.path).name}|{scn.name}|{name}"] = run_hash(cfg, spec, scn, name)
+    kept = {k: r for k, r in results.items() if wanted.get(k) == r.get("hash")}
+    if kept:
+        log(f"imu_learn.fuse: {len(kept)} of {total} runs already in {res_path} with these settings")
+    results = kept
     done = 0
-    for ri, spec in enumerate(cfg.recordings):
-        seq, noise, leica = load_recording_for_fusion(cfg, spec)
+    for spec in cfg.recordings:
         rname = Path(spec.path).name
-        inputs = {name: imu_input(name, seq, model) for name in cfg.inputs}
+        keys = [f"{rname}|{scn.name}|{n}" for scn in cfg.scenarios for n in cfg.inputs]
+        if all(k in results for k in keys):
+            done += len(keys)
+            continue
+        seq, noise, leica = load_recording_for_fusion(cfg, spec)
+        inputs = {name: imu_input(name, seq, processors) for name in cfg.inputs}
         R0 = Rotation.from_quat(wxyz_to_xyzw(seq.q_wxyz[0])).as_matrix()
-        for si, scn in enumerate(cfg.scenarios):
-            rng = np.random.default_rng([cfg.seed, ri, si])
-            aiding = make_aiding(scn, seq, leica, rng)
+        for scn in cfg.scenarios:
+            aiding = make_aiding(scn, seq, leica, aiding_rng(cfg, rname, scn))
             for name, (gyro, acc) in inputs.items():
                 done += 1
                 key = f"{rname}|{scn.name}|{name}"
                 if aiding is None or key in results:
                     continue
-                res = fuse(seq.t_ns, gyro, acc, (R0, seq.p[0], seq.v[0]), [aiding], noise, cfg.gravity,
-                           cfg.keyframe_hz)
+                head = {"recording": rname, "scenario": scn.name, "input": name, "aiding": aiding.label,
+                        "aiding_count": len(aiding), "duration_s": seq.duration_s, "noise": noise.source,
+                        "hash": wanted[key]}
+                bias0 = bias_prior_mean(scn, seq, gyro, acc, cfg.gravity)
+                if bias0 is not None:
+                    head["bias_prior"] = [round(float(b), 6) for b in bias0]
+                try:
+                    res = fuse(seq.t_ns, gyro, acc, (R0, seq.p[0], seq.v[0]), [aiding], noise, cfg.gravity,
+                               cfg.keyframe_hz, bias0=bias0)
+                except RuntimeError as e:  # GTSAM's IndeterminateLinearSystemException and kin
+                    results[key] = {**head, "failed": " ".join(str(e).split())[:300]}
+                    save_results(res_path, cfg, results)
+                    log(f"[{done}/{total}] {key}: failed: {results[key]['failed'][:120]}")
+                    continue
                 s = score(res, seq.t_ns, seq.p, seq.q_wxyz, [tuple(o) for o in scn.outages])
-                results[key] = {"recording": rname, "scenario": scn.name, "input": name, "aiding": aiding.label,
-                                "aiding_count": len(aiding), "duration_s": seq.duration_s,
-                                "noise": noise.source, "seconds": round(res.seconds, 2), **s}
+                results[key] = {**head, "seconds": round(res.seconds, 2), **s}
                 stem = key.replace("|", "_")
                 write_trajectory(out / "trajectories" / f"{stem}_causal.tum", seq.t_ns[res.kf_idx], res.causal_p,
                                  res.causal_R)
                 write_trajectory(out / "trajectories" / f"{stem}_smoothed.tum", seq.t_ns[res.kf_idx],
                                  res.smoothed_p, res.smoothed_R)
-                blob = json.dumps({"settings": settings, "config": asdict(cfg), "runs": results}, indent=1).encode()
-                atomic_write_bytes(res_path, lambda f, b=blob: f.write(b))
+                save_results(res_path, cfg, results)
                 log(f"[{done}/{total}] {key}: position RMSE causal {s['causal']['pos_rmse_m']:.3f} m, "
                     f"smoothed {s['smoothed']['pos_rmse_m']:.3f} m ({res.seconds:.0f} s)")
     table = format_table(cfg, results)
     atomic_write_bytes(out / "table.md", lambda f: f.write(table.encode()))
     return results
+
+
+def save_results(path: Path, cfg: FuseConfig, results: Dict[str, dict]) -> None:
+    blob = json.dumps({"config": asdict(cfg), "runs": results}, indent=1).encode()
+    atomic_write_bytes(path, lambda f: f.write(blob))
 
 
 def format_table(cfg: FuseConfig, results: Dict[str, dict]) -> str:
@@ -152,14 +211,15 @@ def format_table(cfg: FuseConfig, results: Dict[str, dict]) -> str:
             for i in cfg.inputs:
                 r = results.get(f"{rec}|{scn.name}|{i}")
                 for k in ("causal", "smoothed"):
-                    cells.append("–" if r is None else f"{r[k]['pos_rmse_m']:.3f} ({r[k]['rot_rmse_deg']:.2f})")
+                    cells.append("–" if r is None else "failed" if "failed" in r
+                                 else f"{r[k]['pos_rmse_m']:.3f} ({r[k]['rot_rmse_deg']:.2f})")
             lines.append(f"| {rec} | " + " | ".join(cells) + " |")
         if scn.outages:
             lines += ["", "Drift inside each outage (causal: RMSE / max position error [m]):", ""]
             for rec in dict.fromkeys(r["recording"] for r in rows):
                 for i in cfg.inputs:
                     r = results.get(f"{rec}|{scn.name}|{i}")
-                    if r is not None:
+                    if r is not None and "failed" not in r:
                         o = "; ".join(f"{x['start_s']:g}+{x['duration_s']:g} s: {x['rmse_m']:.3f} / {x['max_m']:.3f}"
                                       for x in r["causal"]["outages"])
                         lines.append(f"- {rec}, {i}: {o}")
