@@ -195,6 +195,7 @@ def test_experiment_on_the_shipped_crop_writes_results_and_resumes(shipped, tmp_
         assert r["smoothed"]["pos_rmse_m"] < 0.3 and len(r["causal"]["outages"]) == 1
     assert (tmp_path / "table.md").read_text().count("MH_04_difficult") >= 1
     assert len(list((tmp_path / "trajectories").glob("*.tum"))) == 4
+    assert (tmp_path / "plots" / "MH_04_difficult_gnss.png").stat().st_size > 10_000
     saved = json.loads((tmp_path / "results.json").read_text())
     assert saved["runs"] == json.loads(json.dumps(res))
     logs.clear()
@@ -258,3 +259,28 @@ def test_startup_bias_prior_and_traditional_input(shipped, tmp_path):
     assert res["MH_04_difficult|g|traditional"]["smoothed"]["pos_rmse_m"] < 0.3
     with pytest.raises(ConfigError, match="bias_prior"):
         validate(FuseConfig(recordings=[rec], scenarios=[ScenarioSpec("a", bias_prior="oracle")]))
+
+
+def test_trajectories_read_by_evo_give_the_reported_rmse(shipped, crop, tmp_path):
+    """The TUM files are what evo_ape reads; its unaligned APE on them is our position RMSE."""
+    evo_file = pytest.importorskip("evo.tools.file_interface")
+    from evo.core import metrics, sync
+
+    from imu_learn import _imu_core as core
+
+    rec = RecordingSpec(CROP, "euroc", CROP + "/mav0/state_groundtruth_estimate0/data.csv")
+    cfg = validate(FuseConfig(name="t", data_root=str(shipped), inputs=["raw"], recordings=[rec],
+                              scenarios=[ScenarioSpec("g", "position", 1.0, 0.1)]))
+    res = run_experiment(cfg, tmp_path, lambda m: None)["MH_04_difficult|g|raw"]
+    gt = tmp_path / "gt.tum"
+    core.write_tum(str(gt), np.ascontiguousarray(crop.t_ns), np.ascontiguousarray(crop.p),
+                   np.ascontiguousarray(crop.q_wxyz))
+    ref = evo_file.read_tum_trajectory_file(str(gt))
+    for which in ("causal", "smoothed"):
+        est = evo_file.read_tum_trajectory_file(str(tmp_path / "trajectories" / f"MH_04_difficult_g_raw_{which}.tum"))
+        assert est.num_poses > 500  # 10 Hz keyframes over the 60 s crop
+        r, e = sync.associate_trajectories(ref, est, max_diff=1e-6)
+        assert r.num_poses == e.num_poses == est.num_poses
+        ape = metrics.APE(metrics.PoseRelation.translation_part)
+        ape.process_data((r, e))
+        assert ape.get_statistic(metrics.StatisticsType.rmse) == pytest.approx(res[which]["pos_rmse_m"], rel=1e-6)

@@ -28,7 +28,12 @@ from .aiding import apply_outages, leica_fixes, simulate_position, simulate_rela
 from .config import FuseConfig, RecordingSpec, ScenarioSpec
 from .graph import fuse
 from .noise import ImuNoise
+from .plots import plot_setting, runs_of
 from .score import score
+
+
+# Changes with the estimator in graph.py, so results of an older estimator are not resumed.
+ESTIMATOR = "isam2-dogleg-qr+lm-qr"
 
 
 def file_digest(path: str) -> str:
@@ -39,7 +44,7 @@ def file_digest(path: str) -> str:
 def run_hash(cfg: FuseConfig, spec: RecordingSpec, scn: ScenarioSpec, name: str) -> str:
     """Everything one run's result depends on (not the other recordings, scenarios or inputs)."""
     artefact = {"proposed": cfg.checkpoint, "traditional": cfg.traditional}.get(name)
-    d = {"seed": cfg.seed, "gravity": cfg.gravity, "keyframe_hz": cfg.keyframe_hz, "noise": asdict(cfg.noise),
+    d = {"estimator": ESTIMATOR, "seed": cfg.seed, "gravity": cfg.gravity, "keyframe_hz": cfg.keyframe_hz, "noise": asdict(cfg.noise),
          "recording": asdict(spec), "scenario": asdict(scn), "input": name,
          "artefact": file_digest(artefact) if artefact else ""}
     return hashlib.sha256(json.dumps(d, sort_keys=True).encode()).hexdigest()[:16]
@@ -150,46 +155,51 @@ def run_experiment(cfg: FuseConfig, out: Path, log: Callable[[str], None] = prin
     for spec in cfg.recordings:
         rname = Path(spec.path).name
         keys = [f"{rname}|{scn.name}|{n}" for scn in cfg.scenarios for n in cfg.inputs]
-        if all(k in results for k in keys):
-            done += len(keys)
-            continue
-        seq, noise, leica = load_recording_for_fusion(cfg, spec)
-        inputs = {name: imu_input(name, seq, processors) for name in cfg.inputs}
+        seq, noise, leica = load_recording_for_fusion(cfg, spec)  # also for the plots of finished runs
+        pending = not all(k in results for k in keys)
+        inputs = {name: imu_input(name, seq, processors) for name in cfg.inputs} if pending else {}
         R0 = Rotation.from_quat(wxyz_to_xyzw(seq.q_wxyz[0])).as_matrix()
         for scn in cfg.scenarios:
             aiding = make_aiding(scn, seq, leica, aiding_rng(cfg, rname, scn))
-            for name, (gyro, acc) in inputs.items():
+            for name in cfg.inputs:
                 done += 1
                 key = f"{rname}|{scn.name}|{name}"
                 if aiding is None or key in results:
                     continue
-                head = {"recording": rname, "scenario": scn.name, "input": name, "aiding": aiding.label,
-                        "aiding_count": len(aiding), "duration_s": seq.duration_s, "noise": noise.source,
-                        "hash": wanted[key]}
-                bias0 = bias_prior_mean(scn, seq, gyro, acc, cfg.gravity)
-                if bias0 is not None:
-                    head["bias_prior"] = [round(float(b), 6) for b in bias0]
-                try:
-                    res = fuse(seq.t_ns, gyro, acc, (R0, seq.p[0], seq.v[0]), [aiding], noise, cfg.gravity,
-                               cfg.keyframe_hz, bias0=bias0)
-                except RuntimeError as e:  # GTSAM's IndeterminateLinearSystemException and kin
-                    results[key] = {**head, "failed": " ".join(str(e).split())[:300]}
-                    save_results(res_path, cfg, results)
-                    log(f"[{done}/{total}] {key}: failed: {results[key]['failed'][:120]}")
-                    continue
-                s = score(res, seq.t_ns, seq.p, seq.q_wxyz, [tuple(o) for o in scn.outages])
-                results[key] = {**head, "seconds": round(res.seconds, 2), **s}
-                stem = key.replace("|", "_")
-                write_trajectory(out / "trajectories" / f"{stem}_causal.tum", seq.t_ns[res.kf_idx], res.causal_p,
-                                 res.causal_R)
-                write_trajectory(out / "trajectories" / f"{stem}_smoothed.tum", seq.t_ns[res.kf_idx],
-                                 res.smoothed_p, res.smoothed_R)
+                gyro, acc = inputs[name]
+                r = results[key] = run_one(cfg, out, seq, noise, R0, scn, aiding, key, gyro, acc) | {"hash": wanted[key]}
                 save_results(res_path, cfg, results)
-                log(f"[{done}/{total}] {key}: position RMSE causal {s['causal']['pos_rmse_m']:.3f} m, "
-                    f"smoothed {s['smoothed']['pos_rmse_m']:.3f} m ({res.seconds:.0f} s)")
+                log(f"[{done}/{total}] {key}: " + (f"failed: {r['failed'][:120]}" if "failed" in r else
+                    f"position RMSE causal {r['causal']['pos_rmse_m']:.3f} m, smoothed {r['smoothed']['pos_rmse_m']:.3f} m "
+                    f"({r['seconds']:.0f} s)"))
+            if aiding is not None:
+                plot_setting(out / "plots" / f"{rname}_{scn.name}.png", f"{rname}, {aiding.label}", seq.t_ns, seq.p,
+                             runs_of(out / "trajectories", rname, scn.name, list(cfg.inputs)),
+                             [tuple(o) for o in scn.outages])
     table = format_table(cfg, results)
     atomic_write_bytes(out / "table.md", lambda f: f.write(table.encode()))
     return results
+
+
+def run_one(cfg: FuseConfig, out: Path, seq, noise: ImuNoise, R0: np.ndarray, scn: ScenarioSpec, aiding, key: str,
+            gyro: np.ndarray, acc: np.ndarray) -> dict:
+    """Fuse one input with one aiding; its scores (or ``failed``) and its trajectories on disk."""
+    rname, _, name = key.split("|")
+    head = {"recording": rname, "scenario": scn.name, "input": name, "aiding": aiding.label,
+            "aiding_count": len(aiding), "duration_s": seq.duration_s, "noise": noise.source}
+    bias0 = bias_prior_mean(scn, seq, gyro, acc, cfg.gravity)
+    if bias0 is not None:
+        head["bias_prior"] = [round(float(b), 6) for b in bias0]
+    try:
+        res = fuse(seq.t_ns, gyro, acc, (R0, seq.p[0], seq.v[0]), [aiding], noise, cfg.gravity, cfg.keyframe_hz,
+                   bias0=bias0)
+    except RuntimeError as e:  # GTSAM's IndeterminateLinearSystemException and kin
+        return {**head, "failed": " ".join(str(e).split())[:300]}
+    stem = key.replace("|", "_")
+    for kind, p, R in (("causal", res.causal_p, res.causal_R), ("smoothed", res.smoothed_p, res.smoothed_R)):
+        write_trajectory(out / "trajectories" / f"{stem}_{kind}.tum", seq.t_ns[res.kf_idx], p, R)
+    s = score(res, seq.t_ns, seq.p, seq.q_wxyz, [tuple(o) for o in scn.outages])
+    return {**head, "seconds": round(res.seconds, 2), **s}
 
 
 def save_results(path: Path, cfg: FuseConfig, results: Dict[str, dict]) -> None:
