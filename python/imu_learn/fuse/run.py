@@ -31,7 +31,6 @@ from .noise import ImuNoise
 from .plots import plot_setting, runs_of
 from .score import score
 
-
 # Changes with the estimator in graph.py, so results of an older estimator are not resumed.
 ESTIMATOR = "isam2-dogleg-qr+lm-qr"
 
