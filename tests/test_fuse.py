@@ -326,3 +326,18 @@ def test_trajectories_read_by_evo_give_the_reported_rmse(shipped, crop, tmp_path
         ape = metrics.APE(metrics.PoseRelation.translation_part)
         ape.process_data((r, e))
         assert ape.get_statistic(metrics.StatisticsType.rmse) == pytest.approx(res[which]["pos_rmse_m"], rel=1e-6)
+
+
+def test_a_recording_can_name_its_own_model_and_a_missing_one_fails_before_any_run(shipped, tmp_path):
+    from imu_learn.fuse.run import artefact_of, run_hash
+
+    own = RecordingSpec(CROP, "euroc", CROP + "/mav0/state_groundtruth_estimate0/data.csv", checkpoint=str(tmp_path / "nope.pt"))
+    other = RecordingSpec(CROP, "euroc", CROP + "/mav0/state_groundtruth_estimate0/data.csv")
+    cfg = validate(FuseConfig(name="t", data_root=str(shipped), inputs=["raw", "proposed"], recordings=[other, own],
+                              scenarios=[ScenarioSpec("g", "position", 1.0, 0.1)]))
+    assert artefact_of(cfg, own, "proposed") == str(tmp_path / "nope.pt")
+    assert artefact_of(cfg, other, "proposed") == cfg.checkpoint
+    assert run_hash(cfg, own, cfg.scenarios[0], "raw") == run_hash(cfg, other, cfg.scenarios[0], "raw")
+    with pytest.raises(FileNotFoundError, match="nope.pt"):
+        run_experiment(cfg, tmp_path / "o", lambda m: None)
+    assert not (tmp_path / "o" / "results.json").exists()

@@ -22,6 +22,9 @@ class RecordingSpec:
     format: str = "auto"
     groundtruth: str = ""  # relative to the data root; empty: the layout's own
     max_gap_s: float = 0.05
+    # Per-recording models, where the global ones saw this recording in training (empty: the global)
+    checkpoint: str = ""
+    traditional: str = ""
 
 
 @dataclass

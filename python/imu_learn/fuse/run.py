@@ -40,11 +40,21 @@ def file_digest(path: str) -> str:
     return hashlib.sha256(p.read_bytes()).hexdigest() if p.is_file() else ""
 
 
+def artefact_of(cfg: FuseConfig, spec: RecordingSpec, name: str) -> str:
+    """The file behind an input for this recording ("" for raw): its own model where it names one."""
+    if name == "proposed":
+        return spec.checkpoint or cfg.checkpoint
+    if name == "traditional":
+        return spec.traditional or cfg.traditional
+    return ""
+
+
 def run_hash(cfg: FuseConfig, spec: RecordingSpec, scn: ScenarioSpec, name: str) -> str:
     """Everything one run's result depends on (not the other recordings, scenarios or inputs)."""
-    artefact = {"proposed": cfg.checkpoint, "traditional": cfg.traditional}.get(name)
-    d = {"estimator": ESTIMATOR, "seed": cfg.seed, "gravity": cfg.gravity, "keyframe_hz": cfg.keyframe_hz, "noise": asdict(cfg.noise),
-         "recording": asdict(spec), "scenario": asdict(scn), "input": name,
+    artefact = artefact_of(cfg, spec, name)
+    recording = {k: v for k, v in asdict(spec).items() if k not in ("checkpoint", "traditional")}
+    d = {"estimator": ESTIMATOR, "seed": cfg.seed, "gravity": cfg.gravity, "keyframe_hz": cfg.keyframe_hz,
+         "noise": asdict(cfg.noise), "recording": recording, "scenario": asdict(scn), "input": name,
          "artefact": file_digest(artefact) if artefact else ""}
     return hashlib.sha256(json.dumps(d, sort_keys=True).encode()).hexdigest()[:16]
 
@@ -74,31 +84,33 @@ def load_recording_for_fusion(cfg: FuseConfig, spec: RecordingSpec):
     return seq, noise, leica
 
 
-def load_inputs(cfg: FuseConfig) -> Dict[str, object]:
-    """The processors behind the inputs: the refiner for "proposed", the calibration for "traditional"."""
-    out: Dict[str, object] = {}
-    if "proposed" in cfg.inputs:
-        from imu_learn.checkpoint import load_model
+def load_processor(name: str, path: str, cache: Dict[Tuple[str, str], object]) -> object:
+    """The refiner ("proposed") or calibration ("traditional") in ``path``, loaded once."""
+    if (name, path) not in cache:
+        if not Path(path).is_file():
+            hint = (" (python -m imu_learn.evaluate with the 'traditional' method writes it to "
+                    "<report>/methods/traditional.json)" if name == "traditional" else "")
+            raise FileNotFoundError(f"{name}: {path} not found{hint}")
+        if name == "proposed":
+            from imu_learn.checkpoint import load_model
 
-        out["proposed"] = load_model(Path(cfg.checkpoint))
-    if "traditional" in cfg.inputs:
-        from imu_learn.baselines.traditional import Traditional
+            cache[(name, path)] = load_model(Path(path))
+        else:
+            from imu_learn.baselines.traditional import Traditional
 
-        if not Path(cfg.traditional).is_file():
-            raise FileNotFoundError(f"traditional: {cfg.traditional} not found (python -m imu_learn.evaluate with "
-                                    "the 'traditional' method writes it to <report>/methods/traditional.json)")
-        out["traditional"] = Traditional().load(Path(cfg.traditional))
-    return out
+            cache[(name, path)] = Traditional().load(Path(path))
+    return cache[(name, path)]
 
 
-def imu_input(name: str, seq, processors: Dict[str, object]) -> Tuple[np.ndarray, np.ndarray]:
+def imu_input(name: str, seq, artefact: str, cache: Dict[Tuple[str, str], object]) -> Tuple[np.ndarray, np.ndarray]:
     if name == "raw":
         return seq.gyro, seq.acc
+    proc = load_processor(name, artefact, cache)
     if name == "traditional":
-        return processors["traditional"].refine(seq)
+        return proc.refine(seq)
     from imu_learn.refine import refine_arrays
 
-    return refine_arrays(processors["proposed"], seq.gyro, seq.acc)
+    return refine_arrays(proc, seq.gyro, seq.acc)
 
 
 def bias_prior_mean(scn: ScenarioSpec, seq, gyro: np.ndarray, acc: np.ndarray, gravity: float):
@@ -139,7 +151,11 @@ def run_experiment(cfg: FuseConfig, out: Path, log: Callable[[str], None] = prin
     results: Dict[str, dict] = {}
     if res_path.exists():
         results = json.loads(res_path.read_text()).get("runs", {})
-    processors = load_inputs(cfg)
+    processors: Dict[Tuple[str, str], object] = {}
+    for spec in cfg.recordings:  # a missing model fails here, before any run
+        for name in cfg.inputs:
+            if name != "raw":
+                load_processor(name, artefact_of(cfg, spec, name), processors)
     total = len(cfg.recordings) * len(cfg.scenarios) * len(cfg.inputs)
     wanted = {}
     for spec in cfg.recordings:
@@ -156,7 +172,8 @@ def run_experiment(cfg: FuseConfig, out: Path, log: Callable[[str], None] = prin
         keys = [f"{rname}|{scn.name}|{n}" for scn in cfg.scenarios for n in cfg.inputs]
         seq, noise, leica = load_recording_for_fusion(cfg, spec)  # also for the plots of finished runs
         pending = not all(k in results for k in keys)
-        inputs = {name: imu_input(name, seq, processors) for name in cfg.inputs} if pending else {}
+        inputs = ({name: imu_input(name, seq, artefact_of(cfg, spec, name), processors) for name in cfg.inputs}
+                  if pending else {})
         R0 = Rotation.from_quat(wxyz_to_xyzw(seq.q_wxyz[0])).as_matrix()
         for scn in cfg.scenarios:
             aiding = make_aiding(scn, seq, leica, aiding_rng(cfg, rname, scn))
