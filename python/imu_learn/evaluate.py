@@ -95,7 +95,7 @@ from imu_learn.config import (
 )
 from imu_learn.errors import ImuError, one_line
 from imu_learn.metrics import fit_startup_bias, index_at, remove_bias, with_imu
-from imu_learn.quat import quat_conj, quat_mul
+from imu_learn.quat import rotation_angle
 from imu_learn.types import Sequence
 
 PROG = "imu_learn.evaluate"
@@ -331,12 +331,6 @@ def check_checkpoint_split(m: CheckpointRefiner, test_entries: List[str]) -> Non
 
 # ---------------------------------------------------------------------------------------------
 # metrics
-
-
-def rotation_angle(q_gt: np.ndarray, q_hat: np.ndarray) -> np.ndarray:
-    """Angle [rad] of q_gt⁻¹ q_hat (unit quaternions, w x y z)."""
-    e = quat_mul(quat_conj(q_gt), q_hat)
-    return 2.0 * np.arctan2(np.linalg.norm(e[..., 1:], axis=-1), np.abs(e[..., 0]))
 
 
 def window_starts(seq: Sequence, n: int, stride: int, first: int) -> np.ndarray:

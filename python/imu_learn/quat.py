@@ -35,3 +35,9 @@ def quat_rotate(q: np.ndarray, v: np.ndarray) -> np.ndarray:
     u, w = q[..., 1:], q[..., :1]
     uv = np.cross(u, v)
     return v + 2.0 * (w * uv + np.cross(u, uv))
+
+
+def rotation_angle(q_gt: np.ndarray, q_hat: np.ndarray) -> np.ndarray:
+    """Angle [rad] of q_gt⁻¹ q_hat (unit quaternions, w x y z)."""
+    e = quat_mul(quat_conj(q_gt), q_hat)
+    return 2.0 * np.arctan2(np.linalg.norm(e[..., 1:], axis=-1), np.abs(e[..., 0]))

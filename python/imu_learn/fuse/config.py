@@ -7,7 +7,7 @@ from __future__ import annotations
 import os
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import List, Optional
+from typing import List, Optional, Tuple
 
 from imu_learn.config import DATA_ROOT_ENV, ConfigError, from_dict, read_toml
 
@@ -47,6 +47,9 @@ class ScenarioSpec:
     # removed" protocol assumes an estimator has, e.g. from a static start).
     bias_prior: str = "zero"
     startup_bias_s: float = 10.0
+
+    def outage_windows(self) -> List[Tuple[float, float]]:
+        return [(float(o[0]), float(o[1])) for o in self.outages]
 
 
 @dataclass

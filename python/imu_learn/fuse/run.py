@@ -10,6 +10,7 @@ trajectories (TUM files, causal and smoothed, at keyframes) are written beside i
 """
 from __future__ import annotations
 
+import functools
 import hashlib
 import json
 import zlib
@@ -37,7 +38,17 @@ ESTIMATOR = "isam2-dogleg-qr+lm-qr"
 
 def file_digest(path: str) -> str:
     p = Path(path)
-    return hashlib.sha256(p.read_bytes()).hexdigest() if p.is_file() else ""
+    if not p.is_file():
+        return ""
+    st = p.stat()
+    return _digest(str(p.resolve()), st.st_size, st.st_mtime_ns)
+
+
+@functools.lru_cache(maxsize=64)
+def _digest(path: str, _size: int, _mtime_ns: int) -> str:
+    """Keyed by size and mtime too, so a rewritten file is hashed again; read once per run_experiment
+    otherwise (run_hash asks for every recording x scenario)."""
+    return hashlib.sha256(Path(path).read_bytes()).hexdigest()
 
 
 def artefact_of(cfg: FuseConfig, spec: RecordingSpec, name: str) -> str:
@@ -57,6 +68,10 @@ def run_hash(cfg: FuseConfig, spec: RecordingSpec, scn: ScenarioSpec, name: str)
          "noise": asdict(cfg.noise), "recording": recording, "scenario": asdict(scn), "input": name,
          "artefact": file_digest(artefact) if artefact else ""}
     return hashlib.sha256(json.dumps(d, sort_keys=True).encode()).hexdigest()[:16]
+
+
+def run_key(spec: RecordingSpec, scn: ScenarioSpec, name: str) -> str:
+    return f"{Path(spec.path).name}|{scn.name}|{name}"
 
 
 def aiding_rng(cfg: FuseConfig, rname: str, scn: ScenarioSpec) -> np.random.Generator:
@@ -135,7 +150,7 @@ def make_aiding(scn: ScenarioSpec, seq, leica, rng: np.random.Generator):
         t, p, lever = leica
         t = t + int(round(scn.time_offset_s * 1e9))
         a = leica_fixes(t, p, lever, seq.t_ns, scn.rate_hz or None, scn.sigma_m)
-    return apply_outages(a, seq.t_ns, [tuple(o) for o in scn.outages])
+    return apply_outages(a, seq.t_ns, scn.outage_windows())
 
 
 def write_trajectory(path: Path, t_ns: np.ndarray, p: np.ndarray, R: np.ndarray) -> None:
@@ -161,7 +176,7 @@ def run_experiment(cfg: FuseConfig, out: Path, log: Callable[[str], None] = prin
     for spec in cfg.recordings:
         for scn in cfg.scenarios:
             for name in cfg.inputs:
-                wanted[f"{Path(spec.path).name}|{scn.name}|{name}"] = run_hash(cfg, spec, scn, name)
+                wanted[run_key(spec, scn, name)] = run_hash(cfg, spec, scn, name)
     kept = {k: r for k, r in results.items() if wanted.get(k) == r.get("hash")}
     if kept:
         log(f"imu_learn.fuse: {len(kept)} of {total} runs already in {res_path} with these settings")
@@ -169,7 +184,7 @@ def run_experiment(cfg: FuseConfig, out: Path, log: Callable[[str], None] = prin
     done = 0
     for spec in cfg.recordings:
         rname = Path(spec.path).name
-        keys = [f"{rname}|{scn.name}|{n}" for scn in cfg.scenarios for n in cfg.inputs]
+        keys = [run_key(spec, scn, n) for scn in cfg.scenarios for n in cfg.inputs]
         seq, noise, leica = load_recording_for_fusion(cfg, spec)  # also for the plots of finished runs
         pending = not all(k in results for k in keys)
         inputs = ({name: imu_input(name, seq, artefact_of(cfg, spec, name), processors) for name in cfg.inputs}
@@ -179,7 +194,7 @@ def run_experiment(cfg: FuseConfig, out: Path, log: Callable[[str], None] = prin
             aiding = make_aiding(scn, seq, leica, aiding_rng(cfg, rname, scn))
             for name in cfg.inputs:
                 done += 1
-                key = f"{rname}|{scn.name}|{name}"
+                key = run_key(spec, scn, name)
                 if aiding is None or key in results:
                     continue
                 gyro, acc = inputs[name]
@@ -191,7 +206,7 @@ def run_experiment(cfg: FuseConfig, out: Path, log: Callable[[str], None] = prin
             if aiding is not None:
                 plot_setting(out / "plots" / f"{rname}_{scn.name}.png", f"{rname}, {aiding.label}", seq.t_ns, seq.p,
                              runs_of(out / "trajectories", rname, scn.name, list(cfg.inputs)),
-                             [tuple(o) for o in scn.outages])
+                             scn.outage_windows())
     table = format_table(cfg, results)
     atomic_write_bytes(out / "table.md", lambda f: f.write(table.encode()))
     return results
@@ -214,7 +229,7 @@ def run_one(cfg: FuseConfig, out: Path, seq, noise: ImuNoise, R0: np.ndarray, sc
     stem = key.replace("|", "_")
     for kind, p, R in (("causal", res.causal_p, res.causal_R), ("smoothed", res.smoothed_p, res.smoothed_R)):
         write_trajectory(out / "trajectories" / f"{stem}_{kind}.tum", seq.t_ns[res.kf_idx], p, R)
-    s = score(res, seq.t_ns, seq.p, seq.q_wxyz, [tuple(o) for o in scn.outages])
+    s = score(res, seq.t_ns, seq.p, seq.q_wxyz, scn.outage_windows())
     return {**head, "seconds": round(res.seconds, 2), **s}
 
 

@@ -9,15 +9,14 @@ from typing import Sequence as Seq
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-from imu_learn.quat import wxyz_to_xyzw
+from imu_learn.quat import rotation_angle, xyzw_to_wxyz
 
 from .aiding import outage_mask
 from .graph import FusionResult
 
 
 def rotation_errors_deg(R_est: np.ndarray, q_wxyz_gt: np.ndarray) -> np.ndarray:
-    R_gt = Rotation.from_quat(wxyz_to_xyzw(q_wxyz_gt))
-    return np.rad2deg((R_gt.inv() * Rotation.from_matrix(R_est)).magnitude())
+    return np.rad2deg(rotation_angle(q_wxyz_gt, xyzw_to_wxyz(Rotation.from_matrix(R_est).as_quat())))
 
 
 def _rmse(x: np.ndarray) -> float:
