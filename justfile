@@ -52,7 +52,8 @@ refine checkpoint input output *args="":
 labels dataset root="" *args="":
     {{py}} -m imu_learn.labels {{dataset}} {{ if root == "" { "" } else { "--root " + root } }} {{args}}
 
-# Print measured throughput: imu_core vs numpy/GTSAM/polars, then training/refine/causal latency
+# Print measured throughput: imu_core vs numpy/GTSAM/polars, training/refine/causal latency, then online fusion latency
 bench *args="":
     {{py}} bench/bench_core.py {{args}}
     {{py}} bench/bench_learn.py
+    {{py}} bench/bench_fuse_online.py

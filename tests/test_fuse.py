@@ -232,7 +232,7 @@ def test_experiment_on_the_shipped_crop_writes_results_and_resumes(shipped, tmp_
         scenarios=[ScenarioSpec("gnss", "position", 1.0, 0.1, outages=[[20.0, 10.0]])]))
     logs = []
     res = run_experiment(cfg, tmp_path, logs.append)
-    assert set(res) == {"MH_04_difficult|gnss|raw", "MH_04_difficult|gnss|proposed"}
+    assert set(res) == {"MH_04_difficult|gnss|raw|s0", "MH_04_difficult|gnss|proposed|s0"}
     for r in res.values():
         assert r["smoothed"]["pos_rmse_m"] < 0.3 and len(r["causal"]["outages"]) == 1
     assert (tmp_path / "table.md").read_text().count("MH_04_difficult") >= 1
@@ -259,7 +259,7 @@ def test_a_changed_scenario_reruns_only_its_own_runs(shipped, tmp_path, monkeypa
     b.sigma_m = 0.2  # only b changes: a is kept
     calls.clear()
     res = run_experiment(cfg, tmp_path, lambda m: None)
-    assert len(calls) == 1 and set(res) == {"MH_04_difficult|a|raw", "MH_04_difficult|b|raw"}
+    assert len(calls) == 1 and set(res) == {"MH_04_difficult|a|raw|s0", "MH_04_difficult|b|raw|s0"}
 
 
 def test_a_graph_gtsam_cannot_solve_is_recorded_as_failed_and_the_rest_runs(shipped, tmp_path, monkeypatch):
@@ -277,8 +277,8 @@ def test_a_graph_gtsam_cannot_solve_is_recorded_as_failed_and_the_rest_runs(ship
     cfg = validate(FuseConfig(name="t", data_root=str(shipped), inputs=["raw"], recordings=[rec],
                               scenarios=[ScenarioSpec("slow", "position", 0.5, 0.1), ScenarioSpec("fast", "position", 1.0, 0.1)]))
     res = run_experiment(cfg, tmp_path, lambda m: None)
-    assert "Indeterminate" in res["MH_04_difficult|slow|raw"]["failed"]
-    assert res["MH_04_difficult|fast|raw"]["smoothed"]["pos_rmse_m"] < 0.3
+    assert "Indeterminate" in res["MH_04_difficult|slow|raw|s0"]["failed"]
+    assert res["MH_04_difficult|fast|raw|s0"]["smoothed"]["pos_rmse_m"] < 0.3
     assert "| failed | failed |" in (tmp_path / "table.md").read_text()
 
 
@@ -295,10 +295,10 @@ def test_startup_bias_prior_and_traditional_input(shipped, tmp_path):
                               traditional=str(tmp_path / "trad.json"), recordings=[rec],
                               scenarios=[ScenarioSpec("g", "position", 1.0, 0.1, bias_prior="startup")]))
     res = run_experiment(cfg, tmp_path / "o", lambda m: None)
-    raw, tr = res["MH_04_difficult|g|raw"]["bias_prior"], res["MH_04_difficult|g|traditional"]["bias_prior"]
+    raw, tr = res["MH_04_difficult|g|raw|s0"]["bias_prior"], res["MH_04_difficult|g|traditional|s0"]["bias_prior"]
     assert abs(raw[2] - tr[2] - 0.01) < 1e-4  # the calibration's offset, seen by the start-up fit
     assert np.linalg.norm(raw[:3]) > 0.05  # EuRoC's ADIS16448 starts with ~0.08 rad/s of gyro bias
-    assert res["MH_04_difficult|g|traditional"]["smoothed"]["pos_rmse_m"] < 0.3
+    assert res["MH_04_difficult|g|traditional|s0"]["smoothed"]["pos_rmse_m"] < 0.3
     with pytest.raises(ConfigError, match="bias_prior"):
         validate(FuseConfig(recordings=[rec], scenarios=[ScenarioSpec("a", bias_prior="oracle")]))
 
@@ -313,13 +313,13 @@ def test_trajectories_read_by_evo_give_the_reported_rmse(shipped, crop, tmp_path
     rec = RecordingSpec(CROP, "euroc", CROP + "/mav0/state_groundtruth_estimate0/data.csv")
     cfg = validate(FuseConfig(name="t", data_root=str(shipped), inputs=["raw"], recordings=[rec],
                               scenarios=[ScenarioSpec("g", "position", 1.0, 0.1)]))
-    res = run_experiment(cfg, tmp_path, lambda m: None)["MH_04_difficult|g|raw"]
+    res = run_experiment(cfg, tmp_path, lambda m: None)["MH_04_difficult|g|raw|s0"]
     gt = tmp_path / "gt.tum"
     core.write_tum(str(gt), np.ascontiguousarray(crop.t_ns), np.ascontiguousarray(crop.p),
                    np.ascontiguousarray(crop.q_wxyz))
     ref = evo_file.read_tum_trajectory_file(str(gt))
     for which in ("causal", "smoothed"):
-        est = evo_file.read_tum_trajectory_file(str(tmp_path / "trajectories" / f"MH_04_difficult_g_raw_{which}.tum"))
+        est = evo_file.read_tum_trajectory_file(str(tmp_path / "trajectories" / f"MH_04_difficult_g_raw_s0_{which}.tum"))
         assert est.num_poses > 500  # 10 Hz keyframes over the 60 s crop
         r, e = sync.associate_trajectories(ref, est, max_diff=1e-6)
         assert r.num_poses == e.num_poses == est.num_poses
@@ -337,7 +337,26 @@ def test_a_recording_can_name_its_own_model_and_a_missing_one_fails_before_any_r
                               scenarios=[ScenarioSpec("g", "position", 1.0, 0.1)]))
     assert artefact_of(cfg, own, "proposed") == str(tmp_path / "nope.pt")
     assert artefact_of(cfg, other, "proposed") == cfg.checkpoint
-    assert run_hash(cfg, own, cfg.scenarios[0], "raw") == run_hash(cfg, other, cfg.scenarios[0], "raw")
+    assert run_hash(cfg, own, cfg.scenarios[0], "raw", 0) == run_hash(cfg, other, cfg.scenarios[0], "raw", 0)
+    assert run_hash(cfg, own, cfg.scenarios[0], "raw", 0) != run_hash(cfg, own, cfg.scenarios[0], "raw", 1)
     with pytest.raises(FileNotFoundError, match="nope.pt"):
         run_experiment(cfg, tmp_path / "o", lambda m: None)
     assert not (tmp_path / "o" / "results.json").exists()
+
+
+def test_simulated_aiding_runs_once_per_noise_seed_and_the_table_gives_mean_and_std(shipped, tmp_path):
+    from imu_learn.fuse.run import seeds_of
+
+    rec = RecordingSpec(CROP, "euroc", CROP + "/mav0/state_groundtruth_estimate0/data.csv")
+    cfg = validate(FuseConfig(name="t", data_root=str(shipped), inputs=["raw"], recordings=[rec], seeds=[3, 7],
+                              scenarios=[ScenarioSpec("g", "position", 1.0, 0.1)]))
+    res = run_experiment(cfg, tmp_path, lambda m: None)
+    a, b = res["MH_04_difficult|g|raw|s3"], res["MH_04_difficult|g|raw|s7"]
+    assert set(res) == {"MH_04_difficult|g|raw|s3", "MH_04_difficult|g|raw|s7"} and (a["seed"], b["seed"]) == (3, 7)
+    ra, rb = a["smoothed"]["pos_rmse_m"], b["smoothed"]["pos_rmse_m"]
+    assert ra != rb  # different fixes
+    mean, std = (ra + rb) / 2, abs(ra - rb) / np.sqrt(2)
+    assert f"{mean:.3f} ± {std:.3f}" in (tmp_path / "table.md").read_text()
+    assert seeds_of(cfg, ScenarioSpec("l", "leica", 0.0, 0.005)) == [None]  # real aiding: one run
+    with pytest.raises(ConfigError, match="seeds"):
+        validate(FuseConfig(recordings=[rec], scenarios=cfg.scenarios, seeds=[1, 1]))

@@ -67,6 +67,22 @@ class CacheError(ImuError):
     """A label cache is missing, stale or written by an incompatible version."""
 
 
+class AidingError(ImuError, ValueError):
+    """Aiding measurements for :mod:`imu_learn.fuse` cannot be used: an aiding file without a single
+    fix, or none left after a scenario's outages. ``path`` names the aiding file (None for aiding
+    simulated from ground truth), ``label`` the aiding or the scenario."""
+
+    def __init__(self, message: str, path: Optional[str] = None, label: Optional[str] = None) -> None:
+        super().__init__(message)
+        self.path = path
+        self.label = label
+
+
+class AidingOverlapError(AidingError, AlignmentError):
+    """No aiding measurement lies inside the IMU's time span (another clock or unit, a wrong time
+    offset, or the file of another recording)."""
+
+
 __all__ = [
     "ImuError",
     "ParseError",
@@ -79,6 +95,8 @@ __all__ = [
     "AlignmentError",
     "InvalidInputError",
     "CacheError",
+    "AidingError",
+    "AidingOverlapError",
 ]
 
 

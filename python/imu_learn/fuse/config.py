@@ -68,7 +68,9 @@ class FuseConfig:
     name: str = "fuse"
     data_root: str = ""
     out_dir: str = "reports"
-    seed: int = 0
+    # Noise seeds of the simulated aiding: each simulated setting runs once per seed and the tables
+    # give mean +- std over them; real aiding (Leica) runs once.
+    seeds: List[int] = field(default_factory=lambda: [0])
     gravity: float = 9.81
     keyframe_hz: float = 10.0
     inputs: List[str] = field(default_factory=lambda: ["raw", "proposed"])
@@ -92,6 +94,8 @@ def validate(cfg: FuseConfig) -> FuseConfig:
         raise ConfigError("recordings: none given ([[recordings]] path = ...)")
     if not cfg.scenarios:
         raise ConfigError("scenarios: none given ([[scenarios]] name = ..., kind = ...)")
+    if not cfg.seeds or len(set(cfg.seeds)) != len(cfg.seeds):
+        raise ConfigError(f"seeds: one or more distinct integers, got {cfg.seeds}")
     if not cfg.keyframe_hz > 0:
         raise ConfigError(f"keyframe_hz: must be > 0, got {cfg.keyframe_hz}")
     names = [s.name for s in cfg.scenarios]

@@ -4,10 +4,15 @@ their keyframes, and a prior on the first state.
 
 Keyframes are the IMU samples of a fixed-rate grid (``keyframe_hz``) plus every sample an aiding
 measurement is tied to. Each IMU sample k is held over [t_k, t_k+1] (zero-order hold, as
-everywhere in imu_learn). The graph is solved by iSAM2 one keyframe at a time: the estimate of
-keyframe k right after its own update is the *causal* estimate (what a navigation system would
-deliver live); after the last keyframe, a batch Levenberg-Marquardt pass over the whole graph,
-started from iSAM2's final estimate, gives the *smoothed* one.
+everywhere in imu_learn). iSAM2 is updated at each aiding epoch: the estimate of keyframe k as of
+t_k (right after the update at its epoch, or the IMU prediction from the last update in between)
+is the *causal* estimate (what a navigation system would deliver live); after the last keyframe, a
+batch Levenberg-Marquardt pass over the whole graph, started from iSAM2's final estimate, gives
+the *smoothed* one.
+
+:class:`IncrementalFusion` holds the graph and takes the IMU one sample at a time (the online mode,
+:mod:`imu_learn.fuse.online`, streams through it); :func:`fuse` is a loop over a recording's samples
+through it followed by the smoothing pass.
 
 GTSAM's ``CombinedImuFactor`` takes its default (tangent-space, first-order) preintegration; over
 a keyframe interval of 0.1 s (20 samples at 200 Hz) it differs from the exact manifold
@@ -62,6 +67,272 @@ def keyframes(t_ns: np.ndarray, keyframe_hz: float, aiding: Seq) -> np.ndarray:
     return np.unique(np.concatenate(idx).astype(np.int64))
 
 
+@dataclass(frozen=True)
+class CausalState:
+    """What :meth:`IncrementalFusion.add_sample` returns for a sample: the navigation state as of the
+    sample's stamp. ``keyframe``: the sample is a keyframe (its estimate is the one
+    :attr:`FusionResult.causal_p` holds); ``updated``: iSAM2 was updated there (aiding arrived, or
+    the stream ended). Between keyframes it is the IMU prediction from the last keyframe."""
+
+    index: int
+    t_ns: int
+    keyframe: bool
+    updated: bool
+    nav: object  # gtsam.NavState
+
+    @property
+    def p(self) -> np.ndarray:
+        return self.nav.position()
+
+    @property
+    def R(self) -> np.ndarray:
+        return self.nav.attitude().matrix()
+
+    @property
+    def v(self) -> np.ndarray:
+        return self.nav.velocity()
+
+
+def lm_params():
+    import gtsam
+
+    lm = gtsam.LevenbergMarquardtParams()
+    lm.setLinearSolverType("MULTIFRONTAL_QR")
+    return lm
+
+
+class IncrementalFusion:
+    """The factor graph built and solved one IMU sample at a time, as a navigation system would run
+    it: :meth:`add_sample` integrates each sample into the current preintegration and, at a
+    keyframe, adds the ``CombinedImuFactor`` from the previous keyframe and the aiding tied to it,
+    and updates iSAM2 when aiding arrived there (``iterations`` steps; after a coast longer than
+    ``resolve_after_s`` a batch re-solve, see the comments in ``__init__``) or the stream ended; it
+    returns the causal state (:class:`CausalState`). :meth:`smooth`, after the last sample, runs the
+    batch Levenberg-Marquardt pass and gives the :class:`FusionResult` :func:`fuse` returns.
+
+    Keyframe indices are precomputed from the stamps ``t_ns``: the stream knows the keyframe grid
+    and the stamps of its aiding. Each aiding measurement is tied to its nearest IMU sample and is
+    consumed when that sample arrives (a measurement stamped up to half a sample period after
+    that sample is thereby used at it; a live system would use it at the next sample). The
+    recording's last sample is a keyframe with an update: the end of the stream.
+
+    Sample k is held over [t_k, t_k+1] (zero-order hold), so it is integrated when sample k+1
+    arrives and its dt is known; the preintegration at keyframe sample s therefore holds exactly
+    the samples from the previous keyframe up to s - 1.
+
+    ``predict_between``: also return the IMU prediction at samples between keyframes (otherwise
+    None there; :func:`fuse` skips it, its results do not depend on it)."""
+
+    def __init__(
+        self,
+        t_ns: np.ndarray,
+        start_pose: tuple,
+        aiding: Seq = (),
+        noise: ImuNoise = ImuNoise(),
+        gravity: float = 9.81,
+        keyframe_hz: float = 10.0,
+        prior: PriorSigmas = PriorSigmas(),
+        bias0: Optional[np.ndarray] = None,
+        iterations: int = 1,
+        predict_between: bool = True,
+        resolve_after_s: float = 2.0,
+    ) -> None:
+        import gtsam
+        from gtsam.symbol_shorthand import B, V, X
+
+        self._gtsam, self._B, self._V, self._X = gtsam, B, V, X
+        t_ns = np.asarray(t_ns, dtype=np.int64)
+        if t_ns.ndim != 1 or len(t_ns) < 2:
+            raise InvalidInputError(f"fusion needs N >= 2 sample stamps; got shape {t_ns.shape}")
+        self._t_start = time.perf_counter()
+        self.t_ns = t_ns
+        self._stamps = t_ns.tolist()
+        self._n_samples = len(t_ns)
+        self.iterations = int(iterations)
+        self.resolve_after_ns = int(round(resolve_after_s * 1e9)) if np.isfinite(resolve_after_s) else 2 ** 62
+        self._last_update_ns = int(t_ns[0])
+        self.predict_between = bool(predict_between)
+        kf = keyframes(t_ns, keyframe_hz, aiding)
+        self.kf_idx = kf
+        self._kf_list = [int(s) for s in kf]
+        self._key_of = {int(s): k for k, s in enumerate(kf)}
+        self._fixes_at: Dict[int, List] = {}
+        self._between_at: Dict[int, List] = {}
+        for a in aiding:
+            if isinstance(a, PositionFixes):
+                model = gtsam.noiseModel.Isotropic.Sigma(3, a.sigma_m)
+                for s, p in zip(a.idx, a.p):
+                    self._fixes_at.setdefault(int(s), []).append((p, a.lever, model))
+            elif isinstance(a, RelativePoses):
+                model = gtsam.noiseModel.Diagonal.Sigmas(np.r_[[a.sigma_rot_rad] * 3, [a.sigma_trans_m] * 3])
+                for i, j, R, t in zip(a.i, a.j, a.R_ij, a.t_ij):
+                    self._between_at.setdefault(int(j), []).append((int(i), gtsam.Pose3(gtsam.Rot3(R), t), model))
+            else:
+                raise InvalidInputError(f"unknown aiding {type(a).__name__}")
+
+        self._params = noise.gtsam_params(gravity)
+        isam_params = gtsam.ISAM2Params()
+        # QR, not the default Cholesky: with datasheet bias random walks the IMU factors' bias blocks
+        # are 1e10 times stiffer than a loose bias prior, and Cholesky reports such chains as
+        # indeterminate (tests/test_fuse.py keeps a minimal case).
+        isam_params.setFactorization("QR")
+        # Gauss-Newton steps, with iSAM2 updated only where aiding arrives: between aiding epochs a
+        # keyframe adds no information, so its estimate is the IMU prediction. Updating at every
+        # keyframe instead made Gauss-Newton diverge with 0.1 Hz fixes (EuRoC V1_03: 286 km), and
+        # Dogleg, which cured that, needs the whole Bayes tree for each step (cost growing with the
+        # trajectory: 43 s on V1_01 with 1 Hz fixes, now 4 s). After a coast longer than
+        # `resolve_after_s` the IMU-predicted linearisation point is far off and a few Gauss-Newton
+        # steps leave the first fix's estimate metres to hundreds of metres from it (40 s coast:
+        # 243-269 m); there the whole graph so far is re-solved by Levenberg-Marquardt and iSAM2
+        # restarted from that solution (0.02-0.05 m; tests/test_fuse_aiding.py).
+        isam_params.setOptimizationParams(gtsam.ISAM2GaussNewtonParams())
+        # Relinearise any variable whose step exceeds 0.1 (rad, m, m/s), checked at every update: with
+        # 0.01 a 10 Hz VO chain relinearised most of itself each time (V1_01: 29 s, now 11 s, same
+        # RMSE); checking only every 10th update let 0.1 Hz fixes diverge.
+        isam_params.setRelinearizeThreshold(0.1)
+        isam_params.relinearizeSkip = 1
+        self._isam = gtsam.ISAM2(isam_params)
+        self._full = gtsam.NonlinearFactorGraph()
+
+        R0, p0, v0 = start_pose
+        pose0 = gtsam.Pose3(gtsam.Rot3(np.asarray(R0)), np.asarray(p0, dtype=np.float64))
+        bg0, ba0 = (np.zeros(3), np.zeros(3)) if bias0 is None else (np.asarray(bias0)[:3], np.asarray(bias0)[3:])
+        b0 = gtsam.imuBias.ConstantBias(ba0, bg0)  # GTSAM's order: accelerometer, gyroscope
+        self._graph = gtsam.NonlinearFactorGraph()
+        self._values = gtsam.Values()
+        self._graph.add(gtsam.PriorFactorPose3(X(0), pose0, gtsam.noiseModel.Diagonal.Sigmas(
+            np.r_[[prior.rot_rad] * 3, [prior.pos_m] * 3])))
+        self._graph.add(gtsam.PriorFactorVector(V(0), np.asarray(v0, dtype=np.float64),
+                                                gtsam.noiseModel.Isotropic.Sigma(3, prior.vel_mps)))
+        self._graph.add(gtsam.PriorFactorConstantBias(B(0), b0, gtsam.noiseModel.Diagonal.Sigmas(
+            np.r_[[prior.bias_acc] * 3, [prior.bias_gyro] * 3])))
+        self._values.insert(X(0), pose0)
+        self._values.insert(V(0), np.asarray(v0, dtype=np.float64))
+        self._values.insert(B(0), b0)
+
+        K = len(kf)
+        self.causal_p, self.causal_R = np.zeros((K, 3)), np.zeros((K, 3, 3))
+        self._state, self._vel, self._bias = pose0, np.asarray(v0, dtype=np.float64), b0
+        self._nav = gtsam.NavState(pose0, self._vel)
+        self._pim = None
+        self.counts = {"imu_factors": 0, "position_factors": 0, "relative_pose_factors": 0, "isam2_updates": 0,
+                       "resolves_after_coast": 0}
+        self.n = 0  # samples added so far
+        self._k = 0  # the next keyframe's number
+        self._next_kf = self._kf_list[0]
+        self._prev = None  # (t_ns, gyro, acc) of the last sample, integrated when the next arrives
+
+    @property
+    def done(self) -> bool:
+        return self.n == len(self.t_ns)
+
+    def _add_aiding(self, k: int, s: int) -> int:
+        gtsam, X = self._gtsam, self._X
+        graph = self._graph
+        n = graph.size()
+        for p, lever, model in self._fixes_at.get(s, ()):
+            if np.any(lever):
+                graph.add(gtsam.GPSFactorArm(X(k), p, lever, model))
+            else:
+                graph.add(gtsam.GPSFactor(X(k), p, model))
+            self.counts["position_factors"] += 1
+        for i, rel, model in self._between_at.get(s, ()):
+            graph.add(gtsam.BetweenFactorPose3(X(self._key_of[i]), X(k), rel, model))
+            self.counts["relative_pose_factors"] += 1
+        return graph.size() - n
+
+    def add_sample(self, t_ns: int, gyro: np.ndarray, acc: np.ndarray) -> Optional[CausalState]:
+        """Take IMU sample number :attr:`n` (stamp ``t_ns`` [ns], gyro [rad/s] and acc [m/s^2] (3,)):
+        integrate the previous sample, and at a keyframe add its factors and update iSAM2 where
+        aiding arrived. Returns the causal state as of ``t_ns`` (None between keyframes without
+        ``predict_between``)."""
+        n = self.n
+        t = int(t_ns)
+        if n >= self._n_samples or t != self._stamps[n]:
+            expected = "none (the stream has ended)" if n >= self._n_samples else str(self._stamps[n])
+            raise InvalidInputError(f"sample {n}: stamp {t} ns, expected {expected}")
+        gtsam = self._gtsam
+        if n:
+            t_prev, g_prev, a_prev = self._prev
+            self._pim.integrateMeasurement(a_prev, g_prev, (t - t_prev) * 1e-9)
+        self._prev = (t, np.asarray(gyro, dtype=np.float64), np.asarray(acc, dtype=np.float64))
+        self.n = n + 1
+        if n != self._next_kf:
+            if not self.predict_between:
+                return None
+            return CausalState(n, t, False, False, self._pim.predict(self._nav, self._bias))
+        k = self._k
+        updated = False
+        if k == 0:
+            self._add_aiding(0, 0)
+        else:
+            X, V, B = self._X, self._V, self._B
+            pim = self._pim
+            self._graph.add(gtsam.CombinedImuFactor(X(k - 1), V(k - 1), X(k), V(k), B(k - 1), B(k), pim))
+            self.counts["imu_factors"] += 1
+            pred = pim.predict(self._nav, self._bias)
+            self._values.insert(X(k), pred.pose())
+            self._values.insert(V(k), pred.velocity())
+            self._values.insert(B(k), self._bias)
+            if not self._add_aiding(k, n) and k < len(self._kf_list) - 1:
+                # No new information: the estimate as of t_k is the IMU prediction (what a navigation
+                # system outputs between aiding epochs); iSAM2 takes these factors with the next update.
+                self._state, self._vel = pred.pose(), pred.velocity()
+            else:
+                self._update(t)
+                self._state = self._isam.calculateEstimatePose3(X(k))
+                self._vel = self._isam.calculateEstimateVector(V(k))
+                self._bias = self._isam.calculateEstimateConstantBias(B(k))
+                updated = True
+        self.causal_p[k], self.causal_R[k] = self._state.translation(), self._state.rotation().matrix()
+        self._nav = gtsam.NavState(self._state, self._vel)
+        self._k = k + 1
+        if self._k < len(self._kf_list):
+            self._next_kf = self._kf_list[self._k]
+            self._pim = gtsam.PreintegratedCombinedMeasurements(self._params, self._bias)
+        else:
+            self._next_kf = -1
+            self._pim = None
+        return CausalState(n, t, True, updated, self._nav)
+
+    def _update(self, t_ns: int) -> None:
+        gtsam = self._gtsam
+        self._isam.update(self._graph, self._values)
+        for _ in range(self.iterations - 1):
+            self._isam.update()
+        self.counts["isam2_updates"] += 1
+        for f in range(self._graph.size()):
+            self._full.add(self._graph.at(f))
+        self._graph = gtsam.NonlinearFactorGraph()
+        self._values = gtsam.Values()
+        if t_ns - self._last_update_ns > self.resolve_after_ns:
+            est = gtsam.LevenbergMarquardtOptimizer(self._full, self._isam.calculateEstimate(), lm_params()).optimize()
+            self._isam = gtsam.ISAM2(self._isam.params())
+            self._isam.update(self._full, est)
+            self.counts["resolves_after_coast"] += 1
+        self._last_update_ns = t_ns
+
+    def smooth(self) -> FusionResult:
+        """After the last sample: the batch Levenberg-Marquardt pass over the whole graph, started
+        from iSAM2's final estimate; the causal estimates beside the smoothed ones."""
+        if not self.done:
+            raise InvalidInputError(f"smooth() after the last sample: {self.n} of {len(self.t_ns)} added")
+        gtsam, X, V, B = self._gtsam, self._X, self._V, self._B
+        est = gtsam.LevenbergMarquardtOptimizer(self._full, self._isam.calculateEstimate(), lm_params()).optimize()
+        K = len(self._kf_list)
+        smoothed_p, smoothed_R = np.zeros((K, 3)), np.zeros((K, 3, 3))
+        smoothed_v, smoothed_b = np.zeros((K, 3)), np.zeros((K, 6))
+        for k in range(K):
+            pose = est.atPose3(X(k))
+            smoothed_p[k], smoothed_R[k] = pose.translation(), pose.rotation().matrix()
+            smoothed_v[k] = est.atVector(V(k))
+            b = est.atConstantBias(B(k))
+            smoothed_b[k] = np.r_[b.gyroscope(), b.accelerometer()]
+        counts = {k: v for k, v in self.counts.items() if k != "isam2_updates"}
+        return FusionResult(self.kf_idx, self.causal_p, self.causal_R, smoothed_p, smoothed_R, smoothed_v, smoothed_b,
+                            time.perf_counter() - self._t_start, counts)
+
+
 def fuse(
     t_ns: np.ndarray,
     gyro: np.ndarray,
@@ -73,116 +344,24 @@ def fuse(
     keyframe_hz: float = 10.0,
     prior: PriorSigmas = PriorSigmas(),
     bias0: Optional[np.ndarray] = None,
+    iterations: int = 1,
+    resolve_after_s: float = 2.0,
 ) -> FusionResult:
     """Fuse IMU samples (N, 3) with ``aiding`` (:class:`PositionFixes`, :class:`RelativePoses`).
     ``start_pose`` = (R0 (3, 3), p0 (3,), v0 (3,)) of sample 0 (from ground truth: the prior);
-    ``bias0`` (6,) gyro then accelerometer, the bias prior's mean (zero when None)."""
-    import gtsam
-    from gtsam.symbol_shorthand import B, V, X
-
+    ``bias0`` (6,) gyro then accelerometer, the bias prior's mean (zero when None); ``iterations``:
+    iSAM2 steps at each aiding epoch (1 + relinearising extra updates); ``resolve_after_s``: after a
+    coast longer than this, the graph so far is re-solved in batch (see
+    :class:`IncrementalFusion`). The recording streamed
+    through :class:`IncrementalFusion` sample by sample, then smoothed."""
     t_ns = np.asarray(t_ns, dtype=np.int64)
     if len(t_ns) < 2 or gyro.shape != (len(t_ns), 3) or acc.shape != gyro.shape:
         raise InvalidInputError(f"fuse needs N >= 2 samples with gyro and acc (N, 3); got {gyro.shape}, {acc.shape}")
     t_start = time.perf_counter()
-    kf = keyframes(t_ns, keyframe_hz, aiding)
-    key_of = {int(s): k for k, s in enumerate(kf)}
-    fixes_at: Dict[int, List] = {}
-    between_at: Dict[int, List] = {}
-    for a in aiding:
-        if isinstance(a, PositionFixes):
-            model = gtsam.noiseModel.Isotropic.Sigma(3, a.sigma_m)
-            for s, p in zip(a.idx, a.p):
-                fixes_at.setdefault(int(s), []).append((p, a.lever, model))
-        elif isinstance(a, RelativePoses):
-            model = gtsam.noiseModel.Diagonal.Sigmas(np.r_[[a.sigma_rot_rad] * 3, [a.sigma_trans_m] * 3])
-            for i, j, R, t in zip(a.i, a.j, a.R_ij, a.t_ij):
-                between_at.setdefault(int(j), []).append((int(i), gtsam.Pose3(gtsam.Rot3(R), t), model))
-        else:
-            raise InvalidInputError(f"unknown aiding {type(a).__name__}")
-
-    params = noise.gtsam_params(gravity)
-    isam_params = gtsam.ISAM2Params()
-    # QR, not the default Cholesky: with datasheet bias random walks the IMU factors' bias blocks
-    # are 1e10 times stiffer than a loose bias prior, and Cholesky reports such chains as
-    # indeterminate (tests/test_fuse.py keeps a minimal case).
-    isam_params.setFactorization("QR")
-    # Dogleg, not Gauss-Newton: with sparse fixes (0.1 Hz) the IMU-predicted linearisation point is
-    # poor and Gauss-Newton steps overshoot (EuRoC V1_03: causal RMSE 286 km or an indeterminate
-    # system; with Dogleg 31 m, and 2.7 m with the start-up bias prior).
-    isam_params.setOptimizationParams(gtsam.ISAM2DoglegParams())
-    isam_params.setRelinearizeThreshold(0.01)
-    isam_params.relinearizeSkip = 1
-    isam = gtsam.ISAM2(isam_params)
-    full = gtsam.NonlinearFactorGraph()
-
-    R0, p0, v0 = start_pose
-    pose0 = gtsam.Pose3(gtsam.Rot3(np.asarray(R0)), np.asarray(p0, dtype=np.float64))
-    bg0, ba0 = (np.zeros(3), np.zeros(3)) if bias0 is None else (np.asarray(bias0)[:3], np.asarray(bias0)[3:])
-    b0 = gtsam.imuBias.ConstantBias(ba0, bg0)  # GTSAM's order: accelerometer, gyroscope
-    graph = gtsam.NonlinearFactorGraph()
-    values = gtsam.Values()
-    graph.add(gtsam.PriorFactorPose3(X(0), pose0, gtsam.noiseModel.Diagonal.Sigmas(
-        np.r_[[prior.rot_rad] * 3, [prior.pos_m] * 3])))
-    graph.add(gtsam.PriorFactorVector(V(0), np.asarray(v0, dtype=np.float64),
-                                      gtsam.noiseModel.Isotropic.Sigma(3, prior.vel_mps)))
-    graph.add(gtsam.PriorFactorConstantBias(B(0), b0, gtsam.noiseModel.Diagonal.Sigmas(
-        np.r_[[prior.bias_acc] * 3, [prior.bias_gyro] * 3])))
-    values.insert(X(0), pose0)
-    values.insert(V(0), np.asarray(v0, dtype=np.float64))
-    values.insert(B(0), b0)
-
-    K = len(kf)
-    causal_p, causal_R = np.zeros((K, 3)), np.zeros((K, 3, 3))
-    causal_p[0], causal_R[0] = pose0.translation(), pose0.rotation().matrix()
-    state, vel, bias = pose0, np.asarray(v0, dtype=np.float64), b0
-    dt_s = np.diff(t_ns) * 1e-9
-    counts = {"imu_factors": 0, "position_factors": 0, "relative_pose_factors": 0}
-
-    def add_aiding(k: int, s: int) -> None:
-        for p, lever, model in fixes_at.get(s, ()):
-            if np.any(lever):
-                graph.add(gtsam.GPSFactorArm(X(k), p, lever, model))
-            else:
-                graph.add(gtsam.GPSFactor(X(k), p, model))
-            counts["position_factors"] += 1
-        for i, rel, model in between_at.get(s, ()):
-            graph.add(gtsam.BetweenFactorPose3(X(key_of[i]), X(k), rel, model))
-            counts["relative_pose_factors"] += 1
-
-    add_aiding(0, 0)
-    for k in range(1, K):
-        pim = gtsam.PreintegratedCombinedMeasurements(params, bias)
-        for s in range(int(kf[k - 1]), int(kf[k])):
-            pim.integrateMeasurement(acc[s], gyro[s], dt_s[s])
-        graph.add(gtsam.CombinedImuFactor(X(k - 1), V(k - 1), X(k), V(k), B(k - 1), B(k), pim))
-        counts["imu_factors"] += 1
-        pred = pim.predict(gtsam.NavState(state, vel), bias)
-        values.insert(X(k), pred.pose())
-        values.insert(V(k), pred.velocity())
-        values.insert(B(k), bias)
-        add_aiding(k, int(kf[k]))
-        isam.update(graph, values)
-        for f in range(graph.size()):
-            full.add(graph.at(f))
-        graph = gtsam.NonlinearFactorGraph()
-        values = gtsam.Values()
-        state = isam.calculateEstimatePose3(X(k))
-        vel = isam.calculateEstimateVector(V(k))
-        bias = isam.calculateEstimateConstantBias(B(k))
-        causal_p[k], causal_R[k] = state.translation(), state.rotation().matrix()
-    if K == 1:
-        isam.update(graph, values)
-
-    lm = gtsam.LevenbergMarquardtParams()
-    lm.setLinearSolverType("MULTIFRONTAL_QR")
-    est = gtsam.LevenbergMarquardtOptimizer(full, isam.calculateEstimate(), lm).optimize()
-    smoothed_p, smoothed_R = np.zeros((K, 3)), np.zeros((K, 3, 3))
-    smoothed_v, smoothed_b = np.zeros((K, 3)), np.zeros((K, 6))
-    for k in range(K):
-        pose = est.atPose3(X(k))
-        smoothed_p[k], smoothed_R[k] = pose.translation(), pose.rotation().matrix()
-        smoothed_v[k] = est.atVector(V(k))
-        b = est.atConstantBias(B(k))
-        smoothed_b[k] = np.r_[b.gyroscope(), b.accelerometer()]
-    return FusionResult(kf, causal_p, causal_R, smoothed_p, smoothed_R, smoothed_v, smoothed_b,
-                        time.perf_counter() - t_start, counts)
+    inc = IncrementalFusion(t_ns, start_pose, aiding, noise, gravity, keyframe_hz, prior, bias0, iterations,
+                            predict_between=False, resolve_after_s=resolve_after_s)
+    for s in range(len(t_ns)):
+        inc.add_sample(t_ns[s], gyro[s], acc[s])
+    res = inc.smooth()
+    res.seconds = time.perf_counter() - t_start
+    return res

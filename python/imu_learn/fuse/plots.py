@@ -50,6 +50,7 @@ def plot_setting(out_png: Path, title: str, t_ns: np.ndarray, p_gt: np.ndarray,
     return True
 
 
-def runs_of(traj_dir: Path, rname: str, scenario: str, inputs: List[str]) -> List[Tuple[str, Path, Path]]:
-    return [(i, traj_dir / f"{rname}_{scenario}_{i}_causal.tum", traj_dir / f"{rname}_{scenario}_{i}_smoothed.tum")
+def runs_of(traj_dir: Path, stem: str, inputs: List[str]) -> List[Tuple[str, Path, Path]]:
+    """``stem``: the runs' file stem with ``{input}`` where the input's name goes."""
+    return [(i, traj_dir / f"{stem.format(input=i)}_causal.tum", traj_dir / f"{stem.format(input=i)}_smoothed.tum")
             for i in inputs]

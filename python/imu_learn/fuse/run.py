@@ -1,8 +1,9 @@
 """The fusion experiment: every recording x IMU input x aiding scenario of a :class:`FuseConfig`,
 fused by :func:`imu_learn.fuse.graph.fuse` and scored against ground truth.
 
-Every input of a recording and scenario sees the same aiding (one draw seeded by the config's seed
-and the recording's and scenario's names), so rows differ only in the IMU. Results go to
+Every input of a recording and scenario sees the same aiding (for simulated aiding one draw per
+noise seed of the config, seeded by it and the recording's and scenario's names), so rows differ
+only in the IMU; the tables give mean +- std over the seeds. Results go to
 ``<out>/results.json`` after each run (atomically), each with a hash of everything it depends on, so
 an interrupted or extended experiment reruns only what is missing or changed; a run whose graph GTSAM
 cannot solve is recorded as failed with its error and the experiment goes on. ``table.md`` and the
@@ -16,7 +17,7 @@ import json
 import zlib
 from dataclasses import asdict
 from pathlib import Path
-from typing import Callable, Dict, Tuple
+from typing import Callable, Dict, List, Optional, Tuple
 
 import numpy as np
 from scipy.spatial.transform import Rotation
@@ -25,7 +26,15 @@ from imu_learn import _imu_core as core
 from imu_learn.cache import atomic_write_bytes
 from imu_learn.quat import wxyz_to_xyzw, xyzw_to_wxyz
 
-from .aiding import apply_outages, leica_fixes, simulate_position, simulate_relative_pose
+from .aiding import (
+    aiding_gaps,
+    apply_outages,
+    check_aiding,
+    clip_outages,
+    leica_fixes,
+    simulate_position,
+    simulate_relative_pose,
+)
 from .config import FuseConfig, RecordingSpec, ScenarioSpec
 from .graph import fuse
 from .noise import ImuNoise
@@ -33,7 +42,7 @@ from .plots import plot_setting, runs_of
 from .score import score
 
 # Changes with the estimator in graph.py, so results of an older estimator are not resumed.
-ESTIMATOR = "isam2-dogleg-qr+lm-qr"
+ESTIMATOR = "isam2-gn-at-aiding-resolve-after-2s-qr+lm-qr"
 
 
 def file_digest(path: str) -> str:
@@ -60,22 +69,27 @@ def artefact_of(cfg: FuseConfig, spec: RecordingSpec, name: str) -> str:
     return ""
 
 
-def run_hash(cfg: FuseConfig, spec: RecordingSpec, scn: ScenarioSpec, name: str) -> str:
+def seeds_of(cfg: FuseConfig, scn: ScenarioSpec) -> List[Optional[int]]:
+    """The noise seeds a scenario runs with: every seed for simulated aiding, none for real."""
+    return [None] if scn.kind == "leica" else list(cfg.seeds)
+
+
+def run_hash(cfg: FuseConfig, spec: RecordingSpec, scn: ScenarioSpec, name: str, seed: Optional[int]) -> str:
     """Everything one run's result depends on (not the other recordings, scenarios or inputs)."""
     artefact = artefact_of(cfg, spec, name)
     recording = {k: v for k, v in asdict(spec).items() if k not in ("checkpoint", "traditional")}
-    d = {"estimator": ESTIMATOR, "seed": cfg.seed, "gravity": cfg.gravity, "keyframe_hz": cfg.keyframe_hz,
+    d = {"estimator": ESTIMATOR, "seed": seed, "gravity": cfg.gravity, "keyframe_hz": cfg.keyframe_hz,
          "noise": asdict(cfg.noise), "recording": recording, "scenario": asdict(scn), "input": name,
          "artefact": file_digest(artefact) if artefact else ""}
     return hashlib.sha256(json.dumps(d, sort_keys=True).encode()).hexdigest()[:16]
 
 
-def run_key(spec: RecordingSpec, scn: ScenarioSpec, name: str) -> str:
-    return f"{Path(spec.path).name}|{scn.name}|{name}"
+def run_key(spec: RecordingSpec, scn: ScenarioSpec, name: str, seed: Optional[int]) -> str:
+    return f"{Path(spec.path).name}|{scn.name}|{name}" + ("" if seed is None else f"|s{seed}")
 
 
-def aiding_rng(cfg: FuseConfig, rname: str, scn: ScenarioSpec) -> np.random.Generator:
-    return np.random.default_rng([cfg.seed, zlib.crc32(rname.encode()), zlib.crc32(scn.name.encode())])
+def aiding_rng(seed: Optional[int], rname: str, scn: ScenarioSpec) -> np.random.Generator:
+    return np.random.default_rng([seed or 0, zlib.crc32(rname.encode()), zlib.crc32(scn.name.encode())])
 
 
 def load_recording_for_fusion(cfg: FuseConfig, spec: RecordingSpec):
@@ -95,7 +109,7 @@ def load_recording_for_fusion(cfg: FuseConfig, spec: RecordingSpec):
     else:
         noise = ImuNoise(n.gyro_noise_density, n.acc_noise_density, n.gyro_random_walk, n.acc_random_walk,
                          source="config [noise]")
-    leica = read_leica(path) if (path / LEICA_FILE).exists() else None
+    leica = (*read_leica(path), str(path / LEICA_FILE)) if (path / LEICA_FILE).exists() else None
     return seq, noise, leica
 
 
@@ -147,10 +161,11 @@ def make_aiding(scn: ScenarioSpec, seq, leica, rng: np.random.Generator):
     else:
         if leica is None:
             return None
-        t, p, lever = leica
+        t, p, lever, source = leica
         t = t + int(round(scn.time_offset_s * 1e9))
-        a = leica_fixes(t, p, lever, seq.t_ns, scn.rate_hz or None, scn.sigma_m)
-    return apply_outages(a, seq.t_ns, scn.outage_windows())
+        a = leica_fixes(t, p, lever, seq.t_ns, scn.rate_hz or None, scn.sigma_m, source=source)
+    # AidingOverlapError (Leica outside the IMU segment) above; AidingError when outages leave nothing
+    return check_aiding(apply_outages(a, seq.t_ns, scn.outage_windows()), f"{seq.name}|{scn.name}")
 
 
 def write_trajectory(path: Path, t_ns: np.ndarray, p: np.ndarray, R: np.ndarray) -> None:
@@ -171,12 +186,9 @@ def run_experiment(cfg: FuseConfig, out: Path, log: Callable[[str], None] = prin
         for name in cfg.inputs:
             if name != "raw":
                 load_processor(name, artefact_of(cfg, spec, name), processors)
-    total = len(cfg.recordings) * len(cfg.scenarios) * len(cfg.inputs)
-    wanted = {}
-    for spec in cfg.recordings:
-        for scn in cfg.scenarios:
-            for name in cfg.inputs:
-                wanted[run_key(spec, scn, name)] = run_hash(cfg, spec, scn, name)
+    wanted = {run_key(spec, scn, name, seed): run_hash(cfg, spec, scn, name, seed)
+              for spec in cfg.recordings for scn in cfg.scenarios for seed in seeds_of(cfg, scn) for name in cfg.inputs}
+    total = len(wanted)
     kept = {k: r for k, r in results.items() if wanted.get(k) == r.get("hash")}
     if kept:
         log(f"imu_learn.fuse: {len(kept)} of {total} runs already in {res_path} with these settings")
@@ -184,29 +196,36 @@ def run_experiment(cfg: FuseConfig, out: Path, log: Callable[[str], None] = prin
     done = 0
     for spec in cfg.recordings:
         rname = Path(spec.path).name
-        keys = [run_key(spec, scn, n) for scn in cfg.scenarios for n in cfg.inputs]
         seq, noise, leica = load_recording_for_fusion(cfg, spec)  # also for the plots of finished runs
-        pending = not all(k in results for k in keys)
+        pending = any(k.split("|")[0] == rname and k not in results for k in wanted)
         inputs = ({name: imu_input(name, seq, artefact_of(cfg, spec, name), processors) for name in cfg.inputs}
                   if pending else {})
         R0 = Rotation.from_quat(wxyz_to_xyzw(seq.q_wxyz[0])).as_matrix()
         for scn in cfg.scenarios:
-            aiding = make_aiding(scn, seq, leica, aiding_rng(cfg, rname, scn))
-            for name in cfg.inputs:
-                done += 1
-                key = run_key(spec, scn, name)
-                if aiding is None or key in results:
-                    continue
-                gyro, acc = inputs[name]
-                r = results[key] = run_one(cfg, out, seq, noise, R0, scn, aiding, key, gyro, acc) | {"hash": wanted[key]}
-                save_results(res_path, cfg, results)
-                log(f"[{done}/{total}] {key}: " + (f"failed: {r['failed'][:120]}" if "failed" in r else
-                    f"position RMSE causal {r['causal']['pos_rmse_m']:.3f} m, smoothed {r['smoothed']['pos_rmse_m']:.3f} m "
-                    f"({r['seconds']:.0f} s)"))
-            if aiding is not None:
-                plot_setting(out / "plots" / f"{rname}_{scn.name}.png", f"{rname}, {aiding.label}", seq.t_ns, seq.p,
-                             runs_of(out / "trajectories", rname, scn.name, list(cfg.inputs)),
-                             scn.outage_windows())
+            label = None
+            for seed in seeds_of(cfg, scn):
+                aiding = make_aiding(scn, seq, leica, aiding_rng(seed, rname, scn))
+                if aiding is not None and seed == seeds_of(cfg, scn)[0] and (
+                        getattr(aiding, "dropped_outside", 0) or getattr(aiding, "dropped_unmatched", 0)):
+                    log(f"{rname}|{scn.name}: {aiding.label}: {aiding.dropped_outside} fixes outside the IMU segment "
+                        f"and {aiding.dropped_unmatched} without an IMU sample of their own left out")
+                for name in cfg.inputs:
+                    done += 1
+                    key = run_key(spec, scn, name, seed)
+                    if aiding is None or key in results:
+                        continue
+                    gyro, acc = inputs[name]
+                    r = run_one(cfg, out, seq, noise, R0, scn, aiding, key, gyro, acc)
+                    r = results[key] = r | {"seed": seed, "hash": wanted[key]}
+                    save_results(res_path, cfg, results)
+                    log(f"[{done}/{total}] {key}: " + (f"failed: {r['failed'][:120]}" if "failed" in r else
+                        f"position RMSE causal {r['causal']['pos_rmse_m']:.3f} m, smoothed "
+                        f"{r['smoothed']['pos_rmse_m']:.3f} m ({r['seconds']:.0f} s)"))
+                label = label or (aiding.label if aiding is not None else None)
+            if label is not None:  # drawn from the first seed's trajectories
+                stem = run_key(spec, scn, "{input}", seeds_of(cfg, scn)[0]).replace("|", "_")
+                plot_setting(out / "plots" / f"{rname}_{scn.name}.png", f"{rname}, {label}", seq.t_ns, seq.p,
+                             runs_of(out / "trajectories", stem, list(cfg.inputs)), scn.outage_windows())
     table = format_table(cfg, results)
     atomic_write_bytes(out / "table.md", lambda f: f.write(table.encode()))
     return results
@@ -215,9 +234,13 @@ def run_experiment(cfg: FuseConfig, out: Path, log: Callable[[str], None] = prin
 def run_one(cfg: FuseConfig, out: Path, seq, noise: ImuNoise, R0: np.ndarray, scn: ScenarioSpec, aiding, key: str,
             gyro: np.ndarray, acc: np.ndarray) -> dict:
     """Fuse one input with one aiding; its scores (or ``failed``) and its trajectories on disk."""
-    rname, _, name = key.split("|")
+    rname, _, name = key.split("|")[:3]
     head = {"recording": rname, "scenario": scn.name, "input": name, "aiding": aiding.label,
-            "aiding_count": len(aiding), "duration_s": seq.duration_s, "noise": noise.source}
+            "aiding_count": len(aiding), "aiding_gaps": aiding_gaps(aiding, seq.t_ns),
+            "aiding_dropped": {k: getattr(aiding, k) for k in ("dropped_outside", "dropped_unmatched", "dropped_outage")
+                               if hasattr(aiding, k)},
+            "outages_clipped": [list(w) for w in clip_outages(seq.t_ns, scn.outage_windows())],
+            "duration_s": seq.duration_s, "noise": noise.source}
     bias0 = bias_prior_mean(scn, seq, gyro, acc, cfg.gravity)
     if bias0 is not None:
         head["bias_prior"] = [round(float(b), 6) for b in bias0]
@@ -238,31 +261,57 @@ def save_results(path: Path, cfg: FuseConfig, results: Dict[str, dict]) -> None:
     atomic_write_bytes(path, lambda f: f.write(blob))
 
 
+def runs_by_cell(results: Dict[str, dict]) -> Dict[Tuple[str, str, str], List[dict]]:
+    """(recording, scenario, input) -> its runs over the noise seeds."""
+    cells: Dict[Tuple[str, str, str], List[dict]] = {}
+    for r in results.values():
+        cells.setdefault((r["recording"], r["scenario"], r["input"]), []).append(r)
+    return cells
+
+
+def mean_std(values: List[float], digits: int = 3) -> str:
+    """``mean ± std`` (sample std) over the seeds; the value alone for one run."""
+    v = np.asarray(values, dtype=np.float64)
+    if len(v) == 1:
+        return f"{v[0]:.{digits}f}"
+    return f"{v.mean():.{digits}f} ± {v.std(ddof=1):.{digits}f}"
+
+
+def cell_text(runs: List[dict], kind: str) -> str:
+    """A table cell: position RMSE mean ± std over the seeds (rotation RMSE mean in brackets);
+    failed runs are counted, not averaged."""
+    ok = [r for r in runs if "failed" not in r]
+    if not ok:
+        return "failed" if runs else "–"
+    text = (f"{mean_std([r[kind]['pos_rmse_m'] for r in ok])} "
+            f"({np.mean([r[kind]['rot_rmse_deg'] for r in ok]):.2f})")
+    return text + (f" [{len(runs) - len(ok)} failed]" if len(ok) < len(runs) else "")
+
+
 def format_table(cfg: FuseConfig, results: Dict[str, dict]) -> str:
-    lines = [f"# {cfg.name}: position RMSE [m] (rotation RMSE [deg]) at keyframes, causal / smoothed", ""]
+    lines = [f"# {cfg.name}: position RMSE [m] (rotation RMSE [deg]) at keyframes, causal / smoothed",
+             "", f"Simulated aiding: mean ± std over the noise seeds {cfg.seeds}; real aiding: one run.", ""]
+    cells = runs_by_cell(results)
     for scn in cfg.scenarios:
-        rows = [r for r in results.values() if r["scenario"] == scn.name]
-        if not rows:
+        recs = list(dict.fromkeys(rec for rec, s, _ in cells if s == scn.name))
+        if not recs:
             continue
-        lines += [f"## {scn.name}: {rows[0]['aiding']}" + (f", outages {scn.outages}" if scn.outages else ""), ""]
+        label = next(r["aiding"] for (_, s, _), rs in cells.items() if s == scn.name for r in rs)
+        lines += [f"## {scn.name}: {label}" + (f", outages {scn.outages}" if scn.outages else ""), ""]
         head = "| recording | " + " | ".join(f"{i} causal | {i} smoothed" for i in cfg.inputs) + " |"
         lines += [head, "|" + "---|" * (1 + 2 * len(cfg.inputs))]
-        for rec in dict.fromkeys(r["recording"] for r in rows):
-            cells = []
-            for i in cfg.inputs:
-                r = results.get(f"{rec}|{scn.name}|{i}")
-                for k in ("causal", "smoothed"):
-                    cells.append("–" if r is None else "failed" if "failed" in r
-                                 else f"{r[k]['pos_rmse_m']:.3f} ({r[k]['rot_rmse_deg']:.2f})")
-            lines.append(f"| {rec} | " + " | ".join(cells) + " |")
+        for rec in recs:
+            row = [cell_text(cells.get((rec, scn.name, i), []), k) for i in cfg.inputs for k in ("causal", "smoothed")]
+            lines.append(f"| {rec} | " + " | ".join(row) + " |")
         if scn.outages:
-            lines += ["", "Drift inside each outage (causal: RMSE / max position error [m]):", ""]
-            for rec in dict.fromkeys(r["recording"] for r in rows):
+            lines += ["", "Drift inside each outage (causal, max position error [m], mean ± std over the seeds):", ""]
+            for rec in recs:
                 for i in cfg.inputs:
-                    r = results.get(f"{rec}|{scn.name}|{i}")
-                    if r is not None and "failed" not in r:
-                        o = "; ".join(f"{x['start_s']:g}+{x['duration_s']:g} s: {x['rmse_m']:.3f} / {x['max_m']:.3f}"
-                                      for x in r["causal"]["outages"])
+                    ok = [r for r in cells.get((rec, scn.name, i), []) if "failed" not in r]
+                    if ok:
+                        o = "; ".join(f"{x['start_s']:g}+{x['duration_s']:g} s: "
+                                      + mean_std([r["causal"]["outages"][j]["max_m"] for r in ok])
+                                      for j, x in enumerate(ok[0]["causal"]["outages"]))
                         lines.append(f"- {rec}, {i}: {o}")
         lines.append("")
     return "\n".join(lines)
