@@ -24,7 +24,9 @@ import sys
 from pathlib import Path
 
 REPO = Path(__file__).resolve().parent.parent
-CAUSAL_CANDIDATES = ("models/euroc_adis16448_causal.pt", "runs/euroc_causal_s0/best.pt")
+# No causal model ships (the one this recipe trains is at raw IMU's accuracy: README); train it with
+# python -m imu_learn.fit --config configs/euroc_paper.toml --name euroc_causal_s0 --model.causal true --model.fir_taps 0
+CAUSAL_CANDIDATES = ("runs/euroc_causal_s0/best.pt",)
 
 
 def default_checkpoint() -> str:
@@ -78,8 +80,15 @@ def main(argv=None) -> int:
           f"RAYON_NUM_THREADS={m['RAYON_NUM_THREADS'] or '(unset)'}, OMP_NUM_THREADS={m['OMP_NUM_THREADS'] or '(unset)'}, "
           f"python {m['python']}, torch {torch.__version__}")
     if model is None:
-        print(f"proposed: skipped ({'no causal checkpoint: ' + ', '.join(CAUSAL_CANDIDATES) + ' do not exist' if not ckpt else ckpt + ' not found'}; "
-              "pass --checkpoint CAUSAL.pt)")
+        # Latency does not depend on the weights: without a trained causal checkpoint the same
+        # architecture, freshly initialised, is timed (its RMSE is then meaningless, and labelled so).
+        from imu_learn.model import ImuRefiner, ModelConfig
+
+        torch.manual_seed(0)
+        model = ImuRefiner(ModelConfig(causal=True, fir_taps=0)).eval()
+        print(f"proposed: no causal checkpoint ({', '.join(CAUSAL_CANDIDATES)} not found; pass --checkpoint CAUSAL.pt): "
+              f"an UNTRAINED causal model of the recipe's architecture is timed ({sum(p.numel() for p in model.parameters())} "
+              "parameters; latency only, its RMSE says nothing)")
     else:
         print(f"proposed: causal checkpoint {ckpt} ({sum(p.numel() for p in model.parameters())} parameters, "
               f"hidden {model.cfg.hidden}, layers {model.cfg.layers})")
@@ -90,8 +99,6 @@ def main(argv=None) -> int:
         aiding = make_aiding(scn, seq, leica, aiding_rng(0, Path(spec.path).name, scn))
         R0 = Rotation.from_quat(wxyz_to_xyzw(seq.q_wxyz[0])).as_matrix()
         for name, mdl in (("raw", None), ("proposed", model)):
-            if name == "proposed" and mdl is None:
-                continue
             res = stream(seq.t_ns, seq.gyro, seq.acc, (R0, seq.p[0], seq.v[0]), [aiding], mdl, noise, cfg.gravity,
                          cfg.keyframe_hz)
             st = res.stats()
@@ -111,8 +118,8 @@ def main(argv=None) -> int:
               f"{st['real_time_factor']:.1f}× | {sc['pos_rmse_m']:.3f} m | {m['torch_threads']} |")
     print()
     print("Aiding: simulated 1 Hz position fixes (sigma 0.1 m). Latency: perf_counter_ns around the model step and "
-          "IncrementalFusion.add_sample of each sample; update: the samples where iSAM2 was updated (3 Gauss-Newton "
-          "steps); samples slower than 5 ms: those slower than the IMU's sample period (200 Hz); max delay: the longest time from a "
+          "IncrementalFusion.add_sample of each sample; update: the samples where iSAM2 was updated (a Gauss-Newton "
+          "step; after a coast over 2 s a batch re-solve); samples slower than 5 ms: those slower than the IMU's sample period (200 Hz); max delay: the longest time from a "
           "sample's stamp to its output if samples queue while the loop is busy; real-time factor: recording duration / "
           "streaming wall time.")
     return 0

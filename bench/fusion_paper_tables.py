@@ -6,7 +6,7 @@ experiment's results:
 Our analogue of the paper's visual-inertial setting is the simulated 10 Hz relative-pose aiding
 (no absolute fix, so the position drifts as in visual odometry): full-trajectory position RMSE
 [m], causal (live) and smoothed, for each IMU input on each test flight, then the average over
-the flights (the paper's Table III "EuRoC" column). Prints markdown.
+the flights (the paper's Table III "EuRoC" column); mean ± std over the noise seeds. Prints markdown.
 """
 from __future__ import annotations
 
@@ -15,6 +15,8 @@ import json
 import math
 from pathlib import Path
 from typing import Dict, List
+
+from imu_learn.fuse.run import cell_text, mean_std, runs_by_cell
 
 # Quoted from the paper (Zhang et al., Table I: positional RMSE [m] over the entire trajectories,
 # the processed IMU fused with visual data; VINS as reported by its authors). MH_02 has no IMU here.
@@ -30,33 +32,33 @@ PAPER_TABLE3_EUROC = {"Tr.": 0.1592, "Pr.": 0.1210, "VINS": 0.1778, "End-to-End"
 INPUT_LABEL = {"raw": "raw", "traditional": "Tr. (traditional)", "proposed": "Pr. (proposed)"}
 
 
-def cell(r: dict, kind: str) -> str:
-    if r is None:
-        return "–"
-    if "failed" in r:
-        return "failed"
-    return f"{r[kind]['pos_rmse_m']:.3f}"
-
-
 # Not a test flight of the standard split (it trained the global models; its rows use models trained
 # without it), so it stays out of the average that stands beside the paper's.
 NOT_IN_AVERAGE = ("MH_01_easy",)
 
 
 def ours(runs: Dict[str, dict], scenario: str) -> List[str]:
-    recs = list(dict.fromkeys(r["recording"] for r in runs.values() if r["scenario"] == scenario))
-    inputs = list(dict.fromkeys(r["input"] for r in runs.values() if r["scenario"] == scenario))
-    lines = ["| input | " + " | ".join(f"{x} causal / smoothed" for x in recs) + " | average of the test flights, causal / smoothed |",
-             "|---|" + "---|" * (len(recs) + 1)]
+    """Per flight: mean ± std over the noise seeds; the average: each seed's average over the test
+    flights, then mean ± std over the seeds."""
+    cells = runs_by_cell(runs)
+    recs = list(dict.fromkeys(rec for rec, s, _ in cells if s == scenario))
+    inputs = list(dict.fromkeys(i for _, s, i in cells if s == scenario))
+    lines = ["| input | " + " | ".join(f"{x} causal / smoothed" for x in recs)
+             + " | average of the test flights, causal / smoothed |", "|---|" + "---|" * (len(recs) + 1)]
     for i in inputs:
-        cells, avg = [], {"causal": [], "smoothed": []}
-        for rec in recs:
-            r = runs.get(f"{rec}|{scenario}|{i}")
-            cells.append(f"{cell(r, 'causal')} / {cell(r, 'smoothed')}")
-            for k in avg if rec not in NOT_IN_AVERAGE else ():
-                avg[k].append(r[k]["pos_rmse_m"] if r and "failed" not in r else math.nan)
-        mean = " / ".join(f"{sum(v) / len(v):.3f}" for v in avg.values())
-        lines.append(f"| {INPUT_LABEL.get(i, i)} | " + " | ".join(cells) + f" | {mean} |")
+        row = [f"{cell_text(cells[(rec, scenario, i)], 'causal')} / {cell_text(cells[(rec, scenario, i)], 'smoothed')}"
+               for rec in recs]
+        avg = []
+        for kind in ("causal", "smoothed"):
+            per_seed: Dict[object, List[float]] = {}
+            for rec in recs:
+                if rec in NOT_IN_AVERAGE:
+                    continue
+                for r in cells[(rec, scenario, i)]:
+                    per_seed.setdefault(r.get("seed"), []).append(
+                        math.nan if "failed" in r else r[kind]["pos_rmse_m"])
+            avg.append(mean_std([sum(v) / len(v) for v in per_seed.values()]))
+        lines.append(f"| {INPUT_LABEL.get(i, i)} | " + " | ".join(row) + f" | {' / '.join(avg)} |")
     return lines
 
 

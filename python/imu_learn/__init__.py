@@ -9,6 +9,8 @@ Public API (see README):
 from imu_learn._imu_core import __version__
 from imu_learn.batches import AugmentConfig, Batch, BatchConfig, BatchSampler, make_batch
 from imu_learn.errors import (
+    AidingError,
+    AidingOverlapError,
     AlignmentError,
     CacheError,
     ColumnCountError,
@@ -41,4 +43,5 @@ __all__ = [
     "ImuData", "GroundTruth", "Sequence", "Recording", "wxyz_to_xyzw", "xyzw_to_wxyz",
     "ImuError", "ParseError", "HeaderError", "ColumnCountError", "NotNumericError", "NonFiniteError",
     "TimestampError", "FloatTimestampError", "AlignmentError", "InvalidInputError", "CacheError",
+    "AidingError", "AidingOverlapError",
 ]

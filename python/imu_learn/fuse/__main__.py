@@ -22,8 +22,11 @@ EPILOG = """examples:
   IMU_LEARN_DATA=<data root> python -m imu_learn.fuse --config configs/fuse_euroc.toml
       every recording x input x aiding scenario of the config, causal and smoothed
       -> reports/fuse_euroc/{results.json,table.md,trajectories/,plots/}
+  IMU_LEARN_DATA=<data root> python -m imu_learn.fit --config configs/euroc_paper.toml --name euroc_causal_s0 \\
+      --model.causal true --model.fir_taps 0
+      a causal checkpoint (runs/euroc_causal_s0/best.pt; about 3 min on one CPU core)
   IMU_LEARN_DATA=<data root> python -m imu_learn.fuse --config configs/fuse_euroc.toml --online \\
-      --checkpoint models/euroc_adis16448_causal.pt --recordings V1_01_easy --scenarios gnss_1hz
+      --checkpoint runs/euroc_causal_s0/best.pt --recordings V1_01_easy --scenarios gnss_1hz
       the recording as a stream (raw and the causal model's refinement), one line per run with the
       causal position RMSE, per-sample latency (median, p99) and real-time factor
       -> reports/fuse_euroc/online.json
