@@ -5,7 +5,9 @@
 One row per experiment x aiding setting, one column pair per IMU input: position RMSE [m] over the
 whole trajectory, causal / smoothed, averaged over the experiment's test recordings (EuRoC's MH_01
 is reported on its own: it is a training flight of the shared models); for simulated aiding each
-noise seed's average over the recordings, then mean ± std over the seeds. Prints markdown (the
+noise seed's average over the recordings, then mean ± std over the seeds that every recording of
+the row has ("seeds"; an unfinished experiment counts only those). The paired table counts wins
+over every run pair there is. Prints markdown (the
 table is transposed against the issue's sketch, inputs as columns, so it fits a page).
 """
 from __future__ import annotations
@@ -21,11 +23,21 @@ from imu_learn.fuse.run import mean_std, runs_by_cell
 NOT_IN_AVERAGE = ("MH_01_easy",)
 
 
-def average(runs: List[dict], kind: str) -> str:
-    """Mean ± std over the seeds of each seed's average over the recordings in ``runs``."""
-    per_seed: Dict[object, List[float]] = {}
+def complete_seeds(runs: List[dict], n_recordings: int) -> List[object]:
+    """The noise seeds every one of the ``n_recordings`` has a run of (an average over a seed that
+    some recordings lack would compare different recordings)."""
+    count: Dict[object, int] = {}
     for r in runs:
-        per_seed.setdefault(r.get("seed"), []).append(math.nan if "failed" in r else r[kind]["pos_rmse_m"])
+        count[r.get("seed")] = count.get(r.get("seed"), 0) + 1
+    return sorted((s for s, c in count.items() if c == n_recordings), key=lambda s: -1 if s is None else s)
+
+
+def average(runs: List[dict], kind: str, seeds: List[object]) -> str:
+    """Mean ± std over ``seeds`` of each seed's average over the recordings in ``runs``."""
+    per_seed: Dict[object, List[float]] = {s: [] for s in seeds}
+    for r in runs:
+        if r.get("seed") in per_seed:
+            per_seed[r.get("seed")].append(math.nan if "failed" in r else r[kind]["pos_rmse_m"])
     return mean_std([sum(v) / len(v) for v in per_seed.values()])
 
 
@@ -42,10 +54,43 @@ def rows_of(name: str, runs: Dict[str, dict]) -> List[List[str]]:
             if not recs:
                 continue
             row = [name, scn, f"{len(recs)}" if label == "test recordings" else label]
+            seeds = None
             for i in inputs:
                 rs = [r for rec in recs for r in cells.get((rec, scn, i), [])]
-                row.append(f"{average(rs, 'causal')} / {average(rs, 'smoothed')}" if rs else "–")
+                seeds = complete_seeds(rs, len(recs)) if seeds is None else [x for x in seeds if x in complete_seeds(rs, len(recs))]
+            row.append("real" if seeds == [None] else str(len(seeds)))
+            for i in inputs:
+                rs = [r for rec in recs for r in cells.get((rec, scn, i), [])]
+                row.append(f"{average(rs, 'causal', seeds)} / {average(rs, 'smoothed', seeds)}" if rs and seeds else "–")
             out.append(row)
+    return out
+
+
+def paired_rows(name: str, runs: Dict[str, dict], base: str = "raw") -> List[List[str]]:
+    """Each input against ``base`` on the same aiding draw: per noise seed the difference of the
+    average over the test recordings, mean ± std over the seeds (negative: better than ``base``),
+    and on how many recording x seed pairs the input's causal RMSE is the lower."""
+    cells = runs_by_cell(runs)
+    out = []
+    for scn in dict.fromkeys(s for _, s, _ in cells):
+        recs = list(dict.fromkeys(rec for rec, s, _ in cells if s == scn and rec not in NOT_IN_AVERAGE))
+        for i in dict.fromkeys(i for _, s, i in cells if s == scn and i != base):
+            diffs: Dict[str, Dict[object, List[float]]] = {"causal": {}, "smoothed": {}}
+            wins = pairs = 0
+            for rec in recs:
+                mine = {r.get("seed"): r for r in cells.get((rec, scn, i), []) if "failed" not in r}
+                for b in cells.get((rec, scn, base), []):
+                    r = mine.get(b.get("seed"))
+                    if r is None or "failed" in b:
+                        continue
+                    for kind in diffs:
+                        diffs[kind].setdefault(b.get("seed"), []).append(r[kind]["pos_rmse_m"] - b[kind]["pos_rmse_m"])
+                    pairs += 1
+                    wins += r["causal"]["pos_rmse_m"] < b["causal"]["pos_rmse_m"]
+            full = [sd for sd, v in diffs["causal"].items() if len(v) == len(recs)]
+            if pairs and full:
+                d = [mean_std([sum(diffs[k][sd]) / len(recs) for sd in full]) for k in ("causal", "smoothed")]
+                out.append([name, scn, f"{i} − {base}", d[0], d[1], f"{wins} of {pairs}"])
     return out
 
 
@@ -55,13 +100,21 @@ def main(argv=None) -> int:
     a = ap.parse_args(argv)
     inputs: List[str] = []
     rows: List[List[str]] = []
+    paired: List[List[str]] = []
     for path in a.results:
         blob = json.loads(path.read_text())
         inputs = inputs or list(blob["config"]["inputs"])
         rows += rows_of(blob["config"]["name"], blob["runs"])
-    print("| experiment | aiding | recordings | " + " | ".join(f"{i}: causal / smoothed [m]" for i in inputs) + " |")
-    print("|---|---|---|" + "---|" * len(inputs))
+        paired += paired_rows(blob["config"]["name"], blob["runs"])
+    print("| experiment | aiding | recordings | seeds | " + " | ".join(f"{i}: causal / smoothed [m]" for i in inputs) + " |")
+    print("|---|---|---|---|" + "---|" * len(inputs))
     for r in rows:
+        print("| " + " | ".join(r) + " |")
+    print("\nPaired with raw IMU on the same aiding draw (test recordings; difference of the recordings' average "
+          "position RMSE [m] per seed, mean ± std over the seeds; negative = better than raw):\n")
+    print("| experiment | aiding | input | causal difference [m] | smoothed difference [m] | causal RMSE lower than raw |")
+    print("|---|---|---|---|---|---|")
+    for r in paired:
         print("| " + " | ".join(r) + " |")
     return 0
 
