@@ -360,3 +360,33 @@ def test_simulated_aiding_runs_once_per_noise_seed_and_the_table_gives_mean_and_
     assert seeds_of(cfg, ScenarioSpec("l", "leica", 0.0, 0.005)) == [None]  # real aiding: one run
     with pytest.raises(ConfigError, match="seeds"):
         validate(FuseConfig(recordings=[rec], scenarios=cfg.scenarios, seeds=[1, 1]))
+
+
+def test_any_evaluate_method_that_outputs_imu_is_an_input_and_end_to_end_is_not(shipped, tmp_path, monkeypatch):
+    from imu_learn import evaluate
+    from imu_learn.baselines.base import Method
+
+    class Offset(Method):
+        """A fitted method stand-in: adds 0.01 rad/s to the gyro z axis."""
+
+        name = "offset"
+
+        def refine(self, seq):
+            return seq.gyro + np.array([0.0, 0.0, 0.01]), seq.acc
+
+    monkeypatch.setitem(evaluate.REGISTRY, "offset", Offset)
+    (tmp_path / "methods").mkdir()
+    (tmp_path / "methods" / "offset.pt").write_bytes(b"")  # what evaluate would have saved
+    rec = RecordingSpec(CROP, "euroc", CROP + "/mav0/state_groundtruth_estimate0/data.csv")
+    scn = ScenarioSpec("g", "position", 1.0, 0.1, bias_prior="startup")
+    cfg = validate(FuseConfig(name="t", data_root=str(shipped), inputs=["raw", "offset"], recordings=[rec],
+                              methods_dir=str(tmp_path / "methods"), scenarios=[scn]))
+    res = run_experiment(cfg, tmp_path / "o", lambda m: None)
+    raw, off = res["MH_04_difficult|g|raw|s0"]["bias_prior"], res["MH_04_difficult|g|offset|s0"]["bias_prior"]
+    assert off[2] - raw[2] == pytest.approx(0.01, abs=1e-4)  # the method's output is what was fused
+    with pytest.raises(ConfigError, match="end-to-end"):
+        validate(FuseConfig(recordings=[rec], scenarios=[scn], inputs=["raw", "end-to-end"]))
+    with pytest.raises(FileNotFoundError, match="gyro-denoise"):
+        run_experiment(validate(FuseConfig(name="t", data_root=str(shipped), inputs=["gyro-denoise"], recordings=[rec],
+                                           methods_dir=str(tmp_path / "none"), scenarios=[scn])), tmp_path / "p",
+                       lambda m: None)

@@ -25,6 +25,7 @@ class RecordingSpec:
     # Per-recording models, where the global ones saw this recording in training (empty: the global)
     checkpoint: str = ""
     traditional: str = ""
+    methods_dir: str = ""
 
 
 @dataclass
@@ -78,6 +79,9 @@ class FuseConfig:
     # For "traditional": the calibration `python -m imu_learn.evaluate` fitted on the train split
     # (<report>/methods/traditional.json).
     traditional: str = "reports/euroc_paper/methods/traditional.json"
+    # For any other method of `python -m imu_learn.evaluate` that outputs IMU samples (e.g.
+    # "gyro-denoise", "airimu-style"): <methods_dir>/<name>.pt, as evaluate wrote it.
+    methods_dir: str = ""
     recordings: List[RecordingSpec] = field(default_factory=list)
     scenarios: List[ScenarioSpec] = field(default_factory=list)
     noise: NoiseSpec = field(default_factory=NoiseSpec)
@@ -86,10 +90,30 @@ class FuseConfig:
         return Path(self.data_root or os.environ.get(DATA_ROOT_ENV, "") or ".")
 
 
+def imu_methods() -> List[str]:
+    """Every input name: raw, proposed, and each ``imu_learn.evaluate`` method whose output is IMU
+    samples (its class has its own ``refine``; End-to-End regresses poses and is not one)."""
+    from imu_learn.baselines.base import Method
+    from imu_learn.evaluate import REGISTRY, load_method_class
+
+    names = list(INPUTS)
+    for name in REGISTRY:
+        if name in names or name == "raw":
+            continue
+        factory = load_method_class(name)
+        cls = factory if isinstance(factory, type) or factory is None else type(factory())
+        if cls is not None and cls.refine is not Method.refine:
+            names.append(name)
+    return names
+
+
 def validate(cfg: FuseConfig) -> FuseConfig:
     bad = [i for i in cfg.inputs if i not in INPUTS]
     if bad:
-        raise ConfigError(f"inputs: unknown {bad} (known: {', '.join(INPUTS)})")
+        known = imu_methods()
+        bad = [i for i in bad if i not in known]
+        if bad:
+            raise ConfigError(f"inputs: unknown or not IMU-producing {bad} (known: {', '.join(known)})")
     if not cfg.recordings:
         raise ConfigError("recordings: none given ([[recordings]] path = ...)")
     if not cfg.scenarios:

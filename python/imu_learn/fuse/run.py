@@ -66,7 +66,11 @@ def artefact_of(cfg: FuseConfig, spec: RecordingSpec, name: str) -> str:
         return spec.checkpoint or cfg.checkpoint
     if name == "traditional":
         return spec.traditional or cfg.traditional
-    return ""
+    if name == "raw":
+        return ""
+    from imu_learn.evaluate import safe_name
+
+    return str(Path(spec.methods_dir or cfg.methods_dir) / f"{safe_name(name)}.pt")
 
 
 def seeds_of(cfg: FuseConfig, scn: ScenarioSpec) -> List[Optional[int]]:
@@ -77,7 +81,7 @@ def seeds_of(cfg: FuseConfig, scn: ScenarioSpec) -> List[Optional[int]]:
 def run_hash(cfg: FuseConfig, spec: RecordingSpec, scn: ScenarioSpec, name: str, seed: Optional[int]) -> str:
     """Everything one run's result depends on (not the other recordings, scenarios or inputs)."""
     artefact = artefact_of(cfg, spec, name)
-    recording = {k: v for k, v in asdict(spec).items() if k not in ("checkpoint", "traditional")}
+    recording = {k: v for k, v in asdict(spec).items() if k not in ("checkpoint", "traditional", "methods_dir")}
     d = {"estimator": ESTIMATOR, "seed": seed, "gravity": cfg.gravity, "keyframe_hz": cfg.keyframe_hz,
          "noise": asdict(cfg.noise), "recording": recording, "scenario": asdict(scn), "input": name,
          "artefact": file_digest(artefact) if artefact else ""}
@@ -114,20 +118,21 @@ def load_recording_for_fusion(cfg: FuseConfig, spec: RecordingSpec):
 
 
 def load_processor(name: str, path: str, cache: Dict[Tuple[str, str], object]) -> object:
-    """The refiner ("proposed") or calibration ("traditional") in ``path``, loaded once."""
+    """The refiner ("proposed"), or the fitted ``imu_learn.evaluate`` method (calibration and the
+    others) in ``path``, loaded once."""
     if (name, path) not in cache:
         if not Path(path).is_file():
-            hint = (" (python -m imu_learn.evaluate with the 'traditional' method writes it to "
-                    "<report>/methods/traditional.json)" if name == "traditional" else "")
+            hint = ("" if name == "proposed" else
+                    f" (python -m imu_learn.evaluate with the '{name}' method writes it to <report>/methods/)")
             raise FileNotFoundError(f"{name}: {path} not found{hint}")
         if name == "proposed":
             from imu_learn.checkpoint import load_model
 
             cache[(name, path)] = load_model(Path(path))
         else:
-            from imu_learn.baselines.traditional import Traditional
+            from imu_learn.evaluate import load_method_class
 
-            cache[(name, path)] = Traditional().load(Path(path))
+            cache[(name, path)] = load_method_class(name)().load(Path(path))
     return cache[(name, path)]
 
 
@@ -135,7 +140,7 @@ def imu_input(name: str, seq, artefact: str, cache: Dict[Tuple[str, str], object
     if name == "raw":
         return seq.gyro, seq.acc
     proc = load_processor(name, artefact, cache)
-    if name == "traditional":
+    if name != "proposed":
         return proc.refine(seq)
     from imu_learn.refine import refine_arrays
 
