@@ -41,10 +41,9 @@ def average(runs: List[dict], kind: str, seeds: List[object]) -> str:
     return mean_std([sum(v) / len(v) for v in per_seed.values()])
 
 
-def rows_of(name: str, runs: Dict[str, dict]) -> List[List[str]]:
+def rows_of(name: str, runs: Dict[str, dict], inputs: List[str]) -> List[List[str]]:
     cells = runs_by_cell(runs)
     scenarios = list(dict.fromkeys(s for _, s, _ in cells))
-    inputs = list(dict.fromkeys(i for _, _, i in cells))
     groups = {"test recordings": lambda rec: rec not in NOT_IN_AVERAGE, "MH_01_easy": lambda rec: rec in NOT_IN_AVERAGE}
     out = []
     for scn in scenarios:
@@ -57,6 +56,8 @@ def rows_of(name: str, runs: Dict[str, dict]) -> List[List[str]]:
             seeds = None
             for i in inputs:
                 rs = [r for rec in recs for r in cells.get((rec, scn, i), [])]
+                if not rs:
+                    continue
                 seeds = complete_seeds(rs, len(recs)) if seeds is None else [x for x in seeds if x in complete_seeds(rs, len(recs))]
             row.append("real" if seeds == [None] else str(len(seeds)))
             for i in inputs:
@@ -98,13 +99,12 @@ def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("results", nargs="+", type=Path)
     a = ap.parse_args(argv)
-    inputs: List[str] = []
+    blobs = [json.loads(path.read_text()) for path in a.results]
+    inputs = list(dict.fromkeys(i for b in blobs for i in b["config"]["inputs"]))  # "–" where one lacks it
     rows: List[List[str]] = []
     paired: List[List[str]] = []
-    for path in a.results:
-        blob = json.loads(path.read_text())
-        inputs = inputs or list(blob["config"]["inputs"])
-        rows += rows_of(blob["config"]["name"], blob["runs"])
+    for blob in blobs:
+        rows += rows_of(blob["config"]["name"], blob["runs"], inputs)
         paired += paired_rows(blob["config"]["name"], blob["runs"])
     print("| experiment | aiding | recordings | seeds | " + " | ".join(f"{i}: causal / smoothed [m]" for i in inputs) + " |")
     print("|---|---|---|---|" + "---|" * len(inputs))
