@@ -22,21 +22,12 @@ from imu_learn.refine import refine_arrays  # noqa: E402
 
 torch.set_num_threads(1)
 
-CROP = "euroc/MH_04_difficult"
-
-
-def spin_and_climb(n=2000, dt_ns=5_000_000, w=0.5, a=0.2, g=9.81):
-    """Yaw at w rad/s while climbing with a m/s^2: constant body-frame gyro and specific force, so
-    zero-order-hold preintegration is exact; closed-form pose (as in tests/test_fuse.py)."""
-    from scipy.spatial.transform import Rotation
-
-    t = np.arange(n, dtype=np.int64) * dt_ns
-    ts = t * 1e-9
-    gyro = np.tile([0.0, 0.0, w], (n, 1))
-    acc = np.tile([0.0, 0.0, g + a], (n, 1))
-    p = np.c_[np.zeros(n), np.zeros(n), 0.5 * a * ts**2]
-    R = Rotation.from_rotvec(np.c_[np.zeros(n), np.zeros(n), w * ts]).as_matrix()
-    return t, gyro, acc, p, R
+# The closed-form trajectory and the shipped crop, as tests/test_fuse.py builds them.
+from test_fuse import (  # noqa: E402, F401
+    CROP,
+    crop,  # noqa: E402, F401 (a fixture: the tests below take it by name)
+    spin_and_climb,
+)
 
 
 def noisy_case(seed=3):
@@ -56,16 +47,6 @@ def tiny_model(causal=True, seed=0, mean=None, std=None):
         torch.nn.init.normal_(m.head.weight, std=0.5)
         torch.nn.init.normal_(m.head.bias, std=0.1)
     return m.eval()
-
-
-@pytest.fixture(scope="module")
-def crop(shipped):
-    from imu_learn import AlignOptions, load_recording
-
-    root = shipped / CROP
-    rec = load_recording(root, "euroc", groundtruth=root / "mav0/state_groundtruth_estimate0/data.csv",
-                         options=AlignOptions(max_gap_s=0.05))
-    return max(rec.segments, key=len)
 
 
 # --------------------------------------------------------------------------------------------
@@ -94,7 +75,7 @@ def test_online_raw_equals_the_batch_causal_output_with_fixes_and_an_outage():
     assert np.array_equal(online.delay_ns(), delay) and st["delay"]["max_us"] == max(delay) * 1e-3
 
 
-def test_online_raw_equals_the_batch_with_relative_poses_on_a_real_crop(crop):
+def test_online_raw_equals_the_batch_with_relative_poses_on_a_real_crop(crop):  # noqa: F811
     n = 3000  # 15 s of the crop, VO-like aiding at 10 Hz
     t, g, a = crop.t_ns[:n], crop.gyro[:n], crop.acc[:n]
     from scipy.spatial.transform import Rotation
@@ -109,7 +90,7 @@ def test_online_raw_equals_the_batch_with_relative_poses_on_a_real_crop(crop):
     assert online.counts["relative_pose_factors"] == batch.counts["relative_pose_factors"] == len(rel)
 
 
-def test_online_with_a_causal_model_equals_the_batch_on_its_refined_output(crop):
+def test_online_with_a_causal_model_equals_the_batch_on_its_refined_output(crop):  # noqa: F811
     n = 2400  # 12 s
     t, g, a = crop.t_ns[:n], crop.gyro[:n], crop.acc[:n]
     raw = np.c_[g, a]

@@ -171,6 +171,7 @@ def stream(
     prior: PriorSigmas = PriorSigmas(),
     bias0: Optional[np.ndarray] = None,
     iterations: int = 1,
+    resolve_after_s: float = 2.0,
 ) -> OnlineResult:
     """Stream raw samples ``gyro``, ``acc`` (N, 3) with stamps ``t_ns`` through ``model``'s causal
     step (None: raw) and :class:`IncrementalFusion`, timing each sample's whole path."""
@@ -184,7 +185,8 @@ def stream(
     if stepper is not None:
         stepper.warm_up()
     t0 = time.perf_counter()
-    fusion = IncrementalFusion(t_ns, start_pose, aiding, noise, gravity, keyframe_hz, prior, bias0, iterations)
+    fusion = IncrementalFusion(t_ns, start_pose, aiding, noise, gravity, keyframe_hz, prior, bias0, iterations,
+                               resolve_after_s=resolve_after_s)
     setup_s = time.perf_counter() - t0
     lat = np.zeros(n, dtype=np.int64)
     is_kf = np.zeros(n, dtype=bool)
