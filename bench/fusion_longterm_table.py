@@ -14,31 +14,10 @@ from __future__ import annotations
 
 import argparse
 import json
-import math
 from pathlib import Path
 from typing import Dict, List
 
-from imu_learn.fuse.run import mean_std, runs_by_cell
-
-NOT_IN_AVERAGE = ("MH_01_easy",)
-
-
-def complete_seeds(runs: List[dict], n_recordings: int) -> List[object]:
-    """The noise seeds every one of the ``n_recordings`` has a run of (an average over a seed that
-    some recordings lack would compare different recordings)."""
-    count: Dict[object, int] = {}
-    for r in runs:
-        count[r.get("seed")] = count.get(r.get("seed"), 0) + 1
-    return sorted((s for s, c in count.items() if c == n_recordings), key=lambda s: -1 if s is None else s)
-
-
-def average(runs: List[dict], kind: str, seeds: List[object]) -> str:
-    """Mean ± std over ``seeds`` of each seed's average over the recordings in ``runs``."""
-    per_seed: Dict[object, List[float]] = {s: [] for s in seeds}
-    for r in runs:
-        if r.get("seed") in per_seed:
-            per_seed[r.get("seed")].append(math.nan if "failed" in r else r[kind]["pos_rmse_m"])
-    return mean_std([sum(v) / len(v) for v in per_seed.values()])
+from imu_learn.fuse.run import NOT_IN_AVERAGE, average, complete_seeds, mean_std, runs_by_cell
 
 
 def rows_of(name: str, runs: Dict[str, dict], inputs: List[str]) -> List[List[str]]:

@@ -12,11 +12,10 @@ from __future__ import annotations
 
 import argparse
 import json
-import math
 from pathlib import Path
 from typing import Dict, List
 
-from imu_learn.fuse.run import cell_text, mean_std, runs_by_cell
+from imu_learn.fuse.run import NOT_IN_AVERAGE, average, cell_text, complete_seeds, runs_by_cell
 
 # Quoted from the paper (Zhang et al., Table I: positional RMSE [m] over the entire trajectories,
 # the processed IMU fused with visual data; VINS as reported by its authors). MH_02 has no IMU here.
@@ -32,14 +31,9 @@ PAPER_TABLE3_EUROC = {"Tr.": 0.1592, "Pr.": 0.1210, "VINS": 0.1778, "End-to-End"
 INPUT_LABEL = {"raw": "raw", "traditional": "Tr. (traditional)", "proposed": "Pr. (proposed)"}
 
 
-# Not a test flight of the standard split (it trained the global models; its rows use models trained
-# without it), so it stays out of the average that stands beside the paper's.
-NOT_IN_AVERAGE = ("MH_01_easy",)
-
-
 def ours(runs: Dict[str, dict], scenario: str) -> List[str]:
     """Per flight: mean ± std over the noise seeds; the average: each seed's average over the test
-    flights, then mean ± std over the seeds."""
+    flights, then mean ± std over the seeds every test flight has."""
     cells = runs_by_cell(runs)
     recs = list(dict.fromkeys(rec for rec, s, _ in cells if s == scenario))
     inputs = list(dict.fromkeys(i for _, s, i in cells if s == scenario))
@@ -48,16 +42,9 @@ def ours(runs: Dict[str, dict], scenario: str) -> List[str]:
     for i in inputs:
         row = [f"{cell_text(cells[(rec, scenario, i)], 'causal')} / {cell_text(cells[(rec, scenario, i)], 'smoothed')}"
                for rec in recs]
-        avg = []
-        for kind in ("causal", "smoothed"):
-            per_seed: Dict[object, List[float]] = {}
-            for rec in recs:
-                if rec in NOT_IN_AVERAGE:
-                    continue
-                for r in cells[(rec, scenario, i)]:
-                    per_seed.setdefault(r.get("seed"), []).append(
-                        math.nan if "failed" in r else r[kind]["pos_rmse_m"])
-            avg.append(mean_std([sum(v) / len(v) for v in per_seed.values()]))
+        test = [r for rec in recs if rec not in NOT_IN_AVERAGE for r in cells[(rec, scenario, i)]]
+        seeds = complete_seeds(test, len([rec for rec in recs if rec not in NOT_IN_AVERAGE]))
+        avg = [average(test, kind, seeds) for kind in ("causal", "smoothed")]
         lines.append(f"| {INPUT_LABEL.get(i, i)} | " + " | ".join(row) + f" | {' / '.join(avg)} |")
     return lines
 
