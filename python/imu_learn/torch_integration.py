@@ -58,13 +58,20 @@ def horizon_index(horizons: Horizons, W: int, device: torch.device) -> Tensor:
     return torch.as_tensor([h - 1 for h in hs], dtype=torch.long, device=device)
 
 
-def integrate(gyro: Tensor, acc: Tensor, dt: Tensor, horizons: Horizons) -> TorchIncrements:
-    """Increments after the first n samples of each window, for n in ``horizons``.
+@dataclass
+class TorchScan:
+    """Per-sample states of the integration, (B, W, ...): ``R_excl`` the rotation in force while sample
+    i is held (R_0 .. R_{W-1}) and ``R_incl`` after it (R_1 .. R_W), as quaternions (w,x,y,z);
+    ``dv``/``dp`` after sample i (Δβ_{1..W}, Δγ_{1..W})."""
 
-    gyro, acc: (B, W, 3); dt: (B, W) hold time of each sample [s]; horizons: ints in 1..W.
-    """
-    B, W, _ = gyro.shape
-    idx = horizon_index(horizons, W, gyro.device)
+    R_excl: Tensor
+    R_incl: Tensor
+    dv: Tensor
+    dp: Tensor
+
+
+def scan(gyro: Tensor, acc: Tensor, dt: Tensor) -> TorchScan:
+    """Every sample's state: gyro, acc (B, W, 3); dt (B, W) hold time of each sample [s]."""
     dt3 = dt.to(gyro.dtype).unsqueeze(-1)
     step = so3_exp(gyro * dt3)  # (B, W, 4)
     incl = prefix_quat_product(step)  # R_1 .. R_W
@@ -75,4 +82,14 @@ def integrate(gyro: Tensor, acc: Tensor, dt: Tensor, horizons: Horizons) -> Torc
     dv_incl = torch.cumsum(ra_dt, dim=1)  # Δβ_{1..W}
     dv_excl = _shift_right(dv_incl, torch.zeros_like(ra_dt[:, :1]))  # Δβ_{0..W-1}, exact
     dp_incl = torch.cumsum(dv_excl * dt3 + 0.5 * ra_dt * dt3, dim=1)
-    return TorchIncrements(dq_wxyz=incl[:, idx], dv=dv_incl[:, idx], dp=dp_incl[:, idx])
+    return TorchScan(R_excl=R, R_incl=incl, dv=dv_incl, dp=dp_incl)
+
+
+def integrate(gyro: Tensor, acc: Tensor, dt: Tensor, horizons: Horizons) -> TorchIncrements:
+    """Increments after the first n samples of each window, for n in ``horizons``.
+
+    gyro, acc: (B, W, 3); dt: (B, W) hold time of each sample [s]; horizons: ints in 1..W.
+    """
+    idx = horizon_index(horizons, gyro.shape[1], gyro.device)
+    s = scan(gyro, acc, dt)
+    return TorchIncrements(dq_wxyz=s.R_incl[:, idx], dv=s.dv[:, idx], dp=s.dp[:, idx])
