@@ -90,3 +90,38 @@ def test_bad_checkpoint_is_one_line_exit_2(tmp_path, capsys):
     assert main(["--checkpoint", str(bad), "--out", str(tmp_path / "o")]) == 2
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and err.startswith("error:")
+
+
+def test_a_covariance_head_is_exported_as_a_second_output(tmp_path):
+    """TorchScript and ONNX of a model with a covariance head return (refined, variance), both equal
+    to the torch model's on real windows; the card names the output and its units."""
+    _t, g, a = core.read_asl_imu(str(IMU))
+    raw = np.c_[g, a].astype(np.float32)
+    torch.manual_seed(4)
+    m = ImuRefiner(ModelConfig(covariance=True), mean=torch.tensor(raw.mean(0)), std=torch.tensor(raw.std(0)))
+    with torch.no_grad():
+        torch.nn.init.normal_(m.head.weight, std=0.5)
+        for p in m.cov_head.parameters():
+            torch.nn.init.normal_(p, std=0.5)
+    ckpt = tmp_path / "ckpt.pt"
+    save_checkpoint(ckpt, m, {}, epoch=0, step=0, best_metric=None)
+    out = tmp_path / "out"
+    assert main(["--checkpoint", str(ckpt), "--out", str(out), "--window", str(TRACE_W)]) == 0
+    model = load_model(ckpt)
+    x = raw[None, 5000:5000 + 517]
+    with torch.no_grad():
+        ref_y, ref_v = (t.numpy() for t in model.forward_with_variance(torch.from_numpy(x)))
+    assert ref_v.std() > 0.1 * ref_v.mean()  # the variances vary: the check is not constant vs constant
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        ts = torch.jit.load(str(out / "model.ts"))
+    with torch.no_grad():
+        y, v = (t.numpy() for t in ts(torch.from_numpy(x)))
+    assert np.abs(y - ref_y).max() < 1e-4 and (np.abs(v - ref_v) / ref_v).max() < 1e-4
+    ort = pytest.importorskip("onnxruntime")
+    sess = ort.InferenceSession(str(out / "model.onnx"), providers=["CPUExecutionProvider"])
+    y, v = sess.run(["refined", "variance"], {"imu": x})
+    assert np.abs(y - ref_y).max() < 1e-4 and (np.abs(v - ref_v) / ref_v).max() < 1e-4
+    card = json.loads((out / "model.json").read_text())
+    assert [o["name"] for o in card["outputs"]] == ["refined", "variance"]
+    assert card["outputs"][1]["units"][0] == "(rad/s)^2"

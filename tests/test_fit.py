@@ -18,6 +18,7 @@ import torch
 from imu_learn import fit
 from imu_learn.checkpoint import load_checkpoint
 from imu_learn.config import ConfigError, RunConfig, build_config, load_config, read_toml
+from imu_learn.model import ImuRefiner, ModelConfig
 
 REPO = Path(__file__).resolve().parent.parent
 PY = sys.executable
@@ -355,3 +356,31 @@ def test_shipped_configs_split_real_data(shared, name, monkeypatch):
     names = {k: {s.name for s in split[k]} for k in ("train", "val", "test")}
     assert split.train and split.val and split.test
     assert not (names["train"] & names["test"]) and not (names["val"] & names["test"])
+
+
+def test_covariance_head_alone_on_a_frozen_refiner(tmp_path, full_run):
+    """optim.trainable = covariance: the refiner's weights stay those of optim.init bit for bit,
+    the covariance head learns (its weights move), and the NLL is logged."""
+    d = tmp_path / "cov"
+    assert fit.main(tiny(d, 2, "--model.covariance", "true", "--optim.init", str(full_run / "best.pt"),
+                         "--optim.trainable", "covariance", "--loss.w_nll", "1.0")) == 0
+    before, after = weights(full_run / "best.pt"), weights(d / "last.pt")
+    assert all(torch.equal(before[k], after[k]) for k in before)
+    assert any(k.startswith("cov_head.") for k in after)
+    fresh = ImuRefiner(ModelConfig(hidden=8, fc=8, layers=1, covariance=True)).state_dict()
+    assert any(not torch.equal(fresh[k], after[k]) for k in after if k.startswith("cov_head."))
+    assert "val_nll" in rows(d)[0]
+
+
+@pytest.mark.parametrize("args,key", [
+    (["--optim.trainable", "covariance"], "optim.trainable"),
+    (["--loss.w_nll", "1.0"], "loss.w_nll"),
+])
+def test_covariance_settings_that_cannot_work_are_refused(tmp_path, capsys, args, key):
+    assert fit.main(tiny(tmp_path / "x", 1, *args)) == 2
+    assert key in capsys.readouterr().err
+
+
+def test_init_from_a_checkpoint_of_another_shape_is_refused(tmp_path, full_run, capsys):
+    assert fit.main(tiny(tmp_path / "x", 1, "--model.hidden", "16", "--optim.init", str(full_run / "best.pt"))) == 2
+    assert "model.hidden" in capsys.readouterr().err

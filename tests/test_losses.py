@@ -174,3 +174,47 @@ def test_inverse_horizon_scale_weighs_a_short_horizon_like_the_full_window():
     assert two("inverse") == pytest.approx(25.0 * two("none"), rel=1e-9)
     with pytest.raises(ValueError, match="horizon_scale"):
         two("sqrt")
+
+
+def test_gaussian_nll_is_the_closed_form_density():
+    from scipy.stats import multivariate_normal
+
+    from imu_learn.losses import gaussian_nll
+    rng = np.random.default_rng(3)
+    A = rng.normal(size=(9, 9))
+    cov = A @ A.T + np.diag(np.logspace(-8, 0, 9))  # blocks on very different scales, like rad² against m²
+    r = rng.multivariate_normal(np.zeros(9), cov)
+    got = float(gaussian_nll(torch.tensor(r), torch.tensor(cov)))
+    want = -multivariate_normal(np.zeros(9), cov).logpdf(r) - 4.5 * np.log(2 * np.pi)
+    assert got == pytest.approx(want, rel=1e-6, abs=1e-6)
+
+
+def test_nll_term_trains_the_variances_toward_the_residuals():
+    """On a window whose refined samples are off by a fixed error, the NLL's gradient on the
+    per-sample variances points up when they are far too small and down when far too large."""
+    W = 200
+    hs = [40, 200]
+    t_ns, gyro, acc = closed_form_window(W)
+    labels = il.integrate_windows(il.Sequence("w", t_ns, gyro, acc, np.zeros((W + 1, 3)), np.zeros((W + 1, 3)),
+                                              np.tile([1.0, 0, 0, 0], (W + 1, 1))),
+                                  np.array([0], dtype=np.uint64), np.array(hs, dtype=np.uint64))
+    u = torch.tensor(np.concatenate([gyro, acc], 1)[None, :W], dtype=torch.float64)
+    u_off = u + torch.tensor([1e-3] * 3 + [1e-2] * 3, dtype=torch.float64)
+    dt = torch.tensor(np.diff(t_ns)[None] * 1e-9)
+    cfg = LossConfig(w_q=0, w_v=0, w_p=0, w_reg=0, w_nll=1.0, bias_aware=False)
+    grads = []
+    for scale in (1e-12, 1e2):
+        var = torch.full((1, W, 6), scale, dtype=torch.float64, requires_grad=True)
+        loss, terms = imu_loss(u_off, u_off, dt, labels.dq_wxyz, labels.dv, labels.dp, hs, None, cfg, var)
+        assert "nll" in terms and torch.isfinite(loss)
+        loss.backward()
+        grads.append(float(var.grad.sum()))
+    assert grads[0] < 0 < grads[1]
+
+
+def test_nll_without_variances_is_an_error():
+    cfg = LossConfig(w_nll=1.0)
+    x = torch.zeros(1, 10, 6)
+    with pytest.raises(ValueError, match="w_nll"):
+        imu_loss(x, x, np.full((1, 10), 0.005), np.tile([1.0, 0, 0, 0], (1, 1, 1)), np.zeros((1, 1, 3)),
+                 np.zeros((1, 1, 3)), [10], None, cfg)

@@ -154,3 +154,40 @@ def test_fir_branch_starts_at_zero_and_can_hold_the_half_sample_shift():
 def test_fir_taps_must_be_odd_and_bidirectional(kw):
     with pytest.raises(ValueError, match="model.fir_taps"):
         ImuRefiner(ModelConfig(**{**SMALL, **kw}))
+
+
+@pytest.mark.parametrize("causal", [False, True])
+def test_covariance_head_is_bounded_positive_and_leaves_the_refined_samples_alone(causal):
+    torch.manual_seed(0)
+    cfg = ModelConfig(**SMALL, causal=causal, covariance=True)
+    m = ImuRefiner(cfg).eval()
+    x = imu_batch()
+    with torch.no_grad():
+        for p in m.cov_head.parameters():
+            p.mul_(1000.0)  # drive the sigmoid into both saturations
+        refined, var = m.forward_with_variance(x)
+        plain = ImuRefiner(ModelConfig(**SMALL, causal=causal))
+        plain.load_refiner({k: v for k, v in m.state_dict().items() if not k.startswith("cov_head.")})
+        assert torch.equal(plain.eval()(x), refined)
+    assert var.shape == x.shape and bool((var > 0).all())
+    sd = var.sqrt()
+    assert bool((sd[..., :3] >= cfg.sigma_gyro_min * (1 - 1e-5)).all() and (sd[..., :3] <= cfg.sigma_gyro_max * (1 + 1e-5)).all())
+    assert bool((sd[..., 3:] >= cfg.sigma_acc_min * (1 - 1e-5)).all() and (sd[..., 3:] <= cfg.sigma_acc_max * (1 + 1e-5)).all())
+
+
+def test_a_model_without_the_head_says_so():
+    with pytest.raises(ValueError, match="no covariance head"):
+        ImuRefiner(ModelConfig(**SMALL)).forward_with_variance(imu_batch())
+
+
+def test_freeze_refiner_leaves_only_the_head_trainable():
+    m = ImuRefiner(ModelConfig(**SMALL, covariance=True))
+    m.freeze_refiner()
+    trainable = {n for n, p in m.named_parameters() if p.requires_grad}
+    assert trainable and all(n.startswith("cov_head.") for n in trainable)
+
+
+def test_load_refiner_refuses_weights_of_another_shape():
+    big = ImuRefiner(ModelConfig(hidden=16, layers=2, fc=8))
+    with pytest.raises((ValueError, RuntimeError)):
+        ImuRefiner(ModelConfig(**SMALL, covariance=True)).load_refiner(big.state_dict())

@@ -160,6 +160,12 @@ class OptimConfig:
     # below 1 only when every one beats raw) or "mean" (their geometric mean: a large gain on one
     # term, e.g. rotation over 10 samples, counts even while another sits at raw's level).
     select_combine: str = "max"
+    # Start from a trained checkpoint's weights (its model args must match model.*, except the
+    # covariance head, which a refiner without one gets freshly initialised); "" = from scratch.
+    init: str = ""
+    # What the optimiser moves: "all", or "covariance" (the covariance head alone on the frozen
+    # refiner of optim.init: the refined samples stay bit-identical, only the variances learn).
+    trainable: str = "all"
 
 
 @dataclass
@@ -419,6 +425,11 @@ def validate(cfg: RunConfig) -> None:
     need(cfg.model.layers >= 1 and cfg.model.hidden >= 1 and cfg.model.fc >= 1, "model", "sizes must be >= 1")
     need(cfg.loss.horizon_scale in ("none", "inverse"), "loss.horizon_scale",
          f"must be none or inverse, got {cfg.loss.horizon_scale!r}")
+    need(o.trainable in ("all", "covariance"), "optim.trainable", f"must be all or covariance, got {o.trainable!r}")
+    need(o.trainable == "all" or (cfg.model.covariance and bool(o.init)), "optim.trainable",
+         "covariance needs model.covariance = true and optim.init (the frozen refiner)")
+    need(cfg.loss.w_nll >= 0, "loss.w_nll", f"must be >= 0, got {cfg.loss.w_nll}")
+    need(cfg.loss.w_nll == 0 or cfg.model.covariance, "loss.w_nll", "needs model.covariance = true")
     need(cfg.model.refine in REFINE_CHANNELS, "model.refine",
          f"must be one of {', '.join(REFINE_CHANNELS)}, got {cfg.model.refine!r}")
 

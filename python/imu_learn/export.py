@@ -62,44 +62,76 @@ def _atomic(path: Path, write) -> None:
         raise
 
 
+class WithVariance(torch.nn.Module):
+    """What is exported for a model with a covariance head: (refined, variance), both (B, T, 6)."""
+
+    def __init__(self, model: ImuRefiner) -> None:
+        super().__init__()
+        self.model = model
+
+    def forward(self, imu: torch.Tensor):
+        return self.model.forward_with_variance(imu)
+
+
+def exported_module(model: ImuRefiner) -> torch.nn.Module:
+    return WithVariance(model) if model.cov_head is not None else model
+
+
+def output_names(model: ImuRefiner) -> List[str]:
+    return ["refined", "variance"] if model.cov_head is not None else ["refined"]
+
+
 def export_torchscript(model: ImuRefiner, example: torch.Tensor, path: Path) -> None:
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
-        traced = torch.jit.trace(model, (example,), check_trace=False)
+        traced = torch.jit.trace(exported_module(model), (example,), check_trace=False)
         _atomic(path, lambda tmp: torch.jit.save(traced, tmp))
 
 
 def export_onnx(model: ImuRefiner, example: torch.Tensor, path: Path, opset: int = 17) -> None:
-    axes = {"imu": {0: "batch", 1: "time"}, "refined": {0: "batch", 1: "time"}}
+    names = output_names(model)
+    axes = {k: {0: "batch", 1: "time"} for k in ["imu", *names]}
+    module = exported_module(model)
 
     def write(tmp: str) -> None:
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")
             try:  # the TorchScript-based exporter: no extra dependency, dynamic axes for LSTMs
                 torch.onnx.export(
-                    model, (example,), tmp, input_names=["imu"], output_names=["refined"],
+                    module, (example,), tmp, input_names=["imu"], output_names=names,
                     dynamic_axes=axes, opset_version=opset, dynamo=False,
                 )
             except TypeError:  # a torch without the dynamo= switch
                 torch.onnx.export(
-                    model, (example,), tmp, input_names=["imu"], output_names=["refined"],
+                    module, (example,), tmp, input_names=["imu"], output_names=names,
                     dynamic_axes=axes, opset_version=opset,
                 )
 
     _atomic(path, write)
 
 
-def _check(run, model: ImuRefiner, x: torch.Tensor) -> Optional[float]:
-    """Largest |export(x) - model(x)|, or None when the export cannot run on x."""
+def _reference(model: ImuRefiner, x: torch.Tensor) -> List[np.ndarray]:
     with torch.no_grad():
-        ref = model(x).numpy()
+        if model.cov_head is None:
+            return [model(x).numpy()]
+        return [t.numpy() for t in model.forward_with_variance(x)]
+
+
+def _check(run, model: ImuRefiner, x: torch.Tensor) -> Optional[float]:
+    """Largest difference of the export's outputs from the model's on x (absolute for the refined
+    samples, relative for the variances, which are orders of magnitude below 1), or None when the
+    export cannot run on x."""
+    ref = _reference(model, x)
     try:
-        out = np.asarray(run(x))
+        out = [np.asarray(o) for o in run(x)]
     except Exception:
         return None
-    if out.shape != ref.shape:
+    if len(out) != len(ref) or any(o.shape != r.shape for o, r in zip(out, ref)):
         return None
-    return float(np.abs(out - ref).max())
+    diffs = [float(np.abs(out[0] - ref[0]).max())]
+    if len(ref) > 1:
+        diffs.append(float((np.abs(out[1] - ref[1]) / ref[1]).max()))
+    return max(diffs)
 
 
 def export(checkpoint: Path, out: Path, window: int = 200, opset: int = 17, seed: int = 0) -> Dict[str, Any]:
@@ -130,9 +162,10 @@ def export(checkpoint: Path, out: Path, window: int = 200, opset: int = 17, seed
         ts = torch.jit.load(str(ts_path))
     checks: Dict[str, Any] = {}
 
-    def run_ts(x: torch.Tensor) -> np.ndarray:
+    def run_ts(x: torch.Tensor) -> List[np.ndarray]:
         with torch.no_grad():
-            return ts(x).numpy()
+            y = ts(x)
+        return [t.numpy() for t in (y if isinstance(y, (tuple, list)) else (y,))]
 
     checks["torchscript"] = {
         "trace_shape": list(example.shape), "max_abs_diff_trace_shape": _check(run_ts, model, example),
@@ -147,8 +180,8 @@ def export(checkpoint: Path, out: Path, window: int = 200, opset: int = 17, seed
     if ort is not None:
         sess = ort.InferenceSession(str(onnx_path), providers=["CPUExecutionProvider"])
 
-        def run_onnx(x: torch.Tensor) -> np.ndarray:
-            return sess.run(["refined"], {"imu": x.numpy()})[0]
+        def run_onnx(x: torch.Tensor) -> List[np.ndarray]:
+            return sess.run(output_names(model), {"imu": x.numpy()})
 
         checks["onnx"] = {
             "runtime": f"onnxruntime {ort.__version__}",
@@ -174,7 +207,13 @@ def export(checkpoint: Path, out: Path, window: int = 200, opset: int = 17, seed
             "name": "refined", "dtype": "float32", "shape": ["batch", "time", 6],
             "channels": CHANNELS, "units": UNITS,
             "description": "refined IMU = raw + correction, same order and units",
-        }],
+        }] + ([{
+            "name": "variance", "dtype": "float32", "shape": ["batch", "time", 6],
+            "channels": CHANNELS, "units": ["(rad/s)^2"] * 3 + ["(m/s^2)^2"] * 3,
+            "description": "per-sample noise variance of each refined sample, discrete-time (the variance of one "
+                           "sample); a filter that wants a noise density takes sqrt(variance * dt) "
+                           "[rad/s/sqrt(Hz), m/s^2/sqrt(Hz)], GTSAM's PreintegrationParams variance * dt",
+        }] if model.cov_head is not None else []),
         "normalisation": {
             "inside_model": True,
             "mean": [float(v) for v in mean], "std": [float(v) for v in std],

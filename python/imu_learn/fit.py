@@ -207,13 +207,33 @@ def validation_loss(model: ImuRefiner, batch: Batch, cfg: RunConfig, device: tor
     for a in range(0, n_total, chunk):
         b = min(n_total, a + chunk)
         imu = torch.from_numpy(np.ascontiguousarray(batch.imu[a:b], dtype=np.float32)).to(device)
-        refined = model(imu)
-        _, terms = imu_loss(refined, imu, batch.dt[a:b], batch.dq_wxyz[a:b], batch.dv[a:b], batch.dp[a:b],
-                            horizons, batch.bias[a:b], cfg.loss)
+        with torch.no_grad():
+            refined, var = model(imu, with_variance=True)
+            _, terms = imu_loss(refined, imu, batch.dt[a:b], batch.dq_wxyz[a:b], batch.dv[a:b], batch.dp[a:b],
+                                horizons, batch.bias[a:b], cfg.loss, var)
         for k, v in terms.items():
             sums[k] = sums.get(k, 0.0) + float(v) * (b - a)
     model.train(was)
     return {k: v / n_total for k, v in sums.items()}
+
+
+# The model args that may differ between optim.init's checkpoint and the model it initialises.
+COVARIANCE_ARGS = ("covariance", "sigma_gyro_min", "sigma_gyro_max", "sigma_acc_min", "sigma_acc_max")
+
+
+def init_from(model: ImuRefiner, path: Path) -> None:
+    """optim.init: the weights of a trained checkpoint (normalisation included) into ``model``."""
+    state = load_checkpoint(path)
+    theirs = {k: v for k, v in state["model_args"].items() if k not in COVARIANCE_ARGS}
+    ours = {k: v for k, v in model.model_args().items() if k not in COVARIANCE_ARGS}
+    diff = sorted(k for k in set(theirs) | set(ours) if theirs.get(k) != ours.get(k))
+    if diff:
+        raise ConfigError(f"optim.init: {path} was trained with other model args: "
+                          + ", ".join(f"model.{k} = {theirs.get(k)!r} there, {ours.get(k)!r} here" for k in diff))
+    try:
+        model.load_refiner(state["model"])
+    except ValueError as e:
+        raise ConfigError(f"optim.init: {path}: {e}") from None
 
 
 def without_startup_bias(seqs: Seq[Sequence], cfg: RunConfig) -> Tuple[List[Sequence], Dict[str, Any]]:
@@ -412,16 +432,22 @@ def train(
         torch.manual_seed(cfg.seed)
         mean, std = norm_stats(split.train)
         model = ImuRefiner(cfg.model, mean, std)
+        if cfg.optim.init:
+            init_from(model, Path(cfg.optim.init))
+        if cfg.optim.trainable == "covariance":
+            model.freeze_refiner()
         model.to(device)
-        opt = torch.optim.Adam(model.parameters(), lr=cfg.optim.lr)
+        opt = torch.optim.Adam([p for p in model.parameters() if p.requires_grad], lr=cfg.optim.lr)
         step, epochs_done, best, best_epoch = 0, 0, None, None
         history: List[Dict[str, Any]] = []
         partial: Dict[str, float] = {}
         elapsed0 = 0.0
     else:
         model = model_from_checkpoint(state)
+        if cfg.optim.trainable == "covariance":
+            model.freeze_refiner()
         model.to(device)
-        opt = torch.optim.Adam(model.parameters(), lr=cfg.optim.lr)
+        opt = torch.optim.Adam([p for p in model.parameters() if p.requires_grad], lr=cfg.optim.lr)
         opt.load_state_dict(state["optimizer"])
         extra = state.get("extra") or {}
         step, epochs_done = int(state["step"]), int(state["epoch"])
@@ -500,8 +526,8 @@ def train(
             if horizons is None:
                 horizons = [int(h) for h in b.horizons]
             imu = torch.from_numpy(np.ascontiguousarray(b.imu, dtype=np.float32)).to(device)
-            refined = net(imu)
-            loss, terms = imu_loss(refined, imu, b.dt, b.dq_wxyz, b.dv, b.dp, horizons, b.bias, cfg.loss)
+            refined, var = net(imu, with_variance=True)
+            loss, terms = imu_loss(refined, imu, b.dt, b.dq_wxyz, b.dv, b.dp, horizons, b.bias, cfg.loss, var)
             opt.zero_grad(set_to_none=True)
             loss.backward()
             if cfg.optim.grad_clip > 0:

@@ -34,6 +34,7 @@ from typing import Dict, Optional, Tuple, Union
 import numpy as np
 import torch
 
+from imu_learn.torch_covariance import increment_covariance
 from imu_learn.torch_integration import Horizons, integrate
 from imu_learn.torch_so3 import quat_conj, quat_mul, so3_log
 
@@ -58,6 +59,10 @@ class LossConfig:
     # by its horizon's fraction of the longest one, so a 10-sample horizon pulls as hard as the
     # full window: for models scored over short horizons, e.g. the paper's Table II, n = 10).
     horizon_scale: str = "none"
+    # Gaussian negative log-likelihood of the 9-vector residual (δθ, δβ, δγ) under the covariance
+    # propagated from the model's per-sample variances (imu_learn.torch_covariance), summed over the
+    # label horizons like the other terms; needs a model with model.covariance = true. 0 = off.
+    w_nll: float = 0.0
 
 
 def huber_norm(r: Tensor, delta: float) -> Tensor:
@@ -76,6 +81,22 @@ def dead_zone(diff: Tensor, lam: Tensor) -> Tensor:
     return torch.clamp(diff.abs() - lam, min=0.0)
 
 
+def gaussian_nll(r: Tensor, cov: Tensor) -> Tensor:
+    """½ (rᵀ Σ⁻¹ r + log det Σ) for r (..., 9) and Σ (..., 9, 9), without the constant (9/2) log 2π.
+
+    Solved in float64 whatever the inputs' dtype: the blocks of Σ differ by many orders of magnitude
+    (rad² against m² at 10 samples), which float32's Cholesky does not survive. A relative jitter of
+    1e-9 on the diagonal keeps a window whose covariance is numerically rank-deficient solvable.
+    """
+    c = cov.double()
+    d = torch.diagonal(c, dim1=-2, dim2=-1)
+    c = c + torch.diag_embed(1e-9 * d)
+    L = torch.linalg.cholesky(c)
+    z = torch.linalg.solve_triangular(L, r.double().unsqueeze(-1), upper=False).squeeze(-1)
+    logdet = 2.0 * torch.log(torch.diagonal(L, dim1=-2, dim2=-1)).sum(-1)
+    return (0.5 * ((z * z).sum(-1) + logdet)).to(r.dtype)
+
+
 def _as(x: ArrayLike, like: Tensor) -> Tensor:
     if isinstance(x, np.ndarray):
         x = torch.from_numpy(np.ascontiguousarray(x))
@@ -92,14 +113,17 @@ def imu_loss(
     horizons: Horizons,
     bias: Optional[ArrayLike] = None,
     cfg: LossConfig = LossConfig(),
+    var: Optional[Tensor] = None,
 ) -> Tuple[Tensor, Dict[str, Tensor]]:
-    """Total loss and its detached terms ``{"q", "v", "p", "reg", "total"}`` for logging.
+    """Total loss and its detached terms ``{"q", "v", "p", "reg", "total"}`` (and ``"nll"`` when
+    ``cfg.w_nll`` > 0) for logging.
 
     refined: (B, W, 6) network output û, gyro then acc (its dtype/device are used throughout);
     raw: (B, W, 6) network input u_m (recorded IMU plus the added bias, if any); dt: (B, W) [s];
     dq_wxyz (B, H, 4), dv/dp (B, H, 3): ground-truth labels at ``horizons`` (H,) sample counts;
     bias: (B, W, 6) the bias added to the input (None or ignored when ``cfg.bias_aware`` is False).
     Arrays may be numpy (e.g. straight from :class:`imu_learn.BatchSampler`) or tensors.
+    var: (B, W, 6) the model's per-sample noise variances, needed when ``cfg.w_nll`` > 0.
     """
     raw_t = _as(raw, refined)
     dt_t = _as(dt, refined)
@@ -114,6 +138,15 @@ def imu_loss(
 
     r_q = so3_log(quat_mul(dq_s, quat_conj(inc.dq_wxyz)))  # (B, H, 3)
     r_v, r_p = dv_s - inc.dv, dp_s - inc.dp
+    l_nll = None
+    if cfg.w_nll > 0:
+        if var is None:
+            raise ValueError("loss.w_nll > 0 needs the model's variances (model.covariance = true)")
+        # The trajectory the covariance is linearised about is held fixed (detached): the NLL
+        # trains the noise levels, not the refined samples through the Jacobians' dependence on them.
+        ud = u.detach()
+        cov = increment_covariance(ud[..., :3], ud[..., 3:], dt_t, var, horizons)
+        l_nll = gaussian_nll(torch.cat((r_q, r_v, r_p), dim=-1), cov).sum(-1).mean()
     if cfg.horizon_scale == "inverse":
         h = torch.as_tensor([float(x) for x in horizons], dtype=r_q.dtype, device=r_q.device)
         scale = (h.max() / h)[:, None]  # (H, 1)
@@ -128,5 +161,9 @@ def imu_loss(
     l_reg = dead_zone(raw_t - refined, lam).sum(-1).mean()
 
     total = cfg.w_q * l_q + cfg.w_v * l_v + cfg.w_p * l_p + cfg.w_reg * l_reg
-    terms = {"q": l_q.detach(), "v": l_v.detach(), "p": l_p.detach(), "reg": l_reg.detach(), "total": total.detach()}
+    terms = {"q": l_q.detach(), "v": l_v.detach(), "p": l_p.detach(), "reg": l_reg.detach()}
+    if l_nll is not None:
+        total = total + cfg.w_nll * l_nll
+        terms["nll"] = l_nll.detach()
+    terms["total"] = total.detach()
     return total, terms

@@ -43,6 +43,15 @@ class ModelConfig:
     # the half-sample shift between the integration's zero-order hold (sample k held over
     # [t_k, t_k+1]) and when a sample was taken, which taps of [0, -1/2, 1/2] undo exactly.
     fir_taps: int = 0
+    # Learned uncertainty: a second head predicting each refined sample's noise variances (six
+    # channels, discrete-time: the variance of one sample in (rad/s)^2 and (m/s^2)^2; a filter that
+    # wants a noise density takes sigma * sqrt(dt), see imu_learn.torch_covariance). Bounded by
+    # construction: log sigma^2 = log min^2 + (log max^2 - log min^2) * sigmoid(z).
+    covariance: bool = False
+    sigma_gyro_min: float = 1e-4  # [rad/s]
+    sigma_gyro_max: float = 1.0
+    sigma_acc_min: float = 1e-3  # [m/s^2]
+    sigma_acc_max: float = 10.0
 
 
 class ImuRefiner(nn.Module):
@@ -76,6 +85,18 @@ class ImuRefiner(nn.Module):
             nn.init.zeros_(self.fir.weight)
         else:
             self.fir = None
+        if cfg.covariance:
+            lo = torch.tensor([cfg.sigma_gyro_min] * 3 + [cfg.sigma_acc_min] * 3)
+            hi = torch.tensor([cfg.sigma_gyro_max] * 3 + [cfg.sigma_acc_max] * 3)
+            if not bool(((lo > 0) & (hi > lo)).all()):
+                raise ValueError("model.sigma_*: need 0 < min < max for the gyro and accelerometer sigmas")
+            self.register_buffer("log_var_min", 2 * torch.log(lo), persistent=False)
+            self.register_buffer("log_var_max", 2 * torch.log(hi), persistent=False)
+            # Own two layers on the refiner's features: the noise of a sample depends on the motion
+            # (vibration, saturation) in ways the correction does not need to encode linearly.
+            self.cov_head: Optional[nn.Module] = nn.Sequential(nn.Linear(width, cfg.fc), nn.GELU(), nn.Linear(cfg.fc, 6))
+        else:
+            self.cov_head = None
         if cfg.refine not in REFINE_CHANNELS:
             raise ValueError(f"model.refine: must be one of {', '.join(REFINE_CHANNELS)}, got {cfg.refine!r}")
         # Not persistent: derived from the config, so older checkpoints load unchanged.
@@ -85,12 +106,45 @@ class ImuRefiner(nn.Module):
         nn.init.zeros_(self.head.weight)
         nn.init.zeros_(self.head.bias)
 
-    def forward(self, imu: Tensor, state: Optional[State] = None) -> Tensor:
-        """imu (B, W, 6) gyro then acc -> refined (B, W, 6), same dtype."""
-        out, _ = self.forward_with_state(imu, state)
-        return out
+    def forward(self, imu: Tensor, state: Optional[State] = None, with_variance: bool = False):
+        """imu (B, W, 6) gyro then acc -> refined (B, W, 6), same dtype; with ``with_variance`` the
+        pair (refined, variances or None) (through forward so that a DDP wrapper sees the call)."""
+        out, var, _ = self.forward_full(imu, state)
+        return (out, var) if with_variance else out
+
+    def load_refiner(self, state_dict: dict) -> None:
+        """Weights of a trained refiner into this model; only the covariance head may be missing
+        from them (it keeps its fresh initialisation)."""
+        missing, unexpected = self.load_state_dict(state_dict, strict=False)
+        bad = [k for k in missing if not k.startswith("cov_head.")] + list(unexpected)
+        if bad:
+            raise ValueError(f"weights do not fit this model: {', '.join(bad[:6])}")
+
+    def freeze_refiner(self) -> None:
+        """Only the covariance head keeps gradients (and dropout off elsewhere is the caller's eval())."""
+        for name, p in self.named_parameters():
+            p.requires_grad_(name.startswith("cov_head."))
 
     def forward_with_state(self, imu: Tensor, state: Optional[State] = None) -> Tuple[Tensor, State]:
+        refined, _, new_state = self.forward_full(imu, state)
+        return refined, new_state
+
+    def forward_with_variance(self, imu: Tensor) -> Tuple[Tensor, Tensor]:
+        """imu (B, W, 6) -> refined (B, W, 6) and its per-sample noise variances (B, W, 6)."""
+        refined, var, _ = self.forward_full(imu)
+        if var is None:
+            raise ValueError("this model has no covariance head (model.covariance = false)")
+        return refined, var
+
+    def variance(self, features: Tensor) -> Tensor:
+        """Per-sample discrete-time noise variances from the last layer's features."""
+        assert self.cov_head is not None
+        z = torch.sigmoid(self.cov_head(features))
+        lo = self.log_var_min.to(features.dtype)
+        return torch.exp(lo + (self.log_var_max.to(features.dtype) - lo) * z)
+
+    def forward_full(self, imu: Tensor, state: Optional[State] = None) -> Tuple[Tensor, Optional[Tensor], State]:
+        """Refined samples, their variances (None without a covariance head) and the LSTM state."""
         if state is not None and not self.cfg.causal:
             raise ValueError("carried state needs the causal model (bidirectional LSTMs see the future)")
         mean = self.mean.to(imu.dtype)
@@ -106,7 +160,8 @@ class ImuRefiner(nn.Module):
         corr = self.cfg.output_scale * self.head(x)
         if linear is not None:
             corr = corr + linear
-        return imu + std * self.channels.to(imu.dtype) * corr, new_state
+        var = self.variance(x) if self.cov_head is not None else None
+        return imu + std * self.channels.to(imu.dtype) * corr, var, new_state
 
     def _fir(self, x: Tensor) -> Optional[Tensor]:
         """The FIR branch on normalised input (B, W, 6) -> (B, W, 6), or None when off. Not scaled

@@ -101,7 +101,6 @@ def _progress(total: int, enabled: bool, desc: str):
     return tqdm(total=total, disable=not enabled, desc=desc, unit="sample", unit_scale=True, file=sys.stderr)
 
 
-@torch.no_grad()
 def refine_corrections(
     model: ImuRefiner,
     imu32: np.ndarray,
@@ -111,10 +110,21 @@ def refine_corrections(
     progress: bool = False,
 ) -> np.ndarray:
     """Corrections (N, 6) float32 = model output - input, by the module's windowing rule."""
+    return _windowed(model, imu32, window, overlap, batch, progress, False)[0]
+
+
+@torch.no_grad()
+def _windowed(model: ImuRefiner, imu32: np.ndarray, window: int, overlap: int, batch: int, progress: bool,
+              variance: bool) -> Tuple[np.ndarray, Optional[np.ndarray]]:
+    """Corrections (N, 6) and, with ``variance``, the covariance head's variances (N, 6), both
+    float32, stitched by the same windowing rule."""
     n = len(imu32)
     out = np.zeros((n, 6), dtype=np.float32)
+    var_out = np.zeros((n, 6), dtype=np.float32) if variance else None
+    if variance and model.cov_head is None:
+        raise InvalidInputError("this model has no covariance head (trained with model.covariance = false)")
     if n == 0:
-        return out
+        return out, var_out
     device = _device_of(model)
     x_all = torch.from_numpy(np.ascontiguousarray(imu32, dtype=np.float32)).to(device)
     was_training = model.training
@@ -125,22 +135,28 @@ def refine_corrections(
             with _progress(n, progress, "refine (causal)") as bar:
                 for s in range(0, n, window):
                     x = x_all[None, s : s + window]
-                    y, state = model.forward_with_state(x, state)
+                    y, v, state = model.forward_full(x, state)
                     out[s : s + window] = (y - x)[0].float().cpu().numpy()
+                    if var_out is not None:
+                        var_out[s : s + window] = v[0].float().cpu().numpy()
                     bar.update(x.shape[1])
-            return out
+            return out, var_out
         plan = window_plan(n, window, overlap)
         with _progress(n, progress, "refine") as bar:
             for b0 in range(0, len(plan), max(1, batch)):
                 chunk = plan[b0 : b0 + max(1, batch)]
                 x = torch.stack([x_all[s:e] for s, e, _, _ in chunk])
-                corr = (model(x) - x).float().cpu().numpy()
+                y, v = model(x, with_variance=True)
+                corr = (y - x).float().cpu().numpy()
+                vv = v.float().cpu().numpy() if var_out is not None else None
                 for j, (s, _e, kf, kt) in enumerate(chunk):
                     out[kf:kt] = corr[j, kf - s : kt - s]
+                    if var_out is not None:
+                        var_out[kf:kt] = vv[j, kf - s : kt - s]
                 bar.update(chunk[-1][3] - chunk[0][2])
     finally:
         model.train(was_training)
-    return out
+    return out, var_out
 
 
 def refine_arrays(
@@ -157,6 +173,29 @@ def refine_arrays(
     Bidirectional model: overlapping windows stitched by centre crop (see the module docstring);
     causal model: sequential windows with carried state (exact). ``batch`` windows run at once.
     """
+    g, a, _ = _refine(model, gyro, acc, window, overlap, batch, progress, False)
+    return g, a
+
+
+def refine_with_variance(
+    model: ImuRefiner,
+    gyro: np.ndarray,
+    acc: np.ndarray,
+    window: int = 1000,
+    overlap: int = 200,
+    batch: int = 16,
+    progress: bool = False,
+) -> Tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """:func:`refine_arrays` plus the covariance head's per-sample noise variances (N, 6) float64,
+    gyro then acc, discrete-time ((rad/s)^2, (m/s^2)^2: the variance of one sample; a noise density
+    is sigma * sqrt(dt), see :mod:`imu_learn.torch_covariance`)."""
+    g, a, v = _refine(model, gyro, acc, window, overlap, batch, progress, True)
+    assert v is not None
+    return g, a, v
+
+
+def _refine(model: ImuRefiner, gyro: np.ndarray, acc: np.ndarray, window: int, overlap: int, batch: int,
+            progress: bool, variance: bool) -> Tuple[np.ndarray, np.ndarray, Optional[np.ndarray]]:
     gyro = np.asarray(gyro, dtype=np.float64)
     acc = np.asarray(acc, dtype=np.float64)
     if gyro.ndim != 2 or gyro.shape[1] != 3 or acc.shape != gyro.shape:
@@ -165,9 +204,10 @@ def refine_arrays(
     if not np.isfinite(raw).all():
         raise InvalidInputError(f"IMU row {int(np.flatnonzero(~np.isfinite(raw).all(1))[0])} is not finite")
     x32 = raw.astype(np.float32)
-    corr = refine_corrections(model, x32, window, overlap, batch, progress)
+    corr, var = _windowed(model, x32, window, overlap, batch, progress, variance)
     refined = raw + corr.astype(np.float64)
-    return np.ascontiguousarray(refined[:, :3]), np.ascontiguousarray(refined[:, 3:])
+    return (np.ascontiguousarray(refined[:, :3]), np.ascontiguousarray(refined[:, 3:]),
+            None if var is None else var.astype(np.float64))
 
 
 # --------------------------------------------------------------------------------------------

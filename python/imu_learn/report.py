@@ -357,6 +357,17 @@ def markdown(result: Dict[str, Any], rel: List[Dict[str, Any]], air: List[Dict[s
           "e.g. the noise floor's rotation and velocity, are not drawn). Numbers: `integration_error.csv`.", ""]
     for p in pngs:
         L += [f"![{p}]({p})", ""]
+    if r.get("calibration"):
+        from imu_learn.calibration import format_table as calibration_table
+
+        L += ["## Calibration of the increments' covariance", "",
+              "Residual (δθ, δβ, δγ) of the increments over n samples against ground truth (start-up bias "
+              "removed), normalised by the covariance propagated from per-sample noise: the datasheet's white "
+              f"noise ({r['eval'].get('gyro_noise_density')} rad/s/√Hz, {r['eval'].get('acc_noise_density')} "
+              "m/s²/√Hz) or the checkpoint's learned variances. A calibrated covariance has mean NEES = dof and "
+              "the χ² fractions inside its 1σ/2σ/3σ ellipsoids (in brackets); above dof is overconfident, "
+              "below underconfident.", ""]
+        L += calibration_table(r["calibration"]) + [""]
     # biases
     rows = []
     for b in r["biases"]:

@@ -93,9 +93,11 @@ def increment_covariance(gyro: Tensor, acc: Tensor, dt: Tensor, var: Tensor,
     Rx = quat_to_matrix(s.R_excl)  # R_k
     T = torch.cumsum(dt, dim=1)  # T_{k+1}: time at the end of sample k
     Fg, Fa = _noise_jacobians(gyro, acc, dt, Rx, Ri, s.dv, s.dp, T)
-    sd = torch.sqrt(var.to(gyro.dtype))
-    L = torch.cat((Fg * sd[..., None, :3], Fa * sd[..., None, 3:]), dim=-1)  # (B, W, 9, 6)
-    C = torch.cumsum(L @ L.transpose(-1, -2), dim=1)  # Σ_{k<h} F Q Fᵀ for h = 1..W
+    F = torch.cat((Fg, Fa), dim=-1)  # (B, W, 9, 6)
+    # F Q Fᵀ as (F Q) Fᵀ, not (F √Q)(F √Q)ᵀ: sqrt has an infinite derivative at 0, which made the
+    # gradient NaN wherever a variance was exactly zero.
+    FQ = F * var.to(gyro.dtype)[..., None, :]
+    C = torch.cumsum(FQ @ F.transpose(-1, -2), dim=1)  # Σ_{k<h} F Q Fᵀ for h = 1..W
     v, p = s.dv, s.dp
     if horizons is not None:
         idx = horizon_index(horizons, gyro.shape[1], gyro.device)

@@ -218,15 +218,16 @@ fn check_stamps(t_ns: &[i64]) -> Result<()> {
     Ok(())
 }
 
-fn check_imu(t_ns: &[i64], gyro: &[Vec3], acc: &[Vec3]) -> Result<()> {
+/// Lengths, stamps and values of IMU inputs (shared with `covariance`).
+pub(crate) fn check_imu(t_ns: &[i64], gyro: &[Vec3], acc: &[Vec3]) -> Result<()> {
     check_lengths("t_ns", t_ns.len(), gyro, acc)?;
     check_stamps(t_ns)?;
     check_finite(gyro, acc)
 }
 
 /// Rows 0..=n of the integration that starts at sample `k`. The caller has checked the inputs
-/// and that k + n is a valid index.
-fn integrate_from(
+/// and that k + n is a valid index. `covariance` walks the same per-sample states through it.
+pub(crate) fn integrate_from(
     t_ns: &[i64],
     gyro: &[Vec3],
     acc: &[Vec3],

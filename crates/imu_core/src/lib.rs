@@ -2,11 +2,13 @@
 //!
 //! Data flows one way: `io` (files → `ImuSamples` / `GroundTruth`) → `align` (→ `Sequence`s) →
 //! `labels` (Δq/Δβ/Δγ from ground truth) and `batch` (augmented training windows), with
-//! `integrate` (Δq/Δβ/Δγ from IMU samples) and `so3` as the shared maths. Nothing here knows
-//! Python; the bindings live in `python` behind the `python` feature.
+//! `integrate` (Δq/Δβ/Δγ from IMU samples), `covariance` (their covariance under per-sample
+//! noise) and `so3` as the shared maths. Nothing here knows Python; the bindings live in `python`
+//! behind the `python` feature.
 
 pub mod align;
 pub mod batch;
+pub mod covariance;
 pub mod error;
 pub mod integrate;
 pub mod io;

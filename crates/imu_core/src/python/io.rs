@@ -87,13 +87,16 @@ fn read_asl_pose(py: Python<'_>, path: PathBuf, allow_float_timestamps: bool) ->
     gt_out(py, g)
 }
 
+/// Stamps [ns] and positions (N, 3) as numpy arrays.
+type StampedPositions<'py> = (Bound<'py, PyArray1<i64>>, Bound<'py, PyArray2<f64>>);
+
 #[pyfunction]
 #[pyo3(signature = (path, allow_float_timestamps=false))]
 fn read_asl_position(
     py: Python<'_>,
     path: PathBuf,
     allow_float_timestamps: bool,
-) -> PyResult<(Bound<'_, PyArray1<i64>>, Bound<'_, PyArray2<f64>>)> {
+) -> PyResult<StampedPositions<'_>> {
     let (t, p) = py
         .allow_threads(|| asl::read_position(&path, &opts(allow_float_timestamps)))
         .map_err(to_py)?;

@@ -1,6 +1,6 @@
-//! Alignment, integration, labels and batches.
+//! Alignment, integration, covariance, labels and batches.
 
-use numpy::{PyArray2, PyArrayDyn, PyArrayMethods, PyReadonlyArray1, PyReadonlyArray2};
+use numpy::{PyArray2, PyArray3, PyArrayDyn, PyArrayMethods, PyReadonlyArray1, PyReadonlyArray2};
 use std::sync::LazyLock;
 
 use pyo3::prelude::*;
@@ -8,6 +8,7 @@ use pyo3::types::{PyDict, PyList};
 
 use crate::align::{self as core_align, AlignOptions};
 use crate::batch::{self, AugmentConfig, Batch, BatchConfig, BatchMut, BatchPlan};
+use crate::covariance::{self, Cov9};
 use crate::error::ImuError;
 use crate::integrate::{self, PreintegratedMut};
 use crate::labels::{self, GroundTruthView, Labels, LabelsMut};
@@ -238,6 +239,56 @@ fn integrate_windows<'py>(
     labels_dict(py, l)
 }
 
+/// Covariances → (M, 9, 9), moving the buffer (each `Cov9` is row-major).
+fn covariances_out(py: Python<'_>, covs: Vec<Cov9>) -> PyResult<Bound<'_, PyArray3<f64>>> {
+    let m = covs.len();
+    out3_flat(py, covs.into_flattened().into_flattened(), m, 9, 9)
+}
+
+#[pyfunction]
+fn increment_covariance<'py>(
+    py: Python<'py>,
+    t_ns: PyReadonlyArray1<'py, i64>,
+    gyro: PyReadonlyArray2<'py, f64>,
+    acc: PyReadonlyArray2<'py, f64>,
+    var: PyReadonlyArray2<'py, f64>,
+    horizons: PyReadonlyArray1<'py, u64>,
+) -> PyResult<Bound<'py, PyArray3<f64>>> {
+    let (t, g, a, v) = (
+        slice1(&t_ns, "t_ns")?,
+        rows::<3>(&gyro, "gyro")?,
+        rows::<3>(&acc, "acc")?,
+        rows::<6>(&var, "var")?,
+    );
+    let hs: Vec<usize> = slice1(&horizons, "horizons")?.iter().map(|&h| h as usize).collect();
+    let covs = py
+        .allow_threads(|| covariance::increment_covariance(t, g, a, v, &hs))
+        .map_err(to_py)?;
+    covariances_out(py, covs)
+}
+
+#[pyfunction]
+fn interval_covariances<'py>(
+    py: Python<'py>,
+    t_ns: PyReadonlyArray1<'py, i64>,
+    gyro: PyReadonlyArray2<'py, f64>,
+    acc: PyReadonlyArray2<'py, f64>,
+    var: PyReadonlyArray2<'py, f64>,
+    boundaries: PyReadonlyArray1<'py, u64>,
+) -> PyResult<Bound<'py, PyArray3<f64>>> {
+    let (t, g, a, v) = (
+        slice1(&t_ns, "t_ns")?,
+        rows::<3>(&gyro, "gyro")?,
+        rows::<3>(&acc, "acc")?,
+        rows::<6>(&var, "var")?,
+    );
+    let bs: Vec<usize> = slice1(&boundaries, "boundaries")?.iter().map(|&b| b as usize).collect();
+    let covs = py
+        .allow_threads(|| covariance::interval_covariances(t, g, a, v, &bs))
+        .map_err(to_py)?;
+    covariances_out(py, covs)
+}
+
 /// Sequences held in Rust once, so each batch costs only the windows it draws.
 #[pyclass(module = "imu_learn._imu_core", frozen)]
 struct SequenceSet {
@@ -419,6 +470,8 @@ pub fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(preintegrate, m)?)?;
     m.add_function(wrap_pyfunction!(window_labels, m)?)?;
     m.add_function(wrap_pyfunction!(integrate_windows, m)?)?;
+    m.add_function(wrap_pyfunction!(increment_covariance, m)?)?;
+    m.add_function(wrap_pyfunction!(interval_covariances, m)?)?;
     m.add_class::<SequenceSet>()?;
     Ok(())
 }
