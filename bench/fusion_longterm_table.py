@@ -77,14 +77,18 @@ def paired_rows(name: str, runs: Dict[str, dict], base: str = "raw") -> List[Lis
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("results", nargs="+", type=Path)
+    ap.add_argument("--inputs", help="comma list of the input columns (default: every input of the configs)")
     a = ap.parse_args(argv)
     blobs = [json.loads(path.read_text()) for path in a.results]
     inputs = list(dict.fromkeys(i for b in blobs for i in b["config"]["inputs"]))  # "–" where one lacks it
+    if a.inputs:
+        inputs = [i.strip() for i in a.inputs.split(",") if i.strip()]
     rows: List[List[str]] = []
     paired: List[List[str]] = []
     for blob in blobs:
         rows += rows_of(blob["config"]["name"], blob["runs"], inputs)
-        paired += paired_rows(blob["config"]["name"], blob["runs"])
+        paired += [r for r in paired_rows(blob["config"]["name"], blob["runs"])
+                   if r[2].split(" − ")[0] in inputs]
     print("| experiment | aiding | recordings | seeds | " + " | ".join(f"{i}: causal / smoothed [m]" for i in inputs) + " |")
     print("|---|---|---|---|" + "---|" * len(inputs))
     for r in rows:

@@ -456,3 +456,31 @@ def _error_line_after_progress(capsys):
     errors = [x for x in err if x.startswith("imu_learn.evaluate: error:")]
     assert len(errors) == 1 and err[-1] == errors[0], err
     return errors[0]
+
+
+def test_a_checkpoint_with_a_covariance_head_gets_the_calibration_table(tmp_path):
+    """On the shipped V1_01 crop: rows for raw and refined IMU under the datasheet, the learned
+    variances and their mean, per horizon, with NEES and χ² fractions, in result.json and report.md."""
+    torch.manual_seed(0)
+    model = ImuRefiner(ModelConfig(hidden=8, layers=1, fc=8, covariance=True))
+    ck = tmp_path / "best.pt"
+    save_checkpoint(ck, model, {"data": {"window": 50, "split": {"train": ["MH_01_easy"], "val": []}}},
+                    epoch=0, step=0, best_metric=None)
+    out = tmp_path / "out"
+    rc = ev.main(["--config", str(EVAL_DEFAULT), "--methods", "raw", "--no-progress", "--checkpoint", str(ck),
+                  "--out", str(out), "--eval.horizons", "[10, 200]", "--eval.stride", "50", "--eval.curve_count", "2"])
+    torch.set_num_threads(1)
+    assert rc == 0
+    cal = json.loads((out / "result.json").read_text())["calibration"]
+    kinds = {(r["input"], r["covariance"], r["n"]) for r in cal if r["sequence"] == "all test"}
+    assert kinds == {(i, c, n) for i in ("raw", "refined") for c in ("datasheet", "learned", "learned mean")
+                     for n in (10, 200)}
+    for r in cal:
+        s = r["summary"]["all"]
+        assert s["dof"] == 9 and s["windows"] > 0 and s["mean_nees"] > 0
+        assert s["expected_2sigma"] == pytest.approx(0.0886, abs=1e-3)
+    # The untrained head's constant-ish variances (sigma ~1e-2 rad/s, 0.1 m/s^2) are far above the
+    # datasheet's: the datasheet is the overconfident one on real data.
+    by = {(r["input"], r["covariance"], r["n"]): r["summary"]["all"] for r in cal if r["sequence"] == "all test"}
+    assert by[("raw", "datasheet", 200)]["mean_nees"] > by[("raw", "learned", 200)]["mean_nees"]
+    assert "## Calibration of the increments' covariance" in (out / "report.md").read_text()

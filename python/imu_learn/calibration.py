@@ -117,20 +117,19 @@ def _labels_at(seq: Sequence, starts: np.ndarray, n: int, gravity: float) -> _La
 
 
 def window_covariances(seq: Sequence, gyro: np.ndarray, acc: np.ndarray, var: np.ndarray, starts: np.ndarray,
-                       n: int, chunk: int = 128) -> np.ndarray:
-    """Σ (M, 9, 9) of each window's increments under per-sample variances ``var`` (N, 6), float64."""
-    from imu_learn.torch_covariance import increment_covariance
+                       n: int) -> np.ndarray:
+    """Σ (M, 9, 9) of each window's increments under per-sample variances ``var`` (N, 6), float64,
+    by imu_core's propagation (:func:`imu_learn.covariance.increment_covariance`), one window at a time
+    (each costs O(n), so windows of 20 s are as cheap per sample as those of 50 ms)."""
+    from imu_learn.covariance import increment_covariance
 
-    dt = np.diff(seq.t_ns).astype(np.float64) * 1e-9
-    x = np.concatenate([gyro, acc], axis=1)
-    starts = np.asarray(starts, dtype=np.int64)
+    g = np.ascontiguousarray(gyro, dtype=np.float64)
+    a = np.ascontiguousarray(acc, dtype=np.float64)
+    v = np.ascontiguousarray(var, dtype=np.float64)
     out = np.empty((len(starts), 9, 9))
-    idx = starts[:, None] + np.arange(n)[None, :]
-    for a in range(0, len(starts), chunk):
-        i = idx[a:a + chunk]
-        g = torch.from_numpy(x[i, :3])
-        ac = torch.from_numpy(x[i, 3:])
-        out[a:a + chunk] = increment_covariance(g, ac, torch.from_numpy(dt[i]), torch.from_numpy(var[i]), [n])[:, 0].numpy()
+    for i, s in enumerate(np.asarray(starts, dtype=np.int64)):
+        e = int(s) + int(n) + 1
+        out[i] = increment_covariance(seq.t_ns[s:e], g[s:e], a[s:e], v[s:e], [int(n)])[0]
     return out
 
 
@@ -171,8 +170,10 @@ def evaluate_calibration(model, seqs: List[Sequence], horizons: List[int], strid
                          ) -> List[Dict[str, object]]:
     """The calibration rows of the evaluation report: raw IMU and ``model``'s refined IMU, each with
     its start-up bias removed (fitted on the first ``startup_bias_s``, windows start after it, as
-    in the relative pose table), under the datasheet's white noise and under the model's learned
-    per-sample variances; per test sequence and pooled over all of them ("all test")."""
+    in the relative pose table), under the datasheet's white noise, under the model's learned
+    per-sample variances, and under their mean over the sequence per channel ("learned mean": a
+    constant noise level, which separates how well the head tracks the motion from its overall
+    scale); per test sequence and pooled over all of them ("all test")."""
     from imu_learn.metrics import fit_startup_bias, index_at, remove_bias, with_imu
     from imu_learn.refine import refine_with_variance
 
@@ -185,7 +186,8 @@ def evaluate_calibration(model, seqs: List[Sequence], horizons: List[int], strid
         for name, base in (("raw", seq), ("refined", with_imu(seq, gyro, acc))):
             bg, ba = fit_startup_bias(base, startup_bias_s, gravity=gravity)
             fixed = remove_bias(base, bg, ba)
-            for cov_name, var in (("datasheet", sheet), ("learned", learned)):
+            flat = np.broadcast_to(learned.mean(0), learned.shape)
+            for cov_name, var in (("datasheet", sheet), ("learned", learned), ("learned mean", flat)):
                 for n in horizons:
                     starts = np.arange(first, len(seq) - int(n), int(stride), dtype=np.int64)
                     if starts.size == 0:

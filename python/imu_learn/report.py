@@ -39,7 +39,7 @@ PAPER_TABLE2: Dict[str, Dict[str, Tuple[Optional[float], float]]] = {
 }
 # Our method names that correspond to the paper's columns (for the side-by-side note only).
 PAPER_COLUMN_FOR = {"traditional": "Tr.", "gyro-denoise": "Gyro-Denoising", "end-to-end": "End-to-End learning",
-                    "proposed": "Pr."}
+                    "proposed": "Pr.", "tlio-style": "TLIO"}
 
 AIRIMU_NOTE = (
     "AirIMU (Qiu et al., arXiv:2310.04874, https://airimu.github.io/) publishes EuRoC figures (1 s "

@@ -32,7 +32,7 @@ EPILOG = """examples:
       -> reports/fuse_euroc/online.json
 """
 
-ONLINE_ONLY = ("checkpoint", "recordings", "scenarios", "inputs")
+ONLINE_ONLY = ("checkpoint", "recordings", "scenarios")
 
 
 def _names(text: str) -> List[str]:
@@ -63,7 +63,9 @@ def parser() -> argparse.ArgumentParser:
                     help="with --online: only these aiding scenarios (their names in the config, e.g. gnss_1hz; "
                          "default all)")
     ap.add_argument("--inputs", type=_names, default=None, metavar="NAME,...",
-                    help="with --online: IMU inputs to stream, of raw and proposed (default raw,proposed)")
+                    help="with --online: IMU inputs to stream, of raw and proposed (default raw,proposed); "
+                         "without: run only these of the config's inputs (e.g. tlio-style), the results of "
+                         "the others in results.json are left as they are")
     ap.add_argument("--threads", type=int, default=None, metavar="N",
                     help="torch threads for the models (default: 1 with --online, where one sample at a time "
                          "gains nothing from more; torch's own otherwise)")
@@ -98,7 +100,7 @@ def main(argv: Optional[List[str]] = None) -> int:
         else:
             from .run import run_experiment
 
-            run_experiment(cfg, out)
+            run_experiment(cfg, out, only_inputs=args.inputs)
             print(f"imu_learn.fuse: wrote {out / 'table.md'}")
     except (ImuError, FileNotFoundError, OSError) as e:
         if args.traceback:

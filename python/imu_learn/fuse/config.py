@@ -11,7 +11,11 @@ from typing import List, Optional, Tuple
 
 from imu_learn.config import DATA_ROOT_ENV, ConfigError, from_dict, read_toml
 
-INPUTS = ("raw", "traditional", "proposed")
+# "raw+learned-cov" / "proposed+learned-cov": the raw or refined samples, each weighted in the
+# graph by its own noise variances from a refiner's covariance head (covariance_checkpoint) instead
+# of the datasheet's white noise; the pair separates the refined samples' effect from the covariance's.
+LEARNED_COV_INPUTS = ("raw+learned-cov", "proposed+learned-cov")
+INPUTS = ("raw", "traditional", "proposed") + LEARNED_COV_INPUTS
 KINDS = ("position", "relative_pose", "leica")
 BIAS_PRIORS = ("zero", "startup")
 
@@ -26,6 +30,7 @@ class RecordingSpec:
     checkpoint: str = ""
     traditional: str = ""
     methods_dir: str = ""
+    covariance_checkpoint: str = ""
 
 
 @dataclass
@@ -82,6 +87,12 @@ class FuseConfig:
     # For any other method of `python -m imu_learn.evaluate` that outputs IMU samples (e.g.
     # "gyro-denoise", "airimu-style"): <methods_dir>/<name>.pt, as evaluate wrote it.
     methods_dir: str = ""
+    # For the "+learned-cov" inputs: a refiner checkpoint with a covariance head (model.covariance),
+    # e.g. fitted with optim.trainable = "covariance" on the "proposed" checkpoint.
+    covariance_checkpoint: str = ""
+    # For "tlio-style" (raw IMU plus learned displacement factors, fuse/displacement.py; its model is
+    # <methods_dir>/tlio-style.pt): one factor per network window ending every this many seconds.
+    displacement_update_s: float = 1.0
     recordings: List[RecordingSpec] = field(default_factory=list)
     scenarios: List[ScenarioSpec] = field(default_factory=list)
     noise: NoiseSpec = field(default_factory=NoiseSpec)
@@ -96,7 +107,9 @@ def imu_methods() -> List[str]:
     from imu_learn.baselines.base import Method
     from imu_learn.evaluate import REGISTRY, load_method_class
 
-    names = list(INPUTS)
+    from .displacement import FACTOR_INPUTS
+
+    names = list(INPUTS) + list(FACTOR_INPUTS)  # the raw IMU plus learned displacement factors
     for name in REGISTRY:
         if name in names or name == "raw":
             continue
@@ -122,6 +135,8 @@ def validate(cfg: FuseConfig) -> FuseConfig:
         raise ConfigError(f"seeds: one or more distinct integers, got {cfg.seeds}")
     if not cfg.keyframe_hz > 0:
         raise ConfigError(f"keyframe_hz: must be > 0, got {cfg.keyframe_hz}")
+    if not cfg.displacement_update_s > 0:
+        raise ConfigError(f"displacement_update_s: must be > 0, got {cfg.displacement_update_s}")
     names = [s.name for s in cfg.scenarios]
     if len(set(names)) != len(names) or not all(names):
         raise ConfigError(f"scenarios: names must be given and unique, got {names}")

@@ -22,7 +22,7 @@ from __future__ import annotations
 
 import time
 from dataclasses import dataclass, field
-from typing import Dict, List, Optional
+from typing import Callable, Dict, List, Optional
 from typing import Sequence as Seq
 
 import numpy as np
@@ -136,6 +136,7 @@ class IncrementalFusion:
         iterations: int = 1,
         predict_between: bool = True,
         resolve_after_s: float = 2.0,
+        extra_factors: Optional[Callable] = None,
     ) -> None:
         import gtsam
         from gtsam.symbol_shorthand import B, V, X
@@ -217,10 +218,16 @@ class IncrementalFusion:
         self._pim = None
         self.counts = {"imu_factors": 0, "position_factors": 0, "relative_pose_factors": 0, "isam2_updates": 0,
                        "resolves_after_coast": 0}
+        # Factors beyond the aiding (e.g. learned displacements, fuse/displacement.py): called as
+        # extra_factors(self, k, s) at keyframe k (sample s) before its update, it returns factors to
+        # add there; they count as new information (iSAM2 updates at that keyframe).
+        self._extra_factors = extra_factors
+        if extra_factors is not None:
+            self.counts["extra_factors"] = 0
         self.n = 0  # samples added so far
         self._k = 0  # the next keyframe's number
         self._next_kf = self._kf_list[0]
-        self._prev = None  # (t_ns, gyro, acc) of the last sample, integrated when the next arrives
+        self._prev = None  # (t_ns, gyro, acc, var) of the last sample, integrated when the next arrives
 
     @property
     def done(self) -> bool:
@@ -239,13 +246,24 @@ class IncrementalFusion:
         for i, rel, model in self._between_at.get(s, ()):
             graph.add(gtsam.BetweenFactorPose3(X(self._key_of[i]), X(k), rel, model))
             self.counts["relative_pose_factors"] += 1
+        if self._extra_factors is not None:
+            for f in self._extra_factors(self, k, s):
+                graph.add(f)
+                self.counts["extra_factors"] += 1
         return graph.size() - n
 
-    def add_sample(self, t_ns: int, gyro: np.ndarray, acc: np.ndarray) -> Optional[CausalState]:
+    def add_sample(self, t_ns: int, gyro: np.ndarray, acc: np.ndarray,
+                   var: Optional[np.ndarray] = None) -> Optional[CausalState]:
         """Take IMU sample number :attr:`n` (stamp ``t_ns`` [ns], gyro [rad/s] and acc [m/s^2] (3,)):
         integrate the previous sample, and at a keyframe add its factors and update iSAM2 where
         aiding arrived. Returns the causal state as of ``t_ns`` (None between keyframes without
-        ``predict_between``)."""
+        ``predict_between``).
+
+        ``var`` (6,): this sample's own noise variances (discrete-time, gyro then acc, the
+        convention of :mod:`imu_learn.torch_covariance`, e.g. a refiner's covariance head) in place of
+        the datasheet's white noise; GTSAM's preintegration then propagates exactly these per-sample
+        variances into each IMU factor's covariance (it reads the parameters at every sample). The
+        bias random walk stays the datasheet's."""
         n = self.n
         t = int(t_ns)
         if n >= self._n_samples or t != self._stamps[n]:
@@ -253,9 +271,15 @@ class IncrementalFusion:
             raise InvalidInputError(f"sample {n}: stamp {t} ns, expected {expected}")
         gtsam = self._gtsam
         if n:
-            t_prev, g_prev, a_prev = self._prev
-            self._pim.integrateMeasurement(a_prev, g_prev, (t - t_prev) * 1e-9)
-        self._prev = (t, np.asarray(gyro, dtype=np.float64), np.asarray(acc, dtype=np.float64))
+            t_prev, g_prev, a_prev, v_prev = self._prev
+            dt = (t - t_prev) * 1e-9
+            if v_prev is not None:
+                # GTSAM takes continuous-time covariances and divides them by dt itself.
+                self._params.setGyroscopeCovariance(np.diag(v_prev[:3] * dt))
+                self._params.setAccelerometerCovariance(np.diag(v_prev[3:] * dt))
+            self._pim.integrateMeasurement(a_prev, g_prev, dt)
+        self._prev = (t, np.asarray(gyro, dtype=np.float64), np.asarray(acc, dtype=np.float64),
+                      None if var is None else np.asarray(var, dtype=np.float64))
         self.n = n + 1
         if n != self._next_kf:
             if not self.predict_between:
@@ -346,22 +370,27 @@ def fuse(
     bias0: Optional[np.ndarray] = None,
     iterations: int = 1,
     resolve_after_s: float = 2.0,
+    var: Optional[np.ndarray] = None,
+    extra_factors: Optional[Callable] = None,
 ) -> FusionResult:
     """Fuse IMU samples (N, 3) with ``aiding`` (:class:`PositionFixes`, :class:`RelativePoses`).
     ``start_pose`` = (R0 (3, 3), p0 (3,), v0 (3,)) of sample 0 (from ground truth: the prior);
     ``bias0`` (6,) gyro then accelerometer, the bias prior's mean (zero when None); ``iterations``:
     iSAM2 steps at each aiding epoch (1 + relinearising extra updates); ``resolve_after_s``: after a
     coast longer than this, the graph so far is re-solved in batch (see
-    :class:`IncrementalFusion`). The recording streamed
+    :class:`IncrementalFusion`); ``var`` (N, 6): per-sample noise variances instead of the
+    datasheet's white noise (:meth:`IncrementalFusion.add_sample`). The recording streamed
     through :class:`IncrementalFusion` sample by sample, then smoothed."""
     t_ns = np.asarray(t_ns, dtype=np.int64)
     if len(t_ns) < 2 or gyro.shape != (len(t_ns), 3) or acc.shape != gyro.shape:
         raise InvalidInputError(f"fuse needs N >= 2 samples with gyro and acc (N, 3); got {gyro.shape}, {acc.shape}")
     t_start = time.perf_counter()
     inc = IncrementalFusion(t_ns, start_pose, aiding, noise, gravity, keyframe_hz, prior, bias0, iterations,
-                            predict_between=False, resolve_after_s=resolve_after_s)
+                            predict_between=False, resolve_after_s=resolve_after_s, extra_factors=extra_factors)
+    if var is not None and np.shape(var) != (len(t_ns), 6):
+        raise InvalidInputError(f"fuse: var must be (N, 6) = ({len(t_ns)}, 6), got {np.shape(var)}")
     for s in range(len(t_ns)):
-        inc.add_sample(t_ns[s], gyro[s], acc[s])
+        inc.add_sample(t_ns[s], gyro[s], acc[s], None if var is None else var[s])
     res = inc.smooth()
     res.seconds = time.perf_counter() - t_start
     return res

@@ -24,6 +24,7 @@ from scipy.spatial.transform import Rotation
 
 from imu_learn import _imu_core as core
 from imu_learn.cache import atomic_write_bytes
+from imu_learn.config import ConfigError
 from imu_learn.quat import wxyz_to_xyzw, xyzw_to_wxyz
 
 from .aiding import (
@@ -35,7 +36,8 @@ from .aiding import (
     simulate_position,
     simulate_relative_pose,
 )
-from .config import FuseConfig, RecordingSpec, ScenarioSpec
+from .config import LEARNED_COV_INPUTS, FuseConfig, RecordingSpec, ScenarioSpec
+from .displacement import FACTOR_INPUTS, displacement_factors_for
 from .graph import fuse
 from .noise import ImuNoise
 from .plots import plot_setting, runs_of
@@ -64,6 +66,8 @@ def artefact_of(cfg: FuseConfig, spec: RecordingSpec, name: str) -> str:
     """The file behind an input for this recording ("" for raw): its own model where it names one."""
     if name == "proposed":
         return spec.checkpoint or cfg.checkpoint
+    if name in LEARNED_COV_INPUTS:
+        return spec.covariance_checkpoint or cfg.covariance_checkpoint
     if name == "traditional":
         return spec.traditional or cfg.traditional
     if name == "raw":
@@ -81,10 +85,13 @@ def seeds_of(cfg: FuseConfig, scn: ScenarioSpec) -> List[Optional[int]]:
 def run_hash(cfg: FuseConfig, spec: RecordingSpec, scn: ScenarioSpec, name: str, seed: Optional[int]) -> str:
     """Everything one run's result depends on (not the other recordings, scenarios or inputs)."""
     artefact = artefact_of(cfg, spec, name)
-    recording = {k: v for k, v in asdict(spec).items() if k not in ("checkpoint", "traditional", "methods_dir")}
+    recording = {k: v for k, v in asdict(spec).items()
+                 if k not in ("checkpoint", "traditional", "methods_dir", "covariance_checkpoint")}
     d = {"estimator": ESTIMATOR, "seed": seed, "gravity": cfg.gravity, "keyframe_hz": cfg.keyframe_hz,
          "noise": asdict(cfg.noise), "recording": recording, "scenario": asdict(scn), "input": name,
          "artefact": file_digest(artefact) if artefact else ""}
+    if name in FACTOR_INPUTS:  # learned displacement factors: their update grid too
+        d["displacement_update_s"] = cfg.displacement_update_s
     return hashlib.sha256(json.dumps(d, sort_keys=True).encode()).hexdigest()[:16]
 
 
@@ -125,10 +132,13 @@ def load_processor(name: str, path: str, cache: Dict[Tuple[str, str], object]) -
             hint = ("" if name == "proposed" else
                     f" (python -m imu_learn.evaluate with the '{name}' method writes it to <report>/methods/)")
             raise FileNotFoundError(f"{name}: {path} not found{hint}")
-        if name == "proposed":
+        if name == "proposed" or name in LEARNED_COV_INPUTS:
             from imu_learn.checkpoint import load_model
 
-            cache[(name, path)] = load_model(Path(path))
+            model = load_model(Path(path))
+            if name in LEARNED_COV_INPUTS and model.cov_head is None:
+                raise ConfigError(f"{name}: {path} has no covariance head (a model fitted with model.covariance = true)")
+            cache[(name, path)] = model
         else:
             from imu_learn.evaluate import load_method_class
 
@@ -136,15 +146,21 @@ def load_processor(name: str, path: str, cache: Dict[Tuple[str, str], object]) -
     return cache[(name, path)]
 
 
-def imu_input(name: str, seq, artefact: str, cache: Dict[Tuple[str, str], object]) -> Tuple[np.ndarray, np.ndarray]:
+def imu_input(name: str, seq, artefact: str, cache: Dict[Tuple[str, str], object]
+              ) -> Tuple[np.ndarray, np.ndarray, Optional[np.ndarray]]:
+    """(gyro, acc, per-sample variances or None for the datasheet's noise) of one input."""
     if name == "raw":
-        return seq.gyro, seq.acc
+        return seq.gyro, seq.acc, None
     proc = load_processor(name, artefact, cache)
-    if name != "proposed":
-        return proc.refine(seq)
-    from imu_learn.refine import refine_arrays
+    from imu_learn.refine import refine_arrays, refine_with_variance
 
-    return refine_arrays(proc, seq.gyro, seq.acc)
+    if name in LEARNED_COV_INPUTS:
+        gyro, acc, var = refine_with_variance(proc, seq.gyro, seq.acc)
+        # The head's variances are a function of the raw samples (the model's input) either way.
+        return (seq.gyro, seq.acc, var) if name == "raw+learned-cov" else (gyro, acc, var)
+    if name != "proposed":
+        return (*proc.refine(seq), None)
+    return (*refine_arrays(proc, seq.gyro, seq.acc), None)
 
 
 def bias_prior_mean(scn: ScenarioSpec, seq, gyro: np.ndarray, acc: np.ndarray, gravity: float):
@@ -180,7 +196,12 @@ def write_trajectory(path: Path, t_ns: np.ndarray, p: np.ndarray, R: np.ndarray)
                    np.ascontiguousarray(q_wxyz))
 
 
-def run_experiment(cfg: FuseConfig, out: Path, log: Callable[[str], None] = print) -> Dict[str, dict]:
+def run_experiment(cfg: FuseConfig, out: Path, log: Callable[[str], None] = print,
+                   only_inputs: Optional[List[str]] = None) -> Dict[str, dict]:
+    # only_inputs: run only these of the config's inputs; the other inputs' results are left as they are
+    run_inputs = [i for i in cfg.inputs if not only_inputs or i in only_inputs]
+    if only_inputs and set(only_inputs) - set(cfg.inputs):
+        raise ConfigError(f"--inputs: {sorted(set(only_inputs) - set(cfg.inputs))} not among the config's inputs {cfg.inputs}")
     out.mkdir(parents=True, exist_ok=True)
     res_path = out / "results.json"
     results: Dict[str, dict] = {}
@@ -188,13 +209,14 @@ def run_experiment(cfg: FuseConfig, out: Path, log: Callable[[str], None] = prin
         results = json.loads(res_path.read_text()).get("runs", {})
     processors: Dict[Tuple[str, str], object] = {}
     for spec in cfg.recordings:  # a missing model fails here, before any run
-        for name in cfg.inputs:
+        for name in run_inputs:
             if name != "raw":
                 load_processor(name, artefact_of(cfg, spec, name), processors)
     wanted = {run_key(spec, scn, name, seed): run_hash(cfg, spec, scn, name, seed)
               for spec in cfg.recordings for scn in cfg.scenarios for seed in seeds_of(cfg, scn) for name in cfg.inputs}
     total = len(wanted)
-    kept = {k: r for k, r in results.items() if wanted.get(k) == r.get("hash")}
+    kept = {k: r for k, r in results.items()
+            if wanted.get(k) == r.get("hash") or (only_inputs and r.get("input") not in run_inputs)}
     if kept:
         log(f"imu_learn.fuse: {len(kept)} of {total} runs already in {res_path} with these settings")
     results = kept
@@ -202,8 +224,8 @@ def run_experiment(cfg: FuseConfig, out: Path, log: Callable[[str], None] = prin
     for spec in cfg.recordings:
         rname = Path(spec.path).name
         seq, noise, leica = load_recording_for_fusion(cfg, spec)  # also for the plots of finished runs
-        pending = any(k.split("|")[0] == rname and k not in results for k in wanted)
-        inputs = ({name: imu_input(name, seq, artefact_of(cfg, spec, name), processors) for name in cfg.inputs}
+        pending = any(k.split("|")[0] == rname and k.split("|")[2] in run_inputs and k not in results for k in wanted)
+        inputs = ({name: imu_input(name, seq, artefact_of(cfg, spec, name), processors) for name in run_inputs}
                   if pending else {})
         R0 = Rotation.from_quat(wxyz_to_xyzw(seq.q_wxyz[0])).as_matrix()
         for scn in cfg.scenarios:
@@ -217,10 +239,12 @@ def run_experiment(cfg: FuseConfig, out: Path, log: Callable[[str], None] = prin
                 for name in cfg.inputs:
                     done += 1
                     key = run_key(spec, scn, name, seed)
-                    if aiding is None or key in results:
+                    if aiding is None or key in results or name not in run_inputs:
                         continue
-                    gyro, acc = inputs[name]
-                    r = run_one(cfg, out, seq, noise, R0, scn, aiding, key, gyro, acc)
+                    gyro, acc, var = inputs[name]
+                    r = run_one(cfg, out, seq, noise, R0, scn, aiding, key, gyro, acc, var,
+                                displacement=processors.get((name, artefact_of(cfg, spec, name)))
+                                if name in FACTOR_INPUTS else None)
                     r = results[key] = r | {"seed": seed, "hash": wanted[key]}
                     save_results(res_path, cfg, results)
                     log(f"[{done}/{total}] {key}: " + (f"failed: {r['failed'][:120]}" if "failed" in r else
@@ -237,23 +261,29 @@ def run_experiment(cfg: FuseConfig, out: Path, log: Callable[[str], None] = prin
 
 
 def run_one(cfg: FuseConfig, out: Path, seq, noise: ImuNoise, R0: np.ndarray, scn: ScenarioSpec, aiding, key: str,
-            gyro: np.ndarray, acc: np.ndarray) -> dict:
-    """Fuse one input with one aiding; its scores (or ``failed``) and its trajectories on disk."""
+            gyro: np.ndarray, acc: np.ndarray, var: Optional[np.ndarray] = None, displacement=None) -> dict:
+    """Fuse one input with one aiding; its scores (or ``failed``) and its trajectories on disk.
+    ``displacement``: a fitted tlio-style model whose displacements join the graph as factors."""
     rname, _, name = key.split("|")[:3]
     head = {"recording": rname, "scenario": scn.name, "input": name, "aiding": aiding.label,
             "aiding_count": len(aiding), "aiding_gaps": aiding_gaps(aiding, seq.t_ns),
             "aiding_dropped": {k: getattr(aiding, k) for k in ("dropped_outside", "dropped_unmatched", "dropped_outage")
                                if hasattr(aiding, k)},
             "outages_clipped": [list(w) for w in clip_outages(seq.t_ns, scn.outage_windows())],
-            "duration_s": seq.duration_s, "noise": noise.source}
+            "duration_s": seq.duration_s, "noise": noise.source if var is None else "learned per-sample variances"}
     bias0 = bias_prior_mean(scn, seq, gyro, acc, cfg.gravity)
     if bias0 is not None:
         head["bias_prior"] = [round(float(b), 6) for b in bias0]
+    hook = (None if displacement is None else
+            displacement_factors_for(displacement, seq.t_ns, gyro, acc, cfg.displacement_update_s))
     try:
         res = fuse(seq.t_ns, gyro, acc, (R0, seq.p[0], seq.v[0]), [aiding], noise, cfg.gravity, cfg.keyframe_hz,
-                   bias0=bias0)
+                   bias0=bias0, var=var, extra_factors=hook)
     except RuntimeError as e:  # GTSAM's IndeterminateLinearSystemException and kin
         return {**head, "failed": " ".join(str(e).split())[:300]}
+    if hook is not None:
+        head["displacement_factors"] = {"count": hook.count, "skipped": hook.skipped,
+                                        "update_s": cfg.displacement_update_s}
     stem = key.replace("|", "_")
     for kind, p, R in (("causal", res.causal_p, res.causal_R), ("smoothed", res.smoothed_p, res.smoothed_R)):
         write_trajectory(out / "trajectories" / f"{stem}_{kind}.tum", seq.t_ns[res.kf_idx], p, R)
