@@ -121,7 +121,7 @@ def _windowed(model: ImuRefiner, imu32: np.ndarray, window: int, overlap: int, b
     n = len(imu32)
     out = np.zeros((n, 6), dtype=np.float32)
     var_out = np.zeros((n, 6), dtype=np.float32) if variance else None
-    if variance and model.cov_head is None:
+    if variance and getattr(model, "cov_head", None) is None:
         raise InvalidInputError("this model has no covariance head (trained with model.covariance = false)")
     if n == 0:
         return out, var_out
@@ -135,10 +135,12 @@ def _windowed(model: ImuRefiner, imu32: np.ndarray, window: int, overlap: int, b
             with _progress(n, progress, "refine (causal)") as bar:
                 for s in range(0, n, window):
                     x = x_all[None, s : s + window]
-                    y, v, state = model.forward_full(x, state)
-                    out[s : s + window] = (y - x)[0].float().cpu().numpy()
                     if var_out is not None:
+                        y, v, state = model.forward_full(x, state)
                         var_out[s : s + window] = v[0].float().cpu().numpy()
+                    else:  # any model with forward_with_state (the baselines' nets too)
+                        y, state = model.forward_with_state(x, state)
+                    out[s : s + window] = (y - x)[0].float().cpu().numpy()
                     bar.update(x.shape[1])
             return out, var_out
         plan = window_plan(n, window, overlap)
@@ -146,12 +148,15 @@ def _windowed(model: ImuRefiner, imu32: np.ndarray, window: int, overlap: int, b
             for b0 in range(0, len(plan), max(1, batch)):
                 chunk = plan[b0 : b0 + max(1, batch)]
                 x = torch.stack([x_all[s:e] for s, e, _, _ in chunk])
-                y, v = model(x, with_variance=True)
+                if var_out is not None:
+                    y, v = model(x, with_variance=True)
+                    vv = v.float().cpu().numpy()
+                else:  # any model mapping (B, W, 6) to (B, W, 6) (the baselines' nets too)
+                    y, vv = model(x), None
                 corr = (y - x).float().cpu().numpy()
-                vv = v.float().cpu().numpy() if var_out is not None else None
                 for j, (s, _e, kf, kt) in enumerate(chunk):
                     out[kf:kt] = corr[j, kf - s : kt - s]
-                    if var_out is not None:
+                    if var_out is not None and vv is not None:
                         var_out[kf:kt] = vv[j, kf - s : kt - s]
                 bar.update(chunk[-1][3] - chunk[0][2])
     finally:

@@ -92,11 +92,7 @@ type StampedPositions<'py> = (Bound<'py, PyArray1<i64>>, Bound<'py, PyArray2<f64
 
 #[pyfunction]
 #[pyo3(signature = (path, allow_float_timestamps=false))]
-fn read_asl_position(
-    py: Python<'_>,
-    path: PathBuf,
-    allow_float_timestamps: bool,
-) -> PyResult<StampedPositions<'_>> {
+fn read_asl_position(py: Python<'_>, path: PathBuf, allow_float_timestamps: bool) -> PyResult<StampedPositions<'_>> {
     let (t, p) = py
         .allow_threads(|| asl::read_position(&path, &opts(allow_float_timestamps)))
         .map_err(to_py)?;

@@ -8,7 +8,7 @@ use pyo3::types::{PyDict, PyList};
 
 use crate::align::{self as core_align, AlignOptions};
 use crate::batch::{self, AugmentConfig, Batch, BatchConfig, BatchMut, BatchPlan};
-use crate::covariance::{self, Cov9};
+use crate::covariance::{self, Cov9, Var6};
 use crate::error::ImuError;
 use crate::integrate::{self, PreintegratedMut};
 use crate::labels::{self, GroundTruthView, Labels, LabelsMut};
@@ -16,6 +16,7 @@ use crate::python::arrays::{
     flat_mut, out1, out2, out2_flat, out3, out3_flat, pooled_arrays, rows, rows_mut, slice1, zeros, BufferPool,
 };
 use crate::python::errors::to_py;
+use crate::types::Vec3;
 use crate::types::{GroundTruth, ImuSamples, Sequence};
 
 type Arr2<'py> = Bound<'py, PyArray2<f64>>;
@@ -245,6 +246,36 @@ fn covariances_out(py: Python<'_>, covs: Vec<Cov9>) -> PyResult<Bound<'_, PyArra
     out3_flat(py, covs.into_flattened().into_flattened(), m, 9, 9)
 }
 
+/// The signature both covariance functions share: stamps, gyro, acc, variances and sample indices.
+type CovarianceFn = fn(&[i64], &[Vec3], &[Vec3], &[Var6], &[usize]) -> crate::error::Result<Vec<Cov9>>;
+
+/// Checks the arrays, runs ``f`` with the GIL released and returns (M, 9, 9).
+fn covariances_py<'py>(
+    py: Python<'py>,
+    inputs: CovarianceInputs<'_, 'py>,
+    index_name: &str,
+    f: CovarianceFn,
+) -> PyResult<Bound<'py, PyArray3<f64>>> {
+    let (t_ns, gyro, acc, var, idx) = inputs;
+    let (t, g, a, v) = (
+        slice1(t_ns, "t_ns")?,
+        rows::<3>(gyro, "gyro")?,
+        rows::<3>(acc, "acc")?,
+        rows::<6>(var, "var")?,
+    );
+    let is: Vec<usize> = slice1(idx, index_name)?.iter().map(|&i| i as usize).collect();
+    let covs = py.allow_threads(|| f(t, g, a, v, &is)).map_err(to_py)?;
+    covariances_out(py, covs)
+}
+
+type CovarianceInputs<'a, 'py> = (
+    &'a PyReadonlyArray1<'py, i64>,
+    &'a PyReadonlyArray2<'py, f64>,
+    &'a PyReadonlyArray2<'py, f64>,
+    &'a PyReadonlyArray2<'py, f64>,
+    &'a PyReadonlyArray1<'py, u64>,
+);
+
 #[pyfunction]
 fn increment_covariance<'py>(
     py: Python<'py>,
@@ -254,17 +285,8 @@ fn increment_covariance<'py>(
     var: PyReadonlyArray2<'py, f64>,
     horizons: PyReadonlyArray1<'py, u64>,
 ) -> PyResult<Bound<'py, PyArray3<f64>>> {
-    let (t, g, a, v) = (
-        slice1(&t_ns, "t_ns")?,
-        rows::<3>(&gyro, "gyro")?,
-        rows::<3>(&acc, "acc")?,
-        rows::<6>(&var, "var")?,
-    );
-    let hs: Vec<usize> = slice1(&horizons, "horizons")?.iter().map(|&h| h as usize).collect();
-    let covs = py
-        .allow_threads(|| covariance::increment_covariance(t, g, a, v, &hs))
-        .map_err(to_py)?;
-    covariances_out(py, covs)
+    let inputs = (&t_ns, &gyro, &acc, &var, &horizons);
+    covariances_py(py, inputs, "horizons", covariance::increment_covariance)
 }
 
 #[pyfunction]
@@ -276,17 +298,8 @@ fn interval_covariances<'py>(
     var: PyReadonlyArray2<'py, f64>,
     boundaries: PyReadonlyArray1<'py, u64>,
 ) -> PyResult<Bound<'py, PyArray3<f64>>> {
-    let (t, g, a, v) = (
-        slice1(&t_ns, "t_ns")?,
-        rows::<3>(&gyro, "gyro")?,
-        rows::<3>(&acc, "acc")?,
-        rows::<6>(&var, "var")?,
-    );
-    let bs: Vec<usize> = slice1(&boundaries, "boundaries")?.iter().map(|&b| b as usize).collect();
-    let covs = py
-        .allow_threads(|| covariance::interval_covariances(t, g, a, v, &bs))
-        .map_err(to_py)?;
-    covariances_out(py, covs)
+    let inputs = (&t_ns, &gyro, &acc, &var, &boundaries);
+    covariances_py(py, inputs, "boundaries", covariance::interval_covariances)
 }
 
 /// Sequences held in Rust once, so each batch costs only the windows it draws.
