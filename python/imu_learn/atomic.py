@@ -1,0 +1,82 @@
+"""The one atomic-write helper every output of imu_learn goes through.
+
+An output is written to a temporary file beside its final path (same folder, so the rename never
+crosses a file system), flushed and fsynced, then renamed over the final path with ``os.replace``.
+A reader therefore sees either the previous complete file or the new complete file, never a half
+written one: an exception, a signal that ends the process, or a full disk while writing leaves the
+final path untouched and removes the temporary file (a ``SIGKILL`` can leave a ``.<name>.*.tmp``
+beside it, which no reader ever opens).
+"""
+from __future__ import annotations
+
+import os
+import tempfile
+from pathlib import Path
+from typing import BinaryIO, Callable, Union
+
+PathLike = Union[str, "os.PathLike[str]"]
+
+
+def temp_beside(path: Path) -> Path:
+    """A new, empty temporary file in ``path``'s folder (created, so the name is ours)."""
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
+    os.close(fd)
+    return Path(tmp)
+
+
+def _fsync_file(path: Path) -> None:
+    fd = os.open(path, os.O_RDONLY)
+    try:
+        os.fsync(fd)
+    finally:
+        os.close(fd)
+
+
+def _fsync_dir(folder: Path) -> None:
+    # The rename is durable only once the folder's entry is on disk; not every OS lets us open a
+    # folder for this (Windows), which costs durability, never correctness.
+    try:
+        fd = os.open(folder, os.O_RDONLY)
+    except OSError:
+        return
+    try:
+        os.fsync(fd)
+    except OSError:
+        pass
+    finally:
+        os.close(fd)
+
+
+def atomic_write_path(path: PathLike, fill: Callable[[Path], None]) -> None:
+    """Let ``fill(tmp)`` write the whole output to ``tmp`` (by path: for writers such as h5py,
+    scipy.io or torch.onnx that want a file name), then move it over ``path`` atomically."""
+    path = Path(path)
+    tmp = temp_beside(path)
+    try:
+        fill(tmp)
+        _fsync_file(tmp)
+        os.replace(tmp, path)
+    except BaseException:
+        try:
+            os.unlink(tmp)
+        except FileNotFoundError:
+            pass
+        raise
+    _fsync_dir(path.parent)
+
+
+def atomic_write_bytes(path: PathLike, write: Callable[[BinaryIO], object]) -> None:
+    """Write through ``write(fileobj)`` (a binary file object) and move the result over ``path``."""
+
+    def fill(tmp: Path) -> None:
+        with open(tmp, "wb") as f:
+            write(f)
+
+    atomic_write_path(path, fill)
+
+
+def atomic_write_text(path: PathLike, text: str) -> None:
+    """Write ``text`` (UTF-8) to ``path`` atomically."""
+    data = text.encode("utf-8")
+    atomic_write_bytes(path, lambda f: f.write(data))
