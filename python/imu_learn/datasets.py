@@ -5,9 +5,19 @@ import os
 from pathlib import Path
 from typing import List, Tuple
 
-from imu_learn.errors import InvalidInputError
+from imu_learn.errors import InvalidInputError, NoRecordingsError
+from imu_learn.formats import FORMATS
 
 DATASETS = ("euroc", "tum-vi", "blackbird", "broad", "kaist")
+
+# What find_recordings searches for, in the words of the error for a folder without any.
+LOOKED_FOR = {
+    "euroc": "sequence folders holding mav0/ (mav0/imu0/data.csv)",
+    "tum-vi": "sequence folders holding mav0/ (mav0/imu0/data.csv)",
+    "blackbird": "folders holding data.hdf5",
+    "broad": "*.mat trials",
+    "kaist": "folders holding sensor_data/xsens_imu.csv",
+}
 
 
 def find_recordings(dataset: str, root: Path) -> List[Tuple[str, Path]]:
@@ -17,17 +27,12 @@ def find_recordings(dataset: str, root: Path) -> List[Tuple[str, Path]]:
         raise InvalidInputError(f"unknown dataset {dataset!r}; known: {', '.join(DATASETS)}")
     if not root.exists():
         raise FileNotFoundError(2, "No such file or directory", str(root))
-    if dataset in ("euroc", "tum-vi"):
-        found = [p.parent for p in root.rglob("mav0") if p.is_dir()]
-    elif dataset == "blackbird":
-        found = [p.parent for p in root.rglob("data.hdf5")]
-    elif dataset == "broad":
-        found = list(root.rglob("*.mat"))
-    else:
-        found = [p.parent.parent for p in root.rglob("sensor_data/xsens_imu.csv")]
+    found = FORMATS[dataset].find_recordings(root)
     recs = sorted((_name(p, root), p) for p in found)
     if not recs:
-        raise InvalidInputError(f"{root}: no {dataset} recordings found")
+        raise NoRecordingsError(
+            f"{root}: no {dataset} recordings found (looked for {LOOKED_FOR[dataset]} at any depth)", str(root)
+        )
     return recs
 
 

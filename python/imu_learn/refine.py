@@ -18,7 +18,8 @@ Only the IMU is read (no ground truth needed); timestamps and everything but gyr
 - BROAD: IN is a ``.mat`` trial. OUT (a ``.mat`` path, or a folder that gets the input's name)
   gets every variable of the input with ``imu_gyr`` / ``imu_acc`` replaced.
 
-Every file is written to a temporary file beside its target and renamed into place. The input is
+Each layout's module in :mod:`imu_learn.formats` reads and writes it; every file is written to a
+temporary file beside its target and renamed into place (:mod:`imu_learn.atomic`). The input is
 never written: an OUT that resolves to the input file (or, with ``--copy-folder``, the input
 folder) is refused. Errors print one line and exit with status 2.
 
@@ -41,26 +42,21 @@ added to the float64 raw samples, so a model whose correction is zero returns th
 from __future__ import annotations
 
 import argparse
-import csv
 import os
 import shutil
 import sys
-import tempfile
-from dataclasses import dataclass
 from pathlib import Path
-from typing import Callable, List, Optional, Tuple
+from typing import List, Optional, Tuple
 
 import numpy as np
 import torch
 
-from imu_learn import _imu_core as core
+from imu_learn import formats
 from imu_learn.errors import InvalidInputError
+from imu_learn.formats import ImuSource
 from imu_learn.model import ImuRefiner
 
-FORMATS = ("auto", "asl", "euroc", "tum-vi", "blackbird", "broad", "kaist")
-KAIST_GYRO_COLS = (8, 9, 10)  # 0-based columns of xsens_imu.csv (see crates/imu_core/src/io/kaist.rs)
-KAIST_ACC_COLS = (11, 12, 13)
-KAIST_COLUMNS = 17
+FORMATS = ("auto", *formats.FORMATS)
 
 
 # --------------------------------------------------------------------------------------------
@@ -216,173 +212,11 @@ def _refine(model: ImuRefiner, gyro: np.ndarray, acc: np.ndarray, window: int, o
 
 
 # --------------------------------------------------------------------------------------------
-# Formats: locate the IMU file, read it, write a refined copy
+# Where the refined IMU goes (reading and writing each layout is imu_learn.formats' job)
 # --------------------------------------------------------------------------------------------
 
 
-@dataclass
-class Source:
-    fmt: str  # asl, kaist, blackbird, broad
-    imu_file: Path  # the file that holds the IMU
-    root: Path  # the folder copied by --copy-folder
-    rel: Path  # imu_file relative to root (where it goes under OUT when OUT is a folder)
-    gyro: np.ndarray
-    acc: np.ndarray
-    write: Callable[[Path, np.ndarray, np.ndarray], None]  # (out file, gyro, acc)
-
-
-def _tmp_beside(path: Path) -> Path:
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
-    os.close(fd)
-    return Path(tmp)
-
-
-def _replace_atomically(path: Path, fill: Callable[[Path], None]) -> None:
-    tmp = _tmp_beside(path)
-    try:
-        fill(tmp)
-        os.replace(tmp, path)
-    except BaseException:
-        try:
-            os.unlink(tmp)
-        except FileNotFoundError:
-            pass
-        raise
-
-
-def detect(path: Path) -> str:
-    """Format of a recording path (folder or file)."""
-    if path.suffix.lower() == ".mat":
-        return "broad"
-    if path.suffix.lower() in (".hdf5", ".h5") or (path.is_dir() and (path / "data.hdf5").exists()):
-        return "blackbird"
-    if path.name == "xsens_imu.csv" or (path.is_dir() and (path / "sensor_data" / "xsens_imu.csv").exists()):
-        return "kaist"
-    if path.suffix.lower() == ".csv" or (path / "mav0").is_dir() or path.name == "mav0":
-        return "asl"
-    raise InvalidInputError(f"{path}: cannot tell the format from its layout; pass --format (one of {FORMATS[1:]})")
-
-
-def _asl_source(path: Path) -> Source:
-    from imu_learn.formats import asl
-
-    f = asl.imu_file(path)
-    header = core.read_asl_imu_header(str(f)).rstrip("\r\n")
-    t_ns, gyro, acc = core.read_asl_imu(str(f))
-    root = asl.sequence_root(f) if path.is_file() else (path.parent if path.name == "mav0" else path)
-    try:
-        rel = f.resolve().relative_to(root.resolve())
-    except ValueError:
-        root, rel = f.parent, Path(f.name)
-
-    def write(out: Path, g: np.ndarray, a: np.ndarray) -> None:
-        out.parent.mkdir(parents=True, exist_ok=True)
-        core.write_asl_imu(str(out), t_ns, np.ascontiguousarray(g), np.ascontiguousarray(a), header)
-
-    return Source("asl", f, root, rel, gyro, acc, write)
-
-
-def _kaist_source(path: Path) -> Source:
-    f = path if path.is_file() else path / "sensor_data" / "xsens_imu.csv"
-    if not f.exists():
-        raise FileNotFoundError(2, "No such file or directory", str(f))
-    _t, gyro, acc = core.read_kaist_imu(str(f))  # strict validation, and the arrays
-    root = f.parent.parent if f.parent.name == "sensor_data" else f.parent
-    rel = f.relative_to(root)
-
-    def write(out: Path, g: np.ndarray, a: np.ndarray) -> None:
-        with open(f, newline="") as src:
-            rows = list(csv.reader(src))
-        data_rows = [r for r in rows if r]
-        if len(data_rows) != len(g):
-            raise InvalidInputError(f"{f}: {len(data_rows)} non-empty rows but {len(g)} samples were read")
-
-        def fill(tmp: Path) -> None:
-            i = 0
-            with open(tmp, "w", newline="") as dst:
-                w = csv.writer(dst, lineterminator="\n")
-                for r in rows:
-                    if r:
-                        if len(r) != KAIST_COLUMNS:
-                            raise InvalidInputError(f"{f}: a row has {len(r)} columns, expected {KAIST_COLUMNS}")
-                        r = list(r)
-                        for c, v in zip(KAIST_GYRO_COLS + KAIST_ACC_COLS, (*g[i], *a[i])):
-                            r[c] = repr(float(v))
-                        i += 1
-                    w.writerow(r)
-
-        _replace_atomically(out, fill)
-
-    return Source("kaist", f, root, rel, gyro, acc, write)
-
-
-def _blackbird_source(path: Path) -> Source:
-    import h5py
-
-    from imu_learn.formats import blackbird
-
-    f = path if path.is_file() else path / "data.hdf5"
-    imu = blackbird.read_imu(f)
-
-    def write(out: Path, g: np.ndarray, a: np.ndarray) -> None:
-        def fill(tmp: Path) -> None:
-            shutil.copyfile(f, tmp)
-            with h5py.File(tmp, "r+") as h:
-                for name, arr in (("gyro_raw", g), ("accel_raw", a)):
-                    ds = h[name]
-                    ds[...] = arr.astype(ds.dtype).reshape(ds.shape)
-
-        _replace_atomically(out, fill)
-
-    return Source("blackbird", f, f.parent, Path(f.name), imu.gyro, imu.acc, write)
-
-
-def _broad_source(path: Path) -> Source:
-    import scipy.io
-
-    if not path.exists():
-        raise FileNotFoundError(2, "No such file or directory", str(path))
-    m = scipy.io.loadmat(str(path))
-    missing = [k for k in ("imu_gyr", "imu_acc") if k not in m]
-    if missing:
-        raise InvalidInputError(f"{path}: missing variable(s) {missing}")
-    gyro = np.ascontiguousarray(m["imu_gyr"], dtype=np.float64)
-    acc = np.ascontiguousarray(m["imu_acc"], dtype=np.float64)
-    if gyro.ndim != 2 or gyro.shape[1] != 3 or acc.shape != gyro.shape:
-        raise InvalidInputError(f"{path}: imu_gyr {gyro.shape} and imu_acc {acc.shape} must both be (N, 3)")
-
-    def write(out: Path, g: np.ndarray, a: np.ndarray) -> None:
-        data = {k: v for k, v in m.items() if not k.startswith("__")}
-        data["imu_gyr"] = g.astype(m["imu_gyr"].dtype)
-        data["imu_acc"] = a.astype(m["imu_acc"].dtype)
-
-        def fill(tmp: Path) -> None:
-            with open(tmp, "wb") as fh:
-                scipy.io.savemat(fh, data)
-
-        _replace_atomically(out, fill)
-
-    return Source("broad", path, path.parent, Path(path.name), gyro, acc, write)
-
-
-def open_source(path: Path, fmt: str = "auto") -> Source:
-    path = Path(path)
-    if not path.exists():
-        raise FileNotFoundError(2, "No such file or directory", str(path))
-    fmt = detect(path) if fmt == "auto" else fmt
-    if fmt in ("asl", "euroc", "tum-vi"):
-        return _asl_source(path)
-    if fmt == "kaist":
-        return _kaist_source(path)
-    if fmt == "blackbird":
-        return _blackbird_source(path)
-    if fmt == "broad":
-        return _broad_source(path)
-    raise InvalidInputError(f"unknown format {fmt!r}; known: {FORMATS}")
-
-
-def output_file(src: Source, out: Path) -> Path:
+def output_file(src: ImuSource, out: Path) -> Path:
     """The file to write for OUT: OUT itself when it names a file of the input's kind, else the
     input's relative path under the folder OUT."""
     if out.suffix.lower() == src.imu_file.suffix.lower() and not out.is_dir():
@@ -420,7 +254,7 @@ def refine_recording(
 ) -> Path:
     """Refine one recording; returns the file written."""
     input, output = Path(input), Path(output)
-    src = open_source(input, fmt)
+    src = formats.read_imu_source(input, fmt)
     if copy_folder:
         if output.suffix.lower() == src.imu_file.suffix.lower() and not output.is_dir():
             raise InvalidInputError(f"--copy-folder needs OUT to be a folder, got {output}")
@@ -434,7 +268,7 @@ def refine_recording(
     gyro, acc = refine_arrays(model, src.gyro, src.acc, window, overlap, batch, progress)
     if copy_folder:
         shutil.copytree(src.root, output, dirs_exist_ok=True)
-    src.write(target, gyro, acc)
+    formats.write_imu(src, target, gyro, acc)
     return target
 
 

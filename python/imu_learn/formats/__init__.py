@@ -1,4 +1,13 @@
-"""Dataset formats: each module turns one layout on disk into ``ImuData`` + ``GroundTruth``.
+"""Dataset formats: one module per layout on disk, the only place that knows the layout.
+
+Each of :mod:`.asl` (EuRoC, TUM-VI), :mod:`.blackbird`, :mod:`.broad` and :mod:`.kaist` has
+
+- ``NAME`` and ``detect(path) -> bool``: whether ``path`` (a folder or a file) is in this layout;
+- ``find_recordings(root)``: every recording of the layout under a dataset folder;
+- ``read_recording(path, groundtruth=None, allow_float_timestamps=False)``: ``ImuData`` + ``GroundTruth``;
+- ``read_imu_source(path) -> ImuSource``: the IMU alone and where it lives (what refine rewrites);
+- ``write_imu(src, out, gyro, acc)``: ``src``'s IMU file written to ``out`` with gyro and acc
+  replaced and everything else kept, atomically (:mod:`imu_learn.atomic`).
 
 The strict parsing of text formats happens in the Rust core; the modules here only find the files
 of a layout and, for binary containers (HDF5, MAT), read arrays with h5py / scipy and hand them to
@@ -7,47 +16,74 @@ the same Rust alignment path.
 from __future__ import annotations
 
 from pathlib import Path
-from typing import Callable, Dict, Optional, Tuple
+from types import ModuleType
+from typing import Dict, Optional, Tuple
+
+import numpy as np
 
 from imu_learn.errors import InvalidInputError
 from imu_learn.types import GroundTruth, ImuData
 
 from . import asl, blackbird, broad, kaist
+from .source import ImuSource
 
-Reader = Callable[..., Tuple[ImuData, GroundTruth]]
-
-READERS: Dict[str, Reader] = {
-    "euroc": asl.read_recording,
-    "tum-vi": asl.read_recording,
-    "asl": asl.read_recording,
-    "blackbird": blackbird.read_recording,
-    "broad": broad.read_recording,
-    "kaist": kaist.read_recording,
+# The names ``format=`` / ``--format`` accept, each with its layout's module.
+FORMATS: Dict[str, ModuleType] = {
+    "asl": asl,
+    "euroc": asl,
+    "tum-vi": asl,
+    "blackbird": blackbird,
+    "broad": broad,
+    "kaist": kaist,
 }
+
+# Asked in this order by detect_format; the first layout that claims a path wins. KAIST's
+# ``xsens_imu.csv`` is also a ``.csv``, which the ASL rule takes, so KAIST is asked before ASL.
+DETECTION_ORDER: Tuple[ModuleType, ...] = (broad, blackbird, kaist, asl)
+
+__all__ = ["FORMATS", "ImuSource", "detect_format", "layout", "read_imu_source", "read_recording", "write_imu"]
 
 
 def detect_format(path: Path) -> str:
-    """Guess a recording's format from its layout."""
-    if path.suffix == ".mat":
-        return "broad"
-    if (path / "data.hdf5").exists():
-        return "blackbird"
-    if (path / "sensor_data" / "xsens_imu.csv").exists():
-        return "kaist"
-    if (path / "mav0").is_dir() or path.name == "mav0" or path.suffix == ".csv":
-        return "asl"
+    """The name of the layout that ``path`` (a recording folder or file) is in."""
+    path = Path(path)
+    for module in DETECTION_ORDER:
+        if module.detect(path):
+            return module.NAME
     raise InvalidInputError(
-        f"{path}: cannot tell the dataset format from its layout; pass format= one of {sorted(READERS)}"
+        f"{path}: cannot tell the dataset format from its layout; pass format= one of {sorted(FORMATS)}"
     )
+
+
+def layout(path: Path, format: str = "auto") -> ModuleType:
+    """The module of ``format``, or of the layout detected from ``path`` for ``"auto"``."""
+    name = detect_format(path) if format == "auto" else format
+    if name not in FORMATS:
+        raise InvalidInputError(f"unknown format {format!r}; known: {sorted(FORMATS)} or 'auto'")
+    return FORMATS[name]
+
+
+def _existing(path: Path) -> Path:
+    path = Path(path)
+    if not path.exists():
+        raise FileNotFoundError(2, "No such file or directory", str(path))
+    return path
 
 
 def read_recording(
     path: Path, format: str = "auto", groundtruth: Optional[Path] = None, allow_float_timestamps: bool = False
 ) -> Tuple[ImuData, GroundTruth]:
-    path = Path(path)
-    if not path.exists():
-        raise FileNotFoundError(2, "No such file or directory", str(path))
-    fmt = detect_format(path) if format == "auto" else format
-    if fmt not in READERS:
-        raise InvalidInputError(f"unknown format {format!r}; known: {sorted(READERS)} or 'auto'")
-    return READERS[fmt](path, groundtruth=groundtruth, allow_float_timestamps=allow_float_timestamps)
+    path = _existing(path)
+    reader = layout(path, format).read_recording
+    return reader(path, groundtruth=groundtruth, allow_float_timestamps=allow_float_timestamps)
+
+
+def read_imu_source(path: Path, format: str = "auto") -> ImuSource:
+    """The IMU of a recording (no ground truth needed) and where it lives, for refine."""
+    path = _existing(path)
+    return layout(path, format).read_imu_source(path)
+
+
+def write_imu(src: ImuSource, out: Path, gyro: np.ndarray, acc: np.ndarray) -> None:
+    """Write ``src``'s IMU file to ``out`` in its own layout with ``gyro`` / ``acc`` replaced."""
+    FORMATS[src.fmt].write_imu(src, Path(out), gyro, acc)

@@ -1,14 +1,21 @@
-"""EuRoC / TUM-VI ASL folders (``mav0/imu0/data.csv`` + a ground-truth file)."""
+"""EuRoC / TUM-VI ASL folders (``mav0/imu0/data.csv`` + a ground-truth file): detect, read, write
+the refined IMU, and the aiding files beside it (``sensor.yaml``, the Leica positions)."""
 from __future__ import annotations
 
 from pathlib import Path
-from typing import Optional, Tuple
+from typing import List, Optional, Tuple
+
+import numpy as np
 
 from imu_learn import _imu_core as core
+from imu_learn.atomic import atomic_write_path
 from imu_learn.errors import InvalidInputError
 from imu_learn.types import GroundTruth, ImuData
 
 from .groundtruth import read_groundtruth
+from .source import ImuSource
+
+NAME = "asl"
 
 # Searched in order when no ground truth is named: the ASL layout's own files first, then the
 # pose-only TUM file that open_vins ships beside a sequence.
@@ -20,6 +27,17 @@ GROUNDTRUTH_CANDIDATES = (
     "groundtruth.tum",
     "groundtruth.txt",
 )
+
+
+def detect(path: Path) -> bool:
+    """A sequence folder (holding ``mav0``), its ``mav0`` folder, or a ``.csv`` IMU file. KAIST's
+    ``xsens_imu.csv`` is a ``.csv`` too: :func:`imu_learn.formats.detect_format` asks KAIST first."""
+    return path.suffix.lower() == ".csv" or path.name == "mav0" or (path / "mav0").is_dir()
+
+
+def find_recordings(root: Path) -> List[Path]:
+    """Every sequence folder (one holding ``mav0``) under ``root``."""
+    return [p.parent for p in root.rglob("mav0") if p.is_dir()]
 
 
 def imu_file(path: Path) -> Path:
@@ -62,6 +80,27 @@ def read_recording(
     imu = read_imu(path, allow_float_timestamps)
     gt_path = Path(groundtruth) if groundtruth is not None else find_groundtruth(sequence_root(Path(path)))
     return imu, read_groundtruth(gt_path, allow_float_timestamps)
+
+
+def read_imu_source(path: Path) -> ImuSource:
+    """The IMU of a sequence folder, its ``mav0`` or the IMU CSV itself, strictly parsed (integer
+    ns stamps only: the refined copy keeps them as they are)."""
+    f = imu_file(path)
+    t_ns, gyro, acc = core.read_asl_imu(str(f))
+    root = sequence_root(f) if path.is_file() else (path.parent if path.name == "mav0" else path)
+    try:
+        rel = f.resolve().relative_to(root.resolve())
+    except ValueError:  # a CSV outside any sequence folder stands alone
+        root, rel = f.parent, Path(f.name)
+    return ImuSource(NAME, f, root, rel, t_ns, gyro, acc)
+
+
+def write_imu(src: ImuSource, out: Path, gyro: np.ndarray, acc: np.ndarray) -> None:
+    """``out``: ``src``'s IMU CSV with gyro and acc replaced. The original header line and integer
+    ns stamps are kept; values are the shortest text that reads back to the same float64."""
+    header = core.read_asl_imu_header(str(src.imu_file)).rstrip("\r\n")
+    g, a = np.ascontiguousarray(gyro), np.ascontiguousarray(acc)
+    atomic_write_path(out, lambda tmp: core.write_asl_imu(str(tmp), src.t_ns, g, a, header))
 
 
 # --------------------------------------------------------------------------------------------

@@ -3,17 +3,37 @@
 (``ts x y z qx qy qz qw vx vy vz`` at the IMU stamps)."""
 from __future__ import annotations
 
+import shutil
 from pathlib import Path
-from typing import Optional, Tuple
+from typing import List, Optional, Tuple
 
 import numpy as np
 
+from imu_learn.atomic import atomic_write_path
 from imu_learn.errors import InvalidInputError
 from imu_learn.types import GroundTruth, ImuData
 
 from .groundtruth import read_groundtruth
+from .source import ImuSource
 
+NAME = "blackbird"
+IMU_FILE = "data.hdf5"
 GROUNDTRUTH_NAME = "stamped_groundtruth_imu.txt"
+
+
+def detect(path: Path) -> bool:
+    """The folder holding ``data.hdf5``, or an HDF5 file itself."""
+    return path.suffix.lower() in (".hdf5", ".h5") or (path.is_dir() and (path / IMU_FILE).exists())
+
+
+def find_recordings(root: Path) -> List[Path]:
+    """Every folder under ``root`` that holds a ``data.hdf5``."""
+    return [p.parent for p in root.rglob(IMU_FILE)]
+
+
+def hdf5_file(path: Path) -> Path:
+    """``data.hdf5`` of a recording folder, or the file itself."""
+    return path / IMU_FILE if path.is_dir() else path
 
 
 def read_imu(path: Path, gt_t_ns: Optional[np.ndarray] = None) -> ImuData:
@@ -22,7 +42,7 @@ def read_imu(path: Path, gt_t_ns: Optional[np.ndarray] = None) -> ImuData:
     are used; otherwise the float stamps are rounded to ns."""
     import h5py
 
-    h5 = Path(path) / "data.hdf5" if Path(path).is_dir() else Path(path)
+    h5 = hdf5_file(Path(path))
     if not h5.exists():
         raise FileNotFoundError(2, "No such file or directory", str(h5))
     with h5py.File(h5, "r") as f:
@@ -51,3 +71,24 @@ def read_recording(
     root = path if path.is_dir() else path.parent
     gt = read_groundtruth(Path(groundtruth) if groundtruth else root / GROUNDTRUTH_NAME, allow_float_timestamps)
     return read_imu(root, gt.t_ns), gt
+
+
+def read_imu_source(path: Path) -> ImuSource:
+    f = hdf5_file(path)
+    imu = read_imu(f)
+    return ImuSource(NAME, f, f.parent, Path(f.name), imu.t_ns, imu.gyro, imu.acc)
+
+
+def write_imu(src: ImuSource, out: Path, gyro: np.ndarray, acc: np.ndarray) -> None:
+    """``out``: a copy of ``src``'s HDF5 file with ``gyro_raw`` / ``accel_raw`` replaced (each
+    dataset keeps its dtype, chunking and attributes; every other dataset is copied as it is)."""
+    import h5py
+
+    def fill(tmp: Path) -> None:
+        shutil.copyfile(src.imu_file, tmp)
+        with h5py.File(tmp, "r+") as h:
+            for name, arr in (("gyro_raw", gyro), ("accel_raw", acc)):
+                ds = h[name]
+                ds[...] = arr.astype(ds.dtype).reshape(ds.shape)
+
+    atomic_write_path(out, fill)

@@ -1,0 +1,25 @@
+"""What a layout hands to ``imu_learn.refine``: the recording's IMU and where it lives on disk."""
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Optional
+
+import numpy as np
+
+
+@dataclass(frozen=True)
+class ImuSource:
+    """One recording's IMU as read by its layout's ``read_imu_source``.
+
+    ``imu_file`` is also the template of a refined copy: the layout's ``write_imu`` writes it again
+    with only gyro and acc replaced, so everything else in the file is kept as it is.
+    """
+
+    fmt: str  # the layout's name (asl, blackbird, broad, kaist): the module that writes it back
+    imu_file: Path  # the file that holds the IMU
+    root: Path  # the recording's folder (what refine's --copy-folder copies)
+    rel: Path  # imu_file relative to root (where the IMU goes under an output folder)
+    t_ns: Optional[np.ndarray]  # the file's own stamps; None where it has none (BROAD)
+    gyro: np.ndarray  # (N, 3) float64 [rad/s]
+    acc: np.ndarray  # (N, 3) float64 [m/s^2]
