@@ -25,7 +25,6 @@ from __future__ import annotations
 import argparse
 import math
 import os
-import tempfile
 import time
 from dataclasses import dataclass, replace
 from pathlib import Path
@@ -35,6 +34,7 @@ import numpy as np
 from scipy.signal import savgol_filter
 
 import imu_learn as il
+from imu_learn.atomic import atomic_write_text
 from imu_learn.formats import read_recording
 from imu_learn.metrics import fit_startup_bias, index_at, relative_pose_errors, remove_bias, rmse, with_imu
 from imu_learn.quat import quat_conj, quat_mul, quat_rotate
@@ -392,15 +392,6 @@ def summary_line(rec: str, rows: List[Row], best: Row) -> str:
             + (f" — others {others}" if others else ""))
 
 
-def write_atomic(path: Path, text: str) -> None:
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
-    with os.fdopen(fd, "w", encoding="utf-8") as f:
-        f.write(text)
-    os.chmod(tmp, 0o644)
-    os.replace(tmp, path)
-
-
 def tumvi_frame(rows: List[Row]) -> str:
     """One line: which body frame mocap0 is, from the fitted rotation, lever arm and time offset."""
     offs = [r.off_deg for r in rows]
@@ -480,7 +471,7 @@ def main() -> None:
     lines += main_table(rows, best) + tum_lines
     lines += ["", "## Per recording", ""] + [f"- {summary_line(rec, rows, b)}" for rec, b in best.items()]
     text = "\n".join(lines) + "\n"
-    write_atomic(args.out, text)
+    atomic_write_text(args.out, text)
     print(text)
     print(f"wrote {args.out} in {time.time() - start:.0f} s")
 

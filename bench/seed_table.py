@@ -20,7 +20,7 @@ from typing import Any, Dict, List
 
 import torch
 
-from imu_learn.cache import atomic_write_bytes
+from imu_learn.atomic import atomic_write_bytes
 from imu_learn.checkpoint import load_checkpoint, model_from_checkpoint
 from imu_learn.config import load_config
 from imu_learn.fit import evaluate_table, refine_sequence

@@ -9,7 +9,9 @@ beside it, which no reader ever opens).
 """
 from __future__ import annotations
 
+import functools
 import os
+import stat
 import tempfile
 from pathlib import Path
 from typing import BinaryIO, Callable, Union
@@ -17,12 +19,43 @@ from typing import BinaryIO, Callable, Union
 PathLike = Union[str, "os.PathLike[str]"]
 
 
+@functools.lru_cache(maxsize=1)
+def _umask() -> int:
+    # Read once: setting the umask to learn it is process-wide, so it is not done on every write.
+    mask = os.umask(0o022)
+    os.umask(mask)
+    return mask
+
+
+def _output_mode(path: Path) -> int:
+    """The permissions ``open(path, "w")`` would give: the old file's, else 0o666 less the umask
+    (mkstemp's own 0o600 would make every output private to its writer)."""
+    try:
+        return stat.S_IMODE(path.stat().st_mode)
+    except OSError:
+        return 0o666 & ~_umask()
+
+
 def temp_beside(path: Path) -> Path:
     """A new, empty temporary file in ``path``'s folder (created, so the name is ours)."""
     path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
-    os.close(fd)
+    try:
+        fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
+    except OSError as e:  # a read-only or full folder: name the output, not a random temp name
+        raise _named(e, path) from None
+    try:
+        os.fchmod(fd, _output_mode(path))
+    finally:
+        os.close(fd)
     return Path(tmp)
+
+
+def _named(e: OSError, path: Path) -> OSError:
+    """``e`` again, naming the output ``path`` instead of the temporary file or nothing (a write to
+    a full disk raises without a file name), so a one-line report says which output failed."""
+    if e.errno is None:
+        return e
+    return type(e)(e.errno, e.strerror, str(path))
 
 
 def _fsync_file(path: Path) -> None:
@@ -57,11 +90,13 @@ def atomic_write_path(path: PathLike, fill: Callable[[Path], None]) -> None:
         fill(tmp)
         _fsync_file(tmp)
         os.replace(tmp, path)
-    except BaseException:
+    except BaseException as e:
         try:
             os.unlink(tmp)
         except FileNotFoundError:
             pass
+        if isinstance(e, OSError) and (e.filename is None or str(e.filename) == str(tmp)):
+            raise _named(e, path) from e
         raise
     _fsync_dir(path.parent)
 

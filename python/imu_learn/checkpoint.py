@@ -4,8 +4,11 @@ A checkpoint is a ``torch.save`` of a dict holding only tensors and plain Python
 float, bool, list, dict, None), and is always loaded with ``weights_only=True``. It stores the model
 args (so the model can be rebuilt), the model weights (normalisation buffers included), the
 optimiser state, the full run config, epoch, step, best metric, and the code version.
-Writes go to a temporary file and are renamed into place, so a kill never leaves half a checkpoint
-over a good one.
+Writes go through :mod:`imu_learn.atomic` (a temporary file renamed into place), so a kill never
+leaves half a checkpoint over a good one. Every checkpoint also carries ``digest``, a sha256 of its
+whole content (each tensor's dtype, shape and bytes, and every plain value), checked on load: a
+truncated or modified file is a :class:`CheckpointError` naming it, never a model with altered
+weights (torch's own zip reader does not notice a changed byte in a tensor's data).
 
 A checkpoint is self-contained for inference: ``python -m imu_learn.refine`` needs nothing from the
 run folder beside it (the normalisation is in the weights, the architecture in ``model_args``).
@@ -18,16 +21,17 @@ those (the result still loads everywhere a checkpoint does, but cannot be resume
 from __future__ import annotations
 
 import argparse
+import hashlib
 import json
 import os
 import sys
-import tempfile
 from pathlib import Path
 from typing import Any, Dict, List, Optional
 
 import torch
 
 from imu_learn import __version__
+from imu_learn.atomic import atomic_write_bytes
 from imu_learn.errors import ImuError
 from imu_learn.model import ImuRefiner, ModelConfig
 
@@ -35,6 +39,7 @@ FORMAT = "imu_learn.checkpoint.v1"
 # What a stripped (shipped) checkpoint keeps: everything inference and a model card need.
 STRIPPED_KEYS = ("format", "code_version", "model_args", "model", "config", "epoch", "step", "best_metric")
 STRIPPED_EXTRA = ("best_epoch", "elapsed_s", "world_size")
+DIGEST_KEY = "digest"
 
 
 class CheckpointError(ImuError):
@@ -65,19 +70,41 @@ def save_checkpoint(
         "best_metric": None if best_metric is None else float(best_metric),
         "extra": extra or {},
     }
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
-    try:
-        with os.fdopen(fd, "wb") as f:
-            torch.save(state, f)
-            f.flush()
-            os.fsync(f.fileno())
-        os.replace(tmp, path)
-    except BaseException:
-        try:
-            os.unlink(tmp)
-        except FileNotFoundError:
-            pass
-        raise
+    write_checkpoint(path, state)
+
+
+def content_digest(state: Dict[str, Any]) -> str:
+    """sha256 of a checkpoint's content without its ``digest`` entry: every key and plain value,
+    and each tensor's dtype, shape and bytes, in a fixed order (the same after a save and load)."""
+    h = hashlib.sha256()
+    _hash_value(h, {k: v for k, v in state.items() if k != DIGEST_KEY})
+    return h.hexdigest()
+
+
+def _hash_value(h: Any, value: Any) -> None:
+    if isinstance(value, torch.Tensor):
+        t = value.detach().cpu().contiguous()
+        h.update(f"tensor|{t.dtype}|{tuple(t.shape)}|".encode())
+        h.update(t.reshape(-1).view(torch.uint8).numpy().tobytes())
+    elif isinstance(value, dict):
+        # optimizer state has int keys, everything else str keys: sort by type name, then value
+        items = sorted(value.items(), key=lambda kv: (type(kv[0]).__name__, str(kv[0])))
+        h.update(f"dict|{len(items)}|".encode())
+        for k, v in items:
+            _hash_value(h, k)
+            _hash_value(h, v)
+    elif isinstance(value, (list, tuple)):
+        h.update(f"list|{len(value)}|".encode())
+        for v in value:
+            _hash_value(h, v)
+    else:  # str, int, float, bool, None: their repr is exact (floats round-trip)
+        h.update(f"{type(value).__name__}|{value!r}|".encode())
+
+
+def write_checkpoint(path: Path, state: Dict[str, Any]) -> None:
+    """``state`` with its content digest, saved atomically to ``path``."""
+    signed = {**state, DIGEST_KEY: content_digest(state)}
+    atomic_write_bytes(path, lambda f: torch.save(signed, f))
 
 
 def load_checkpoint(path: Path, map_location: str = "cpu") -> Dict[str, Any]:
@@ -90,6 +117,11 @@ def load_checkpoint(path: Path, map_location: str = "cpu") -> Dict[str, Any]:
         raise CheckpointError(f"{path}: not a readable checkpoint ({type(e).__name__}: {e})") from e
     if not isinstance(state, dict) or state.get("format") != FORMAT:
         raise CheckpointError(f"{path}: not an imu_learn checkpoint of format {FORMAT}")
+    # Checkpoints written before digests (the shipped models/*.pt among them) have none and are
+    # accepted as they are; every checkpoint written since carries one.
+    if DIGEST_KEY in state and state[DIGEST_KEY] != content_digest(state):
+        raise CheckpointError(f"{path}: truncated or modified: its content does not match the sha256 "
+                              "recorded when it was written")
     return state
 
 
@@ -112,8 +144,6 @@ def strip_checkpoint(src: Path, dst: Path) -> Dict[str, Any]:
     and the metrics history are dropped; ``extra["stripped_from"]`` names the source
     (``<run folder name>/<file>``). Weights are copied unchanged, so refining with the stripped
     checkpoint gives bit-identical output. Returns the stripped state."""
-    from imu_learn.cache import atomic_write_bytes
-
     src, dst = Path(src), Path(dst)
     if src.exists() and dst.exists() and os.path.samefile(src, dst):
         raise CheckpointError(f"{dst}: is the source checkpoint; write the stripped copy elsewhere")
@@ -126,7 +156,7 @@ def strip_checkpoint(src: Path, dst: Path) -> Dict[str, Any]:
     out["extra"]["stripped_from"] = f"{src.resolve().parent.name}/{src.name}"
     model_from_checkpoint(out)  # refuse to write something that does not rebuild
 
-    atomic_write_bytes(dst, lambda f: torch.save(out, f))
+    write_checkpoint(dst, out)
     return out
 
 

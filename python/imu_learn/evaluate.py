@@ -79,6 +79,7 @@ from typing import Sequence as Seq
 
 import numpy as np
 
+from imu_learn.atomic import atomic_write_path, atomic_write_text
 from imu_learn.baselines.base import FitSettings, Method, PosePrediction, poses_from_imu
 from imu_learn.config import (
     ConfigError,
@@ -488,9 +489,9 @@ def prepare_method(name: str, factory: Callable[[], Method], res: Resolved, spli
     file = methods_dir / f"{fname}{suffix}"
     sig = {"fit_settings": asdict(settings), "split": _split_signature(split), "class": type(method).__qualname__}
     if reuse and rec_path.exists():
-        old = json.loads(rec_path.read_text())
-        same = all(old.get(k) == json.loads(json.dumps(v)) for k, v in sig.items())
-        if same:
+        old = _read_record(rec_path)
+        same = old is not None and all(old.get(k) == json.loads(json.dumps(v)) for k, v in sig.items())
+        if same and old is not None:
             try:
                 if old.get("file") and Path(old["file"]).exists():
                     method = method.load(Path(old["file"])) or method
@@ -505,12 +506,38 @@ def prepare_method(name: str, factory: Callable[[], Method], res: Resolved, spli
     except (ValueError, RuntimeError, ImuError) as e:
         raise MethodError(f"{name}: fit failed: {one_line(e)}") from e
     fit_s = time.time() - t0
-    method.save(file)
-    record = {**sig, "method": name, "fit_s": round(fit_s, 2), "file": str(file) if file.exists() else None,
+    saved = save_method(method, file)
+    record = {**sig, "method": name, "fit_s": round(fit_s, 2), "file": str(file) if saved else None,
               "log": _summarise_log(log)}
-    methods_dir.mkdir(parents=True, exist_ok=True)
-    rec_path.write_text(json.dumps(record, indent=2, default=str))
+    # The record last: a record names only a saved fit that is complete.
+    atomic_write_text(rec_path, json.dumps(record, indent=2, default=str))
     return method, {**record, "status": "fitted"}
+
+
+def _read_record(path: Path) -> Optional[Dict[str, Any]]:
+    """A fit record, or None (after saying so) when it cannot be read: the method is refitted."""
+    try:
+        record = json.loads(path.read_text())
+    except (OSError, UnicodeDecodeError, json.JSONDecodeError) as e:
+        print(f"{PROG}: {path}: unreadable fit record ({one_line(e)}); refitting", file=sys.stderr)
+        return None
+    return record if isinstance(record, dict) else None
+
+
+def save_method(method: Method, file: Path) -> bool:
+    """``method.save`` to ``file`` atomically (the method writes a temporary file beside it, which
+    then replaces ``file``); False, writing nothing, for a method without a ``save`` of its own
+    (nothing fitted to keep, e.g. raw)."""
+    if type(method).save is Method.save:
+        return False
+
+    def fill(tmp: Path) -> None:
+        method.save(tmp)
+        if tmp.stat().st_size == 0:  # e.g. a writer that appended its own suffix to the name
+            raise MethodError(f"{file}: {type(method).__name__}.save wrote nothing to the path it was given")
+
+    atomic_write_path(file, fill)
+    return True
 
 
 def _summarise_log(log: Dict[str, Any]) -> Dict[str, Any]:
@@ -693,7 +720,7 @@ def main(argv: Optional[Seq[str]] = None) -> int:
     except KeyboardInterrupt:
         print(f"{PROG}: interrupted", file=sys.stderr)
         return 130
-    except (ImuError, FileNotFoundError) as e:
+    except (ImuError, OSError) as e:  # OSError: a full disk or read-only report folder, named in e
         if args.traceback:
             raise
         print(f"{PROG}: error: {one_line(e)}", file=sys.stderr)

@@ -23,9 +23,7 @@ from __future__ import annotations
 import argparse
 import hashlib
 import json
-import os
 import sys
-import tempfile
 import warnings
 from pathlib import Path
 from typing import Any, Dict, List, Optional
@@ -33,6 +31,7 @@ from typing import Any, Dict, List, Optional
 import numpy as np
 import torch
 
+from imu_learn.atomic import atomic_write_path, atomic_write_text
 from imu_learn.model import ImuRefiner
 
 CHANNELS = ["gyro_x", "gyro_y", "gyro_z", "acc_x", "acc_y", "acc_z"]
@@ -46,20 +45,6 @@ def _sha256(path: Path) -> str:
         for chunk in iter(lambda: f.read(1 << 20), b""):
             h.update(chunk)
     return h.hexdigest()
-
-
-def _atomic(path: Path, write) -> None:
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
-    os.close(fd)
-    try:
-        write(tmp)
-        os.replace(tmp, path)
-    except BaseException:
-        try:
-            os.unlink(tmp)
-        except FileNotFoundError:
-            pass
-        raise
 
 
 class WithVariance(torch.nn.Module):
@@ -85,7 +70,7 @@ def export_torchscript(model: ImuRefiner, example: torch.Tensor, path: Path) -> 
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         traced = torch.jit.trace(exported_module(model), (example,), check_trace=False)
-        _atomic(path, lambda tmp: torch.jit.save(traced, tmp))
+        atomic_write_path(path, lambda tmp: torch.jit.save(traced, str(tmp)))
 
 
 def export_onnx(model: ImuRefiner, example: torch.Tensor, path: Path, opset: int = 17) -> None:
@@ -93,21 +78,21 @@ def export_onnx(model: ImuRefiner, example: torch.Tensor, path: Path, opset: int
     axes = {k: {0: "batch", 1: "time"} for k in ["imu", *names]}
     module = exported_module(model)
 
-    def write(tmp: str) -> None:
+    def write(tmp: Path) -> None:
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")
             try:  # the TorchScript-based exporter: no extra dependency, dynamic axes for LSTMs
                 torch.onnx.export(
-                    module, (example,), tmp, input_names=["imu"], output_names=names,
+                    module, (example,), str(tmp), input_names=["imu"], output_names=names,
                     dynamic_axes=axes, opset_version=opset, dynamo=False,
                 )
             except TypeError:  # a torch without the dynamo= switch
                 torch.onnx.export(
-                    module, (example,), tmp, input_names=["imu"], output_names=names,
+                    module, (example,), str(tmp), input_names=["imu"], output_names=names,
                     dynamic_axes=axes, opset_version=opset,
                 )
 
-    _atomic(path, write)
+    atomic_write_path(path, write)
 
 
 def _reference(model: ImuRefiner, x: torch.Tensor) -> List[np.ndarray]:
@@ -237,13 +222,7 @@ def export(checkpoint: Path, out: Path, window: int = 200, opset: int = 17, seed
         "torch_version": torch.__version__,
         "sha256": {"model.ts": _sha256(ts_path), "model.onnx": _sha256(onnx_path)},
     }
-    text = json.dumps(card, indent=2) + "\n"
-
-    def write_card(tmp: str) -> None:
-        with open(tmp, "w") as f:
-            f.write(text)
-
-    _atomic(out / "model.json", write_card)
+    atomic_write_text(out / "model.json", json.dumps(card, indent=2) + "\n")
     return card
 
 

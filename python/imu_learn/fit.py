@@ -24,16 +24,19 @@ What a run does:
 * after every epoch: loss on fixed, non-augmented validation windows (``BatchSampler.eval_windows``,
   stride ``data.val_stride``); ``best.pt`` when it improves, then ``last.pt`` (both atomic, via
   :mod:`imu_learn.checkpoint`: model args and weights incl. normalisation, optimiser, full config,
-  epoch, step, best metric, code version, and the metrics history); a row appended to
-  ``RUN/metrics.csv``; TensorBoard scalars in ``RUN/tb`` when the ``tensorboard`` package is
+  epoch, step, best metric, code version, and the metrics history); ``RUN/metrics.csv`` rewritten
+  (atomically) with one row per epoch so far; TensorBoard scalars in ``RUN/tb`` when the ``tensorboard`` package is
   installed (it is optional; without it nothing is written there).
 * ``--resume RUN``: everything is rebuilt from ``RUN/last.pt`` (config, split check, model,
   optimiser, step, history; metrics.csv is rewritten from the checkpoint's history so a kill
   between two writes cannot duplicate or lose a row). A checkpoint taken mid-epoch (Ctrl-C)
-  continues mid-epoch. The data must be what the run started with (split.json is compared).
+  continues mid-epoch. The data must be what the run started with (split.json is compared). A
+  truncated or modified ``last.pt`` (its content digest does not match) is refused with one line,
+  never silently replaced by a fresh start.
 * Ctrl-C: ``last.pt`` is saved with the state after the last finished step, one line says how to
-  resume, exit status 130. Known errors (config, data, checkpoint, missing files) print one line and
-  exit with status 2.
+  resume, exit status 130. Known errors (config, data, checkpoint, missing files, a full disk or a
+  read-only run folder) print one line and exit with status 2; every file of the run folder is
+  written atomically (:mod:`imu_learn.atomic`), so what is there after any failure is complete.
 * at the end: relative pose error on the held-out test split (:mod:`imu_learn.metrics`) for the
   raw IMU and for the best-validation model, over ``data.eval_horizons`` IMU samples (default 10
   and 200), pooled and per test recording, open loop and with a
@@ -68,6 +71,7 @@ from typing import Sequence as Seq
 import numpy as np
 import torch
 
+from imu_learn.atomic import atomic_write_text
 from imu_learn.batches import Batch, BatchSampler
 from imu_learn.checkpoint import load_checkpoint, load_model, model_from_checkpoint, save_checkpoint
 from imu_learn.config import ConfigError, RunConfig, build_config, parse_overrides, read_toml, to_toml
@@ -131,26 +135,15 @@ def deferred_interrupt():
 
 
 def write_csv(path: Path, rows: List[Dict[str, Any]]) -> None:
-    from imu_learn.cache import atomic_write_bytes
-
+    """All ``rows`` to ``path``, atomically (rewritten whole each epoch rather than appended to,
+    so a kill or a full disk never leaves half a row)."""
     buf = io.StringIO()
     if rows:
         w = csv.DictWriter(buf, fieldnames=list(rows[0].keys()), lineterminator="\n")
         w.writeheader()
         for r in rows:
             w.writerow(r)
-    atomic_write_bytes(path, lambda f: f.write(buf.getvalue().encode()))
-
-
-def append_csv(path: Path, row: Dict[str, Any]) -> None:
-    new = not path.exists() or path.stat().st_size == 0
-    with open(path, "a", newline="") as f:
-        w = csv.DictWriter(f, fieldnames=list(row.keys()), lineterminator="\n")
-        if new:
-            w.writeheader()
-        w.writerow(row)
-        f.flush()
-        os.fsync(f.fileno())
+    atomic_write_text(path, buf.getvalue())
 
 
 def _tb_writer(run_dir: Path):
@@ -500,7 +493,7 @@ def train(
             if improved:
                 checkpoint(run_dir / "best.pt")
             checkpoint(run_dir / "last.pt")
-            append_csv(run_dir / "metrics.csv", row)
+            write_csv(run_dir / "metrics.csv", history)
             if tb is not None:
                 for k, v in row.items():
                     if k.startswith(("train_", "val_")):
@@ -565,8 +558,6 @@ def train(
 
 def final_evaluation(cfg: RunConfig, run_dir: Path, split: Split, device: torch.device,
                      best_epoch: Optional[int], best: Optional[float]) -> Dict[str, Any]:
-    from imu_learn.cache import atomic_write_bytes
-
     if not split.test:
         print(f"{PROG}: no test sequences in data.split.test; no final table")
         return {}
@@ -592,8 +583,7 @@ def final_evaluation(cfg: RunConfig, run_dir: Path, split: Split, device: torch.
         "startup_bias": res["startup_bias"],
         "text": table,
     }
-    text = json.dumps(out, indent=2)
-    atomic_write_bytes(run_dir / "results.json", lambda f: f.write(text.encode()))
+    atomic_write_text(run_dir / "results.json", json.dumps(out, indent=2))
     return out
 
 
@@ -663,7 +653,7 @@ def main(argv: Optional[Seq[str]] = None, on_step: Optional[StepHook] = None) ->
                 raise ConfigError(f"{run_dir}: already holds a run; continue it with --resume {run_dir} or pick another --name")
             if dist.main:
                 run_dir.mkdir(parents=True, exist_ok=True)
-                (run_dir / "config.toml").write_text(to_toml(cfg))
+                atomic_write_text(run_dir / "config.toml", to_toml(cfg))
                 write_split(split, run_dir / "split.json")
                 print(f"{PROG}: run folder {run_dir}", file=sys.stderr)
         train(cfg, run_dir, state, split, on_step=on_step, progress=not args.no_progress)
@@ -673,7 +663,7 @@ def main(argv: Optional[Seq[str]] = None, on_step: Optional[StepHook] = None) ->
             if run_dir is not None and (run_dir / "last.pt").exists() else ""
         print(f"{PROG}: interrupted{where}", file=sys.stderr)
         return EXIT_INTERRUPTED
-    except (ImuError, FileNotFoundError) as e:
+    except (ImuError, OSError) as e:  # OSError: a full disk or read-only run folder, named in e
         print(f"{PROG}: error: {one_line(e)}", file=sys.stderr)
         return EXIT_ERROR
 

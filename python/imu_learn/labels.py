@@ -16,14 +16,16 @@ from typing import List, Optional
 from imu_learn import __version__
 from imu_learn.cache import (
     CACHE_VERSION,
-    MANIFEST,
     fingerprint,
-    read_manifest,
+    holding_cache_lock,
+    recording_reusable,
+    reusable_recordings,
     write_manifest,
+    write_progress,
     write_segment,
 )
 from imu_learn.datasets import DATASETS, find_recordings
-from imu_learn.errors import CacheError, ImuError
+from imu_learn.errors import ImuError
 from imu_learn.integration import PAPER_FRACTIONS, window_labels
 from imu_learn.loading import AlignOptions, load_recording
 
@@ -32,6 +34,7 @@ def source_files(path: Path) -> List[Path]:
     return [path] if path.is_file() else [p for p in path.rglob("*") if p.is_file()]
 
 
+@holding_cache_lock("out")  # two runs on one folder take turns instead of mixing their files
 def build_cache(
     dataset: str,
     root: Path,
@@ -47,13 +50,7 @@ def build_cache(
         "dataset": dataset, "window": window, "stride": stride, "fractions": list(PAPER_FRACTIONS),
         "gravity": gravity, "align": asdict(options),
     }
-    old = {}
-    if (out / MANIFEST).exists():
-        try:
-            old = {r["name"]: r for r in read_manifest(out)["recordings"]}
-        except CacheError:
-            if not rebuild:
-                raise
+    old = reusable_recordings(out, rebuild, log=lambda m: print(m, file=sys.stderr))
     recordings = find_recordings(dataset, root)
     manifest = {
         "cache_version": CACHE_VERSION, "imu_learn_version": __version__, "settings": settings,
@@ -69,7 +66,7 @@ def build_cache(
         prev = old.get(name)
         if (
             not rebuild and prev is not None and prev.get("fingerprint") == fp
-            and all((out / s["file"]).exists() for s in prev["segments"])
+            and recording_reusable(out, prev, log=lambda m: print(m, file=sys.stderr))
         ):
             manifest["recordings"].append(prev)
             continue
@@ -78,15 +75,14 @@ def build_cache(
         segments = []
         for i, seq in enumerate(rec.segments):
             lab = window_labels(seq, window, stride, PAPER_FRACTIONS, gravity)
-            fname = f"{name}__{i}.npz"
-            write_segment(out / fname, seq, lab.__dict__)
-            segments.append({"name": seq.name, "file": fname, "samples": len(seq), "windows": int(len(lab.starts))})
+            stored = write_segment(out, f"{name}__{i}", seq, lab.__dict__)
+            segments.append({"name": seq.name, **stored, "samples": len(seq), "windows": int(len(lab.starts))})
         manifest["recordings"].append(
             {"name": name, "path": str(path), "fingerprint": fp, "segments": segments, "report": rec.report,
              "seconds": round(time.perf_counter() - t0, 3)}
         )
-        # The manifest after each recording makes an interrupted run resumable.
-        write_manifest(out, manifest)
+        # The progress after each recording makes an interrupted run resumable.
+        write_progress(out, manifest)
     write_manifest(out, manifest)
     return manifest
 

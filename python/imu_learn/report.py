@@ -2,7 +2,8 @@
 and the quoted (published, NOT measured here) figures the results are compared against.
 
 Everything here formats the result dict that :func:`imu_learn.evaluate.run_evaluation` builds;
-nothing is computed from data.
+nothing is computed from data. Every file is written through :mod:`imu_learn.atomic` (complete or
+not at all), ``report.md`` last.
 """
 from __future__ import annotations
 
@@ -10,6 +11,8 @@ import math
 from datetime import datetime
 from pathlib import Path
 from typing import Any, Dict, List, Optional, Tuple
+
+from imu_learn.atomic import atomic_write_bytes, atomic_write_text
 
 VARIANTS = ("open_loop", "bias_removed")
 VARIANT_LABELS = {"open_loop": "open loop", "bias_removed": "start-up bias removed"}
@@ -175,7 +178,7 @@ def _write_csv(path: Path, rows: List[Dict[str, Any]]) -> None:
     import polars as pl
 
     if not rows:
-        path.write_text("")
+        atomic_write_text(path, "")
         return
     cols: List[str] = []
     for r in rows:
@@ -183,11 +186,16 @@ def _write_csv(path: Path, rows: List[Dict[str, Any]]) -> None:
             if k not in cols:
                 cols.append(k)
     data = {c: [r.get(c) for r in rows] for c in cols}
-    pl.DataFrame(data, strict=False).write_csv(path)
+    frame = pl.DataFrame(data, strict=False)
+    atomic_write_bytes(path, frame.write_csv)
 
 
 # ---------------------------------------------------------------------------------------------
 # plots
+
+
+def write_png(path: Path, fig: Any, dpi: int) -> None:
+    atomic_write_bytes(path, lambda f: fig.savefig(f, format="png", dpi=dpi))
 
 
 def plot_curves(result: Dict[str, Any], curves: List[Dict[str, Any]], out_dir: Path) -> List[str]:
@@ -227,7 +235,7 @@ def plot_curves(result: Dict[str, Any], curves: List[Dict[str, Any]], out_dir: P
                      f"(test: {seqs}; mean over sequences)", fontsize=10)
         fig.tight_layout(rect=(0, 0.1, 1, 0.95))
         name = f"integration_error_{v}.png"
-        fig.savefig(out_dir / name, dpi=110)
+        write_png(out_dir / name, fig, dpi=110)
         plt.close(fig)
         files.append(name)
     return files
@@ -395,8 +403,9 @@ def write_report(out_dir: Path, result: Dict[str, Any]) -> None:
     for name, rows in csvs.items():
         _write_csv(out_dir / name, rows)
     pngs = plot_curves(result, curves, out_dir)
-    (out_dir / "result.json").write_text(json.dumps({k: v for k, v in result.items() if k != "rows"}, indent=2, default=str))
-    (out_dir / "report.md").write_text(markdown(result, rel, air, pngs, list(csvs) + ["result.json"]))
+    atomic_write_text(out_dir / "result.json",
+                      json.dumps({k: v for k, v in result.items() if k != "rows"}, indent=2, default=str))
+    atomic_write_text(out_dir / "report.md", markdown(result, rel, air, pngs, list(csvs) + ["result.json"]))
 
 
 def summary_text(result: Dict[str, Any]) -> str:

@@ -254,7 +254,7 @@ def make_split(data: DataConfig, min_len: Optional[int] = None) -> Split:
 
 
 def write_split(split: Split, path: Path) -> None:
-    from imu_learn.cache import atomic_write_bytes
+    from imu_learn.atomic import atomic_write_bytes
 
     text = json.dumps(split.record, indent=2)
     atomic_write_bytes(Path(path), lambda f: f.write(text.encode()))

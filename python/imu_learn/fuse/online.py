@@ -262,7 +262,7 @@ def run_online(cfg, out: Path, checkpoint: Optional[str] = None, recordings: Opt
     import torch
     from scipy.spatial.transform import Rotation
 
-    from imu_learn.cache import atomic_write_bytes
+    from imu_learn.atomic import atomic_write_text
     from imu_learn.quat import wxyz_to_xyzw
 
     from . import run as runmod
@@ -287,14 +287,11 @@ def run_online(cfg, out: Path, checkpoint: Optional[str] = None, recordings: Opt
             ckpt_of[spec.path] = path
     out = Path(out)
     res_path = out / "online.json"
-    runs: Dict[str, dict] = {}
-    if res_path.exists():
-        runs = json.loads(res_path.read_text()).get("runs", {})
+    runs = runmod.read_runs(res_path, log)
     info = machine()
 
     def save() -> None:
-        blob = json.dumps({"machine": info, "config": asdict(cfg), "runs": runs}, indent=1).encode()
-        atomic_write_bytes(res_path, lambda f: f.write(blob))
+        atomic_write_text(res_path, json.dumps({"machine": info, "config": asdict(cfg), "runs": runs}, indent=1))
 
     for spec in specs:
         rname = Path(spec.path).name

@@ -23,7 +23,7 @@ import numpy as np
 from scipy.spatial.transform import Rotation
 
 from imu_learn import _imu_core as core
-from imu_learn.cache import atomic_write_bytes
+from imu_learn.atomic import atomic_write_path, atomic_write_text
 from imu_learn.config import ConfigError
 from imu_learn.quat import wxyz_to_xyzw, xyzw_to_wxyz
 
@@ -192,8 +192,8 @@ def make_aiding(scn: ScenarioSpec, seq, leica, rng: np.random.Generator):
 def write_trajectory(path: Path, t_ns: np.ndarray, p: np.ndarray, R: np.ndarray) -> None:
     path.parent.mkdir(parents=True, exist_ok=True)
     q_wxyz = xyzw_to_wxyz(Rotation.from_matrix(R).as_quat())
-    core.write_tum(str(path), np.ascontiguousarray(t_ns, dtype=np.int64), np.ascontiguousarray(p),
-                   np.ascontiguousarray(q_wxyz))
+    t_ns, p, q_wxyz = np.ascontiguousarray(t_ns, dtype=np.int64), np.ascontiguousarray(p), np.ascontiguousarray(q_wxyz)
+    atomic_write_path(path, lambda tmp: core.write_tum(str(tmp), t_ns, p, q_wxyz))
 
 
 def run_experiment(cfg: FuseConfig, out: Path, log: Callable[[str], None] = print,
@@ -204,9 +204,7 @@ def run_experiment(cfg: FuseConfig, out: Path, log: Callable[[str], None] = prin
         raise ConfigError(f"--inputs: {sorted(set(only_inputs) - set(cfg.inputs))} not among the config's inputs {cfg.inputs}")
     out.mkdir(parents=True, exist_ok=True)
     res_path = out / "results.json"
-    results: Dict[str, dict] = {}
-    if res_path.exists():
-        results = json.loads(res_path.read_text()).get("runs", {})
+    results = read_runs(res_path, log)
     processors: Dict[Tuple[str, str], object] = {}
     for spec in cfg.recordings:  # a missing model fails here, before any run
         for name in run_inputs:
@@ -255,9 +253,22 @@ def run_experiment(cfg: FuseConfig, out: Path, log: Callable[[str], None] = prin
                 stem = run_key(spec, scn, "{input}", seeds_of(cfg, scn)[0]).replace("|", "_")
                 plot_setting(out / "plots" / f"{rname}_{scn.name}.png", f"{rname}, {label}", seq.t_ns, seq.p,
                              runs_of(out / "trajectories", stem, list(cfg.inputs)), scn.outage_windows())
-    table = format_table(cfg, results)
-    atomic_write_bytes(out / "table.md", lambda f: f.write(table.encode()))
+    atomic_write_text(out / "table.md", format_table(cfg, results))
     return results
+
+
+def read_runs(path: Path, log: Callable[[str], None]) -> Dict[str, dict]:
+    """The runs recorded in ``path`` (results.json or online.json); none when there is no file, and
+    none, said through ``log``, when it cannot be read (its runs are done again and it is
+    rewritten)."""
+    if not path.exists():
+        return {}
+    try:
+        runs = json.loads(path.read_text()).get("runs", {})
+    except (OSError, UnicodeDecodeError, json.JSONDecodeError, AttributeError) as e:
+        log(f"imu_learn.fuse: {path}: unreadable ({type(e).__name__}: {e}); its runs are done again")
+        return {}
+    return runs if isinstance(runs, dict) else {}
 
 
 def run_one(cfg: FuseConfig, out: Path, seq, noise: ImuNoise, R0: np.ndarray, scn: ScenarioSpec, aiding, key: str,
@@ -292,8 +303,7 @@ def run_one(cfg: FuseConfig, out: Path, seq, noise: ImuNoise, R0: np.ndarray, sc
 
 
 def save_results(path: Path, cfg: FuseConfig, results: Dict[str, dict]) -> None:
-    blob = json.dumps({"config": asdict(cfg), "runs": results}, indent=1).encode()
-    atomic_write_bytes(path, lambda f: f.write(blob))
+    atomic_write_text(path, json.dumps({"config": asdict(cfg), "runs": results}, indent=1))
 
 
 def runs_by_cell(results: Dict[str, dict]) -> Dict[Tuple[str, str, str], List[dict]]:
