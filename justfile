@@ -52,8 +52,9 @@ refine checkpoint input output *args="":
 labels dataset root="" *args="":
     {{py}} -m imu_learn.labels {{dataset}} {{ if root == "" { "" } else { "--root " + root } }} {{args}}
 
-# Print measured throughput: imu_core vs numpy/GTSAM/polars, training/refine/causal latency, then online fusion latency
+# Print measured throughput: imu_core vs numpy/GTSAM/polars, training/refine/causal latency, online fusion latency, then cost against recording length (BENCH_SCALE_ARGS='--hours 1,10')
 bench *args="":
     {{py}} bench/bench_core.py {{args}}
     {{py}} bench/bench_learn.py
     {{py}} bench/bench_fuse_online.py
+    {{py}} bench/bench_scale.py {{ if args =~ '--quick' { '--quick' } else { '' } }} ${BENCH_SCALE_ARGS:-}
