@@ -19,9 +19,13 @@ from imu_learn.errors import (
     ImuError,
     InvalidInputError,
     NonFiniteError,
+    NoOverlapError,
+    NoRecordingsError,
     NotNumericError,
     ParseError,
     TimestampError,
+    TooFewRowsError,
+    TooShortError,
 )
 from imu_learn.integration import (
     PAPER_FRACTIONS,
@@ -43,5 +47,5 @@ __all__ = [
     "ImuData", "GroundTruth", "Sequence", "Recording", "wxyz_to_xyzw", "xyzw_to_wxyz",
     "ImuError", "ParseError", "HeaderError", "ColumnCountError", "NotNumericError", "NonFiniteError",
     "TimestampError", "FloatTimestampError", "AlignmentError", "InvalidInputError", "CacheError",
-    "AidingError", "AidingOverlapError",
+    "AidingError", "AidingOverlapError", "TooFewRowsError", "NoOverlapError", "TooShortError", "NoRecordingsError",
 ]

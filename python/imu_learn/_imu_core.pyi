@@ -2,7 +2,9 @@
 
 Arrays: ``t_ns`` int64 (N,); vectors float64 (N, 3); quaternions float64 (N, 4) in w,x,y,z order.
 Inputs must be C-contiguous; outputs are fresh arrays that own Rust's buffers (no copy).
-Errors: subclasses of imu_learn.errors.ImuError; a missing file raises FileNotFoundError.
+Errors: subclasses of imu_learn.errors.ImuError; a missing file raises FileNotFoundError. Readers of
+IMU and ground-truth files raise TooFewRowsError for a file with fewer than 2 rows (empty, header
+only, one sample or pose).
 """
 from os import PathLike
 from typing import Dict, List, Optional, Sequence, Tuple, Union
@@ -50,8 +52,11 @@ def read_kaist_pose(path: _Path, allow_float_timestamps: bool = False) -> Dict[s
 def align(
     imu_t_ns: _I64, gyro: _F64, acc: _F64, gt_t_ns: _I64, p: _F64, q_wxyz: _F64, v: Optional[_F64],
     max_gap_ns: int, min_segment_samples: int, velocity_half_window: int,
+    imu_source: Optional[_Path] = None, gt_source: Optional[_Path] = None,
 ) -> Tuple[List[Dict[str, np.ndarray]], Dict[str, object]]:
-    """Ground truth onto IMU stamps -> (segments as dicts of t_ns/gyro/acc/p/v/q_wxyz, report)."""
+    """Ground truth onto IMU stamps -> (segments as dicts of t_ns/gyro/acc/p/v/q_wxyz, report).
+    imu_source / gt_source: the files the arrays came from, named by the errors (NoOverlapError,
+    AlignmentError: ``path`` = gt_source, ``imu_path`` = imu_source)."""
 
 def derive_velocity(t_ns: _I64, p: _F64, half_window: int) -> _F64:
     """Velocity from positions by a local quadratic fit over +-half_window samples."""

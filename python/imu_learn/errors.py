@@ -55,12 +55,48 @@ class FloatTimestampError(TimestampError):
     """Integer-nanosecond timestamps were written in float notation and have lost precision."""
 
 
+class TooFewRowsError(ParseError):
+    """A file parses but holds too few rows to use: empty, a header alone, or a single IMU sample
+    or ground-truth pose (integration needs an interval, interpolation a pose on each side).
+    ``line`` is the last line read (0 for an empty file)."""
+
+
 class AlignmentError(ImuError):
-    """IMU samples and ground truth cannot be put on one time base."""
+    """IMU samples and ground truth cannot be put on one time base. ``path`` names the
+    ground-truth file and ``imu_path`` the IMU file where they are known (None for arrays)."""
+
+    def __init__(self, message: str, path: Optional[str] = None, imu_path: Optional[str] = None) -> None:
+        super().__init__(message)
+        self.path = path
+        self.imu_path = imu_path
+
+
+class NoOverlapError(AlignmentError):
+    """The ground truth's time span and the IMU's are disjoint (another clock or unit, a time
+    offset, or the file of another recording); the message gives both spans."""
+
+
+class TooShortError(ImuError, ValueError):
+    """A recording (``path``) holds no stretch as long as one window of ``needed`` samples; the
+    message says how long it is and which setting to lower."""
+
+    def __init__(self, message: str, path: Optional[str] = None, samples: int = 0, needed: int = 0) -> None:
+        super().__init__(message)
+        self.path = path
+        self.samples = samples
+        self.needed = needed
 
 
 class InvalidInputError(ImuError, ValueError):
     """Arrays or settings given by the caller are inconsistent."""
+
+
+class NoRecordingsError(InvalidInputError):
+    """A dataset folder (``path``) holds no recording of the layout asked for."""
+
+    def __init__(self, message: str, path: Optional[str] = None) -> None:
+        super().__init__(message)
+        self.path = path
 
 
 class CacheError(ImuError):
@@ -83,6 +119,46 @@ class AidingOverlapError(AidingError, AlignmentError):
     offset, or the file of another recording)."""
 
 
+class BagError(ImuError, ValueError):
+    """A ROS bag cannot be used as asked. ``path`` names the bag, ``topic`` the topic concerned
+    (None where the error is about the whole bag)."""
+
+    def __init__(self, message: str, path: Optional[str] = None, topic: Optional[str] = None) -> None:
+        super().__init__(message)
+        self.path = path
+        self.topic = topic
+
+
+class NotABagError(BagError):
+    """The path is not a ROS 1 bag or a ROS 2 bag folder."""
+
+
+class TruncatedBagError(BagError):
+    """The file starts like a bag (ROS 1, sqlite3 or mcap) but cannot be read to its end."""
+
+
+class BagTopicError(BagError):
+    """The topic asked for is not in the bag (or none was given and the bag has no single one to
+    use); ``topics`` maps each of the bag's topics to its message type, and the message lists them."""
+
+    def __init__(self, message: str, path: Optional[str] = None, topic: Optional[str] = None,
+                 topics: Optional[dict] = None) -> None:
+        super().__init__(message, path, topic)
+        self.topics = dict(topics or {})
+
+
+class BagTypeError(BagError):
+    """The topic holds messages of another type than the one it is read as."""
+
+
+class BagStampError(BagError):
+    """A topic's header stamps do not increase (message ``index`` is at or before the one before it)."""
+
+    def __init__(self, message: str, path: Optional[str] = None, topic: Optional[str] = None, index: int = 0) -> None:
+        super().__init__(message, path, topic)
+        self.index = index
+
+
 __all__ = [
     "ImuError",
     "ParseError",
@@ -92,11 +168,21 @@ __all__ = [
     "NonFiniteError",
     "TimestampError",
     "FloatTimestampError",
+    "TooFewRowsError",
     "AlignmentError",
+    "NoOverlapError",
+    "TooShortError",
     "InvalidInputError",
+    "NoRecordingsError",
     "CacheError",
     "AidingError",
     "AidingOverlapError",
+    "BagError",
+    "NotABagError",
+    "TruncatedBagError",
+    "BagTopicError",
+    "BagTypeError",
+    "BagStampError",
 ]
 
 

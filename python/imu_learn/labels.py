@@ -25,13 +25,25 @@ from imu_learn.cache import (
     write_segment,
 )
 from imu_learn.datasets import DATASETS, find_recordings
-from imu_learn.errors import ImuError
+from imu_learn.errors import ImuError, TooShortError
 from imu_learn.integration import PAPER_FRACTIONS, window_labels
 from imu_learn.loading import AlignOptions, load_recording
 
 
 def source_files(path: Path) -> List[Path]:
     return [path] if path.is_file() else [p for p in path.rglob("*") if p.is_file()]
+
+
+def require_one_window(path: Path, segments: list, window: int) -> None:
+    """A recording none of whose segments holds one window would add nothing to the cache but an
+    entry with zero windows: say so instead, with the setting to change."""
+    longest = max((len(s) for s in segments), default=0)
+    if longest < window + 1:  # a window of W intervals spans W + 1 samples
+        raise TooShortError(
+            f"{path}: too short: its longest segment has {longest} samples, one window of {window} "
+            f"needs {window + 1}; lower --window or add data",
+            str(path), longest, window + 1,
+        )
 
 
 @holding_cache_lock("out")  # two runs on one folder take turns instead of mixing their files
@@ -72,6 +84,7 @@ def build_cache(
             continue
         t0 = time.perf_counter()
         rec = load_recording(path, format=dataset, options=options)
+        require_one_window(path, rec.segments, window)
         segments = []
         for i, seq in enumerate(rec.segments):
             lab = window_labels(seq, window, stride, PAPER_FRACTIONS, gravity)

@@ -3,12 +3,12 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 from pathlib import Path
-from typing import List, Optional, Union
+from typing import List, Optional, Tuple, Union
 
 import numpy as np
 
 from imu_learn import _imu_core as core
-from imu_learn.formats import asl, read_recording
+from imu_learn.formats import asl, blackbird, detect_format, read_recording
 from imu_learn.types import GroundTruth, ImuData, Recording, Sequence
 
 PathLike = Union[str, Path]
@@ -38,8 +38,19 @@ def read_imu(path: PathLike, allow_float_timestamps: bool = False) -> ImuData:
     return asl.read_imu(Path(path), allow_float_timestamps)
 
 
-def align(imu: ImuData, gt: GroundTruth, options: AlignOptions = AlignOptions(), name: str = "") -> Recording:
-    """Interpolate ground truth onto the IMU stamps; one ``Sequence`` per gap-free segment."""
+def align(
+    imu: ImuData,
+    gt: GroundTruth,
+    options: AlignOptions = AlignOptions(),
+    name: str = "",
+    sources: Tuple[Optional[PathLike], Optional[PathLike]] = (None, None),
+) -> Recording:
+    """Interpolate ground truth onto the IMU stamps; one ``Sequence`` per gap-free segment.
+
+    ``sources``: the (IMU, ground-truth) files the data came from, named by alignment errors
+    (:class:`~imu_learn.errors.NoOverlapError` and the other :class:`~imu_learn.errors.AlignmentError`).
+    """
+    imu_source, gt_source = (None if s is None else str(s) for s in sources)
     rate = (len(imu) - 1) / max((imu.t_ns[-1] - imu.t_ns[0]) * 1e-9, 1e-9) if len(imu) > 1 else 1.0
     segs, report = core.align(
         np.ascontiguousarray(imu.t_ns, dtype=np.int64),
@@ -52,6 +63,8 @@ def align(imu: ImuData, gt: GroundTruth, options: AlignOptions = AlignOptions(),
         int(round(options.max_gap_s * 1e9)),
         max(2, int(round(options.min_segment_s * rate))),
         int(options.velocity_half_window),
+        imu_source=imu_source,
+        gt_source=gt_source,
     )
     seqs = [
         Sequence(name=f"{name}#{i}" if len(segs) > 1 else name, **seg)  # type: ignore[arg-type]
@@ -69,9 +82,26 @@ def load_recording(
 ) -> Recording:
     """Read and align a recording; keeps the alignment report (what was dropped, gaps)."""
     path = Path(path)
-    imu, gt = read_recording(path, format, None if groundtruth is None else Path(groundtruth), allow_float_timestamps)
+    gt_path = None if groundtruth is None else Path(groundtruth)
+    imu, gt = read_recording(path, format, gt_path, allow_float_timestamps)
     name = path.stem if path.suffix == ".mat" else path.name
-    return align(imu, gt, options, name=name)
+    return align(imu, gt, options, name=name, sources=source_files(path, format, gt_path))
+
+
+def source_files(path: Path, format: str = "auto", groundtruth: Optional[Path] = None) -> Tuple[Path, Path]:
+    """The IMU file and the ground-truth file a recording was read from, for error messages. Call
+    it after the recording was read, so that the layout is known to hold them."""
+    fmt = detect_format(path) if format == "auto" else format
+    root = path if path.is_dir() else path.parent
+    if fmt in ("asl", "euroc", "tum-vi"):
+        imu = asl.imu_file(path)
+        return imu, groundtruth or asl.find_groundtruth(asl.sequence_root(path))
+    if fmt == "blackbird":
+        return root / "data.hdf5", groundtruth or root / blackbird.GROUNDTRUTH_NAME
+    if fmt == "kaist":
+        imu = path if path.is_file() else path / "sensor_data" / "xsens_imu.csv"
+        return imu, groundtruth or imu.parent.parent / "global_pose.csv"
+    return path, groundtruth or path  # BROAD: one .mat holds both
 
 
 def load_sequence(

@@ -37,6 +37,7 @@ import numpy as np
 
 from imu_learn.config import DATA_ROOT_ENV, ConfigError, DataConfig, RootConfig
 from imu_learn.datasets import DATASETS, find_recordings
+from imu_learn.errors import TooShortError
 from imu_learn.loading import AlignOptions, load_sequence
 from imu_learn.types import Sequence
 
@@ -231,6 +232,14 @@ def make_split(data: DataConfig, min_len: Optional[int] = None) -> Split:
                 cache[e.name] = load_sequence(path, root.format, gt, options=AlignOptions(max_gap_s=root.max_gap_s, gt_time_offset_s=root.gt_time_offset_s))
             parts = cut(cache[e.name], e.start, e.stop, e.name)
             kept = [s for s in parts if len(s) >= min_len]
+            if not kept:  # the entry would silently add nothing to its split
+                longest = max((len(s) for s in parts), default=0)
+                raise TooShortError(
+                    f"data.split.{split}: {e.label} ({path}) is too short: its longest segment has {longest} "
+                    f"samples, fewer than the {min_len} one window needs (data.window = {data.window}); lower data.window "
+                    "or add data",
+                    str(path), longest, min_len,
+                )
             rows.append({
                 "entry": e.label,
                 "recording": e.name,

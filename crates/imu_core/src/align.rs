@@ -29,6 +29,8 @@
 //! `min_segment_samples` are dropped; `AlignReport` counts each kind so a caller can tell a crop
 //! from a broken recording.
 
+use std::path::PathBuf;
+
 use crate::error::{ImuError, Result};
 use crate::so3::{quat_from_wxyz, quat_to_wxyz, slerp};
 use crate::types::{GroundTruth, ImuSamples, QuatWxyz, Sequence, Vec3};
@@ -190,25 +192,63 @@ fn fit_slope(t: &[i64], p: &[Vec3], tc: i64, pc: Vec3) -> Vec3 {
     out
 }
 
+/// The files the IMU and the ground truth were read from, so that alignment errors can name them;
+/// `None` for arrays that came from elsewhere.
+#[derive(Clone, Debug, Default, PartialEq, Eq)]
+pub struct Sources {
+    pub imu: Option<PathBuf>,
+    pub gt: Option<PathBuf>,
+}
+
+impl Sources {
+    /// "IMU <path>: " / "ground truth <path>: " prefixes for messages, empty when unknown.
+    fn prefix(&self) -> String {
+        let mut out = String::new();
+        if let Some(p) = &self.imu {
+            out += &format!("IMU {}", p.display());
+        }
+        if let Some(p) = &self.gt {
+            out += &format!("{}ground truth {}", if out.is_empty() { "" } else { ", " }, p.display());
+        }
+        if out.is_empty() {
+            out
+        } else {
+            out + ": "
+        }
+    }
+}
+
 /// Put `gt` onto the IMU stamps. Returns one `Sequence` per GT segment (see module docs) that
 /// holds at least `opts.min_segment_samples` IMU samples, and a report of what was dropped.
 ///
 /// There is no gravity argument: alignment is kinematics only; `labels` applies gravity later.
 ///
 /// Errors: `InvalidInput` for arrays of mismatched length, non-increasing stamps or bad options;
-/// `Alignment` when GT has fewer than 2 poses, when IMU and GT do not overlap in time, or when
-/// no segment survives.
+/// `NoOverlap` when IMU and GT do not overlap in time; `Alignment` when GT has fewer than 2 poses
+/// or when no segment survives.
 pub fn align(imu: &ImuSamples, gt: &GroundTruth, opts: &AlignOptions) -> Result<(Vec<Sequence>, AlignReport)> {
-    check_inputs(imu, gt, opts)?;
+    align_from(imu, gt, opts, &Sources::default())
+}
+
+/// `align`, with errors that name the files in `sources`.
+pub fn align_from(
+    imu: &ImuSamples,
+    gt: &GroundTruth,
+    opts: &AlignOptions,
+    sources: &Sources,
+) -> Result<(Vec<Sequence>, AlignReport)> {
+    check_inputs(imu, gt, opts, sources)?;
     let tg = &gt.t_ns;
     let ti = &imu.t_ns;
     let (g0, g1) = (tg[0], tg[tg.len() - 1]);
     let (i0, i1) = (ti[0], ti[ti.len() - 1]);
     if i1 < g0 || i0 > g1 {
-        return Err(ImuError::Alignment(format!(
-            "IMU and ground truth do not overlap in time: IMU spans [{i0}, {i1}] ns, ground truth \
-             [{g0}, {g1}] ns (are both in the same clock and unit?)"
-        )));
+        return Err(ImuError::NoOverlap {
+            imu: sources.imu.clone(),
+            gt: sources.gt.clone(),
+            imu_span_ns: (i0, i1),
+            gt_span_ns: (g0, g1),
+        });
     }
 
     let mut report = AlignReport {
@@ -233,6 +273,7 @@ pub fn align(imu: &ImuSamples, gt: &GroundTruth, opts: &AlignOptions) -> Result<
     report.velocity_derived = gt.v.is_none();
     let mut seqs = Vec::new();
     let mut covered = 0usize;
+    let mut longest_short = 0usize;
     for &(a, b) in &ranges {
         if b == a {
             continue; // a lone pose: nothing to interpolate between
@@ -244,6 +285,7 @@ pub fn align(imu: &ImuSamples, gt: &GroundTruth, opts: &AlignOptions) -> Result<
         covered += count;
         if count < opts.min_segment_samples {
             report.dropped_short += count;
+            longest_short = longest_short.max(count);
             continue;
         }
         let v_seg: Vec<Vec3> = match &gt.v {
@@ -262,9 +304,11 @@ pub fn align(imu: &ImuSamples, gt: &GroundTruth, opts: &AlignOptions) -> Result<
 
     if seqs.is_empty() {
         return Err(ImuError::Alignment(format!(
-            "no aligned segment has at least {} IMU samples: of {} IMU samples, {} precede the \
-             ground truth, {} follow it, {} fall in its {} gap(s) longer than {} ns, and {} are in \
-             segments that are too short",
+            "{}no aligned segment has at least {} IMU samples (the longest has {longest_short}; \
+             lower the minimum segment length, min_segment_s in Python, to keep shorter ones): of \
+             {} IMU samples, {} precede the ground truth, {} follow it, {} fall in its {} gap(s) \
+             longer than {} ns, and {} are in segments that are too short",
+            sources.prefix(),
             opts.min_segment_samples,
             report.imu_samples,
             report.dropped_before,
@@ -278,7 +322,7 @@ pub fn align(imu: &ImuSamples, gt: &GroundTruth, opts: &AlignOptions) -> Result<
     Ok((seqs, report))
 }
 
-fn check_inputs(imu: &ImuSamples, gt: &GroundTruth, opts: &AlignOptions) -> Result<()> {
+fn check_inputs(imu: &ImuSamples, gt: &GroundTruth, opts: &AlignOptions, sources: &Sources) -> Result<()> {
     if opts.max_gap_ns <= 0 {
         return Err(ImuError::invalid(format!(
             "max_gap_ns must be positive, got {}",
@@ -310,11 +354,12 @@ fn check_inputs(imu: &ImuSamples, gt: &GroundTruth, opts: &AlignOptions) -> Resu
         )));
     }
     if n == 0 {
-        return Err(ImuError::invalid("no IMU samples"));
+        return Err(ImuError::invalid(format!("{}no IMU samples", sources.prefix())));
     }
     if m < 2 {
         return Err(ImuError::Alignment(format!(
-            "ground truth has {m} pose(s); at least 2 are needed to interpolate"
+            "{}ground truth has {m} pose(s); at least 2 are needed to interpolate",
+            sources.prefix()
         )));
     }
     strictly_increasing("IMU", &imu.t_ns)?;

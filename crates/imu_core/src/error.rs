@@ -4,7 +4,7 @@
 //! exception class (see `python/errors.rs`).
 
 use std::fmt;
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 
 pub type Result<T, E = ImuError> = std::result::Result<T, E>;
 
@@ -24,6 +24,83 @@ impl fmt::Display for TimestampProblem {
             TimestampProblem::NotIncreasing => f.write_str("is earlier than the previous row's timestamp"),
         }
     }
+}
+
+/// What a reader needs of a file's rows, for `ImuError::TooFewRows`: "IMU file" / "sample" / 2 /
+/// "one sampling interval".
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct RowsNeeded {
+    /// The kind of file, as a user calls it.
+    pub what: &'static str,
+    /// One row, as a user calls it.
+    pub unit: &'static str,
+    pub needed: usize,
+    /// Why that many.
+    pub why: &'static str,
+}
+
+/// IMU files: one sample holds no interval to integrate or align.
+pub const IMU_ROWS: RowsNeeded = RowsNeeded {
+    what: "IMU file",
+    unit: "sample",
+    needed: 2,
+    why: "one sampling interval",
+};
+
+/// Ground-truth files: interpolation onto IMU stamps needs a pose on each side.
+pub const POSE_ROWS: RowsNeeded = RowsNeeded {
+    what: "ground-truth file",
+    unit: "pose",
+    needed: 2,
+    why: "one on each side of an IMU stamp to interpolate",
+};
+
+fn plural(n: usize, unit: &str) -> String {
+    if n == 1 {
+        format!("{n} {unit}")
+    } else {
+        format!("{n} {unit}s")
+    }
+}
+
+fn too_few_rows_message(path: &Path, line: usize, rows: &RowsNeeded, found: usize) -> String {
+    let (p, what, unit) = (path.display(), rows.what, rows.unit);
+    let need = format!("at least {} are needed ({})", rows.needed, rows.why);
+    match (found, line) {
+        (0, 0) => format!("{p}: {what} is empty (no {unit}s); {need}"),
+        (0, 1) => format!("{p}: {what} has a header but no {unit}s; {need}"),
+        (0, _) => format!("{p}: {what} has no {unit}s (only a header, comments or blank lines); {need}"),
+        _ => format!("{p}:{line}: {what} has only {}; {need}", plural(found, unit)),
+    }
+}
+
+/// Seconds with ms resolution: stamps are epoch ns, and a user compares spans by eye.
+fn seconds(ns: i64) -> String {
+    format!("{:.3}", ns as f64 * 1e-9)
+}
+
+fn no_overlap_message(imu: Option<&Path>, gt: Option<&Path>, imu_span: (i64, i64), gt_span: (i64, i64)) -> String {
+    let gt_name = gt.map_or("ground truth".to_string(), |p| format!("ground truth {}", p.display()));
+    let imu_name = imu.map_or("the IMU".to_string(), |p| format!("the IMU {}", p.display()));
+    let (relation, gap_ns) = if gt_span.1 < imu_span.0 {
+        ("ends", imu_span.0 - gt_span.1)
+    } else {
+        ("starts", gt_span.0 - imu_span.1)
+    };
+    let when = if relation == "ends" {
+        "before the IMU starts"
+    } else {
+        "after the IMU ends"
+    };
+    format!(
+        "{gt_name} covers {}-{} s, {imu_name} {}-{} s: they never overlap (the ground truth {relation} \
+         {} s {when}; are both on the same clock and in the same unit?)",
+        seconds(gt_span.0),
+        seconds(gt_span.1),
+        seconds(imu_span.0),
+        seconds(imu_span.1),
+        seconds(gap_ns),
+    )
 }
 
 #[derive(Debug, thiserror::Error)]
@@ -101,7 +178,29 @@ pub enum ImuError {
         value: String,
     },
 
-    /// Ground truth and IMU cannot be put on one time base (no overlap, too few poses, ...).
+    /// A file that parses but holds too few data rows to be used: empty, a header alone, only
+    /// comments, or fewer rows than `needed` (one IMU sample has no interval; one pose cannot be
+    /// interpolated). `line` is the last line read (0 for an empty file).
+    #[error("{}", too_few_rows_message(path, *line, rows, *found))]
+    TooFewRows {
+        path: PathBuf,
+        line: usize,
+        rows: RowsNeeded,
+        found: usize,
+    },
+
+    /// The IMU's and the ground truth's time spans are disjoint (another clock or unit, a time
+    /// offset, or the file of another recording). Paths are `None` for arrays passed in directly.
+    #[error("{}", no_overlap_message(imu.as_deref(), gt.as_deref(), *imu_span_ns, *gt_span_ns))]
+    NoOverlap {
+        imu: Option<PathBuf>,
+        gt: Option<PathBuf>,
+        imu_span_ns: (i64, i64),
+        gt_span_ns: (i64, i64),
+    },
+
+    /// Ground truth and IMU cannot be put on one time base (too few poses, nothing long enough
+    /// left after alignment, ...).
     #[error("{0}")]
     Alignment(String),
 

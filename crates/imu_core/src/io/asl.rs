@@ -11,7 +11,7 @@ use std::path::Path;
 
 use super::table::{self, Separator, Table, TableSpec, TimeUnit};
 use super::{write_atomic, ReadOptions};
-use crate::error::{ImuError, Result};
+use crate::error::{ImuError, Result, RowsNeeded, IMU_ROWS, POSE_ROWS};
 use crate::types::{GroundTruth, ImuSamples, Vec3};
 
 /// The EuRoC imu0 header; written when `write_imu` gets no header.
@@ -68,8 +68,25 @@ fn check_header(path: &Path, found: &str, accepted: &[&str]) -> Result<()> {
     })
 }
 
-fn read_checked(path: &Path, accepted: &[&str], n_columns: usize, opts: &ReadOptions) -> Result<Table> {
+/// Reads an ASL file: header checked, rows parsed, and, where `rows` says what they are for, at
+/// least as many rows as that needs (an empty file is reported as such, not as a bad header).
+fn read_checked(
+    path: &Path,
+    accepted: &[&str],
+    n_columns: usize,
+    opts: &ReadOptions,
+    rows: Option<&RowsNeeded>,
+) -> Result<Table> {
     let bytes = table::read_bytes(path)?;
+    let empty = Table {
+        path: path.to_path_buf(),
+        ..Table::default()
+    };
+    if let Some(rows) = rows {
+        if bytes.iter().all(u8::is_ascii_whitespace) {
+            table::require_rows(&empty, &bytes, rows)?;
+        }
+    }
     check_header(path, &table::first_line(&bytes), accepted)?;
     let spec = TableSpec {
         separator: Separator::Comma,
@@ -80,7 +97,11 @@ fn read_checked(path: &Path, accepted: &[&str], n_columns: usize, opts: &ReadOpt
         names: Vec::new(),
         allow_float_timestamps: opts.allow_float_timestamps,
     };
-    table::parse_table(path, &bytes, &spec)
+    let t = table::parse_table(path, &bytes, &spec)?;
+    if let Some(rows) = rows {
+        table::require_rows(&t, &bytes, rows)?;
+    }
+    Ok(t)
 }
 
 fn v3(r: &[f64], at: usize) -> Vec3 {
@@ -89,7 +110,7 @@ fn v3(r: &[f64], at: usize) -> Vec3 {
 
 /// Reads an ASL IMU file (`#timestamp [ns],w_RS_S_x [rad s^-1],...,a_RS_S_z [m s^-2]`).
 pub fn read_imu(path: impl AsRef<Path>, opts: &ReadOptions) -> Result<ImuSamples> {
-    let t = read_checked(path.as_ref(), &[IMU_HEADER], 7, opts)?;
+    let t = read_checked(path.as_ref(), &[IMU_HEADER], 7, opts, Some(&IMU_ROWS))?;
     let n = t.len();
     let mut gyro = Vec::with_capacity(n);
     let mut acc = Vec::with_capacity(n);
@@ -181,7 +202,13 @@ pub fn write_imu(path: impl AsRef<Path>, samples: &ImuSamples, header: Option<&s
 /// Reads an ASL state file: t, p, q_wxyz, v, gyro bias, accel bias (17 columns). Accepts the
 /// official header and the short `#time(ns),px,py,pz,qw,...` spelling.
 pub fn read_state(path: impl AsRef<Path>, opts: &ReadOptions) -> Result<GroundTruth> {
-    let t = read_checked(path.as_ref(), &[STATE_HEADER, STATE_HEADER_SHORT], 17, opts)?;
+    let t = read_checked(
+        path.as_ref(),
+        &[STATE_HEADER, STATE_HEADER_SHORT],
+        17,
+        opts,
+        Some(&POSE_ROWS),
+    )?;
     let n = t.len();
     let mut gt = GroundTruth {
         p: Vec::with_capacity(n),
@@ -205,7 +232,7 @@ pub fn read_state(path: impl AsRef<Path>, opts: &ReadOptions) -> Result<GroundTr
 
 /// Reads a TUM-VI mocap pose file: t, p, q_wxyz (8 columns); `v` is `None`.
 pub fn read_pose(path: impl AsRef<Path>, opts: &ReadOptions) -> Result<GroundTruth> {
-    let t = read_checked(path.as_ref(), &[POSE_HEADER], 8, opts)?;
+    let t = read_checked(path.as_ref(), &[POSE_HEADER], 8, opts, Some(&POSE_ROWS))?;
     let n = t.len();
     let mut p = Vec::with_capacity(n);
     let mut q = Vec::with_capacity(n);
@@ -224,7 +251,7 @@ pub fn read_pose(path: impl AsRef<Path>, opts: &ReadOptions) -> Result<GroundTru
 /// Reads an ASL position file (EuRoC's Leica laser tracker, `mav0/leica0/data.csv`): t and p
 /// (4 columns), with the same strict parsing as every ASL file.
 pub fn read_position(path: impl AsRef<Path>, opts: &ReadOptions) -> Result<(Vec<i64>, Vec<Vec3>)> {
-    let t = read_checked(path.as_ref(), &[POSITION_HEADER], 4, opts)?;
+    let t = read_checked(path.as_ref(), &[POSITION_HEADER], 4, opts, None)?;
     let p = t.values.chunks_exact(3).map(|r| v3(r, 0)).collect();
     Ok((t.t_ns, p))
 }

@@ -18,7 +18,7 @@ use nalgebra::{Matrix3, Rotation3, UnitQuaternion};
 
 use super::table::{self, Separator, TableSpec, TimeUnit};
 use super::ReadOptions;
-use crate::error::{ImuError, Result};
+use crate::error::{ImuError, Result, IMU_ROWS, POSE_ROWS};
 use crate::so3::{canonical_wxyz, quat_from_wxyz, quat_to_wxyz};
 use crate::types::{GroundTruth, ImuSamples};
 
@@ -78,7 +78,10 @@ fn spec(names: &[&str], opts: &ReadOptions) -> TableSpec {
 /// Reads `xsens_imu.csv`: gyro [rad/s] and acceleration [m/s²]; the Xsens orientation, Euler
 /// angles and magnetic field are checked like every field but not returned.
 pub fn read_xsens_imu(path: impl AsRef<Path>, opts: &ReadOptions) -> Result<ImuSamples> {
-    let t = table::read_table(path.as_ref(), &spec(&XSENS_FIELD_NAMES, opts))?;
+    let path = path.as_ref();
+    let bytes = table::read_bytes(path)?;
+    let t = table::parse_table(path, &bytes, &spec(&XSENS_FIELD_NAMES, opts))?;
+    table::require_rows(&t, &bytes, &IMU_ROWS)?;
     let n = t.len();
     let mut gyro = Vec::with_capacity(n);
     let mut acc = Vec::with_capacity(n);
@@ -98,7 +101,8 @@ pub fn read_xsens_imu(path: impl AsRef<Path>, opts: &ReadOptions) -> Result<ImuS
 /// `InvalidInput` error naming file and line.
 pub fn read_global_pose(path: impl AsRef<Path>, opts: &ReadOptions) -> Result<GroundTruth> {
     let path = path.as_ref();
-    let t = table::read_table(path, &spec(&POSE_FIELD_NAMES, opts))?;
+    let bytes = table::read_bytes(path)?;
+    let t = table::parse_table(path, &bytes, &spec(&POSE_FIELD_NAMES, opts))?;
     let n = t.len();
     let mut p = Vec::with_capacity(n);
     let mut q = Vec::with_capacity(n);
@@ -120,6 +124,8 @@ pub fn read_global_pose(path: impl AsRef<Path>, opts: &ReadOptions) -> Result<Gr
         q.push(canonical_wxyz(quat_to_wxyz(&quat_from_wxyz(quat_to_wxyz(&raw)))));
         p.push([r[3], r[7], r[11]]);
     }
+    // After the rotation check, so that a bad matrix is reported as such even in a one-row file.
+    table::require_rows(&t, &bytes, &POSE_ROWS)?;
     Ok(GroundTruth {
         t_ns: t.t_ns,
         p,

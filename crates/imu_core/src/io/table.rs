@@ -25,7 +25,7 @@ use std::path::{Path, PathBuf};
 
 use rayon::prelude::*;
 
-use crate::error::{ImuError, Result, TimestampProblem};
+use crate::error::{ImuError, Result, RowsNeeded, TimestampProblem};
 
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum Separator {
@@ -106,6 +106,32 @@ pub fn first_line(bytes: &[u8]) -> String {
     let b = strip_bom(bytes);
     let end = memchr::memchr(b'\n', b).unwrap_or(b.len());
     String::from_utf8_lossy(strip_cr(&b[..end])).into_owned()
+}
+
+/// `TooFewRows` unless `table` (parsed from `bytes`) holds at least `rows.needed` rows. Checked
+/// by each reader rather than in `parse_table`, since only the reader knows what a row is for.
+pub fn require_rows(table: &Table, bytes: &[u8], rows: &RowsNeeded) -> Result<()> {
+    if table.len() >= rows.needed {
+        return Ok(());
+    }
+    let line = match table.lines.last() {
+        Some(&l) => l,
+        None => count_lines(strip_bom(bytes)),
+    };
+    Err(ImuError::TooFewRows {
+        path: table.path.clone(),
+        line,
+        rows: *rows,
+        found: table.len(),
+    })
+}
+
+/// Lines up to the last one holding anything but whitespace (0 for a blank file).
+fn count_lines(bytes: &[u8]) -> usize {
+    match bytes.iter().rposition(|b| !b.is_ascii_whitespace()) {
+        Some(last) => memchr::memchr_iter(b'\n', &bytes[..last]).count() + 1,
+        None => 0,
+    }
 }
 
 /// Reads and parses `path` according to `spec`.

@@ -10,7 +10,7 @@ use std::path::Path;
 
 use super::table::{self, Separator, TableSpec, TimeUnit};
 use super::{write_atomic, ReadOptions};
-use crate::error::{ImuError, Result};
+use crate::error::{ImuError, Result, POSE_ROWS};
 use crate::so3::{wxyz_to_xyzw, xyzw_to_wxyz};
 use crate::types::GroundTruth;
 
@@ -28,7 +28,10 @@ pub fn read_tum(path: impl AsRef<Path>, opts: &ReadOptions) -> Result<GroundTrut
         names: FIELD_NAMES.iter().map(|s| s.to_string()).collect(),
         allow_float_timestamps: opts.allow_float_timestamps,
     };
-    let t = table::read_table(path.as_ref(), &spec)?;
+    let path = path.as_ref();
+    let bytes = table::read_bytes(path)?;
+    let t = table::parse_table(path, &bytes, &spec)?;
+    table::require_rows(&t, &bytes, &POSE_ROWS)?;
     let n = t.len();
     let w = t.n_columns - 1;
     let with_v = t.n_columns == 11;

@@ -1,12 +1,13 @@
 //! Alignment, integration, covariance, labels and batches.
 
 use numpy::{PyArray2, PyArray3, PyArrayDyn, PyArrayMethods, PyReadonlyArray1, PyReadonlyArray2};
+use std::path::PathBuf;
 use std::sync::LazyLock;
 
 use pyo3::prelude::*;
 use pyo3::types::{PyDict, PyList};
 
-use crate::align::{self as core_align, AlignOptions};
+use crate::align::{self as core_align, AlignOptions, Sources};
 use crate::batch::{self, AugmentConfig, Batch, BatchConfig, BatchMut, BatchPlan};
 use crate::covariance::{self, Cov9, Var6};
 use crate::error::ImuError;
@@ -15,7 +16,7 @@ use crate::labels::{self, GroundTruthView, Labels, LabelsMut};
 use crate::python::arrays::{
     flat_mut, out1, out2, out2_flat, out3, out3_flat, pooled_arrays, rows, rows_mut, slice1, zeros, BufferPool,
 };
-use crate::python::errors::to_py;
+use crate::python::errors::{alignment_to_py, to_py};
 use crate::types::Vec3;
 use crate::types::{GroundTruth, ImuSamples, Sequence};
 
@@ -35,7 +36,7 @@ fn seq_dict(py: Python<'_>, s: Sequence) -> PyResult<Bound<'_, PyDict>> {
 
 #[pyfunction]
 #[allow(clippy::too_many_arguments)]
-#[pyo3(signature = (imu_t_ns, gyro, acc, gt_t_ns, p, q_wxyz, v, max_gap_ns, min_segment_samples, velocity_half_window))]
+#[pyo3(signature = (imu_t_ns, gyro, acc, gt_t_ns, p, q_wxyz, v, max_gap_ns, min_segment_samples, velocity_half_window, imu_source=None, gt_source=None))]
 fn align<'py>(
     py: Python<'py>,
     imu_t_ns: PyReadonlyArray1<'py, i64>,
@@ -48,6 +49,8 @@ fn align<'py>(
     max_gap_ns: i64,
     min_segment_samples: usize,
     velocity_half_window: usize,
+    imu_source: Option<PathBuf>,
+    gt_source: Option<PathBuf>,
 ) -> PyResult<(Bound<'py, PyList>, Bound<'py, PyDict>)> {
     let imu = ImuSamples {
         t_ns: slice1(&imu_t_ns, "imu_t_ns")?.to_vec(),
@@ -66,9 +69,13 @@ fn align<'py>(
         min_segment_samples,
         velocity_half_window,
     };
+    let sources = Sources {
+        imu: imu_source,
+        gt: gt_source,
+    };
     let (seqs, report) = py
-        .allow_threads(|| core_align::align(&imu, &gt, &opts))
-        .map_err(to_py)?;
+        .allow_threads(|| core_align::align_from(&imu, &gt, &opts, &sources))
+        .map_err(|e| alignment_to_py(e, &sources))?;
     let list = PyList::empty(py);
     for s in seqs {
         list.append(seq_dict(py, s)?)?;
