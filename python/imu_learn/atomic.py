@@ -115,3 +115,40 @@ def atomic_write_text(path: PathLike, text: str) -> None:
     """Write ``text`` (UTF-8) to ``path`` atomically."""
     data = text.encode("utf-8")
     atomic_write_bytes(path, lambda f: f.write(data))
+
+
+def _fsync_tree(folder: Path) -> None:
+    for dirpath, _dirs, files in os.walk(folder):
+        for name in files:
+            _fsync_file(Path(dirpath) / name)
+        _fsync_dir(Path(dirpath))
+
+
+def atomic_write_dir(path: PathLike, fill: Callable[[Path], None]) -> None:
+    """Let ``fill(tmp)`` create the folder ``tmp`` (it does not exist yet; its name is ``path``'s,
+    inside a temporary folder beside ``path``) with the whole output, then rename it to ``path``.
+    For outputs that are folders (a ROS 2 bag). A folder cannot replace another in one step, so an
+    existing ``path`` is refused (``FileExistsError``) instead of being removed first."""
+    path = Path(path)
+    if path.exists() or path.is_symlink():
+        raise FileExistsError(17, "exists already (a folder output is never replaced; remove it first)", str(path))
+    path.parent.mkdir(parents=True, exist_ok=True)
+    try:
+        holder = Path(tempfile.mkdtemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent))
+    except OSError as e:
+        raise _named(e, path) from None
+    try:
+        tmp = holder / path.name  # the name a writer may embed in its files (rosbags names storage after it)
+        fill(tmp)
+        os.chmod(tmp, 0o777 & ~_umask())
+        _fsync_tree(tmp)
+        os.rename(tmp, path)  # fails rather than merging if path appeared meanwhile
+    except BaseException as e:
+        import shutil
+
+        shutil.rmtree(holder, ignore_errors=True)
+        if isinstance(e, OSError) and (e.filename is None or str(e.filename).startswith(str(holder))):
+            raise _named(e, path) from e
+        raise
+    os.rmdir(holder)
+    _fsync_dir(path.parent)

@@ -79,12 +79,15 @@ def load_recording(
     groundtruth: Optional[PathLike] = None,
     options: AlignOptions = AlignOptions(),
     allow_float_timestamps: bool = False,
+    imu_topic: Optional[str] = None,
+    groundtruth_topic: Optional[str] = None,
 ) -> Recording:
-    """Read and align a recording; keeps the alignment report (what was dropped, gaps)."""
+    """Read and align a recording; keeps the alignment report (what was dropped, gaps). The topics
+    are for ROS bags only (see :func:`load_sequence`)."""
     path = Path(path)
     gt_path = None if groundtruth is None else Path(groundtruth)
-    imu, gt = read_recording(path, format, gt_path, allow_float_timestamps)
-    name = path.stem if path.suffix == ".mat" else path.name
+    imu, gt = read_recording(path, format, gt_path, allow_float_timestamps, imu_topic, groundtruth_topic)
+    name = path.stem if path.suffix in (".mat", ".bag") else path.name
     return align(imu, gt, options, name=name, sources=source_files(path, format, gt_path))
 
 
@@ -110,10 +113,16 @@ def load_sequence(
     groundtruth: Optional[PathLike] = None,
     options: AlignOptions = AlignOptions(),
     allow_float_timestamps: bool = False,
+    imu_topic: Optional[str] = None,
+    groundtruth_topic: Optional[str] = None,
 ) -> List[Sequence]:
     """Load a recording as a list of aligned ``Sequence`` segments (one unless ground truth has gaps).
 
-    ``format``: "auto", "euroc", "tum-vi", "asl", "blackbird", "broad" or "kaist".
+    ``format``: "auto", "euroc", "tum-vi", "asl", "blackbird", "broad", "kaist" or "rosbag" (a ROS 1
+    ``.bag`` or a ROS 2 bag folder).
     ``groundtruth``: a separate TUM (``t[s] tx ty tz qx qy qz qw``) or ASL ground-truth file.
+    ``imu_topic`` / ``groundtruth_topic`` (bags only): the sensor_msgs/msg/Imu topic and the
+    PoseStamped / TransformStamped / Odometry topic; each may be left out when the bag has one.
     """
-    return load_recording(path, format, groundtruth, options, allow_float_timestamps).segments
+    return load_recording(path, format, groundtruth, options, allow_float_timestamps, imu_topic,
+                          groundtruth_topic).segments

@@ -1,8 +1,8 @@
 """Apply a trained refiner to a recording and write the refined IMU in the input's own format.
 
     python -m imu_learn.refine --checkpoint CKPT --input IN --output OUT
-        [--format auto|asl|euroc|tum-vi|blackbird|broad|kaist] [--window 1000 --overlap 200]
-        [--device auto|cpu|cuda] [--batch 16] [--copy-folder] [--quiet]
+        [--format auto|asl|euroc|tum-vi|blackbird|broad|kaist|rosbag] [--imu-topic TOPIC]
+        [--window 1000 --overlap 200] [--device auto|cpu|cuda] [--batch 16] [--copy-folder] [--quiet]
 
 Only the IMU is read (no ground truth needed); timestamps and everything but gyro/acc are kept:
 
@@ -17,6 +17,12 @@ Only the IMU is read (no ground truth needed); timestamps and everything but gyr
   with ``gyro_raw`` / ``accel_raw`` replaced (datasets keep their dtype, chunking, attributes).
 - BROAD: IN is a ``.mat`` trial. OUT (a ``.mat`` path, or a folder that gets the input's name)
   gets every variable of the input with ``imu_gyr`` / ``imu_acc`` replaced.
+- ROS bags: IN is a ROS 1 ``.bag`` or a ROS 2 bag folder (sqlite3 or mcap); ``--imu-topic`` names
+  the sensor_msgs/msg/Imu topic (not needed when the bag has one). OUT is a new bag of the same kind
+  (ROS 2 keeps its storage plugin and compression) in which only that topic's angular_velocity and
+  linear_acceleration change; every other message, connection and stamp, and the IMU messages'
+  headers and covariance fields, are copied unchanged. A ROS 2 OUT folder that exists is refused
+  (a folder cannot be replaced in one step); ``--copy-folder`` does not apply.
 
 Each layout's module in :mod:`imu_learn.formats` reads and writes it; every file is written to a
 temporary file beside its target and renamed into place (:mod:`imu_learn.atomic`). The input is
@@ -251,10 +257,14 @@ def refine_recording(
     copy_folder: bool = False,
     batch: int = 16,
     progress: bool = False,
+    imu_topic: Optional[str] = None,
 ) -> Path:
-    """Refine one recording; returns the file written."""
+    """Refine one recording; returns the file (or ROS 2 bag folder) written. ``imu_topic``: the
+    IMU topic of a ROS bag."""
     input, output = Path(input), Path(output)
-    src = formats.read_imu_source(input, fmt)
+    src = formats.read_imu_source(input, fmt, imu_topic)
+    if copy_folder and src.fmt == formats.rosbag.NAME:
+        raise InvalidInputError("--copy-folder does not apply to ROS bags: the output bag holds every topic already")
     if copy_folder:
         if output.suffix.lower() == src.imu_file.suffix.lower() and not output.is_dir():
             raise InvalidInputError(f"--copy-folder needs OUT to be a folder, got {output}")
@@ -289,9 +299,10 @@ def _parser() -> argparse.ArgumentParser:
         description="Write a recording's IMU refined by a trained model, in the input's own format.",
     )
     p.add_argument("--checkpoint", required=True, type=Path, help="imu_learn checkpoint (.pt)")
-    p.add_argument("--input", required=True, type=Path, help="recording folder or IMU file (never written)")
-    p.add_argument("--output", required=True, type=Path, help="folder, or a file of the input's kind")
+    p.add_argument("--input", required=True, type=Path, help="recording folder, IMU file or ROS bag (never written)")
+    p.add_argument("--output", required=True, type=Path, help="folder, or a file (or bag) of the input's kind")
     p.add_argument("--format", default="auto", choices=FORMATS)
+    p.add_argument("--imu-topic", help="ROS bags: the sensor_msgs/msg/Imu topic (default: the bag's only one)")
     p.add_argument("--window", type=int, default=1000, help="samples per window (default 1000)")
     p.add_argument("--overlap", type=int, default=200, help="overlap of consecutive windows (default 200)")
     p.add_argument("--batch", type=int, default=16, help="windows run at once (default 16)")
@@ -310,7 +321,7 @@ def main(argv: Optional[List[str]] = None) -> int:
         model = load_model(args.checkpoint).to(device)
         target = refine_recording(
             model, args.input, args.output, args.format, args.window, args.overlap, args.copy_folder,
-            args.batch, progress=not args.quiet,
+            args.batch, progress=not args.quiet, imu_topic=args.imu_topic,
         )
     except Exception as e:  # every failure is one line and status 2
         msg = " ".join(str(e).split()) or type(e).__name__

@@ -1,6 +1,7 @@
 """Dataset formats: one module per layout on disk, the only place that knows the layout.
 
-Each of :mod:`.asl` (EuRoC, TUM-VI), :mod:`.blackbird`, :mod:`.broad` and :mod:`.kaist` has
+Each of :mod:`.asl` (EuRoC, TUM-VI), :mod:`.blackbird`, :mod:`.broad`, :mod:`.kaist` and
+:mod:`.rosbag` (ROS 1 / ROS 2 bags; its readers also take ``imu_topic`` / ``groundtruth_topic``) has
 
 - ``NAME`` and ``detect(path) -> bool``: whether ``path`` (a folder or a file) is in this layout;
 - ``find_recordings(root)``: every recording of the layout under a dataset folder;
@@ -24,7 +25,7 @@ import numpy as np
 from imu_learn.errors import InvalidInputError
 from imu_learn.types import GroundTruth, ImuData
 
-from . import asl, blackbird, broad, kaist
+from . import asl, blackbird, broad, kaist, rosbag
 from .source import ImuSource
 
 # The names ``format=`` / ``--format`` accept, each with its layout's module.
@@ -35,11 +36,13 @@ FORMATS: Dict[str, ModuleType] = {
     "blackbird": blackbird,
     "broad": broad,
     "kaist": kaist,
+    "rosbag": rosbag,
 }
 
 # Asked in this order by detect_format; the first layout that claims a path wins. KAIST's
 # ``xsens_imu.csv`` is also a ``.csv``, which the ASL rule takes, so KAIST is asked before ASL.
-DETECTION_ORDER: Tuple[ModuleType, ...] = (broad, blackbird, kaist, asl)
+# A ROS 2 bag folder is asked first: nothing else holds a ``metadata.yaml``.
+DETECTION_ORDER: Tuple[ModuleType, ...] = (rosbag, broad, blackbird, kaist, asl)
 
 __all__ = ["FORMATS", "ImuSource", "detect_format", "layout", "read_imu_source", "read_recording", "write_imu"]
 
@@ -70,18 +73,34 @@ def _existing(path: Path) -> Path:
     return path
 
 
+def _topics(module: ModuleType, **topics: Optional[str]) -> Dict[str, str]:
+    """The bag topics given, for the rosbag layout; an error for any other layout (no topics)."""
+    given = {k: v for k, v in topics.items() if v is not None}
+    if given and module is not rosbag:
+        raise InvalidInputError(f"{', '.join(given)} only apply to ROS bags, not to the {module.NAME} format")
+    return given
+
+
 def read_recording(
-    path: Path, format: str = "auto", groundtruth: Optional[Path] = None, allow_float_timestamps: bool = False
+    path: Path,
+    format: str = "auto",
+    groundtruth: Optional[Path] = None,
+    allow_float_timestamps: bool = False,
+    imu_topic: Optional[str] = None,
+    groundtruth_topic: Optional[str] = None,
 ) -> Tuple[ImuData, GroundTruth]:
     path = _existing(path)
-    reader = layout(path, format).read_recording
-    return reader(path, groundtruth=groundtruth, allow_float_timestamps=allow_float_timestamps)
+    module = layout(path, format)
+    topics = _topics(module, imu_topic=imu_topic, groundtruth_topic=groundtruth_topic)
+    return module.read_recording(path, groundtruth=groundtruth, allow_float_timestamps=allow_float_timestamps,
+                                 **topics)
 
 
-def read_imu_source(path: Path, format: str = "auto") -> ImuSource:
+def read_imu_source(path: Path, format: str = "auto", imu_topic: Optional[str] = None) -> ImuSource:
     """The IMU of a recording (no ground truth needed) and where it lives, for refine."""
     path = _existing(path)
-    return layout(path, format).read_imu_source(path)
+    module = layout(path, format)
+    return module.read_imu_source(path, **_topics(module, imu_topic=imu_topic))
 
 
 def write_imu(src: ImuSource, out: Path, gyro: np.ndarray, acc: np.ndarray) -> None:

@@ -23,3 +23,4 @@ class ImuSource:
     t_ns: Optional[np.ndarray]  # the file's own stamps; None where it has none (BROAD)
     gyro: np.ndarray  # (N, 3) float64 [rad/s]
     acc: np.ndarray  # (N, 3) float64 [m/s^2]
+    topic: Optional[str] = None  # the bag topic the IMU was read from (ROS bags only)

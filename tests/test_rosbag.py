@@ -1,0 +1,324 @@
+"""imu_learn.formats.rosbag: ROS 1 and ROS 2 (sqlite3, mcap) bags in and out, on fixture bags
+written from the shipped EuRoC crop (tests/rosbag_fixtures.py)."""
+import shutil
+from pathlib import Path
+
+import numpy as np
+import pytest
+import torch
+
+from imu_learn import _imu_core as core
+from imu_learn.errors import (
+    BagError,
+    BagStampError,
+    BagTopicError,
+    BagTypeError,
+    ImuError,
+    NotABagError,
+    TruncatedBagError,
+)
+from imu_learn.formats import detect_format, read_imu_source, rosbag, write_imu
+from imu_learn.formats.groundtruth import read_groundtruth
+from imu_learn.loading import align, load_sequence
+from imu_learn.model import ImuRefiner, ModelConfig
+from imu_learn.refine import main as refine_main
+from imu_learn.refine import refine_recording
+from imu_learn.types import GroundTruth, ImuData
+from rosbag_fixtures import GT_CSV, IMU_CSV, KINDS, POSE_TOPICS, TOPICS, bag_name, write_fixture_bag
+
+torch.set_num_threads(1)
+CROP = IMU_CSV.parents[2]
+SEQ_FIELDS = ("t_ns", "gyro", "acc", "p", "v", "q_wxyz")
+
+
+@pytest.fixture(scope="session")
+def bags(tmp_path_factory):
+    """One fixture bag per container, written once per session."""
+    folder = tmp_path_factory.mktemp("bags")
+    return {kind: write_fixture_bag(folder, kind) for kind in KINDS}
+
+
+def assert_same_sequences(a, b):
+    assert len(a) == len(b) > 0
+    for x, y in zip(a, b):
+        for f in SEQ_FIELDS:
+            u, w = getattr(x, f), getattr(y, f)
+            assert u.dtype == w.dtype and u.shape == w.shape, f
+            assert np.array_equal(u, w), f  # bit for bit: the same floats, not close ones
+
+
+def random_model(seed=0):
+    """Random weights with a non-zero head, so refinement changes every sample."""
+    torch.manual_seed(seed)
+    _t, g, a = core.read_asl_imu(str(IMU_CSV))
+    raw = np.c_[g, a]
+    m = ImuRefiner(ModelConfig(), mean=torch.tensor(raw.mean(0)), std=torch.tensor(raw.std(0)))
+    with torch.no_grad():
+        torch.nn.init.normal_(m.head.weight, std=0.5)
+        torch.nn.init.normal_(m.head.bias, std=0.1)
+    return m.eval()
+
+
+def messages_by_topic(bag):
+    """{topic: [(bag stamp, raw bytes), ...]} and the connections of a bag, read back with rosbags."""
+    with rosbag.open_bag(bag) as reader:
+        out = {}
+        for conn, stamp, raw in reader.messages():
+            out.setdefault(conn.topic, []).append((stamp, bytes(raw)))
+        conns = [(c.topic, c.msgtype, c.msgdef.data, c.digest, c.ext) for c in reader.connections]
+    return out, conns
+
+
+def decoded(bag, topic):
+    with rosbag.open_bag(bag) as reader:
+        conns = [c for c in reader.connections if c.topic == topic]
+        return [reader.deserialize(raw, c.msgtype) for c, _t, raw in reader.messages(connections=conns)]
+
+
+# --------------------------------------------------------------------------------------------
+# Reading
+# --------------------------------------------------------------------------------------------
+
+
+@pytest.mark.parametrize("kind", KINDS)
+def test_detects_and_lists_topics(bags, kind):
+    assert detect_format(bags[kind]) == "rosbag"
+    assert rosbag.list_topics(bags[kind]) == dict(sorted(TOPICS.items()))
+    if kind != "ros1":  # the storage file inside a ROS 2 bag folder is the bag too
+        storage = next(p for p in bags[kind].iterdir() if p.suffix in (".db3", ".mcap"))
+        assert detect_format(storage) == "rosbag" and rosbag.bag_path(storage) == bags[kind]
+
+
+@pytest.mark.parametrize("kind", KINDS)
+def test_load_equals_asl_folder_bit_for_bit(bags, kind, capsys):
+    """The bag's IMU with EuRoC's ground-truth file beside it loads exactly as the ASL folder."""
+    from_asl = load_sequence(CROP, "euroc")
+    from_bag = load_sequence(bags[kind], "rosbag", groundtruth=GT_CSV)
+    assert_same_sequences(from_bag, from_asl)
+    assert "using IMU topic /imu0" in capsys.readouterr().err  # the bag's only IMU topic, said so
+
+
+@pytest.mark.parametrize("kind", KINDS)
+@pytest.mark.parametrize("topic", POSE_TOPICS)
+def test_pose_topic_loads_as_the_same_poses_from_the_asl_folder(bags, kind, topic):
+    """Each pose type gives the ASL ground truth's poses (no velocity: it is fitted from poses)."""
+    t, g, a = core.read_asl_imu(str(IMU_CSV))
+    gt = read_groundtruth(GT_CSV)
+    expected = align(ImuData(t, g, a), GroundTruth(gt.t_ns, gt.p, gt.q_wxyz, None)).segments
+    got = load_sequence(bags[kind], format="rosbag", imu_topic="/imu0", groundtruth_topic=topic)
+    assert_same_sequences(got, expected)
+
+
+def test_several_pose_topics_need_one_named(bags):
+    with pytest.raises(BagTopicError, match="3 ground-truth topics.*groundtruth_topic"):
+        load_sequence(bags["mcap"], "rosbag")
+
+
+def test_topics_are_for_bags_only():
+    with pytest.raises(ImuError, match="imu_topic only apply to ROS bags"):
+        load_sequence(CROP, "euroc", imu_topic="/imu0")
+
+
+@pytest.mark.parametrize("kind", KINDS)
+def test_positions_topic(bags, kind):
+    gt = read_groundtruth(GT_CSV)
+    t, p = rosbag.read_positions(bags[kind], "/leica/position")
+    assert np.array_equal(t, gt.t_ns[::10]) and np.array_equal(p, gt.p[::10])
+
+
+# --------------------------------------------------------------------------------------------
+# Writing: refine, byte-identical copies, round trips
+# --------------------------------------------------------------------------------------------
+
+
+@pytest.fixture(scope="module")
+def refined(bags, tmp_path_factory):
+    """Each bag and the ASL folder refined by the same random model."""
+    out = tmp_path_factory.mktemp("refined")
+    model = random_model()
+    asl = refine_recording(model, CROP, out / "asl.csv")
+    return {"asl": asl, **{k: refine_recording(model, bags[k], out / bag_name(k)) for k in KINDS}}
+
+
+@pytest.mark.parametrize("kind", KINDS)
+def test_refine_on_a_bag_equals_refine_on_the_asl_folder(bags, refined, kind):
+    _t, g_asl, a_asl = core.read_asl_imu(str(refined["asl"]))
+    src = read_imu_source(refined[kind], imu_topic="/imu0")
+    assert np.array_equal(src.gyro, g_asl) and np.array_equal(src.acc, a_asl)
+    raw = read_imu_source(bags[kind], imu_topic="/imu0")
+    assert not np.array_equal(src.gyro, raw.gyro)  # the model did change the IMU
+    assert np.array_equal(src.t_ns, raw.t_ns)
+
+
+@pytest.mark.parametrize("kind", KINDS)
+def test_output_is_the_same_kind_of_bag(bags, refined, kind):
+    out = refined[kind]
+    if kind == "ros1":
+        assert out.is_file() and out.read_bytes().startswith(b"#ROSBAG V2.0")
+    else:
+        meta_in, meta_out = rosbag._ros2_metadata(bags[kind]), rosbag._ros2_metadata(out)
+        assert meta_out["storage_identifier"] == meta_in["storage_identifier"] == kind
+        assert meta_out["message_count"] == meta_in["message_count"]
+        assert [p.name for p in out.iterdir()] and all(p.stem == out.name for p in out.iterdir()
+                                                       if p.name != "metadata.yaml")
+
+
+@pytest.mark.parametrize("kind", KINDS)
+def test_every_other_message_is_byte_identical(bags, refined, kind):
+    before, conns_before = messages_by_topic(bags[kind])
+    after, conns_after = messages_by_topic(refined[kind])
+    assert conns_after == conns_before  # topic, type, definition, hash, QoS / callerid
+    assert sorted(after) == sorted(before)
+    for topic in before:
+        if topic != "/imu0":
+            assert after[topic] == before[topic], topic  # stamps and bytes
+    assert [s for s, _ in after["/imu0"]] == [s for s, _ in before["/imu0"]]
+    # An Imu message ends in fixed-size doubles in both encodings: angular_velocity is bytes
+    # [-192, -168) from the end, linear_acceleration [-96, -72); nothing else may differ.
+    vectors = set(range(169, 193)) | set(range(73, 97))  # distances from the end, len - index
+    for (_, b0), (_, b1) in zip(before["/imu0"], after["/imu0"]):
+        assert len(b0) == len(b1)
+        diff = np.flatnonzero(np.frombuffer(b0, np.uint8) != np.frombuffer(b1, np.uint8))
+        assert set((len(b0) - diff).tolist()) <= vectors
+
+
+@pytest.mark.parametrize("kind", KINDS)
+def test_imu_headers_and_covariances_are_kept(bags, refined, kind):
+    old, new = decoded(bags[kind], "/imu0"), decoded(refined[kind], "/imu0")
+    assert len(old) == len(new)
+    for m0, m1 in zip(old, new):
+        # each reader builds its own message classes, so compare their text, not the objects
+        assert repr(m1.header) == repr(m0.header) and repr(m1.orientation) == repr(m0.orientation)
+        for f in ("orientation_covariance", "angular_velocity_covariance", "linear_acceleration_covariance"):
+            assert np.array_equal(getattr(m1, f), getattr(m0, f)), f
+    assert any(m1.angular_velocity != m0.angular_velocity for m0, m1 in zip(old, new))
+
+
+@pytest.mark.parametrize("kind", KINDS)
+def test_round_trip_unchanged_imu_gives_the_same_messages(bags, tmp_path, kind):
+    """Writing the IMU back as read re-serializes every IMU message to its original bytes."""
+    src = read_imu_source(bags[kind])
+    out = tmp_path / bag_name(kind)
+    write_imu(src, out, src.gyro, src.acc)
+    assert messages_by_topic(out) == messages_by_topic(bags[kind])
+
+
+@pytest.mark.parametrize("kind", KINDS)
+def test_round_trip_written_values_read_back_exactly(bags, tmp_path, kind):
+    src = read_imu_source(bags[kind])
+    rng = np.random.default_rng(1)
+    g, a = rng.normal(size=src.gyro.shape), rng.normal(size=src.acc.shape) * 9.81
+    out = tmp_path / bag_name(kind)
+    write_imu(src, out, g, a)
+    back = read_imu_source(out)
+    assert np.array_equal(back.gyro, g) and np.array_equal(back.acc, a) and np.array_equal(back.t_ns, src.t_ns)
+    # and the refined bag is itself a bag the loader takes
+    assert len(load_sequence(out, "rosbag", groundtruth=GT_CSV)[0]) > 0
+
+
+def test_refine_never_overwrites_the_input(bags, tmp_path):
+    bag = shutil.copy(bags["ros1"], tmp_path / "in.bag")
+    before = Path(bag).read_bytes()
+    with pytest.raises(ImuError, match="refusing to overwrite the input"):
+        refine_recording(random_model(), Path(bag), Path(bag))
+    assert Path(bag).read_bytes() == before
+
+
+def test_existing_ros2_output_folder_is_refused(bags, tmp_path):
+    out = tmp_path / "exists"
+    out.mkdir()
+    (out / "keep.txt").write_text("mine")
+    src = read_imu_source(bags["sqlite3"])
+    with pytest.raises(FileExistsError):
+        write_imu(src, out, src.gyro, src.acc)
+    assert [p.name for p in out.iterdir()] == ["keep.txt"]
+    assert not [p for p in tmp_path.iterdir() if p.name.startswith(".")]  # no temporary folder left
+
+
+# --------------------------------------------------------------------------------------------
+# Errors: typed, naming bag and topic; one line from the CLI
+# --------------------------------------------------------------------------------------------
+
+
+@pytest.mark.parametrize("kind", KINDS)
+def test_missing_topic_lists_the_bags_topics(bags, kind):
+    with pytest.raises(BagTopicError) as e:
+        rosbag.read_imu(bags[kind], "/imu1")
+    msg = str(e.value)
+    assert str(bags[kind]) in msg and "/imu1" in msg and e.value.topic == "/imu1"
+    assert all(t in msg for t in TOPICS) and "/imu0 (sensor_msgs/msg/Imu)" in msg
+    assert e.value.topics == dict(sorted(TOPICS.items()))
+
+
+@pytest.mark.parametrize("kind", KINDS)
+def test_topic_of_the_wrong_type(bags, kind):
+    with pytest.raises(BagTypeError, match="/groundtruth/pose: type geometry_msgs/msg/PoseStamped, expected sensor"):
+        rosbag.read_imu(bags[kind], "/groundtruth/pose")
+    with pytest.raises(BagTypeError, match="positions only"):
+        load_sequence(bags[kind], "rosbag", groundtruth_topic="/leica/position")
+    with pytest.raises(BagTypeError, match="/cam0/image_raw"):
+        load_sequence(bags[kind], "rosbag", groundtruth_topic="/cam0/image_raw")
+
+
+def _stamps_going_back(msgs):
+    """Ten IMU messages whose 6th header stamp is before the 5th's (bag stamps still in order)."""
+    t = [1_000_000_000 + 5_000_000 * i for i in range(10)]
+    t[5], t[4] = t[4], t[5]
+    return [(1_000_000_000 + 5_000_000 * i, "/imu0", msgs.imu(s, (0, 0, 0), (0, 0, 9.81), i))
+            for i, s in enumerate(t)]
+
+
+@pytest.mark.parametrize("kind", KINDS)
+def test_stamps_going_back(tmp_path, kind):
+    bag = write_fixture_bag(tmp_path, kind, messages=_stamps_going_back)
+    with pytest.raises(BagStampError, match="topic /imu0: header stamp of message 5") as e:
+        rosbag.read_imu(bag, "/imu0")
+    assert e.value.path == str(bag) and e.value.topic == "/imu0" and e.value.index == 5
+
+
+def test_not_a_bag(tmp_path):
+    text = tmp_path / "notes.bag"
+    text.write_text("not a bag\n" * 100)
+    folder = tmp_path / "folder"
+    folder.mkdir()
+    (folder / "metadata.yaml").write_text("just: text\n")
+    for path in (text, folder):
+        with pytest.raises(NotABagError, match=str(path)):
+            rosbag.read_imu(path, "/imu0")
+    with pytest.raises(NotABagError, match="without metadata.yaml"):
+        rosbag.read_imu(tmp_path, "/imu0")
+
+
+def _truncate(bag: Path) -> Path:
+    f = bag if bag.is_file() else next(p for p in bag.iterdir() if p.suffix in (".db3", ".mcap"))
+    data = f.read_bytes()
+    f.write_bytes(data[: len(data) // 2])
+    return f
+
+
+@pytest.mark.parametrize("kind", KINDS)
+def test_truncated_bag(bags, tmp_path, kind):
+    bag = tmp_path / bag_name(kind)
+    (shutil.copytree if bags[kind].is_dir() else shutil.copy)(bags[kind], bag)
+    _truncate(bag)
+    with pytest.raises(TruncatedBagError) as e:
+        rosbag.read_imu(bag, "/imu0")
+    assert str(bag) in str(e.value) and "truncated or damaged" in str(e.value)
+
+
+def test_cli_prints_one_line_naming_bag_and_topic(bags, tmp_path, capsys):
+    from imu_learn.checkpoint import save_checkpoint
+
+    ckpt = tmp_path / "m.pt"
+    save_checkpoint(ckpt, random_model(), {"test": True}, epoch=1, step=1, best_metric=None)
+    rc = refine_main(["--checkpoint", str(ckpt), "--input", str(bags["mcap"]), "--output", str(tmp_path / "o"),
+                      "--imu-topic", "/imu1", "--quiet"])
+    err = capsys.readouterr().err.strip().splitlines()
+    assert rc == 2 and len(err) == 1
+    assert "BagTopicError" in err[0] and str(bags["mcap"]) in err[0] and "/imu1" in err[0] and "/imu0" in err[0]
+    assert not (tmp_path / "o").exists()
+
+
+def test_every_bag_error_is_an_imu_error():
+    for cls in (NotABagError, TruncatedBagError, BagTopicError, BagTypeError, BagStampError):
+        assert issubclass(cls, BagError) and issubclass(cls, ImuError)
