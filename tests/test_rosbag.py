@@ -19,7 +19,7 @@ from imu_learn.errors import (
 )
 from imu_learn.formats import detect_format, read_imu_source, rosbag, write_imu
 from imu_learn.formats.groundtruth import read_groundtruth
-from imu_learn.loading import align, load_sequence
+from imu_learn.loading import AlignOptions, align, load_sequence
 from imu_learn.model import ImuRefiner, ModelConfig
 from imu_learn.refine import main as refine_main
 from imu_learn.refine import refine_recording
@@ -322,3 +322,36 @@ def test_cli_prints_one_line_naming_bag_and_topic(bags, tmp_path, capsys):
 def test_every_bag_error_is_an_imu_error():
     for cls in (NotABagError, TruncatedBagError, BagTopicError, BagTypeError, BagStampError):
         assert issubclass(cls, BagError) and issubclass(cls, ImuError)
+
+
+# --------------------------------------------------------------------------------------------
+# Labels and fit configs take bags
+# --------------------------------------------------------------------------------------------
+
+
+def test_labels_cli_on_a_folder_of_bags(bags, tmp_path, capsys):
+    from imu_learn.labels import main as labels_main
+
+    root = bags["ros1"].parent
+    rc = labels_main(["rosbag", "--root", str(root), "--out", str(tmp_path / "cache"), "--quiet",
+                      "--imu-topic", "/imu0", "--groundtruth-topic", "/groundtruth/pose"])
+    out = capsys.readouterr().out
+    assert rc == 0, out
+    for name in ("run:", "run_sqlite3:", "run_mcap:"):  # a .bag's name drops the suffix
+        assert name in out
+    rc = labels_main(["rosbag", "--root", str(root), "--out", str(tmp_path / "cache2"), "--quiet"])
+    err = capsys.readouterr().err.strip().splitlines()
+    assert rc == 2 and "3 ground-truth topics" in err[-1] and len(err[-1].splitlines()) == 1
+
+
+def test_fit_config_root_can_be_a_bag(bags):
+    from imu_learn.config import DataConfig, RootConfig, SplitConfig
+    from imu_learn.splits import make_split
+
+    root = RootConfig(str(bags["mcap"]), "rosbag", str(GT_CSV), max_gap_s=0.06, imu_topic="/imu0")
+    data = DataConfig(roots=[root], split=SplitConfig(train=["run_mcap[0:0.8]"], val=["run_mcap[0.8:1]"], test=[]))
+    split = make_split(data)
+    whole = load_sequence(CROP, "euroc", options=AlignOptions(max_gap_s=0.06))
+    n = sum(len(s) for s in split.train) + sum(len(s) for s in split.val)
+    assert n == sum(len(s) for s in whole)
+    assert np.array_equal(split.train[0].gyro, whole[0].gyro[: len(split.train[0])])

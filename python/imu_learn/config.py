@@ -53,7 +53,7 @@ DATA_ROOT_ENV = "IMU_LEARN_DATA"
 class RootConfig:
     """Where recordings are. ``path`` is a dataset folder (every recording under it is found, as
     ``just labels`` finds them) or one recording (an ASL folder, a Blackbird folder, a ``.mat``).
-    ``format``: euroc, tum-vi, blackbird, broad or kaist. ``groundtruth``: a separate TUM/ASL file,
+    ``format``: euroc, tum-vi, blackbird, broad, kaist or rosbag (``imu_topic`` / ``groundtruth_topic``). ``groundtruth``: a separate TUM/ASL file,
     only for a ``path`` that is a single recording. Relative paths are taken from
     ``data.data_root`` when one is set, else from the working directory, else from the repository
     root."""
@@ -67,6 +67,9 @@ class RootConfig:
     # Added to the ground truth's stamps (AlignOptions.gt_time_offset_s) where its clock is measured
     # to be off the IMU's (bench/groundtruth_report.py: a ground truth late by tau gets -tau).
     gt_time_offset_s: float = 0.0
+    # format = "rosbag": the IMU and ground-truth topics (empty: each bag's only one).
+    imu_topic: str = ""
+    groundtruth_topic: str = ""
 
 
 @dataclass

@@ -8,7 +8,7 @@ from typing import List, Tuple
 from imu_learn.errors import InvalidInputError, NoRecordingsError
 from imu_learn.formats import FORMATS
 
-DATASETS = ("euroc", "tum-vi", "blackbird", "broad", "kaist")
+DATASETS = ("euroc", "tum-vi", "blackbird", "broad", "kaist", "rosbag")
 
 # What find_recordings searches for, in the words of the error for a folder without any.
 LOOKED_FOR = {
@@ -17,6 +17,7 @@ LOOKED_FOR = {
     "blackbird": "folders holding data.hdf5",
     "broad": "*.mat trials",
     "kaist": "folders holding sensor_data/xsens_imu.csv",
+    "rosbag": "ROS 1 .bag files and ROS 2 bag folders (holding metadata.yaml)",
 }
 
 
@@ -38,7 +39,7 @@ def find_recordings(dataset: str, root: Path) -> List[Tuple[str, Path]]:
 
 def _name(path: Path, root: Path) -> str:
     rel = path.relative_to(root) if path != root else Path(path.name)
-    stem = rel.with_suffix("") if rel.suffix == ".mat" else rel
+    stem = rel.with_suffix("") if rel.suffix in (".mat", ".bag") else rel
     return str(stem).replace(os.sep, "_") if str(stem) != "." else path.name
 
 

@@ -11,7 +11,7 @@ import sys
 import time
 from dataclasses import asdict
 from pathlib import Path
-from typing import List, Optional
+from typing import Dict, List, Optional
 
 from imu_learn import __version__
 from imu_learn.cache import (
@@ -57,10 +57,14 @@ def build_cache(
     options: AlignOptions = AlignOptions(),
     rebuild: bool = False,
     progress: bool = True,
+    topics: Optional[Dict[str, str]] = None,
 ) -> dict:
+    """``topics``: ``imu_topic`` / ``groundtruth_topic`` for ROS bags (each may be left out where
+    every bag has one)."""
+    topics = {k: v for k, v in (topics or {}).items() if v}
     settings = {
         "dataset": dataset, "window": window, "stride": stride, "fractions": list(PAPER_FRACTIONS),
-        "gravity": gravity, "align": asdict(options),
+        "gravity": gravity, "align": asdict(options), **({"topics": topics} if topics else {}),
     }
     old = reusable_recordings(out, rebuild, log=lambda m: print(m, file=sys.stderr))
     recordings = find_recordings(dataset, root)
@@ -83,7 +87,7 @@ def build_cache(
             manifest["recordings"].append(prev)
             continue
         t0 = time.perf_counter()
-        rec = load_recording(path, format=dataset, options=options)
+        rec = load_recording(path, format=dataset, options=options, **topics)
         require_one_window(path, rec.segments, window)
         segments = []
         for i, seq in enumerate(rec.segments):
@@ -111,6 +115,8 @@ def main(argv: Optional[List[str]] = None) -> int:
     ap.add_argument(
         "--max-gap", type=float, default=AlignOptions.max_gap_s, help="split at GT gaps longer than this [s]"
     )
+    ap.add_argument("--imu-topic", help="rosbag: the sensor_msgs/msg/Imu topic (default: each bag's only one)")
+    ap.add_argument("--groundtruth-topic", help="rosbag: the PoseStamped / TransformStamped / Odometry topic")
     ap.add_argument("--rebuild", action="store_true", help="rebuild everything, even an incompatible cache")
     ap.add_argument("--quiet", action="store_true")
     a = ap.parse_args(argv)
@@ -119,7 +125,7 @@ def main(argv: Optional[List[str]] = None) -> int:
     try:
         m = build_cache(
             a.dataset, root, out, a.window, a.stride, a.gravity, AlignOptions(max_gap_s=a.max_gap),
-            a.rebuild, not a.quiet,
+            a.rebuild, not a.quiet, {"imu_topic": a.imu_topic, "groundtruth_topic": a.groundtruth_topic},
         )
     except (ImuError, OSError) as e:
         print(f"error: {e}", file=sys.stderr)

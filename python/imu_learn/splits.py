@@ -157,7 +157,7 @@ def find_all(roots: List[RootConfig], data_root: Optional[Path] = None) -> Dict[
         fmt = _format_for(root)
         path = resolve_data_path(root.path, data_root, f"data.roots[{i}].path")
         if root.groundtruth:
-            recs = [(path.stem if path.suffix == ".mat" else path.name, path)]
+            recs = [(path.stem if path.suffix in (".mat", ".bag") else path.name, path)]
         else:
             recs = find_recordings(fmt, path)
         for name, p in recs:
@@ -229,7 +229,8 @@ def make_split(data: DataConfig, min_len: Optional[int] = None) -> Split:
             path, root = found[e.name]
             if e.name not in cache:
                 gt = gt_paths.get(id(root))
-                cache[e.name] = load_sequence(path, root.format, gt, options=AlignOptions(max_gap_s=root.max_gap_s, gt_time_offset_s=root.gt_time_offset_s))
+                cache[e.name] = load_sequence(path, root.format, gt, options=AlignOptions(max_gap_s=root.max_gap_s, gt_time_offset_s=root.gt_time_offset_s),
+                                              imu_topic=root.imu_topic or None, groundtruth_topic=root.groundtruth_topic or None)
             parts = cut(cache[e.name], e.start, e.stop, e.name)
             kept = [s for s in parts if len(s) >= min_len]
             if not kept:  # the entry would silently add nothing to its split
