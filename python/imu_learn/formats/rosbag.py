@@ -486,3 +486,46 @@ def _copy_messages(reader, writer, conns: dict, rewrite, ros1: bool) -> None:
             msg = fn(reader.deserialize(raw, conn.msgtype), ts)
             raw = ts.serialize_ros1(msg, conn.msgtype) if ros1 else ts.serialize_cdr(msg, conn.msgtype)
         writer.write(conns[conn.id], stamp, raw)
+
+
+# --------------------------------------------------------------------------------------------
+# A trajectory as a bag topic (imu_learn.fuse's output beside its TUM files)
+# --------------------------------------------------------------------------------------------
+
+ODOMETRY_TYPE = "nav_msgs/msg/Odometry"
+
+
+def write_odometry(out: Path, topic: str, t_ns: np.ndarray, p: np.ndarray, q_wxyz: np.ndarray,
+                   frame_id: str = "world", child_frame_id: str = "imu") -> None:
+    """``out``: a ROS 1 bag (one file, so it is replaced atomically on a rerun) with one
+    ``nav_msgs/msg/Odometry`` message per pose on ``topic``, stamped (header and bag) at ``t_ns``;
+    twist and covariances are zero (not estimated here). ``rosbags-convert`` turns it into ROS 2."""
+    from rosbags.rosbag1 import Writer
+    from rosbags.typesys import Stores, get_typestore
+
+    ts = get_typestore(Stores.ROS1_NOETIC)
+    T = ts.types
+    zero36, zero3 = np.zeros(36), T["geometry_msgs/msg/Vector3"](x=0.0, y=0.0, z=0.0)
+    twist = T["geometry_msgs/msg/TwistWithCovariance"](twist=T["geometry_msgs/msg/Twist"](linear=zero3, angular=zero3),
+                                                       covariance=zero36)
+
+    def message(i: int, t: int, pos, q) -> bytes:
+        header = T["std_msgs/msg/Header"](seq=i, stamp=T["builtin_interfaces/msg/Time"](sec=t // 1_000_000_000,
+                                          nanosec=t % 1_000_000_000), frame_id=frame_id)
+        pose = T["geometry_msgs/msg/Pose"](
+            position=T["geometry_msgs/msg/Point"](x=pos[0], y=pos[1], z=pos[2]),
+            orientation=T["geometry_msgs/msg/Quaternion"](x=q[1], y=q[2], z=q[3], w=q[0]),
+        )
+        msg = T[ODOMETRY_TYPE](header=header, child_frame_id=child_frame_id,
+                               pose=T["geometry_msgs/msg/PoseWithCovariance"](pose=pose, covariance=zero36), twist=twist)
+        return bytes(ts.serialize_ros1(msg, ODOMETRY_TYPE))
+
+    def fill(tmp: Path) -> None:
+        tmp.unlink()  # rosbags creates the file itself and refuses an existing one
+        with Writer(tmp) as writer:
+            conn = writer.add_connection(topic, ODOMETRY_TYPE, typestore=ts)
+            for i, (t, pos, q) in enumerate(zip(np.asarray(t_ns, np.int64).tolist(), np.asarray(p, float).tolist(),
+                                                np.asarray(q_wxyz, float).tolist())):
+                writer.write(conn, t, message(i, t, pos, q))
+
+    atomic_write_path(Path(out), fill)

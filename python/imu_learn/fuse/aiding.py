@@ -266,3 +266,15 @@ def check_aiding(aiding: Aiding, label: str) -> Aiding:
     why = f": dropped {', '.join(dropped)}" if dropped else ""
     raise AidingError(f"{label}: no aiding measurement left ({aiding.label}{', ' + source if source else ''}){why}",
                       source, label)
+
+
+def bag_position_source(bag, topic: str, lever=(0.0, 0.0, 0.0)) -> Tuple[np.ndarray, np.ndarray, np.ndarray, str]:
+    """Real position fixes from a ROS bag topic (geometry_msgs/msg/PointStamped as EuRoC's Leica, or
+    the position of a PoseStamped / TransformStamped / Odometry topic), in the form
+    :func:`leica_fixes` takes: ``(t_ns, p, lever, source)``. ``lever``: the measured point in the
+    body frame (a bag does not say it; the fuse config does). Header stamps; typed bag errors."""
+    from imu_learn.formats.rosbag import read_positions
+
+    t_ns, p = read_positions(bag, topic)
+    lever_arm = np.asarray(lever, dtype=np.float64).reshape(3)
+    return t_ns, p, lever_arm, f"{bag} topic {topic}"

@@ -26,6 +26,13 @@ class RecordingSpec:
     format: str = "auto"
     groundtruth: str = ""  # relative to the data root; empty: the layout's own
     max_gap_s: float = 0.05
+    # ROS bags: the IMU and ground-truth topics (empty: the bag's only one), and the position or
+    # pose topic the "leica" scenarios take their real fixes from, with the body-frame lever arm of
+    # the point it measures (a bag does not carry it).
+    imu_topic: str = ""
+    groundtruth_topic: str = ""
+    aiding_topic: str = ""
+    aiding_lever: List[float] = field(default_factory=lambda: [0.0, 0.0, 0.0])
     # Per-recording models, where the global ones saw this recording in training (empty: the global)
     checkpoint: str = ""
     traditional: str = ""

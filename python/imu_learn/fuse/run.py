@@ -30,6 +30,7 @@ from imu_learn.quat import wxyz_to_xyzw, xyzw_to_wxyz
 from .aiding import (
     aiding_gaps,
     apply_outages,
+    bag_position_source,
     check_aiding,
     clip_outages,
     leica_fixes,
@@ -111,7 +112,8 @@ def load_recording_for_fusion(cfg: FuseConfig, spec: RecordingSpec):
     root = cfg.root()
     path = root / spec.path
     gt = root / spec.groundtruth if spec.groundtruth else None
-    rec = load_recording(path, spec.format, groundtruth=gt, options=AlignOptions(max_gap_s=spec.max_gap_s))
+    rec = load_recording(path, spec.format, groundtruth=gt, options=AlignOptions(max_gap_s=spec.max_gap_s),
+                         imu_topic=spec.imu_topic or None, groundtruth_topic=spec.groundtruth_topic or None)
     seq = max(rec.segments, key=len)
     yaml = path / "mav0" / "imu0" / "sensor.yaml"
     n = cfg.noise
@@ -121,6 +123,8 @@ def load_recording_for_fusion(cfg: FuseConfig, spec: RecordingSpec):
         noise = ImuNoise(n.gyro_noise_density, n.acc_noise_density, n.gyro_random_walk, n.acc_random_walk,
                          source="config [noise]")
     leica = (*read_leica(path), str(path / LEICA_FILE)) if (path / LEICA_FILE).exists() else None
+    if spec.aiding_topic:  # a bag's position / pose topic in the Leica's place
+        leica = bag_position_source(path, spec.aiding_topic, spec.aiding_lever)
     return seq, noise, leica
 
 
@@ -196,6 +200,21 @@ def write_trajectory(path: Path, t_ns: np.ndarray, p: np.ndarray, R: np.ndarray)
     atomic_write_path(path, lambda tmp: core.write_tum(str(tmp), t_ns, p, q_wxyz))
 
 
+def write_trajectory_bag(path: Path, t_ns: np.ndarray, p: np.ndarray, R: np.ndarray,
+                         topic: str = "/imu_learn/odometry") -> None:
+    """The trajectory as ``nav_msgs/msg/Odometry`` on ``topic`` in a ROS 1 bag (poses only)."""
+    from imu_learn.formats.rosbag import write_odometry
+
+    path.parent.mkdir(parents=True, exist_ok=True)
+    write_odometry(path, topic, t_ns, p, xyzw_to_wxyz(Rotation.from_matrix(R).as_quat()))
+
+
+def is_bag(cfg: FuseConfig, spec: RecordingSpec) -> bool:
+    from imu_learn.formats import rosbag
+
+    return spec.format == rosbag.NAME or (spec.format == "auto" and rosbag.detect(cfg.root() / spec.path))
+
+
 def run_experiment(cfg: FuseConfig, out: Path, log: Callable[[str], None] = print,
                    only_inputs: Optional[List[str]] = None) -> Dict[str, dict]:
     # only_inputs: run only these of the config's inputs; the other inputs' results are left as they are
@@ -242,7 +261,7 @@ def run_experiment(cfg: FuseConfig, out: Path, log: Callable[[str], None] = prin
                     gyro, acc, var = inputs[name]
                     r = run_one(cfg, out, seq, noise, R0, scn, aiding, key, gyro, acc, var,
                                 displacement=processors.get((name, artefact_of(cfg, spec, name)))
-                                if name in FACTOR_INPUTS else None)
+                                if name in FACTOR_INPUTS else None, bag_output=is_bag(cfg, spec))
                     r = results[key] = r | {"seed": seed, "hash": wanted[key]}
                     save_results(res_path, cfg, results)
                     log(f"[{done}/{total}] {key}: " + (f"failed: {r['failed'][:120]}" if "failed" in r else
@@ -272,7 +291,8 @@ def read_runs(path: Path, log: Callable[[str], None]) -> Dict[str, dict]:
 
 
 def run_one(cfg: FuseConfig, out: Path, seq, noise: ImuNoise, R0: np.ndarray, scn: ScenarioSpec, aiding, key: str,
-            gyro: np.ndarray, acc: np.ndarray, var: Optional[np.ndarray] = None, displacement=None) -> dict:
+            gyro: np.ndarray, acc: np.ndarray, var: Optional[np.ndarray] = None, displacement=None,
+            bag_output: bool = False) -> dict:
     """Fuse one input with one aiding; its scores (or ``failed``) and its trajectories on disk.
     ``displacement``: a fitted tlio-style model whose displacements join the graph as factors."""
     rname, _, name = key.split("|")[:3]
@@ -298,6 +318,8 @@ def run_one(cfg: FuseConfig, out: Path, seq, noise: ImuNoise, R0: np.ndarray, sc
     stem = key.replace("|", "_")
     for kind, p, R in (("causal", res.causal_p, res.causal_R), ("smoothed", res.smoothed_p, res.smoothed_R)):
         write_trajectory(out / "trajectories" / f"{stem}_{kind}.tum", seq.t_ns[res.kf_idx], p, R)
+        if bag_output:  # a bag recording also gets its trajectory as a bag topic
+            write_trajectory_bag(out / "trajectories" / f"{stem}_{kind}.bag", seq.t_ns[res.kf_idx], p, R)
     s = score(res, seq.t_ns, seq.p, seq.q_wxyz, scn.outage_windows())
     return {**head, "seconds": round(res.seconds, 2), **s}
 
