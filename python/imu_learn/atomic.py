@@ -14,7 +14,7 @@ import os
 import stat
 import tempfile
 from pathlib import Path
-from typing import BinaryIO, Callable, Union
+from typing import BinaryIO, Callable, Optional, Union
 
 PathLike = Union[str, "os.PathLike[str]"]
 
@@ -50,11 +50,11 @@ def temp_beside(path: Path) -> Path:
     return Path(tmp)
 
 
-def _named(e: OSError, path: Path) -> OSError:
+def _named(e: OSError, path: Path, tmp: Optional[Path] = None) -> OSError:
     """``e`` again, naming the output ``path`` instead of the temporary file or nothing (a write to
     a full disk raises without a file name), so a one-line report says which output failed."""
-    if e.errno is None:
-        return e
+    if e.errno is None:  # e.g. imu_core's writers: the temporary file's name is in the message
+        return type(e)(str(e).replace(str(tmp), str(path))) if tmp is not None and str(tmp) in str(e) else e
     return type(e)(e.errno, e.strerror, str(path))
 
 
@@ -96,7 +96,7 @@ def atomic_write_path(path: PathLike, fill: Callable[[Path], None]) -> None:
         except FileNotFoundError:
             pass
         if isinstance(e, OSError) and (e.filename is None or str(e.filename) == str(tmp)):
-            raise _named(e, path) from e
+            raise _named(e, path, tmp) from e
         raise
     _fsync_dir(path.parent)
 
