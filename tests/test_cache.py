@@ -5,6 +5,7 @@ import shutil
 import pytest
 
 from imu_learn import cache, labels
+from imu_learn.atomic import atomic_write_bytes
 from imu_learn.errors import CacheError
 
 
@@ -73,6 +74,6 @@ def test_atomic_write_leaves_old_file_on_failure(tmp_path):
         raise RuntimeError("interrupted")
 
     with pytest.raises(RuntimeError):
-        cache.atomic_write_bytes(p, boom)
+        atomic_write_bytes(p, boom)
     assert p.read_bytes() == b"old"
     assert [x.name for x in tmp_path.iterdir()] == ["x.bin"]
