@@ -57,4 +57,5 @@ bench *args="":
     {{py}} bench/bench_core.py {{args}}
     {{py}} bench/bench_learn.py
     {{py}} bench/bench_fuse_online.py
+    {{py}} bench/bench_rosbag.py {{ if args =~ '--quick' { '--quick' } else { '' } }}
     {{py}} bench/bench_scale.py {{ if args =~ '--quick' { '--quick' } else { '' } }} ${BENCH_SCALE_ARGS:-}
