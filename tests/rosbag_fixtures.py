@@ -147,17 +147,18 @@ def fixture_messages(msgs: _Msgs, seconds: float = 0.0):
     return [(t + RECEIVE_DELAY_NS, topic, m) for t, topic, m in out]
 
 
-def write_fixture_bag(folder: Path, kind: str, seconds: float = 0.0, messages=None) -> Path:
+def write_fixture_bag(folder: Path, kind: str, seconds: float = 0.0, messages=None, name: str = "") -> Path:
     """A bag of ``kind`` (ros1, sqlite3, mcap) in ``folder`` holding :data:`TOPICS`; returns its path.
     ``messages``: a function of the message constructors returning (stamp, topic, msg) to write
-    instead of :func:`fixture_messages` (for the error cases)."""
+    instead of :func:`fixture_messages` (for the error cases). ``name``: the bag's file or folder
+    name (default :func:`bag_name`)."""
     from rosbags.typesys import Stores, get_typestore
 
     ros1 = kind == "ros1"
     ts = get_typestore(Stores.ROS1_NOETIC if ros1 else Stores.LATEST)
     msgs = _Msgs(ts, ros1)
     items = messages(msgs) if messages is not None else fixture_messages(msgs, seconds)
-    path = Path(folder) / bag_name(kind)
+    path = Path(folder) / (name or bag_name(kind))
     if ros1:
         from rosbags.rosbag1 import Writer as Writer1
 

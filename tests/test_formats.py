@@ -69,7 +69,16 @@ def make_broad(root: Path, n: int = 120) -> Path:
     return path
 
 
-MAKERS = {"asl": make_asl, "kaist": make_kaist, "blackbird": make_blackbird, "broad": make_broad}
+def make_rosbag(root: Path) -> Path:
+    """A ROS 1 bag ``<root>.bag`` of 2 s of the EuRoC crop (tests/rosbag_fixtures.py)."""
+    from rosbag_fixtures import write_fixture_bag
+
+    root.parent.mkdir(parents=True, exist_ok=True)
+    return write_fixture_bag(root.parent, "ros1", seconds=2.0, name=root.name + ".bag")
+
+
+MAKERS = {"asl": make_asl, "kaist": make_kaist, "blackbird": make_blackbird, "broad": make_broad,
+          "rosbag": make_rosbag}
 
 
 @pytest.mark.parametrize("name", sorted(MAKERS))
