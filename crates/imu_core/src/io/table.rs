@@ -15,7 +15,8 @@
 //!   the 9th fractional digit.
 //! - Timestamps must be strictly increasing (`Timestamp` with `Duplicate`/`NotIncreasing`).
 //! - Blank lines are allowed only at the end of the file.
-//! - When several rows are bad, the first one in file order is reported.
+//! - When several rows are bad, the first one in file order is reported, a stamp out of order
+//!   included (it is not left for a check after every row has parsed).
 //!
 //! Rows are parsed in parallel over line-aligned chunks of the buffer; each chunk reports its
 //! first problem with a chunk-local line number and the merge, walking chunks in order, keeps the
@@ -103,9 +104,13 @@ fn strip_cr(line: &[u8]) -> &[u8] {
 
 /// The first line of a file's bytes (BOM and line ending removed), lossily decoded.
 pub fn first_line(bytes: &[u8]) -> String {
-    let b = strip_bom(bytes);
-    let end = memchr::memchr(b'\n', b).unwrap_or(b.len());
-    String::from_utf8_lossy(strip_cr(&b[..end])).into_owned()
+    line_text(strip_bom(bytes))
+}
+
+/// The first line of `bytes` as they are (line ending removed), lossily decoded.
+fn line_text(bytes: &[u8]) -> String {
+    let end = memchr::memchr(b'\n', bytes).unwrap_or(bytes.len());
+    String::from_utf8_lossy(strip_cr(&bytes[..end])).into_owned()
 }
 
 /// `TooFewRows` unless `table` (parsed from `bytes`) holds at least `rows.needed` rows. Checked
@@ -180,7 +185,8 @@ pub fn parse_table(path: &Path, bytes: &[u8], spec: &TableSpec) -> Result<Table>
     let mut header = None;
     if spec.header_line {
         let end = memchr::memchr(b'\n', bytes).map_or(bytes.len(), |i| i + 1);
-        header = Some(first_line(bytes));
+        // `bytes` has lost its BOM already; a second one is part of the header's text.
+        header = Some(line_text(bytes));
         body_start = end;
         first_body_line = 1;
     }
@@ -218,16 +224,21 @@ pub fn parse_table(path: &Path, bytes: &[u8], spec: &TableSpec) -> Result<Table>
         let has_rows = !out.t.is_empty();
         if has_rows || out.error.is_some() {
             if let Some(p) = pending.take() {
+                // Every row so far is above the pending line: a stamp out of order among them
+                // comes first in the file.
+                check_increasing(&table)?;
                 return Err(to_error(path, &table.names, n_columns, p));
             }
         }
-        if let Some(mut e) = out.error {
-            e.line += offset;
-            return Err(to_error(path, &table.names, n_columns, e));
-        }
+        // A chunk's rows all come before its bad line, if it has one.
         table.t_ns.extend_from_slice(&out.t);
         table.values.extend_from_slice(&out.v);
         table.lines.extend(out.lines.iter().map(|l| l + offset + 1));
+        if let Some(mut e) = out.error {
+            check_increasing(&table)?;
+            e.line += offset;
+            return Err(to_error(path, &table.names, n_columns, e));
+        }
         if pending.is_none() {
             pending = out.pending.map(|mut p| {
                 p.line += offset;
