@@ -26,6 +26,10 @@ test:
     cargo test --quiet
     {{py}} -m pytest -q
 
+# Property tests of every imu_core reader with many cases (release); prints the cases each property ran
+fuzz cases="50000":
+    PROPTEST_CASES={{cases}} cargo test --release -p imu_core --test prop_readers -- --nocapture
+
 # Lint: rustfmt, clippy (no warnings), ruff
 lint:
     cargo fmt --all --check
