@@ -108,6 +108,19 @@ def write_imu(src: ImuSource, out: Path, gyro: np.ndarray, acc: np.ndarray) -> N
 # --------------------------------------------------------------------------------------------
 
 LEICA_FILE = Path("mav0") / "leica0" / "data.csv"
+IMU_SENSOR_YAML = Path("mav0") / "imu0" / "sensor.yaml"
+
+
+def imu_sensor_yaml(path: Path) -> Optional[Path]:
+    """The IMU's ``sensor.yaml`` of an ASL sequence folder (its noise densities), or None."""
+    yaml = Path(path) / IMU_SENSOR_YAML
+    return yaml if yaml.exists() else None
+
+
+def leica_file(path: Path) -> Optional[Path]:
+    """The Leica position CSV of an ASL sequence folder (EuRoC's machine hall), or None."""
+    csv = Path(path) / LEICA_FILE
+    return csv if csv.exists() else None
 
 
 def read_sensor_yaml(path: Path) -> dict:

@@ -107,7 +107,7 @@ def aiding_rng(seed: Optional[int], rname: str, scn: ScenarioSpec) -> np.random.
 def load_recording_for_fusion(cfg: FuseConfig, spec: RecordingSpec):
     """The recording's longest gap-free segment, its noise model, and its Leica fixes (or None)."""
     from imu_learn import AlignOptions, load_recording
-    from imu_learn.formats.asl import LEICA_FILE, read_leica
+    from imu_learn.formats.asl import imu_sensor_yaml, leica_file, read_leica
 
     root = cfg.root()
     path = root / spec.path
@@ -115,14 +115,15 @@ def load_recording_for_fusion(cfg: FuseConfig, spec: RecordingSpec):
     rec = load_recording(path, spec.format, groundtruth=gt, options=AlignOptions(max_gap_s=spec.max_gap_s),
                          imu_topic=spec.imu_topic or None, groundtruth_topic=spec.groundtruth_topic or None)
     seq = max(rec.segments, key=len)
-    yaml = path / "mav0" / "imu0" / "sensor.yaml"
+    yaml = imu_sensor_yaml(path)
     n = cfg.noise
-    if n.source == "sensor.yaml" and yaml.exists():
+    if n.source == "sensor.yaml" and yaml is not None:
         noise = ImuNoise.from_sensor_yaml(yaml)
     else:
         noise = ImuNoise(n.gyro_noise_density, n.acc_noise_density, n.gyro_random_walk, n.acc_random_walk,
                          source="config [noise]")
-    leica = (*read_leica(path), str(path / LEICA_FILE)) if (path / LEICA_FILE).exists() else None
+    leica_csv = leica_file(path)
+    leica = (*read_leica(leica_csv), str(leica_csv)) if leica_csv is not None else None
     if spec.aiding_topic:  # a bag's position / pose topic in the Leica's place
         leica = bag_position_source(path, spec.aiding_topic, spec.aiding_lever)
     return seq, noise, leica
