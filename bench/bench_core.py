@@ -31,6 +31,7 @@ REPO = HERE.parent
 sys.path.insert(0, str(HERE))
 
 import numpy_reference as nr  # noqa: E402
+from imu_learn.machine import cpu_name  # noqa: E402
 
 SEQUENCES = ("MH_01_easy", "V1_01_easy")
 WINDOW, STRIDE, BATCH = 200, 1, 256
@@ -69,16 +70,6 @@ def _version(pkg: str) -> str:
         return "not installed"
 
 
-def _cpu_model() -> str:
-    try:
-        for line in Path("/proc/cpuinfo").read_text().splitlines():
-            if line.startswith("model name"):
-                return line.split(":", 1)[1].strip()
-    except OSError:
-        pass
-    return platform.processor() or "unknown"
-
-
 def _numpy_blas() -> str:
     try:
         import threadpoolctl  # type: ignore[import-not-found]
@@ -102,7 +93,7 @@ def machine_lines(have_core: bool) -> List[str]:
     except AttributeError:
         affinity = os.cpu_count() or 0
     lines = [
-        f"- CPU: {_cpu_model()}; os.cpu_count() = {os.cpu_count()}, usable by this process = {affinity}",
+        f"- CPU: {cpu_name()}; os.cpu_count() = {os.cpu_count()}, usable by this process = {affinity}",
         f"- RAYON_NUM_THREADS = {os.environ.get('RAYON_NUM_THREADS', '(unset: one thread per usable core)')}",
         f"- Python {platform.python_version()} on {platform.system()} {platform.release()}",
         f"- numpy {np.__version__}; BLAS: {_numpy_blas()}",

@@ -25,18 +25,10 @@ from pathlib import Path
 import numpy as np
 import torch
 
+from imu_learn.machine import cpu_name
+
 REPO = Path(__file__).resolve().parent.parent
 CROP = REPO / "datasets" / "euroc" / "V1_01_easy"
-
-
-def cpu_name() -> str:
-    try:
-        for line in open("/proc/cpuinfo"):
-            if line.startswith("model name"):
-                return line.split(":", 1)[1].strip()
-    except OSError:
-        pass
-    return platform.processor() or platform.machine()
 
 
 def sync(device: torch.device) -> None:

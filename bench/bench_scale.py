@@ -57,6 +57,8 @@ HERE = Path(__file__).resolve().parent
 REPO = HERE.parent
 sys.path.insert(0, str(REPO / "tests"))  # tests/synthetic.py: stamps and the quaternion helpers
 
+from imu_learn.machine import cpu_name  # noqa: E402
+
 STAGES = ("parse", "align", "window_labels", "labels_cli", "refine", "fuse")
 DEFAULT_HOURS = "1/6,1,10"
 DEFAULT_FUSE_HOURS = "1/12,1/6,1/3,2/3"  # fusion grows faster than linearly: docs/scale.md
@@ -401,14 +403,7 @@ def format_table(rows: List[dict]) -> str:
 
 
 def machine() -> str:
-    cpu = platform.processor() or platform.machine()
-    try:
-        for line in open("/proc/cpuinfo"):
-            if line.startswith("model name"):
-                cpu = line.split(":", 1)[1].strip()
-                break
-    except OSError:
-        pass
+    cpu = cpu_name()
     mem = os.sysconf("SC_PAGE_SIZE") * os.sysconf("SC_PHYS_PAGES") / 2**30
     return f"{cpu}, {os.cpu_count()} cores, {mem:.0f} GiB RAM, Python {platform.python_version()}"
 

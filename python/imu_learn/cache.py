@@ -38,6 +38,7 @@ from typing import Any, Callable, Dict, Iterator, List, Optional, Tuple, TypeVar
 import numpy as np
 
 from imu_learn.atomic import atomic_write_bytes
+from imu_learn.digest import file_sha256
 from imu_learn.errors import CacheError
 from imu_learn.types import Sequence
 
@@ -61,14 +62,6 @@ def fingerprint(paths: List[Path], settings: Dict[str, Any]) -> str:
         st = p.stat()
         h.update(f"{p.resolve()}|{st.st_size}|{st.st_mtime_ns}".encode())
     return h.hexdigest()[:32]
-
-
-def file_sha256(path: Path) -> str:
-    h = hashlib.sha256()
-    with open(path, "rb") as f:
-        for chunk in iter(lambda: f.read(1 << 20), b""):
-            h.update(chunk)
-    return h.hexdigest()
 
 
 def rebuild_hint(folder: Path, manifest: Optional[Dict[str, Any]] = None) -> str:

@@ -21,7 +21,6 @@ Python through ``ImuRefiner.step`` / ``forward_with_state``.
 from __future__ import annotations
 
 import argparse
-import hashlib
 import json
 import sys
 import warnings
@@ -32,19 +31,12 @@ import numpy as np
 import torch
 
 from imu_learn.atomic import atomic_write_path, atomic_write_text
+from imu_learn.digest import file_sha256
 from imu_learn.model import ImuRefiner
 
 CHANNELS = ["gyro_x", "gyro_y", "gyro_z", "acc_x", "acc_y", "acc_z"]
 UNITS = ["rad/s"] * 3 + ["m/s^2"] * 3
 CARD_FORMAT = "imu_learn.export.v1"
-
-
-def _sha256(path: Path) -> str:
-    h = hashlib.sha256()
-    with open(path, "rb") as f:
-        for chunk in iter(lambda: f.read(1 << 20), b""):
-            h.update(chunk)
-    return h.hexdigest()
 
 
 class WithVariance(torch.nn.Module):
@@ -215,12 +207,12 @@ def export(checkpoint: Path, out: Path, window: int = 200, opset: int = 17, seed
         "onnx_opset": int(opset),
         "checks": checks,
         "source_checkpoint": {
-            "path": str(Path(checkpoint)), "sha256": _sha256(Path(checkpoint)),
+            "path": str(Path(checkpoint)), "sha256": file_sha256(Path(checkpoint)),
             "epoch": state.get("epoch"), "step": state.get("step"), "best_metric": state.get("best_metric"),
             "code_version": state.get("code_version"),
         },
         "torch_version": torch.__version__,
-        "sha256": {"model.ts": _sha256(ts_path), "model.onnx": _sha256(onnx_path)},
+        "sha256": {"model.ts": file_sha256(ts_path), "model.onnx": file_sha256(onnx_path)},
     }
     atomic_write_text(out / "model.json", json.dumps(card, indent=2) + "\n")
     return card
