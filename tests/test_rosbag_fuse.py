@@ -1,7 +1,8 @@
 """imu_learn.fuse on a ROS bag: real position fixes from a bag topic, and the fused trajectory
-written as a nav_msgs/msg/Odometry bag topic beside the TUM file."""
+written as a nav_msgs/msg/Odometry topic, in a bag of the recording's own kind, beside the TUM file."""
 import numpy as np
 import pytest
+from rosbags.highlevel import AnyReader
 
 from imu_learn import _imu_core as core
 from imu_learn.errors import BagTopicError
@@ -9,7 +10,7 @@ from imu_learn.formats import rosbag
 from imu_learn.fuse.aiding import bag_position_source, leica_fixes
 from imu_learn.fuse.config import FuseConfig, RecordingSpec, ScenarioSpec, validate
 from imu_learn.fuse.run import run_experiment
-from rosbag_fixtures import GT_CSV, write_fixture_bag
+from rosbag_fixtures import GT_CSV, KINDS, bag_name, write_fixture_bag
 
 
 @pytest.fixture(scope="module")
@@ -30,18 +31,67 @@ def test_bag_topic_gives_the_fixes_of_its_positions(bag):
         bag_position_source(bag, "/leica/pos")
 
 
-def test_fuse_a_bag_with_its_position_topic_writes_odometry(bag, tmp_path):
+def read_odometry(bag):
+    """(kind, stamps, header stamps, positions, quaternions wxyz, topics) of an Odometry bag, read with
+    rosbags itself (not through imu_learn's reader)."""
+    with AnyReader([bag]) as reader:
+        topics = {c.topic: c.msgtype for c in reader.connections}
+        t, th, p, q = [], [], [], []
+        for conn, stamp, raw in reader.messages():
+            msg = reader.deserialize(raw, conn.msgtype)
+            pose = msg.pose.pose
+            t.append(stamp)
+            th.append(msg.header.stamp.sec * 1_000_000_000 + msg.header.stamp.nanosec)
+            p.append((pose.position.x, pose.position.y, pose.position.z))
+            q.append((pose.orientation.w, pose.orientation.x, pose.orientation.y, pose.orientation.z))
+    return rosbag.bag_kind(bag), np.array(t), np.array(th), np.array(p), np.array(q), topics
+
+
+@pytest.mark.parametrize("kind", KINDS)
+def test_fuse_a_bag_with_its_position_topic_writes_odometry_in_its_kind(tmp_path, kind):
+    bag = write_fixture_bag(tmp_path, kind)
     spec = RecordingSpec(str(bag), "rosbag", str(GT_CSV), imu_topic="/imu0", aiding_topic="/leica/position")
     cfg = validate(FuseConfig(name="t", data_root=str(tmp_path), inputs=["raw"], recordings=[spec],
                               scenarios=[ScenarioSpec("leica", "leica", 1.0, 0.05)]))
     res = run_experiment(cfg, tmp_path / "out", lambda m: None)
-    assert set(res) == {"run_mcap|leica|raw"}
+    stem = f"{bag_name(kind)}_leica_raw"
+    assert set(res) == {f"{bag_name(kind)}|leica|raw"}
     (r,) = res.values()
     assert r["aiding_count"] > 0 and r["smoothed"]["pos_rmse_m"] < 0.5
-    for kind in ("causal", "smoothed"):
-        tum = tmp_path / "out" / "trajectories" / f"run_mcap_leica_raw_{kind}.tum"
-        odom = tum.with_suffix(".bag")
-        d = core.read_tum(str(tum))
-        t, p = rosbag.read_positions(odom, "/imu_learn/odometry")
-        assert np.array_equal(t, d["t_ns"]) and np.allclose(p, d["p"], atol=1e-6, rtol=0)
-        assert rosbag.list_topics(odom) == {"/imu_learn/odometry": "nav_msgs/msg/Odometry"}
+    traj = tmp_path / "out" / "trajectories"
+    for part in ("causal", "smoothed"):
+        d = core.read_tum(str(traj / f"{stem}_{part}.tum"))
+        odom = traj / (f"{stem}_{part}.bag" if kind == "ros1" else f"{stem}_{part}")
+        got_kind, t, t_header, p, q, topics = read_odometry(odom)
+        assert got_kind == kind and topics == {"/imu_learn/odometry": "nav_msgs/msg/Odometry"}
+        assert np.array_equal(t, d["t_ns"]) and np.array_equal(t_header, d["t_ns"])
+        assert np.array_equal(p, d["p"]) and np.array_equal(q, d["q_wxyz"])  # the same floats as the TUM file
+    if kind != "ros1":
+        assert rosbag._ros2_metadata(odom)["storage_identifier"] == kind
+    assert not [f for f in traj.iterdir() if f.name.startswith(".")]  # no temporary left
+
+
+@pytest.mark.parametrize("kind", KINDS)
+def test_odometry_bag_is_replaced_on_a_rerun(tmp_path, kind):
+    """A second write replaces the first (ROS 2: the folder is swapped, never merged); a write that
+    fails leaves the previous bag as it was."""
+    like = write_fixture_bag(tmp_path, kind, seconds=1.0)
+    out = rosbag.output_bag_path(tmp_path / "traj", like)
+    t = np.array([1, 2, 3]) * 1_000_000_000
+    q = np.tile([1.0, 0.0, 0.0, 0.0], (3, 1))
+    rosbag.write_odometry(out, "/odom", t, np.zeros((3, 3)), q, like=like)
+    rosbag.write_odometry(out, "/odom", t[:2], np.ones((2, 3)), q[:2], like=like)
+    _, _, _, p, _, _ = read_odometry(out)
+    assert np.array_equal(p, np.ones((2, 3)))
+    with pytest.raises(ZeroDivisionError):
+        rosbag.write_odometry(out, "/odom", t, np.full((3, 3), 2.0), q, like=like, frame_id=_Explodes())
+    _, _, _, p, _, _ = read_odometry(out)
+    assert np.array_equal(p, np.ones((2, 3)))
+    assert not [f for f in tmp_path.iterdir() if f.name.startswith(".")]  # nothing left aside
+
+
+class _Explodes(str):
+    """A frame id whose serialization fails part-way through writing the bag."""
+
+    def encode(self, *args, **kwargs):
+        raise ZeroDivisionError("injected")

@@ -10,12 +10,15 @@ with ``rosbags`` (pure Python, no ROS install).
 - ``write_imu``: a new bag of the input's kind (ROS 1 stays ROS 1; ROS 2 keeps its storage plugin
   and compression) in which only the IMU topic's angular_velocity and linear_acceleration change;
   every other message is copied as raw bytes with its connection and stamp.
+- ``write_odometry``: a trajectory as ``nav_msgs/msg/Odometry`` in a bag of a given bag's kind
+  (:mod:`imu_learn.fuse`'s output for a bag recording).
 
 The arrays read here go to the same Rust alignment path (``imu_learn.loading.align``) as those of
 the other binary containers (Blackbird's HDF5, BROAD's MAT).
 """
 from __future__ import annotations
 
+import os
 import sys
 from contextlib import contextmanager
 from pathlib import Path
@@ -495,37 +498,120 @@ def _copy_messages(reader, writer, conns: dict, rewrite, ros1: bool) -> None:
 ODOMETRY_TYPE = "nav_msgs/msg/Odometry"
 
 
-def write_odometry(out: Path, topic: str, t_ns: np.ndarray, p: np.ndarray, q_wxyz: np.ndarray,
+def bag_kind(path: Path) -> str:
+    """``"ros1"``, or a ROS 2 bag's storage plugin (``"sqlite3"``, ``"mcap"``)."""
+    bag = bag_path(path)
+    if is_ros1(bag):
+        return "ros1"
+    return str(_ros2_metadata(bag).get("storage_identifier", "sqlite3")).lower()
+
+
+def output_bag_path(base: Path, like: Path) -> Path:
+    """Where a bag of ``like``'s kind named ``base`` goes: ``base.bag`` (a ROS 1 file) or the
+    folder ``base`` (ROS 2). The suffix is appended, not swapped: a stem may hold dots."""
+    base = Path(base)
+    return base.with_name(base.name + ".bag") if is_ros1(bag_path(like)) else base
+
+
+def write_odometry(out: Path, topic: str, t_ns: np.ndarray, p: np.ndarray, q_wxyz: np.ndarray, like: Path,
                    frame_id: str = "world", child_frame_id: str = "imu") -> None:
-    """``out``: a ROS 1 bag (one file, so it is replaced atomically on a rerun) with one
-    ``nav_msgs/msg/Odometry`` message per pose on ``topic``, stamped (header and bag) at ``t_ns``;
-    twist and covariances are zero (not estimated here). ``rosbags-convert`` turns it into ROS 2."""
+    """``out``: a bag of ``like``'s kind (ROS 1, or ROS 2 with its storage plugin and metadata
+    version) with one ``nav_msgs/msg/Odometry`` message per pose on ``topic``, stamped (header and
+    bag) at ``t_ns``; twist and covariances are zero (not estimated here). Written atomically; a
+    previous ``out`` is replaced (see :func:`_replace_bag_dir` for a ROS 2 folder)."""
+    t_ns, p, q_wxyz = _trajectory_arrays(t_ns, p, q_wxyz)
+    like = bag_path(like)
+    if is_ros1(like):
+        def fill(tmp: Path) -> None:
+            tmp.unlink()  # rosbags creates the file itself and refuses an existing one
+            _write_odometry_ros1(tmp, topic, t_ns, p, q_wxyz, frame_id, child_frame_id)
+
+        atomic_write_path(Path(out), fill)
+    else:
+        meta = _ros2_metadata(like)
+        _replace_bag_dir(Path(out), lambda tmp: _write_odometry_ros2(
+            tmp, meta, topic, t_ns, p, q_wxyz, frame_id, child_frame_id))
+
+
+def _trajectory_arrays(t_ns, p, q_wxyz) -> Tuple[np.ndarray, np.ndarray, np.ndarray]:
+    t_ns = np.asarray(t_ns, np.int64)
+    p, q_wxyz = np.asarray(p, np.float64), np.asarray(q_wxyz, np.float64)
+    if t_ns.ndim != 1 or p.shape != (len(t_ns), 3) or q_wxyz.shape != (len(t_ns), 4):
+        raise InvalidInputError(f"a trajectory needs t_ns (N,), p (N, 3), q_wxyz (N, 4); got {t_ns.shape}, "
+                                f"{p.shape}, {q_wxyz.shape}")
+    return t_ns, p, q_wxyz
+
+
+def _odometry(T, header, pos, q, child_frame_id: str):
+    """One Odometry message of the typestore types ``T`` (pose only; twist and covariances zero)."""
+    zero3 = T["geometry_msgs/msg/Vector3"](x=0.0, y=0.0, z=0.0)
+    twist = T["geometry_msgs/msg/TwistWithCovariance"](
+        twist=T["geometry_msgs/msg/Twist"](linear=zero3, angular=zero3), covariance=np.zeros(36))
+    pose = T["geometry_msgs/msg/Pose"](
+        position=T["geometry_msgs/msg/Point"](x=pos[0], y=pos[1], z=pos[2]),
+        orientation=T["geometry_msgs/msg/Quaternion"](x=q[1], y=q[2], z=q[3], w=q[0]),
+    )
+    return T[ODOMETRY_TYPE](header=header, child_frame_id=child_frame_id,
+                            pose=T["geometry_msgs/msg/PoseWithCovariance"](pose=pose, covariance=np.zeros(36)),
+                            twist=twist)
+
+
+def _odometry_messages(ts, ros1: bool, t_ns, p, q_wxyz, frame_id: str, child_frame_id: str
+                       ) -> Iterator[Tuple[int, bytes]]:
+    """(stamp, serialized Odometry) per pose; ROS 1 headers carry ``seq``, ROS 2 ones do not."""
+    T = ts.types
+    for i, (t, pos, q) in enumerate(zip(t_ns.tolist(), p.tolist(), q_wxyz.tolist())):
+        stamp = T["builtin_interfaces/msg/Time"](sec=t // 1_000_000_000, nanosec=t % 1_000_000_000)
+        header = T["std_msgs/msg/Header"](stamp=stamp, frame_id=frame_id, **({"seq": i} if ros1 else {}))
+        msg = _odometry(T, header, pos, q, child_frame_id)
+        raw = ts.serialize_ros1(msg, ODOMETRY_TYPE) if ros1 else ts.serialize_cdr(msg, ODOMETRY_TYPE)
+        yield t, bytes(raw)
+
+
+def _write_odometry_ros1(path: Path, topic: str, t_ns, p, q_wxyz, frame_id: str, child_frame_id: str) -> None:
     from rosbags.rosbag1 import Writer
     from rosbags.typesys import Stores, get_typestore
 
     ts = get_typestore(Stores.ROS1_NOETIC)
-    T = ts.types
-    zero36, zero3 = np.zeros(36), T["geometry_msgs/msg/Vector3"](x=0.0, y=0.0, z=0.0)
-    twist = T["geometry_msgs/msg/TwistWithCovariance"](twist=T["geometry_msgs/msg/Twist"](linear=zero3, angular=zero3),
-                                                       covariance=zero36)
+    with Writer(path) as writer:
+        conn = writer.add_connection(topic, ODOMETRY_TYPE, typestore=ts)
+        for t, raw in _odometry_messages(ts, True, t_ns, p, q_wxyz, frame_id, child_frame_id):
+            writer.write(conn, t, raw)
 
-    def message(i: int, t: int, pos, q) -> bytes:
-        header = T["std_msgs/msg/Header"](seq=i, stamp=T["builtin_interfaces/msg/Time"](sec=t // 1_000_000_000,
-                                          nanosec=t % 1_000_000_000), frame_id=frame_id)
-        pose = T["geometry_msgs/msg/Pose"](
-            position=T["geometry_msgs/msg/Point"](x=pos[0], y=pos[1], z=pos[2]),
-            orientation=T["geometry_msgs/msg/Quaternion"](x=q[1], y=q[2], z=q[3], w=q[0]),
-        )
-        msg = T[ODOMETRY_TYPE](header=header, child_frame_id=child_frame_id,
-                               pose=T["geometry_msgs/msg/PoseWithCovariance"](pose=pose, covariance=zero36), twist=twist)
-        return bytes(ts.serialize_ros1(msg, ODOMETRY_TYPE))
 
-    def fill(tmp: Path) -> None:
-        tmp.unlink()  # rosbags creates the file itself and refuses an existing one
-        with Writer(tmp) as writer:
-            conn = writer.add_connection(topic, ODOMETRY_TYPE, typestore=ts)
-            for i, (t, pos, q) in enumerate(zip(np.asarray(t_ns, np.int64).tolist(), np.asarray(p, float).tolist(),
-                                                np.asarray(q_wxyz, float).tolist())):
-                writer.write(conn, t, message(i, t, pos, q))
+def _write_odometry_ros2(path: Path, meta: dict, topic: str, t_ns, p, q_wxyz, frame_id: str,
+                         child_frame_id: str) -> None:
+    from rosbags.rosbag2 import Writer
+    from rosbags.rosbag2.enums import StoragePlugin
+    from rosbags.typesys import Stores, get_typestore
 
-    atomic_write_path(Path(out), fill)
+    ts = get_typestore(Stores.LATEST)
+    plugin = StoragePlugin[str(meta.get("storage_identifier", "sqlite3")).upper()]
+    version = 8 if int(meta.get("version", 9)) <= 8 else 9  # the versions rosbags writes, as in _copy_ros2
+    with Writer(path, version=version, storage_plugin=plugin) as writer:
+        conn = writer.add_connection(topic, ODOMETRY_TYPE, typestore=ts)
+        for t, raw in _odometry_messages(ts, False, t_ns, p, q_wxyz, frame_id, child_frame_id):
+            writer.write(conn, t, raw)
+
+
+def _replace_bag_dir(out: Path, fill: Callable[[Path], None]) -> None:
+    """:func:`imu_learn.atomic.atomic_write_dir`, replacing a previous ``out`` (a rerun of the same
+    fusion): the old folder is renamed aside first, removed once the new one is in place, and put
+    back if writing fails. A reader sees the old bag, the new bag or (between two renames) none,
+    never a partial one; a folder cannot be swapped for another in one step."""
+    import shutil
+    import tempfile
+
+    if not (out.exists() or out.is_symlink()):
+        atomic_write_dir(out, fill)
+        return
+    holder = Path(tempfile.mkdtemp(prefix=f".{out.name}.", suffix=".old", dir=out.parent))
+    aside = holder / out.name
+    os.rename(out, aside)
+    try:
+        atomic_write_dir(out, fill)
+    except BaseException:
+        os.rename(aside, out)
+        os.rmdir(holder)
+        raise
+    shutil.rmtree(holder)

@@ -201,19 +201,25 @@ def write_trajectory(path: Path, t_ns: np.ndarray, p: np.ndarray, R: np.ndarray)
     atomic_write_path(path, lambda tmp: core.write_tum(str(tmp), t_ns, p, q_wxyz))
 
 
-def write_trajectory_bag(path: Path, t_ns: np.ndarray, p: np.ndarray, R: np.ndarray,
-                         topic: str = "/imu_learn/odometry") -> None:
-    """The trajectory as ``nav_msgs/msg/Odometry`` on ``topic`` in a ROS 1 bag (poses only)."""
-    from imu_learn.formats.rosbag import write_odometry
+def write_trajectory_bag(base: Path, t_ns: np.ndarray, p: np.ndarray, R: np.ndarray, like: Path,
+                         topic: str = "/imu_learn/odometry") -> Path:
+    """The trajectory as ``nav_msgs/msg/Odometry`` on ``topic`` (poses only) in a bag of the
+    recording ``like``'s kind: ``base.bag`` for ROS 1, the folder ``base`` for ROS 2 (same storage
+    plugin). Returns the bag written."""
+    from imu_learn.formats.rosbag import output_bag_path, write_odometry
 
+    path = output_bag_path(base, like)
     path.parent.mkdir(parents=True, exist_ok=True)
-    write_odometry(path, topic, t_ns, p, xyzw_to_wxyz(Rotation.from_matrix(R).as_quat()))
+    write_odometry(path, topic, t_ns, p, xyzw_to_wxyz(Rotation.from_matrix(R).as_quat()), like=like)
+    return path
 
 
-def is_bag(cfg: FuseConfig, spec: RecordingSpec) -> bool:
+def bag_of(cfg: FuseConfig, spec: RecordingSpec) -> Optional[Path]:
+    """The recording's bag (its trajectories are written as bags of the same kind), or None."""
     from imu_learn.formats import rosbag
 
-    return spec.format == rosbag.NAME or (spec.format == "auto" and rosbag.detect(cfg.root() / spec.path))
+    path = cfg.root() / spec.path
+    return path if spec.format == rosbag.NAME or (spec.format == "auto" and rosbag.detect(path)) else None
 
 
 def run_experiment(cfg: FuseConfig, out: Path, log: Callable[[str], None] = print,
@@ -262,7 +268,7 @@ def run_experiment(cfg: FuseConfig, out: Path, log: Callable[[str], None] = prin
                     gyro, acc, var = inputs[name]
                     r = run_one(cfg, out, seq, noise, R0, scn, aiding, key, gyro, acc, var,
                                 displacement=processors.get((name, artefact_of(cfg, spec, name)))
-                                if name in FACTOR_INPUTS else None, bag_output=is_bag(cfg, spec))
+                                if name in FACTOR_INPUTS else None, bag=bag_of(cfg, spec))
                     r = results[key] = r | {"seed": seed, "hash": wanted[key]}
                     save_results(res_path, cfg, results)
                     log(f"[{done}/{total}] {key}: " + (f"failed: {r['failed'][:120]}" if "failed" in r else
@@ -293,9 +299,11 @@ def read_runs(path: Path, log: Callable[[str], None]) -> Dict[str, dict]:
 
 def run_one(cfg: FuseConfig, out: Path, seq, noise: ImuNoise, R0: np.ndarray, scn: ScenarioSpec, aiding, key: str,
             gyro: np.ndarray, acc: np.ndarray, var: Optional[np.ndarray] = None, displacement=None,
-            bag_output: bool = False) -> dict:
+            bag: Optional[Path] = None) -> dict:
     """Fuse one input with one aiding; its scores (or ``failed``) and its trajectories on disk.
-    ``displacement``: a fitted tlio-style model whose displacements join the graph as factors."""
+    ``displacement``: a fitted tlio-style model whose displacements join the graph as factors;
+    ``bag``: the recording's bag, when it is one (the trajectories are then written as its kind of
+    bag too)."""
     rname, _, name = key.split("|")[:3]
     head = {"recording": rname, "scenario": scn.name, "input": name, "aiding": aiding.label,
             "aiding_count": len(aiding), "aiding_gaps": aiding_gaps(aiding, seq.t_ns),
@@ -319,8 +327,8 @@ def run_one(cfg: FuseConfig, out: Path, seq, noise: ImuNoise, R0: np.ndarray, sc
     stem = key.replace("|", "_")
     for kind, p, R in (("causal", res.causal_p, res.causal_R), ("smoothed", res.smoothed_p, res.smoothed_R)):
         write_trajectory(out / "trajectories" / f"{stem}_{kind}.tum", seq.t_ns[res.kf_idx], p, R)
-        if bag_output:  # a bag recording also gets its trajectory as a bag topic
-            write_trajectory_bag(out / "trajectories" / f"{stem}_{kind}.bag", seq.t_ns[res.kf_idx], p, R)
+        if bag is not None:  # a bag recording also gets its trajectory as a bag topic
+            write_trajectory_bag(out / "trajectories" / f"{stem}_{kind}", seq.t_ns[res.kf_idx], p, R, like=bag)
     s = score(res, seq.t_ns, seq.p, seq.q_wxyz, scn.outage_windows())
     return {**head, "seconds": round(res.seconds, 2), **s}
 
