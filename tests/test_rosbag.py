@@ -22,12 +22,13 @@ from imu_learn.formats.groundtruth import read_groundtruth
 from imu_learn.loading import AlignOptions, align, load_sequence
 from imu_learn.model import ImuRefiner, ModelConfig
 from imu_learn.refine import main as refine_main
-from imu_learn.refine import refine_recording
+from imu_learn.refine import refine_recording, refine_with_variance
 from imu_learn.types import GroundTruth, ImuData
 from rosbag_fixtures import GT_CSV, IMU_CSV, KINDS, POSE_TOPICS, TOPICS, bag_name, write_fixture_bag
 
 torch.set_num_threads(1)
 CROP = IMU_CSV.parents[2]
+COV_CHECKPOINT = Path(__file__).resolve().parent.parent / "models" / "euroc_adis16448_cov.pt"
 SEQ_FIELDS = ("t_ns", "gyro", "acc", "p", "v", "q_wxyz")
 
 
@@ -233,6 +234,88 @@ def test_existing_ros2_output_folder_is_refused(bags, tmp_path):
         write_imu(src, out, src.gyro, src.acc)
     assert [p.name for p in out.iterdir()] == ["keep.txt"]
     assert not [p for p in tmp_path.iterdir() if p.name.startswith(".")]  # no temporary folder left
+
+
+# --------------------------------------------------------------------------------------------
+# --fill-covariance: the learned per-sample variances in the IMU covariance fields
+# --------------------------------------------------------------------------------------------
+
+
+@pytest.fixture(scope="module")
+def cov_refined(bags, tmp_path_factory):
+    """Each bag refined by the shipped covariance model with --fill-covariance, and what
+    refine_with_variance gives for the recording (gyro, acc, variances)."""
+    from imu_learn.checkpoint import load_model
+
+    out = tmp_path_factory.mktemp("cov_refined")
+    for kind in KINDS:
+        rc = refine_main(["--checkpoint", str(COV_CHECKPOINT), "--input", str(bags[kind]),
+                          "--output", str(out / bag_name(kind)), "--fill-covariance", "--device", "cpu", "--quiet"])
+        assert rc == 0
+    raw = read_imu_source(bags["ros1"])
+    expected = refine_with_variance(load_model(COV_CHECKPOINT), raw.gyro, raw.acc)
+    return {kind: out / bag_name(kind) for kind in KINDS}, expected
+
+
+@pytest.mark.parametrize("kind", KINDS)
+def test_fill_covariance_writes_the_predicted_variances(bags, cov_refined, kind):
+    outs, (gyro, acc, var) = cov_refined
+    old, new = decoded(bags[kind], "/imu0"), decoded(outs[kind], "/imu0")
+    assert len(old) == len(new) == len(var)
+    gyro_cov = np.array([m.angular_velocity_covariance for m in new])
+    acc_cov = np.array([m.linear_acceleration_covariance for m in new])
+    assert gyro_cov.dtype == acc_cov.dtype == np.float64
+    # row-major 3x3 diagonals of the variances, float64 exact; off-diagonals exactly 0
+    assert np.array_equal(gyro_cov.reshape(-1, 3, 3), np.stack([np.diag(v) for v in var[:, :3]]))
+    assert np.array_equal(acc_cov.reshape(-1, 3, 3), np.stack([np.diag(v) for v in var[:, 3:]]))
+    assert np.unique(var[:, 0]).size > 1  # per-sample values, not one level
+    got = read_imu_source(outs[kind])
+    assert np.array_equal(got.gyro, gyro) and np.array_equal(got.acc, acc)
+    for m0, m1 in zip(old, new):
+        assert repr(m1.header) == repr(m0.header) and repr(m1.orientation) == repr(m0.orientation)
+        assert np.array_equal(m1.orientation_covariance, m0.orientation_covariance)
+
+
+@pytest.mark.parametrize("kind", KINDS)
+def test_fill_covariance_changes_nothing_else(bags, cov_refined, kind):
+    outs, _ = cov_refined
+    before, conns_before = messages_by_topic(bags[kind])
+    after, conns_after = messages_by_topic(outs[kind])
+    assert conns_after == conns_before and sorted(after) == sorted(before)
+    for topic in before:
+        if topic != "/imu0":
+            assert after[topic] == before[topic], topic
+    assert [s for s, _ in after["/imu0"]] == [s for s, _ in before["/imu0"]]
+    # From the end of an Imu message: linear_acceleration_covariance [-72, 0), linear_acceleration
+    # [-96, -72), angular_velocity_covariance [-168, -96), angular_velocity [-192, -168); the header,
+    # orientation and orientation_covariance before them may not change.
+    may_change = set(range(1, 193))
+    for (_, b0), (_, b1) in zip(before["/imu0"], after["/imu0"]):
+        assert len(b0) == len(b1)
+        diff = np.flatnonzero(np.frombuffer(b0, np.uint8) != np.frombuffer(b1, np.uint8))
+        assert set((len(b0) - diff).tolist()) <= may_change
+
+
+def test_fill_covariance_needs_a_covariance_head(bags, tmp_path, capsys):
+    from imu_learn.checkpoint import save_checkpoint
+
+    ckpt = tmp_path / "no_head.pt"
+    save_checkpoint(ckpt, random_model(), {"test": True}, epoch=1, step=1, best_metric=None)
+    rc = refine_main(["--checkpoint", str(ckpt), "--input", str(bags["ros1"]), "--output", str(tmp_path / "o.bag"),
+                      "--fill-covariance", "--device", "cpu", "--quiet"])
+    err = capsys.readouterr().err.strip().splitlines()
+    assert rc == 2 and len(err) == 1
+    assert str(ckpt) in err[0] and "no covariance head" in err[0] and "--fill-covariance" in err[0]
+    assert not (tmp_path / "o.bag").exists()
+
+
+def test_fill_covariance_needs_a_bag(tmp_path, capsys):
+    rc = refine_main(["--checkpoint", str(COV_CHECKPOINT), "--input", str(CROP), "--output", str(tmp_path / "o"),
+                      "--fill-covariance", "--device", "cpu", "--quiet"])
+    err = capsys.readouterr().err.strip().splitlines()
+    assert rc == 2 and len(err) == 1
+    assert str(CROP) in err[0] and "not a bag" in err[0] and "--fill-covariance" in err[0]
+    assert not (tmp_path / "o").exists()
 
 
 # --------------------------------------------------------------------------------------------

@@ -2,7 +2,8 @@
 
     python -m imu_learn.refine --checkpoint CKPT --input IN --output OUT
         [--format auto|asl|euroc|tum-vi|blackbird|broad|kaist|rosbag] [--imu-topic TOPIC]
-        [--window 1000 --overlap 200] [--device auto|cpu|cuda] [--batch 16] [--copy-folder] [--quiet]
+        [--window 1000 --overlap 200] [--device auto|cpu|cuda] [--batch 16] [--copy-folder]
+        [--fill-covariance] [--quiet]
 
 Only the IMU is read (no ground truth needed); timestamps and everything but gyro/acc are kept:
 
@@ -23,6 +24,10 @@ Only the IMU is read (no ground truth needed); timestamps and everything but gyr
   linear_acceleration change; every other message, connection and stamp, and the IMU messages'
   headers and covariance fields, are copied unchanged. A ROS 2 OUT folder that exists is refused
   (a folder cannot be replaced in one step); ``--copy-folder`` does not apply.
+  ``--fill-covariance`` (a checkpoint with a covariance head) also writes each IMU message's
+  angular_velocity_covariance and linear_acceleration_covariance: the diagonal 3x3 (row-major,
+  off-diagonals 0) of that sample's predicted discrete-time variances, (rad/s)^2 and (m/s^2)^2
+  (:func:`refine_with_variance`); orientation_covariance is kept.
 
 Each layout's module in :mod:`imu_learn.formats` reads and writes it; every file is written to a
 temporary file beside its target and renamed into place (:mod:`imu_learn.atomic`). The input is
@@ -258,11 +263,16 @@ def refine_recording(
     batch: int = 16,
     progress: bool = False,
     imu_topic: Optional[str] = None,
+    fill_covariance: bool = False,
 ) -> Path:
     """Refine one recording; returns the file (or ROS 2 bag folder) written. ``imu_topic``: the
-    IMU topic of a ROS bag."""
+    IMU topic of a ROS bag; ``fill_covariance``: a bag's IMU covariance fields get the model's
+    per-sample variances (the model needs a covariance head)."""
     input, output = Path(input), Path(output)
     src = formats.read_imu_source(input, fmt, imu_topic)
+    if fill_covariance and src.fmt != formats.rosbag.NAME:
+        raise InvalidInputError(f"--fill-covariance writes the covariance fields of a ROS bag's IMU messages; "
+                                f"{input} is {src.fmt}, not a bag")
     if copy_folder and src.fmt == formats.rosbag.NAME:
         raise InvalidInputError("--copy-folder does not apply to ROS bags: the output bag holds every topic already")
     if copy_folder:
@@ -275,6 +285,10 @@ def refine_recording(
     target = output_file(src, output)
     if _same(target, src.imu_file) or _same(output, input):
         raise InvalidInputError(f"refusing to overwrite the input: OUT {output} is the input {input}")
+    if fill_covariance:
+        gyro, acc, var = refine_with_variance(model, src.gyro, src.acc, window, overlap, batch, progress)
+        formats.rosbag.write_imu(src, target, gyro, acc, variances=var)
+        return target
     gyro, acc = refine_arrays(model, src.gyro, src.acc, window, overlap, batch, progress)
     if copy_folder:
         shutil.copytree(src.root, output, dirs_exist_ok=True)
@@ -293,6 +307,14 @@ def pick_device(name: str) -> torch.device:
     return torch.device(name)
 
 
+def require_covariance_head(model: ImuRefiner, checkpoint: Path) -> None:
+    """Before any input is read: ``--fill-covariance`` needs variances, which only a model with a
+    covariance head predicts."""
+    if getattr(model, "cov_head", None) is None:
+        raise InvalidInputError(f"{checkpoint}: no covariance head (trained with model.covariance = false); "
+                                f"--fill-covariance needs one, e.g. models/euroc_adis16448_cov.pt")
+
+
 def _parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(
         prog="python -m imu_learn.refine",
@@ -308,6 +330,9 @@ def _parser() -> argparse.ArgumentParser:
     p.add_argument("--batch", type=int, default=16, help="windows run at once (default 16)")
     p.add_argument("--device", default="auto", help="auto (cuda if available), cpu, cuda, cuda:1 ...")
     p.add_argument("--copy-folder", action="store_true", help="copy the whole input folder to OUT first")
+    p.add_argument("--fill-covariance", action="store_true",
+                   help="ROS bags, a checkpoint with a covariance head: write each IMU message's angular_velocity / "
+                        "linear_acceleration covariance as the diagonal of its predicted per-sample variances")
     p.add_argument("--quiet", action="store_true", help="no progress bar, no summary")
     return p
 
@@ -319,9 +344,11 @@ def main(argv: Optional[List[str]] = None) -> int:
 
         device = pick_device(args.device)
         model = load_model(args.checkpoint).to(device)
+        if args.fill_covariance:
+            require_covariance_head(model, args.checkpoint)
         target = refine_recording(
             model, args.input, args.output, args.format, args.window, args.overlap, args.copy_folder,
-            args.batch, progress=not args.quiet, imu_topic=args.imu_topic,
+            args.batch, progress=not args.quiet, imu_topic=args.imu_topic, fill_covariance=args.fill_covariance,
         )
     except Exception as e:  # every failure is one line and status 2
         msg = " ".join(str(e).split()) or type(e).__name__
@@ -329,7 +356,8 @@ def main(argv: Optional[List[str]] = None) -> int:
         return 2
     if not args.quiet:
         kind = "causal" if model.cfg.causal else f"window {args.window}, overlap {args.overlap}"
-        print(f"refined IMU ({kind}, {device}) written to {target}")
+        cov = "; covariance fields: learned per-sample variances" if args.fill_covariance else ""
+        print(f"refined IMU ({kind}, {device}{cov}) written to {target}")
     return 0
 
 

@@ -358,27 +358,56 @@ def read_imu_source(path: Path, imu_topic: Optional[str] = None) -> ImuSource:
 # --------------------------------------------------------------------------------------------
 
 
-def write_imu(src: ImuSource, out: Path, gyro: np.ndarray, acc: np.ndarray) -> None:
+def write_imu(src: ImuSource, out: Path, gyro: np.ndarray, acc: np.ndarray,
+              variances: Optional[np.ndarray] = None) -> None:
     """``out``: a bag of ``src``'s kind with the IMU topic's angular_velocity / linear_acceleration
-    replaced by ``gyro`` / ``acc`` (in message order) and everything else copied unchanged."""
+    replaced by ``gyro`` / ``acc`` (in message order) and everything else copied unchanged.
+    ``variances`` (N, 6), gyro then acc, per-sample discrete-time variances ((rad/s)^2, (m/s^2)^2):
+    each message's angular_velocity_covariance / linear_acceleration_covariance become their
+    diagonal 3x3 (row-major, off-diagonals 0); without it the covariance fields are kept."""
     topic = src.topic
     if topic is None:
         raise InvalidInputError(f"{src.imu_file}: no IMU topic recorded in the source")
     vectors = np.concatenate([np.asarray(gyro, np.float64), np.asarray(acc, np.float64)], axis=1)
     if vectors.shape != (len(src.gyro), 6):
         raise InvalidInputError(f"{src.imu_file} topic {topic}: {len(src.gyro)} IMU messages, got {vectors.shape}")
-    copy_bag(src.imu_file, Path(out), {topic: _imu_rewriter(vectors)})
+    covariances = None if variances is None else _diagonal_covariances(src, variances)
+    copy_bag(src.imu_file, Path(out), {topic: _imu_rewriter(vectors, covariances)})
 
 
-def _imu_rewriter(vectors: np.ndarray) -> Callable[[object, object], object]:
-    """Replaces the vectors of the i-th IMU message it is given with row i of ``vectors``."""
+def _diagonal_covariances(src: ImuSource, variances: np.ndarray) -> np.ndarray:
+    """(N, 2, 9): per message the row-major diagonal 3x3 of its gyro and of its acc variances."""
+    var = np.asarray(variances, np.float64)
+    if var.shape != (len(src.gyro), 6):
+        raise InvalidInputError(f"{src.imu_file} topic {src.topic}: {len(src.gyro)} IMU messages, got variances "
+                                f"of shape {var.shape} (want (N, 6), gyro then acc)")
+    bad = np.flatnonzero(~(np.isfinite(var) & (var >= 0)).all(1))
+    if bad.size:
+        raise InvalidInputError(f"{src.imu_file} topic {src.topic}: variance of message {int(bad[0])} is negative "
+                                f"or not finite")
+    cov = np.zeros((len(var), 2, 3, 3))
+    diag = np.arange(3)
+    cov[:, 0, diag, diag] = var[:, :3]
+    cov[:, 1, diag, diag] = var[:, 3:]
+    return cov.reshape(len(var), 2, 9)
+
+
+def _imu_rewriter(vectors: np.ndarray, covariances: Optional[np.ndarray] = None
+                  ) -> Callable[[object, object], object]:
+    """Replaces the vectors of the i-th IMU message it is given with row i of ``vectors`` and, when
+    ``covariances`` (N, 2, 9) is given, its angular_velocity / linear_acceleration covariances."""
     rows = iter(vectors.tolist())
+    covs = iter(covariances) if covariances is not None else None
 
     def rewrite(msg, typestore) -> object:
         g0, g1, g2, a0, a1, a2 = next(rows)
         vec = typestore.types["geometry_msgs/msg/Vector3"]
         msg.angular_velocity = vec(x=g0, y=g1, z=g2)
         msg.linear_acceleration = vec(x=a0, y=a1, z=a2)
+        if covs is not None:
+            gyro_cov, acc_cov = next(covs)
+            msg.angular_velocity_covariance = gyro_cov
+            msg.linear_acceleration_covariance = acc_cov
         return msg
 
     return rewrite
