@@ -115,25 +115,21 @@ def installed(fault: Fault) -> Iterator[Fault]:
 
     from imu_learn import _imu_core as core
 
-    def torch_save(obj: Any, f: Any, *args: Any, **kwargs: Any) -> Any:
-        if isinstance(f, (str, os.PathLike)):
-            buf = io.BytesIO()
-            saved(obj, buf, *args, **kwargs)
-            with fault.open(f, "wb") as out:
-                out.write(buf.getvalue())
-            return None
-        return saved(obj, f, *args, **kwargs)
+    def through_fault(save: Callable[..., Any]) -> Callable[..., Any]:
+        # A writer given a path serialises to memory, then writes through the failing file.
+        def wrapped(obj: Any, target: Any = None, *args: Any, **kwargs: Any) -> Any:
+            if isinstance(target, (str, os.PathLike)):
+                buf = io.BytesIO()
+                save(obj, buf, *args, **kwargs)
+                with fault.open(target, "wb") as out:
+                    out.write(buf.getvalue())
+                return None
+            return save(obj, target, *args, **kwargs)
 
-    def write_csv(frame: Any, file: Any = None, *args: Any, **kwargs: Any) -> Any:
-        if isinstance(file, (str, os.PathLike)):
-            buf = io.BytesIO()
-            csv_saved(frame, buf, *args, **kwargs)
-            with fault.open(file, "wb") as out:
-                out.write(buf.getvalue())
-            return None
-        return csv_saved(frame, file, *args, **kwargs)
+        return wrapped
 
-    saved, csv_saved = torch.save, polars.DataFrame.write_csv
+    torch_save, write_csv = through_fault(torch.save), through_fault(polars.DataFrame.write_csv)
+
     patches = [(builtins, "open", fault.open), (io, "open", fault.open), (torch, "save", torch_save),
                (polars.DataFrame, "write_csv", write_csv)]
     for name in ("write_asl_imu", "write_tum"):

@@ -254,6 +254,13 @@ def expected_path(root, case):
     return root / case / "seq" / (GT_REL if case in ("gt_one_row", "no_overlap") else IMU_REL)
 
 
+def assert_cli_error(rc, err, degenerate, case):
+    """One error line naming the case's class, its file and what is wrong; a non-zero exit."""
+    line = one_error_line(err)
+    cls, words = CASES[case]
+    assert rc != 0 and cls in line and str(expected_path(degenerate, case)) in line and words in line, line
+
+
 @pytest.mark.parametrize("case", list(CASES))
 def test_labels_cli(degenerate, tmp_path, case, capsys):
     from imu_learn.labels import main
@@ -270,9 +277,7 @@ def test_fit_cli(degenerate, tmp_path, case, capsys):
 
     rc = main(["--config", str(fit_config(tmp_path, degenerate / case, "seq")), "--run-dir", str(tmp_path / "run"),
                "--no-progress"])
-    line = one_error_line(capsys.readouterr().err)
-    cls, words = CASES[case]
-    assert rc != 0 and cls in line and str(expected_path(degenerate, case)) in line and words in line, line
+    assert_cli_error(rc, capsys.readouterr().err, degenerate, case)
 
 
 @pytest.mark.parametrize("case", ["header_only", "no_overlap", "short", "empty"])
@@ -282,9 +287,7 @@ def test_evaluate_cli(degenerate, tmp_path, case, capsys):
     ev = tmp_path / "eval.toml"
     ev.write_text(f'name = "t"\nbase = "{fit_config(tmp_path, degenerate / case, "seq")}"\nmethods = ["raw"]\n')
     rc = main(["--config", str(ev), "--out", str(tmp_path / "report"), "--no-progress"])
-    line = one_error_line(capsys.readouterr().err)
-    cls, words = CASES[case]
-    assert rc != 0 and cls in line and str(expected_path(degenerate, case)) in line and words in line, line
+    assert_cli_error(rc, capsys.readouterr().err, degenerate, case)
 
 
 @pytest.mark.parametrize("case", ["header_only", "one_row", "gt_one_row", "no_overlap"])
@@ -295,9 +298,7 @@ def test_fuse_cli(degenerate, tmp_path, case, capsys):
     cfg.write_text(f'name = "t"\ninputs = ["raw"]\nseeds = [0]\n[[recordings]]\npath = "{degenerate / case / "seq"}"\n'
                    'format = "euroc"\n[[scenarios]]\nname = "gnss"\nkind = "position"\n')
     rc = main(["--config", str(cfg), "--out", str(tmp_path / "fused")])
-    line = one_error_line(capsys.readouterr().err)
-    cls, words = CASES[case]
-    assert rc != 0 and cls in line and str(expected_path(degenerate, case)) in line and words in line, line
+    assert_cli_error(rc, capsys.readouterr().err, degenerate, case)
 
 
 @pytest.mark.parametrize("case", ["header_only", "one_row"])

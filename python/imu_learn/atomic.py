@@ -124,13 +124,18 @@ def _fsync_tree(folder: Path) -> None:
         _fsync_dir(Path(dirpath))
 
 
-def atomic_write_dir(path: PathLike, fill: Callable[[Path], None]) -> None:
+def atomic_write_dir(path: PathLike, fill: Callable[[Path], None], replace: bool = False) -> None:
     """Let ``fill(tmp)`` create the folder ``tmp`` (it does not exist yet; its name is ``path``'s,
     inside a temporary folder beside ``path``) with the whole output, then rename it to ``path``.
     For outputs that are folders (a ROS 2 bag). A folder cannot replace another in one step, so an
-    existing ``path`` is refused (``FileExistsError``) instead of being removed first."""
+    existing ``path`` is refused (``FileExistsError``) unless ``replace``: then the old folder is
+    renamed aside first, removed once the new one is in place, and put back if writing fails. A
+    reader sees the old folder, the new one or (between two renames) none, never a partial one."""
     path = Path(path)
     if path.exists() or path.is_symlink():
+        if replace:
+            _replace_dir(path, fill)
+            return
         raise FileExistsError(17, "exists already (a folder output is never replaced; remove it first)", str(path))
     path.parent.mkdir(parents=True, exist_ok=True)
     try:
@@ -152,3 +157,18 @@ def atomic_write_dir(path: PathLike, fill: Callable[[Path], None]) -> None:
         raise
     os.rmdir(holder)
     _fsync_dir(path.parent)
+
+
+def _replace_dir(path: Path, fill: Callable[[Path], None]) -> None:
+    import shutil
+
+    holder = Path(tempfile.mkdtemp(prefix=f".{path.name}.", suffix=".old", dir=path.parent))
+    aside = holder / path.name
+    os.rename(path, aside)
+    try:
+        atomic_write_dir(path, fill)
+    except BaseException:
+        os.rename(aside, path)
+        os.rmdir(holder)
+        raise
+    shutil.rmtree(holder)

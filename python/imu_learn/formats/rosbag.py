@@ -18,7 +18,6 @@ the other binary containers (Blackbird's HDF5, BROAD's MAT).
 """
 from __future__ import annotations
 
-import os
 import sys
 from contextlib import contextmanager
 from pathlib import Path
@@ -547,7 +546,7 @@ def write_odometry(out: Path, topic: str, t_ns: np.ndarray, p: np.ndarray, q_wxy
     """``out``: a bag of ``like``'s kind (ROS 1, or ROS 2 with its storage plugin and metadata
     version) with one ``nav_msgs/msg/Odometry`` message per pose on ``topic``, stamped (header and
     bag) at ``t_ns``; twist and covariances are zero (not estimated here). Written atomically; a
-    previous ``out`` is replaced (see :func:`_replace_bag_dir` for a ROS 2 folder)."""
+    previous ``out`` is replaced (a ROS 2 folder through ``atomic_write_dir(..., replace=True)``)."""
     t_ns, p, q_wxyz = _trajectory_arrays(t_ns, p, q_wxyz)
     like = bag_path(like)
     if is_ros1(like):
@@ -558,8 +557,8 @@ def write_odometry(out: Path, topic: str, t_ns: np.ndarray, p: np.ndarray, q_wxy
         atomic_write_path(Path(out), fill)
     else:
         meta = _ros2_metadata(like)
-        _replace_bag_dir(Path(out), lambda tmp: _write_odometry_ros2(
-            tmp, meta, topic, t_ns, p, q_wxyz, frame_id, child_frame_id))
+        atomic_write_dir(Path(out), lambda tmp: _write_odometry_ros2(
+            tmp, meta, topic, t_ns, p, q_wxyz, frame_id, child_frame_id), replace=True)
 
 
 def _trajectory_arrays(t_ns, p, q_wxyz) -> Tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -621,26 +620,3 @@ def _write_odometry_ros2(path: Path, meta: dict, topic: str, t_ns, p, q_wxyz, fr
         conn = writer.add_connection(topic, ODOMETRY_TYPE, typestore=ts)
         for t, raw in _odometry_messages(ts, False, t_ns, p, q_wxyz, frame_id, child_frame_id):
             writer.write(conn, t, raw)
-
-
-def _replace_bag_dir(out: Path, fill: Callable[[Path], None]) -> None:
-    """:func:`imu_learn.atomic.atomic_write_dir`, replacing a previous ``out`` (a rerun of the same
-    fusion): the old folder is renamed aside first, removed once the new one is in place, and put
-    back if writing fails. A reader sees the old bag, the new bag or (between two renames) none,
-    never a partial one; a folder cannot be swapped for another in one step."""
-    import shutil
-    import tempfile
-
-    if not (out.exists() or out.is_symlink()):
-        atomic_write_dir(out, fill)
-        return
-    holder = Path(tempfile.mkdtemp(prefix=f".{out.name}.", suffix=".old", dir=out.parent))
-    aside = holder / out.name
-    os.rename(out, aside)
-    try:
-        atomic_write_dir(out, fill)
-    except BaseException:
-        os.rename(aside, out)
-        os.rmdir(holder)
-        raise
-    shutil.rmtree(holder)

@@ -25,6 +25,7 @@ from scipy.spatial.transform import Rotation
 from imu_learn import _imu_core as core
 from imu_learn.atomic import atomic_write_path, atomic_write_text
 from imu_learn.config import ConfigError
+from imu_learn.digest import file_sha256
 from imu_learn.quat import wxyz_to_xyzw, xyzw_to_wxyz
 
 from .aiding import (
@@ -60,7 +61,7 @@ def file_digest(path: str) -> str:
 def _digest(path: str, _size: int, _mtime_ns: int) -> str:
     """Keyed by size and mtime too, so a rewritten file is hashed again; read once per run_experiment
     otherwise (run_hash asks for every recording x scenario)."""
-    return hashlib.sha256(Path(path).read_bytes()).hexdigest()
+    return file_sha256(Path(path))
 
 
 def artefact_of(cfg: FuseConfig, spec: RecordingSpec, name: str) -> str:
