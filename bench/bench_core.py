@@ -31,7 +31,7 @@ REPO = HERE.parent
 sys.path.insert(0, str(HERE))
 
 import numpy_reference as nr  # noqa: E402
-from imu_learn.machine import cpu_name  # noqa: E402
+from imu_learn.util.machine import cpu_name  # noqa: E402
 
 SEQUENCES = ("MH_01_easy", "V1_01_easy")
 WINDOW, STRIDE, BATCH = 200, 1, 256
@@ -126,7 +126,6 @@ def imu_csv(data: Path, name: str) -> Path:
 def load_imu(path: Path, have_core: bool):
     if have_core:
         from imu_learn import _imu_core as core
-
         return core.read_asl_imu(str(path))
     return nr.read_asl_imu_numpy(path)
 
@@ -217,7 +216,6 @@ def bench_labels(seqs: List[tuple], have_core: bool, repeats: int) -> List[Row]:
 
     if have_core:
         from imu_learn import _imu_core as core
-
         def run_core():
             return [core.window_labels(s[0], s[3], s[4], s[5], WINDOW, STRIDE, list(FRACTIONS), GRAVITY) for s in seqs]
 
@@ -241,7 +239,6 @@ def bench_batches(seqs: List[tuple], have_core: bool, repeats: int, per_repeat: 
     if have_core:
         import imu_learn
         from imu_learn import AugmentConfig, BatchConfig, BatchSampler
-
         parts = [imu_learn.Sequence(f"s{i}", *s) for i, s in enumerate(seqs)]
         sampler = BatchSampler(parts, BatchConfig(window=WINDOW, batch_size=BATCH, augment=AugmentConfig(**AUGMENT)))
         seed = iter(range(10**9))
@@ -266,7 +263,6 @@ def bench_csv(path: Path, have_core: bool, repeats: int) -> List[Row]:
 
     if have_core:
         from imu_learn import _imu_core as core
-
         m = measure(lambda: core.read_asl_imu(str(path)), repeats)
         rows.append(_row("csv", "imu_learn._imu_core.read_asl_imu", m, n_rows, "rows", note))
     try:

@@ -66,10 +66,10 @@ def main(argv=None) -> int:
     torch.set_num_threads(args.threads)
     from scipy.spatial.transform import Rotation
 
+    from imu_learn.core.quat import wxyz_to_xyzw
     from imu_learn.fuse.config import ScenarioSpec
     from imu_learn.fuse.online import load_causal_model, machine, score_online, stream
     from imu_learn.fuse.run import aiding_rng, load_recording_for_fusion, make_aiding
-    from imu_learn.quat import wxyz_to_xyzw
 
     ckpt = args.checkpoint if args.checkpoint is not None else default_checkpoint()
     model = None
@@ -82,7 +82,7 @@ def main(argv=None) -> int:
     if model is None:
         # Latency does not depend on the weights: without a trained causal checkpoint the same
         # architecture, freshly initialised, is timed (its RMSE is then meaningless, and labelled so).
-        from imu_learn.model import ImuRefiner, ModelConfig
+        from imu_learn.nn.model import ImuRefiner, ModelConfig
 
         torch.manual_seed(0)
         model = ImuRefiner(ModelConfig(causal=True, fir_taps=0)).eval()

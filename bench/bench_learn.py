@@ -25,7 +25,7 @@ from pathlib import Path
 import numpy as np
 import torch
 
-from imu_learn.machine import cpu_name
+from imu_learn.util.machine import cpu_name
 
 REPO = Path(__file__).resolve().parent.parent
 CROP = REPO / "datasets" / "euroc" / "V1_01_easy"
@@ -44,8 +44,8 @@ def random_head(model):
 
 def bench_refine(device: torch.device, reps: int):
     from imu_learn import _imu_core as core
-    from imu_learn.model import ImuRefiner, ModelConfig
-    from imu_learn.refine import refine_arrays
+    from imu_learn.infer.refine import refine_arrays
+    from imu_learn.nn.model import ImuRefiner, ModelConfig
 
     _t, g, a = core.read_asl_imu(str(CROP / "mav0" / "imu0" / "data.csv"))
     raw = np.c_[g, a]
@@ -64,7 +64,7 @@ def bench_refine(device: torch.device, reps: int):
 
 
 def bench_step(device: torch.device, steps: int):
-    from imu_learn.model import ImuRefiner, ModelConfig
+    from imu_learn.nn.model import ImuRefiner, ModelConfig
 
     model = random_head(ImuRefiner(ModelConfig(causal=True))).to(device).eval()
     xs = torch.randn(steps + 100, 1, 6, device=device)
@@ -82,11 +82,11 @@ def bench_step(device: torch.device, steps: int):
 
 
 def bench_train(device: torch.device, iters: int):
-    from imu_learn.batches import AugmentConfig, BatchConfig, BatchSampler
-    from imu_learn.loading import load_sequence
-    from imu_learn.model import ImuRefiner, ModelConfig
-    from imu_learn.torch_integration import integrate
-    from imu_learn.torch_so3 import quat_conj, quat_mul, so3_log
+    from imu_learn.core.batches import AugmentConfig, BatchConfig, BatchSampler
+    from imu_learn.data.loading import load_sequence
+    from imu_learn.nn.integration import integrate
+    from imu_learn.nn.model import ImuRefiner, ModelConfig
+    from imu_learn.nn.so3 import quat_conj, quat_mul, so3_log
 
     seqs = load_sequence(CROP)
     aug = AugmentConfig(gyro_noise_density=1.7e-4, acc_noise_density=2e-3, gyro_bias_max=0.01, acc_bias_max=0.1)

@@ -1,4 +1,4 @@
-"""Throughput of ROS bag reading and writing (imu_learn.formats.rosbag), measured now on this
+"""Throughput of ROS bag reading and writing (imu_learn.data.formats.rosbag), measured now on this
 machine and printed as a markdown table, for ROS 1, ROS 2 sqlite3 and ROS 2 mcap:
 
 - read IMU: sensor_msgs/msg/Imu messages/s of ``read_imu`` (decode, stamps, checks);
@@ -25,7 +25,7 @@ from pathlib import Path
 REPO = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(REPO / "tests"))
 
-from imu_learn.formats import rosbag  # noqa: E402
+from imu_learn.data.formats import rosbag  # noqa: E402
 from rosbag_fixtures import KINDS, write_fixture_bag  # noqa: E402
 
 

@@ -57,7 +57,7 @@ HERE = Path(__file__).resolve().parent
 REPO = HERE.parent
 sys.path.insert(0, str(REPO / "tests"))  # tests/synthetic.py: stamps and the quaternion helpers
 
-from imu_learn.machine import cpu_name  # noqa: E402
+from imu_learn.util.machine import cpu_name  # noqa: E402
 
 STAGES = ("parse", "align", "window_labels", "labels_cli", "refine", "fuse")
 DEFAULT_HOURS = "1/6,1,10"
@@ -125,7 +125,7 @@ def write_recording(rec: Path, seconds: int, seed: int = 0) -> Dict[str, float]:
     import polars as pl
 
     from imu_learn import _imu_core as core
-    from imu_learn.atomic import atomic_write_bytes, atomic_write_path, atomic_write_text
+    from imu_learn.util.atomic import atomic_write_bytes, atomic_write_path, atomic_write_text
     from synthetic import stamps
 
     t_ns = stamps(seconds)
@@ -173,7 +173,7 @@ def gt_csv(rec: Path) -> Path:
 def prepare_and_run(stage: str, rec: Path, scratch: Path) -> Dict[str, object]:
     """Prepare the stage's inputs (untimed), then time the stage. Returns seconds and extras."""
     import imu_learn as il
-    from imu_learn.formats.groundtruth import read_groundtruth
+    from imu_learn.data.formats.groundtruth import read_groundtruth
 
     extra: Dict[str, object] = {}
     if stage == "write":
@@ -199,14 +199,14 @@ def prepare_and_run(stage: str, rec: Path, scratch: Path) -> Dict[str, object]:
             else:
                 run = fuse_runner(seq, extra)
     elif stage == "labels_cli":
-        from imu_learn.labels import main as labels_main
+        from imu_learn.data.labels import main as labels_main
 
         def run() -> None:
             argv = ["euroc", "--root", str(rec.parent), "--out", str(scratch / "labels"), "--rebuild", "--quiet"]
             if labels_main(argv) != 0:
                 raise RuntimeError("python -m imu_learn.labels failed")
     elif stage == "refine":
-        from imu_learn.refine import main as refine_main
+        from imu_learn.infer.refine import main as refine_main
 
         def run() -> None:
             argv = ["--checkpoint", str(CHECKPOINT), "--input", str(rec), "--output", str(scratch / "refined"),
@@ -226,8 +226,8 @@ def fuse_runner(seq, extra: Dict[str, object]):
     import numpy as np
     from scipy.spatial.transform import Rotation
 
+    from imu_learn.core.quat import wxyz_to_xyzw
     from imu_learn.fuse import ImuNoise, fuse, graph, simulate_position
-    from imu_learn.quat import wxyz_to_xyzw
 
     fixes = simulate_position(seq.t_ns, seq.p, FIX_RATE_HZ, FIX_SIGMA_M, np.random.default_rng(0))
     R0 = Rotation.from_quat(wxyz_to_xyzw(seq.q_wxyz[0])).as_matrix()
@@ -301,7 +301,7 @@ def child_main(stage: str, rec: Path, scratch: Path, result: Path, torch_threads
         import torch
 
         torch.set_num_threads(torch_threads)
-    from imu_learn.atomic import atomic_write_text
+    from imu_learn.util.atomic import atomic_write_text
 
     out = prepare_and_run(stage, rec, scratch)
     out["peak_self_mib"] = peak_rss_self_mib()
@@ -469,7 +469,7 @@ def main(argv: Optional[List[str]] = None) -> int:
     rows.sort(key=lambda r: (order[r["stage"]], r["samples"]))
     print(format_table(rows))
     if args.json:
-        from imu_learn.atomic import atomic_write_text
+        from imu_learn.util.atomic import atomic_write_text
 
         atomic_write_text(args.json, json.dumps({"rows": rows, "writes": writes, "machine": machine()}, indent=1))
     return 0

@@ -21,11 +21,11 @@ from pathlib import Path
 import numpy as np
 
 import imu_learn as il
-from imu_learn import fit
 from imu_learn.baselines.traditional import Traditional
-from imu_learn.config import build_config
-from imu_learn.metrics import with_imu
-from imu_learn.quat import quat_conj, quat_mul, xyzw_to_wxyz
+from imu_learn.core.quat import quat_conj, quat_mul, xyzw_to_wxyz
+from imu_learn.eval.metrics import with_imu
+from imu_learn.train import fit
+from imu_learn.train.config import build_config
 
 SPARSE = il.AlignOptions(max_gap_s=0.06)  # the ASL state file is 20 Hz
 

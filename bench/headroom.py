@@ -33,13 +33,13 @@ import numpy as np
 import torch
 
 from imu_learn.baselines.base import FitSettings
+from imu_learn.baselines.noise_floor import synthesize_imu
 from imu_learn.baselines.traditional import Traditional
-from imu_learn.config import load_config
-from imu_learn.fit import recording_of
-from imu_learn.metrics import relative_pose_rmse_many, with_imu, without_fitted_bias
-from imu_learn.noise_floor import synthesize_imu
-from imu_learn.splits import make_split
-from imu_learn.types import Sequence
+from imu_learn.data.splits import make_split
+from imu_learn.data.types import Sequence
+from imu_learn.eval.metrics import relative_pose_rmse_many, with_imu, without_fitted_bias
+from imu_learn.train.config import load_config
+from imu_learn.train.fit import recording_of
 
 
 def startup_removed(seqs: List[Sequence], cfg, seconds: float) -> List[Sequence]:

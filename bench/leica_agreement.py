@@ -17,8 +17,8 @@ import numpy as np
 from scipy.spatial.transform import Rotation
 
 from imu_learn import AlignOptions, load_recording
-from imu_learn.formats.asl import read_leica
-from imu_learn.quat import wxyz_to_xyzw
+from imu_learn.core.quat import wxyz_to_xyzw
+from imu_learn.data.formats.asl import read_leica
 
 
 def residuals(t_leica, p_leica, seq, lever, shift_ns=0):

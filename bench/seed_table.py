@@ -20,11 +20,11 @@ from typing import Any, Dict, List
 
 import torch
 
-from imu_learn.atomic import atomic_write_bytes
-from imu_learn.checkpoint import load_checkpoint, model_from_checkpoint
-from imu_learn.config import load_config
-from imu_learn.fit import evaluate_table, refine_sequence
-from imu_learn.splits import make_split
+from imu_learn.data.splits import make_split
+from imu_learn.train.checkpoint import load_checkpoint, model_from_checkpoint
+from imu_learn.train.config import load_config
+from imu_learn.train.fit import evaluate_table, refine_sequence
+from imu_learn.util.atomic import atomic_write_bytes
 
 
 def score_run(run: Path, cfg, test) -> Dict[str, Any]:

@@ -69,7 +69,7 @@ def main(argv=None) -> int:
     for name, extra in parse_variants(args.variants):
         for seed in args.seeds:
             run = f"{args.prefix}{name}_s{seed}"
-            cmd = [args.python, "-m", "imu_learn.fit", "--config", args.config, "--name", run, "--runs_dir", str(runs_dir),
+            cmd = [args.python, "-m", "imu_learn.train.fit", "--config", args.config, "--name", run, "--runs_dir", str(runs_dir),
                    "--seed", str(seed), "--data.split.test", "[]", "--no-progress", *extra]
             todo.append((name, seed, run, cmd))
     running: List[Tuple[str, subprocess.Popen, object]] = []

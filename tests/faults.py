@@ -9,7 +9,7 @@ disk), or stops there until a signal arrives (``pause``), or until a release fil
 writers that bypass Python's files (imu_core's Rust writers, ``torch.save`` and polars given a
 path) through them. Run as a script it installs a fault and runs a module as ``python -m`` would::
 
-    python tests/faults.py PATTERN NTH ACTION MARKER -- imu_learn.fit --run-dir ...
+    python tests/faults.py PATTERN NTH ACTION MARKER -- imu_learn.train.fit --run-dir ...
 """
 from __future__ import annotations
 
@@ -114,7 +114,6 @@ def installed(fault: Fault) -> Iterator[Fault]:
     import torch
 
     from imu_learn import _imu_core as core
-
     def through_fault(save: Callable[..., Any]) -> Callable[..., Any]:
         # A writer given a path serialises to memory, then writes through the failing file.
         def wrapped(obj: Any, target: Any = None, *args: Any, **kwargs: Any) -> Any:

@@ -25,7 +25,7 @@ from typing import Dict
 import numpy as np
 
 from imu_learn import _imu_core as core
-from imu_learn.formats.groundtruth import read_groundtruth
+from imu_learn.data.formats.groundtruth import read_groundtruth
 
 REPO = Path(__file__).resolve().parent.parent
 CROP = REPO / "datasets" / "euroc" / "MH_04_difficult"

@@ -1,6 +1,6 @@
 """Closed-form trajectories and an independent quaternion oracle for the tests.
 
-Deliberately not imu_learn.quat: rotation here is the sandwich product q (0, v) q* built on a
+Deliberately not imu_learn.core.quat: rotation here is the sandwich product q (0, v) q* built on a
 plain Hamilton product, so the tests do not check the package's algebra against itself.
 Quaternions are w,x,y,z; stamps are exact 200 Hz nanoseconds.
 """
@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from imu_learn.types import Sequence
+from imu_learn.data.types import Sequence
 
 G = 9.81
 RATE = 200.0

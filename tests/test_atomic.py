@@ -1,4 +1,4 @@
-"""imu_learn.atomic, the one atomic-write helper: the old file or the new one, never half of one;
+"""imu_learn.util.atomic, the one atomic-write helper: the old file or the new one, never half of one;
 errors name the output; outputs get the permissions a plain open() would give."""
 import errno
 import os
@@ -7,8 +7,8 @@ import stat
 import pytest
 
 import faults
-from imu_learn import atomic
-from imu_learn.atomic import atomic_write_bytes, atomic_write_path, atomic_write_text
+from imu_learn.util import atomic
+from imu_learn.util.atomic import atomic_write_bytes, atomic_write_path, atomic_write_text
 
 
 def listing(folder):

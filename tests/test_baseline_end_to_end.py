@@ -8,7 +8,7 @@ import torch
 import imu_learn as il
 from imu_learn.baselines.base import FitSettings, quat_mul
 from imu_learn.baselines.end_to_end import EndToEnd, EndToEndConfig, window_targets
-from imu_learn.batches import BatchConfig, BatchSampler
+from imu_learn.core.batches import BatchConfig, BatchSampler
 
 torch.set_num_threads(1)
 
@@ -41,7 +41,7 @@ def test_targets_match_the_rust_labels(data):
     phi, dp = window_targets([train], b.seq_index, b.start, W)
     # rotation: the label's Δq at the full window
     dq = b.dq_wxyz[:, -1]
-    from imu_learn.torch_so3 import so3_exp
+    from imu_learn.nn.so3 import so3_exp
     q = so3_exp(torch.from_numpy(phi)).numpy()
     assert np.allclose(np.abs((q * dq).sum(-1)), 1.0, atol=1e-9)
     # translation: R_kᵀ(p_{k+n} − p_k) = Δγ + R_kᵀ v_k Δt + ½ R_kᵀ g Δt²

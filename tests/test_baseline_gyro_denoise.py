@@ -6,8 +6,8 @@ import torch
 import imu_learn as il
 from imu_learn.baselines.base import FitSettings
 from imu_learn.baselines.gyro_denoise import GyroDenoise, _chunk_products, multiscale_rotation_loss
-from imu_learn.torch_so3 import quat_mul, so3_exp
-from imu_learn.types import Sequence
+from imu_learn.data.types import Sequence
+from imu_learn.nn.so3 import quat_mul, so3_exp
 
 torch.set_num_threads(1)
 
@@ -42,7 +42,7 @@ def test_loss_zero_on_ground_truth(mh):
     s = mh[0]
     q = torch.from_numpy(s.q_wxyz[:65])[None]
     dt = torch.from_numpy(np.diff(s.t_ns[:65]) * 1e-9)[None]
-    from imu_learn.torch_so3 import quat_conj, so3_log
+    from imu_learn.nn.so3 import quat_conj, so3_log
     rel = quat_mul(quat_conj(q[:, :-1]), q[:, 1:])
     gyro = so3_log(rel) / dt.unsqueeze(-1)
     assert float(multiscale_rotation_loss(gyro, dt, q, (16, 32, 64), 0.005)) < 1e-20

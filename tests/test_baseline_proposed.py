@@ -1,4 +1,4 @@
-"""The proposed refiner as a Method: in-process fit, refine, checkpoints (ours and imu_learn.fit's)."""
+"""The proposed refiner as a Method: in-process fit, refine, checkpoints (ours and imu_learn.train.fit's)."""
 from pathlib import Path
 
 import numpy as np
@@ -8,9 +8,9 @@ import torch
 import imu_learn as il
 from imu_learn.baselines.base import FitSettings
 from imu_learn.baselines.proposed import Proposed, ProposedConfig
-from imu_learn.checkpoint import load_model, save_checkpoint
-from imu_learn.model import ImuRefiner, ModelConfig
-from imu_learn.refine import refine_arrays
+from imu_learn.infer.refine import refine_arrays
+from imu_learn.nn.model import ImuRefiner, ModelConfig
+from imu_learn.train.checkpoint import load_model, save_checkpoint
 
 torch.set_num_threads(1)
 
@@ -72,7 +72,7 @@ def test_save_is_an_imu_learn_checkpoint(fitted, data, tmp_path):
     _, val = data
     f = tmp_path / "proposed.pt"
     m.save(f)
-    assert isinstance(load_model(f), ImuRefiner)  # readable by imu_learn.refine's loader
+    assert isinstance(load_model(f), ImuRefiner)  # readable by imu_learn.infer.refine's loader
     for m2 in (Proposed().load(f), Proposed.from_checkpoint(f)):
         assert m2.window == W and m2.model.cfg.hidden == 16
         g1, a1 = m.refine(val)
@@ -81,7 +81,7 @@ def test_save_is_an_imu_learn_checkpoint(fitted, data, tmp_path):
 
 
 def test_from_a_fit_style_checkpoint(data, tmp_path):
-    """A checkpoint as imu_learn.fit writes it: the window comes from config.data.window."""
+    """A checkpoint as imu_learn.train.fit writes it: the window comes from config.data.window."""
     _, val = data
     torch.manual_seed(1)
     model = ImuRefiner(ModelConfig(hidden=8, layers=1, fc=8))

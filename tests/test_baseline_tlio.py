@@ -20,7 +20,7 @@ from imu_learn.baselines.tlio import (
     yaw_of_matrix,
     yaw_of_quat,
 )
-from imu_learn.quat import quat_mul, quat_rotate
+from imu_learn.core.quat import quat_mul, quat_rotate
 
 torch.set_num_threads(1)
 
@@ -191,7 +191,7 @@ def test_too_short_training_data_is_an_error(data):
 
 
 def test_registered_in_evaluate_as_a_regressor():
-    from imu_learn.evaluate import DEFAULT_METHODS, REGISTRY, is_refiner, load_method_class
+    from imu_learn.eval.run import DEFAULT_METHODS, REGISTRY, is_refiner, load_method_class
 
     assert "tlio-style" in REGISTRY and "tlio-style" not in DEFAULT_METHODS
     cls = load_method_class("tlio-style")

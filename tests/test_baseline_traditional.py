@@ -6,8 +6,8 @@ import torch
 import imu_learn as il
 from imu_learn.baselines.base import FitSettings
 from imu_learn.baselines.traditional import Traditional, _Data, _VelResiduals, lowpass, rotation_increments
-from imu_learn.torch_integration import integrate
-from imu_learn.types import Sequence
+from imu_learn.data.types import Sequence
+from imu_learn.nn.integration import integrate
 
 torch.set_num_threads(1)
 

@@ -4,9 +4,9 @@ import shutil
 
 import pytest
 
-from imu_learn import cache, labels
-from imu_learn.atomic import atomic_write_bytes
+from imu_learn.data import cache, labels
 from imu_learn.errors import CacheError
+from imu_learn.util.atomic import atomic_write_bytes
 
 
 @pytest.fixture()

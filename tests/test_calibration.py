@@ -1,9 +1,10 @@
-"""Calibration metrics (imu_learn.calibration) on synthetic data whose noise is known exactly."""
+"""Calibration metrics (imu_learn.eval.calibration) on synthetic data whose noise is known exactly."""
 import numpy as np
 import pytest
 from scipy.stats import chi2
 
-from imu_learn.calibration import (
+from imu_learn.data.types import Sequence
+from imu_learn.eval.calibration import (
     BLOCKS,
     calibrate,
     datasheet_variances,
@@ -13,7 +14,6 @@ from imu_learn.calibration import (
     summarise,
     summarise_nees,
 )
-from imu_learn.types import Sequence
 from synthetic import G, moving, qconj, qmul, rotate
 
 
@@ -55,7 +55,7 @@ def _exact_imu(seq: Sequence):
     residual to be dominated by the noise added below)."""
     from scipy.spatial.transform import Rotation
 
-    from imu_learn.quat import wxyz_to_xyzw
+    from imu_learn.core.quat import wxyz_to_xyzw
     t = (seq.t_ns - seq.t_ns[0]) * 1e-9
     dt = np.diff(t)
     rel = qmul(qconj(seq.q_wxyz[:-1]), seq.q_wxyz[1:])
@@ -87,7 +87,7 @@ def test_known_per_sample_noise_is_calibrated():
         noisy_g = gyro + rng.normal(size=gyro.shape) * np.sqrt(var[:, :3])
         noisy_a = acc + rng.normal(size=acc.shape) * np.sqrt(var[:, 3:])
         rs.append(residuals(seq, noisy_g, noisy_a, starts, 200).r)
-    from imu_learn.calibration import window_covariances
+    from imu_learn.eval.calibration import window_covariances
     cov = window_covariances(seq, gyro, acc, var, starts, 200)
     s = summarise(np.concatenate(rs), np.concatenate([cov] * len(rs)))
     # 8 x 470 windows (overlapping, so fewer independent ones): 5 % on the mean, 0.03 on fractions.

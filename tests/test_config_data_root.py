@@ -6,10 +6,10 @@ from pathlib import Path
 
 import pytest
 
-from imu_learn import evaluate as ev
-from imu_learn import fit
-from imu_learn.config import ConfigError, load_config
-from imu_learn.splits import DataPathError, make_split
+from imu_learn.data.splits import DataPathError, make_split
+from imu_learn.eval import run as ev
+from imu_learn.train import fit
+from imu_learn.train.config import ConfigError, load_config
 
 REPO = Path(__file__).resolve().parent.parent
 CROPS = REPO / "datasets" / "euroc"
@@ -80,7 +80,7 @@ def test_cli_beats_env(roots, monkeypatch):
     c = load_config(cfg, ["--data.data_root", str(good)])
     assert c.data.data_root == str(good)
     assert make_split(c.data).record["data_root"] == str(good.resolve())
-    # the same in imu_learn.evaluate (its [data] goes to the same DataConfig)
+    # the same in imu_learn.eval.run (its [data] goes to the same DataConfig)
     ecfg = cfg.parent / "eval_dr.toml"
     ecfg.write_text(f'base = "{cfg.name}"\nmethods = ["raw"]\n')
     assert ev.load_eval_config(ecfg).run.data.data_root == str(empty)
@@ -136,7 +136,7 @@ def test_missing_recording_is_a_one_line_error(roots, monkeypatch, capsys):
 
 
 def test_split_json_records_the_data_root(roots, monkeypatch):
-    from imu_learn.splits import write_split
+    from imu_learn.data.splits import write_split
 
     good, _, cfg = roots
     monkeypatch.setenv(ENV, str(good))

@@ -1,4 +1,4 @@
-"""The Rust covariance (imu_learn.covariance) against the torch closed form on real EuRoC IMU data,
+"""The Rust covariance (imu_learn.core.covariance) against the torch closed form on real EuRoC IMU data,
 against GTSAM, and its typed errors."""
 import numpy as np
 import pytest
@@ -6,10 +6,10 @@ import torch
 
 import imu_learn as il
 from imu_learn import _imu_core as core
-from imu_learn.covariance import increment_covariance, interval_covariances
-from imu_learn.torch_covariance import increment_covariance as torch_increment_covariance
-from imu_learn.torch_covariance import to_gtsam_manifold
-from imu_learn.torch_integration import integrate
+from imu_learn.core.covariance import increment_covariance, interval_covariances
+from imu_learn.nn.covariance import increment_covariance as torch_increment_covariance
+from imu_learn.nn.covariance import to_gtsam_manifold
+from imu_learn.nn.integration import integrate
 
 torch.set_num_threads(1)
 

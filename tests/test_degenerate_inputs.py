@@ -10,7 +10,7 @@ import pytest
 import torch
 
 import imu_learn as il
-from imu_learn.datasets import find_recordings
+from imu_learn.data.datasets import find_recordings
 from imu_learn.errors import NoRecordingsError, TooShortError
 
 torch.set_num_threads(1)
@@ -125,7 +125,7 @@ def test_recording_shorter_than_a_segment_names_both_files(tmp_path):
 # ---- window level: labels and the fit/evaluate split -----------------------------------------
 
 def test_labels_refuse_a_recording_shorter_than_one_window(tmp_path):
-    from imu_learn.labels import build_cache
+    from imu_learn.data.labels import build_cache
 
     seq = good(tmp_path / "data" / "seq", n=250)  # 1.245 s: aligns, but holds no 300-sample window
     with pytest.raises(TooShortError) as e:
@@ -157,8 +157,8 @@ format = "euroc"
 
 
 def test_split_refuses_a_recording_shorter_than_one_window(tmp_path):
-    from imu_learn.config import build_config, read_toml
-    from imu_learn.splits import make_split
+    from imu_learn.data.splits import make_split
+    from imu_learn.train.config import build_config, read_toml
 
     seq = good(tmp_path / "data" / "short", n=250)
     cfg = build_config(read_toml(fit_config(tmp_path, tmp_path / "data", "short")), {})
@@ -185,8 +185,8 @@ def test_dataset_folder_without_recordings(tmp_path, dataset, looked_for):
 
 @pytest.fixture(scope="module")
 def checkpoint(tmp_path_factory):
-    from imu_learn.checkpoint import save_checkpoint
-    from imu_learn.model import ImuRefiner, ModelConfig
+    from imu_learn.nn.model import ImuRefiner, ModelConfig
+    from imu_learn.train.checkpoint import save_checkpoint
 
     torch.manual_seed(0)
     model = ImuRefiner(ModelConfig(hidden=8, fc=8), mean=torch.zeros(6), std=torch.ones(6))
@@ -198,7 +198,7 @@ def checkpoint(tmp_path_factory):
 def test_refine_a_recording_shorter_than_its_window(tmp_path, checkpoint):
     """The window is how refine chunks a long recording, not something the model needs: a shorter
     recording is one window of its own length (refine.py's stitching rule), as a user expects."""
-    from imu_learn.refine import main
+    from imu_learn.infer.refine import main
 
     seq = good(tmp_path / "seq", n=50)
     out = tmp_path / "out"
@@ -263,7 +263,7 @@ def assert_cli_error(rc, err, degenerate, case):
 
 @pytest.mark.parametrize("case", list(CASES))
 def test_labels_cli(degenerate, tmp_path, case, capsys):
-    from imu_learn.labels import main
+    from imu_learn.data.labels import main
 
     rc = main(["euroc", "--root", str(degenerate / case), "--out", str(tmp_path / "cache"), "--quiet",
                "--window", "300"])
@@ -273,7 +273,7 @@ def test_labels_cli(degenerate, tmp_path, case, capsys):
 
 @pytest.mark.parametrize("case", list(CASES))
 def test_fit_cli(degenerate, tmp_path, case, capsys):
-    from imu_learn.fit import main
+    from imu_learn.train.fit import main
 
     rc = main(["--config", str(fit_config(tmp_path, degenerate / case, "seq")), "--run-dir", str(tmp_path / "run"),
                "--no-progress"])
@@ -282,7 +282,7 @@ def test_fit_cli(degenerate, tmp_path, case, capsys):
 
 @pytest.mark.parametrize("case", ["header_only", "no_overlap", "short", "empty"])
 def test_evaluate_cli(degenerate, tmp_path, case, capsys):
-    from imu_learn.evaluate import main
+    from imu_learn.eval.run import main
 
     ev = tmp_path / "eval.toml"
     ev.write_text(f'name = "t"\nbase = "{fit_config(tmp_path, degenerate / case, "seq")}"\nmethods = ["raw"]\n')
@@ -303,7 +303,7 @@ def test_fuse_cli(degenerate, tmp_path, case, capsys):
 
 @pytest.mark.parametrize("case", ["header_only", "one_row"])
 def test_refine_cli(degenerate, tmp_path, checkpoint, case, capsys):
-    from imu_learn.refine import main
+    from imu_learn.infer.refine import main
 
     rc = main(["--checkpoint", str(checkpoint), "--input", str(degenerate / case / "seq"), "--output",
                str(tmp_path / "out"), "--device", "cpu", "--quiet"])

@@ -1,4 +1,4 @@
-"""Evaluation (imu_learn.evaluate): metrics with known answers, the command end to end, its errors."""
+"""Evaluation (imu_learn.eval.run): metrics with known answers, the command end to end, its errors."""
 import csv
 import json
 import math
@@ -8,15 +8,14 @@ import numpy as np
 import pytest
 import torch
 
-from imu_learn import evaluate as ev
 from imu_learn.baselines.base import Method, PosePrediction, Raw
-from imu_learn.checkpoint import save_checkpoint
-from imu_learn.config import ConfigError
-from imu_learn.errors import InvalidInputError
-from imu_learn.metrics import with_imu
-from imu_learn.model import ImuRefiner, ModelConfig
-from imu_learn.noise_floor import NOISE_FLOOR_NAME, synthesize_imu
-from imu_learn.types import Sequence
+from imu_learn.baselines.noise_floor import NOISE_FLOOR_NAME, synthesize_imu
+from imu_learn.data.types import Sequence
+from imu_learn.errors import ConfigError, InvalidInputError
+from imu_learn.eval import run as ev
+from imu_learn.eval.metrics import with_imu
+from imu_learn.nn.model import ImuRefiner, ModelConfig
+from imu_learn.train.checkpoint import save_checkpoint
 from synthetic import AXIS, DT, G, axis_angle, moving, qmul, spin
 
 torch.set_num_threads(1)
@@ -376,7 +375,7 @@ def test_end_to_end_reuse(e2e, capsys):
 def _error_line(capsys):
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1, err
-    assert err[0].startswith("imu_learn.evaluate: error:"), err
+    assert err[0].startswith("imu_learn.eval.run: error:"), err
     return err[0]
 
 
@@ -453,7 +452,7 @@ def test_cli_refuses_a_checkpoint_trained_on_the_test_recording(capsys, tmp_path
 def _error_line_after_progress(capsys):
     """The error line, after the command's own progress lines on stderr ("raw: fitting ...")."""
     err = capsys.readouterr().err.strip().splitlines()
-    errors = [x for x in err if x.startswith("imu_learn.evaluate: error:")]
+    errors = [x for x in err if x.startswith("imu_learn.eval.run: error:")]
     assert len(errors) == 1 and err[-1] == errors[0], err
     return errors[0]
 

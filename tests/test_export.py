@@ -1,4 +1,4 @@
-"""imu_learn.export: TorchScript and ONNX reproduce the torch model on real IMU windows."""
+"""imu_learn.infer.export: TorchScript and ONNX reproduce the torch model on real IMU windows."""
 import json
 import warnings
 from pathlib import Path
@@ -8,9 +8,9 @@ import pytest
 import torch
 
 from imu_learn import _imu_core as core
-from imu_learn.checkpoint import load_model, save_checkpoint
-from imu_learn.export import main
-from imu_learn.model import ImuRefiner, ModelConfig
+from imu_learn.infer.export import main
+from imu_learn.nn.model import ImuRefiner, ModelConfig
+from imu_learn.train.checkpoint import load_model, save_checkpoint
 
 torch.set_num_threads(1)
 

@@ -15,10 +15,10 @@ from pathlib import Path
 import pytest
 import torch
 
-from imu_learn import fit
-from imu_learn.checkpoint import load_checkpoint
-from imu_learn.config import ConfigError, RunConfig, build_config, load_config, read_toml
-from imu_learn.model import ImuRefiner, ModelConfig
+from imu_learn.nn.model import ImuRefiner, ModelConfig
+from imu_learn.train import fit
+from imu_learn.train.checkpoint import load_checkpoint
+from imu_learn.train.config import ConfigError, RunConfig, build_config, load_config, read_toml
 
 REPO = Path(__file__).resolve().parent.parent
 PY = sys.executable
@@ -120,7 +120,7 @@ def test_bias_removed_pose_of_raw_matches_the_final_table_protocol():
     sequence changes its open-loop error but (almost) not the bias-removed one."""
     import numpy as np
 
-    from imu_learn.metrics import relative_pose_rmse_many, simulate_sequence, with_imu
+    from imu_learn.eval.metrics import relative_pose_rmse_many, simulate_sequence, with_imu
 
     cfg = build_config({}, {"data.startup_bias_s": 5.0, "data.val_stride": 20})
     rng = np.random.default_rng(3)
@@ -158,8 +158,8 @@ def test_train_bias_remove_takes_a_constant_bias_out_of_train_and_val_only():
     over the whole segment and subtracted from the train and val segments; test is untouched."""
     import numpy as np
 
-    from imu_learn.metrics import simulate_sequence, with_imu
-    from imu_learn.splits import Split
+    from imu_learn.data.splits import Split
+    from imu_learn.eval.metrics import simulate_sequence, with_imu
 
     rng = np.random.default_rng(5)
     n = 4001  # 20 s at 200 Hz
@@ -182,7 +182,7 @@ def test_resume_in_new_process_matches_uninterrupted(tmp_path, full_run):
     d = tmp_path / "resumed"
     assert fit.main(tiny(d, 1)) == 0
     assert len(rows(d)) == 1
-    p = subprocess.run([PY, "-m", "imu_learn.fit", "--resume", str(d), "--optim.epochs", "3", "--no-progress"],
+    p = subprocess.run([PY, "-m", "imu_learn.train.fit", "--resume", str(d), "--optim.epochs", "3", "--no-progress"],
                        cwd=REPO, capture_output=True, text=True, timeout=120)
     assert p.returncode == 0, p.stderr
     assert rows(d) == rows(full_run)
@@ -217,7 +217,7 @@ def test_ctrl_c_saves_last_and_exits_130(tmp_path, full_run, capsys):
 
 def test_sigint_to_a_real_process(tmp_path):
     d = tmp_path / "sigint"
-    proc = subprocess.Popen([PY, "-m", "imu_learn.fit", *tiny(d, 1000)], cwd=REPO,
+    proc = subprocess.Popen([PY, "-m", "imu_learn.train.fit", *tiny(d, 1000)], cwd=REPO,
                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     try:
         deadline = time.time() + 60
@@ -230,7 +230,7 @@ def test_sigint_to_a_real_process(tmp_path):
         if proc.poll() is None:
             proc.kill()
     assert proc.returncode == 130, err
-    assert err.strip().splitlines()[-1].startswith("imu_learn.fit: interrupted")
+    assert err.strip().splitlines()[-1].startswith("imu_learn.train.fit: interrupted")
     assert load_checkpoint(d / "last.pt")["step"] >= 4
 
 
@@ -242,12 +242,12 @@ def test_corrupt_checkpoint_is_one_line_exit_2_and_nothing_changes(tmp_path, ful
     bad = {"truncated": data[: len(data) // 2], "garbage": os.urandom(4096), "empty": b""}[damage]
     (d / "last.pt").write_bytes(bad)
     before = snapshot(d)
-    p = subprocess.run([PY, "-m", "imu_learn.fit", "--resume", str(d), "--optim.epochs", "5"],
+    p = subprocess.run([PY, "-m", "imu_learn.train.fit", "--resume", str(d), "--optim.epochs", "5"],
                        cwd=REPO, capture_output=True, text=True, timeout=120)
     assert p.returncode == 2
     lines = p.stderr.strip().splitlines()
     assert len(lines) == 1, p.stderr
-    assert lines[0].startswith("imu_learn.fit: error: CheckpointError:") and "last.pt" in lines[0]
+    assert lines[0].startswith("imu_learn.train.fit: error: CheckpointError:") and "last.pt" in lines[0]
     assert snapshot(d) == before
 
 
@@ -276,7 +276,7 @@ def test_resume_without_checkpoint(tmp_path, capsys):
 def test_override_errors_name_the_key(tmp_path, capsys, args, key):
     assert fit.main(["--run-dir", str(tmp_path / "x"), *args]) == 2
     err = capsys.readouterr().err.strip().splitlines()
-    assert len(err) == 1 and key in err[0] and err[0].startswith("imu_learn.fit: error:")
+    assert len(err) == 1 and key in err[0] and err[0].startswith("imu_learn.train.fit: error:")
     assert not (tmp_path / "x").exists()
 
 
@@ -327,8 +327,8 @@ def test_root_max_gap_lets_sparse_ground_truth_through():
     """The default run scores V1_01 against the shipped 20 Hz ASL state: with the root's
     max_gap_s = 0.06 it is one segment over the whole crop; with the 50 ms default every 50 ms
     step between states is a gap and no segment is long enough."""
+    from imu_learn.data.splits import make_split
     from imu_learn.errors import AlignmentError
-    from imu_learn.splits import make_split
 
     d = RunConfig().data
     assert d.roots[1].groundtruth.endswith("groundtruth_state_20hz.csv") and d.roots[1].max_gap_s == 0.06
@@ -345,7 +345,7 @@ def test_root_max_gap_lets_sparse_ground_truth_through():
 
 @pytest.mark.parametrize("name", ["euroc", "blackbird", "broad", "euroc_paper", "tumvi"])
 def test_shipped_configs_split_real_data(shared, name, monkeypatch):
-    from imu_learn.splits import make_split
+    from imu_learn.data.splits import make_split
 
     monkeypatch.chdir(REPO)
     monkeypatch.setenv("IMU_LEARN_DATA", str(shared))

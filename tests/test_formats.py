@@ -1,4 +1,4 @@
-"""imu_learn.formats: one module per layout that detects, reads and writes it (refine and loading
+"""imu_learn.data.formats: one module per layout that detects, reads and writes it (refine and loading
 both go through it)."""
 import hashlib
 from pathlib import Path
@@ -6,10 +6,10 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from imu_learn import formats
-from imu_learn.datasets import DATASETS, find_recordings
+from imu_learn.data import formats
+from imu_learn.data.datasets import DATASETS, find_recordings
+from imu_learn.data.formats import DETECTION_ORDER, FORMATS, detect_format, read_imu_source, read_recording, write_imu
 from imu_learn.errors import InvalidInputError
-from imu_learn.formats import DETECTION_ORDER, FORMATS, detect_format, read_imu_source, read_recording, write_imu
 
 REPO = Path(__file__).resolve().parent.parent
 SHIPPED_ASL = REPO / "datasets" / "euroc" / "V1_01_easy"

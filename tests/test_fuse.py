@@ -7,8 +7,8 @@ import pytest
 gtsam = pytest.importorskip("gtsam")
 
 from imu_learn import AlignOptions, load_recording  # noqa: E402
-from imu_learn.config import ConfigError  # noqa: E402
-from imu_learn.formats.asl import read_leica, read_sensor_yaml  # noqa: E402
+from imu_learn.data.formats.asl import read_leica, read_sensor_yaml  # noqa: E402
+from imu_learn.errors import ConfigError  # noqa: E402
 from imu_learn.fuse import (  # noqa: E402
     ImuNoise,
     PositionFixes,
@@ -37,7 +37,7 @@ def crop(shipped):
 def start_of(seq):
     from scipy.spatial.transform import Rotation
 
-    from imu_learn.quat import wxyz_to_xyzw
+    from imu_learn.core.quat import wxyz_to_xyzw
     return Rotation.from_quat(wxyz_to_xyzw(seq.q_wxyz[0])).as_matrix(), seq.p[0], seq.v[0]
 
 
@@ -85,7 +85,7 @@ def test_noise_free_relative_poses_are_the_ground_truth_motion(crop):
     rel = simulate_relative_pose(crop.t_ns, crop.p, crop.q_wxyz, 10.0, 0.0, 0.0, np.random.default_rng(0))
     from scipy.spatial.transform import Rotation
 
-    from imu_learn.quat import wxyz_to_xyzw
+    from imu_learn.core.quat import wxyz_to_xyzw
     R = Rotation.from_quat(wxyz_to_xyzw(crop.q_wxyz))
     k = 5
     i, j = rel.i[k], rel.j[k]
@@ -309,7 +309,6 @@ def test_trajectories_read_by_evo_give_the_reported_rmse(shipped, crop, tmp_path
     from evo.core import metrics, sync
 
     from imu_learn import _imu_core as core
-
     rec = RecordingSpec(CROP, "euroc", CROP + "/mav0/state_groundtruth_estimate0/data.csv")
     cfg = validate(FuseConfig(name="t", data_root=str(shipped), inputs=["raw"], recordings=[rec],
                               scenarios=[ScenarioSpec("g", "position", 1.0, 0.1)]))
@@ -363,8 +362,8 @@ def test_simulated_aiding_runs_once_per_noise_seed_and_the_table_gives_mean_and_
 
 
 def test_any_evaluate_method_that_outputs_imu_is_an_input_and_end_to_end_is_not(shipped, tmp_path, monkeypatch):
-    from imu_learn import evaluate
     from imu_learn.baselines.base import Method
+    from imu_learn.eval import run as evaluate
 
     class Offset(Method):
         """A fitted method stand-in: adds 0.01 rad/s to the gyro z axis."""

@@ -8,8 +8,8 @@ import numpy as np
 import pytest
 
 import imu_learn as il
+from imu_learn.data.formats.asl import LEICA_FILE, read_leica
 from imu_learn.errors import AidingError, AidingOverlapError, AlignmentError, ImuError, ParseError
-from imu_learn.formats.asl import LEICA_FILE, read_leica
 from imu_learn.fuse.aiding import (
     PositionFixes,
     aiding_gaps,
@@ -159,7 +159,6 @@ def test_real_leica_fixes_drop_exactly_those_outside_the_imu_segment():
     if not (root / LEICA_FILE).exists():
         pytest.skip(f"{root / LEICA_FILE} not present")
     from imu_learn import AlignOptions, load_recording
-
     seq = max(load_recording(root, "euroc", options=AlignOptions(max_gap_s=0.05)).segments, key=len)
     t, p, lever = read_leica(root)
     fixes = leica_fixes(t, p, lever, seq.t_ns, None, 0.01, source=str(root / LEICA_FILE))

@@ -174,7 +174,6 @@ def test_tlio_style_is_a_fusion_input_that_adds_factors(shipped, tiny_tlio, tmp_
 
 def test_the_hook_on_a_real_model_feeds_windows_of_its_length(shipped, tiny_tlio):
     from imu_learn import AlignOptions, load_recording
-
     m, _ = tiny_tlio
     root = shipped / "euroc" / "MH_04_difficult"
     rec = load_recording(root, "euroc", groundtruth=root / "mav0/state_groundtruth_estimate0/data.csv",

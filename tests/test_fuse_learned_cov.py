@@ -44,7 +44,7 @@ def test_each_imu_factor_carries_the_covariance_propagated_over_its_own_interval
     blocks of the first keyframe interval) equals imu_core's propagation of the same variances."""
     from scipy.spatial.transform import Rotation
 
-    from imu_learn.covariance import interval_covariances
+    from imu_learn.core.covariance import interval_covariances
 
     t, gyro, acc, p, R, fixes = noisy_run()
     rng = np.random.default_rng(5)

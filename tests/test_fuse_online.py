@@ -9,16 +9,15 @@ import torch
 
 gtsam = pytest.importorskip("gtsam")
 
-from imu_learn.checkpoint import save_checkpoint  # noqa: E402
-from imu_learn.config import ConfigError  # noqa: E402
-from imu_learn.errors import InvalidInputError  # noqa: E402
+from imu_learn.errors import ConfigError, InvalidInputError  # noqa: E402
 from imu_learn.fuse import PositionFixes, apply_outages, fuse, simulate_relative_pose  # noqa: E402
 from imu_learn.fuse.__main__ import main as fuse_main  # noqa: E402
 from imu_learn.fuse.__main__ import parser  # noqa: E402
 from imu_learn.fuse.graph import IncrementalFusion  # noqa: E402
 from imu_learn.fuse.online import CausalStepper, load_causal_model, stream  # noqa: E402
-from imu_learn.model import ImuRefiner, ModelConfig  # noqa: E402
-from imu_learn.refine import refine_arrays  # noqa: E402
+from imu_learn.infer.refine import refine_arrays  # noqa: E402
+from imu_learn.nn.model import ImuRefiner, ModelConfig  # noqa: E402
+from imu_learn.train.checkpoint import save_checkpoint  # noqa: E402
 
 torch.set_num_threads(1)
 
@@ -80,7 +79,7 @@ def test_online_raw_equals_the_batch_with_relative_poses_on_a_real_crop(crop):  
     t, g, a = crop.t_ns[:n], crop.gyro[:n], crop.acc[:n]
     from scipy.spatial.transform import Rotation
 
-    from imu_learn.quat import wxyz_to_xyzw
+    from imu_learn.core.quat import wxyz_to_xyzw
     start = (Rotation.from_quat(wxyz_to_xyzw(crop.q_wxyz[0])).as_matrix(), crop.p[0], crop.v[0])
     rel = simulate_relative_pose(t, crop.p[:n], crop.q_wxyz[:n], 10.0, 0.1, 0.01, np.random.default_rng(0))
     batch = fuse(t, g, a, start, [rel])
@@ -103,7 +102,7 @@ def test_online_with_a_causal_model_equals_the_batch_on_its_refined_output(crop)
     assert np.abs(stepped - np.c_[rg, ra]).max() < 1e-5
     from scipy.spatial.transform import Rotation
 
-    from imu_learn.quat import wxyz_to_xyzw
+    from imu_learn.core.quat import wxyz_to_xyzw
     start = (Rotation.from_quat(wxyz_to_xyzw(crop.q_wxyz[0])).as_matrix(), crop.p[0], crop.v[0])
     fixes = PositionFixes(np.arange(0, n, 200), crop.p[:n:200], 0.1, np.zeros(3), "exact 1 Hz")
     batch = fuse(t, rg, ra, start, [fixes])
@@ -199,7 +198,7 @@ def test_cli_online_streams_raw_and_a_causal_model_and_writes_online_json(shippe
     aiding = make_aiding(cfg.scenarios[0], seq, leica, aiding_rng(0, "MH_04_short", cfg.scenarios[0]))
     from scipy.spatial.transform import Rotation
 
-    from imu_learn.quat import wxyz_to_xyzw
+    from imu_learn.core.quat import wxyz_to_xyzw
     R0 = Rotation.from_quat(wxyz_to_xyzw(seq.q_wxyz[0])).as_matrix()
     batch = fuse(seq.t_ns, seq.gyro, seq.acc, (R0, seq.p[0], seq.v[0]), [aiding], noise, cfg.gravity, cfg.keyframe_hz)
     assert raw["causal"]["pos_rmse_m"] == pytest.approx(score(batch, seq.t_ns, seq.p, seq.q_wxyz)["causal"]["pos_rmse_m"],

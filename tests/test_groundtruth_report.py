@@ -12,7 +12,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from imu_learn.types import Sequence
+from imu_learn.data.types import Sequence
 from synthetic import G, axis_angle, qconj, qmul, rotate, stamps
 
 REPO = Path(__file__).resolve().parent.parent

@@ -110,7 +110,7 @@ def test_kaist_format_recording_loads_and_its_imu_reproduces_its_labels(tmp_path
 
 
 def test_every_shared_euroc_groundtruth_file_reads(shared):
-    from imu_learn.formats.groundtruth import read_groundtruth
+    from imu_learn.data.formats.groundtruth import read_groundtruth
 
     for f in sorted((shared / "euroc-groundtruth").glob("*.csv")):
         gt = read_groundtruth(f)

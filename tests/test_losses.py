@@ -5,8 +5,8 @@ import pytest
 import torch
 
 import imu_learn as il
-from imu_learn.losses import LossConfig, dead_zone, huber_norm, imu_loss
-from imu_learn.model import ImuRefiner, ModelConfig
+from imu_learn.nn.losses import LossConfig, dead_zone, huber_norm, imu_loss
+from imu_learn.nn.model import ImuRefiner, ModelConfig
 
 torch.set_num_threads(1)
 
@@ -179,7 +179,7 @@ def test_inverse_horizon_scale_weighs_a_short_horizon_like_the_full_window():
 def test_gaussian_nll_is_the_closed_form_density():
     from scipy.stats import multivariate_normal
 
-    from imu_learn.losses import gaussian_nll
+    from imu_learn.nn.losses import gaussian_nll
     rng = np.random.default_rng(3)
     A = rng.normal(size=(9, 9))
     cov = A @ A.T + np.diag(np.logspace(-8, 0, 9))  # blocks on very different scales, like rad² against m²

@@ -3,7 +3,7 @@ state only for the causal variant, normalisation saved with the weights."""
 import pytest
 import torch
 
-from imu_learn.model import ImuRefiner, ModelConfig
+from imu_learn.nn.model import ImuRefiner, ModelConfig
 
 torch.set_num_threads(1)
 
@@ -131,7 +131,7 @@ def test_fir_branch_starts_at_zero_and_can_hold_the_half_sample_shift():
     mean, std = x.mean((0, 1)), x.std((0, 1))
     model = ImuRefiner(ModelConfig(fir_taps=3, **SMALL), mean=mean, std=std).double()
     assert torch.equal(model(x), x)
-    from imu_learn.model import FIR_GAIN
+    from imu_learn.nn.model import FIR_GAIN
 
     with torch.no_grad():
         # one filter per channel (depthwise); a constant added to the taps is ignored (zero DC gain)

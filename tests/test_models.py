@@ -3,7 +3,7 @@ device through the CLI, is small, has a complete model card, and does not make i
 
 The parametrised tests run over ``models/*.pt`` as found at collection time (none: no cases), and
 models/README.md is checked against the folder both ways, so a model it names cannot go missing
-silently. The same checks, and ``python -m imu_learn.checkpoint strip``, are exercised on a
+silently. The same checks, and ``python -m imu_learn.train.checkpoint strip``, are exercised on a
 throwaway checkpoint from a few training steps on the crops, so they are tested before any model
 is shipped.
 """
@@ -18,11 +18,12 @@ import pytest
 import torch
 
 from imu_learn import _imu_core as core
-from imu_learn import fit, load_recording
-from imu_learn.checkpoint import CheckpointError, describe, load_checkpoint, load_model, strip_checkpoint
-from imu_learn.checkpoint import main as checkpoint_main
-from imu_learn.model_check import compare_with_raw, format_comparison
-from imu_learn.refine import main as refine_main
+from imu_learn import load_recording
+from imu_learn.infer.model_check import compare_with_raw, format_comparison
+from imu_learn.infer.refine import main as refine_main
+from imu_learn.train import fit
+from imu_learn.train.checkpoint import CheckpointError, describe, load_checkpoint, load_model, strip_checkpoint
+from imu_learn.train.checkpoint import main as checkpoint_main
 
 torch.set_num_threads(1)
 
@@ -119,7 +120,7 @@ def claimed(state, t_ns: np.ndarray):
 def test_shipped_model_is_small_and_loads(ckpt):
     assert ckpt.stat().st_size < MAX_MODEL_BYTES, f"{ckpt.name}: {ckpt.stat().st_size / 1e6:.2f} MB"
     state = load_checkpoint(ckpt)
-    assert state["optimizer"] is None, f"{ckpt.name}: strip it (python -m imu_learn.checkpoint strip)"
+    assert state["optimizer"] is None, f"{ckpt.name}: strip it (python -m imu_learn.train.checkpoint strip)"
     load_model(ckpt)
 
 

@@ -1,13 +1,13 @@
-"""Noise floor (imu_learn.noise_floor): the IMU synthesised from ground truth integrates back onto it."""
+"""Noise floor (imu_learn.baselines.noise_floor): the IMU synthesised from ground truth integrates back onto it."""
 import numpy as np
 import pytest
 import torch
 
 from imu_learn.baselines.base import poses_from_imu
+from imu_learn.baselines.noise_floor import NOISE_FLOOR_NAME, GroundTruthImu, quat_log, synthesize_imu
+from imu_learn.data.types import Sequence
 from imu_learn.errors import InvalidInputError
-from imu_learn.evaluate import evaluate_sequence, pose_errors, window_starts
-from imu_learn.noise_floor import NOISE_FLOOR_NAME, GroundTruthImu, quat_log, synthesize_imu
-from imu_learn.types import Sequence
+from imu_learn.eval.run import evaluate_sequence, pose_errors, window_starts
 from synthetic import AXIS, DT, G, axis_angle, moving, qconj, qmul, spin
 
 torch.set_num_threads(1)

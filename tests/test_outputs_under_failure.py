@@ -25,11 +25,11 @@ import torch
 
 import faults
 from imu_learn import _imu_core as core
-from imu_learn import cache, labels
 from imu_learn.baselines.base import Raw
-from imu_learn.checkpoint import CheckpointError, load_checkpoint, save_checkpoint
+from imu_learn.data import cache, labels
 from imu_learn.errors import CacheError
-from imu_learn.model import ImuRefiner, ModelConfig
+from imu_learn.nn.model import ImuRefiner, ModelConfig
+from imu_learn.train.checkpoint import CheckpointError, load_checkpoint, save_checkpoint
 
 torch.set_num_threads(1)
 
@@ -178,12 +178,12 @@ def read_only(folder: Path, monkeypatch):
             for d in dirs:
                 d.chmod(0o755)
     else:  # root without mount: chmod does not stop root, so the file system's answer is simulated
-        import imu_learn.atomic
+        import imu_learn.util.atomic
 
         def refuse(*a, **k):
             raise OSError(errno.EROFS, os.strerror(errno.EROFS), str(k.get("dir", "?")) + "/.x.tmp")
 
-        monkeypatch.setattr(imu_learn.atomic.tempfile, "mkstemp", refuse)
+        monkeypatch.setattr(imu_learn.util.atomic.tempfile, "mkstemp", refuse)
         print("read-only: monkeypatched EROFS (root, mount not allowed)")
         yield
         monkeypatch.undo()
@@ -222,7 +222,7 @@ def refine_args(ckpt: Path, out: Path) -> list:
 
 
 def refine(ckpt: Path, out: Path) -> int:
-    from imu_learn.refine import main
+    from imu_learn.infer.refine import main
 
     return main([str(a) for a in refine_args(ckpt, out)])
 
@@ -242,7 +242,7 @@ def test_refine_signal_midway_then_rerun(models, tmp_path, sig):
     out = tmp_path / "out"
     assert refine(models[0], out) == 0
     before = files(out)
-    proc = faulty_cli("*data.csv*", 1, "pause", tmp_path / "fired", "imu_learn.refine", *refine_args(models[1], out))
+    proc = faulty_cli("*data.csv*", 1, "pause", tmp_path / "fired", "imu_learn.infer.refine", *refine_args(models[1], out))
     signal_midway(proc, tmp_path / "fired", sig)
     assert proc.returncode != 0
     assert files(out)[str(IMU_REL)] == before[str(IMU_REL)]
@@ -323,7 +323,7 @@ def test_labels_sigterm_midway_then_resume(tmp_path, reference_cache):
     out = tmp_path / "out"
     marker = tmp_path / "fired"
     # stopped while writing the progress after the second recording, then SIGTERM
-    proc = faulty_cli(f"*{cache.PROGRESS}*", 2, "pause", marker, "imu_learn.labels", *labels_args(out))
+    proc = faulty_cli(f"*{cache.PROGRESS}*", 2, "pause", marker, "imu_learn.data.labels", *labels_args(out))
     signal_midway(proc, marker, signal.SIGTERM)
     assert proc.returncode == -signal.SIGTERM
     assert not (out / cache.MANIFEST).exists()  # nothing finished: no manifest, not a partial one
@@ -364,14 +364,14 @@ def test_two_labels_runs_on_one_cache_take_turns(tmp_path, reference_cache):
     out = tmp_path / "out"
     marker = tmp_path / "holding"
     # The first run stops inside the lock (halfway through its first progress file) until released.
-    first = faulty_cli(f"*{cache.PROGRESS}*", 1, "hold", marker, "imu_learn.labels", *labels_args(out))
+    first = faulty_cli(f"*{cache.PROGRESS}*", 1, "hold", marker, "imu_learn.data.labels", *labels_args(out))
     second = None
     try:
         deadline = time.time() + 120
         while not marker.exists():
             assert first.poll() is None and time.time() < deadline, first.communicate()[1]
             time.sleep(0.05)
-        second = subprocess.Popen([sys.executable, "-m", "imu_learn.labels", *labels_args(out, "--rebuild")],
+        second = subprocess.Popen([sys.executable, "-m", "imu_learn.data.labels", *labels_args(out, "--rebuild")],
                                   cwd=REPO, env=ENV, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
         waiting = second.stderr.readline()  # it says it waits, and does
         assert "waiting" in waiting, waiting
@@ -409,7 +409,7 @@ def test_damaged_cache_is_refused_then_rebuilt_by_labels(tmp_path, reference_cac
         culprit = out / cache.MANIFEST
     with pytest.raises(CacheError) as e:
         cache.load_cache(out)
-    assert str(culprit) in str(e.value) and "imu_learn.labels" in str(e.value)
+    assert str(culprit) in str(e.value) and "imu_learn.data.labels" in str(e.value)
     capsys.readouterr()
     assert labels.main(labels_args(out)) == 0
     err = capsys.readouterr().err
@@ -426,8 +426,7 @@ FIT_TINY = ["--no-progress", "--data.window", "50", "--data.batch_size", "8", "-
 
 
 def fit(*args: str) -> int:
-    from imu_learn import fit as fit_mod
-
+    from imu_learn.train import fit as fit_mod
     return fit_mod.main([str(a) for a in args])
 
 
@@ -457,7 +456,7 @@ def test_fit_signal_midway_through_a_checkpoint_then_resume(tmp_path, sig):
     run = tmp_path / "run"
     marker = tmp_path / "fired"
     # stopped halfway through epoch 2's last.pt (epoch 1's is complete)
-    proc = faulty_cli("*last.pt*", 2, "pause", marker, "imu_learn.fit", *fit_new(run, 3))
+    proc = faulty_cli("*last.pt*", 2, "pause", marker, "imu_learn.train.fit", *fit_new(run, 3))
     signal_midway(proc, marker, sig)
     assert proc.returncode == -sig
     for p in run.iterdir():
@@ -543,15 +542,13 @@ EVAL_ARGS = ["--config", str(REPO / "configs" / "eval_default.toml"), "--no-prog
 
 
 def evaluate(out: Path, methods: str = "raw,saver") -> int:
-    from imu_learn import evaluate as ev
-
+    from imu_learn.eval import run as ev
     return ev.main([*EVAL_ARGS, "--methods", methods, "--out", str(out)])
 
 
 @pytest.fixture()
 def saver(monkeypatch):
-    from imu_learn import evaluate as ev
-
+    from imu_learn.eval import run as ev
     monkeypatch.setitem(ev.REGISTRY, "saver", SavingRaw)
 
 
@@ -570,7 +567,7 @@ def test_evaluate_failing_writer_keeps_the_previous_report(out_dir, saver, capsy
 def test_evaluate_sigint_midway_then_rerun(tmp_path):
     out = tmp_path / "out"
     marker = tmp_path / "fired"
-    proc = faulty_cli("*report.md*", 1, "pause", marker, "imu_learn.evaluate", *EVAL_ARGS, "--methods", "raw",
+    proc = faulty_cli("*report.md*", 1, "pause", marker, "imu_learn.eval.run", *EVAL_ARGS, "--methods", "raw",
                       "--out", out)
     err = signal_midway(proc, marker, signal.SIGINT)
     assert proc.returncode == 130, err

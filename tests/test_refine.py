@@ -1,4 +1,4 @@
-"""imu_learn.refine: windowed refinement, stitching, and writing each format back unchanged but for the IMU."""
+"""imu_learn.infer.refine: windowed refinement, stitching, and writing each format back unchanged but for the IMU."""
 import csv
 import hashlib
 import os
@@ -12,9 +12,9 @@ import pytest
 import torch
 
 from imu_learn import _imu_core as core
-from imu_learn.checkpoint import save_checkpoint
-from imu_learn.model import ImuRefiner, ModelConfig
-from imu_learn.refine import main, refine_arrays, window_plan
+from imu_learn.infer.refine import main, refine_arrays, window_plan
+from imu_learn.nn.model import ImuRefiner, ModelConfig
+from imu_learn.train.checkpoint import save_checkpoint
 
 torch.set_num_threads(1)
 
@@ -131,7 +131,7 @@ def test_cli_refines_an_asl_folder(tmp_path, ckpt, imu):
     out = tmp_path / "out"
     env = dict(os.environ, OMP_NUM_THREADS="1", MKL_NUM_THREADS="1")
     r = subprocess.run(
-        [sys.executable, "-m", "imu_learn.refine", "--checkpoint", str(ckpt), "--input", str(src), "--output", str(out),
+        [sys.executable, "-m", "imu_learn.infer.refine", "--checkpoint", str(ckpt), "--input", str(src), "--output", str(out),
          "--window", "1000", "--overlap", "200", "--device", "cpu", "--quiet"],
         capture_output=True, text=True, env=env, timeout=120,
     )
@@ -147,7 +147,7 @@ def test_cli_refines_an_asl_folder(tmp_path, ckpt, imu):
     t, g, a = imu
     t2, g2, a2 = core.read_asl_imu(str(written))
     np.testing.assert_array_equal(t2, t)
-    from imu_learn.checkpoint import load_model
+    from imu_learn.train.checkpoint import load_model
 
     rg, ra = refine_arrays(load_model(ckpt), g, a, window=1000, overlap=200)
     np.testing.assert_array_equal(g2, rg)  # shortest round-trip text: exact
@@ -191,7 +191,7 @@ def test_bad_checkpoint_is_one_line_exit_2(tmp_path, capsys):
     assert not (tmp_path / "o").exists()
     # and through the real entry point
     r = subprocess.run(
-        [sys.executable, "-m", "imu_learn.refine", "--checkpoint", str(bad), "--input", str(src), "--output",
+        [sys.executable, "-m", "imu_learn.infer.refine", "--checkpoint", str(bad), "--input", str(src), "--output",
          str(tmp_path / "o")], capture_output=True, text=True, env=dict(os.environ, OMP_NUM_THREADS="1"), timeout=120,
     )
     assert r.returncode == 2 and r.stderr.count("\n") == 1 and "checkpoint" in r.stderr
@@ -227,7 +227,7 @@ def test_kaist_keeps_every_other_column(tmp_path, ckpt):
         assert len(r1) == 17 and r1[:8] == r0[:8] and r1[14:] == r0[14:]
     g0 = np.array([[float(x) for x in r[8:11]] for r in old])
     a0 = np.array([[float(x) for x in r[11:14]] for r in old])
-    from imu_learn.checkpoint import load_model
+    from imu_learn.train.checkpoint import load_model
 
     rg, ra = refine_arrays(load_model(ckpt), g0, a0, window=128, overlap=32)
     _t, g1, a1 = core.read_kaist_imu(str(out / "sensor_data" / "xsens_imu.csv"))
@@ -251,7 +251,7 @@ def test_blackbird_hdf5_copy_with_imu_replaced(tmp_path, ckpt):
     out = tmp_path / "out"
     assert main(["--checkpoint", str(ckpt), "--input", str(src), "--output", str(out), "--quiet"]) == 0
     assert sha(src / "data.hdf5") == before
-    from imu_learn.checkpoint import load_model
+    from imu_learn.train.checkpoint import load_model
 
     rg, ra = refine_arrays(load_model(ckpt), g, a)
     with h5py.File(out / "data.hdf5", "r") as f:
@@ -276,7 +276,7 @@ def test_broad_mat_copy_with_imu_replaced(tmp_path, ckpt):
     assert main(["--checkpoint", str(ckpt), "--input", str(src), "--output", str(out), "--quiet"]) == 0
     assert sha(src) == before
     m = scipy_io.loadmat(out / "01_trial.mat")
-    from imu_learn.checkpoint import load_model
+    from imu_learn.train.checkpoint import load_model
 
     rg, ra = refine_arrays(load_model(ckpt), g, a)
     np.testing.assert_array_equal(m["imu_gyr"], rg)

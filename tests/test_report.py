@@ -1,4 +1,4 @@
-"""The evaluation report (imu_learn.report): quoted paper figures, tables, summary, files."""
+"""The evaluation report (imu_learn.eval.report): quoted paper figures, tables, summary, files."""
 import csv
 import json
 import math
@@ -7,7 +7,7 @@ from pathlib import Path
 
 import pytest
 
-from imu_learn import report
+from imu_learn.eval import report
 
 REPO = Path(__file__).resolve().parent.parent
 PAPER = REPO.parent / "shared" / "paper" / "imu_rnn_navigation.tex"

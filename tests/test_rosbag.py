@@ -1,4 +1,4 @@
-"""imu_learn.formats.rosbag: ROS 1 and ROS 2 (sqlite3, mcap) bags in and out, on fixture bags
+"""imu_learn.data.formats.rosbag: ROS 1 and ROS 2 (sqlite3, mcap) bags in and out, on fixture bags
 written from the shipped EuRoC crop (tests/rosbag_fixtures.py)."""
 import shutil
 from pathlib import Path
@@ -8,6 +8,10 @@ import pytest
 import torch
 
 from imu_learn import _imu_core as core
+from imu_learn.data.formats import detect_format, read_imu_source, rosbag, write_imu
+from imu_learn.data.formats.groundtruth import read_groundtruth
+from imu_learn.data.loading import AlignOptions, align, load_sequence
+from imu_learn.data.types import GroundTruth, ImuData
 from imu_learn.errors import (
     BagError,
     BagStampError,
@@ -17,13 +21,9 @@ from imu_learn.errors import (
     NotABagError,
     TruncatedBagError,
 )
-from imu_learn.formats import detect_format, read_imu_source, rosbag, write_imu
-from imu_learn.formats.groundtruth import read_groundtruth
-from imu_learn.loading import AlignOptions, align, load_sequence
-from imu_learn.model import ImuRefiner, ModelConfig
-from imu_learn.refine import main as refine_main
-from imu_learn.refine import refine_recording, refine_with_variance
-from imu_learn.types import GroundTruth, ImuData
+from imu_learn.infer.refine import main as refine_main
+from imu_learn.infer.refine import refine_recording, refine_with_variance
+from imu_learn.nn.model import ImuRefiner, ModelConfig
 from rosbag_fixtures import GT_CSV, IMU_CSV, KINDS, POSE_TOPICS, TOPICS, bag_name, write_fixture_bag
 
 torch.set_num_threads(1)
@@ -245,7 +245,7 @@ def test_existing_ros2_output_folder_is_refused(bags, tmp_path):
 def cov_refined(bags, tmp_path_factory):
     """Each bag refined by the shipped covariance model with --fill-covariance, and what
     refine_with_variance gives for the recording (gyro, acc, variances)."""
-    from imu_learn.checkpoint import load_model
+    from imu_learn.train.checkpoint import load_model
 
     out = tmp_path_factory.mktemp("cov_refined")
     for kind in KINDS:
@@ -297,7 +297,7 @@ def test_fill_covariance_changes_nothing_else(bags, cov_refined, kind):
 
 
 def test_fill_covariance_needs_a_covariance_head(bags, tmp_path, capsys):
-    from imu_learn.checkpoint import save_checkpoint
+    from imu_learn.train.checkpoint import save_checkpoint
 
     ckpt = tmp_path / "no_head.pt"
     save_checkpoint(ckpt, random_model(), {"test": True}, epoch=1, step=1, best_metric=None)
@@ -390,7 +390,7 @@ def test_truncated_bag(bags, tmp_path, kind):
 
 
 def test_cli_prints_one_line_naming_bag_and_topic(bags, tmp_path, capsys):
-    from imu_learn.checkpoint import save_checkpoint
+    from imu_learn.train.checkpoint import save_checkpoint
 
     ckpt = tmp_path / "m.pt"
     save_checkpoint(ckpt, random_model(), {"test": True}, epoch=1, step=1, best_metric=None)
@@ -413,7 +413,7 @@ def test_every_bag_error_is_an_imu_error():
 
 
 def test_labels_cli_on_a_folder_of_bags(bags, tmp_path, capsys):
-    from imu_learn.labels import main as labels_main
+    from imu_learn.data.labels import main as labels_main
 
     root = bags["ros1"].parent
     rc = labels_main(["rosbag", "--root", str(root), "--out", str(tmp_path / "cache"), "--quiet",
@@ -428,8 +428,8 @@ def test_labels_cli_on_a_folder_of_bags(bags, tmp_path, capsys):
 
 
 def test_fit_config_root_can_be_a_bag(bags):
-    from imu_learn.config import DataConfig, RootConfig, SplitConfig
-    from imu_learn.splits import make_split
+    from imu_learn.data.config import DataConfig, RootConfig, SplitConfig
+    from imu_learn.data.splits import make_split
 
     root = RootConfig(str(bags["mcap"]), "rosbag", str(GT_CSV), max_gap_s=0.06, imu_topic="/imu0")
     data = DataConfig(roots=[root], split=SplitConfig(train=["run_mcap[0:0.8]"], val=["run_mcap[0.8:1]"], test=[]))

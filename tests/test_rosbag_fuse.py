@@ -5,8 +5,8 @@ import pytest
 from rosbags.highlevel import AnyReader
 
 from imu_learn import _imu_core as core
+from imu_learn.data.formats import rosbag
 from imu_learn.errors import BagTopicError
-from imu_learn.formats import rosbag
 from imu_learn.fuse.aiding import bag_position_source, leica_fixes
 from imu_learn.fuse.config import FuseConfig, RecordingSpec, ScenarioSpec, validate
 from imu_learn.fuse.run import run_experiment

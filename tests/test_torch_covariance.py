@@ -5,9 +5,9 @@ import numpy as np
 import pytest
 import torch
 
-from imu_learn.torch_covariance import continuous_covariance, increment_covariance, to_gtsam_manifold
-from imu_learn.torch_integration import integrate
-from imu_learn.torch_so3 import quat_conj, quat_mul, so3_log
+from imu_learn.nn.covariance import continuous_covariance, increment_covariance, to_gtsam_manifold
+from imu_learn.nn.integration import integrate
+from imu_learn.nn.so3 import quat_conj, quat_mul, so3_log
 
 torch.set_num_threads(1)
 

@@ -5,8 +5,8 @@ import pytest
 import torch
 
 import imu_learn as il
-from imu_learn.torch_integration import integrate, prefix_quat_product
-from imu_learn.torch_so3 import quat_conj, quat_mul, quat_rotate, so3_exp, so3_log
+from imu_learn.nn.integration import integrate, prefix_quat_product
+from imu_learn.nn.so3 import quat_conj, quat_mul, quat_rotate, so3_exp, so3_log
 
 torch.set_num_threads(1)
 

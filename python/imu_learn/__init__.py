@@ -7,7 +7,18 @@ Public API (see README):
     errors: ImuError and its subclasses
 """
 from imu_learn._imu_core import __version__
-from imu_learn.batches import AugmentConfig, Batch, BatchConfig, BatchSampler, make_batch
+from imu_learn.core.batches import AugmentConfig, Batch, BatchConfig, BatchSampler, make_batch
+from imu_learn.core.integration import (
+    PAPER_FRACTIONS,
+    Increments,
+    WindowLabels,
+    integrate_windows,
+    preintegrate,
+    window_labels,
+)
+from imu_learn.core.quat import wxyz_to_xyzw, xyzw_to_wxyz
+from imu_learn.data.loading import AlignOptions, align, load_recording, load_sequence, read_imu
+from imu_learn.data.types import GroundTruth, ImuData, Recording, Sequence
 from imu_learn.errors import (
     AidingError,
     AidingOverlapError,
@@ -27,17 +38,6 @@ from imu_learn.errors import (
     TooFewRowsError,
     TooShortError,
 )
-from imu_learn.integration import (
-    PAPER_FRACTIONS,
-    Increments,
-    WindowLabels,
-    integrate_windows,
-    preintegrate,
-    window_labels,
-)
-from imu_learn.loading import AlignOptions, align, load_recording, load_sequence, read_imu
-from imu_learn.quat import wxyz_to_xyzw, xyzw_to_wxyz
-from imu_learn.types import GroundTruth, ImuData, Recording, Sequence
 
 __all__ = [
     "__version__",

@@ -75,11 +75,11 @@ def integrate_windows(t_ns: _I64, gyro: _F64, acc: _F64, starts: _U64, horizons:
 def increment_covariance(t_ns: _I64, gyro: _F64, acc: _F64, var: _F64, horizons: _U64) -> _F64:
     """(H, 9, 9) covariance of (dtheta, dbeta, dgamma) after each horizon's number of intervals from
     sample 0 (the rows of preintegrate; horizon 0 is zero). var (N, 6): per-sample discrete-time
-    variances, gyro then acc. See imu_learn.covariance."""
+    variances, gyro then acc. See imu_learn.core.covariance."""
 
 def interval_covariances(t_ns: _I64, gyro: _F64, acc: _F64, var: _F64, boundaries: _U64) -> _F64:
     """(M - 1, 9, 9) covariance of each interval [t_b[i], t_b[i+1]] integrated from its own start, for
-    strictly increasing sample indices boundaries (M,). See imu_learn.covariance."""
+    strictly increasing sample indices boundaries (M,). See imu_learn.core.covariance."""
 
 class SequenceSet:
     """Aligned sequences held in Rust: tuples (t_ns, gyro, acc, p, v, q_wxyz)."""

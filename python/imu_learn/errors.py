@@ -196,3 +196,22 @@ def one_line(e: BaseException) -> str:
         if isinstance(e, ImuError):
             msg = f"{type(e).__name__}: {msg}"
     return " ".join(msg.split())
+
+
+class ConfigError(ImuError, ValueError):
+    """A configuration file or override names an unknown key or gives a value of the wrong type."""
+
+
+class CheckpointError(ImuError):
+    """A checkpoint is missing, corrupt, or of an unknown format."""
+
+
+class DataPathError(ConfigError, FileNotFoundError):
+    """A recording or ground-truth path of ``data.roots`` exists under none of the places tried."""
+
+    def __str__(self) -> str:  # FileNotFoundError's own str would show errno and filename
+        return str(self.args[0]) if self.args else ""
+
+
+class MethodError(ImuError):
+    """A method failed to fit, load or predict."""

@@ -8,7 +8,7 @@ from imu_learn.fuse.config import load
 from imu_learn.fuse import run as R
 from imu_learn.fuse.graph import fuse
 from imu_learn.fuse.score import score
-from imu_learn.quat import wxyz_to_xyzw
+from imu_learn.core.quat import wxyz_to_xyzw
 
 rec_name, scen_names, modes = sys.argv[1], sys.argv[2].split(","), sys.argv[3].split(",")
 cfg = load(Path("/work/main/configs/fuse_euroc.toml"), "/work/shared/data")

@@ -5,10 +5,10 @@ import numpy as np
 import gtsam
 from scipy.spatial.transform import Rotation
 import imu_learn as il
-from imu_learn.formats.groundtruth import read_groundtruth
+from imu_learn.data.formats.groundtruth import read_groundtruth
 from imu_learn.fuse import ImuNoise, fuse, simulate_position
 from imu_learn.fuse import graph
-from imu_learn.quat import wxyz_to_xyzw
+from imu_learn.core.quat import wxyz_to_xyzw
 import bench_scale as bs
 
 mode, seconds = sys.argv[1], int(sys.argv[2])

@@ -14,7 +14,7 @@ What it takes from the paper:
   always refined in overlapping windows);
 - supervision through a differentiable integrator: the loss is on the increments integrated from
   the corrected IMU over the full training window (rotation, velocity and position:
-  :func:`imu_learn.torch_integration.integrate` inside :func:`imu_learn.losses.imu_loss` at the
+  :func:`imu_learn.nn.integration.integrate` inside :func:`imu_learn.nn.losses.imu_loss` at the
   single horizon n = window, Huber on each residual's norm, no regulariser, no bias term);
 - trained WITHOUT augmentation (the recorded IMU as it is).
 
@@ -40,10 +40,10 @@ from torch import nn
 
 from imu_learn.baselines.base import FitSettings, Method
 from imu_learn.baselines.proposed import imu_stats, pick_device, train_refiner
-from imu_learn.batches import Batch, BatchConfig
-from imu_learn.losses import LossConfig, imu_loss
-from imu_learn.refine import refine_arrays
-from imu_learn.types import Sequence
+from imu_learn.core.batches import Batch, BatchConfig
+from imu_learn.data.types import Sequence
+from imu_learn.infer.refine import refine_arrays
+from imu_learn.nn.losses import LossConfig, imu_loss
 
 Tensor = torch.Tensor
 FORMAT = "imu_learn.baselines.airimu_style.v1"
@@ -69,7 +69,7 @@ class AirImuConfig:
     overlap: int = -1  # refine overlap [samples]; -1: window // 2
 
     @property
-    def causal(self) -> bool:  # for imu_learn.refine: always refined in stitched windows
+    def causal(self) -> bool:  # for imu_learn.infer.refine: always refined in stitched windows
         return False
 
     def loss_config(self) -> LossConfig:

@@ -17,9 +17,9 @@ from typing import Dict, List, Optional, Tuple
 
 import numpy as np
 
-from imu_learn.integration import integrate_windows
-from imu_learn.quat import quat_mul, quat_rotate  # noqa: F401  (re-exported: baselines use them from here)
-from imu_learn.types import Sequence
+from imu_learn.core.integration import integrate_windows
+from imu_learn.core.quat import quat_mul, quat_rotate  # noqa: F401  (re-exported: baselines use them from here)
+from imu_learn.data.types import Sequence
 
 
 @dataclass(frozen=True)

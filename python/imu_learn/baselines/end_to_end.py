@@ -21,11 +21,11 @@ One regressor per scored horizon: ``fit`` trains a separate net for every n in
 trained on 10-sample windows, not from a 200-sample net fed 10 samples. Each net gets the full
 budget (``FitSettings.steps``), so the fit time grows with the number of horizons (and with n).
 
-Training (per horizon n): windows from the Rust :class:`~imu_learn.batches.BatchSampler` (n
+Training (per horizon n): windows from the Rust :class:`~imu_learn.core.batches.BatchSampler` (n
 samples, no augmentation by default), targets from the ground truth of the training sequences
 looked up by each window's ``seq_index``/``start``: Δq = q_k⁻¹ ⊗ q_{k+n}, Δp = R_kᵀ(p_{k+n} − p_k).
 Loss: ``w_q`` Huber(|Log(Δq ⊗ Δq̂⁻¹)|, δ_q) + ``w_p`` Huber(|Δp − Δp̂|, δ_p), Huber on the norm of
-each 3-vector residual (:func:`imu_learn.losses.huber_norm`), batch mean. Adam at
+each 3-vector residual (:func:`imu_learn.nn.losses.huber_norm`), batch mean. Adam at
 ``FitSettings.lr`` for ``FitSettings.steps`` steps; with validation sequences the weights with the
 lowest loss on fixed validation windows (checked ``evals`` times) are kept.
 
@@ -56,12 +56,12 @@ import torch
 from torch import nn
 
 from imu_learn.baselines.base import FitSettings, Method, PosePrediction
-from imu_learn.batches import AugmentConfig, BatchConfig, BatchSampler
-from imu_learn.losses import huber_norm
-from imu_learn.quat import quat_mul, quat_rotate
-from imu_learn.torch_so3 import quat_conj, so3_exp, so3_log
-from imu_learn.torch_so3 import quat_mul as tquat_mul
-from imu_learn.types import Sequence
+from imu_learn.core.batches import AugmentConfig, BatchConfig, BatchSampler
+from imu_learn.core.quat import quat_mul, quat_rotate
+from imu_learn.data.types import Sequence
+from imu_learn.nn.losses import huber_norm
+from imu_learn.nn.so3 import quat_conj, so3_exp, so3_log
+from imu_learn.nn.so3 import quat_mul as tquat_mul
 
 Tensor = torch.Tensor
 FORMAT = "imu_learn.baselines.end_to_end.v2"  # one net per horizon

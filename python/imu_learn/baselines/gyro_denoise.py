@@ -35,9 +35,9 @@ import torch
 from torch import nn
 
 from imu_learn.baselines.base import FitSettings, Method
-from imu_learn.losses import huber_norm
-from imu_learn.torch_so3 import quat_conj, quat_mul, so3_exp, so3_log
-from imu_learn.types import Sequence
+from imu_learn.data.types import Sequence
+from imu_learn.nn.losses import huber_norm
+from imu_learn.nn.so3 import quat_conj, quat_mul, so3_exp, so3_log
 
 Tensor = torch.Tensor
 

@@ -1,6 +1,6 @@
 """The proposed method as an evaluated :class:`~imu_learn.baselines.base.Method`: the paper's
-refiner (:class:`imu_learn.model.ImuRefiner`, stacked bidirectional LSTM + FC, a residual on the
-raw IMU) trained with the paper's loss (:func:`imu_learn.losses.imu_loss`: Huber on integrated
+refiner (:class:`imu_learn.nn.model.ImuRefiner`, stacked bidirectional LSTM + FC, a residual on the
+raw IMU) trained with the paper's loss (:func:`imu_learn.nn.losses.imu_loss`: Huber on integrated
 Δq/Δβ/Δγ at the label horizons + the dead-zone regulariser, bias-aware) on augmented Rust batches.
 
 Two ways in:
@@ -13,12 +13,12 @@ Two ways in:
   ``settings.steps`` augmented batches of ``settings.window`` samples, gradient-norm clipping, and
   the weights with the lowest loss on fixed non-augmented validation windows (checked ``evals``
   times) kept. Augmentation, model and loss default to those of ``imu_learn.fit``'s default run
-  (:class:`imu_learn.config.DataConfig`, :class:`ModelConfig`, :class:`LossConfig`).
+  (:class:`imu_learn.train.config.DataConfig`, :class:`ModelConfig`, :class:`LossConfig`).
 
 ``refine`` runs :func:`imu_learn.refine.refine_arrays` with windows of the training length and a
 half-window overlap (each sample taken from the window in which it lies most central, so the model
 never needs more context than it was trained with). ``save`` writes an ordinary imu_learn
-checkpoint (:mod:`imu_learn.checkpoint`), which ``python -m imu_learn.refine`` and
+checkpoint (:mod:`imu_learn.train.checkpoint`), which ``python -m imu_learn.refine`` and
 ``from_checkpoint`` read as well.
 
 :func:`train_refiner` is the training loop shared with the AirIMU-style baseline.
@@ -34,11 +34,11 @@ import torch
 from torch import nn
 
 from imu_learn.baselines.base import FitSettings, Method
-from imu_learn.batches import AugmentConfig, Batch, BatchConfig, BatchSampler
-from imu_learn.losses import LossConfig, imu_loss
-from imu_learn.model import ImuRefiner, ModelConfig
-from imu_learn.refine import refine_arrays
-from imu_learn.types import Sequence
+from imu_learn.core.batches import AugmentConfig, Batch, BatchConfig, BatchSampler
+from imu_learn.data.types import Sequence
+from imu_learn.infer.refine import refine_arrays
+from imu_learn.nn.losses import LossConfig, imu_loss
+from imu_learn.nn.model import ImuRefiner, ModelConfig
 
 Tensor = torch.Tensor
 LossFn = Callable[[nn.Module, Batch, torch.device, bool], Tensor]
@@ -46,7 +46,7 @@ LossFn = Callable[[nn.Module, Batch, torch.device, bool], Tensor]
 
 def default_augment() -> AugmentConfig:
     """The augmentation of ``imu_learn.fit``'s default run."""
-    from imu_learn.config import DataConfig
+    from imu_learn.data.config import DataConfig
 
     return DataConfig().augment
 
@@ -135,7 +135,7 @@ def train_refiner(
 class ProposedConfig:
     model: ModelConfig = field(default_factory=ModelConfig)
     loss: LossConfig = field(default_factory=LossConfig)
-    augment: Optional[AugmentConfig] = None  # None: imu_learn.fit's default augmentation
+    augment: Optional[AugmentConfig] = None  # None: imu_learn.train.fit's default augmentation
     grad_clip: float = 1.0
     evals: int = 10  # validation checks over the run
     val_stride: int = 0  # validation window step [samples]; 0: window // 2
@@ -162,7 +162,7 @@ class Proposed(Method):
     @classmethod
     def from_checkpoint(cls, path: Path, device: str = "cpu") -> Proposed:
         """The model of an ``imu_learn.fit`` checkpoint (or of :meth:`save`)."""
-        from imu_learn.checkpoint import load_checkpoint, model_from_checkpoint
+        from imu_learn.train.checkpoint import load_checkpoint, model_from_checkpoint
 
         state = load_checkpoint(Path(path), map_location="cpu")
         model = model_from_checkpoint(state)
@@ -205,7 +205,7 @@ class Proposed(Method):
         return refine_arrays(self.model, seq.gyro, seq.acc, window=W, overlap=min(overlap, W - 1))
 
     def save(self, path: Path) -> None:
-        from imu_learn.checkpoint import save_checkpoint
+        from imu_learn.train.checkpoint import save_checkpoint
 
         cfg = dict(self.run_config)
         cfg.setdefault("data", {})

@@ -30,7 +30,7 @@ Training (TLIO's recipe, two phases within the shared budget ``FitSettings.steps
 ``mse_fraction`` (half by default: 150 of evaluate's 300 steps) with the MSE loss on d̂ alone
 (Σ_axes (d - d̂)², batch mean), the rest with the Gaussian negative log-likelihood
 ½ Σ_axes [(d - d̂)² e^{-log σ̂²} + log σ̂²] (batch mean), Adam at ``FitSettings.lr``, gradient norm
-clipped at 1. Windows are drawn by the same Rust :class:`~imu_learn.batches.BatchSampler` as the
+clipped at 1. Windows are drawn by the same Rust :class:`~imu_learn.core.batches.BatchSampler` as the
 other learned baselines (no IMU noise or bias augmentation: only the yaw augmentation), the
 orientation R_i and the target from the training sequences' **ground truth** (as TLIO trains).
 With validation sequences, ``evals`` checks on fixed validation windows (every W/2 samples, no
@@ -73,9 +73,9 @@ import torch
 from torch import nn
 
 from imu_learn.baselines.base import FitSettings, Method, PosePrediction, poses_from_imu
-from imu_learn.batches import BatchConfig, BatchSampler
-from imu_learn.quat import quat_rotate
-from imu_learn.types import Sequence
+from imu_learn.core.batches import BatchConfig, BatchSampler
+from imu_learn.core.quat import quat_rotate
+from imu_learn.data.types import Sequence
 
 Tensor = torch.Tensor
 FORMAT = "imu_learn.baselines.tlio.v1"

@@ -12,7 +12,7 @@ per sensor, or none); the specific force that drives the g-sensitivity is the re
 with the gyro's cutoff.
 
 Fit (``fit``): nonlinear least squares *through the same zero-order-hold integration* that the
-evaluation uses (the scheme of :func:`imu_learn.torch_integration.integrate`, in float64; agrees with
+evaluation uses (the scheme of :func:`imu_learn.nn.integration.integrate`, in float64; agrees with
 the core's ``integrate_windows`` to ~1e-15), on short windows of the
 training sequences (``window`` samples, labels at the paper's fractions of it):
 
@@ -52,10 +52,10 @@ import torch
 from scipy.signal import butter, sosfiltfilt
 
 from imu_learn.baselines.base import FitSettings, Method
-from imu_learn.integration import PAPER_FRACTIONS, window_labels
-from imu_learn.torch_integration import prefix_quat_product
-from imu_learn.torch_so3 import quat_conj, quat_mul, quat_rotate, so3_exp, so3_log
-from imu_learn.types import Sequence
+from imu_learn.core.integration import PAPER_FRACTIONS, window_labels
+from imu_learn.data.types import Sequence
+from imu_learn.nn.integration import prefix_quat_product
+from imu_learn.nn.so3 import quat_conj, quat_mul, quat_rotate, so3_exp, so3_log
 
 Tensor = torch.Tensor
 
@@ -196,7 +196,7 @@ def _tree_product(q: Tensor) -> Tensor:
 
 def rotation_increments(gyro: Tensor, dt: Tensor, horizons: Seq[int]) -> Tensor:
     """Δq (..., H, 4) after the first h samples, h in ``horizons`` (increasing): the same zero-order
-    hold as :func:`imu_learn.torch_integration.integrate`, but only the products up to the horizons
+    hold as :func:`imu_learn.nn.integration.integrate`, but only the products up to the horizons
     (pairwise within each segment between horizons, then chained), so about W quaternion products
     instead of W·log2 W. gyro (..., W, 3), dt broadcastable to (..., W)."""
     step = so3_exp(gyro * dt.unsqueeze(-1))

@@ -1,7 +1,7 @@
 """Aiding measurements for the factor graph, each tied to IMU sample indices.
 
 Real: EuRoC's Leica MS50 laser tracker (a prism's position, 20 Hz; lever arm from its
-``sensor.yaml``; read strictly by :func:`imu_learn.formats.asl.read_leica`), snapped to the nearest
+``sensor.yaml``; read strictly by :func:`imu_learn.data.formats.asl.read_leica`), snapped to the nearest
 IMU sample. Simulated from ground truth (seeded, and labelled as simulated in every table): a
 GNSS-like position fix and a VO-like relative pose. Outages drop every measurement inside
 configured time windows.
@@ -31,8 +31,8 @@ from typing import Sequence as Seq
 import numpy as np
 from scipy.spatial.transform import Rotation
 
+from imu_learn.core.quat import wxyz_to_xyzw
 from imu_learn.errors import AidingError, AidingOverlapError, InvalidInputError
-from imu_learn.quat import wxyz_to_xyzw
 
 
 @dataclass(frozen=True)
@@ -273,7 +273,7 @@ def bag_position_source(bag, topic: str, lever=(0.0, 0.0, 0.0)) -> Tuple[np.ndar
     the position of a PoseStamped / TransformStamped / Odometry topic), in the form
     :func:`leica_fixes` takes: ``(t_ns, p, lever, source)``. ``lever``: the measured point in the
     body frame (a bag does not say it; the fuse config does). Header stamps; typed bag errors."""
-    from imu_learn.formats.rosbag import read_positions
+    from imu_learn.data.formats.rosbag import read_positions
 
     t_ns, p = read_positions(bag, topic)
     lever_arm = np.asarray(lever, dtype=np.float64).reshape(3)

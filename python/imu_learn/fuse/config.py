@@ -1,6 +1,6 @@
 """The fusion experiment's configuration (``configs/fuse_*.toml``): recordings x IMU inputs x
 aiding scenarios. Keys and value types are checked as for ``imu_learn.fit`` configs
-(:func:`imu_learn.config.from_dict`); paths of recordings are relative to the data root
+(:func:`imu_learn.train.config.from_dict`); paths of recordings are relative to the data root
 (``data_root``, else the environment variable ``IMU_LEARN_DATA``; ``--data-root`` beats both)."""
 from __future__ import annotations
 
@@ -9,7 +9,8 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import List, Optional, Tuple
 
-from imu_learn.config import DATA_ROOT_ENV, ConfigError, from_dict, read_toml
+from imu_learn.errors import ConfigError
+from imu_learn.settings import DATA_ROOT_ENV, from_dict, read_toml
 
 # "raw+learned-cov" / "proposed+learned-cov": the raw or refined samples, each weighted in the
 # graph by its own noise variances from a refiner's covariance head (covariance_checkpoint) instead
@@ -112,7 +113,7 @@ def imu_methods() -> List[str]:
     """Every input name: raw, proposed, and each ``imu_learn.evaluate`` method whose output is IMU
     samples (its class has its own ``refine``; End-to-End regresses poses and is not one)."""
     from imu_learn.baselines.base import Method
-    from imu_learn.evaluate import REGISTRY, load_method_class
+    from imu_learn.baselines.registry import REGISTRY, load_method_class
 
     from .displacement import FACTOR_INPUTS
 

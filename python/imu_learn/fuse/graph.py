@@ -260,7 +260,7 @@ class IncrementalFusion:
         ``predict_between``).
 
         ``var`` (6,): this sample's own noise variances (discrete-time, gyro then acc, the
-        convention of :mod:`imu_learn.torch_covariance`, e.g. a refiner's covariance head) in place of
+        convention of :mod:`imu_learn.nn.covariance`, e.g. a refiner's covariance head) in place of
         the datasheet's white noise; GTSAM's preintegration then propagates exactly these per-sample
         variances into each IMU factor's covariance (it reads the parameters at every sample). The
         bias random walk stays the datasheet's."""

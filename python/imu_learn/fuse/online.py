@@ -2,7 +2,7 @@
 
 Each raw sample goes through the whole per-sample path a navigation system would run live:
 
-1. the causal model's :meth:`~imu_learn.model.ImuRefiner.step` (input ``proposed``; ``raw`` passes
+1. the causal model's :meth:`~imu_learn.nn.model.ImuRefiner.step` (input ``proposed``; ``raw`` passes
    the sample through) refines it with the LSTM state carried from the previous sample;
 2. :meth:`IncrementalFusion.add_sample <imu_learn.fuse.graph.IncrementalFusion.add_sample>`
    advances the preintegration and, at a keyframe, adds the IMU and aiding factors and updates
@@ -31,8 +31,7 @@ from typing import Callable, Dict, List, Optional, Sequence, Tuple
 
 import numpy as np
 
-from imu_learn.config import ConfigError
-from imu_learn.errors import InvalidInputError
+from imu_learn.errors import ConfigError, InvalidInputError
 
 from .graph import FusionResult, IncrementalFusion, PriorSigmas
 from .noise import ImuNoise
@@ -84,7 +83,7 @@ class CausalStepper:
 def load_causal_model(path: Path, hint: str = ""):
     """A causal checkpoint's model; a bidirectional one is a :class:`ConfigError` (``hint`` is
     appended to its message)."""
-    from imu_learn.checkpoint import load_model
+    from imu_learn.train.checkpoint import load_model
 
     model = load_model(Path(path))
     if not model.cfg.causal:
@@ -225,7 +224,7 @@ def machine() -> Dict[str, object]:
     """What the latencies were measured on."""
     import torch
 
-    from imu_learn.machine import cpu_name
+    from imu_learn.util.machine import cpu_name
 
     cpu = cpu_name()
     try:
@@ -257,8 +256,8 @@ def run_online(cfg, out: Path, checkpoint: Optional[str] = None, recordings: Opt
     import torch
     from scipy.spatial.transform import Rotation
 
-    from imu_learn.atomic import atomic_write_text
-    from imu_learn.quat import wxyz_to_xyzw
+    from imu_learn.core.quat import wxyz_to_xyzw
+    from imu_learn.util.atomic import atomic_write_text
 
     from . import run as runmod
 
@@ -307,7 +306,7 @@ def run_online(cfg, out: Path, checkpoint: Optional[str] = None, recordings: Opt
                     # experiment) is fitted on the input the stream will see: the causal refinement
                     # of the first seconds, which refine_arrays gives (up to float32 rounding).
                     if name == "proposed" and refined is None:
-                        from imu_learn.refine import refine_arrays
+                        from imu_learn.infer.refine import refine_arrays
 
                         refined = refine_arrays(model, seq.gyro, seq.acc)
                     g, a = refined if name == "proposed" else (seq.gyro, seq.acc)

@@ -9,7 +9,7 @@ from typing import List, Sequence, Tuple
 import numpy as np
 
 from imu_learn import _imu_core as core
-from imu_learn.atomic import atomic_write_bytes
+from imu_learn.util.atomic import atomic_write_bytes
 
 
 def plot_setting(out_png: Path, title: str, t_ns: np.ndarray, p_gt: np.ndarray,

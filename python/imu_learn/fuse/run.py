@@ -23,10 +23,10 @@ import numpy as np
 from scipy.spatial.transform import Rotation
 
 from imu_learn import _imu_core as core
-from imu_learn.atomic import atomic_write_path, atomic_write_text
-from imu_learn.config import ConfigError
-from imu_learn.digest import file_sha256
-from imu_learn.quat import wxyz_to_xyzw, xyzw_to_wxyz
+from imu_learn.core.quat import wxyz_to_xyzw, xyzw_to_wxyz
+from imu_learn.errors import ConfigError
+from imu_learn.util.atomic import atomic_write_path, atomic_write_text
+from imu_learn.util.digest import file_sha256
 
 from .aiding import (
     aiding_gaps,
@@ -74,7 +74,7 @@ def artefact_of(cfg: FuseConfig, spec: RecordingSpec, name: str) -> str:
         return spec.traditional or cfg.traditional
     if name == "raw":
         return ""
-    from imu_learn.evaluate import safe_name
+    from imu_learn.baselines.registry import safe_name
 
     return str(Path(spec.methods_dir or cfg.methods_dir) / f"{safe_name(name)}.pt")
 
@@ -108,7 +108,7 @@ def aiding_rng(seed: Optional[int], rname: str, scn: ScenarioSpec) -> np.random.
 def load_recording_for_fusion(cfg: FuseConfig, spec: RecordingSpec):
     """The recording's longest gap-free segment, its noise model, and its Leica fixes (or None)."""
     from imu_learn import AlignOptions, load_recording
-    from imu_learn.formats.asl import imu_sensor_yaml, leica_file, read_leica
+    from imu_learn.data.formats.asl import imu_sensor_yaml, leica_file, read_leica
 
     root = cfg.root()
     path = root / spec.path
@@ -139,14 +139,14 @@ def load_processor(name: str, path: str, cache: Dict[Tuple[str, str], object]) -
                     f" (python -m imu_learn.evaluate with the '{name}' method writes it to <report>/methods/)")
             raise FileNotFoundError(f"{name}: {path} not found{hint}")
         if name == "proposed" or name in LEARNED_COV_INPUTS:
-            from imu_learn.checkpoint import load_model
+            from imu_learn.train.checkpoint import load_model
 
             model = load_model(Path(path))
             if name in LEARNED_COV_INPUTS and model.cov_head is None:
                 raise ConfigError(f"{name}: {path} has no covariance head (a model fitted with model.covariance = true)")
             cache[(name, path)] = model
         else:
-            from imu_learn.evaluate import load_method_class
+            from imu_learn.baselines.registry import load_method_class
 
             cache[(name, path)] = load_method_class(name)().load(Path(path))
     return cache[(name, path)]
@@ -158,7 +158,7 @@ def imu_input(name: str, seq, artefact: str, cache: Dict[Tuple[str, str], object
     if name == "raw":
         return seq.gyro, seq.acc, None
     proc = load_processor(name, artefact, cache)
-    from imu_learn.refine import refine_arrays, refine_with_variance
+    from imu_learn.infer.refine import refine_arrays, refine_with_variance
 
     if name in LEARNED_COV_INPUTS:
         gyro, acc, var = refine_with_variance(proc, seq.gyro, seq.acc)
@@ -172,8 +172,8 @@ def imu_input(name: str, seq, artefact: str, cache: Dict[Tuple[str, str], object
 def bias_prior_mean(scn: ScenarioSpec, seq, gyro: np.ndarray, acc: np.ndarray, gravity: float):
     if scn.bias_prior == "zero":
         return None
-    from imu_learn.metrics import fit_startup_bias
-    from imu_learn.types import Sequence
+    from imu_learn.data.types import Sequence
+    from imu_learn.eval.metrics import fit_startup_bias
 
     bg, ba = fit_startup_bias(Sequence(seq.name, seq.t_ns, gyro, acc, seq.p, seq.v, seq.q_wxyz),
                               scn.startup_bias_s, gravity=gravity)
@@ -207,7 +207,7 @@ def write_trajectory_bag(base: Path, t_ns: np.ndarray, p: np.ndarray, R: np.ndar
     """The trajectory as ``nav_msgs/msg/Odometry`` on ``topic`` (poses only) in a bag of the
     recording ``like``'s kind: ``base.bag`` for ROS 1, the folder ``base`` for ROS 2 (same storage
     plugin). Returns the bag written."""
-    from imu_learn.formats.rosbag import output_bag_path, write_odometry
+    from imu_learn.data.formats.rosbag import output_bag_path, write_odometry
 
     path = output_bag_path(base, like)
     path.parent.mkdir(parents=True, exist_ok=True)
@@ -217,7 +217,7 @@ def write_trajectory_bag(base: Path, t_ns: np.ndarray, p: np.ndarray, R: np.ndar
 
 def bag_of(cfg: FuseConfig, spec: RecordingSpec) -> Optional[Path]:
     """The recording's bag (its trajectories are written as bags of the same kind), or None."""
-    from imu_learn.formats import rosbag
+    from imu_learn.data.formats import rosbag
 
     path = cfg.root() / spec.path
     return path if spec.format == rosbag.NAME or (spec.format == "auto" and rosbag.detect(path)) else None

@@ -9,7 +9,7 @@ from typing import Sequence as Seq
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-from imu_learn.quat import rotation_angle, xyzw_to_wxyz
+from imu_learn.core.quat import rotation_angle, xyzw_to_wxyz
 
 from .aiding import outage_mask
 from .graph import FusionResult

@@ -1,0 +1,60 @@
+"""Every method ``imu-learn evaluate`` can fit and score, by name, and how to load one. Methods are
+imported only when asked for (most need torch)."""
+from __future__ import annotations
+
+import importlib
+import logging
+import re
+from typing import Callable, Dict, Optional, Tuple, Union
+
+from imu_learn.baselines.base import Method
+from imu_learn.errors import ConfigError
+
+log = logging.getLogger(__name__)
+
+# Method name -> (module, class name or None = the Method subclass defined there whose ``name``
+# matches, else its only one), or a factory callable (tests register their own).
+MethodEntry = Union[Tuple[str, Optional[str]], Callable[[], Method]]
+
+REGISTRY: Dict[str, MethodEntry] = {
+    "raw": ("imu_learn.baselines.base", "Raw"),
+    "traditional": ("imu_learn.baselines.traditional", None),
+    "gyro-denoise": ("imu_learn.baselines.gyro_denoise", None),
+    "end-to-end": ("imu_learn.baselines.end_to_end", None),
+    "airimu-style": ("imu_learn.baselines.airimu_style", None),
+    "proposed": ("imu_learn.baselines.proposed", None),
+}
+DEFAULT_METHODS = list(REGISTRY)
+# Registered after the defaults, so only runs that name it fit it (--methods tlio-style): TLIO-style
+# displacement regression, evaluated with ground-truth orientation inside each window (its docstring).
+REGISTRY["tlio-style"] = ("imu_learn.baselines.tlio", None)
+
+
+def safe_name(name: str) -> str:
+    return re.sub(r"[^A-Za-z0-9_.\-]+", "-", name).strip("-") or "method"
+
+
+def load_method_class(name: str) -> Optional[Callable[[], Method]]:
+    """A factory for method ``name``, or None (after a one-line warning) when its module is absent."""
+    if name not in REGISTRY:
+        raise ConfigError(f"methods: unknown method {name!r} (known: {', '.join(REGISTRY)})")
+    entry = REGISTRY[name]
+    if callable(entry):
+        return entry
+    module, cls_name = entry
+    try:
+        mod = importlib.import_module(module)
+    except ImportError as e:
+        missing = getattr(e, "name", None) or str(e)
+        why = "" if missing == module else f" (it needs {missing})"
+        log.warning("skipping %s: module %s not available%s", name, module, why)
+        return None
+    if cls_name is not None:
+        return getattr(mod, cls_name)
+    cands = [c for c in vars(mod).values()
+             if isinstance(c, type) and issubclass(c, Method) and c.__module__ == mod.__name__]
+    named = [c for c in cands if getattr(c, "name", None) == name]
+    pick = named or cands
+    if len(pick) != 1:
+        raise ConfigError(f"methods: {module} defines {len(pick)} Method classes named {name!r}; cannot pick one")
+    return pick[0]

@@ -1,0 +1,64 @@
+"""IMU preintegration and ground-truth labels (both computed in Rust)."""
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Sequence as Seq
+
+import numpy as np
+
+from imu_learn import _imu_core as core
+from imu_learn.data.types import Sequence
+
+PAPER_FRACTIONS = (0.2, 0.4, 0.6, 0.8, 1.0)
+
+
+@dataclass(frozen=True)
+class Increments:
+    """Rotation, velocity and position increments; ``dq_wxyz`` (..., 4), ``dv``/``dp`` (..., 3), ``dt`` (...) [s]."""
+
+    dq_wxyz: np.ndarray
+    dv: np.ndarray
+    dp: np.ndarray
+    dt: np.ndarray
+
+
+@dataclass(frozen=True)
+class WindowLabels(Increments):
+    """Per-window increments, shape (windows, horizons, ...); ``starts`` (windows,), ``horizons`` (horizons,)."""
+
+    starts: np.ndarray = None  # type: ignore[assignment]
+    horizons: np.ndarray = None  # type: ignore[assignment]
+
+
+def _f64(a: np.ndarray) -> np.ndarray:
+    return np.ascontiguousarray(a, dtype=np.float64)
+
+
+def preintegrate(t_ns: np.ndarray, gyro: np.ndarray, acc: np.ndarray) -> Increments:
+    """Cumulative Δq, Δβ, Δγ; row j covers [t_0, t_j] (row 0 is the identity).
+
+    Sample i is held over [t_i, t_{i+1}) with the exact SO(3) exponential: the scheme of GTSAM's
+    ``PreintegratedImuMeasurementsManifold`` with zero bias.
+    """
+    dq, dv, dp, dt = core.preintegrate(np.ascontiguousarray(t_ns, dtype=np.int64), _f64(gyro), _f64(acc))
+    return Increments(dq, dv, dp, dt)
+
+
+def window_labels(
+    seq: Sequence, window: int, stride: int = 1, fractions: Seq[float] = PAPER_FRACTIONS, gravity: float = 9.81
+) -> WindowLabels:
+    """Ground-truth Δq/Δβ/Δγ for every window (start step ``stride``) at ``fractions`` of ``window``."""
+    d = core.window_labels(
+        np.ascontiguousarray(seq.t_ns, dtype=np.int64), _f64(seq.p), _f64(seq.v), _f64(seq.q_wxyz),
+        int(window), int(stride), [float(f) for f in fractions], float(gravity),
+    )
+    return WindowLabels(**d)
+
+
+def integrate_windows(seq: Sequence, starts: np.ndarray, horizons: np.ndarray) -> WindowLabels:
+    """IMU-side Δq/Δβ/Δγ for the given windows and horizons (same layout as :func:`window_labels`)."""
+    d = core.integrate_windows(
+        np.ascontiguousarray(seq.t_ns, dtype=np.int64), _f64(seq.gyro), _f64(seq.acc),
+        np.ascontiguousarray(starts, dtype=np.uint64), np.ascontiguousarray(horizons, dtype=np.uint64),
+    )
+    return WindowLabels(**d)

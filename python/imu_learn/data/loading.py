@@ -1,0 +1,128 @@
+"""Load a recording: read it (formats/), put ground truth on the IMU stamps (Rust), split at gaps."""
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+from typing import List, Optional, Tuple, Union
+
+import numpy as np
+
+from imu_learn import _imu_core as core
+from imu_learn.data.formats import asl, blackbird, detect_format, read_recording
+from imu_learn.data.types import GroundTruth, ImuData, Recording, Sequence
+
+PathLike = Union[str, Path]
+
+
+@dataclass(frozen=True)
+class AlignOptions:
+    """How ground truth is put on IMU stamps.
+
+    max_gap_s: ground-truth stamps further apart than this split the recording into segments.
+    min_segment_s: shorter segments are dropped (too short to hold a training window).
+    velocity_half_window: pose-only ground truth gets velocity from a local quadratic fit over
+        +-this many poses (see crates/imu_core/src/align.rs for why).
+    """
+
+    max_gap_s: float = 0.05
+    min_segment_s: float = 1.0
+    velocity_half_window: int = 4
+    gt_time_offset_s: float = 0.0
+
+
+def read_imu(path: PathLike, allow_float_timestamps: bool = False) -> ImuData:
+    """Read one ASL IMU CSV (``mav0/imu0/data.csv``, or the sequence folder holding it).
+
+    Raises the typed errors of :mod:`imu_learn.errors` naming file, line, column and field.
+    """
+    return asl.read_imu(Path(path), allow_float_timestamps)
+
+
+def align(
+    imu: ImuData,
+    gt: GroundTruth,
+    options: AlignOptions = AlignOptions(),
+    name: str = "",
+    sources: Tuple[Optional[PathLike], Optional[PathLike]] = (None, None),
+) -> Recording:
+    """Interpolate ground truth onto the IMU stamps; one ``Sequence`` per gap-free segment.
+
+    ``sources``: the (IMU, ground-truth) files the data came from, named by alignment errors
+    (:class:`~imu_learn.errors.NoOverlapError` and the other :class:`~imu_learn.errors.AlignmentError`).
+    """
+    imu_source, gt_source = (None if s is None else str(s) for s in sources)
+    rate = (len(imu) - 1) / max((imu.t_ns[-1] - imu.t_ns[0]) * 1e-9, 1e-9) if len(imu) > 1 else 1.0
+    segs, report = core.align(
+        np.ascontiguousarray(imu.t_ns, dtype=np.int64),
+        np.ascontiguousarray(imu.gyro, dtype=np.float64),
+        np.ascontiguousarray(imu.acc, dtype=np.float64),
+        np.ascontiguousarray(gt.t_ns, dtype=np.int64) + int(round(options.gt_time_offset_s * 1e9)),
+        np.ascontiguousarray(gt.p, dtype=np.float64),
+        np.ascontiguousarray(gt.q_wxyz, dtype=np.float64),
+        None if gt.v is None else np.ascontiguousarray(gt.v, dtype=np.float64),
+        int(round(options.max_gap_s * 1e9)),
+        max(2, int(round(options.min_segment_s * rate))),
+        int(options.velocity_half_window),
+        imu_source=imu_source,
+        gt_source=gt_source,
+    )
+    seqs = [
+        Sequence(name=f"{name}#{i}" if len(segs) > 1 else name, **seg)  # type: ignore[arg-type]
+        for i, seg in enumerate(segs)
+    ]
+    return Recording(name=name, segments=seqs, report=report)
+
+
+def load_recording(
+    path: PathLike,
+    format: str = "auto",
+    groundtruth: Optional[PathLike] = None,
+    options: AlignOptions = AlignOptions(),
+    allow_float_timestamps: bool = False,
+    imu_topic: Optional[str] = None,
+    groundtruth_topic: Optional[str] = None,
+) -> Recording:
+    """Read and align a recording; keeps the alignment report (what was dropped, gaps). The topics
+    are for ROS bags only (see :func:`load_sequence`)."""
+    path = Path(path)
+    gt_path = None if groundtruth is None else Path(groundtruth)
+    imu, gt = read_recording(path, format, gt_path, allow_float_timestamps, imu_topic, groundtruth_topic)
+    name = path.stem if path.suffix in (".mat", ".bag") else path.name
+    return align(imu, gt, options, name=name, sources=source_files(path, format, gt_path))
+
+
+def source_files(path: Path, format: str = "auto", groundtruth: Optional[Path] = None) -> Tuple[Path, Path]:
+    """The IMU file and the ground-truth file a recording was read from, for error messages. Call
+    it after the recording was read, so that the layout is known to hold them."""
+    fmt = detect_format(path) if format == "auto" else format
+    root = path if path.is_dir() else path.parent
+    if fmt in ("asl", "euroc", "tum-vi"):
+        imu = asl.imu_file(path)
+        return imu, groundtruth or asl.find_groundtruth(asl.sequence_root(path))
+    if fmt == "blackbird":
+        return root / "data.hdf5", groundtruth or root / blackbird.GROUNDTRUTH_NAME
+    if fmt == "kaist":
+        imu = path if path.is_file() else path / "sensor_data" / "xsens_imu.csv"
+        return imu, groundtruth or imu.parent.parent / "global_pose.csv"
+    return path, groundtruth or path  # BROAD: one .mat holds both
+
+
+def load_sequence(
+    path: PathLike,
+    format: str = "auto",
+    groundtruth: Optional[PathLike] = None,
+    options: AlignOptions = AlignOptions(),
+    allow_float_timestamps: bool = False,
+    imu_topic: Optional[str] = None,
+    groundtruth_topic: Optional[str] = None,
+) -> List[Sequence]:
+    """Load a recording as a list of aligned ``Sequence`` segments (one unless ground truth has gaps).
+
+    ``format``: "auto", "euroc", "tum-vi", "asl", "blackbird", "broad", "kaist" or "rosbag" (a ROS 1
+    ``.bag`` or a ROS 2 bag folder).
+    ``groundtruth``: a separate TUM (``t[s] tx ty tz qx qy qz qw``) or ASL ground-truth file.
+    ``imu_topic`` / ``groundtruth_topic`` (bags only): the sensor_msgs/msg/Imu topic and the
+    PoseStamped / TransformStamped / Odometry topic; each may be left out when the bag has one.
+    """
+    return load_recording(path, format, groundtruth, options, allow_float_timestamps, imu_topic,
+                          groundtruth_topic).segments

@@ -1,0 +1,268 @@
+"""Train / validation / test split BY SEQUENCE, from the run config, recorded in the run folder.
+
+Every split names recordings (as found under ``data.roots``; all gap-free segments of a recording go
+to the same split). A name may carry a time block, ``NAME[a:b]``: the part of the recording from
+fraction a to fraction b of its duration (cut on IMU samples, so two blocks of one recording share
+no sample and no training window reaches into the other). Blocks of one recording used by
+different splits must not overlap; a recording used whole may appear in one split only.
+
+The default run has only the two shipped 60 s EuRoC crops, so:
+
+    train = MH_01_easy[0:0.8]   first 48 s
+    val   = MH_01_easy[0.8:1]   last 12 s: a disjoint time block of the same flight, used only for
+                                model selection (best.pt); it is not independent of train (same
+                                device, same day, same bias), so it is optimistic
+    test  = V1_01_easy          another flight in another room, never seen in training or selection
+
+``split.json`` in the run folder lists the data root used (``data_root``: absolute, or null),
+then, per split, each entry, the recording path and format, the time block, and the segments with
+their sample ranges and durations.
+
+Relative ``data.roots[i].path`` and ``.groundtruth`` are taken from the data root
+(``data.data_root``: ``--data.data_root DIR``, else the environment variable ``IMU_LEARN_DATA``,
+else the config file's value) when one is set, else (and for paths not under it) from the working
+directory, else from the repository root (the shipped crops of ``configs/default.toml``). A path
+found nowhere is a :class:`DataPathError` naming the config key, the paths tried and how to set the
+data root.
+"""
+from __future__ import annotations
+
+import json
+import re
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Dict, List, Optional, Tuple
+
+import numpy as np
+
+from imu_learn.data.config import DataConfig, RootConfig
+from imu_learn.data.datasets import DATASETS, find_recordings
+from imu_learn.data.loading import AlignOptions, load_sequence
+from imu_learn.data.types import Sequence
+from imu_learn.errors import (
+    ConfigError,
+    DataPathError,  # noqa: F401  (defined with every error class)
+    TooShortError,
+)
+from imu_learn.settings import DATA_ROOT_ENV
+
+SPLITS = ("train", "val", "test")
+_BLOCK = re.compile(r"^(?P<name>.+?)\[(?P<a>[^:\]]*):(?P<b>[^\]]*)\]$")
+REPO_ROOT = Path(__file__).resolve().parents[3]
+
+
+@dataclass(frozen=True)
+class SplitEntry:
+    name: str  # recording name
+    start: float = 0.0  # fraction of the duration
+    stop: float = 1.0
+
+    @property
+    def label(self) -> str:
+        return self.name if (self.start, self.stop) == (0.0, 1.0) else f"{self.name}[{self.start:g}:{self.stop:g}]"
+
+
+def parse_entry(text: str, key: str = "data.split") -> SplitEntry:
+    m = _BLOCK.match(text.strip())
+    if not m:
+        if "[" in text or "]" in text:
+            raise ConfigError(f"{key}: {text!r} is not NAME or NAME[a:b]")
+        return SplitEntry(text.strip())
+    try:
+        a = float(m["a"]) if m["a"].strip() else 0.0
+        b = float(m["b"]) if m["b"].strip() else 1.0
+    except ValueError:
+        raise ConfigError(f"{key}: {text!r}: block bounds must be numbers") from None
+    if not (0.0 <= a < b <= 1.0):
+        raise ConfigError(f"{key}: {text!r}: need 0 <= a < b <= 1")
+    return SplitEntry(m["name"], a, b)
+
+
+def parse_split(data: DataConfig) -> Dict[str, List[SplitEntry]]:
+    out = {s: [parse_entry(t, f"data.split.{s}") for t in getattr(data.split, s)] for s in SPLITS}
+    # Overlap check between and within splits, per recording.
+    spans: Dict[str, List[Tuple[float, float, str]]] = {}
+    for s, entries in out.items():
+        for e in entries:
+            for a, b, other in spans.get(e.name, []):
+                if e.start < b and a < e.stop:
+                    raise ConfigError(
+                        f"data.split.{s}: {e.label} overlaps {other} (splits must not share data)"
+                    )
+            spans.setdefault(e.name, []).append((e.start, e.stop, f"{e.label} in {s}"))
+    return out
+
+
+def resolve_path(p: str) -> Path:
+    """A config path: as given (absolute, or from the working directory), else from the repo root."""
+    path = Path(p).expanduser()
+    if path.is_absolute() or path.exists():
+        return path
+    alt = REPO_ROOT / path
+    return alt if alt.exists() else path
+
+
+def data_root_dir(data: DataConfig) -> Optional[Path]:
+    """The data root as an absolute folder (a relative one from the working directory, else the
+    repository root), or None when none is set."""
+    if not data.data_root:
+        return None
+    return resolve_path(data.data_root).resolve()
+
+
+def resolve_data_path(p: str, data_root: Optional[Path], key: str) -> Path:
+    """A ``data.roots`` path (``key`` names it in errors): absolute as given; relative, from the
+    data root when one is set, else (or when not there) the working directory, else the repo root."""
+    path = Path(p).expanduser()
+    if path.is_absolute():
+        tried = [path]
+    else:
+        tried = ([data_root / path] if data_root is not None else []) + [path, REPO_ROOT / path]
+    for cand in tried:
+        if cand.exists():
+            return cand
+    if data_root is None:
+        where = "no data root set"
+    elif not data_root.is_dir():
+        where = f"data root {data_root} is not a folder"
+    else:
+        where = f"data root {data_root}"
+    shown = ", ".join(str(c) for c in dict.fromkeys(tried))
+    raise DataPathError(
+        f"{key}: {p!r} not found (tried {shown}; {where}); set the data root with "
+        f"{DATA_ROOT_ENV}=DIR or --data.data_root DIR (see docs/datasets.md)"
+    )
+
+
+def groundtruth_paths(roots: List[RootConfig], data_root: Optional[Path]) -> Dict[int, Path]:
+    """``id(root)`` -> its resolved ``groundtruth`` file, for the roots that name one."""
+    return {id(r): resolve_data_path(r.groundtruth, data_root, f"data.roots[{i}].groundtruth")
+            for i, r in enumerate(roots) if r.groundtruth}
+
+
+def _format_for(root: RootConfig) -> str:
+    fmt = root.format
+    if fmt not in DATASETS:
+        raise ConfigError(f"data.roots: format {fmt!r} unknown; known: {', '.join(DATASETS)}")
+    return fmt
+
+
+def find_all(roots: List[RootConfig], data_root: Optional[Path] = None) -> Dict[str, Tuple[Path, RootConfig]]:
+    """Recording name -> (path, root) over all roots (relative paths from ``data_root``, see
+    :func:`resolve_data_path`); duplicate names are an error."""
+    found: Dict[str, Tuple[Path, RootConfig]] = {}
+    for i, root in enumerate(roots):
+        fmt = _format_for(root)
+        path = resolve_data_path(root.path, data_root, f"data.roots[{i}].path")
+        if root.groundtruth:
+            recs = [(path.stem if path.suffix in (".mat", ".bag") else path.name, path)]
+        else:
+            recs = find_recordings(fmt, path)
+        for name, p in recs:
+            if name in found and found[name][0] != p:
+                raise ConfigError(f"data.roots[{i}]: recording name {name!r} also found at {found[name][0]}")
+            found[name] = (p, root)
+    return found
+
+
+def cut(segments: List[Sequence], start: float, stop: float, name: str) -> List[Sequence]:
+    """The part [start, stop) (fractions of the recording's total time span) of its segments."""
+    if (start, stop) == (0.0, 1.0):
+        return list(segments)
+    t0 = min(int(s.t_ns[0]) for s in segments)
+    t1 = max(int(s.t_ns[-1]) for s in segments)
+    lo = t0 + start * (t1 - t0)
+    hi = t0 + stop * (t1 - t0)
+    out = []
+    for s in segments:
+        keep = (s.t_ns >= lo) & ((s.t_ns < hi) if stop < 1.0 else (s.t_ns <= hi))
+        idx = np.flatnonzero(keep)
+        if len(idx) < 2:
+            continue
+        a, b = int(idx[0]), int(idx[-1]) + 1
+        out.append(
+            Sequence(
+                name=f"{s.name}[{start:g}:{stop:g}]",
+                t_ns=s.t_ns[a:b], gyro=s.gyro[a:b], acc=s.acc[a:b], p=s.p[a:b], v=s.v[a:b], q_wxyz=s.q_wxyz[a:b],
+            )
+        )
+    return out
+
+
+@dataclass
+class Split:
+    train: List[Sequence]
+    val: List[Sequence]
+    test: List[Sequence]
+    record: Dict[str, object]
+
+    def __getitem__(self, key: str) -> List[Sequence]:
+        return getattr(self, key)
+
+
+def make_split(data: DataConfig, min_len: Optional[int] = None) -> Split:
+    """Load every named recording and cut it into the configured splits.
+
+    Segments shorter than ``min_len`` samples (default ``window + 1``, one window) are dropped and
+    reported; a train or val split left empty is an error.
+    """
+    entries = parse_split(data)
+    root_dir = data_root_dir(data)
+    found = find_all(data.roots, root_dir)
+    gt_paths = groundtruth_paths(data.roots, root_dir)
+    min_len = data.window + 1 if min_len is None else min_len
+    cache: Dict[str, List[Sequence]] = {}
+    result: Dict[str, List[Sequence]] = {}
+    record: Dict[str, object] = {"rule": "by sequence; NAME[a:b] is a time block (fractions of the duration)",
+                                 "data_root": str(root_dir) if root_dir is not None else None}
+    for split in SPLITS:
+        seqs: List[Sequence] = []
+        rows = []
+        for e in entries[split]:
+            if e.name not in found:
+                raise ConfigError(
+                    f"data.split.{split}: no recording named {e.name!r} under data.roots "
+                    f"(found: {', '.join(sorted(found)) or 'none'})"
+                )
+            path, root = found[e.name]
+            if e.name not in cache:
+                gt = gt_paths.get(id(root))
+                cache[e.name] = load_sequence(path, root.format, gt, options=AlignOptions(max_gap_s=root.max_gap_s, gt_time_offset_s=root.gt_time_offset_s),
+                                              imu_topic=root.imu_topic or None, groundtruth_topic=root.groundtruth_topic or None)
+            parts = cut(cache[e.name], e.start, e.stop, e.name)
+            kept = [s for s in parts if len(s) >= min_len]
+            if not kept:  # the entry would silently add nothing to its split
+                longest = max((len(s) for s in parts), default=0)
+                raise TooShortError(
+                    f"data.split.{split}: {e.label} ({path}) is too short: its longest segment has {longest} "
+                    f"samples, fewer than the {min_len} one window needs (data.window = {data.window}); lower data.window "
+                    "or add data",
+                    str(path), longest, min_len,
+                )
+            rows.append({
+                "entry": e.label,
+                "recording": e.name,
+                "path": str(path),
+                "format": root.format,
+                "groundtruth": root.groundtruth or None,
+                "groundtruth_path": str(gt_paths[id(root)]) if root.groundtruth else None,
+                "block": [e.start, e.stop],
+                "segments": [
+                    {"name": s.name, "samples": len(s), "t0_ns": int(s.t_ns[0]), "t1_ns": int(s.t_ns[-1]),
+                     "duration_s": round(s.duration_s, 3), "used": len(s) >= min_len}
+                    for s in parts
+                ],
+            })
+            seqs += kept
+        if split in ("train", "val") and not seqs:
+            raise ConfigError(f"data.split.{split}: no segment of at least {min_len} samples")
+        result[split] = seqs
+        record[split] = rows
+    return Split(result["train"], result["val"], result["test"], record)
+
+
+def write_split(split: Split, path: Path) -> None:
+    from imu_learn.util.atomic import atomic_write_bytes
+
+    text = json.dumps(split.record, indent=2)
+    atomic_write_bytes(Path(path), lambda f: f.write(text.encode()))

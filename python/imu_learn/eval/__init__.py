@@ -1,0 +1,2 @@
+"""Evaluation: metrics, the fit-and-score protocol over the baselines registry, reports,
+calibration of learned covariances."""

@@ -1,0 +1,645 @@
+"""Evaluate IMU methods on held-out sequences: ``python -m imu_learn.evaluate``.
+
+Reproduces the paper's Section V experiments (Table II: relative translation / rotation RMSE over
+ten IMU frames; the integration-error-against-horizon figure) for any set of methods, plus
+AirIMU's short-horizon figures, and writes a report folder.
+
+Usage::
+
+    python -m imu_learn.evaluate --config configs/eval_default.toml        # the shipped crops
+    python -m imu_learn.evaluate --config configs/eval_euroc.toml --methods raw,traditional
+    python -m imu_learn.evaluate --config configs/eval_euroc.toml --checkpoint runs/euroc/best.pt
+    python -m imu_learn.evaluate --config configs/eval_euroc.toml --reuse  # reuse fitted methods
+    python -m imu_learn.evaluate --config configs/eval_euroc.toml --fit.steps 100 --eval.stride 20 \\
+        --data.split.test '["V1_01_easy"]'                                  # dotted overrides
+
+The protocol (what is fitted on what, what each metric is) is :data:`imu_learn.eval.protocol.PROTOCOL`,
+which every report prints.
+
+Output: ``<reports_dir>/<name>/`` (default ``reports/<config name>``) with ``report.md``, CSV
+tables, PNG plots and ``methods/``; a summary table on the terminal. Known errors (config, data,
+missing files, a method failing) print one line and exit with status 2.
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import re
+import sys
+import time
+from dataclasses import asdict, dataclass, field, fields
+from pathlib import Path
+from typing import Any, Callable, Dict, List, Optional, Tuple
+from typing import Sequence as Seq
+
+import numpy as np
+
+from imu_learn.baselines.base import FitSettings, Method, PosePrediction, poses_from_imu
+from imu_learn.baselines.registry import DEFAULT_METHODS, REGISTRY, load_method_class, safe_name  # noqa: F401
+from imu_learn.core.quat import rotation_angle
+from imu_learn.data.types import Sequence
+from imu_learn.errors import (
+    ConfigError,
+    ImuError,
+    MethodError,
+    one_line,
+)
+from imu_learn.eval.metrics import fit_startup_bias, index_at, remove_bias, with_imu
+from imu_learn.settings import hints_of, merge, nest
+from imu_learn.train.config import (
+    RunConfig,
+    build_config,
+    from_dict,
+    parse_overrides,
+    parse_value,
+    read_toml,
+    split_overrides,
+)
+from imu_learn.util.atomic import atomic_write_path, atomic_write_text
+
+PROG = "imu_learn.eval.run"
+EXIT_ERROR = 2
+VARIANTS = ("open_loop", "bias_removed")
+VARIANT_LABELS = {"open_loop": "open loop", "bias_removed": "start-up bias removed"}
+CHECKPOINT_NAME = "proposed (fit run)"  # the row of a --checkpoint
+
+
+# ---------------------------------------------------------------------------------------------
+# configuration
+
+
+@dataclass
+class EvalSettings:
+    horizons: List[int] = field(default_factory=lambda: [10, 50, 200])  # relative pose over n samples
+    airimu_s: List[float] = field(default_factory=lambda: [0.5, 1.0, 2.0, 3.0])  # AirIMU's position horizons
+    curve_min_s: float = 0.05  # integration error against horizon: shortest, longest, how many
+    curve_max_s: float = 5.0
+    curve_count: int = 12
+    stride: int = 0  # window start step [samples]; 0: data.eval_stride
+    startup_bias_s: float = 0.0  # seconds the start-up bias is fitted on (windows start after); 0: data.startup_bias_s
+    noise_floor: str = "auto"  # auto (pose-only ground truth), always, never
+    # The datasheet white noise the calibration table compares a learned covariance with
+    # (continuous-time densities; default EuRoC's ADIS16448 sensor.yaml).
+    gyro_noise_density: float = 1.6968e-4  # rad/s/sqrt(Hz)
+    acc_noise_density: float = 2.0e-3  # m/s^2/sqrt(Hz)
+
+
+@dataclass
+class FitBudget:
+    """The FitSettings every method gets (seed: the config's seed; gravity: data.gravity)."""
+
+    window: int = 0  # 0: data.window
+    batch_size: int = 32
+    steps: int = 300
+    lr: float = 1e-3
+    device: str = "cpu"
+    threads: int = 2
+
+
+@dataclass
+class EvalConfig:
+    name: str = ""  # report folder name; default the config file's name without "eval_"
+    base: str = ""  # fit config with the data and split (relative to this file, else as given)
+    methods: List[str] = field(default_factory=lambda: list(DEFAULT_METHODS))
+    seed: int = 0
+    reports_dir: str = "reports"
+    eval: EvalSettings = field(default_factory=EvalSettings)
+    fit: FitBudget = field(default_factory=FitBudget)
+
+
+@dataclass
+class Resolved:
+    cfg: EvalConfig
+    run: RunConfig  # base fit config with [data] overrides: its .data is what is used
+    path: Optional[Path]
+    base_path: Optional[Path]
+
+    @property
+    def stride(self) -> int:
+        return self.cfg.eval.stride or self.run.data.eval_stride
+
+    @property
+    def startup_bias_s(self) -> float:
+        return self.cfg.eval.startup_bias_s or self.run.data.startup_bias_s
+
+    def fit_settings(self) -> FitSettings:
+        f = self.cfg.fit
+        return FitSettings(window=f.window or self.run.data.window, batch_size=f.batch_size, steps=f.steps, lr=f.lr,
+                           seed=self.cfg.seed, device=f.device, threads=f.threads, gravity=self.run.data.gravity,
+                           horizons=tuple(sorted({int(n) for n in self.cfg.eval.horizons})))
+
+
+def _resolve_base(base: str, cfg_path: Optional[Path]) -> Path:
+    from imu_learn.data.splits import resolve_path
+
+    p = Path(base).expanduser()
+    if not p.is_absolute() and cfg_path is not None and (cfg_path.parent / p).exists():
+        return cfg_path.parent / p
+    return resolve_path(base)
+
+
+def _eval_field_type(key: str) -> Any:
+    cls: Any = EvalConfig
+    parts = key.split(".")
+    for i, part in enumerate(parts):
+        names = {f.name for f in fields(cls)} if hasattr(cls, "__dataclass_fields__") else set()
+        if part not in names:
+            where = ".".join(parts[:i]) or "top level"
+            raise ConfigError(f"--{key}: unknown key (known in {where}: {', '.join(sorted(names)) or 'none'})")
+        cls = hints_of(cls)[part]
+    return cls
+
+
+def load_eval_config(path: Optional[Path] = None, overrides: Seq[str] = ()) -> Resolved:
+    """Defaults, then the eval TOML ``path``, then ``--key value`` overrides (``data.*`` go to the
+    fit config's data; the rest to :class:`EvalConfig`)."""
+    raw = dict(read_toml(Path(path))) if path else {}
+    data_over = raw.pop("data", {})
+    if not isinstance(data_over, dict):
+        raise ConfigError("data: expected a table")
+    flat_data: List[str] = []
+    flat_eval: Dict[str, Any] = {}
+    for key, text in split_overrides(overrides, usage="--key value"):
+        if key.startswith("data."):
+            flat_data += [f"--{key}", text]
+        else:
+            flat_eval[key] = parse_value(key, text, _eval_field_type(key))
+    nested = nest(flat_eval)
+    merged = merge(raw, nested)
+    cfg = from_dict(EvalConfig, merged)
+    base_path = _resolve_base(cfg.base, Path(path) if path else None) if cfg.base else None
+    base = read_toml(base_path) if base_path is not None else {}
+    run = build_config(merge(base, {"data": data_over}), parse_overrides(flat_data))
+    if not cfg.name:
+        stem = Path(path).stem if path else "default"
+        cfg.name = stem[5:] if stem.startswith("eval_") and len(stem) > 5 else stem
+    _validate(cfg)
+    return Resolved(cfg, run, Path(path) if path else None, base_path)
+
+
+def _validate(cfg: EvalConfig) -> None:
+    e, f = cfg.eval, cfg.fit
+
+    def need(ok: bool, key: str, what: str) -> None:
+        if not ok:
+            raise ConfigError(f"{key}: {what}")
+
+    need(len(cfg.methods) > 0, "methods", "give at least one method")
+    need(len(e.horizons) > 0 and all(n >= 1 for n in e.horizons), "eval.horizons", "must be >= 1 samples")
+    need(all(s > 0 for s in e.airimu_s), "eval.airimu_s", "must be positive")
+    need(0 < e.curve_min_s < e.curve_max_s, "eval.curve_min_s", "need 0 < curve_min_s < curve_max_s")
+    need(e.curve_count >= 2, "eval.curve_count", "must be at least 2")
+    need(e.stride >= 0, "eval.stride", "must be >= 0")
+    need(e.startup_bias_s >= 0, "eval.startup_bias_s", "must be >= 0")
+    need(e.noise_floor in ("auto", "always", "never"), "eval.noise_floor", f"expected auto, always or never, got {e.noise_floor!r}")
+    need(f.steps >= 0 and f.batch_size >= 1 and f.threads >= 1 and f.lr > 0 and f.window >= 0, "fit",
+         "steps >= 0, batch_size >= 1, threads >= 1, lr > 0, window >= 0")
+    need(re.fullmatch(r"[A-Za-z0-9_.\-]+", cfg.name) is not None, "name", f"{cfg.name!r}: use letters, digits, . _ -")
+
+
+# ---------------------------------------------------------------------------------------------
+# methods
+
+
+class CheckpointRefiner(Method):
+    """The refiner trained by ``python -m imu_learn.fit``, from its checkpoint (``best.pt``)."""
+
+    name = "proposed"
+    rotation_only = False
+
+    def __init__(self, path: Path, device: str = "cpu") -> None:
+        import torch
+
+        from imu_learn.train.checkpoint import load_checkpoint, model_from_checkpoint
+
+        self.path = Path(path)
+        state = load_checkpoint(self.path, map_location=device)
+        self.config = state.get("config") or {}
+        self.device = torch.device(device)
+        self.model = model_from_checkpoint(state).to(self.device)
+        self.window = int(((self.config.get("data") or {}).get("window")) or 200)
+
+    def splits(self) -> Dict[str, List[str]]:
+        sp = (self.config.get("data") or {}).get("split") or {}
+        return {k: list(sp.get(k) or []) for k in ("train", "val", "test")}
+
+    def refine(self, seq: Sequence) -> Tuple[np.ndarray, np.ndarray]:
+        from imu_learn.train.fit import refine_sequence
+
+        s = refine_sequence(self.model, seq, self.window, self.device)
+        return s.gyro, s.acc
+
+
+def _recording(label: str) -> str:
+    from imu_learn.data.splits import parse_entry
+
+    return parse_entry(label).name
+
+
+def check_checkpoint_split(m: CheckpointRefiner, test_entries: List[str]) -> None:
+    seen = {_recording(e): k for k in ("train", "val") for e in m.splits()[k]}
+    for t in test_entries:
+        r = _recording(t)
+        if r in seen:
+            raise ConfigError(f"--checkpoint {m.path}: its {seen[r]} split uses {r}, a test recording here "
+                              "(test sequences must never be seen in training or selection)")
+
+
+# ---------------------------------------------------------------------------------------------
+# metrics
+
+
+def window_starts(seq: Sequence, n: int, stride: int, first: int) -> np.ndarray:
+    """Starts first, first+stride, ... with k + n <= len - 1 (the end state is a ground-truth sample)."""
+    return np.arange(int(first), len(seq) - int(n), int(stride), dtype=np.int64)
+
+
+def pose_errors(seq: Sequence, starts: np.ndarray, n: int, pred: PosePrediction) -> Dict[str, np.ndarray]:
+    """Per-window errors of ``pred`` (end states of windows of n samples) against the ground truth
+    of ``seq``: ``rot_rad``, ``trans_m`` (nan without p), ``vel_mps`` (nan without v)."""
+    j = np.asarray(starts, dtype=np.int64) + int(n)
+    rot = rotation_angle(seq.q_wxyz[j], np.asarray(pred.q_wxyz, dtype=np.float64))
+    nan = np.full(len(j), np.nan)
+    trans = nan if pred.p is None else np.linalg.norm(np.asarray(pred.p) - seq.p[j], axis=-1)
+    vel = nan if getattr(pred, "v", None) is None else np.linalg.norm(np.asarray(pred.v) - seq.v[j], axis=-1)
+    return {"rot_rad": rot, "trans_m": trans, "vel_mps": vel}
+
+
+def sample_rate(seq: Sequence) -> float:
+    return 1e9 / float(np.median(np.diff(np.asarray(seq.t_ns, dtype=np.int64))))
+
+
+def seconds_to_samples(seconds: float, rate: float) -> int:
+    return max(1, int(round(seconds * rate)))
+
+
+def curve_seconds(e: EvalSettings) -> List[float]:
+    return [float(x) for x in np.geomspace(e.curve_min_s, e.curve_max_s, e.curve_count)]
+
+
+def horizon_plan(seq: Sequence, e: EvalSettings) -> Dict[str, Any]:
+    """Horizons [samples] to evaluate on ``seq``: the table's n, and seconds -> samples."""
+    rate = sample_rate(seq)
+    secs = sorted(set([1.0] + list(e.airimu_s) + curve_seconds(e)))
+    by_s = {float(s): seconds_to_samples(s, rate) for s in secs}
+    return {"rate_hz": rate, "by_s": by_s, "n": sorted(set(int(n) for n in e.horizons) | set(by_s.values()))}
+
+
+def is_refiner(method: Method) -> bool:
+    return type(method).predict is Method.predict
+
+
+def evaluate_sequence(method: Method, seq: Sequence, horizons: Seq[int], stride: int, startup_bias_s: float,
+                      gravity: float = 9.81) -> Tuple[Dict[Tuple[str, int], Dict[str, np.ndarray]], Dict[str, Any]]:
+    """Errors of ``method`` on ``seq``: {(variant, n): per-window errors} and the fitted start-up bias.
+
+    Refiners: ``refine`` once; the bias is fitted on the refined samples and removed from them; both
+    variants are integrated from the ground-truth start state. Regressors: the bias is fitted on the
+    raw input and removed from it before ``predict``.
+    """
+    first = index_at(seq, startup_bias_s)
+    refiner = is_refiner(method)
+    if refiner:
+        gyro, acc = method.refine(seq)
+        base = with_imu(seq, gyro, acc)
+    else:
+        base = seq
+    bg, ba = fit_startup_bias(base, startup_bias_s, gravity=gravity)
+    inputs = {"open_loop": base, "bias_removed": remove_bias(base, bg, ba)}
+    out: Dict[Tuple[str, int], Dict[str, np.ndarray]] = {}
+    for variant, s in inputs.items():
+        for n in horizons:
+            starts = window_starts(seq, n, stride, first)
+            if starts.size == 0:
+                continue
+            if refiner:
+                pred = poses_from_imu(s, s.gyro, s.acc, starts.astype(np.uint64), int(n), gravity)
+                if method.rotation_only:
+                    pred = PosePrediction(pred.q_wxyz, None, None)
+            else:
+                pred = method.predict(s, starts.astype(np.uint64), int(n), gravity)
+            e = pose_errors(seq, starts, n, pred)
+            e["starts"] = starts
+            out[(variant, int(n))] = e
+    bias = {"gyro": bg.tolist(), "acc": ba.tolist(), "fitted_on": "refined output" if refiner else "raw input"}
+    return out, bias
+
+
+def rmse(x: np.ndarray) -> float:
+    x = np.asarray(x, dtype=np.float64)
+    return float(np.sqrt(np.mean(x * x))) if x.size else float("nan")
+
+
+# ---------------------------------------------------------------------------------------------
+# the run
+
+
+def _split_signature(split: Any) -> Dict[str, Any]:
+    return {k: [[(g["name"], g["samples"], g["t0_ns"], g["t1_ns"]) for g in e["segments"]] for e in split.record.get(k, [])]
+            for k in ("train", "val")}
+
+
+def _ground_truth_kinds(run: RunConfig, test_entries: List[str]) -> Dict[str, str]:
+    """Recording -> "pose-only (velocity derived)" or "with velocity", for the test recordings."""
+    from imu_learn.data.formats import read_recording
+    from imu_learn.data.splits import data_root_dir, find_all, groundtruth_paths
+
+    root_dir = data_root_dir(run.data)
+    found = find_all(run.data.roots, root_dir)
+    gt_paths = groundtruth_paths(run.data.roots, root_dir)
+    out = {}
+    for label in test_entries:
+        rec = _recording(label)
+        if rec in out or rec not in found:
+            continue
+        path, root = found[rec]
+        _, gt = read_recording(path, root.format, gt_paths.get(id(root)))
+        out[rec] = "pose-only (velocity derived)" if gt.v is None else "with velocity"
+    return out
+
+
+def _versions() -> Dict[str, str]:
+    import platform
+
+    import polars
+    import torch
+
+    import imu_learn
+
+    v = {"imu_learn": imu_learn.__version__, "torch": torch.__version__, "numpy": np.__version__,
+         "polars": polars.__version__, "python": platform.python_version()}
+    try:
+        import matplotlib
+
+        v["matplotlib"] = matplotlib.__version__
+    except ImportError:  # pragma: no cover
+        v["matplotlib"] = "not installed"
+    return v
+
+
+def _seed_all(seed: int) -> None:
+    import random
+
+    import torch
+
+    random.seed(seed)
+    np.random.seed(seed % (2**32))
+    torch.manual_seed(seed)
+
+
+def prepare_method(name: str, factory: Callable[[], Method], res: Resolved, split: Any, methods_dir: Path,
+                   settings: FitSettings, reuse: bool) -> Tuple[Method, Dict[str, Any]]:
+    """Fit ``name`` on the train split (or load it with ``reuse``); returns the method and its record."""
+    method = factory()
+    fname = safe_name(name)
+    rec_path = methods_dir / f"{fname}.record.json"  # not <name>.json: that is where e.g. traditional saves its fit
+    suffix = getattr(method, "save_suffix", None) or (".json" if name == "traditional" else ".pt")
+    file = methods_dir / f"{fname}{suffix}"
+    sig = {"fit_settings": asdict(settings), "split": _split_signature(split), "class": type(method).__qualname__}
+    if reuse and rec_path.exists():
+        old = _read_record(rec_path)
+        same = old is not None and all(old.get(k) == json.loads(json.dumps(v)) for k, v in sig.items())
+        if same and old is not None:
+            try:
+                if old.get("file") and Path(old["file"]).exists():
+                    method = method.load(Path(old["file"])) or method
+            except Exception as e:
+                raise MethodError(f"{name}: loading {old['file']}: {one_line(e)}") from e
+            return method, {**old, "status": "reused"}
+        print(f"{PROG}: {name}: saved fit does not match the settings or split; refitting", file=sys.stderr)
+    _seed_all(settings.seed)
+    t0 = time.time()
+    try:
+        log = method.fit(list(split.train), list(split.val), settings) or {}
+    except (ValueError, RuntimeError, ImuError) as e:
+        raise MethodError(f"{name}: fit failed: {one_line(e)}") from e
+    fit_s = time.time() - t0
+    saved = save_method(method, file)
+    record = {**sig, "method": name, "fit_s": round(fit_s, 2), "file": str(file) if saved else None,
+              "log": _summarise_log(log)}
+    # The record last: a record names only a saved fit that is complete.
+    atomic_write_text(rec_path, json.dumps(record, indent=2, default=str))
+    return method, {**record, "status": "fitted"}
+
+
+def _read_record(path: Path) -> Optional[Dict[str, Any]]:
+    """A fit record, or None (after saying so) when it cannot be read: the method is refitted."""
+    try:
+        record = json.loads(path.read_text())
+    except (OSError, UnicodeDecodeError, json.JSONDecodeError) as e:
+        print(f"{PROG}: {path}: unreadable fit record ({one_line(e)}); refitting", file=sys.stderr)
+        return None
+    return record if isinstance(record, dict) else None
+
+
+def save_method(method: Method, file: Path) -> bool:
+    """``method.save`` to ``file`` atomically (the method writes a temporary file beside it, which
+    then replaces ``file``); False, writing nothing, for a method without a ``save`` of its own
+    (nothing fitted to keep, e.g. raw)."""
+    if type(method).save is Method.save:
+        return False
+
+    def fill(tmp: Path) -> None:
+        method.save(tmp)
+        if tmp.stat().st_size == 0:  # e.g. a writer that appended its own suffix to the name
+            raise MethodError(f"{file}: {type(method).__name__}.save wrote nothing to the path it was given")
+
+    atomic_write_path(file, fill)
+    return True
+
+
+def _summarise_log(log: Dict[str, Any]) -> Dict[str, Any]:
+    """First/last values of list entries (a fit log can be long)."""
+    out: Dict[str, Any] = {}
+    for k, v in dict(log).items():
+        if isinstance(v, (list, tuple)):
+            vals = [x for x in v if isinstance(x, (int, float, str, type(None)))]
+            out[k] = vals if len(vals) <= 6 else {"first": vals[0], "last": vals[-1], "count": len(vals)}
+        elif isinstance(v, (int, float, str, bool, type(None))):
+            out[k] = v
+    return out
+
+
+def run_evaluation(res: Resolved, methods: List[str], out_dir: Path, reuse: bool = False,
+                   checkpoint: Optional[Path] = None, progress: bool = True,
+                   t_start: Optional[float] = None) -> Dict[str, Any]:
+    """Fit (or reuse) the methods, evaluate them on the test split, write the report; returns the result.
+    ``t_start``: when the command started (wall time is measured from it; default now)."""
+    import torch
+    from tqdm import tqdm
+
+    from imu_learn.baselines.noise_floor import NOISE_FLOOR_NAME, GroundTruthImu
+    from imu_learn.data.splits import make_split
+    from imu_learn.eval import report
+
+    t_start = time.time() if t_start is None else t_start
+    cfg, data = res.cfg, res.run.data
+    settings = res.fit_settings()
+    torch.set_num_threads(settings.threads)
+    split = make_split(data)
+    if not split.test:
+        raise ConfigError("data.split.test: no test sequence (of at least one window)")
+    test_entries = list(data.split.test)
+    out_dir.mkdir(parents=True, exist_ok=True)
+    methods_dir = out_dir / "methods"
+    methods_dir.mkdir(exist_ok=True)
+
+    # methods: resolve, then fit / load (train split only; val for their own selection)
+    prepared: List[Tuple[str, Method]] = []
+    records: Dict[str, Dict[str, Any]] = {}
+    skipped: List[str] = []
+    for name in methods:
+        factory = load_method_class(name)
+        if factory is None:
+            skipped.append(name)
+            continue
+        print(f"{PROG}: {name}: {'loading or ' if reuse else ''}fitting on the train split", file=sys.stderr)
+        m, rec = prepare_method(name, factory, res, split, methods_dir, settings, reuse)
+        prepared.append((name, m))
+        records[name] = rec
+    if checkpoint is not None:
+        # A full `imu_learn.fit` run, beside (not instead of) the same-budget "proposed" row.
+        ck = CheckpointRefiner(checkpoint, "cpu" if settings.device == "auto" else settings.device)
+        check_checkpoint_split(ck, test_entries)
+        prepared.append((CHECKPOINT_NAME, ck))
+        records[CHECKPOINT_NAME] = {"status": "checkpoint", "file": str(checkpoint), "checkpoint_split": ck.splits()}
+    gt_kinds = _ground_truth_kinds(res.run, test_entries)
+    nf = cfg.eval.noise_floor
+    if nf == "always" or (nf == "auto" and any(k.startswith("pose-only") for k in gt_kinds.values())):
+        prepared.append((NOISE_FLOOR_NAME, GroundTruthImu(data.gravity)))
+        records[NOISE_FLOOR_NAME] = {"status": "reference (synthesised from the test ground truth)"}
+
+    # evaluation
+    stride, bias_s = res.stride, res.startup_bias_s
+    plans = {s.name: horizon_plan(s, cfg.eval) for s in split.test}
+    errors: Dict[Tuple[str, str, str, int], List[Dict[str, np.ndarray]]] = {}
+    biases: List[Dict[str, Any]] = []
+    tasks = [(name, m, s) for name, m in prepared for s in split.test]
+    bar = tqdm(tasks, desc="evaluate", unit="seq", disable=not progress, dynamic_ncols=True, file=sys.stderr)
+    t_eval: Dict[str, float] = {}
+    for name, m, s in bar:
+        bar.set_postfix_str(f"{name} / {s.name}", refresh=True)
+        t0 = time.time()
+        try:
+            errs, bias = evaluate_sequence(m, s, plans[s.name]["n"], stride, bias_s, data.gravity)
+        except (ValueError, RuntimeError) as e:
+            raise MethodError(f"{name} on {s.name}: {one_line(e)}") from e
+        t_eval[name] = t_eval.get(name, 0.0) + time.time() - t0
+        rec = s.name.split("#")[0]
+        for (variant, n), e in errs.items():
+            errors.setdefault((name, variant, rec, n), []).append(e)
+        biases.append({"method": name, "segment": s.name, "recording": rec, "fitted_on": bias["fitted_on"],
+                       **{f"gyro_bias_{a}": b for a, b in zip("xyz", bias["gyro"])},
+                       **{f"acc_bias_{a}": b for a, b in zip("xyz", bias["acc"])}})
+    bar.close()
+    for name in t_eval:
+        records.setdefault(name, {})["eval_s"] = round(t_eval[name], 2)
+
+    calibration: List[Dict[str, Any]] = []
+    if checkpoint is not None and ck.model.cov_head is not None:
+        from imu_learn.eval.calibration import evaluate_calibration
+
+        print(f"{PROG}: calibration of the learned covariance of {checkpoint}", file=sys.stderr)
+        calibration = evaluate_calibration(ck.model, split.test, list(cfg.eval.horizons), stride, bias_s,
+                                           cfg.eval.gyro_noise_density, cfg.eval.acc_noise_density, data.gravity)
+
+    rows = []
+    rates = {}
+    for s in split.test:
+        rates.setdefault(s.name.split("#")[0], plans[s.name]["rate_hz"])
+    for (name, variant, rec, n), es in sorted(errors.items(), key=lambda kv: (kv[0][0], kv[0][1], kv[0][2], kv[0][3])):
+        cat = {k: np.concatenate([e[k] for e in es]) for k in ("rot_rad", "trans_m", "vel_mps")}
+        r = rmse(cat["rot_rad"])
+        rows.append({"method": name, "variant": variant, "sequence": rec, "n": n, "horizon_s": n / rates[rec],
+                     "rot_rad": r, "rot_deg": math.degrees(r), "trans_m": rmse(cat["trans_m"]),
+                     "vel_mps": rmse(cat["vel_mps"]), "windows": int(cat["rot_rad"].size)})
+    order = [n for n, _ in prepared]
+    by_s = {rec: {} for rec in rates}
+    for s in split.test:
+        by_s[s.name.split("#")[0]] = plans[s.name]["by_s"]
+    result = {
+        "config_name": cfg.name,
+        "config_path": str(res.path) if res.path else None,
+        "base_path": str(res.base_path) if res.base_path else None,
+        "eval": asdict(cfg.eval),
+        "stride": stride,
+        "startup_bias_s": bias_s,
+        "fit_settings": asdict(settings),
+        "seed": cfg.seed,
+        "methods": order,
+        "requested": list(methods),
+        "skipped": skipped,
+        "records": records,
+        "split": split.record,
+        "test_sequences": list(rates),
+        "test_segments": [{"name": s.name, "samples": len(s), "duration_s": round(s.duration_s, 3)} for s in split.test],
+        "ground_truth": gt_kinds,
+        "rates_hz": rates,
+        "horizons_by_s": by_s,
+        "curve_s": curve_seconds(cfg.eval),
+        "rows": rows,
+        "calibration": calibration,
+        "biases": biases,
+        "versions": _versions(),
+        "roots": [asdict(r) for r in data.roots],
+        "data_root": split.record.get("data_root"),
+        "gravity": data.gravity,
+    }
+    result["wall_s"] = time.time() - t_start
+    report.write_report(out_dir, result)
+    result["wall_s"] = time.time() - t_start
+    return result
+
+
+# ---------------------------------------------------------------------------------------------
+# command line
+
+
+def _parser() -> argparse.ArgumentParser:
+    p = argparse.ArgumentParser(
+        prog=f"python -m {PROG}", allow_abbrev=False,
+        description="Fit methods on the train split and evaluate them on the held-out test split (paper Section V).",
+        epilog="Overrides: --fit.steps 100 --eval.stride 20 --eval.horizons '[10, 200]' --data.split.test '[\"V1_01_easy\"]'")
+    p.add_argument("--config", type=Path, help="eval TOML (configs/eval_*.toml); default: built-in defaults on the shipped crops")
+    p.add_argument("--methods", help=f"comma list (default: the config's; known: {', '.join(REGISTRY)})")
+    p.add_argument("--checkpoint", type=Path, help=f"also evaluate this imu_learn.train.fit checkpoint (best.pt), as the row {CHECKPOINT_NAME!r}")
+    p.add_argument("--out", type=Path, help="report folder (default <reports_dir>/<config name>)")
+    p.add_argument("--reuse", action="store_true", help="load fitted methods from the report folder when settings and split match")
+    p.add_argument("--no-progress", action="store_true", help="no progress bar")
+    p.add_argument("--traceback", action="store_true", help="show the full traceback of a known error")
+    return p
+
+
+def main(argv: Optional[Seq[str]] = None) -> int:
+    argv = list(sys.argv[1:] if argv is None else argv)
+    args, rest = _parser().parse_known_args(argv)
+    t0 = time.time()
+    try:
+        res = load_eval_config(args.config, rest)  # no --config: defaults, data = the fit defaults (crops)
+        methods = [m.strip() for m in args.methods.split(",") if m.strip()] if args.methods else list(res.cfg.methods)
+        for m in methods:
+            if m not in REGISTRY:
+                raise ConfigError(f"--methods: unknown method {m!r} (known: {', '.join(REGISTRY)})")
+        if args.checkpoint is not None and not args.checkpoint.exists():
+            raise FileNotFoundError(2, "No such file or directory", str(args.checkpoint))
+        out = args.out or Path(res.cfg.reports_dir) / res.cfg.name
+        result = run_evaluation(res, methods, out, reuse=args.reuse, checkpoint=args.checkpoint,
+                                progress=not args.no_progress, t_start=t0)
+    except KeyboardInterrupt:
+        print(f"{PROG}: interrupted", file=sys.stderr)
+        return 130
+    except (ImuError, OSError) as e:  # OSError: a full disk or read-only report folder, named in e
+        if args.traceback:
+            raise
+        print(f"{PROG}: error: {one_line(e)}", file=sys.stderr)
+        return EXIT_ERROR
+    from imu_learn.eval import report
+    print(report.summary_text(result))
+    print(f"report: {out / 'report.md'}")
+    print(f"total wall time: {time.time() - t0:.1f} s")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

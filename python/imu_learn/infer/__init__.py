@@ -1,0 +1,2 @@
+"""Applying a checkpoint: the one windowing rule, refine (files and arrays), export (TorchScript,
+ONNX), and the shipped-model check."""

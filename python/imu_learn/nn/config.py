@@ -1,0 +1,61 @@
+"""The model's and the loss's settings as plain dataclasses (no torch), so that configs, checkpoint
+cards and the fusion code can read and validate them without importing torch."""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+REFINE_CHANNELS = {"imu": [1.0] * 6, "gyro": [1.0, 1.0, 1.0, 0.0, 0.0, 0.0]}
+
+
+@dataclass
+class ModelConfig:
+    hidden: int = 64  # LSTM hidden size per direction
+    layers: int = 2  # stacked LSTM blocks, each followed by a fully connected layer
+    fc: int = 64  # width of the fully connected layers between LSTM blocks
+    causal: bool = False  # unidirectional (online) variant
+    output_scale: float = 0.1  # correction = output_scale * input std * head output
+    dropout: float = 0.0
+    # Which channels the model corrects: "imu" (all six, the paper) or "gyro" (the accelerometer
+    # passes through unchanged, as in denoise-imu-gyro). On data where the accelerometer's
+    # corrections do not transfer, "gyro" still improves translation through better attitude.
+    refine: str = "imu"
+    # Taps of an optional learned linear FIR filter over the normalised raw input, added to the
+    # LSTM's correction (0 = off; odd, centred, edges padded by repetition; bidirectional only;
+    # one filter per channel on its own input, with zero DC gain).
+    # It holds what a linear filter says best and an LSTM learns slowly: low-pass smoothing and
+    # the half-sample shift between the integration's zero-order hold (sample k held over
+    # [t_k, t_k+1]) and when a sample was taken, which taps of [0, -1/2, 1/2] undo exactly.
+    fir_taps: int = 0
+    # Learned uncertainty: a second head predicting each refined sample's noise variances (six
+    # channels, discrete-time: the variance of one sample in (rad/s)^2 and (m/s^2)^2; a filter that
+    # wants a noise density takes sigma * sqrt(dt), see imu_learn.nn.covariance). Bounded by
+    # construction: log sigma^2 = log min^2 + (log max^2 - log min^2) * sigmoid(z).
+    covariance: bool = False
+    sigma_gyro_min: float = 1e-4  # [rad/s]
+    sigma_gyro_max: float = 1.0
+    sigma_acc_min: float = 1e-3  # [m/s^2]
+    sigma_acc_max: float = 10.0
+
+
+
+@dataclass(frozen=True)
+class LossConfig:
+    w_q: float = 1.0  # weight of the rotation term
+    w_v: float = 1.0  # weight of the velocity (Δβ) term
+    w_p: float = 1.0  # weight of the position (Δγ) term
+    huber_q: float = 0.005  # Huber delta on |Log(Δq_s Δq̂⁻¹)| [rad]
+    huber_v: float = 0.05  # Huber delta on |Δβ_s − Δβ̂| [m/s]
+    huber_p: float = 0.01  # Huber delta on |Δγ_s − Δγ̂| [m]
+    w_reg: float = 1.0  # weight of the regulariser
+    reg_gyro: float = 0.05  # λ for the gyro channels [rad/s]
+    reg_acc: float = 0.5  # λ for the accelerometer channels [m/s²]
+    bias_aware: bool = True  # the paper's bias-augmented loss: integrate (û − b)
+    # Residual scaling per horizon: "none" (the paper: every horizon's residual as it is, so the
+    # longest horizons, whose residuals are largest, dominate) or "inverse" (each residual divided
+    # by its horizon's fraction of the longest one, so a 10-sample horizon pulls as hard as the
+    # full window: for models scored over short horizons, e.g. the paper's Table II, n = 10).
+    horizon_scale: str = "none"
+    # Gaussian negative log-likelihood of the 9-vector residual (δθ, δβ, δγ) under the covariance
+    # propagated from the model's per-sample variances (imu_learn.nn.covariance), summed over the
+    # label horizons like the other terms; needs a model with model.covariance = true. 0 = off.
+    w_nll: float = 0.0

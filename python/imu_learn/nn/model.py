@@ -1,0 +1,156 @@
+"""The paper's IMU model: stacked bidirectional LSTM joined by fully connected layers, mapping raw
+6-axis IMU windows to refined 6-axis measurements as a residual on the raw input.
+
+Input normalisation (per-channel mean and std of the training data) is stored in the model as
+buffers, so a checkpoint or an exported model needs nothing else to run. A causal variant
+(unidirectional LSTM) runs window by window or sample by sample with carried state, for online use.
+"""
+from __future__ import annotations
+
+from dataclasses import asdict
+from typing import List, Optional, Tuple
+
+import torch
+from torch import nn
+
+from imu_learn.nn.config import REFINE_CHANNELS, ModelConfig
+
+Tensor = torch.Tensor
+State = List[Tuple[Tensor, Tensor]]
+
+
+# The FIR branch's output is its taps times this: Adam moves a weight by about lr per step, and
+# the taps that matter are O(1/2) (preconditioning, so they are reached in hundreds of steps).
+FIR_GAIN = 10.0
+
+class ImuRefiner(nn.Module):
+    """refined = raw + correction(normalised raw); correction is scaled per channel by the input's
+    std so that gyro and accelerometer corrections start on their own scales."""
+
+    def __init__(self, cfg: ModelConfig, mean: Optional[Tensor] = None, std: Optional[Tensor] = None) -> None:
+        super().__init__()
+        self.cfg = cfg
+        self.register_buffer("mean", torch.zeros(6) if mean is None else torch.as_tensor(mean, dtype=torch.float32))
+        self.register_buffer("std", torch.ones(6) if std is None else torch.as_tensor(std, dtype=torch.float32))
+        dirs = 1 if cfg.causal else 2
+        self.lstms = nn.ModuleList()
+        self.fcs = nn.ModuleList()
+        width = 6
+        for _ in range(cfg.layers):
+            self.lstms.append(nn.LSTM(width, cfg.hidden, batch_first=True, bidirectional=not cfg.causal))
+            self.fcs.append(nn.Sequential(nn.Linear(dirs * cfg.hidden, cfg.fc), nn.GELU(), nn.Dropout(cfg.dropout)))
+            width = cfg.fc
+        self.head = nn.Linear(width, 6)
+        if cfg.fir_taps:
+            if cfg.causal or cfg.fir_taps < 0 or cfg.fir_taps % 2 == 0:
+                raise ValueError(f"model.fir_taps: an odd number of taps for the bidirectional model, got {cfg.fir_taps}"
+                                 + (" with model.causal = true" if cfg.causal else ""))
+            # One filter per channel on its own input (no cross-axis terms) with zero DC gain (the
+            # taps' mean is taken out in _fir): it can shape and shift a signal in time but cannot
+            # scale it or mix axes. A full 6x6 filter with DC gain was measured to learn scale and
+            # misalignment of the training flights that made the validation flights' rotation over
+            # 1 s worse (docs/learning.md).
+            self.fir = nn.Conv1d(6, 6, cfg.fir_taps, groups=6, bias=False)
+            nn.init.zeros_(self.fir.weight)
+        else:
+            self.fir = None
+        if cfg.covariance:
+            lo = torch.tensor([cfg.sigma_gyro_min] * 3 + [cfg.sigma_acc_min] * 3)
+            hi = torch.tensor([cfg.sigma_gyro_max] * 3 + [cfg.sigma_acc_max] * 3)
+            if not bool(((lo > 0) & (hi > lo)).all()):
+                raise ValueError("model.sigma_*: need 0 < min < max for the gyro and accelerometer sigmas")
+            self.register_buffer("log_var_min", 2 * torch.log(lo), persistent=False)
+            self.register_buffer("log_var_max", 2 * torch.log(hi), persistent=False)
+            # Own two layers on the refiner's features: the noise of a sample depends on the motion
+            # (vibration, saturation) in ways the correction does not need to encode linearly.
+            self.cov_head: Optional[nn.Module] = nn.Sequential(nn.Linear(width, cfg.fc), nn.GELU(), nn.Linear(cfg.fc, 6))
+        else:
+            self.cov_head = None
+        if cfg.refine not in REFINE_CHANNELS:
+            raise ValueError(f"model.refine: must be one of {', '.join(REFINE_CHANNELS)}, got {cfg.refine!r}")
+        # Not persistent: derived from the config, so older checkpoints load unchanged.
+        self.register_buffer("channels", torch.tensor(REFINE_CHANNELS[cfg.refine], dtype=torch.float32), persistent=False)
+        # Start as the identity map: the regulariser and the paper both want training to begin
+        # from the raw IMU's quality, not from noise.
+        nn.init.zeros_(self.head.weight)
+        nn.init.zeros_(self.head.bias)
+
+    def forward(self, imu: Tensor, state: Optional[State] = None, with_variance: bool = False):
+        """imu (B, W, 6) gyro then acc -> refined (B, W, 6), same dtype; with ``with_variance`` the
+        pair (refined, variances or None) (through forward so that a DDP wrapper sees the call)."""
+        out, var, _ = self.forward_full(imu, state)
+        return (out, var) if with_variance else out
+
+    def load_refiner(self, state_dict: dict) -> None:
+        """Weights of a trained refiner into this model; only the covariance head may be missing
+        from them (it keeps its fresh initialisation)."""
+        missing, unexpected = self.load_state_dict(state_dict, strict=False)
+        bad = [k for k in missing if not k.startswith("cov_head.")] + list(unexpected)
+        if bad:
+            raise ValueError(f"weights do not fit this model: {', '.join(bad[:6])}")
+
+    def freeze_refiner(self) -> None:
+        """Only the covariance head keeps gradients (and dropout off elsewhere is the caller's eval())."""
+        for name, p in self.named_parameters():
+            p.requires_grad_(name.startswith("cov_head."))
+
+    def forward_with_state(self, imu: Tensor, state: Optional[State] = None) -> Tuple[Tensor, State]:
+        refined, _, new_state = self.forward_full(imu, state)
+        return refined, new_state
+
+    def forward_with_variance(self, imu: Tensor) -> Tuple[Tensor, Tensor]:
+        """imu (B, W, 6) -> refined (B, W, 6) and its per-sample noise variances (B, W, 6)."""
+        refined, var, _ = self.forward_full(imu)
+        if var is None:
+            raise ValueError("this model has no covariance head (model.covariance = false)")
+        return refined, var
+
+    def variance(self, features: Tensor) -> Tensor:
+        """Per-sample discrete-time noise variances from the last layer's features."""
+        assert self.cov_head is not None
+        z = torch.sigmoid(self.cov_head(features))
+        lo = self.log_var_min.to(features.dtype)
+        return torch.exp(lo + (self.log_var_max.to(features.dtype) - lo) * z)
+
+    def forward_full(self, imu: Tensor, state: Optional[State] = None) -> Tuple[Tensor, Optional[Tensor], State]:
+        """Refined samples, their variances (None without a covariance head) and the LSTM state."""
+        if state is not None and not self.cfg.causal:
+            raise ValueError("carried state needs the causal model (bidirectional LSTMs see the future)")
+        mean = self.mean.to(imu.dtype)
+        std = self.std.to(imu.dtype)
+        x = (imu - mean) / std
+        linear = self._fir(x)
+        new_state: State = []
+        for i, (lstm, fc) in enumerate(zip(self.lstms, self.fcs)):
+            s = None if state is None else state[i]
+            x, (h, c) = lstm(x, s)
+            new_state.append((h, c))
+            x = fc(x)
+        corr = self.cfg.output_scale * self.head(x)
+        if linear is not None:
+            corr = corr + linear
+        var = self.variance(x) if self.cov_head is not None else None
+        return imu + std * self.channels.to(imu.dtype) * corr, var, new_state
+
+    def _fir(self, x: Tensor) -> Optional[Tensor]:
+        """The FIR branch on normalised input (B, W, 6) -> (B, W, 6), or None when off. Not scaled
+        by output_scale: its response is O(1) (a half-sample shift is ±1/2)."""
+        if self.fir is None:
+            return None
+        k = self.cfg.fir_taps // 2
+        padded = nn.functional.pad(x.transpose(1, 2), (k, k), mode="replicate")
+        w = self.fir.weight - self.fir.weight.mean(dim=-1, keepdim=True)
+        return FIR_GAIN * nn.functional.conv1d(padded, w, groups=6).transpose(1, 2)
+
+    @torch.no_grad()
+    def step(self, sample: Tensor, state: Optional[State] = None) -> Tuple[Tensor, State]:
+        """One sample (B, 6) -> refined (B, 6) and the state to pass to the next call (causal only)."""
+        if not self.cfg.causal:
+            raise ValueError("step() needs the causal model")
+        out, state = self.forward_with_state(sample[:, None, :], state)
+        return out[:, 0], state
+
+    def model_args(self) -> dict:
+        return asdict(self.cfg)
+
+

@@ -1,0 +1,1 @@
+"""Training: the run configuration, the loop with its validation and selection, checkpoints."""

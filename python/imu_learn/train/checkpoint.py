@@ -1,0 +1,209 @@
+"""Checkpoints: everything needed to rebuild a run, loaded without executing pickled code.
+
+A checkpoint is a ``torch.save`` of a dict holding only tensors and plain Python values (str, int,
+float, bool, list, dict, None), and is always loaded with ``weights_only=True``. It stores the model
+args (so the model can be rebuilt), the model weights (normalisation buffers included), the
+optimiser state, the full run config, epoch, step, best metric, and the code version.
+Writes go through :mod:`imu_learn.util.atomic` (a temporary file renamed into place), so a kill never
+leaves half a checkpoint over a good one. Every checkpoint also carries ``digest``, a sha256 of its
+whole content (each tensor's dtype, shape and bytes, and every plain value), checked on load: a
+truncated or modified file is a :class:`CheckpointError` naming it, never a model with altered
+weights (torch's own zip reader does not notice a changed byte in a tensor's data).
+
+A checkpoint is self-contained for inference: ``python -m imu_learn.refine`` needs nothing from the
+run folder beside it (the normalisation is in the weights, the architecture in ``model_args``).
+A run's ``best.pt`` also carries the optimiser state and the metrics history; to ship a model, strip
+those (the result still loads everywhere a checkpoint does, but cannot be resumed)::
+
+    python -m imu_learn.train.checkpoint strip runs/NAME/best.pt models/NAME.pt
+    python -m imu_learn.train.checkpoint info models/NAME.pt      # what a checkpoint holds, for a model card
+"""
+from __future__ import annotations
+
+import argparse
+import hashlib
+import json
+import os
+import sys
+from pathlib import Path
+from typing import Any, Dict, List, Optional
+
+import torch
+
+from imu_learn._imu_core import __version__
+from imu_learn.errors import (
+    CheckpointError,  # noqa: F401  (defined with every error class)
+    ImuError,
+)
+from imu_learn.nn.model import ImuRefiner, ModelConfig
+from imu_learn.util.atomic import atomic_write_bytes
+
+FORMAT = "imu_learn.train.checkpoint.v1"
+# What a stripped (shipped) checkpoint keeps: everything inference and a model card need.
+STRIPPED_KEYS = ("format", "code_version", "model_args", "model", "config", "epoch", "step", "best_metric")
+STRIPPED_EXTRA = ("best_epoch", "elapsed_s", "world_size")
+DIGEST_KEY = "digest"
+
+
+def save_checkpoint(
+    path: Path,
+    model: ImuRefiner,
+    config: Dict[str, Any],
+    epoch: int,
+    step: int,
+    best_metric: Optional[float],
+    optimizer: Optional[torch.optim.Optimizer] = None,
+    extra: Optional[Dict[str, Any]] = None,
+) -> None:
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    state = {
+        "format": FORMAT,
+        "code_version": __version__,
+        "model_args": model.model_args(),
+        "model": {k: v.detach().cpu() for k, v in model.state_dict().items()},
+        "optimizer": None if optimizer is None else optimizer.state_dict(),
+        "config": config,
+        "epoch": int(epoch),
+        "step": int(step),
+        "best_metric": None if best_metric is None else float(best_metric),
+        "extra": extra or {},
+    }
+    write_checkpoint(path, state)
+
+
+def content_digest(state: Dict[str, Any]) -> str:
+    """sha256 of a checkpoint's content without its ``digest`` entry: every key and plain value,
+    and each tensor's dtype, shape and bytes, in a fixed order (the same after a save and load)."""
+    h = hashlib.sha256()
+    _hash_value(h, {k: v for k, v in state.items() if k != DIGEST_KEY})
+    return h.hexdigest()
+
+
+def _hash_value(h: Any, value: Any) -> None:
+    if isinstance(value, torch.Tensor):
+        t = value.detach().cpu().contiguous()
+        h.update(f"tensor|{t.dtype}|{tuple(t.shape)}|".encode())
+        h.update(t.reshape(-1).view(torch.uint8).numpy().tobytes())
+    elif isinstance(value, dict):
+        # optimizer state has int keys, everything else str keys: sort by type name, then value
+        items = sorted(value.items(), key=lambda kv: (type(kv[0]).__name__, str(kv[0])))
+        h.update(f"dict|{len(items)}|".encode())
+        for k, v in items:
+            _hash_value(h, k)
+            _hash_value(h, v)
+    elif isinstance(value, (list, tuple)):
+        h.update(f"list|{len(value)}|".encode())
+        for v in value:
+            _hash_value(h, v)
+    else:  # str, int, float, bool, None: their repr is exact (floats round-trip)
+        h.update(f"{type(value).__name__}|{value!r}|".encode())
+
+
+def write_checkpoint(path: Path, state: Dict[str, Any]) -> None:
+    """``state`` with its content digest, saved atomically to ``path``."""
+    signed = {**state, DIGEST_KEY: content_digest(state)}
+    atomic_write_bytes(path, lambda f: torch.save(signed, f))
+
+
+def load_checkpoint(path: Path, map_location: str = "cpu") -> Dict[str, Any]:
+    path = Path(path)
+    if not path.exists():
+        raise FileNotFoundError(2, "No such file or directory", str(path))
+    try:
+        state = torch.load(path, map_location=map_location, weights_only=True)
+    except Exception as e:  # torch raises many kinds for a damaged file; all mean "corrupt"
+        raise CheckpointError(f"{path}: not a readable checkpoint ({type(e).__name__}: {e})") from e
+    if not isinstance(state, dict) or state.get("format") != FORMAT:
+        raise CheckpointError(f"{path}: not an imu_learn checkpoint of format {FORMAT}")
+    # Checkpoints written before digests (the shipped models/*.pt among them) have none and are
+    # accepted as they are; every checkpoint written since carries one.
+    if DIGEST_KEY in state and state[DIGEST_KEY] != content_digest(state):
+        raise CheckpointError(f"{path}: truncated or modified: its content does not match the sha256 "
+                              "recorded when it was written")
+    return state
+
+
+def model_from_checkpoint(state: Dict[str, Any]) -> ImuRefiner:
+    model = ImuRefiner(ModelConfig(**state["model_args"]))
+    model.load_state_dict(state["model"])
+    model.eval()
+    return model
+
+
+def load_model(path: Path, map_location: str = "cpu") -> ImuRefiner:
+    """The trained model of a checkpoint, in eval mode."""
+    return model_from_checkpoint(load_checkpoint(path, map_location))
+
+
+def strip_checkpoint(src: Path, dst: Path) -> Dict[str, Any]:
+    """Write to ``dst`` (atomically) a copy of checkpoint ``src`` with only what inference needs:
+    model args, weights (normalisation buffers included), config, epoch, step, best metric, code
+    version, and from ``extra`` the best epoch, training time and world size. The optimiser state
+    and the metrics history are dropped; ``extra["stripped_from"]`` names the source
+    (``<run folder name>/<file>``). Weights are copied unchanged, so refining with the stripped
+    checkpoint gives bit-identical output. Returns the stripped state."""
+    src, dst = Path(src), Path(dst)
+    if src.exists() and dst.exists() and os.path.samefile(src, dst):
+        raise CheckpointError(f"{dst}: is the source checkpoint; write the stripped copy elsewhere")
+    state = load_checkpoint(src)
+    out: Dict[str, Any] = {k: state.get(k) for k in STRIPPED_KEYS}
+    out["model"] = {k: v.detach().cpu().clone() for k, v in state["model"].items()}
+    out["optimizer"] = None
+    extra = state.get("extra") or {}
+    out["extra"] = {k: extra[k] for k in STRIPPED_EXTRA if k in extra}
+    out["extra"]["stripped_from"] = f"{src.resolve().parent.name}/{src.name}"
+    model_from_checkpoint(out)  # refuse to write something that does not rebuild
+
+    write_checkpoint(dst, out)
+    return out
+
+
+def describe(state: Dict[str, Any]) -> Dict[str, Any]:
+    """A summary of a loaded checkpoint (plain values), as ``python -m imu_learn.train.checkpoint info`` prints."""
+    cfg = state.get("config") or {}
+    data = cfg.get("data") or {}
+    n_params = sum(int(v.numel()) for k, v in state["model"].items() if k not in ("mean", "std"))
+    return {
+        "format": state.get("format"),
+        "code_version": state.get("code_version"),
+        "model_args": state.get("model_args"),
+        "parameters": n_params,
+        "normalisation": {k: [float(x) for x in state["model"][k]] for k in ("mean", "std") if k in state["model"]},
+        "epoch": state.get("epoch"),
+        "step": state.get("step"),
+        "best_metric": state.get("best_metric"),
+        "selected_on": (cfg.get("optim") or {}).get("select"),
+        "has_optimizer": state.get("optimizer") is not None,
+        "split": data.get("split"),
+        "roots": [r.get("path") for r in data.get("roots") or []],
+        "window": data.get("window"),
+        "extra": {k: v for k, v in (state.get("extra") or {}).items() if k not in ("history", "partial")},
+    }
+
+
+def main(argv: Optional[List[str]] = None) -> int:
+    p = argparse.ArgumentParser(prog="python -m imu_learn.train.checkpoint",
+                                description="Inspect a checkpoint or write a small copy for shipping.")
+    sub = p.add_subparsers(dest="cmd", required=True)
+    ps = sub.add_parser("strip", help="copy a checkpoint keeping only what inference needs (no optimiser state)")
+    ps.add_argument("src", type=Path)
+    ps.add_argument("dst", type=Path)
+    pi = sub.add_parser("info", help="print what a checkpoint holds (JSON)")
+    pi.add_argument("path", type=Path)
+    args = p.parse_args(argv)
+    try:
+        if args.cmd == "strip":
+            strip_checkpoint(args.src, args.dst)
+            before, after = args.src.stat().st_size, args.dst.stat().st_size
+            print(f"{args.dst}: {after / 1e6:.3f} MB (from {before / 1e6:.3f} MB)")
+        else:
+            print(json.dumps(describe(load_checkpoint(args.path)), indent=2))
+    except (ImuError, OSError) as e:
+        print(f"error: {type(e).__name__}: {' '.join(str(e).split())}", file=sys.stderr)
+        return 2
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

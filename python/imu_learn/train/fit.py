@@ -1,0 +1,672 @@
+"""Train the paper's IMU refiner: ``python -m imu_learn.fit``.
+
+Usage::
+
+    python -m imu_learn.fit                                  # default run: the shipped EuRoC crops
+    python -m imu_learn.fit --config configs/euroc.toml      # a config file
+    python -m imu_learn.fit --optim.lr 3e-4 --data.window 100 --name try1   # dotted overrides
+    python -m imu_learn.fit --resume runs/try1               # continue a run (``--optim.epochs N`` to extend)
+    python -m imu_learn.fit --print-config                   # the resolved config as TOML
+    torchrun --nproc_per_node 4 -m imu_learn.fit --config configs/euroc.toml   # several GPUs
+
+What a run does:
+
+* config: defaults (= ``configs/default.toml``), then ``--config FILE``, then ``--key.sub value``
+  overrides, each checked against the field's type (:mod:`imu_learn.train.config`).
+* split by sequence (:mod:`imu_learn.data.splits`), written to ``RUN/split.json``; the config to
+  ``RUN/config.toml``. Run folder: ``<runs_dir>/<name>``, name defaulting to a timestamp.
+* model normalisation (per-channel mean/std) from the training split's raw IMU.
+* Adam (paper: lr 1e-4). An epoch is ``optim.steps_per_epoch`` augmented batches, built by the Rust
+  ``BatchSampler`` in the main process (no forked DataLoader workers: rayon does not survive a
+  fork). Batch ``step`` is drawn with a seed derived from (seed, rank, step), and torch's RNG is
+  re-seeded from the same triple before the step (dropout), so a resumed run draws exactly the
+  batches the uninterrupted one would have.
+* after every epoch: loss on fixed, non-augmented validation windows (``BatchSampler.eval_windows``,
+  stride ``data.val_stride``); ``best.pt`` when it improves, then ``last.pt`` (both atomic, via
+  :mod:`imu_learn.train.checkpoint`: model args and weights incl. normalisation, optimiser, full config,
+  epoch, step, best metric, code version, and the metrics history); ``RUN/metrics.csv`` rewritten
+  (atomically) with one row per epoch so far; TensorBoard scalars in ``RUN/tb`` when the ``tensorboard`` package is
+  installed (it is optional; without it nothing is written there).
+* ``--resume RUN``: everything is rebuilt from ``RUN/last.pt`` (config, split check, model,
+  optimiser, step, history; metrics.csv is rewritten from the checkpoint's history so a kill
+  between two writes cannot duplicate or lose a row). A checkpoint taken mid-epoch (Ctrl-C)
+  continues mid-epoch. The data must be what the run started with (split.json is compared). A
+  truncated or modified ``last.pt`` (its content digest does not match) is refused with one line,
+  never silently replaced by a fresh start.
+* Ctrl-C: ``last.pt`` is saved with the state after the last finished step, one line says how to
+  resume, exit status 130. Known errors (config, data, checkpoint, missing files, a full disk or a
+  read-only run folder) print one line and exit with status 2; every file of the run folder is
+  written atomically (:mod:`imu_learn.util.atomic`), so what is there after any failure is complete.
+* at the end: relative pose error on the held-out test split (:mod:`imu_learn.eval.metrics`) for the
+  raw IMU and for the best-validation model, over ``data.eval_horizons`` IMU samples (default 10
+  and 200), pooled and per test recording, open loop and with a
+  start-up bias (fitted on each input's first ``data.startup_bias_s`` seconds against ground truth,
+  raw and refined separately) subtracted; windows start after those seconds so no cell is scored on
+  data its bias was fitted on. Printed and written to ``RUN/results.json``.
+
+Devices: ``device = "auto"`` uses CUDA when present, else the CPU with ``threads`` torch threads.
+Several GPUs: start with ``torchrun --nproc_per_node K -m imu_learn.fit ...``; when ``WORLD_SIZE``
+is above 1 each process joins a process group (NCCL on CUDA, Gloo on CPU), wraps the model in
+DistributedDataParallel, draws its own batch stream (the rank enters the seed) so the effective
+batch is K × batch_size, and only rank 0 writes files and evaluates; validation runs on every rank
+(it is small), so all ranks agree on the best epoch without communication.
+"""
+from __future__ import annotations
+
+import argparse
+import contextlib
+import csv
+import io
+import json
+import math
+import os
+import signal
+import sys
+import time
+from datetime import datetime
+from pathlib import Path
+from typing import Any, Callable, Dict, List, Optional, Tuple
+from typing import Sequence as Seq
+
+import numpy as np
+import torch
+
+from imu_learn.core.batches import Batch, BatchSampler
+from imu_learn.data.splits import Split, make_split, write_split
+from imu_learn.data.types import Sequence
+from imu_learn.errors import ImuError, one_line
+from imu_learn.eval.metrics import index_at, relative_pose_rmse_many, with_imu, without_fitted_bias
+from imu_learn.nn.losses import imu_loss
+from imu_learn.nn.model import ImuRefiner
+from imu_learn.train.checkpoint import load_checkpoint, load_model, model_from_checkpoint, save_checkpoint
+from imu_learn.train.config import ConfigError, RunConfig, build_config, parse_overrides, read_toml, to_toml
+from imu_learn.util.atomic import atomic_write_text
+
+RESUME_OVERRIDABLE = ("optim.epochs", "device", "threads")
+EXIT_ERROR = 2
+EXIT_INTERRUPTED = 130
+PROG = "imu_learn.train.fit"
+
+StepHook = Callable[[int, float], None]
+
+
+# ---------------------------------------------------------------------------------------------
+# small helpers
+
+
+def batch_seed(seed: int, rank: int, step: int) -> int:
+    """The seed of batch ``step`` on ``rank``: a pure function of the triple (resume-exact)."""
+    return int(np.random.SeedSequence([int(seed) & 0xFFFFFFFF, int(rank), int(step)]).generate_state(1, np.uint64)[0] >> 1)
+
+
+def pick_device(spec: str, local_rank: int = 0) -> torch.device:
+    if spec == "auto":
+        return torch.device(f"cuda:{local_rank}" if torch.cuda.is_available() else "cpu")
+    if spec.startswith("cuda") and not torch.cuda.is_available():
+        raise ConfigError(f"device: {spec!r} asked for but CUDA is not available")
+    return torch.device(spec)
+
+
+def norm_stats(seqs: Seq[Sequence]) -> tuple:
+    x = np.concatenate([np.concatenate([s.gyro, s.acc], axis=1) for s in seqs], axis=0)
+    mean = x.mean(axis=0)
+    std = np.maximum(x.std(axis=0), 1e-6)
+    return torch.as_tensor(mean, dtype=torch.float32), torch.as_tensor(std, dtype=torch.float32)
+
+
+@contextlib.contextmanager
+def deferred_interrupt():
+    """Hold a Ctrl-C until the block is done (a checkpoint write is never cut short)."""
+    if not hasattr(signal, "SIGINT") or signal.getsignal(signal.SIGINT) is not signal.default_int_handler:
+        yield
+        return
+    got: List[Any] = []
+    try:
+        old = signal.signal(signal.SIGINT, lambda *a: got.append(a))
+    except ValueError:  # not the main thread
+        yield
+        return
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGINT, old)
+        if got:
+            raise KeyboardInterrupt
+
+
+def write_csv(path: Path, rows: List[Dict[str, Any]]) -> None:
+    """All ``rows`` to ``path``, atomically (rewritten whole each epoch rather than appended to,
+    so a kill or a full disk never leaves half a row)."""
+    buf = io.StringIO()
+    if rows:
+        w = csv.DictWriter(buf, fieldnames=list(rows[0].keys()), lineterminator="\n")
+        w.writeheader()
+        for r in rows:
+            w.writerow(r)
+    atomic_write_text(path, buf.getvalue())
+
+
+def _tb_writer(run_dir: Path):
+    try:
+        from torch.utils.tensorboard import SummaryWriter  # needs the tensorboard package
+    except Exception:
+        return None
+    return SummaryWriter(str(run_dir / "tb"))
+
+
+# ---------------------------------------------------------------------------------------------
+# distributed
+
+
+class Dist:
+    def __init__(self) -> None:
+        self.world = int(os.environ.get("WORLD_SIZE", "1"))
+        self.rank = int(os.environ.get("RANK", "0"))
+        self.local_rank = int(os.environ.get("LOCAL_RANK", "0"))
+        self.on = self.world > 1
+
+    @property
+    def main(self) -> bool:
+        return self.rank == 0
+
+    def init(self, device: torch.device) -> None:
+        if self.on and not torch.distributed.is_initialized():
+            backend = "nccl" if device.type == "cuda" else "gloo"
+            if device.type == "cuda":
+                torch.cuda.set_device(device)
+            torch.distributed.init_process_group(backend)
+
+    def barrier(self) -> None:
+        if self.on and torch.distributed.is_initialized():
+            torch.distributed.barrier()
+
+    def close(self) -> None:
+        if self.on and torch.distributed.is_initialized():
+            torch.distributed.destroy_process_group()
+
+
+# ---------------------------------------------------------------------------------------------
+# evaluation pieces
+
+
+@torch.no_grad()
+def validation_loss(model: ImuRefiner, batch: Batch, cfg: RunConfig, device: torch.device, chunk: int = 256) -> Dict[str, float]:
+    """Loss terms over all fixed validation windows (window-weighted means)."""
+    was = model.training
+    model.eval()
+    sums: Dict[str, float] = {}
+    n_total = batch.imu.shape[0]
+    horizons = [int(h) for h in batch.horizons]
+    for a in range(0, n_total, chunk):
+        b = min(n_total, a + chunk)
+        imu = torch.from_numpy(np.ascontiguousarray(batch.imu[a:b], dtype=np.float32)).to(device)
+        with torch.no_grad():
+            refined, var = model(imu, with_variance=True)
+            _, terms = imu_loss(refined, imu, batch.dt[a:b], batch.dq_wxyz[a:b], batch.dv[a:b], batch.dp[a:b],
+                                horizons, batch.bias[a:b], cfg.loss, var)
+        for k, v in terms.items():
+            sums[k] = sums.get(k, 0.0) + float(v) * (b - a)
+    model.train(was)
+    return {k: v / n_total for k, v in sums.items()}
+
+
+# The model args that may differ between optim.init's checkpoint and the model it initialises.
+COVARIANCE_ARGS = ("covariance", "sigma_gyro_min", "sigma_gyro_max", "sigma_acc_min", "sigma_acc_max")
+
+
+def init_from(model: ImuRefiner, path: Path) -> None:
+    """optim.init: the weights of a trained checkpoint (normalisation included) into ``model``."""
+    state = load_checkpoint(path)
+    theirs = {k: v for k, v in state["model_args"].items() if k not in COVARIANCE_ARGS}
+    ours = {k: v for k, v in model.model_args().items() if k not in COVARIANCE_ARGS}
+    diff = sorted(k for k in set(theirs) | set(ours) if theirs.get(k) != ours.get(k))
+    if diff:
+        raise ConfigError(f"optim.init: {path} was trained with other model args: "
+                          + ", ".join(f"model.{k} = {theirs.get(k)!r} there, {ours.get(k)!r} here" for k in diff))
+    try:
+        model.load_refiner(state["model"])
+    except ValueError as e:
+        raise ConfigError(f"optim.init: {path}: {e}") from None
+
+
+def without_startup_bias(seqs: Seq[Sequence], cfg: RunConfig) -> Tuple[List[Sequence], Dict[str, Any]]:
+    """Each sequence with its own start-up bias (fitted on its first ``data.startup_bias_s``
+    seconds against ground truth) subtracted, and the biases by sequence name."""
+    return without_fitted_bias(seqs, cfg.data.startup_bias_s, cfg.data.gravity)
+
+
+def without_device_bias(split: Split, cfg: RunConfig) -> Split:
+    """``data.train_bias = "remove"``: the training and validation segments, each with one constant
+    gyro and accelerometer bias fitted against its ground truth over the whole segment subtracted
+    (test segments unchanged)."""
+    g = cfg.data.gravity
+    return Split(without_fitted_bias(split.train, None, g)[0], without_fitted_bias(split.val, None, g)[0],
+                 split.test, split.record)
+
+
+def bias_removed_pose(seqs: Seq[Sequence], n: int, cfg: RunConfig) -> Dict[str, float]:
+    """Relative pose RMSE over ``n`` samples with each sequence's start-up bias removed (the
+    final table's second protocol); windows from ``data.startup_bias_s`` on when the sequence is
+    long enough for that, else from its start (short validation blocks still get a score)."""
+    d = cfg.data
+    fixed, _ = without_startup_bias(seqs, cfg)
+    long_enough = all(len(s) - index_at(s, d.startup_bias_s) > n for s in seqs)
+    first = d.startup_bias_s if long_enough else 0.0
+    return relative_pose_rmse_many(fixed, n, d.val_stride, d.gravity, first_s=first)
+
+
+class ValidationPose:
+    """The ``optim.select = "val_pose"`` metric: relative pose RMSE on the validation sequences,
+    start-up bias removed (as in the final table), at the horizons ``optim.select_horizons``
+    (default: ``data.window`` samples), scored as the largest model/raw ratio over those horizons
+    and the terms ``optim.select_terms`` (rotation and translation, or rotation only), combined by
+    ``optim.select_combine``: "max" is below 1 only when the model beats raw IMU on every one, so a
+    model that trades one for another is not picked; "mean" is their geometric mean.
+    Selecting on the reported protocol matters because the validation loss also scores the
+    device's own constant bias, which the bias-aware model passes through by design."""
+
+    def __init__(self, seqs: Seq[Sequence], cfg: RunConfig) -> None:
+        self.seqs, self.cfg = list(seqs), cfg
+        self.horizons = list(cfg.optim.select_horizons) or [cfg.data.window]
+        self.keys = ("rot_rad",) if cfg.optim.select_terms == "rot" else ("rot_rad", "trans_m")
+        # "recordings": each validation recording's ratio counts alike (geometric mean), so one
+        # recording with noisy ground truth cannot decide the pooled RMSE alone.
+        groups: Dict[str, List[int]] = {}
+        for i, s in enumerate(self.seqs):
+            groups.setdefault(recording_of(s.name) if cfg.optim.select_average == "recordings" else "all", []).append(i)
+        self.groups = list(groups.values())
+        self.raw = {n: self._scores(self.seqs, n) for n in self.horizons}
+
+    def _scores(self, seqs: List[Sequence], n: int) -> List[Dict[str, float]]:
+        return [bias_removed_pose([seqs[i] for i in g], n, self.cfg) for g in self.groups]
+
+    @torch.no_grad()
+    def __call__(self, model: ImuRefiner, device: torch.device) -> Dict[str, float]:
+        was = model.training
+        refined = [refine_sequence(model, s, self.cfg.data.window, device) for s in self.seqs]
+        model.train(was)
+        out: Dict[str, float] = {}
+        ratios = []
+        for n in self.horizons:
+            got = self._scores(refined, n)
+            for k in self.keys:
+                logs = [math.log(max(m[k], 1e-15) / max(r[k], 1e-15)) for m, r in zip(got, self.raw[n])]
+                ratios.append(math.exp(sum(logs) / len(logs)))
+            pooled = bias_removed_pose(refined, n, self.cfg) if len(self.groups) > 1 else got[0]
+            out[f"pose_rot_deg_n{n}"], out[f"pose_trans_m_n{n}"] = pooled["rot_deg"], pooled["trans_m"]
+        # the longest horizon's figures also under the short names (metrics.csv columns kept)
+        out["pose_rot_deg"], out["pose_trans_m"] = pooled["rot_deg"], pooled["trans_m"]
+        if self.cfg.optim.select_combine == "mean":
+            out["pose_score"] = math.exp(sum(math.log(r) for r in ratios) / len(ratios))
+        else:
+            out["pose_score"] = max(ratios)
+        return out
+
+
+@torch.no_grad()
+def refine_sequence(model: ImuRefiner, seq: Sequence, window: int, device: torch.device, batch: int = 64) -> Sequence:
+    """The model applied to a whole sequence: windows of ``window`` samples at half-window hops,
+    each sample taken from the window whose centre is nearest (the model never sees more context
+    than in training). The correction (refined − input) is added to the float64 raw samples."""
+    model.eval()
+    n = len(seq)
+    raw = np.concatenate([seq.gyro, seq.acc], axis=1)
+    w = min(window, n)
+    hop = max(1, w // 2)
+    starts = list(range(0, n - w + 1, hop))
+    if starts[-1] != n - w:
+        starts.append(n - w)
+    corr = np.zeros_like(raw)
+    bounds = [0] + [(starts[j] + starts[j + 1] + w) // 2 for j in range(len(starts) - 1)] + [n]
+    x32 = raw.astype(np.float32)
+    for a in range(0, len(starts), batch):
+        ss = starts[a:a + batch]
+        inp = torch.from_numpy(np.stack([x32[s:s + w] for s in ss])).to(device)
+        out = (model(inp) - inp).double().cpu().numpy()
+        for j, s in enumerate(ss):
+            jj = a + j
+            lo, hi = bounds[jj], bounds[jj + 1]
+            corr[lo:hi] = out[j, lo - s:hi - s]
+    refined = raw + corr
+    return with_imu(seq, refined[:, :3], refined[:, 3:])
+
+
+def recording_of(segment_name: str) -> str:
+    """``V1_01_easy#2`` -> ``V1_01_easy`` (segments of one recording are scored together)."""
+    return segment_name.split("#")[0]
+
+
+def _cells(seqs: List[Sequence], fixed: List[Sequence], cfg: RunConfig) -> Dict[str, Any]:
+    d = cfg.data
+    return {
+        col: {str(n): relative_pose_rmse_many(ss, n, d.eval_stride, d.gravity, first_s=d.startup_bias_s)
+              for n in d.eval_horizons}
+        for col, ss in (("open_loop", seqs), ("bias_removed", fixed))
+    }
+
+
+def evaluate_table(raw_seqs: List[Sequence], model_seqs: List[Sequence], cfg: RunConfig) -> Dict[str, Any]:
+    """Relative pose RMSE (rot deg, trans m) at ``data.eval_horizons``, raw vs model, open loop vs
+    bias removed: pooled over every window of the test split (``rows``) and per test recording
+    (``per_recording``, as the paper's Table II lists sequences)."""
+    out: Dict[str, Any] = {"rows": {}, "per_recording": {}, "startup_bias": {}}
+    for row, seqs in (("raw", raw_seqs), ("model", model_seqs)):
+        fixed, out["startup_bias"][row] = without_startup_bias(seqs, cfg)
+        out["rows"][row] = _cells(seqs, fixed, cfg)
+        for rec in dict.fromkeys(recording_of(s.name) for s in seqs):
+            idx = [i for i, s in enumerate(seqs) if recording_of(s.name) == rec]
+            out["per_recording"].setdefault(rec, {})[row] = _cells([seqs[i] for i in idx], [fixed[i] for i in idx], cfg)
+    return out
+
+
+def format_table(res: Dict[str, Any], names: List[str], cfg: RunConfig) -> str:
+    d = cfg.data
+    hs = list(d.eval_horizons)
+    recs = sorted({n.split("#")[0] for n in names})
+    what = ", ".join(names) if len(names) <= 3 else f"{len(names)} segments of {len(recs)} recordings"
+    head = (f"Held-out test ({what}): relative pose RMSE over n IMU samples, windows every "
+            f"{d.eval_stride} samples from {d.startup_bias_s:g} s on")
+    k = len(hs)
+    cols = [(c, n) for c in ("open_loop", "bias_removed") for n in hs]
+    width = 14 * k - 1
+    lines = [head,
+             f"{'':24}|{'open loop':^{width}}|{'start-up bias removed':^{width}}",
+             f"{'':24}|" + "|".join(f"{'n=' + str(n):^13}" for _, n in cols[:k]) + "|"
+             + "|".join(f"{'n=' + str(n):^13}" for _, n in cols[k:])]
+    for row, label in (("raw", "raw IMU"), ("model", "trained model")):
+        for key, unit, fmt in (("rot_deg", "rot [deg]", "{:.4f}"), ("trans_m", "trans [m]", "{:.5f}")):
+            first = label if key == "rot_deg" else ""
+            cells = [fmt.format(res["rows"][row][c][str(n)][key]) for c, n in cols]
+            lines.append(f"{first:14}{unit:>10}|" + "|".join(f"{x:^13}" for x in cells[:k]) + "|"
+                         + "|".join(f"{x:^13}" for x in cells[k:]))
+    return "\n".join(lines)
+
+
+# ---------------------------------------------------------------------------------------------
+# the run
+
+
+def train(
+    cfg: RunConfig,
+    run_dir: Path,
+    state: Optional[Dict[str, Any]] = None,
+    split: Optional[Split] = None,
+    on_step: Optional[StepHook] = None,
+    progress: bool = True,
+) -> Dict[str, Any]:
+    """Train (or continue from checkpoint ``state``) and evaluate; returns the results dict.
+
+    ``on_step(step, loss)`` is called after every finished optimiser step (tests use it to
+    interrupt at a chosen step). KeyboardInterrupt propagates after ``last.pt`` is saved.
+    """
+    from tqdm import tqdm
+
+    dist = Dist()
+    device = pick_device(cfg.device, dist.local_rank)
+    if device.type == "cpu":
+        torch.set_num_threads(cfg.threads)
+    dist.init(device)
+    main = dist.main
+    run_dir = Path(run_dir)
+
+    if split is None:
+        split = make_split(cfg.data)
+    if cfg.data.train_bias == "remove":
+        split = without_device_bias(split, cfg)
+    bc = cfg.data.batch_config()
+    sampler = BatchSampler(split.train, bc)
+    val_batch = BatchSampler(split.val, bc).eval_windows(cfg.data.val_stride)
+    val_pose = ValidationPose(split.val, cfg) if cfg.optim.select == "val_pose" else None
+    select_key = "pose_score" if val_pose is not None else "total"
+
+    spe = cfg.optim.steps_per_epoch
+    total = cfg.optim.epochs * spe
+    if state is None:
+        torch.manual_seed(cfg.seed)
+        mean, std = norm_stats(split.train)
+        model = ImuRefiner(cfg.model, mean, std)
+        if cfg.optim.init:
+            init_from(model, Path(cfg.optim.init))
+        if cfg.optim.trainable == "covariance":
+            model.freeze_refiner()
+        model.to(device)
+        opt = torch.optim.Adam([p for p in model.parameters() if p.requires_grad], lr=cfg.optim.lr)
+        step, epochs_done, best, best_epoch = 0, 0, None, None
+        history: List[Dict[str, Any]] = []
+        partial: Dict[str, float] = {}
+        elapsed0 = 0.0
+    else:
+        model = model_from_checkpoint(state)
+        if cfg.optim.trainable == "covariance":
+            model.freeze_refiner()
+        model.to(device)
+        opt = torch.optim.Adam([p for p in model.parameters() if p.requires_grad], lr=cfg.optim.lr)
+        opt.load_state_dict(state["optimizer"])
+        extra = state.get("extra") or {}
+        step, epochs_done = int(state["step"]), int(state["epoch"])
+        best = state["best_metric"]
+        best_epoch = extra.get("best_epoch")
+        history = list(extra.get("history", []))
+        partial = dict(extra.get("partial", {}))
+        elapsed0 = float(extra.get("elapsed_s", 0.0))
+    model.train()
+    net: torch.nn.Module = model
+    if dist.on:
+        net = torch.nn.parallel.DistributedDataParallel(model, device_ids=[device.index] if device.type == "cuda" else None)
+
+    cfg_dict = cfg.to_dict()
+    tb = _tb_writer(run_dir) if main else None
+    t_start = time.time()
+
+    def elapsed() -> float:
+        return elapsed0 + time.time() - t_start
+
+    def checkpoint(path: Path) -> None:
+        if not main:
+            return
+        extra = {"history": history, "partial": partial, "best_epoch": best_epoch, "elapsed_s": elapsed(),
+                 "world_size": dist.world}
+        with deferred_interrupt():
+            save_checkpoint(path, model, cfg_dict, epochs_done, step, best, opt, extra)
+
+    def end_of_epoch(bar) -> None:
+        nonlocal epochs_done, best, best_epoch, partial
+        epoch = step // spe
+        val = validation_loss(model, val_batch, cfg, device)
+        if val_pose is not None:
+            val.update(val_pose(model, device))
+        n = max(1.0, partial.get("n", 0.0))
+        row: Dict[str, Any] = {"epoch": epoch, "step": step, "lr": cfg.optim.lr}
+        for k in sorted(k for k in partial if k != "n"):
+            row[f"train_{k}"] = partial[k] / n
+        for k in sorted(val):
+            row[f"val_{k}"] = val[k]
+        improved = best is None or val[select_key] < best
+        if improved:
+            best, best_epoch = val[select_key], epoch
+        row["best_epoch"] = best_epoch
+        row["elapsed_s"] = round(elapsed(), 2)
+        history.append(row)
+        epochs_done = epoch
+        partial = {}
+        if main:
+            if improved:
+                checkpoint(run_dir / "best.pt")
+            checkpoint(run_dir / "last.pt")
+            write_csv(run_dir / "metrics.csv", history)
+            if tb is not None:
+                for k, v in row.items():
+                    if k.startswith(("train_", "val_")):
+                        tb.add_scalar(k.replace("_", "/", 1), v, step)
+                tb.flush()
+            bar.write(f"epoch {epoch}/{cfg.optim.epochs}  train {row.get('train_total', float('nan')):.5f}  "
+                      f"val {val['total']:.5f}"
+                      + (f"  pose {val['pose_score']:.4f}" if val_pose is not None else "")
+                      + ("  *best*" if improved else ""))
+
+    horizons = None
+    bar = tqdm(total=total, initial=step, desc="fit", unit="step", disable=not (progress and main),
+               dynamic_ncols=True, mininterval=1.0)
+    try:
+        while True:
+            if step > 0 and step % spe == 0 and epochs_done < step // spe:
+                end_of_epoch(bar)
+            if step >= total:
+                break
+            s = batch_seed(cfg.seed, dist.rank, step)
+            torch.manual_seed(s)
+            b = sampler.sample(s)
+            if horizons is None:
+                horizons = [int(h) for h in b.horizons]
+            imu = torch.from_numpy(np.ascontiguousarray(b.imu, dtype=np.float32)).to(device)
+            refined, var = net(imu, with_variance=True)
+            loss, terms = imu_loss(refined, imu, b.dt, b.dq_wxyz, b.dv, b.dp, horizons, b.bias, cfg.loss, var)
+            opt.zero_grad(set_to_none=True)
+            loss.backward()
+            if cfg.optim.grad_clip > 0:
+                torch.nn.utils.clip_grad_norm_(model.parameters(), cfg.optim.grad_clip)
+            opt.step()
+            step += 1
+            for k, v in terms.items():
+                partial[k] = partial.get(k, 0.0) + float(v)
+            partial["n"] = partial.get("n", 0.0) + 1.0
+            lv = float(terms["total"])
+            bar.update(1)
+            bar.set_postfix(epoch=f"{step // spe + (step % spe > 0)}/{cfg.optim.epochs}", loss=f"{lv:.4g}", refresh=False)
+            if on_step is not None:
+                on_step(step, lv)
+    except KeyboardInterrupt:
+        bar.close()
+        checkpoint(run_dir / "last.pt")
+        if tb is not None:
+            tb.close()
+        raise
+    bar.close()
+    if tb is not None:
+        tb.close()
+
+    results: Dict[str, Any] = {}
+    if main and val_pose is not None and best is not None and best >= 1.0:
+        print(f"{PROG}: note: no epoch beat raw IMU on the validation sequences with the start-up bias removed "
+              f"(best score {best:.4f} at epoch {best_epoch}; below 1 means better on rotation and translation)")
+    if main:
+        results = final_evaluation(cfg, run_dir, split, device, best_epoch, best)
+    dist.barrier()
+    dist.close()
+    return results
+
+
+def final_evaluation(cfg: RunConfig, run_dir: Path, split: Split, device: torch.device,
+                     best_epoch: Optional[int], best: Optional[float]) -> Dict[str, Any]:
+    if not split.test:
+        print(f"{PROG}: no test sequences in data.split.test; no final table")
+        return {}
+    model = load_model(run_dir / "best.pt", map_location=str(device)).to(device)
+    refined = [refine_sequence(model, s, cfg.data.window, device) for s in split.test]
+    res = evaluate_table(list(split.test), refined, cfg)
+    names = [s.name for s in split.test]
+    table = format_table(res, names, cfg)
+    print(table)
+    out = {
+        "test_sequences": names,
+        "checkpoint": "best.pt",
+        "best_epoch": best_epoch,
+        "selected_on": cfg.optim.select,
+        "best_metric": best,
+        "horizons_samples": list(cfg.data.eval_horizons),
+        "eval_stride": cfg.data.eval_stride,
+        "windows_from_s": cfg.data.startup_bias_s,
+        "startup_bias_s": cfg.data.startup_bias_s,
+        "units": {"rot_deg": "deg", "rot_rad": "rad", "trans_m": "m"},
+        "table": res["rows"],
+        "per_recording": res["per_recording"],
+        "startup_bias": res["startup_bias"],
+        "text": table,
+    }
+    atomic_write_text(run_dir / "results.json", json.dumps(out, indent=2))
+    return out
+
+
+# ---------------------------------------------------------------------------------------------
+# command line
+
+
+def _parser() -> argparse.ArgumentParser:
+    p = argparse.ArgumentParser(prog=f"python -m {PROG}", allow_abbrev=False,
+                                description="Train the IMU refiner. Any config field can be overridden with --key.sub VALUE.",
+                                epilog="e.g. --optim.lr 3e-4 --optim.epochs 50 --data.window 100 --model.hidden 32")
+    p.add_argument("--config", type=Path, help="TOML run config (default: built-in defaults = configs/default.toml)")
+    p.add_argument("--resume", type=Path, metavar="RUN_DIR", help="continue the run in RUN_DIR from its last.pt")
+    p.add_argument("--run-dir", type=Path, help="run folder (default <runs_dir>/<name or timestamp>)")
+    p.add_argument("--no-progress", action="store_true", help="no progress bar")
+    p.add_argument("--print-config", action="store_true", help="print the resolved config as TOML and exit")
+    return p
+
+
+def _segments(record: Dict[str, Any]) -> Dict[str, Any]:
+    """What a split holds (segment names, sizes, stamps), not where it was read from."""
+    return {k: [[(g["name"], g["samples"], g["t0_ns"], g["t1_ns"]) for g in e["segments"]] for e in record.get(k, [])]
+            for k in ("train", "val", "test")}
+
+
+def main(argv: Optional[Seq[str]] = None, on_step: Optional[StepHook] = None) -> int:
+    argv = list(sys.argv[1:] if argv is None else argv)
+    args, rest = _parser().parse_known_args(argv)
+    run_dir: Optional[Path] = None
+    try:
+        overrides = parse_overrides(rest)
+        state = None
+        if args.resume is not None:
+            if args.config is not None:
+                raise ConfigError("--config: not with --resume (the run's config is in its checkpoint)")
+            bad = [k for k in overrides if k not in RESUME_OVERRIDABLE]
+            if bad:
+                raise ConfigError(f"--{bad[0]}: cannot be changed when resuming (only {', '.join(RESUME_OVERRIDABLE)})")
+            run_dir = args.resume
+            if not run_dir.is_dir():
+                raise FileNotFoundError(2, "No such run folder", str(run_dir))
+            state = load_checkpoint(run_dir / "last.pt")  # before anything is written
+            cfg = build_config(state["config"], overrides)
+            if cfg.optim.epochs * cfg.optim.steps_per_epoch < int(state["step"]):
+                raise ConfigError(f"--optim.epochs: {cfg.optim.epochs} is fewer than the {state['epoch']} epochs already run")
+        else:
+            cfg = build_config(read_toml(args.config) if args.config else {}, overrides)
+        if args.print_config:
+            print(to_toml(cfg), end="")
+            return 0
+        split = make_split(cfg.data)
+        dist = Dist()
+        if state is not None:
+            saved = json.loads((run_dir / "split.json").read_text()) if (run_dir / "split.json").exists() else None
+            if saved is not None and _segments(saved) != _segments(json.loads(json.dumps(split.record))):
+                raise ConfigError(f"{run_dir}/split.json: the data differ from what the run started with")
+            if dist.main:
+                write_csv(run_dir / "metrics.csv", list((state.get("extra") or {}).get("history", [])))
+            print(f"{PROG}: resuming {run_dir} at epoch {state['epoch']}, step {state['step']}", file=sys.stderr)
+        else:
+            if args.run_dir is not None:
+                run_dir = args.run_dir
+            else:
+                name = cfg.name or datetime.now().strftime("%Y%m%d-%H%M%S")
+                run_dir = Path(cfg.runs_dir) / name
+            if (run_dir / "last.pt").exists():
+                raise ConfigError(f"{run_dir}: already holds a run; continue it with --resume {run_dir} or pick another --name")
+            if dist.main:
+                run_dir.mkdir(parents=True, exist_ok=True)
+                atomic_write_text(run_dir / "config.toml", to_toml(cfg))
+                write_split(split, run_dir / "split.json")
+                print(f"{PROG}: run folder {run_dir}", file=sys.stderr)
+        train(cfg, run_dir, state, split, on_step=on_step, progress=not args.no_progress)
+        return 0
+    except KeyboardInterrupt:
+        where = f"; saved {run_dir / 'last.pt'}, continue with: python -m {PROG} --resume {run_dir}" \
+            if run_dir is not None and (run_dir / "last.pt").exists() else ""
+        print(f"{PROG}: interrupted{where}", file=sys.stderr)
+        return EXIT_INTERRUPTED
+    except (ImuError, OSError) as e:  # OSError: a full disk or read-only run folder, named in e
+        print(f"{PROG}: error: {one_line(e)}", file=sys.stderr)
+        return EXIT_ERROR
+
+
+if __name__ == "__main__":
+    sys.exit(main())

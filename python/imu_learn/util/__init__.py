@@ -1,0 +1,1 @@
+"""Small helpers every stage shares: atomic writes, file digests, the machine's name."""
