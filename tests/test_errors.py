@@ -98,3 +98,23 @@ def test_shape_errors_are_invalid_input():
         core.preintegrate(np.zeros(3, dtype=np.int64), np.zeros((3, 4)), np.zeros((3, 3)))
     with pytest.raises(il.InvalidInputError):
         core.preintegrate(np.arange(3, dtype=np.int64), np.zeros((3, 3)), np.zeros((2, 3)))
+
+
+@pytest.mark.parametrize("body,cls,where", [
+    ("", "TooFewRowsError", (1, None, None)),
+    (rows([1]) + "2,0.1,0.2,0.3,9.0,0.1\n", "ColumnCountError", (3, None, None)),
+    (rows([1]) + "2,0.1,abc,0.3,9.0,0.1,0.2\n", "NotNumericError", (3, 3, "w_RS_S_y [rad s^-1]")),
+    (rows([1]) + "2,0.1,0.2,0.3,nan,0.1,0.2\n", "NonFiniteError", (3, 5, "a_RS_S_x [m s^-2]")),
+    (rows([5, 5]), "TimestampError", (3, 1, "timestamp [ns]")),
+])
+def test_core_raises_the_classes_of_errors_py_directly(tmp_path, body, cls, where):
+    """The Rust core raises the classes defined in imu_learn.errors (pyo3 import_exception!), with
+    path/line/column/field set, through the public reader and through _imu_core alike."""
+    import imu_learn.errors as errors
+
+    p = write(tmp_path, body)
+    for read in (lambda: il.read_imu(p), lambda: core.read_asl_imu(str(p))):
+        with pytest.raises(errors.ParseError) as e:
+            read()
+        assert type(e.value) is getattr(errors, cls)
+        assert (e.value.path, (e.value.line, e.value.column, e.value.field)) == (str(p), where)

@@ -2,9 +2,13 @@
 
 Arrays: ``t_ns`` int64 (N,); vectors float64 (N, 3); quaternions float64 (N, 4) in w,x,y,z order.
 Inputs must be C-contiguous; outputs are fresh arrays that own Rust's buffers (no copy).
-Errors: subclasses of imu_learn.errors.ImuError; a missing file raises FileNotFoundError. Readers of
-IMU and ground-truth files raise TooFewRowsError for a file with fewer than 2 rows (empty, header
-only, one sample or pose).
+Errors: the classes of imu_learn.errors, raised directly by the core (pyo3 import_exception!), one
+per core error kind; a missing file raises FileNotFoundError. Readers of IMU and ground-truth files
+raise TooFewRowsError for a file with fewer than 2 rows (empty, header only, one sample or pose).
+Inconsistent arguments raise InvalidInputError naming the argument (``horizons[1] = ...``), checked
+before anything is allocated; memory that runs out for a huge batch is a MemoryError, never an abort.
+Index arguments (_Idx) take a 1-d uint64 or int64 array or a list of ints; a negative entry is an
+InvalidInputError (never wrapped to 2^64 - 1).
 """
 from os import PathLike
 from typing import Dict, List, Optional, Sequence, Tuple, Union
@@ -16,7 +20,7 @@ __version__: str
 
 _Path = Union[str, PathLike]
 _I64 = npt.NDArray[np.int64]
-_U64 = npt.NDArray[np.uint64]
+_Idx = Union[npt.NDArray[np.uint64], npt.NDArray[np.int64], Sequence[int]]
 _F64 = npt.NDArray[np.float64]
 
 def read_asl_imu(path: _Path, allow_float_timestamps: bool = False) -> Tuple[_I64, _F64, _F64]:
@@ -69,15 +73,17 @@ def window_labels(
 ) -> Dict[str, np.ndarray]:
     """Ground-truth labels -> {starts (W,), horizons (H,), dq_wxyz (W,H,4), dv, dp (W,H,3), dt (W,H)}."""
 
-def integrate_windows(t_ns: _I64, gyro: _F64, acc: _F64, starts: _U64, horizons: _U64) -> Dict[str, np.ndarray]:
-    """IMU-side increments in the layout of window_labels."""
+def integrate_windows(t_ns: _I64, gyro: _F64, acc: _F64, starts: _Idx, horizons: _Idx) -> Dict[str, np.ndarray]:
+    """IMU-side increments in the layout of window_labels. Horizons in 1..N-1, every start + the
+    longest horizon below N (InvalidInputError otherwise, even with no starts); no starts give
+    empty (0, H, ...) arrays."""
 
-def increment_covariance(t_ns: _I64, gyro: _F64, acc: _F64, var: _F64, horizons: _U64) -> _F64:
+def increment_covariance(t_ns: _I64, gyro: _F64, acc: _F64, var: _F64, horizons: _Idx) -> _F64:
     """(H, 9, 9) covariance of (dtheta, dbeta, dgamma) after each horizon's number of intervals from
     sample 0 (the rows of preintegrate; horizon 0 is zero). var (N, 6): per-sample discrete-time
     variances, gyro then acc. See imu_learn.core.covariance."""
 
-def interval_covariances(t_ns: _I64, gyro: _F64, acc: _F64, var: _F64, boundaries: _U64) -> _F64:
+def interval_covariances(t_ns: _I64, gyro: _F64, acc: _F64, var: _F64, boundaries: _Idx) -> _F64:
     """(M - 1, 9, 9) covariance of each interval [t_b[i], t_b[i+1]] integrated from its own start, for
     strictly increasing sample indices boundaries (M,). See imu_learn.core.covariance."""
 
@@ -92,6 +98,7 @@ class SequenceSet:
         acc_bias_max: float = 0.0, gyro_bias_walk: float = 0.0, acc_bias_walk: float = 0.0,
     ) -> Dict[str, np.ndarray]:
         """Augmented batch: imu (B,W,6), dt (B,W), dq_wxyz (B,H,4), dv/dp (B,H,3), label_dt (B,H),
-        bias (B,W,6), seq_index (B,), start (B,), horizons (H,)."""
+        bias (B,W,6), seq_index (B,), start (B,), horizons (H,). A batch_size x window no allocation
+        can hold is an InvalidInputError naming batch_size; memory that runs out, a MemoryError."""
     def eval_windows(self, window: int, stride: int, fractions: Sequence[float], gravity: float) -> Dict[str, np.ndarray]:
         """Every window at a fixed stride, no augmentation; layout of make_batch."""

@@ -123,7 +123,7 @@ pub fn derive_velocity(t_ns: &[i64], p: &[Vec3], half_window: usize) -> Vec<Vec3
     (0..n)
         .map(|i| {
             let mut lo = i.saturating_sub(h);
-            let mut hi = (i + h).min(n - 1);
+            let mut hi = i.saturating_add(h).min(n - 1);
             // A clipped end window of two points would fall back to a line, which is biased by
             // acceleration; stretch it inwards to three so the ends stay exact for quadratics.
             if hi - lo < 2 && n >= 3 {

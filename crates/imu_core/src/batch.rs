@@ -119,7 +119,7 @@ impl Batch {
 /// shorter than a window are skipped; it is an error only if all are.
 pub fn make_batch(seqs: &[Sequence], cfg: &BatchConfig, seed: u64) -> Result<Batch> {
     let plan = BatchPlan::new(seqs, cfg)?;
-    let mut out = Batch::alloc(cfg.batch_size, cfg.window, plan.horizons.clone());
+    let mut out = Batch::alloc(cfg.batch_size, cfg.window, plan.horizons.clone(), "batch_size")?;
     plan.fill(seqs, cfg, seed, out.as_mut())?;
     Ok(out)
 }
@@ -154,6 +154,9 @@ impl BatchPlan {
         if cum.last().copied().unwrap_or(0) == 0 {
             return Err(too_short(seqs, w));
         }
+        // The outputs are sized by batch_size × window: refuse sizes no allocation can hold here,
+        // before the caller allocates them.
+        batch_bytes(cfg.batch_size, w, horizons.len(), "batch_size")?;
         Ok(BatchPlan { horizons, cum })
     }
 
@@ -193,27 +196,68 @@ pub fn eval_windows(seqs: &[Sequence], window: usize, stride: usize, fractions: 
     if picks.is_empty() {
         return Err(too_short(seqs, window));
     }
-    let mut out = Batch::alloc(picks.len(), window, hs);
+    let mut out = Batch::alloc(picks.len(), window, hs, "eval_windows")?;
     let hs = out.horizons.clone();
     fill_all(out.as_mut(), window, &hs, |b, _| picks[b], seqs, gravity, None);
     Ok(out)
 }
 
+/// Bytes the outputs of `b` windows of `w` samples at `h` horizons take (imu and bias B×W×6, dt
+/// B×W, labels B×H×11, seq_index and start B), or an error naming `what` (the argument that set
+/// `b`) when that is more than one allocation can hold. Checked before anything is allocated.
+pub fn batch_bytes(b: usize, w: usize, h: usize, what: &str) -> Result<usize> {
+    // b, w, h < 2^64, so b·w and b·h fit in u128; the sums and scalings are checked.
+    let (b, w, h) = (b as u128, w as u128, h as u128);
+    let bytes = (b * w)
+        .checked_mul(13 * 8)
+        .zip((b * h).checked_mul(11 * 8))
+        .and_then(|(x, y)| x.checked_add(y))
+        .and_then(|x| x.checked_add(b * 12));
+    bytes
+        .and_then(|n| usize::try_from(n).ok())
+        .filter(|&n| n <= isize::MAX as usize)
+        .ok_or_else(|| {
+            let need = bytes.map_or("more than 2^128".to_string(), |n| n.to_string());
+            ImuError::invalid(format!(
+                "{what}: {b} windows of {w} samples at {h} horizons need {need} bytes, more than one \
+                 allocation can hold"
+            ))
+        })
+}
+
+/// A zero-filled Vec of `n` entries, or an error instead of aborting when memory runs out.
+fn zeroed<T: Clone + Default>(n: usize, what: &str) -> Result<Vec<T>> {
+    let mut v = Vec::new();
+    v.try_reserve_exact(n).map_err(|e| {
+        ImuError::invalid(format!(
+            "{what}: {n} entries of {} bytes cannot be allocated ({e})",
+            std::mem::size_of::<T>()
+        ))
+    })?;
+    v.resize(n, T::default());
+    Ok(v)
+}
+
 impl Batch {
-    fn alloc(b: usize, w: usize, horizons: Vec<usize>) -> Batch {
+    /// Zeroed outputs, checked (`batch_bytes`) and allocated fallibly: a huge `batch_size` is an
+    /// error, never an abort.
+    fn alloc(b: usize, w: usize, horizons: Vec<usize>, what: &str) -> Result<Batch> {
         let h = horizons.len();
-        Batch {
-            imu: vec![0.0; b * w * 6],
-            dt: vec![0.0; b * w],
-            dq_wxyz: vec![[0.0; 4]; b * h],
-            dv: vec![[0.0; 3]; b * h],
-            dp: vec![[0.0; 3]; b * h],
-            label_dt: vec![0.0; b * h],
-            bias: vec![0.0; b * w * 6],
-            seq_index: vec![0; b],
-            start: vec![0; b],
+        batch_bytes(b, w, h, what)?;
+        // Cannot overflow: batch_bytes bounded the largest product.
+        let (bw6, bw, bh) = (b * w * 6, b * w, b * h);
+        Ok(Batch {
+            imu: zeroed(bw6, what)?,
+            dt: zeroed(bw, what)?,
+            dq_wxyz: zeroed(bh, what)?,
+            dv: zeroed(bh, what)?,
+            dp: zeroed(bh, what)?,
+            label_dt: zeroed(bh, what)?,
+            bias: zeroed(bw6, what)?,
+            seq_index: zeroed(b, what)?,
+            start: zeroed(b, what)?,
             horizons,
-        }
+        })
     }
 
     /// Mutable views of every per-window buffer.
@@ -314,7 +358,7 @@ fn too_short(seqs: &[Sequence], window: usize) -> ImuError {
     let longest = seqs.iter().map(Sequence::len).max().unwrap_or(0);
     ImuError::invalid(format!(
         "a window of {window} samples needs {} states, but the longest of {} sequence(s) has {longest}",
-        window + 1,
+        window as u128 + 1,
         seqs.len()
     ))
 }

@@ -21,9 +21,8 @@ use nalgebra::{Matrix3, SMatrix, Vector3};
 
 use crate::error::{ImuError, Result};
 use crate::integrate::{check_imu, integrate_from};
-use crate::labels::{seconds_between, Increment};
 use crate::so3::v3;
-use crate::types::{QuatWxyz, Vec3};
+use crate::types::{seconds_between, Increment, QuatWxyz, Vec3};
 
 /// Per-sample discrete-time variances: gyro x, y, z [(rad/s)²], then acc x, y, z [(m/s²)²].
 pub type Var6 = [f64; 6];

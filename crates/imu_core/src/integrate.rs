@@ -19,9 +19,9 @@
 use rayon::prelude::*;
 
 use crate::error::{ImuError, Result};
-use crate::labels::{seconds_between, Increment, Labels};
+use crate::labels::check_windows;
 use crate::so3;
-use crate::types::{QuatWxyz, Vec3};
+use crate::types::{seconds_between, Increment, Labels, QuatWxyz, Vec3};
 
 /// Cumulative increments, one row per stamp: row j covers [t_0, t_j]; row 0 is the identity.
 #[derive(Clone, Debug, Default, PartialEq)]
@@ -639,6 +639,9 @@ pub fn preintegrate_dt(dt: &[f64], gyro: &[Vec3], acc: &[Vec3]) -> Result<Preint
 /// ones (entry `w * horizons.len() + h` is window `w`, horizon `h`), so the two compare entry by
 /// entry. Window start k at horizon n integrates samples k..k+n-1 over [t_k, t_{k+n}], and equals
 /// row n of `preintegrate` on the stamps k..=k+n bit for bit. Windows run in parallel.
+///
+/// The arguments are checked before anything is allocated (`labels::check_windows`): horizons in
+/// 1..=len−1, starts leaving room for the longest one. No starts give no windows (an empty result).
 pub fn integrate_windows(
     t_ns: &[i64],
     gyro: &[Vec3],
@@ -647,15 +650,14 @@ pub fn integrate_windows(
     horizons: &[usize],
 ) -> Result<Labels> {
     check_imu(t_ns, gyro, acc)?;
-    let max_h = horizons.iter().copied().max().unwrap_or(0);
-    if let Some(&bad) = starts
-        .iter()
-        .find(|&&k| k.checked_add(max_h).is_none_or(|e| e >= t_ns.len()))
-    {
-        return Err(ImuError::invalid(format!(
-            "window start {bad} + horizon {max_h} is past the sequence end ({} samples)",
-            t_ns.len()
-        )));
+    // Every argument is checked before anything is sized by it: `wanted` below has max_h + 1
+    // entries, so an unchecked horizon of 2^40 (or a negative one cast to u64) would abort.
+    let max_h = check_windows(t_ns.len(), starts, horizons)?;
+    if starts.is_empty() {
+        return Ok(Labels {
+            horizons: horizons.to_vec(),
+            ..Labels::default()
+        });
     }
     // Horizon index for each row 0..=max_h that is asked for (several horizons may share a row).
     let mut wanted: Vec<Vec<usize>> = vec![Vec::new(); max_h + 1];
@@ -722,8 +724,12 @@ mod tests {
         let p = preintegrate_dt(&[], &[], &[]).unwrap();
         assert_eq!(p.len(), 1);
         assert_eq!(p.row(0).unwrap().dq_wxyz, [1.0, 0.0, 0.0, 0.0]);
-        let l = integrate_windows(&[], &[], &[], &[], &[1, 2]).unwrap();
+        let l = integrate_windows(&[], &[], &[], &[], &[]).unwrap();
         assert!(l.dq_wxyz.is_empty());
+        let t = [0, 1, 2, 3];
+        let l = integrate_windows(&t, &[[0.0; 3]; 4], &[[0.0; 3]; 4], &[], &[1, 3]).unwrap();
+        assert!(l.dq_wxyz.is_empty() && l.starts.is_empty());
+        assert_eq!(l.horizons, vec![1, 3]);
     }
 
     #[test]
@@ -816,6 +822,44 @@ mod tests {
     }
 
     #[test]
+    fn window_arguments_are_checked_before_anything_is_allocated() {
+        // Without starts nothing is integrated, but the horizons are still checked: a horizon of
+        // 2^40 (or usize::MAX, a negative one cast) used to size a Vec of max_h + 1 entries first.
+        let z = [0.0; 3];
+        let t = [0, 1, 2, 3];
+        for huge in [1usize << 40, usize::MAX, usize::MAX - 1] {
+            is_invalid(
+                integrate_windows(&t, &[z; 4], &[z; 4], &[], &[2, huge]),
+                &format!("horizons[1] = {huge} is past the sequence end"),
+            );
+            is_invalid(
+                integrate_windows(&t, &[z; 4], &[z; 4], &[0], &[huge]),
+                "allows horizons 1..=3",
+            );
+        }
+        is_invalid(
+            integrate_windows(&t, &[z; 4], &[z; 4], &[], &[0]),
+            "horizons[0] = 0: a horizon must be at least 1 sample",
+        );
+        is_invalid(integrate_windows(&t, &[z; 4], &[z; 4], &[0], &[4]), "horizons[0] = 4");
+        is_invalid(integrate_windows(&[], &[], &[], &[], &[1]), "no horizon fits");
+        is_invalid(integrate_windows(&[7], &[z], &[z], &[], &[1]), "no horizon fits");
+        is_invalid(
+            integrate_windows(&t, &[z; 4], &[z; 4], &[0, 1, 2], &[2]),
+            "starts[2]: window start 2 + horizon 2",
+        );
+        // Lengths are checked first of all.
+        is_invalid(integrate_windows(&t, &[z; 3], &[z; 4], &[], &[1 << 40]), "gyro has 3");
+        assert_eq!(
+            integrate_windows(&t, &[z; 4], &[z; 4], &[0, 1], &[2, 1])
+                .unwrap()
+                .dt
+                .len(),
+            4
+        );
+    }
+
+    #[test]
     fn extreme_stamps_do_not_overflow() {
         let z = [0.0; 3];
         let t = [i64::MIN, 0, i64::MAX];
@@ -844,7 +888,7 @@ mod tests {
         let t: Vec<i64> = (0..12).map(|i| i * 5_000_000 + (i * i) % 7 * 100_000).collect();
         let gyro: Vec<Vec3> = (0..12).map(|i| [0.1 * i as f64, -0.2, 0.05]).collect();
         let acc: Vec<Vec3> = (0..12).map(|i| [1.0, 0.1 * i as f64, 9.8]).collect();
-        let hs = [4, 0, 2, 4];
+        let hs = [4, 1, 2, 4];
         let l = integrate_windows(&t, &gyro, &acc, &[3, 0], &hs).unwrap();
         for (w, &k) in [3usize, 0].iter().enumerate() {
             let p = preintegrate(&t[k..], &gyro[k..], &acc[k..]).unwrap();

@@ -16,18 +16,12 @@ use rayon::prelude::*;
 
 use crate::error::{ImuError, Result};
 use crate::types::{gravity_vector, QuatWxyz, Sequence, Vec3};
+// Defined with the other plain data in `types`; re-exported where they were first declared.
+pub(crate) use crate::types::seconds_between;
+pub use crate::types::{Increment, Labels};
 
 /// The paper's five horizons: 20/40/60/80/100 % of the window.
 pub const PAPER_FRACTIONS: [f64; 5] = [0.2, 0.4, 0.6, 0.8, 1.0];
-
-/// One increment between state k and state k + n.
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub struct Increment {
-    pub dq_wxyz: QuatWxyz,
-    pub dv: Vec3,
-    pub dp: Vec3,
-    pub dt: f64,
-}
 
 /// Ground truth borrowed as slices: all that labels need (no IMU samples). Every slice must
 /// have the length of `t_ns` (`GroundTruthView::check`).
@@ -108,17 +102,6 @@ pub(crate) fn increment_unchecked(seq: &Sequence, k: usize, j: usize, gravity: f
     Frame::at(&gt, k, gravity).to(&gt, j)
 }
 
-/// Seconds between two nanosecond stamps. Stamps from arbitrary epochs can be far enough apart
-/// to overflow i64; only then is the (slow, software) i128 conversion needed, and it gives the
-/// same f64 as the i64 one whenever both exist.
-#[inline]
-pub(crate) fn seconds_between(t0: i64, t1: i64) -> f64 {
-    match t1.checked_sub(t0) {
-        Some(d) => d as f64 * 1e-9,
-        None => (t1 as i128 - t0 as i128) as f64 * 1e-9,
-    }
-}
-
 /// Unit quaternion w,x,y,z from a stored one (files carry 6–9 digits, so norms are off by ~1e-6).
 #[inline]
 fn normalized(q: QuatWxyz) -> QuatWxyz {
@@ -195,17 +178,6 @@ impl Frame {
     }
 }
 
-/// Labels of many windows, row-major: entry `w * horizons.len() + h` is window `w`, horizon `h`.
-#[derive(Clone, Debug, Default, PartialEq)]
-pub struct Labels {
-    pub starts: Vec<usize>,
-    pub horizons: Vec<usize>,
-    pub dq_wxyz: Vec<QuatWxyz>,
-    pub dv: Vec<Vec3>,
-    pub dp: Vec<Vec3>,
-    pub dt: Vec<f64>,
-}
-
 /// Output buffers for `labels_into`, each `starts.len() * horizons.len()` entries, row-major.
 pub struct LabelsMut<'a> {
     pub dq_wxyz: &'a mut [QuatWxyz],
@@ -230,9 +202,45 @@ pub fn window_starts(len: usize, window: usize, stride: usize) -> Result<Vec<usi
     Ok((0..=len - window - 1).step_by(stride).collect())
 }
 
+/// The windows `labels_at` and `integrate::integrate_windows` are asked for, checked before
+/// anything is sized by them: every horizon is at least 1 and fits in a sequence of `len` states
+/// (horizon n needs states k..=k+n, so n ≤ len − 1), and every start leaves room for the longest
+/// horizon. Returns the longest horizon (0 for none). Errors name the argument and its index.
+pub fn check_windows(len: usize, starts: &[usize], horizons: &[usize]) -> Result<usize> {
+    for (i, &n) in horizons.iter().enumerate() {
+        if n == 0 {
+            return Err(ImuError::invalid(format!(
+                "horizons[{i}] = 0: a horizon must be at least 1 sample"
+            )));
+        }
+        if n >= len {
+            let allowed = match len {
+                0 | 1 => format!("a sequence of {len} samples holds no interval, so no horizon fits"),
+                _ => format!("a sequence of {len} samples allows horizons 1..={}", len - 1),
+            };
+            return Err(ImuError::invalid(format!(
+                "horizons[{i}] = {n} is past the sequence end: {allowed}"
+            )));
+        }
+    }
+    let max_h = horizons.iter().copied().max().unwrap_or(0);
+    if let Some((i, &bad)) = starts
+        .iter()
+        .enumerate()
+        .find(|&(_, &k)| k.checked_add(max_h).is_none_or(|e| e >= len))
+    {
+        return Err(ImuError::invalid(format!(
+            "starts[{i}]: window start {bad} + horizon {max_h} is past the sequence end ({len} samples)"
+        )));
+    }
+    Ok(max_h)
+}
+
 /// Labels at the given horizons for the given window starts, computed in parallel.
 pub fn labels_at(seq: &Sequence, starts: &[usize], horizons: &[usize], gravity: f64) -> Result<Labels> {
     check_sequence(seq)?;
+    // Checked before the buffers are sized by the caller's arguments.
+    check_windows(seq.len(), starts, horizons)?;
     let total = starts.len() * horizons.len();
     let mut out = Labels {
         starts: starts.to_vec(),
@@ -267,16 +275,7 @@ pub fn labels_into(
     out: LabelsMut<'_>,
 ) -> Result<()> {
     gt.check()?;
-    let max_h = horizons.iter().copied().max().unwrap_or(0);
-    if let Some(&bad) = starts
-        .iter()
-        .find(|&&k| k.checked_add(max_h).is_none_or(|e| e >= gt.len()))
-    {
-        return Err(ImuError::invalid(format!(
-            "window start {bad} + horizon {max_h} is past the sequence end ({} samples)",
-            gt.len()
-        )));
-    }
+    check_windows(gt.len(), starts, horizons)?;
     let nh = horizons.len();
     let total = starts.len() * nh;
     let lens = [out.dq_wxyz.len(), out.dv.len(), out.dp.len(), out.dt.len()];
@@ -313,6 +312,15 @@ pub fn labels_into(
 pub fn window_labels(seq: &Sequence, window: usize, stride: usize, fractions: &[f64], gravity: f64) -> Result<Labels> {
     let hs = horizons(window, fractions)?;
     let starts = window_starts(seq.len(), window, stride)?;
+    if starts.is_empty() {
+        // A sequence shorter than one window has no windows (not an error): `labels_at` would
+        // reject its horizons, which do not fit, though no window asks for them.
+        check_sequence(seq)?;
+        return Ok(Labels {
+            horizons: hs,
+            ..Labels::default()
+        });
+    }
     labels_at(seq, &starts, &hs, gravity)
 }
 

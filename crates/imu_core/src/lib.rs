@@ -20,4 +20,4 @@ pub mod types;
 mod python;
 
 pub use error::{ImuError, Result};
-pub use types::{GroundTruth, ImuSamples, QuatWxyz, Sequence, Vec3, GRAVITY};
+pub use types::{GroundTruth, ImuSamples, Increment, Labels, QuatWxyz, Sequence, Vec3, GRAVITY};

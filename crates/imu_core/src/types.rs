@@ -1,5 +1,6 @@
-//! Plain data carried between the stages. Rows are `[f64; 3]` / `[f64; 4]` so that a `Vec` of
-//! them is one contiguous N×3 (N×4) block that crosses to numpy without a copy.
+//! Plain data carried between the stages (samples, ground truth, sequences, increments, labels)
+//! and the one stamp difference → seconds conversion they share. Rows are `[f64; 3]` / `[f64; 4]`
+//! so that a `Vec` of them is one contiguous N×3 (N×4) block that crosses to numpy without a copy.
 //!
 //! Quaternions are Hamilton, body(IMU) → world, stored w,x,y,z (`q_wxyz`) everywhere in the core.
 //! Files that store x,y,z,w (TUM) are converted at the reader/writer through `so3::xyzw_to_wxyz`.
@@ -62,6 +63,37 @@ impl Sequence {
     }
     pub fn is_empty(&self) -> bool {
         self.t_ns.is_empty()
+    }
+}
+
+/// One increment between state k and state k + n.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Increment {
+    pub dq_wxyz: QuatWxyz,
+    pub dv: Vec3,
+    pub dp: Vec3,
+    pub dt: f64,
+}
+
+/// Labels of many windows, row-major: entry `w * horizons.len() + h` is window `w`, horizon `h`.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct Labels {
+    pub starts: Vec<usize>,
+    pub horizons: Vec<usize>,
+    pub dq_wxyz: Vec<QuatWxyz>,
+    pub dv: Vec<Vec3>,
+    pub dp: Vec<Vec3>,
+    pub dt: Vec<f64>,
+}
+
+/// Seconds between two nanosecond stamps. Stamps from arbitrary epochs can be far enough apart
+/// to overflow i64; only then is the (slow, software) i128 conversion needed, and it gives the
+/// same f64 as the i64 one whenever both exist.
+#[inline]
+pub(crate) fn seconds_between(t0: i64, t1: i64) -> f64 {
+    match t1.checked_sub(t0) {
+        Some(d) => d as f64 * 1e-9,
+        None => (t1 as i128 - t0 as i128) as f64 * 1e-9,
     }
 }
 

@@ -365,3 +365,42 @@ fn bad_requests_are_invalid_input() {
     invalid(eval_windows(&seqs, 40, 0, &PAPER_FRACTIONS, GRAVITY));
     invalid(eval_windows(&[], 40, 1, &PAPER_FRACTIONS, GRAVITY));
 }
+
+#[test]
+fn a_batch_too_large_to_allocate_is_an_error_not_an_abort() {
+    let s = seqs();
+    for batch_size in [1usize << 40, 1 << 62, usize::MAX] {
+        let c = BatchConfig {
+            batch_size,
+            ..cfg(AugmentConfig::default())
+        };
+        match make_batch(&s, &c, 0) {
+            Err(ImuError::InvalidInput(msg)) => {
+                // Past isize::MAX bytes it is refused outright; below, the allocation is tried and
+                // fails as an error (never an abort).
+                assert!(msg.starts_with("batch_size:"), "{msg}");
+                assert!(
+                    msg.contains("more than one allocation") || msg.contains("cannot be allocated"),
+                    "{msg}"
+                );
+            }
+            other => panic!("batch_size {batch_size}: expected InvalidInput, got {other:?}"),
+        }
+    }
+    assert_eq!(
+        imu_core::batch::batch_bytes(2, 3, 4, "x").unwrap(),
+        2 * 3 * 13 * 8 + 2 * 4 * 11 * 8 + 2 * 12
+    );
+    // A huge window is "too short", and its message does not overflow computing window + 1.
+    for window in [1usize << 40, usize::MAX] {
+        let c = BatchConfig {
+            window,
+            ..cfg(AugmentConfig::default())
+        };
+        match make_batch(&s, &c, 0) {
+            Err(ImuError::InvalidInput(msg)) => assert!(msg.contains("needs"), "{msg}"),
+            other => panic!("window {window}: expected InvalidInput, got {other:?}"),
+        }
+        assert!(eval_windows(&s, window, 1, &PAPER_FRACTIONS, GRAVITY).is_err());
+    }
+}

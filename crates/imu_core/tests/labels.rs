@@ -2,7 +2,9 @@ mod common;
 
 use common::{jittered_stamps, rot_err, synthetic_sequence, vec_err};
 use imu_core::integrate::integrate_windows;
-use imu_core::labels::{check_sequence, horizons, increment, labels_at, window_labels, window_starts, PAPER_FRACTIONS};
+use imu_core::labels::{
+    check_sequence, check_windows, horizons, increment, labels_at, window_labels, window_starts, PAPER_FRACTIONS,
+};
 use imu_core::so3::{self, arr3, quat_to_wxyz, v3};
 use imu_core::types::{Sequence, GRAVITY};
 use imu_core::ImuError;
@@ -175,4 +177,36 @@ fn labels_are_independent_of_the_world_origin_and_heading() {
         assert!(vec_err(a.dv[i], b.dv[i]) < 1e-12);
         assert!(vec_err(a.dp[i], b.dp[i]) < 1e-12);
     }
+}
+
+#[test]
+fn window_arguments_are_checked_before_any_buffer_is_sized() {
+    let seq = small_seq(20);
+    // No starts still checks the horizons: a huge one used to size buffers before any check.
+    invalid(
+        labels_at(&seq, &[], &[1 << 40], GRAVITY),
+        "horizons[0] = 1099511627776 is past the sequence end",
+    );
+    invalid(labels_at(&seq, &[], &[2, usize::MAX], GRAVITY), "horizons[1]");
+    invalid(
+        labels_at(&seq, &[0], &[0], GRAVITY),
+        "horizons[0] = 0: a horizon must be at least 1 sample",
+    );
+    invalid(labels_at(&seq, &[0], &[20], GRAVITY), "allows horizons 1..=19");
+    invalid(
+        labels_at(&seq, &[0, 3, 15], &[5], GRAVITY),
+        "starts[2]: window start 15 + horizon 5",
+    );
+    assert_eq!(check_windows(20, &[0, 14], &[5, 2]).unwrap(), 5);
+    assert_eq!(check_windows(0, &[], &[]).unwrap(), 0);
+    invalid(check_windows(1, &[], &[1]), "no horizon fits");
+    // The same checks, in the same words, for the IMU side.
+    invalid(
+        integrate_windows(&seq.t_ns, &seq.gyro, &seq.acc, &[], &[1 << 40]),
+        "horizons[0] = 1099511627776 is past the sequence end",
+    );
+    // window_labels on a sequence shorter than its window: no windows, not an error.
+    let short = window_labels(&seq, 1 << 40, 1, &PAPER_FRACTIONS, GRAVITY).unwrap();
+    assert!(short.starts.is_empty() && short.dt.is_empty());
+    assert_eq!(short.horizons.len(), PAPER_FRACTIONS.len());
 }

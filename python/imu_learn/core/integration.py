@@ -8,6 +8,7 @@ import numpy as np
 
 from imu_learn import _imu_core as core
 from imu_learn.data.types import Sequence
+from imu_learn.errors import InvalidInputError
 
 PAPER_FRACTIONS = (0.2, 0.4, 0.6, 0.8, 1.0)
 
@@ -55,10 +56,26 @@ def window_labels(
     return WindowLabels(**d)
 
 
+def _indices(x: np.ndarray, name: str) -> np.ndarray:
+    """Sample indices as a 1-d int64 or uint64 array, signedness kept: a negative index reaches the
+    core as itself (and is rejected there, naming ``name``) instead of wrapping to 2^64 - 1."""
+    a = np.asarray(x)
+    if a.size == 0:
+        return np.zeros(0, dtype=np.uint64)
+    if a.ndim != 1 or not np.issubdtype(a.dtype, np.integer):
+        raise InvalidInputError(f"{name} must be a 1-d sequence of integers, got {a.dtype} {a.shape}")
+    return np.ascontiguousarray(a, dtype=np.uint64 if np.issubdtype(a.dtype, np.unsignedinteger) else np.int64)
+
+
 def integrate_windows(seq: Sequence, starts: np.ndarray, horizons: np.ndarray) -> WindowLabels:
-    """IMU-side Δq/Δβ/Δγ for the given windows and horizons (same layout as :func:`window_labels`)."""
+    """IMU-side Δq/Δβ/Δγ for the given windows and horizons (same layout as :func:`window_labels`).
+
+    Horizons must lie in 1..N-1 and each start leave room for the longest (N samples in ``seq``);
+    no starts give an empty result. Anything else raises :class:`imu_learn.errors.InvalidInputError`
+    naming the argument (``starts[i]`` / ``horizons[i]``), checked before anything is allocated.
+    """
     d = core.integrate_windows(
         np.ascontiguousarray(seq.t_ns, dtype=np.int64), _f64(seq.gyro), _f64(seq.acc),
-        np.ascontiguousarray(starts, dtype=np.uint64), np.ascontiguousarray(horizons, dtype=np.uint64),
+        _indices(starts, "starts"), _indices(horizons, "horizons"),
     )
     return WindowLabels(**d)

@@ -8,6 +8,7 @@ use numpy::{
     IntoPyArray, PyArray, PyArray1, PyArray2, PyArray3, PyArrayDyn, PyReadonlyArray1, PyReadonlyArray2,
     PyReadwriteArray, PyUntypedArrayMethods,
 };
+use pyo3::exceptions::PyMemoryError;
 use pyo3::prelude::*;
 
 use crate::error::ImuError;
@@ -127,15 +128,30 @@ impl Drop for PooledBuffer {
     }
 }
 
-fn take_buffer(pool: &BufferPool, len: usize) -> Vec<f64> {
+/// A buffer of `len` floats from the pool, or a fresh zeroed one; running out of memory is a
+/// `MemoryError`, never an abort.
+fn take_buffer(pool: &BufferPool, len: usize) -> PyResult<Vec<f64>> {
     if let Ok(mut idle) = pool.lock() {
         while let Some(v) = idle.pop() {
             if v.len() == len {
-                return v;
+                return Ok(v);
             }
         }
     }
-    vec![0.0; len]
+    try_zeroed(len)
+}
+
+/// `vec![T::default(); n]`, but a `MemoryError` instead of an abort when it cannot be allocated.
+pub fn try_zeroed<T: Clone + Default>(n: usize) -> PyResult<Vec<T>> {
+    let mut v = Vec::new();
+    v.try_reserve_exact(n).map_err(|e| {
+        PyMemoryError::new_err(format!(
+            "{n} entries of {} bytes cannot be allocated ({e})",
+            std::mem::size_of::<T>()
+        ))
+    })?;
+    v.resize(n, T::default());
+    Ok(v)
 }
 
 /// Float64 arrays of the given C-order shapes, carved out of one pooled buffer. `fill` gets one
@@ -150,8 +166,16 @@ pub fn pooled_arrays<'py, F>(
 where
     F: FnOnce(Vec<&mut [f64]>) -> crate::error::Result<()> + Send,
 {
-    let sizes: Vec<usize> = shapes.iter().map(|s| s.iter().product()).collect();
-    let mut data = take_buffer(pool, sizes.iter().sum());
+    let sizes: Vec<usize> = shapes
+        .iter()
+        .map(|s| s.iter().try_fold(1usize, |a, &d| a.checked_mul(d)))
+        .collect::<Option<_>>()
+        .ok_or_else(|| shape_err(format!("output shapes {shapes:?} overflow")))?;
+    let total = sizes
+        .iter()
+        .try_fold(0usize, |a, &n| a.checked_add(n))
+        .ok_or_else(|| shape_err(format!("output shapes {shapes:?} overflow")))?;
+    let mut data = take_buffer(pool, total)?;
     {
         let mut parts = Vec::with_capacity(sizes.len());
         let mut rest: &mut [f64] = &mut data;

@@ -14,7 +14,8 @@ use crate::error::ImuError;
 use crate::integrate::{self, PreintegratedMut};
 use crate::labels::{self, GroundTruthView, Labels, LabelsMut};
 use crate::python::arrays::{
-    flat_mut, out1, out2, out2_flat, out3, out3_flat, pooled_arrays, rows, rows_mut, slice1, zeros, BufferPool,
+    flat_mut, out1, out2, out2_flat, out3, out3_flat, pooled_arrays, rows, rows_mut, slice1, try_zeroed, zeros,
+    BufferPool,
 };
 use crate::python::errors::{alignment_to_py, to_py};
 use crate::types::Vec3;
@@ -209,8 +210,12 @@ fn window_labels<'py>(
             dp: rows_mut::<3, _>(&mut dp_w)?,
             dt: flat_mut(&mut dt_w)?,
         };
-        py.allow_threads(|| labels::labels_into(gt, &starts, &hs, gravity, out))
-            .map_err(to_py)?;
+        // No windows (a sequence shorter than one): nothing to compute, and `labels_into` would
+        // reject horizons that no window asks for (see `labels::window_labels`).
+        if !starts.is_empty() {
+            py.allow_threads(|| labels::labels_into(gt, &starts, &hs, gravity, out))
+                .map_err(to_py)?;
+        }
     }
     let d = PyDict::new(py);
     d.set_item(
@@ -225,22 +230,57 @@ fn window_labels<'py>(
     Ok(d)
 }
 
+/// Sample indices from Python: a 1-d uint64 or int64 array, or a sequence of ints. Negative
+/// values and values past usize are an `InvalidInputError` naming the argument and the entry,
+/// so the core only ever sees what its own checks can judge.
+#[derive(FromPyObject)]
+enum Indices<'py> {
+    Unsigned(PyReadonlyArray1<'py, u64>),
+    Signed(PyReadonlyArray1<'py, i64>),
+    /// Python ints up to ±2^127 (so 2^64 − 1 and beyond are judged here, not by pyo3).
+    List(Vec<i128>),
+}
+
+impl Indices<'_> {
+    fn to_usize(&self, name: &str) -> PyResult<Vec<usize>> {
+        let bad = |i: usize, v: String| {
+            to_py(ImuError::invalid(format!(
+                "{name}[{i}] = {v} is not a sample index (a non-negative integer)"
+            )))
+        };
+        fn convert<T: Copy + ToString>(v: &[T], bad: impl Fn(usize, String) -> PyErr) -> PyResult<Vec<usize>>
+        where
+            usize: TryFrom<T>,
+        {
+            v.iter()
+                .enumerate()
+                .map(|(i, &x)| usize::try_from(x).map_err(|_| bad(i, x.to_string())))
+                .collect()
+        }
+        match self {
+            Indices::Unsigned(a) => convert(slice1(a, name)?, bad),
+            Indices::Signed(a) => convert(slice1(a, name)?, bad),
+            Indices::List(v) => convert(v, bad),
+        }
+    }
+}
+
 #[pyfunction]
 fn integrate_windows<'py>(
     py: Python<'py>,
     t_ns: PyReadonlyArray1<'py, i64>,
     gyro: PyReadonlyArray2<'py, f64>,
     acc: PyReadonlyArray2<'py, f64>,
-    starts: PyReadonlyArray1<'py, u64>,
-    horizons: PyReadonlyArray1<'py, u64>,
+    starts: Indices<'py>,
+    horizons: Indices<'py>,
 ) -> PyResult<Bound<'py, PyDict>> {
     let (t, g, a) = (
         slice1(&t_ns, "t_ns")?,
         rows::<3>(&gyro, "gyro")?,
         rows::<3>(&acc, "acc")?,
     );
-    let starts: Vec<usize> = slice1(&starts, "starts")?.iter().map(|&s| s as usize).collect();
-    let horizons: Vec<usize> = slice1(&horizons, "horizons")?.iter().map(|&s| s as usize).collect();
+    let starts = starts.to_usize("starts")?;
+    let horizons = horizons.to_usize("horizons")?;
     let l = py
         .allow_threads(|| integrate::integrate_windows(t, g, a, &starts, &horizons))
         .map_err(to_py)?;
@@ -270,7 +310,7 @@ fn covariances_py<'py>(
         rows::<3>(acc, "acc")?,
         rows::<6>(var, "var")?,
     );
-    let is: Vec<usize> = slice1(idx, index_name)?.iter().map(|&i| i as usize).collect();
+    let is = idx.to_usize(index_name)?;
     let covs = py.allow_threads(|| f(t, g, a, v, &is)).map_err(to_py)?;
     covariances_out(py, covs)
 }
@@ -280,7 +320,7 @@ type CovarianceInputs<'a, 'py> = (
     &'a PyReadonlyArray2<'py, f64>,
     &'a PyReadonlyArray2<'py, f64>,
     &'a PyReadonlyArray2<'py, f64>,
-    &'a PyReadonlyArray1<'py, u64>,
+    &'a Indices<'py>,
 );
 
 #[pyfunction]
@@ -290,7 +330,7 @@ fn increment_covariance<'py>(
     gyro: PyReadonlyArray2<'py, f64>,
     acc: PyReadonlyArray2<'py, f64>,
     var: PyReadonlyArray2<'py, f64>,
-    horizons: PyReadonlyArray1<'py, u64>,
+    horizons: Indices<'py>,
 ) -> PyResult<Bound<'py, PyArray3<f64>>> {
     let inputs = (&t_ns, &gyro, &acc, &var, &horizons);
     covariances_py(py, inputs, "horizons", covariance::increment_covariance)
@@ -303,7 +343,7 @@ fn interval_covariances<'py>(
     gyro: PyReadonlyArray2<'py, f64>,
     acc: PyReadonlyArray2<'py, f64>,
     var: PyReadonlyArray2<'py, f64>,
-    boundaries: PyReadonlyArray1<'py, u64>,
+    boundaries: Indices<'py>,
 ) -> PyResult<Bound<'py, PyArray3<f64>>> {
     let inputs = (&t_ns, &gyro, &acc, &var, &boundaries);
     covariances_py(py, inputs, "boundaries", covariance::interval_covariances)
@@ -407,12 +447,12 @@ impl SequenceSet {
         };
         let plan = BatchPlan::new(&self.seqs, &cfg).map_err(to_py)?;
         let (b, w, h) = (batch_size, window, plan.horizons.len());
-        let seq_index = zeros::<u32, _>(py, [b]);
-        let start = zeros::<u64, _>(py, [b]);
+        // `BatchPlan::new` bounded b × w; memory that still runs out is a MemoryError.
+        let mut seq_index = try_zeroed::<u32>(b)?;
+        let mut start = try_zeroed::<u64>(b)?;
         let (seqs, plan_ref, cfg_ref) = (&self.seqs, &plan, &cfg);
         let arrays = {
-            let (mut si_w, mut st_w) = (seq_index.readwrite(), start.readwrite());
-            let (si, st) = (flat_mut(&mut si_w)?, flat_mut(&mut st_w)?);
+            let (si, st) = (&mut seq_index[..], &mut start[..]);
             pooled_arrays(
                 py,
                 &self.pool,
@@ -460,8 +500,8 @@ impl SequenceSet {
         d.set_item("dp", dp)?;
         d.set_item("label_dt", label_dt)?;
         d.set_item("bias", bias)?;
-        d.set_item("seq_index", seq_index)?;
-        d.set_item("start", start)?;
+        d.set_item("seq_index", out1(py, seq_index))?;
+        d.set_item("start", out1(py, start))?;
         d.set_item(
             "horizons",
             out1(py, plan.horizons.iter().map(|&h| h as u64).collect::<Vec<u64>>()),

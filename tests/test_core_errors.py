@@ -1,0 +1,181 @@
+"""Arguments the Rust core is given from Python are checked before anything is sized or indexed by
+them: a huge, negative or zero horizon, starts past the end, a huge batch are typed errors naming
+the argument, never a pyo3 PanicException or an abort (issue 22.5). Each case runs in a child
+process too, so an abort (which would kill pytest itself) shows up as a failure, not a crash."""
+import subprocess
+import sys
+import textwrap
+
+import numpy as np
+import pytest
+
+import imu_learn as il
+import imu_learn.errors as errors
+from imu_learn import _imu_core as core
+from imu_learn.core import covariance as cov
+from imu_learn.core import integration
+
+N = 10
+T = np.arange(N, dtype=np.int64) * 5_000_000
+G = np.tile([0.1, -0.2, 0.3], (N, 1))
+A = np.tile([0.0, 0.0, 9.81], (N, 1))
+SEQ = il.Sequence("s", T, G, A, np.zeros((N, 3)), np.zeros((N, 3)), np.tile([1.0, 0, 0, 0], (N, 1)))
+HUGE = 2**40
+
+# (starts, horizons, words the message must hold): N = 10 samples allow horizons 1..9.
+BAD_WINDOWS = {
+    "empty starts, horizon 2^40": ([], [HUGE], [f"horizons[0] = {HUGE}", "past the sequence end", "1..=9"]),
+    "empty starts, horizon 2^64-1": (np.array([], np.uint64), np.array([2**64 - 1], np.uint64), ["horizons[0]"]),
+    "negative horizon": ([0], [-1], ["horizons[0] = -1", "non-negative"]),
+    "empty starts, negative horizon": ([], [3, -5], ["horizons[1] = -5"]),
+    "horizon 0": ([0], [0], ["horizons[0] = 0", "at least 1"]),
+    "horizon = length": ([0], [N], [f"horizons[0] = {N}", "past the sequence end"]),
+    "start past the end": ([0, N], [1], [f"starts[1]: window start {N} + horizon 1", "past the sequence end"]),
+    "start + horizon past the end": ([0, 5], [5], ["starts[1]: window start 5 + horizon 5"]),
+    "negative start": ([-1], [1], ["starts[0] = -1"]),
+    "start 2^63": (np.array([2**63], np.uint64), np.array([1], np.uint64), ["starts[0]"]),
+}
+
+
+def _raw(starts, horizons):
+    """The arrays as a direct caller of _imu_core passes them: int64 for signed input."""
+    def arr(x):
+        a = np.asarray(x)
+        return a if a.dtype.kind in "iu" and a.size else np.asarray(x, dtype=np.int64)
+    return arr(starts), arr(horizons)
+
+
+@pytest.mark.parametrize("case", list(BAD_WINDOWS))
+def test_integrate_windows_rejects_bad_windows_through_the_wrapper(case):
+    starts, horizons, words = BAD_WINDOWS[case]
+    with pytest.raises(errors.InvalidInputError) as e:
+        integration.integrate_windows(SEQ, starts, horizons)
+    assert type(e.value) is errors.InvalidInputError
+    for w in words:
+        assert w in str(e.value), (case, str(e.value))
+
+
+@pytest.mark.parametrize("case", list(BAD_WINDOWS))
+def test_integrate_windows_rejects_bad_windows_in_the_core_directly(case):
+    starts, horizons, words = BAD_WINDOWS[case]
+    for s, h in [_raw(starts, horizons), (list(np.asarray(starts).tolist()), list(np.asarray(horizons).tolist()))]:
+        with pytest.raises(errors.InvalidInputError) as e:
+            core.integrate_windows(T, G, A, s, h)
+        for w in words:
+            assert w in str(e.value), (case, str(e.value))
+
+
+def test_empty_starts_give_an_empty_result_and_good_windows_still_work():
+    out = integration.integrate_windows(SEQ, [], [1, 9])
+    assert out.dq_wxyz.shape == (0, 2, 4) and out.dt.shape == (0, 2)
+    assert list(out.horizons) == [1, 9]
+    ok = integration.integrate_windows(SEQ, np.array([0, 1], np.int64), np.array([8, 1], np.int64))
+    assert ok.dt.shape == (2, 2)
+    assert ok.dt[0, 0] == pytest.approx(8 * 0.005) and ok.dt[1, 1] == pytest.approx(0.005)
+    # Signed and unsigned index arrays and lists give the same result.
+    u = core.integrate_windows(T, G, A, np.array([0, 1], np.uint64), np.array([8, 1], np.uint64))
+    lst = core.integrate_windows(T, G, A, [0, 1], [8, 1])
+    for k in ("dq_wxyz", "dv", "dp", "dt"):
+        np.testing.assert_array_equal(u[k], getattr(ok, k))
+        np.testing.assert_array_equal(lst[k], getattr(ok, k))
+
+
+def test_non_integer_or_2d_indices_are_typed_errors():
+    with pytest.raises(errors.InvalidInputError, match="horizons must be a 1-d sequence of integers"):
+        integration.integrate_windows(SEQ, [0], [1.5])
+    with pytest.raises(errors.InvalidInputError, match="starts must be a 1-d sequence of integers"):
+        integration.integrate_windows(SEQ, [[0]], [1])
+    # The core alone: pyo3 refuses to convert, naming the argument (a TypeError, not a panic).
+    with pytest.raises(TypeError, match="horizons"):
+        core.integrate_windows(T, G, A, [0], np.array([1.5]))
+
+
+VAR = np.full((N, 6), 1e-4)
+
+
+@pytest.mark.parametrize("fn,name", [(core.increment_covariance, "horizons"), (core.interval_covariances, "boundaries")])
+@pytest.mark.parametrize("idx,word", [([HUGE], str(HUGE)), (np.array([-1], np.int64), "= -1"), ([-3], "= -3"),
+                                      (np.array([2**64 - 1], np.uint64), str(2**64 - 1))])
+def test_covariance_indices_are_checked_in_the_core(fn, name, idx, word):
+    with pytest.raises(errors.InvalidInputError) as e:
+        fn(T, G, A, VAR, idx)
+    assert word in str(e.value)
+
+
+def test_covariance_wrappers_name_the_argument():
+    with pytest.raises(errors.InvalidInputError, match="horizons"):
+        cov.increment_covariance(T, G, A, VAR, [-1])
+    with pytest.raises(errors.InvalidInputError, match="horizon 1099511627776"):
+        cov.increment_covariance(T, G, A, VAR, [HUGE])
+    with pytest.raises(errors.InvalidInputError, match="boundary 1099511627776"):
+        cov.interval_covariances(T, G, A, VAR, [0, HUGE])
+
+
+def _sequence_set():
+    return core.SequenceSet([(SEQ.t_ns, SEQ.gyro, SEQ.acc, SEQ.p, SEQ.v, SEQ.q_wxyz)])
+
+
+@pytest.mark.parametrize("batch_size", [2**40, 2**62, 2**64 - 1])
+def test_huge_batch_is_a_typed_error_not_an_abort(batch_size):
+    with pytest.raises((errors.InvalidInputError, MemoryError)) as e:
+        _sequence_set().make_batch(4, batch_size, [0.5, 1.0], 9.81, 0)
+    if isinstance(e.value, errors.InvalidInputError):
+        assert "batch_size" in str(e.value)
+
+
+def test_huge_window_is_a_typed_error():
+    s = _sequence_set()
+    for window in (HUGE, 2**64 - 1):
+        with pytest.raises(errors.InvalidInputError, match="needs"):
+            s.make_batch(window, 2, [1.0], 9.81, 0)
+        with pytest.raises(errors.InvalidInputError):
+            s.eval_windows(window, 1, [1.0], 9.81)
+    # window_labels: a sequence shorter than the window has no windows (empty, not an error).
+    lab = core.window_labels(T, SEQ.p, SEQ.v, SEQ.q_wxyz, HUGE, 1, [1.0], 9.81)
+    assert lab["dt"].shape == (0, 1) and list(lab["horizons"]) == [HUGE]
+
+
+def test_huge_half_window_derives_velocity():
+    p = np.stack([T * 1e-9, np.zeros(N), np.zeros(N)], axis=1)
+    v = core.derive_velocity(T, p, 2**64 - 1)
+    np.testing.assert_allclose(v[:, 0], 1.0, atol=1e-9)
+
+
+def test_core_raises_the_classes_of_errors_py_itself():
+    """import_exception!: the very classes of imu_learn.errors, not look-alikes or re-wraps."""
+    with pytest.raises(errors.InvalidInputError) as e:
+        core.preintegrate(np.arange(3, dtype=np.int64), np.zeros((3, 3)), np.zeros((2, 3)))
+    assert type(e.value) is errors.InvalidInputError is il.InvalidInputError
+    assert isinstance(e.value, ValueError) and isinstance(e.value, errors.ImuError)
+    t = np.arange(20, dtype=np.int64) * 5_000_000
+    z = np.zeros((20, 3))
+    q = np.tile([1.0, 0, 0, 0], (20, 1))
+    with pytest.raises(errors.NoOverlapError) as e:
+        core.align(t, z, z, t + 10**12, z, q, None, 10**9, 2, 4, "imu.csv", "gt.csv")
+    assert type(e.value) is errors.NoOverlapError
+    assert (e.value.path, e.value.imu_path) == ("gt.csv", "imu.csv")
+
+
+CHILD = textwrap.dedent("""
+    import numpy as np, sys
+    from imu_learn import _imu_core as core
+    import imu_learn.errors as errors
+    t = np.arange(10, dtype=np.int64) * 5_000_000; z = np.zeros((10, 3))
+    cases = [([], [2**40]), (np.array([], np.int64), np.array([-1], np.int64)),
+             (np.array([], np.uint64), np.array([2**64 - 1], np.uint64)), ([0], [0]), ([10], [1])]
+    for s, h in cases:
+        try:
+            core.integrate_windows(t, z, z, s, h)
+        except errors.InvalidInputError:
+            continue
+        sys.exit("no error for %r" % ((s, h),))
+    print("all typed")
+""")
+
+
+def test_no_case_aborts_the_process():
+    """An allocation of 2^40 entries aborts the process rather than raising: run the cases in a
+    child so that this shows up as a failed test with the child's exit status."""
+    r = subprocess.run([sys.executable, "-c", CHILD], capture_output=True, text=True, timeout=120)
+    assert r.returncode == 0 and "all typed" in r.stdout, (r.returncode, r.stdout, r.stderr[-2000:])
+    assert "PanicException" not in r.stderr
