@@ -1,5 +1,9 @@
-"""Real recording: raw IMU, seed-0 aiding of configs/fuse_euroc.toml's scenarios, each ISAM2 setting. Not committed."""
-import json, sys, time
+"""Real recording: raw IMU, seed-0 aiding of configs/fuse_euroc.toml's scenarios, each ISAM2 setting.
+
+python docs/probes/fuse_isam2/real.py REC SCENARIOS MODES [DATA_ROOT]; the data root (holding euroc/)
+is the fourth argument, else $IMU_LEARN_DATA; results are appended to $PROBE_OUT/real.jsonl
+(default: probe_out/ in the working directory)."""
+import json, os, sys, time
 from pathlib import Path
 import numpy as np
 import gtsam
@@ -11,12 +15,19 @@ from imu_learn.fuse.score import score
 from imu_learn.core.quat import wxyz_to_xyzw
 
 rec_name, scen_names, modes = sys.argv[1], sys.argv[2].split(","), sys.argv[3].split(",")
-cfg = load(Path("/work/main/configs/fuse_euroc.toml"), "/work/shared/data")
+HERE = Path(__file__).resolve().parent
+REPO = HERE.parents[2]  # docs/probes/fuse_isam2 -> repository root
+data_root = sys.argv[4] if len(sys.argv) > 4 else os.environ.get("IMU_LEARN_DATA", "")
+if not data_root:
+    sys.exit("set the data root: 4th argument or IMU_LEARN_DATA")
+OUT = Path(os.environ.get("PROBE_OUT", "probe_out"))
+OUT.mkdir(parents=True, exist_ok=True)
+cfg = load(REPO / "configs" / "fuse_euroc.toml", data_root)
 spec = next(s for s in cfg.recordings if Path(s.path).name == rec_name)
 seq, noise, leica = R.load_recording_for_fusion(cfg, spec)
 R0 = Rotation.from_quat(wxyz_to_xyzw(seq.q_wxyz[0])).as_matrix()
 _ISAM2 = gtsam.ISAM2
-sys.path.insert(0, '/tmp/fusescale')
+sys.path.insert(0, str(HERE))  # fls.py
 import fls
 for sn in scen_names:
     scn = next(s for s in cfg.scenarios if s.name == sn)
@@ -37,4 +48,4 @@ for sn in scen_names:
                    smoothed=s["smoothed"]["pos_rmse_m"], causal_rot=s["causal"]["rot_rmse_deg"],
                    max_dcausal=float(np.abs(res.causal_p).max()))
         print(json.dumps(out), flush=True)
-        open("/tmp/fusescale/real.jsonl", "a").write(json.dumps(out) + "\n")
+        open(OUT / "real.jsonl", "a").write(json.dumps(out) + "\n")
