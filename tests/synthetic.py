@@ -71,3 +71,18 @@ def moving(seconds: float = 20.0, cubic=(0.0, 0.0, 0.0)) -> Sequence:
     v = v0 + a0 * tt + 3 * c * tt**2
     z = np.zeros((len(t), 3))
     return Sequence("moving", t_ns, z, z.copy(), p, v, q)
+
+
+def spin_and_climb(n=2000, dt_ns=5_000_000, w=0.5, a=0.2, g=9.81):
+    """Yaw at w rad/s about the gravity axis while climbing with a [m/s^2]: body-frame gyro and
+    specific force are constant, so zero-order-hold preintegration is exact; closed-form pose.
+    Returns t [ns] from 0, gyro, acc, p (n, 3) and body-to-world matrices R (n, 3, 3)."""
+    from scipy.spatial.transform import Rotation
+
+    t = np.arange(n, dtype=np.int64) * dt_ns
+    ts = t * 1e-9
+    gyro = np.tile([0.0, 0.0, w], (n, 1))
+    acc = np.tile([0.0, 0.0, g + a], (n, 1))
+    p = np.c_[np.zeros(n), np.zeros(n), 0.5 * a * ts**2]
+    R = Rotation.from_rotvec(np.c_[np.zeros(n), np.zeros(n), w * ts]).as_matrix()
+    return t, gyro, acc, p, R

@@ -1,42 +1,28 @@
-"""The AirIMU-style baseline: zero-init identity, training through integration, refine, save/load."""
-from pathlib import Path
-
+"""The AirIMU-style baseline's own promises: zero-init identity, training through integration, the
+unidirectional variant. What every method must do (shapes, save/load, determinism) is
+test_baselines_contract.py."""
 import numpy as np
 import pytest
 import torch
 
-import imu_learn as il
 from imu_learn.baselines.airimu_style import AirImuConfig, AirImuNet, AirImuStyle
-from imu_learn.baselines.base import FitSettings, poses_from_imu
+from imu_learn.baselines.base import FitSettings
 
 torch.set_num_threads(1)
 
-REPO = Path(__file__).resolve().parent.parent
 W = 50
 SETTINGS = FitSettings(window=W, batch_size=16, steps=50, lr=3e-3, seed=0)
 TINY = AirImuConfig(conv=8, hidden=16, evals=4)
 
 
-def crop(s, a, b):
-    return il.Sequence(s.name, s.t_ns[a:b], s.gyro[a:b], s.acc[a:b], s.p[a:b], s.v[a:b], s.q_wxyz[a:b])
-
-
 @pytest.fixture(scope="module")
-def data():
-    s = il.load_sequence(REPO / "datasets" / "euroc" / "MH_01_easy")[0]
-    return crop(s, 0, 3000), crop(s, 3000, 4000)
-
-
-@pytest.fixture(scope="module")
-def fitted(data):
-    train, val = data
+def fitted(crop_split):
     m = AirImuStyle(TINY)
-    log = m.fit([train], [val], SETTINGS)
-    return m, log
+    return m, m.fit([crop_split[0]], [crop_split[1]], SETTINGS)
 
 
-def test_untrained_is_the_identity(data):
-    _, val = data
+def test_untrained_is_the_identity(crop_split):
+    _, val = crop_split
     m = AirImuStyle(TINY)
     m.model = AirImuNet(TINY, mean=torch.ones(6), std=torch.full((6,), 2.0))  # zero heads whatever the stats
     g, a = m.refine(val)
@@ -53,42 +39,14 @@ def test_training_improves_its_own_loss(fitted):
     assert np.isfinite(log["val_loss"]).all() and len(log["val_loss"]) == 4
 
 
-def test_refine_changes_the_imu_and_predict_integrates_it(fitted, data):
+def test_trained_refine_changes_the_imu(fitted, crop_split):
     m, _ = fitted
-    _, val = data
-    g, a = m.refine(val)
-    assert g.shape == (len(val), 3) and a.shape == (len(val), 3) and g.dtype == np.float64
-    assert np.isfinite(g).all() and np.isfinite(a).all()
-    assert not np.array_equal(g, val.gyro)
-    starts = np.arange(0, 800, 40, dtype=np.uint64)
-    p = m.predict(val, starts, 100)
-    assert p.q_wxyz.shape == (len(starts), 4) and p.p.shape == (len(starts), 3) and p.v.shape == (len(starts), 3)
-    ref = poses_from_imu(val, g, a, starts, 100)
-    assert np.array_equal(p.q_wxyz, ref.q_wxyz) and np.array_equal(p.p, ref.p)
+    g, _a = m.refine(crop_split[1])
+    assert not np.array_equal(g, crop_split[1].gyro)
 
 
-def test_refine_of_a_sequence_shorter_than_the_window(fitted, data):
-    m, _ = fitted
-    _, val = data
-    short = crop(val, 0, W - 7)
-    g, a = m.refine(short)
-    assert g.shape == (W - 7, 3) and a.shape == (W - 7, 3)
-
-
-def test_save_load_round_trip(fitted, data, tmp_path):
-    m, _ = fitted
-    _, val = data
-    f = tmp_path / "air.pt"
-    m.save(f)
-    m2 = AirImuStyle().load(f)
-    assert m2.window == W and m2.config.hidden == 16 and m2.config.conv == 8
-    g1, a1 = m.refine(val)
-    g2, a2 = m2.refine(val)
-    assert np.array_equal(g1, g2) and np.array_equal(a1, a2)
-
-
-def test_unidirectional_variant_trains(data):
-    train, _ = data
+def test_unidirectional_variant_trains(crop_split):
+    train, _ = crop_split
     m = AirImuStyle(AirImuConfig(conv=4, hidden=8, bidirectional=False))
     log = m.fit([train], [], FitSettings(window=W, batch_size=8, steps=3, lr=1e-3))
     assert len(log["train_loss"]) == 3 and log["val_loss"] == []

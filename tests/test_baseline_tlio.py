@@ -1,7 +1,7 @@
-"""The TLIO-style displacement baseline: frames, yaw equivariance, the NLL, training phases,
-prediction at any n on a shipped crop, save/load and its registration in evaluate."""
-from pathlib import Path
-
+"""The TLIO-style displacement baseline's own promises: frames, yaw equivariance, the NLL, training
+phases, the rules of prediction at any n on a shipped crop, its file format and its registration in
+evaluate. What every method must do (shapes, save/load, determinism, too-short data) is
+test_baselines_contract.py."""
 import numpy as np
 import pytest
 import torch
@@ -24,14 +24,9 @@ from imu_learn.core.quat import quat_mul, quat_rotate
 
 torch.set_num_threads(1)
 
-REPO = Path(__file__).resolve().parent.parent
 CFG = TlioConfig(window_s=0.25, width=8, fc=16, evals=4)  # W = 50 samples at 200 Hz
 W = 50
 SETTINGS = FitSettings(window=W, batch_size=16, steps=40, lr=3e-3, seed=0)
-
-
-def crop(s, a, b):
-    return il.Sequence(s.name, s.t_ns[a:b], s.gyro[a:b], s.acc[a:b], s.p[a:b], s.v[a:b], s.q_wxyz[a:b])
 
 
 def yawed(s, psi):
@@ -43,17 +38,9 @@ def yawed(s, psi):
 
 
 @pytest.fixture(scope="module")
-def data():
-    s = il.load_sequence(REPO / "datasets" / "euroc" / "MH_01_easy")[0]
-    return crop(s, 0, 3000), crop(s, 3000, 4000)  # 15 s train, 5 s val
-
-
-@pytest.fixture(scope="module")
-def fitted(data):
-    train, val = data
+def fitted(crop_split):
     m = TlioStyle(CFG)
-    log = m.fit([train], [val], SETTINGS)
-    return m, log
+    return m, m.fit([crop_split[0]], [crop_split[1]], SETTINGS)
 
 
 def test_yaw_and_frames():
@@ -109,8 +96,8 @@ def test_training_phases_and_selection(fitted):
     assert np.mean(log["train_loss"][:3]) > np.mean(log["train_loss"][17:20])  # MSE went down
 
 
-def test_training_windows_are_yaw_invariant_without_augmentation(data):
-    train, _ = data
+def test_training_windows_are_yaw_invariant_without_augmentation(crop_split):
+    train, _ = crop_split
     m = TlioStyle(CFG)
     m.window = W
     seqs = [train, yawed(train, 2.5)]
@@ -126,9 +113,9 @@ def test_training_windows_are_yaw_invariant_without_augmentation(data):
     assert not np.allclose(xr, x0)
 
 
-def test_prediction_is_yaw_equivariant(fitted, data):
+def test_prediction_is_yaw_equivariant(fitted, crop_split):
     m, _ = fitted
-    _, val = data
+    _, val = crop_split
     starts = np.arange(0, 700, 23)
     psi = 2.0
     d = m.window_displacements(val, starts)
@@ -143,15 +130,14 @@ def test_prediction_is_yaw_equivariant(fitted, data):
     assert np.allclose(cov, cov.T) and np.all(np.linalg.eigvalsh(cov) > 0)
 
 
-def test_predict_shapes_and_n_rules(fitted, data):
+def test_predict_n_rules(fitted, crop_split):
     m, _ = fitted
-    _, val = data
+    _, val = crop_split
     starts = np.arange(60, 700, 37, dtype=np.uint64)
     k = starts.astype(int)
     for n in (10, W, 3 * W + 7):
         p = m.predict(val, starts, n)
-        assert p.q_wxyz.shape == (len(starts), 4) and p.p.shape == (len(starts), 3) and p.v is None
-        assert np.isfinite(p.p).all()
+        assert p.v is None
         # rotation: the gyro integrated from the ground-truth start
         assert np.allclose(p.q_wxyz, poses_from_imu(val, val.gyro, val.acc, starts, n).q_wxyz)
     D = lambda s: m.window_displacements(val, s)  # noqa: E731
@@ -168,26 +154,15 @@ def test_predict_shapes_and_n_rules(fitted, data):
     assert np.allclose(quat_rotate(val.q_wxyz[:1], val.acc[:1]), world_imu(val.gyro[:1], val.acc[:1], val.q_wxyz[:1])[:, 3:])
 
 
-def test_save_load_round_trip(fitted, data, tmp_path):
+def test_the_file_keeps_window_rate_and_config_and_no_other_file_loads(fitted, tmp_path):
     m, _ = fitted
-    _, val = data
     f = tmp_path / "tlio.pt"
     m.save(f)
     m2 = TlioStyle().load(f)
     assert m2.window == W and m2.config.width == 8 and m2.rate_hz == pytest.approx(200.0, rel=1e-3)
-    starts = np.arange(60, 700, 20, dtype=np.uint64)
-    for n in (W, 130):
-        a, b = m.predict(val, starts, n), m2.predict(val, starts, n)
-        assert np.array_equal(a.q_wxyz, b.q_wxyz) and np.allclose(a.p, b.p, atol=1e-12)
     torch.save({"format": "x"}, tmp_path / "other.pt")
     with pytest.raises(ValueError, match="tlio-style"):
         TlioStyle().load(tmp_path / "other.pt")
-
-
-def test_too_short_training_data_is_an_error(data):
-    train, _ = data
-    with pytest.raises(ValueError, match="longer than the window"):
-        TlioStyle(CFG).fit([crop(train, 0, 40)], [], SETTINGS)
 
 
 def test_registered_in_evaluate_as_a_regressor():

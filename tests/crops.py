@@ -1,0 +1,41 @@
+"""The shipped EuRoC crops as the tests load them; the fixtures ``crop``, ``crop_easy`` and
+``crop_split`` in conftest.py hand these out, ``cut`` takes samples [a, b) of any of them."""
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Tuple
+
+from imu_learn.data.types import Sequence
+
+REPO = Path(__file__).resolve().parent.parent
+SHIPPED = REPO / "datasets"
+CROP = "euroc/MH_04_difficult"  # the crop fusion runs on (relative to the data root)
+EASY = "euroc/MH_01_easy"  # the crop the baselines and labels tests fit and score on
+SPLIT = (3000, 4000)  # crop_split: samples [0, 3000) train (15 s), [3000, 4000) validation (5 s)
+
+
+def cut(seq: Sequence, a: int, b: int) -> Sequence:
+    """Samples [a, b) of ``seq`` (views, not copies), same name."""
+    return Sequence(seq.name, seq.t_ns[a:b], seq.gyro[a:b], seq.acc[a:b], seq.p[a:b], seq.v[a:b], seq.q_wxyz[a:b])
+
+
+def load_crop(root: Path = SHIPPED) -> Sequence:
+    """MH_04_difficult as fusion loads it: ground truth from the state estimate, gaps up to 50 ms
+    bridged, the longest gap-free segment (the whole 60 s)."""
+    from imu_learn import AlignOptions, load_recording
+
+    rec = load_recording(root / CROP, "euroc", groundtruth=root / CROP / "mav0/state_groundtruth_estimate0/data.csv",
+                         options=AlignOptions(max_gap_s=0.05))
+    return max(rec.segments, key=len)
+
+
+def load_easy(root: Path = SHIPPED) -> Sequence:
+    """MH_01_easy with the loader's defaults, its first segment (the whole 60 s)."""
+    from imu_learn import load_sequence
+
+    return load_sequence(root / EASY)[0]
+
+
+def split(seq: Sequence) -> Tuple[Sequence, Sequence]:
+    a, b = SPLIT
+    return cut(seq, 0, a), cut(seq, a, b)
