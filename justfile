@@ -21,10 +21,14 @@ setup:
 dev:
     maturin develop --release --quiet
 
-# Run the whole test suite: Rust (no Python needed) then Python
+# Run the whole test suite: Rust (no Python needed) then Python, slow tests included; lists the 20 slowest
 test:
     cargo test --quiet
-    {{py}} -m pytest -q
+    {{py}} -m pytest -q --durations=20
+
+# The Python tests without the slow ones (trainings, whole CLI runs, fusion experiments), for quick checks
+test-fast *args="":
+    {{py}} -m pytest -q -m "not slow" {{args}}
 
 # Property tests of every imu_core reader with many cases (release); prints the cases each property ran
 fuzz cases="50000":
@@ -36,30 +40,31 @@ lint:
     cargo clippy --all-targets --features python -- -D warnings
     {{py}} -m ruff check python tests bench
 
-# Train the paper's model (no args: the shipped crops, < 10 min on 2 CPU cores); e.g. just fit --config configs/euroc.toml
+# Train the paper's model (no args: the shipped crops, < 10 min on 2 CPU cores); e.g. just fit --config configs/euroc.toml --data-root DIR
 fit *args="":
-    {{py}} -m imu_learn.fit {{args}}
+    {{py}} -m imu_learn.cli fit {{args}}
 
-# Fit every method on the train split and evaluate on the test split; e.g. just evaluate --config configs/eval_euroc.toml
+# Fit every method on the train split and evaluate on the test split; e.g. just evaluate --config configs/eval_euroc.toml --data-root DIR
 evaluate *args="":
-    {{py}} -m imu_learn.evaluate {{args}}
+    {{py}} -m imu_learn.cli evaluate {{args}}
 
-# Fuse raw and refined IMU with aiding in a GTSAM factor graph; e.g. just fuse --config configs/fuse_euroc.toml
+# Fuse raw and refined IMU with aiding in a GTSAM factor graph; e.g. just fuse --config configs/fuse_euroc.toml --data-root DIR
 fuse *args="":
-    {{py}} -m imu_learn.fuse {{args}}
+    {{py}} -m imu_learn.cli fuse {{args}}
 
 # Write refined IMU in the input's own format: just refine CKPT IN OUT
 refine checkpoint input output *args="":
-    {{py}} -m imu_learn.refine --checkpoint {{checkpoint}} --input {{input}} --output {{output}} {{args}}
+    {{py}} -m imu_learn.cli refine --checkpoint {{checkpoint}} --input {{input}} --out {{output}} {{args}}
 
-# Build the label cache of a dataset (euroc, tum-vi, blackbird, broad, kaist); root defaults to datasets/<name>
-labels dataset root="" *args="":
-    {{py}} -m imu_learn.labels {{dataset}} {{ if root == "" { "" } else { "--root " + root } }} {{args}}
+# Build the label cache of a dataset (euroc, tum-vi, ...) from <data root>/<name> (--data-root DIR, $IMU_LEARN_DATA, else datasets/) or --dataset-dir DIR
+labels dataset *args="":
+    {{py}} -m imu_learn.cli labels {{dataset}} {{args}}
 
 # Print measured throughput: imu_core vs numpy/GTSAM/polars, training/refine/causal latency, online fusion latency, then cost against recording length (BENCH_SCALE_ARGS='--hours 1,10')
 bench *args="":
     {{py}} bench/bench_core.py {{args}}
     {{py}} bench/bench_learn.py
+    {{py}} bench/bench_fit_startup.py {{ if args =~ '--quick' { '--repeat 1' } else { '' } }}
     {{py}} bench/bench_fuse_online.py
     {{py}} bench/bench_rosbag.py {{ if args =~ '--quick' { '--quick' } else { '' } }}
     {{py}} bench/bench_scale.py {{ if args =~ '--quick' { '--quick' } else { '' } }} ${BENCH_SCALE_ARGS:-}

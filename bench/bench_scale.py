@@ -199,17 +199,17 @@ def prepare_and_run(stage: str, rec: Path, scratch: Path) -> Dict[str, object]:
             else:
                 run = fuse_runner(seq, extra)
     elif stage == "labels_cli":
-        from imu_learn.data.labels import main as labels_main
+        from imu_learn.cli.labels import main as labels_main
 
         def run() -> None:
-            argv = ["euroc", "--root", str(rec.parent), "--out", str(scratch / "labels"), "--rebuild", "--quiet"]
+            argv = ["euroc", "--dataset-dir", str(rec.parent), "--out", str(scratch / "labels"), "--rebuild", "--quiet"]
             if labels_main(argv) != 0:
                 raise RuntimeError("python -m imu_learn.labels failed")
     elif stage == "refine":
-        from imu_learn.infer.refine import main as refine_main
+        from imu_learn.cli.refine import main as refine_main
 
         def run() -> None:
-            argv = ["--checkpoint", str(CHECKPOINT), "--input", str(rec), "--output", str(scratch / "refined"),
+            argv = ["--checkpoint", str(CHECKPOINT), "--input", str(rec), "--out", str(scratch / "refined"),
                     "--device", "cpu", "--quiet"]
             if refine_main(argv) != 0:
                 raise RuntimeError("python -m imu_learn.refine failed")

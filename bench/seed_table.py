@@ -21,9 +21,10 @@ from typing import Any, Dict, List
 import torch
 
 from imu_learn.data.splits import make_split
+from imu_learn.infer.windowing import refine_sequence
 from imu_learn.train.checkpoint import load_checkpoint, model_from_checkpoint
 from imu_learn.train.config import load_config
-from imu_learn.train.fit import evaluate_table, refine_sequence
+from imu_learn.train.fit import evaluate_table
 from imu_learn.util.atomic import atomic_write_bytes
 
 
@@ -33,7 +34,7 @@ def score_run(run: Path, cfg, test) -> Dict[str, Any]:
     model = model_from_checkpoint(state)
     saved = json.loads((run / "split.json").read_text()) if (run / "split.json").exists() else {}
     window = int(state["config"]["data"]["window"])
-    refined = [refine_sequence(model, s, window, torch.device("cpu")) for s in test]
+    refined = [refine_sequence(model, s) for s in test]  # the checkpoint's windowing rule (its training window)
     res = evaluate_table(list(test), refined, cfg)
     res["run"], res["window"], res["train_entries"] = str(run), window, [r["entry"] for r in saved.get("train", [])]
     text = json.dumps(res, indent=2)

@@ -69,8 +69,8 @@ def main(argv=None) -> int:
     for name, extra in parse_variants(args.variants):
         for seed in args.seeds:
             run = f"{args.prefix}{name}_s{seed}"
-            cmd = [args.python, "-m", "imu_learn.train.fit", "--config", args.config, "--name", run, "--runs_dir", str(runs_dir),
-                   "--seed", str(seed), "--data.split.test", "[]", "--no-progress", *extra]
+            cmd = [args.python, "-m", "imu_learn.fit", "--config", args.config, "--name", run, "--runs_dir", str(runs_dir),
+                   "--seed", str(seed), "--data.split.test", "[]", "--quiet", *extra]
             todo.append((name, seed, run, cmd))
     running: List[Tuple[str, subprocess.Popen, object]] = []
     failed = []

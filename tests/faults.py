@@ -9,7 +9,7 @@ disk), or stops there until a signal arrives (``pause``), or until a release fil
 writers that bypass Python's files (imu_core's Rust writers, ``torch.save`` and polars given a
 path) through them. Run as a script it installs a fault and runs a module as ``python -m`` would::
 
-    python tests/faults.py PATTERN NTH ACTION MARKER -- imu_learn.train.fit --run-dir ...
+    python tests/faults.py PATTERN NTH ACTION MARKER -- imu_learn.fit --out ...
 """
 from __future__ import annotations
 

@@ -4,6 +4,7 @@ import shutil
 
 import pytest
 
+from imu_learn.cli import labels as labels_cli
 from imu_learn.data import cache, labels
 from imu_learn.errors import CacheError
 from imu_learn.util.atomic import atomic_write_bytes
@@ -58,11 +59,11 @@ def test_other_cache_version_is_refused_unless_rebuild(dataset, tmp_path):
 
 
 def test_cli_reports_and_bad_root_is_one_line_error(dataset, tmp_path, capsys):
-    assert labels.main(["euroc", "--root", str(dataset), "--out", str(tmp_path / "c"), "--quiet"]) == 0
+    assert labels_cli.main(["euroc", "--dataset-dir", str(dataset), "--out", str(tmp_path / "c"), "--quiet"]) == 0
     assert "MH_01_easy" in capsys.readouterr().out
-    assert labels.main(["euroc", "--root", str(tmp_path / "missing"), "--quiet"]) == 2
+    assert labels_cli.main(["euroc", "--dataset-dir", str(tmp_path / "missing"), "--quiet"]) == 2
     err = capsys.readouterr().err
-    assert err.startswith("error:") and len(err.strip().splitlines()) == 1
+    assert err == f"imu-learn labels: error: FileNotFoundError: {tmp_path / 'missing'}: No such file or directory\n"
 
 
 def test_atomic_write_leaves_old_file_on_failure(tmp_path):

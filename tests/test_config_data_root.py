@@ -6,9 +6,9 @@ from pathlib import Path
 
 import pytest
 
+from imu_learn.cli import fit as fit_cli
 from imu_learn.data.splits import DataPathError, make_split
 from imu_learn.eval import run as ev
-from imu_learn.train import fit
 from imu_learn.train.config import ConfigError, load_config
 
 REPO = Path(__file__).resolve().parent.parent
@@ -116,10 +116,10 @@ def test_missing_recording_is_a_one_line_error(roots, monkeypatch, capsys):
     assert "\n" not in msg
     assert msg.startswith("data.roots[0].path: 'euroc/MH_01_easy' not found")
     assert str(empty.resolve() / "euroc" / "MH_01_easy") in msg  # the path tried under the data root
-    assert "IMU_LEARN_DATA" in msg and "--data.data_root" in msg
+    assert "IMU_LEARN_DATA" in msg and "--data-root" in msg
     # no data root at all: the message says so
     monkeypatch.delenv(ENV)
-    with pytest.raises(DataPathError, match=r"no data root set.*IMU_LEARN_DATA=DIR or --data.data_root DIR"):
+    with pytest.raises(DataPathError, match=r"no data root set.*IMU_LEARN_DATA=DIR or --data-root DIR"):
         make_split(load_config(cfg).data)
     # a missing ground-truth file names its own key
     monkeypatch.setenv(ENV, str(good))
@@ -130,7 +130,7 @@ def test_missing_recording_is_a_one_line_error(roots, monkeypatch, capsys):
     # the command: exit status 2 and the one line
     monkeypatch.setenv(ENV, str(empty))
     capsys.readouterr()
-    assert fit.main(["--config", str(cfg), "--run-dir", str(good.parent / "run")]) == 2
+    assert fit_cli.main(["--config", str(cfg), "--out", str(good.parent / "run")]) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "data.roots[0].path" in err[0] and "IMU_LEARN_DATA" in err[0], err
 

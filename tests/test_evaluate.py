@@ -10,6 +10,7 @@ import torch
 
 from imu_learn.baselines.base import Method, PosePrediction, Raw
 from imu_learn.baselines.noise_floor import NOISE_FLOOR_NAME, synthesize_imu
+from imu_learn.cli import evaluate as ev_cli
 from imu_learn.data.types import Sequence
 from imu_learn.errors import ConfigError, InvalidInputError
 from imu_learn.eval import run as ev
@@ -35,14 +36,6 @@ def flying(seconds=20.0):
 
 # ---------------------------------------------------------------------------------------------
 # building blocks
-
-
-def test_rmse():
-    assert ev.rmse(np.array([3.0, 4.0])) == pytest.approx(math.sqrt(12.5), rel=1e-15)
-    assert ev.rmse(np.array([-2.0])) == 2.0
-    assert ev.rmse(np.zeros(4)) == 0.0
-    assert ev.rmse([1.0, 1.0, 1.0, 5.0]) == pytest.approx(math.sqrt(7.0), rel=1e-15)
-    assert math.isnan(ev.rmse(np.zeros(0)))
 
 
 def test_rotation_angle():
@@ -260,7 +253,7 @@ def test_too_short_for_the_start_up_bias_is_a_typed_error():
 
 # V1_01 against its pose-only groundtruth_pose.tum here (the default run uses the ASL state, which
 # has velocity): pose-only test ground truth is what brings in the noise-floor row.
-E2E_ARGS = ["--config", str(EVAL_DEFAULT), "--methods", "raw,traditional", "--no-progress",
+E2E_ARGS = ["--config", str(EVAL_DEFAULT), "--methods", "raw,traditional", "--quiet",
             "--fit.threads", "1", "--fit.steps", "2", "--eval.stride", "50",
             "--data.roots", '[{path = "datasets/euroc/MH_01_easy"}, {path = "datasets/euroc/V1_01_easy"}]']
 
@@ -273,7 +266,7 @@ def _read_csv(path):
 @pytest.fixture(scope="module")
 def e2e(tmp_path_factory):
     out = tmp_path_factory.mktemp("eval") / "report"
-    rc = ev.main(E2E_ARGS + ["--out", str(out)])
+    rc = ev_cli.main(E2E_ARGS + ["--out", str(out)])
     torch.set_num_threads(1)
     return rc, out
 
@@ -341,7 +334,7 @@ def test_end_to_end_reuse(e2e, capsys):
     assert rc == 0
     before = _read_csv(out / "relative_pose.csv")
     capsys.readouterr()
-    rc = ev.main(E2E_ARGS + ["--out", str(out), "--reuse"])
+    rc = ev_cli.main(E2E_ARGS + ["--out", str(out), "--reuse"])
     torch.set_num_threads(1)
     cap = capsys.readouterr()
     assert rc == 0, cap.err
@@ -375,41 +368,41 @@ def test_end_to_end_reuse(e2e, capsys):
 def _error_line(capsys):
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1, err
-    assert err[0].startswith("imu_learn.eval.run: error:"), err
+    assert err[0].startswith("imu-learn evaluate: error:"), err
     return err[0]
 
 
 def test_cli_unknown_method(capsys, tmp_path):
-    assert ev.main(["--config", str(EVAL_DEFAULT), "--methods", "raw,no-such-method", "--out", str(tmp_path)]) == 2
+    assert ev_cli.main(["--config", str(EVAL_DEFAULT), "--methods", "raw,no-such-method", "--out", str(tmp_path)]) == 2
     line = _error_line(capsys)
     assert "unknown method" in line and "no-such-method" in line
     assert not any(tmp_path.iterdir())  # nothing was run
 
 
 def test_cli_unknown_override_key(capsys, tmp_path):
-    assert ev.main(["--config", str(EVAL_DEFAULT), "--methods", "raw", "--eval.no_such_key", "3",
+    assert ev_cli.main(["--config", str(EVAL_DEFAULT), "--methods", "raw", "--eval.no_such_key", "3",
                     "--out", str(tmp_path)]) == 2
     line = _error_line(capsys)
     assert "eval.no_such_key" in line and "unknown key" in line
-    assert ev.main(["--methods", "raw", "--nonsense", "1", "--out", str(tmp_path)]) == 2
+    assert ev_cli.main(["--methods", "raw", "--nonsense", "1", "--out", str(tmp_path)]) == 2
     assert "nonsense" in _error_line(capsys)
 
 
 def test_cli_bad_override_value(capsys, tmp_path):
-    assert ev.main(["--config", str(EVAL_DEFAULT), "--eval.noise_floor", "sometimes", "--out", str(tmp_path)]) == 2
+    assert ev_cli.main(["--config", str(EVAL_DEFAULT), "--eval.noise_floor", "sometimes", "--out", str(tmp_path)]) == 2
     assert "eval.noise_floor" in _error_line(capsys)
 
 
 def test_cli_missing_checkpoint(capsys, tmp_path):
     missing = tmp_path / "nope" / "best.pt"
-    assert ev.main(["--config", str(EVAL_DEFAULT), "--methods", "raw", "--checkpoint", str(missing),
+    assert ev_cli.main(["--config", str(EVAL_DEFAULT), "--methods", "raw", "--checkpoint", str(missing),
                     "--out", str(tmp_path / "out")]) == 2
     line = _error_line(capsys)
     assert str(missing) in line and "No such file" in line
 
 
 def test_cli_missing_config(capsys, tmp_path):
-    assert ev.main(["--config", str(tmp_path / "absent.toml")]) == 2
+    assert ev_cli.main(["--config", str(tmp_path / "absent.toml")]) == 2
     assert "absent.toml" in _error_line(capsys)
 
 
@@ -440,7 +433,7 @@ def test_cli_refuses_a_checkpoint_trained_on_the_test_recording(capsys, tmp_path
     ck = tmp_path / "best.pt"
     save_checkpoint(ck, model, {"data": {"window": 50, "split": {"train": ["V1_01_easy[0:0.5]"], "val": []}}},
                     epoch=0, step=0, best_metric=None)
-    rc = ev.main(["--config", str(EVAL_DEFAULT), "--methods", "raw", "--no-progress", "--checkpoint", str(ck),
+    rc = ev_cli.main(["--config", str(EVAL_DEFAULT), "--methods", "raw", "--quiet", "--checkpoint", str(ck),
                   "--out", str(tmp_path / "out")])
     torch.set_num_threads(1)
     assert rc == 2
@@ -452,7 +445,7 @@ def test_cli_refuses_a_checkpoint_trained_on_the_test_recording(capsys, tmp_path
 def _error_line_after_progress(capsys):
     """The error line, after the command's own progress lines on stderr ("raw: fitting ...")."""
     err = capsys.readouterr().err.strip().splitlines()
-    errors = [x for x in err if x.startswith("imu_learn.eval.run: error:")]
+    errors = [x for x in err if x.startswith("imu-learn evaluate: error:")]
     assert len(errors) == 1 and err[-1] == errors[0], err
     return errors[0]
 
@@ -466,7 +459,7 @@ def test_a_checkpoint_with_a_covariance_head_gets_the_calibration_table(tmp_path
     save_checkpoint(ck, model, {"data": {"window": 50, "split": {"train": ["MH_01_easy"], "val": []}}},
                     epoch=0, step=0, best_metric=None)
     out = tmp_path / "out"
-    rc = ev.main(["--config", str(EVAL_DEFAULT), "--methods", "raw", "--no-progress", "--checkpoint", str(ck),
+    rc = ev_cli.main(["--config", str(EVAL_DEFAULT), "--methods", "raw", "--quiet", "--checkpoint", str(ck),
                   "--out", str(out), "--eval.horizons", "[10, 200]", "--eval.stride", "50", "--eval.curve_count", "2"])
     torch.set_num_threads(1)
     assert rc == 0

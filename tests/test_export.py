@@ -8,7 +8,7 @@ import pytest
 import torch
 
 from imu_learn import _imu_core as core
-from imu_learn.infer.export import main
+from imu_learn.cli.export import main
 from imu_learn.nn.model import ImuRefiner, ModelConfig
 from imu_learn.train.checkpoint import load_model, save_checkpoint
 
@@ -89,7 +89,7 @@ def test_bad_checkpoint_is_one_line_exit_2(tmp_path, capsys):
     bad.write_bytes(b"garbage")
     assert main(["--checkpoint", str(bad), "--out", str(tmp_path / "o")]) == 2
     err = capsys.readouterr().err
-    assert err.count("\n") == 1 and err.startswith("error:")
+    assert err.count("\n") == 1 and err.startswith("imu-learn export: error: CheckpointError: ")
 
 
 def test_a_covariance_head_is_exported_as_a_second_output(tmp_path):

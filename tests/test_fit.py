@@ -15,6 +15,7 @@ from pathlib import Path
 import pytest
 import torch
 
+from imu_learn.cli import fit as fit_cli
 from imu_learn.nn.model import ImuRefiner, ModelConfig
 from imu_learn.train import fit
 from imu_learn.train.checkpoint import load_checkpoint
@@ -24,7 +25,7 @@ REPO = Path(__file__).resolve().parent.parent
 PY = sys.executable
 
 TINY = [
-    "--no-progress",
+    "--quiet",
     "--data.window", "50", "--data.batch_size", "8", "--data.val_stride", "200", "--data.eval_stride", "50",
     "--model.hidden", "8", "--model.fc", "8", "--model.layers", "1",
     "--optim.steps_per_epoch", "4", "--optim.lr", "1e-3", "--seed", "7", "--threads", "1",
@@ -32,7 +33,7 @@ TINY = [
 
 
 def tiny(run_dir, epochs, *more):
-    return ["--run-dir", str(run_dir), *TINY, "--optim.epochs", str(epochs), *more]
+    return ["--out", str(run_dir), *TINY, "--optim.epochs", str(epochs), *more]
 
 
 def rows(run_dir):
@@ -55,7 +56,7 @@ def snapshot(d):
 def full_run(tmp_path_factory):
     """An uninterrupted 3-epoch run, the reference for the resume tests."""
     d = tmp_path_factory.mktemp("fit") / "full"
-    assert fit.main(tiny(d, 3)) == 0
+    assert fit_cli.main(tiny(d, 3)) == 0
     return d
 
 
@@ -99,7 +100,7 @@ def test_select_on_validation_pose(tmp_path, full_run, capsys):
     """optim.select = "val_pose": best.pt is the epoch with the lowest bias-removed pose score on
     the validation block, which can differ from the loss pick; the score is a ratio to raw IMU."""
     d = tmp_path / "pose"
-    assert fit.main(tiny(d, 3, "--optim.select", "val_pose")) == 0
+    assert fit_cli.main(tiny(d, 3, "--optim.select", "val_pose")) == 0
     r = rows(d)
     scores = [float(x["val_pose_score"]) for x in r]
     assert all(0.0 < x < 10.0 for x in scores)
@@ -143,8 +144,8 @@ def test_select_combine_mean_is_the_geometric_mean_of_the_ratios(tmp_path):
     their geometric mean; same batches and weights, so per epoch mean <= max, and the two agree
     only when every ratio is the same."""
     more = ["--optim.select", "val_pose", "--optim.select_horizons", "[10, 50]"]
-    assert fit.main(tiny(tmp_path / "max", 2, *more)) == 0
-    assert fit.main(tiny(tmp_path / "mean", 2, *more, "--optim.select_combine", "mean")) == 0
+    assert fit_cli.main(tiny(tmp_path / "max", 2, *more)) == 0
+    assert fit_cli.main(tiny(tmp_path / "mean", 2, *more, "--optim.select_combine", "mean")) == 0
     a, b = rows(tmp_path / "max"), rows(tmp_path / "mean")
     assert [x["val_total"] for x in a] == [x["val_total"] for x in b]
     for x, y in zip(a, b):
@@ -180,9 +181,9 @@ def test_train_bias_remove_takes_a_constant_bias_out_of_train_and_val_only():
 
 def test_resume_in_new_process_matches_uninterrupted(tmp_path, full_run):
     d = tmp_path / "resumed"
-    assert fit.main(tiny(d, 1)) == 0
+    assert fit_cli.main(tiny(d, 1)) == 0
     assert len(rows(d)) == 1
-    p = subprocess.run([PY, "-m", "imu_learn.train.fit", "--resume", str(d), "--optim.epochs", "3", "--no-progress"],
+    p = subprocess.run([PY, "-m", "imu_learn.fit", "--resume", str(d), "--optim.epochs", "3", "--quiet"],
                        cwd=REPO, capture_output=True, text=True, timeout=120)
     assert p.returncode == 0, p.stderr
     assert rows(d) == rows(full_run)
@@ -200,7 +201,7 @@ def test_ctrl_c_saves_last_and_exits_130(tmp_path, full_run, capsys):
         if step == 6:  # in the middle of epoch 2
             raise KeyboardInterrupt
 
-    assert fit.main(tiny(d, 3), on_step=hook) == 130
+    assert fit_cli.main(tiny(d, 3), on_step=hook) == 130
     err = capsys.readouterr().err.strip().splitlines()
     assert "interrupted" in err[-1] and "--resume" in err[-1]
     state = load_checkpoint(d / "last.pt")
@@ -208,7 +209,7 @@ def test_ctrl_c_saves_last_and_exits_130(tmp_path, full_run, capsys):
     assert len(rows(d)) == 1
     assert not (d / "results.json").exists()
     # continuing mid-epoch reproduces the uninterrupted run
-    assert fit.main(["--resume", str(d), "--no-progress"]) == 0
+    assert fit_cli.main(["--resume", str(d), "--quiet"]) == 0
     assert rows(d) == rows(full_run)
     a, b = weights(d / "last.pt"), weights(full_run / "last.pt")
     for k in a:
@@ -217,7 +218,7 @@ def test_ctrl_c_saves_last_and_exits_130(tmp_path, full_run, capsys):
 
 def test_sigint_to_a_real_process(tmp_path):
     d = tmp_path / "sigint"
-    proc = subprocess.Popen([PY, "-m", "imu_learn.train.fit", *tiny(d, 1000)], cwd=REPO,
+    proc = subprocess.Popen([PY, "-m", "imu_learn.fit", *tiny(d, 1000)], cwd=REPO,
                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     try:
         deadline = time.time() + 60
@@ -230,7 +231,7 @@ def test_sigint_to_a_real_process(tmp_path):
         if proc.poll() is None:
             proc.kill()
     assert proc.returncode == 130, err
-    assert err.strip().splitlines()[-1].startswith("imu_learn.train.fit: interrupted")
+    assert err.strip().splitlines()[-1].startswith("imu-learn fit: interrupted; saved ")
     assert load_checkpoint(d / "last.pt")["step"] >= 4
 
 
@@ -242,18 +243,18 @@ def test_corrupt_checkpoint_is_one_line_exit_2_and_nothing_changes(tmp_path, ful
     bad = {"truncated": data[: len(data) // 2], "garbage": os.urandom(4096), "empty": b""}[damage]
     (d / "last.pt").write_bytes(bad)
     before = snapshot(d)
-    p = subprocess.run([PY, "-m", "imu_learn.train.fit", "--resume", str(d), "--optim.epochs", "5"],
+    p = subprocess.run([PY, "-m", "imu_learn.fit", "--resume", str(d), "--optim.epochs", "5"],
                        cwd=REPO, capture_output=True, text=True, timeout=120)
     assert p.returncode == 2
     lines = p.stderr.strip().splitlines()
     assert len(lines) == 1, p.stderr
-    assert lines[0].startswith("imu_learn.train.fit: error: CheckpointError:") and "last.pt" in lines[0]
+    assert lines[0].startswith("imu-learn fit: error: CheckpointError:") and "last.pt" in lines[0]
     assert snapshot(d) == before
 
 
 def test_resume_without_checkpoint(tmp_path, capsys):
     (tmp_path / "empty").mkdir()
-    assert fit.main(["--resume", str(tmp_path / "empty")]) == 2
+    assert fit_cli.main(["--resume", str(tmp_path / "empty")]) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "last.pt" in err[0]
     assert list((tmp_path / "empty").iterdir()) == []
@@ -274,9 +275,9 @@ def test_resume_without_checkpoint(tmp_path, capsys):
     ],
 )
 def test_override_errors_name_the_key(tmp_path, capsys, args, key):
-    assert fit.main(["--run-dir", str(tmp_path / "x"), *args]) == 2
+    assert fit_cli.main(["--out", str(tmp_path / "x"), *args]) == 2
     err = capsys.readouterr().err.strip().splitlines()
-    assert len(err) == 1 and key in err[0] and err[0].startswith("imu_learn.train.fit: error:")
+    assert len(err) == 1 and key in err[0] and err[0].startswith("imu-learn fit: error:")
     assert not (tmp_path / "x").exists()
 
 
@@ -284,26 +285,26 @@ def test_resume_refuses_changing_the_model(tmp_path, full_run, capsys):
     d = tmp_path / "r"
     shutil.copytree(full_run, d)
     before = snapshot(d)
-    assert fit.main(["--resume", str(d), "--model.hidden", "16"]) == 2
+    assert fit_cli.main(["--resume", str(d), "--model.hidden", "16"]) == 2
     assert "model.hidden" in capsys.readouterr().err
     assert snapshot(d) == before
 
 
 def test_existing_run_is_not_overwritten(full_run, capsys):
     before = snapshot(full_run)
-    assert fit.main(tiny(full_run, 3)) == 2
+    assert fit_cli.main(tiny(full_run, 3)) == 2
     assert "--resume" in capsys.readouterr().err
     assert snapshot(full_run) == before
 
 
 def test_bad_split_name(tmp_path, capsys):
-    assert fit.main(["--run-dir", str(tmp_path / "x"), "--data.split.test", "NoSuchSeq"]) == 2
+    assert fit_cli.main(["--out", str(tmp_path / "x"), "--data.split.test", "NoSuchSeq"]) == 2
     err = capsys.readouterr().err
     assert "data.split.test" in err and "NoSuchSeq" in err
 
 
 def test_overlapping_blocks_rejected(tmp_path, capsys):
-    assert fit.main(["--run-dir", str(tmp_path / "x"), "--data.split.val", "MH_01_easy[0.7:1]"]) == 2
+    assert fit_cli.main(["--out", str(tmp_path / "x"), "--data.split.val", "MH_01_easy[0.7:1]"]) == 2
     assert "overlaps" in capsys.readouterr().err
 
 
@@ -362,7 +363,7 @@ def test_covariance_head_alone_on_a_frozen_refiner(tmp_path, full_run):
     """optim.trainable = covariance: the refiner's weights stay those of optim.init bit for bit,
     the covariance head learns (its weights move), and the NLL is logged."""
     d = tmp_path / "cov"
-    assert fit.main(tiny(d, 2, "--model.covariance", "true", "--optim.init", str(full_run / "best.pt"),
+    assert fit_cli.main(tiny(d, 2, "--model.covariance", "true", "--optim.init", str(full_run / "best.pt"),
                          "--optim.trainable", "covariance", "--loss.w_nll", "1.0")) == 0
     before, after = weights(full_run / "best.pt"), weights(d / "last.pt")
     assert all(torch.equal(before[k], after[k]) for k in before)
@@ -377,10 +378,10 @@ def test_covariance_head_alone_on_a_frozen_refiner(tmp_path, full_run):
     (["--loss.w_nll", "1.0"], "loss.w_nll"),
 ])
 def test_covariance_settings_that_cannot_work_are_refused(tmp_path, capsys, args, key):
-    assert fit.main(tiny(tmp_path / "x", 1, *args)) == 2
+    assert fit_cli.main(tiny(tmp_path / "x", 1, *args)) == 2
     assert key in capsys.readouterr().err
 
 
 def test_init_from_a_checkpoint_of_another_shape_is_refused(tmp_path, full_run, capsys):
-    assert fit.main(tiny(tmp_path / "x", 1, "--model.hidden", "16", "--optim.init", str(full_run / "best.pt"))) == 2
+    assert fit_cli.main(tiny(tmp_path / "x", 1, "--model.hidden", "16", "--optim.init", str(full_run / "best.pt"))) == 2
     assert "model.hidden" in capsys.readouterr().err

@@ -6,7 +6,8 @@ import pytest
 
 gtsam = pytest.importorskip("gtsam")
 
-from imu_learn import AlignOptions, load_recording  # noqa: E402
+from crops import CROP  # noqa: E402  (the `crop` fixture, conftest.py, is this recording)
+from imu_learn.cli.fuse import main as fuse_main  # noqa: E402
 from imu_learn.data.formats.asl import read_leica, read_sensor_yaml  # noqa: E402
 from imu_learn.errors import ConfigError  # noqa: E402
 from imu_learn.fuse import (  # noqa: E402
@@ -18,20 +19,10 @@ from imu_learn.fuse import (  # noqa: E402
     simulate_position,
     simulate_relative_pose,
 )
-from imu_learn.fuse.__main__ import main as fuse_main  # noqa: E402
 from imu_learn.fuse.config import FuseConfig, RecordingSpec, ScenarioSpec, load, validate  # noqa: E402
 from imu_learn.fuse.run import run_experiment  # noqa: E402
 from imu_learn.fuse.score import score  # noqa: E402
-
-CROP = "euroc/MH_04_difficult"
-
-
-@pytest.fixture(scope="module")
-def crop(shipped):
-    root = shipped / CROP
-    rec = load_recording(root, "euroc", groundtruth=root / "mav0/state_groundtruth_estimate0/data.csv",
-                         options=AlignOptions(max_gap_s=0.05))
-    return max(rec.segments, key=len)
+from synthetic import spin_and_climb  # noqa: E402
 
 
 def start_of(seq):
@@ -160,20 +151,6 @@ def test_noise_free_fixes_pin_a_bias_that_dead_reckoning_cannot(crop):
     assert np.abs(est[:3] - (bg + np.array([-0.0022, 0.0208, 0.0757]))).max() < 5e-3
 
 
-def spin_and_climb(n=2000, dt_ns=5_000_000, w=0.5, a=0.2, g=9.81):
-    """Yaw at w rad/s about the gravity axis while climbing with a [m/s^2]: body-frame gyro and
-    specific force are constant, so zero-order-hold preintegration is exact; closed-form pose."""
-    from scipy.spatial.transform import Rotation
-
-    t = np.arange(n, dtype=np.int64) * dt_ns
-    ts = t * 1e-9
-    gyro = np.tile([0.0, 0.0, w], (n, 1))
-    acc = np.tile([0.0, 0.0, g + a], (n, 1))
-    p = np.c_[np.zeros(n), np.zeros(n), 0.5 * a * ts**2]
-    R = Rotation.from_rotvec(np.c_[np.zeros(n), np.zeros(n), w * ts]).as_matrix()
-    return t, gyro, acc, p, R
-
-
 def test_exact_imu_and_perfect_fixes_recover_the_closed_form_trajectory():
     t, gyro, acc, p, R = spin_and_climb()
     fixes = PositionFixes(np.arange(0, len(t), 200), p[::200], 1e-4, np.zeros(3), "exact")
@@ -220,7 +197,7 @@ def test_config_rejects_unknown_keys_inputs_and_kinds(tmp_path):
 def test_cli_reports_a_missing_recording_in_one_line(tmp_path, capsys):
     f = tmp_path / "f.toml"
     f.write_text('inputs = ["raw"]\n[[recordings]]\npath = "nowhere"\n[[scenarios]]\nname = "g"\n')
-    assert fuse_main(["--config", str(f), "--data-root", str(tmp_path), "--out", str(tmp_path / "o")]) == 1
+    assert fuse_main(["--config", str(f), "--data-root", str(tmp_path), "--out", str(tmp_path / "o")]) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "nowhere" in err[0]
 

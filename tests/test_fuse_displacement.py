@@ -123,17 +123,15 @@ def test_a_window_far_from_the_network_length_is_skipped():
 
 
 @pytest.fixture(scope="module")
-def tiny_tlio(shipped, tmp_path_factory):
+def tiny_tlio(crop_split, tmp_path_factory):
     """A tlio-style model fitted for a few steps on a shipped crop, saved as evaluate would."""
     import torch
 
-    import imu_learn as il
     from imu_learn.baselines.base import FitSettings
     from imu_learn.baselines.tlio import TlioConfig, TlioStyle
 
     torch.set_num_threads(1)
-    s = il.load_sequence(shipped / "euroc" / "MH_01_easy")[0]
-    tr = il.Sequence(s.name, s.t_ns[:3000], s.gyro[:3000], s.acc[:3000], s.p[:3000], s.v[:3000], s.q_wxyz[:3000])
+    tr = crop_split[0]  # the first 15 s of MH_01_easy
     m = TlioStyle(TlioConfig(width=8, fc=8, evals=1))
     m.fit([tr], [], FitSettings(window=200, batch_size=8, steps=6, lr=1e-3))
     d = tmp_path_factory.mktemp("methods")
@@ -172,13 +170,9 @@ def test_tlio_style_is_a_fusion_input_that_adds_factors(shipped, tiny_tlio, tmp_
         run_experiment(cfg, out, lambda msg: None, only_inputs=["proposed"])
 
 
-def test_the_hook_on_a_real_model_feeds_windows_of_its_length(shipped, tiny_tlio):
-    from imu_learn import AlignOptions, load_recording
+def test_the_hook_on_a_real_model_feeds_windows_of_its_length(crop, tiny_tlio):
     m, _ = tiny_tlio
-    root = shipped / "euroc" / "MH_04_difficult"
-    rec = load_recording(root, "euroc", groundtruth=root / "mav0/state_groundtruth_estimate0/data.csv",
-                         options=AlignOptions(max_gap_s=0.05))
-    seq = max(rec.segments, key=len)
+    seq = crop
     t, gyro, acc = seq.t_ns[:2000], seq.gyro[:2000], seq.acc[:2000]  # the first 10 s
     hook = displacement_factors_for(m, t, gyro, acc, update_s=1.0)
     R0 = Rotation.from_quat(seq.q_wxyz[0, [1, 2, 3, 0]]).as_matrix()

@@ -9,10 +9,10 @@ import torch
 
 gtsam = pytest.importorskip("gtsam")
 
+from imu_learn.cli.fuse import main as fuse_main  # noqa: E402
+from imu_learn.cli.fuse import parser  # noqa: E402
 from imu_learn.errors import ConfigError, InvalidInputError  # noqa: E402
 from imu_learn.fuse import PositionFixes, apply_outages, fuse, simulate_relative_pose  # noqa: E402
-from imu_learn.fuse.__main__ import main as fuse_main  # noqa: E402
-from imu_learn.fuse.__main__ import parser  # noqa: E402
 from imu_learn.fuse.graph import IncrementalFusion  # noqa: E402
 from imu_learn.fuse.online import CausalStepper, load_causal_model, stream  # noqa: E402
 from imu_learn.infer.refine import refine_arrays  # noqa: E402
@@ -21,12 +21,9 @@ from imu_learn.train.checkpoint import save_checkpoint  # noqa: E402
 
 torch.set_num_threads(1)
 
-# The closed-form trajectory and the shipped crop, as tests/test_fuse.py builds them.
-from test_fuse import (  # noqa: E402, F401
-    CROP,
-    crop,  # noqa: E402, F401 (a fixture: the tests below take it by name)
-    spin_and_climb,
-)
+# The closed-form trajectory (tests/synthetic.py); the shipped crop is conftest.py's `crop` fixture.
+from crops import CROP  # noqa: E402
+from synthetic import spin_and_climb  # noqa: E402
 
 
 def noisy_case(seed=3):
@@ -74,7 +71,7 @@ def test_online_raw_equals_the_batch_causal_output_with_fixes_and_an_outage():
     assert np.array_equal(online.delay_ns(), delay) and st["delay"]["max_us"] == max(delay) * 1e-3
 
 
-def test_online_raw_equals_the_batch_with_relative_poses_on_a_real_crop(crop):  # noqa: F811
+def test_online_raw_equals_the_batch_with_relative_poses_on_a_real_crop(crop):
     n = 3000  # 15 s of the crop, VO-like aiding at 10 Hz
     t, g, a = crop.t_ns[:n], crop.gyro[:n], crop.acc[:n]
     from scipy.spatial.transform import Rotation
@@ -89,7 +86,7 @@ def test_online_raw_equals_the_batch_with_relative_poses_on_a_real_crop(crop):  
     assert online.counts["relative_pose_factors"] == batch.counts["relative_pose_factors"] == len(rel)
 
 
-def test_online_with_a_causal_model_equals_the_batch_on_its_refined_output(crop):  # noqa: F811
+def test_online_with_a_causal_model_equals_the_batch_on_its_refined_output(crop):
     n = 2400  # 12 s
     t, g, a = crop.t_ns[:n], crop.gyro[:n], crop.acc[:n]
     raw = np.c_[g, a]
@@ -215,19 +212,18 @@ def test_a_bidirectional_checkpoint_is_a_one_line_typed_error(shipped, tmp_path,
     short_recording(shipped, tmp_path / "data", samples=400)
     cfg_file = tmp_path / "f.toml"
     write_config(cfg_file, tmp_path / "data", tmp_path / "reports", ckpt)  # the config's own model
-    assert fuse_main(["--config", str(cfg_file), "--online"]) == 1
+    assert fuse_main(["--config", str(cfg_file), "--online"]) == 2
     cap = capsys.readouterr()
     err = cap.err.strip().splitlines()
     assert len(err) == 1 and "ConfigError" in err[0] and "bidirectional" in err[0] and "Traceback" not in cap.err
     assert not (tmp_path / "reports" / "online_test" / "online.json").exists()  # refused before any run
-    assert fuse_main(["--config", str(cfg_file), "--online", "--recordings", "nowhere"]) == 1
+    assert fuse_main(["--config", str(cfg_file), "--online", "--recordings", "nowhere"]) == 2
     assert "--recordings: nowhere not in the config" in capsys.readouterr().err
 
 
-def test_online_options_without_online_are_refused(tmp_path):
-    with pytest.raises(SystemExit) as e:
-        fuse_main(["--config", str(tmp_path / "f.toml"), "--checkpoint", "x.pt"])
-    assert e.value.code == 2
+def test_online_options_without_online_are_refused(tmp_path, capsys):
+    assert fuse_main(["--config", str(tmp_path / "f.toml"), "--checkpoint", "x.pt"]) == 2
+    assert capsys.readouterr().err == "imu-learn fuse: error: ConfigError: --checkpoint: only with --online\n"
 
 
 def test_help_documents_every_option_and_gives_an_example(capsys):
@@ -242,4 +238,4 @@ def test_help_documents_every_option_and_gives_an_example(capsys):
         assert a.help and a.help.strip(), a.option_strings
     for o in options:
         assert o in text
-    assert "examples:" in text and "python -m imu_learn.fuse --config configs/fuse_euroc.toml --online" in text
+    assert "examples:" in text and "imu-learn fuse --config configs/fuse_euroc.toml" in text and "--online" in text

@@ -42,6 +42,7 @@ def test_rmse_arithmetic():
     assert rmse(np.array([3.0, 4.0])) == pytest.approx(math.sqrt(12.5))
     assert rmse(np.array([-2.0])) == 2.0
     assert rmse(np.zeros(5)) == 0.0
+    assert rmse([1.0, 1.0, 1.0, 5.0]) == pytest.approx(math.sqrt(7.0), rel=1e-15)  # a list too
     assert math.isnan(rmse(np.zeros(0)))
 
 

@@ -19,11 +19,11 @@ import torch
 
 from imu_learn import _imu_core as core
 from imu_learn import load_recording
+from imu_learn.cli import fit as fit_cli
+from imu_learn.cli.checkpoint import main as checkpoint_main
+from imu_learn.cli.refine import main as refine_main
 from imu_learn.infer.model_check import compare_with_raw, format_comparison
-from imu_learn.infer.refine import main as refine_main
-from imu_learn.train import fit
 from imu_learn.train.checkpoint import CheckpointError, describe, load_checkpoint, load_model, strip_checkpoint
-from imu_learn.train.checkpoint import main as checkpoint_main
 
 torch.set_num_threads(1)
 
@@ -80,7 +80,7 @@ def card_sections(text: str):
 def refine_and_check_crop(ckpt: Path, crop: Path, out: Path) -> np.ndarray:
     """Refine ``crop`` with ``ckpt`` through the CLI entry point; the output must be the input's ASL
     format (same header, same stamps) with finite values. Returns the refined (N, 6)."""
-    assert refine_main(["--checkpoint", str(ckpt), "--input", str(crop), "--output", str(out), "--quiet"]) == 0
+    assert refine_main(["--checkpoint", str(ckpt), "--input", str(crop), "--out", str(out), "--quiet"]) == 0
     src, dst = crop / IMU_REL, out / IMU_REL
     assert dst.is_file()
     assert core.read_asl_imu_header(str(dst)) == core.read_asl_imu_header(str(src))
@@ -212,7 +212,7 @@ def test_tumvi_crop_loads_as_one_gap_free_segment():
 
 
 TINY = [
-    "--no-progress", "--data.window", "50", "--data.batch_size", "8", "--data.val_stride", "200",
+    "--quiet", "--data.window", "50", "--data.batch_size", "8", "--data.val_stride", "200",
     "--data.eval_stride", "50", "--model.hidden", "8", "--model.fc", "8", "--model.layers", "1",
     "--optim.steps_per_epoch", "2", "--optim.epochs", "1", "--optim.lr", "1e-3", "--seed", "7", "--threads", "1",
 ]
@@ -221,7 +221,7 @@ TINY = [
 @pytest.fixture(scope="module")
 def run_dir(tmp_path_factory):
     d = tmp_path_factory.mktemp("models") / "run"
-    assert fit.main(["--run-dir", str(d), *TINY]) == 0
+    assert fit_cli.main(["--out", str(d), *TINY]) == 0
     return d
 
 

@@ -26,7 +26,8 @@ import torch
 import faults
 from imu_learn import _imu_core as core
 from imu_learn.baselines.base import Raw
-from imu_learn.data import cache, labels
+from imu_learn.cli import labels as labels_cli
+from imu_learn.data import cache
 from imu_learn.errors import CacheError
 from imu_learn.nn.model import ImuRefiner, ModelConfig
 from imu_learn.train.checkpoint import CheckpointError, load_checkpoint, save_checkpoint
@@ -218,11 +219,11 @@ def models(tmp_path_factory):
 
 
 def refine_args(ckpt: Path, out: Path) -> list:
-    return ["--checkpoint", ckpt, "--input", CROP, "--output", out, "--device", "cpu", "--quiet", "--window", "1000"]
+    return ["--checkpoint", ckpt, "--input", CROP, "--out", out, "--device", "cpu", "--quiet", "--window", "1000"]
 
 
 def refine(ckpt: Path, out: Path) -> int:
-    from imu_learn.infer.refine import main
+    from imu_learn.cli.refine import main
 
     return main([str(a) for a in refine_args(ckpt, out)])
 
@@ -242,7 +243,7 @@ def test_refine_signal_midway_then_rerun(models, tmp_path, sig):
     out = tmp_path / "out"
     assert refine(models[0], out) == 0
     before = files(out)
-    proc = faulty_cli("*data.csv*", 1, "pause", tmp_path / "fired", "imu_learn.infer.refine", *refine_args(models[1], out))
+    proc = faulty_cli("*data.csv*", 1, "pause", tmp_path / "fired", "imu_learn.refine", *refine_args(models[1], out))
     signal_midway(proc, tmp_path / "fired", sig)
     assert proc.returncode != 0
     assert files(out)[str(IMU_REL)] == before[str(IMU_REL)]
@@ -278,7 +279,7 @@ def test_refine_real_full_disk(models, out_dir, capsys):
 
 
 def labels_args(out: Path, *more: str) -> list:
-    return ["euroc", "--root", str(REPO / "datasets" / "euroc"), "--out", str(out), "--quiet",
+    return ["euroc", "--dataset-dir", str(REPO / "datasets" / "euroc"), "--out", str(out), "--quiet",
             "--window", "100", "--stride", "50", *more]
 
 
@@ -298,22 +299,22 @@ def assert_same_arrays(a: list, b: list) -> None:
 @pytest.fixture(scope="module")
 def reference_cache(tmp_path_factory):
     out = tmp_path_factory.mktemp("labels") / "ref"
-    assert labels.main(labels_args(out)) == 0
+    assert labels_cli.main(labels_args(out)) == 0
     return cache_arrays(out)
 
 
 @pytest.mark.parametrize("pattern,nth", [("*.npz*", 2), ("*manifest.json*", 1)])
 def test_labels_failing_writer_keeps_the_previous_cache(out_dir, reference_cache, capsys, pattern, nth):
-    assert labels.main(labels_args(out_dir)) == 0
+    assert labels_cli.main(labels_args(out_dir)) == 0
     before = files(out_dir)
     with faults.installed(faults.Fault(pattern, nth)) as fault:
-        assert labels.main(labels_args(out_dir, "--rebuild")) == 2
+        assert labels_cli.main(labels_args(out_dir, "--rebuild")) == 2
     assert fault.fired
     one_error_line(capsys.readouterr().err, str(out_dir))
     assert_intact(before, out_dir, untouched=cache.MANIFEST)
     assert_same_arrays(cache_arrays(out_dir), reference_cache)  # the previous cache, whole
     # the next run finishes, and drops the files no manifest lists any more
-    assert labels.main(labels_args(out_dir)) == 0
+    assert labels_cli.main(labels_args(out_dir)) == 0
     listed = {s["file"] for r in cache.read_manifest(out_dir)["recordings"] for s in r["segments"]}
     assert {p.name for p in out_dir.glob("*.npz")} == listed
     assert not (out_dir / cache.PROGRESS).exists()
@@ -323,7 +324,7 @@ def test_labels_sigterm_midway_then_resume(tmp_path, reference_cache):
     out = tmp_path / "out"
     marker = tmp_path / "fired"
     # stopped while writing the progress after the second recording, then SIGTERM
-    proc = faulty_cli(f"*{cache.PROGRESS}*", 2, "pause", marker, "imu_learn.data.labels", *labels_args(out))
+    proc = faulty_cli(f"*{cache.PROGRESS}*", 2, "pause", marker, "imu_learn.labels", *labels_args(out))
     signal_midway(proc, marker, signal.SIGTERM)
     assert proc.returncode == -signal.SIGTERM
     assert not (out / cache.MANIFEST).exists()  # nothing finished: no manifest, not a partial one
@@ -334,27 +335,27 @@ def test_labels_sigterm_midway_then_resume(tmp_path, reference_cache):
     assert_only_hidden_temporaries(out)
     with pytest.raises(CacheError, match="no label cache"):
         cache.load_cache(out)
-    assert labels.main(labels_args(out)) == 0
+    assert labels_cli.main(labels_args(out)) == 0
     m = cache.read_manifest(out)
     assert m["recordings"][0]["seconds"] == progress["recordings"][0]["seconds"]  # resumed, not redone
     assert_same_arrays(cache_arrays(out), reference_cache)
 
 
 def test_labels_read_only_cache(out_dir, capsys, monkeypatch):
-    assert labels.main(labels_args(out_dir)) == 0
+    assert labels_cli.main(labels_args(out_dir)) == 0
     before = files(out_dir)
     with read_only(out_dir, monkeypatch):
-        assert labels.main(labels_args(out_dir, "--rebuild")) == 2
+        assert labels_cli.main(labels_args(out_dir, "--rebuild")) == 2
     one_error_line(capsys.readouterr().err, str(out_dir))
     assert_intact(before, out_dir, untouched=cache.MANIFEST)
 
 
 def test_labels_real_full_disk(out_dir, reference_cache, capsys):
     needs_mount()
-    assert labels.main(labels_args(out_dir)) == 0
+    assert labels_cli.main(labels_args(out_dir)) == 0
     before = files(out_dir)
     faults.shrink_to_used(out_dir, 8192)
-    assert labels.main(labels_args(out_dir, "--rebuild")) == 2
+    assert labels_cli.main(labels_args(out_dir, "--rebuild")) == 2
     assert "No space left" in one_error_line(capsys.readouterr().err, str(out_dir))
     assert_intact(before, out_dir, untouched=cache.MANIFEST)
     assert_same_arrays(cache_arrays(out_dir), reference_cache)
@@ -364,14 +365,14 @@ def test_two_labels_runs_on_one_cache_take_turns(tmp_path, reference_cache):
     out = tmp_path / "out"
     marker = tmp_path / "holding"
     # The first run stops inside the lock (halfway through its first progress file) until released.
-    first = faulty_cli(f"*{cache.PROGRESS}*", 1, "hold", marker, "imu_learn.data.labels", *labels_args(out))
+    first = faulty_cli(f"*{cache.PROGRESS}*", 1, "hold", marker, "imu_learn.labels", *labels_args(out))
     second = None
     try:
         deadline = time.time() + 120
         while not marker.exists():
             assert first.poll() is None and time.time() < deadline, first.communicate()[1]
             time.sleep(0.05)
-        second = subprocess.Popen([sys.executable, "-m", "imu_learn.data.labels", *labels_args(out, "--rebuild")],
+        second = subprocess.Popen([sys.executable, "-m", "imu_learn.labels", *labels_args(out, "--rebuild")],
                                   cwd=REPO, env=ENV, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
         waiting = second.stderr.readline()  # it says it waits, and does
         assert "waiting" in waiting, waiting
@@ -392,7 +393,7 @@ def test_two_labels_runs_on_one_cache_take_turns(tmp_path, reference_cache):
 @pytest.mark.parametrize("damage", ["truncate a segment", "flip a segment byte", "edit the manifest"])
 def test_damaged_cache_is_refused_then_rebuilt_by_labels(tmp_path, reference_cache, capsys, damage):
     out = tmp_path / "c"
-    assert labels.main(labels_args(out)) == 0
+    assert labels_cli.main(labels_args(out)) == 0
     seg = sorted(out.glob("*.npz"))[0]
     if damage == "truncate a segment":
         seg.write_bytes(seg.read_bytes()[:-100])
@@ -409,9 +410,9 @@ def test_damaged_cache_is_refused_then_rebuilt_by_labels(tmp_path, reference_cac
         culprit = out / cache.MANIFEST
     with pytest.raises(CacheError) as e:
         cache.load_cache(out)
-    assert str(culprit) in str(e.value) and "imu_learn.data.labels" in str(e.value)
+    assert str(culprit) in str(e.value) and "imu-learn labels euroc --out" in str(e.value)
     capsys.readouterr()
-    assert labels.main(labels_args(out)) == 0
+    assert labels_cli.main(labels_args(out)) == 0
     err = capsys.readouterr().err
     assert str(culprit) in err and "rebuilding" in err
     assert_same_arrays(cache_arrays(out), reference_cache)
@@ -420,22 +421,22 @@ def test_damaged_cache_is_refused_then_rebuilt_by_labels(tmp_path, reference_cac
 # ---------------------------------------------------------------------------------------------
 # fit
 
-FIT_TINY = ["--no-progress", "--data.window", "50", "--data.batch_size", "8", "--data.val_stride", "200",
+FIT_TINY = ["--quiet", "--data.window", "50", "--data.batch_size", "8", "--data.val_stride", "200",
             "--data.eval_stride", "50", "--model.hidden", "8", "--model.fc", "8", "--model.layers", "1",
             "--optim.steps_per_epoch", "4", "--optim.lr", "1e-3", "--seed", "7", "--threads", "1"]
 
 
 def fit(*args: str) -> int:
-    from imu_learn.train import fit as fit_mod
+    from imu_learn.cli import fit as fit_mod
     return fit_mod.main([str(a) for a in args])
 
 
 def fit_new(run: Path, epochs: int) -> list:
-    return ["--run-dir", str(run), *FIT_TINY, "--optim.epochs", str(epochs)]
+    return ["--out", str(run), *FIT_TINY, "--optim.epochs", str(epochs)]
 
 
 def fit_resume(run: Path, epochs: int) -> list:
-    return ["--resume", str(run), "--no-progress", "--optim.epochs", str(epochs)]
+    return ["--resume", str(run), "--quiet", "--optim.epochs", str(epochs)]
 
 
 def test_fit_failing_writer_keeps_the_previous_checkpoint(out_dir, capsys):
@@ -456,7 +457,7 @@ def test_fit_signal_midway_through_a_checkpoint_then_resume(tmp_path, sig):
     run = tmp_path / "run"
     marker = tmp_path / "fired"
     # stopped halfway through epoch 2's last.pt (epoch 1's is complete)
-    proc = faulty_cli("*last.pt*", 2, "pause", marker, "imu_learn.train.fit", *fit_new(run, 3))
+    proc = faulty_cli("*last.pt*", 2, "pause", marker, "imu_learn.fit", *fit_new(run, 3))
     signal_midway(proc, marker, sig)
     assert proc.returncode == -sig
     for p in run.iterdir():
@@ -513,10 +514,16 @@ def test_fit_resume_on_a_tampered_last_pt_refuses_in_one_line(tmp_path, capsys):
     assert files(run) == before  # refused, not restarted from scratch
 
 
-def test_checkpoints_written_before_digests_still_load():
+def test_checkpoints_written_before_digests_still_load(tmp_path):
+    """A checkpoint saved before digests existed (no ``digest`` entry) loads, with its weights."""
     for path in sorted((REPO / "models").glob("*.pt")):
         state = load_checkpoint(path)
-        assert "digest" not in state  # shipped before digests existed; not rewritten
+        old = {k: v for k, v in state.items() if k != "digest"}
+        file = tmp_path / path.name
+        torch.save(old, file)
+        loaded = load_checkpoint(file)
+        assert "digest" not in loaded
+        assert all(torch.equal(loaded["model"][k], v) for k, v in state["model"].items())
 
 
 # ---------------------------------------------------------------------------------------------
@@ -536,14 +543,14 @@ class SavingRaw(Raw):
         return self
 
 
-EVAL_ARGS = ["--config", str(REPO / "configs" / "eval_default.toml"), "--no-progress", "--fit.threads", "1",
+EVAL_ARGS = ["--config", str(REPO / "configs" / "eval_default.toml"), "--quiet", "--fit.threads", "1",
              "--eval.stride", "200", "--eval.noise_floor", "never", "--eval.curve_count", "2",
              "--eval.horizons", "[10]", "--eval.airimu_s", "[1.0]"]
 
 
 def evaluate(out: Path, methods: str = "raw,saver") -> int:
-    from imu_learn.eval import run as ev
-    return ev.main([*EVAL_ARGS, "--methods", methods, "--out", str(out)])
+    from imu_learn.cli import evaluate as ev_cli
+    return ev_cli.main([*EVAL_ARGS, "--methods", methods, "--out", str(out)])
 
 
 @pytest.fixture()
@@ -567,7 +574,7 @@ def test_evaluate_failing_writer_keeps_the_previous_report(out_dir, saver, capsy
 def test_evaluate_sigint_midway_then_rerun(tmp_path):
     out = tmp_path / "out"
     marker = tmp_path / "fired"
-    proc = faulty_cli("*report.md*", 1, "pause", marker, "imu_learn.eval.run", *EVAL_ARGS, "--methods", "raw",
+    proc = faulty_cli("*report.md*", 1, "pause", marker, "imu_learn.evaluate", *EVAL_ARGS, "--methods", "raw",
                       "--out", out)
     err = signal_midway(proc, marker, signal.SIGINT)
     assert proc.returncode == 130, err
@@ -615,7 +622,7 @@ sigma_m = {sigma_m}
 
 def fuse(config: Path, out: Path) -> int:
     pytest.importorskip("gtsam")
-    from imu_learn.fuse.__main__ import main
+    from imu_learn.cli.fuse import main
 
     return main(["--config", str(config), "--out", str(out)])
 
@@ -625,7 +632,7 @@ def test_fuse_failing_writer_keeps_the_previous_results(tmp_path, out_dir, capsy
     assert fuse(fuse_config(tmp_path / "a.toml", 0.1), out_dir) == 0
     before = files(out_dir)
     with faults.installed(faults.Fault(pattern)) as fault:
-        assert fuse(fuse_config(tmp_path / "b.toml", 0.2), out_dir) == 1  # another aiding: every run redone
+        assert fuse(fuse_config(tmp_path / "b.toml", 0.2), out_dir) == 2  # another aiding: every run redone
     name = Path(fault.fired).name
     final = next(n for n in before if Path(n).name == name or name.startswith(f".{Path(n).name}."))
     one_error_line(capsys.readouterr().err, str(out_dir / final))
@@ -654,7 +661,7 @@ def test_fuse_read_only_report_folder(tmp_path, out_dir, capsys, monkeypatch):
     assert fuse(fuse_config(tmp_path / "a.toml", 0.1), out_dir) == 0
     before = files(out_dir)
     with read_only(out_dir, monkeypatch):
-        assert fuse(fuse_config(tmp_path / "b.toml", 0.2), out_dir) == 1
+        assert fuse(fuse_config(tmp_path / "b.toml", 0.2), out_dir) == 2
     one_error_line(capsys.readouterr().err, str(out_dir))
     assert_intact(before, out_dir)
 

@@ -12,7 +12,9 @@ import pytest
 import torch
 
 from imu_learn import _imu_core as core
-from imu_learn.infer.refine import main, refine_arrays, window_plan
+from imu_learn.cli.refine import main
+from imu_learn.infer.refine import refine_arrays
+from imu_learn.infer.windowing import window_plan
 from imu_learn.nn.model import ImuRefiner, ModelConfig
 from imu_learn.train.checkpoint import save_checkpoint
 
@@ -131,7 +133,7 @@ def test_cli_refines_an_asl_folder(tmp_path, ckpt, imu):
     out = tmp_path / "out"
     env = dict(os.environ, OMP_NUM_THREADS="1", MKL_NUM_THREADS="1")
     r = subprocess.run(
-        [sys.executable, "-m", "imu_learn.infer.refine", "--checkpoint", str(ckpt), "--input", str(src), "--output", str(out),
+        [sys.executable, "-m", "imu_learn.refine", "--checkpoint", str(ckpt), "--input", str(src), "--out", str(out),
          "--window", "1000", "--overlap", "200", "--device", "cpu", "--quiet"],
         capture_output=True, text=True, env=env, timeout=120,
     )
@@ -161,20 +163,20 @@ def test_cli_copy_folder_csv_output_and_refusals(tmp_path, ckpt, capsys):
     before = sha(src / IMU_REL)
     # --copy-folder: the whole sequence, IMU replaced
     out = tmp_path / "copy"
-    assert main(["--checkpoint", str(ckpt), "--input", str(src), "--output", str(out), "--copy-folder", "--quiet"]) == 0
+    assert main(["--checkpoint", str(ckpt), "--input", str(src), "--out", str(out), "--copy-folder", "--quiet"]) == 0
     assert (out / "groundtruth_pose.tum").read_bytes() == (src / "groundtruth_pose.tum").read_bytes()
     assert (out / "mav0" / "imu0" / "sensor.yaml").exists() and sha(out / IMU_REL) != before
     # a .csv input and a .csv output
     csv_out = tmp_path / "refined.csv"
-    assert main(["--checkpoint", str(ckpt), "--input", str(src / IMU_REL), "--output", str(csv_out), "--quiet"]) == 0
+    assert main(["--checkpoint", str(ckpt), "--input", str(src / IMU_REL), "--out", str(csv_out), "--quiet"]) == 0
     assert csv_out.read_bytes() == (out / IMU_REL).read_bytes()
     capsys.readouterr()
     # OUT == IN, as a folder and as the file itself: refused, input untouched
     for o in (src, src / IMU_REL):
-        assert main(["--checkpoint", str(ckpt), "--input", str(src), "--output", str(o), "--quiet"]) == 2
+        assert main(["--checkpoint", str(ckpt), "--input", str(src), "--out", str(o), "--quiet"]) == 2
         err = capsys.readouterr().err
         assert err.count("\n") == 1 and "input" in err
-    assert main(["--checkpoint", str(ckpt), "--input", str(src), "--output", str(src / "x"), "--copy-folder"]) == 2
+    assert main(["--checkpoint", str(ckpt), "--input", str(src), "--out", str(src / "x"), "--copy-folder"]) == 2
     capsys.readouterr()
     assert sha(src / IMU_REL) == before
 
@@ -185,13 +187,13 @@ def test_bad_checkpoint_is_one_line_exit_2(tmp_path, capsys):
     bad = tmp_path / "bad.pt"
     bad.write_bytes(b"not a checkpoint at all")
     for ck in (bad, tmp_path / "missing.pt"):
-        assert main(["--checkpoint", str(ck), "--input", str(src), "--output", str(tmp_path / "o")]) == 2
+        assert main(["--checkpoint", str(ck), "--input", str(src), "--out", str(tmp_path / "o")]) == 2
         cap = capsys.readouterr()
-        assert cap.err.count("\n") == 1 and cap.err.startswith("error:"), cap.err
+        assert cap.err.count("\n") == 1 and cap.err.startswith("imu-learn refine: error: "), cap.err
     assert not (tmp_path / "o").exists()
     # and through the real entry point
     r = subprocess.run(
-        [sys.executable, "-m", "imu_learn.infer.refine", "--checkpoint", str(bad), "--input", str(src), "--output",
+        [sys.executable, "-m", "imu_learn.refine", "--checkpoint", str(bad), "--input", str(src), "--out",
          str(tmp_path / "o")], capture_output=True, text=True, env=dict(os.environ, OMP_NUM_THREADS="1"), timeout=120,
     )
     assert r.returncode == 2 and r.stderr.count("\n") == 1 and "checkpoint" in r.stderr
@@ -217,7 +219,7 @@ def test_kaist_keeps_every_other_column(tmp_path, ckpt):
             f.write(f"{t_ns[i]}," + ",".join(f"{x:.9g}" for x in row) + "\n")
     before = (root / "sensor_data" / "xsens_imu.csv").read_text()
     out = tmp_path / "out"
-    assert main(["--checkpoint", str(ckpt), "--input", str(root), "--output", str(out), "--quiet", "--window", "128",
+    assert main(["--checkpoint", str(ckpt), "--input", str(root), "--out", str(out), "--quiet", "--window", "128",
                  "--overlap", "32"]) == 0
     assert (root / "sensor_data" / "xsens_imu.csv").read_text() == before
     new = list(csv.reader(open(out / "sensor_data" / "xsens_imu.csv")))
@@ -249,7 +251,7 @@ def test_blackbird_hdf5_copy_with_imu_replaced(tmp_path, ckpt):
         f["gyro_raw"].attrs["unit"] = "rad/s"
     before = sha(src / "data.hdf5")
     out = tmp_path / "out"
-    assert main(["--checkpoint", str(ckpt), "--input", str(src), "--output", str(out), "--quiet"]) == 0
+    assert main(["--checkpoint", str(ckpt), "--input", str(src), "--out", str(out), "--quiet"]) == 0
     assert sha(src / "data.hdf5") == before
     from imu_learn.train.checkpoint import load_model
 
@@ -273,7 +275,7 @@ def test_broad_mat_copy_with_imu_replaced(tmp_path, ckpt):
                            "sampling_rate": 286.0})
     before = sha(src)
     out = tmp_path / "out"
-    assert main(["--checkpoint", str(ckpt), "--input", str(src), "--output", str(out), "--quiet"]) == 0
+    assert main(["--checkpoint", str(ckpt), "--input", str(src), "--out", str(out), "--quiet"]) == 0
     assert sha(src) == before
     m = scipy_io.loadmat(out / "01_trial.mat")
     from imu_learn.train.checkpoint import load_model
@@ -284,5 +286,5 @@ def test_broad_mat_copy_with_imu_replaced(tmp_path, ckpt):
     np.testing.assert_array_equal(m["opt_quat"], q)
     assert float(m["sampling_rate"].ravel()[0]) == 286.0
     # OUT == IN for a file input: refused
-    assert main(["--checkpoint", str(ckpt), "--input", str(src), "--output", str(src), "--quiet"]) == 2
+    assert main(["--checkpoint", str(ckpt), "--input", str(src), "--out", str(src), "--quiet"]) == 2
     assert sha(src) == before

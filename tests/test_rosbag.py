@@ -8,6 +8,7 @@ import pytest
 import torch
 
 from imu_learn import _imu_core as core
+from imu_learn.cli.refine import main as refine_main
 from imu_learn.data.formats import detect_format, read_imu_source, rosbag, write_imu
 from imu_learn.data.formats.groundtruth import read_groundtruth
 from imu_learn.data.loading import AlignOptions, align, load_sequence
@@ -21,7 +22,6 @@ from imu_learn.errors import (
     NotABagError,
     TruncatedBagError,
 )
-from imu_learn.infer.refine import main as refine_main
 from imu_learn.infer.refine import refine_recording, refine_with_variance
 from imu_learn.nn.model import ImuRefiner, ModelConfig
 from rosbag_fixtures import GT_CSV, IMU_CSV, KINDS, POSE_TOPICS, TOPICS, bag_name, write_fixture_bag
@@ -91,12 +91,13 @@ def test_detects_and_lists_topics(bags, kind):
 
 
 @pytest.mark.parametrize("kind", KINDS)
-def test_load_equals_asl_folder_bit_for_bit(bags, kind, capsys):
+def test_load_equals_asl_folder_bit_for_bit(bags, kind, caplog):
     """The bag's IMU with EuRoC's ground-truth file beside it loads exactly as the ASL folder."""
+    caplog.set_level("INFO", logger="imu_learn")
     from_asl = load_sequence(CROP, "euroc")
     from_bag = load_sequence(bags[kind], "rosbag", groundtruth=GT_CSV)
     assert_same_sequences(from_bag, from_asl)
-    assert "using IMU topic /imu0" in capsys.readouterr().err  # the bag's only IMU topic, said so
+    assert "using IMU topic /imu0" in caplog.text  # the bag's only IMU topic, said so (logged)
 
 
 @pytest.mark.parametrize("kind", KINDS)
@@ -250,7 +251,7 @@ def cov_refined(bags, tmp_path_factory):
     out = tmp_path_factory.mktemp("cov_refined")
     for kind in KINDS:
         rc = refine_main(["--checkpoint", str(COV_CHECKPOINT), "--input", str(bags[kind]),
-                          "--output", str(out / bag_name(kind)), "--fill-covariance", "--device", "cpu", "--quiet"])
+                          "--out", str(out / bag_name(kind)), "--fill-covariance", "--device", "cpu", "--quiet"])
         assert rc == 0
     raw = read_imu_source(bags["ros1"])
     expected = refine_with_variance(load_model(COV_CHECKPOINT), raw.gyro, raw.acc)
@@ -301,7 +302,7 @@ def test_fill_covariance_needs_a_covariance_head(bags, tmp_path, capsys):
 
     ckpt = tmp_path / "no_head.pt"
     save_checkpoint(ckpt, random_model(), {"test": True}, epoch=1, step=1, best_metric=None)
-    rc = refine_main(["--checkpoint", str(ckpt), "--input", str(bags["ros1"]), "--output", str(tmp_path / "o.bag"),
+    rc = refine_main(["--checkpoint", str(ckpt), "--input", str(bags["ros1"]), "--out", str(tmp_path / "o.bag"),
                       "--fill-covariance", "--device", "cpu", "--quiet"])
     err = capsys.readouterr().err.strip().splitlines()
     assert rc == 2 and len(err) == 1
@@ -310,7 +311,7 @@ def test_fill_covariance_needs_a_covariance_head(bags, tmp_path, capsys):
 
 
 def test_fill_covariance_needs_a_bag(tmp_path, capsys):
-    rc = refine_main(["--checkpoint", str(COV_CHECKPOINT), "--input", str(CROP), "--output", str(tmp_path / "o"),
+    rc = refine_main(["--checkpoint", str(COV_CHECKPOINT), "--input", str(CROP), "--out", str(tmp_path / "o"),
                       "--fill-covariance", "--device", "cpu", "--quiet"])
     err = capsys.readouterr().err.strip().splitlines()
     assert rc == 2 and len(err) == 1
@@ -394,7 +395,7 @@ def test_cli_prints_one_line_naming_bag_and_topic(bags, tmp_path, capsys):
 
     ckpt = tmp_path / "m.pt"
     save_checkpoint(ckpt, random_model(), {"test": True}, epoch=1, step=1, best_metric=None)
-    rc = refine_main(["--checkpoint", str(ckpt), "--input", str(bags["mcap"]), "--output", str(tmp_path / "o"),
+    rc = refine_main(["--checkpoint", str(ckpt), "--input", str(bags["mcap"]), "--out", str(tmp_path / "o"),
                       "--imu-topic", "/imu1", "--quiet"])
     err = capsys.readouterr().err.strip().splitlines()
     assert rc == 2 and len(err) == 1
@@ -413,16 +414,16 @@ def test_every_bag_error_is_an_imu_error():
 
 
 def test_labels_cli_on_a_folder_of_bags(bags, tmp_path, capsys):
-    from imu_learn.data.labels import main as labels_main
+    from imu_learn.cli.labels import main as labels_main
 
     root = bags["ros1"].parent
-    rc = labels_main(["rosbag", "--root", str(root), "--out", str(tmp_path / "cache"), "--quiet",
+    rc = labels_main(["rosbag", "--dataset-dir", str(root), "--out", str(tmp_path / "cache"), "--quiet",
                       "--imu-topic", "/imu0", "--groundtruth-topic", "/groundtruth/pose"])
     out = capsys.readouterr().out
     assert rc == 0, out
     for name in ("run:", "run_sqlite3:", "run_mcap:"):  # a .bag's name drops the suffix
         assert name in out
-    rc = labels_main(["rosbag", "--root", str(root), "--out", str(tmp_path / "cache2"), "--quiet"])
+    rc = labels_main(["rosbag", "--dataset-dir", str(root), "--out", str(tmp_path / "cache2"), "--quiet"])
     err = capsys.readouterr().err.strip().splitlines()
     assert rc == 2 and "3 ground-truth topics" in err[-1] and len(err[-1].splitlines()) == 1
 

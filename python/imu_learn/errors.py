@@ -3,6 +3,12 @@
 Every core error kind has its own class, all under :class:`ImuError`. Parse errors carry the
 file, the 1-based line and column and the header's field name as attributes, so callers can
 report or fix the exact cell. A missing file is the built-in :class:`FileNotFoundError`.
+
+The Rust core raises these classes itself (pyo3's ``import_exception!`` in
+``crates/imu_core/src/python/errors.rs``): one class per core error kind, HeaderError,
+ColumnCountError, NotNumericError, NonFiniteError, TimestampError, FloatTimestampError,
+TooFewRowsError, AlignmentError, NoOverlapError, InvalidInputError. Nothing re-wraps them, so
+renaming one of them, or changing its constructor's keywords, breaks the core's mapping.
 """
 from __future__ import annotations
 
@@ -187,15 +193,18 @@ __all__ = [
 
 
 def one_line(e: BaseException) -> str:
-    """An error as the one line an entry point prints: ``path: reason`` for a missing file, the
-    class name before the message for imu_learn's own errors, whitespace collapsed."""
-    if isinstance(e, FileNotFoundError) and e.filename:
-        msg = f"{e.filename}: {e.strerror or 'not found'}"
+    """An error as the one line an entry point prints: always ``<Class>: <message>``, the message of
+    an OSError with a file being ``path: reason`` (``FileNotFoundError: runs/x: No such file or
+    directory``), whitespace collapsed."""
+    if isinstance(e, OSError) and e.filename and e.strerror:
+        msg = f"{e.filename}: {e.strerror}"
+        if e.filename2:
+            msg = f"{e.filename} -> {e.filename2}: {e.strerror}"
+    elif isinstance(e, FileNotFoundError) and e.filename:
+        msg = f"{e.filename}: not found"
     else:
-        msg = str(e) or type(e).__name__
-        if isinstance(e, ImuError):
-            msg = f"{type(e).__name__}: {msg}"
-    return " ".join(msg.split())
+        msg = str(e)
+    return " ".join(f"{type(e).__name__}: {msg}".split()) if msg else type(e).__name__
 
 
 class ConfigError(ImuError, ValueError):

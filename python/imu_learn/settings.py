@@ -20,14 +20,14 @@ else:  # pragma: no cover - only on 3.9/3.10
         tomllib = None  # type: ignore[assignment]
 
 
-# Environment variable naming the data root (DataConfig.data_root); --data.data_root beats it.
+# Environment variable naming the data root (DataConfig.data_root); --data-root DIR (the CLI) beats it.
 DATA_ROOT_ENV = "IMU_LEARN_DATA"
 
 
 
 def hints_of(cls: type) -> Dict[str, Any]:
     mod = sys.modules[cls.__module__]
-    return typing.get_typehints_of(cls, vars(mod))
+    return typing.get_type_hints(cls, vars(mod))
 
 
 def _type_name(tp: Any) -> str:

@@ -23,8 +23,8 @@ matters for fusion; it lands with the fusion issue), and its option of feeding w
 (ground-truth-rotated) accelerations. The heads are zero-initialised, so the untrained model is the
 identity (refine returns the raw IMU bit for bit).
 
-``refine`` runs :func:`imu_learn.refine.refine_arrays` (overlapping windows of the training
-length, half-window overlap, centre-crop stitching). Training uses
+``refine`` applies the net by the one windowing rule (:mod:`imu_learn.infer.windowing`:
+overlapping windows of the training length, half overlap, centre-crop stitching). Training uses
 :func:`imu_learn.baselines.proposed.train_refiner` (Adam, ``FitSettings`` budget, best validation
 weights kept).
 """
@@ -39,10 +39,11 @@ import torch
 from torch import nn
 
 from imu_learn.baselines.base import FitSettings, Method
-from imu_learn.baselines.proposed import imu_stats, pick_device, train_refiner
+from imu_learn.baselines.proposed import start_refiner_fit, train_refiner
 from imu_learn.core.batches import Batch, BatchConfig
 from imu_learn.data.types import Sequence
-from imu_learn.infer.refine import refine_arrays
+from imu_learn.infer.windowing import Windowing, apply
+from imu_learn.nn.device import pick_device
 from imu_learn.nn.losses import LossConfig, imu_loss
 
 Tensor = torch.Tensor
@@ -66,10 +67,9 @@ class AirImuConfig:
     grad_clip: float = 1.0
     evals: int = 10  # validation checks over the run
     val_stride: int = 0  # validation window step [samples]; 0: window // 2
-    overlap: int = -1  # refine overlap [samples]; -1: window // 2
 
     @property
-    def causal(self) -> bool:  # for imu_learn.infer.refine: always refined in stitched windows
+    def causal(self) -> bool:  # for imu_learn.infer.windowing: always refined in stitched windows
         return False
 
     def loss_config(self) -> LossConfig:
@@ -134,14 +134,8 @@ class AirImuStyle(Method):
 
     def fit(self, train: List[Sequence], val: List[Sequence], settings: FitSettings = FitSettings()) -> Dict[str, list]:
         c = self.config
-        W = int(settings.window)
-        train = [s for s in train if len(s) > W]
-        if not train:
-            raise ValueError(f"airimu-style: no training sequence longer than the window ({W} samples)")
-        self.window = W
-        self.device = pick_device(settings.device)
-        torch.manual_seed(settings.seed)
-        mean, std = imu_stats(train)
+        train, mean, std = start_refiner_fit(self, train, settings)
+        W = self.window
         self.model = AirImuNet(c, mean=mean, std=std)
         bc = BatchConfig(window=W, batch_size=settings.batch_size, gravity=settings.gravity)  # no augmentation
         if int(bc.fractions[-1] * W) != W:
@@ -149,9 +143,8 @@ class AirImuStyle(Method):
         return train_refiner(self.model, train, val, settings, bc, self._loss, c.evals, c.grad_clip, c.val_stride)
 
     def refine(self, seq: Sequence) -> Tuple[np.ndarray, np.ndarray]:
-        W = self.window
-        overlap = self.config.overlap if self.config.overlap >= 0 else W // 2
-        return refine_arrays(self.model, seq.gyro, seq.acc, window=W, overlap=min(overlap, W - 1))
+        gyro, acc, _ = apply(self.model, seq.gyro, seq.acc, Windowing.for_training_window(self.window))
+        return gyro, acc
 
     def save(self, path: Path) -> None:
         path = Path(path)
@@ -163,7 +156,7 @@ class AirImuStyle(Method):
         d = torch.load(Path(path), map_location="cpu", weights_only=True)
         if not isinstance(d, dict) or d.get("format") != FORMAT:
             raise ValueError(f"{path}: not an airimu-style baseline file ({FORMAT})")
-        self.config = AirImuConfig(**d["config"])
+        self.config = AirImuConfig(**{k: v for k, v in d["config"].items() if k != "overlap"})  # older files: a refine overlap, now the windowing rule's
         self.model = AirImuNet(self.config)
         self.model.load_state_dict(d["state"])
         self.model.to(self.device).eval()

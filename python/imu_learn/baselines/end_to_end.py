@@ -46,7 +46,7 @@ for the nearest horizon h (by ratio, :meth:`EndToEnd.horizon_for`):
 """
 from __future__ import annotations
 
-import sys
+import logging
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Dict, List, Optional, Tuple
@@ -56,13 +56,15 @@ import torch
 from torch import nn
 
 from imu_learn.baselines.base import FitSettings, Method, PosePrediction
-from imu_learn.core.batches import AugmentConfig, BatchConfig, BatchSampler
+from imu_learn.core.batches import AugmentConfig, BatchConfig, BatchSampler, batch_seed
 from imu_learn.core.quat import quat_mul, quat_rotate
 from imu_learn.data.types import Sequence
+from imu_learn.nn.device import pick_device
 from imu_learn.nn.losses import huber_norm
 from imu_learn.nn.so3 import quat_conj, so3_exp, so3_log
 from imu_learn.nn.so3 import quat_mul as tquat_mul
 
+logger = logging.getLogger(__name__)
 Tensor = torch.Tensor
 FORMAT = "imu_learn.baselines.end_to_end.v2"  # one net per horizon
 FORMAT_V1 = "imu_learn.baselines.end_to_end.v1"  # one net (still read)
@@ -118,12 +120,6 @@ class EndToEndNet(nn.Module):
         feat = torch.cat((h_n[-2], h_n[-1]), dim=-1)  # forward after the last sample, backward after the first
         out = self.out_mean.to(imu.dtype) + self.out_std.to(imu.dtype) * self.head(feat)
         return out[:, :3], out[:, 3:]
-
-
-def _device(name: str) -> torch.device:
-    if name == "auto":
-        return torch.device("cuda" if torch.cuda.is_available() else "cpu")
-    return torch.device(name)
 
 
 def window_targets(seqs: List[Sequence], seq_index: np.ndarray, start: np.ndarray, n) -> Tuple[np.ndarray, np.ndarray]:
@@ -189,15 +185,15 @@ class EndToEnd(Method):
         horizon ``train_loss``, ``val_loss``, ``val_step``, ``best_step``; with several the same
         prefixed ``n<h>.`` per horizon; ``horizons`` lists the trained ones."""
         self.window = int(settings.window)
-        self.device = _device(settings.device)
+        self.device = pick_device(settings.device)
         wanted = sorted({int(h) for h in settings.horizons}) or [self.window]
         usable = [h for h in wanted if any(len(s) > h for s in train)]
         if not usable:
             raise ValueError(f"end-to-end: no training sequence longer than the window ({max(wanted)} samples)")
         skipped = [h for h in wanted if h not in usable]
         if skipped:
-            print(f"end-to-end: no training sequence longer than {skipped} samples: those horizons use the net "
-                  f"of the nearest trained one", file=sys.stderr)
+            logger.warning("end-to-end: no training sequence longer than %s samples: those horizons use the net "
+                           "of the nearest trained one", skipped)
         nets: Dict[int, EndToEndNet] = {}
         log: Dict[str, list] = {"horizons": list(usable)}
         if skipped:
@@ -245,7 +241,7 @@ class EndToEnd(Method):
         log: Dict[str, list] = {"train_loss": [], "val_loss": [], "val_step": []}
         best, best_state = float("inf"), None
         for step in range(steps):
-            b = sampler.sample(settings.seed * 1_000_003 + step)
+            b = sampler.sample(batch_seed(settings.seed, 0, step))
             n = W
             if c.multi_length:
                 n = int(rng.choice(b.horizons))

@@ -36,6 +36,7 @@ from torch import nn
 
 from imu_learn.baselines.base import FitSettings, Method
 from imu_learn.data.types import Sequence
+from imu_learn.nn.device import pick_device
 from imu_learn.nn.losses import huber_norm
 from imu_learn.nn.so3 import quat_conj, quat_mul, so3_exp, so3_log
 
@@ -178,7 +179,7 @@ class GyroDenoise(Method):
         return multiscale_rotation_loss(gyro, dt.to(self.device), q.to(self.device), self.scales, self.huber_delta)
 
     def fit(self, train: List[Sequence], val: List[Sequence], settings: FitSettings = FitSettings()) -> Dict[str, list]:
-        dev = torch.device(settings.device if settings.device != "auto" else ("cuda" if torch.cuda.is_available() else "cpu"))
+        dev = pick_device(settings.device)
         if dev.type == "cpu":
             torch.set_num_threads(settings.threads)
         torch.manual_seed(settings.seed)

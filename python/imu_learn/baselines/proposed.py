@@ -15,9 +15,8 @@ Two ways in:
   times) kept. Augmentation, model and loss default to those of ``imu_learn.fit``'s default run
   (:class:`imu_learn.train.config.DataConfig`, :class:`ModelConfig`, :class:`LossConfig`).
 
-``refine`` runs :func:`imu_learn.refine.refine_arrays` with windows of the training length and a
-half-window overlap (each sample taken from the window in which it lies most central, so the model
-never needs more context than it was trained with). ``save`` writes an ordinary imu_learn
+``refine`` applies the model by the one windowing rule (:mod:`imu_learn.infer.windowing`: windows
+of the training length, half overlap, centre crop), as fit, evaluate, refine and fuse do. ``save`` writes an ordinary imu_learn
 checkpoint (:mod:`imu_learn.train.checkpoint`), which ``python -m imu_learn.refine`` and
 ``from_checkpoint`` read as well.
 
@@ -34,9 +33,10 @@ import torch
 from torch import nn
 
 from imu_learn.baselines.base import FitSettings, Method
-from imu_learn.core.batches import AugmentConfig, Batch, BatchConfig, BatchSampler
+from imu_learn.core.batches import AugmentConfig, Batch, BatchConfig, BatchSampler, batch_seed
 from imu_learn.data.types import Sequence
-from imu_learn.infer.refine import refine_arrays
+from imu_learn.infer.windowing import Windowing, apply
+from imu_learn.nn.device import pick_device
 from imu_learn.nn.losses import LossConfig, imu_loss
 from imu_learn.nn.model import ImuRefiner, ModelConfig
 
@@ -51,17 +51,26 @@ def default_augment() -> AugmentConfig:
     return DataConfig().augment
 
 
-def pick_device(name: str) -> torch.device:
-    if name == "auto":
-        return torch.device("cuda" if torch.cuda.is_available() else "cpu")
-    return torch.device(name)
-
-
 def imu_stats(seqs: List[Sequence]) -> Tuple[Tensor, Tensor]:
     """Per-channel mean and std (6,) float32 of the raw IMU (gyro then acc) of ``seqs``."""
     raw = np.concatenate([np.c_[s.gyro, s.acc] for s in seqs])
     return (torch.as_tensor(raw.mean(0), dtype=torch.float32),
             torch.as_tensor(np.maximum(raw.std(0), 1e-6), dtype=torch.float32))
+
+
+def start_refiner_fit(method: Method, train: List[Sequence], settings: FitSettings) -> Tuple[List[Sequence], Tensor, Tensor]:
+    """What a sample refiner's ``fit`` starts with: the training sequences longer than the window
+    (a ValueError naming the method when there is none), ``method.window`` and ``method.device``
+    set from ``settings``, torch seeded, and the input normalisation (:func:`imu_stats`)."""
+    W = int(settings.window)
+    train = [s for s in train if len(s) > W]
+    if not train:
+        raise ValueError(f"{method.name}: no training sequence longer than the window ({W} samples)")
+    method.window = W
+    method.device = pick_device(settings.device)
+    torch.manual_seed(settings.seed)
+    mean, std = imu_stats(train)
+    return train, mean, std
 
 
 def slice_batch(b: Batch, a: int, e: int) -> Batch:
@@ -102,7 +111,7 @@ def train_refiner(
     log: Dict[str, list] = {"train_loss": [], "val_loss": [], "val_step": []}
     best, best_state = float("inf"), None
     for step in range(steps):
-        b = sampler.sample(settings.seed * 1_000_003 + step)
+        b = sampler.sample(batch_seed(settings.seed, 0, step))
         model.train()
         loss = loss_fn(model, b, device, True)
         opt.zero_grad()
@@ -139,7 +148,6 @@ class ProposedConfig:
     grad_clip: float = 1.0
     evals: int = 10  # validation checks over the run
     val_stride: int = 0  # validation window step [samples]; 0: window // 2
-    overlap: int = -1  # refine overlap [samples]; -1: window // 2
 
 
 class Proposed(Method):
@@ -181,14 +189,8 @@ class Proposed(Method):
 
     def fit(self, train: List[Sequence], val: List[Sequence], settings: FitSettings = FitSettings()) -> Dict[str, list]:
         c = self.config
-        W = int(settings.window)
-        train = [s for s in train if len(s) > W]
-        if not train:
-            raise ValueError(f"proposed: no training sequence longer than the window ({W} samples)")
-        self.window = W
-        self.device = pick_device(settings.device)
-        torch.manual_seed(settings.seed)
-        mean, std = imu_stats(train)
+        train, mean, std = start_refiner_fit(self, train, settings)
+        W = self.window
         self.model = ImuRefiner(c.model, mean=mean, std=std)
         augment = c.augment if c.augment is not None else default_augment()
         bc = BatchConfig(window=W, batch_size=settings.batch_size, gravity=settings.gravity, augment=augment)
@@ -200,9 +202,8 @@ class Proposed(Method):
         return log
 
     def refine(self, seq: Sequence) -> Tuple[np.ndarray, np.ndarray]:
-        W = self.window
-        overlap = self.config.overlap if self.config.overlap >= 0 else W // 2
-        return refine_arrays(self.model, seq.gyro, seq.acc, window=W, overlap=min(overlap, W - 1))
+        gyro, acc, _ = apply(self.model, seq.gyro, seq.acc, Windowing.for_training_window(self.window))
+        return gyro, acc
 
     def save(self, path: Path) -> None:
         from imu_learn.train.checkpoint import save_checkpoint

@@ -73,9 +73,10 @@ import torch
 from torch import nn
 
 from imu_learn.baselines.base import FitSettings, Method, PosePrediction, poses_from_imu
-from imu_learn.core.batches import BatchConfig, BatchSampler
+from imu_learn.core.batches import BatchConfig, BatchSampler, batch_seed
 from imu_learn.core.quat import quat_rotate
 from imu_learn.data.types import Sequence
+from imu_learn.nn.device import pick_device
 
 Tensor = torch.Tensor
 FORMAT = "imu_learn.baselines.tlio.v1"
@@ -196,12 +197,6 @@ class TlioNet(nn.Module):
         return d, torch.clamp(logvar, self.logvar_min, self.logvar_max)
 
 
-def _device(name: str) -> torch.device:
-    if name == "auto":
-        return torch.device("cuda" if torch.cuda.is_available() else "cpu")
-    return torch.device(name)
-
-
 def sample_rate_hz(seqs: List[Sequence]) -> float:
     """Median sample rate over the sequences' sample periods."""
     dts = np.concatenate([np.diff(np.asarray(s.t_ns, dtype=np.int64)) for s in seqs if len(s) > 1])
@@ -250,7 +245,7 @@ class TlioStyle(Method):
         loss, of its phase), ``phase`` ("mse"/"nll" per step), ``val_mse``, ``val_nll``, ``val_step``,
         ``best_step``, ``window``, ``mse_steps``, ``nll_steps``."""
         c = self.config
-        self.device = _device(settings.device)
+        self.device = pick_device(settings.device)
         self.rate_hz = sample_rate_hz(train)
         W = self.window = max(2, int(round(c.window_s * self.rate_hz)))
         train = [s for s in train if len(s) > W]
@@ -295,7 +290,7 @@ class TlioStyle(Method):
                                 "window": [W], "mse_steps": [n_mse], "nll_steps": [steps - n_mse]}
         best, best_state = float("inf"), None
         for step in range(steps):
-            b = sampler.sample(settings.seed * 1_000_003 + step)
+            b = sampler.sample(batch_seed(settings.seed, 0, step))
             x, d = self._windows(world, train, b.seq_index, b.start, rng if c.yaw_augment else None)
             xt = torch.as_tensor(x, dtype=torch.float32, device=self.device)
             dt = torch.as_tensor(d, dtype=torch.float32, device=self.device)

@@ -364,20 +364,14 @@ class Traditional(Method):
             va = tr
         fs = min(it[1] for it in tr.items)
         grid = [c for c in self.cutoffs_hz if c is None or c < 0.5 * fs] or [None]
-        first = grid[0]
         g_idx, a_idx = np.r_[0:9, 12:21], np.r_[0:9]
 
         # 1. gyro: fit at the first cutoff, score the grid on validation, refit at the chosen one.
         def rot(w: _Windows) -> Callable[[Tensor], Tensor]:
             return lambda th: _rot_residuals(th, w)
 
-        w0 = tr.windows(first, None)
-        theta_g = _solve(rot(w0), np.zeros(21), g_idx, self.prior, self.huber_rot, self.max_iter)
-        val_rot = [_rms(rot(va.windows(c, None)), theta_g) for c in grid]
-        c_g = grid[int(np.argmin(val_rot))]
-        wg = tr.windows(c_g, None)
-        if c_g != first:
-            theta_g = _solve(rot(wg), theta_g, g_idx, self.prior, self.huber_rot, self.max_iter)
+        theta_g, c_g, val_rot, wg = self._fit_at_best_cutoff(
+            rot, lambda c: tr.windows(c, None), lambda c: va.windows(c, None), grid, np.zeros(21), g_idx, self.huber_rot)
         g_before, g_after = _rms(rot(wg), np.zeros(21)), _rms(rot(wg), theta_g)
 
         # 2. accel with the gyro model fixed: the same on velocity/position residuals.
@@ -385,13 +379,8 @@ class Traditional(Method):
             with torch.no_grad():
                 return _VelResiduals(_gyro_model(torch.from_numpy(theta_g), w.gyro, w.acc_g), w)
 
-        w0 = tr.windows(c_g, first)
-        theta_a = _solve(vel(w0), np.zeros(12), a_idx, self.prior, self.huber_vel, self.max_iter)
-        val_vel = [_rms(vel(va.windows(c_g, c)), theta_a) for c in grid]
-        c_a = grid[int(np.argmin(val_vel))]
-        wa = tr.windows(c_g, c_a)
-        if c_a != first:
-            theta_a = _solve(vel(wa), theta_a, a_idx, self.prior, self.huber_vel, self.max_iter)
+        theta_a, c_a, val_vel, wa = self._fit_at_best_cutoff(
+            vel, lambda c: tr.windows(c_g, c), lambda c: va.windows(c_g, c), grid, np.zeros(12), a_idx, self.huber_vel)
         # "before" = raw IMU (identity model, no filter) on the same windows
         raw = tr.windows(None, None)
         ident = _gyro_model(torch.zeros(21, dtype=torch.float64), raw.gyro, raw.acc_g)
@@ -412,6 +401,20 @@ class Traditional(Method):
             "cutoff_gyro": [c_g], "cutoff_acc": [c_a], "train_windows": [len(tr)], "stride": [tr.stride],
         }
         return log
+
+    def _fit_at_best_cutoff(self, residuals: Callable, train_at: Callable, val_at: Callable, grid: list,
+                            theta0: np.ndarray, idx: np.ndarray, huber: float) -> tuple:
+        """One stage of :meth:`fit`: solve at the grid's first cutoff, score every cutoff on the
+        validation windows, re-solve at the best one. Returns (theta, chosen cutoff, validation RMS
+        per cutoff, the training windows at the chosen cutoff)."""
+        first = grid[0]
+        theta = _solve(residuals(train_at(first)), theta0, idx, self.prior, huber, self.max_iter)
+        val = [_rms(residuals(val_at(c)), theta) for c in grid]
+        chosen = grid[int(np.argmin(val))]
+        windows = train_at(chosen)
+        if chosen != first:
+            theta = _solve(residuals(windows), theta, idx, self.prior, huber, self.max_iter)
+        return theta, chosen, val, windows
 
     # -- persistence ----------------------------------------------------------------------------
 

@@ -73,6 +73,13 @@ def _core_set(seqs: Iterable[Sequence]):
     return core.SequenceSet(parts)
 
 
+def batch_seed(seed: int, rank: int, step: int) -> int:
+    """The seed of batch ``step`` on ``rank`` (0 for a single process): a pure function of the
+    triple, so a resumed run draws exactly the batches it would have drawn, and ranks or runs with
+    neighbouring seeds draw unrelated streams. Every trainer (fit, the baselines) seeds batches so."""
+    return int(np.random.SeedSequence([int(seed) & 0xFFFFFFFF, int(rank), int(step)]).generate_state(1, np.uint64)[0] >> 1)
+
+
 class BatchSampler:
     """Holds the sequences once in Rust; each call draws a fresh augmented batch."""
 

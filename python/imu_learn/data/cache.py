@@ -3,14 +3,20 @@
 Layout (format version ``CACHE_VERSION``), one folder per dataset::
 
     <cache>/manifest.json          settings, source fingerprints, alignment reports, file list with
-                                   the sha256 of every segment file, and its own sha256
+                                   the sha256 of every segment file, and its own sha256; per
+                                   recording, ``source`` (format, ground-truth file, alignment
+                                   options, topics) and ``source_fingerprint`` (those plus the size
+                                   and mtime of every source file), which ``fit`` checks
     <cache>/manifest.partial.json  the same for the recordings an unfinished run has done
     <cache>/<rec>__<i>.<sha>.npz   t_ns, gyro, acc, p, v, q_wxyz         (N, ...)
                                    starts (W,), horizons (H,),
                                    dq_wxyz (W, H, 4), dv/dp (W, H, 3), dt (W, H)
     <cache>/.lock                  held (flock) by the ``labels`` run writing the folder
 
-Quaternions are w,x,y,z. Every file is written through :mod:`imu_learn.util.atomic`, so an interrupted
+Quaternions are w,x,y,z. The aligned ground-truth states (p, v, q at every IMU stamp) are the
+cumulative form of the labels: the increment from any sample k to any later j is a function of
+the states at k and j alone (``labels::increment``), which is how training's batch sampler labels
+windows at random starts from the cached sequences; the per-window tables serve fixed-stride users. Every file is written through :mod:`imu_learn.util.atomic`, so an interrupted
 run leaves only complete files. Segment files are named by their content and the manifest is
 replaced only when a run has finished, so until then readers see the previous complete cache; an
 unfinished run's progress goes to ``manifest.partial.json``, which the next run resumes from.
@@ -30,8 +36,8 @@ import hashlib
 import inspect
 import io
 import json
+import logging
 import re
-import sys
 from pathlib import Path
 from typing import Any, Callable, Dict, Iterator, List, Optional, Tuple, TypeVar
 
@@ -42,8 +48,11 @@ from imu_learn.errors import CacheError
 from imu_learn.util.atomic import atomic_write_bytes
 from imu_learn.util.digest import file_sha256
 
+logger = logging.getLogger(__name__)
+
 # 2: the manifest records each segment file's sha256 and its own.
-CACHE_VERSION = 2
+# 3: each recording records its ``source`` and ``source_fingerprint`` (what ``fit`` checks).
+CACHE_VERSION = 3
 MANIFEST = "manifest.json"
 PROGRESS = "manifest.partial.json"  # an unfinished run's manifest, for resuming
 SEGMENT_FILE = re.compile(r".+__\d+(\.[0-9a-f]{16})?\.npz")  # what write_segment names (older: no digest)
@@ -66,7 +75,7 @@ def fingerprint(paths: List[Path], settings: Dict[str, Any]) -> str:
 
 def rebuild_hint(folder: Path, manifest: Optional[Dict[str, Any]] = None) -> str:
     dataset = ((manifest or {}).get("settings") or {}).get("dataset") or "<dataset>"
-    return f"rebuild it with `python -m imu_learn.labels {dataset} --out {folder}`"
+    return f"rebuild it with `imu-learn labels {dataset} --out {folder}`"
 
 
 # ---------------------------------------------------------------------------------------------
@@ -99,8 +108,10 @@ def segment_problem(folder: Path, seg: Dict[str, Any]) -> Optional[str]:
     return None
 
 
-def read_segment(folder: Path, seg: Dict[str, Any], manifest: Optional[Dict[str, Any]] = None) -> tuple:
-    """(Sequence, labels) of manifest entry ``seg``, after checking the file against its sha256."""
+def read_segment(folder: Path, seg: Dict[str, Any], manifest: Optional[Dict[str, Any]] = None,
+                 with_labels: bool = True) -> tuple:
+    """(Sequence, labels) of manifest entry ``seg``, after checking the file against its sha256;
+    labels is None when not ``with_labels`` (their arrays are then not read)."""
     path = folder / seg["file"]
     problem = segment_problem(folder, seg)
     if problem is not None:
@@ -108,7 +119,7 @@ def read_segment(folder: Path, seg: Dict[str, Any], manifest: Optional[Dict[str,
     try:
         with np.load(path) as z:
             seq = Sequence(name=seg["name"], **{k: z[k] for k in SEQUENCE_KEYS})
-            labels = {k: z[f"label_{k}"] for k in LABEL_KEYS}
+            labels = {k: z[f"label_{k}"] for k in LABEL_KEYS} if with_labels else None
     except (OSError, KeyError, ValueError) as e:
         raise CacheError(f"{path}: unreadable cache file ({e}); {rebuild_hint(folder, manifest)}") from e
     return seq, labels
@@ -161,6 +172,15 @@ def read_manifest(folder: Path) -> Dict[str, Any]:
     return manifest
 
 
+def current_manifest(folder: Path) -> Tuple[Optional[Dict[str, Any]], Optional[str]]:
+    """The complete manifest of ``folder`` (None when there is none yet) and why it cannot be
+    trusted (None when it can); another format version is a CacheError."""
+    path = Path(folder) / MANIFEST
+    if not path.exists():
+        return None, None
+    return _manifest_and_problem(path)
+
+
 def reusable_recordings(folder: Path, rebuild: bool, log: Callable[[str], None]) -> Dict[str, Dict[str, Any]]:
     """The entries of the manifest (and of an interrupted run's progress file, which is newer)
     in ``folder`` that a ``labels`` run may keep, by recording name: none with ``rebuild``; a
@@ -171,7 +191,7 @@ def reusable_recordings(folder: Path, rebuild: bool, log: Callable[[str], None])
             continue
         manifest, problem = _manifest_and_problem(path)
         if problem is not None or manifest is None:
-            log(f"imu_learn.data.labels: {problem}; rebuilding what it lists")
+            log(f"{problem}; rebuilding what it lists")
             continue
         out.update({r["name"]: r for r in manifest["recordings"]})
     return out
@@ -182,7 +202,7 @@ def recording_reusable(folder: Path, rec: Dict[str, Any], log: Callable[[str], N
     reason goes to ``log`` (the recording is rebuilt)."""
     problem = recording_problem(folder, rec)
     if problem is not None:
-        log(f"imu_learn.data.labels: {problem}; rebuilding {rec['name']}")
+        log(f"{problem}; rebuilding {rec['name']}")
     return problem is None
 
 
@@ -230,7 +250,7 @@ def load_cache(folder: Path) -> List[tuple]:
 
 
 @contextlib.contextmanager
-def cache_lock(folder: Path, log: Callable[[str], None] = lambda m: print(m, file=sys.stderr)) -> Iterator[None]:
+def cache_lock(folder: Path, log: Optional[Callable[[str], None]] = None) -> Iterator[None]:
     """Hold the exclusive lock of cache ``folder`` (created if needed) for the block; when another
     process holds it, say so through ``log`` and wait for it. The kernel drops the lock when its
     holder exits, however it exits, so a killed run never leaves the folder locked."""
@@ -240,7 +260,8 @@ def cache_lock(folder: Path, log: Callable[[str], None] = lambda m: print(m, fil
         try:
             fcntl.flock(f.fileno(), fcntl.LOCK_EX | fcntl.LOCK_NB)
         except BlockingIOError:
-            log(f"imu_learn.data.labels: {folder} is being written by another run; waiting for it to finish")
+            # a warning: said even with --quiet, a run that waits must say why
+            (log or logger.warning)(f"{folder} is being written by another run; waiting for it to finish")
             fcntl.flock(f.fileno(), fcntl.LOCK_EX)
         try:
             yield

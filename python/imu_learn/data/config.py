@@ -66,7 +66,7 @@ def _default_augment() -> AugmentConfig:
 @dataclass
 class DataConfig:
     # Folder that relative data.roots[i].path / .groundtruth are taken from (see
-    # splits.resolve_data_path). Set by, highest first: --data.data_root DIR, the environment
+    # splits.resolve_data_path). Set by, highest first: --data-root DIR, the environment
     # variable IMU_LEARN_DATA (read by build_config), this value in the config file. Empty: paths
     # are taken from the working directory, else the repository root (the shipped crops).
     data_root: str = ""
@@ -90,6 +90,12 @@ class DataConfig:
     # and a bias at run time is the estimator's job, as the paper's footnote asks). Test sequences
     # are never changed.
     train_bias: str = "keep"
+    # A label cache folder (``imu-learn labels <dataset> --out DIR``, e.g. "cache/euroc"; relative to
+    # the working directory): the split's recordings are read from it, aligned, instead of parsing and
+    # aligning the raw files. A recording it lacks, or whose source files or alignment settings
+    # (format, ground-truth file, max_gap_s, gt_time_offset_s, topics) changed since it was cached, is
+    # rebuilt into it, with a warning naming it. Empty: read the raw files.
+    cache: str = ""
 
     def batch_config(self) -> BatchConfig:
         return BatchConfig(self.window, self.batch_size, tuple(self.fractions), self.gravity, self.augment)

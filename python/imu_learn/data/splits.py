@@ -19,11 +19,13 @@ then, per split, each entry, the recording path and format, the time block, and 
 their sample ranges and durations.
 
 Relative ``data.roots[i].path`` and ``.groundtruth`` are taken from the data root
-(``data.data_root``: ``--data.data_root DIR``, else the environment variable ``IMU_LEARN_DATA``,
+(``data.data_root``: ``--data-root DIR``, else the environment variable ``IMU_LEARN_DATA``,
 else the config file's value) when one is set, else (and for paths not under it) from the working
-directory, else from the repository root (the shipped crops of ``configs/default.toml``). A path
-found nowhere is a :class:`DataPathError` naming the config key, the paths tried and how to set the
-data root.
+directory. Only when imu_learn runs from a source checkout (:func:`checkout_root`: an editable or
+``maturin develop`` install, never an installed wheel) is the checkout's root tried last, so the
+default run's shipped crops (``datasets/euroc/...`` in ``configs/default.toml``) resolve from any
+working directory there. A path found nowhere is a :class:`DataPathError` naming the config key,
+the paths tried and how to set the data root.
 """
 from __future__ import annotations
 
@@ -31,12 +33,14 @@ import json
 import re
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Dict, List, Optional, Tuple
+from typing import Any, Dict, List, Optional, Tuple
+from typing import Sequence as Seq
 
 import numpy as np
 
 from imu_learn.data.config import DataConfig, RootConfig
 from imu_learn.data.datasets import DATASETS, find_recordings
+from imu_learn.data.labels import RecordingSource, cached_segments
 from imu_learn.data.loading import AlignOptions, load_sequence
 from imu_learn.data.types import Sequence
 from imu_learn.errors import (
@@ -48,7 +52,18 @@ from imu_learn.settings import DATA_ROOT_ENV
 
 SPLITS = ("train", "val", "test")
 _BLOCK = re.compile(r"^(?P<name>.+?)\[(?P<a>[^:\]]*):(?P<b>[^\]]*)\]$")
-REPO_ROOT = Path(__file__).resolve().parents[3]
+
+
+def checkout_root() -> Optional[Path]:
+    """The source checkout imu_learn runs from (the folder holding ``pyproject.toml`` and
+    ``python/imu_learn``), or None for an installed package: relative data paths fall back to it
+    only in a checkout, so an installed wheel resolves them from the data root or the working
+    directory alone."""
+    pkg = Path(__file__).resolve().parents[1]  # .../imu_learn
+    root = pkg.parents[1]  # <checkout>/python/imu_learn -> <checkout>
+    if pkg.parent.name == "python" and (root / "pyproject.toml").is_file():
+        return root
+    return None
 
 
 @dataclass(frozen=True)
@@ -94,17 +109,19 @@ def parse_split(data: DataConfig) -> Dict[str, List[SplitEntry]]:
 
 
 def resolve_path(p: str) -> Path:
-    """A config path: as given (absolute, or from the working directory), else from the repo root."""
+    """A config path: as given (absolute, or from the working directory), else from the source
+    checkout's root when running from one (:func:`checkout_root`)."""
     path = Path(p).expanduser()
     if path.is_absolute() or path.exists():
         return path
-    alt = REPO_ROOT / path
+    repo = checkout_root()
+    alt = repo / path if repo is not None else path
     return alt if alt.exists() else path
 
 
 def data_root_dir(data: DataConfig) -> Optional[Path]:
     """The data root as an absolute folder (a relative one from the working directory, else the
-    repository root), or None when none is set."""
+    source checkout's root when running from one), or None when none is set."""
     if not data.data_root:
         return None
     return resolve_path(data.data_root).resolve()
@@ -112,12 +129,15 @@ def data_root_dir(data: DataConfig) -> Optional[Path]:
 
 def resolve_data_path(p: str, data_root: Optional[Path], key: str) -> Path:
     """A ``data.roots`` path (``key`` names it in errors): absolute as given; relative, from the
-    data root when one is set, else (or when not there) the working directory, else the repo root."""
+    data root when one is set, else (or when not there) the working directory, else the source
+    checkout's root when running from one (:func:`checkout_root`; never for an installed wheel)."""
     path = Path(p).expanduser()
     if path.is_absolute():
         tried = [path]
     else:
-        tried = ([data_root / path] if data_root is not None else []) + [path, REPO_ROOT / path]
+        repo = checkout_root()
+        tried = (([data_root / path] if data_root is not None else []) + [path]
+                 + ([repo / path] if repo is not None else []))
     for cand in tried:
         if cand.exists():
             return cand
@@ -130,7 +150,7 @@ def resolve_data_path(p: str, data_root: Optional[Path], key: str) -> Path:
     shown = ", ".join(str(c) for c in dict.fromkeys(tried))
     raise DataPathError(
         f"{key}: {p!r} not found (tried {shown}; {where}); set the data root with "
-        f"{DATA_ROOT_ENV}=DIR or --data.data_root DIR (see docs/datasets.md)"
+        f"{DATA_ROOT_ENV}=DIR or --data-root DIR (see docs/datasets.md)"
     )
 
 
@@ -189,6 +209,26 @@ def cut(segments: List[Sequence], start: float, stop: float, name: str) -> List[
     return out
 
 
+def recording_source(name: str, path: Path, root: RootConfig, groundtruth: Optional[Path]) -> RecordingSource:
+    """How recording ``name`` of config root ``root`` is read and aligned (what its cache entry
+    depends on)."""
+    topics = {"imu_topic": root.imu_topic, "groundtruth_topic": root.groundtruth_topic}
+    return RecordingSource(name, path, root.format, groundtruth,
+                           AlignOptions(max_gap_s=root.max_gap_s, gt_time_offset_s=root.gt_time_offset_s),
+                           {k: v for k, v in topics.items() if v})
+
+
+def from_label_cache(data: DataConfig, entries: Dict[str, List[SplitEntry]],
+                     found: Dict[str, Tuple[Path, RootConfig]], gt_paths: Dict[int, Path]) -> Dict[str, List[Sequence]]:
+    """``data.cache``: the aligned segments of every recording the split names, by name, from the
+    label cache (rebuilt there first where missing or stale, see :func:`cached_segments`)."""
+    names = [e.name for s in SPLITS for e in entries[s] if e.name in found]
+    sources = [recording_source(n, found[n][0], found[n][1], gt_paths.get(id(found[n][1])))
+               for n in dict.fromkeys(names)]
+    return cached_segments(Path(data.cache).expanduser(), sources, window=data.window,
+                           gravity=data.gravity, fractions=data.fractions)
+
+
 @dataclass
 class Split:
     train: List[Sequence]
@@ -212,9 +252,12 @@ def make_split(data: DataConfig, min_len: Optional[int] = None) -> Split:
     gt_paths = groundtruth_paths(data.roots, root_dir)
     min_len = data.window + 1 if min_len is None else min_len
     cache: Dict[str, List[Sequence]] = {}
+    if data.cache:  # the label cache's aligned segments instead of the raw files
+        cache = from_label_cache(data, entries, found, gt_paths)
     result: Dict[str, List[Sequence]] = {}
     record: Dict[str, object] = {"rule": "by sequence; NAME[a:b] is a time block (fractions of the duration)",
-                                 "data_root": str(root_dir) if root_dir is not None else None}
+                                 "data_root": str(root_dir) if root_dir is not None else None,
+                                 "cache": data.cache or None}
     for split in SPLITS:
         seqs: List[Sequence] = []
         rows = []
@@ -226,8 +269,8 @@ def make_split(data: DataConfig, min_len: Optional[int] = None) -> Split:
                 )
             path, root = found[e.name]
             if e.name not in cache:
-                gt = gt_paths.get(id(root))
-                cache[e.name] = load_sequence(path, root.format, gt, options=AlignOptions(max_gap_s=root.max_gap_s, gt_time_offset_s=root.gt_time_offset_s),
+                src = recording_source(e.name, path, root, gt_paths.get(id(root)))
+                cache[e.name] = load_sequence(src.path, src.format, src.groundtruth, options=src.options,
                                               imu_topic=root.imu_topic or None, groundtruth_topic=root.groundtruth_topic or None)
             parts = cut(cache[e.name], e.start, e.stop, e.name)
             kept = [s for s in parts if len(s) >= min_len]
@@ -266,3 +309,10 @@ def write_split(split: Split, path: Path) -> None:
 
     text = json.dumps(split.record, indent=2)
     atomic_write_bytes(Path(path), lambda f: f.write(text.encode()))
+
+
+def split_signature(record: Dict[str, Any], splits: Seq[str] = SPLITS) -> Dict[str, Any]:
+    """What a split record (``Split.record``, ``split.json``) holds for ``splits``: segment names,
+    sizes and stamps, not where they were read from. Two runs on the same data compare equal."""
+    return {k: [[(g["name"], g["samples"], g["t0_ns"], g["t1_ns"]) for g in e["segments"]] for e in record.get(k, [])]
+            for k in splits}

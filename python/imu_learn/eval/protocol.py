@@ -6,7 +6,7 @@ PROTOCOL = """\
   sequences are never seen in training or in model selection: every method is fitted on the
   train split only, and uses the val split only for its own model selection. A ``--checkpoint``
   whose training or validation split names a test recording is refused.
-  Relative data paths are taken from the data root (``--data.data_root DIR``, else the environment
+  Relative data paths are taken from the data root (``--data-root DIR``, else the environment
   variable ``IMU_LEARN_DATA``, else the configs' ``data.data_root``; see :mod:`imu_learn.data.splits`).
 * Fitting: each method gets the same budget (``[fit]``: a ``FitSettings`` with window, batch size,
   steps, learning rate, device, threads; seed = the config's ``seed``, gravity = ``data.gravity``;
@@ -45,3 +45,8 @@ PROTOCOL = """\
   perfect label; what remains is label noise (``eval.noise_floor = "always"`` adds it for every
   ground truth, ``"never"`` drops it).
 """
+
+# The two variants above, as every table, CSV and report names them: key, label, short label.
+VARIANTS = ("open_loop", "bias_removed")
+VARIANT_LABELS = {"open_loop": "open loop", "bias_removed": "start-up bias removed"}
+VARIANT_SHORT = {"open_loop": "open loop", "bias_removed": "bias removed"}

@@ -12,15 +12,15 @@ from datetime import datetime
 from pathlib import Path
 from typing import Any, Dict, List, Optional, Tuple
 
+from imu_learn.eval.protocol import PROTOCOL, VARIANT_LABELS, VARIANT_SHORT, VARIANTS
 from imu_learn.util.atomic import atomic_write_bytes, atomic_write_text
-
-VARIANTS = ("open_loop", "bias_removed")
-VARIANT_LABELS = {"open_loop": "open loop", "bias_removed": "start-up bias removed"}
 
 # ---------------------------------------------------------------------------------------------
 # quoted figures (copied from publications; never our measurements)
 
-PAPER_SOURCE = ("the reproduced paper (/work/shared/paper/imu_rnn_navigation.tex), Table II "
+# Named by its public citation (README, "Citation"), never by where a copy lies on some machine.
+PAPER_SOURCE = ("the reproduced paper (M. Zhang, M. Zhang, Y. Chen and M. Li, *IMU Data Processing for "
+                "Inertial Aided Navigation: A Recurrent Neural Network Based Approach*), Table II "
                 "(label table:delta_pose_error): RMSE in relative translation (m) / orientation (rad) "
                 "over ten IMU frames, EuRoC")
 PAPER_TABLE2_SEQUENCES = ["MH_02_easy", "MH_04_difficult", "V1_03_difficult", "V2_02_medium", "V1_01_easy", "Average"]
@@ -262,28 +262,26 @@ def _esc(s: str) -> str:
 
 
 def protocol_text() -> str:
-    from imu_learn.eval.protocol import PROTOCOL
     return PROTOCOL.strip()
 
 
-def markdown(result: Dict[str, Any], rel: List[Dict[str, Any]], air: List[Dict[str, Any]],
-             pngs: List[str], csvs: List[str]) -> str:
-    r = result
-    L: List[str] = []
-    L += [f"# Evaluation report: {r['config_name']}", "",
-          f"Written {datetime.now().strftime('%Y-%m-%d %H:%M:%S')} by `python -m imu_learn.evaluate`"
-          f"{' --config ' + r['config_path'] if r.get('config_path') else ''}; "
-          f"wall time **{r['wall_s']:.1f} s** (from the start of the command to writing this report; "
-          "fitting included, imports not).", "",
-          "All numbers in the tables below are **our measurements** unless marked *quoted*.", ""]
-    L += ["## Protocol", "", protocol_text(), ""]
-    # data
-    L += ["## Data and split", "",
-          f"Fit config: `{r.get('base_path') or 'built-in defaults'}`; gravity {r['gravity']} m/s²; "
-          f"windows every {r['stride']} samples from {r['startup_bias_s']:g} s on; start-up bias fitted on the "
-          f"first {r['startup_bias_s']:g} s.", "",
-          f"Data roots (relative paths from the data root `{r['data_root']}`):" if r.get("data_root")
-          else "Data roots:", ""]
+def _md_head(r: Dict[str, Any]) -> List[str]:
+    return [f"# Evaluation report: {r['config_name']}", "",
+            f"Written {datetime.now().strftime('%Y-%m-%d %H:%M:%S')} by `python -m imu_learn.evaluate`"
+            f"{' --config ' + r['config_path'] if r.get('config_path') else ''}; "
+            f"wall time **{r['wall_s']:.1f} s** (from the start of the command to writing this report; "
+            "fitting included, imports not).", "",
+            "All numbers in the tables below are **our measurements** unless marked *quoted*.", "",
+            "## Protocol", "", protocol_text(), ""]
+
+
+def _md_data(r: Dict[str, Any]) -> List[str]:
+    L = ["## Data and split", "",
+         f"Fit config: `{r.get('base_path') or 'built-in defaults'}`; gravity {r['gravity']} m/s²; "
+         f"windows every {r['stride']} samples from {r['startup_bias_s']:g} s on; start-up bias fitted on the "
+         f"first {r['startup_bias_s']:g} s.", "",
+         f"Data roots (relative paths from the data root `{r['data_root']}`):" if r.get("data_root")
+         else "Data roots:", ""]
     for root in r["roots"]:
         L.append(f"- `{root['path']}` ({root['format']}{', ground truth ' + root['groundtruth'] if root.get('groundtruth') else ''})")
     L.append("")
@@ -296,18 +294,23 @@ def markdown(result: Dict[str, Any], rel: List[Dict[str, Any]], air: List[Dict[s
                          _esc(r["ground_truth"].get(e["recording"], "")) if split == "test" else ""])
     L += _md_table(["split", "entry", "segments", "duration [s]", "ground truth"], rows) + [""]
     L += ["Test sampling rate: " + ", ".join(f"{_esc(k)} {v:.1f} Hz" for k, v in r["rates_hz"].items()), ""]
-    # versions, seeds, settings
-    L += ["## Versions, seeds, fit budget", "",
-          "Versions: " + ", ".join(f"{k} {v}" for k, v in r["versions"].items()) + ".", "",
-          f"Seed: {r['seed']} (numpy, torch and `FitSettings.seed`; set before each method's fit).", "",
-          "FitSettings (the same for every method): " + ", ".join(f"{k}={v}" for k, v in r["fit_settings"].items()) + ".", ""]
-    # methods
+    return L
+
+
+def _md_versions(r: Dict[str, Any]) -> List[str]:
+    return ["## Versions, seeds, fit budget", "",
+            "Versions: " + ", ".join(f"{k} {v}" for k, v in r["versions"].items()) + ".", "",
+            f"Seed: {r['seed']} (numpy, torch and `FitSettings.seed`; set before each method's fit).", "",
+            "FitSettings (the same for every method): " + ", ".join(f"{k}={v}" for k, v in r["fit_settings"].items()) + ".", ""]
+
+
+def _md_methods(r: Dict[str, Any]) -> List[str]:
     rows = []
     for m in r["methods"]:
         rec = r["records"].get(m, {})
         rows.append([_esc(m), rec.get("status", ""), _f(rec.get("fit_s"), "{:.1f}"), _f(rec.get("eval_s"), "{:.1f}"),
                      f"`{rec['file']}`" if rec.get("file") else "-"])
-    L += ["## Methods", ""] + _md_table(["method", "status", "fit [s]", "evaluation [s]", "saved / loaded from"], rows) + [""]
+    L = ["## Methods", ""] + _md_table(["method", "status", "fit [s]", "evaluation [s]", "saved / loaded from"], rows) + [""]
     if r["skipped"]:
         L += [f"Skipped (module not available): {', '.join(r['skipped'])}.", ""]
     if any(m.startswith("ground truth") for m in r["methods"]):
@@ -315,11 +318,15 @@ def markdown(result: Dict[str, Any], rel: List[Dict[str, Any]], air: List[Dict[s
               "itself (`imu_learn.baselines.noise_floor`). Its rotation and velocity errors are zero by construction; its "
               "position error is the disagreement between the ground-truth positions and the (derived) "
               "ground-truth velocities, i.e. label noise that no method can beat.", ""]
-    # Table II analogue
+    return L
+
+
+def _md_relative_pose(r: Dict[str, Any], rel: List[Dict[str, Any]]) -> List[str]:
+    """The paper's Table II analogue at the first horizon, then every horizon's average."""
     n0 = int(r["eval"]["horizons"][0])
     seqs = r["test_sequences"] + ["average"]
     idx = {(x["method"], x["variant"], x["sequence"], x["n"]): x for x in rel}
-    L += ["## Relative pose RMSE over n IMU samples (paper Table II analogue)", ""]
+    L = ["## Relative pose RMSE over n IMU samples (paper Table II analogue)", ""]
     for v in VARIANTS:
         L += [f"**{VARIANT_LABELS[v]}**, n = {n0} samples, translation [m] / rotation [rad]:", ""]
         rows = []
@@ -340,12 +347,14 @@ def markdown(result: Dict[str, Any], rel: List[Dict[str, Any]], air: List[Dict[s
                 x = idx.get((m, v, "average", int(n)))
                 cells.append("-" if x is None else f"{_f(x['trans_m'])} / {_f(x['rot_rad'])} / {_f(x['rot_deg'], '{:.3f}')}")
             rows.append([_esc(m), VARIANT_LABELS[v]] + cells)
-    L += _md_table(head, rows) + [""]
-    # AirIMU
+    return L + _md_table(head, rows) + [""]
+
+
+def _md_airimu(r: Dict[str, Any], air: List[Dict[str, Any]]) -> List[str]:
     secs = sorted(set(float(x) for x in r["eval"]["airimu_s"]) | {1.0})
-    L += ["## AirIMU-style figures (our measurements, AirIMU's definitions)", "",
-          "Mean over test recordings: rotation RMSE over 1 s [deg] and [rad], position RMSE over "
-          + ", ".join(f"{s:g}" for s in secs) + " s [m] (per recording: `airimu_figures.csv`):", ""]
+    L = ["## AirIMU-style figures (our measurements, AirIMU's definitions)", "",
+         "Mean over test recordings: rotation RMSE over 1 s [deg] and [rad], position RMSE over "
+         + ", ".join(f"{s:g}" for s in secs) + " s [m] (per recording: `airimu_figures.csv`):", ""]
     head = ["method", "variant", "rot 1 s [deg]", "rot 1 s [rad]"] + [f"pos {s:g} s [m]" for s in secs]
     rows = []
     for a in air:
@@ -353,34 +362,49 @@ def markdown(result: Dict[str, Any], rel: List[Dict[str, Any]], air: List[Dict[s
             continue
         rows.append([_esc(a["method"]), VARIANT_LABELS[a["variant"]], _f(a["rot_1s_deg"], "{:.3f}"), _f(a["rot_1s_rad"])]
                     + [_f(a.get(f"pos_{s:g}s_m")) for s in secs])
-    L += _md_table(head, rows) + [""]
-    # curves
-    L += ["## Integration error against horizon (paper's integration-error figure)", "",
-          f"{len(r['curve_s'])} log-spaced horizons from {r['curve_s'][0]:g} s to {r['curve_s'][-1]:g} s; "
-          "RMSE of position, rotation and velocity, mean over test recordings (values at or below 1e-10, "
-          "e.g. the noise floor's rotation and velocity, are not drawn). Numbers: `integration_error.csv`.", ""]
+    return L + _md_table(head, rows) + [""]
+
+
+def _md_curves(r: Dict[str, Any], pngs: List[str]) -> List[str]:
+    L = ["## Integration error against horizon (paper's integration-error figure)", "",
+         f"{len(r['curve_s'])} log-spaced horizons from {r['curve_s'][0]:g} s to {r['curve_s'][-1]:g} s; "
+         "RMSE of position, rotation and velocity, mean over test recordings (values at or below 1e-10, "
+         "e.g. the noise floor's rotation and velocity, are not drawn). Numbers: `integration_error.csv`.", ""]
     for p in pngs:
         L += [f"![{p}]({p})", ""]
-    if r.get("calibration"):
-        from imu_learn.eval.calibration import format_table as calibration_table
+    return L
 
-        L += ["## Calibration of the increments' covariance", "",
-              "Residual (δθ, δβ, δγ) of the increments over n samples against ground truth (start-up bias "
-              "removed), normalised by the covariance propagated from per-sample noise: the datasheet's white "
-              f"noise ({r['eval'].get('gyro_noise_density')} rad/s/√Hz, {r['eval'].get('acc_noise_density')} "
-              "m/s²/√Hz) or the checkpoint's learned variances. A calibrated covariance has mean NEES = dof and "
-              "the χ² fractions inside its 1σ/2σ/3σ ellipsoids (in brackets); above dof is overconfident, "
-              "below underconfident.", ""]
-        L += calibration_table(r["calibration"]) + [""]
-    # biases
+
+def _md_calibration(r: Dict[str, Any]) -> List[str]:
+    if not r.get("calibration"):
+        return []
+    from imu_learn.eval.calibration import format_table as calibration_table
+
+    return ["## Calibration of the increments' covariance", "",
+            "Residual (δθ, δβ, δγ) of the increments over n samples against ground truth (start-up bias "
+            "removed), normalised by the covariance propagated from per-sample noise: the datasheet's white "
+            f"noise ({r['eval'].get('gyro_noise_density')} rad/s/√Hz, {r['eval'].get('acc_noise_density')} "
+            "m/s²/√Hz) or the checkpoint's learned variances. A calibrated covariance has mean NEES = dof and "
+            "the χ² fractions inside its 1σ/2σ/3σ ellipsoids (in brackets); above dof is overconfident, "
+            "below underconfident.", ""] + calibration_table(r["calibration"]) + [""]
+
+
+def _md_biases(r: Dict[str, Any]) -> List[str]:
     rows = []
     for b in r["biases"]:
         rows.append([_esc(b["method"]), _esc(b["segment"]), b["fitted_on"],
                      ", ".join(_f(b[f"gyro_bias_{a}"], "{:.5f}") for a in "xyz"),
                      ", ".join(_f(b[f"acc_bias_{a}"], "{:.4f}") for a in "xyz")])
-    L += ["## Start-up biases (first seconds of each test segment, against ground truth)", ""]
-    L += _md_table(["method", "segment", "fitted on", "gyro [rad/s]", "acc [m/s²]"], rows) + [""]
-    L += [quoted_section()]
+    L = ["## Start-up biases (first seconds of each test segment, against ground truth)", ""]
+    return L + _md_table(["method", "segment", "fitted on", "gyro [rad/s]", "acc [m/s²]"], rows) + [""]
+
+
+def markdown(result: Dict[str, Any], rel: List[Dict[str, Any]], air: List[Dict[str, Any]],
+             pngs: List[str], csvs: List[str]) -> str:
+    """``report.md``: one section after another, each built from ``result`` by its own function."""
+    r = result
+    L = (_md_head(r) + _md_data(r) + _md_versions(r) + _md_methods(r) + _md_relative_pose(r, rel)
+         + _md_airimu(r, air) + _md_curves(r, pngs) + _md_calibration(r) + _md_biases(r) + [quoted_section()])
     L += ["## Files", ""] + [f"- `{c}`" for c in csvs + pngs] + ["- `methods/`: fitted methods and their fit records", ""]
     return "\n".join(L)
 
@@ -420,7 +444,7 @@ def summary_text(result: Dict[str, Any]) -> str:
         for v in VARIANTS:
             a, b, c = rel.get((m, v, n0)), rel.get((m, v, nl)), air.get((m, v))
             g = lambda d, k: _f(d[k]) if d else "-"  # noqa: E731
-            lines.append(f"{m:<{w}}  {('open loop' if v == 'open_loop' else 'bias removed'):<12}  "
+            lines.append(f"{m:<{w}}  {VARIANT_SHORT[v]:<12}  "
                          f"{g(a, 'trans_m'):>11}  {g(a, 'rot_rad'):>12}  {g(b, 'trans_m'):>11}  "
                          f"{(_f(b['rot_deg'], '{:.3f}') if b else '-'):>12}  "
                          f"{(_f(c['rot_1s_deg'], '{:.3f}') if c else '-'):>11}  {g(c, 'pos_1s_m'):>10}")

@@ -22,8 +22,8 @@ missing files, a method failing) print one line and exit with status 2.
 """
 from __future__ import annotations
 
-import argparse
 import json
+import logging
 import math
 import re
 import sys
@@ -38,6 +38,7 @@ import numpy as np
 from imu_learn.baselines.base import FitSettings, Method, PosePrediction, poses_from_imu
 from imu_learn.baselines.registry import DEFAULT_METHODS, REGISTRY, load_method_class, safe_name  # noqa: F401
 from imu_learn.core.quat import rotation_angle
+from imu_learn.data.splits import split_signature
 from imu_learn.data.types import Sequence
 from imu_learn.errors import (
     ConfigError,
@@ -45,7 +46,8 @@ from imu_learn.errors import (
     MethodError,
     one_line,
 )
-from imu_learn.eval.metrics import fit_startup_bias, index_at, remove_bias, with_imu
+from imu_learn.eval.metrics import fit_startup_bias, index_at, remove_bias, rmse, with_imu
+from imu_learn.eval.protocol import VARIANTS
 from imu_learn.settings import hints_of, merge, nest
 from imu_learn.train.config import (
     RunConfig,
@@ -58,10 +60,7 @@ from imu_learn.train.config import (
 )
 from imu_learn.util.atomic import atomic_write_path, atomic_write_text
 
-PROG = "imu_learn.eval.run"
-EXIT_ERROR = 2
-VARIANTS = ("open_loop", "bias_removed")
-VARIANT_LABELS = {"open_loop": "open loop", "bias_removed": "start-up bias removed"}
+logger = logging.getLogger(__name__)
 CHECKPOINT_NAME = "proposed (fit run)"  # the row of a --checkpoint
 
 
@@ -218,17 +217,17 @@ class CheckpointRefiner(Method):
         self.config = state.get("config") or {}
         self.device = torch.device(device)
         self.model = model_from_checkpoint(state).to(self.device)
-        self.window = int(((self.config.get("data") or {}).get("window")) or 200)
+        self.window = self.model.windowing.window  # the checkpoint's rule (imu_learn.infer.windowing)
 
     def splits(self) -> Dict[str, List[str]]:
         sp = (self.config.get("data") or {}).get("split") or {}
         return {k: list(sp.get(k) or []) for k in ("train", "val", "test")}
 
     def refine(self, seq: Sequence) -> Tuple[np.ndarray, np.ndarray]:
-        from imu_learn.train.fit import refine_sequence
+        from imu_learn.infer.windowing import apply
 
-        s = refine_sequence(self.model, seq, self.window, self.device)
-        return s.gyro, s.acc
+        gyro, acc, _ = apply(self.model, seq.gyro, seq.acc)
+        return gyro, acc
 
 
 def _recording(label: str) -> str:
@@ -306,7 +305,7 @@ def evaluate_sequence(method: Method, seq: Sequence, horizons: Seq[int], stride:
     else:
         base = seq
     bg, ba = fit_startup_bias(base, startup_bias_s, gravity=gravity)
-    inputs = {"open_loop": base, "bias_removed": remove_bias(base, bg, ba)}
+    inputs = dict(zip(VARIANTS, (base, remove_bias(base, bg, ba))))
     out: Dict[Tuple[str, int], Dict[str, np.ndarray]] = {}
     for variant, s in inputs.items():
         for n in horizons:
@@ -326,18 +325,8 @@ def evaluate_sequence(method: Method, seq: Sequence, horizons: Seq[int], stride:
     return out, bias
 
 
-def rmse(x: np.ndarray) -> float:
-    x = np.asarray(x, dtype=np.float64)
-    return float(np.sqrt(np.mean(x * x))) if x.size else float("nan")
-
-
 # ---------------------------------------------------------------------------------------------
 # the run
-
-
-def _split_signature(split: Any) -> Dict[str, Any]:
-    return {k: [[(g["name"], g["samples"], g["t0_ns"], g["t1_ns"]) for g in e["segments"]] for e in split.record.get(k, [])]
-            for k in ("train", "val")}
 
 
 def _ground_truth_kinds(run: RunConfig, test_entries: List[str]) -> Dict[str, str]:
@@ -396,7 +385,7 @@ def prepare_method(name: str, factory: Callable[[], Method], res: Resolved, spli
     rec_path = methods_dir / f"{fname}.record.json"  # not <name>.json: that is where e.g. traditional saves its fit
     suffix = getattr(method, "save_suffix", None) or (".json" if name == "traditional" else ".pt")
     file = methods_dir / f"{fname}{suffix}"
-    sig = {"fit_settings": asdict(settings), "split": _split_signature(split), "class": type(method).__qualname__}
+    sig = {"fit_settings": asdict(settings), "split": split_signature(split.record, ("train", "val")), "class": type(method).__qualname__}
     if reuse and rec_path.exists():
         old = _read_record(rec_path)
         same = old is not None and all(old.get(k) == json.loads(json.dumps(v)) for k, v in sig.items())
@@ -407,7 +396,7 @@ def prepare_method(name: str, factory: Callable[[], Method], res: Resolved, spli
             except Exception as e:
                 raise MethodError(f"{name}: loading {old['file']}: {one_line(e)}") from e
             return method, {**old, "status": "reused"}
-        print(f"{PROG}: {name}: saved fit does not match the settings or split; refitting", file=sys.stderr)
+        logger.info("%s: saved fit does not match the settings or split; refitting", name)
     _seed_all(settings.seed)
     t0 = time.time()
     try:
@@ -428,7 +417,7 @@ def _read_record(path: Path) -> Optional[Dict[str, Any]]:
     try:
         record = json.loads(path.read_text())
     except (OSError, UnicodeDecodeError, json.JSONDecodeError) as e:
-        print(f"{PROG}: {path}: unreadable fit record ({one_line(e)}); refitting", file=sys.stderr)
+        logger.warning("%s: unreadable fit record (%s); refitting", path, one_line(e))
         return None
     return record if isinstance(record, dict) else None
 
@@ -461,15 +450,167 @@ def _summarise_log(log: Dict[str, Any]) -> Dict[str, Any]:
     return out
 
 
+@dataclass
+class _Rows:
+    """The rows of an evaluation, in report order: (name, method), each one's record, the names
+    whose module is not available, and the ``--checkpoint`` row's refiner (None without one)."""
+
+    methods: List[Tuple[str, Method]] = field(default_factory=list)
+    records: Dict[str, Dict[str, Any]] = field(default_factory=dict)
+    skipped: List[str] = field(default_factory=list)
+    checkpoint: Optional[CheckpointRefiner] = None
+
+    def add(self, name: str, method: Method, record: Dict[str, Any]) -> None:
+        self.methods.append((name, method))
+        self.records[name] = record
+
+
+def _fit_methods(res: Resolved, methods: List[str], split: Any, methods_dir: Path, settings: FitSettings,
+                 reuse: bool) -> _Rows:
+    """Resolve the methods, then fit (or load) each on the train split (val for its own selection)."""
+    rows = _Rows()
+    for name in methods:
+        factory = load_method_class(name)
+        if factory is None:
+            rows.skipped.append(name)
+            continue
+        logger.info("%s: %sfitting on the train split", name, "loading or " if reuse else "")
+        rows.add(name, *prepare_method(name, factory, res, split, methods_dir, settings, reuse))
+    return rows
+
+
+def _add_checkpoint(rows: _Rows, checkpoint: Path, settings: FitSettings, test_entries: List[str]) -> None:
+    """A full ``imu_learn.fit`` run, beside (not instead of) the same-budget "proposed" row."""
+    ck = CheckpointRefiner(checkpoint, "cpu" if settings.device == "auto" else settings.device)
+    check_checkpoint_split(ck, test_entries)
+    rows.add(CHECKPOINT_NAME, ck, {"status": "checkpoint", "file": str(checkpoint), "checkpoint_split": ck.splits()})
+    rows.checkpoint = ck
+
+
+def _add_noise_floor(rows: _Rows, noise_floor: str, gt_kinds: Dict[str, str], gravity: float) -> None:
+    """The ground-truth IMU row (``eval.noise_floor``; "auto": where a test ground truth is pose-only)."""
+    from imu_learn.baselines.noise_floor import NOISE_FLOOR_NAME, GroundTruthImu
+
+    if noise_floor == "always" or (noise_floor == "auto" and any(k.startswith("pose-only") for k in gt_kinds.values())):
+        rows.add(NOISE_FLOOR_NAME, GroundTruthImu(gravity),
+                 {"status": "reference (synthesised from the test ground truth)"})
+
+
+def _bias_row(name: str, seg: str, rec: str, bias: Dict[str, Any]) -> Dict[str, Any]:
+    return {"method": name, "segment": seg, "recording": rec, "fitted_on": bias["fitted_on"],
+            **{f"gyro_bias_{a}": b for a, b in zip("xyz", bias["gyro"])},
+            **{f"acc_bias_{a}": b for a, b in zip("xyz", bias["acc"])}}
+
+
+def _evaluate_all(rows: _Rows, test: List[Sequence], plans: Dict[str, Dict[str, Any]], stride: int, bias_s: float,
+                  gravity: float, progress: bool) -> Tuple[Dict[Tuple[str, str, str, int], List[Dict[str, np.ndarray]]],
+                                                           List[Dict[str, Any]]]:
+    """Every row on every test segment: per-window errors by (method, variant, recording, n), the
+    fitted start-up biases; each row's evaluation time goes into its record (``eval_s``)."""
+    from tqdm import tqdm
+
+    errors: Dict[Tuple[str, str, str, int], List[Dict[str, np.ndarray]]] = {}
+    biases: List[Dict[str, Any]] = []
+    tasks = [(name, m, s) for name, m in rows.methods for s in test]
+    bar = tqdm(tasks, desc="evaluate", unit="seq", disable=not progress, dynamic_ncols=True, file=sys.stderr)
+    t_eval: Dict[str, float] = {}
+    for name, m, s in bar:
+        bar.set_postfix_str(f"{name} / {s.name}", refresh=True)
+        t0 = time.time()
+        try:
+            errs, bias = evaluate_sequence(m, s, plans[s.name]["n"], stride, bias_s, gravity)
+        except (ValueError, RuntimeError) as e:
+            raise MethodError(f"{name} on {s.name}: {one_line(e)}") from e
+        t_eval[name] = t_eval.get(name, 0.0) + time.time() - t0
+        rec = s.name.split("#")[0]
+        for (variant, n), e in errs.items():
+            errors.setdefault((name, variant, rec, n), []).append(e)
+        biases.append(_bias_row(name, s.name, rec, bias))
+    bar.close()
+    for name in t_eval:
+        rows.records.setdefault(name, {})["eval_s"] = round(t_eval[name], 2)
+    return errors, biases
+
+
+def _calibration(rows: _Rows, test: List[Sequence], e: EvalSettings, stride: int, bias_s: float,
+                 gravity: float) -> List[Dict[str, Any]]:
+    """The calibration table of a ``--checkpoint`` with a covariance head (else none)."""
+    ck = rows.checkpoint
+    if ck is None or ck.model.cov_head is None:
+        return []
+    from imu_learn.eval.calibration import evaluate_calibration
+
+    logger.info("calibration of the learned covariance of %s", ck.path)
+    return evaluate_calibration(ck.model, test, list(e.horizons), stride, bias_s,
+                                e.gyro_noise_density, e.acc_noise_density, gravity)
+
+
+def _per_recording(test: List[Sequence], plans: Dict[str, Dict[str, Any]]) -> Tuple[Dict[str, float], Dict[str, Any]]:
+    """Sample rate and horizon plan (seconds -> samples) of each test recording."""
+    rates: Dict[str, float] = {}
+    for s in test:
+        rates.setdefault(s.name.split("#")[0], plans[s.name]["rate_hz"])
+    by_s: Dict[str, Any] = {rec: {} for rec in rates}
+    for s in test:
+        by_s[s.name.split("#")[0]] = plans[s.name]["by_s"]
+    return rates, by_s
+
+
+def _error_rows(errors: Dict[Tuple[str, str, str, int], List[Dict[str, np.ndarray]]],
+                rates: Dict[str, float]) -> List[Dict[str, Any]]:
+    """RMSE of each (method, variant, recording, n) over its windows (all segments pooled)."""
+    rows = []
+    for (name, variant, rec, n), es in sorted(errors.items(), key=lambda kv: (kv[0][0], kv[0][1], kv[0][2], kv[0][3])):
+        cat = {k: np.concatenate([e[k] for e in es]) for k in ("rot_rad", "trans_m", "vel_mps")}
+        r = rmse(cat["rot_rad"])
+        rows.append({"method": name, "variant": variant, "sequence": rec, "n": n, "horizon_s": n / rates[rec],
+                     "rot_rad": r, "rot_deg": math.degrees(r), "trans_m": rmse(cat["trans_m"]),
+                     "vel_mps": rmse(cat["vel_mps"]), "windows": int(cat["rot_rad"].size)})
+    return rows
+
+
+def _result(res: Resolved, settings: FitSettings, methods: List[str], split: Any, rows: _Rows,
+            plans: Dict[str, Dict[str, Any]], gt_kinds: Dict[str, str], measured: Dict[str, Any]) -> Dict[str, Any]:
+    """The result dict the report is written from (``measured``: rows, calibration, biases)."""
+    cfg, data = res.cfg, res.run.data
+    rates, by_s = _per_recording(split.test, plans)
+    return {
+        "config_name": cfg.name,
+        "config_path": str(res.path) if res.path else None,
+        "base_path": str(res.base_path) if res.base_path else None,
+        "eval": asdict(cfg.eval),
+        "stride": res.stride,
+        "startup_bias_s": res.startup_bias_s,
+        "fit_settings": asdict(settings),
+        "seed": cfg.seed,
+        "methods": [n for n, _ in rows.methods],
+        "requested": list(methods),
+        "skipped": rows.skipped,
+        "records": rows.records,
+        "split": split.record,
+        "test_sequences": list(rates),
+        "test_segments": [{"name": s.name, "samples": len(s), "duration_s": round(s.duration_s, 3)} for s in split.test],
+        "ground_truth": gt_kinds,
+        "rates_hz": rates,
+        "horizons_by_s": by_s,
+        "curve_s": curve_seconds(cfg.eval),
+        "rows": _error_rows(measured["errors"], rates),
+        "calibration": measured["calibration"],
+        "biases": measured["biases"],
+        "versions": _versions(),
+        "roots": [asdict(r) for r in data.roots],
+        "data_root": split.record.get("data_root"),
+        "gravity": data.gravity,
+    }
+
+
 def run_evaluation(res: Resolved, methods: List[str], out_dir: Path, reuse: bool = False,
                    checkpoint: Optional[Path] = None, progress: bool = True,
                    t_start: Optional[float] = None) -> Dict[str, Any]:
     """Fit (or reuse) the methods, evaluate them on the test split, write the report; returns the result.
     ``t_start``: when the command started (wall time is measured from it; default now)."""
     import torch
-    from tqdm import tqdm
 
-    from imu_learn.baselines.noise_floor import NOISE_FLOOR_NAME, GroundTruthImu
     from imu_learn.data.splits import make_split
     from imu_learn.eval import report
 
@@ -485,161 +626,19 @@ def run_evaluation(res: Resolved, methods: List[str], out_dir: Path, reuse: bool
     methods_dir = out_dir / "methods"
     methods_dir.mkdir(exist_ok=True)
 
-    # methods: resolve, then fit / load (train split only; val for their own selection)
-    prepared: List[Tuple[str, Method]] = []
-    records: Dict[str, Dict[str, Any]] = {}
-    skipped: List[str] = []
-    for name in methods:
-        factory = load_method_class(name)
-        if factory is None:
-            skipped.append(name)
-            continue
-        print(f"{PROG}: {name}: {'loading or ' if reuse else ''}fitting on the train split", file=sys.stderr)
-        m, rec = prepare_method(name, factory, res, split, methods_dir, settings, reuse)
-        prepared.append((name, m))
-        records[name] = rec
+    rows = _fit_methods(res, methods, split, methods_dir, settings, reuse)
     if checkpoint is not None:
-        # A full `imu_learn.fit` run, beside (not instead of) the same-budget "proposed" row.
-        ck = CheckpointRefiner(checkpoint, "cpu" if settings.device == "auto" else settings.device)
-        check_checkpoint_split(ck, test_entries)
-        prepared.append((CHECKPOINT_NAME, ck))
-        records[CHECKPOINT_NAME] = {"status": "checkpoint", "file": str(checkpoint), "checkpoint_split": ck.splits()}
+        _add_checkpoint(rows, checkpoint, settings, test_entries)
     gt_kinds = _ground_truth_kinds(res.run, test_entries)
-    nf = cfg.eval.noise_floor
-    if nf == "always" or (nf == "auto" and any(k.startswith("pose-only") for k in gt_kinds.values())):
-        prepared.append((NOISE_FLOOR_NAME, GroundTruthImu(data.gravity)))
-        records[NOISE_FLOOR_NAME] = {"status": "reference (synthesised from the test ground truth)"}
+    _add_noise_floor(rows, cfg.eval.noise_floor, gt_kinds, data.gravity)
 
-    # evaluation
     stride, bias_s = res.stride, res.startup_bias_s
     plans = {s.name: horizon_plan(s, cfg.eval) for s in split.test}
-    errors: Dict[Tuple[str, str, str, int], List[Dict[str, np.ndarray]]] = {}
-    biases: List[Dict[str, Any]] = []
-    tasks = [(name, m, s) for name, m in prepared for s in split.test]
-    bar = tqdm(tasks, desc="evaluate", unit="seq", disable=not progress, dynamic_ncols=True, file=sys.stderr)
-    t_eval: Dict[str, float] = {}
-    for name, m, s in bar:
-        bar.set_postfix_str(f"{name} / {s.name}", refresh=True)
-        t0 = time.time()
-        try:
-            errs, bias = evaluate_sequence(m, s, plans[s.name]["n"], stride, bias_s, data.gravity)
-        except (ValueError, RuntimeError) as e:
-            raise MethodError(f"{name} on {s.name}: {one_line(e)}") from e
-        t_eval[name] = t_eval.get(name, 0.0) + time.time() - t0
-        rec = s.name.split("#")[0]
-        for (variant, n), e in errs.items():
-            errors.setdefault((name, variant, rec, n), []).append(e)
-        biases.append({"method": name, "segment": s.name, "recording": rec, "fitted_on": bias["fitted_on"],
-                       **{f"gyro_bias_{a}": b for a, b in zip("xyz", bias["gyro"])},
-                       **{f"acc_bias_{a}": b for a, b in zip("xyz", bias["acc"])}})
-    bar.close()
-    for name in t_eval:
-        records.setdefault(name, {})["eval_s"] = round(t_eval[name], 2)
-
-    calibration: List[Dict[str, Any]] = []
-    if checkpoint is not None and ck.model.cov_head is not None:
-        from imu_learn.eval.calibration import evaluate_calibration
-
-        print(f"{PROG}: calibration of the learned covariance of {checkpoint}", file=sys.stderr)
-        calibration = evaluate_calibration(ck.model, split.test, list(cfg.eval.horizons), stride, bias_s,
-                                           cfg.eval.gyro_noise_density, cfg.eval.acc_noise_density, data.gravity)
-
-    rows = []
-    rates = {}
-    for s in split.test:
-        rates.setdefault(s.name.split("#")[0], plans[s.name]["rate_hz"])
-    for (name, variant, rec, n), es in sorted(errors.items(), key=lambda kv: (kv[0][0], kv[0][1], kv[0][2], kv[0][3])):
-        cat = {k: np.concatenate([e[k] for e in es]) for k in ("rot_rad", "trans_m", "vel_mps")}
-        r = rmse(cat["rot_rad"])
-        rows.append({"method": name, "variant": variant, "sequence": rec, "n": n, "horizon_s": n / rates[rec],
-                     "rot_rad": r, "rot_deg": math.degrees(r), "trans_m": rmse(cat["trans_m"]),
-                     "vel_mps": rmse(cat["vel_mps"]), "windows": int(cat["rot_rad"].size)})
-    order = [n for n, _ in prepared]
-    by_s = {rec: {} for rec in rates}
-    for s in split.test:
-        by_s[s.name.split("#")[0]] = plans[s.name]["by_s"]
-    result = {
-        "config_name": cfg.name,
-        "config_path": str(res.path) if res.path else None,
-        "base_path": str(res.base_path) if res.base_path else None,
-        "eval": asdict(cfg.eval),
-        "stride": stride,
-        "startup_bias_s": bias_s,
-        "fit_settings": asdict(settings),
-        "seed": cfg.seed,
-        "methods": order,
-        "requested": list(methods),
-        "skipped": skipped,
-        "records": records,
-        "split": split.record,
-        "test_sequences": list(rates),
-        "test_segments": [{"name": s.name, "samples": len(s), "duration_s": round(s.duration_s, 3)} for s in split.test],
-        "ground_truth": gt_kinds,
-        "rates_hz": rates,
-        "horizons_by_s": by_s,
-        "curve_s": curve_seconds(cfg.eval),
-        "rows": rows,
-        "calibration": calibration,
-        "biases": biases,
-        "versions": _versions(),
-        "roots": [asdict(r) for r in data.roots],
-        "data_root": split.record.get("data_root"),
-        "gravity": data.gravity,
-    }
+    errors, biases = _evaluate_all(rows, split.test, plans, stride, bias_s, data.gravity, progress)
+    calibration = _calibration(rows, split.test, cfg.eval, stride, bias_s, data.gravity)
+    result = _result(res, settings, methods, split, rows, plans, gt_kinds,
+                     {"errors": errors, "calibration": calibration, "biases": biases})
     result["wall_s"] = time.time() - t_start
     report.write_report(out_dir, result)
     result["wall_s"] = time.time() - t_start
     return result
-
-
-# ---------------------------------------------------------------------------------------------
-# command line
-
-
-def _parser() -> argparse.ArgumentParser:
-    p = argparse.ArgumentParser(
-        prog=f"python -m {PROG}", allow_abbrev=False,
-        description="Fit methods on the train split and evaluate them on the held-out test split (paper Section V).",
-        epilog="Overrides: --fit.steps 100 --eval.stride 20 --eval.horizons '[10, 200]' --data.split.test '[\"V1_01_easy\"]'")
-    p.add_argument("--config", type=Path, help="eval TOML (configs/eval_*.toml); default: built-in defaults on the shipped crops")
-    p.add_argument("--methods", help=f"comma list (default: the config's; known: {', '.join(REGISTRY)})")
-    p.add_argument("--checkpoint", type=Path, help=f"also evaluate this imu_learn.train.fit checkpoint (best.pt), as the row {CHECKPOINT_NAME!r}")
-    p.add_argument("--out", type=Path, help="report folder (default <reports_dir>/<config name>)")
-    p.add_argument("--reuse", action="store_true", help="load fitted methods from the report folder when settings and split match")
-    p.add_argument("--no-progress", action="store_true", help="no progress bar")
-    p.add_argument("--traceback", action="store_true", help="show the full traceback of a known error")
-    return p
-
-
-def main(argv: Optional[Seq[str]] = None) -> int:
-    argv = list(sys.argv[1:] if argv is None else argv)
-    args, rest = _parser().parse_known_args(argv)
-    t0 = time.time()
-    try:
-        res = load_eval_config(args.config, rest)  # no --config: defaults, data = the fit defaults (crops)
-        methods = [m.strip() for m in args.methods.split(",") if m.strip()] if args.methods else list(res.cfg.methods)
-        for m in methods:
-            if m not in REGISTRY:
-                raise ConfigError(f"--methods: unknown method {m!r} (known: {', '.join(REGISTRY)})")
-        if args.checkpoint is not None and not args.checkpoint.exists():
-            raise FileNotFoundError(2, "No such file or directory", str(args.checkpoint))
-        out = args.out or Path(res.cfg.reports_dir) / res.cfg.name
-        result = run_evaluation(res, methods, out, reuse=args.reuse, checkpoint=args.checkpoint,
-                                progress=not args.no_progress, t_start=t0)
-    except KeyboardInterrupt:
-        print(f"{PROG}: interrupted", file=sys.stderr)
-        return 130
-    except (ImuError, OSError) as e:  # OSError: a full disk or read-only report folder, named in e
-        if args.traceback:
-            raise
-        print(f"{PROG}: error: {one_line(e)}", file=sys.stderr)
-        return EXIT_ERROR
-    from imu_learn.eval import report
-    print(report.summary_text(result))
-    print(f"report: {out / 'report.md'}")
-    print(f"total wall time: {time.time() - t0:.1f} s")
-    return 0
-
-
-if __name__ == "__main__":
-    sys.exit(main())

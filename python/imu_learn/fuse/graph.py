@@ -101,6 +101,54 @@ def lm_params():
     return lm
 
 
+def _aiding_by_sample(aiding: Seq) -> tuple:
+    """The aiding's factors' ingredients by the IMU sample they are tied to: position fixes
+    ``{s: [(p, lever, model)]}`` and relative poses ``{j: [(i, Pose3, model)]}``."""
+    import gtsam
+
+    fixes_at: Dict[int, List] = {}
+    between_at: Dict[int, List] = {}
+    for a in aiding:
+        if isinstance(a, PositionFixes):
+            model = gtsam.noiseModel.Isotropic.Sigma(3, a.sigma_m)
+            for s, p in zip(a.idx, a.p):
+                fixes_at.setdefault(int(s), []).append((p, a.lever, model))
+        elif isinstance(a, RelativePoses):
+            model = gtsam.noiseModel.Diagonal.Sigmas(np.r_[[a.sigma_rot_rad] * 3, [a.sigma_trans_m] * 3])
+            for i, j, R, t in zip(a.i, a.j, a.R_ij, a.t_ij):
+                between_at.setdefault(int(j), []).append((int(i), gtsam.Pose3(gtsam.Rot3(R), t), model))
+        else:
+            raise InvalidInputError(f"unknown aiding {type(a).__name__}")
+    return fixes_at, between_at
+
+
+def isam2_params():
+    """iSAM2's settings for :class:`IncrementalFusion` (why each: the comments)."""
+    import gtsam
+
+    isam_params = gtsam.ISAM2Params()
+    # QR, not the default Cholesky: with datasheet bias random walks the IMU factors' bias blocks
+    # are 1e10 times stiffer than a loose bias prior, and Cholesky reports such chains as
+    # indeterminate (tests/test_fuse.py keeps a minimal case).
+    isam_params.setFactorization("QR")
+    # Gauss-Newton steps, with iSAM2 updated only where aiding arrives: between aiding epochs a
+    # keyframe adds no information, so its estimate is the IMU prediction. Updating at every
+    # keyframe instead made Gauss-Newton diverge with 0.1 Hz fixes (EuRoC V1_03: 286 km), and
+    # Dogleg, which cured that, needs the whole Bayes tree for each step (cost growing with the
+    # trajectory: 43 s on V1_01 with 1 Hz fixes, now 4 s). After a coast longer than
+    # `resolve_after_s` the IMU-predicted linearisation point is far off and a few Gauss-Newton
+    # steps leave the first fix's estimate metres to hundreds of metres from it (40 s coast:
+    # 243-269 m); there the whole graph so far is re-solved by Levenberg-Marquardt and iSAM2
+    # restarted from that solution (0.02-0.05 m; tests/test_fuse_aiding.py).
+    isam_params.setOptimizationParams(gtsam.ISAM2GaussNewtonParams())
+    # Relinearise any variable whose step exceeds 0.1 (rad, m, m/s), checked at every update: with
+    # 0.01 a 10 Hz VO chain relinearised most of itself each time (V1_01: 29 s, now 11 s, same
+    # RMSE); checking only every 10th update let 0.1 Hz fixes diverge.
+    isam_params.setRelinearizeThreshold(0.1)
+    isam_params.relinearizeSkip = 1
+    return isam_params
+
+
 class IncrementalFusion:
     """The factor graph built and solved one IMU sample at a time, as a navigation system would run
     it: :meth:`add_sample` integrates each sample into the current preintegration and, at a
@@ -157,63 +205,15 @@ class IncrementalFusion:
         self.kf_idx = kf
         self._kf_list = [int(s) for s in kf]
         self._key_of = {int(s): k for k, s in enumerate(kf)}
-        self._fixes_at: Dict[int, List] = {}
-        self._between_at: Dict[int, List] = {}
-        for a in aiding:
-            if isinstance(a, PositionFixes):
-                model = gtsam.noiseModel.Isotropic.Sigma(3, a.sigma_m)
-                for s, p in zip(a.idx, a.p):
-                    self._fixes_at.setdefault(int(s), []).append((p, a.lever, model))
-            elif isinstance(a, RelativePoses):
-                model = gtsam.noiseModel.Diagonal.Sigmas(np.r_[[a.sigma_rot_rad] * 3, [a.sigma_trans_m] * 3])
-                for i, j, R, t in zip(a.i, a.j, a.R_ij, a.t_ij):
-                    self._between_at.setdefault(int(j), []).append((int(i), gtsam.Pose3(gtsam.Rot3(R), t), model))
-            else:
-                raise InvalidInputError(f"unknown aiding {type(a).__name__}")
-
+        self._fixes_at, self._between_at = _aiding_by_sample(aiding)
         self._params = noise.gtsam_params(gravity)
-        isam_params = gtsam.ISAM2Params()
-        # QR, not the default Cholesky: with datasheet bias random walks the IMU factors' bias blocks
-        # are 1e10 times stiffer than a loose bias prior, and Cholesky reports such chains as
-        # indeterminate (tests/test_fuse.py keeps a minimal case).
-        isam_params.setFactorization("QR")
-        # Gauss-Newton steps, with iSAM2 updated only where aiding arrives: between aiding epochs a
-        # keyframe adds no information, so its estimate is the IMU prediction. Updating at every
-        # keyframe instead made Gauss-Newton diverge with 0.1 Hz fixes (EuRoC V1_03: 286 km), and
-        # Dogleg, which cured that, needs the whole Bayes tree for each step (cost growing with the
-        # trajectory: 43 s on V1_01 with 1 Hz fixes, now 4 s). After a coast longer than
-        # `resolve_after_s` the IMU-predicted linearisation point is far off and a few Gauss-Newton
-        # steps leave the first fix's estimate metres to hundreds of metres from it (40 s coast:
-        # 243-269 m); there the whole graph so far is re-solved by Levenberg-Marquardt and iSAM2
-        # restarted from that solution (0.02-0.05 m; tests/test_fuse_aiding.py).
-        isam_params.setOptimizationParams(gtsam.ISAM2GaussNewtonParams())
-        # Relinearise any variable whose step exceeds 0.1 (rad, m, m/s), checked at every update: with
-        # 0.01 a 10 Hz VO chain relinearised most of itself each time (V1_01: 29 s, now 11 s, same
-        # RMSE); checking only every 10th update let 0.1 Hz fixes diverge.
-        isam_params.setRelinearizeThreshold(0.1)
-        isam_params.relinearizeSkip = 1
-        self._isam = gtsam.ISAM2(isam_params)
+        self._isam = gtsam.ISAM2(isam2_params())
         self._full = gtsam.NonlinearFactorGraph()
-
-        R0, p0, v0 = start_pose
-        pose0 = gtsam.Pose3(gtsam.Rot3(np.asarray(R0)), np.asarray(p0, dtype=np.float64))
-        bg0, ba0 = (np.zeros(3), np.zeros(3)) if bias0 is None else (np.asarray(bias0)[:3], np.asarray(bias0)[3:])
-        b0 = gtsam.imuBias.ConstantBias(ba0, bg0)  # GTSAM's order: accelerometer, gyroscope
-        self._graph = gtsam.NonlinearFactorGraph()
-        self._values = gtsam.Values()
-        self._graph.add(gtsam.PriorFactorPose3(X(0), pose0, gtsam.noiseModel.Diagonal.Sigmas(
-            np.r_[[prior.rot_rad] * 3, [prior.pos_m] * 3])))
-        self._graph.add(gtsam.PriorFactorVector(V(0), np.asarray(v0, dtype=np.float64),
-                                                gtsam.noiseModel.Isotropic.Sigma(3, prior.vel_mps)))
-        self._graph.add(gtsam.PriorFactorConstantBias(B(0), b0, gtsam.noiseModel.Diagonal.Sigmas(
-            np.r_[[prior.bias_acc] * 3, [prior.bias_gyro] * 3])))
-        self._values.insert(X(0), pose0)
-        self._values.insert(V(0), np.asarray(v0, dtype=np.float64))
-        self._values.insert(B(0), b0)
+        pose0, v0, b0 = self._start_with_prior(start_pose, prior, bias0)
 
         K = len(kf)
         self.causal_p, self.causal_R = np.zeros((K, 3)), np.zeros((K, 3, 3))
-        self._state, self._vel, self._bias = pose0, np.asarray(v0, dtype=np.float64), b0
+        self._state, self._vel, self._bias = pose0, v0, b0
         self._nav = gtsam.NavState(pose0, self._vel)
         self._pim = None
         self.counts = {"imu_factors": 0, "position_factors": 0, "relative_pose_factors": 0, "isam2_updates": 0,
@@ -228,6 +228,26 @@ class IncrementalFusion:
         self._k = 0  # the next keyframe's number
         self._next_kf = self._kf_list[0]
         self._prev = None  # (t_ns, gyro, acc, var) of the last sample, integrated when the next arrives
+
+    def _start_with_prior(self, start_pose: tuple, prior: PriorSigmas, bias0: Optional[np.ndarray]) -> tuple:
+        """The first keyframe's state (pose, velocity, bias) and its prior factors in a new pending graph."""
+        gtsam, B, V, X = self._gtsam, self._B, self._V, self._X
+        R0, p0, v0 = start_pose
+        pose0 = gtsam.Pose3(gtsam.Rot3(np.asarray(R0)), np.asarray(p0, dtype=np.float64))
+        v0 = np.asarray(v0, dtype=np.float64)
+        bg0, ba0 = (np.zeros(3), np.zeros(3)) if bias0 is None else (np.asarray(bias0)[:3], np.asarray(bias0)[3:])
+        b0 = gtsam.imuBias.ConstantBias(ba0, bg0)  # GTSAM's order: accelerometer, gyroscope
+        self._graph = gtsam.NonlinearFactorGraph()
+        self._values = gtsam.Values()
+        self._graph.add(gtsam.PriorFactorPose3(X(0), pose0, gtsam.noiseModel.Diagonal.Sigmas(
+            np.r_[[prior.rot_rad] * 3, [prior.pos_m] * 3])))
+        self._graph.add(gtsam.PriorFactorVector(V(0), v0, gtsam.noiseModel.Isotropic.Sigma(3, prior.vel_mps)))
+        self._graph.add(gtsam.PriorFactorConstantBias(B(0), b0, gtsam.noiseModel.Diagonal.Sigmas(
+            np.r_[[prior.bias_acc] * 3, [prior.bias_gyro] * 3])))
+        self._values.insert(X(0), pose0)
+        self._values.insert(V(0), v0)
+        self._values.insert(B(0), b0)
+        return pose0, v0, b0
 
     @property
     def done(self) -> bool:

@@ -245,6 +245,95 @@ def _select(names: Optional[Sequence[str]], available: List[str], what: str) -> 
     return [n for n in available if n in names]
 
 
+def _causal_models(cfg, specs: list, checkpoint: Optional[str]) -> Tuple[Dict[str, object], Dict[str, str]]:
+    """Every recording's causal model for ``proposed``, loaded (and checked causal) before any run:
+    the models by checkpoint path, and each recording's checkpoint path."""
+    from . import run as runmod
+
+    models: Dict[str, object] = {}
+    ckpt_of: Dict[str, str] = {}
+    for spec in specs:
+        path = checkpoint or runmod.artefact_of(cfg, spec, "proposed")
+        if not Path(path).is_file():
+            raise FileNotFoundError(2, "No such file or directory (the causal checkpoint for 'proposed')", path)
+        if path not in models:
+            hint = "" if checkpoint else "; pass --checkpoint CAUSAL.pt, or --inputs raw"
+            models[path] = load_causal_model(Path(path), hint)
+        ckpt_of[spec.path] = path
+    return models, ckpt_of
+
+
+def _bias_prior(cfg, scn, seq, name: str, model, refined: Dict[str, tuple]) -> Optional[np.ndarray]:
+    """The bias prior's mean for input ``name`` (None for a zero prior). The start-up prior (an
+    initialisation from ground truth, as in the batch experiment) is fitted on the input the stream
+    will see: the causal refinement of the first seconds, which refine_arrays gives (up to float32
+    rounding); ``refined`` caches it per recording."""
+    from . import run as runmod
+
+    if scn.bias_prior == "zero":
+        return None
+    if name == "proposed" and "proposed" not in refined:
+        from imu_learn.infer.refine import refine_arrays
+
+        refined["proposed"] = refine_arrays(model, seq.gyro, seq.acc)
+    g, a = refined["proposed"] if name == "proposed" else (seq.gyro, seq.acc)
+    return runmod.bias_prior_mean(scn, seq, g, a, cfg.gravity)
+
+
+def _run_line(key: str, sc: dict, st: dict) -> str:
+    """One finished online run, on one line."""
+    ps, up = st["per_sample"], st["update"]
+    return (f"{key}: causal position RMSE {sc['pos_rmse_m']:.3f} m; per-sample latency median "
+            f"{ps['median_us']:.0f} us, p99 {ps['p99_us']:.0f} us, max {ps['max_us'] / 1e3:.1f} ms; "
+            f"update p99 {up['p99_us'] / 1e3:.1f} ms ({up['count']}); max delay queued "
+            f"{st['delay']['max_us'] / 1e3:.1f} ms; real-time factor {st['real_time_factor']:.1f} "
+            f"({st['samples']} samples, {st['duration_s']:.0f} s in {st['wall_s']:.1f} s)")
+
+
+def _stream_recording(cfg, spec, scns: list, inputs: Sequence[str], models: Dict[str, object],
+                      ckpt_of: Dict[str, str], runs: Dict[str, dict], save: Callable[[], None],
+                      log: Callable[[str], None]) -> None:
+    """Every scenario x input of one recording, each run stored in ``runs`` and saved as it ends."""
+    import torch
+    from scipy.spatial.transform import Rotation
+
+    from imu_learn.core.quat import wxyz_to_xyzw
+
+    from . import run as runmod
+
+    rname = Path(spec.path).name
+    seq, noise, leica = runmod.load_recording_for_fusion(cfg, spec)
+    R0 = Rotation.from_quat(wxyz_to_xyzw(seq.q_wxyz[0])).as_matrix()
+    refined: Dict[str, tuple] = {}
+    for scn in scns:
+        scn_seed = runmod.seeds_of(cfg, scn)[0]  # None for real aiding
+        aiding = runmod.make_aiding(scn, seq, leica, runmod.aiding_rng(scn_seed, rname, scn))
+        if aiding is None:
+            log(f"{rname}|{scn.name}: no {scn.kind} aiding in this recording; skipped")
+            continue
+        for name in inputs:
+            model = models[ckpt_of[spec.path]] if name == "proposed" else None
+            bias0 = _bias_prior(cfg, scn, seq, name, model, refined)
+            key = runmod.run_key(spec, scn, name, scn_seed)
+            try:
+                res = stream(seq.t_ns, seq.gyro, seq.acc, (R0, seq.p[0], seq.v[0]), [aiding], model, noise,
+                             cfg.gravity, cfg.keyframe_hz, bias0=bias0)
+            except RuntimeError as e:  # GTSAM's IndeterminateLinearSystemException and kin
+                runs[key] = {"recording": rname, "scenario": scn.name, "input": name,
+                             "failed": " ".join(str(e).split())[:300]}
+                save()
+                log(f"{key}: failed: {runs[key]['failed'][:120]}")
+                continue
+            st = res.stats()
+            sc = score_online(res, seq.t_ns, seq.p, seq.q_wxyz, scn.outage_windows())
+            runs[key] = {"recording": rname, "scenario": scn.name, "input": name, "seed": scn_seed,
+                         "aiding": aiding.label, "aiding_count": len(aiding),
+                         "checkpoint": ckpt_of.get(spec.path, "") if name == "proposed" else "",
+                         "torch_threads": torch.get_num_threads(), "causal": sc, **st}
+            save()
+            log(_run_line(key, sc, st))
+
+
 def run_online(cfg, out: Path, checkpoint: Optional[str] = None, recordings: Optional[Sequence[str]] = None,
                scenarios: Optional[Sequence[str]] = None, inputs: Sequence[str] = ONLINE_INPUTS,
                log: Callable[[str], None] = print) -> Dict[str, dict]:
@@ -253,10 +342,6 @@ def run_online(cfg, out: Path, checkpoint: Optional[str] = None, recordings: Opt
     every run, merged with the runs already there (a run named again is measured again).
     ``checkpoint`` (a causal one) beats the config's models for ``proposed``. Simulated aiding uses
     the config's first noise seed (the same draw as the batch experiment's runs of that seed)."""
-    import torch
-    from scipy.spatial.transform import Rotation
-
-    from imu_learn.core.quat import wxyz_to_xyzw
     from imu_learn.util.atomic import atomic_write_text
 
     from . import run as runmod
@@ -268,19 +353,8 @@ def run_online(cfg, out: Path, checkpoint: Optional[str] = None, recordings: Opt
     scn_names = _select(scenarios, [s.name for s in cfg.scenarios], "scenarios")
     specs = [r for r in cfg.recordings if Path(r.path).name in rec_names]
     scns = [s for s in cfg.scenarios if s.name in scn_names]
-    models: Dict[str, object] = {}
-    ckpt_of: Dict[str, str] = {}
-    if "proposed" in inputs:  # every model is loaded (and checked causal) before any run
-        for spec in specs:
-            path = checkpoint or runmod.artefact_of(cfg, spec, "proposed")
-            if not Path(path).is_file():
-                raise FileNotFoundError(2, "No such file or directory (the causal checkpoint for 'proposed')", path)
-            if path not in models:
-                hint = "" if checkpoint else "; pass --checkpoint CAUSAL.pt, or --inputs raw"
-                models[path] = load_causal_model(Path(path), hint)
-            ckpt_of[spec.path] = path
-    out = Path(out)
-    res_path = out / "online.json"
+    models, ckpt_of = _causal_models(cfg, specs, checkpoint) if "proposed" in inputs else ({}, {})
+    res_path = Path(out) / "online.json"
     runs = runmod.read_runs(res_path, log)
     info = machine()
 
@@ -288,53 +362,7 @@ def run_online(cfg, out: Path, checkpoint: Optional[str] = None, recordings: Opt
         atomic_write_text(res_path, json.dumps({"machine": info, "config": asdict(cfg), "runs": runs}, indent=1))
 
     for spec in specs:
-        rname = Path(spec.path).name
-        seq, noise, leica = runmod.load_recording_for_fusion(cfg, spec)
-        R0 = Rotation.from_quat(wxyz_to_xyzw(seq.q_wxyz[0])).as_matrix()
-        refined = None
-        for scn in scns:
-            scn_seed = runmod.seeds_of(cfg, scn)[0]  # None for real aiding
-            aiding = runmod.make_aiding(scn, seq, leica, runmod.aiding_rng(scn_seed, rname, scn))
-            if aiding is None:
-                log(f"{rname}|{scn.name}: no {scn.kind} aiding in this recording; skipped")
-                continue
-            for name in inputs:
-                model = models[ckpt_of[spec.path]] if name == "proposed" else None
-                bias0 = None
-                if scn.bias_prior != "zero":
-                    # The start-up prior (an initialisation from ground truth, as in the batch
-                    # experiment) is fitted on the input the stream will see: the causal refinement
-                    # of the first seconds, which refine_arrays gives (up to float32 rounding).
-                    if name == "proposed" and refined is None:
-                        from imu_learn.infer.refine import refine_arrays
-
-                        refined = refine_arrays(model, seq.gyro, seq.acc)
-                    g, a = refined if name == "proposed" else (seq.gyro, seq.acc)
-                    bias0 = runmod.bias_prior_mean(scn, seq, g, a, cfg.gravity)
-                key = runmod.run_key(spec, scn, name, scn_seed)
-                try:
-                    res = stream(seq.t_ns, seq.gyro, seq.acc, (R0, seq.p[0], seq.v[0]), [aiding], model, noise,
-                                 cfg.gravity, cfg.keyframe_hz, bias0=bias0)
-                except RuntimeError as e:  # GTSAM's IndeterminateLinearSystemException and kin
-                    runs[key] = {"recording": rname, "scenario": scn.name, "input": name,
-                                 "failed": " ".join(str(e).split())[:300]}
-                    save()
-                    log(f"{key}: failed: {runs[key]['failed'][:120]}")
-                    continue
-                st = res.stats()
-                sc = score_online(res, seq.t_ns, seq.p, seq.q_wxyz, scn.outage_windows())
-                runs[key] = {"recording": rname, "scenario": scn.name, "input": name, "seed": scn_seed,
-                             "aiding": aiding.label, "aiding_count": len(aiding),
-                             "checkpoint": ckpt_of.get(spec.path, "") if name == "proposed" else "",
-                             "torch_threads": torch.get_num_threads(), "causal": sc, **st}
-                save()
-                ps, up = st["per_sample"], st["update"]
-                log(f"{key}: causal position RMSE {sc['pos_rmse_m']:.3f} m; per-sample latency median "
-                    f"{ps['median_us']:.0f} us, p99 {ps['p99_us']:.0f} us, max {ps['max_us'] / 1e3:.1f} ms; "
-                    f"update p99 {up['p99_us'] / 1e3:.1f} ms ({up['count']}); max delay queued "
-                    f"{st['delay']['max_us'] / 1e3:.1f} ms; real-time factor {st['real_time_factor']:.1f} "
-                    f"({st['samples']} samples, {st['duration_s']:.0f} s in {st['wall_s']:.1f} s)")
+        _stream_recording(cfg, spec, scns, inputs, models, ckpt_of, runs, save, log)
     if not res_path.exists():
         save()
     return runs
-

@@ -158,15 +158,16 @@ def imu_input(name: str, seq, artefact: str, cache: Dict[Tuple[str, str], object
     if name == "raw":
         return seq.gyro, seq.acc, None
     proc = load_processor(name, artefact, cache)
-    from imu_learn.infer.refine import refine_arrays, refine_with_variance
+    from imu_learn.infer.windowing import apply  # the checkpoint's windowing rule, as refine/evaluate/fit
 
     if name in LEARNED_COV_INPUTS:
-        gyro, acc, var = refine_with_variance(proc, seq.gyro, seq.acc)
+        gyro, acc, var = apply(proc, seq.gyro, seq.acc, variance=True)
         # The head's variances are a function of the raw samples (the model's input) either way.
         return (seq.gyro, seq.acc, var) if name == "raw+learned-cov" else (gyro, acc, var)
     if name != "proposed":
         return (*proc.refine(seq), None)
-    return (*refine_arrays(proc, seq.gyro, seq.acc), None)
+    gyro, acc, _ = apply(proc, seq.gyro, seq.acc)
+    return gyro, acc, None
 
 
 def bias_prior_mean(scn: ScenarioSpec, seq, gyro: np.ndarray, acc: np.ndarray, gravity: float):

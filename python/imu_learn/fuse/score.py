@@ -10,6 +10,7 @@ import numpy as np
 from scipy.spatial.transform import Rotation
 
 from imu_learn.core.quat import rotation_angle, xyzw_to_wxyz
+from imu_learn.eval.metrics import rmse
 
 from .aiding import outage_mask
 from .graph import FusionResult
@@ -17,10 +18,6 @@ from .graph import FusionResult
 
 def rotation_errors_deg(R_est: np.ndarray, q_wxyz_gt: np.ndarray) -> np.ndarray:
     return np.rad2deg(rotation_angle(q_wxyz_gt, xyzw_to_wxyz(Rotation.from_matrix(R_est).as_quat())))
-
-
-def _rmse(x: np.ndarray) -> float:
-    return float(np.sqrt(np.mean(np.square(x)))) if len(x) else float("nan")
 
 
 def score(res: FusionResult, t_ns: np.ndarray, p_gt: np.ndarray, q_wxyz_gt: np.ndarray,
@@ -35,12 +32,12 @@ def score(res: FusionResult, t_ns: np.ndarray, p_gt: np.ndarray, q_wxyz_gt: np.n
         per: List[Dict[str, float]] = []
         for start, dur in outages:
             m = (rel_s >= start) & (rel_s < start + dur)
-            per.append({"start_s": float(start), "duration_s": float(dur), "rmse_m": _rmse(e[m]),
+            per.append({"start_s": float(start), "duration_s": float(dur), "rmse_m": rmse(e[m]),
                         "max_m": float(e[m].max()) if m.any() else float("nan")})
         out[name] = {
-            "pos_rmse_m": _rmse(e),
-            "pos_rmse_aided_m": _rmse(e[~inside]),
-            "rot_rmse_deg": _rmse(rotation_errors_deg(R, q_wxyz_gt[idx])),
+            "pos_rmse_m": rmse(e),
+            "pos_rmse_aided_m": rmse(e[~inside]),
+            "rot_rmse_deg": rmse(rotation_errors_deg(R, q_wxyz_gt[idx])),
             "outages": per,
         }
     return out

@@ -1,6 +1,6 @@
 """Export a trained refiner for use outside Python/imu_learn: TorchScript, ONNX and a JSON card.
 
-    python -m imu_learn.export --checkpoint CKPT --out DIR [--window 200] [--opset 17]
+    imu-learn export --checkpoint CKPT --out DIR [--window 200] [--opset 17]
 
 writes into DIR:
 
@@ -20,23 +20,22 @@ Python through ``ImuRefiner.step`` / ``forward_with_state``.
 """
 from __future__ import annotations
 
-import argparse
 import json
-import sys
 import warnings
 from pathlib import Path
-from typing import Any, Dict, List, Optional
+from typing import Any, Dict, List, Optional, Tuple
 
 import numpy as np
 import torch
 
+from imu_learn.errors import InvalidInputError
 from imu_learn.nn.model import ImuRefiner
 from imu_learn.util.atomic import atomic_write_path, atomic_write_text
 from imu_learn.util.digest import file_sha256
 
 CHANNELS = ["gyro_x", "gyro_y", "gyro_z", "acc_x", "acc_y", "acc_z"]
 UNITS = ["rad/s"] * 3 + ["m/s^2"] * 3
-CARD_FORMAT = "imu_learn.infer.export.v1"
+CARD_FORMAT = "imu_learn.export.v1"
 
 
 class WithVariance(torch.nn.Module):
@@ -111,89 +110,90 @@ def _check(run, model: ImuRefiner, x: torch.Tensor) -> Optional[float]:
     return max(diffs)
 
 
-def export(checkpoint: Path, out: Path, window: int = 200, opset: int = 17, seed: int = 0) -> Dict[str, Any]:
-    """Write model.ts, model.onnx and model.json into ``out``; returns the JSON card."""
-    from imu_learn.train.checkpoint import load_checkpoint, model_from_checkpoint
-
-    if window < 2:
-        raise ValueError(f"--window must be >= 2, got {window}")
-    state = load_checkpoint(Path(checkpoint))
-    model = model_from_checkpoint(state).cpu().float().eval()
-    out = Path(out)
-    out.mkdir(parents=True, exist_ok=True)
-
-    # A plausible raw-IMU window: the model's own mean/std (the export does not depend on it).
+def example_inputs(model: ImuRefiner, window: int, seed: int = 0) -> Tuple[torch.Tensor, torch.Tensor]:
+    """Two plausible raw-IMU inputs from the model's own mean/std (the export does not depend on
+    them): (1, window, 6) to trace with, and another batch size and length to check dynamic axes."""
     gen = torch.Generator().manual_seed(seed)
     mean, std = model.mean.float(), model.std.float()
 
     def sample(b: int, w: int) -> torch.Tensor:
         return mean + std * torch.randn(b, w, 6, generator=gen)
 
-    example = sample(1, window)
-    other = sample(3, window + window // 2 + 1)  # another batch size and length
+    return sample(1, window), sample(3, window + window // 2 + 1)
 
-    ts_path, onnx_path = out / "model.ts", out / "model.onnx"
-    export_torchscript(model, example, ts_path)
+
+def _checks(run, model: ImuRefiner, example: torch.Tensor, other: torch.Tensor) -> Dict[str, Any]:
+    return {
+        "trace_shape": list(example.shape), "max_abs_diff_trace_shape": _check(run, model, example),
+        "other_shape": list(other.shape), "max_abs_diff_other_shape": _check(run, model, other),
+    }
+
+
+def torchscript_checked(model: ImuRefiner, example: torch.Tensor, other: torch.Tensor, path: Path) -> Dict[str, Any]:
+    """Write the TorchScript export to ``path``, reload it and compare it with the torch model."""
+    export_torchscript(model, example, path)
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")  # torch >= 2.9 marks torch.jit as deprecated
-        ts = torch.jit.load(str(ts_path))
-    checks: Dict[str, Any] = {}
+        ts = torch.jit.load(str(path))
 
     def run_ts(x: torch.Tensor) -> List[np.ndarray]:
         with torch.no_grad():
             y = ts(x)
         return [t.numpy() for t in (y if isinstance(y, (tuple, list)) else (y,))]
 
-    checks["torchscript"] = {
-        "trace_shape": list(example.shape), "max_abs_diff_trace_shape": _check(run_ts, model, example),
-        "other_shape": list(other.shape), "max_abs_diff_other_shape": _check(run_ts, model, other),
-    }
+    return _checks(run_ts, model, example, other)
 
-    export_onnx(model, example, onnx_path, opset)
+
+def onnx_checked(model: ImuRefiner, example: torch.Tensor, other: torch.Tensor, path: Path,
+                 opset: int) -> Dict[str, Any]:
+    """Write the ONNX export to ``path`` and compare it with the torch model under onnxruntime
+    (a note instead when onnxruntime is not installed)."""
+    export_onnx(model, example, path, opset)
     try:
         import onnxruntime as ort
     except ImportError:
-        ort = None
-    if ort is not None:
-        sess = ort.InferenceSession(str(onnx_path), providers=["CPUExecutionProvider"])
+        return {"runtime": None, "note": "onnxruntime not installed; export not verified"}
+    sess = ort.InferenceSession(str(path), providers=["CPUExecutionProvider"])
 
-        def run_onnx(x: torch.Tensor) -> List[np.ndarray]:
-            return sess.run(output_names(model), {"imu": x.numpy()})
+    def run_onnx(x: torch.Tensor) -> List[np.ndarray]:
+        return sess.run(output_names(model), {"imu": x.numpy()})
 
-        checks["onnx"] = {
-            "runtime": f"onnxruntime {ort.__version__}",
-            "trace_shape": list(example.shape), "max_abs_diff_trace_shape": _check(run_onnx, model, example),
-            "other_shape": list(other.shape), "max_abs_diff_other_shape": _check(run_onnx, model, other),
-        }
-    else:
-        checks["onnx"] = {"runtime": None, "note": "onnxruntime not installed; export not verified"}
+    return {"runtime": f"onnxruntime {ort.__version__}", **_checks(run_onnx, model, example, other)}
 
+
+def _io_spec(model: ImuRefiner) -> Dict[str, Any]:
+    """The card's inputs and outputs: names, dtypes, shapes, channels and units."""
+    imu = {"dtype": "float32", "shape": ["batch", "time", 6], "channels": CHANNELS}
+    outputs = [{"name": "refined", **imu, "units": UNITS,
+                "description": "refined IMU = raw + correction, same order and units"}]
+    if model.cov_head is not None:
+        outputs.append({
+            "name": "variance", **imu, "units": ["(rad/s)^2"] * 3 + ["(m/s^2)^2"] * 3,
+            "description": "per-sample noise variance of each refined sample, discrete-time (the variance of one "
+                           "sample); a filter that wants a noise density takes sqrt(variance * dt) "
+                           "[rad/s/sqrt(Hz), m/s^2/sqrt(Hz)], GTSAM's PreintegrationParams variance * dt",
+        })
+    inputs = [{"name": "imu", **imu, "units": UNITS,
+               "description": "raw IMU samples in time order (not normalised: normalisation is inside the model)"}]
+    return {"inputs": inputs, "outputs": outputs}
+
+
+def model_card(model: ImuRefiner, state: Dict[str, Any], checkpoint: Path, files: Dict[str, Path], window: int,
+               opset: int, checks: Dict[str, Any]) -> Dict[str, Any]:
+    """The JSON card of an export: I/O, normalisation, model args, checks, source checkpoint, digests.
+    ``files``: {"torchscript": path, "onnx": path}."""
     def dyn(c: Dict[str, Any]) -> bool:
         d = c.get("max_abs_diff_other_shape")
         return d is not None and d < 1e-4
 
-    card: Dict[str, Any] = {
+    dynamic = dyn(checks["torchscript"]) and dyn(checks["onnx"])
+    return {
         "format": CARD_FORMAT,
-        "files": {"torchscript": ts_path.name, "onnx": onnx_path.name},
-        "inputs": [{
-            "name": "imu", "dtype": "float32", "shape": ["batch", "time", 6],
-            "channels": CHANNELS, "units": UNITS,
-            "description": "raw IMU samples in time order (not normalised: normalisation is inside the model)",
-        }],
-        "outputs": [{
-            "name": "refined", "dtype": "float32", "shape": ["batch", "time", 6],
-            "channels": CHANNELS, "units": UNITS,
-            "description": "refined IMU = raw + correction, same order and units",
-        }] + ([{
-            "name": "variance", "dtype": "float32", "shape": ["batch", "time", 6],
-            "channels": CHANNELS, "units": ["(rad/s)^2"] * 3 + ["(m/s^2)^2"] * 3,
-            "description": "per-sample noise variance of each refined sample, discrete-time (the variance of one "
-                           "sample); a filter that wants a noise density takes sqrt(variance * dt) "
-                           "[rad/s/sqrt(Hz), m/s^2/sqrt(Hz)], GTSAM's PreintegrationParams variance * dt",
-        }] if model.cov_head is not None else []),
+        "files": {k: p.name for k, p in files.items()},
+        **_io_spec(model),
         "normalisation": {
             "inside_model": True,
-            "mean": [float(v) for v in mean], "std": [float(v) for v in std],
+            "mean": [float(v) for v in model.mean.float()], "std": [float(v) for v in model.std.float()],
             "rule": "x_norm = (imu - mean) / std; refined = imu + output_scale * std * head(network(x_norm))",
             "output_scale": float(model.cfg.output_scale),
         },
@@ -202,8 +202,7 @@ def export(checkpoint: Path, out: Path, window: int = 200, opset: int = 17, seed
         "state": "each call starts from zero LSTM state; the bidirectional model needs context on both sides"
         " (see imu_learn.infer.refine for windowing)",
         "trace_window": int(window),
-        "dynamic_axes": {"batch": dyn(checks["torchscript"]) and dyn(checks["onnx"]),
-                         "time": dyn(checks["torchscript"]) and dyn(checks["onnx"])},
+        "dynamic_axes": {"batch": dynamic, "time": dynamic},
         "onnx_opset": int(opset),
         "checks": checks,
         "source_checkpoint": {
@@ -212,37 +211,34 @@ def export(checkpoint: Path, out: Path, window: int = 200, opset: int = 17, seed
             "code_version": state.get("code_version"),
         },
         "torch_version": torch.__version__,
-        "sha256": {"model.ts": file_sha256(ts_path), "model.onnx": file_sha256(onnx_path)},
+        "sha256": {p.name: file_sha256(p) for p in files.values()},
     }
+
+
+def export(checkpoint: Path, out: Path, window: int = 200, opset: int = 17, seed: int = 0) -> Dict[str, Any]:
+    """Write model.ts, model.onnx and model.json into ``out``; returns the JSON card."""
+    from imu_learn.train.checkpoint import load_checkpoint, model_from_checkpoint
+
+    if window < 2:
+        raise InvalidInputError(f"--window must be >= 2, got {window}")
+    state = load_checkpoint(Path(checkpoint))
+    model = model_from_checkpoint(state).cpu().float().eval()
+    out = Path(out)
+    out.mkdir(parents=True, exist_ok=True)
+    example, other = example_inputs(model, window, seed)
+    files = {"torchscript": out / "model.ts", "onnx": out / "model.onnx"}
+    checks = {"torchscript": torchscript_checked(model, example, other, files["torchscript"]),
+              "onnx": onnx_checked(model, example, other, files["onnx"], opset)}
+    card = model_card(model, state, Path(checkpoint), files, window, opset, checks)
     atomic_write_text(out / "model.json", json.dumps(card, indent=2) + "\n")
     return card
 
 
-def main(argv: Optional[List[str]] = None) -> int:
-    p = argparse.ArgumentParser(
-        prog="python -m imu_learn.export", description="Export a refiner to TorchScript and ONNX."
-    )
-    p.add_argument("--checkpoint", required=True, type=Path)
-    p.add_argument("--out", required=True, type=Path, help="folder for model.ts, model.onnx, model.json")
-    p.add_argument("--window", type=int, default=200, help="time length of the example used for tracing")
-    p.add_argument("--opset", type=int, default=17, help="ONNX opset (default 17)")
-    args = p.parse_args(argv)
-    try:
-        card = export(args.checkpoint, args.out, args.window, args.opset)
-    except Exception as e:  # one line, status 2
-        msg = " ".join(str(e).split()) or type(e).__name__
-        print(f"error: {type(e).__name__}: {msg}", file=sys.stderr)
-        return 2
-    c = card["checks"]
-    print(f"wrote {args.out / 'model.ts'}, {args.out / 'model.onnx'}, {args.out / 'model.json'}")
+def summary(card: Dict[str, Any], out: Path) -> str:
+    """What ``imu-learn export`` prints: the files written and each export's largest difference."""
+    lines = [f"wrote {out / 'model.ts'}, {out / 'model.onnx'}, {out / 'model.json'}"]
     for name in ("torchscript", "onnx"):
-        r = c[name]
-        print(
-            f"  {name}: max |export - torch| {r.get('max_abs_diff_trace_shape')} at {r.get('trace_shape')}, "
-            f"{r.get('max_abs_diff_other_shape')} at {r.get('other_shape')}"
-        )
-    return 0
-
-
-if __name__ == "__main__":
-    sys.exit(main())
+        r = card["checks"][name]
+        lines.append(f"  {name}: max |export - torch| {r.get('max_abs_diff_trace_shape')} at {r.get('trace_shape')}, "
+                     f"{r.get('max_abs_diff_other_shape')} at {r.get('other_shape')}")
+    return "\n".join(lines)

@@ -1,7 +1,8 @@
 """Does a trained model improve a recording? Raw vs refined relative pose error on one recording.
 
-:func:`compare_with_raw` refines a recording's IMU exactly as ``python -m imu_learn.refine`` does
-(the same reader values, :func:`imu_learn.refine.refine_arrays` with the CLI's default windowing),
+:func:`compare_with_raw` refines a recording's IMU exactly as ``imu-learn refine`` does (the same
+reader values, :func:`imu_learn.infer.refine.refine_arrays` with the checkpoint's windowing rule,
+:mod:`imu_learn.infer.windowing`, the rule fit selected and scored it with),
 puts ground truth on the raw and on the refined IMU by the same alignment (so both have identical
 segments and stamps), and scores both with the final table's metric (:mod:`imu_learn.eval.metrics`,
 as ``fit.evaluate_table`` does): relative pose RMSE over n IMU samples, windows every ``stride``
@@ -29,20 +30,20 @@ from imu_learn.data.formats import read_recording
 from imu_learn.data.loading import AlignOptions, align
 from imu_learn.data.types import ImuData
 from imu_learn.data.types import Sequence as Seq
-from imu_learn.eval.metrics import GRAVITY, relative_pose_rmse_many, without_fitted_bias
-from imu_learn.infer.refine import pick_device, refine_arrays
+from imu_learn.eval.metrics import GRAVITY, variant_table, without_fitted_bias
+from imu_learn.eval.protocol import VARIANTS
+from imu_learn.infer.refine import refine_arrays
+from imu_learn.infer.windowing import windowing_of
+from imu_learn.nn.device import pick_device
 from imu_learn.train.checkpoint import load_checkpoint, model_from_checkpoint
 
 PathLike = Union[str, Path]
-PROTOCOLS = ("open_loop", "bias_removed")
 
 
 def _table(seqs: List[Seq], horizons: Sequence[int], stride: int, startup_bias_s: float,
            gravity: float) -> Dict[str, Any]:
     fixed, _ = without_fitted_bias(seqs, startup_bias_s, gravity)
-    return {col: {str(n): relative_pose_rmse_many(ss, int(n), stride, gravity, first_s=startup_bias_s)
-                  for n in horizons}
-            for col, ss in (("open_loop", seqs), ("bias_removed", fixed))}
+    return variant_table(seqs, fixed, horizons, stride, startup_bias_s, gravity)
 
 
 def compare_with_raw(
@@ -52,8 +53,8 @@ def compare_with_raw(
     groundtruth: Optional[PathLike] = None,
     horizons: Sequence[int] = (10, 200),
     *,
-    window: int = 1000,
-    overlap: int = 200,
+    window: Optional[int] = None,
+    overlap: Optional[int] = None,
     stride: Optional[int] = None,
     startup_bias_s: Optional[float] = None,
     gravity: Optional[float] = None,
@@ -65,7 +66,7 @@ def compare_with_raw(
     Returns ``{"raw": T, "refined": T, "ratio": R, "segments", "samples", "settings"}`` where
     ``T[protocol][str(n)]`` is ``{"rot_rad", "rot_deg", "trans_m", "windows"}`` for protocol
     ``open_loop`` or ``bias_removed`` and ``R[protocol][str(n)] = {"rot", "trans"}`` is refined / raw
-    (below 1: the model helps). ``window``/``overlap`` are refine's (its CLI defaults);
+    (below 1: the model helps). ``window``/``overlap`` override the checkpoint's windowing rule (None: its own);
     ``max_gap_s`` splits the recording at ground-truth gaps as :class:`imu_learn.AlignOptions`.
     """
     state = load_checkpoint(Path(checkpoint))
@@ -76,7 +77,8 @@ def compare_with_raw(
 
     model = model_from_checkpoint(state).to(pick_device(device))
     imu, gt = read_recording(Path(recording_path), format, None if groundtruth is None else Path(groundtruth))
-    gyro, acc = refine_arrays(model, imu.gyro, imu.acc, window=window, overlap=overlap)
+    rule = windowing_of(model).replace(window, overlap)
+    gyro, acc = refine_arrays(model, imu.gyro, imu.acc, window=rule.window, overlap=rule.overlap)
     options = AlignOptions(max_gap_s=max_gap_s)
     name = Path(recording_path).name
     raw = align(imu, gt, options, name=name).segments
@@ -90,14 +92,14 @@ def compare_with_raw(
     ratio = {col: {str(n): {"rot": t_ref[col][str(n)]["rot_rad"] / max(t_raw[col][str(n)]["rot_rad"], 1e-12),
                             "trans": t_ref[col][str(n)]["trans_m"] / max(t_raw[col][str(n)]["trans_m"], 1e-12)}
                    for n in horizons}
-             for col in PROTOCOLS}
+             for col in VARIANTS}
     return {
         "checkpoint": str(checkpoint),
         "recording": str(recording_path),
         "segments": [s.name for s in raw],
         "samples": int(sum(len(s) for s in raw)),
         "settings": {"horizons": [int(n) for n in horizons], "stride": stride, "startup_bias_s": startup_bias_s,
-                     "gravity": gravity, "window": window, "overlap": overlap, "max_gap_s": max_gap_s},
+                     "gravity": gravity, "window": rule.window, "overlap": rule.overlap, "max_gap_s": max_gap_s},
         "raw": t_raw,
         "refined": t_ref,
         "ratio": ratio,
@@ -107,9 +109,9 @@ def compare_with_raw(
 def format_comparison(res: Dict[str, Any]) -> str:
     """The comparison as a small text table (rot in deg, trans in m)."""
     lines = [f"{res['recording']} ({res['samples']} samples) with {res['checkpoint']}",
-             f"{'':10}{'':9}" + "".join(f"{c + ' n=' + n:>22}" for c in PROTOCOLS for n in res["raw"][c])]
+             f"{'':10}{'':9}" + "".join(f"{c + ' n=' + n:>22}" for c in VARIANTS for n in res["raw"][c])]
     for row in ("raw", "refined"):
         for key, fmt in (("rot_deg", "{:.4f}"), ("trans_m", "{:.5f}")):
-            cells = [fmt.format(res[row][c][n][key]) for c in PROTOCOLS for n in res[row][c]]
+            cells = [fmt.format(res[row][c][n][key]) for c in VARIANTS for n in res[row][c]]
             lines.append(f"{row if key == 'rot_deg' else '':10}{key:9}" + "".join(f"{x:>22}" for x in cells))
     return "\n".join(lines)

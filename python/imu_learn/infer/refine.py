@@ -1,8 +1,8 @@
 """Apply a trained refiner to a recording and write the refined IMU in the input's own format.
 
-    python -m imu_learn.refine --checkpoint CKPT --input IN --output OUT
+    imu-learn refine --checkpoint CKPT --input IN --out OUT
         [--format auto|asl|euroc|tum-vi|blackbird|broad|kaist|rosbag] [--imu-topic TOPIC]
-        [--window 1000 --overlap 200] [--device auto|cpu|cuda] [--batch 16] [--copy-folder]
+        [--window W --overlap O] [--device auto|cpu|cuda] [--batch 16] [--copy-folder]
         [--fill-covariance] [--quiet]
 
 Only the IMU is read (no ground truth needed); timestamps and everything but gyro/acc are kept:
@@ -34,158 +34,58 @@ temporary file beside its target and renamed into place (:mod:`imu_learn.util.at
 never written: an OUT that resolves to the input file (or, with ``--copy-folder``, the input
 folder) is refused. Errors print one line and exit with status 2.
 
-Stitching rule (bidirectional model). A sequence of N samples is cut into windows of W samples
-starting every S = W - O samples (O the overlap); the last window is moved back to end at N so that
-every window is full length (N <= W: one window of N). Consecutive windows k, k+1 overlap on
-[s_{k+1}, e_k); sample i of the overlap is taken from window k if i < b = (s_{k+1} + e_k) // 2 and
-from window k+1 otherwise: each sample comes from the window in which it lies farthest from a
-window edge (a centre crop keeping ~O/2 samples of context on each side), and the first and last
-windows keep their outer edges, which are the sequence's own. The result therefore approximates
-running the model over the whole sequence at once; the difference is bounded by how much the LSTM
-remembers beyond O/2 samples (measured in tests/test_refine.py). For W >= N it is exact.
-
-Causal model: windows of W samples run one after the other with the LSTM state carried over, which
-is the whole-sequence causal forward exactly (no overlap, no stitching; ``overlap`` is unused).
-
-Precision: the network runs in float32; its correction (model output minus its float32 input) is
-added to the float64 raw samples, so a model whose correction is zero returns the input bit for bit.
+Windowing: :mod:`imu_learn.infer.windowing`, the one rule every path applies a checkpoint with
+(by default the checkpoint's training window, half overlap; causal models with carried state).
+``--window``/``--overlap`` override it.
 """
 from __future__ import annotations
 
-import argparse
 import os
 import shutil
-import sys
 from pathlib import Path
-from typing import List, Optional, Tuple
+from typing import Optional, Tuple
 
 import numpy as np
-import torch
 
 from imu_learn.data import formats
 from imu_learn.data.formats import ImuSource
 from imu_learn.errors import InvalidInputError
+from imu_learn.infer.windowing import Windowing, apply, corrections, windowing_of
 from imu_learn.nn.model import ImuRefiner
 
 FORMATS = ("auto", *formats.FORMATS)
 
 
 # --------------------------------------------------------------------------------------------
-# Windowing and the model
+# Windowing and the model: imu_learn.infer.windowing (the one rule)
 # --------------------------------------------------------------------------------------------
 
 
-def window_plan(n: int, window: int, overlap: int) -> List[Tuple[int, int, int, int]]:
-    """The windows of the stitching rule: (start, end, keep_from, keep_to) per window, where the
-    window covers samples [start, end) and contributes samples [keep_from, keep_to) to the output.
-    The kept ranges tile [0, n) in order."""
-    if window < 1:
-        raise InvalidInputError(f"window must be >= 1, got {window}")
-    if not 0 <= overlap < window:
-        raise InvalidInputError(f"overlap must be in [0, window), got overlap {overlap} for window {window}")
-    if n <= window:
-        return [(0, n, 0, n)] if n > 0 else []
-    stride = window - overlap
-    starts = list(range(0, n - window + 1, stride))
-    if starts[-1] + window < n:
-        starts.append(n - window)
-    plan = []
-    for k, s in enumerate(starts):
-        e = s + window
-        keep_from = 0 if k == 0 else (s + starts[k - 1] + window) // 2
-        keep_to = n if k == len(starts) - 1 else (starts[k + 1] + e) // 2
-        plan.append((s, e, keep_from, keep_to))
-    return plan
+def _rule(model: ImuRefiner, window: Optional[int], overlap: Optional[int], batch: Optional[int]) -> Windowing:
+    """The model's rule (:func:`windowing_of`) with the caller's overrides (None: the rule's)."""
+    return windowing_of(model).replace(window, overlap, batch)
 
 
-def _device_of(model: ImuRefiner) -> torch.device:
-    return next(iter(model.parameters())).device
-
-
-def _progress(total: int, enabled: bool, desc: str):
-    from tqdm import tqdm
-
-    return tqdm(total=total, disable=not enabled, desc=desc, unit="sample", unit_scale=True, file=sys.stderr)
-
-
-def refine_corrections(
-    model: ImuRefiner,
-    imu32: np.ndarray,
-    window: int = 1000,
-    overlap: int = 200,
-    batch: int = 16,
-    progress: bool = False,
-) -> np.ndarray:
-    """Corrections (N, 6) float32 = model output - input, by the module's windowing rule."""
-    return _windowed(model, imu32, window, overlap, batch, progress, False)[0]
-
-
-@torch.no_grad()
-def _windowed(model: ImuRefiner, imu32: np.ndarray, window: int, overlap: int, batch: int, progress: bool,
-              variance: bool) -> Tuple[np.ndarray, Optional[np.ndarray]]:
-    """Corrections (N, 6) and, with ``variance``, the covariance head's variances (N, 6), both
-    float32, stitched by the same windowing rule."""
-    n = len(imu32)
-    out = np.zeros((n, 6), dtype=np.float32)
-    var_out = np.zeros((n, 6), dtype=np.float32) if variance else None
-    if variance and getattr(model, "cov_head", None) is None:
-        raise InvalidInputError("this model has no covariance head (trained with model.covariance = false)")
-    if n == 0:
-        return out, var_out
-    device = _device_of(model)
-    x_all = torch.from_numpy(np.ascontiguousarray(imu32, dtype=np.float32)).to(device)
-    was_training = model.training
-    model.eval()
-    try:
-        if model.cfg.causal:
-            state = None
-            with _progress(n, progress, "refine (causal)") as bar:
-                for s in range(0, n, window):
-                    x = x_all[None, s : s + window]
-                    if var_out is not None:
-                        y, v, state = model.forward_full(x, state)
-                        var_out[s : s + window] = v[0].float().cpu().numpy()
-                    else:  # any model with forward_with_state (the baselines' nets too)
-                        y, state = model.forward_with_state(x, state)
-                    out[s : s + window] = (y - x)[0].float().cpu().numpy()
-                    bar.update(x.shape[1])
-            return out, var_out
-        plan = window_plan(n, window, overlap)
-        with _progress(n, progress, "refine") as bar:
-            for b0 in range(0, len(plan), max(1, batch)):
-                chunk = plan[b0 : b0 + max(1, batch)]
-                x = torch.stack([x_all[s:e] for s, e, _, _ in chunk])
-                if var_out is not None:
-                    y, v = model(x, with_variance=True)
-                    vv = v.float().cpu().numpy()
-                else:  # any model mapping (B, W, 6) to (B, W, 6) (the baselines' nets too)
-                    y, vv = model(x), None
-                corr = (y - x).float().cpu().numpy()
-                for j, (s, _e, kf, kt) in enumerate(chunk):
-                    out[kf:kt] = corr[j, kf - s : kt - s]
-                    if var_out is not None and vv is not None:
-                        var_out[kf:kt] = vv[j, kf - s : kt - s]
-                bar.update(chunk[-1][3] - chunk[0][2])
-    finally:
-        model.train(was_training)
-    return out, var_out
+def refine_corrections(model: ImuRefiner, imu32: np.ndarray, window: Optional[int] = None,
+                       overlap: Optional[int] = None, batch: Optional[int] = None,
+                       progress: bool = False) -> np.ndarray:
+    """Corrections (N, 6) float32 = model output - input, by :mod:`imu_learn.infer.windowing`."""
+    return corrections(model, imu32, _rule(model, window, overlap, batch), progress)[0]
 
 
 def refine_arrays(
     model: ImuRefiner,
     gyro: np.ndarray,
     acc: np.ndarray,
-    window: int = 1000,
-    overlap: int = 200,
-    batch: int = 16,
+    window: Optional[int] = None,
+    overlap: Optional[int] = None,
+    batch: Optional[int] = None,
     progress: bool = False,
 ) -> Tuple[np.ndarray, np.ndarray]:
-    """Refine raw gyro [rad/s] and acc [m/s^2] (N, 3) with ``model`` -> (gyro, acc) float64 (N, 3).
-
-    Bidirectional model: overlapping windows stitched by centre crop (see the module docstring);
-    causal model: sequential windows with carried state (exact). ``batch`` windows run at once.
-    """
-    g, a, _ = _refine(model, gyro, acc, window, overlap, batch, progress, False)
+    """Refine raw gyro [rad/s] and acc [m/s^2] (N, 3) with ``model`` -> (gyro, acc) float64 (N, 3),
+    by :mod:`imu_learn.infer.windowing`'s rule (``window``/``overlap``/``batch`` None: the model's,
+    i.e. its checkpoint's training window with half overlap)."""
+    g, a, _ = apply(model, gyro, acc, _rule(model, window, overlap, batch), progress)
     return g, a
 
 
@@ -193,33 +93,17 @@ def refine_with_variance(
     model: ImuRefiner,
     gyro: np.ndarray,
     acc: np.ndarray,
-    window: int = 1000,
-    overlap: int = 200,
-    batch: int = 16,
+    window: Optional[int] = None,
+    overlap: Optional[int] = None,
+    batch: Optional[int] = None,
     progress: bool = False,
 ) -> Tuple[np.ndarray, np.ndarray, np.ndarray]:
     """:func:`refine_arrays` plus the covariance head's per-sample noise variances (N, 6) float64,
     gyro then acc, discrete-time ((rad/s)^2, (m/s^2)^2: the variance of one sample; a noise density
     is sigma * sqrt(dt), see :mod:`imu_learn.nn.covariance`)."""
-    g, a, v = _refine(model, gyro, acc, window, overlap, batch, progress, True)
+    g, a, v = apply(model, gyro, acc, _rule(model, window, overlap, batch), progress, variance=True)
     assert v is not None
     return g, a, v
-
-
-def _refine(model: ImuRefiner, gyro: np.ndarray, acc: np.ndarray, window: int, overlap: int, batch: int,
-            progress: bool, variance: bool) -> Tuple[np.ndarray, np.ndarray, Optional[np.ndarray]]:
-    gyro = np.asarray(gyro, dtype=np.float64)
-    acc = np.asarray(acc, dtype=np.float64)
-    if gyro.ndim != 2 or gyro.shape[1] != 3 or acc.shape != gyro.shape:
-        raise InvalidInputError(f"gyro and acc must both be (N, 3); got {gyro.shape} and {acc.shape}")
-    raw = np.concatenate([gyro, acc], axis=1)
-    if not np.isfinite(raw).all():
-        raise InvalidInputError(f"IMU row {int(np.flatnonzero(~np.isfinite(raw).all(1))[0])} is not finite")
-    x32 = raw.astype(np.float32)
-    corr, var = _windowed(model, x32, window, overlap, batch, progress, variance)
-    refined = raw + corr.astype(np.float64)
-    return (np.ascontiguousarray(refined[:, :3]), np.ascontiguousarray(refined[:, 3:]),
-            None if var is None else var.astype(np.float64))
 
 
 # --------------------------------------------------------------------------------------------
@@ -257,10 +141,10 @@ def refine_recording(
     input: Path,
     output: Path,
     fmt: str = "auto",
-    window: int = 1000,
-    overlap: int = 200,
+    window: Optional[int] = None,
+    overlap: Optional[int] = None,
     copy_folder: bool = False,
-    batch: int = 16,
+    batch: Optional[int] = None,
     progress: bool = False,
     imu_topic: Optional[str] = None,
     fill_covariance: bool = False,
@@ -296,70 +180,9 @@ def refine_recording(
     return target
 
 
-# --------------------------------------------------------------------------------------------
-# CLI
-# --------------------------------------------------------------------------------------------
-
-
-def pick_device(name: str) -> torch.device:
-    if name == "auto":
-        return torch.device("cuda" if torch.cuda.is_available() else "cpu")
-    return torch.device(name)
-
-
 def require_covariance_head(model: ImuRefiner, checkpoint: Path) -> None:
     """Before any input is read: ``--fill-covariance`` needs variances, which only a model with a
     covariance head predicts."""
     if getattr(model, "cov_head", None) is None:
         raise InvalidInputError(f"{checkpoint}: no covariance head (trained with model.covariance = false); "
                                 f"--fill-covariance needs one, e.g. models/euroc_adis16448_cov.pt")
-
-
-def _parser() -> argparse.ArgumentParser:
-    p = argparse.ArgumentParser(
-        prog="python -m imu_learn.refine",
-        description="Write a recording's IMU refined by a trained model, in the input's own format.",
-    )
-    p.add_argument("--checkpoint", required=True, type=Path, help="imu_learn checkpoint (.pt)")
-    p.add_argument("--input", required=True, type=Path, help="recording folder, IMU file or ROS bag (never written)")
-    p.add_argument("--output", required=True, type=Path, help="folder, or a file (or bag) of the input's kind")
-    p.add_argument("--format", default="auto", choices=FORMATS)
-    p.add_argument("--imu-topic", help="ROS bags: the sensor_msgs/msg/Imu topic (default: the bag's only one)")
-    p.add_argument("--window", type=int, default=1000, help="samples per window (default 1000)")
-    p.add_argument("--overlap", type=int, default=200, help="overlap of consecutive windows (default 200)")
-    p.add_argument("--batch", type=int, default=16, help="windows run at once (default 16)")
-    p.add_argument("--device", default="auto", help="auto (cuda if available), cpu, cuda, cuda:1 ...")
-    p.add_argument("--copy-folder", action="store_true", help="copy the whole input folder to OUT first")
-    p.add_argument("--fill-covariance", action="store_true",
-                   help="ROS bags, a checkpoint with a covariance head: write each IMU message's angular_velocity / "
-                        "linear_acceleration covariance as the diagonal of its predicted per-sample variances")
-    p.add_argument("--quiet", action="store_true", help="no progress bar, no summary")
-    return p
-
-
-def main(argv: Optional[List[str]] = None) -> int:
-    args = _parser().parse_args(argv)
-    try:
-        from imu_learn.train.checkpoint import load_model
-
-        device = pick_device(args.device)
-        model = load_model(args.checkpoint).to(device)
-        if args.fill_covariance:
-            require_covariance_head(model, args.checkpoint)
-        target = refine_recording(
-            model, args.input, args.output, args.format, args.window, args.overlap, args.copy_folder,
-            args.batch, progress=not args.quiet, imu_topic=args.imu_topic, fill_covariance=args.fill_covariance,
-        )
-    except Exception as e:  # every failure is one line and status 2
-        msg = " ".join(str(e).split()) or type(e).__name__
-        print(f"error: {type(e).__name__}: {msg}", file=sys.stderr)
-        return 2
-    if not args.quiet:
-        kind = "causal" if model.cfg.causal else f"window {args.window}, overlap {args.overlap}"
-        cov = "; covariance fields: learned per-sample variances" if args.fill_covariance else ""
-        print(f"refined IMU ({kind}, {device}{cov}) written to {target}")
-    return 0
-
-
-if __name__ == "__main__":
-    sys.exit(main())

@@ -15,30 +15,24 @@ run folder beside it (the normalisation is in the weights, the architecture in `
 A run's ``best.pt`` also carries the optimiser state and the metrics history; to ship a model, strip
 those (the result still loads everywhere a checkpoint does, but cannot be resumed)::
 
-    python -m imu_learn.train.checkpoint strip runs/NAME/best.pt models/NAME.pt
-    python -m imu_learn.train.checkpoint info models/NAME.pt      # what a checkpoint holds, for a model card
+    imu-learn checkpoint strip runs/NAME/best.pt models/NAME.pt
+    imu-learn checkpoint info models/NAME.pt      # what a checkpoint holds, for a model card
 """
 from __future__ import annotations
 
-import argparse
 import hashlib
-import json
 import os
-import sys
 from pathlib import Path
-from typing import Any, Dict, List, Optional
+from typing import Any, Dict, Optional
 
 import torch
 
 from imu_learn._imu_core import __version__
-from imu_learn.errors import (
-    CheckpointError,  # noqa: F401  (defined with every error class)
-    ImuError,
-)
+from imu_learn.errors import CheckpointError  # noqa: F401  (defined with every error class)
 from imu_learn.nn.model import ImuRefiner, ModelConfig
 from imu_learn.util.atomic import atomic_write_bytes
 
-FORMAT = "imu_learn.train.checkpoint.v1"
+FORMAT = "imu_learn.checkpoint.v1"
 # What a stripped (shipped) checkpoint keeps: everything inference and a model card need.
 STRIPPED_KEYS = ("format", "code_version", "model_args", "model", "config", "epoch", "step", "best_metric")
 STRIPPED_EXTRA = ("best_epoch", "elapsed_s", "world_size")
@@ -125,9 +119,14 @@ def load_checkpoint(path: Path, map_location: str = "cpu") -> Dict[str, Any]:
 
 
 def model_from_checkpoint(state: Dict[str, Any]) -> ImuRefiner:
+    """The checkpoint's model in eval mode, with its windowing rule attached (the training window:
+    :func:`imu_learn.infer.windowing.windowing_of_config`), so every path applies it alike."""
+    from imu_learn.infer.windowing import attach, windowing_of_config
+
     model = ImuRefiner(ModelConfig(**state["model_args"]))
     model.load_state_dict(state["model"])
     model.eval()
+    attach(model, windowing_of_config(state.get("config")))
     return model
 
 
@@ -160,7 +159,7 @@ def strip_checkpoint(src: Path, dst: Path) -> Dict[str, Any]:
 
 
 def describe(state: Dict[str, Any]) -> Dict[str, Any]:
-    """A summary of a loaded checkpoint (plain values), as ``python -m imu_learn.train.checkpoint info`` prints."""
+    """A summary of a loaded checkpoint (plain values), as ``imu-learn checkpoint info`` prints."""
     cfg = state.get("config") or {}
     data = cfg.get("data") or {}
     n_params = sum(int(v.numel()) for k, v in state["model"].items() if k not in ("mean", "std"))
@@ -180,30 +179,3 @@ def describe(state: Dict[str, Any]) -> Dict[str, Any]:
         "window": data.get("window"),
         "extra": {k: v for k, v in (state.get("extra") or {}).items() if k not in ("history", "partial")},
     }
-
-
-def main(argv: Optional[List[str]] = None) -> int:
-    p = argparse.ArgumentParser(prog="python -m imu_learn.train.checkpoint",
-                                description="Inspect a checkpoint or write a small copy for shipping.")
-    sub = p.add_subparsers(dest="cmd", required=True)
-    ps = sub.add_parser("strip", help="copy a checkpoint keeping only what inference needs (no optimiser state)")
-    ps.add_argument("src", type=Path)
-    ps.add_argument("dst", type=Path)
-    pi = sub.add_parser("info", help="print what a checkpoint holds (JSON)")
-    pi.add_argument("path", type=Path)
-    args = p.parse_args(argv)
-    try:
-        if args.cmd == "strip":
-            strip_checkpoint(args.src, args.dst)
-            before, after = args.src.stat().st_size, args.dst.stat().st_size
-            print(f"{args.dst}: {after / 1e6:.3f} MB (from {before / 1e6:.3f} MB)")
-        else:
-            print(json.dumps(describe(load_checkpoint(args.path)), indent=2))
-    except (ImuError, OSError) as e:
-        print(f"error: {type(e).__name__}: {' '.join(str(e).split())}", file=sys.stderr)
-        return 2
-    return 0
-
-
-if __name__ == "__main__":
-    sys.exit(main())

@@ -53,16 +53,16 @@ batch is K × batch_size, and only rank 0 writes files and evaluates; validation
 """
 from __future__ import annotations
 
-import argparse
 import contextlib
 import csv
 import io
 import json
+import logging
 import math
 import os
 import signal
-import sys
 import time
+from dataclasses import dataclass, field
 from datetime import datetime
 from pathlib import Path
 from typing import Any, Callable, Dict, List, Optional, Tuple
@@ -71,40 +71,27 @@ from typing import Sequence as Seq
 import numpy as np
 import torch
 
-from imu_learn.core.batches import Batch, BatchSampler
-from imu_learn.data.splits import Split, make_split, write_split
+from imu_learn.core.batches import Batch, BatchSampler, batch_seed
+from imu_learn.data.splits import Split, make_split, split_signature, write_split
 from imu_learn.data.types import Sequence
-from imu_learn.errors import ImuError, one_line
-from imu_learn.eval.metrics import index_at, relative_pose_rmse_many, with_imu, without_fitted_bias
+from imu_learn.eval.metrics import index_at, relative_pose_rmse_many, variant_table, without_fitted_bias
+from imu_learn.eval.protocol import VARIANT_LABELS, VARIANTS
+from imu_learn.infer import windowing
+from imu_learn.nn.device import pick_device
 from imu_learn.nn.losses import imu_loss
 from imu_learn.nn.model import ImuRefiner
 from imu_learn.train.checkpoint import load_checkpoint, load_model, model_from_checkpoint, save_checkpoint
-from imu_learn.train.config import ConfigError, RunConfig, build_config, parse_overrides, read_toml, to_toml
+from imu_learn.train.config import ConfigError, RunConfig, build_config, read_toml, to_toml
 from imu_learn.util.atomic import atomic_write_text
 
 RESUME_OVERRIDABLE = ("optim.epochs", "device", "threads")
-EXIT_ERROR = 2
-EXIT_INTERRUPTED = 130
-PROG = "imu_learn.train.fit"
+logger = logging.getLogger(__name__)
 
 StepHook = Callable[[int, float], None]
 
 
 # ---------------------------------------------------------------------------------------------
 # small helpers
-
-
-def batch_seed(seed: int, rank: int, step: int) -> int:
-    """The seed of batch ``step`` on ``rank``: a pure function of the triple (resume-exact)."""
-    return int(np.random.SeedSequence([int(seed) & 0xFFFFFFFF, int(rank), int(step)]).generate_state(1, np.uint64)[0] >> 1)
-
-
-def pick_device(spec: str, local_rank: int = 0) -> torch.device:
-    if spec == "auto":
-        return torch.device(f"cuda:{local_rank}" if torch.cuda.is_available() else "cpu")
-    if spec.startswith("cuda") and not torch.cuda.is_available():
-        raise ConfigError(f"device: {spec!r} asked for but CUDA is not available")
-    return torch.device(spec)
 
 
 def norm_stats(seqs: Seq[Sequence]) -> tuple:
@@ -282,9 +269,7 @@ class ValidationPose:
 
     @torch.no_grad()
     def __call__(self, model: ImuRefiner, device: torch.device) -> Dict[str, float]:
-        was = model.training
-        refined = [refine_sequence(model, s, self.cfg.data.window, device) for s in self.seqs]
-        model.train(was)
+        refined = [refine_sequence(model, s, self.cfg) for s in self.seqs]  # keeps model.training
         out: Dict[str, float] = {}
         ratios = []
         for n in self.horizons:
@@ -303,32 +288,11 @@ class ValidationPose:
         return out
 
 
-@torch.no_grad()
-def refine_sequence(model: ImuRefiner, seq: Sequence, window: int, device: torch.device, batch: int = 64) -> Sequence:
-    """The model applied to a whole sequence: windows of ``window`` samples at half-window hops,
-    each sample taken from the window whose centre is nearest (the model never sees more context
-    than in training). The correction (refined − input) is added to the float64 raw samples."""
-    model.eval()
-    n = len(seq)
-    raw = np.concatenate([seq.gyro, seq.acc], axis=1)
-    w = min(window, n)
-    hop = max(1, w // 2)
-    starts = list(range(0, n - w + 1, hop))
-    if starts[-1] != n - w:
-        starts.append(n - w)
-    corr = np.zeros_like(raw)
-    bounds = [0] + [(starts[j] + starts[j + 1] + w) // 2 for j in range(len(starts) - 1)] + [n]
-    x32 = raw.astype(np.float32)
-    for a in range(0, len(starts), batch):
-        ss = starts[a:a + batch]
-        inp = torch.from_numpy(np.stack([x32[s:s + w] for s in ss])).to(device)
-        out = (model(inp) - inp).double().cpu().numpy()
-        for j, s in enumerate(ss):
-            jj = a + j
-            lo, hi = bounds[jj], bounds[jj + 1]
-            corr[lo:hi] = out[j, lo - s:hi - s]
-    refined = raw + corr
-    return with_imu(seq, refined[:, :3], refined[:, 3:])
+def refine_sequence(model: ImuRefiner, seq: Sequence, cfg: RunConfig) -> Sequence:
+    """The model applied to a whole sequence by the one windowing rule
+    (:mod:`imu_learn.infer.windowing`) for a model trained on ``cfg.data.window``: the same rule
+    ``imu-learn refine``, evaluate, fuse and model_check apply to the saved checkpoint."""
+    return windowing.refine_sequence(model, seq, windowing.Windowing.for_training_window(cfg.data.window))
 
 
 def recording_of(segment_name: str) -> str:
@@ -338,11 +302,7 @@ def recording_of(segment_name: str) -> str:
 
 def _cells(seqs: List[Sequence], fixed: List[Sequence], cfg: RunConfig) -> Dict[str, Any]:
     d = cfg.data
-    return {
-        col: {str(n): relative_pose_rmse_many(ss, n, d.eval_stride, d.gravity, first_s=d.startup_bias_s)
-              for n in d.eval_horizons}
-        for col, ss in (("open_loop", seqs), ("bias_removed", fixed))
-    }
+    return variant_table(seqs, fixed, d.eval_horizons, d.eval_stride, d.startup_bias_s, d.gravity)
 
 
 def evaluate_table(raw_seqs: List[Sequence], model_seqs: List[Sequence], cfg: RunConfig) -> Dict[str, Any]:
@@ -367,10 +327,10 @@ def format_table(res: Dict[str, Any], names: List[str], cfg: RunConfig) -> str:
     head = (f"Held-out test ({what}): relative pose RMSE over n IMU samples, windows every "
             f"{d.eval_stride} samples from {d.startup_bias_s:g} s on")
     k = len(hs)
-    cols = [(c, n) for c in ("open_loop", "bias_removed") for n in hs]
+    cols = [(c, n) for c in VARIANTS for n in hs]
     width = 14 * k - 1
     lines = [head,
-             f"{'':24}|{'open loop':^{width}}|{'start-up bias removed':^{width}}",
+             f"{'':24}|" + "|".join(f"{VARIANT_LABELS[v]:^{width}}" for v in VARIANTS),
              f"{'':24}|" + "|".join(f"{'n=' + str(n):^13}" for _, n in cols[:k]) + "|"
              + "|".join(f"{'n=' + str(n):^13}" for _, n in cols[k:])]
     for row, label in (("raw", "raw IMU"), ("model", "trained model")):
@@ -384,6 +344,178 @@ def format_table(res: Dict[str, Any], names: List[str], cfg: RunConfig) -> str:
 
 # ---------------------------------------------------------------------------------------------
 # the run
+
+
+@dataclass
+class Validation:
+    """The fixed validation windows and, with ``optim.select = "val_pose"``, the pose score."""
+
+    batch: Batch
+    pose: Optional[ValidationPose]
+
+    @property
+    def select_key(self) -> str:
+        return "pose_score" if self.pose is not None else "total"
+
+    def __call__(self, model: ImuRefiner, cfg: RunConfig, device: torch.device) -> Dict[str, float]:
+        val = validation_loss(model, self.batch, cfg, device)
+        if self.pose is not None:
+            val.update(self.pose(model, device))
+        return val
+
+
+@dataclass
+class TrainState:
+    """What a run carries from step to step and saves in its checkpoints."""
+
+    model: ImuRefiner
+    opt: torch.optim.Optimizer
+    step: int = 0
+    epochs_done: int = 0
+    best: Optional[float] = None
+    best_epoch: Optional[int] = None
+    history: List[Dict[str, Any]] = field(default_factory=list)
+    partial: Dict[str, float] = field(default_factory=dict)  # summed loss terms of the epoch so far
+    elapsed0: float = 0.0  # seconds run before a resume
+    t_start: float = field(default_factory=time.time)
+
+    def elapsed(self) -> float:
+        return self.elapsed0 + time.time() - self.t_start
+
+
+def setup_device(cfg: RunConfig) -> Tuple[Dist, torch.device]:
+    """The process group (when ``WORLD_SIZE`` > 1) and this process's device."""
+    dist = Dist()
+    device = pick_device(cfg.device, dist.local_rank)
+    if device.type == "cpu":
+        torch.set_num_threads(cfg.threads)
+    dist.init(device)
+    return dist, device
+
+
+def prepare_data(cfg: RunConfig, split: Optional[Split]) -> Tuple[Split, BatchSampler, Validation]:
+    """The split (made from ``cfg.data`` when not given; device bias removed with
+    ``data.train_bias = "remove"``), the training batch sampler and the validation set."""
+    if split is None:
+        split = make_split(cfg.data)
+    if cfg.data.train_bias == "remove":
+        split = without_device_bias(split, cfg)
+    bc = cfg.data.batch_config()
+    sampler = BatchSampler(split.train, bc)
+    val_batch = BatchSampler(split.val, bc).eval_windows(cfg.data.val_stride)
+    val_pose = ValidationPose(split.val, cfg) if cfg.optim.select == "val_pose" else None
+    return split, sampler, Validation(val_batch, val_pose)
+
+
+def _optimizer(model: ImuRefiner, cfg: RunConfig) -> torch.optim.Optimizer:
+    return torch.optim.Adam([p for p in model.parameters() if p.requires_grad], lr=cfg.optim.lr)
+
+
+def new_state(cfg: RunConfig, train_seqs: Seq[Sequence], device: torch.device) -> TrainState:
+    """A fresh model (seeded by ``cfg.seed``, normalised on ``train_seqs``, ``optim.init``'s weights
+    when set) and its optimiser."""
+    torch.manual_seed(cfg.seed)
+    mean, std = norm_stats(train_seqs)
+    model = ImuRefiner(cfg.model, mean, std)
+    if cfg.optim.init:
+        init_from(model, Path(cfg.optim.init))
+    if cfg.optim.trainable == "covariance":
+        model.freeze_refiner()
+    model.to(device)
+    return TrainState(model, _optimizer(model, cfg))
+
+
+def resumed_state(cfg: RunConfig, state: Dict[str, Any], device: torch.device) -> TrainState:
+    """Model, optimiser, step, best metric and history of checkpoint ``state``."""
+    model = model_from_checkpoint(state)
+    if cfg.optim.trainable == "covariance":
+        model.freeze_refiner()
+    model.to(device)
+    opt = _optimizer(model, cfg)
+    opt.load_state_dict(state["optimizer"])
+    extra = state.get("extra") or {}
+    return TrainState(
+        model, opt, step=int(state["step"]), epochs_done=int(state["epoch"]), best=state["best_metric"],
+        best_epoch=extra.get("best_epoch"), history=list(extra.get("history", [])),
+        partial=dict(extra.get("partial", {})), elapsed0=float(extra.get("elapsed_s", 0.0)),
+    )
+
+
+def save_state(path: Path, ts: TrainState, cfg_dict: Dict[str, Any], dist: Dist) -> None:
+    """Checkpoint ``ts`` to ``path`` (rank 0 only; a Ctrl-C waits until the file is written)."""
+    if not dist.main:
+        return
+    extra = {"history": ts.history, "partial": ts.partial, "best_epoch": ts.best_epoch, "elapsed_s": ts.elapsed(),
+             "world_size": dist.world}
+    with deferred_interrupt():
+        save_checkpoint(path, ts.model, cfg_dict, ts.epochs_done, ts.step, ts.best, ts.opt, extra)
+
+
+def train_step(net: torch.nn.Module, ts: TrainState, sampler: BatchSampler, cfg: RunConfig, rank: int,
+               device: torch.device) -> float:
+    """One optimiser step on batch ``ts.step`` (batch and torch RNG seeded from (seed, rank, step));
+    adds the loss terms to ``ts.partial`` and returns the total loss."""
+    s = batch_seed(cfg.seed, rank, ts.step)
+    torch.manual_seed(s)
+    b = sampler.sample(s)
+    horizons = [int(h) for h in b.horizons]
+    imu = torch.from_numpy(np.ascontiguousarray(b.imu, dtype=np.float32)).to(device)
+    refined, var = net(imu, with_variance=True)
+    loss, terms = imu_loss(refined, imu, b.dt, b.dq_wxyz, b.dv, b.dp, horizons, b.bias, cfg.loss, var)
+    ts.opt.zero_grad(set_to_none=True)
+    loss.backward()
+    if cfg.optim.grad_clip > 0:
+        torch.nn.utils.clip_grad_norm_(ts.model.parameters(), cfg.optim.grad_clip)
+    ts.opt.step()
+    ts.step += 1
+    for k, v in terms.items():
+        ts.partial[k] = ts.partial.get(k, 0.0) + float(v)
+    ts.partial["n"] = ts.partial.get("n", 0.0) + 1.0
+    return float(terms["total"])
+
+
+def select_epoch(ts: TrainState, val: Dict[str, float], cfg: RunConfig, select_key: str) -> Tuple[Dict[str, Any], bool]:
+    """Close the epoch that just ended in ``ts``: its metrics row (appended to the history) and
+    whether it is the best so far by ``select_key`` (then ``ts.best``/``best_epoch`` move to it)."""
+    epoch = ts.step // cfg.optim.steps_per_epoch
+    n = max(1.0, ts.partial.get("n", 0.0))
+    row: Dict[str, Any] = {"epoch": epoch, "step": ts.step, "lr": cfg.optim.lr}
+    for k in sorted(k for k in ts.partial if k != "n"):
+        row[f"train_{k}"] = ts.partial[k] / n
+    for k in sorted(val):
+        row[f"val_{k}"] = val[k]
+    improved = ts.best is None or val[select_key] < ts.best
+    if improved:
+        ts.best, ts.best_epoch = val[select_key], epoch
+    row["best_epoch"] = ts.best_epoch
+    row["elapsed_s"] = round(ts.elapsed(), 2)
+    ts.history.append(row)
+    ts.epochs_done = epoch
+    ts.partial = {}
+    return row, improved
+
+
+def record_epoch(run_dir: Path, ts: TrainState, row: Dict[str, Any], improved: bool, cfg_dict: Dict[str, Any],
+                 dist: Dist, tb: Any) -> None:
+    """Rank 0: best.pt (when ``improved``), last.pt, metrics.csv and the TensorBoard scalars."""
+    if not dist.main:
+        return
+    if improved:
+        save_state(run_dir / "best.pt", ts, cfg_dict, dist)
+    save_state(run_dir / "last.pt", ts, cfg_dict, dist)
+    write_csv(run_dir / "metrics.csv", ts.history)
+    if tb is not None:
+        for k, v in row.items():
+            if k.startswith(("train_", "val_")):
+                tb.add_scalar(k.replace("_", "/", 1), v, ts.step)
+        tb.flush()
+
+
+def epoch_line(row: Dict[str, Any], val: Dict[str, float], cfg: RunConfig, improved: bool) -> str:
+    return (f"epoch {row['epoch']}/{cfg.optim.epochs}  train {row.get('train_total', float('nan')):.5f}  "
+            f"val {val['total']:.5f}"
+            + (f"  pose {val['pose_score']:.4f}" if "pose_score" in val else "")
+            + ("  *best*" if improved else ""))
 
 
 def train(
@@ -401,143 +533,39 @@ def train(
     """
     from tqdm import tqdm
 
-    dist = Dist()
-    device = pick_device(cfg.device, dist.local_rank)
-    if device.type == "cpu":
-        torch.set_num_threads(cfg.threads)
-    dist.init(device)
-    main = dist.main
+    dist, device = setup_device(cfg)
     run_dir = Path(run_dir)
-
-    if split is None:
-        split = make_split(cfg.data)
-    if cfg.data.train_bias == "remove":
-        split = without_device_bias(split, cfg)
-    bc = cfg.data.batch_config()
-    sampler = BatchSampler(split.train, bc)
-    val_batch = BatchSampler(split.val, bc).eval_windows(cfg.data.val_stride)
-    val_pose = ValidationPose(split.val, cfg) if cfg.optim.select == "val_pose" else None
-    select_key = "pose_score" if val_pose is not None else "total"
+    split, sampler, validation = prepare_data(cfg, split)
+    ts = new_state(cfg, split.train, device) if state is None else resumed_state(cfg, state, device)
+    ts.model.train()
+    net: torch.nn.Module = ts.model
+    if dist.on:
+        net = torch.nn.parallel.DistributedDataParallel(ts.model, device_ids=[device.index] if device.type == "cuda" else None)
 
     spe = cfg.optim.steps_per_epoch
     total = cfg.optim.epochs * spe
-    if state is None:
-        torch.manual_seed(cfg.seed)
-        mean, std = norm_stats(split.train)
-        model = ImuRefiner(cfg.model, mean, std)
-        if cfg.optim.init:
-            init_from(model, Path(cfg.optim.init))
-        if cfg.optim.trainable == "covariance":
-            model.freeze_refiner()
-        model.to(device)
-        opt = torch.optim.Adam([p for p in model.parameters() if p.requires_grad], lr=cfg.optim.lr)
-        step, epochs_done, best, best_epoch = 0, 0, None, None
-        history: List[Dict[str, Any]] = []
-        partial: Dict[str, float] = {}
-        elapsed0 = 0.0
-    else:
-        model = model_from_checkpoint(state)
-        if cfg.optim.trainable == "covariance":
-            model.freeze_refiner()
-        model.to(device)
-        opt = torch.optim.Adam([p for p in model.parameters() if p.requires_grad], lr=cfg.optim.lr)
-        opt.load_state_dict(state["optimizer"])
-        extra = state.get("extra") or {}
-        step, epochs_done = int(state["step"]), int(state["epoch"])
-        best = state["best_metric"]
-        best_epoch = extra.get("best_epoch")
-        history = list(extra.get("history", []))
-        partial = dict(extra.get("partial", {}))
-        elapsed0 = float(extra.get("elapsed_s", 0.0))
-    model.train()
-    net: torch.nn.Module = model
-    if dist.on:
-        net = torch.nn.parallel.DistributedDataParallel(model, device_ids=[device.index] if device.type == "cuda" else None)
-
     cfg_dict = cfg.to_dict()
-    tb = _tb_writer(run_dir) if main else None
-    t_start = time.time()
-
-    def elapsed() -> float:
-        return elapsed0 + time.time() - t_start
-
-    def checkpoint(path: Path) -> None:
-        if not main:
-            return
-        extra = {"history": history, "partial": partial, "best_epoch": best_epoch, "elapsed_s": elapsed(),
-                 "world_size": dist.world}
-        with deferred_interrupt():
-            save_checkpoint(path, model, cfg_dict, epochs_done, step, best, opt, extra)
-
-    def end_of_epoch(bar) -> None:
-        nonlocal epochs_done, best, best_epoch, partial
-        epoch = step // spe
-        val = validation_loss(model, val_batch, cfg, device)
-        if val_pose is not None:
-            val.update(val_pose(model, device))
-        n = max(1.0, partial.get("n", 0.0))
-        row: Dict[str, Any] = {"epoch": epoch, "step": step, "lr": cfg.optim.lr}
-        for k in sorted(k for k in partial if k != "n"):
-            row[f"train_{k}"] = partial[k] / n
-        for k in sorted(val):
-            row[f"val_{k}"] = val[k]
-        improved = best is None or val[select_key] < best
-        if improved:
-            best, best_epoch = val[select_key], epoch
-        row["best_epoch"] = best_epoch
-        row["elapsed_s"] = round(elapsed(), 2)
-        history.append(row)
-        epochs_done = epoch
-        partial = {}
-        if main:
-            if improved:
-                checkpoint(run_dir / "best.pt")
-            checkpoint(run_dir / "last.pt")
-            write_csv(run_dir / "metrics.csv", history)
-            if tb is not None:
-                for k, v in row.items():
-                    if k.startswith(("train_", "val_")):
-                        tb.add_scalar(k.replace("_", "/", 1), v, step)
-                tb.flush()
-            bar.write(f"epoch {epoch}/{cfg.optim.epochs}  train {row.get('train_total', float('nan')):.5f}  "
-                      f"val {val['total']:.5f}"
-                      + (f"  pose {val['pose_score']:.4f}" if val_pose is not None else "")
-                      + ("  *best*" if improved else ""))
-
-    horizons = None
-    bar = tqdm(total=total, initial=step, desc="fit", unit="step", disable=not (progress and main),
+    tb = _tb_writer(run_dir) if dist.main else None
+    bar = tqdm(total=total, initial=ts.step, desc="fit", unit="step", disable=not (progress and dist.main),
                dynamic_ncols=True, mininterval=1.0)
     try:
         while True:
-            if step > 0 and step % spe == 0 and epochs_done < step // spe:
-                end_of_epoch(bar)
-            if step >= total:
+            if ts.step > 0 and ts.step % spe == 0 and ts.epochs_done < ts.step // spe:
+                val = validation(ts.model, cfg, device)
+                row, improved = select_epoch(ts, val, cfg, validation.select_key)
+                record_epoch(run_dir, ts, row, improved, cfg_dict, dist, tb)
+                if dist.main:
+                    bar.write(epoch_line(row, val, cfg, improved))
+            if ts.step >= total:
                 break
-            s = batch_seed(cfg.seed, dist.rank, step)
-            torch.manual_seed(s)
-            b = sampler.sample(s)
-            if horizons is None:
-                horizons = [int(h) for h in b.horizons]
-            imu = torch.from_numpy(np.ascontiguousarray(b.imu, dtype=np.float32)).to(device)
-            refined, var = net(imu, with_variance=True)
-            loss, terms = imu_loss(refined, imu, b.dt, b.dq_wxyz, b.dv, b.dp, horizons, b.bias, cfg.loss, var)
-            opt.zero_grad(set_to_none=True)
-            loss.backward()
-            if cfg.optim.grad_clip > 0:
-                torch.nn.utils.clip_grad_norm_(model.parameters(), cfg.optim.grad_clip)
-            opt.step()
-            step += 1
-            for k, v in terms.items():
-                partial[k] = partial.get(k, 0.0) + float(v)
-            partial["n"] = partial.get("n", 0.0) + 1.0
-            lv = float(terms["total"])
+            lv = train_step(net, ts, sampler, cfg, dist.rank, device)
             bar.update(1)
-            bar.set_postfix(epoch=f"{step // spe + (step % spe > 0)}/{cfg.optim.epochs}", loss=f"{lv:.4g}", refresh=False)
+            bar.set_postfix(epoch=f"{ts.step // spe + (ts.step % spe > 0)}/{cfg.optim.epochs}", loss=f"{lv:.4g}", refresh=False)
             if on_step is not None:
-                on_step(step, lv)
+                on_step(ts.step, lv)
     except KeyboardInterrupt:
         bar.close()
-        checkpoint(run_dir / "last.pt")
+        save_state(run_dir / "last.pt", ts, cfg_dict, dist)
         if tb is not None:
             tb.close()
         raise
@@ -546,11 +574,12 @@ def train(
         tb.close()
 
     results: Dict[str, Any] = {}
-    if main and val_pose is not None and best is not None and best >= 1.0:
-        print(f"{PROG}: note: no epoch beat raw IMU on the validation sequences with the start-up bias removed "
-              f"(best score {best:.4f} at epoch {best_epoch}; below 1 means better on rotation and translation)")
-    if main:
-        results = final_evaluation(cfg, run_dir, split, device, best_epoch, best)
+    if dist.main and validation.pose is not None and ts.best is not None and ts.best >= 1.0:
+        logger.warning("no epoch beat raw IMU on the validation sequences with the start-up bias removed "
+                       "(best score %.4f at epoch %s; below 1 means better on rotation and translation)",
+                       ts.best, ts.best_epoch)
+    if dist.main:
+        results = final_evaluation(cfg, run_dir, split, device, ts.best_epoch, ts.best)
     dist.barrier()
     dist.close()
     return results
@@ -559,14 +588,13 @@ def train(
 def final_evaluation(cfg: RunConfig, run_dir: Path, split: Split, device: torch.device,
                      best_epoch: Optional[int], best: Optional[float]) -> Dict[str, Any]:
     if not split.test:
-        print(f"{PROG}: no test sequences in data.split.test; no final table")
+        logger.info("no test sequences in data.split.test; no final table")
         return {}
     model = load_model(run_dir / "best.pt", map_location=str(device)).to(device)
-    refined = [refine_sequence(model, s, cfg.data.window, device) for s in split.test]
+    refined = [refine_sequence(model, s, cfg) for s in split.test]
     res = evaluate_table(list(split.test), refined, cfg)
     names = [s.name for s in split.test]
-    table = format_table(res, names, cfg)
-    print(table)
+    table = format_table(res, names, cfg)  # the command prints it (results["text"])
     out = {
         "test_sequences": names,
         "checkpoint": "best.pt",
@@ -588,85 +616,52 @@ def final_evaluation(cfg: RunConfig, run_dir: Path, split: Split, device: torch.
 
 
 # ---------------------------------------------------------------------------------------------
-# command line
+# starting a run (the command line is imu_learn.cli.fit)
 
 
-def _parser() -> argparse.ArgumentParser:
-    p = argparse.ArgumentParser(prog=f"python -m {PROG}", allow_abbrev=False,
-                                description="Train the IMU refiner. Any config field can be overridden with --key.sub VALUE.",
-                                epilog="e.g. --optim.lr 3e-4 --optim.epochs 50 --data.window 100 --model.hidden 32")
-    p.add_argument("--config", type=Path, help="TOML run config (default: built-in defaults = configs/default.toml)")
-    p.add_argument("--resume", type=Path, metavar="RUN_DIR", help="continue the run in RUN_DIR from its last.pt")
-    p.add_argument("--run-dir", type=Path, help="run folder (default <runs_dir>/<name or timestamp>)")
-    p.add_argument("--no-progress", action="store_true", help="no progress bar")
-    p.add_argument("--print-config", action="store_true", help="print the resolved config as TOML and exit")
-    return p
+def resolve_config(config: Optional[Path], resume: Optional[Path],
+                   overrides: Dict[str, Any]) -> Tuple[RunConfig, Optional[Dict[str, Any]]]:
+    """The run config: defaults, ``config`` (a TOML) and ``overrides``; or, with ``resume`` (a run
+    folder), the config of its ``last.pt`` with only :data:`RESUME_OVERRIDABLE` overrides. Returns
+    (config, the resumed checkpoint or None); nothing is written."""
+    if resume is None:
+        return build_config(read_toml(config) if config else {}, overrides), None
+    if config is not None:
+        raise ConfigError("--config: not with --resume (the run's config is in its checkpoint)")
+    bad = [k for k in overrides if k not in RESUME_OVERRIDABLE]
+    if bad:
+        raise ConfigError(f"--{bad[0]}: cannot be changed when resuming (only {', '.join(RESUME_OVERRIDABLE)})")
+    if not resume.is_dir():
+        raise FileNotFoundError(2, "No such run folder", str(resume))
+    state = load_checkpoint(resume / "last.pt")  # before anything is written
+    cfg = build_config(state["config"], overrides)
+    if cfg.optim.epochs * cfg.optim.steps_per_epoch < int(state["step"]):
+        raise ConfigError(f"--optim.epochs: {cfg.optim.epochs} is fewer than the {state['epoch']} epochs already run")
+    return cfg, state
 
 
-def _segments(record: Dict[str, Any]) -> Dict[str, Any]:
-    """What a split holds (segment names, sizes, stamps), not where it was read from."""
-    return {k: [[(g["name"], g["samples"], g["t0_ns"], g["t1_ns"]) for g in e["segments"]] for e in record.get(k, [])]
-            for k in ("train", "val", "test")}
-
-
-def main(argv: Optional[Seq[str]] = None, on_step: Optional[StepHook] = None) -> int:
-    argv = list(sys.argv[1:] if argv is None else argv)
-    args, rest = _parser().parse_known_args(argv)
-    run_dir: Optional[Path] = None
-    try:
-        overrides = parse_overrides(rest)
-        state = None
-        if args.resume is not None:
-            if args.config is not None:
-                raise ConfigError("--config: not with --resume (the run's config is in its checkpoint)")
-            bad = [k for k in overrides if k not in RESUME_OVERRIDABLE]
-            if bad:
-                raise ConfigError(f"--{bad[0]}: cannot be changed when resuming (only {', '.join(RESUME_OVERRIDABLE)})")
-            run_dir = args.resume
-            if not run_dir.is_dir():
-                raise FileNotFoundError(2, "No such run folder", str(run_dir))
-            state = load_checkpoint(run_dir / "last.pt")  # before anything is written
-            cfg = build_config(state["config"], overrides)
-            if cfg.optim.epochs * cfg.optim.steps_per_epoch < int(state["step"]):
-                raise ConfigError(f"--optim.epochs: {cfg.optim.epochs} is fewer than the {state['epoch']} epochs already run")
-        else:
-            cfg = build_config(read_toml(args.config) if args.config else {}, overrides)
-        if args.print_config:
-            print(to_toml(cfg), end="")
-            return 0
-        split = make_split(cfg.data)
-        dist = Dist()
-        if state is not None:
-            saved = json.loads((run_dir / "split.json").read_text()) if (run_dir / "split.json").exists() else None
-            if saved is not None and _segments(saved) != _segments(json.loads(json.dumps(split.record))):
-                raise ConfigError(f"{run_dir}/split.json: the data differ from what the run started with")
-            if dist.main:
-                write_csv(run_dir / "metrics.csv", list((state.get("extra") or {}).get("history", [])))
-            print(f"{PROG}: resuming {run_dir} at epoch {state['epoch']}, step {state['step']}", file=sys.stderr)
-        else:
-            if args.run_dir is not None:
-                run_dir = args.run_dir
-            else:
-                name = cfg.name or datetime.now().strftime("%Y%m%d-%H%M%S")
-                run_dir = Path(cfg.runs_dir) / name
-            if (run_dir / "last.pt").exists():
-                raise ConfigError(f"{run_dir}: already holds a run; continue it with --resume {run_dir} or pick another --name")
-            if dist.main:
-                run_dir.mkdir(parents=True, exist_ok=True)
-                atomic_write_text(run_dir / "config.toml", to_toml(cfg))
-                write_split(split, run_dir / "split.json")
-                print(f"{PROG}: run folder {run_dir}", file=sys.stderr)
-        train(cfg, run_dir, state, split, on_step=on_step, progress=not args.no_progress)
-        return 0
-    except KeyboardInterrupt:
-        where = f"; saved {run_dir / 'last.pt'}, continue with: python -m {PROG} --resume {run_dir}" \
-            if run_dir is not None and (run_dir / "last.pt").exists() else ""
-        print(f"{PROG}: interrupted{where}", file=sys.stderr)
-        return EXIT_INTERRUPTED
-    except (ImuError, OSError) as e:  # OSError: a full disk or read-only run folder, named in e
-        print(f"{PROG}: error: {one_line(e)}", file=sys.stderr)
-        return EXIT_ERROR
-
-
-if __name__ == "__main__":
-    sys.exit(main())
+def open_run(cfg: RunConfig, state: Optional[Dict[str, Any]], run_dir: Optional[Path]) -> Tuple[Path, Split]:
+    """The split and the run folder: for a resumed run (``state`` given, ``run_dir`` its folder) the
+    data are checked against its split.json; a new run's folder (``run_dir``, default
+    ``<runs_dir>/<name or timestamp>``) is created with config.toml and split.json."""
+    split = make_split(cfg.data)
+    dist = Dist()
+    if state is not None:
+        assert run_dir is not None
+        saved = json.loads((run_dir / "split.json").read_text()) if (run_dir / "split.json").exists() else None
+        if saved is not None and split_signature(saved) != split_signature(json.loads(json.dumps(split.record))):
+            raise ConfigError(f"{run_dir}/split.json: the data differ from what the run started with")
+        if dist.main:
+            write_csv(run_dir / "metrics.csv", list((state.get("extra") or {}).get("history", [])))
+        logger.info("resuming %s at epoch %s, step %s", run_dir, state["epoch"], state["step"])
+        return run_dir, split
+    if run_dir is None:
+        run_dir = Path(cfg.runs_dir) / (cfg.name or datetime.now().strftime("%Y%m%d-%H%M%S"))
+    if (run_dir / "last.pt").exists():
+        raise ConfigError(f"{run_dir}: already holds a run; continue it with --resume {run_dir} or pick another --name")
+    if dist.main:
+        run_dir.mkdir(parents=True, exist_ok=True)
+        atomic_write_text(run_dir / "config.toml", to_toml(cfg))
+        write_split(split, run_dir / "split.json")
+        logger.info("run folder %s", run_dir)
+    return run_dir, split

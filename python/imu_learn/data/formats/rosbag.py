@@ -18,7 +18,7 @@ the other binary containers (Blackbird's HDF5, BROAD's MAT).
 """
 from __future__ import annotations
 
-import sys
+import logging
 from contextlib import contextmanager
 from pathlib import Path
 from typing import Callable, Dict, Iterator, List, Optional, Tuple
@@ -38,6 +38,8 @@ from imu_learn.util.atomic import atomic_write_dir, atomic_write_path
 
 from .groundtruth import read_groundtruth
 from .source import ImuSource
+
+logger = logging.getLogger(__name__)
 
 NAME = "rosbag"
 IMU_TYPE = "sensor_msgs/msg/Imu"
@@ -206,7 +208,7 @@ def _only_topic(reader, bag: Path, types: Tuple[str, ...], what: str, option: st
     or several."""
     found = sorted({c.topic for c in reader.connections if c.msgtype in types})
     if len(found) == 1:
-        print(f"{bag}: using {what} topic {found[0]} (the bag's only one)", file=sys.stderr)
+        logger.info("%s: using %s topic %s (the bag's only one)", bag, what, found[0])
         return found[0]
     why = f"no {what} topic" if not found else f"{len(found)} {what} topics ({', '.join(found)})"
     raise BagTopicError(f"{bag}: {why} of type {' or '.join(types)}; pass {option}; the bag has: "

@@ -1,0 +1,136 @@
+"""What every ``imu-learn`` subcommand shares: the common flags, logging set-up, and the one error
+wrapper (:func:`run_command`).
+
+* A known error (:class:`imu_learn.errors.ImuError` and its subclasses, :class:`OSError` incl.
+  FileNotFoundError / PermissionError) prints ``imu-learn <cmd>: error: <Class>: <message>`` on one
+  line on stderr and exits 2; with ``--traceback`` it is re-raised instead.
+* Ctrl-C prints ``imu-learn <cmd>: interrupted`` (and what was kept) and exits 130.
+* Any other exception is a bug: it is never caught, Python prints its traceback.
+* Logging of the library goes to stderr as ``imu-learn <cmd>: message`` (INFO; WARNING with
+  ``--quiet``, which also turns the progress bars off). Results go to stdout.
+"""
+from __future__ import annotations
+
+import argparse
+import contextlib
+import importlib
+import logging
+import os
+import sys
+from typing import Any, Callable, Dict, Iterator, List, Optional, Sequence, Union
+
+from imu_learn.errors import ImuError, one_line
+
+EXIT_OK = 0
+EXIT_ERROR = 2
+EXIT_INTERRUPTED = 130
+KNOWN_ERRORS = (ImuError, OSError)
+DATA_ROOT_ENV = "IMU_LEARN_DATA"
+
+# subcommand -> one-line help; each lives in imu_learn.cli.<name> (module imported only when run)
+COMMANDS: Dict[str, str] = {
+    "labels": "build the label cache of a dataset (parse, align, labels; Rust)",
+    "fit": "train the refiner from a config (default: the shipped crops)",
+    "evaluate": "fit every method on a train split, score it on a test split",
+    "refine": "write refined IMU with a checkpoint, in the input's own format",
+    "export": "export a checkpoint to TorchScript and ONNX",
+    "fuse": "fuse IMU with aiding in a GTSAM factor graph",
+    "checkpoint": "inspect (info) or strip a checkpoint",
+}
+
+Kept = Union[str, Callable[[], str]]
+
+
+def prog(name: str) -> str:
+    return f"imu-learn {name}"
+
+
+class _StderrHandler(logging.Handler):
+    """Writes to the current ``sys.stderr`` (not the one at set-up: tests swap it)."""
+
+    def emit(self, record: logging.LogRecord) -> None:
+        try:
+            sys.stderr.write(self.format(record) + "\n")
+            sys.stderr.flush()
+        except Exception:  # pragma: no cover - logging must never raise
+            self.handleError(record)
+
+
+class _Format(logging.Formatter):
+    def __init__(self, name: str) -> None:
+        super().__init__()
+        self.name = name
+
+    def format(self, record: logging.LogRecord) -> str:
+        level = "" if record.levelno < logging.WARNING else f"{record.levelname.lower()}: "
+        return f"{prog(self.name)}: {level}{record.getMessage()}"
+
+
+@contextlib.contextmanager
+def logging_to_stderr(name: str, quiet: bool) -> Iterator[None]:
+    """For the block: the ``imu_learn`` logger to stderr as ``imu-learn <name>: message``, INFO, or
+    WARNING when quiet. The logger is left as it was afterwards (a command run from Python, e.g. a
+    test, leaves no handler behind)."""
+    log = logging.getLogger("imu_learn")
+    handler = _StderrHandler()
+    handler.setFormatter(_Format(name))
+    level = log.level
+    log.addHandler(handler)
+    log.setLevel(logging.WARNING if quiet else logging.INFO)
+    try:
+        yield
+    finally:
+        log.removeHandler(handler)
+        log.setLevel(level)
+
+
+def add_common(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--quiet", "-q", action="store_true", help="no progress bars and no info messages (warnings and "
+                                                                "errors still go to stderr)")
+    p.add_argument("--traceback", action="store_true", help="re-raise a known error (full traceback) instead of "
+                                                            "its one-line message")
+
+
+def add_data_root(p: argparse.ArgumentParser, what: str) -> None:
+    p.add_argument("--data-root", metavar="DIR", default=None,
+                   help=f"the data root {what} are relative to (default: ${DATA_ROOT_ENV}, else the config's "
+                        "data_root; this flag beats both)")
+
+
+def parser(name: str) -> argparse.ArgumentParser:
+    mod = importlib.import_module(f"imu_learn.cli.{name}")
+    p = argparse.ArgumentParser(prog=prog(name), allow_abbrev=False, description=mod.DESCRIPTION,
+                                epilog=getattr(mod, "EPILOG", None),
+                                formatter_class=argparse.RawDescriptionHelpFormatter)
+    mod.add_arguments(p)
+    add_common(p)
+    return p
+
+
+def run_command(name: str, argv: Optional[Sequence[str]] = None, **hooks: Any) -> int:
+    """Parse ``argv`` for subcommand ``name`` and run it under the one error rule (module doc)."""
+    mod = importlib.import_module(f"imu_learn.cli.{name}")
+    p = parser(name)
+    argv = list(sys.argv[1:] if argv is None else argv)
+    if getattr(mod, "OVERRIDES", False):  # --key.sub VALUE config overrides
+        args, rest = p.parse_known_args(argv)
+    else:
+        args, rest = p.parse_args(argv), []
+    kept: List[Kept] = []  # what the command has kept so far, said on Ctrl-C
+    try:
+        with logging_to_stderr(name, args.quiet):
+            return int(mod.run(args, rest, kept.append, **hooks) or EXIT_OK)
+    except KNOWN_ERRORS as e:
+        if args.traceback:
+            raise
+        sys.stderr.write(f"{prog(name)}: error: {one_line(e)}\n")
+        return EXIT_ERROR
+    except KeyboardInterrupt:
+        said = [k() if callable(k) else k for k in kept]
+        said = [s for s in said if s]
+        sys.stderr.write(f"{prog(name)}: interrupted{'; ' + '; '.join(said) if said else ''}\n")
+        return EXIT_INTERRUPTED
+
+
+def data_root_default() -> Optional[str]:
+    return os.environ.get(DATA_ROOT_ENV) or None
