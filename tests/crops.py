@@ -39,3 +39,35 @@ def load_easy(root: Path = SHIPPED) -> Sequence:
 def split(seq: Sequence) -> Tuple[Sequence, Sequence]:
     a, b = SPLIT
     return cut(seq, 0, a), cut(seq, a, b)
+
+
+# A run config over the shipped crops with paths relative to a data root (a folder holding
+# euroc/<SEQ>); ``{data_root}`` is a line of the [data] table (empty, or data_root = "...").
+CROP_RUN_TOML = """
+name = "crops"
+[data]
+{data_root}
+[[data.roots]]
+path = "euroc/MH_01_easy"
+[[data.roots]]
+path = "euroc/V1_01_easy"
+groundtruth = "euroc/V1_01_easy/groundtruth_state_20hz.csv"
+max_gap_s = 0.06
+[data.split]
+train = ["MH_01_easy[0:0.8]"]
+val = ["MH_01_easy[0.8:1]"]
+test = ["V1_01_easy"]
+"""
+
+
+def whole_pass(model, g, a):
+    """A refiner over the whole sequence in one forward pass (float64 raw + float32 correction, as
+    the windowing rule composes it): the oracle stitched outputs are compared with."""
+    import numpy as np
+    import torch
+
+    raw = np.c_[g, a]
+    x = torch.from_numpy(raw.astype(np.float32))[None]
+    with torch.no_grad():
+        corr = (model(x) - x)[0].numpy()
+    return raw + corr.astype(np.float64)

@@ -6,6 +6,7 @@ from pathlib import Path
 
 import pytest
 
+from crops import CROP_RUN_TOML
 from imu_learn.cli import fit as fit_cli
 from imu_learn.data.splits import DataPathError, make_split
 from imu_learn.eval import run as ev
@@ -16,21 +17,6 @@ CROPS = REPO / "datasets" / "euroc"
 ENV = "IMU_LEARN_DATA"
 
 # The shipped crops, addressed relative to a data root (a folder that holds euroc/<SEQ>).
-CONFIG = """
-name = "dr"
-[data]
-{data_root}
-[[data.roots]]
-path = "euroc/MH_01_easy"
-[[data.roots]]
-path = "euroc/V1_01_easy"
-groundtruth = "euroc/V1_01_easy/groundtruth_state_20hz.csv"
-max_gap_s = 0.06
-[data.split]
-train = ["MH_01_easy[0:0.8]"]
-val = ["MH_01_easy[0.8:1]"]
-test = ["V1_01_easy"]
-"""
 
 
 def _root(base: Path) -> Path:
@@ -53,7 +39,7 @@ def roots(tmp_path, monkeypatch):
     work.mkdir()
     monkeypatch.chdir(work)
     cfg = tmp_path / "dr.toml"
-    cfg.write_text(CONFIG.format(data_root=""))
+    cfg.write_text(CROP_RUN_TOML.format(data_root=""))
     return good, empty, cfg
 
 
@@ -89,7 +75,7 @@ def test_cli_beats_env(roots, monkeypatch):
 
 def test_config_value_and_env_over_it(roots, monkeypatch):
     good, empty, cfg = roots
-    cfg.write_text(CONFIG.format(data_root=f'data_root = "{good}"'))
+    cfg.write_text(CROP_RUN_TOML.format(data_root=f'data_root = "{good}"'))
     c = load_config(cfg)
     assert c.data.data_root == str(good)
     assert make_split(c.data).record["data_root"] == str(good.resolve())

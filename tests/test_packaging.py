@@ -27,6 +27,8 @@ from typing import Dict, Iterator, List, Set
 
 import pytest
 
+from crops import CROP_RUN_TOML
+
 try:
     import tomllib
 except ImportError:  # Python < 3.11
@@ -122,19 +124,6 @@ from imu_learn.data.splits import make_split
 s = make_split(load_config(sys.argv[1]).data)
 print(json.dumps([s.record["data_root"], s.record["test"][0]["path"]]))
 """
-CONFIG = """
-name = "wheel"
-[[data.roots]]
-path = "euroc/MH_01_easy"
-[[data.roots]]
-path = "euroc/V1_01_easy"
-groundtruth = "euroc/V1_01_easy/groundtruth_state_20hz.csv"
-max_gap_s = 0.06
-[data.split]
-train = ["MH_01_easy[0:0.8]"]
-val = ["MH_01_easy[0.8:1]"]
-test = ["V1_01_easy"]
-"""
 
 
 @pytest.mark.slow
@@ -142,7 +131,7 @@ def test_bare_wheel_resolves_relative_data_paths_without_a_checkout(bare, data_r
     import json
 
     cfg = tmp_path / "wheel.toml"
-    cfg.write_text(CONFIG)
+    cfg.write_text(CROP_RUN_TOML.format(data_root=""))
     elsewhere = tmp_path / "elsewhere"
     elsewhere.mkdir()
     # from the data root (IMU_LEARN_DATA), the working directory elsewhere

@@ -11,6 +11,7 @@ import numpy as np
 import pytest
 import torch
 
+from crops import whole_pass
 from imu_learn import _imu_core as core
 from imu_learn.cli.refine import main
 from imu_learn.infer.refine import refine_arrays
@@ -48,13 +49,6 @@ def imu():
     return t, g, a
 
 
-def whole(model, g, a):
-    """The model over the whole sequence at once, as refine_arrays composes it (float64 raw + float32 correction)."""
-    raw = np.c_[g, a]
-    x = torch.from_numpy(raw.astype(np.float32))[None]
-    with torch.no_grad():
-        corr = (model(x) - x)[0].numpy()
-    return raw + corr.astype(np.float64)
 
 
 def sha(path):
@@ -80,7 +74,7 @@ def test_window_covering_everything_is_the_whole_sequence_forward_exactly(imu):
     _t, g, a = imu
     m = random_model()
     rg, ra = refine_arrays(m, g, a, window=len(g), overlap=0)
-    np.testing.assert_array_equal(np.c_[rg, ra], whole(m, g, a))
+    np.testing.assert_array_equal(np.c_[rg, ra], whole_pass(m, g, a))
     assert np.abs(rg - g).max() > 1e-4 and np.abs(ra - a).max() > 1e-3  # the model does change the data
 
 
@@ -90,7 +84,7 @@ def test_stitched_windows_match_whole_sequence_at_the_centres(imu):
     matches the whole-sequence forward to float32 rounding."""
     _t, g, a = imu
     m = random_model(memory=1.5)
-    ref = whole(m, g, a)
+    ref = whole_pass(m, g, a)
     corr = np.abs(ref - np.c_[g, a]).max(0)
     diff = {}
     for ov in (0, 200):
@@ -105,7 +99,7 @@ def test_stitched_windows_match_whole_sequence_at_the_centres(imu):
 def test_causal_sequential_windows_equal_the_whole_causal_forward_exactly(imu):
     _t, g, a = imu
     m = random_model(causal=True)
-    ref = whole(m, g, a)
+    ref = whole_pass(m, g, a)
     for w in (1000, 333):
         rg, ra = refine_arrays(m, g, a, window=w, overlap=200)
         np.testing.assert_array_equal(np.c_[rg, ra], ref)

@@ -14,6 +14,7 @@ import numpy as np
 import pytest
 import torch
 
+from crops import whole_pass
 from imu_learn import _imu_core as core
 from imu_learn.data.types import Sequence
 from imu_learn.infer import windowing
@@ -128,13 +129,6 @@ def test_the_rule_comes_from_the_checkpoint(checkpoint):
     assert windowing.windowing_of(ImuRefiner(ModelConfig())) == Windowing(200, 100)  # a model built in memory
 
 
-def whole(model, g, a):
-    """One forward pass over the whole sequence (float64 raw + float32 correction)."""
-    raw = np.c_[g, a]
-    x = torch.from_numpy(raw.astype(np.float32))[None]
-    with torch.no_grad():
-        corr = (model(x) - x)[0].numpy()
-    return raw + corr.astype(np.float64)
 
 
 def test_causal_chunks_with_carried_state_equal_one_whole_sequence_pass(imu):
@@ -146,7 +140,7 @@ def test_causal_chunks_with_carried_state_equal_one_whole_sequence_pass(imu):
     assert windowing.causal_chunks(100, 150) == [(0, 100)] and windowing.causal_chunks(0, 150) == []
     _t, g, a = imu
     model = small_model(True, g, a)
-    ref = whole(model, g, a)
+    ref = whole_pass(model, g, a)
     for w in (W, 9, 37, 333, len(g), len(g) + 5):
         got = np.c_[refine_arrays(model, g, a, window=w)]
         np.testing.assert_array_equal(got, ref, err_msg=f"chunks of {w}")
@@ -166,7 +160,7 @@ def test_edge_lengths(imu, causal, n):
     plan = window_plan(n, W, W // 2)
     assert plan[0][2] == 0 and plan[-1][3] == n and all(p[3] == q[2] for p, q in zip(plan, plan[1:]))
     if causal or n <= W:  # one window, or the causal forward: the whole-sequence pass exactly
-        np.testing.assert_array_equal(got, whole(model, g, a))
+        np.testing.assert_array_equal(got, whole_pass(model, g, a))
     if n == W + 1:  # two windows, [0, W) and [1, W + 1), split at the middle of their overlap
         assert plan == [(0, W, 0, (W + 1) // 2), (1, W + 1, (W + 1) // 2, W + 1)]
 
