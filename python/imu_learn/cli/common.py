@@ -20,12 +20,12 @@ import sys
 from typing import Any, Callable, Dict, Iterator, List, Optional, Sequence, Union
 
 from imu_learn.errors import ImuError, one_line
+from imu_learn.settings import DATA_ROOT_ENV
 
 EXIT_OK = 0
 EXIT_ERROR = 2
 EXIT_INTERRUPTED = 130
 KNOWN_ERRORS = (ImuError, OSError)
-DATA_ROOT_ENV = "IMU_LEARN_DATA"
 
 # subcommand -> one-line help; each lives in imu_learn.cli.<name> (module imported only when run)
 COMMANDS: Dict[str, str] = {
