@@ -439,3 +439,30 @@ def test_fit_config_root_can_be_a_bag(bags):
     n = sum(len(s) for s in split.train) + sum(len(s) for s in split.val)
     assert n == sum(len(s) for s in whole)
     assert np.array_equal(split.train[0].gyro, whole[0].gyro[: len(split.train[0])])
+
+
+def test_a_bag_without_the_bags_extra_is_one_line_naming_the_extra(bags):
+    """With rosbags absent (blocked in a child process), reading a bag is a MissingExtraError and
+    the CLI prints one line naming the extra, not a ModuleNotFoundError traceback."""
+    import subprocess
+    import sys
+
+    block = ("import importlib.abc, sys\n"
+             "class NoBags(importlib.abc.MetaPathFinder):\n"
+             "    def find_spec(self, name, path=None, target=None):\n"
+             "        if name == 'rosbags' or name.startswith('rosbags.'):\n"
+             "            raise ImportError('rosbags is blocked in this test')\n"
+             "sys.meta_path.insert(0, NoBags())\n")
+    bag = bags["ros1"]
+    api = block + ("from imu_learn.data.formats.rosbag import open_bag\n"
+                   "from imu_learn.errors import MissingExtraError\n"
+                   f"try:\n    open_bag({str(bag)!r}).__enter__()\nexcept MissingExtraError as e:\n    print('OK', e)\n")
+    r = subprocess.run([sys.executable, "-c", api], capture_output=True, text=True)
+    assert r.returncode == 0 and r.stdout.startswith("OK ") and "bags extra" in r.stdout, r.stderr[-2000:]
+    cli = block + ("from imu_learn.cli import main\n"
+                   f"sys.exit(main(['refine', '--checkpoint', 'models/euroc_adis16448.pt', '--input', {str(bag)!r}, "
+                   "'--out', 'never_written.bag']))\n")
+    r = subprocess.run([sys.executable, "-c", cli], capture_output=True, text=True, cwd=Path(__file__).resolve().parents[1])
+    lines = r.stderr.strip().splitlines()
+    assert r.returncode == 2 and len(lines) == 1, r.stderr[-2000:]
+    assert lines[0].startswith("imu-learn refine: error: MissingExtraError: ") and "imu-learn[bags]" in lines[0]

@@ -29,6 +29,7 @@ from imu_learn.errors import (
     HeaderError,
     ImuError,
     InvalidInputError,
+    MissingExtraError,
     NonFiniteError,
     NoOverlapError,
     NoRecordingsError,
@@ -47,5 +48,5 @@ __all__ = [
     "ImuData", "GroundTruth", "Sequence", "Recording", "wxyz_to_xyzw", "xyzw_to_wxyz",
     "ImuError", "ParseError", "HeaderError", "ColumnCountError", "NotNumericError", "NonFiniteError",
     "TimestampError", "FloatTimestampError", "AlignmentError", "InvalidInputError", "CacheError",
-    "AidingError", "AidingOverlapError", "TooFewRowsError", "NoOverlapError", "TooShortError", "NoRecordingsError",
+    "AidingError", "AidingOverlapError", "MissingExtraError", "TooFewRowsError", "NoOverlapError", "TooShortError", "NoRecordingsError",
 ]

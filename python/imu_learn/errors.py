@@ -224,3 +224,7 @@ class DataPathError(ConfigError, FileNotFoundError):
 
 class MethodError(ImuError):
     """A method failed to fit, load or predict."""
+
+
+class MissingExtraError(ImuError, ImportError):
+    """A stage needs an optional dependency that is not installed; the message names the extra."""

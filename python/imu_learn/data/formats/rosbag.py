@@ -31,6 +31,7 @@ from imu_learn.errors import (
     BagTopicError,
     BagTypeError,
     InvalidInputError,
+    MissingExtraError,
     NotABagError,
     TruncatedBagError,
 )
@@ -139,10 +140,21 @@ def _reader_errors() -> Tuple[type, ...]:
             EOFError, KeyError, IndexError, UnicodeDecodeError, AssertionError)
 
 
+
+def require_rosbags(path: Path) -> None:
+    """:class:`MissingExtraError` naming the bag when ``rosbags`` (the ``bags`` extra) is absent."""
+    try:
+        import rosbags  # noqa: F401
+    except ImportError as e:
+        raise MissingExtraError(f"{path}: reading a ROS bag needs the bags extra "
+                                "(pip install 'imu-learn[bags]', or rosbags>=0.11 on Python >= 3.10)") from e
+
+
 @contextmanager
 def open_bag(path: Path, topic: Optional[str] = None) -> Iterator[AnyReader]:  # noqa: F821
     """An open ``rosbags`` AnyReader of ``path``; every read error inside the block becomes
     :class:`NotABagError` or :class:`TruncatedBagError` naming the bag (and ``topic``)."""
+    require_rosbags(path)
     from rosbags.highlevel import AnyReader
     from rosbags.typesys import Stores, get_typestore
 
