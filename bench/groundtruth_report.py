@@ -45,6 +45,9 @@ TUMVI = tuple(f"dataset-room{i}_512_16" for i in range(1, 6))
 EUROC_GT = ("mav0/state_groundtruth_estimate0/data.csv", "groundtruth_pose.tum", "groundtruth_state_20hz.csv",
             "groundtruth_original_euroc.csv")
 TUMVI_GT = ("mav0/mocap0/data.csv",)
+FETCH = ("01_square", "03_um", "04_eight", "06_right_turn", "07_left_turn", "08_origin")
+FETCH_GT = ("mav0/mocap0/data.csv",)
+FETCH_GAP_S = 0.1  # the Fetch mocap has gaps up to 70 ms in every recording
 GAPS_S = (0.05, 0.1, 0.3, 0.5)
 DRIFT_GAP_S = 0.3  # TUM-VI segments for the 5 s / 20 s drift (windows must fit inside one segment)
 G = 9.81
@@ -54,8 +57,13 @@ G = 9.81
 # loading
 
 
+def is_fetch(root: Path) -> bool:
+    return root.parent.name == "fetch"
+
+
 def read(root: Path, gt_rel: str) -> Tuple[il.ImuData, il.GroundTruth]:
-    return read_recording(root, "euroc", groundtruth=root / gt_rel)
+    fmt = "fetch" if is_fetch(root) else "euroc"
+    return read_recording(root, fmt, groundtruth=root / gt_rel)
 
 
 def gt_rate_hz(gt: il.GroundTruth) -> float:
@@ -195,6 +203,24 @@ def fit_offset(segs: List[il.Sequence], m: int = 10, max_shift: int = 20) -> Off
     dt = float(np.median(np.concatenate([np.diff(s.t_ns) for s in segs]))) * 1e-9
     r, c, cost = kabsch(*shifted_pairs(rates, shift))
     return Offset(r, c, (shift + 0.5) * dt, 0.5 * dt, math.sqrt(cost))
+
+
+def fit_acc_rotation(segs: List[il.Sequence], half: int = 15) -> np.ndarray:
+    """GT body -> IMU rotation from specific force (Kabsch, bias = centring term): the smoothed
+    accelerometer vs. R_gtᵀ (p̈_gt + g). For a ground robot, which turns about z only, the gyro fixes
+    the tilt but not the yaw of R_off; gravity and the horizontal accelerations fix both."""
+    a, b = [], []
+    for s in segs:
+        if len(s) <= 4 * half:
+            continue
+        dt = float(np.median(np.diff(s.t_ns))) * 1e-9
+        smooth = lambda x: savgol_filter(x, 2 * half + 1, 2, axis=0)  # noqa: E731
+        f_world = np.gradient(np.gradient(smooth(s.p), dt, axis=0), dt, axis=0) + np.array([0.0, 0.0, G])
+        f_body = np.einsum("nji,nj->ni", rotation_matrices(s.q_wxyz), f_world)
+        keep = slice(2 * half, len(s) - 2 * half)
+        a.append(smooth(s.acc)[keep])
+        b.append(f_body[keep])
+    return kabsch(np.concatenate(a), np.concatenate(b))[0]
 
 
 def angle_axis(r: np.ndarray) -> Tuple[float, np.ndarray]:
@@ -340,9 +366,11 @@ def gt_label(gt_rel: str) -> str:
 def score_gt(root: Path, gt_rel: str) -> Tuple[Row, il.ImuData, il.GroundTruth, Offset]:
     """Everything the main table says about one ground-truth file (plus what the TUM-VI part needs)."""
     imu, gt = read(root, gt_rel)
-    gap = default_gap_s(gt)
+    gap = FETCH_GAP_S if is_fetch(root) else default_gap_s(gt)
     segs = segments(imu, gt, gap)
     off = fit_offset(segs)
+    if is_fetch(root):  # the gyro leaves the yaw of R_off free (rotation about z only): take the accelerometer's
+        off = replace(off, r_off=fit_acc_rotation(segs))
     rotated = segments(imu, gt, gap, r_off=off.r_off)
     held = segments(imu, gt, gap, shift_s=off.integrator_shift_s, r_off=off.r_off)
     lever, lever_se = fit_lever_arm(segments(imu, gt, gap, shift_s=off.tau_s, r_off=off.r_off),
@@ -402,6 +430,19 @@ def tumvi_frame(rows: List[Row]) -> str:
             f"{max(arms):.1f} cm, τ {min(taus):+.1f}…{max(taus):+.1f} ms over {len(rows)} rooms.")
 
 
+def fetch_frame(rows: List[Row]) -> List[str]:
+    """The Fetch mocap body frame against the IMU, in a few lines."""
+    if not rows:
+        return []
+    offs = [r.off_deg for r in rows]
+    taus = [r.tau_ms for r in rows]
+    return ["", "## Fetch mocap0 body frame", "",
+            f"Fetch (Debias_IMU) mocap0 against the IMU over {len(rows)} recordings, segments at max_gap_s = "
+            f"{FETCH_GAP_S} (the mocap has gaps up to 70 ms): R_off {min(offs):.2f}–{max(offs):.2f}° "
+            f"(fitted on specific force: the robot turns about z only, so the gyro leaves R_off's yaw free), "
+            f"τ {min(taus):+.1f}…{max(taus):+.1f} ms. The pose is used as it is (no rotation, no time offset)."]
+
+
 def noise_table(tum: List[Tuple[Row, il.ImuData, il.GroundTruth, Offset]]) -> List[str]:
     out = ["", "## TUM-VI mocap0: noise floor", "",
            "σ: mocap orientation noise at the mocap's own 120 Hz stamps (RMSE of gyro vs. mocap relative rotation "
@@ -447,6 +488,7 @@ def main() -> None:
     args = ap.parse_args()
     start = time.time()
     jobs = [(args.data / "euroc" / r, EUROC_GT) for r in EUROC] + [(args.data / "tum-vi" / r, TUMVI_GT) for r in TUMVI]
+    jobs += [(args.data / "fetch" / r, FETCH_GT) for r in FETCH]
     results = []
     for root, cands in jobs:
         for gt_rel in cands:
@@ -459,6 +501,7 @@ def main() -> None:
     best = pick_best(rows)
     tum = [x for x in results if x[0].recording in TUMVI]
     tum_lines = ["", "## TUM-VI body frame", "", tumvi_frame([x[0] for x in tum])] + noise_table(tum) + gap_table(tum)
+    tum_lines += fetch_frame([x[0] for x in results if x[0].recording in FETCH])
     lines = ["# Ground truth vs. own IMU", "",
              f"Generated by `bench/groundtruth_report.py` in {time.time() - start:.0f} s (method: its docstring).", "",
              "Bias: one constant gyro + accelerometer bias per recording, fitted on the whole recording (medians "

@@ -8,7 +8,7 @@ from typing import List, Tuple
 from imu_learn.data.formats import FORMATS
 from imu_learn.errors import InvalidInputError, NoRecordingsError
 
-DATASETS = ("euroc", "tum-vi", "blackbird", "broad", "kaist", "rosbag")
+DATASETS = ("euroc", "tum-vi", "blackbird", "broad", "kaist", "fetch", "rosbag")
 
 # What find_recordings searches for, in the words of the error for a folder without any.
 LOOKED_FOR = {
@@ -17,6 +17,7 @@ LOOKED_FOR = {
     "blackbird": "folders holding data.hdf5",
     "broad": "*.mat trials",
     "kaist": "folders holding sensor_data/xsens_imu.csv",
+    "fetch": "folders holding mav0/imu0/data.csv with the Fetch header (# timestamp, wx, wy, wz, ax, ay, az)",
     "rosbag": "ROS 1 .bag files and ROS 2 bag folders (holding metadata.yaml)",
 }
 

@@ -8,7 +8,7 @@ from typing import List, Optional, Tuple, Union
 import numpy as np
 
 from imu_learn import _imu_core as core
-from imu_learn.data.formats import asl, blackbird, detect_format, read_recording
+from imu_learn.data.formats import asl, blackbird, detect_format, fetch, read_recording
 from imu_learn.data.types import GroundTruth, ImuData, Recording, Sequence
 
 PathLike = Union[str, Path]
@@ -101,6 +101,8 @@ def source_files(path: Path, format: str = "auto", groundtruth: Optional[Path] =
         return imu, groundtruth or asl.find_groundtruth(asl.sequence_root(path))
     if fmt == "blackbird":
         return root / "data.hdf5", groundtruth or root / blackbird.GROUNDTRUTH_NAME
+    if fmt == "fetch":
+        return fetch.imu_file(path), groundtruth or fetch.recording_root(path) / fetch.MOCAP_FILE
     if fmt == "kaist":
         imu = path if path.is_file() else path / "sensor_data" / "xsens_imu.csv"
         return imu, groundtruth or imu.parent.parent / "global_pose.csv"

@@ -1,6 +1,6 @@
 """Dataset formats: one module per layout on disk, the only place that knows the layout.
 
-Each of :mod:`.asl` (EuRoC, TUM-VI), :mod:`.blackbird`, :mod:`.broad`, :mod:`.kaist` and
+Each of :mod:`.asl` (EuRoC, TUM-VI), :mod:`.blackbird`, :mod:`.broad`, :mod:`.fetch`, :mod:`.kaist` and
 :mod:`.rosbag` (ROS 1 / ROS 2 bags; its readers also take ``imu_topic`` / ``groundtruth_topic``) has
 
 - ``NAME`` and ``detect(path) -> bool``: whether ``path`` (a folder or a file) is in this layout;
@@ -25,7 +25,7 @@ import numpy as np
 from imu_learn.data.types import GroundTruth, ImuData
 from imu_learn.errors import InvalidInputError
 
-from . import asl, blackbird, broad, kaist, rosbag
+from . import asl, blackbird, broad, fetch, kaist, rosbag
 from .source import ImuSource
 
 # The names ``format=`` / ``--format`` accept, each with its layout's module.
@@ -36,13 +36,15 @@ FORMATS: Dict[str, ModuleType] = {
     "blackbird": blackbird,
     "broad": broad,
     "kaist": kaist,
+    "fetch": fetch,
     "rosbag": rosbag,
 }
 
 # Asked in this order by detect_format; the first layout that claims a path wins. KAIST's
 # ``xsens_imu.csv`` is also a ``.csv``, which the ASL rule takes, so KAIST is asked before ASL.
-# A ROS 2 bag folder is asked first: nothing else holds a ``metadata.yaml``.
-DETECTION_ORDER: Tuple[ModuleType, ...] = (rosbag, broad, blackbird, kaist, asl)
+# A ROS 2 bag folder is asked first: nothing else holds a ``metadata.yaml``. Fetch (an ASL-like
+# ``mav0`` with its own header) is asked before ASL.
+DETECTION_ORDER: Tuple[ModuleType, ...] = (rosbag, broad, blackbird, kaist, fetch, asl)
 
 __all__ = ["FORMATS", "ImuSource", "detect_format", "layout", "read_imu_source", "read_recording", "write_imu"]
 
