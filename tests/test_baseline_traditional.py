@@ -1,6 +1,8 @@
 """Traditional baseline (low-pass + intrinsic model fitted through the integration), its own
 promises: the fast paths against the integration, the filter, recovering an injected distortion.
 What every method must do (shapes, save/load, determinism) is test_baselines_contract.py."""
+import json
+
 import numpy as np
 import torch
 
@@ -73,3 +75,37 @@ def test_recovers_injected_gyro_distortion(crop_split):
     # parameters: M_dist ≈ M_clean S⁻¹ and b_dist ≈ S b_clean + b (up to the small g-sensitivity terms)
     np.testing.assert_allclose(dist.params.M_g, clean.params.M_g @ np.linalg.inv(S), atol=3e-3)
     np.testing.assert_allclose(dist.params.b_g, S @ clean.params.b_g + b, atol=2e-3)
+
+
+def test_traditional_timing_fits_a_known_delay_then_the_model(crop_split, tmp_path):
+    """traditional+timing: the recorded IMU delayed by 1.4 samples (by linear interpolation); the
+    temporal calibration is the timing baseline's search on the same windows, and it finds the
+    delay on top of the crop's own offset (to within what interpolating twice smooths); plain
+    traditional keeps 0 and loads fits saved before the offset existed."""
+    from imu_learn.baselines.timing import Timing, shifted
+    from imu_learn.baselines.traditional import TraditionalTiming
+
+    tr, va = crop_split
+    own = Timing(max_windows=750)
+    own.fit([tr], [va], SETTINGS)
+    late = [shifted(s, -1.4) for s in (tr, va)]
+    m = TraditionalTiming(cutoffs_hz=(None,), max_windows=150)
+    log = m.fit([late[0]], [late[1]], SETTINGS)
+    same = Timing(max_windows=750)  # traditional: 5 × max_windows short windows
+    same.fit([late[0]], [late[1]], SETTINGS)
+    assert m.params.time_offset == same.tau
+    assert abs(m.params.time_offset - (own.tau + 1.4)) < 0.15, (m.params.time_offset, own.tau)
+    assert log["tau_samples"] == [m.params.time_offset]
+    m.save(tmp_path / "tt.json")
+    m2 = TraditionalTiming().load(tmp_path / "tt.json")
+    np.testing.assert_array_equal(m2.refine(va)[0], m.refine(va)[0])
+    # plain traditional: no offset; a fit saved before the offset existed loads with tau = 0
+    t = Traditional(cutoffs_hz=(None,), max_windows=150)
+    t.fit([tr], [va], SETTINGS)
+    assert t.params.time_offset == 0.0
+    d = t.to_dict()
+    del d["time_offset"]
+    (tmp_path / "old.json").write_text(json.dumps(d))
+    old = Traditional().load(tmp_path / "old.json")
+    assert old.params.time_offset == 0.0
+    np.testing.assert_array_equal(old.refine(va)[0], t.refine(va)[0])

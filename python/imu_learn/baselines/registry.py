@@ -18,7 +18,9 @@ MethodEntry = Union[Tuple[str, Optional[str]], Callable[[], Method]]
 
 REGISTRY: Dict[str, MethodEntry] = {
     "raw": ("imu_learn.baselines.base", "Raw"),
+    "timing": ("imu_learn.baselines.timing", "Timing"),
     "traditional": ("imu_learn.baselines.traditional", None),
+    "traditional+timing": ("imu_learn.baselines.traditional", "TraditionalTiming"),
     "gyro-denoise": ("imu_learn.baselines.gyro_denoise", None),
     "end-to-end": ("imu_learn.baselines.end_to_end", None),
     "airimu-style": ("imu_learn.baselines.airimu_style", None),
@@ -31,7 +33,9 @@ REGISTRY["tlio-style"] = ("imu_learn.baselines.tlio", None)
 
 
 def safe_name(name: str) -> str:
-    return re.sub(r"[^A-Za-z0-9_.\-]+", "-", name).strip("-") or "method"
+    """``name`` as a file name: letters, digits and ``_.+-`` kept (``traditional+timing``), runs of
+    anything else one ``-``."""
+    return re.sub(r"[^A-Za-z0-9_.+\-]+", "-", name).strip("-") or "method"
 
 
 def load_method_class(name: str) -> Optional[Callable[[], Method]]:

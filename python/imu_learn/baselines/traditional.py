@@ -37,6 +37,16 @@ that model, and the model is refitted (warm start) at the best one; then the sam
 accelerometer with the chosen gyro model fixed. (Filter and model are both linear, so they nearly
 commute and the model barely depends on the cutoff; refitting per cutoff would cost a fit each.)
 Without validation sequences the training windows score the grid.
+
+Temporal calibration (``fit_offset=True``, registered as ``traditional+timing``): before the
+affine model, one constant time offset tau [samples] is fitted by the 1-D search of
+:mod:`imu_learn.baselines.timing` on the same gyro rotation residuals (raw samples, no model, over
+``offset_window`` = 10-sample windows, 5 × ``max_windows`` of them), as
+Kalibr fits a camera's time offset; both sensors are resampled by linear interpolation at
+t + tau·dt, then filtered and calibrated as above (``refine`` applies them in that order). The
+validation split keeps tau = 0 when the fitted offset does not lower its cost. Plain
+``traditional`` keeps tau = 0 (its saved fits, with or without a ``time_offset`` entry, load as
+before).
 """
 from __future__ import annotations
 
@@ -52,6 +62,7 @@ import torch
 from scipy.signal import butter, sosfiltfilt
 
 from imu_learn.baselines.base import FitSettings, Method
+from imu_learn.baselines.timing import RotationWindows, fit_offset, shifted
 from imu_learn.core.integration import PAPER_FRACTIONS, window_labels
 from imu_learn.data.types import Sequence
 from imu_learn.nn.integration import prefix_quat_product
@@ -91,6 +102,7 @@ class TraditionalParams:
     b_a: np.ndarray
     cutoff_gyro: Optional[float] = None
     cutoff_acc: Optional[float] = None
+    time_offset: float = 0.0  # [samples]: IMU resampled at t + time_offset·dt before the model
 
     @classmethod
     def identity(cls) -> TraditionalParams:
@@ -317,6 +329,7 @@ class Traditional(Method):
 
     name = "traditional"
     rotation_only = False
+    save_suffix = ".json"
 
     def __init__(
         self,
@@ -328,6 +341,9 @@ class Traditional(Method):
         huber_rot: float = 0.01,
         huber_vel: float = 0.1,
         max_iter: int = 20,
+        fit_offset: bool = False,
+        max_shift: float = 3.0,
+        offset_window: int = 10,
     ) -> None:
         self.cutoffs_hz = tuple(cutoffs_hz)
         self.filter_order = filter_order
@@ -337,12 +353,16 @@ class Traditional(Method):
         self.huber_rot = huber_rot
         self.huber_vel = huber_vel
         self.max_iter = max_iter
+        self.fit_offset = fit_offset
+        self.max_shift = max_shift
+        self.offset_window = offset_window
         self.params = TraditionalParams.identity()
 
     # -- applying the model ---------------------------------------------------------------------
 
     def refine(self, seq: Sequence) -> Tuple[np.ndarray, np.ndarray]:
         p = self.params
+        seq = shifted(seq, p.time_offset)
         fs = sample_rate(seq)
         g_f = lowpass(seq.gyro, fs, p.cutoff_gyro, self.filter_order)
         ag_f = lowpass(seq.acc, fs, p.cutoff_gyro, self.filter_order)
@@ -356,6 +376,12 @@ class Traditional(Method):
     def fit(self, train: List[Sequence], val: List[Sequence], settings: FitSettings = FitSettings()) -> Dict[str, list]:
         torch.manual_seed(settings.seed)
         window = int(self.window or settings.window)
+        tau, tau_log = 0.0, {}
+        if self.fit_offset:
+            if not any(len(s) > window for s in train):
+                raise ValueError(f"no training sequence is longer than the window ({window} samples)")
+            tau, tau_log = self._fit_time_offset(train, val, self.offset_window, settings.gravity)
+            train, val = [shifted(s, tau) for s in train], [shifted(s, tau) for s in val]
         tr = _Data(train, window, self.max_windows, settings.gravity, self.filter_order)
         if len(tr) == 0:
             raise ValueError(f"no training sequence is longer than the window ({window} samples)")
@@ -390,7 +416,7 @@ class Traditional(Method):
         self.params = TraditionalParams(
             M_g=np.eye(3) + theta_g[:9].reshape(3, 3), b_g=theta_g[9:12].copy(), G=theta_g[12:21].reshape(3, 3).copy(),
             M_a=np.eye(3) + theta_a[:9].reshape(3, 3), b_a=theta_a[9:12].copy(),
-            cutoff_gyro=c_g, cutoff_acc=c_a,
+            cutoff_gyro=c_g, cutoff_acc=c_a, time_offset=tau,
         )
         # Losses: RMS over the training windows/horizons of |residual| before (raw IMU) and after the
         # fit, rotation [rad] and velocity+position [m/s, m]; train_loss adds the two (unitless sum).
@@ -399,8 +425,22 @@ class Traditional(Method):
             "gyro_loss": [g_before, g_after], "acc_loss": [a_before, a_after],
             "train_loss": [g_before + a_before, g_after + a_after],
             "cutoff_gyro": [c_g], "cutoff_acc": [c_a], "train_windows": [len(tr)], "stride": [tr.stride],
+            **tau_log,
         }
         return log
+
+    def _fit_time_offset(self, train: List[Sequence], val: List[Sequence], window: int,
+                         gravity: float) -> Tuple[float, Dict[str, list]]:
+        """The temporal calibration: tau [samples] by the timing baseline's 1-D search on the raw
+        gyro's rotation residuals over ``offset_window``-sample training windows (short, for the
+        reason :mod:`imu_learn.baselines.timing` gives), kept only if it lowers the validation cost."""
+        tr = RotationWindows(train, window, 5 * self.max_windows, gravity)
+        tau, _, _ = fit_offset(tr, self.max_shift, 0.25, 1e-3, self.huber_rot)
+        va = RotationWindows(val, window, 5 * self.max_windows, gravity) if val else tr
+        va = va if len(va) else tr
+        zero, got = va.cost(0.0, self.huber_rot), va.cost(tau, self.huber_rot)
+        kept = tau if got < zero else 0.0
+        return kept, {"tau_samples": [kept], "tau_fitted": [tau], "tau_val_cost": [zero, got]}
 
     def _fit_at_best_cutoff(self, residuals: Callable, train_at: Callable, val_at: Callable, grid: list,
                             theta0: np.ndarray, idx: np.ndarray, huber: float) -> tuple:
@@ -423,7 +463,7 @@ class Traditional(Method):
         return {
             "method": self.name, "M_g": p.M_g.tolist(), "b_g": p.b_g.tolist(), "G": p.G.tolist(),
             "M_a": p.M_a.tolist(), "b_a": p.b_a.tolist(), "cutoff_gyro": p.cutoff_gyro, "cutoff_acc": p.cutoff_acc,
-            "filter_order": self.filter_order,
+            "filter_order": self.filter_order, "time_offset": p.time_offset,
         }
 
     def save(self, path: Path) -> None:
@@ -435,5 +475,15 @@ class Traditional(Method):
             raise ValueError(f"{path} holds {d.get('method')!r} parameters, not {self.name!r}")
         a = lambda k: np.asarray(d[k], dtype=np.float64)  # noqa: E731
         self.filter_order = int(d.get("filter_order", self.filter_order))
-        self.params = TraditionalParams(a("M_g"), a("b_g"), a("G"), a("M_a"), a("b_a"), d["cutoff_gyro"], d["cutoff_acc"])
+        self.params = TraditionalParams(a("M_g"), a("b_g"), a("G"), a("M_a"), a("b_a"), d["cutoff_gyro"], d["cutoff_acc"],
+                                        float(d.get("time_offset", 0.0)))
         return self
+
+
+class TraditionalTiming(Traditional):
+    """``traditional`` with its temporal calibration: a time offset fitted first, then the model."""
+
+    name = "traditional+timing"
+
+    def __init__(self, *args, fit_offset: bool = True, **kwargs) -> None:
+        super().__init__(*args, fit_offset=fit_offset, **kwargs)

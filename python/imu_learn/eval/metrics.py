@@ -22,7 +22,7 @@ so the fit is consistent with it. Apply with :func:`remove_bias` (subtraction).
 from __future__ import annotations
 
 import math
-from typing import Dict, List, Optional, Tuple
+from typing import Any, Dict, List, Optional, Tuple
 from typing import Sequence as Seq
 
 import numpy as np
@@ -197,6 +197,25 @@ def variant_table(seqs: Seq[Sequence], fixed: Seq[Sequence], horizons: Seq[int],
     return {variant: {str(int(n)): relative_pose_rmse_many(ss, int(n), stride, gravity, first_s=startup_bias_s)
                       for n in horizons}
             for variant, ss in zip(VARIANTS, (seqs, fixed))}
+
+
+def floor_ratios(rows: Dict[str, Dict[str, Dict[str, Dict[str, float]]]], floors: Seq[str],
+                 model: str) -> Dict[str, Dict[str, Dict[str, Any]]]:
+    """The ``model`` row judged against the best of the ``floors`` rows (e.g. raw and timing) of a
+    :func:`variant_table`-shaped ``rows`` ({row: {variant: {n: cell}}}), cell by cell:
+    ``{variant: {n: {"rot": ratio, "rot_floor": row, "trans": ratio, "trans_floor": row}}}``, each
+    ratio the model's RMSE over the lowest floor RMSE of that cell (below 1: the model beats every
+    floor), rotation and translation separately."""
+    out: Dict[str, Dict[str, Dict[str, Any]]] = {}
+    for variant, by_n in rows[model].items():
+        for n, cell in by_n.items():
+            got: Dict[str, Any] = {}
+            for key, col in (("rot", "rot_deg"), ("trans", "trans_m")):
+                best = min(floors, key=lambda f: rows[f][variant][n][col])
+                got[key] = cell[col] / max(rows[best][variant][n][col], 1e-300)
+                got[key + "_floor"] = best
+            out.setdefault(variant, {})[n] = got
+    return out
 
 
 def simulate_sequence(

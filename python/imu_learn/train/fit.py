@@ -38,7 +38,9 @@ What a run does:
   read-only run folder) print one line and exit with status 2; every file of the run folder is
   written atomically (:mod:`imu_learn.util.atomic`), so what is there after any failure is complete.
 * at the end: relative pose error on the held-out test split (:mod:`imu_learn.eval.metrics`) for the
-  raw IMU and for the best-validation model, over ``data.eval_horizons`` IMU samples (default 10
+  raw IMU, for the timing floor (the raw IMU resampled at the one time offset fitted on the training
+  split, :mod:`imu_learn.baselines.timing`) and for the best-validation model, judged against the
+  better of raw and timing in each cell ("model/floor"), over ``data.eval_horizons`` IMU samples (default 10
   and 200), pooled and per test recording, open loop and with a
   start-up bias (fitted on each input's first ``data.startup_bias_s`` seconds against ground truth,
   raw and refined separately) subtracted; windows start after those seconds so no cell is scored on
@@ -74,7 +76,7 @@ import torch
 from imu_learn.core.batches import Batch, BatchSampler, batch_seed
 from imu_learn.data.splits import Split, make_split, split_signature, write_split
 from imu_learn.data.types import Sequence
-from imu_learn.eval.metrics import index_at, relative_pose_rmse_many, variant_table, without_fitted_bias
+from imu_learn.eval.metrics import floor_ratios, index_at, relative_pose_rmse_many, variant_table, without_fitted_bias
 from imu_learn.eval.protocol import VARIANT_LABELS, VARIANTS
 from imu_learn.infer import windowing
 from imu_learn.nn.device import pick_device
@@ -305,17 +307,36 @@ def _cells(seqs: List[Sequence], fixed: List[Sequence], cfg: RunConfig) -> Dict[
     return variant_table(seqs, fixed, d.eval_horizons, d.eval_stride, d.startup_bias_s, d.gravity)
 
 
-def evaluate_table(raw_seqs: List[Sequence], model_seqs: List[Sequence], cfg: RunConfig) -> Dict[str, Any]:
-    """Relative pose RMSE (rot deg, trans m) at ``data.eval_horizons``, raw vs model, open loop vs
-    bias removed: pooled over every window of the test split (``rows``) and per test recording
-    (``per_recording``, as the paper's Table II lists sequences)."""
+def timing_floor(split: Split, cfg: RunConfig) -> Tuple[List[Sequence], float]:
+    """The ``timing`` floor of the final table: the raw test IMU resampled at the one time offset
+    [samples] fitted on the run's training split (validation only keeps it or not), as
+    :mod:`imu_learn.baselines.timing` does; returns the shifted test sequences and the offset."""
+    from imu_learn.baselines.base import FitSettings
+    from imu_learn.baselines.timing import Timing
+
+    m = Timing()
+    m.fit(list(split.train), list(split.val), FitSettings(window=cfg.data.window, gravity=cfg.data.gravity))
+    test = [Sequence(s.name, s.t_ns, *m.refine(s), s.p, s.v, s.q_wxyz) for s in split.test]
+    return test, m.tau
+
+
+def evaluate_table(raw_seqs: List[Sequence], model_seqs: List[Sequence], cfg: RunConfig,
+                   timing_seqs: Optional[List[Sequence]] = None) -> Dict[str, Any]:
+    """Relative pose RMSE (rot deg, trans m) at ``data.eval_horizons``, raw (and, given
+    ``timing_seqs``, the timing floor) vs model, open loop vs bias removed: pooled over every window
+    of the test split (``rows``) and per test recording (``per_recording``, as the paper's Table II
+    lists sequences). ``vs_floor``: the model's ratio to the best of the floor rows (raw, timing)
+    per cell (:func:`imu_learn.eval.metrics.floor_ratios`)."""
     out: Dict[str, Any] = {"rows": {}, "per_recording": {}, "startup_bias": {}}
-    for row, seqs in (("raw", raw_seqs), ("model", model_seqs)):
+    rows = [("raw", raw_seqs)] + ([("timing", timing_seqs)] if timing_seqs is not None else []) + [("model", model_seqs)]
+    for row, seqs in rows:
         fixed, out["startup_bias"][row] = without_startup_bias(seqs, cfg)
         out["rows"][row] = _cells(seqs, fixed, cfg)
         for rec in dict.fromkeys(recording_of(s.name) for s in seqs):
             idx = [i for i, s in enumerate(seqs) if recording_of(s.name) == rec]
             out["per_recording"].setdefault(rec, {})[row] = _cells([seqs[i] for i in idx], [fixed[i] for i in idx], cfg)
+    floors = [r for r, _ in rows if r != "model"]
+    out["vs_floor"] = floor_ratios(out["rows"], floors, "model")
     return out
 
 
@@ -333,12 +354,24 @@ def format_table(res: Dict[str, Any], names: List[str], cfg: RunConfig) -> str:
              f"{'':24}|" + "|".join(f"{VARIANT_LABELS[v]:^{width}}" for v in VARIANTS),
              f"{'':24}|" + "|".join(f"{'n=' + str(n):^13}" for _, n in cols[:k]) + "|"
              + "|".join(f"{'n=' + str(n):^13}" for _, n in cols[k:])]
-    for row, label in (("raw", "raw IMU"), ("model", "trained model")):
+    tau = res.get("timing_offset_samples")
+    labels = {"raw": "raw IMU", "timing": "timing" if tau is None else f"timing {tau:+.2f}", "model": "trained model"}
+    for row in [r for r in ("raw", "timing", "model") if r in res["rows"]]:
         for key, unit, fmt in (("rot_deg", "rot [deg]", "{:.4f}"), ("trans_m", "trans [m]", "{:.5f}")):
-            first = label if key == "rot_deg" else ""
+            first = labels[row] if key == "rot_deg" else ""
             cells = [fmt.format(res["rows"][row][c][str(n)][key]) for c, n in cols]
             lines.append(f"{first:14}{unit:>10}|" + "|".join(f"{x:^13}" for x in cells[:k]) + "|"
                          + "|".join(f"{x:^13}" for x in cells[k:]))
+    vs = res.get("vs_floor")
+    if vs:
+        for key, unit in (("rot", "rot"), ("trans", "trans")):
+            first = "model/floor" if key == "rot" else ""
+            cells = [f"{vs[c][str(n)][key]:.3g} {vs[c][str(n)][key + '_floor']}" for c, n in cols]
+            lines.append(f"{first:14}{unit:>10}|" + "|".join(f"{x:^13}" for x in cells[:k]) + "|"
+                         + "|".join(f"{x:^13}" for x in cells[k:]))
+        lines.append("model/floor: the trained model's error over the lower floor row (named) of each cell; below 1 beats it")
+        if "timing" in res["rows"]:
+            lines.append("timing: raw IMU resampled at the time offset [samples] fitted on the training split")
     return "\n".join(lines)
 
 
@@ -592,7 +625,9 @@ def final_evaluation(cfg: RunConfig, run_dir: Path, split: Split, device: torch.
         return {}
     model = load_model(run_dir / "best.pt", map_location=str(device)).to(device)
     refined = [refine_sequence(model, s, cfg) for s in split.test]
-    res = evaluate_table(list(split.test), refined, cfg)
+    timing_seqs, tau = timing_floor(split, cfg)
+    res = evaluate_table(list(split.test), refined, cfg, timing_seqs)
+    res["timing_offset_samples"] = tau
     names = [s.name for s in split.test]
     table = format_table(res, names, cfg)  # the command prints it (results["text"])
     out = {
@@ -607,6 +642,8 @@ def final_evaluation(cfg: RunConfig, run_dir: Path, split: Split, device: torch.
         "startup_bias_s": cfg.data.startup_bias_s,
         "units": {"rot_deg": "deg", "rot_rad": "rad", "trans_m": "m"},
         "table": res["rows"],
+        "timing_offset_samples": tau,
+        "vs_floor": res["vs_floor"],
         "per_recording": res["per_recording"],
         "startup_bias": res["startup_bias"],
         "text": table,
