@@ -39,6 +39,17 @@ PROTOCOL = """\
   log-spaced horizons from ``curve_min_s`` to ``curve_max_s``, default 12 from 0.05 s to 5 s):
   RMSE of position, rotation and velocity (the paper's integration-error figure). Seconds are
   turned into samples with the recording's median sample period.
+* The peers' protocols, open loop (:mod:`imu_learn.eval.peers`; every method's samples as they are,
+  no bias removed, scored from the start of each gap-free test segment, not from ``startup_bias_s``):
+  AOE (Brossard et al. 2020) = RMSE over every sample of the angle between the ground-truth
+  orientation and the gyro integrated from the ground-truth orientation at the segment's first
+  sample; "AOE mean" = the mean of that angle (what AirIMU's evaluation code reports as AOE); yaw AOE =
+  the RMSE of the yaw (about world z, z-y-x Euler) of the world-frame error R̂ Rᵀ. AirIMU's ROE / RTE
+  (means) and RO_RMSE / RP_RMSE (RMSEs) over non-overlapping consecutive windows of 1 s
+  (round(rate) samples) starting at sample 0, each from the ground-truth state (p, v, R) at its first
+  sample: orientation angle and position error at the window's end. Segments of a recording are
+  pooled (samples for AOE, windows for the rest). Regressors get the window metrics from ``predict``
+  on the raw input and no AOE; methods without a position no RTE ("-").
 * Noise floor: where the test ground truth is pose-only (velocity derived from positions), a row
   "ground truth (noise floor)" gives the same metrics for an IMU synthesised from the ground truth
   itself (:mod:`imu_learn.baselines.noise_floor`), which integrates to exactly the ground truth for a

@@ -389,6 +389,46 @@ def _md_calibration(r: Dict[str, Any]) -> List[str]:
             "below underconfident.", ""] + calibration_table(r["calibration"]) + [""]
 
 
+def peers_table(result: Dict[str, Any]) -> List[Dict[str, Any]]:
+    """The peers' open-loop rows per (method, recording), then each method's mean over recordings."""
+    from imu_learn.eval.peers import PEER_KEYS
+
+    rows = list(result.get("peers") or [])
+    out: List[Dict[str, Any]] = []
+    for m in result["methods"]:
+        per = [x for x in rows if x["method"] == m]
+        out += per
+        if len(per) > 1:
+            out.append({"method": m, "sequence": "average", **{k: _mean([p[k] for p in per]) for k in PEER_KEYS},
+                        "window_samples": per[0]["window_samples"] if len({p["window_samples"] for p in per}) == 1 else -1,
+                        "segments": sum(p["segments"] for p in per), "samples": sum(p["samples"] for p in per),
+                        "windows": sum(p["windows"] for p in per)})
+    return out
+
+
+def _md_peers(r: Dict[str, Any], peers: List[Dict[str, Any]]) -> List[str]:
+    if not peers:
+        return []
+    L = ["## The peers' protocols, open loop (AOE; AirIMU's 1 s ROE / RTE)", "",
+         "Open loop: each method's samples as they are (no bias removed), integrated from the ground-truth "
+         "initial state (`imu_learn.eval.peers`). AOE / yaw AOE: RMSE over every sample of the recording of "
+         "the orientation (yaw) error of the gyro integrated from the ground-truth orientation at the "
+         "first sample (Brossard et al. 2020); \"AOE mean\": the mean of that angle instead, which is what "
+         "AirIMU's evaluation code reports as AOE; a recording with gaps is scored per gap-free segment, each "
+         "from its own ground-truth start, samples pooled. ROE / RO_RMSE, RTE / RP_RMSE: mean / RMSE over "
+         "non-overlapping consecutive 1 s windows (round(rate) samples) from sample 0, each from the "
+         "ground-truth state (p, v, R) at its first sample (AirIMU's protocol). \"-\": the method gives no such "
+         "output (regressors: no whole-recording attitude; rotation-only methods: no position). Numbers: "
+         "`peers.csv`.", ""]
+    rows = [[_esc(x["method"]), _esc(x["sequence"]), _f(x["aoe_deg"], "{:.2f}"), _f(x["aoe_mean_deg"], "{:.2f}"),
+             _f(x["yaw_aoe_deg"], "{:.2f}"),
+             _f(x["roe_deg"], "{:.3f}"), _f(x["ro_rmse_deg"], "{:.3f}"), _f(x["rte_m"], "{:.3f}"),
+             _f(x["rp_rmse_m"], "{:.3f}"), str(x["windows"])] for x in peers]
+    head = ["method", "recording", "AOE [deg]", "AOE mean [deg]", "yaw AOE [deg]", "ROE 1 s [deg]", "RO_RMSE 1 s [deg]",
+            "RTE 1 s [m]", "RP_RMSE 1 s [m]", "windows"]
+    return L + _md_table(head, rows) + [""]
+
+
 def _md_biases(r: Dict[str, Any]) -> List[str]:
     rows = []
     for b in r["biases"]:
@@ -404,7 +444,7 @@ def markdown(result: Dict[str, Any], rel: List[Dict[str, Any]], air: List[Dict[s
     """``report.md``: one section after another, each built from ``result`` by its own function."""
     r = result
     L = (_md_head(r) + _md_data(r) + _md_versions(r) + _md_methods(r) + _md_relative_pose(r, rel)
-         + _md_airimu(r, air) + _md_curves(r, pngs) + _md_calibration(r) + _md_biases(r) + [quoted_section()])
+         + _md_airimu(r, air) + _md_peers(r, peers_table(r)) + _md_curves(r, pngs) + _md_calibration(r) + _md_biases(r) + [quoted_section()])
     L += ["## Files", ""] + [f"- `{c}`" for c in csvs + pngs] + ["- `methods/`: fitted methods and their fit records", ""]
     return "\n".join(L)
 
@@ -419,6 +459,7 @@ def write_report(out_dir: Path, result: Dict[str, Any]) -> None:
     curves = curve_table(result)
     csvs = {"relative_pose.csv": rel, "airimu_figures.csv": air, "integration_error.csv": curves,
             "errors_all_horizons.csv": result["rows"], "startup_bias.csv": result["biases"],
+            "peers.csv": peers_table(result),
             "quoted_paper_table2.csv": quoted_rows()}
     for name, rows in csvs.items():
         _write_csv(out_dir / name, rows)
@@ -448,6 +489,16 @@ def summary_text(result: Dict[str, Any]) -> str:
                          f"{g(a, 'trans_m'):>11}  {g(a, 'rot_rad'):>12}  {g(b, 'trans_m'):>11}  "
                          f"{(_f(b['rot_deg'], '{:.3f}') if b else '-'):>12}  "
                          f"{(_f(c['rot_1s_deg'], '{:.3f}') if c else '-'):>11}  {g(c, 'pos_1s_m'):>10}")
+    peers = {x["method"]: x for x in peers_table(result) if x["sequence"] == "average"
+             or len(result["test_sequences"]) == 1}
+    if peers:
+        lines.append("open loop, peers' protocols (mean over test recordings): AOE [deg] / RO_RMSE 1 s [deg] / "
+                     "RP_RMSE 1 s [m]")
+        for m in result["methods"]:
+            x = peers.get(m)
+            if x is not None:
+                lines.append(f"{m:<{w}}  {_f(x['aoe_deg'], '{:.2f}'):>8} / {_f(x['ro_rmse_deg'], '{:.3f}'):>7} / "
+                             f"{_f(x['rp_rmse_m'], '{:.3f}'):>6}")
     if result["skipped"]:
         lines.append(f"skipped (module not available): {', '.join(result['skipped'])}")
     lines.append(f"quoted for reference (paper Table II, EuRoC, its own test sequences, not ours): Pr. average "

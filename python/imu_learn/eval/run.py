@@ -290,12 +290,15 @@ def is_refiner(method: Method) -> bool:
 
 
 def evaluate_sequence(method: Method, seq: Sequence, horizons: Seq[int], stride: int, startup_bias_s: float,
-                      gravity: float = 9.81) -> Tuple[Dict[Tuple[str, int], Dict[str, np.ndarray]], Dict[str, Any]]:
+                      gravity: float = 9.81, peers: Optional[Dict[str, Any]] = None
+                      ) -> Tuple[Dict[Tuple[str, int], Dict[str, np.ndarray]], Dict[str, Any]]:
     """Errors of ``method`` on ``seq``: {(variant, n): per-window errors} and the fitted start-up bias.
 
     Refiners: ``refine`` once; the bias is fitted on the refined samples and removed from them; both
     variants are integrated from the ground-truth start state. Regressors: the bias is fitted on the
-    raw input and removed from it before ``predict``.
+    raw input and removed from it before ``predict``. ``peers`` (a dict), when given, is filled with the
+    open-loop errors of :mod:`imu_learn.eval.peers` on the whole segment (refiners: AOE from the refined
+    samples and the 1 s windows; regressors: the 1 s windows from ``predict`` on the raw input, no AOE).
     """
     first = index_at(seq, startup_bias_s)
     refiner = is_refiner(method)
@@ -304,6 +307,8 @@ def evaluate_sequence(method: Method, seq: Sequence, horizons: Seq[int], stride:
         base = with_imu(seq, gyro, acc)
     else:
         base = seq
+    if peers is not None:
+        peers.update(_peer_errors(method, base, refiner, gravity))
     bg, ba = fit_startup_bias(base, startup_bias_s, gravity=gravity)
     inputs = dict(zip(VARIANTS, (base, remove_bias(base, bg, ba))))
     out: Dict[Tuple[str, int], Dict[str, np.ndarray]] = {}
@@ -323,6 +328,23 @@ def evaluate_sequence(method: Method, seq: Sequence, horizons: Seq[int], stride:
             out[(variant, int(n))] = e
     bias = {"gyro": bg.tolist(), "acc": ba.tolist(), "fitted_on": "refined output" if refiner else "raw input"}
     return out, bias
+
+
+def _peer_errors(method: Method, base: Sequence, refiner: bool, gravity: float) -> Dict[str, Any]:
+    """Open-loop peer errors of one segment (``base``: the refined samples of a refiner, the raw input
+    of a regressor)."""
+    from imu_learn.eval import peers
+
+    if refiner:
+        return peers.segment_errors(base, base.gyro, base.acc, gravity, position=not method.rotation_only)
+    w = peers.window_samples(base)
+    starts = peers.peer_window_starts(base, w)
+    if starts.size == 0:
+        return {"angle_rad": None, "yaw_rad": None, "rot_rad": np.zeros(0), "trans_m": np.zeros(0), "window": w}
+    pred = method.predict(base, starts.astype(np.uint64), w, gravity)
+    e = pose_errors(base, starts, w, pred)
+    trans = None if pred.p is None else e["trans_m"]
+    return {"angle_rad": None, "yaw_rad": None, "rot_rad": e["rot_rad"], "trans_m": trans, "window": w}
 
 
 # ---------------------------------------------------------------------------------------------
@@ -503,11 +525,14 @@ def _bias_row(name: str, seg: str, rec: str, bias: Dict[str, Any]) -> Dict[str, 
 
 
 def _evaluate_all(rows: _Rows, test: List[Sequence], plans: Dict[str, Dict[str, Any]], stride: int, bias_s: float,
-                  gravity: float, progress: bool) -> Tuple[Dict[Tuple[str, str, str, int], List[Dict[str, np.ndarray]]],
-                                                           List[Dict[str, Any]]]:
+                  gravity: float, progress: bool, peer_out: Optional[Dict[Tuple[str, str], Any]] = None
+                  ) -> Tuple[Dict[Tuple[str, str, str, int], List[Dict[str, np.ndarray]]], List[Dict[str, Any]]]:
     """Every row on every test segment: per-window errors by (method, variant, recording, n), the
-    fitted start-up biases; each row's evaluation time goes into its record (``eval_s``)."""
+    fitted start-up biases; each row's evaluation time goes into its record (``eval_s``). ``peer_out``
+    (when given) collects the open-loop peer errors by (method, recording), segments pooled."""
     from tqdm import tqdm
+
+    from imu_learn.eval.peers import PeerErrors, add_segment
 
     errors: Dict[Tuple[str, str, str, int], List[Dict[str, np.ndarray]]] = {}
     biases: List[Dict[str, Any]] = []
@@ -518,7 +543,8 @@ def _evaluate_all(rows: _Rows, test: List[Sequence], plans: Dict[str, Dict[str, 
         bar.set_postfix_str(f"{name} / {s.name}", refresh=True)
         t0 = time.time()
         try:
-            errs, bias = evaluate_sequence(m, s, plans[s.name]["n"], stride, bias_s, gravity)
+            seg_peers: Optional[Dict[str, Any]] = {} if peer_out is not None else None
+            errs, bias = evaluate_sequence(m, s, plans[s.name]["n"], stride, bias_s, gravity, peers=seg_peers)
         except (ValueError, RuntimeError) as e:
             raise MethodError(f"{name} on {s.name}: {one_line(e)}") from e
         t_eval[name] = t_eval.get(name, 0.0) + time.time() - t0
@@ -526,6 +552,8 @@ def _evaluate_all(rows: _Rows, test: List[Sequence], plans: Dict[str, Dict[str, 
         for (variant, n), e in errs.items():
             errors.setdefault((name, variant, rec, n), []).append(e)
         biases.append(_bias_row(name, s.name, rec, bias))
+        if peer_out is not None and seg_peers:
+            add_segment(peer_out.setdefault((name, rec), PeerErrors()), seg_peers)
     bar.close()
     for name in t_eval:
         rows.records.setdefault(name, {})["eval_s"] = round(t_eval[name], 2)
@@ -569,6 +597,14 @@ def _error_rows(errors: Dict[Tuple[str, str, str, int], List[Dict[str, np.ndarra
     return rows
 
 
+def _peer_rows(rows: _Rows, peer_out: Dict[Tuple[str, str], Any], recordings: List[str]) -> List[Dict[str, Any]]:
+    """One row per (method, test recording): the peers' open-loop metrics (:mod:`imu_learn.eval.peers`)."""
+    from imu_learn.eval.peers import summarise
+
+    return [{"method": name, "sequence": rec, **summarise(peer_out[(name, rec)])}
+            for name, _ in rows.methods for rec in recordings if (name, rec) in peer_out]
+
+
 def _result(res: Resolved, settings: FitSettings, methods: List[str], split: Any, rows: _Rows,
             plans: Dict[str, Dict[str, Any]], gt_kinds: Dict[str, str], measured: Dict[str, Any]) -> Dict[str, Any]:
     """The result dict the report is written from (``measured``: rows, calibration, biases)."""
@@ -597,6 +633,7 @@ def _result(res: Resolved, settings: FitSettings, methods: List[str], split: Any
         "rows": _error_rows(measured["errors"], rates),
         "calibration": measured["calibration"],
         "biases": measured["biases"],
+        "peers": measured.get("peers", []),
         "versions": _versions(),
         "roots": [asdict(r) for r in data.roots],
         "data_root": split.record.get("data_root"),
@@ -634,10 +671,12 @@ def run_evaluation(res: Resolved, methods: List[str], out_dir: Path, reuse: bool
 
     stride, bias_s = res.stride, res.startup_bias_s
     plans = {s.name: horizon_plan(s, cfg.eval) for s in split.test}
-    errors, biases = _evaluate_all(rows, split.test, plans, stride, bias_s, data.gravity, progress)
+    peer_out: Dict[Tuple[str, str], Any] = {}
+    errors, biases = _evaluate_all(rows, split.test, plans, stride, bias_s, data.gravity, progress, peer_out)
     calibration = _calibration(rows, split.test, cfg.eval, stride, bias_s, data.gravity)
     result = _result(res, settings, methods, split, rows, plans, gt_kinds,
-                     {"errors": errors, "calibration": calibration, "biases": biases})
+                     {"errors": errors, "calibration": calibration, "biases": biases,
+                      "peers": _peer_rows(rows, peer_out, list(dict.fromkeys(s.name.split("#")[0] for s in split.test)))})
     result["wall_s"] = time.time() - t_start
     report.write_report(out_dir, result)
     result["wall_s"] = time.time() - t_start
