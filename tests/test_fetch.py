@@ -125,7 +125,7 @@ def test_refined_copy_keeps_stamps_and_reads_back(tmp_path):
     assert out.read_text().splitlines()[0] == IMU_HEADER
 
 
-REAL = Path("/work/shared/data/fetch/01_square")
+REAL = Path(__file__).resolve().parents[1].parent / "shared" / "data" / "fetch" / "01_square"  # beside the repo, as conftest.SHARED
 
 
 @pytest.mark.skipif(not REAL.is_dir(), reason="the Fetch recordings are not on this machine")

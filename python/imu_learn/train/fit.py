@@ -366,7 +366,7 @@ def format_table(res: Dict[str, Any], names: List[str], cfg: RunConfig) -> str:
     if vs:
         for key, unit in (("rot", "rot"), ("trans", "trans")):
             first = "model/floor" if key == "rot" else ""
-            cells = [f"{vs[c][str(n)][key]:.3g} {vs[c][str(n)][key + '_floor']}" for c, n in cols]
+            cells = [f"{vs[c][str(n)][key]:.2f} {vs[c][str(n)][key + '_floor']}" for c, n in cols]
             lines.append(f"{first:14}{unit:>10}|" + "|".join(f"{x:^13}" for x in cells[:k]) + "|"
                          + "|".join(f"{x:^13}" for x in cells[k:]))
         lines.append("model/floor: the trained model's error over the lower floor row (named) of each cell; below 1 beats it")
