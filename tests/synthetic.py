@@ -6,6 +6,8 @@ Quaternions are w,x,y,z; stamps are exact 200 Hz nanoseconds.
 """
 from __future__ import annotations
 
+from pathlib import Path
+
 import numpy as np
 
 from imu_learn.data.types import Sequence
@@ -86,3 +88,33 @@ def spin_and_climb(n=2000, dt_ns=5_000_000, w=0.5, a=0.2, g=9.81):
     p = np.c_[np.zeros(n), np.zeros(n), 0.5 * a * ts**2]
     R = Rotation.from_rotvec(np.c_[np.zeros(n), np.zeros(n), w * ts]).as_matrix()
     return t, gyro, acc, p, R
+
+
+# ---- the Fetch (Debias_IMU) recorder's layout ----------------------------------------------
+
+FETCH_T0 = 1691116804753040896  # Fetch recordings: a float64 (multiple of 256 ns at this epoch)
+IMU_HEADER = "# timestamp, wx, wy, wz, ax, ay, az"
+MOCAP_HEADER = "# timestamp, x, y, z, qw, qx, qy, qz"
+
+
+def fetch_row(t: float, vals) -> str:
+    return ",".join(f"{x:.18e}" for x in [t, *vals])
+
+
+def write_fetch_recording(root: Path, seconds: float = 4.0, name: str = "01_crop") -> Path:
+    """A recording of a robot turning at 0.5 rad/s about z: IMU at 100 Hz, mocap at ~90 Hz, both
+    with float64 stamps printed as the recorder prints them."""
+    rec = root / name if name else root
+    (rec / "mav0" / "imu0").mkdir(parents=True)
+    (rec / "mav0" / "mocap0").mkdir(parents=True)
+    w = 0.5
+    t_imu = FETCH_T0 + np.arange(int(seconds * 100)) * 10_000_000
+    imu = [fetch_row(float(t), [0.0, 0.0, w, 0.0, 0.0, 9.81]) for t in t_imu]
+    (rec / "mav0" / "imu0" / "data.csv").write_text("\n".join([IMU_HEADER] + imu) + "\n")
+    t_gt = FETCH_T0 - 50_000_000 + np.arange(int((seconds + 0.2) * 90)) * 11_111_111
+    mocap = []
+    for t in t_gt:
+        a = w * (t - FETCH_T0) * 1e-9
+        mocap.append(fetch_row(float(t), [0.0, 0.0, 0.36, np.cos(a / 2), 0.0, 0.0, np.sin(a / 2)]))
+    (rec / "mav0" / "mocap0" / "data.csv").write_text("\n".join([MOCAP_HEADER] + mocap) + "\n")
+    return rec

@@ -19,33 +19,8 @@ from imu_learn.errors import (
     ParseError,
     TimestampError,
 )
-
-T0 = 1691116804753040896  # a float64 (multiple of 256 ns at this epoch)
-IMU_HEADER = "# timestamp, wx, wy, wz, ax, ay, az"
-MOCAP_HEADER = "# timestamp, x, y, z, qw, qx, qy, qz"
-
-
-def _row(t: float, vals) -> str:
-    return ",".join(f"{x:.18e}" for x in [t, *vals])
-
-
-def write_crop(root: Path, seconds: float = 4.0) -> Path:
-    """A recording of a robot turning at 0.5 rad/s about z: IMU at 100 Hz, mocap at ~90 Hz, both
-    with float64 stamps printed as the recorder prints them."""
-    rec = root / "01_crop"
-    (rec / "mav0" / "imu0").mkdir(parents=True)
-    (rec / "mav0" / "mocap0").mkdir(parents=True)
-    w = 0.5
-    t_imu = T0 + np.arange(int(seconds * 100)) * 10_000_000
-    imu = [_row(float(t), [0.0, 0.0, w, 0.0, 0.0, 9.81]) for t in t_imu]
-    (rec / "mav0" / "imu0" / "data.csv").write_text("\n".join([IMU_HEADER] + imu) + "\n")
-    t_gt = T0 - 50_000_000 + np.arange(int((seconds + 0.2) * 90)) * 11_111_111
-    mocap = []
-    for t in t_gt:
-        a = w * (t - T0) * 1e-9
-        mocap.append(_row(float(t), [0.0, 0.0, 0.36, np.cos(a / 2), 0.0, 0.0, np.sin(a / 2)]))
-    (rec / "mav0" / "mocap0" / "data.csv").write_text("\n".join([MOCAP_HEADER] + mocap) + "\n")
-    return rec
+from synthetic import FETCH_T0 as T0
+from synthetic import IMU_HEADER, fetch_row, write_fetch_recording
 
 
 def test_float_stamp_is_parsed_exactly():
@@ -59,7 +34,7 @@ def test_float_stamp_is_parsed_exactly():
 
 
 def test_crop_reads_detects_and_aligns(tmp_path):
-    rec = write_crop(tmp_path)
+    rec = write_fetch_recording(tmp_path)
     assert detect_format(rec) == "fetch"
     assert detect_format(rec / "mav0" / "imu0" / "data.csv") == "fetch"
     assert [n for n, _ in find_recordings("fetch", tmp_path)] == ["01_crop"]
@@ -98,7 +73,7 @@ def test_asl_layout_is_not_taken_for_fetch(tmp_path):
 )
 def test_bad_row_is_a_typed_error_naming_file_line_and_field(tmp_path, row, error, line, column, field):
     f = tmp_path / "data.csv"
-    good = [_row(float(T0 + k * 10_000_000), [0, 0, 0, 0, 0, 9.8]) for k in range(2)]
+    good = [fetch_row(float(T0 + k * 10_000_000), [0, 0, 0, 0, 0, 9.8]) for k in range(2)]
     f.write_text("\n".join([IMU_HEADER, *good, row, good[-1]]) + "\n")
     with pytest.raises(error) as e:
         fetch.read_table(f, fetch.IMU_NAMES)
@@ -109,13 +84,13 @@ def test_bad_row_is_a_typed_error_naming_file_line_and_field(tmp_path, row, erro
 
 def test_wrong_header_is_a_header_error(tmp_path):
     f = tmp_path / "data.csv"
-    f.write_text("# timestamp, x, y, z, qw, qx, qy, qz\n" + _row(float(T0), [0] * 7) + "\n")
+    f.write_text("# timestamp, x, y, z, qw, qx, qy, qz\n" + fetch_row(float(T0), [0] * 7) + "\n")
     with pytest.raises(HeaderError):
         fetch.read_table(f, fetch.IMU_NAMES)
 
 
 def test_refined_copy_keeps_stamps_and_reads_back(tmp_path):
-    rec = write_crop(tmp_path, seconds=1.0)
+    rec = write_fetch_recording(tmp_path, seconds=1.0)
     src = read_imu_source(rec)
     gyro, acc = src.gyro + 0.125, src.acc * 0.5
     out = tmp_path / "out.csv"

@@ -77,8 +77,15 @@ def make_rosbag(root: Path) -> Path:
     return write_fixture_bag(root.parent, "ros1", seconds=2.0, name=root.name + ".bag")
 
 
+def make_fetch(root: Path) -> Path:
+    """A Fetch (Debias_IMU) recording: float-notation stamps, IMU and mocap (tests/synthetic.py)."""
+    from synthetic import write_fetch_recording
+
+    return write_fetch_recording(root, name="")
+
+
 MAKERS = {"asl": make_asl, "kaist": make_kaist, "blackbird": make_blackbird, "broad": make_broad,
-          "rosbag": make_rosbag}
+          "rosbag": make_rosbag, "fetch": make_fetch}
 
 
 @pytest.mark.parametrize("name", sorted(MAKERS))
