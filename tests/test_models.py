@@ -23,7 +23,14 @@ from imu_learn.cli import fit as fit_cli
 from imu_learn.cli.checkpoint import main as checkpoint_main
 from imu_learn.cli.refine import main as refine_main
 from imu_learn.infer.model_check import compare_with_raw, format_comparison
-from imu_learn.train.checkpoint import CheckpointError, describe, load_checkpoint, load_model, strip_checkpoint
+from imu_learn.train.checkpoint import (
+    CheckpointError,
+    describe,
+    load_checkpoint,
+    load_model,
+    strip_checkpoint,
+    write_checkpoint,
+)
 
 torch.set_num_threads(1)
 
@@ -239,8 +246,9 @@ def test_strip_keeps_what_inference_needs_and_refines_bit_identically(run_dir, t
     full, small = load_checkpoint(run_dir / "best.pt"), load_checkpoint(shipped)
     assert small["optimizer"] is None and full["optimizer"] is not None
     assert "history" not in small["extra"] and small["extra"]["stripped_from"] == "run_copy/best.pt"
-    for k in ("format", "code_version", "model_args", "config", "epoch", "step", "best_metric"):
+    for k in ("format", "code_version", "model_args", "epoch", "step", "best_metric"):
         assert small[k] == full[k], k
+    assert small["config"] == full["config"]  # a run with relative folders: its config as trained
     assert small["model"].keys() == full["model"].keys()
     assert all(torch.equal(small["model"][k], full["model"][k]) for k in full["model"])
     assert shipped.stat().st_size < (run_dir / "best.pt").stat().st_size
@@ -249,6 +257,23 @@ def test_strip_keeps_what_inference_needs_and_refines_bit_identically(run_dir, t
     for name, crop in (("euroc", EUROC), ("tumvi", TUMVI)):
         refine_and_check_crop(shipped, crop, tmp_path / f"small_{name}")
         assert (tmp_path / f"small_{name}" / IMU_REL).read_bytes() == (tmp_path / f"orig_{name}" / IMU_REL).read_bytes()
+
+
+def test_strip_drops_the_machines_absolute_folders_from_the_config(run_dir, tmp_path):
+    """A run trained with an absolute data root, cache and runs folder ships without them; the
+    recording paths (relative to the data root) and every other setting stay."""
+    state = load_checkpoint(run_dir / "best.pt")
+    cfg = state["config"]
+    cfg["data"]["data_root"] = str(tmp_path / "data")
+    cfg["data"]["cache"] = str(tmp_path / "cache" / "euroc")
+    cfg["runs_dir"] = str(tmp_path / "runs")
+    src = tmp_path / "abs.pt"
+    write_checkpoint(src, state)
+    strip_checkpoint(src, tmp_path / "shipped.pt")
+    got = load_checkpoint(tmp_path / "shipped.pt")["config"]
+    assert got["data"]["data_root"] == "" and got["data"]["cache"] == "" and got["runs_dir"] == "runs"
+    assert got["data"]["roots"] == cfg["data"]["roots"] and got["model"] == cfg["model"]
+    assert got["optim"] == cfg["optim"] and got["data"]["split"] == cfg["data"]["split"]
 
 
 def test_strip_cli(run_dir, tmp_path, capsys):

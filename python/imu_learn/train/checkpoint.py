@@ -21,6 +21,7 @@ those (the result still loads everywhere a checkpoint does, but cannot be resume
 from __future__ import annotations
 
 import hashlib
+import json
 import os
 from pathlib import Path
 from typing import Any, Dict, Optional
@@ -135,18 +136,34 @@ def load_model(path: Path, map_location: str = "cpu") -> ImuRefiner:
     return model_from_checkpoint(load_checkpoint(path, map_location))
 
 
+def without_machine_paths(config: Dict[str, Any]) -> Dict[str, Any]:
+    """A copy of a run config fit to ship: the training machine's absolute folders go (``data.data_root``
+    and ``data.cache`` become "", ``runs_dir`` "runs"); recording paths stay (relative to the data
+    root in every shipped config)."""
+    cfg = json.loads(json.dumps(config))
+    data = cfg.get("data") if isinstance(cfg.get("data"), dict) else {}
+    for key, empty in (("data_root", ""), ("cache", "")):
+        if isinstance(data.get(key), str) and Path(data[key]).is_absolute():
+            data[key] = empty
+    if isinstance(cfg.get("runs_dir"), str) and Path(cfg["runs_dir"]).is_absolute():
+        cfg["runs_dir"] = "runs"
+    return cfg
+
+
 def strip_checkpoint(src: Path, dst: Path) -> Dict[str, Any]:
     """Write to ``dst`` (atomically) a copy of checkpoint ``src`` with only what inference needs:
     model args, weights (normalisation buffers included), config, epoch, step, best metric, code
     version, and from ``extra`` the best epoch, training time and world size. The optimiser state
     and the metrics history are dropped; ``extra["stripped_from"]`` names the source
-    (``<run folder name>/<file>``). Weights are copied unchanged, so refining with the stripped
+    (``<run folder name>/<file>``); the config loses the machine's absolute folders
+    (:func:`without_machine_paths`). Weights are copied unchanged, so refining with the stripped
     checkpoint gives bit-identical output. Returns the stripped state."""
     src, dst = Path(src), Path(dst)
     if src.exists() and dst.exists() and os.path.samefile(src, dst):
         raise CheckpointError(f"{dst}: is the source checkpoint; write the stripped copy elsewhere")
     state = load_checkpoint(src)
     out: Dict[str, Any] = {k: state.get(k) for k in STRIPPED_KEYS}
+    out["config"] = without_machine_paths(state.get("config") or {})
     out["model"] = {k: v.detach().cpu().clone() for k, v in state["model"].items()}
     out["optimizer"] = None
     extra = state.get("extra") or {}
