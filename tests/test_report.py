@@ -217,3 +217,30 @@ def test_write_report_files(tmp_path):
     assert {r["variant"] for r in rel} == set(report.VARIANTS) and {r["method"] for r in rel} == set(METHODS)
     saved = json.loads((tmp_path / "result.json").read_text())
     assert "rows" not in saved and saved["methods"] == METHODS
+
+
+def test_floor_table_divides_each_learned_cell_by_the_best_floor_method():
+    """raw is the only floor method in make_result: every learned row is its value over raw's, the
+    noise floor (a reference) is not judged, and the summary and report.md carry the ratios."""
+    result = make_result()
+    floor = report.floor_table(result)
+    judged = {x["method"] for x in floor}
+    assert judged == {"gyro-denoise", "end-to-end", "proposed (fit run)"}
+    rel = {(x["method"], x["variant"], x["n"]): x for x in report.relative_pose_table(result) if x["sequence"] == "average"}
+    for x in floor:
+        assert x["floor"] == "raw"
+        assert x["ratio"] == pytest.approx(rel[(x["method"], x["variant"], x["n"])][x["term"]]
+                                           / rel[("raw", x["variant"], x["n"])][x["term"]])
+    # _value scales with the method's index in METHODS: proposed (index 4) is 5x raw (index 0)
+    assert all(x["ratio"] == pytest.approx(5.0) for x in floor if x["method"] == "proposed (fit run)")
+    assert not any(x["method"] == "gyro-denoise" and x["term"] == "trans_m" for x in floor)  # no translation
+    text = report.summary_text(result)
+    assert "learned / best floor (raw)" in text and "5.00 (raw)" in text
+    # a better floor method in the run takes over where it is lower
+    result["methods"] = ["raw", "timing"] + [m for m in result["methods"] if m != "raw"]
+    result["rows"] += [{**x, "method": "timing", "rot_rad": x["rot_rad"] / 2} for x in result["rows"] if x["method"] == "raw"]
+    floor = report.floor_table(result)
+    assert {x["floor"] for x in floor if x["term"] == "rot_rad"} == {"timing"}
+    assert {x["floor"] for x in floor if x["term"] == "trans_m"} == {"raw"}
+    assert all(x["ratio"] == pytest.approx(10.0) for x in floor if x["method"] == "proposed (fit run)" and x["term"] == "rot_rad")
+    assert "## Learned methods against the floor" in report.markdown(result, report.relative_pose_table(result), [], [], [])

@@ -61,3 +61,8 @@ PROTOCOL = """\
 VARIANTS = ("open_loop", "bias_removed")
 VARIANT_LABELS = {"open_loop": "open loop", "bias_removed": "start-up bias removed"}
 VARIANT_SHORT = {"open_loop": "open loop", "bias_removed": "bias removed"}
+
+# The simple floor every learned method is judged against (the best of these per cell), and the
+# reference rows that are neither floor nor learned.
+FLOOR_METHODS = ("raw", "timing", "traditional", "traditional+timing")
+REFERENCE_METHODS = ("ground truth (noise floor)",)

@@ -12,7 +12,14 @@ from datetime import datetime
 from pathlib import Path
 from typing import Any, Dict, List, Optional, Tuple
 
-from imu_learn.eval.protocol import PROTOCOL, VARIANT_LABELS, VARIANT_SHORT, VARIANTS
+from imu_learn.eval.protocol import (
+    FLOOR_METHODS,
+    PROTOCOL,
+    REFERENCE_METHODS,
+    VARIANT_LABELS,
+    VARIANT_SHORT,
+    VARIANTS,
+)
 from imu_learn.util.atomic import atomic_write_bytes, atomic_write_text
 
 # ---------------------------------------------------------------------------------------------
@@ -429,6 +436,19 @@ def _md_peers(r: Dict[str, Any], peers: List[Dict[str, Any]]) -> List[str]:
     return L + _md_table(head, rows) + [""]
 
 
+def _md_floor(r: Dict[str, Any]) -> List[str]:
+    floor = floor_table(r)
+    if not floor:
+        return []
+    L = ["## Learned methods against the floor", "",
+         "Each learned method's error over the best of the simple methods in this run (" +
+         ", ".join(f"`{m}`" for m in r["methods"] if m in FLOOR_METHODS) + ": raw IMU, a fitted time offset, "
+         "an affine calibration, both), per cell, mean over the test recordings; below 1 the learning pays.", ""]
+    rows = [[_esc(x["method"]), VARIANT_SHORT[x["variant"]], str(x["n"]), "rot" if x["term"] == "rot_rad" else "trans",
+             _f(x["ratio"], "{:.3f}"), _esc(x["floor"])] for x in floor]
+    return L + _md_table(["method", "variant", "n", "term", "method / best floor", "best floor"], rows) + [""]
+
+
 def _md_biases(r: Dict[str, Any]) -> List[str]:
     rows = []
     for b in r["biases"]:
@@ -444,7 +464,7 @@ def markdown(result: Dict[str, Any], rel: List[Dict[str, Any]], air: List[Dict[s
     """``report.md``: one section after another, each built from ``result`` by its own function."""
     r = result
     L = (_md_head(r) + _md_data(r) + _md_versions(r) + _md_methods(r) + _md_relative_pose(r, rel)
-         + _md_airimu(r, air) + _md_peers(r, peers_table(r)) + _md_curves(r, pngs) + _md_calibration(r) + _md_biases(r) + [quoted_section()])
+         + _md_floor(r) + _md_airimu(r, air) + _md_peers(r, peers_table(r)) + _md_curves(r, pngs) + _md_calibration(r) + _md_biases(r) + [quoted_section()])
     L += ["## Files", ""] + [f"- `{c}`" for c in csvs + pngs] + ["- `methods/`: fitted methods and their fit records", ""]
     return "\n".join(L)
 
@@ -467,6 +487,29 @@ def write_report(out_dir: Path, result: Dict[str, Any]) -> None:
     atomic_write_text(out_dir / "result.json",
                       json.dumps({k: v for k, v in result.items() if k != "rows"}, indent=2, default=str))
     atomic_write_text(out_dir / "report.md", markdown(result, rel, air, pngs, list(csvs) + ["result.json"]))
+
+
+def floor_table(result: Dict[str, Any]) -> List[Dict[str, Any]]:
+    """Each learned method against the best floor method (:data:`FLOOR_METHODS` present in the run) per
+    variant, horizon and term, on the mean over test recordings: ``ratio`` = method / best floor
+    (below 1: learning pays), ``floor`` names the best floor method. Empty without a floor method."""
+    rel = {(x["method"], x["variant"], x["n"]): x for x in relative_pose_table(result) if x["sequence"] == "average"}
+    floors = [m for m in result["methods"] if m in FLOOR_METHODS]
+    learned = [m for m in result["methods"] if m not in FLOOR_METHODS and m not in REFERENCE_METHODS]
+    out: List[Dict[str, Any]] = []
+    for m in learned:
+        for v in VARIANTS:
+            for n in [int(h) for h in result["eval"]["horizons"]]:
+                for key in ("rot_rad", "trans_m"):
+                    mine = rel.get((m, v, n), {}).get(key, float("nan"))
+                    cands = [(rel[(f, v, n)][key], f) for f in floors
+                             if (f, v, n) in rel and math.isfinite(rel[(f, v, n)][key])]
+                    if not cands or not math.isfinite(mine):
+                        continue
+                    best, name = min(cands)
+                    out.append({"method": m, "variant": v, "n": n, "term": key, "value": mine, "floor": name,
+                                "floor_value": best, "ratio": mine / best if best > 0 else float("nan")})
+    return out
 
 
 def summary_text(result: Dict[str, Any]) -> str:
@@ -499,6 +542,16 @@ def summary_text(result: Dict[str, Any]) -> str:
             if x is not None:
                 lines.append(f"{m:<{w}}  {_f(x['aoe_deg'], '{:.2f}'):>8} / {_f(x['ro_rmse_deg'], '{:.3f}'):>7} / "
                              f"{_f(x['rp_rmse_m'], '{:.3f}'):>6}")
+    floor = floor_table(result)
+    if floor:
+        lines.append("learned / best floor (" + ", ".join(m for m in result["methods"] if m in FLOOR_METHODS)
+                     + "), mean over test recordings; below 1 the learning pays:")
+        for m in dict.fromkeys(x["method"] for x in floor):
+            for v in VARIANTS:
+                cells = [f"{'rot' if x['term'] == 'rot_rad' else 'trans'} n={x['n']} {x['ratio']:.2f} ({x['floor']})"
+                         for x in floor if x["method"] == m and x["variant"] == v]
+                if cells:
+                    lines.append(f"  {m:<{w}}  {VARIANT_SHORT[v]:<12}  " + ", ".join(cells))
     if result["skipped"]:
         lines.append(f"skipped (module not available): {', '.join(result['skipped'])}")
     lines.append(f"quoted for reference (paper Table II, EuRoC, its own test sequences, not ours): Pr. average "
