@@ -225,17 +225,25 @@ pub fn batch_bytes(b: usize, w: usize, h: usize, what: &str) -> Result<usize> {
         })
 }
 
-/// A zero-filled Vec of `n` entries, or an error instead of aborting when memory runs out.
-fn zeroed<T: Clone + Default>(n: usize, what: &str) -> Result<Vec<T>> {
+/// A zero-filled Vec of `n` entries, or the reservation error instead of aborting when memory runs
+/// out: the one fallible allocation the core and the bindings share (each names its own error).
+pub(crate) fn try_zeroed_vec<T: Clone + Default>(
+    n: usize,
+) -> std::result::Result<Vec<T>, std::collections::TryReserveError> {
     let mut v = Vec::new();
-    v.try_reserve_exact(n).map_err(|e| {
+    v.try_reserve_exact(n)?;
+    v.resize(n, T::default());
+    Ok(v)
+}
+
+/// [`try_zeroed_vec`] with the core's error, naming `what`.
+fn zeroed<T: Clone + Default>(n: usize, what: &str) -> Result<Vec<T>> {
+    try_zeroed_vec(n).map_err(|e| {
         ImuError::invalid(format!(
             "{what}: {n} entries of {} bytes cannot be allocated ({e})",
             std::mem::size_of::<T>()
         ))
-    })?;
-    v.resize(n, T::default());
-    Ok(v)
+    })
 }
 
 impl Batch {

@@ -62,7 +62,7 @@ import torch
 from scipy.signal import butter, sosfiltfilt
 
 from imu_learn.baselines.base import FitSettings, Method
-from imu_learn.baselines.timing import RotationWindows, fit_offset, shifted
+from imu_learn.baselines.timing import RotationWindows, fit_offset, median_period_ns, shifted
 from imu_learn.core.integration import PAPER_FRACTIONS, window_labels
 from imu_learn.data.types import Sequence
 from imu_learn.nn.integration import prefix_quat_product
@@ -75,7 +75,7 @@ DEFAULT_CUTOFFS: Tuple[Optional[float], ...] = (None, 40.0, 20.0, 10.0, 5.0)
 
 def sample_rate(seq: Sequence) -> float:
     """Sampling rate [Hz] from the median sample period."""
-    return 1e9 / float(np.median(np.diff(np.asarray(seq.t_ns, dtype=np.int64))))
+    return 1e9 / median_period_ns(seq)
 
 
 def lowpass(x: np.ndarray, fs: float, cutoff_hz: Optional[float], order: int = 2) -> np.ndarray:

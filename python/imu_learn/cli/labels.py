@@ -2,11 +2,10 @@
 from __future__ import annotations
 
 import argparse
-import os
 from pathlib import Path
 from typing import Any, Callable, List, Optional, Sequence
 
-from imu_learn.cli.common import DATA_ROOT_ENV, run_command
+from imu_learn.cli.common import DATA_ROOT_ENV, data_root_default, run_command
 
 DESCRIPTION = f"""Build the label cache of a dataset: read every recording, align ground truth to the IMU
 stamps, compute the Δq/Δβ/Δγ labels of every window (Rust, in parallel) and write them to
@@ -45,7 +44,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 def dataset_dir(args: argparse.Namespace) -> Path:
     if args.dataset_dir is not None:
         return args.dataset_dir
-    return Path(args.data_root or os.environ.get(DATA_ROOT_ENV) or "datasets") / args.dataset
+    return Path(args.data_root or data_root_default() or "datasets") / args.dataset
 
 
 def run(args: argparse.Namespace, rest: List[str], keep: Callable[[Any], None]) -> int:

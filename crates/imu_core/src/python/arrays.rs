@@ -143,15 +143,12 @@ fn take_buffer(pool: &BufferPool, len: usize) -> PyResult<Vec<f64>> {
 
 /// `vec![T::default(); n]`, but a `MemoryError` instead of an abort when it cannot be allocated.
 pub fn try_zeroed<T: Clone + Default>(n: usize) -> PyResult<Vec<T>> {
-    let mut v = Vec::new();
-    v.try_reserve_exact(n).map_err(|e| {
+    crate::batch::try_zeroed_vec(n).map_err(|e| {
         PyMemoryError::new_err(format!(
             "{n} entries of {} bytes cannot be allocated ({e})",
             std::mem::size_of::<T>()
         ))
-    })?;
-    v.resize(n, T::default());
-    Ok(v)
+    })
 }
 
 /// Float64 arrays of the given C-order shapes, carved out of one pooled buffer. `fill` gets one

@@ -34,6 +34,7 @@ from imu_learn.errors import (
 )
 from imu_learn.util.atomic import atomic_write_text
 
+from .asl import sequence_root
 from .source import ImuSource
 
 NAME = "fetch"
@@ -75,13 +76,8 @@ def find_recordings(root: Path) -> List[Path]:
     return [p.parent for p in Path(root).rglob("mav0") if p.is_dir() and detect(p.parent)]
 
 
-def recording_root(path: Path) -> Path:
-    """The folder holding ``mav0`` for a recording folder, its ``mav0`` or a file inside it."""
-    p = path if path.is_dir() else path.parent
-    for cand in (p, *p.parents):
-        if (cand / "mav0").is_dir():
-            return cand
-    return p
+# The folder holding ``mav0`` for a recording folder, its ``mav0`` or a file inside it: the ASL rule.
+recording_root = sequence_root
 
 
 def imu_file(path: Path) -> Path:
