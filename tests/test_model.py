@@ -191,3 +191,32 @@ def test_load_refiner_refuses_weights_of_another_shape():
     big = ImuRefiner(ModelConfig(hidden=16, layers=2, fc=8))
     with pytest.raises((ValueError, RuntimeError)):
         ImuRefiner(ModelConfig(**SMALL, covariance=True)).load_refiner(big.state_dict())
+
+
+@pytest.mark.parametrize("tau,taps", [(0.54, 3), (-0.3, 3), (1.68, 5), (-2.0, 5)])
+def test_fir_init_timing_equals_the_timing_floor(tau, taps):
+    """An untrained model with model.fir_init_tau = tau is the `timing` floor: raw IMU resampled at
+    t + tau samples (baselines.timing.resample, an independent numpy interpolation), away from the
+    window's ends (padded by repetition there, held ends in resample)."""
+    import numpy as np
+
+    from imu_learn.baselines.timing import resample
+
+    model = ImuRefiner(ModelConfig(fir_taps=taps, fir_init_tau=tau, **SMALL),
+                       mean=torch.tensor([0.1, -0.2, 0.3, 9.0, 0.1, -3.0]), std=torch.tensor([0.5, 0.4, 0.3, 2.0, 1.5, 1.0]))
+    x = imu_batch(B=1, W=60, dtype=torch.float64)
+    with torch.no_grad():
+        out = model.double()(x)[0].numpy()
+    period = 5_000_000
+    t = np.arange(60, dtype=np.int64) * period
+    ref = resample(t, x[0].numpy(), tau, period)
+    k = taps // 2
+    np.testing.assert_allclose(out[k:-k], ref[k:-k], rtol=0, atol=1e-6)  # float32 taps
+    assert np.abs(out[k:-k] - x[0].numpy()[k:-k]).max() > 1e-3  # it does shift
+
+
+def test_fir_init_tau_out_of_reach():
+    with pytest.raises(ValueError, match="fir_taps >= 5"):
+        ImuRefiner(ModelConfig(fir_taps=3, fir_init_tau=1.7, **SMALL))
+    with pytest.raises(ValueError, match="needs the FIR branch"):
+        ImuRefiner(ModelConfig(fir_init_tau=0.5, **SMALL))

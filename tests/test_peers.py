@@ -220,3 +220,23 @@ def _pool(seq):
     acc = peers.PeerErrors()
     peers.add_segment(acc, peers.segment_errors(seq, seq.gyro, seq.acc, G))
     return acc
+
+
+def test_masked_aoe_bridges_gaps_and_counts_only_measured_samples():
+    """The gyro runs through a ground-truth gap; the error grows there (b t) but is counted only where
+    ground truth was measured: closed form over the kept samples; covered() against a hand-made case."""
+    b = 0.03
+    seq, t = _spinning([0.2, 1.0, -0.4], 0.5, b, n=2001, jitter=0.0)
+    gt_t = np.r_[seq.t_ns[:600], seq.t_ns[1100:]]  # 2.5 s without ground truth
+    m = peers.covered(seq.t_ns, gt_t, max_gap_s=0.05)
+    assert m[:600].all() and not m[600:1100].any() and m[1100:].all()
+    r = peers.masked_aoe(seq, seq.gyro, m)
+    kept = t[m]
+    assert r["aoe_deg"] == pytest.approx(math.degrees(b * math.sqrt(np.mean(kept**2))), rel=1e-10)
+    assert r["samples"] == 1501 and r["bridged"] == 500
+    # a stamp between two ground-truth stamps 0.04 s apart is measured, one halfway across 0.06 s is not
+    g = np.array([0, 40_000_000, 100_000_000], dtype=np.int64)
+    np.testing.assert_array_equal(peers.covered(np.array([0, 20_000_000, 70_000_000, 100_000_000]), g, 0.05),
+                                  [True, True, False, True])
+    with pytest.raises(ValueError, match="first sample"):
+        peers.masked_aoe(seq, seq.gyro, ~m)

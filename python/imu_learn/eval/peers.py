@@ -74,6 +74,33 @@ def attitude_errors(seq: Sequence, gyro: Optional[np.ndarray] = None) -> Dict[st
     return {"angle_rad": rotation_angle(seq.q_wxyz, q_hat), "yaw_rad": yaw_error(seq.q_wxyz, q_hat)}
 
 
+def covered(t_ns: np.ndarray, gt_t_ns: np.ndarray, max_gap_s: float) -> np.ndarray:
+    """(N,) bool: IMU stamps ``t_ns`` that lie between two ground-truth stamps ``gt_t_ns`` at most
+    ``max_gap_s`` apart (or on one): where interpolated ground truth is measured, not bridged."""
+    t = np.asarray(t_ns, dtype=np.int64)
+    g = np.asarray(gt_t_ns, dtype=np.int64)
+    j = np.searchsorted(g, t, side="left")
+    exact = (j < len(g)) & (g[np.minimum(j, len(g) - 1)] == t)
+    inside = (j > 0) & (j < len(g))
+    lo, hi = g[np.clip(j - 1, 0, len(g) - 1)], g[np.clip(j, 0, len(g) - 1)]
+    return exact | (inside & (hi - lo <= int(round(max_gap_s * 1e9))))
+
+
+def masked_aoe(seq: Sequence, gyro: np.ndarray, mask: np.ndarray) -> Dict[str, float]:
+    """AOE over a whole recording whose ground truth has gaps (AirIMU's ``--mask``, Brossard's TUM-VI
+    protocol): ``seq`` is ONE segment spanning the gaps (ground truth interpolated across them, e.g.
+    loaded with a large ``AlignOptions.max_gap_s``), the gyro integrated through the gaps from the first
+    sample, the error counted only where ``mask`` (:func:`covered`) says ground truth was measured.
+    Returns AOE (RMSE) and the mean error angle [deg], yaw AOE [deg] and the samples counted."""
+    m = np.asarray(mask, dtype=bool)
+    if m.shape != (len(seq),) or not m[0] or not m.any():
+        raise ValueError("masked_aoe: the mask must be (N,) with ground truth at the first sample")
+    e = attitude_errors(seq, gyro)
+    a, y = e["angle_rad"][m], e["yaw_rad"][m]
+    return {"aoe_deg": math.degrees(float(np.sqrt(np.mean(a * a)))), "aoe_mean_deg": math.degrees(float(np.mean(a))),
+            "yaw_aoe_deg": math.degrees(float(np.sqrt(np.mean(y * y)))), "samples": int(m.sum()), "bridged": int((~m).sum())}
+
+
 def window_samples(seq: Sequence, seconds: float = PEER_WINDOW_S) -> int:
     """round(seconds · rate) samples, rate = 1 / median sample period (at least 1)."""
     rate = 1e9 / float(np.median(np.diff(np.asarray(seq.t_ns, dtype=np.int64))))

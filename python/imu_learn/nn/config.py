@@ -26,6 +26,13 @@ class ModelConfig:
     # the half-sample shift between the integration's zero-order hold (sample k held over
     # [t_k, t_k+1]) and when a sample was taken, which taps of [0, -1/2, 1/2] undo exactly.
     fir_taps: int = 0
+    # Where the FIR starts: 0 = zero taps (the identity map); tau != 0 = a time shift by tau samples
+    # (linear interpolation between the two nearest taps, |tau| <= fir_taps // 2), so that the
+    # untrained model equals the `timing` floor (raw IMU at a fitted time offset) and training
+    # learns what that floor leaves. `imu-learn fit` fills it from the training split when
+    # model.fir_init = "timing" (the offset the `timing` baseline fits there).
+    fir_init: str = "zero"
+    fir_init_tau: float = 0.0
     # Learned uncertainty: a second head predicting each refined sample's noise variances (six
     # channels, discrete-time: the variance of one sample in (rad/s)^2 and (m/s^2)^2; a filter that
     # wants a noise density takes sigma * sqrt(dt), see imu_learn.nn.covariance). Bounded by

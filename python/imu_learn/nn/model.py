@@ -7,6 +7,7 @@ buffers, so a checkpoint or an exported model needs nothing else to run. A causa
 """
 from __future__ import annotations
 
+import math
 from dataclasses import asdict
 from typing import List, Optional, Tuple
 
@@ -22,6 +23,24 @@ State = List[Tuple[Tensor, Tensor]]
 # The FIR branch's output is its taps times this: Adam moves a weight by about lr per step, and
 # the taps that matter are O(1/2) (preconditioning, so they are reached in hundreds of steps).
 FIR_GAIN = 10.0
+
+def shift_taps(tau: float, taps: int) -> Tensor:
+    """FIR taps (taps,) whose zero-DC branch (``ImuRefiner._fir``) adds x(k + tau) - x(k), x(k + tau)
+    linearly interpolated between its two nearest samples: the time shift of the `timing` floor
+    (:func:`imu_learn.baselines.timing.resample`) as the FIR's starting point."""
+    k = taps // 2
+    if not abs(tau) <= k:
+        raise ValueError(f"model.fir_init_tau: a shift of {tau} samples needs fir_taps >= {2 * math.ceil(abs(tau)) + 1}, "
+                         f"got {taps}")
+    w = torch.zeros(taps, dtype=torch.float64)
+    lo = math.floor(tau)
+    frac = tau - lo
+    w[k + lo] += 1.0 - frac
+    if frac:
+        w[k + lo + 1] += frac
+    w[k] -= 1.0
+    return (w / FIR_GAIN).to(torch.float32)
+
 
 class ImuRefiner(nn.Module):
     """refined = raw + correction(normalised raw); correction is scaled per channel by the input's
@@ -41,6 +60,10 @@ class ImuRefiner(nn.Module):
             self.fcs.append(nn.Sequential(nn.Linear(dirs * cfg.hidden, cfg.fc), nn.GELU(), nn.Dropout(cfg.dropout)))
             width = cfg.fc
         self.head = nn.Linear(width, 6)
+        if cfg.fir_init not in ("zero", "timing"):
+            raise ValueError(f"model.fir_init: 'zero' or 'timing', got {cfg.fir_init!r}")
+        if cfg.fir_init_tau and not cfg.fir_taps:
+            raise ValueError("model.fir_init_tau needs the FIR branch (model.fir_taps >= 3)")
         if cfg.fir_taps:
             if cfg.causal or cfg.fir_taps < 0 or cfg.fir_taps % 2 == 0:
                 raise ValueError(f"model.fir_taps: an odd number of taps for the bidirectional model, got {cfg.fir_taps}"
@@ -52,6 +75,9 @@ class ImuRefiner(nn.Module):
             # 1 s worse (docs/learning.md).
             self.fir = nn.Conv1d(6, 6, cfg.fir_taps, groups=6, bias=False)
             nn.init.zeros_(self.fir.weight)
+            if cfg.fir_init_tau:
+                with torch.no_grad():
+                    self.fir.weight.copy_(shift_taps(cfg.fir_init_tau, cfg.fir_taps).expand(6, 1, -1))
         else:
             self.fir = None
         if cfg.covariance:

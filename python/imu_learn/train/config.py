@@ -72,6 +72,10 @@ class OptimConfig:
     # What the optimiser moves: "all", or "covariance" (the covariance head alone on the frozen
     # refiner of optim.init: the refined samples stay bit-identical, only the variances learn).
     trainable: str = "all"
+    # Score the untrained model on validation as epoch 0 before the first step, so that best.pt can
+    # be the starting point itself (with model.fir_init = "timing": the timing floor): the selected
+    # model is then never worse than where training started, on validation.
+    validate_start: bool = False
 
 
 @dataclass

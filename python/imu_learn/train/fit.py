@@ -307,6 +307,20 @@ def _cells(seqs: List[Sequence], fixed: List[Sequence], cfg: RunConfig) -> Dict[
     return variant_table(seqs, fixed, d.eval_horizons, d.eval_stride, d.startup_bias_s, d.gravity)
 
 
+def with_timing_init(cfg: RunConfig, split: Split) -> RunConfig:
+    """``cfg`` with ``model.fir_init_tau`` set to the time offset the `timing` floor fits on the
+    split's training recordings (validation keeps it or not), so the untrained model is that floor."""
+    import dataclasses
+
+    from imu_learn.baselines.base import FitSettings
+    from imu_learn.baselines.timing import Timing
+
+    m = Timing(max_shift=float(cfg.model.fir_taps // 2))
+    m.fit(list(split.train), list(split.val), FitSettings(window=cfg.data.window, gravity=cfg.data.gravity))
+    logger.info("model.fir_init = timing: the FIR starts as a shift of %+.3f samples (fitted on the train split)", m.tau)
+    return dataclasses.replace(cfg, model=dataclasses.replace(cfg.model, fir_init_tau=float(m.tau)))
+
+
 def timing_floor(split: Split, cfg: RunConfig) -> Tuple[List[Sequence], float]:
     """The ``timing`` floor of the final table: the raw test IMU resampled at the one time offset
     [samples] fitted on the run's training split (validation only keeps it or not), as
@@ -569,6 +583,8 @@ def train(
     dist, device = setup_device(cfg)
     run_dir = Path(run_dir)
     split, sampler, validation = prepare_data(cfg, split)
+    if state is None and cfg.model.fir_init == "timing":
+        cfg = with_timing_init(cfg, split)
     ts = new_state(cfg, split.train, device) if state is None else resumed_state(cfg, state, device)
     ts.model.train()
     net: torch.nn.Module = ts.model
@@ -583,6 +599,12 @@ def train(
                dynamic_ncols=True, mininterval=1.0)
     try:
         while True:
+            if ts.step == 0 and not ts.history and cfg.optim.validate_start:
+                val = validation(ts.model, cfg, device)
+                row, improved = select_epoch(ts, val, cfg, validation.select_key)
+                record_epoch(run_dir, ts, row, improved, cfg_dict, dist, tb)
+                if dist.main:
+                    bar.write(epoch_line(row, val, cfg, improved))
             if ts.step > 0 and ts.step % spe == 0 and ts.epochs_done < ts.step // spe:
                 val = validation(ts.model, cfg, device)
                 row, improved = select_epoch(ts, val, cfg, validation.select_key)
