@@ -385,3 +385,21 @@ def test_covariance_settings_that_cannot_work_are_refused(tmp_path, capsys, args
 def test_init_from_a_checkpoint_of_another_shape_is_refused(tmp_path, full_run, capsys):
     assert fit_cli.main(tiny(tmp_path / "x", 1, "--model.hidden", "16", "--optim.init", str(full_run / "best.pt"))) == 2
     assert "model.hidden" in capsys.readouterr().err
+
+
+def test_fir_init_timing_and_validate_start(tmp_path):
+    """model.fir_init = timing: fit stores the train split's fitted offset in the checkpoint's model
+    config and the untrained model is scored as epoch 0 (optim.validate_start), which best.pt can be."""
+    from imu_learn.baselines.timing import Timing  # noqa: F401  (the floor the FIR starts as)
+
+    d = tmp_path / "fir"
+    assert fit_cli.main(tiny(d, 2, "--model.fir_taps", "5", "--model.fir_init", "timing",
+                             "--optim.validate_start", "true", "--optim.lr", "1e-1")) == 0
+    r = rows(d)
+    assert [row["epoch"] for row in r] == ["0", "1", "2"]
+    assert r[0]["train_total"] == "" and r[0]["val_total"] != ""
+    ck = load_checkpoint(d / "best.pt")
+    tau = ck["config"]["model"]["fir_init_tau"]
+    assert tau != 0.0 and abs(tau) <= 2.0
+    best = min(r, key=lambda row: float(row["val_total"]))
+    assert int(ck["epoch"]) == int(best["epoch"])

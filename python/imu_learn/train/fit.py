@@ -128,7 +128,9 @@ def write_csv(path: Path, rows: List[Dict[str, Any]]) -> None:
     so a kill or a full disk never leaves half a row)."""
     buf = io.StringIO()
     if rows:
-        w = csv.DictWriter(buf, fieldnames=list(rows[0].keys()), lineterminator="\n")
+        # Every key of every row (an epoch-0 row from optim.validate_start has no training terms).
+        names = list(dict.fromkeys(k for r in rows for k in r))
+        w = csv.DictWriter(buf, fieldnames=names, lineterminator="\n")
         w.writeheader()
         for r in rows:
             w.writerow(r)
