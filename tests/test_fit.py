@@ -388,12 +388,12 @@ def test_init_from_a_checkpoint_of_another_shape_is_refused(tmp_path, full_run, 
 
 
 def test_fir_init_timing_and_validate_start(tmp_path):
-    """model.fir_init = timing: fit stores the train split's fitted offset in the checkpoint's model
+    """model.start = timing: fit stores the train split's fitted offset in the checkpoint's model
     config and the untrained model is scored as epoch 0 (optim.validate_start), which best.pt can be."""
     from imu_learn.baselines.timing import Timing  # noqa: F401  (the floor the FIR starts as)
 
     d = tmp_path / "fir"
-    assert fit_cli.main(tiny(d, 2, "--model.fir_taps", "5", "--model.fir_init", "timing",
+    assert fit_cli.main(tiny(d, 2, "--model.fir_taps", "5", "--model.start", "timing",
                              "--optim.validate_start", "true", "--optim.lr", "1e-1")) == 0
     r = rows(d)
     assert [row["epoch"] for row in r] == ["0", "1", "2"]
@@ -403,3 +403,20 @@ def test_fir_init_timing_and_validate_start(tmp_path):
     assert tau != 0.0 and abs(tau) <= 2.0
     best = min(r, key=lambda row: float(row["val_total"]))
     assert int(ck["epoch"]) == int(best["epoch"])
+
+
+def test_select_reference_start_scores_against_the_untrained_floor(tmp_path):
+    """optim.select_reference = start: epoch 0 (the floor model.start names) scores exactly 1, later
+    epochs their ratios over it; the reference survives a resume; it needs validate_start."""
+    d = tmp_path / "ref"
+    args = ["--model.fir_taps", "3", "--model.start", "timing", "--optim.validate_start", "true",
+            "--optim.select", "val_pose", "--optim.select_reference", "start"]
+    assert fit_cli.main(tiny(d, 1, *args)) == 0
+    r = rows(d)
+    assert float(r[0]["val_pose_score"]) == pytest.approx(1.0, abs=1e-12)
+    ref = load_checkpoint(d / "last.pt")["extra"]["select_reference"]
+    assert ref and all(x > 0 for x in ref)
+    assert fit_cli.main(["--resume", str(d), "--quiet", "--optim.epochs", "2"]) == 0
+    assert load_checkpoint(d / "last.pt")["extra"]["select_reference"] == ref
+    assert len(rows(d)) == 3
+    assert fit_cli.main(tiny(tmp_path / "bad", 1, "--optim.select", "val_pose", "--optim.select_reference", "start")) == 2

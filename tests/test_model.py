@@ -220,3 +220,38 @@ def test_fir_init_tau_out_of_reach():
         ImuRefiner(ModelConfig(fir_taps=3, fir_init_tau=1.7, **SMALL))
     with pytest.raises(ValueError, match="needs the FIR branch"):
         ImuRefiner(ModelConfig(fir_init_tau=0.5, **SMALL))
+
+
+def test_start_traditional_timing_equals_the_calibration_floor():
+    """model.calib with the fixed affine calibration and the FIR shift of a TraditionalParams is, untrained,
+    exactly baselines.traditional's numpy refine with those parameters (no low-pass filter)."""
+    import numpy as np
+
+    from imu_learn.baselines.traditional import Traditional, TraditionalParams
+    from imu_learn.data.types import Sequence
+
+    rng = np.random.default_rng(3)
+    p = TraditionalParams(M_g=np.eye(3) + 0.02 * rng.standard_normal((3, 3)), b_g=0.01 * rng.standard_normal(3),
+                          G=0.001 * rng.standard_normal((3, 3)), M_a=np.eye(3) + 0.01 * rng.standard_normal((3, 3)),
+                          b_a=0.1 * rng.standard_normal(3), time_offset=0.6)
+    A = np.zeros((6, 6))
+    A[:3, :3], A[:3, 3:], A[3:, 3:] = p.M_g, -p.G, p.M_a
+    c = np.concatenate([-p.M_g @ p.b_g, -p.M_a @ p.b_a])
+    model = ImuRefiner(ModelConfig(fir_taps=3, fir_init_tau=p.time_offset, calib=True, start="traditional+timing", **SMALL))
+    model.set_calibration(torch.as_tensor(A), torch.as_tensor(c))
+    x = imu_batch(B=1, W=80, dtype=torch.float64)
+    with torch.no_grad():
+        out = model.double()(x)[0].numpy()
+    n = 80
+    t = np.arange(n, dtype=np.int64) * 5_000_000 + 10**12
+    z = np.zeros((n, 3))
+    seq = Sequence("s", t, x[0, :, :3].numpy(), x[0, :, 3:].numpy(), z, z, np.tile([1.0, 0, 0, 0], (n, 1)))
+    trad = Traditional(cutoffs_hz=(None,))
+    trad.params = p
+    g, a = trad.refine(seq)
+    np.testing.assert_allclose(out[1:-1], np.concatenate([g, a], 1)[1:-1], rtol=0, atol=2e-5)  # float32 buffers
+    gyro_only = ImuRefiner(ModelConfig(calib=True, refine="gyro", **SMALL))
+    gyro_only.set_calibration(torch.as_tensor(A), torch.as_tensor(c))
+    with torch.no_grad():
+        o2 = gyro_only.double()(x)[0].numpy()
+    np.testing.assert_array_equal(o2[:, 3:], x[0, :, 3:].numpy())  # the accelerometer passes through

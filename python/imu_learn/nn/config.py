@@ -26,13 +26,16 @@ class ModelConfig:
     # the half-sample shift between the integration's zero-order hold (sample k held over
     # [t_k, t_k+1]) and when a sample was taken, which taps of [0, -1/2, 1/2] undo exactly.
     fir_taps: int = 0
-    # Where the FIR starts: 0 = zero taps (the identity map); tau != 0 = a time shift by tau samples
-    # (linear interpolation between the two nearest taps, |tau| <= fir_taps // 2), so that the
-    # untrained model equals the `timing` floor (raw IMU at a fitted time offset) and training
-    # learns what that floor leaves. `imu-learn fit` fills it from the training split when
-    # model.fir_init = "timing" (the offset the `timing` baseline fits there).
-    fir_init: str = "zero"
+    # Where training starts (`imu-learn fit` fills the fields below from the train split):
+    # "raw" (the identity map, the paper); "timing": the FIR starts as a time shift by
+    # fir_init_tau samples (linear interpolation between the two nearest taps,
+    # |tau| <= fir_taps // 2), so the untrained model is the `timing` floor; "traditional+timing": that
+    # shift plus a fixed affine calibration (calib = true: scale, misalignment, bias and g-sensitivity as
+    # `traditional+timing` fits them, without its low-pass filter), so the untrained model is that floor
+    # and the network learns only what the floor leaves.
+    start: str = "raw"
     fir_init_tau: float = 0.0
+    calib: bool = False  # a fixed affine calibration (buffers calib_A (6, 6), calib_c (6,)) before the network
     # Learned uncertainty: a second head predicting each refined sample's noise variances (six
     # channels, discrete-time: the variance of one sample in (rad/s)^2 and (m/s^2)^2; a filter that
     # wants a noise density takes sigma * sqrt(dt), see imu_learn.nn.covariance). Bounded by

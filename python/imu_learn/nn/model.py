@@ -42,6 +42,9 @@ def shift_taps(tau: float, taps: int) -> Tensor:
     return (w / FIR_GAIN).to(torch.float32)
 
 
+MODEL_STARTS = ("raw", "timing", "traditional+timing")
+
+
 class ImuRefiner(nn.Module):
     """refined = raw + correction(normalised raw); correction is scaled per channel by the input's
     std so that gyro and accelerometer corrections start on their own scales."""
@@ -51,6 +54,9 @@ class ImuRefiner(nn.Module):
         self.cfg = cfg
         self.register_buffer("mean", torch.zeros(6) if mean is None else torch.as_tensor(mean, dtype=torch.float32))
         self.register_buffer("std", torch.ones(6) if std is None else torch.as_tensor(std, dtype=torch.float32))
+        if cfg.calib:  # identity until set_calibration (fit) or a checkpoint's state_dict fills it
+            self.register_buffer("calib_A", torch.eye(6))
+            self.register_buffer("calib_c", torch.zeros(6))
         dirs = 1 if cfg.causal else 2
         self.lstms = nn.ModuleList()
         self.fcs = nn.ModuleList()
@@ -60,8 +66,8 @@ class ImuRefiner(nn.Module):
             self.fcs.append(nn.Sequential(nn.Linear(dirs * cfg.hidden, cfg.fc), nn.GELU(), nn.Dropout(cfg.dropout)))
             width = cfg.fc
         self.head = nn.Linear(width, 6)
-        if cfg.fir_init not in ("zero", "timing"):
-            raise ValueError(f"model.fir_init: 'zero' or 'timing', got {cfg.fir_init!r}")
+        if cfg.start not in MODEL_STARTS:
+            raise ValueError(f"model.start: one of {', '.join(MODEL_STARTS)}, got {cfg.start!r}")
         if cfg.fir_init_tau and not cfg.fir_taps:
             raise ValueError("model.fir_init_tau needs the FIR branch (model.fir_taps >= 3)")
         if cfg.fir_taps:
@@ -144,6 +150,9 @@ class ImuRefiner(nn.Module):
             raise ValueError("carried state needs the causal model (bidirectional LSTMs see the future)")
         mean = self.mean.to(imu.dtype)
         std = self.std.to(imu.dtype)
+        if self.cfg.calib:  # the fixed calibration, on the channels the model refines
+            cal = imu @ self.calib_A.to(imu.dtype).T + self.calib_c.to(imu.dtype)
+            imu = torch.where(self.channels.to(imu.dtype) > 0, cal, imu)
         x = (imu - mean) / std
         linear = self._fir(x)
         new_state: State = []
@@ -167,6 +176,14 @@ class ImuRefiner(nn.Module):
         padded = nn.functional.pad(x.transpose(1, 2), (k, k), mode="replicate")
         w = self.fir.weight - self.fir.weight.mean(dim=-1, keepdim=True)
         return FIR_GAIN * nn.functional.conv1d(padded, w, groups=6).transpose(1, 2)
+
+    @torch.no_grad()
+    def set_calibration(self, A: Tensor, c: Tensor) -> None:
+        """The fixed affine calibration: refined input = A @ [gyro, acc] + c (needs model.calib)."""
+        if not self.cfg.calib:
+            raise ValueError("set_calibration needs model.calib = true")
+        self.calib_A.copy_(torch.as_tensor(A, dtype=torch.float32))
+        self.calib_c.copy_(torch.as_tensor(c, dtype=torch.float32))
 
     @torch.no_grad()
     def step(self, sample: Tensor, state: Optional[State] = None) -> Tuple[Tensor, State]:

@@ -76,6 +76,11 @@ class OptimConfig:
     # be the starting point itself (with model.fir_init = "timing": the timing floor): the selected
     # model is then never worse than where training started, on validation.
     validate_start: bool = False
+    # val_pose only: what the pose score's ratios are taken against: "raw" (raw IMU) or "start" (the
+    # untrained model, i.e. the floor model.start names; needs optim.validate_start): each cell's
+    # model/raw ratio divided by the start's, so with select_combine = "max" a score below 1 means better
+    # than the floor in EVERY scored cell (rotation and translation, each horizon).
+    select_reference: str = "raw"
 
 
 @dataclass
@@ -173,6 +178,10 @@ def validate(cfg: RunConfig) -> None:
          f"must be keep or remove, got {cfg.data.train_bias!r}")
     need(o.select_combine in ("max", "mean"), "optim.select_combine",
          f"must be max or mean, got {o.select_combine!r}")
+    need(o.select_reference in ("raw", "start"), "optim.select_reference",
+         f"must be raw or start, got {o.select_reference!r}")
+    need(o.select_reference == "raw" or (o.validate_start and o.select == "val_pose"), "optim.select_reference",
+         "start needs optim.validate_start = true and optim.select = val_pose")
     need(o.select in SELECT_METRICS, "optim.select", f"must be one of {', '.join(SELECT_METRICS)}, got {o.select!r}")
     need(cfg.threads >= 1, "threads", "must be at least 1")
     need(cfg.device == "auto" or cfg.device == "cpu" or cfg.device.startswith("cuda"), "device",
