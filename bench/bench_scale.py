@@ -1,6 +1,7 @@
 """Cost against recording length: time and peak memory of each stage on synthetic 200 Hz recordings.
 
-    python bench/bench_scale.py [--hours 1/6,1,10] [--fuse-hours 1/12,1/6,1/3,2/3] [--stages parse,align,...]
+    python bench/bench_scale.py [--hours 1/6,1,10] [--fuse-hours 1/4,1/2,1,2] [--fuse-lag S] [--fuse-smoothing batch|window]
+                                [--stages parse,align,...]
                                 [--quick] [--cache DIR] [--max-rss-gib 12]
 
 A synthetic EuRoC ASL recording (``mav0/imu0/data.csv`` with the EuRoC header, the 17-column
@@ -22,7 +23,8 @@ stage's alone; the parent also watches the child's resident memory and stops it 
   refined copy of the IMU file;
 - ``fuse``    ``imu_learn.fuse.fuse`` on the raw IMU with simulated 1 Hz position fixes (sigma 0.1 m,
   10 Hz keyframes, the EuRoC ADIS16448 noise model: the ``gnss_1hz`` scenario of
-  configs/fuse_euroc.toml), causal iSAM2 then the batch smoothing pass; run on ``--fuse-hours``.
+  configs/fuse_euroc.toml), the causal estimate (the fixed-lag smoother, window ``--fuse-lag`` s;
+  ``inf``: iSAM2 over the whole graph) then the batch smoothing pass; run on ``--fuse-hours``.
 
 "wall s" is timed inside the child around the stage's own call (imports and the inputs a stage needs
 are prepared before, untimed). "peak RSS MiB" is the resident high-water mark DURING the stage (the
@@ -61,7 +63,7 @@ from imu_learn.util.machine import cpu_name  # noqa: E402
 
 STAGES = ("parse", "align", "window_labels", "labels_cli", "refine", "fuse")
 DEFAULT_HOURS = "1/6,1,10"
-DEFAULT_FUSE_HOURS = "1/12,1/6,1/3,2/3"  # fusion grows faster than linearly: docs/scale.md
+DEFAULT_FUSE_HOURS = "1/4,1/2,1,2"  # the fixed-lag causal estimate is linear (docs/scale.md)
 QUICK_HOURS = "1/60,1/12"
 CHECKPOINT = REPO / "models" / "euroc_adis16448.pt"
 GENERATOR_VERSION = 1  # bump when the synthetic recording changes: cached ones are rewritten
@@ -170,7 +172,8 @@ def gt_csv(rec: Path) -> Path:
     return rec / "mav0" / "state_groundtruth_estimate0" / "data.csv"
 
 
-def prepare_and_run(stage: str, rec: Path, scratch: Path) -> Dict[str, object]:
+def prepare_and_run(stage: str, rec: Path, scratch: Path, lag_s: float = float("inf"),
+                    smoothing: str = "batch") -> Dict[str, object]:
     """Prepare the stage's inputs (untimed), then time the stage. Returns seconds and extras."""
     import imu_learn as il
     from imu_learn.data.formats.groundtruth import read_groundtruth
@@ -197,7 +200,7 @@ def prepare_and_run(stage: str, rec: Path, scratch: Path) -> Dict[str, object]:
                 def run() -> None:
                     extra["windows"] = len(il.window_labels(seq, WINDOW, STRIDE).starts)
             else:
-                run = fuse_runner(seq, extra)
+                run = fuse_runner(seq, extra, lag_s, smoothing)
     elif stage == "labels_cli":
         from imu_learn.cli.labels import main as labels_main
 
@@ -221,7 +224,7 @@ def prepare_and_run(stage: str, rec: Path, scratch: Path) -> Dict[str, object]:
     return {"seconds": time.perf_counter() - t0, "stage_peak_mib": status_mib("VmHWM"), **extra}
 
 
-def fuse_runner(seq, extra: Dict[str, object]):
+def fuse_runner(seq, extra: Dict[str, object], lag_s: float, smoothing: str):
     """fuse() on the raw IMU with simulated 1 Hz fixes; the smoothing pass timed on its own."""
     import numpy as np
     from scipy.spatial.transform import Rotation
@@ -234,6 +237,8 @@ def fuse_runner(seq, extra: Dict[str, object]):
     smooth = graph.IncrementalFusion.smooth
 
     def timed_smooth(self):  # instrumentation only: the same method, its time recorded
+        # the causal pass's own peak and what it leaves resident (the graph kept for smoothing)
+        extra["causal_peak_mib"], extra["rss_before_smooth_mib"] = status_mib("VmHWM"), status_mib("VmRSS")
         t0 = time.perf_counter()
         try:
             return smooth(self)
@@ -252,10 +257,13 @@ def fuse_runner(seq, extra: Dict[str, object]):
     graph.IncrementalFusion._update = timed_update
 
     def run() -> None:
-        res = fuse(seq.t_ns, seq.gyro, seq.acc, (R0, seq.p[0], seq.v[0]), [fixes], ImuNoise())
+        res = fuse(seq.t_ns, seq.gyro, seq.acc, (R0, seq.p[0], seq.v[0]), [fixes], ImuNoise(), lag_s=lag_s,
+                   smoothing=smoothing)
         err = res.smoothed_p - seq.p[res.kf_idx]
-        extra.update(keyframes=len(res.kf_idx), fixes=len(fixes), counts=res.counts,
+        err_c = res.causal_p - seq.p[res.kf_idx]
+        extra.update(keyframes=len(res.kf_idx), fixes=len(fixes), counts=res.counts, lag_s=lag_s, smoothing=smoothing,
                      smoothed_pos_rmse_m=float(np.sqrt((err**2).sum(1).mean())),
+                     causal_pos_rmse_m=float(np.sqrt((err_c**2).sum(1).mean())),
                      updates_s=float(sum(update_s)), **update_growth(update_s))
 
     return run
@@ -292,7 +300,8 @@ def peak_rss_self_mib() -> float:
     return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0  # Linux: KiB
 
 
-def child_main(stage: str, rec: Path, scratch: Path, result: Path, torch_threads: int) -> int:
+def child_main(stage: str, rec: Path, scratch: Path, result: Path, torch_threads: int, lag_s: float,
+               smoothing: str) -> int:
     """Run one stage and write its result. Only ``refine`` imports torch (540 MiB resident on its
     own), so the other stages' peaks are theirs. The peak is read right after the stage and the
     child leaves by ``os._exit``: an interpreter that imported torch grows by ~125 MiB while it
@@ -303,7 +312,7 @@ def child_main(stage: str, rec: Path, scratch: Path, result: Path, torch_threads
         torch.set_num_threads(torch_threads)
     from imu_learn.util.atomic import atomic_write_text
 
-    out = prepare_and_run(stage, rec, scratch)
+    out = prepare_and_run(stage, rec, scratch, lag_s, smoothing)
     out["peak_self_mib"] = peak_rss_self_mib()
     out["torch_threads"] = torch_threads if "torch" in sys.modules else None
     if "torch" in sys.modules:
@@ -335,7 +344,8 @@ def run_child(stage: str, rec: Path, scratch: Path, args) -> Dict[str, object]:
     """One stage in a fresh interpreter; its own peak RSS from wait4, stopped above the limit."""
     result = scratch / f"{stage}.json"
     cmd = [sys.executable, __file__, "--child", stage, "--rec", str(rec), "--scratch", str(scratch),
-           "--result", str(result), "--torch-threads", str(args.torch_threads)]
+           "--result", str(result), "--torch-threads", str(args.torch_threads), "--fuse-lag", str(args.fuse_lag),
+           "--fuse-smoothing", args.fuse_smoothing]
     t0 = time.perf_counter()
     proc = subprocess.Popen(cmd)
     limit = args.max_rss_gib * 1024.0
@@ -419,6 +429,10 @@ def main(argv: Optional[List[str]] = None) -> int:
                     help="folder for the synthetic recordings and stage outputs")
     ap.add_argument("--max-rss-gib", type=float, default=12.0, help="stop a stage whose resident memory exceeds this")
     ap.add_argument("--torch-threads", type=int, default=1)
+    ap.add_argument("--fuse-lag", type=float, default=None,
+                    help="the fuse stage's fixed-lag window [s] (default: the estimator's; inf: iSAM2 over the whole graph)")
+    ap.add_argument("--fuse-smoothing", choices=("batch", "window"), default="batch",
+                    help="the fuse stage's smoothed estimate: batch LM over the whole graph, or the fixed-lag window's")
     ap.add_argument("--json", type=Path, default=None, help="also write every measurement here")
     ap.add_argument("--child", default=None, help=argparse.SUPPRESS)
     ap.add_argument("--rec", type=Path, help=argparse.SUPPRESS)
@@ -426,15 +440,20 @@ def main(argv: Optional[List[str]] = None) -> int:
     ap.add_argument("--result", type=Path, help=argparse.SUPPRESS)
     args = ap.parse_args(argv)
     os.environ.setdefault("RAYON_NUM_THREADS", "1")
+    if args.fuse_lag is None:
+        from imu_learn.fuse.graph import DEFAULT_LAG_S
+
+        args.fuse_lag = DEFAULT_LAG_S
     if args.child:
-        return child_main(args.child, args.rec, args.scratch, args.result, args.torch_threads)
+        return child_main(args.child, args.rec, args.scratch, args.result, args.torch_threads, args.fuse_lag,
+                          args.fuse_smoothing)
     stages = [s.strip() for s in args.stages.split(",") if s.strip()]
     if set(stages) - set(STAGES):
         ap.error(f"--stages: unknown {sorted(set(stages) - set(STAGES))}; known: {','.join(STAGES)}")
     hours = args.hours or parse_hours(QUICK_HOURS if args.quick else DEFAULT_HOURS)
     fuse_hours = args.fuse_hours or (hours if args.quick else parse_hours(DEFAULT_FUSE_HOURS))
     print(f"# bench_scale: {machine()}; torch threads {args.torch_threads}, "
-          f"RAYON_NUM_THREADS={os.environ['RAYON_NUM_THREADS']}; {date.today().isoformat()}")
+          f"RAYON_NUM_THREADS={os.environ['RAYON_NUM_THREADS']}; fuse lag {args.fuse_lag:g} s, smoothing {args.fuse_smoothing}; {date.today().isoformat()}")
     print(f"# command: python bench/bench_scale.py {' '.join(argv if argv is not None else sys.argv[1:])}".rstrip())
     lengths = sorted({int(h * 3600) for h in hours} | ({int(h * 3600) for h in fuse_hours} if "fuse" in stages else set()))
     rows: List[dict] = []

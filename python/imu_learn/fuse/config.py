@@ -12,10 +12,16 @@ from typing import List, Optional, Tuple
 from imu_learn.errors import ConfigError
 from imu_learn.settings import DATA_ROOT_ENV, from_dict, read_toml
 
+from .graph import DEFAULT_LAG_S
+
 # "raw+learned-cov" / "proposed+learned-cov": the raw or refined samples, each weighted in the
 # graph by its own noise variances from a refiner's covariance head (covariance_checkpoint) instead
 # of the datasheet's white noise; the pair separates the refined samples' effect from the covariance's.
-LEARNED_COV_INPUTS = ("raw+learned-cov", "proposed+learned-cov")
+# "learned": the one learned input (issue 24): the device model's refined samples weighted by its learned
+# covariance (covariance_checkpoint, as proposed+learned-cov), plus the tlio-style displacement factors
+# where the device has that model (<methods_dir>/tlio-style.pt; regressed from the raw samples).
+LEARNED_INPUT = "learned"
+LEARNED_COV_INPUTS = ("raw+learned-cov", "proposed+learned-cov", LEARNED_INPUT)
 INPUTS = ("raw", "traditional", "proposed") + LEARNED_COV_INPUTS
 KINDS = ("position", "relative_pose", "leica")
 BIAS_PRIORS = ("zero", "startup")
@@ -87,6 +93,9 @@ class FuseConfig:
     seeds: List[int] = field(default_factory=lambda: [0])
     gravity: float = 9.81
     keyframe_hz: float = 10.0
+    # The causal estimate's fixed-lag window [s] (imu_learn.fuse.graph; inf: iSAM2 over the whole
+    # graph, whose cost grows with the square of the recording's length).
+    lag_s: float = DEFAULT_LAG_S
     inputs: List[str] = field(default_factory=lambda: ["raw", "proposed"])
     checkpoint: str = "models/euroc_adis16448.pt"  # for "proposed" (relative to the working directory)
     # For "traditional": the calibration `python -m imu_learn.evaluate` fitted on the train split
@@ -143,6 +152,8 @@ def validate(cfg: FuseConfig) -> FuseConfig:
         raise ConfigError(f"seeds: one or more distinct integers, got {cfg.seeds}")
     if not cfg.keyframe_hz > 0:
         raise ConfigError(f"keyframe_hz: must be > 0, got {cfg.keyframe_hz}")
+    if not cfg.lag_s > 0:
+        raise ConfigError(f"lag_s: must be > 0 (inf: the whole graph), got {cfg.lag_s}")
     if not cfg.displacement_update_s > 0:
         raise ConfigError(f"displacement_update_s: must be > 0, got {cfg.displacement_update_s}")
     names = [s.name for s in cfg.scenarios]

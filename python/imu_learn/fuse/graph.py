@@ -10,6 +10,12 @@ is the *causal* estimate (what a navigation system would deliver live); after th
 batch Levenberg-Marquardt pass over the whole graph, started from iSAM2's final estimate, gives
 the *smoothed* one.
 
+The causal estimate runs on GTSAM's ``IncrementalFixedLagSmoother`` (iSAM2 over the keyframes of the
+last ``lag_s`` seconds; older ones are marginalised into a prior on the window), so each update costs
+the same however long the recording: fusion is linear in its length (docs/scale.md). ``lag_s = inf``
+keeps iSAM2 over the whole graph (each update's cost grows with the graph: quadratic overall), the
+estimator the fusion tables were first written with.
+
 :class:`IncrementalFusion` holds the graph and takes the IMU one sample at a time (the online mode,
 :mod:`imu_learn.fuse.online`, streams through it); :func:`fuse` is a loop over a recording's samples
 through it followed by the smoothing pass.
@@ -101,25 +107,63 @@ def lm_params():
     return lm
 
 
+def window_lm_params():
+    """:func:`lm_params` for the re-solve of the fixed-lag window: there the marginal prior and a single
+    fix fit almost exactly (final error near 0), where LM's default tests (a decrease of 1e-5 relative
+    or absolute) took 14-50 iterations to creep to it; a decrease under 1e-3 (in half the chi-square)
+    ends it."""
+    lm = lm_params()
+    lm.setAbsoluteErrorTol(1e-3)
+    return lm
+
+
 def _aiding_by_sample(aiding: Seq) -> tuple:
     """The aiding's factors' ingredients by the IMU sample they are tied to: position fixes
-    ``{s: [(p, lever, model)]}`` and relative poses ``{j: [(i, Pose3, model)]}``."""
+    ``{s: [(p, lever, model)]}`` and relative poses ``{j: [(i, Pose3, model)]}`` (absolute poses
+    there too, as ``(None, Pose3, model)``)."""
     import gtsam
+
+    from .aiding import AbsolutePoses
 
     fixes_at: Dict[int, List] = {}
     between_at: Dict[int, List] = {}
     for a in aiding:
         if isinstance(a, PositionFixes):
             model = gtsam.noiseModel.Isotropic.Sigma(3, a.sigma_m)
-            for s, p in zip(a.idx, a.p):
-                fixes_at.setdefault(int(s), []).append((p, a.lever, model))
+            # Per-fix sigmas (M, 3) where the aiding has them (fuse/rtklib.py's GnssFixes), else sigma_m.
+            sig = getattr(a, "sigmas", None)
+            if sig is not None and np.shape(sig) != (len(a.idx), 3):
+                raise InvalidInputError(f"{a.label}: per-fix sigmas {np.shape(sig)}, expected ({len(a.idx)}, 3)")
+            for n, (s, p) in enumerate(zip(a.idx, a.p)):
+                m = model if sig is None else gtsam.noiseModel.Diagonal.Sigmas(np.asarray(sig[n], dtype=np.float64))
+                fixes_at.setdefault(int(s), []).append((p, a.lever, m))
         elif isinstance(a, RelativePoses):
             model = gtsam.noiseModel.Diagonal.Sigmas(np.r_[[a.sigma_rot_rad] * 3, [a.sigma_trans_m] * 3])
             for i, j, R, t in zip(a.i, a.j, a.R_ij, a.t_ij):
                 between_at.setdefault(int(j), []).append((int(i), gtsam.Pose3(gtsam.Rot3(R), t), model))
+        elif isinstance(a, AbsolutePoses):  # a pose prior at its sample: (None, Pose3, model)
+            model = gtsam.noiseModel.Diagonal.Sigmas(np.r_[[a.sigma_rot_rad] * 3, [a.sigma_trans_m] * 3])
+            for s, R, t in zip(a.idx, a.R, a.p):
+                between_at.setdefault(int(s), []).append((None, gtsam.Pose3(gtsam.Rot3(R), t), model))
         else:
             raise InvalidInputError(f"unknown aiding {type(a).__name__}")
     return fixes_at, between_at
+
+
+# The causal estimate's window [s] (keyframes this recent stay in the fixed-lag smoother): chosen by
+# measurement (docs/scale.md). Shorter windows cost less per update; a window shorter than the gap
+# between fixes marginalises states no fix has corrected yet (their prior is then the IMU's alone).
+DEFAULT_LAG_S = 10.0
+_NO_LAG = 1e15  # [s]: a smoother lag no recording reaches
+# [s] The first seconds stay in the window whatever the lag: attitude and bias are still settling
+# there, and marginalised at those estimates they stay wrong in the prior on the window (EuRoC V1_01
+# with 1 Hz fixes and a 30 s outage: causal RMSE 6.1 m with lag 10 s from the start, 2.87 m as the
+# whole graph with the first 30 s held).
+SETTLE_S = 30.0
+# The smoothed estimate: "batch", Levenberg-Marquardt over the whole graph (every factor kept: memory
+# and time linear, docs/scale.md); "window", each keyframe's last estimate in the fixed-lag window
+# (no graph kept, no batch pass).
+SMOOTHING = ("batch", "window")
 
 
 def isam2_params():
@@ -139,7 +183,8 @@ def isam2_params():
     # `resolve_after_s` the IMU-predicted linearisation point is far off and a few Gauss-Newton
     # steps leave the first fix's estimate metres to hundreds of metres from it (40 s coast:
     # 243-269 m); there the whole graph so far is re-solved by Levenberg-Marquardt and iSAM2
-    # restarted from that solution (0.02-0.05 m; tests/test_fuse_aiding.py).
+    # restarted from that solution (0.02-0.05 m; tests/test_fuse_aiding.py). With the fixed-lag
+    # smoother the re-solve covers its window and the coast (IncrementalFusion._resolve_window).
     isam_params.setOptimizationParams(gtsam.ISAM2GaussNewtonParams())
     # Relinearise any variable whose step exceeds 0.1 (rad, m, m/s), checked at every update: with
     # 0.01 a 10 Hz VO chain relinearised most of itself each time (V1_01: 29 s, now 11 s, same
@@ -149,12 +194,55 @@ def isam2_params():
     return isam_params
 
 
+# GTSAM walks the batch pass's Bayes tree recursively (freeing it, at least), one stack frame per level;
+# on the long chain of a 10 h recording (360,000 keyframes) that overflowed the main thread's 8 MiB
+# stack (SIGSEGV, bench/bench_scale.py). The batch pass runs in a thread with this much stack per
+# keyframe (at least 64 MiB); only the pages touched are ever resident.
+STACK_PER_KEYFRAME = 1024
+
+
+def deep_stack(fn: Callable, keyframes: int):
+    """``fn()`` run in a thread whose stack fits GTSAM's recursion over ``keyframes`` keyframes; its
+    result, or its exception raised here."""
+    import threading
+
+    size = max(64 << 20, int(keyframes) * STACK_PER_KEYFRAME)
+    size = (size + (1 << 20) - 1) & ~((1 << 20) - 1)  # whole MiB
+    out: Dict[str, object] = {}
+
+    def target() -> None:
+        try:
+            out["value"] = fn()
+        except BaseException as e:  # noqa: BLE001 (re-raised in the caller's thread)
+            out["error"] = e
+
+    old = threading.stack_size(size)
+    try:
+        worker = threading.Thread(target=target, name="imu_learn-batch-smoothing")
+        worker.start()
+    finally:
+        threading.stack_size(old)
+    worker.join()
+    if "error" in out:
+        raise out["error"]
+    return out["value"]
+
+
+def fixed_lag_params():
+    """iSAM2's settings inside the fixed-lag smoother: :func:`isam2_params`, and the slots of the
+    factors it marginalises reused (else its factor list keeps an empty slot for each: 10,800 after
+    15 min at 1 Hz fixes, against 125 live factors)."""
+    params = isam2_params()
+    params.findUnusedFactorSlots = True
+    return params
+
+
 class IncrementalFusion:
     """The factor graph built and solved one IMU sample at a time, as a navigation system would run
     it: :meth:`add_sample` integrates each sample into the current preintegration and, at a
     keyframe, adds the ``CombinedImuFactor`` from the previous keyframe and the aiding tied to it,
-    and updates iSAM2 when aiding arrived there (``iterations`` steps; after a coast longer than
-    ``resolve_after_s`` a batch re-solve, see the comments in ``__init__``) or the stream ended; it
+    and updates the causal solver when aiding arrived there (``iterations`` steps; after a coast
+    longer than ``resolve_after_s`` a batch re-solve, see :func:`isam2_params`) or the stream ended; it
     returns the causal state (:class:`CausalState`). :meth:`smooth`, after the last sample, runs the
     batch Levenberg-Marquardt pass and gives the :class:`FusionResult` :func:`fuse` returns.
 
@@ -169,7 +257,12 @@ class IncrementalFusion:
     the samples from the previous keyframe up to s - 1.
 
     ``predict_between``: also return the IMU prediction at samples between keyframes (otherwise
-    None there; :func:`fuse` skips it, its results do not depend on it)."""
+    None there; :func:`fuse` skips it, its results do not depend on it).
+
+    ``lag_s``: the causal solver is GTSAM's ``IncrementalFixedLagSmoother`` holding the keyframes of
+    the last ``lag_s`` seconds (each update's cost bounded; tests/test_fuse_fixed_lag.py); ``inf``:
+    iSAM2 over the whole graph, whose updates grow with it. Every factor is also kept for the
+    smoothing pass, which starts from each keyframe's last estimate in the window."""
 
     def __init__(
         self,
@@ -185,6 +278,8 @@ class IncrementalFusion:
         predict_between: bool = True,
         resolve_after_s: float = 2.0,
         extra_factors: Optional[Callable] = None,
+        lag_s: float = DEFAULT_LAG_S,
+        smoothing: str = "batch",
     ) -> None:
         import gtsam
         from gtsam.symbol_shorthand import B, V, X
@@ -207,7 +302,11 @@ class IncrementalFusion:
         self._key_of = {int(s): k for k, s in enumerate(kf)}
         self._fixes_at, self._between_at = _aiding_by_sample(aiding)
         self._params = noise.gtsam_params(gravity)
-        self._isam = gtsam.ISAM2(isam2_params())
+        if smoothing not in SMOOTHING:
+            raise InvalidInputError(f"smoothing: one of {', '.join(SMOOTHING)}, got {smoothing!r}")
+        self.smoothing = smoothing
+        self._start_solver(lag_s)
+        self._kf_t = ((t_ns[kf] - t_ns[0]) * 1e-9).tolist()  # each keyframe's time [s]: the smoother's stamps
         self._full = gtsam.NonlinearFactorGraph()
         pose0, v0, b0 = self._start_with_prior(start_pose, prior, bias0)
 
@@ -218,6 +317,10 @@ class IncrementalFusion:
         self._pim = None
         self.counts = {"imu_factors": 0, "position_factors": 0, "relative_pose_factors": 0, "isam2_updates": 0,
                        "resolves_after_coast": 0}
+        if self.windowed:
+            # Factors tied to a keyframe already marginalised (e.g. a relative pose reaching back further
+            # than the lag): left out of the causal estimate (the batch smoothing pass has them).
+            self.counts["factors_before_window"] = 0
         # Factors beyond the aiding (e.g. learned displacements, fuse/displacement.py): called as
         # extra_factors(self, k, s) at keyframe k (sample s) before its update, it returns factors to
         # add there; they count as new information (iSAM2 updates at that keyframe).
@@ -228,6 +331,24 @@ class IncrementalFusion:
         self._k = 0  # the next keyframe's number
         self._next_kf = self._kf_list[0]
         self._prev = None  # (t_ns, gyro, acc, var) of the last sample, integrated when the next arrives
+
+    def _start_solver(self, lag_s: float) -> None:
+        """The causal solver: a fixed-lag smoother over the last ``lag_s`` seconds, or (``lag_s = inf``)
+        iSAM2 over the whole graph."""
+        gtsam = self._gtsam
+        lag_s = float(lag_s)
+        if not lag_s > 0:
+            raise InvalidInputError(f"lag_s: the fixed-lag window must be > 0 s (inf: the whole graph), got {lag_s}")
+        self.lag_s = lag_s
+        self.windowed = bool(np.isfinite(lag_s))
+        if self.windowed:
+            self._isam = gtsam.IncrementalFixedLagSmoother(lag_s, fixed_lag_params())
+            self._initial = gtsam.Values()  # every keyframe's latest estimate: the smoothing pass starts there
+            # (start, until) [s]: keyframes from start on stay in the window until then (_lag_now): the
+            # first SETTLE_S, then each coast
+            self._hold = (0.0, SETTLE_S)
+        else:
+            self._isam = gtsam.ISAM2(isam2_params())
 
     def _start_with_prior(self, start_pose: tuple, prior: PriorSigmas, bias0: Optional[np.ndarray]) -> tuple:
         """The first keyframe's state (pose, velocity, bias) and its prior factors in a new pending graph."""
@@ -264,6 +385,10 @@ class IncrementalFusion:
                 graph.add(gtsam.GPSFactor(X(k), p, model))
             self.counts["position_factors"] += 1
         for i, rel, model in self._between_at.get(s, ()):
+            if i is None:  # an absolute pose (AbsolutePoses)
+                graph.add(gtsam.PriorFactorPose3(X(k), rel, model))
+                self.counts["pose_factors"] = self.counts.get("pose_factors", 0) + 1
+                continue
             graph.add(gtsam.BetweenFactorPose3(X(self._key_of[i]), X(k), rel, model))
             self.counts["relative_pose_factors"] += 1
         if self._extra_factors is not None:
@@ -340,29 +465,112 @@ class IncrementalFusion:
         return CausalState(n, t, True, updated, self._nav)
 
     def _update(self, t_ns: int) -> None:
+        """Hand the pending factors and values to the causal solver; after a coast longer than
+        ``resolve_after_ns`` re-solve in batch (the whole graph, or with the fixed-lag smoother its
+        window plus the coast: bounded, so fusion stays linear)."""
+        gtsam = self._gtsam
+        coast = t_ns - self._last_update_ns > self.resolve_after_ns
+        if self.smoothing == "batch" or not self.windowed:  # the whole-graph path re-solves the whole graph
+            for f in range(self._graph.size()):
+                self._full.add(self._graph.at(f))
+        if self.windowed:
+            self._update_window(coast, (t_ns - self._stamps[0]) * 1e-9, (self._last_update_ns - self._stamps[0]) * 1e-9)
+        else:
+            self._update_whole(coast)
+        self.counts["isam2_updates"] += 1
+        self.counts["resolves_after_coast"] += int(coast)
+        self._graph = gtsam.NonlinearFactorGraph()
+        self._values = gtsam.Values()
+        self._last_update_ns = t_ns
+
+    def _update_whole(self, coast: bool) -> None:
+        """iSAM2 over the whole graph; after a coast, Levenberg-Marquardt over all of it and iSAM2
+        restarted from that solution."""
         gtsam = self._gtsam
         self._isam.update(self._graph, self._values)
         for _ in range(self.iterations - 1):
             self._isam.update()
-        self.counts["isam2_updates"] += 1
-        for f in range(self._graph.size()):
-            self._full.add(self._graph.at(f))
-        self._graph = gtsam.NonlinearFactorGraph()
-        self._values = gtsam.Values()
-        if t_ns - self._last_update_ns > self.resolve_after_ns:
+        if coast:
             est = gtsam.LevenbergMarquardtOptimizer(self._full, self._isam.calculateEstimate(), lm_params()).optimize()
             self._isam = gtsam.ISAM2(self._isam.params())
             self._isam.update(self._full, est)
-            self.counts["resolves_after_coast"] += 1
-        self._last_update_ns = t_ns
+
+    def _update_window(self, coast: bool, t_s: float, last_s: float) -> None:
+        """The fixed-lag smoother at time ``t_s`` (the previous update at ``last_s``): the new keyframes
+        stamped with their times, factors reaching before the window left to the smoothing pass;
+        after a coast the window and the coast are re-solved (:meth:`_resolve_window`) before anything
+        of them is marginalised."""
+        values = self._values
+        stamps = {key: self._kf_t[self._gtsam.Symbol(key).index()] for key in values.keys()}
+        self._initial.insert(values)
+        graph = self._inside_window(self._graph, set(stamps) | set(self._isam.timestamps()))
+        if coast:  # (inside the first SETTLE_S the start stays held too)
+            self._hold = (0.0, max(SETTLE_S, t_s + self.lag_s)) if t_s <= SETTLE_S else (last_s, t_s + self.lag_s)
+        # after a coast, nothing leaves the window at the IMU prediction
+        self._isam.setSmootherLag(_NO_LAG if coast else self._lag_now(t_s))
+        self._isam.update(graph, values, stamps)
+        for _ in range(self.iterations - 1):
+            self._isam.update()
+        if coast:
+            self._resolve_window(self._lag_now(t_s))
+        self._initial.insert_or_assign(self._isam.calculateEstimate())
+
+    def _lag_now(self, t_s: float) -> float:
+        """The window at time ``t_s``: ``lag_s``; in the first :data:`SETTLE_S`, everything so far; and
+        until ``lag_s`` after the end of the last coast, from ``lag_s`` before its start: the coast's
+        states, fixed by a single measurement at its end, are marginalised only once the aiding after
+        it has relinearised them."""
+        start, until = self._hold
+        return self.lag_s if t_s > until else max(self.lag_s, t_s - start + self.lag_s)
+
+    def _inside_window(self, graph, keys: set):
+        """``graph``'s factors whose variables are all in ``keys`` (the window's and the new ones)."""
+        kept = self._gtsam.NonlinearFactorGraph()
+        for f in range(graph.size()):
+            factor = graph.at(f)
+            if all(k in keys for k in factor.keys()):
+                kept.add(factor)
+            else:
+                self.counts["factors_before_window"] += 1
+        return kept
+
+    def _resolve_window(self, lag_s: float) -> None:
+        """After a coast, as the whole-graph path does with the whole graph: Levenberg-Marquardt over
+        the smoother's factors (the window, its marginal prior, the coast just added), started from
+        iSAM2's step, and a new smoother started from that solution, so the states that now leave
+        the window (``lag_s``) are marginalised at the re-solved estimate, not at the IMU prediction."""
+        gtsam = self._gtsam
+        old = self._isam
+        window = gtsam.NonlinearFactorGraph()
+        factors = old.getFactors()
+        for f in range(factors.size()):
+            factor = factors.at(f)
+            if factor is not None:  # the slots of removed factors are empty
+                window.add(factor)
+        est = gtsam.LevenbergMarquardtOptimizer(window, old.calculateEstimate(), window_lm_params()).optimize()
+        self._isam = gtsam.IncrementalFixedLagSmoother(lag_s, fixed_lag_params())
+        self._isam.update(window, est, dict(old.timestamps()))
+
+    def window_size(self) -> int:
+        """Variables the causal solver holds now (the fixed-lag smoother's window, or the whole graph)."""
+        return len(self._isam.timestamps()) if self.windowed else self._isam.calculateEstimate().size()
 
     def smooth(self) -> FusionResult:
         """After the last sample: the batch Levenberg-Marquardt pass over the whole graph, started
-        from iSAM2's final estimate; the causal estimates beside the smoothed ones."""
+        from iSAM2's final estimate (with the fixed-lag smoother: each keyframe's last estimate in
+        its window); the causal estimates beside the smoothed ones. With ``smoothing = "window"``
+        no batch pass: the smoothed estimate is that last estimate (a fixed-lag smoother's output;
+        with ``lag_s = inf``, iSAM2's final one)."""
         if not self.done:
             raise InvalidInputError(f"smooth() after the last sample: {self.n} of {len(self.t_ns)} added")
         gtsam, X, V, B = self._gtsam, self._X, self._V, self._B
-        est = gtsam.LevenbergMarquardtOptimizer(self._full, self._isam.calculateEstimate(), lm_params()).optimize()
+        initial = self._initial if self.windowed else self._isam.calculateEstimate()
+        if self.smoothing == "batch":
+            full = self._full
+            est = deep_stack(lambda: gtsam.LevenbergMarquardtOptimizer(full, initial, lm_params()).optimize(),
+                             len(self._kf_list))
+        else:
+            est = initial
         K = len(self._kf_list)
         smoothed_p, smoothed_R = np.zeros((K, 3)), np.zeros((K, 3, 3))
         smoothed_v, smoothed_b = np.zeros((K, 3)), np.zeros((K, 6))
@@ -392,6 +600,8 @@ def fuse(
     resolve_after_s: float = 2.0,
     var: Optional[np.ndarray] = None,
     extra_factors: Optional[Callable] = None,
+    lag_s: float = DEFAULT_LAG_S,
+    smoothing: str = "batch",
 ) -> FusionResult:
     """Fuse IMU samples (N, 3) with ``aiding`` (:class:`PositionFixes`, :class:`RelativePoses`).
     ``start_pose`` = (R0 (3, 3), p0 (3,), v0 (3,)) of sample 0 (from ground truth: the prior);
@@ -399,14 +609,17 @@ def fuse(
     iSAM2 steps at each aiding epoch (1 + relinearising extra updates); ``resolve_after_s``: after a
     coast longer than this, the graph so far is re-solved in batch (see
     :class:`IncrementalFusion`); ``var`` (N, 6): per-sample noise variances instead of the
-    datasheet's white noise (:meth:`IncrementalFusion.add_sample`). The recording streamed
+    datasheet's white noise (:meth:`IncrementalFusion.add_sample`); ``lag_s``: the causal
+    estimate's fixed-lag window [s] (inf: iSAM2 over the whole graph); ``smoothing``: "batch" (LM over
+    the whole graph) or "window" (no batch pass, see :meth:`IncrementalFusion.smooth`). The recording streamed
     through :class:`IncrementalFusion` sample by sample, then smoothed."""
     t_ns = np.asarray(t_ns, dtype=np.int64)
     if len(t_ns) < 2 or gyro.shape != (len(t_ns), 3) or acc.shape != gyro.shape:
         raise InvalidInputError(f"fuse needs N >= 2 samples with gyro and acc (N, 3); got {gyro.shape}, {acc.shape}")
     t_start = time.perf_counter()
     inc = IncrementalFusion(t_ns, start_pose, aiding, noise, gravity, keyframe_hz, prior, bias0, iterations,
-                            predict_between=False, resolve_after_s=resolve_after_s, extra_factors=extra_factors)
+                            predict_between=False, resolve_after_s=resolve_after_s, extra_factors=extra_factors,
+                            lag_s=lag_s, smoothing=smoothing)
     if var is not None and np.shape(var) != (len(t_ns), 6):
         raise InvalidInputError(f"fuse: var must be (N, 6) = ({len(t_ns)}, 6), got {np.shape(var)}")
     for s in range(len(t_ns)):

@@ -6,7 +6,8 @@ Each raw sample goes through the whole per-sample path a navigation system would
    the sample through) refines it with the LSTM state carried from the previous sample;
 2. :meth:`IncrementalFusion.add_sample <imu_learn.fuse.graph.IncrementalFusion.add_sample>`
    advances the preintegration and, at a keyframe, adds the IMU and aiding factors and updates
-   iSAM2 where aiding arrived; it returns the causal state as of the sample's stamp.
+   the causal solver (the fixed-lag smoother of ``lag_s``, the config's) where aiding arrived; it
+   returns the causal state as of the sample's stamp.
 
 The wall time of that whole path (``time.perf_counter_ns`` around model step and fusion) is the
 per-sample latency; the real-time factor is the recording's duration over the loop's wall time (> 1:
@@ -33,7 +34,7 @@ import numpy as np
 
 from imu_learn.errors import ConfigError, InvalidInputError
 
-from .graph import FusionResult, IncrementalFusion, PriorSigmas
+from .graph import DEFAULT_LAG_S, FusionResult, IncrementalFusion, PriorSigmas
 from .noise import ImuNoise
 
 ONLINE_INPUTS = ("raw", "proposed")
@@ -171,6 +172,7 @@ def stream(
     bias0: Optional[np.ndarray] = None,
     iterations: int = 1,
     resolve_after_s: float = 2.0,
+    lag_s: float = DEFAULT_LAG_S,
 ) -> OnlineResult:
     """Stream raw samples ``gyro``, ``acc`` (N, 3) with stamps ``t_ns`` through ``model``'s causal
     step (None: raw) and :class:`IncrementalFusion`, timing each sample's whole path."""
@@ -185,7 +187,7 @@ def stream(
         stepper.warm_up()
     t0 = time.perf_counter()
     fusion = IncrementalFusion(t_ns, start_pose, aiding, noise, gravity, keyframe_hz, prior, bias0, iterations,
-                               resolve_after_s=resolve_after_s)
+                               resolve_after_s=resolve_after_s, lag_s=lag_s)
     setup_s = time.perf_counter() - t0
     lat = np.zeros(n, dtype=np.int64)
     is_kf = np.zeros(n, dtype=bool)
@@ -317,7 +319,7 @@ def _stream_recording(cfg, spec, scns: list, inputs: Sequence[str], models: Dict
             key = runmod.run_key(spec, scn, name, scn_seed)
             try:
                 res = stream(seq.t_ns, seq.gyro, seq.acc, (R0, seq.p[0], seq.v[0]), [aiding], model, noise,
-                             cfg.gravity, cfg.keyframe_hz, bias0=bias0)
+                             cfg.gravity, cfg.keyframe_hz, bias0=bias0, lag_s=cfg.lag_s)
             except RuntimeError as e:  # GTSAM's IndeterminateLinearSystemException and kin
                 runs[key] = {"recording": rname, "scenario": scn.name, "input": name,
                              "failed": " ".join(str(e).split())[:300]}

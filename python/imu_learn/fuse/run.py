@@ -14,6 +14,8 @@ from __future__ import annotations
 import functools
 import hashlib
 import json
+import os
+import sys
 import zlib
 from dataclasses import asdict
 from pathlib import Path
@@ -38,15 +40,23 @@ from .aiding import (
     simulate_position,
     simulate_relative_pose,
 )
-from .config import LEARNED_COV_INPUTS, FuseConfig, RecordingSpec, ScenarioSpec
+from .config import LEARNED_COV_INPUTS, LEARNED_INPUT, FuseConfig, RecordingSpec, ScenarioSpec
 from .displacement import FACTOR_INPUTS, displacement_factors_for
-from .graph import fuse
+from .graph import SETTLE_S, fuse
 from .noise import ImuNoise
 from .plots import plot_setting, runs_of
 from .score import score
 
 # Changes with the estimator in graph.py, so results of an older estimator are not resumed.
 ESTIMATOR = "isam2-gn-at-aiding-resolve-after-2s-qr+lm-qr"
+
+
+def estimator(cfg: FuseConfig) -> str:
+    """The estimator's name in the runs' hashes: the whole-graph one (lag inf) keeps its old name, so
+    its results are resumed; a fixed-lag window names its length."""
+    if not np.isfinite(cfg.lag_s):
+        return ESTIMATOR
+    return f"{ESTIMATOR}+fixed-lag-{cfg.lag_s:g}s-settle-{SETTLE_S:g}s-window-resolve-held"
 
 
 def file_digest(path: str) -> str:
@@ -79,6 +89,21 @@ def artefact_of(cfg: FuseConfig, spec: RecordingSpec, name: str) -> str:
     return str(Path(spec.methods_dir or cfg.methods_dir) / f"{safe_name(name)}.pt")
 
 
+def displacement_artefact(cfg: FuseConfig, spec: RecordingSpec) -> str:
+    """The tlio-style model the ``learned`` input adds displacement factors from ("" when there is none)."""
+    path = artefact_of(cfg, spec, FACTOR_INPUTS[0])
+    return path if Path(path).is_file() else ""
+
+
+def displacement_of(cfg: FuseConfig, spec: RecordingSpec, name: str, processors: Dict[Tuple[str, str], object]):
+    """The fitted displacement model an input adds factors from, or None."""
+    if name in FACTOR_INPUTS:
+        return processors.get((name, artefact_of(cfg, spec, name)))
+    if name == LEARNED_INPUT and displacement_artefact(cfg, spec):
+        return load_processor(FACTOR_INPUTS[0], displacement_artefact(cfg, spec), processors)
+    return None
+
+
 def seeds_of(cfg: FuseConfig, scn: ScenarioSpec) -> List[Optional[int]]:
     """The noise seeds a scenario runs with: every seed for simulated aiding, none for real."""
     return [None] if scn.kind == "leica" else list(cfg.seeds)
@@ -89,10 +114,13 @@ def run_hash(cfg: FuseConfig, spec: RecordingSpec, scn: ScenarioSpec, name: str,
     artefact = artefact_of(cfg, spec, name)
     recording = {k: v for k, v in asdict(spec).items()
                  if k not in ("checkpoint", "traditional", "methods_dir", "covariance_checkpoint")}
-    d = {"estimator": ESTIMATOR, "seed": seed, "gravity": cfg.gravity, "keyframe_hz": cfg.keyframe_hz,
+    d = {"estimator": estimator(cfg), "seed": seed, "gravity": cfg.gravity, "keyframe_hz": cfg.keyframe_hz,
          "noise": asdict(cfg.noise), "recording": recording, "scenario": asdict(scn), "input": name,
          "artefact": file_digest(artefact) if artefact else ""}
     if name in FACTOR_INPUTS:  # learned displacement factors: their update grid too
+        d["displacement_update_s"] = cfg.displacement_update_s
+    if name == LEARNED_INPUT:  # its displacement model, when the device has one
+        d["displacement"] = file_digest(displacement_artefact(cfg, spec))
         d["displacement_update_s"] = cfg.displacement_update_s
     return hashlib.sha256(json.dumps(d, sort_keys=True).encode()).hexdigest()[:16]
 
@@ -225,11 +253,17 @@ def bag_of(cfg: FuseConfig, spec: RecordingSpec) -> Optional[Path]:
 
 
 def run_experiment(cfg: FuseConfig, out: Path, log: Callable[[str], None] = print,
-                   only_inputs: Optional[List[str]] = None) -> Dict[str, dict]:
+                   only_inputs: Optional[List[str]] = None, jobs: int = 1) -> Dict[str, dict]:
+    """Every run of ``cfg`` not yet in ``<out>/results.json`` with the same settings; ``jobs`` > 1 fuses
+    that many runs at a time in worker processes (each single-threaded); this process alone writes
+    results.json, after each run, in the runs' fixed order, so ``--jobs`` changes no output but
+    the runs' ``seconds``."""
     # only_inputs: run only these of the config's inputs; the other inputs' results are left as they are
     run_inputs = [i for i in cfg.inputs if not only_inputs or i in only_inputs]
     if only_inputs and set(only_inputs) - set(cfg.inputs):
         raise ConfigError(f"--inputs: {sorted(set(only_inputs) - set(cfg.inputs))} not among the config's inputs {cfg.inputs}")
+    if int(jobs) < 1:
+        raise ConfigError(f"--jobs: must be >= 1, got {jobs}")
     out.mkdir(parents=True, exist_ok=True)
     res_path = out / "results.json"
     results = read_runs(res_path, log)
@@ -245,44 +279,136 @@ def run_experiment(cfg: FuseConfig, out: Path, log: Callable[[str], None] = prin
             if wanted.get(k) == r.get("hash") or (only_inputs and r.get("input") not in run_inputs)}
     if kept:
         log(f"imu_learn.fuse: {len(kept)} of {total} runs already in {res_path} with these settings")
-    results = kept
-    done = 0
-    for spec in cfg.recordings:
-        rname = Path(spec.path).name
-        seq, noise, leica = load_recording_for_fusion(cfg, spec)  # also for the plots of finished runs
-        pending = any(k.split("|")[0] == rname and k.split("|")[2] in run_inputs and k not in results for k in wanted)
-        inputs = ({name: imu_input(name, seq, artefact_of(cfg, spec, name), processors) for name in run_inputs}
-                  if pending else {})
-        R0 = Rotation.from_quat(wxyz_to_xyzw(seq.q_wxyz[0])).as_matrix()
-        for scn in cfg.scenarios:
-            label = None
-            for seed in seeds_of(cfg, scn):
-                aiding = make_aiding(scn, seq, leica, aiding_rng(seed, rname, scn))
-                if aiding is not None and seed == seeds_of(cfg, scn)[0] and (
-                        getattr(aiding, "dropped_outside", 0) or getattr(aiding, "dropped_unmatched", 0)):
-                    log(f"{rname}|{scn.name}: {aiding.label}: {aiding.dropped_outside} fixes outside the IMU segment "
-                        f"and {aiding.dropped_unmatched} without an IMU sample of their own left out")
-                for name in cfg.inputs:
-                    done += 1
-                    key = run_key(spec, scn, name, seed)
-                    if aiding is None or key in results or name not in run_inputs:
-                        continue
-                    gyro, acc, var = inputs[name]
-                    r = run_one(cfg, out, seq, noise, R0, scn, aiding, key, gyro, acc, var,
-                                displacement=processors.get((name, artefact_of(cfg, spec, name)))
-                                if name in FACTOR_INPUTS else None, bag=bag_of(cfg, spec))
-                    r = results[key] = r | {"seed": seed, "hash": wanted[key]}
-                    save_results(res_path, cfg, results)
-                    log(f"[{done}/{total}] {key}: " + (f"failed: {r['failed'][:120]}" if "failed" in r else
-                        f"position RMSE causal {r['causal']['pos_rmse_m']:.3f} m, smoothed "
-                        f"{r['smoothed']['pos_rmse_m']:.3f} m ({r['seconds']:.0f} s)"))
-                label = label or (aiding.label if aiding is not None else None)
-            if label is not None:  # drawn from the first seed's trajectories
-                stem = run_key(spec, scn, "{input}", seeds_of(cfg, scn)[0]).replace("|", "_")
-                plot_setting(out / "plots" / f"{rname}_{scn.name}.png", f"{rname}, {label}", seq.t_ns, seq.p,
-                             runs_of(out / "trajectories", stem, list(cfg.inputs)), scn.outage_windows())
-    atomic_write_text(out / "table.md", format_table(cfg, results))
-    return results
+    runs = RunQueue(int(jobs), res_path, cfg, kept, wanted, log)
+    plots: List[Callable[[], None]] = []
+    with runs:
+        for spec in cfg.recordings:
+            plots += _submit_recording(cfg, out, spec, run_inputs, processors, runs)
+    for plot in plots:  # after every run: they draw the trajectories on disk
+        plot()
+    atomic_write_text(out / "table.md", format_table(cfg, runs.results))
+    return runs.results
+
+
+def _submit_recording(cfg: FuseConfig, out: Path, spec: RecordingSpec, run_inputs: List[str],
+                      processors: Dict[Tuple[str, str], object], runs: RunQueue) -> List[Callable[[], None]]:
+    """Hand every missing run of one recording to ``runs``; returns its scenarios' plots, to draw once
+    the runs are done."""
+    rname = Path(spec.path).name
+    seq, noise, leica = load_recording_for_fusion(cfg, spec)  # also for the plots of finished runs
+    pending = any(k.split("|")[0] == rname and k.split("|")[2] in run_inputs and k not in runs.results
+                  for k in runs.wanted)
+    inputs = ({name: imu_input(name, seq, artefact_of(cfg, spec, name), processors) for name in run_inputs}
+              if pending else {})
+    R0 = Rotation.from_quat(wxyz_to_xyzw(seq.q_wxyz[0])).as_matrix()
+    plots: List[Callable[[], None]] = []
+    for scn in cfg.scenarios:
+        label = None
+        for seed in seeds_of(cfg, scn):
+            aiding = make_aiding(scn, seq, leica, aiding_rng(seed, rname, scn))
+            if aiding is not None and seed == seeds_of(cfg, scn)[0] and (
+                    getattr(aiding, "dropped_outside", 0) or getattr(aiding, "dropped_unmatched", 0)):
+                runs.log(f"{rname}|{scn.name}: {aiding.label}: {aiding.dropped_outside} fixes outside the IMU segment "
+                         f"and {aiding.dropped_unmatched} without an IMU sample of their own left out")
+            for name in cfg.inputs:
+                key = run_key(spec, scn, name, seed)
+                runs.count += 1
+                if aiding is None or key in runs.results or name not in run_inputs:
+                    continue
+                gyro, acc, var = inputs[name]
+                displacement = displacement_of(cfg, spec, name, processors)
+                runs.submit(key, seed, (cfg, out, seq, noise, R0, scn, aiding, key, gyro, acc, var),
+                            {"displacement": displacement, "bag": bag_of(cfg, spec)})
+            label = label or (aiding.label if aiding is not None else None)
+        if label is not None:  # drawn from the first seed's trajectories
+            stem = run_key(spec, scn, "{input}", seeds_of(cfg, scn)[0]).replace("|", "_")
+            plots.append(functools.partial(_plot, out, rname, scn, label, seq.t_ns, seq.p, stem, list(cfg.inputs)))
+    return plots
+
+
+def _plot(out: Path, rname: str, scn: ScenarioSpec, label: str, t_ns: np.ndarray, p: np.ndarray, stem: str,
+          inputs: List[str]) -> None:
+    plot_setting(out / "plots" / f"{rname}_{scn.name}.png", f"{rname}, {label}", t_ns, p,
+                 runs_of(out / "trajectories", stem, inputs), scn.outage_windows())
+
+
+# Thread pools of the numeric libraries a worker may load, held to one thread each (set before the
+# workers start: they read these at import).
+SINGLE_THREAD_ENV = ("OMP_NUM_THREADS", "MKL_NUM_THREADS", "OPENBLAS_NUM_THREADS", "RAYON_NUM_THREADS")
+
+
+def _single_threaded_worker() -> None:
+    """A worker's initialiser: torch (when a run brings a model) on one thread too."""
+    os.environ.update({k: "1" for k in SINGLE_THREAD_ENV})
+    if "torch" in sys.modules:
+        sys.modules["torch"].set_num_threads(1)
+
+
+class RunQueue:
+    """The runs of an experiment: fused here one after the other (``jobs`` 1), or ``jobs`` at a time in
+    worker processes (spawned, single-threaded). Either way this process records each result as
+    it ends and rewrites results.json (atomically, the runs in ``wanted``'s order), so an
+    interrupted experiment resumes from the runs that ended."""
+
+    def __init__(self, jobs: int, res_path: Path, cfg: FuseConfig, results: Dict[str, dict], wanted: Dict[str, str],
+                 log: Callable[[str], None]) -> None:
+        self.jobs, self.res_path, self.cfg, self.log = jobs, res_path, cfg, log
+        self.results, self.wanted = dict(results), wanted
+        self.count = 0  # runs looked at so far, for the progress lines
+        self._pool = None
+        self._futures: Dict[object, Tuple[str, Optional[int], int]] = {}
+        self._env: Dict[str, Optional[str]] = {}
+
+    def __enter__(self) -> RunQueue:
+        if self.jobs > 1:
+            import multiprocessing
+            from concurrent.futures import ProcessPoolExecutor
+
+            self._env = {k: os.environ.get(k) for k in SINGLE_THREAD_ENV}
+            os.environ.update({k: "1" for k in SINGLE_THREAD_ENV})
+            self._pool = ProcessPoolExecutor(self.jobs, mp_context=multiprocessing.get_context("spawn"),
+                                             initializer=_single_threaded_worker)
+        return self
+
+    def __exit__(self, exc_type, exc, tb) -> None:
+        if self._pool is None:
+            return
+        try:
+            if exc_type is None:
+                self._collect()
+        finally:
+            self._pool.shutdown(wait=True, cancel_futures=True)
+            # whatever ended is kept (an error in one run stops the rest), so a rerun resumes after it
+            for fut, (key, seed, n) in self._futures.items():
+                if fut.done() and not fut.cancelled() and fut.exception() is None and key not in self.results:
+                    self._record(key, seed, n, fut.result())
+            for k, v in self._env.items():
+                if v is None:
+                    os.environ.pop(k, None)
+                else:
+                    os.environ[k] = v
+
+    def submit(self, key: str, seed: Optional[int], args: tuple, kwargs: dict) -> None:
+        if self._pool is None:
+            self._record(key, seed, self.count, run_one(*args, **kwargs))
+        else:
+            self._futures[self._pool.submit(run_one, *args, **kwargs)] = (key, seed, self.count)
+
+    def _collect(self) -> None:
+        from concurrent.futures import as_completed
+
+        for fut in as_completed(self._futures):
+            key, seed, n = self._futures[fut]
+            self._record(key, seed, n, fut.result())
+
+    def _record(self, key: str, seed: Optional[int], n: int, r: dict) -> None:
+        r = self.results[key] = r | {"seed": seed, "hash": self.wanted[key]}
+        order = {k: i for i, k in enumerate(self.wanted)}
+        self.results = dict(sorted(self.results.items(), key=lambda kv: order.get(kv[0], len(order))))
+        save_results(self.res_path, self.cfg, self.results)
+        self.log(f"[{n}/{len(self.wanted)}] {key}: " + (f"failed: {r['failed'][:120]}" if "failed" in r else
+                 f"position RMSE causal {r['causal']['pos_rmse_m']:.3f} m, smoothed "
+                 f"{r['smoothed']['pos_rmse_m']:.3f} m ({r['seconds']:.0f} s)"))
 
 
 def read_runs(path: Path, log: Callable[[str], None]) -> Dict[str, dict]:
@@ -316,11 +442,13 @@ def run_one(cfg: FuseConfig, out: Path, seq, noise: ImuNoise, R0: np.ndarray, sc
     bias0 = bias_prior_mean(scn, seq, gyro, acc, cfg.gravity)
     if bias0 is not None:
         head["bias_prior"] = [round(float(b), 6) for b in bias0]
+    # The displacement network regresses from the raw samples it was trained on (tlio-style's input
+    # is the raw IMU; "learned" fuses refined samples beside it).
     hook = (None if displacement is None else
-            displacement_factors_for(displacement, seq.t_ns, gyro, acc, cfg.displacement_update_s))
+            displacement_factors_for(displacement, seq.t_ns, seq.gyro, seq.acc, cfg.displacement_update_s))
     try:
         res = fuse(seq.t_ns, gyro, acc, (R0, seq.p[0], seq.v[0]), [aiding], noise, cfg.gravity, cfg.keyframe_hz,
-                   bias0=bias0, var=var, extra_factors=hook)
+                   bias0=bias0, var=var, extra_factors=hook, lag_s=cfg.lag_s)
     except RuntimeError as e:  # GTSAM's IndeterminateLinearSystemException and kin
         return {**head, "failed": " ".join(str(e).split())[:300]}
     if hook is not None:
