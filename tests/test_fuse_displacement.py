@@ -2,6 +2,7 @@
 Jacobians, a closed-form trajectory, the causal orientation the network is fed, and the
 ``tlio-style`` fusion input in the experiment runner."""
 import json
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -179,3 +180,30 @@ def test_the_hook_on_a_real_model_feeds_windows_of_its_length(crop, tiny_tlio):
     res = fuse(t, gyro, acc, (R0, seq.p[0], seq.v[0]), [], extra_factors=hook)
     assert hook.count == 9 and all(abs((b - a) - m.window) <= 2 for a, b in hook.windows)
     assert np.isfinite(res.smoothed_p).all()
+
+
+def test_learned_input_is_refined_samples_with_learned_variances_plus_displacements(shipped, tiny_tlio, tmp_path):
+    """`learned`: the covariance checkpoint's refined samples and variances, plus the tlio-style factors
+    where <methods_dir>/tlio-style.pt exists (regressed from the raw samples); without that model, no
+    displacement factors and the same samples."""
+    from imu_learn.fuse.config import FuseConfig, RecordingSpec, ScenarioSpec, imu_methods, validate
+    from imu_learn.fuse.run import run_experiment
+
+    m, methods = tiny_tlio
+    assert "learned" in imu_methods()
+    crop = "euroc/MH_04_difficult"
+    rec = RecordingSpec(crop, "euroc", crop + "/mav0/state_groundtruth_estimate0/data.csv")
+    scn = ScenarioSpec("g", "position", 1.0, 0.1)
+    cov = str(Path(__file__).resolve().parent.parent / "models" / "euroc_adis16448_cov.pt")
+    cfg = validate(FuseConfig(name="t", data_root=str(shipped), inputs=["learned", "proposed+learned-cov"],
+                              recordings=[rec], methods_dir=str(methods), covariance_checkpoint=cov, scenarios=[scn]))
+    res = run_experiment(cfg, tmp_path / "with", lambda msg: None)
+    r, plain = res["MH_04_difficult|g|learned|s0"], res["MH_04_difficult|g|proposed+learned-cov|s0"]
+    assert r["displacement_factors"]["count"] > 0 and "displacement_factors" not in plain
+    assert r["noise"] == plain["noise"] == "learned per-sample variances"
+    assert r["smoothed"]["pos_rmse_m"] != plain["smoothed"]["pos_rmse_m"]  # the factors act
+    cfg.methods_dir = str(tmp_path / "none")  # a device without a displacement model
+    res = run_experiment(cfg, tmp_path / "without", lambda msg: None)
+    r = res["MH_04_difficult|g|learned|s0"]
+    assert "displacement_factors" not in r
+    assert r["smoothed"]["pos_rmse_m"] == pytest.approx(res["MH_04_difficult|g|proposed+learned-cov|s0"]["smoothed"]["pos_rmse_m"], abs=1e-12)

@@ -228,3 +228,18 @@ class MethodError(ImuError):
 
 class MissingExtraError(ImuError, ImportError):
     """A stage needs an optional dependency that is not installed; the message names the extra."""
+
+
+# navigation aiding (fuse)
+class AidingQuaternionError(ParseError):
+    """An aiding trajectory row's quaternion is far from unit length (``line`` names the row)."""
+
+
+class ExtrinsicsError(ParseError):
+    """A sensor-to-body extrinsic (``T_BS`` of a Kalibr/ASL ``sensor.yaml``) is missing or malformed;
+    ``path`` names the file, ``field`` the entry (``T_BS``, ``T_BS.data``) and ``line`` where known."""
+
+
+# GNSS/IMU (fuse)
+class SolutionQualityError(ParseError):
+    """An RTKLIB solution row has a quality flag Q outside 1-6 or an unusable standard deviation."""

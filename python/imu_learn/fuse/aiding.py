@@ -278,3 +278,33 @@ def bag_position_source(bag, topic: str, lever=(0.0, 0.0, 0.0)) -> Tuple[np.ndar
     t_ns, p = read_positions(bag, topic)
     lever_arm = np.asarray(lever, dtype=np.float64).reshape(3)
     return t_ns, p, lever_arm, f"{bag} topic {topic}"
+
+
+@dataclass(frozen=True)
+class AbsolutePoses:
+    """Body poses in the navigation frame at IMU samples ``idx``: rotations ``R`` (M, 3, 3) and
+    positions ``p`` (M, 3), e.g. a camera trajectory moved into the IMU frame and its world rotated
+    into the navigation frame (:mod:`imu_learn.fuse.navigate`); isotropic rotation [rad] and
+    translation [m] sigmas. Each becomes a prior factor on its keyframe's pose. ``i`` and ``j`` are
+    both ``idx`` (the keyframe rule reads every non-position aiding's samples from them).
+    :func:`apply_outages` does not take them: the navigator drops the rows inside its gaps first."""
+
+    idx: np.ndarray
+    R: np.ndarray
+    p: np.ndarray
+    sigma_rot_rad: float
+    sigma_trans_m: float
+    label: str
+    source: str = ""
+    dropped_outage: int = 0
+
+    @property
+    def i(self) -> np.ndarray:
+        return self.idx
+
+    @property
+    def j(self) -> np.ndarray:
+        return self.idx
+
+    def __len__(self) -> int:
+        return len(self.idx)

@@ -1,6 +1,7 @@
 """Dataset formats: one module per layout on disk, the only place that knows the layout.
 
-Each of :mod:`.asl` (EuRoC, TUM-VI), :mod:`.blackbird`, :mod:`.broad`, :mod:`.fetch`, :mod:`.kaist` and
+Each of :mod:`.asl` (EuRoC, TUM-VI), :mod:`.blackbird`, :mod:`.broad`, :mod:`.fetch`, :mod:`.gnss_imu`
+(an IMU CSV + RTKLIB time tag; no ground truth of its own), :mod:`.kaist` and
 :mod:`.rosbag` (ROS 1 / ROS 2 bags; its readers also take ``imu_topic`` / ``groundtruth_topic``) has
 
 - ``NAME`` and ``detect(path) -> bool``: whether ``path`` (a folder or a file) is in this layout;
@@ -25,7 +26,7 @@ import numpy as np
 from imu_learn.data.types import GroundTruth, ImuData
 from imu_learn.errors import InvalidInputError
 
-from . import asl, blackbird, broad, fetch, kaist, rosbag
+from . import asl, blackbird, broad, fetch, gnss_imu, kaist, rosbag
 from .source import ImuSource
 
 # The names ``format=`` / ``--format`` accept, each with its layout's module.
@@ -37,14 +38,16 @@ FORMATS: Dict[str, ModuleType] = {
     "broad": broad,
     "kaist": kaist,
     "fetch": fetch,
+    "gnss-imu": gnss_imu,
     "rosbag": rosbag,
 }
 
 # Asked in this order by detect_format; the first layout that claims a path wins. KAIST's
 # ``xsens_imu.csv`` is also a ``.csv``, which the ASL rule takes, so KAIST is asked before ASL.
 # A ROS 2 bag folder is asked first: nothing else holds a ``metadata.yaml``. Fetch (an ASL-like
-# ``mav0`` with its own header) is asked before ASL.
-DETECTION_ORDER: Tuple[ModuleType, ...] = (rosbag, broad, blackbird, kaist, fetch, asl)
+# ``mav0`` with its own header) is asked before ASL. A GNSS/IMU log (an IMU ``.csv`` with its RTKLIB
+# ``.csv.tag`` beside it) is asked before KAIST and ASL, which would claim a ``.csv``.
+DETECTION_ORDER: Tuple[ModuleType, ...] = (rosbag, broad, blackbird, gnss_imu, kaist, fetch, asl)
 
 __all__ = ["FORMATS", "ImuSource", "detect_format", "layout", "read_imu_source", "read_recording", "write_imu"]
 

@@ -1,0 +1,252 @@
+"""The navigator's first state from the data alone (no ground truth): attitude, heading, position,
+velocity and biases, each with where it came from; and how long the estimate takes to converge.
+
+* **Roll and pitch** are levelled from the accelerometer: at rest it measures the specific force
+  ``f_B = R_WB^T (0, 0, g)``, so ``roll = atan2(f_y, f_z)`` and ``pitch = atan2(-f_x, hypot(f_y,
+  f_z))`` (:func:`level`). The mean is taken over the **still start** when the recording has one
+  (:func:`still_start`: the run of 0.25 s blocks from the first sample whose gyro and accelerometer
+  spread stay below thresholds and whose mean stays where it started, at least ``min_still_s`` long), else over the first ``level_s``
+  seconds, where the vehicle's own accelerations tilt the estimate (``attitude_source`` says which).
+  A known accelerometer bias (checkpoint) is removed first.
+* **Heading** comes from pose aiding: the aiding's world frame A (for a camera trajectory, the first
+  camera's frame) is not gravity-aligned, so the rotation from A to the navigation frame W (z up) is
+  estimated from the levelled attitude and the aiding's first body orientation at the same time:
+  ``R_WA = R_WB0 R_AB0^T`` with ``R_WB0``'s yaw chosen so that ``R_WA`` has zero yaw
+  (:func:`world_from_aiding`): W is A levelled, the body's first heading is the aiding's.
+  Position-only aiding gives no heading until the track moves (see :mod:`imu_learn.fuse.navigate`).
+* **Position and velocity** from the first aiding poses (velocity: their finite difference over
+  the first ``velocity_s`` seconds, zero on a still start).
+* **Biases** from the checkpoint when it carries a device bias (``device_bias``: gyro and acc),
+  else zero (:func:`checkpoint_bias`).
+* **Convergence** (:func:`convergence`): the first time from which the causal estimate stays
+  within ``pos_m`` / ``rot_deg`` of the smoothed one (the best the data allows in hindsight): how
+  long the loose start takes to settle; no ground truth involved.
+"""
+from __future__ import annotations
+
+import logging
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Dict, Optional, Tuple, Union
+
+import numpy as np
+from scipy.spatial.transform import Rotation
+
+from imu_learn.errors import InvalidInputError
+
+log = logging.getLogger(__name__)
+
+BLOCK_S = 0.25
+# A block is still when every gyro axis varies less than this [rad/s] and every accelerometer axis
+# less than ACC_STILL [m/s^2] (standard deviation inside the block), and the accelerometer's mean
+# norm is within ACC_NORM_TOL of gravity. EuRoC's ADIS16448 at rest on the ground: gyro ~0.003
+# rad/s, acc ~0.02-0.03 m/s^2 per sample; rotors spinning or the vehicle carried exceed both.
+GYRO_STILL = 0.02
+ACC_STILL = 0.08
+ACC_NORM_TOL = 0.3
+ACC_MEAN_DRIFT = 0.1  # [m/s^2] a block's mean further than this from the first block's: moving
+
+
+@dataclass
+class InitialState:
+    """``R_WB`` (3, 3), ``p`` (3,), ``v`` (3,) of the first fused sample in the navigation frame W;
+    ``bias`` (6,) gyro then acc; ``R_WA`` (3, 3) the aiding world's rotation into W (identity for
+    aiding already in W); ``info``: where each came from (JSON-ready)."""
+
+    R_WB: np.ndarray
+    p: np.ndarray
+    v: np.ndarray
+    bias: np.ndarray
+    R_WA: np.ndarray = field(default_factory=lambda: np.eye(3))
+    info: Dict[str, object] = field(default_factory=dict)
+
+
+def still_start(t_ns: np.ndarray, gyro: np.ndarray, acc: np.ndarray, gravity: float = 9.81,
+                max_s: float = 20.0) -> float:
+    """Seconds of rest at the start of the recording (0.0 when the first block already moves):
+    consecutive :data:`BLOCK_S` blocks from the first sample that are still (module constants),
+    at most ``max_s``."""
+    t = (np.asarray(t_ns, dtype=np.int64) - int(t_ns[0])) * 1e-9
+    n_blocks = int(min(t[-1], max_s) // BLOCK_S)
+    still = 0.0
+    first = None
+    for b in range(n_blocks):
+        m = (t >= b * BLOCK_S) & (t < (b + 1) * BLOCK_S)
+        if m.sum() < 3:
+            break
+        g, a = gyro[m], acc[m]
+        mean = a.mean(axis=0)
+        first = mean if first is None else first
+        # a steady acceleration is as smooth as rest: the mean must also stay where it started
+        if (g.std(axis=0).max() > GYRO_STILL or a.std(axis=0).max() > ACC_STILL
+                or abs(np.linalg.norm(mean) - gravity) > ACC_NORM_TOL
+                or np.abs(mean - first).max() > ACC_MEAN_DRIFT):
+            break
+        still = (b + 1) * BLOCK_S
+    return still
+
+
+def level(f_B: np.ndarray) -> Tuple[float, float, np.ndarray]:
+    """(roll, pitch, R_WB with zero yaw) of a body at rest measuring the specific force ``f_B``."""
+    f = np.asarray(f_B, dtype=np.float64)
+    if not np.all(np.isfinite(f)) or np.linalg.norm(f) < 1e-6:
+        raise InvalidInputError(f"cannot level from the specific force {f.tolist()}")
+    roll = float(np.arctan2(f[1], f[2]))
+    pitch = float(np.arctan2(-f[0], np.hypot(f[1], f[2])))
+    R = Rotation.from_euler("ZYX", [0.0, pitch, roll]).as_matrix()
+    return roll, pitch, R
+
+
+def yaw_of(R: np.ndarray) -> float:
+    """The heading (ZYX yaw) of a rotation, radians."""
+    return float(np.arctan2(R[1, 0], R[0, 0]))
+
+
+def rot_z(yaw: float) -> np.ndarray:
+    c, s = np.cos(yaw), np.sin(yaw)
+    return np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
+
+
+def world_from_aiding(R_level: np.ndarray, R_AB0: np.ndarray) -> Tuple[np.ndarray, np.ndarray]:
+    """(R_WA, R_WB0): the aiding world A levelled into W with A's heading kept, and the body's first
+    attitude in W, from the levelled (zero-yaw) attitude ``R_level`` and the aiding's body
+    orientation ``R_AB0`` at the same time (module docstring)."""
+    R_WA0 = R_level @ R_AB0.T
+    turn = rot_z(-yaw_of(R_WA0))
+    return turn @ R_WA0, turn @ R_level
+
+
+def gravity_in_aiding(imu_t_ns: np.ndarray, acc: np.ndarray, t_ns: np.ndarray, p_A: np.ndarray, R_AB: np.ndarray,
+                      window_s: float = 3.0, acc_bias: Optional[np.ndarray] = None, edge_s: float = 0.1
+                      ) -> Tuple[np.ndarray, Dict[str, object]]:
+    """(up_A, info): the direction opposite gravity in the aiding's world A from the first
+    ``window_s`` seconds of body poses (``t_ns``, ``p_A``, ``R_AB``) and the accelerometer: the
+    specific force rotated into A and averaged, minus the aiding's own mean acceleration over the
+    window (its velocity change, velocities from the positions over ``edge_s`` at each end):
+    ``mean(R_AB f_B) - (v_end - v_start) / T = -g_A``. Works while moving, where levelling the
+    accelerometer alone is tilted by the vehicle's accelerations."""
+    t = (np.asarray(t_ns, dtype=np.int64) - int(t_ns[0])) * 1e-9
+    T = min(window_s, float(t[-1]))
+    if T < 4 * edge_s:
+        raise InvalidInputError(f"gravity from aiding: the aiding spans {t[-1]:.2f} s, at least {4 * edge_s:g} s needed")
+    ti = (np.asarray(imu_t_ns, dtype=np.int64) - int(t_ns[0])) * 1e-9
+    m = (ti >= 0) & (ti <= T)
+    from scipy.spatial.transform import Slerp
+
+    R_i = Slerp(t, Rotation.from_matrix(R_AB))(ti[m])
+    f = acc[m] - (np.zeros(3) if acc_bias is None else np.asarray(acc_bias))
+    mean_f_A = R_i.apply(f).mean(axis=0)
+
+    def velocity(at: float) -> np.ndarray:
+        a, b = np.searchsorted(t, at - edge_s), np.searchsorted(t, at + edge_s)
+        a, b = max(a, 0), min(b, len(t) - 1)
+        if b <= a:
+            b = min(a + 1, len(t) - 1)
+        return (p_A[b] - p_A[a]) / max(t[b] - t[a], 1e-3)
+
+    dv = (velocity(T - edge_s) - velocity(edge_s)) / max(T - 2 * edge_s, 1e-3)
+    up = mean_f_A - dv
+    g = float(np.linalg.norm(up))
+    info = {"attitude_source": f"gravity in the aiding's frame: accelerometer rotated by the aiding's attitude and "
+                               f"averaged over the first {T:.1f} s, minus the aiding's own mean acceleration "
+                               f"({np.linalg.norm(dv):.3f} m/s^2)", "gravity_norm_mps2": round(g, 4)}
+    return up / g, info
+
+
+def level_aiding(up_A: np.ndarray, R_AB0: np.ndarray) -> Tuple[np.ndarray, np.ndarray]:
+    """(R_WA, R_WB0): the rotation taking the aiding's world A to W (``up_A`` onto z, A's heading
+    kept: zero yaw) and the body's first attitude in W."""
+    R0 = Rotation.align_vectors([[0.0, 0.0, 1.0]], [np.asarray(up_A, dtype=np.float64)])[0].as_matrix()
+    R_WA = rot_z(-yaw_of(R0)) @ R0
+    return R_WA, R_WA @ R_AB0
+
+
+def checkpoint_bias(path: Union[str, Path, None]) -> Tuple[np.ndarray, str]:
+    """(bias (6,) gyro then acc, where it came from): the checkpoint's ``device_bias`` (top level or
+    under ``extra``: ``{"gyro": [3], "acc": [3]}``) when it carries one, else zeros."""
+    if path is None:
+        return np.zeros(6), "zero (no checkpoint)"
+    from imu_learn.train.checkpoint import load_checkpoint
+
+    state = load_checkpoint(Path(path))
+    dev = state.get("device_bias") or (state.get("extra") or {}).get("device_bias")
+    if isinstance(dev, dict) and "gyro" in dev and "acc" in dev:
+        b = np.r_[np.asarray(dev["gyro"], dtype=np.float64).reshape(3), np.asarray(dev["acc"], dtype=np.float64).reshape(3)]
+        if np.all(np.isfinite(b)):
+            return b, f"the checkpoint's device bias ({path})"
+    return np.zeros(6), f"zero (the checkpoint {Path(path).name} carries no device bias)"
+
+
+def attitude_from_accelerometer(t_ns: np.ndarray, gyro: np.ndarray, acc: np.ndarray, gravity: float = 9.81,
+                                acc_bias: Optional[np.ndarray] = None, level_s: float = 2.0,
+                                min_still_s: float = 1.0) -> Tuple[np.ndarray, Dict[str, object]]:
+    """(R_WB zero yaw, info): levelled from the mean specific force over the still start (at least
+    ``min_still_s`` long) or, without one, over the first ``level_s`` seconds (module docstring)."""
+    still = still_start(t_ns, gyro, acc, gravity)
+    t = (np.asarray(t_ns, dtype=np.int64) - int(t_ns[0])) * 1e-9
+    if still >= min_still_s:
+        m, source = t < still, f"still start ({still:.2f} s at rest, accelerometer averaged over it)"
+    else:
+        m, source = t < level_s, (f"no still start: accelerometer averaged over the first {level_s:g} s while moving "
+                                  "(its own accelerations tilt the estimate)")
+    f = acc[m].mean(axis=0) - (np.zeros(3) if acc_bias is None else np.asarray(acc_bias))
+    roll, pitch, R = level(f)
+    info = {"attitude_source": source, "still_s": round(still, 3), "roll_deg": round(float(np.rad2deg(roll)), 3),
+            "pitch_deg": round(float(np.rad2deg(pitch)), 3), "levelled_over_s": round(float(t[m][-1]), 3)}
+    return R, info
+
+
+def convergence(t_s: np.ndarray, causal_p: np.ndarray, causal_R: np.ndarray, smoothed_p: np.ndarray,
+                smoothed_R: np.ndarray, pos_m: float = 0.1, rot_deg: float = 1.0) -> Dict[str, object]:
+    """When the causal estimate settles: the first time (seconds from ``t_s[0]``) from which it
+    stays within ``pos_m`` and ``rot_deg`` of the smoothed estimate at every later keyframe (None
+    when it never does), for position and rotation separately and together."""
+    t = np.asarray(t_s, dtype=np.float64) - float(t_s[0])
+    dp = np.linalg.norm(causal_p - smoothed_p, axis=1)
+    dr = np.rad2deg(np.linalg.norm((Rotation.from_matrix(causal_R).inv()
+                                    * Rotation.from_matrix(smoothed_R)).as_rotvec(), axis=1))
+
+    def settled(bad: np.ndarray) -> Optional[float]:
+        if bad[-1]:
+            return None
+        last_bad = np.flatnonzero(bad)
+        return float(t[last_bad[-1] + 1]) if len(last_bad) else 0.0
+
+    return {"pos_tol_m": pos_m, "rot_tol_deg": rot_deg, "position_s": settled(dp > pos_m),
+            "rotation_s": settled(dr > rot_deg), "converged_s": settled((dp > pos_m) | (dr > rot_deg)),
+            "causal_minus_smoothed_pos_rms_m": float(np.sqrt(np.mean(dp ** 2))),
+            "causal_minus_smoothed_rot_rms_deg": float(np.sqrt(np.mean(dr ** 2)))}
+
+
+def track_start(t_ns: np.ndarray, gyro: np.ndarray, fix_idx: np.ndarray, fix_p: np.ndarray, R_level: np.ndarray,
+                level_end: int, gyro_bias: np.ndarray, min_speed_mps: float = 1.0
+                ) -> Tuple[int, int, np.ndarray, np.ndarray, Dict[str, object]]:
+    """Heading from a position track, as GNSS/INS filters set it (and
+    :func:`imu_learn.fuse.gnss_run.initial_state` for the car): the first fix after the levelling
+    window (IMU sample ``level_end``) whose horizontal speed (central difference of the fixes)
+    exceeds ``min_speed_mps``; the levelled attitude carried there by the gyro (minus ``gyro_bias``),
+    then turned about z so that the body x-axis points along the track (a vehicle moving along its
+    x-axis: a car, a walker's forward axis). Returns (start sample, fix number, R_WB, v, info)."""
+    fix_idx = np.asarray(fix_idx, dtype=np.int64)
+    tf = (t_ns[fix_idx] - int(t_ns[0])) * 1e-9
+    v = np.gradient(fix_p, tf, axis=0) if len(tf) >= 2 else np.zeros_like(fix_p)
+    speed = np.linalg.norm(v[:, :2], axis=1)
+    moving = (fix_idx >= level_end) & (speed > min_speed_mps)
+    if not moving.any():
+        raise InvalidInputError(f"position aiding: no fix faster than {min_speed_mps:g} m/s after the levelling window: "
+                                "the heading cannot be set from the track")
+    e = int(np.flatnonzero(moving)[0])
+    s0 = int(fix_idx[e])
+    R = Rotation.from_matrix(R_level)
+    dt = np.diff(t_ns[level_end:s0 + 1]) * 1e-9
+    if len(dt):
+        steps = Rotation.from_rotvec((gyro[level_end:s0] - np.asarray(gyro_bias)) * dt[:, None])
+        for step in steps:
+            R = R * step
+    Rm = R.as_matrix()
+    turn = float(np.arctan2(v[e, 1], v[e, 0]) - np.arctan2(Rm[1, 0], Rm[0, 0]))
+    R0 = rot_z(turn) @ Rm
+    info = {"heading_source": f"the track once moving: fix {e} at {tf[e]:.2f} s, {speed[e]:.2f} m/s (> "
+                              f"{min_speed_mps:g}); body x-axis along the velocity",
+            "start_after_first_sample_s": round(float(tf[e]), 3)}
+    return s0, e, R0, v[e].copy(), info

@@ -1,0 +1,637 @@
+"""Navigate a user's recording: IMU fused with real aiding, no ground truth at run time.
+
+``imu-learn fuse --input REC --aiding FILE --aiding-kind {position,pose,relative-pose}`` runs
+:func:`navigate`: it reads the recording's IMU only (the layouts of :mod:`imu_learn.data.formats`;
+ground truth is never opened), the aiding file (:mod:`.tum`), the extrinsic (:mod:`.extrinsics`),
+optionally refines the IMU with a checkpoint (:mod:`imu_learn.infer.refine`), builds the first state
+from the data (:mod:`.init`) and fuses with :func:`imu_learn.fuse.graph.fuse` under a loose prior.
+It writes ``causal.tum`` and ``smoothed.tum`` (``t tx ty tz qx qy qz qw``, seconds, body = IMU
+frame, at the graph's keyframes), ``plot.png`` and ``summary.json`` to the output folder.
+
+Frames. A camera trajectory (ORB-SLAM2 and the like) gives ``T_C0_Ck``: camera k in the first
+camera's frame C0. With the camera-to-body extrinsic ``T_BS`` the body pose in that aiding world
+A = C0 is ``T_A_Bk = T_C0_Ck T_BS^-1``, and the body motion between two frames
+``T_Bi_Bj = T_A_Bi^-1 T_A_Bj`` (the same as ``T_BS T_Ci_Cj T_BS^-1``).
+
+* ``relative-pose`` (recommended for visual odometry / SLAM): a ``BetweenFactorPose3`` between the
+  body poses of consecutive aiding rows. Relative motions do not depend on the aiding's world
+  frame, so its non-gravity-aligned first-camera frame needs no handling at all; roll and pitch
+  come from gravity through the IMU, heading and position are the prior's gauge (fixed by the
+  first pose). Rows further apart than ``max_relative_gap_s`` are not chained: a visual system
+  that lost track reports no motion across the gap, and the IMU alone carries it.
+* ``pose``: a prior factor on each aided body pose in the navigation frame W. A is rotated into W by
+  ``R_WA``, estimated once at the start from the levelled attitude (:func:`.init.world_from_aiding`):
+  its tilt error (the accelerometer bias over g, ~0.1-0.5 deg) then stays in every absolute pose
+  and pulls against gravity; the absolute poses' rotation sigma is loose for that reason
+  (``pose_sigma_rot_deg``). Estimating ``R_WA`` inside the graph would remove the error but is not
+  done here.
+* ``position``: position fixes in their own world frame, taken as gravity-aligned (z up): a
+  TUM/CSV/ASL file of positions (one sigma, ``position_sigma_m``), or an RTKLIB ``.pos`` file
+  (:mod:`imu_learn.fuse.rtklib`: local ENU at its first epoch, each fix with its own sigmas, float
+  solutions down-weighted). The extrinsic's translation, when given, is the antenna's lever arm.
+  Roll and pitch are levelled at the IMU's start; the heading comes from the track once moving
+  faster than 1 m/s (:func:`.init.track_start`: the body x-axis along the velocity, as GNSS/INS
+  filters for cars do), where fusion starts.
+
+Scoring (``groundtruth``, optional, read only after fusion and only for the report): ground truth
+interpolated at the estimate's stamps; absolute aiding that shares the ground truth's world
+(``position``): RMSE without alignment; relative and camera-frame aiding: after a rigid SE(3)
+(Umeyama, no scale) alignment, as ``evo_ape -a``. The visual-only trajectory (the aiding's own body
+positions) is scored the same way beside it.
+"""
+from __future__ import annotations
+
+import json
+import logging
+import time
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+from typing import Dict, Optional, Sequence, Tuple
+
+import numpy as np
+from scipy.spatial.transform import Rotation, Slerp
+
+from imu_learn.errors import AidingError, ConfigError, InvalidInputError
+from imu_learn.util.atomic import atomic_write_bytes, atomic_write_text
+
+from . import init as initial
+from .aiding import AbsolutePoses, PositionFixes, RelativePoses, snap_to_samples
+from .extrinsics import inverse, read_t_bs
+from .noise import ImuNoise
+from .tum import Trajectory, check_overlap, read_trajectory
+
+log = logging.getLogger(__name__)
+
+KINDS = ("position", "pose", "relative-pose")
+AIDING_FORMATS = ("tum", "csv", "asl", "rtklib")
+
+
+@dataclass(frozen=True)
+class NavigateOptions:
+    """How :func:`navigate` reads and weighs the aiding (defaults: a stereo visual SLAM at 20 Hz)."""
+
+    aiding_kind: str = "relative-pose"
+    aiding_format: str = "tum"
+    keyframe_hz: float = 10.0
+    gravity: float = 9.81
+    # relative-pose factors between consecutive rows. ORB-SLAM2 stereo on EuRoC, frame to frame (50 ms)
+    # against ground truth: median 3-5 mm and 0.04-0.08 deg (RMS 5-9 mm, 0.06-0.16 deg; docs/navigate.md).
+    # Its errors are correlated (drift, not white), so sigmas at the median fuse best (measured on
+    # MH_04 and V1_01 trial0: 0.003 m / 0.05 deg beat 0.005 / 0.1 and 0.01 / 0.1).
+    rel_sigma_rot_deg: float = 0.05
+    rel_sigma_trans_m: float = 0.003
+    max_relative_gap_s: float = 0.5
+    # absolute poses (in the aiding's world, rotated into W)
+    pose_sigma_rot_deg: float = 1.0
+    pose_sigma_m: float = 0.02
+    position_sigma_m: float = 0.05
+    # the first state's prior (loose: it comes from the data, not ground truth)
+    prior_rot_deg: float = 3.0
+    prior_pos_m: float = 0.1
+    prior_vel_mps: float = 0.5
+    level_s: float = 2.0
+    gaps: Tuple[Tuple[float, float], ...] = ()  # (start_s, duration_s) from the first IMU sample: aiding dropped
+    aiding_hz: Optional[float] = None  # thin the aiding to at most this rate (None: every row)
+    lag_s: Optional[float] = None  # the causal fixed-lag window (None: the graph's default)
+    # the IMU as mounted: roll, pitch, yaw [deg] of the body frame relative to the IMU frame
+    # (:func:`imu_learn.data.formats.gnss_imu.mounting_rotation`; body = M imu), and a logging delay
+    # [s] added to every IMU stamp (rtklibexplorer's imu_t_off: -0.125 s on its drive)
+    imu_rotation_rpy_deg: Optional[Tuple[float, float, float]] = None
+    imu_delay_s: float = 0.0
+    # position aiding: the antenna from the IMU, body frame [m] (instead of an extrinsic's translation)
+    lever_arm: Optional[Tuple[float, float, float]] = None
+    # the non-holonomic constraint of a wheeled vehicle (:mod:`.nhc`): no sideways / vertical body velocity
+    nhc: bool = False
+    nhc_sigma_lat_mps: float = 0.1
+    nhc_sigma_vert_mps: float = 0.1
+    # white noise / random walk of the IMU (gyro_nd, acc_nd, gyro_rw, acc_rw) instead of the built-in
+    imu_noise: Optional[Tuple[float, float, float, float]] = None
+
+    def check(self) -> None:
+        if self.aiding_kind not in KINDS:
+            raise ConfigError(f"--aiding-kind: one of {', '.join(KINDS)}, got {self.aiding_kind!r}")
+        if self.aiding_format not in AIDING_FORMATS:
+            raise ConfigError(f"--aiding-format: one of {', '.join(AIDING_FORMATS)}, got {self.aiding_format!r}")
+        for name in ("keyframe_hz", "rel_sigma_rot_deg", "rel_sigma_trans_m", "max_relative_gap_s",
+                     "pose_sigma_rot_deg", "pose_sigma_m", "position_sigma_m", "prior_rot_deg", "prior_pos_m",
+                     "prior_vel_mps", "level_s", "nhc_sigma_lat_mps", "nhc_sigma_vert_mps"):
+            v = getattr(self, name)
+            if not (np.isfinite(v) and v > 0):
+                raise ConfigError(f"{name}: must be a positive number, got {v!r}")
+        if self.aiding_hz is not None and not self.aiding_hz > 0:
+            raise ConfigError(f"--aiding-hz: must be > 0, got {self.aiding_hz!r}")
+        for start, dur in self.gaps:
+            if not (np.isfinite(start) and np.isfinite(dur) and dur > 0):
+                raise ConfigError(f"--gaps: each START:DURATION with DURATION > 0, got {start}:{dur}")
+        for name, n in (("imu_rotation_rpy_deg", 3), ("lever_arm", 3), ("imu_noise", 4)):
+            v = getattr(self, name)
+            if v is not None and (len(v) != n or not np.all(np.isfinite(np.asarray(v, dtype=np.float64)))):
+                raise ConfigError(f"--{name.replace('_', '-')}: {n} finite numbers, got {v!r}")
+        if self.imu_noise is not None and not all(x > 0 for x in self.imu_noise):
+            raise ConfigError(f"--imu-noise: each density must be > 0, got {self.imu_noise!r}")
+        if not np.isfinite(self.imu_delay_s):
+            raise ConfigError(f"--imu-delay-s: must be finite, got {self.imu_delay_s!r}")
+        if self.lever_arm is not None and self.aiding_kind != "position":
+            raise ConfigError("--lever-arm is the antenna's: only with --aiding-kind position")
+        if self.aiding_format == "rtklib" and self.aiding_kind != "position":
+            raise ConfigError("--aiding-format rtklib holds positions: use it with --aiding-kind position")
+
+
+def parse_vector(text: str, n: int, option: str) -> Tuple[float, ...]:
+    """``"180,-6.79,185.35"`` -> (180.0, -6.79, 185.35): exactly ``n`` comma-separated numbers."""
+    try:
+        v = tuple(float(x) for x in text.split(","))
+    except ValueError:
+        v = ()
+    if len(v) != n or not all(np.isfinite(v)):
+        raise ConfigError(f"{option}: expected {n} comma-separated finite numbers, got {text!r}")
+    return v
+
+
+def parse_gaps(text: str) -> Tuple[Tuple[float, float], ...]:
+    """``"30:10,60:10"`` -> ((30.0, 10.0), (60.0, 10.0)): START:DURATION seconds from the first IMU sample."""
+    out = []
+    for part in (p.strip() for p in text.split(",")):
+        if not part:
+            continue
+        a, sep, b = part.partition(":")
+        try:
+            if not sep:
+                raise ValueError
+            out.append((float(a), float(b)))
+        except ValueError:
+            raise ConfigError(f"--gaps: {part!r} is not START:DURATION (seconds)") from None
+    return tuple(out)
+
+
+# --------------------------------------------------------------------------------------------
+# Poses and their frames
+# --------------------------------------------------------------------------------------------
+
+
+def body_poses(traj: Trajectory, T_BS: Optional[np.ndarray]) -> Tuple[np.ndarray, np.ndarray]:
+    """(R_A_B (N, 3, 3), p_A_B (N, 3)): the aiding's sensor poses moved to the body (IMU) frame,
+    ``T_A_B = T_A_S T_BS^-1`` (module docstring); the poses unchanged without an extrinsic."""
+    R = Rotation.from_quat(traj.q_xyzw).as_matrix()
+    p = traj.p
+    if T_BS is None:
+        return R, p.copy()
+    T_SB = inverse(T_BS)
+    return R @ T_SB[:3, :3], p + R @ T_SB[:3, 3]
+
+
+def _in_windows(rel_s: np.ndarray, windows: Sequence[Tuple[float, float]]) -> np.ndarray:
+    inside = np.zeros(len(rel_s), dtype=bool)
+    for start, dur in windows:
+        inside |= (rel_s >= start) & (rel_s < start + dur)
+    return inside
+
+
+def thin(t_ns: np.ndarray, rate_hz: Optional[float]) -> np.ndarray:
+    """Mask keeping the first row of each 1/rate_hz bin (all rows when rate_hz is None)."""
+    if rate_hz is None:
+        return np.ones(len(t_ns), dtype=bool)
+    bins = (t_ns - t_ns[0]) // int(round(1e9 / rate_hz))
+    keep = np.zeros(len(t_ns), dtype=bool)
+    keep[np.unique(bins, return_index=True)[1]] = True
+    return keep
+
+
+@dataclass
+class AidingRows:
+    """The aiding rows the run uses: their IMU sample (index into the full IMU), stamp, and body
+    pose / position in the aiding's world A; ``dropped``: rows left out and why."""
+
+    sample: np.ndarray
+    t_ns: np.ndarray
+    imu_t_ns: np.ndarray  # the stamp of each row's IMU sample (where the graph puts it)
+    p: np.ndarray
+    R: Optional[np.ndarray]
+    dropped: Dict[str, int] = field(default_factory=dict)
+
+
+def select_rows(traj: Trajectory, imu_t_ns: np.ndarray, T_BS: Optional[np.ndarray], opts: NavigateOptions) -> AidingRows:
+    """The aiding rows tied to IMU samples (:func:`imu_learn.fuse.aiding.snap_to_samples`), thinned
+    and without the rows inside ``opts.gaps``."""
+    check_overlap(traj, imu_t_ns)
+    nearest, inside, close = snap_to_samples(imu_t_ns, traj.t_ns)
+    keep = inside & close
+    dropped = {"outside_imu": int((~inside).sum()), "no_imu_sample": int((inside & ~close).sum())}
+    # one row per IMU sample (the first)
+    seen = np.zeros(len(keep), dtype=bool)
+    _, first = np.unique(np.where(keep, nearest, -1), return_index=True)
+    seen[first] = True
+    shared = keep & ~seen
+    dropped["shared_sample"] = int(shared.sum())
+    keep &= seen
+    rel_s = (traj.t_ns - int(imu_t_ns[0])) * 1e-9
+    in_gap = keep & _in_windows(rel_s, opts.gaps)
+    dropped["in_gaps"] = int(in_gap.sum())
+    keep &= ~in_gap
+    idx = np.flatnonzero(keep)
+    th = thin(traj.t_ns[idx], opts.aiding_hz)
+    dropped["thinned"] = int((~th).sum())
+    idx = idx[th]
+    if len(idx) < 2:
+        raise AidingError(f"{traj.path}: {len(idx)} aiding row(s) left inside the IMU's span (dropped: "
+                          f"{', '.join(f'{v} {k}' for k, v in dropped.items() if v)}); at least 2 needed",
+                          traj.path, opts.aiding_kind)
+    if traj.q_xyzw is not None and opts.aiding_kind != "position":
+        R, p = body_poses(traj, T_BS)
+        R = R[idx]
+        p = p[idx]
+    else:
+        R, p = None, traj.p[idx].copy()
+    sample = nearest[idx].astype(np.int64)
+    return AidingRows(sample, traj.t_ns[idx], np.asarray(imu_t_ns, dtype=np.int64)[sample], p, R, dropped)
+
+
+# --------------------------------------------------------------------------------------------
+# The run
+# --------------------------------------------------------------------------------------------
+
+
+def read_imu(path: Path, fmt: str = "auto"):
+    """(t_ns, gyro, acc, noise, source file) of a recording: the IMU only (no ground truth is read)."""
+    from imu_learn.data import formats
+    from imu_learn.data.formats.asl import imu_sensor_yaml
+
+    src = formats.read_imu_source(Path(path), fmt)
+    if src.t_ns is None:
+        raise InvalidInputError(f"{path}: the recording has no IMU stamps of its own; navigation needs them")
+    yaml = imu_sensor_yaml(src.root) if src.fmt == "asl" else None
+    noise = ImuNoise.from_sensor_yaml(yaml) if yaml is not None else ImuNoise()
+    return np.asarray(src.t_ns, dtype=np.int64), np.asarray(src.gyro), np.asarray(src.acc), noise, str(src.imu_file)
+
+
+def read_aiding(path: Path, opts: NavigateOptions) -> Trajectory:
+    """The aiding file as a :class:`Trajectory` (poses, or positions for ``position``; RTKLIB: see
+    :func:`rtklib_rows`)."""
+    return read_trajectory(path, opts.aiding_format, need_orientation=opts.aiding_kind != "position")
+
+
+def rtklib_rows(path: Path, imu_t_ns: np.ndarray, lever: np.ndarray, opts: NavigateOptions):
+    """(GnssFixes on the IMU's samples with their own per-fix sigmas, AidingRows, the RtkSolution) of an RTKLIB
+    ``.pos`` file (:mod:`imu_learn.fuse.rtklib`: local ENU at the first epoch; fixed and float
+    solutions, float down-weighted), without the fixes inside ``opts.gaps``."""
+    from .rtklib import fixes_on_imu, read_pos
+
+    sol = read_pos(Path(path))
+    fixes = fixes_on_imu(sol, imu_t_ns, lever)
+    rel_s = (imu_t_ns[fixes.idx] - int(imu_t_ns[0])) * 1e-9
+    in_gap = _in_windows(rel_s, opts.gaps)
+    fixes = fixes.select(~in_gap, dropped_outage=int(in_gap.sum()))
+    if len(fixes) < 2:
+        raise AidingError(f"{path}: {len(fixes)} usable fix(es) inside the IMU's span", str(path), "position")
+    dropped = {"outside_imu": fixes.dropped_outside, "no_imu_sample": fixes.dropped_unmatched,
+               "in_gaps": int(in_gap.sum()), "quality_not_used": int(len(sol) - len(fixes) - int(in_gap.sum())
+                                                                     - fixes.dropped_outside - fixes.dropped_unmatched)}
+    t = np.asarray(imu_t_ns, dtype=np.int64)[fixes.idx]
+    return fixes, AidingRows(fixes.idx.astype(np.int64), t, t, fixes.p.copy(), None, dropped), sol
+
+
+def build_aiding(rows: AidingRows, s0: int, R_WA: np.ndarray, lever: np.ndarray, opts: NavigateOptions,
+                 label: str, source: str, gnss=None):
+    """The graph's aiding object for the rows, sample indices counted from ``s0`` (the first fused sample)."""
+    idx = rows.sample - s0
+    if opts.aiding_kind == "relative-pose":
+        gap = np.diff(rows.t_ns) * 1e-9
+        ok = gap <= opts.max_relative_gap_s
+        i, j = np.flatnonzero(ok), np.flatnonzero(ok) + 1
+        Ri, Rj = rows.R[i], rows.R[j]
+        R_ij = np.einsum("nki,nkj->nij", Ri, Rj)  # Ri^T Rj
+        t_ij = np.einsum("nki,nk->ni", Ri, rows.p[j] - rows.p[i])
+        a = RelativePoses(idx[i], idx[j], R_ij, t_ij, float(np.deg2rad(opts.rel_sigma_rot_deg)),
+                          float(opts.rel_sigma_trans_m),
+                          f"{label}: relative poses, sigma {opts.rel_sigma_rot_deg:g} deg / {opts.rel_sigma_trans_m:g} m")
+        return a, {"relative_poses": int(len(i)), "not_chained_over_gaps": int((~ok).sum())}
+    if opts.aiding_kind == "pose":
+        R = np.einsum("ij,njk->nik", R_WA, rows.R)
+        p = rows.p @ R_WA.T
+        a = AbsolutePoses(idx, R, p, float(np.deg2rad(opts.pose_sigma_rot_deg)), float(opts.pose_sigma_m),
+                          f"{label}: absolute poses, sigma {opts.pose_sigma_rot_deg:g} deg / {opts.pose_sigma_m:g} m",
+                          source)
+        return a, {"absolute_poses": int(len(idx))}
+    keep = idx >= 0  # fixes before the start (the track heading's first fast fix) are left out
+    if gnss is not None:
+        from dataclasses import replace
+
+        g = gnss.select(keep)
+        a = replace(g, idx=g.idx - s0)
+    else:
+        a = PositionFixes(idx[keep], (rows.p @ R_WA.T)[keep], float(opts.position_sigma_m),
+                          np.asarray(lever, dtype=np.float64), f"{label}: positions, sigma {opts.position_sigma_m:g} m",
+                          source)
+    return a, {"position_fixes": int(len(a)), "fixes_before_start": int((~keep).sum())}
+
+
+def start_state(t_ns, gyro, acc, rows: AidingRows, s0: int, bias0: np.ndarray, opts: NavigateOptions
+                ) -> initial.InitialState:
+    """The first fused sample's state from the data (:mod:`.init`)."""
+    R_level, info = initial.attitude_from_accelerometer(t_ns[s0:], gyro[s0:], acc[s0:], opts.gravity,
+                                                        acc_bias=bias0[3:], level_s=opts.level_s)
+    if rows.R is not None:
+        # gravity in the aiding's frame from the first seconds (the aiding's own acceleration removed):
+        # works while moving, where the accelerometer alone is tilted by the motion
+        up_A, g_info = initial.gravity_in_aiding(t_ns[s0:], acc[s0:] , rows.t_ns, rows.p, rows.R,
+                                                 window_s=max(opts.level_s, 3.0), acc_bias=bias0[3:])
+        R_WA, R_WB = initial.level_aiding(up_A, rows.R[0])
+        info["accelerometer_only"] = {k: info.pop(k) for k in ("attitude_source", "roll_deg", "pitch_deg",
+                                                               "levelled_over_s")}
+        tilt = np.degrees(np.arccos(np.clip((R_WB.T @ [0, 0, 1]) @ (R_level.T @ [0, 0, 1]), -1, 1)))
+        info.update(g_info)
+        info["accelerometer_only"]["tilt_difference_deg"] = round(float(tilt), 3)
+        info["heading_source"] = "the first aiding pose's yaw (moved into the IMU frame with the extrinsic)"
+    else:
+        R_WA, R_WB = np.eye(3), R_level
+        info["heading_source"] = ("none yet (position-only aiding): zero yaw under a loose prior; the fixes resolve it "
+                                  "once the track moves")
+    p_W = rows.p @ R_WA.T
+    t_rel = (rows.t_ns - rows.t_ns[0]) * 1e-9
+    if info["still_s"] >= 1.0:
+        v = np.zeros(3)
+        info["velocity_source"] = "zero (still start)"
+    else:
+        k = int(np.searchsorted(t_rel, 0.2))
+        k = min(max(k, 1), len(t_rel) - 1)
+        v = (p_W[k] - p_W[0]) / max(t_rel[k], 1e-3)
+        info["velocity_source"] = f"aiding finite difference over the first {t_rel[k]:.2f} s"
+    info["position_source"] = "the first aiding row"
+    info["R_WA_deg_from_identity"] = round(float(np.rad2deg(Rotation.from_matrix(R_WA).magnitude())), 3)
+    return initial.InitialState(R_WB, p_W[0], v, bias0, R_WA, info)
+
+
+def position_start(t_ns, gyro, acc, rows: AidingRows, lever: np.ndarray, bias0: np.ndarray, opts: NavigateOptions
+                   ) -> Tuple[int, initial.InitialState]:
+    """(first fused sample, first state) for position-only aiding: levelled at the IMU's start,
+    heading from the track once moving (:func:`.init.track_start`)."""
+    R_level, info = initial.attitude_from_accelerometer(t_ns, gyro, acc, opts.gravity, acc_bias=bias0[3:],
+                                                        level_s=opts.level_s)
+    still = info["still_s"] >= 1.0
+    level_end = int(np.searchsorted(t_ns, int(t_ns[0]) + int(round(info["levelled_over_s"] * 1e9))))
+    # the gyro's mean over a still start is its bias: used to carry the attitude to the start
+    gb = gyro[:level_end].mean(axis=0) if still else bias0[:3]
+    s0, e, R0, v0, h_info = initial.track_start(t_ns, gyro, rows.sample, rows.p, R_level, level_end, gb)
+    info.update(h_info)
+    info["velocity_source"] = "the track's central difference at the first fast fix"
+    info["position_source"] = "the first fast fix (minus the lever arm)"
+    return s0, initial.InitialState(R0, rows.p[e] - R0 @ lever, v0, bias0, np.eye(3), info)
+
+
+def navigate(input: Path, aiding_file: Path, out: Path, opts: NavigateOptions = NavigateOptions(),
+             fmt: str = "auto", extrinsics: Optional[Path] = None, checkpoint: Optional[Path] = None,
+             groundtruth: Optional[Path] = None) -> Dict[str, object]:
+    """Fuse the recording ``input``'s IMU with ``aiding_file`` and write ``out``/{causal.tum,
+    smoothed.tum, plot.png, summary.json}; returns the summary (module docstring)."""
+    from .graph import PriorSigmas, fuse
+
+    t_start = time.perf_counter()
+    opts.check()
+    if opts.aiding_kind != "position" and extrinsics is None:
+        log.warning("no --extrinsics: the aiding's poses are taken as body (IMU) poses")
+    T_BS = read_t_bs(extrinsics) if extrinsics is not None else None
+    if opts.lever_arm is not None and T_BS is not None:
+        raise ConfigError("--lever-arm and --extrinsics both give the antenna's lever arm: pass one")
+    t_ns, gyro, acc, noise, imu_file = read_imu(input, fmt)
+    mounting = None
+    if opts.imu_rotation_rpy_deg is not None:
+        from imu_learn.data.formats.gnss_imu import mounting_rotation
+
+        mounting = mounting_rotation(opts.imu_rotation_rpy_deg)
+        gyro, acc = np.ascontiguousarray(gyro @ mounting.T), np.ascontiguousarray(acc @ mounting.T)
+    if opts.imu_delay_s:
+        t_ns = t_ns + int(round(opts.imu_delay_s * 1e9))
+    if opts.imu_noise is not None:
+        noise = ImuNoise(*opts.imu_noise, source="--imu-noise")
+    lever = T_BS[:3, 3] if (T_BS is not None and opts.aiding_kind == "position") else np.zeros(3)
+    if opts.lever_arm is not None:
+        lever = np.asarray(opts.lever_arm, dtype=np.float64)
+    gnss = None
+    if opts.aiding_format == "rtklib":
+        from dataclasses import replace
+
+        from .rtklib import normal_gravity
+
+        gnss, rows, sol = rtklib_rows(aiding_file, t_ns, lever, opts)
+        rows_read = len(rows.sample) + sum(rows.dropped.values())
+        # geodetic fixes: the normal gravity at their origin (9.797 m/s^2 on the drive, not 9.81)
+        opts = replace(opts, gravity=round(normal_gravity(sol.origin_llh[0], sol.origin_llh[2]), 6))
+    else:
+        traj = read_aiding(aiding_file, opts)
+        rows = select_rows(traj, t_ns, T_BS, opts)
+        rows_read = len(traj)
+    bias0, bias_source = initial.checkpoint_bias(checkpoint)
+    imu_input = "raw"
+    if checkpoint is not None:
+        from imu_learn.infer.refine import refine_arrays
+        from imu_learn.train.checkpoint import load_model
+
+        gyro, acc = refine_arrays(load_model(Path(checkpoint)), gyro, acc)
+        imu_input = f"refined by {Path(checkpoint).name}"
+    if opts.aiding_kind == "position":
+        s0, st = position_start(t_ns, gyro, acc, rows, lever, bias0, opts)
+    else:
+        s0 = int(rows.sample[0])
+        st = start_state(t_ns, gyro, acc, rows, s0, bias0, opts)
+    aiding, counts = build_aiding(rows, s0, st.R_WA, lever, opts, Path(aiding_file).name, str(aiding_file), gnss)
+    if len(aiding) == 0:
+        raise AidingError(f"{aiding_file}: no aiding measurement left to fuse", str(aiding_file), opts.aiding_kind)
+    sel = slice(s0, None)
+    at_rest = st.info["still_s"] >= 1.0 and opts.aiding_kind != "position"  # position aiding starts moving
+    prior = PriorSigmas(rot_rad=float(np.deg2rad(opts.prior_rot_deg)), pos_m=opts.prior_pos_m,
+                        vel_mps=0.05 if at_rest else opts.prior_vel_mps)
+    kw = {} if opts.lag_s is None else {"lag_s": opts.lag_s}
+    if opts.nhc:
+        from .nhc import NhcSettings, nhc_callback
+
+        kw["extra_factors"] = nhc_callback(NhcSettings(opts.nhc_sigma_lat_mps, opts.nhc_sigma_vert_mps),
+                                           np.ascontiguousarray(gyro[sel]))
+    log.info(f"fusing {len(t_ns) - s0} IMU samples ({imu_input}) with {len(aiding)} {opts.aiding_kind} measurements "
+             f"of {aiding_file}")
+    try:
+        res = fuse(t_ns[sel], np.ascontiguousarray(gyro[sel]), np.ascontiguousarray(acc[sel]),
+                   (st.R_WB, st.p, st.v), [aiding], noise=noise, gravity=opts.gravity, keyframe_hz=opts.keyframe_hz,
+                   prior=prior, bias0=bias0, **kw)
+    except RuntimeError as e:  # GTSAM's IndeterminateLinearSystemException and kin
+        raise AidingError(f"{aiding_file}: the factor graph could not be solved: {' '.join(str(e).split())[:300]}",
+                          str(aiding_file), opts.aiding_kind) from None
+    t_fused = t_ns[sel]
+    kf_t = t_fused[res.kf_idx]
+    out = Path(out)
+    out.mkdir(parents=True, exist_ok=True)
+    from .run import write_trajectory
+
+    write_trajectory(out / "causal.tum", kf_t, res.causal_p, res.causal_R)
+    write_trajectory(out / "smoothed.tum", kf_t, res.smoothed_p, res.smoothed_R)
+    conv = initial.convergence(kf_t * 1e-9, res.causal_p, res.causal_R, res.smoothed_p, res.smoothed_R)
+    summary: Dict[str, object] = {
+        "input": str(input), "imu_file": imu_file, "imu_input": imu_input, "noise": noise.source,
+        "aiding": str(aiding_file), "aiding_kind": opts.aiding_kind, "aiding_format": opts.aiding_format,
+        "aiding_label": aiding.label, "extrinsics": None if extrinsics is None else str(extrinsics),
+        "checkpoint": None if checkpoint is None else str(checkpoint),
+        "aiding_rows_read": int(rows_read), "aiding_rows_used": int(len(rows.sample)), "aiding_dropped": rows.dropped,
+        **counts, "keyframes": int(len(res.kf_idx)),
+        "imu_samples_before_start": s0, "duration_s": round(float((t_fused[-1] - t_fused[0]) * 1e-9), 3),
+        "init": {**st.info, "bias0": [round(float(b), 6) for b in st.bias], "bias_source": bias_source,
+                 "prior": asdict(prior)},
+        "convergence": conv, "counts": res.counts, "seconds_fusion": round(res.seconds, 2),
+        "options": {k: (list(map(list, v)) if k == "gaps" else v) for k, v in asdict(opts).items()},
+        "imu_mounting": None if mounting is None else np.round(mounting, 6).tolist(),
+        "lever_arm_m": [round(float(x), 4) for x in lever],
+        "final_bias": [round(float(b), 6) for b in res.smoothed_bias[-1]],
+        "outputs": {"causal": str(out / "causal.tum"), "smoothed": str(out / "smoothed.tum")},
+    }
+    scores = None
+    if groundtruth is not None:
+        scores = score_against(groundtruth, opts, kf_t, res, rows, st.R_WA, int(t_ns[0]))
+        summary["groundtruth"] = str(groundtruth)
+        summary["scores"] = scores
+    if plot(out / "plot.png", f"{Path(input).name}: {aiding.label}", kf_t, res, rows, st.R_WA, scores, opts.gaps,
+            int(t_ns[0])):
+        summary["outputs"]["plot"] = str(out / "plot.png")
+    summary["seconds"] = round(time.perf_counter() - t_start, 2)
+    atomic_write_text(out / "summary.json", json.dumps(summary, indent=1))
+    return summary
+
+
+def one_line(summary: Dict[str, object]) -> str:
+    """The line the CLI prints for a run."""
+    s = summary
+    conv = s["convergence"]["converged_s"]
+    text = (f"{Path(str(s['input'])).name}: {s['keyframes']} keyframes over {s['duration_s']:.1f} s, "
+            f"{s['aiding_rows_used']} {s['aiding_kind']} rows ({s['imu_input']} IMU); "
+            f"causal within {s['convergence']['pos_tol_m']:g} m / {s['convergence']['rot_tol_deg']:g} deg of smoothed "
+            + (f"from {conv:.1f} s" if conv is not None else "not by the end"))
+    sc = s.get("scores")
+    if sc:
+        kind = "aligned" if sc["aligned"] else "unaligned"
+        text += (f"; {kind} position RMSE causal {sc['causal']['pos_rmse_m']:.3f} m, smoothed "
+                 f"{sc['smoothed']['pos_rmse_m']:.3f} m")
+        if sc.get("aiding_only"):
+            text += f", aiding alone {sc['aiding_only']['pos_rmse_m']:.3f} m"
+    return text + f" -> {Path(str(s['outputs']['smoothed'])).parent} ({s['seconds']:.0f} s)"
+
+
+# --------------------------------------------------------------------------------------------
+# Scoring against ground truth (optional; read after fusion, for the report only)
+# --------------------------------------------------------------------------------------------
+
+
+def umeyama(src: np.ndarray, dst: np.ndarray) -> Tuple[np.ndarray, np.ndarray]:
+    """(R, t) minimising sum |dst - (R src + t)|^2 (rigid, no scale), as evo_ape -a."""
+    mu_s, mu_d = src.mean(axis=0), dst.mean(axis=0)
+    cov = (dst - mu_d).T @ (src - mu_s) / len(src)
+    U, _, Vt = np.linalg.svd(cov)
+    S = np.eye(3)
+    if np.linalg.det(U) * np.linalg.det(Vt) < 0:
+        S[2, 2] = -1.0
+    R = U @ S @ Vt
+    return R, mu_d - R @ mu_s
+
+
+def interpolate_groundtruth(gt, t_ns: np.ndarray):
+    """Ground truth at ``t_ns`` inside its span: (mask of stamps inside, p (M, 3), R (M, 3, 3))."""
+    g_t = np.asarray(gt.t_ns, dtype=np.int64)
+    inside = (t_ns >= g_t[0]) & (t_ns <= g_t[-1])
+    t = t_ns[inside]
+    x = (t - g_t[0]).astype(np.float64)
+    xp = (g_t - g_t[0]).astype(np.float64)
+    p = np.stack([np.interp(x, xp, gt.p[:, k]) for k in range(3)], axis=1)
+    q = np.asarray(gt.q_wxyz)[:, [1, 2, 3, 0]]
+    R = Slerp(xp, Rotation.from_quat(q))(x).as_matrix()
+    return inside, p, R
+
+
+def _errors(p_est, R_est, p_gt, R_gt, align: bool, R_al=None, t_al=None):
+    if align and R_al is None:
+        R_al, t_al = umeyama(p_est, p_gt)
+    if not align:
+        R_al, t_al = np.eye(3), np.zeros(3)
+    p = p_est @ R_al.T + t_al
+    e = np.linalg.norm(p - p_gt, axis=1)
+    out = {"pos_rmse_m": float(np.sqrt(np.mean(e ** 2))), "pos_max_m": float(e.max()), "n": int(len(e))}
+    if R_est is not None:
+        dR = Rotation.from_matrix(np.einsum("nki,nkj->nij", R_gt, np.einsum("ij,njk->nik", R_al, R_est)))
+        out["rot_rmse_deg"] = float(np.rad2deg(np.sqrt(np.mean(dR.magnitude() ** 2))))
+    return out, e, R_al, t_al
+
+
+def score_against(groundtruth: Path, opts: NavigateOptions, kf_t: np.ndarray, res, rows: AidingRows,
+                  R_WA: np.ndarray, t0_ns: int) -> Dict[str, object]:
+    """Position (and rotation) RMSE of the causal and smoothed trajectories, and of the aiding alone,
+    against ``groundtruth`` (module docstring: aligned or not), plus the error inside each gap
+    (``opts.gaps``: seconds from ``t0_ns``, the first IMU sample)."""
+    from imu_learn.data.formats.groundtruth import read_groundtruth
+
+    gt = read_groundtruth(Path(groundtruth))
+    align = opts.aiding_kind != "position"
+    inside, p_gt, R_gt = interpolate_groundtruth(gt, kf_t)
+    if inside.sum() < 3:
+        raise AidingError(f"{groundtruth}: fewer than 3 keyframes inside the ground truth's time span", str(groundtruth))
+    out: Dict[str, object] = {"aligned": align, "alignment": "SE(3) Umeyama, no scale (evo_ape -a)" if align else "none"}
+    rel_s = (kf_t[inside] - t0_ns) * 1e-9
+    in_gap = _in_windows(rel_s, opts.gaps)
+    for kind, p, R in (("causal", res.causal_p, res.causal_R), ("smoothed", res.smoothed_p, res.smoothed_R)):
+        s, e, _, _ = _errors(p[inside], R[inside], p_gt, R_gt, align)
+        if opts.gaps:
+            s["gaps"] = [{"start_s": a, "duration_s": d,
+                          "rmse_m": float(np.sqrt(np.mean(e[m] ** 2))) if (m := _in_windows(rel_s, [(a, d)])).any()
+                          else None, "max_m": float(e[m].max()) if m.any() else None} for a, d in opts.gaps]
+            s["outside_gaps_rmse_m"] = float(np.sqrt(np.mean(e[~in_gap] ** 2))) if (~in_gap).any() else None
+        out[kind] = s
+    # the aiding alone (its body positions, in W) at its own stamps, aligned the same way
+    a_in, a_p_gt, a_R_gt = interpolate_groundtruth(gt, rows.t_ns)
+    if a_in.sum() >= 3:
+        p_a = (rows.p @ R_WA.T)[a_in]
+        R_a = None if rows.R is None else np.einsum("ij,njk->nik", R_WA, rows.R)[a_in]
+        out["aiding_only"], _, _, _ = _errors(p_a, R_a, a_p_gt, a_R_gt, align)
+        # the fused trajectories at the same stamps (the aiding's samples are keyframes)
+        pos = {int(t): k for k, t in enumerate(kf_t)}
+        ks = np.array([pos[int(t)] for t in rows.imu_t_ns[a_in] if int(t) in pos])
+        if len(ks) >= 3:
+            for kind, p, R in (("causal", res.causal_p, res.causal_R), ("smoothed", res.smoothed_p, res.smoothed_R)):
+                gi, gp, gR = interpolate_groundtruth(gt, kf_t[ks])
+                out[f"{kind}_at_aiding_stamps"], _, _, _ = _errors(p[ks][gi], R[ks][gi], gp, gR, align)
+    return out
+
+
+# --------------------------------------------------------------------------------------------
+# The plot
+# --------------------------------------------------------------------------------------------
+
+
+def plot(out_png: Path, title: str, kf_t: np.ndarray, res, rows: AidingRows, R_WA: np.ndarray,
+         scores: Optional[dict], gaps: Sequence[Tuple[float, float]], t0_ns: int) -> bool:
+    """Top view of the causal and smoothed trajectories and the aiding, and the causal estimate's
+    distance from the smoothed one over time (gaps shaded). False (nothing written) without matplotlib."""
+    try:
+        import matplotlib
+    except ImportError:
+        return False
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, (top, err) = plt.subplots(1, 2, figsize=(13, 5))
+    pa = rows.p @ R_WA.T
+    top.plot(pa[:, 0], pa[:, 1], ".", ms=1.5, color="grey", label="aiding (body)")
+    top.plot(res.causal_p[:, 0], res.causal_p[:, 1], "-", lw=1, label="causal")
+    top.plot(res.smoothed_p[:, 0], res.smoothed_p[:, 1], "--", lw=1, label="smoothed")
+    top.set(xlabel="x [m]", ylabel="y [m]", title="top view (navigation frame, z up)")
+    top.axis("equal")
+    top.legend(fontsize=7)
+    t = (kf_t - t0_ns) * 1e-9
+    err.plot(t, np.linalg.norm(res.causal_p - res.smoothed_p, axis=1), lw=1, label="|causal - smoothed| [m]")
+    for start, dur in gaps:
+        err.axvspan(start, start + dur, color="grey", alpha=0.2, lw=0)
+    sub = ""
+    if scores:
+        sub = (f"\n{'aligned' if scores['aligned'] else 'unaligned'} position RMSE against ground truth: causal "
+               f"{scores['causal']['pos_rmse_m']:.3f} m, smoothed {scores['smoothed']['pos_rmse_m']:.3f} m")
+    err.set(xlabel="time from the first IMU sample [s]", ylabel="[m]", yscale="log")
+    err.set_title("causal estimate against the smoothed one" + sub, fontsize=9)
+    err.legend(fontsize=7)
+    fig.suptitle(title, fontsize=9)
+    fig.tight_layout()
+    atomic_write_bytes(out_png, lambda f: fig.savefig(f, format="png", dpi=90))
+    plt.close(fig)
+    return True

@@ -1,0 +1,214 @@
+"""``imu-learn fuse --input`` on GNSS/IMU logs (the ``gnss-imu`` IMU format: CSV + RTKLIB ``.tag``;
+RTKLIB ``.pos`` position aiding), with the mounting rotation, logging delay, lever arm and the
+non-holonomic constraint: a synthetic car written in those formats (tiny writers below), and the
+first minute of the real drive when the data is on this machine. No ground truth at run time: the
+synthetic truth is only compared afterwards."""
+from __future__ import annotations
+
+import json
+import math
+import os
+import struct
+from pathlib import Path
+
+import numpy as np
+import pytest
+from scipy.spatial.transform import Rotation
+
+from imu_learn.cli import main
+from imu_learn.data import formats
+from imu_learn.data.formats import gnss_imu
+from imu_learn.fuse import rtklib
+
+G_UNIT = 9.80665
+START_S = 1752003261  # the tag's start [s, GPST since 1970]
+LAT0, LON0, H0 = 40.0, -105.0, 1600.0
+RPY = (180.0, 0.0, 90.0)  # mounting: roll, pitch, yaw of the body frame relative to the IMU frame
+DELAY_S = 0.1  # the IMU's stamps are this late: --imu-delay-s -0.1
+LEVER = np.array([0.3, -0.2, 0.5])  # the antenna from the IMU, body frame [m]
+POS_HEADER = ("%  GPST                  latitude(deg) longitude(deg)  height(m)   Q  ns   sdn(m)   sde(m)   sdu(m)  "
+              "sdne(m)  sdeu(m)  sdun(m) age(s)  ratio    vn(m/s)    ve(m/s)    vu(m/s)")
+
+
+# --- tiny writers ----------------------------------------------------------------------------------
+
+def write_tag(path: Path, start_s: int, frac: float, end_ms: int) -> None:
+    head = b"TIMETAG RTKLIB demo5".ljust(60, b"\0") + struct.pack("<IId", 0, start_s, frac)
+    path.write_bytes(head + struct.pack("<II", end_ms // 2, 0) + struct.pack("<II", end_ms, 100))
+
+
+def write_imu_csv(path: Path, acc_g: np.ndarray, gyro_dps: np.ndarray, counter_ms: np.ndarray) -> None:
+    rows = "".join(f"{a[0]:.7f},{a[1]:.7f},{a[2]:.7f},{w[0]:.6f},{w[1]:.6f},{w[2]:.6f},{int(c)}\n"
+                   for a, w, c in zip(acc_g, gyro_dps, counter_ms))
+    path.write_text("0.11,-0.2\n" + rows + "0.0,0.01")  # a cut first line and a cut last line, as logged
+
+
+def write_pos(path: Path, t_s: np.ndarray, enu: np.ndarray, vel: np.ndarray, q: np.ndarray) -> None:
+    x0 = rtklib.llh_to_ecef(LAT0, LON0, H0)
+    Rn = rtklib.ecef_to_enu_rotation(LAT0, LON0)
+    lines = []
+    for tk, p, v, qk in zip(t_s, enu, vel, q):
+        lat, lon, h = rtklib.ecef_to_llh(x0 + Rn.T @ p)
+        whole = int(math.floor(tk))
+        ms = int(round((tk - whole) * 1000))
+        stamp = np.datetime_as_string(np.datetime64(whole, "s")).replace("-", "/").replace("T", " ") + f".{ms:03d}"
+        sd = 0.01 if qk == 1 else 0.1
+        lines.append(f"{stamp} {lat:.9f} {lon:.9f} {h:.4f} {qk} 20 {sd:.4f} {sd:.4f} {sd:.4f} 0.0 0.0 0.0 0.0 0.0 "
+                     f"{v[1]:.4f} {v[0]:.4f} {v[2]:.4f}")
+    path.write_text("% program   : RTKPOST\n" + POS_HEADER + "\n" + "\n".join(lines) + "\n")
+
+
+def synthetic_car(folder: Path, seconds: float = 24.0):
+    """A level car (body x forward, z up, ENU): still 4 s, 1 m/s^2 for 4 s, a 1 rad left turn at
+    4 m/s from 10 s to 15 s, straight on; never sideways (the NHC holds). IMU at 100 Hz mounted with
+    ``RPY``, stamps ``DELAY_S`` late; fixes at 4 Hz of the antenna (``LEVER``), Q = 1 except a float
+    stretch. Returns (imu csv, pos file, truth: t [s since START_S], IMU positions (N, 3))."""
+    fs, sub = 100, 10
+    tt = np.arange(int(seconds * fs * sub)) / (fs * sub)  # a fine grid for the truth
+    acc_t = np.where((tt >= 4) & (tt < 8), 1.0, 0.0)
+    speed = np.clip(tt - 4.0, 0.0, 4.0)
+    rate = np.where((tt >= 10) & (tt < 15), 0.2, 0.0)
+    psi = np.radians(30.0) + np.concatenate([[0.0], np.cumsum((rate[1:] + rate[:-1]) / 2) / (fs * sub)])
+    vel = np.stack([speed * np.cos(psi), speed * np.sin(psi), np.zeros_like(tt)], axis=1)
+    pos = np.concatenate([np.zeros((1, 3)), np.cumsum((vel[1:] + vel[:-1]) / 2, axis=0) / (fs * sub)])
+    g = rtklib.normal_gravity(LAT0, H0)
+    f_body = np.stack([acc_t, speed * rate, np.full_like(tt, g)], axis=1)  # tangential, centripetal, up
+    w_body = np.stack([np.zeros_like(tt), np.zeros_like(tt), rate], axis=1)
+    i = np.arange(0, len(tt), sub)
+    M = gnss_imu.mounting_rotation(RPY)  # body = M imu
+    imu = folder / "imu_0001.csv"
+    n = len(i)
+    write_imu_csv(imu, f_body[i] @ M / G_UNIT, np.degrees(w_body[i] @ M), 5000 + 10 * np.arange(n))
+    write_tag(imu.with_name(imu.name + ".tag"), START_S, DELAY_S, 10 * (n - 1))
+    k = np.arange(0, len(tt) - sub, 250)  # 4 Hz
+    R = Rotation.from_euler("z", psi[k][:, None]).as_matrix()
+    ant = pos[k] + R @ LEVER
+    q = np.where((tt[k] > 18) & (tt[k] < 20), 2, 1)
+    pos_file = folder / "gnss_0001.pos"
+    write_pos(pos_file, START_S + tt[k] + 0.002, ant, vel[k], q)
+    return imu, pos_file, (tt[i], pos[i])
+
+
+def run(argv, capsys):
+    rc = main(["fuse", *map(str, argv)])
+    cap = capsys.readouterr()
+    return rc, cap.out, cap.err
+
+
+def read_tum(path: Path) -> np.ndarray:
+    return np.loadtxt(path, ndmin=2)
+
+
+# --- the format ------------------------------------------------------------------------------------
+
+def test_gnss_imu_is_an_imu_format_detected_by_its_tag(tmp_path):
+    imu, _pos, (t, _p) = synthetic_car(tmp_path)
+    assert formats.detect_format(imu) == "gnss-imu"
+    assert formats.FORMATS["gnss-imu"] is gnss_imu
+    assert gnss_imu.find_recordings(tmp_path) == [imu]
+    src = formats.read_imu_source(imu, "gnss-imu")
+    assert src.fmt == "gnss-imu" and len(src.t_ns) == len(t)  # the cut first and last lines left out
+    assert src.t_ns[0] == (START_S + DELAY_S) * 10**9
+    # SI units, in the IMU frame: gravity along the IMU's -z for roll 180 (body z up = IMU -z)
+    assert np.linalg.norm(src.acc[0]) == pytest.approx(rtklib.normal_gravity(LAT0, H0), abs=1e-4)
+    assert src.acc[0, 2] < -9.7
+    # written back in its own layout: units, counter, cut lines and the tag kept
+    out = tmp_path / "out" / "refined.csv"
+    out.parent.mkdir()
+    formats.write_imu(src, out, src.gyro * 2, src.acc)
+    back = formats.read_imu_source(out)
+    np.testing.assert_array_equal(back.t_ns, src.t_ns)
+    np.testing.assert_allclose(back.gyro, src.gyro * 2, atol=1e-7)
+    np.testing.assert_allclose(back.acc, src.acc, atol=1e-6)
+    assert out.read_text().splitlines()[0] == "0.11,-0.2"
+    # a lone CSV (no tag beside it) is not claimed
+    lone = tmp_path / "lone.csv"
+    lone.write_text(imu.read_text())
+    assert not gnss_imu.detect(lone)
+
+
+# --- the synthetic car through imu-learn fuse --input ----------------------------------------------
+
+def test_synthetic_car_navigated_with_mounting_delay_lever_and_nhc(tmp_path, capsys):
+    imu, pos, (t_true, p_true) = synthetic_car(tmp_path)
+    base = ["--input", imu, "--format", "gnss-imu", "--aiding", pos, "--aiding-kind", "position",
+            "--aiding-format", "rtklib", "--imu-rotation-rpy-deg", ",".join(map(str, RPY)),
+            "--imu-delay-s", -DELAY_S, "--lever-arm", ",".join(map(str, LEVER)),
+            "--imu-noise", "1e-4,1e-3,1e-5,1e-4", "--keyframe-hz", 4]
+    rc, out, err = run(base + ["--nhc", "--out", tmp_path / "nav"], capsys)
+    assert rc == 0, err
+    assert "imu_0001.csv" in out and "position rows" in out
+    s = json.loads((tmp_path / "nav" / "summary.json").read_text())
+    assert s["counts"]["extra_factors"] > 0  # the NHC factors
+    assert s["lever_arm_m"] == pytest.approx(LEVER.tolist())
+    assert s["options"]["gravity"] == pytest.approx(rtklib.normal_gravity(LAT0, H0), abs=1e-5)
+    for name in ("causal.tum", "smoothed.tum", "plot.png", "summary.json"):
+        assert (tmp_path / "nav" / name).is_file(), name
+    for kind, tol in (("smoothed", 0.03), ("causal", 0.1)):
+        d = read_tum(tmp_path / "nav" / f"{kind}.tum")
+        ts = d[:, 0] - START_S
+        p = np.stack([np.interp(ts, t_true, p_true[:, k]) for k in range(3)], axis=1)
+        origin = p_true[np.searchsorted(t_true, 0.0)] + Rotation.from_euler("z", 30, degrees=True).apply(LEVER)
+        # the ENU origin is the first fix (the antenna at rest): truth shifted onto it
+        err3 = np.linalg.norm(d[:, 1:4] - (p - origin), axis=1)
+        assert np.sqrt(np.mean(err3 ** 2)) < tol, (kind, np.sqrt(np.mean(err3 ** 2)))
+    # the heading after the turn: 30 + 57.3 deg, body x forward
+    d = read_tum(tmp_path / "nav" / "smoothed.tum")
+    yaw = Rotation.from_quat(d[-1, 4:8]).as_euler("ZYX", degrees=True)[0]
+    assert yaw == pytest.approx(30.0 + math.degrees(1.0), abs=1.0)
+
+
+def test_navigator_option_errors(tmp_path, capsys):
+    imu, pos, _ = synthetic_car(tmp_path, seconds=10.0)
+    base = ["--input", imu, "--aiding", pos, "--aiding-kind", "position", "--aiding-format", "rtklib"]
+    rc, _out, err = run(base + ["--imu-rotation-rpy-deg", "180,0"], capsys)
+    assert rc == 2 and "ConfigError: --imu-rotation-rpy-deg: expected 3 comma-separated" in err
+    rc, _out, err = run(["--input", imu, "--aiding", pos, "--aiding-kind", "pose", "--lever-arm", "0,0,1"], capsys)
+    assert rc == 2 and "--lever-arm is the antenna's: only with --aiding-kind position" in err
+    rc, _out, err = run(["--config", "configs/fuse_euroc.toml", "--nhc"], capsys)
+    assert rc == 2 and "--nhc: only with --input" in err
+    rc, _out, err = run(base + ["--set", "a=1"], capsys)
+    assert rc == 2 and "--set: only with --config" in err
+
+
+# --- the real drive, first minute ------------------------------------------------------------------
+
+DATA = Path(os.environ["IMU_LEARN_DATA"]) if os.environ.get("IMU_LEARN_DATA") else \
+    Path(__file__).resolve().parents[1].parent / "shared" / "data"
+DRIVE = DATA / "gnss-imu" / "drive_0708"
+
+
+def crop_drive(folder: Path, seconds: float) -> Path:
+    """The drive's IMU log cut after ``seconds`` (its tag's end moved with it)."""
+    src = DRIVE / "imu_1934.csv"
+    lines = src.read_text().splitlines(keepends=True)
+    c0 = float(lines[1].split(",")[6])
+    keep = [ln for ln in lines[1:] if float(ln.split(",")[6]) - c0 <= seconds * 1000]
+    out = folder / "imu_1934.csv"
+    out.write_text(lines[0] + "".join(keep))
+    tag = (DRIVE / "imu_1934.csv.tag").read_bytes()
+    end_ms = int(round(float(keep[-1].split(",")[6]) - c0))
+    out.with_name(out.name + ".tag").write_bytes(tag[:76] + struct.pack("<II", end_ms, 0))
+    return out
+
+
+@pytest.mark.skipif(not (DRIVE / "imu_1934.csv").is_file(), reason="the gnss-imu drive is not on this machine "
+                    "(set IMU_LEARN_DATA to the data root)")
+def test_real_drive_first_minute(tmp_path, capsys):
+    imu = crop_drive(tmp_path, 75.0)
+    pos = DRIVE / "gnss_1934_sf.pos"
+    rc, out, err = run(["--input", imu, "--format", "gnss-imu", "--aiding", pos, "--aiding-kind", "position",
+                        "--aiding-format", "rtklib", "--imu-rotation-rpy-deg", "180,-6.79,185.35", "--imu-delay-s",
+                        "-0.125", "--nhc", "--out", tmp_path / "nav"], capsys)
+    assert rc == 0, err
+    s = json.loads((tmp_path / "nav" / "summary.json").read_text())
+    assert s["counts"]["extra_factors"] > 0
+    sol = rtklib.read_pos(pos)
+    d = read_tum(tmp_path / "nav" / "smoothed.tum")
+    t = np.round(d[:, 0] * 1e9).astype(np.int64)
+    m = (sol.q == 1) & (sol.t_ns >= t[0]) & (sol.t_ns <= t[-1])
+    assert m.sum() > 100
+    x = (sol.t_ns[m] - t[0]) * 1e-9
+    p = np.stack([np.interp(x, (t - t[0]) * 1e-9, d[:, 1 + k]) for k in range(3)], axis=1)
+    h = np.linalg.norm(p[:, :2] - sol.enu[m, :2], axis=1)
+    assert np.sqrt(np.mean(h ** 2)) < 0.1, np.sqrt(np.mean(h ** 2))  # cm level where fixed (2.6 cm on the whole drive)
