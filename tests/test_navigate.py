@@ -426,3 +426,32 @@ def test_rtklib_fixes_are_position_aiding_with_their_own_sigmas(tmp_path, capsys
     assert main(["fuse", "--input", str(rec), "--aiding", str(pos), "--aiding-format", "rtklib", "--aiding-kind",
                  "pose", "--out", str(tmp_path / "o2")]) == 2
     assert "rtklib holds positions" in capsys.readouterr().err
+
+
+def test_cli_learned_input_covariance_and_displacements(crop_without_groundtruth, crop_split, tmp_path, capsys):
+    """--checkpoint with a covariance head weights the refined samples by its variances, --displacement adds
+    the tlio-style factors (regressed from the raw IMU): together the 'learned' input, still no ground truth."""
+    import torch
+
+    from imu_learn.baselines.base import FitSettings
+    from imu_learn.baselines.tlio import TlioConfig, TlioStyle
+
+    torch.set_num_threads(1)
+    m = TlioStyle(TlioConfig(width=8, fc=8, evals=1))
+    m.fit([crop_split[0]], [], FitSettings(window=200, batch_size=8, steps=4, lr=1e-3))
+    m.save(tmp_path / "tlio-style.pt")
+    rec, tum, yaml = crop_without_groundtruth
+    cov = SHIPPED.parent / "models" / "euroc_adis16448_cov.pt"
+    out = tmp_path / "out"
+    rc = main(["fuse", "--input", str(rec), "--aiding", str(tum), "--aiding-kind", "pose", "--extrinsics", str(yaml),
+               "--checkpoint", str(cov), "--displacement", str(tmp_path / "tlio-style.pt"), "--out", str(out)])
+    cap = capsys.readouterr()
+    assert rc == 0, cap.err
+    s = json.loads((out / "summary.json").read_text())
+    assert s["noise"] == "learned per-sample variances"
+    assert "learned covariance" in s["imu_input"] and "displacements of tlio-style.pt" in s["imu_input"]
+    assert s["counts"]["extra_factors"] > 0
+    assert aligned_rmse(out / "smoothed.tum", SHIPPED / CROP / GT_REL) < 0.1
+    rc = main(["fuse", "--input", str(rec), "--aiding", str(tum), "--aiding-kind", "pose", "--extrinsics", str(yaml),
+               "--displacement", str(tmp_path / "missing.pt"), "--out", str(tmp_path / "o2")])
+    assert rc == 2 and "missing.pt not found" in capsys.readouterr().err

@@ -60,7 +60,7 @@ def _names(text: str) -> List[str]:
 
 NAVIGATE_ONLY = ("format", "aiding", "aiding_kind", "aiding_format", "extrinsics", "groundtruth", "keyframe_hz",
                  "gaps", "aiding_hz", "sigma_rot_deg", "sigma_m", "max_relative_gap_s", "lag_s", "imu_rotation_rpy_deg",
-                 "imu_delay_s", "lever_arm", "nhc", "imu_noise")
+                 "imu_delay_s", "lever_arm", "nhc", "imu_noise", "displacement")
 
 
 def add_arguments(ap: argparse.ArgumentParser) -> None:
@@ -120,6 +120,10 @@ def add_navigate_arguments(ap: argparse.ArgumentParser) -> None:
     g.add_argument("--aiding-format", choices=AIDING_FORMATS, default=None,
                    help="tum (t tx ty tz qx qy qz qw, seconds; default), csv (the same with commas), asl (ns, p, q_wxyz), "
                         "rtklib (.pos; with --aiding-kind position)")
+    g.add_argument("--displacement", type=Path, default=None, metavar="PT",
+                   help="a tlio-style displacement model (imu-learn evaluate --methods tlio-style writes "
+                        "<out>/methods/tlio-style.pt): its 1 s displacements of the raw IMU join the graph as factors; "
+                        "with a --checkpoint that has a covariance head this is the 'learned' input")
     g.add_argument("--extrinsics", type=Path, default=None, metavar="YAML",
                    help="the aiding sensor's Kalibr/ASL sensor.yaml: T_BS, sensor to body (IMU); camera poses are moved "
                         "into the IMU frame with it (without: the aiding is taken as body poses)")
@@ -216,7 +220,7 @@ def navigate(args: argparse.Namespace, keep: Callable[[Any], None]) -> int:
     keep(f"nothing is written to {out} before the fusion ends")
     summary = run_navigation(args.input, args.aiding, out, o, fmt=args.format or "auto", extrinsics=args.extrinsics,
                              checkpoint=None if args.checkpoint is None else Path(args.checkpoint),
-                             groundtruth=args.groundtruth)
+                             groundtruth=args.groundtruth, displacement=args.displacement)
     print(one_line(summary))
     return 0
 

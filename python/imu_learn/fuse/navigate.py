@@ -378,9 +378,37 @@ def position_start(t_ns, gyro, acc, rows: AidingRows, lever: np.ndarray, bias0: 
     return s0, initial.InitialState(R0, rows.p[e] - R0 @ lever, v0, bias0, np.eye(3), info)
 
 
+def refined_input(checkpoint: Optional[Path], gyro: np.ndarray, acc: np.ndarray):
+    """(gyro, acc, per-sample variances or None, label): the IMU refined by ``checkpoint`` (raw without
+    one), weighted by its covariance head's variances when it has one (the ``learned`` input's samples)."""
+    if checkpoint is None:
+        return gyro, acc, None, "raw"
+    from imu_learn.infer.windowing import apply
+    from imu_learn.train.checkpoint import load_model
+
+    model = load_model(Path(checkpoint))
+    if model.cov_head is None:
+        g, a, _ = apply(model, gyro, acc)
+        return g, a, None, f"refined by {Path(checkpoint).name}"
+    g, a, var = apply(model, gyro, acc, variance=True)
+    return g, a, var, f"refined by {Path(checkpoint).name}, weighted by its learned covariance"
+
+
+def displacement_hook(path: Path, t_ns: np.ndarray, gyro: np.ndarray, acc: np.ndarray, update_s: float = 1.0):
+    """The graph's ``extra_factors`` hook of a saved tlio-style model (its displacements of the raw IMU)."""
+    from imu_learn.baselines.registry import load_method_class
+
+    from .displacement import displacement_factors_for
+
+    if not Path(path).is_file():
+        raise FileNotFoundError(f"--displacement: {path} not found (imu-learn evaluate --methods tlio-style writes it)")
+    model = load_method_class("tlio-style")().load(Path(path))
+    return displacement_factors_for(model, t_ns, np.ascontiguousarray(gyro), np.ascontiguousarray(acc), update_s)
+
+
 def navigate(input: Path, aiding_file: Path, out: Path, opts: NavigateOptions = NavigateOptions(),
              fmt: str = "auto", extrinsics: Optional[Path] = None, checkpoint: Optional[Path] = None,
-             groundtruth: Optional[Path] = None) -> Dict[str, object]:
+             groundtruth: Optional[Path] = None, displacement: Optional[Path] = None) -> Dict[str, object]:
     """Fuse the recording ``input``'s IMU with ``aiding_file`` and write ``out``/{causal.tum,
     smoothed.tum, plot.png, summary.json}; returns the summary (module docstring)."""
     from .graph import PriorSigmas, fuse
@@ -421,13 +449,8 @@ def navigate(input: Path, aiding_file: Path, out: Path, opts: NavigateOptions = 
         rows = select_rows(traj, t_ns, T_BS, opts)
         rows_read = len(traj)
     bias0, bias_source = initial.checkpoint_bias(checkpoint)
-    imu_input = "raw"
-    if checkpoint is not None:
-        from imu_learn.infer.refine import refine_arrays
-        from imu_learn.train.checkpoint import load_model
-
-        gyro, acc = refine_arrays(load_model(Path(checkpoint)), gyro, acc)
-        imu_input = f"refined by {Path(checkpoint).name}"
+    raw_gyro, raw_acc = gyro, acc
+    gyro, acc, var, imu_input = refined_input(checkpoint, gyro, acc)
     if opts.aiding_kind == "position":
         s0, st = position_start(t_ns, gyro, acc, rows, lever, bias0, opts)
     else:
@@ -440,12 +463,20 @@ def navigate(input: Path, aiding_file: Path, out: Path, opts: NavigateOptions = 
     at_rest = st.info["still_s"] >= 1.0 and opts.aiding_kind != "position"  # position aiding starts moving
     prior = PriorSigmas(rot_rad=float(np.deg2rad(opts.prior_rot_deg)), pos_m=opts.prior_pos_m,
                         vel_mps=0.05 if at_rest else opts.prior_vel_mps)
-    kw = {} if opts.lag_s is None else {"lag_s": opts.lag_s}
+    kw: Dict[str, object] = {} if opts.lag_s is None else {"lag_s": opts.lag_s}
+    hooks = []
     if opts.nhc:
         from .nhc import NhcSettings, nhc_callback
 
-        kw["extra_factors"] = nhc_callback(NhcSettings(opts.nhc_sigma_lat_mps, opts.nhc_sigma_vert_mps),
-                                           np.ascontiguousarray(gyro[sel]))
+        hooks.append(nhc_callback(NhcSettings(opts.nhc_sigma_lat_mps, opts.nhc_sigma_vert_mps),
+                                  np.ascontiguousarray(gyro[sel])))
+    if displacement is not None:
+        hooks.append(displacement_hook(Path(displacement), t_ns[sel], raw_gyro[sel], raw_acc[sel]))
+        imu_input += f" + displacements of {Path(displacement).name}"
+    if hooks:
+        kw["extra_factors"] = hooks[0] if len(hooks) == 1 else (lambda fusion, k, s: [f for h in hooks for f in h(fusion, k, s)])
+    if var is not None:
+        kw["var"] = np.ascontiguousarray(var[sel])
     log.info(f"fusing {len(t_ns) - s0} IMU samples ({imu_input}) with {len(aiding)} {opts.aiding_kind} measurements "
              f"of {aiding_file}")
     try:
@@ -465,10 +496,11 @@ def navigate(input: Path, aiding_file: Path, out: Path, opts: NavigateOptions = 
     write_trajectory(out / "smoothed.tum", kf_t, res.smoothed_p, res.smoothed_R)
     conv = initial.convergence(kf_t * 1e-9, res.causal_p, res.causal_R, res.smoothed_p, res.smoothed_R)
     summary: Dict[str, object] = {
-        "input": str(input), "imu_file": imu_file, "imu_input": imu_input, "noise": noise.source,
+        "input": str(input), "imu_file": imu_file, "imu_input": imu_input, "noise": noise.source if var is None else "learned per-sample variances",
         "aiding": str(aiding_file), "aiding_kind": opts.aiding_kind, "aiding_format": opts.aiding_format,
         "aiding_label": aiding.label, "extrinsics": None if extrinsics is None else str(extrinsics),
         "checkpoint": None if checkpoint is None else str(checkpoint),
+        "displacement": None if displacement is None else str(displacement),
         "aiding_rows_read": int(rows_read), "aiding_rows_used": int(len(rows.sample)), "aiding_dropped": rows.dropped,
         **counts, "keyframes": int(len(res.kf_idx)),
         "imu_samples_before_start": s0, "duration_s": round(float((t_fused[-1] - t_fused[0]) * 1e-9), 3),
