@@ -366,3 +366,30 @@ def test_any_evaluate_method_that_outputs_imu_is_an_input_and_end_to_end_is_not(
         run_experiment(validate(FuseConfig(name="t", data_root=str(shipped), inputs=["gyro-denoise"], recordings=[rec],
                                            methods_dir=str(tmp_path / "none"), scenarios=[scn])), tmp_path / "p",
                        lambda m: None)
+
+
+@pytest.mark.slow
+def test_nhc_scenario_adds_the_constraint_and_leaves_other_runs_hashes_alone(shipped, tmp_path, monkeypatch):
+    """scenarios.nhc_sigma_mps > 0 adds the non-holonomic constraint at the keyframes (an extra_factors
+    hook reaches fuse); 0 (the default) leaves the run's hash as it was before the option existed."""
+    import imu_learn.fuse.run as run_mod
+
+    rec = RecordingSpec(CROP, "euroc", CROP + "/mav0/state_groundtruth_estimate0/data.csv")
+    plain, nhc = ScenarioSpec("p", "position", 1.0, 0.1), ScenarioSpec("n", "position", 1.0, 0.1, nhc_sigma_mps=0.05)
+    assert "nhc_sigma_mps" not in run_mod.scenario_of(plain) and run_mod.scenario_of(nhc)["nhc_sigma_mps"] == 0.05
+    cfg = validate(FuseConfig(name="t", data_root=str(shipped), inputs=["raw"], recordings=[rec], scenarios=[plain, nhc]))
+    hooks = {}
+    real = run_mod.fuse
+
+    def spy(*x, **k):
+        hooks[len(hooks)] = k.get("extra_factors")
+        return real(*x, **k)
+
+    monkeypatch.setattr(run_mod, "fuse", spy)
+    res = run_experiment(cfg, tmp_path, lambda m: None)
+    assert hooks[0] is None and callable(hooks[1])
+    a, b = res["MH_04_difficult|p|raw|s0"], res["MH_04_difficult|n|raw|s0"]
+    assert a["smoothed"]["pos_rmse_m"] != b["smoothed"]["pos_rmse_m"]  # the constraint acts (a drone is not a car)
+    with pytest.raises(ConfigError, match="nhc_sigma_mps"):
+        validate(FuseConfig(name="t", data_root=str(shipped), inputs=["raw"], recordings=[rec],
+                            scenarios=[ScenarioSpec("x", "position", 1.0, 0.1, nhc_sigma_mps=-1.0)]))

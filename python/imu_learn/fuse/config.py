@@ -67,6 +67,9 @@ class ScenarioSpec:
     # removed" protocol assumes an estimator has, e.g. from a static start).
     bias_prior: str = "zero"
     startup_bias_s: float = 10.0
+    # Wheeled platforms: the non-holonomic constraint (fuse/nhc.py: no sideways or vertical velocity of
+    # the body frame) at every keyframe, with these sigmas [m/s]; 0 = off.
+    nhc_sigma_mps: float = 0.0
 
     def outage_windows(self) -> List[Tuple[float, float]]:
         return [(float(o[0]), float(o[1])) for o in self.outages]
@@ -164,6 +167,8 @@ def validate(cfg: FuseConfig) -> FuseConfig:
             raise ConfigError(f"scenarios.{s.name}.kind: must be one of {', '.join(KINDS)}, got {s.kind!r}")
         if s.rate_hz < 0 or (s.kind != "leica" and s.rate_hz == 0):
             raise ConfigError(f"scenarios.{s.name}.rate_hz: must be > 0, got {s.rate_hz}")
+        if not s.nhc_sigma_mps >= 0:
+            raise ConfigError(f"scenarios.{s.name}.nhc_sigma_mps: must be >= 0 (0 = off), got {s.nhc_sigma_mps}")
         if s.bias_prior not in BIAS_PRIORS:
             raise ConfigError(f"scenarios.{s.name}.bias_prior: must be one of {', '.join(BIAS_PRIORS)}, got {s.bias_prior!r}")
         for o in s.outages:

@@ -115,7 +115,7 @@ def run_hash(cfg: FuseConfig, spec: RecordingSpec, scn: ScenarioSpec, name: str,
     recording = {k: v for k, v in asdict(spec).items()
                  if k not in ("checkpoint", "traditional", "methods_dir", "covariance_checkpoint")}
     d = {"estimator": estimator(cfg), "seed": seed, "gravity": cfg.gravity, "keyframe_hz": cfg.keyframe_hz,
-         "noise": asdict(cfg.noise), "recording": recording, "scenario": asdict(scn), "input": name,
+         "noise": asdict(cfg.noise), "recording": recording, "scenario": scenario_of(scn), "input": name,
          "artefact": file_digest(artefact) if artefact else ""}
     if name in FACTOR_INPUTS:  # learned displacement factors: their update grid too
         d["displacement_update_s"] = cfg.displacement_update_s
@@ -123,6 +123,12 @@ def run_hash(cfg: FuseConfig, spec: RecordingSpec, scn: ScenarioSpec, name: str,
         d["displacement"] = file_digest(displacement_artefact(cfg, spec))
         d["displacement_update_s"] = cfg.displacement_update_s
     return hashlib.sha256(json.dumps(d, sort_keys=True).encode()).hexdigest()[:16]
+
+
+def scenario_of(scn: ScenarioSpec) -> dict:
+    """The scenario's settings as a run depends on them (an option left off is left out, so results
+    written before the option existed still resume)."""
+    return {k: v for k, v in asdict(scn).items() if not (k == "nhc_sigma_mps" and v == 0)}
 
 
 def run_key(spec: RecordingSpec, scn: ScenarioSpec, name: str, seed: Optional[int]) -> str:
@@ -446,9 +452,15 @@ def run_one(cfg: FuseConfig, out: Path, seq, noise: ImuNoise, R0: np.ndarray, sc
     # is the raw IMU; "learned" fuses refined samples beside it).
     hook = (None if displacement is None else
             displacement_factors_for(displacement, seq.t_ns, seq.gyro, seq.acc, cfg.displacement_update_s))
+    extra = hook
+    if scn.nhc_sigma_mps > 0:  # wheeled platform: the non-holonomic constraint at every keyframe
+        from .nhc import NhcSettings, nhc_callback
+
+        nhc = nhc_callback(NhcSettings(scn.nhc_sigma_mps, scn.nhc_sigma_mps), np.ascontiguousarray(gyro))
+        extra = nhc if hook is None else (lambda fusion, k, s: [*hook(fusion, k, s), *nhc(fusion, k, s)])
     try:
         res = fuse(seq.t_ns, gyro, acc, (R0, seq.p[0], seq.v[0]), [aiding], noise, cfg.gravity, cfg.keyframe_hz,
-                   bias0=bias0, var=var, extra_factors=hook, lag_s=cfg.lag_s)
+                   bias0=bias0, var=var, extra_factors=extra, lag_s=cfg.lag_s)
     except RuntimeError as e:  # GTSAM's IndeterminateLinearSystemException and kin
         return {**head, "failed": " ".join(str(e).split())[:300]}
     if hook is not None:
