@@ -28,13 +28,13 @@ from typing import Dict, List, Optional, Sequence, Tuple
 
 import numpy as np
 
+from imu_learn.data.formats.fields import number
 from imu_learn.errors import (
     AidingError,
     AidingOverlapError,
     ColumnCountError,
     HeaderError,
     InvalidInputError,
-    NonFiniteError,
     NotNumericError,
     SolutionQualityError,
     TimestampError,
@@ -234,15 +234,7 @@ def read_pos(path: Path) -> RtkSolution:
         t = _time_ns(tok[:2], p, lineno)
         vals: Dict[str, float] = {}
         for name, c in col.items():
-            try:
-                x = float(tok[c])
-            except ValueError:
-                raise NotNumericError(f"{p}:{lineno}: column {c + 1} ({name}): {tok[c]!r} is not a number", p,
-                                      lineno, c + 1, name) from None
-            if not math.isfinite(x):
-                raise NonFiniteError(f"{p}:{lineno}: column {c + 1} ({name}): {tok[c]!r} is not finite", p, lineno,
-                                     c + 1, name)
-            vals[name] = x
+            vals[name] = number(tok[c], p, lineno, c + 1, name)
         q = vals["Q"]
         if q != int(q) or int(q) not in Q_NAMES:
             raise SolutionQualityError(f"{p}:{lineno}: column {col['Q'] + 1} (Q): {tok[col['Q']]!r} is not a "

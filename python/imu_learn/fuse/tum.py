@@ -32,6 +32,7 @@ from typing import List, Optional, Tuple, Union
 
 import numpy as np
 
+from imu_learn.data.formats.fields import number
 from imu_learn.errors import (
     AidingOverlapError,
     AidingQuaternionError,
@@ -145,15 +146,7 @@ def read_trajectory(path: Union[str, Path], layout: str = "tum", need_orientatio
                                       src, lineno, 1, names[0]) from None
             vals = []
             for c, cell in enumerate(cells[1:], start=2):
-                try:
-                    v = float(cell)
-                except ValueError:
-                    raise NotNumericError(f"{src}:{lineno}: column {c} ({names[c - 1]}): {cell!r} is not a number",
-                                          src, lineno, c, names[c - 1]) from None
-                if not math.isfinite(v):
-                    raise NonFiniteError(f"{src}:{lineno}: column {c} ({names[c - 1]}): {cell} is not finite",
-                                         src, lineno, c, names[c - 1])
-                vals.append(v)
+                vals.append(number(cell, src, lineno, c, names[c - 1]))
             if stamps and stamp <= stamps[-1]:
                 prev = lines[-1]
                 raise TimestampError(

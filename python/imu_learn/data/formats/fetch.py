@@ -27,7 +27,6 @@ from imu_learn.data.types import GroundTruth, ImuData
 from imu_learn.errors import (
     ColumnCountError,
     HeaderError,
-    NonFiniteError,
     NotNumericError,
     TimestampError,
     TooFewRowsError,
@@ -35,6 +34,7 @@ from imu_learn.errors import (
 from imu_learn.util.atomic import atomic_write_text
 
 from .asl import sequence_root
+from .fields import number
 from .source import ImuSource
 
 NAME = "fetch"
@@ -127,14 +127,7 @@ def read_table(path: Path, names: Tuple[str, ...]) -> Tuple[np.ndarray, np.ndarr
                                    p, lineno, None, None)
         for c, (text, name) in enumerate(zip(fields, names)):
             text = text.strip()
-            try:
-                x = float(text)
-            except ValueError:
-                raise NotNumericError(f"{p}:{lineno}: column {c + 1} ({name}): {text!r} is not a number",
-                                      p, lineno, c + 1, name) from None
-            if not math.isfinite(x):
-                raise NonFiniteError(f"{p}:{lineno}: column {c + 1} ({name}): {text!r} is not finite",
-                                     p, lineno, c + 1, name)
+            x = number(text, p, lineno, c + 1, name)
             if c == 0:
                 try:
                     stamp = parse_stamp(text)

@@ -42,6 +42,7 @@ from imu_learn.errors import (
     TooFewRowsError,
 )
 
+from .fields import number
 from .source import ImuSource
 
 log = logging.getLogger(__name__)
@@ -124,19 +125,7 @@ def _parse_row(fields: Sequence[str], p: str, lineno: int) -> Tuple[float, ...]:
     if len(fields) != len(FIELDS):
         raise ColumnCountError(f"{p}:{lineno}: expected {len(FIELDS)} columns ({', '.join(FIELDS)}), found "
                                f"{len(fields)}", p, lineno, None, None)
-    out = []
-    for c, (text, name) in enumerate(zip(fields, FIELDS)):
-        text = text.strip()
-        try:
-            x = float(text)
-        except ValueError:
-            raise NotNumericError(f"{p}:{lineno}: column {c + 1} ({name}): {text!r} is not a number",
-                                  p, lineno, c + 1, name) from None
-        if not math.isfinite(x):
-            raise NonFiniteError(f"{p}:{lineno}: column {c + 1} ({name}): {text!r} is not finite", p, lineno, c + 1,
-                                 name)
-        out.append(x)
-    return tuple(out)
+    return tuple(number(text, p, lineno, c + 1, name) for c, (text, name) in enumerate(zip(fields, FIELDS)))
 
 
 def read_csv(path: Path, trust_first_line: bool = False) -> Tuple[np.ndarray, np.ndarray, Tuple[int, ...]]:
