@@ -531,7 +531,9 @@ def cell_text(runs: List[dict], kind: str) -> str:
 
 def format_table(cfg: FuseConfig, results: Dict[str, dict]) -> str:
     lines = [f"# {cfg.name}: position RMSE [m] (rotation RMSE [deg]) at keyframes, causal / smoothed",
-             "", f"Simulated aiding: mean ± std over the noise seeds {cfg.seeds}; real aiding: one run.", ""]
+             "", f"Simulated aiding: mean ± std over the noise seeds {cfg.seeds}; real aiding: one run.",
+             "First state: a prior from ground truth (pose and velocity at the first sample; the experiment runner's "
+             "controlled setting; `imu-learn fuse --input` starts from the data alone).", ""]
     cells = runs_by_cell(results)
     for scn in cfg.scenarios:
         recs = list(dict.fromkeys(rec for rec, s, _ in cells if s == scn.name))
