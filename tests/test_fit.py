@@ -420,3 +420,17 @@ def test_select_reference_start_scores_against_the_untrained_floor(tmp_path):
     assert load_checkpoint(d / "last.pt")["extra"]["select_reference"] == ref
     assert len(rows(d)) == 3
     assert fit_cli.main(tiny(tmp_path / "bad", 1, "--optim.select", "val_pose", "--optim.select_reference", "start")) == 2
+
+
+def test_init_from_a_checkpoint_older_than_a_model_arg(tmp_path, full_run):
+    """optim.init from a checkpoint written before model.start / fir_init_tau / calib existed: the missing
+    args are their defaults, so the init is accepted (the shipped models are such checkpoints)."""
+    from imu_learn.train.checkpoint import write_checkpoint
+
+    state = load_checkpoint(full_run / "best.pt")
+    for k in ("start", "fir_init_tau", "calib"):
+        state["model_args"].pop(k)
+    old = tmp_path / "old.pt"
+    write_checkpoint(old, state)
+    assert fit_cli.main(tiny(tmp_path / "cov", 1, "--model.covariance", "true", "--optim.init", str(old),
+                             "--optim.trainable", "covariance", "--loss.w_nll", "1.0")) == 0

@@ -64,7 +64,7 @@ import math
 import os
 import signal
 import time
-from dataclasses import dataclass, field
+from dataclasses import asdict, dataclass, field
 from datetime import datetime
 from pathlib import Path
 from typing import Any, Callable, Dict, List, Optional, Tuple
@@ -81,7 +81,7 @@ from imu_learn.eval.protocol import VARIANT_LABELS, VARIANTS
 from imu_learn.infer import windowing
 from imu_learn.nn.device import pick_device
 from imu_learn.nn.losses import imu_loss
-from imu_learn.nn.model import ImuRefiner
+from imu_learn.nn.model import ImuRefiner, ModelConfig
 from imu_learn.train.checkpoint import load_checkpoint, load_model, model_from_checkpoint, save_checkpoint
 from imu_learn.train.config import ConfigError, RunConfig, build_config, read_toml, to_toml
 from imu_learn.util.atomic import atomic_write_text
@@ -208,7 +208,8 @@ COVARIANCE_ARGS = ("covariance", "sigma_gyro_min", "sigma_gyro_max", "sigma_acc_
 def init_from(model: ImuRefiner, path: Path) -> None:
     """optim.init: the weights of a trained checkpoint (normalisation included) into ``model``."""
     state = load_checkpoint(path)
-    theirs = {k: v for k, v in state["model_args"].items() if k not in COVARIANCE_ARGS}
+    # a checkpoint written before a model arg existed has that arg's default
+    theirs = {k: v for k, v in {**asdict(ModelConfig()), **state["model_args"]}.items() if k not in COVARIANCE_ARGS}
     ours = {k: v for k, v in model.model_args().items() if k not in COVARIANCE_ARGS}
     diff = sorted(k for k in set(theirs) | set(ours) if theirs.get(k) != ours.get(k))
     if diff:
