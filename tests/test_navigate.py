@@ -455,3 +455,26 @@ def test_cli_learned_input_covariance_and_displacements(crop_without_groundtruth
     rc = main(["fuse", "--input", str(rec), "--aiding", str(tum), "--aiding-kind", "pose", "--extrinsics", str(yaml),
                "--displacement", str(tmp_path / "missing.pt"), "--out", str(tmp_path / "o2")])
     assert rc == 2 and "missing.pt not found" in capsys.readouterr().err
+
+
+def test_cli_calibration_applies_a_saved_floor_fit(crop_without_groundtruth, tmp_path, capsys):
+    """--calibration <evaluate's methods/timing.json>: the floor method's output is fused (the method named by
+    the file); with --checkpoint, or a file that names no method, a one-line error."""
+    from imu_learn.baselines.timing import Timing
+
+    m = Timing()
+    m.tau = 0.5
+    m.save(tmp_path / "timing.json")
+    rec, tum, yaml = crop_without_groundtruth
+    base = ["fuse", "--input", str(rec), "--aiding", str(tum), "--aiding-kind", "pose", "--extrinsics", str(yaml)]
+    assert main([*base, "--calibration", str(tmp_path / "timing.json"), "--out", str(tmp_path / "o")]) == 0
+    capsys.readouterr()
+    s = json.loads((tmp_path / "o" / "summary.json").read_text())
+    assert s["imu_input"] == "timing (timing.json)" and s["calibration"].endswith("timing.json")
+    assert aligned_rmse(tmp_path / "o" / "smoothed.tum", SHIPPED / CROP / GT_REL) < 0.06
+    (tmp_path / "notamethod.json").write_text("{}")
+    assert main([*base, "--calibration", str(tmp_path / "notamethod.json"), "--out", str(tmp_path / "o2")]) == 2
+    assert "the file name must be a method's" in capsys.readouterr().err
+    assert main([*base, "--calibration", str(tmp_path / "timing.json"), "--checkpoint",
+                 str(SHIPPED.parent / "models" / "euroc_adis16448.pt"), "--out", str(tmp_path / "o3")]) == 2
+    assert "pass one" in capsys.readouterr().err

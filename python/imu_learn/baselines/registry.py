@@ -5,6 +5,7 @@ from __future__ import annotations
 import importlib
 import logging
 import re
+from pathlib import Path
 from typing import Callable, Dict, Optional, Tuple, Union
 
 from imu_learn.baselines.base import Method
@@ -36,6 +37,15 @@ def safe_name(name: str) -> str:
     """``name`` as a file name: letters, digits and ``_.+-`` kept (``traditional+timing``), runs of
     anything else one ``-``."""
     return re.sub(r"[^A-Za-z0-9_.+\-]+", "-", name).strip("-") or "method"
+
+
+def method_file(folder: Path, name: str, method: Optional[Method] = None) -> Path:
+    """Where ``imu-learn evaluate`` saves method ``name``'s fit in ``folder`` (``<safe name><its
+    save_suffix>``; ``method``: an instance when the caller has one, else the registry's class)."""
+    if method is None:
+        factory = load_method_class(name)
+        method = factory if isinstance(factory, type) or factory is None else factory()
+    return Path(folder) / f"{safe_name(name)}{getattr(method, 'save_suffix', None) or '.pt'}"
 
 
 def load_method_class(name: str) -> Optional[Callable[[], Method]]:

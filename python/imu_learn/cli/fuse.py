@@ -60,7 +60,7 @@ def _names(text: str) -> List[str]:
 
 NAVIGATE_ONLY = ("format", "aiding", "aiding_kind", "aiding_format", "extrinsics", "groundtruth", "keyframe_hz",
                  "gaps", "aiding_hz", "sigma_rot_deg", "sigma_m", "max_relative_gap_s", "lag_s", "imu_rotation_rpy_deg",
-                 "imu_delay_s", "lever_arm", "nhc", "imu_noise", "displacement")
+                 "imu_delay_s", "lever_arm", "nhc", "imu_noise", "displacement", "calibration")
 
 
 def add_arguments(ap: argparse.ArgumentParser) -> None:
@@ -124,6 +124,9 @@ def add_navigate_arguments(ap: argparse.ArgumentParser) -> None:
                    help="a tlio-style displacement model (imu-learn evaluate --methods tlio-style writes "
                         "<out>/methods/tlio-style.pt): its 1 s displacements of the raw IMU join the graph as factors; "
                         "with a --checkpoint that has a covariance head this is the 'learned' input")
+    g.add_argument("--calibration", type=Path, default=None, metavar="FILE",
+                   help="apply a fit imu-learn evaluate saved (<out>/methods/timing.json, traditional+timing.json) "
+                        "to the IMU instead of a checkpoint: the simple floor a learned input is judged against")
     g.add_argument("--extrinsics", type=Path, default=None, metavar="YAML",
                    help="the aiding sensor's Kalibr/ASL sensor.yaml: T_BS, sensor to body (IMU); camera poses are moved "
                         "into the IMU frame with it (without: the aiding is taken as body poses)")
@@ -220,7 +223,8 @@ def navigate(args: argparse.Namespace, keep: Callable[[Any], None]) -> int:
     keep(f"nothing is written to {out} before the fusion ends")
     summary = run_navigation(args.input, args.aiding, out, o, fmt=args.format or "auto", extrinsics=args.extrinsics,
                              checkpoint=None if args.checkpoint is None else Path(args.checkpoint),
-                             groundtruth=args.groundtruth, displacement=args.displacement)
+                             groundtruth=args.groundtruth, displacement=args.displacement,
+                             calibration=args.calibration)
     print(one_line(summary))
     return 0
 

@@ -36,7 +36,7 @@ from typing import Sequence as Seq
 import numpy as np
 
 from imu_learn.baselines.base import FitSettings, Method, PosePrediction, poses_from_imu
-from imu_learn.baselines.registry import DEFAULT_METHODS, REGISTRY, load_method_class, safe_name  # noqa: F401
+from imu_learn.baselines.registry import DEFAULT_METHODS, REGISTRY, load_method_class, method_file, safe_name  # noqa: F401
 from imu_learn.core.quat import rotation_angle
 from imu_learn.data.splits import split_signature
 from imu_learn.data.types import Sequence
@@ -405,8 +405,7 @@ def prepare_method(name: str, factory: Callable[[], Method], res: Resolved, spli
     method = factory()
     fname = safe_name(name)
     rec_path = methods_dir / f"{fname}.record.json"  # not <name>.json: that is where e.g. traditional saves its fit
-    suffix = getattr(method, "save_suffix", None) or (".json" if name == "traditional" else ".pt")
-    file = methods_dir / f"{fname}{suffix}"
+    file = method_file(methods_dir, name, method)
     sig = {"fit_settings": asdict(settings), "split": split_signature(split.record, ("train", "val")), "class": type(method).__qualname__}
     if reuse and rec_path.exists():
         old = _read_record(rec_path)

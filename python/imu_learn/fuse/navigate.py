@@ -394,6 +394,26 @@ def refined_input(checkpoint: Optional[Path], gyro: np.ndarray, acc: np.ndarray)
     return g, a, var, f"refined by {Path(checkpoint).name}, weighted by its learned covariance"
 
 
+def calibrated_input(path: Path, t_ns: np.ndarray, gyro: np.ndarray, acc: np.ndarray):
+    """(gyro, acc, label): the IMU through a fit ``imu-learn evaluate`` saved (``<out>/methods/timing.json``,
+    ``traditional+timing.json``, ...; the method is the file's name), the floor a learned input is judged by."""
+    from imu_learn.baselines.registry import REGISTRY, load_method_class
+    from imu_learn.data.types import Sequence
+
+    name = Path(path).stem
+    if name not in REGISTRY:
+        raise ConfigError(f"--calibration: {path}: the file name must be a method's ({', '.join(REGISTRY)}), as "
+                          "imu-learn evaluate writes it")
+    if not Path(path).is_file():
+        raise FileNotFoundError(f"--calibration: {path} not found (imu-learn evaluate --methods {name} writes it)")
+    method = load_method_class(name)().load(Path(path))
+    n = len(t_ns)
+    z = np.zeros((n, 3))
+    seq = Sequence(name, t_ns, gyro, acc, z, z, np.tile([1.0, 0.0, 0.0, 0.0], (n, 1)))  # no ground truth: refine reads IMU only
+    g, a = method.refine(seq)
+    return np.ascontiguousarray(g), np.ascontiguousarray(a), f"{name} ({Path(path).name})"
+
+
 def displacement_hook(path: Path, t_ns: np.ndarray, gyro: np.ndarray, acc: np.ndarray, update_s: float = 1.0):
     """The graph's ``extra_factors`` hook of a saved tlio-style model (its displacements of the raw IMU)."""
     from imu_learn.baselines.registry import load_method_class
@@ -408,7 +428,8 @@ def displacement_hook(path: Path, t_ns: np.ndarray, gyro: np.ndarray, acc: np.nd
 
 def navigate(input: Path, aiding_file: Path, out: Path, opts: NavigateOptions = NavigateOptions(),
              fmt: str = "auto", extrinsics: Optional[Path] = None, checkpoint: Optional[Path] = None,
-             groundtruth: Optional[Path] = None, displacement: Optional[Path] = None) -> Dict[str, object]:
+             groundtruth: Optional[Path] = None, displacement: Optional[Path] = None,
+             calibration: Optional[Path] = None) -> Dict[str, object]:
     """Fuse the recording ``input``'s IMU with ``aiding_file`` and write ``out``/{causal.tum,
     smoothed.tum, plot.png, summary.json}; returns the summary (module docstring)."""
     from .graph import PriorSigmas, fuse
@@ -450,7 +471,13 @@ def navigate(input: Path, aiding_file: Path, out: Path, opts: NavigateOptions = 
         rows_read = len(traj)
     bias0, bias_source = initial.checkpoint_bias(checkpoint)
     raw_gyro, raw_acc = gyro, acc
-    gyro, acc, var, imu_input = refined_input(checkpoint, gyro, acc)
+    if calibration is not None:
+        if checkpoint is not None:
+            raise ConfigError("--calibration and --checkpoint both refine the IMU: pass one")
+        gyro, acc, imu_input = calibrated_input(Path(calibration), t_ns, gyro, acc)
+        var = None
+    else:
+        gyro, acc, var, imu_input = refined_input(checkpoint, gyro, acc)
     if opts.aiding_kind == "position":
         s0, st = position_start(t_ns, gyro, acc, rows, lever, bias0, opts)
     else:
@@ -501,6 +528,7 @@ def navigate(input: Path, aiding_file: Path, out: Path, opts: NavigateOptions = 
         "aiding_label": aiding.label, "extrinsics": None if extrinsics is None else str(extrinsics),
         "checkpoint": None if checkpoint is None else str(checkpoint),
         "displacement": None if displacement is None else str(displacement),
+        "calibration": None if calibration is None else str(calibration),
         "aiding_rows_read": int(rows_read), "aiding_rows_used": int(len(rows.sample)), "aiding_dropped": rows.dropped,
         **counts, "keyframes": int(len(res.kf_idx)),
         "imu_samples_before_start": s0, "duration_s": round(float((t_fused[-1] - t_fused[0]) * 1e-9), 3),

@@ -84,9 +84,9 @@ def artefact_of(cfg: FuseConfig, spec: RecordingSpec, name: str) -> str:
         return spec.traditional or cfg.traditional
     if name == "raw":
         return ""
-    from imu_learn.baselines.registry import safe_name
+    from imu_learn.baselines.registry import method_file
 
-    return str(Path(spec.methods_dir or cfg.methods_dir) / f"{safe_name(name)}.pt")
+    return str(method_file(Path(spec.methods_dir or cfg.methods_dir), name))
 
 
 def displacement_artefact(cfg: FuseConfig, spec: RecordingSpec) -> str:
