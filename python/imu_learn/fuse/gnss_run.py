@@ -38,10 +38,10 @@ from scipy.spatial.transform import Rotation
 
 from imu_learn.data.formats.gnss_imu import GnssImuLog, mounting_rotation, read_imu_log
 from imu_learn.errors import ConfigError, InvalidInputError
-from imu_learn.settings import DATA_ROOT_ENV, from_dict, read_toml
+from imu_learn.settings import DATA_ROOT_ENV, from_dict, merge, nest, read_toml
 from imu_learn.util.atomic import atomic_write_text
 
-from .graph import IncrementalFusion, PriorSigmas
+from .graph import IncrementalFusion, PriorSigmas, chain_factors
 from .nhc import NhcSettings, calibrate_lever, nhc_callback
 from .noise import ImuNoise
 from .rtklib import GnssFixes, RtkSolution, fixes_on_imu, normal_gravity, read_pos
@@ -277,12 +277,6 @@ def velocity_callback(fixes: GnssFixes, sol: RtkSolution, sigma: float, float_ga
     return extra
 
 
-def _chain(callbacks: List[Callable]) -> Optional[Callable]:
-    if not callbacks:
-        return None
-    return lambda inc, k, s: [f for cb in callbacks for f in cb(inc, k, s)]
-
-
 def run_variant(cfg: GnssRunConfig, variant: str, t: np.ndarray, gyro: np.ndarray, acc: np.ndarray,
                 fixes: GnssFixes, start: Dict[str, object], noise: ImuNoise, gravity: float,
                 eval_idx: np.ndarray, sol: RtkSolution, diag_idx: Sequence[int] = (),
@@ -303,7 +297,7 @@ def run_variant(cfg: GnssRunConfig, variant: str, t: np.ndarray, gyro: np.ndarra
         lever_nhc = tuple(n.lever) if nhc_lever is None else tuple(float(x) for x in nhc_lever)
         callbacks.append(nhc_callback(NhcSettings(n.sigma_lat, n.sigma_vert, lever_nhc, n.every_s,
                                                   math.radians(n.max_yaw_rate_dps)), gyro))
-    extra = _chain(callbacks)
+    extra = chain_factors(*callbacks)
     t0 = time.perf_counter()
     inc = IncrementalFusion(t, (start["R0"], start["p0"], start["v0"]), [fixes], noise, gravity, cfg.keyframe_hz,
                             prior, bias0, predict_between=True, resolve_after_s=cfg.resolve_after_s,
@@ -507,16 +501,10 @@ def apply_override(cfg: GnssRunConfig, item: str) -> None:
         value = json.loads(text)
     except json.JSONDecodeError:
         value = text
-    d: Dict[str, object] = {}
-    parts = key.strip().split(".")
-    cur = d
-    for k in parts[:-1]:
-        cur = cur.setdefault(k, {})  # type: ignore[assignment]
-    cur[parts[-1]] = value
-    new = from_dict(GnssRunConfig, {**{k: asdict(v) if hasattr(v, "__dataclass_fields__") else v
-                                       for k, v in asdict(cfg).items() if k == parts[0]}, **d}
-                    if len(parts) == 1 else {parts[0]: {**asdict(getattr(cfg, parts[0])), **d[parts[0]]}})
-    setattr(cfg, parts[0], getattr(new, parts[0]))
+    key = key.strip()
+    new = from_dict(GnssRunConfig, merge(asdict(cfg), nest({key: value})))
+    top = key.split(".")[0]
+    setattr(cfg, top, getattr(new, top))
 
 
 def write_results(res: Dict[str, object], cfg: GnssRunConfig, out: Path) -> Tuple[Path, Path]:

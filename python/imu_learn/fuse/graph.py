@@ -585,6 +585,15 @@ class IncrementalFusion:
                             time.perf_counter() - self._t_start, counts)
 
 
+def chain_factors(*hooks: Optional[Callable]) -> Optional[Callable]:
+    """One ``extra_factors`` hook of several (None entries left out): each one's factors at every keyframe,
+    in order; None when there is none."""
+    live = [h for h in hooks if h is not None]
+    if len(live) <= 1:
+        return live[0] if live else None
+    return lambda fusion, k, s: [f for h in live for f in h(fusion, k, s)]
+
+
 def fuse(
     t_ns: np.ndarray,
     gyro: np.ndarray,

@@ -432,7 +432,7 @@ def navigate(input: Path, aiding_file: Path, out: Path, opts: NavigateOptions = 
              calibration: Optional[Path] = None) -> Dict[str, object]:
     """Fuse the recording ``input``'s IMU with ``aiding_file`` and write ``out``/{causal.tum,
     smoothed.tum, plot.png, summary.json}; returns the summary (module docstring)."""
-    from .graph import PriorSigmas, fuse
+    from .graph import PriorSigmas, chain_factors, fuse
 
     t_start = time.perf_counter()
     opts.check()
@@ -501,7 +501,7 @@ def navigate(input: Path, aiding_file: Path, out: Path, opts: NavigateOptions = 
         hooks.append(displacement_hook(Path(displacement), t_ns[sel], raw_gyro[sel], raw_acc[sel]))
         imu_input += f" + displacements of {Path(displacement).name}"
     if hooks:
-        kw["extra_factors"] = hooks[0] if len(hooks) == 1 else (lambda fusion, k, s: [f for h in hooks for f in h(fusion, k, s)])
+        kw["extra_factors"] = chain_factors(*hooks)
     if var is not None:
         kw["var"] = np.ascontiguousarray(var[sel])
     log.info(f"fusing {len(t_ns) - s0} IMU samples ({imu_input}) with {len(aiding)} {opts.aiding_kind} measurements "

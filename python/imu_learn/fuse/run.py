@@ -42,7 +42,7 @@ from .aiding import (
 )
 from .config import LEARNED_COV_INPUTS, LEARNED_INPUT, FuseConfig, RecordingSpec, ScenarioSpec
 from .displacement import FACTOR_INPUTS, displacement_factors_for
-from .graph import SETTLE_S, fuse
+from .graph import SETTLE_S, chain_factors, fuse
 from .noise import ImuNoise
 from .plots import plot_setting, runs_of
 from .score import score
@@ -452,12 +452,12 @@ def run_one(cfg: FuseConfig, out: Path, seq, noise: ImuNoise, R0: np.ndarray, sc
     # is the raw IMU; "learned" fuses refined samples beside it).
     hook = (None if displacement is None else
             displacement_factors_for(displacement, seq.t_ns, seq.gyro, seq.acc, cfg.displacement_update_s))
-    extra = hook
+    nhc = None
     if scn.nhc_sigma_mps > 0:  # wheeled platform: the non-holonomic constraint at every keyframe
         from .nhc import NhcSettings, nhc_callback
 
         nhc = nhc_callback(NhcSettings(scn.nhc_sigma_mps, scn.nhc_sigma_mps), np.ascontiguousarray(gyro))
-        extra = nhc if hook is None else (lambda fusion, k, s: [*hook(fusion, k, s), *nhc(fusion, k, s)])
+    extra = chain_factors(hook, nhc)
     try:
         res = fuse(seq.t_ns, gyro, acc, (R0, seq.p[0], seq.v[0]), [aiding], noise, cfg.gravity, cfg.keyframe_hz,
                    bias0=bias0, var=var, extra_factors=extra, lag_s=cfg.lag_s)
