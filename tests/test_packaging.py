@@ -78,9 +78,14 @@ def _venv(where: Path, requirement: str) -> Path:
     """A fresh venv at ``where`` with ``requirement`` pip-installed; its python."""
     venv.EnvBuilder(with_pip=True, clear=True).create(where)
     py = where / "bin" / "python"
+    # --no-cache-dir is not used: pip's cache is what makes the 3 GB torch download a one-time cost
     r = _run([py, "-m", "pip", "install", "--quiet", "--disable-pip-version-check", requirement], cwd=where)
-    if r.returncode != 0 and any(s in r.stdout + r.stderr for s in UNAVAILABLE):
-        pytest.skip(f"dependencies of {requirement} unavailable: {(r.stdout + r.stderr).strip()[-400:]}")
+    if r.returncode != 0:
+        # a half-installed venv (torch's is ~5 GB) is removed at once: pytest keeps its last three
+        # temporary folders, and a failed install left behind would fill the disk for the next run
+        shutil.rmtree(where, ignore_errors=True)
+        if any(s in r.stdout + r.stderr for s in UNAVAILABLE):
+            pytest.skip(f"dependencies of {requirement} unavailable: {(r.stdout + r.stderr).strip()[-400:]}")
     _ok(r)
     return py
 
@@ -89,8 +94,10 @@ def _venv(where: Path, requirement: str) -> Path:
 def bare(wheel, tmp_path_factory) -> Iterator[Path]:
     """A venv with the wheel and its core dependencies only (removed afterwards)."""
     where = tmp_path_factory.mktemp("venv_bare")
-    yield _venv(where, str(wheel))
-    shutil.rmtree(where, ignore_errors=True)
+    try:
+        yield _venv(where, str(wheel))
+    finally:
+        shutil.rmtree(where, ignore_errors=True)
 
 
 @pytest.fixture(scope="module")
@@ -151,8 +158,10 @@ def trained(wheel, tmp_path_factory) -> Iterator[Path]:
     """A venv with the wheel and its train extra (torch, ~5 GB installed with the CUDA build: removed
     afterwards; pip's cache, where it keeps downloads, serves torch after the first time)."""
     where = tmp_path_factory.mktemp("venv_train")
-    yield _venv(where, f"{wheel}[train]")
-    shutil.rmtree(where, ignore_errors=True)
+    try:
+        yield _venv(where, f"{wheel}[train]")
+    finally:
+        shutil.rmtree(where, ignore_errors=True)
 
 
 @pytest.mark.slow
