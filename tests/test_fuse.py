@@ -203,7 +203,7 @@ def test_cli_reports_a_missing_recording_in_one_line(tmp_path, capsys):
 
 
 def test_experiment_on_the_shipped_crop_writes_results_and_resumes(shipped, tmp_path):
-    cfg = validate(FuseConfig(
+    cfg = validate(FuseConfig(init="groundtruth",
         name="t", data_root=str(shipped), inputs=["raw", "proposed"], checkpoint="models/euroc_adis16448.pt",
         recordings=[RecordingSpec(CROP, "euroc", CROP + "/mav0/state_groundtruth_estimate0/data.csv")],
         scenarios=[ScenarioSpec("gnss", "position", 1.0, 0.1, outages=[[20.0, 10.0]])]))
@@ -227,7 +227,7 @@ def test_a_changed_scenario_reruns_only_its_own_runs(shipped, tmp_path, monkeypa
 
     rec = RecordingSpec(CROP, "euroc", CROP + "/mav0/state_groundtruth_estimate0/data.csv")
     a, b = ScenarioSpec("a", "position", 1.0, 0.1), ScenarioSpec("b", "position", 0.5, 0.1)
-    cfg = validate(FuseConfig(name="t", data_root=str(shipped), inputs=["raw"], recordings=[rec], scenarios=[a, b]))
+    cfg = validate(FuseConfig(init="groundtruth", name="t", data_root=str(shipped), inputs=["raw"], recordings=[rec], scenarios=[a, b]))
     calls = []
     real = run_mod.fuse
     monkeypatch.setattr(run_mod, "fuse", lambda *x, **k: calls.append(1) or real(*x, **k))
@@ -251,7 +251,7 @@ def test_a_graph_gtsam_cannot_solve_is_recorded_as_failed_and_the_rest_runs(ship
 
     monkeypatch.setattr(run_mod, "fuse", flaky)
     rec = RecordingSpec(CROP, "euroc", CROP + "/mav0/state_groundtruth_estimate0/data.csv")
-    cfg = validate(FuseConfig(name="t", data_root=str(shipped), inputs=["raw"], recordings=[rec],
+    cfg = validate(FuseConfig(init="groundtruth", name="t", data_root=str(shipped), inputs=["raw"], recordings=[rec],
                               scenarios=[ScenarioSpec("slow", "position", 0.5, 0.1), ScenarioSpec("fast", "position", 1.0, 0.1)]))
     res = run_experiment(cfg, tmp_path, lambda m: None)
     assert "Indeterminate" in res["MH_04_difficult|slow|raw|s0"]["failed"]
@@ -268,7 +268,7 @@ def test_startup_bias_prior_and_traditional_input(shipped, tmp_path):
                                     None, None)
     trad.save(tmp_path / "trad.json")
     rec = RecordingSpec(CROP, "euroc", CROP + "/mav0/state_groundtruth_estimate0/data.csv")
-    cfg = validate(FuseConfig(name="t", data_root=str(shipped), inputs=["raw", "traditional"],
+    cfg = validate(FuseConfig(init="groundtruth", name="t", data_root=str(shipped), inputs=["raw", "traditional"],
                               traditional=str(tmp_path / "trad.json"), recordings=[rec],
                               scenarios=[ScenarioSpec("g", "position", 1.0, 0.1, bias_prior="startup")]))
     res = run_experiment(cfg, tmp_path / "o", lambda m: None)
@@ -287,7 +287,7 @@ def test_trajectories_read_by_evo_give_the_reported_rmse(shipped, crop, tmp_path
 
     from imu_learn import _imu_core as core
     rec = RecordingSpec(CROP, "euroc", CROP + "/mav0/state_groundtruth_estimate0/data.csv")
-    cfg = validate(FuseConfig(name="t", data_root=str(shipped), inputs=["raw"], recordings=[rec],
+    cfg = validate(FuseConfig(init="groundtruth", name="t", data_root=str(shipped), inputs=["raw"], recordings=[rec],
                               scenarios=[ScenarioSpec("g", "position", 1.0, 0.1)]))
     res = run_experiment(cfg, tmp_path, lambda m: None)["MH_04_difficult|g|raw|s0"]
     gt = tmp_path / "gt.tum"
@@ -309,7 +309,7 @@ def test_a_recording_can_name_its_own_model_and_a_missing_one_fails_before_any_r
 
     own = RecordingSpec(CROP, "euroc", CROP + "/mav0/state_groundtruth_estimate0/data.csv", checkpoint=str(tmp_path / "nope.pt"))
     other = RecordingSpec(CROP, "euroc", CROP + "/mav0/state_groundtruth_estimate0/data.csv")
-    cfg = validate(FuseConfig(name="t", data_root=str(shipped), inputs=["raw", "proposed"], recordings=[other, own],
+    cfg = validate(FuseConfig(init="groundtruth", name="t", data_root=str(shipped), inputs=["raw", "proposed"], recordings=[other, own],
                               scenarios=[ScenarioSpec("g", "position", 1.0, 0.1)]))
     assert artefact_of(cfg, own, "proposed") == str(tmp_path / "nope.pt")
     assert artefact_of(cfg, other, "proposed") == cfg.checkpoint
@@ -324,7 +324,7 @@ def test_simulated_aiding_runs_once_per_noise_seed_and_the_table_gives_mean_and_
     from imu_learn.fuse.run import seeds_of
 
     rec = RecordingSpec(CROP, "euroc", CROP + "/mav0/state_groundtruth_estimate0/data.csv")
-    cfg = validate(FuseConfig(name="t", data_root=str(shipped), inputs=["raw"], recordings=[rec], seeds=[3, 7],
+    cfg = validate(FuseConfig(init="groundtruth", name="t", data_root=str(shipped), inputs=["raw"], recordings=[rec], seeds=[3, 7],
                               scenarios=[ScenarioSpec("g", "position", 1.0, 0.1)]))
     res = run_experiment(cfg, tmp_path, lambda m: None)
     a, b = res["MH_04_difficult|g|raw|s3"], res["MH_04_difficult|g|raw|s7"]
@@ -355,7 +355,7 @@ def test_any_evaluate_method_that_outputs_imu_is_an_input_and_end_to_end_is_not(
     (tmp_path / "methods" / "offset.pt").write_bytes(b"")  # what evaluate would have saved
     rec = RecordingSpec(CROP, "euroc", CROP + "/mav0/state_groundtruth_estimate0/data.csv")
     scn = ScenarioSpec("g", "position", 1.0, 0.1, bias_prior="startup")
-    cfg = validate(FuseConfig(name="t", data_root=str(shipped), inputs=["raw", "offset"], recordings=[rec],
+    cfg = validate(FuseConfig(init="groundtruth", name="t", data_root=str(shipped), inputs=["raw", "offset"], recordings=[rec],
                               methods_dir=str(tmp_path / "methods"), scenarios=[scn]))
     res = run_experiment(cfg, tmp_path / "o", lambda m: None)
     raw, off = res["MH_04_difficult|g|raw|s0"]["bias_prior"], res["MH_04_difficult|g|offset|s0"]["bias_prior"]
@@ -363,7 +363,7 @@ def test_any_evaluate_method_that_outputs_imu_is_an_input_and_end_to_end_is_not(
     with pytest.raises(ConfigError, match="end-to-end"):
         validate(FuseConfig(recordings=[rec], scenarios=[scn], inputs=["raw", "end-to-end"]))
     with pytest.raises(FileNotFoundError, match="gyro-denoise"):
-        run_experiment(validate(FuseConfig(name="t", data_root=str(shipped), inputs=["gyro-denoise"], recordings=[rec],
+        run_experiment(validate(FuseConfig(init="groundtruth", name="t", data_root=str(shipped), inputs=["gyro-denoise"], recordings=[rec],
                                            methods_dir=str(tmp_path / "none"), scenarios=[scn])), tmp_path / "p",
                        lambda m: None)
 
@@ -377,7 +377,7 @@ def test_nhc_scenario_adds_the_constraint_and_leaves_other_runs_hashes_alone(shi
     rec = RecordingSpec(CROP, "euroc", CROP + "/mav0/state_groundtruth_estimate0/data.csv")
     plain, nhc = ScenarioSpec("p", "position", 1.0, 0.1), ScenarioSpec("n", "position", 1.0, 0.1, nhc_sigma_mps=0.05)
     assert "nhc_sigma_mps" not in run_mod.scenario_of(plain) and run_mod.scenario_of(nhc)["nhc_sigma_mps"] == 0.05
-    cfg = validate(FuseConfig(name="t", data_root=str(shipped), inputs=["raw"], recordings=[rec], scenarios=[plain, nhc]))
+    cfg = validate(FuseConfig(init="groundtruth", name="t", data_root=str(shipped), inputs=["raw"], recordings=[rec], scenarios=[plain, nhc]))
     hooks = {}
     real = run_mod.fuse
 
@@ -391,5 +391,5 @@ def test_nhc_scenario_adds_the_constraint_and_leaves_other_runs_hashes_alone(shi
     a, b = res["MH_04_difficult|p|raw|s0"], res["MH_04_difficult|n|raw|s0"]
     assert a["smoothed"]["pos_rmse_m"] != b["smoothed"]["pos_rmse_m"]  # the constraint acts (a drone is not a car)
     with pytest.raises(ConfigError, match="nhc_sigma_mps"):
-        validate(FuseConfig(name="t", data_root=str(shipped), inputs=["raw"], recordings=[rec],
+        validate(FuseConfig(init="groundtruth", name="t", data_root=str(shipped), inputs=["raw"], recordings=[rec],
                             scenarios=[ScenarioSpec("x", "position", 1.0, 0.1, nhc_sigma_mps=-1.0)]))

@@ -149,7 +149,7 @@ def test_tlio_style_is_a_fusion_input_that_adds_factors(shipped, tiny_tlio, tmp_
     crop = "euroc/MH_04_difficult"
     rec = RecordingSpec(crop, "euroc", crop + "/mav0/state_groundtruth_estimate0/data.csv")
     scn = ScenarioSpec("g", "position", 1.0, 0.1)
-    cfg = validate(FuseConfig(name="t", data_root=str(shipped), inputs=["raw", "tlio-style"], recordings=[rec],
+    cfg = validate(FuseConfig(init="groundtruth", name="t", data_root=str(shipped), inputs=["raw", "tlio-style"], recordings=[rec],
                               methods_dir=str(methods), scenarios=[scn]))
     out = tmp_path / "o"
     res = run_experiment(cfg, out, lambda msg: None, only_inputs=["raw"])
@@ -195,7 +195,7 @@ def test_learned_input_is_refined_samples_with_learned_variances_plus_displaceme
     rec = RecordingSpec(crop, "euroc", crop + "/mav0/state_groundtruth_estimate0/data.csv")
     scn = ScenarioSpec("g", "position", 1.0, 0.1)
     cov = str(Path(__file__).resolve().parent.parent / "models" / "euroc_adis16448_cov.pt")
-    cfg = validate(FuseConfig(name="t", data_root=str(shipped), inputs=["learned", "proposed+learned-cov"],
+    cfg = validate(FuseConfig(init="groundtruth", name="t", data_root=str(shipped), inputs=["learned", "proposed+learned-cov"],
                               recordings=[rec], methods_dir=str(methods), covariance_checkpoint=cov, scenarios=[scn]))
     res = run_experiment(cfg, tmp_path / "with", lambda msg: None)
     r, plain = res["MH_04_difficult|g|learned|s0"], res["MH_04_difficult|g|proposed+learned-cov|s0"]

@@ -136,7 +136,7 @@ def without_seconds(path):
 
 @pytest.mark.slow  # two experiments and worker processes: about 12 s on an idle machine
 def test_jobs_2_writes_the_same_results_as_jobs_1(shipped, tmp_path):
-    cfg = validate(FuseConfig(
+    cfg = validate(FuseConfig(init="groundtruth",
         name="t", data_root=str(shipped), inputs=["raw"], seeds=[0, 1],
         recordings=[RecordingSpec(CROP, "euroc", CROP + "/mav0/state_groundtruth_estimate0/data.csv")],
         scenarios=[ScenarioSpec("sparse", "position", 0.2, 0.1)]))

@@ -14,7 +14,13 @@ from imu_learn.cli.fuse import parser  # noqa: E402
 from imu_learn.errors import ConfigError, InvalidInputError  # noqa: E402
 from imu_learn.fuse import PositionFixes, apply_outages, fuse, simulate_relative_pose  # noqa: E402
 from imu_learn.fuse.graph import IncrementalFusion  # noqa: E402
-from imu_learn.fuse.online import CausalStepper, load_causal_model, stream  # noqa: E402
+from imu_learn.fuse.online import (  # noqa: E402
+    CausalStepper,
+    WindowedStepper,
+    load_causal_model,
+    load_learned_model,
+    stream,
+)
 from imu_learn.infer.refine import refine_arrays  # noqa: E402
 from imu_learn.nn.model import ImuRefiner, ModelConfig  # noqa: E402
 from imu_learn.train.checkpoint import save_checkpoint  # noqa: E402
@@ -22,7 +28,7 @@ from imu_learn.train.checkpoint import save_checkpoint  # noqa: E402
 torch.set_num_threads(1)
 
 # The closed-form trajectory (tests/synthetic.py); the shipped crop is conftest.py's `crop` fixture.
-from crops import CROP  # noqa: E402
+from crops import CROP, REPO  # noqa: E402
 from synthetic import spin_and_climb  # noqa: E402
 
 
@@ -146,11 +152,12 @@ def short_recording(shipped, root, samples=1600):
         (dst / rel).write_text("".join(lines[: n + 1]))
 
 
-def write_config(path, root, out, checkpoint):
+def write_config(path, root, out, checkpoint, covariance=""):
     path.write_text(f'''name = "online_test"
 data_root = "{root}"
 out_dir = "{out}"
 checkpoint = "{checkpoint}"
+covariance_checkpoint = "{covariance}"
 [[recordings]]
 path = "euroc/MH_04_short"
 format = "euroc"
@@ -239,3 +246,145 @@ def test_help_documents_every_option_and_gives_an_example(capsys):
     for o in options:
         assert o in text
     assert "examples:" in text and "imu-learn fuse --config configs/fuse_euroc.toml" in text and "--online" in text
+
+
+# --------------------------------------------------------------------------------------------
+# the learned input: a bidirectional covariance model streamed by windows (WindowedStepper)
+
+LEARNED = REPO / "models" / "euroc_adis16448_cov.pt"
+
+
+def tiny_cov_model(window, overlap, seed=0):
+    from imu_learn.infer.windowing import Windowing, attach
+
+    torch.manual_seed(seed)
+    m = ImuRefiner(ModelConfig(causal=False, hidden=8, fc=8, covariance=True))
+    with torch.no_grad():
+        torch.nn.init.normal_(m.head.weight, std=0.5)
+    return attach(m.eval(), Windowing(window, overlap))
+
+
+def stream_windows(stepper, gyro, acc):
+    """Every released sample (index, gyro, acc, var) and the arrival that released it."""
+    out, at = [], []
+    for i in range(len(gyro)):
+        r = stepper.push(gyro[i], acc[i])
+        out += r
+        at += [i] * len(r)
+    r = stepper.finish()
+    return out + r, np.array(at + [len(gyro) - 1] * len(r))
+
+
+@pytest.mark.parametrize("window,overlap", [(8, 4), (7, 3), (6, 5), (9, 0), (1, 0)])
+def test_windowed_stepper_follows_the_one_windowing_rule_for_every_length(window, overlap):
+    """Whatever the length N (unknown while streaming; window_plan moves its last window back to end at
+    N), each sample is released once, in order, and is apply()'s sample; the model runs once per window."""
+    from imu_learn.infer.windowing import apply, window_plan
+
+    model = tiny_cov_model(window, overlap)
+    rng = np.random.default_rng(window)
+    for n in range(1, 5 * window + 8):
+        g, a = rng.normal(size=(n, 3)), rng.normal(9.8, 1.0, size=(n, 3))
+        rg, ra, rv = apply(model, g, a, variance=True)
+        st = WindowedStepper(model)
+        out, at = stream_windows(st, g, a)
+        assert [o[0] for o in out] == list(range(n)), (n, [o[0] for o in out])
+        assert (at >= np.arange(n)).all() and st.model_calls == len(window_plan(n, window, overlap))
+        got = np.array([np.r_[o[1], o[2]] for o in out])
+        var = np.array([o[3] for o in out])
+        # one window per forward here, 16 offline: the same up to float32 rounding (measured: refined
+        # bit-identical, variances <= 2e-6 relative)
+        assert np.abs(got - np.c_[rg, ra]).max() <= 1e-6
+        assert np.abs(var / rv - 1).max() <= 1e-5
+
+
+def test_learned_streamed_equals_offline_apply_on_the_crop(crop):
+    """The shipped checkpoint on the 60 s crop: the streamed refined samples and variances are
+    apply(model, gyro, acc, variance=True)'s (measured: refined <= 6e-8, variances <= 2e-6 relative:
+    float32 rounding of a 1-window vs a 16-window forward); a sample waits at most a window, and inside
+    the recording (not its first window nor the end) at most 3/4 of one."""
+    from imu_learn.infer.windowing import apply, window_plan
+
+    model = load_learned_model(LEARNED)
+    W = model.windowing.window
+    g, a = crop.gyro, crop.acc
+    rg, ra, rv = apply(model, g, a, variance=True)
+    st = WindowedStepper(model)
+    out, at = stream_windows(st, g, a)
+    n = len(g)
+    assert [o[0] for o in out] == list(range(n)) and st.model_calls == len(window_plan(n, W, model.windowing.overlap))
+    got = np.array([np.r_[o[1], o[2]] for o in out])
+    var = np.array([o[3] for o in out])
+    assert np.abs(got - np.c_[rg, ra]).max() <= 1e-6
+    assert np.abs(var / rv - 1).max() <= 1e-5
+    delay = at - np.arange(n)
+    assert delay.max() <= W - 1 and delay[W : n - 2 * W].max() <= 3 * W // 4
+
+
+def test_online_learned_equals_the_batch_on_the_offline_refined_input_and_variances(crop):
+    n = 2400  # 12 s of the crop, 1 Hz fixes
+    t, g, a = crop.t_ns[:n], crop.gyro[:n], crop.acc[:n]
+    from scipy.spatial.transform import Rotation
+
+    from imu_learn.core.quat import wxyz_to_xyzw
+    from imu_learn.infer.windowing import apply, window_plan
+    model = load_learned_model(LEARNED)
+    rg, ra, rv = apply(model, g, a, variance=True)
+    start = (Rotation.from_quat(wxyz_to_xyzw(crop.q_wxyz[0])).as_matrix(), crop.p[0], crop.v[0])
+    fixes = PositionFixes(np.arange(0, n, 200), crop.p[:n:200], 0.1, np.zeros(3), "exact 1 Hz")
+    batch = fuse(t, rg, ra, start, [fixes], var=rv)
+    assert np.abs(rg - g).max() > 1e-3 and np.abs(ra - a).max() > 1e-2  # the model changes the data
+    online = stream(t, g, a, start, [fixes], model=model)
+    assert np.array_equal(online.kf_idx, batch.kf_idx)
+    # measured: 1.0e-9 m and 3.2e-10 (the refined inputs differ by float32 rounding, above)
+    assert np.abs(online.causal_p - batch.causal_p).max() < 1e-7
+    assert np.abs(online.causal_R - batch.causal_R).max() < 1e-8
+    # each sample is fused once its window settled it; the model's calls are in the latency of the
+    # samples that completed a window
+    idx = online.released_index()
+    assert (idx >= np.arange(n)).all() and (np.diff(idx) >= 0).all() and idx[-1] == n - 1
+    st = online.stats()
+    assert st["algorithmic_delay"]["max_samples"] == int((idx - np.arange(n)).max()) > 0
+    w = model.windowing
+    assert st["model_run"]["count"] == online.model_ran.sum() == len(window_plan(n, w.window, w.overlap))
+    assert np.array_equal(online.algorithmic_delay_ns(), t[idx] - t)
+
+
+def test_learned_without_a_covariance_head_or_causal_is_a_config_error(tmp_path):
+    bi = tmp_path / "bi.pt"
+    save_checkpoint(bi, tiny_model(causal=False), {"test": True}, epoch=1, step=1, best_metric=None)
+    with pytest.raises(ConfigError, match="covariance head"):
+        load_learned_model(bi)
+    with pytest.raises(ConfigError, match="covariance head"):
+        WindowedStepper(tiny_model(causal=False))
+    t, gyro, acc, start, fixes = noisy_case()
+    with pytest.raises(ConfigError, match="covariance head"):
+        stream(t, gyro, acc, start, [fixes], model=tiny_model(causal=False))
+    causal = tmp_path / "causal.pt"
+    save_checkpoint(causal, tiny_model(), {"test": True}, epoch=1, step=1, best_metric=None)
+    with pytest.raises(ConfigError, match="causal"):
+        load_learned_model(causal)
+
+
+def test_cli_online_streams_learned_with_its_variances(shipped, tmp_path, capsys):
+    short_recording(shipped, tmp_path / "data")
+    cov = tmp_path / "cov.pt"
+    save_checkpoint(cov, tiny_cov_model(200, 100), {"test": True}, epoch=1, step=1, best_metric=None)
+    cfg_file = tmp_path / "f.toml"
+    write_config(cfg_file, tmp_path / "data", tmp_path / "reports", tmp_path / "unused.pt", cov)
+    rc = fuse_main(["--config", str(cfg_file), "--online", "--inputs", "learned", "--scenarios", "gnss_1hz"])
+    assert rc == 0, capsys.readouterr().err
+    out = capsys.readouterr().out
+    assert "MH_04_short|gnss_1hz|learned" in out and "algorithmic delay median" in out
+    run = json.loads((tmp_path / "reports" / "online_test" / "online.json").read_text())["runs"][
+        "MH_04_short|gnss_1hz|learned|s0"]
+    assert run["checkpoint"] == str(cov) and run["displacement"] == ""
+    assert run["samples"] == 1600 and 0 < run["algorithmic_delay"]["max_samples"] < 200
+    assert run["model_run"]["count"] == 15  # windows of 200 samples starting every 100: 0, 100, ..., 1400
+    # a model without a covariance head is refused before any run
+    write_config(cfg_file, tmp_path / "data", tmp_path / "reports2", tmp_path / "unused.pt", tmp_path / "bi.pt")
+    save_checkpoint(tmp_path / "bi.pt", tiny_model(causal=False), {"test": True}, epoch=1, step=1, best_metric=None)
+    assert fuse_main(["--config", str(cfg_file), "--online", "--inputs", "raw,learned"]) == 2
+    err = capsys.readouterr().err
+    assert "ConfigError" in err and "covariance head" in err
+    assert not (tmp_path / "reports2" / "online_test" / "online.json").exists()

@@ -478,3 +478,34 @@ def test_cli_calibration_applies_a_saved_floor_fit(crop_without_groundtruth, tmp
     assert main([*base, "--calibration", str(tmp_path / "timing.json"), "--checkpoint",
                  str(SHIPPED.parent / "models" / "euroc_adis16448.pt"), "--out", str(tmp_path / "o3")]) == 2
     assert "pass one" in capsys.readouterr().err
+
+
+def test_variance_scale_multiplies_the_learned_variances_and_needs_a_covariance_head(crop_without_groundtruth,
+                                                                                      tmp_path, capsys):
+    """--variance-scale G,A multiplies the covariance head's gyro and acc variances (fuse/variance.py calibrates
+    them over the keyframe interval); without a covariance head, without a checkpoint or not G,A > 0: refused."""
+    from imu_learn.errors import ConfigError
+    from imu_learn.fuse.navigate import NavigateOptions, refined_input
+
+    models = SHIPPED.parent / "models"
+    rng = np.random.default_rng(0)
+    gyro, acc = rng.normal(0, 0.1, (400, 3)), rng.normal(0, 0.5, (400, 3)) + [0.0, 0.0, 9.81]
+    g1, a1, v1, _ = refined_input(models / "euroc_adis16448_cov.pt", gyro, acc)
+    g2, a2, v2, label = refined_input(models / "euroc_adis16448_cov.pt", gyro, acc, (0.1, 0.25))
+    np.testing.assert_array_equal(g1, g2)
+    np.testing.assert_allclose(v2, v1 * np.array([0.1] * 3 + [0.25] * 3), rtol=1e-12)
+    assert "scaled by 0.1 (gyro), 0.25 (acc)" in label
+    with pytest.raises(ConfigError, match="no covariance head"):
+        refined_input(models / "euroc_adis16448.pt", gyro, acc, (0.1, 0.25))
+    with pytest.raises(ConfigError, match="needs --checkpoint"):
+        refined_input(None, gyro, acc, (0.1, 0.25))
+    for bad in ((0.0, 1.0), (1.0, float("nan")), (1.0,)):
+        with pytest.raises(ConfigError, match="--variance-scale"):
+            NavigateOptions(aiding_kind="pose", variance_scale=bad).check()
+    rec, tum, yaml = crop_without_groundtruth
+    base = ["fuse", "--input", str(rec), "--aiding", str(tum), "--aiding-kind", "pose", "--extrinsics", str(yaml)]
+    assert main([*base, "--checkpoint", str(models / "euroc_adis16448.pt"), "--variance-scale", "0.1,0.2",
+                 "--out", str(tmp_path / "o")]) == 2
+    assert "has no covariance head" in capsys.readouterr().err
+    assert main([*base, "--variance-scale", "0.1", "--out", str(tmp_path / "o2")]) == 2
+    assert "--variance-scale: expected 2" in capsys.readouterr().err

@@ -51,7 +51,7 @@ def read_odometry(bag):
 def test_fuse_a_bag_with_its_position_topic_writes_odometry_in_its_kind(tmp_path, kind):
     bag = write_fixture_bag(tmp_path, kind)
     spec = RecordingSpec(str(bag), "rosbag", str(GT_CSV), imu_topic="/imu0", aiding_topic="/leica/position")
-    cfg = validate(FuseConfig(name="t", data_root=str(tmp_path), inputs=["raw"], recordings=[spec],
+    cfg = validate(FuseConfig(init="groundtruth", name="t", data_root=str(tmp_path), inputs=["raw"], recordings=[spec],
                               scenarios=[ScenarioSpec("leica", "leica", 1.0, 0.05)]))
     res = run_experiment(cfg, tmp_path / "out", lambda m: None)
     stem = f"{bag_name(kind)}_leica_raw"

@@ -60,7 +60,7 @@ def _names(text: str) -> List[str]:
 
 NAVIGATE_ONLY = ("format", "aiding", "aiding_kind", "aiding_format", "extrinsics", "groundtruth", "keyframe_hz",
                  "gaps", "aiding_hz", "sigma_rot_deg", "sigma_m", "max_relative_gap_s", "lag_s", "imu_rotation_rpy_deg",
-                 "imu_delay_s", "lever_arm", "nhc", "imu_noise", "displacement", "calibration")
+                 "imu_delay_s", "lever_arm", "nhc", "imu_noise", "displacement", "calibration", "variance_scale")
 
 
 def add_arguments(ap: argparse.ArgumentParser) -> None:
@@ -89,9 +89,13 @@ def add_arguments(ap: argparse.ArgumentParser) -> None:
                     help="with --online: only these aiding scenarios (their names in the config, e.g. gnss_1hz; "
                          "default all)")
     ap.add_argument("--inputs", type=_names, default=None, metavar="NAME,...",
-                    help="with --online: IMU inputs to stream, of raw and proposed (default raw,proposed); "
+                    help="with --online: IMU inputs to stream, of raw, proposed and learned (default raw,proposed; "
+                         "learned: the config's covariance_checkpoint run once per window, its variances fused); "
                          "without: run only these of the config's inputs (e.g. tlio-style), the results of "
                          "the others in results.json are left as they are")
+    ap.add_argument("--init", choices=("data", "groundtruth"), default=None,
+                    help="the runs' first state, instead of the config's init: from the data alone (the default), or "
+                         "a prior from ground truth (the controlled setting; tables say which)")
     ap.add_argument("--jobs", type=int, default=1, metavar="N", help="runs fused at a time, in worker processes (one thread each); results.json is the same")
     g = ap.add_argument_group("the GNSS outage experiment (a --config with kind = \"gnss-outages\")")
     g.add_argument("--set", action="append", default=None, metavar="KEY=JSON", dest="set_values",
@@ -124,6 +128,10 @@ def add_navigate_arguments(ap: argparse.ArgumentParser) -> None:
                    help="a tlio-style displacement model (imu-learn evaluate --methods tlio-style writes "
                         "<out>/methods/tlio-style.pt): its 1 s displacements of the raw IMU join the graph as factors; "
                         "with a --checkpoint that has a covariance head this is the 'learned' input")
+    g.add_argument("--variance-scale", default=None, metavar="G,A",
+                   help="multiply the covariance head's per-sample gyro and acc variances by G and A (a "
+                        "--checkpoint with a covariance head only; bench/variance_scale.py calibrates them over "
+                        "the keyframe interval)")
     g.add_argument("--calibration", type=Path, default=None, metavar="FILE",
                    help="apply a fit imu-learn evaluate saved (<out>/methods/timing.json, traditional+timing.json) "
                         "to the IMU instead of a checkpoint: the simple floor a learned input is judged against")
@@ -179,7 +187,7 @@ def navigate(args: argparse.Namespace, keep: Callable[[Any], None]) -> int:
     from imu_learn.fuse.navigate import NavigateOptions, one_line, parse_gaps, parse_vector
     from imu_learn.fuse.navigate import navigate as run_navigation
 
-    wrong = [f"--{o.replace('_', '-')}" for o in ("recordings", "scenarios", "inputs", "data_root", "variants")
+    wrong = [f"--{o.replace('_', '-')}" for o in ("recordings", "scenarios", "inputs", "data_root", "variants", "init")
              if getattr(args, o) is not None] + (["--online"] if args.online else []) \
         + (["--set"] if args.set_values is not None else [])
     if wrong:
@@ -213,6 +221,8 @@ def navigate(args: argparse.Namespace, keep: Callable[[Any], None]) -> int:
         o = replace(o, nhc=True)
     if args.imu_noise is not None:
         o = replace(o, imu_noise=parse_vector(args.imu_noise, 4, "--imu-noise"))
+    if args.variance_scale is not None:
+        o = replace(o, variance_scale=parse_vector(args.variance_scale, 2, "--variance-scale"))
     if args.sigma_rot_deg is not None:
         o = replace(o, **{"rel_sigma_rot_deg" if o.aiding_kind == "relative-pose" else "pose_sigma_rot_deg":
                           args.sigma_rot_deg})
@@ -230,7 +240,7 @@ def navigate(args: argparse.Namespace, keep: Callable[[Any], None]) -> int:
 
 
 GNSS_KIND = "gnss-outages"
-NOT_GNSS = ("online", "checkpoint", "recordings", "scenarios", "inputs", "threads")
+NOT_GNSS = ("online", "checkpoint", "recordings", "scenarios", "inputs", "threads", "init")
 
 
 def config_kind(path: Path) -> Optional[str]:
@@ -288,6 +298,10 @@ def run(args: argparse.Namespace, rest: List[str], keep: Callable[[Any], None]) 
     from imu_learn.fuse.config import load
 
     cfg = load(args.config, args.data_root)
+    if args.init is not None:
+        if args.online:
+            raise ConfigError("--init: the online mode starts from ground truth (not from the data yet)")
+        cfg.init = args.init
     out = args.out or Path(cfg.out_dir) / cfg.name
     if args.threads is not None or args.online:
         import torch

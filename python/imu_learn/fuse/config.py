@@ -24,6 +24,11 @@ LEARNED_INPUT = "learned"
 LEARNED_COV_INPUTS = ("raw+learned-cov", "proposed+learned-cov", LEARNED_INPUT)
 INPUTS = ("raw", "traditional", "proposed") + LEARNED_COV_INPUTS
 KINDS = ("position", "relative_pose", "leica")
+# The first state of every run: "data" (fuse/inmotion.py: levelled from the accelerometer, heading from
+# yaw hypotheses fitted to the first fixes, or a gauge for relative aiding; no ground truth at run time)
+# or "groundtruth" (pose and velocity of the first sample from ground truth: the controlled setting,
+# labelled as such in every table).
+INITS = ("data", "groundtruth")
 BIAS_PRIORS = ("zero", "startup")
 
 
@@ -99,6 +104,7 @@ class FuseConfig:
     # The causal estimate's fixed-lag window [s] (imu_learn.fuse.graph; inf: iSAM2 over the whole
     # graph, whose cost grows with the square of the recording's length).
     lag_s: float = DEFAULT_LAG_S
+    init: str = "data"  # INITS
     inputs: List[str] = field(default_factory=lambda: ["raw", "proposed"])
     checkpoint: str = "models/euroc_adis16448.pt"  # for "proposed" (relative to the working directory)
     # For "traditional": the calibration `python -m imu_learn.evaluate` fitted on the train split
@@ -155,6 +161,8 @@ def validate(cfg: FuseConfig) -> FuseConfig:
         raise ConfigError(f"seeds: one or more distinct integers, got {cfg.seeds}")
     if not cfg.keyframe_hz > 0:
         raise ConfigError(f"keyframe_hz: must be > 0, got {cfg.keyframe_hz}")
+    if cfg.init not in INITS:
+        raise ConfigError(f"init: must be one of {', '.join(INITS)}, got {cfg.init!r}")
     if not cfg.lag_s > 0:
         raise ConfigError(f"lag_s: must be > 0 (inf: the whole graph), got {cfg.lag_s}")
     if not cfg.displacement_update_s > 0:

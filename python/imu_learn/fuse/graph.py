@@ -48,6 +48,18 @@ class PriorSigmas:
     vel_mps: float = 1e-2
     bias_gyro: float = 0.1  # rad/s: EuRoC's ADIS16448 starts with up to ~0.08 rad/s
     bias_acc: float = 0.5  # m/s^2
+    # When set: heading [rad] apart from roll/pitch (rot_rad), both in the navigation frame (a levelled
+    # start whose heading is less known than its tilt); None: rot_rad about every body axis.
+    yaw_rad: Optional[float] = None
+
+    def pose_noise(self, R0: np.ndarray, gtsam):
+        """The first pose's prior noise model (GTSAM's Pose3 tangent: body rotation, then position)."""
+        if self.yaw_rad is None:
+            return gtsam.noiseModel.Diagonal.Sigmas(np.r_[[self.rot_rad] * 3, [self.pos_m] * 3])
+        R0 = np.asarray(R0, dtype=np.float64)
+        cov = np.diag(np.r_[[self.rot_rad ** 2] * 2, self.yaw_rad ** 2, [self.pos_m ** 2] * 3])
+        cov[:3, :3] = R0.T @ cov[:3, :3] @ R0  # R = R0 Exp(xi): a world-frame angle is R0 xi
+        return gtsam.noiseModel.Gaussian.Covariance(cov)
 
 
 @dataclass
@@ -360,8 +372,7 @@ class IncrementalFusion:
         b0 = gtsam.imuBias.ConstantBias(ba0, bg0)  # GTSAM's order: accelerometer, gyroscope
         self._graph = gtsam.NonlinearFactorGraph()
         self._values = gtsam.Values()
-        self._graph.add(gtsam.PriorFactorPose3(X(0), pose0, gtsam.noiseModel.Diagonal.Sigmas(
-            np.r_[[prior.rot_rad] * 3, [prior.pos_m] * 3])))
+        self._graph.add(gtsam.PriorFactorPose3(X(0), pose0, prior.pose_noise(R0, gtsam)))
         self._graph.add(gtsam.PriorFactorVector(V(0), v0, gtsam.noiseModel.Isotropic.Sigma(3, prior.vel_mps)))
         self._graph.add(gtsam.PriorFactorConstantBias(B(0), b0, gtsam.noiseModel.Diagonal.Sigmas(
             np.r_[[prior.bias_acc] * 3, [prior.bias_gyro] * 3])))

@@ -86,6 +86,34 @@ def still_start(t_ns: np.ndarray, gyro: np.ndarray, acc: np.ndarray, gravity: fl
     return still
 
 
+def first_rest(t_ns: np.ndarray, gyro: np.ndarray, acc: np.ndarray, gravity: float = 9.81, within_s: float = 30.0,
+               min_s: float = 1.0) -> Optional[Tuple[int, int]]:
+    """(first sample, end sample) of the first stretch of rest at least ``min_s`` long that starts in
+    the first ``within_s`` seconds (still :data:`BLOCK_S` blocks, the criteria of :func:`still_start`),
+    or None. A recording that starts with a hand-held excitation and then sits on the ground (EuRoC's
+    machine-hall flights before take-off) has one after its start."""
+    t = (np.asarray(t_ns, dtype=np.int64) - int(t_ns[0])) * 1e-9
+    n_blocks = int(min(t[-1], within_s + 20.0) // BLOCK_S)
+    edges = np.searchsorted(t, np.arange(n_blocks + 1) * BLOCK_S)
+    run_start = None
+    for b in range(n_blocks):
+        a, e = edges[b], edges[b + 1]
+        ok = e - a >= 3
+        if ok:
+            g, f = gyro[a:e], acc[a:e]
+            ok = (g.std(axis=0).max() <= GYRO_STILL and f.std(axis=0).max() <= ACC_STILL
+                  and abs(np.linalg.norm(f.mean(axis=0)) - gravity) <= ACC_NORM_TOL)
+        if ok and run_start is None and b * BLOCK_S <= within_s:
+            run_start = b
+        elif not ok and run_start is not None:
+            if (b - run_start) * BLOCK_S >= min_s:
+                return int(edges[run_start]), int(edges[b])
+            run_start = None
+    if run_start is not None and (n_blocks - run_start) * BLOCK_S >= min_s:
+        return int(edges[run_start]), int(edges[n_blocks])
+    return None
+
+
 def level(f_B: np.ndarray) -> Tuple[float, float, np.ndarray]:
     """(roll, pitch, R_WB with zero yaw) of a body at rest measuring the specific force ``f_B``."""
     f = np.asarray(f_B, dtype=np.float64)

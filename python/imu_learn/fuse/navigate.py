@@ -58,6 +58,7 @@ from . import init as initial
 from .aiding import AbsolutePoses, PositionFixes, RelativePoses, snap_to_samples
 from .extrinsics import inverse, read_t_bs
 from .noise import ImuNoise
+from .score import umeyama
 from .tum import Trajectory, check_overlap, read_trajectory
 
 log = logging.getLogger(__name__)
@@ -106,6 +107,9 @@ class NavigateOptions:
     nhc_sigma_vert_mps: float = 0.1
     # white noise / random walk of the IMU (gyro_nd, acc_nd, gyro_rw, acc_rw) instead of the built-in
     imu_noise: Optional[Tuple[float, float, float, float]] = None
+    # multiply a covariance head's per-sample gyro and acc variances (the `learned` input) by these:
+    # the head's variances calibrated over the keyframe interval (:mod:`.variance`; docs/navigate.md)
+    variance_scale: Optional[Tuple[float, float]] = None
 
     def check(self) -> None:
         if self.aiding_kind not in KINDS:
@@ -127,6 +131,10 @@ class NavigateOptions:
             v = getattr(self, name)
             if v is not None and (len(v) != n or not np.all(np.isfinite(np.asarray(v, dtype=np.float64)))):
                 raise ConfigError(f"--{name.replace('_', '-')}: {n} finite numbers, got {v!r}")
+        if self.variance_scale is not None and (
+                len(self.variance_scale) != 2
+                or not all(np.isfinite(x) and x > 0 for x in np.asarray(self.variance_scale, dtype=np.float64))):
+            raise ConfigError(f"--variance-scale: two positive numbers G,A, got {self.variance_scale!r}")
         if self.imu_noise is not None and not all(x > 0 for x in self.imu_noise):
             raise ConfigError(f"--imu-noise: each density must be > 0, got {self.imu_noise!r}")
         if not np.isfinite(self.imu_delay_s):
@@ -378,20 +386,33 @@ def position_start(t_ns, gyro, acc, rows: AidingRows, lever: np.ndarray, bias0: 
     return s0, initial.InitialState(R0, rows.p[e] - R0 @ lever, v0, bias0, np.eye(3), info)
 
 
-def refined_input(checkpoint: Optional[Path], gyro: np.ndarray, acc: np.ndarray):
+def refined_input(checkpoint: Optional[Path], gyro: np.ndarray, acc: np.ndarray,
+                  variance_scale: Optional[Tuple[float, float]] = None):
     """(gyro, acc, per-sample variances or None, label): the IMU refined by ``checkpoint`` (raw without
-    one), weighted by its covariance head's variances when it has one (the ``learned`` input's samples)."""
+    one), weighted by its covariance head's variances when it has one (the ``learned`` input's samples).
+    ``variance_scale`` (k_gyro, k_acc), dimensionless: multiplies the head's gyro and acc variances
+    (:mod:`.variance` calibrates them over the keyframe interval); a :class:`ConfigError` without a
+    covariance head."""
     if checkpoint is None:
+        if variance_scale is not None:
+            raise ConfigError("--variance-scale scales a covariance head's variances: it needs --checkpoint")
         return gyro, acc, None, "raw"
     from imu_learn.infer.windowing import apply
     from imu_learn.train.checkpoint import load_model
 
     model = load_model(Path(checkpoint))
     if model.cov_head is None:
+        if variance_scale is not None:
+            raise ConfigError(f"--variance-scale: {Path(checkpoint).name} has no covariance head (model.covariance)")
         g, a, _ = apply(model, gyro, acc)
         return g, a, None, f"refined by {Path(checkpoint).name}"
     g, a, var = apply(model, gyro, acc, variance=True)
-    return g, a, var, f"refined by {Path(checkpoint).name}, weighted by its learned covariance"
+    label = f"refined by {Path(checkpoint).name}, weighted by its learned covariance"
+    if variance_scale is not None:
+        kg, ka = (float(x) for x in variance_scale)
+        var = var * np.repeat([kg, ka], 3)
+        label += f" scaled by {kg:g} (gyro), {ka:g} (acc)"
+    return g, a, var, label
 
 
 def calibrated_input(path: Path, t_ns: np.ndarray, gyro: np.ndarray, acc: np.ndarray):
@@ -474,10 +495,12 @@ def navigate(input: Path, aiding_file: Path, out: Path, opts: NavigateOptions = 
     if calibration is not None:
         if checkpoint is not None:
             raise ConfigError("--calibration and --checkpoint both refine the IMU: pass one")
+        if opts.variance_scale is not None:
+            raise ConfigError("--variance-scale scales a covariance head's variances: not with --calibration")
         gyro, acc, imu_input = calibrated_input(Path(calibration), t_ns, gyro, acc)
         var = None
     else:
-        gyro, acc, var, imu_input = refined_input(checkpoint, gyro, acc)
+        gyro, acc, var, imu_input = refined_input(checkpoint, gyro, acc, opts.variance_scale)
     if opts.aiding_kind == "position":
         s0, st = position_start(t_ns, gyro, acc, rows, lever, bias0, opts)
     else:
@@ -523,12 +546,14 @@ def navigate(input: Path, aiding_file: Path, out: Path, opts: NavigateOptions = 
     write_trajectory(out / "smoothed.tum", kf_t, res.smoothed_p, res.smoothed_R)
     conv = initial.convergence(kf_t * 1e-9, res.causal_p, res.causal_R, res.smoothed_p, res.smoothed_R)
     summary: Dict[str, object] = {
-        "input": str(input), "imu_file": imu_file, "imu_input": imu_input, "noise": noise.source if var is None else "learned per-sample variances",
+        "input": str(input), "imu_file": imu_file, "imu_input": imu_input, "noise": noise.source if var is None else "learned per-sample variances"
+        + ("" if opts.variance_scale is None else " x variance_scale"),
         "aiding": str(aiding_file), "aiding_kind": opts.aiding_kind, "aiding_format": opts.aiding_format,
         "aiding_label": aiding.label, "extrinsics": None if extrinsics is None else str(extrinsics),
         "checkpoint": None if checkpoint is None else str(checkpoint),
         "displacement": None if displacement is None else str(displacement),
         "calibration": None if calibration is None else str(calibration),
+        "variance_scale": None if opts.variance_scale is None else [float(x) for x in opts.variance_scale],
         "aiding_rows_read": int(rows_read), "aiding_rows_used": int(len(rows.sample)), "aiding_dropped": rows.dropped,
         **counts, "keyframes": int(len(res.kf_idx)),
         "imu_samples_before_start": s0, "duration_s": round(float((t_fused[-1] - t_fused[0]) * 1e-9), 3),
@@ -575,18 +600,6 @@ def one_line(summary: Dict[str, object]) -> str:
 # --------------------------------------------------------------------------------------------
 # Scoring against ground truth (optional; read after fusion, for the report only)
 # --------------------------------------------------------------------------------------------
-
-
-def umeyama(src: np.ndarray, dst: np.ndarray) -> Tuple[np.ndarray, np.ndarray]:
-    """(R, t) minimising sum |dst - (R src + t)|^2 (rigid, no scale), as evo_ape -a."""
-    mu_s, mu_d = src.mean(axis=0), dst.mean(axis=0)
-    cov = (dst - mu_d).T @ (src - mu_s) / len(src)
-    U, _, Vt = np.linalg.svd(cov)
-    S = np.eye(3)
-    if np.linalg.det(U) * np.linalg.det(Vt) < 0:
-        S[2, 2] = -1.0
-    R = U @ S @ Vt
-    return R, mu_d - R @ mu_s
 
 
 def interpolate_groundtruth(gt, t_ns: np.ndarray):

@@ -17,7 +17,7 @@ import json
 import os
 import sys
 import zlib
-from dataclasses import asdict
+from dataclasses import asdict, replace
 from pathlib import Path
 from typing import Callable, Dict, List, Optional, Tuple
 
@@ -26,7 +26,7 @@ from scipy.spatial.transform import Rotation
 
 from imu_learn import _imu_core as core
 from imu_learn.core.quat import wxyz_to_xyzw, xyzw_to_wxyz
-from imu_learn.errors import ConfigError
+from imu_learn.errors import ConfigError, InvalidInputError
 from imu_learn.util.atomic import atomic_write_path, atomic_write_text
 from imu_learn.util.digest import file_sha256
 
@@ -43,6 +43,7 @@ from .aiding import (
 from .config import LEARNED_COV_INPUTS, LEARNED_INPUT, FuseConfig, RecordingSpec, ScenarioSpec
 from .displacement import FACTOR_INPUTS, displacement_factors_for
 from .graph import SETTLE_S, chain_factors, fuse
+from .inmotion import AlignSettings, crop, data_start, from_sample
 from .noise import ImuNoise
 from .plots import plot_setting, runs_of
 from .score import score
@@ -122,6 +123,8 @@ def run_hash(cfg: FuseConfig, spec: RecordingSpec, scn: ScenarioSpec, name: str,
     if name == LEARNED_INPUT:  # its displacement model, when the device has one
         d["displacement"] = file_digest(displacement_artefact(cfg, spec))
         d["displacement_update_s"] = cfg.displacement_update_s
+    if cfg.init != "groundtruth":  # (results from before the option existed started from ground truth)
+        d["init"] = AlignSettings().tag()
     return hashlib.sha256(json.dumps(d, sort_keys=True).encode()).hexdigest()[:16]
 
 
@@ -306,6 +309,7 @@ def _submit_recording(cfg: FuseConfig, out: Path, spec: RecordingSpec, run_input
                   for k in runs.wanted)
     inputs = ({name: imu_input(name, seq, artefact_of(cfg, spec, name), processors) for name in run_inputs}
               if pending else {})
+    # the ground-truth first attitude, for init = "groundtruth" only (run_one starts from the data otherwise)
     R0 = Rotation.from_quat(wxyz_to_xyzw(seq.q_wxyz[0])).as_matrix()
     plots: List[Callable[[], None]] = []
     for scn in cfg.scenarios:
@@ -435,9 +439,10 @@ def run_one(cfg: FuseConfig, out: Path, seq, noise: ImuNoise, R0: np.ndarray, sc
             gyro: np.ndarray, acc: np.ndarray, var: Optional[np.ndarray] = None, displacement=None,
             bag: Optional[Path] = None) -> dict:
     """Fuse one input with one aiding; its scores (or ``failed``) and its trajectories on disk.
-    ``displacement``: a fitted tlio-style model whose displacements join the graph as factors;
-    ``bag``: the recording's bag, when it is one (the trajectories are then written as its kind of
-    bag too)."""
+    ``R0``: ground truth's first attitude, the first state with ``cfg.init = "groundtruth"`` (else
+    the run starts from the data: :func:`imu_learn.fuse.inmotion.data_start`); ``displacement``: a
+    fitted tlio-style model whose displacements join the graph as factors; ``bag``: the recording's
+    bag, when it is one (the trajectories are then written as its kind of bag too)."""
     rname, _, name = key.split("|")[:3]
     head = {"recording": rname, "scenario": scn.name, "input": name, "aiding": aiding.label,
             "aiding_count": len(aiding), "aiding_gaps": aiding_gaps(aiding, seq.t_ns),
@@ -448,21 +453,31 @@ def run_one(cfg: FuseConfig, out: Path, seq, noise: ImuNoise, R0: np.ndarray, sc
     bias0 = bias_prior_mean(scn, seq, gyro, acc, cfg.gravity)
     if bias0 is not None:
         head["bias_prior"] = [round(float(b), 6) for b in bias0]
+    try:
+        start = first_state(cfg, seq, noise, R0, aiding, gyro, acc, bias0, var)
+    except (RuntimeError, InvalidInputError) as e:  # no heading could be aligned
+        return {**head, "failed": " ".join(str(e).split())[:300]}
+    head["init"] = start.info
+    s0 = start.start
     # The displacement network regresses from the raw samples it was trained on (tlio-style's input
     # is the raw IMU; "learned" fuses refined samples beside it).
     hook = (None if displacement is None else
-            displacement_factors_for(displacement, seq.t_ns, seq.gyro, seq.acc, cfg.displacement_update_s))
+            displacement_factors_for(displacement, seq.t_ns[s0:], seq.gyro[s0:], seq.acc[s0:],
+                                     cfg.displacement_update_s))
     nhc = None
     if scn.nhc_sigma_mps > 0:  # wheeled platform: the non-holonomic constraint at every keyframe
         from .nhc import NhcSettings, nhc_callback
 
-        nhc = nhc_callback(NhcSettings(scn.nhc_sigma_mps, scn.nhc_sigma_mps), np.ascontiguousarray(gyro))
+        nhc = nhc_callback(NhcSettings(scn.nhc_sigma_mps, scn.nhc_sigma_mps), np.ascontiguousarray(gyro[s0:]))
     extra = chain_factors(hook, nhc)
     try:
-        res = fuse(seq.t_ns, gyro, acc, (R0, seq.p[0], seq.v[0]), [aiding], noise, cfg.gravity, cfg.keyframe_hz,
-                   bias0=bias0, var=var, extra_factors=extra, lag_s=cfg.lag_s)
+        res = fuse(seq.t_ns[s0:], gyro[s0:], acc[s0:], (start.R, start.p, start.v), [from_sample(aiding, s0)], noise,
+                   cfg.gravity, cfg.keyframe_hz, prior=start.prior, bias0=start.bias,
+                   var=None if var is None else var[s0:], extra_factors=extra, lag_s=cfg.lag_s)
     except RuntimeError as e:  # GTSAM's IndeterminateLinearSystemException and kin
         return {**head, "failed": " ".join(str(e).split())[:300]}
+    # keyframes in the recording's samples; a data start's alignment window is neither written nor scored
+    res = crop(res, s0, start.score_from)
     if hook is not None:
         head["displacement_factors"] = {"count": hook.count, "skipped": hook.skipped,
                                         "update_s": cfg.displacement_update_s}
@@ -471,8 +486,26 @@ def run_one(cfg: FuseConfig, out: Path, seq, noise: ImuNoise, R0: np.ndarray, sc
         write_trajectory(out / "trajectories" / f"{stem}_{kind}.tum", seq.t_ns[res.kf_idx], p, R)
         if bag is not None:  # a bag recording also gets its trajectory as a bag topic
             write_trajectory_bag(out / "trajectories" / f"{stem}_{kind}", seq.t_ns[res.kf_idx], p, R, like=bag)
-    s = score(res, seq.t_ns, seq.p, seq.q_wxyz, scn.outage_windows())
+    s = score(res, seq.t_ns, seq.p, seq.q_wxyz, scn.outage_windows(), align=start.align)
     return {**head, "seconds": round(res.seconds, 2), **s}
+
+
+def first_state(cfg: FuseConfig, seq, noise: ImuNoise, R0: np.ndarray, aiding, gyro: np.ndarray, acc: np.ndarray,
+                bias0: Optional[np.ndarray], var: Optional[np.ndarray]):
+    """The run's first fused sample and state: ground truth's (``cfg.init = "groundtruth"``, the
+    graph's tight default prior) or the data's (:func:`imu_learn.fuse.inmotion.data_start`)."""
+    if cfg.init == "groundtruth":
+        from .graph import PriorSigmas
+        from .inmotion import DataStart
+
+        return DataStart(0, 0, R0, seq.p[0], seq.v[0], np.zeros(6) if bias0 is None else bias0, PriorSigmas(), False,
+                         {"source": "ground truth: pose and velocity of the first sample"})
+    st = data_start(seq.t_ns, gyro, acc, aiding, noise, cfg.gravity, cfg.keyframe_hz, bias0, var)
+    return replace(st, info=json_ready(st.info))
+
+
+def json_ready(info: Dict[str, object]) -> Dict[str, object]:
+    return {k: (round(float(v), 4) if isinstance(v, (float, np.floating)) else v) for k, v in info.items()}
 
 
 def save_results(path: Path, cfg: FuseConfig, results: Dict[str, dict]) -> None:
@@ -529,11 +562,21 @@ def cell_text(runs: List[dict], kind: str) -> str:
     return text + (f" [{len(runs) - len(ok)} failed]" if len(ok) < len(runs) else "")
 
 
+def first_state_label(cfg: FuseConfig) -> str:
+    """What every table says of its runs' first state."""
+    if cfg.init == "groundtruth":
+        return ("First state: **a prior from ground truth** (pose and velocity at the first sample; the controlled "
+                "setting, `init = \"groundtruth\"`; the default `init = \"data\"` and `imu-learn fuse --input` start from "
+                "the data alone).")
+    return ("First state: from the data alone (`init = \"data\"`, fuse/inmotion.py): levelled from the accelerometer; "
+            "position fixes: heading from yaw hypotheses fitted to the first fixes, the run scored from the end of that "
+            "alignment window; relative poses: zero yaw at the origin, scores after a rigid SE(3) alignment.")
+
+
 def format_table(cfg: FuseConfig, results: Dict[str, dict]) -> str:
     lines = [f"# {cfg.name}: position RMSE [m] (rotation RMSE [deg]) at keyframes, causal / smoothed",
              "", f"Simulated aiding: mean ± std over the noise seeds {cfg.seeds}; real aiding: one run.",
-             "First state: a prior from ground truth (pose and velocity at the first sample; the experiment runner's "
-             "controlled setting; `imu-learn fuse --input` starts from the data alone).", ""]
+             first_state_label(cfg), ""]
     cells = runs_by_cell(results)
     for scn in cfg.scenarios:
         recs = list(dict.fromkeys(rec for rec, s, _ in cells if s == scn.name))

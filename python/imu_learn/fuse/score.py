@@ -1,6 +1,8 @@
 """Scores of a fused trajectory against ground truth at its keyframes: position RMSE [m], rotation
 RMSE [deg], and for each outage the RMSE and maximum of the position error inside it (how far the
-estimate coasts without aiding)."""
+estimate coasts without aiding). Unaligned where the aiding fixes the world frame (positions in
+ground truth's frame, or a ground-truth first state); after a rigid SE(3) alignment (:func:`umeyama`,
+``evo_ape -a``) where it does not (relative aiding started from the data)."""
 from __future__ import annotations
 
 from typing import Dict, List, Tuple
@@ -20,14 +22,30 @@ def rotation_errors_deg(R_est: np.ndarray, q_wxyz_gt: np.ndarray) -> np.ndarray:
     return np.rad2deg(rotation_angle(q_wxyz_gt, xyzw_to_wxyz(Rotation.from_matrix(R_est).as_quat())))
 
 
+def umeyama(src: np.ndarray, dst: np.ndarray) -> Tuple[np.ndarray, np.ndarray]:
+    """(R, t) minimising sum |dst - (R src + t)|^2 (rigid, no scale), as evo_ape -a."""
+    mu_s, mu_d = src.mean(axis=0), dst.mean(axis=0)
+    cov = (dst - mu_d).T @ (src - mu_s) / len(src)
+    U, _, Vt = np.linalg.svd(cov)
+    S = np.eye(3)
+    if np.linalg.det(U) * np.linalg.det(Vt) < 0:
+        S[2, 2] = -1.0
+    R = U @ S @ Vt
+    return R, mu_d - R @ mu_s
+
+
 def score(res: FusionResult, t_ns: np.ndarray, p_gt: np.ndarray, q_wxyz_gt: np.ndarray,
-          outages: Seq[Tuple[float, float]] = ()) -> Dict[str, object]:
-    """``{causal|smoothed: {pos_rmse_m, rot_rmse_deg, outages: [{start_s, duration_s, rmse_m, max_m}]}}``."""
+          outages: Seq[Tuple[float, float]] = (), align: bool = False) -> Dict[str, object]:
+    """``{causal|smoothed: {pos_rmse_m, rot_rmse_deg, outages: [{start_s, duration_s, rmse_m, max_m}]}}``;
+    ``align``: each trajectory rigidly aligned to ground truth first (its own alignment)."""
     idx = res.kf_idx
     inside = outage_mask(t_ns, outages)[idx] if outages else np.zeros(len(idx), bool)
     rel_s = (t_ns[idx] - t_ns[0]) * 1e-9
     out: Dict[str, object] = {}
     for name, p, R in (("causal", res.causal_p, res.causal_R), ("smoothed", res.smoothed_p, res.smoothed_R)):
+        if align:
+            R_al, t_al = umeyama(p, p_gt[idx])
+            p, R = p @ R_al.T + t_al, np.einsum("ij,njk->nik", R_al, R)
         e = np.linalg.norm(p - p_gt[idx], axis=1)
         per: List[Dict[str, float]] = []
         for start, dur in outages:
