@@ -126,6 +126,12 @@ def test_the_runner_starts_from_the_data_by_default_and_says_so(shipped, tmp_pat
     assert "a prior from ground truth" in (tmp_path / "gt" / "table.md").read_text()
     with pytest.raises(Exception, match="init"):
         validate(FuseConfig(init="oracle", recordings=[rec], scenarios=scns))
+    with pytest.raises(Exception, match="align_travel_m"):
+        validate(FuseConfig(align_travel_m=0.0, recordings=[rec], scenarios=scns))
+    # a shorter alignment window is a different run
+    short = validate(FuseConfig(name="t", data_root=str(shipped), inputs=["raw"], recordings=[rec], scenarios=scns,
+                                align_travel_m=1.0))
+    assert run_hash(short, rec, scns[0], "raw", 0) != run_hash(cfg, rec, scns[0], "raw", 0)
     json.dumps(res)  # JSON-ready
 
 

@@ -105,6 +105,9 @@ class FuseConfig:
     # graph, whose cost grows with the square of the recording's length).
     lag_s: float = DEFAULT_LAG_S
     init: str = "data"  # INITS
+    # init = "data" with position fixes: the heading's alignment window ends at the first fix this far
+    # [m] (horizontally) from the first fix (fuse/inmotion.py; a ground robot in a small room needs less)
+    align_travel_m: float = 2.0
     inputs: List[str] = field(default_factory=lambda: ["raw", "proposed"])
     checkpoint: str = "models/euroc_adis16448.pt"  # for "proposed" (relative to the working directory)
     # For "traditional": the calibration `python -m imu_learn.evaluate` fitted on the train split
@@ -163,6 +166,8 @@ def validate(cfg: FuseConfig) -> FuseConfig:
         raise ConfigError(f"keyframe_hz: must be > 0, got {cfg.keyframe_hz}")
     if cfg.init not in INITS:
         raise ConfigError(f"init: must be one of {', '.join(INITS)}, got {cfg.init!r}")
+    if not cfg.align_travel_m > 0:
+        raise ConfigError(f"align_travel_m: must be > 0, got {cfg.align_travel_m}")
     if not cfg.lag_s > 0:
         raise ConfigError(f"lag_s: must be > 0 (inf: the whole graph), got {cfg.lag_s}")
     if not cfg.displacement_update_s > 0:

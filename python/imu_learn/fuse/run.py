@@ -124,7 +124,7 @@ def run_hash(cfg: FuseConfig, spec: RecordingSpec, scn: ScenarioSpec, name: str,
         d["displacement"] = file_digest(displacement_artefact(cfg, spec))
         d["displacement_update_s"] = cfg.displacement_update_s
     if cfg.init != "groundtruth":  # (results from before the option existed started from ground truth)
-        d["init"] = AlignSettings().tag()
+        d["init"] = AlignSettings(min_travel_m=cfg.align_travel_m).tag()
     return hashlib.sha256(json.dumps(d, sort_keys=True).encode()).hexdigest()[:16]
 
 
@@ -500,7 +500,8 @@ def first_state(cfg: FuseConfig, seq, noise: ImuNoise, R0: np.ndarray, aiding, g
 
         return DataStart(0, 0, R0, seq.p[0], seq.v[0], np.zeros(6) if bias0 is None else bias0, PriorSigmas(), False,
                          {"source": "ground truth: pose and velocity of the first sample"})
-    st = data_start(seq.t_ns, gyro, acc, aiding, noise, cfg.gravity, cfg.keyframe_hz, bias0, var)
+    st = data_start(seq.t_ns, gyro, acc, aiding, noise, cfg.gravity, cfg.keyframe_hz, bias0, var,
+                    AlignSettings(min_travel_m=cfg.align_travel_m))
     return replace(st, info=json_ready(st.info))
 
 
