@@ -152,9 +152,11 @@ def test_cli_init_overrides_the_config_and_is_refused_where_it_does_not_apply(sh
     assert fuse_main(args + ["--init", "groundtruth"]) == 0
     runs = json.loads((tmp_path / "o" / "results.json").read_text())["runs"]
     assert runs["MH_04_difficult|g|raw|s0"]["init"]["source"].startswith("ground truth")
+    # online, from the data: the same first state as the batch run, the alignment window not scored
+    assert fuse_main(args + ["--init", "data", "--online", "--inputs", "raw"]) == 0
+    online = json.loads((tmp_path / "o" / "online.json").read_text())["runs"]["MH_04_difficult|g|raw|s0"]
+    assert "yaw hypotheses" in online["init"]["heading_source"] and online["causal"]["pos_rmse_m"] < 1.0
     capsys.readouterr()
-    assert fuse_main(args + ["--init", "data", "--online"]) == 2
-    assert "--init" in capsys.readouterr().err
     assert fuse_main(["--input", str(shipped / CROP), "--aiding", str(cfg), "--aiding-kind", "position",
                       "--init", "data", "--out", str(tmp_path / "n")]) == 2
     assert "--init: only with --config" in capsys.readouterr().err

@@ -154,6 +154,7 @@ def short_recording(shipped, root, samples=1600):
 
 def write_config(path, root, out, checkpoint, covariance=""):
     path.write_text(f'''name = "online_test"
+init = "groundtruth"
 data_root = "{root}"
 out_dir = "{out}"
 checkpoint = "{checkpoint}"

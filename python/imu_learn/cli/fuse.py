@@ -299,8 +299,6 @@ def run(args: argparse.Namespace, rest: List[str], keep: Callable[[Any], None]) 
 
     cfg = load(args.config, args.data_root)
     if args.init is not None:
-        if args.online:
-            raise ConfigError("--init: the online mode starts from ground truth (not from the data yet)")
         cfg.init = args.init
     out = args.out or Path(cfg.out_dir) / cfg.name
     if args.threads is not None or args.online:

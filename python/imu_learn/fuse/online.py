@@ -439,13 +439,17 @@ def make_stepper(model):
 
 
 def score_online(res: OnlineResult, t_ns: np.ndarray, p_gt: np.ndarray, q_wxyz_gt: np.ndarray,
-                 outages: Sequence[Tuple[float, float]] = ()) -> Dict[str, object]:
+                 outages: Sequence[Tuple[float, float]] = (), first: int = 0, align: bool = False) -> Dict[str, object]:
     """The causal scores of :func:`imu_learn.fuse.score.score` (position and rotation RMSE at the
-    keyframes, drift in each outage), plus the position RMSE of the causal state at every sample."""
+    keyframes, drift in each outage), plus the position RMSE of the causal state at every sample;
+    from sample ``first`` on (a data start's alignment window is not scored), SE(3)-aligned first
+    with ``align`` (relative aiding started from the data; the per-sample RMSE is then left out)."""
+    from .inmotion import crop
     from .score import score
 
-    s = dict(score(res.as_fusion_result(), t_ns, p_gt, q_wxyz_gt, outages)["causal"])
-    s["pos_rmse_every_sample_m"] = float(np.sqrt(np.mean(np.sum((res.p - p_gt) ** 2, axis=1))))
+    s = dict(score(crop(res.as_fusion_result(), 0, first), t_ns, p_gt, q_wxyz_gt, outages, align=align)["causal"])
+    if not align:
+        s["pos_rmse_every_sample_m"] = float(np.sqrt(np.mean(np.sum((res.p[first:] - p_gt[first:]) ** 2, axis=1))))
     return s
 
 
@@ -509,7 +513,7 @@ def _learned_models(cfg, specs: list) -> Tuple[Dict[str, object], Dict[str, str]
     return models, ckpt_of
 
 
-def _displacement_hook(cfg, spec, seq) -> Optional[Callable]:
+def _displacement_hook(cfg, spec, seq, s0: int = 0) -> Optional[Callable]:
     """The ``learned`` input's displacement factors where the device has a tlio-style model (as the
     batch run adds them, on the raw IMU; the hook reads only samples before the current keyframe),
     else None."""
@@ -521,7 +525,7 @@ def _displacement_hook(cfg, spec, seq) -> Optional[Callable]:
         return None
     proc = runmod.load_processor(FACTOR_INPUTS[0], path, {})
     log.info("learned: displacement factors from %s", path)
-    return displacement_factors_for(proc, seq.t_ns, seq.gyro, seq.acc, cfg.displacement_update_s)
+    return displacement_factors_for(proc, seq.t_ns[s0:], seq.gyro[s0:], seq.acc[s0:], cfg.displacement_update_s)
 
 
 def _bias_prior(cfg, scn, seq, name: str, model, refined: Dict[str, tuple]) -> Optional[np.ndarray]:
@@ -575,6 +579,7 @@ def _stream_recording(cfg, spec, scns: list, inputs: Sequence[str], models: Dict
     from imu_learn.core.quat import wxyz_to_xyzw
 
     from . import run as runmod
+    from .inmotion import from_sample
 
     rname = Path(spec.path).name
     seq, noise, leica = runmod.load_recording_for_fusion(cfg, spec)
@@ -591,26 +596,33 @@ def _stream_recording(cfg, spec, scns: list, inputs: Sequence[str], models: Dict
             model = models[ckpt_of[(name, spec.path)]] if name != "raw" else None
             bias0 = _bias_prior(cfg, scn, seq, name, model, refined)
             key = runmod.run_key(spec, scn, name, scn_seed)
-            # a fresh hook per run: it holds the run's orientation estimates
-            hook = _displacement_hook(cfg, spec, seq) if name == "learned" and with_displacement else None
             try:
-                res = stream(seq.t_ns, seq.gyro, seq.acc, (R0, seq.p[0], seq.v[0]), [aiding], model, noise,
-                             cfg.gravity, cfg.keyframe_hz, bias0=bias0, lag_s=cfg.lag_s, extra_factors=hook)
-            except RuntimeError as e:  # GTSAM's IndeterminateLinearSystemException and kin
+                # the batch runner's first state (cfg.init), found from the raw samples (the input's own
+                # refinement is not streamed yet at the start)
+                start = runmod.first_state(cfg, seq, noise, R0, aiding, seq.gyro, seq.acc, bias0, None)
+                s0 = start.start
+                # a fresh hook per run: it holds the run's orientation estimates
+                hook = _displacement_hook(cfg, spec, seq, s0) if name == "learned" and with_displacement else None
+                res = stream(seq.t_ns[s0:], seq.gyro[s0:], seq.acc[s0:], (start.R, start.p, start.v),
+                             [from_sample(aiding, s0)], model, noise, cfg.gravity, cfg.keyframe_hz, prior=start.prior,
+                             bias0=start.bias, lag_s=cfg.lag_s, extra_factors=hook)
+            except (RuntimeError, InvalidInputError) as e:  # GTSAM's exceptions; no heading could be aligned
                 runs[key] = {"recording": rname, "scenario": scn.name, "input": name,
                              "failed": " ".join(str(e).split())[:300]}
                 save()
                 log(f"{key}: failed: {runs[key]['failed'][:120]}")
                 continue
             st = res.stats()
-            sc = score_online(res, seq.t_ns, seq.p, seq.q_wxyz, scn.outage_windows())
+            shift = (seq.t_ns[s0] - seq.t_ns[0]) * 1e-9  # outages count from the recording's first sample
+            sc = score_online(res, seq.t_ns[s0:], seq.p[s0:], seq.q_wxyz[s0:],
+                              [(a - shift, d) for a, d in scn.outage_windows()], start.score_from - s0, start.align)
+            for o in sc["outages"]:
+                o["start_s"] += shift
             runs[key] = {"recording": rname, "scenario": scn.name, "input": name, "seed": scn_seed,
                          "aiding": aiding.label, "aiding_count": len(aiding),
                          "checkpoint": ckpt_of.get((name, spec.path), ""),
                          "displacement": runmod.displacement_artefact(cfg, spec) if hook is not None else "",
-                         "torch_threads": torch.get_num_threads(), "causal": sc, **st,
-                         "init": {"source": "ground truth: pose and velocity of the first sample (the online mode "
-                                            "does not start from the data yet)"}}
+                         "torch_threads": torch.get_num_threads(), "causal": sc, **st, "init": start.info}
             save()
             log(_run_line(key, sc, st))
 
