@@ -61,26 +61,41 @@ class InitialState:
     info: Dict[str, object] = field(default_factory=dict)
 
 
+def block_edges(t_ns: np.ndarray, n_blocks: int) -> np.ndarray:
+    """Sample index where each :data:`BLOCK_S` block from the first sample starts (n_blocks + 1 edges)."""
+    t = (np.asarray(t_ns, dtype=np.int64) - int(t_ns[0])) * 1e-9
+    return np.searchsorted(t, np.arange(n_blocks + 1) * BLOCK_S)
+
+
+def block_is_still(g: np.ndarray, a: np.ndarray, gravity: float) -> bool:
+    """A block of gyro and accelerometer samples at rest: at least 3 samples, every axis' spread below
+    :data:`GYRO_STILL` / :data:`ACC_STILL`, the accelerometer's mean norm within :data:`ACC_NORM_TOL`
+    of gravity."""
+    return bool(len(g) >= 3 and g.std(axis=0).max() <= GYRO_STILL and a.std(axis=0).max() <= ACC_STILL
+                and abs(np.linalg.norm(a.mean(axis=0)) - gravity) <= ACC_NORM_TOL)
+
+
+def _blocks(t_ns: np.ndarray, max_s: float) -> int:
+    return int(min((int(t_ns[-1]) - int(t_ns[0])) * 1e-9, max_s) // BLOCK_S)
+
+
 def still_start(t_ns: np.ndarray, gyro: np.ndarray, acc: np.ndarray, gravity: float = 9.81,
                 max_s: float = 20.0) -> float:
     """Seconds of rest at the start of the recording (0.0 when the first block already moves):
-    consecutive :data:`BLOCK_S` blocks from the first sample that are still (module constants),
-    at most ``max_s``."""
-    t = (np.asarray(t_ns, dtype=np.int64) - int(t_ns[0])) * 1e-9
-    n_blocks = int(min(t[-1], max_s) // BLOCK_S)
+    consecutive :data:`BLOCK_S` blocks from the first sample that are still (:func:`block_is_still`)
+    and whose accelerometer mean stays where it started, at most ``max_s``."""
+    n_blocks = _blocks(t_ns, max_s)
+    edges = block_edges(t_ns, n_blocks)
     still = 0.0
     first = None
     for b in range(n_blocks):
-        m = (t >= b * BLOCK_S) & (t < (b + 1) * BLOCK_S)
-        if m.sum() < 3:
+        g, a = gyro[edges[b]:edges[b + 1]], acc[edges[b]:edges[b + 1]]
+        if not block_is_still(g, a, gravity):
             break
-        g, a = gyro[m], acc[m]
         mean = a.mean(axis=0)
         first = mean if first is None else first
         # a steady acceleration is as smooth as rest: the mean must also stay where it started
-        if (g.std(axis=0).max() > GYRO_STILL or a.std(axis=0).max() > ACC_STILL
-                or abs(np.linalg.norm(mean) - gravity) > ACC_NORM_TOL
-                or np.abs(mean - first).max() > ACC_MEAN_DRIFT):
+        if np.abs(mean - first).max() > ACC_MEAN_DRIFT:
             break
         still = (b + 1) * BLOCK_S
     return still
@@ -89,20 +104,14 @@ def still_start(t_ns: np.ndarray, gyro: np.ndarray, acc: np.ndarray, gravity: fl
 def first_rest(t_ns: np.ndarray, gyro: np.ndarray, acc: np.ndarray, gravity: float = 9.81, within_s: float = 30.0,
                min_s: float = 1.0) -> Optional[Tuple[int, int]]:
     """(first sample, end sample) of the first stretch of rest at least ``min_s`` long that starts in
-    the first ``within_s`` seconds (still :data:`BLOCK_S` blocks, the criteria of :func:`still_start`),
-    or None. A recording that starts with a hand-held excitation and then sits on the ground (EuRoC's
-    machine-hall flights before take-off) has one after its start."""
-    t = (np.asarray(t_ns, dtype=np.int64) - int(t_ns[0])) * 1e-9
-    n_blocks = int(min(t[-1], within_s + 20.0) // BLOCK_S)
-    edges = np.searchsorted(t, np.arange(n_blocks + 1) * BLOCK_S)
+    the first ``within_s`` seconds (still blocks, :func:`block_is_still`), or None. A recording that
+    starts with a hand-held excitation and then sits on the ground (EuRoC's machine-hall flights
+    before take-off) has one after its start."""
+    n_blocks = _blocks(t_ns, within_s + 20.0)
+    edges = block_edges(t_ns, n_blocks)
     run_start = None
     for b in range(n_blocks):
-        a, e = edges[b], edges[b + 1]
-        ok = e - a >= 3
-        if ok:
-            g, f = gyro[a:e], acc[a:e]
-            ok = (g.std(axis=0).max() <= GYRO_STILL and f.std(axis=0).max() <= ACC_STILL
-                  and abs(np.linalg.norm(f.mean(axis=0)) - gravity) <= ACC_NORM_TOL)
+        ok = block_is_still(gyro[edges[b]:edges[b + 1]], acc[edges[b]:edges[b + 1]], gravity)
         if ok and run_start is None and b * BLOCK_S <= within_s:
             run_start = b
         elif not ok and run_start is not None:

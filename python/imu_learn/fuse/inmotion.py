@@ -95,10 +95,11 @@ def _fix_residual_rms(res, fixes: PositionFixes) -> float:
     return float(np.sqrt(np.mean(np.sum((p - fixes.p) ** 2, axis=1))))
 
 
-def yaw_hypotheses(t_ns, gyro, acc, fixes: PositionFixes, R_level: np.ndarray, v0: np.ndarray, still: bool,
+def yaw_hypotheses(t_ns, gyro, acc, fixes: PositionFixes, R_level: np.ndarray, still: bool,
                    bias0: np.ndarray, noise: ImuNoise, gravity: float, keyframe_hz: float, var: Optional[np.ndarray],
                    settings: AlignSettings) -> Tuple[int, object, Dict[str, object]]:
-    """(window's last sample, the winning hypothesis' FusionResult over the window, info)."""
+    """(window's last sample, the winning hypothesis' FusionResult over the window, info). Each
+    hypothesis starts at zero velocity, held to it at rest and loosely (2 m/s) otherwise."""
     e = alignment_window(fixes, settings.min_travel_m, settings.min_fixes)
     end = int(fixes.idx[e])
     win = replace(fixes, idx=fixes.idx[:e + 1], p=fixes.p[:e + 1])
@@ -110,7 +111,7 @@ def yaw_hypotheses(t_ns, gyro, acc, fixes: PositionFixes, R_level: np.ndarray, v
         R0 = initial.rot_z(float(yaw)) @ R_level
         p0 = fixes.p[0] - R0 @ fixes.lever
         try:
-            res = fuse(t_ns[sl], gyro[sl], acc[sl], (R0, p0, v0), [win], noise, gravity, keyframe_hz, prior=prior,
+            res = fuse(t_ns[sl], gyro[sl], acc[sl], (R0, p0, np.zeros(3)), [win], noise, gravity, keyframe_hz, prior=prior,
                        bias0=bias0, var=None if var is None else var[sl], lag_s=np.inf)
         except RuntimeError:  # GTSAM could not solve this hypothesis: it does not win
             continue
@@ -150,7 +151,7 @@ def data_start(t_ns, gyro, acc, aiding, noise: ImuNoise, gravity: float, keyfram
         raise InvalidInputError(f"init = \"data\": no data start for {type(aiding).__name__} aiding")
     fixes = from_sample(aiding, s0)
     sl = slice(s0, None)
-    end, res, h_info = yaw_hypotheses(t_ns[sl], gyro[sl], acc[sl], fixes, R_level, np.zeros(3), still, b0, noise,
+    end, res, h_info = yaw_hypotheses(t_ns[sl], gyro[sl], acc[sl], fixes, R_level, still, b0, noise,
                                       gravity, keyframe_hz, None if var is None else var[sl], settings)
     info.update(h_info)
     info["position_source"] = info["velocity_source"] = "the winning hypothesis' smoothed first state"

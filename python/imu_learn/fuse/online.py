@@ -592,14 +592,18 @@ def _stream_recording(cfg, spec, scns: list, inputs: Sequence[str], models: Dict
         if aiding is None:
             log(f"{rname}|{scn.name}: no {scn.kind} aiding in this recording; skipped")
             continue
+        starts: Dict[Optional[bytes], object] = {}  # bias prior -> the scenario's first state
         for name in inputs:
             model = models[ckpt_of[(name, spec.path)]] if name != "raw" else None
             bias0 = _bias_prior(cfg, scn, seq, name, model, refined)
             key = runmod.run_key(spec, scn, name, scn_seed)
             try:
                 # the batch runner's first state (cfg.init), found from the raw samples (the input's own
-                # refinement is not streamed yet at the start)
-                start = runmod.first_state(cfg, seq, noise, R0, aiding, seq.gyro, seq.acc, bias0, None)
+                # refinement is not streamed yet at the start): the same for every input with the same bias prior
+                b_key = None if bias0 is None else np.asarray(bias0).tobytes()
+                if b_key not in starts:
+                    starts[b_key] = runmod.first_state(cfg, seq, noise, R0, aiding, seq.gyro, seq.acc, bias0, None)
+                start = starts[b_key]
                 s0 = start.start
                 # a fresh hook per run: it holds the run's orientation estimates
                 hook = _displacement_hook(cfg, spec, seq, s0) if name == "learned" and with_displacement else None
