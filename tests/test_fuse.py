@@ -6,7 +6,7 @@ import pytest
 
 gtsam = pytest.importorskip("gtsam")
 
-from crops import CROP  # noqa: E402  (the `crop` fixture, conftest.py, is this recording)
+from crops import CROP, REPO  # noqa: E402  (the `crop` fixture, conftest.py, is this recording)
 from imu_learn.cli.fuse import main as fuse_main  # noqa: E402
 from imu_learn.data.formats.asl import read_leica, read_sensor_yaml  # noqa: E402
 from imu_learn.errors import ConfigError  # noqa: E402
@@ -192,6 +192,21 @@ def test_config_rejects_unknown_keys_inputs_and_kinds(tmp_path):
         validate(FuseConfig(inputs=["magic"], recordings=[RecordingSpec("x")], scenarios=[ScenarioSpec("a")]))
     with pytest.raises(ConfigError, match="kind"):
         validate(FuseConfig(recordings=[RecordingSpec("x")], scenarios=[ScenarioSpec("a", kind="radar")]))
+
+
+@pytest.mark.parametrize("path", sorted((REPO / "configs").glob("fuse_*.toml")), ids=lambda p: p.name)
+def test_every_shipped_fusion_config_loads(path):
+    """The configs whose commands docs/ quotes must parse: unknown keys, inputs or kinds are errors."""
+    from imu_learn.cli.fuse import config_kind
+    from imu_learn.fuse import gnss_run
+
+    if config_kind(path) is None:
+        cfg = load(path)
+        assert cfg.recordings and cfg.scenarios and cfg.inputs
+        if "learned" in cfg.inputs:
+            assert cfg.covariance_checkpoint and cfg.methods_dir, "learned needs a covariance head and tlio-style"
+    else:
+        gnss_run.check(gnss_run.load_config(path), path)
 
 
 def test_cli_reports_a_missing_recording_in_one_line(tmp_path, capsys):
