@@ -31,6 +31,8 @@ DEFAULT_METHODS = list(REGISTRY)
 # Registered after the defaults, so only runs that name it fit it (--methods tlio-style): TLIO-style
 # displacement regression, evaluated with ground-truth orientation inside each window (its docstring).
 REGISTRY["tlio-style"] = ("imu_learn.baselines.tlio", None)
+# ... and its simple floor, the same factors predicting zero displacement (the device stays put).
+REGISTRY["zero-displacement"] = ("imu_learn.baselines.zero_displacement", None)
 
 
 def safe_name(name: str) -> str:

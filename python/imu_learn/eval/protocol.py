@@ -64,5 +64,5 @@ VARIANT_SHORT = {"open_loop": "open loop", "bias_removed": "bias removed"}
 
 # The simple floor every learned method is judged against (the best of these per cell), and the
 # reference rows that are neither floor nor learned.
-FLOOR_METHODS = ("raw", "timing", "traditional", "traditional+timing")
+FLOOR_METHODS = ("raw", "timing", "traditional", "traditional+timing", "zero-displacement")
 REFERENCE_METHODS = ("ground truth (noise floor)",)

@@ -443,7 +443,7 @@ def _md_floor(r: Dict[str, Any]) -> List[str]:
     L = ["## Learned methods against the floor", "",
          "Each learned method's error over the best of the simple methods in this run (" +
          ", ".join(f"`{m}`" for m in r["methods"] if m in FLOOR_METHODS) + ": raw IMU, a fitted time offset, "
-         "an affine calibration, both), per cell, mean over the test recordings; below 1 the learning pays.", ""]
+         "an affine calibration, both; `zero-displacement`: the device stays put), per cell, mean over the test recordings; below 1 the learning pays.", ""]
     rows = [[_esc(x["method"]), VARIANT_SHORT[x["variant"]], str(x["n"]), "rot" if x["term"] == "rot_rad" else "trans",
              _f(x["ratio"], "{:.3f}"), _esc(x["floor"])] for x in floor]
     return L + _md_table(["method", "variant", "n", "term", "method / best floor", "best floor"], rows) + [""]

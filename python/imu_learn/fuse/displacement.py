@@ -43,7 +43,8 @@ import numpy as np
 
 from .aiding import epochs
 
-FACTOR_INPUTS = ("tlio-style",)  # fusion inputs that add displacement factors to the raw IMU
+FACTOR_INPUTS = ("tlio-style", "zero-displacement")  # fusion inputs that add displacement factors to the raw IMU
+# (the second is the first's simple floor: zero displacement, baselines/zero_displacement.py)
 
 # (world-frame IMU samples (L, 6), orientation of the last sample (3, 3)) -> (d̂ (3,), Σ (3, 3)), world frame
 Regressor = Callable[[np.ndarray, np.ndarray], Tuple[np.ndarray, np.ndarray]]
@@ -156,5 +157,6 @@ class DisplacementFactors:
 
 def displacement_factors_for(model, seq_t_ns: np.ndarray, gyro: np.ndarray, acc: np.ndarray,
                              update_s: float = 1.0) -> DisplacementFactors:
-    """The hook for a fitted :class:`~imu_learn.baselines.tlio.TlioStyle` ``model``."""
+    """The hook for a fitted :class:`~imu_learn.baselines.tlio.TlioStyle` or
+    :class:`~imu_learn.baselines.zero_displacement.ZeroDisplacement` ``model``."""
     return DisplacementFactors(model.regress_window, seq_t_ns, gyro, acc, model.window, update_s)
