@@ -457,6 +457,23 @@ def test_cli_learned_input_covariance_and_displacements(crop_without_groundtruth
     assert rc == 2 and "missing.pt not found" in capsys.readouterr().err
 
 
+def test_cli_displacement_takes_the_zero_displacement_floor(crop_without_groundtruth, crop_split, tmp_path, capsys):
+    """--displacement <evaluate's methods/zero-displacement.json>: the floor's factors (no network) join the graph."""
+    from imu_learn.baselines.zero_displacement import ZeroDisplacement
+
+    m = ZeroDisplacement()
+    m.fit([crop_split[0]], [])
+    m.save(tmp_path / "zero-displacement.json")
+    rec, tum, yaml = crop_without_groundtruth
+    out = tmp_path / "out"
+    rc = main(["fuse", "--input", str(rec), "--aiding", str(tum), "--aiding-kind", "pose", "--extrinsics", str(yaml),
+               "--displacement", str(tmp_path / "zero-displacement.json"), "--out", str(out)])
+    assert rc == 0, capsys.readouterr().err
+    s = json.loads((out / "summary.json").read_text())
+    assert "zero-displacement.json" in s["imu_input"] and s["counts"]["extra_factors"] > 0
+    assert aligned_rmse(out / "smoothed.tum", SHIPPED / CROP / GT_REL) < 0.1
+
+
 def test_cli_calibration_applies_a_saved_floor_fit(crop_without_groundtruth, tmp_path, capsys):
     """--calibration <evaluate's methods/timing.json>: the floor method's output is fused (the method named by
     the file); with --checkpoint, or a file that names no method, a one-line error."""

@@ -127,7 +127,8 @@ def add_navigate_arguments(ap: argparse.ArgumentParser) -> None:
     g.add_argument("--displacement", type=Path, default=None, metavar="PT",
                    help="a tlio-style displacement model (imu-learn evaluate --methods tlio-style writes "
                         "<out>/methods/tlio-style.pt): its 1 s displacements of the raw IMU join the graph as factors; "
-                        "with a --checkpoint that has a covariance head this is the 'learned' input")
+                        "with a --checkpoint that has a covariance head this is the 'learned' input; or its floor "
+                        "<out>/methods/zero-displacement.json (the device stays put, with the fitted spread)")
     g.add_argument("--variance-scale", default=None, metavar="G,A",
                    help="multiply the covariance head's per-sample gyro and acc variances by G and A (a "
                         "--checkpoint with a covariance head only; bench/variance_scale.py calibrates them over "

@@ -436,14 +436,16 @@ def calibrated_input(path: Path, t_ns: np.ndarray, gyro: np.ndarray, acc: np.nda
 
 
 def displacement_hook(path: Path, t_ns: np.ndarray, gyro: np.ndarray, acc: np.ndarray, update_s: float = 1.0):
-    """The graph's ``extra_factors`` hook of a saved tlio-style model (its displacements of the raw IMU)."""
+    """The graph's ``extra_factors`` hook of a saved tlio-style model (its displacements of the raw IMU),
+    or of its floor ``zero-displacement`` (a ``.json`` file: zero displacement with the fitted spread)."""
     from imu_learn.baselines.registry import load_method_class
 
     from .displacement import displacement_factors_for
 
     if not Path(path).is_file():
         raise FileNotFoundError(f"--displacement: {path} not found (imu-learn evaluate --methods tlio-style writes it)")
-    model = load_method_class("tlio-style")().load(Path(path))
+    name = "zero-displacement" if Path(path).suffix.lower() == ".json" else "tlio-style"
+    model = load_method_class(name)().load(Path(path))
     return displacement_factors_for(model, t_ns, np.ascontiguousarray(gyro), np.ascontiguousarray(acc), update_s)
 
 
