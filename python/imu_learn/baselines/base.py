@@ -51,6 +51,12 @@ class PosePrediction:
     v: Optional[np.ndarray] = None
 
 
+def sample_rate_hz(seqs: List[Sequence]) -> float:
+    """Median sample rate [Hz] over the sequences' sample periods (the displacement baselines' window)."""
+    dts = np.concatenate([np.diff(np.asarray(s.t_ns, dtype=np.int64)) for s in seqs if len(s) > 1])
+    return 1e9 / float(np.median(dts))
+
+
 def poses_from_imu(
     seq: Sequence, gyro: np.ndarray, acc: np.ndarray, starts: np.ndarray, n: int, gravity: float = 9.81
 ) -> PosePrediction:

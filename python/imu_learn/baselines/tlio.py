@@ -72,7 +72,7 @@ import numpy as np
 import torch
 from torch import nn
 
-from imu_learn.baselines.base import FitSettings, Method, PosePrediction, poses_from_imu
+from imu_learn.baselines.base import FitSettings, Method, PosePrediction, poses_from_imu, sample_rate_hz
 from imu_learn.core.batches import BatchConfig, BatchSampler, batch_seed
 from imu_learn.core.quat import quat_rotate
 from imu_learn.data.types import Sequence
@@ -195,12 +195,6 @@ class TlioNet(nn.Module):
         d = scale * self.head_d(f)
         logvar = self.head_v(f) + 2.0 * torch.log(scale)
         return d, torch.clamp(logvar, self.logvar_min, self.logvar_max)
-
-
-def sample_rate_hz(seqs: List[Sequence]) -> float:
-    """Median sample rate over the sequences' sample periods."""
-    dts = np.concatenate([np.diff(np.asarray(s.t_ns, dtype=np.int64)) for s in seqs if len(s) > 1])
-    return 1e9 / float(np.median(dts))
 
 
 # ---------------------------------------------------------------------------------------------

@@ -23,7 +23,7 @@ from typing import Dict, List, Tuple
 
 import numpy as np
 
-from imu_learn.baselines.base import FitSettings, Method, PosePrediction, poses_from_imu
+from imu_learn.baselines.base import FitSettings, Method, PosePrediction, poses_from_imu, sample_rate_hz
 from imu_learn.data.types import Sequence
 
 FORMAT = "imu_learn.baselines.zero_displacement.v1"
@@ -62,8 +62,7 @@ class ZeroDisplacement(Method):
         self.windows = 0
 
     def fit(self, train: List[Sequence], val: List[Sequence], settings: FitSettings = FitSettings()) -> Dict[str, list]:
-        dts = np.concatenate([np.diff(np.asarray(s.t_ns, dtype=np.int64)) for s in train if len(s) > 1])
-        self.rate_hz = 1e9 / float(np.median(dts))
+        self.rate_hz = sample_rate_hz(train)
         self.window = max(2, int(round(WINDOW_S * self.rate_hz)))
         self.var_h, self.var_v, self.windows = displacement_variances(train, self.window)
         # train_loss: the mean square displacement [m²] that predicting zero leaves on the training windows

@@ -43,7 +43,8 @@ import numpy as np
 
 from .aiding import epochs
 
-FACTOR_INPUTS = ("tlio-style", "zero-displacement")  # fusion inputs that add displacement factors to the raw IMU
+TLIO_INPUT = "tlio-style"  # the learned displacement model (the `learned` input adds its factors)
+FACTOR_INPUTS = (TLIO_INPUT, "zero-displacement")  # fusion inputs that add displacement factors to the raw IMU
 # (the second is the first's simple floor: zero displacement, baselines/zero_displacement.py)
 
 # (world-frame IMU samples (L, 6), orientation of the last sample (3, 3)) -> (d̂ (3,), Σ (3, 3)), world frame

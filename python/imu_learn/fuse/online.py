@@ -518,12 +518,12 @@ def _displacement_hook(cfg, spec, seq, s0: int = 0) -> Optional[Callable]:
     batch run adds them, on the raw IMU; the hook reads only samples before the current keyframe),
     else None."""
     from . import run as runmod
-    from .displacement import FACTOR_INPUTS, displacement_factors_for
+    from .displacement import TLIO_INPUT, displacement_factors_for
 
     path = runmod.displacement_artefact(cfg, spec)
     if not path:
         return None
-    proc = runmod.load_processor(FACTOR_INPUTS[0], path, {})
+    proc = runmod.load_processor(TLIO_INPUT, path, {})
     log.info("learned: displacement factors from %s", path)
     return displacement_factors_for(proc, seq.t_ns[s0:], seq.gyro[s0:], seq.acc[s0:], cfg.displacement_update_s)
 

@@ -41,7 +41,7 @@ from .aiding import (
     simulate_relative_pose,
 )
 from .config import LEARNED_COV_INPUTS, LEARNED_INPUT, FuseConfig, RecordingSpec, ScenarioSpec
-from .displacement import FACTOR_INPUTS, displacement_factors_for
+from .displacement import FACTOR_INPUTS, TLIO_INPUT, displacement_factors_for
 from .graph import SETTLE_S, chain_factors, fuse
 from .inmotion import AlignSettings, crop, data_start, from_sample
 from .noise import ImuNoise
@@ -92,7 +92,7 @@ def artefact_of(cfg: FuseConfig, spec: RecordingSpec, name: str) -> str:
 
 def displacement_artefact(cfg: FuseConfig, spec: RecordingSpec) -> str:
     """The tlio-style model the ``learned`` input adds displacement factors from ("" when there is none)."""
-    path = artefact_of(cfg, spec, FACTOR_INPUTS[0])
+    path = artefact_of(cfg, spec, TLIO_INPUT)
     return path if Path(path).is_file() else ""
 
 
@@ -101,13 +101,18 @@ def displacement_of(cfg: FuseConfig, spec: RecordingSpec, name: str, processors:
     if name in FACTOR_INPUTS:
         return processors.get((name, artefact_of(cfg, spec, name)))
     if name == LEARNED_INPUT and displacement_artefact(cfg, spec):
-        return load_processor(FACTOR_INPUTS[0], displacement_artefact(cfg, spec), processors)
+        return load_processor(TLIO_INPUT, displacement_artefact(cfg, spec), processors)
     return None
 
 
 def seeds_of(cfg: FuseConfig, scn: ScenarioSpec) -> List[Optional[int]]:
     """The noise seeds a scenario runs with: every seed for simulated aiding, none for real."""
     return [None] if scn.kind == "leica" else list(cfg.seeds)
+
+
+def align_settings(cfg: FuseConfig) -> AlignSettings:
+    """The data start's settings this config asks for (its runs' hash and their first state)."""
+    return AlignSettings(min_travel_m=cfg.align_travel_m)
 
 
 def run_hash(cfg: FuseConfig, spec: RecordingSpec, scn: ScenarioSpec, name: str, seed: Optional[int]) -> str:
@@ -124,7 +129,7 @@ def run_hash(cfg: FuseConfig, spec: RecordingSpec, scn: ScenarioSpec, name: str,
         d["displacement"] = file_digest(displacement_artefact(cfg, spec))
         d["displacement_update_s"] = cfg.displacement_update_s
     if cfg.init != "groundtruth":  # (results from before the option existed started from ground truth)
-        d["init"] = AlignSettings(min_travel_m=cfg.align_travel_m).tag()
+        d["init"] = align_settings(cfg).tag()
     return hashlib.sha256(json.dumps(d, sort_keys=True).encode()).hexdigest()[:16]
 
 
@@ -501,7 +506,7 @@ def first_state(cfg: FuseConfig, seq, noise: ImuNoise, R0: np.ndarray, aiding, g
         return DataStart(0, 0, R0, seq.p[0], seq.v[0], np.zeros(6) if bias0 is None else bias0, PriorSigmas(), False,
                          {"source": "ground truth: pose and velocity of the first sample"})
     st = data_start(seq.t_ns, gyro, acc, aiding, noise, cfg.gravity, cfg.keyframe_hz, bias0, var,
-                    AlignSettings(min_travel_m=cfg.align_travel_m))
+                    align_settings(cfg))
     return replace(st, info=json_ready(st.info))
 
 
