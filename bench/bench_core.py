@@ -239,7 +239,7 @@ def bench_batches(seqs: List[tuple], have_core: bool, repeats: int, per_repeat: 
     if have_core:
         import imu_learn
         from imu_learn import AugmentConfig, BatchConfig, BatchSampler
-        parts = [imu_learn.Sequence(f"s{i}", *s) for i, s in enumerate(seqs)]
+        parts = [imu_learn.Segment(f"s{i}", *s) for i, s in enumerate(seqs)]
         sampler = BatchSampler(parts, BatchConfig(window=WINDOW, batch_size=BATCH, augment=AugmentConfig(**AUGMENT)))
         seed = iter(range(10**9))
         m = measure(lambda: [sampler.sample(next(seed)) for _ in range(per_repeat)], repeats)

@@ -76,7 +76,7 @@ def default_gap_s(gt: il.GroundTruth) -> float:
 
 
 def segments(imu: il.ImuData, gt: il.GroundTruth, max_gap_s: float, shift_s: float = 0.0,
-             r_off: Optional[np.ndarray] = None) -> List[il.Sequence]:
+             r_off: Optional[np.ndarray] = None) -> List[il.Segment]:
     """Aligned gap-free segments; optionally GT stamps moved by −shift_s and the IMU rotated into
     the GT body frame (ω_gt = R_offᵀ ω_imu)."""
     if shift_s:
@@ -101,7 +101,7 @@ def exp_q(v: np.ndarray) -> np.ndarray:
     return np.concatenate([np.cos(a / 2), np.sinc(a / (2 * np.pi)) * v / 2], -1)
 
 
-def fit_bias(segs: List[il.Sequence], n: int = 10) -> Tuple[np.ndarray, np.ndarray]:
+def fit_bias(segs: List[il.Segment], n: int = 10) -> Tuple[np.ndarray, np.ndarray]:
     """Whole-recording constant (gyro, accel) bias: medians of n-sample window residuals / Δt over
     all segments, the accelerometer one with the gyro bias removed (label_agreement's fit)."""
     rg, ra = [], []
@@ -117,7 +117,7 @@ def fit_bias(segs: List[il.Sequence], n: int = 10) -> Tuple[np.ndarray, np.ndarr
     return bg, np.median(np.concatenate(ra), axis=0)
 
 
-def pooled_errors(segs: List[il.Sequence], n: int, stride: int = 1, from_s: float = 0.0) -> Tuple[float, float]:
+def pooled_errors(segs: List[il.Segment], n: int, stride: int = 1, from_s: float = 0.0) -> Tuple[float, float]:
     """(rotation RMSE [deg], translation RMSE [m]) over all windows of n samples that start at least
     ``from_s`` after the first segment's start."""
     t0 = segs[0].t_ns[0]
@@ -130,11 +130,11 @@ def pooled_errors(segs: List[il.Sequence], n: int, stride: int = 1, from_s: floa
     return math.degrees(rmse(np.concatenate(rot))), rmse(np.concatenate(trans))
 
 
-def bias_removed(segs: List[il.Sequence], bg: np.ndarray, ba: np.ndarray) -> List[il.Sequence]:
+def bias_removed(segs: List[il.Segment], bg: np.ndarray, ba: np.ndarray) -> List[il.Segment]:
     return [remove_bias(s, bg, ba) for s in segs]
 
 
-def bias_removed_score(segs: List[il.Sequence], n: int) -> Tuple[float, float]:
+def bias_removed_score(segs: List[il.Segment], n: int) -> Tuple[float, float]:
     """(rot [deg], trans [m]) RMSE over n samples with the whole-recording bias removed."""
     return pooled_errors(bias_removed(segs, *fit_bias(segs)), n)
 
@@ -143,7 +143,7 @@ def bias_removed_score(segs: List[il.Sequence], n: int) -> Tuple[float, float]:
 # rotation / time offset
 
 
-def mean_rates(seq: il.Sequence, m: int) -> Tuple[np.ndarray, np.ndarray]:
+def mean_rates(seq: il.Segment, m: int) -> Tuple[np.ndarray, np.ndarray]:
     """Mean angular rates over m-sample windows (stride 1): IMU (Σ ω dt / Σ dt) and ground truth
     (Log(q_kᵀ q_k+m) / Δt), both in their own body frames; rows k = 0 .. len − m − 1."""
     dt = np.diff(seq.t_ns) * 1e-9
@@ -189,7 +189,7 @@ class Offset:
         return self.tau_s - self.hold_s
 
 
-def fit_offset(segs: List[il.Sequence], m: int = 10, max_shift: int = 20) -> Offset:
+def fit_offset(segs: List[il.Segment], m: int = 10, max_shift: int = 20) -> Offset:
     """Constant rotation + gyro bias (Kabsch) and time offset (shift grid + parabola) between the
     gyro and the ground truth's angular rate. The rates are compared under the integrator's
     zero-order hold (sample k held on [t_k, t_k+1]); τ adds back the half period, so it is the
@@ -205,7 +205,7 @@ def fit_offset(segs: List[il.Sequence], m: int = 10, max_shift: int = 20) -> Off
     return Offset(r, c, (shift + 0.5) * dt, 0.5 * dt, math.sqrt(cost))
 
 
-def fit_acc_rotation(segs: List[il.Sequence], half: int = 15) -> np.ndarray:
+def fit_acc_rotation(segs: List[il.Segment], half: int = 15) -> np.ndarray:
     """GT body -> IMU rotation from specific force (Kabsch, bias = centring term): the smoothed
     accelerometer vs. R_gtᵀ (p̈_gt + g). For a ground robot, which turns about z only, the gyro fixes
     the tilt but not the yaw of R_off; gravity and the horizontal accelerations fix both."""
@@ -244,7 +244,7 @@ def rotation_matrices(q: np.ndarray) -> np.ndarray:
     return np.stack([quat_rotate(q, np.broadcast_to(e, (len(q), 3))) for e in np.eye(3)], axis=2)
 
 
-def lever_rows(seq: il.Sequence, gyro_bias: np.ndarray, half: int) -> Tuple[np.ndarray, np.ndarray]:
+def lever_rows(seq: il.Segment, gyro_bias: np.ndarray, half: int) -> Tuple[np.ndarray, np.ndarray]:
     """Rows of  S(R a_imu) − S(p̈) − g = S(R (ω̇× + ω×ω×)) r + S(R) b_a  in the world frame, S one
     smoothing filter applied to every term alike (the equation stays exact); edges dropped."""
     dt = float(np.median(np.diff(seq.t_ns))) * 1e-9
@@ -260,7 +260,7 @@ def lever_rows(seq: il.Sequence, gyro_bias: np.ndarray, half: int) -> Tuple[np.n
     return design[keep].reshape(-1, 6), y[keep].reshape(-1)
 
 
-def fit_lever_arm(segs: List[il.Sequence], gyro_bias: np.ndarray, half: int = 20) -> Tuple[np.ndarray, np.ndarray]:
+def fit_lever_arm(segs: List[il.Segment], gyro_bias: np.ndarray, half: int = 20) -> Tuple[np.ndarray, np.ndarray]:
     """Lever arm r [m] of the IMU in the (IMU-aligned) GT body frame and its standard error."""
     rows = [lever_rows(s, gyro_bias, half) for s in segs if len(s) > 4 * half]
     a, y = np.concatenate([r[0] for r in rows]), np.concatenate([r[1] for r in rows])

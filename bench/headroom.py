@@ -36,34 +36,34 @@ from imu_learn.baselines.base import FitSettings
 from imu_learn.baselines.noise_floor import synthesize_imu
 from imu_learn.baselines.traditional import Traditional
 from imu_learn.data.splits import make_split
-from imu_learn.data.types import Sequence
+from imu_learn.data.types import Segment
 from imu_learn.eval.metrics import relative_pose_rmse_many, with_imu, without_fitted_bias
 from imu_learn.train.config import load_config
 from imu_learn.train.fit import recording_of
 
 
-def startup_removed(seqs: List[Sequence], cfg, seconds: float) -> List[Sequence]:
+def startup_removed(seqs: List[Segment], cfg, seconds: float) -> List[Segment]:
     return without_fitted_bias(seqs, seconds, cfg.data.gravity)[0]
 
 
-def oracle_bias(seqs: List[Sequence], cfg) -> List[Sequence]:
+def oracle_bias(seqs: List[Segment], cfg) -> List[Segment]:
     return without_fitted_bias(seqs, None, cfg.data.gravity)[0]
 
 
-def midpoint(s: Sequence) -> Sequence:
+def midpoint(s: Segment) -> Segment:
     g, a = s.gyro.copy(), s.acc.copy()
     g[:-1] = 0.5 * (s.gyro[:-1] + s.gyro[1:])
     a[:-1] = 0.5 * (s.acc[:-1] + s.acc[1:])
     return with_imu(s, g, a)
 
 
-def oracle_calibration(seqs: List[Sequence], cfg) -> List[Sequence]:
+def oracle_calibration(seqs: List[Segment], cfg) -> List[Segment]:
     method = Traditional()
     method.fit(list(seqs), list(seqs), FitSettings(window=cfg.data.window, gravity=cfg.data.gravity))
     return [with_imu(s, *method.refine(s)) for s in seqs]
 
 
-def noise_floor(seqs: List[Sequence], cfg) -> List[Sequence]:
+def noise_floor(seqs: List[Segment], cfg) -> List[Segment]:
     return [with_imu(s, *synthesize_imu(s, gravity=cfg.data.gravity)) for s in seqs]
 
 
@@ -75,10 +75,10 @@ def main(argv=None) -> int:
     cfg = load_config(args.config)
     d = cfg.data
     test = make_split(d).test
-    recs: Dict[str, List[Sequence]] = {}
+    recs: Dict[str, List[Segment]] = {}
     for s in test:
         recs.setdefault(recording_of(s.name), []).append(s)
-    rows: Dict[str, Callable[[List[Sequence]], List[Sequence]]] = {
+    rows: Dict[str, Callable[[List[Segment]], List[Segment]]] = {
         "raw": lambda ss: startup_removed(ss, cfg, d.startup_bias_s),
         "oracle bias (whole recording)": lambda ss: oracle_bias(ss, cfg),
         "oracle calibration (fitted on the test recording)": lambda ss: startup_removed(oracle_calibration(ss, cfg), cfg, d.startup_bias_s),

@@ -37,20 +37,20 @@ def quat_conj_mul(a: np.ndarray, b: np.ndarray) -> np.ndarray:
                      aw * by - ax * bz + ay * bw + az * bx, aw * bz + ax * by - ay * bx + az * bw], -1)
 
 
-def fit_constant_bias(seq: il.Sequence, n: int = 10) -> tuple[np.ndarray, np.ndarray]:
+def fit_constant_bias(seq: il.Segment, n: int = 10) -> tuple[np.ndarray, np.ndarray]:
     """Least-squares constant biases from short windows: rotation residual / Δt for the gyro, then
     velocity residual / Δt for the accelerometer (with the gyro bias removed)."""
     lab = il.window_labels(seq, window=n, stride=n, fractions=[1.0])
     imu = il.integrate_windows(seq, lab.starts, lab.horizons)
     dt = lab.dt[:, 0:1]
     bg = np.median(log_q(quat_conj_mul(lab.dq_wxyz[:, 0], imu.dq_wxyz[:, 0])) / dt, axis=0)
-    s2 = il.Sequence("g", seq.t_ns, seq.gyro - bg, seq.acc, seq.p, seq.v, seq.q_wxyz)
+    s2 = il.Segment("g", seq.t_ns, seq.gyro - bg, seq.acc, seq.p, seq.v, seq.q_wxyz)
     imu2 = il.integrate_windows(s2, lab.starts, lab.horizons)
     ba = np.median((imu2.dv[:, 0] - lab.dv[:, 0]) / dt, axis=0)
     return bg, ba
 
 
-def residuals(seq: il.Sequence, lab: il.WindowLabels) -> np.ndarray:
+def residuals(seq: il.Segment, lab: il.WindowLabels) -> np.ndarray:
     imu = il.integrate_windows(seq, lab.starts, lab.horizons)
     r = np.sqrt(np.mean(rot_err(imu.dq_wxyz, lab.dq_wxyz) ** 2, axis=0))
     v = np.sqrt(np.mean(np.sum((imu.dv - lab.dv) ** 2, -1), axis=0))
@@ -73,7 +73,7 @@ def main() -> None:
         gt_name = state.name if state.is_file() else "default ground truth"
         lab = il.window_labels(seq, window=200, stride=20)
         bg, ba = fit_constant_bias(seq)
-        fixed = il.Sequence("c", seq.t_ns, seq.gyro - bg, seq.acc - ba, seq.p, seq.v, seq.q_wxyz)
+        fixed = il.Segment("c", seq.t_ns, seq.gyro - bg, seq.acc - ba, seq.p, seq.v, seq.q_wxyz)
         raw, cor = residuals(seq, lab), residuals(fixed, lab)
         print(f"\n{root.name} ({gt_name}): {len(seq)} samples, {len(lab.starts)} windows; fitted gyro bias "
               f"{np.array2string(bg, precision=4)} rad/s, accel bias {np.array2string(ba, precision=3)} m/s²")

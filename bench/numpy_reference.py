@@ -255,7 +255,7 @@ def window_labels(
 class SequenceSet:
     """Sequences concatenated once (like the core's SequenceSet) so a batch is pure gathers.
 
-    ``seqs``: objects with t_ns, gyro, acc, p, v, q_wxyz (``imu_learn.Sequence``) or tuples in
+    ``seqs``: objects with t_ns, gyro, acc, p, v, q_wxyz (``imu_learn.Segment``) or tuples in
     that order.
     """
 

@@ -25,13 +25,13 @@ def shipped() -> Path:
 # The crops are module-scoped: a test that writes into a crop's arrays spoils only its own module.
 @pytest.fixture(scope="module")
 def crop():
-    """The shipped EuRoC MH_04_difficult crop (60 s at 200 Hz) as fusion loads it: one Sequence."""
+    """The shipped EuRoC MH_04_difficult crop (60 s at 200 Hz) as fusion loads it: one Segment."""
     return load_crop()
 
 
 @pytest.fixture(scope="module")
 def crop_easy():
-    """The shipped EuRoC MH_01_easy crop (60 s at 200 Hz) with the loader's defaults: one Sequence."""
+    """The shipped EuRoC MH_01_easy crop (60 s at 200 Hz) with the loader's defaults: one Segment."""
     return load_easy()
 
 

@@ -5,7 +5,7 @@ from __future__ import annotations
 from pathlib import Path
 from typing import Tuple
 
-from imu_learn.data.types import Sequence
+from imu_learn.data.types import Segment
 
 REPO = Path(__file__).resolve().parent.parent
 SHIPPED = REPO / "datasets"
@@ -14,12 +14,12 @@ EASY = "euroc/MH_01_easy"  # the crop the baselines and labels tests fit and sco
 SPLIT = (3000, 4000)  # crop_split: samples [0, 3000) train (15 s), [3000, 4000) validation (5 s)
 
 
-def cut(seq: Sequence, a: int, b: int) -> Sequence:
+def cut(seq: Segment, a: int, b: int) -> Segment:
     """Samples [a, b) of ``seq`` (views, not copies), same name."""
-    return Sequence(seq.name, seq.t_ns[a:b], seq.gyro[a:b], seq.acc[a:b], seq.p[a:b], seq.v[a:b], seq.q_wxyz[a:b])
+    return Segment(seq.name, seq.t_ns[a:b], seq.gyro[a:b], seq.acc[a:b], seq.p[a:b], seq.v[a:b], seq.q_wxyz[a:b])
 
 
-def load_crop(root: Path = SHIPPED) -> Sequence:
+def load_crop(root: Path = SHIPPED) -> Segment:
     """MH_04_difficult as fusion loads it: ground truth from the state estimate, gaps up to 50 ms
     bridged, the longest gap-free segment (the whole 60 s)."""
     from imu_learn import AlignOptions, load_recording
@@ -29,14 +29,14 @@ def load_crop(root: Path = SHIPPED) -> Sequence:
     return max(rec.segments, key=len)
 
 
-def load_easy(root: Path = SHIPPED) -> Sequence:
+def load_easy(root: Path = SHIPPED) -> Segment:
     """MH_01_easy with the loader's defaults, its first segment (the whole 60 s)."""
     from imu_learn import load_sequence
 
     return load_sequence(root / EASY)[0]
 
 
-def split(seq: Sequence) -> Tuple[Sequence, Sequence]:
+def split(seq: Segment) -> Tuple[Segment, Segment]:
     a, b = SPLIT
     return cut(seq, 0, a), cut(seq, a, b)
 

@@ -10,7 +10,7 @@ from pathlib import Path
 
 import numpy as np
 
-from imu_learn.data.types import Sequence
+from imu_learn.data.types import Segment
 
 G = 9.81
 RATE = 200.0
@@ -47,7 +47,7 @@ def axis_angle(axis, angle) -> np.ndarray:
     return np.concatenate([np.cos(angle / 2)[..., None], np.sin(angle / 2)[..., None] * axis], -1)
 
 
-def spin(seconds: float = 20.0, rate: float = 0.7, axis=AXIS) -> Sequence:
+def spin(seconds: float = 20.0, rate: float = 0.7, axis=AXIS) -> Segment:
     """Constant body rate ``rate`` about a fixed axis, at rest at the origin, with its closed-form
     IMU: gyro = rate·axis, acc = Rᵀ [0, 0, g] (exact under the zero-order hold)."""
     t_ns = stamps(seconds)
@@ -57,10 +57,10 @@ def spin(seconds: float = 20.0, rate: float = 0.7, axis=AXIS) -> Sequence:
     z = np.zeros((len(t), 3))
     gyro = np.tile(rate * axis, (len(t), 1))
     acc = rotate(qconj(q), np.tile([0.0, 0.0, G], (len(t), 1)))
-    return Sequence("spin", t_ns, gyro, acc, z, z.copy(), q)
+    return Segment("spin", t_ns, gyro, acc, z, z.copy(), q)
 
 
-def moving(seconds: float = 20.0, cubic=(0.0, 0.0, 0.0)) -> Sequence:
+def moving(seconds: float = 20.0, cubic=(0.0, 0.0, 0.0)) -> Segment:
     """Wobbling rotation about a drifting axis and a quadratic (+ optional cubic) position curve with
     its exact derivative as velocity. No IMU (zeros): synthesise one to suit the test."""
     t_ns = stamps(seconds)
@@ -72,7 +72,7 @@ def moving(seconds: float = 20.0, cubic=(0.0, 0.0, 0.0)) -> Sequence:
     p = p0 + v0 * tt + 0.5 * a0 * tt**2 + c * tt**3
     v = v0 + a0 * tt + 3 * c * tt**2
     z = np.zeros((len(t), 3))
-    return Sequence("moving", t_ns, z, z.copy(), p, v, q)
+    return Segment("moving", t_ns, z, z.copy(), p, v, q)
 
 
 def spin_and_climb(n=2000, dt_ns=5_000_000, w=0.5, a=0.2, g=9.81):

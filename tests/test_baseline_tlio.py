@@ -34,7 +34,7 @@ def yawed(s, psi):
     qz = np.array([np.cos(psi / 2), 0.0, 0.0, np.sin(psi / 2)])
     q = quat_mul(np.broadcast_to(qz, s.q_wxyz.shape), s.q_wxyz)
     Rz = rot_z(np.array(psi))
-    return il.Sequence(s.name + "_yawed", s.t_ns, s.gyro, s.acc, s.p @ Rz.T, s.v @ Rz.T, q)
+    return il.Segment(s.name + "_yawed", s.t_ns, s.gyro, s.acc, s.p @ Rz.T, s.v @ Rz.T, q)
 
 
 @pytest.fixture(scope="module")

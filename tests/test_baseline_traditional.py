@@ -9,7 +9,7 @@ import torch
 import imu_learn as il
 from imu_learn.baselines.base import FitSettings
 from imu_learn.baselines.traditional import Traditional, _Data, _VelResiduals, lowpass, rotation_increments
-from imu_learn.data.types import Sequence
+from imu_learn.data.types import Segment
 from imu_learn.nn.integration import integrate
 
 torch.set_num_threads(1)
@@ -60,8 +60,8 @@ def test_recovers_injected_gyro_distortion(crop_split):
     S = np.array([[1.03, 0.010, -0.015], [-0.008, 0.97, 0.012], [0.02, -0.01, 1.02]])
     b = np.array([0.05, -0.04, 0.03])
 
-    def distort(s: Sequence) -> Sequence:
-        return Sequence(s.name, s.t_ns, s.gyro @ S.T + b, s.acc, s.p, s.v, s.q_wxyz)
+    def distort(s: Segment) -> Segment:
+        return Segment(s.name, s.t_ns, s.gyro @ S.T + b, s.acc, s.p, s.v, s.q_wxyz)
 
     clean, dist = Traditional(cutoffs_hz=(None,), max_windows=150), Traditional(cutoffs_hz=(None,), max_windows=150)
     clean.fit([tr], [va], SETTINGS)

@@ -15,7 +15,7 @@ def constant_velocity(v, n=1000, name="cv"):
     p = np.outer(t * 1e-9, v)
     q = np.tile([1.0, 0.0, 0.0, 0.0], (n, 1))
     acc = np.tile([0.0, 0.0, 9.81], (n, 1))
-    return il.Sequence(name, t, np.zeros((n, 3)), acc, p, np.tile(v, (n, 1)).astype(float), q)
+    return il.Segment(name, t, np.zeros((n, 3)), acc, p, np.tile(v, (n, 1)).astype(float), q)
 
 
 def test_variances_are_the_mean_square_one_second_displacement():

@@ -3,7 +3,7 @@ import numpy as np
 import pytest
 from scipy.stats import chi2
 
-from imu_learn.data.types import Sequence
+from imu_learn.data.types import Segment
 from imu_learn.eval.calibration import (
     BLOCKS,
     calibrate,
@@ -50,7 +50,7 @@ def test_nees_is_nan_where_the_covariance_is_not_positive_definite():
     assert e[0] == pytest.approx(3.0) and np.isnan(e[1])
 
 
-def _exact_imu(seq: Sequence):
+def _exact_imu(seq: Segment):
     """The trajectory's own IMU by finite differences of its ground truth (exact enough for the
     residual to be dominated by the noise added below)."""
     from scipy.spatial.transform import Rotation

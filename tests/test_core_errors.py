@@ -19,7 +19,7 @@ N = 10
 T = np.arange(N, dtype=np.int64) * 5_000_000
 G = np.tile([0.1, -0.2, 0.3], (N, 1))
 A = np.tile([0.0, 0.0, 9.81], (N, 1))
-SEQ = il.Sequence("s", T, G, A, np.zeros((N, 3)), np.zeros((N, 3)), np.tile([1.0, 0, 0, 0], (N, 1)))
+SEQ = il.Segment("s", T, G, A, np.zeros((N, 3)), np.zeros((N, 3)), np.tile([1.0, 0, 0, 0], (N, 1)))
 HUGE = 2**40
 
 # (starts, horizons, words the message must hold): N = 10 samples allow horizons 1..9.

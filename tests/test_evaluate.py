@@ -11,7 +11,7 @@ import torch
 from imu_learn.baselines.base import Method, PosePrediction, Raw
 from imu_learn.baselines.noise_floor import NOISE_FLOOR_NAME, synthesize_imu
 from imu_learn.cli import evaluate as ev_cli
-from imu_learn.data.types import Sequence
+from imu_learn.data.types import Segment
 from imu_learn.errors import ConfigError, InvalidInputError
 from imu_learn.eval import run as ev
 from imu_learn.eval.metrics import with_imu
@@ -91,7 +91,7 @@ def test_horizon_plan_seconds_to_samples():
     assert plan["n"] == [7, 10, 100, 200, 400, 1000]
     # another rate: 100 Hz (every other sample); short horizons never become 0 samples
     s = spin(seconds=6.0)
-    s100 = Sequence("s", s.t_ns[::2], s.gyro[::2], s.acc[::2], s.p[::2], s.v[::2], s.q_wxyz[::2])
+    s100 = Segment("s", s.t_ns[::2], s.gyro[::2], s.acc[::2], s.p[::2], s.v[::2], s.q_wxyz[::2])
     plan = ev.horizon_plan(s100, ev.EvalSettings(horizons=[10], airimu_s=[0.003], curve_min_s=0.05,
                                                    curve_max_s=5.0, curve_count=2))
     assert plan["rate_hz"] == pytest.approx(100.0, rel=1e-12)

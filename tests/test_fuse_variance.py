@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from imu_learn.data.types import Sequence
+from imu_learn.data.types import Segment
 from imu_learn.errors import InvalidInputError
 from imu_learn.fuse.variance import interval_residuals, remove_bias, scale_from_residuals, sequence_residuals
 
@@ -14,12 +14,12 @@ N = 40_001  # 200 s at 200 Hz: 2000 intervals of 20 samples
 SG, SA = 0.01, 0.2  # per-sample sigmas [rad/s], [m/s^2]
 
 
-def still(gyro_noise: np.ndarray, acc_noise: np.ndarray) -> Sequence:
+def still(gyro_noise: np.ndarray, acc_noise: np.ndarray) -> Segment:
     """A body at rest, level, for N samples at 200 Hz: ground truth exact, the IMU reads 0 and +g plus noise."""
     t = np.arange(N, dtype=np.int64) * 5_000_000
     z = np.zeros((N, 3))
     q = np.tile([1.0, 0.0, 0.0, 0.0], (N, 1))
-    return Sequence("still", t, gyro_noise, np.array([0.0, 0.0, G]) + acc_noise, z, z.copy(), q)
+    return Segment("still", t, gyro_noise, np.array([0.0, 0.0, G]) + acc_noise, z, z.copy(), q)
 
 
 def per_sample_var() -> np.ndarray:
@@ -59,7 +59,7 @@ def test_inputs_are_checked_and_short_sequences_give_no_interval():
         interval_residuals(seq, np.ones((N, 5)))
     with pytest.raises(InvalidInputError, match="K must be"):
         interval_residuals(seq, per_sample_var(), K=0)
-    short = Sequence("s", seq.t_ns[:10], seq.gyro[:10], seq.acc[:10], seq.p[:10], seq.v[:10], seq.q_wxyz[:10])
+    short = Segment("s", seq.t_ns[:10], seq.gyro[:10], seq.acc[:10], seq.p[:10], seq.v[:10], seq.q_wxyz[:10])
     assert len(remove_bias(interval_residuals(short, per_sample_var()[:10], K=20))) == 0
     with pytest.raises(InvalidInputError, match="no interval"):
         scale_from_residuals([interval_residuals(short, per_sample_var()[:10], K=20)])

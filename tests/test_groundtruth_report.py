@@ -12,7 +12,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from imu_learn.data.types import Sequence
+from imu_learn.data.types import Segment
 from synthetic import G, axis_angle, qconj, qmul, rotate, stamps
 
 REPO = Path(__file__).resolve().parent.parent
@@ -44,7 +44,7 @@ def body_rate(t: np.ndarray, eps: float = 1e-5) -> np.ndarray:
     return 2 * d[:, 1:] * np.sign(d[:, :1]) / (2 * eps)
 
 
-def recording(tau_s: float, lever=(0.0, 0.0, 0.0), seconds: float = 30.0, seed: int = 0) -> Sequence:
+def recording(tau_s: float, lever=(0.0, 0.0, 0.0), seconds: float = 30.0, seed: int = 0) -> Segment:
     t_ns = stamps(seconds)
     t = (t_ns - t_ns[0]) * 1e-9
     q_off = axis_angle(OFF_AXIS, OFF_ANGLE)
@@ -54,7 +54,7 @@ def recording(tau_s: float, lever=(0.0, 0.0, 0.0), seconds: float = 30.0, seed: 
     q = motion(t)
     acc = rotate(qconj(q), position(t, 2) + np.array([0.0, 0.0, G]))
     p_gt = position(t - tau_s) - rotate(q_gt, np.broadcast_to(np.asarray(lever, dtype=float), (len(t), 3)))
-    return Sequence("synthetic", t_ns, gyro, acc, p_gt, np.zeros_like(p_gt), q_gt)
+    return Segment("synthetic", t_ns, gyro, acc, p_gt, np.zeros_like(p_gt), q_gt)
 
 
 def rotation_matrix(q: np.ndarray) -> np.ndarray:
@@ -74,7 +74,7 @@ def test_fit_offset_recovers_rotation_time_offset_and_bias(tau_s):
 
 def test_fit_offset_sees_no_offset_where_there_is_none():
     seq = recording(0.0)
-    seq = Sequence(seq.name, seq.t_ns, seq.gyro, seq.acc, seq.p, seq.v, motion((seq.t_ns - seq.t_ns[0]) * 1e-9))
+    seq = Segment(seq.name, seq.t_ns, seq.gyro, seq.acc, seq.p, seq.v, motion((seq.t_ns - seq.t_ns[0]) * 1e-9))
     off = gr.fit_offset([seq])
     assert gr.angle_axis(off.r_off)[0] < 0.02
     assert abs(off.tau_s) < 3e-4
@@ -85,7 +85,7 @@ def test_fit_lever_arm_recovers_a_known_lever_arm():
     seq = recording(0.0, lever=lever)
     # IMU rotated into the GT body frame, as score_gt does with the fitted R_off
     r = rotation_matrix(axis_angle(OFF_AXIS, OFF_ANGLE))
-    seq = Sequence(seq.name, seq.t_ns, seq.gyro @ r, seq.acc @ r, seq.p, seq.v, seq.q_wxyz)
+    seq = Segment(seq.name, seq.t_ns, seq.gyro @ r, seq.acc @ r, seq.p, seq.v, seq.q_wxyz)
     est, se = gr.fit_lever_arm([seq], r.T @ BIAS)
     np.testing.assert_allclose(est, lever, atol=2e-3)
     assert np.all(se < 2e-3)

@@ -44,7 +44,7 @@ def test_integrated_real_imu_agrees_with_labels_once_bias_is_removed(shared):
     lab = il.window_labels(seq, window=200, stride=50)
     raw = il.integrate_windows(seq, lab.starts, lab.horizons)
     bias_g = np.array([-0.002, 0.021, 0.077])  # the real data README: V1_0x gyro bias
-    corrected = il.Sequence("c", seq.t_ns, seq.gyro - bias_g, seq.acc, seq.p, seq.v, seq.q_wxyz)
+    corrected = il.Segment("c", seq.t_ns, seq.gyro - bias_g, seq.acc, seq.p, seq.v, seq.q_wxyz)
     cor = il.integrate_windows(corrected, lab.starts, lab.horizons)
     e_raw = rot_angle(raw.dq_wxyz[:, -1], lab.dq_wxyz[:, -1])
     e_cor = rot_angle(cor.dq_wxyz[:, -1], lab.dq_wxyz[:, -1])

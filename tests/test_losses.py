@@ -195,7 +195,7 @@ def test_nll_term_trains_the_variances_toward_the_residuals():
     W = 200
     hs = [40, 200]
     t_ns, gyro, acc = closed_form_window(W)
-    labels = il.integrate_windows(il.Sequence("w", t_ns, gyro, acc, np.zeros((W + 1, 3)), np.zeros((W + 1, 3)),
+    labels = il.integrate_windows(il.Segment("w", t_ns, gyro, acc, np.zeros((W + 1, 3)), np.zeros((W + 1, 3)),
                                               np.tile([1.0, 0, 0, 0], (W + 1, 1))),
                                   np.array([0], dtype=np.uint64), np.array(hs, dtype=np.uint64))
     u = torch.tensor(np.concatenate([gyro, acc], 1)[None, :W], dtype=torch.float64)

@@ -67,7 +67,7 @@ def test_constant_gyro_bias_rotation_error_closed_form():
     """A constant gyro bias b on a static IMU rotates by |b| n dt over n samples."""
     n_samples, dt_ns = 1001, 5_000_000
     t_ns = np.arange(n_samples, dtype=np.int64) * dt_ns
-    seq = il.Sequence(
+    seq = il.Segment(
         "static", t_ns, np.zeros((n_samples, 3)), np.tile([0.0, 0.0, G], (n_samples, 1)),
         np.zeros((n_samples, 3)), np.zeros((n_samples, 3)), np.tile([1.0, 0.0, 0.0, 0.0], (n_samples, 1)),
     )

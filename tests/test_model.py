@@ -228,7 +228,7 @@ def test_start_traditional_timing_equals_the_calibration_floor():
     import numpy as np
 
     from imu_learn.baselines.traditional import Traditional, TraditionalParams
-    from imu_learn.data.types import Sequence
+    from imu_learn.data.types import Segment
 
     rng = np.random.default_rng(3)
     p = TraditionalParams(M_g=np.eye(3) + 0.02 * rng.standard_normal((3, 3)), b_g=0.01 * rng.standard_normal(3),
@@ -245,7 +245,7 @@ def test_start_traditional_timing_equals_the_calibration_floor():
     n = 80
     t = np.arange(n, dtype=np.int64) * 5_000_000 + 10**12
     z = np.zeros((n, 3))
-    seq = Sequence("s", t, x[0, :, :3].numpy(), x[0, :, 3:].numpy(), z, z, np.tile([1.0, 0, 0, 0], (n, 1)))
+    seq = Segment("s", t, x[0, :, :3].numpy(), x[0, :, 3:].numpy(), z, z, np.tile([1.0, 0, 0, 0], (n, 1)))
     trad = Traditional(cutoffs_hz=(None,))
     trad.params = p
     g, a = trad.refine(seq)

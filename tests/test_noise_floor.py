@@ -5,7 +5,7 @@ import torch
 
 from imu_learn.baselines.base import poses_from_imu
 from imu_learn.baselines.noise_floor import NOISE_FLOOR_NAME, GroundTruthImu, quat_log, synthesize_imu
-from imu_learn.data.types import Sequence
+from imu_learn.data.types import Segment
 from imu_learn.errors import InvalidInputError
 from imu_learn.eval.run import evaluate_sequence, pose_errors, window_starts
 from synthetic import AXIS, DT, G, axis_angle, moving, qconj, qmul, spin
@@ -20,7 +20,7 @@ def spinning_in_place(seconds: float = 20.0, rate: float = 0.7):
     return seq, seq.gyro, seq.acc
 
 
-def integrate_from_start(seq: Sequence, gyro: np.ndarray, acc: np.ndarray):
+def integrate_from_start(seq: Segment, gyro: np.ndarray, acc: np.ndarray):
     """End states of one window over the whole sequence from the ground-truth start."""
     pred = poses_from_imu(seq, gyro, acc, np.array([0], dtype=np.uint64), len(seq) - 1, G)
     return pred
@@ -105,7 +105,7 @@ def test_quaternion_sign_and_scale_do_not_matter():
     q = seq.q_wxyz.copy()
     q[1::2] *= -1.0
     q *= 1.0 + 1e-7 * np.arange(len(q))[:, None] / len(q)
-    g2, a2 = synthesize_imu(Sequence(seq.name, seq.t_ns, seq.gyro, seq.acc, seq.p, seq.v, q), G)
+    g2, a2 = synthesize_imu(Segment(seq.name, seq.t_ns, seq.gyro, seq.acc, seq.p, seq.v, q), G)
     np.testing.assert_allclose(g2, g, atol=1e-9)
     np.testing.assert_allclose(a2, a, atol=1e-9)
 
@@ -119,7 +119,7 @@ def test_gravity_is_a_parameter():
 @pytest.mark.parametrize("n", [0, 1])
 def test_too_short_is_a_typed_error(n):
     seq, _, _ = spinning_in_place(seconds=1.0)
-    short = Sequence("short", seq.t_ns[:n], seq.gyro[:n], seq.acc[:n], seq.p[:n], seq.v[:n], seq.q_wxyz[:n])
+    short = Segment("short", seq.t_ns[:n], seq.gyro[:n], seq.acc[:n], seq.p[:n], seq.v[:n], seq.q_wxyz[:n])
     with pytest.raises(InvalidInputError, match="at least 2 samples"):
         synthesize_imu(short)
     with pytest.raises(InvalidInputError):
@@ -128,7 +128,7 @@ def test_too_short_is_a_typed_error(n):
 
 def test_two_samples_suffice():
     seq, gyro, acc = spinning_in_place(seconds=1.0)
-    two = Sequence("two", seq.t_ns[:2], seq.gyro[:2], seq.acc[:2], seq.p[:2], seq.v[:2], seq.q_wxyz[:2])
+    two = Segment("two", seq.t_ns[:2], seq.gyro[:2], seq.acc[:2], seq.p[:2], seq.v[:2], seq.q_wxyz[:2])
     g, a = synthesize_imu(two, G)
     np.testing.assert_allclose(g, gyro[:2], atol=1e-11)
     np.testing.assert_allclose(a, np.tile(acc[0], (2, 1)), atol=1e-11)
@@ -139,4 +139,4 @@ def test_non_increasing_stamps_are_a_typed_error():
     t = seq.t_ns.copy()
     t[5] = t[4]
     with pytest.raises(InvalidInputError, match="increase"):
-        synthesize_imu(Sequence("dup", t, seq.gyro, seq.acc, seq.p, seq.v, seq.q_wxyz))
+        synthesize_imu(Segment("dup", t, seq.gyro, seq.acc, seq.p, seq.v, seq.q_wxyz))

@@ -8,7 +8,7 @@ from scipy.spatial.transform import Rotation
 
 from imu_learn.baselines.base import Method, PosePrediction, Raw
 from imu_learn.core.quat import xyzw_to_wxyz
-from imu_learn.data.types import Sequence
+from imu_learn.data.types import Segment
 from imu_learn.eval import peers
 from imu_learn.eval import run as ev
 from imu_learn.eval.report import _md_peers, peers_table, summary_text
@@ -33,7 +33,7 @@ def _spinning(axis, rate_rad_s, bias_rad_s, n=1001, jitter=0.3, r0=None):
     q = xyzw_to_wxyz(rot.as_quat())
     z = np.zeros((n, 3))
     gyro = np.tile((rate_rad_s + bias_rad_s) * axis, (n, 1))
-    return Sequence("spin", t_ns, gyro, z + [0, 0, G], z, z, q), t
+    return Segment("spin", t_ns, gyro, z + [0, 0, G], z, z, q), t
 
 
 @pytest.mark.parametrize("jitter", [0.0, 0.3])
@@ -83,7 +83,7 @@ def test_exact_imu_on_constant_acceleration_gives_zero_rte():
     r0 = Rotation.from_rotvec([0.4, -0.7, 0.9])
     q = np.tile(xyzw_to_wxyz(r0.as_quat()), (n, 1))
     acc = np.tile(r0.inv().apply(a - np.array([0, 0, -G])), (n, 1))
-    seq = Sequence("line", t_ns, np.zeros((n, 3)), acc, p, v, q)
+    seq = Segment("line", t_ns, np.zeros((n, 3)), acc, p, v, q)
     acc_e = peers.PeerErrors()
     peers.add_segment(acc_e, peers.segment_errors(seq, seq.gyro, seq.acc, G))
     s = peers.summarise(acc_e)
@@ -131,7 +131,7 @@ def _independent(seq, w, gravity=G):
 
 
 def test_agrees_with_an_independent_implementation_on_the_euroc_crop(crop):
-    seq = Sequence(crop.name, crop.t_ns[:6001], crop.gyro[:6001], crop.acc[:6001], crop.p[:6001], crop.v[:6001],
+    seq = Segment(crop.name, crop.t_ns[:6001], crop.gyro[:6001], crop.acc[:6001], crop.p[:6001], crop.v[:6001],
                    crop.q_wxyz[:6001])  # 30 s: the raw gyro drifts by several degrees, far from any wrap
     w = peers.window_samples(seq)
     assert w == 200
@@ -157,8 +157,8 @@ def test_agrees_with_an_independent_implementation_on_the_euroc_crop(crop):
 
 
 def test_segments_are_pooled_each_from_its_own_start(crop):
-    a = Sequence("r#0", *(x[:2001] for x in (crop.t_ns, crop.gyro, crop.acc, crop.p, crop.v, crop.q_wxyz)))
-    b = Sequence("r#1", *(x[3000:5001] for x in (crop.t_ns, crop.gyro, crop.acc, crop.p, crop.v, crop.q_wxyz)))
+    a = Segment("r#0", *(x[:2001] for x in (crop.t_ns, crop.gyro, crop.acc, crop.p, crop.v, crop.q_wxyz)))
+    b = Segment("r#1", *(x[3000:5001] for x in (crop.t_ns, crop.gyro, crop.acc, crop.p, crop.v, crop.q_wxyz)))
     pooled = peers.PeerErrors()
     for s in (a, b):
         peers.add_segment(pooled, peers.segment_errors(s, s.gyro, s.acc, G))
@@ -185,7 +185,7 @@ class _RotationOnly(Raw):
 
 
 def test_evaluate_sequence_fills_the_peer_errors(crop):
-    seq = Sequence(crop.name, *(x[:2401] for x in (crop.t_ns, crop.gyro, crop.acc, crop.p, crop.v, crop.q_wxyz)))
+    seq = Segment(crop.name, *(x[:2401] for x in (crop.t_ns, crop.gyro, crop.acc, crop.p, crop.v, crop.q_wxyz)))
     d = {}
     ev.evaluate_sequence(Raw(), seq, [10], 10, 2.0, G, peers=d)
     ref = peers.segment_errors(seq, seq.gyro, seq.acc, G)

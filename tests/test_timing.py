@@ -9,7 +9,7 @@ import pytest
 
 from imu_learn.baselines.base import FitSettings
 from imu_learn.baselines.timing import Timing, resample, shifted
-from imu_learn.data.types import Sequence
+from imu_learn.data.types import Segment
 from imu_learn.eval.metrics import floor_ratios, simulate_sequence
 from synthetic import DT, stamps
 
@@ -25,13 +25,13 @@ def forces(t: np.ndarray) -> np.ndarray:
     return np.stack([0.5 * np.sin(1.1 * t), 0.4 * np.cos(2.3 * t), 9.81 + 0.3 * np.sin(0.9 * t)], 1)
 
 
-def delayed(tau: float, seconds: float = 20.0, name: str = "s") -> Sequence:
+def delayed(tau: float, seconds: float = 20.0, name: str = "s") -> Segment:
     """Ground truth whose exact zero-order-hold IMU is rates(t_i), forces(t_i); the recorded IMU is
     that signal ``tau`` samples late: rates(t_i - tau·dt)."""
     t_ns = stamps(seconds)
     t = (t_ns - t_ns[0]) * 1e-9
     gt = simulate_sequence(t_ns, rates(t), forces(t), name=name)
-    return Sequence(name, t_ns, rates(t - tau * DT), forces(t - tau * DT), gt.p, gt.v, gt.q_wxyz)
+    return Segment(name, t_ns, rates(t - tau * DT), forces(t - tau * DT), gt.p, gt.v, gt.q_wxyz)
 
 
 def test_resampling_at_zero_is_the_input_bit_for_bit():
@@ -122,7 +122,7 @@ def test_fits_final_table_has_a_timing_row_and_judges_the_model_against_the_best
     timing_seqs, tau = timing_floor(split, cfg)
     assert abs(tau - 0.7) < 0.01
     t = (test.t_ns - test.t_ns[0]) * 1e-9
-    exact = Sequence("test", test.t_ns, rates(t), forces(t), test.p, test.v, test.q_wxyz)
+    exact = Segment("test", test.t_ns, rates(t), forces(t), test.p, test.v, test.q_wxyz)
     res = evaluate_table([test], [exact], cfg, timing_seqs)
     res["timing_offset_samples"] = tau
     assert list(res["rows"]) == ["raw", "timing", "model"]

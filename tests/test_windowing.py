@@ -16,7 +16,7 @@ import torch
 
 from crops import whole_pass
 from imu_learn import _imu_core as core
-from imu_learn.data.types import Sequence
+from imu_learn.data.types import Segment
 from imu_learn.infer import windowing
 from imu_learn.infer.refine import refine_arrays, refine_with_variance
 from imu_learn.infer.windowing import Windowing, window_plan
@@ -40,12 +40,12 @@ def imu():
     return core.read_asl_imu(str(CROP / IMU_REL))
 
 
-def as_sequence(t, g, a) -> Sequence:
-    """The whole IMU file as a Sequence (ground truth unused by refinement: placeholders)."""
+def as_sequence(t, g, a) -> Segment:
+    """The whole IMU file as a Segment (ground truth unused by refinement: placeholders)."""
     n = len(t)
     q = np.zeros((n, 4))
     q[:, 0] = 1.0
-    return Sequence("MH_04_difficult", t, g, a, np.zeros((n, 3)), np.zeros((n, 3)), q)
+    return Segment("MH_04_difficult", t, g, a, np.zeros((n, 3)), np.zeros((n, 3)), q)
 
 
 def small_model(causal: bool, g, a, seed: int = 0) -> ImuRefiner:

@@ -18,7 +18,7 @@ from imu_learn.core.integration import (
 )
 from imu_learn.core.quat import wxyz_to_xyzw, xyzw_to_wxyz
 from imu_learn.data.loading import AlignOptions, align, load_recording, load_sequence, read_imu
-from imu_learn.data.types import GroundTruth, ImuData, Recording, Sequence
+from imu_learn.data.types import GroundTruth, ImuData, Recording, Segment
 from imu_learn.errors import (
     AidingError,
     AidingOverlapError,
@@ -45,7 +45,7 @@ __all__ = [
     "AlignOptions", "align", "load_recording", "load_sequence", "read_imu",
     "preintegrate", "window_labels", "integrate_windows", "Increments", "WindowLabels", "PAPER_FRACTIONS",
     "AugmentConfig", "BatchConfig", "BatchSampler", "Batch", "make_batch",
-    "ImuData", "GroundTruth", "Sequence", "Recording", "wxyz_to_xyzw", "xyzw_to_wxyz",
+    "ImuData", "GroundTruth", "Segment", "Recording", "wxyz_to_xyzw", "xyzw_to_wxyz",
     "ImuError", "ParseError", "HeaderError", "ColumnCountError", "NotNumericError", "NonFiniteError",
     "TimestampError", "FloatTimestampError", "AlignmentError", "InvalidInputError", "CacheError",
     "AidingError", "AidingOverlapError", "MissingExtraError", "TooFewRowsError", "NoOverlapError", "TooShortError", "NoRecordingsError",

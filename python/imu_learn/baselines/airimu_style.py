@@ -41,7 +41,7 @@ from torch import nn
 from imu_learn.baselines.base import FitSettings, Method
 from imu_learn.baselines.proposed import start_refiner_fit, train_refiner
 from imu_learn.core.batches import Batch, BatchConfig
-from imu_learn.data.types import Sequence
+from imu_learn.data.types import Segment
 from imu_learn.infer.windowing import Windowing, apply
 from imu_learn.nn.device import pick_device
 from imu_learn.nn.losses import LossConfig, imu_loss
@@ -132,7 +132,7 @@ class AirImuStyle(Method):
                            cfg=self.config.loss_config())
         return loss
 
-    def fit(self, train: List[Sequence], val: List[Sequence], settings: FitSettings = FitSettings()) -> Dict[str, list]:
+    def fit(self, train: List[Segment], val: List[Segment], settings: FitSettings = FitSettings()) -> Dict[str, list]:
         c = self.config
         train, mean, std = start_refiner_fit(self, train, settings)
         W = self.window
@@ -142,7 +142,7 @@ class AirImuStyle(Method):
             raise ValueError("airimu-style: the last label fraction must be 1.0 (the full window)")
         return train_refiner(self.model, train, val, settings, bc, self._loss, c.evals, c.grad_clip, c.val_stride)
 
-    def refine(self, seq: Sequence) -> Tuple[np.ndarray, np.ndarray]:
+    def refine(self, seq: Segment) -> Tuple[np.ndarray, np.ndarray]:
         gyro, acc, _ = apply(self.model, seq.gyro, seq.acc, Windowing.for_training_window(self.window))
         return gyro, acc
 

@@ -19,7 +19,7 @@ import numpy as np
 
 from imu_learn.core.integration import integrate_windows
 from imu_learn.core.quat import quat_mul, quat_rotate  # noqa: F401  (re-exported: baselines use them from here)
-from imu_learn.data.types import Sequence
+from imu_learn.data.types import Segment
 
 
 @dataclass(frozen=True)
@@ -51,18 +51,18 @@ class PosePrediction:
     v: Optional[np.ndarray] = None
 
 
-def sample_rate_hz(seqs: List[Sequence]) -> float:
+def sample_rate_hz(seqs: List[Segment]) -> float:
     """Median sample rate [Hz] over the sequences' sample periods (the displacement baselines' window)."""
     dts = np.concatenate([np.diff(np.asarray(s.t_ns, dtype=np.int64)) for s in seqs if len(s) > 1])
     return 1e9 / float(np.median(dts))
 
 
 def poses_from_imu(
-    seq: Sequence, gyro: np.ndarray, acc: np.ndarray, starts: np.ndarray, n: int, gravity: float = 9.81
+    seq: Segment, gyro: np.ndarray, acc: np.ndarray, starts: np.ndarray, n: int, gravity: float = 9.81
 ) -> PosePrediction:
     """Integrate (gyro, acc) for n samples from the ground-truth state at each start (end
     orientation, position and velocity)."""
-    s = Sequence(seq.name, seq.t_ns, np.ascontiguousarray(gyro), np.ascontiguousarray(acc), seq.p, seq.v, seq.q_wxyz)
+    s = Segment(seq.name, seq.t_ns, np.ascontiguousarray(gyro), np.ascontiguousarray(acc), seq.p, seq.v, seq.q_wxyz)
     inc = integrate_windows(s, np.asarray(starts, dtype=np.uint64), np.array([n], dtype=np.uint64))
     k = np.asarray(starts, dtype=np.int64)
     qk = seq.q_wxyz[k]
@@ -80,15 +80,15 @@ class Method:
     name = "method"
     rotation_only = False
 
-    def fit(self, train: List[Sequence], val: List[Sequence], settings: FitSettings = FitSettings()) -> Dict[str, list]:
+    def fit(self, train: List[Segment], val: List[Segment], settings: FitSettings = FitSettings()) -> Dict[str, list]:
         """Fit on ``train`` (``val`` for model selection); returns a log, e.g. {"train_loss": [...]}."""
         return {}
 
-    def refine(self, seq: Sequence) -> Tuple[np.ndarray, np.ndarray]:
+    def refine(self, seq: Segment) -> Tuple[np.ndarray, np.ndarray]:
         """Corrected (gyro, acc), each (N, 3) float64."""
         return seq.gyro, seq.acc
 
-    def predict(self, seq: Sequence, starts: np.ndarray, n: int, gravity: float = 9.81) -> PosePrediction:
+    def predict(self, seq: Segment, starts: np.ndarray, n: int, gravity: float = 9.81) -> PosePrediction:
         gyro, acc = self.refine(seq)
         pred = poses_from_imu(seq, gyro, acc, starts, n, gravity)
         if self.rotation_only:

@@ -58,7 +58,7 @@ from torch import nn
 from imu_learn.baselines.base import FitSettings, Method, PosePrediction
 from imu_learn.core.batches import AugmentConfig, BatchConfig, BatchSampler, batch_seed
 from imu_learn.core.quat import quat_mul, quat_rotate
-from imu_learn.data.types import Sequence
+from imu_learn.data.types import Segment
 from imu_learn.nn.device import pick_device
 from imu_learn.nn.losses import huber_norm
 from imu_learn.nn.so3 import quat_conj, so3_exp, so3_log
@@ -122,7 +122,7 @@ class EndToEndNet(nn.Module):
         return out[:, :3], out[:, 3:]
 
 
-def window_targets(seqs: List[Sequence], seq_index: np.ndarray, start: np.ndarray, n) -> Tuple[np.ndarray, np.ndarray]:
+def window_targets(seqs: List[Segment], seq_index: np.ndarray, start: np.ndarray, n) -> Tuple[np.ndarray, np.ndarray]:
     """Ground-truth (φ = Log(q_k⁻¹ q_{k+n}) (B, 3), Δp = R_kᵀ(p_{k+n} − p_k) (B, 3)); ``n`` int or (B,)."""
     idx = np.asarray(seq_index, dtype=np.int64)
     k = np.asarray(start, dtype=np.int64)
@@ -179,7 +179,7 @@ class EndToEnd(Method):
         r_q = so3_log(tquat_mul(so3_exp(phi), quat_conj(so3_exp(phi_hat))))
         return c.w_q * huber_norm(r_q, c.huber_q).mean() + c.w_p * huber_norm(dp - dp_hat, c.huber_p).mean()
 
-    def fit(self, train: List[Sequence], val: List[Sequence], settings: FitSettings = FitSettings()) -> Dict[str, list]:
+    def fit(self, train: List[Segment], val: List[Segment], settings: FitSettings = FitSettings()) -> Dict[str, list]:
         """One net per horizon of ``settings.horizons`` (else ``settings.window``), each trained on
         windows of exactly that many samples for ``settings.steps`` steps. Log keys: with one
         horizon ``train_loss``, ``val_loss``, ``val_step``, ``best_step``; with several the same
@@ -205,7 +205,7 @@ class EndToEnd(Method):
         self.nets = nets
         return log
 
-    def _fit_one(self, train: List[Sequence], val: List[Sequence], settings: FitSettings,
+    def _fit_one(self, train: List[Segment], val: List[Segment], settings: FitSettings,
                  W: int) -> Tuple[EndToEndNet, Dict[str, list]]:
         """A net trained on windows of W samples, and its log."""
         c = self.config
@@ -280,7 +280,7 @@ class EndToEnd(Method):
     # ------------------------------------------------------------------ inference
 
     @torch.no_grad()
-    def regress(self, seq: Sequence, starts: np.ndarray, n: int) -> Tuple[np.ndarray, np.ndarray]:
+    def regress(self, seq: Segment, starts: np.ndarray, n: int) -> Tuple[np.ndarray, np.ndarray]:
         """(Δq̂ (S, 4) wxyz, Δp̂ (S, 3)) for the n samples from each start (start body frame), by the
         net of :meth:`horizon_for` (n); composed from segments of that net's length h when
         ``long_horizon == "chain"`` and n > h."""
@@ -303,7 +303,7 @@ class EndToEnd(Method):
         return dq, dp
 
     @torch.no_grad()
-    def _regress_direct(self, seq: Sequence, starts: np.ndarray, n: int,
+    def _regress_direct(self, seq: Segment, starts: np.ndarray, n: int,
                         horizon: Optional[int] = None) -> Tuple[np.ndarray, np.ndarray]:
         """n samples from each start fed to the net of ``horizon`` (default :meth:`horizon_for` (n))."""
         if len(starts) and (starts.min() < 0 or starts.max() + n > len(seq)):
@@ -325,7 +325,7 @@ class EndToEnd(Method):
             return np.zeros((0, 4)), np.zeros((0, 3))
         return np.concatenate(qs), np.concatenate(ps)
 
-    def predict(self, seq: Sequence, starts: np.ndarray, n: int, gravity: float = 9.81) -> PosePrediction:
+    def predict(self, seq: Segment, starts: np.ndarray, n: int, gravity: float = 9.81) -> PosePrediction:
         k = np.asarray(starts, dtype=np.int64)
         dq, dp = self.regress(seq, k, n)
         qk = seq.q_wxyz[k]

@@ -28,14 +28,14 @@ from __future__ import annotations
 
 from pathlib import Path
 from typing import Dict, List, Optional, Tuple
-from typing import Sequence as Seq
+from typing import Segment as Seq
 
 import numpy as np
 import torch
 from torch import nn
 
 from imu_learn.baselines.base import FitSettings, Method
-from imu_learn.data.types import Sequence
+from imu_learn.data.types import Segment
 from imu_learn.nn.device import pick_device
 from imu_learn.nn.losses import huber_norm
 from imu_learn.nn.so3 import quat_conj, quat_mul, so3_exp, so3_log
@@ -117,7 +117,7 @@ def multiscale_rotation_loss(gyro: Tensor, dt: Tensor, q_gt: Tensor, scales: Seq
     return loss
 
 
-def _dt(seq: Sequence) -> np.ndarray:
+def _dt(seq: Segment) -> np.ndarray:
     t = np.asarray(seq.t_ns, dtype=np.int64)
     dt = np.empty(len(t))
     dt[:-1] = np.diff(t) * 1e-9
@@ -155,7 +155,7 @@ class GyroDenoise(Method):
 
     # -- training -------------------------------------------------------------------------------
 
-    def _windows(self, seqs: List[Sequence], W: int, B: int, rng: np.random.Generator, R: int):
+    def _windows(self, seqs: List[Segment], W: int, B: int, rng: np.random.Generator, R: int):
         """B windows: imu (B, R + W, 6) with R samples of context, dt (B, W), q_gt (B, W + 1, 4)."""
         lens = np.array([len(s) for s in seqs], dtype=np.float64)
         which = rng.choice(len(seqs), size=B, p=lens / lens.sum())
@@ -178,7 +178,7 @@ class GyroDenoise(Method):
         gyro = self.model(imu.to(self.device))[:, R:].double()
         return multiscale_rotation_loss(gyro, dt.to(self.device), q.to(self.device), self.scales, self.huber_delta)
 
-    def fit(self, train: List[Sequence], val: List[Sequence], settings: FitSettings = FitSettings()) -> Dict[str, list]:
+    def fit(self, train: List[Segment], val: List[Segment], settings: FitSettings = FitSettings()) -> Dict[str, list]:
         dev = pick_device(settings.device)
         if dev.type == "cpu":
             torch.set_num_threads(settings.threads)
@@ -232,7 +232,7 @@ class GyroDenoise(Method):
 
     # -- inference ------------------------------------------------------------------------------
 
-    def refine(self, seq: Sequence) -> Tuple[np.ndarray, np.ndarray]:
+    def refine(self, seq: Segment) -> Tuple[np.ndarray, np.ndarray]:
         self.model.eval()
         x = np.concatenate([seq.gyro, seq.acc], axis=1)
         with torch.no_grad():

@@ -35,7 +35,7 @@ import numpy as np
 
 from imu_learn.baselines.base import Method
 from imu_learn.core.quat import quat_conj, quat_mul, quat_rotate
-from imu_learn.data.types import Sequence
+from imu_learn.data.types import Segment
 from imu_learn.errors import InvalidInputError
 
 NOISE_FLOOR_NAME = "ground truth (noise floor)"
@@ -53,7 +53,7 @@ def quat_log(q_wxyz: np.ndarray) -> np.ndarray:
     return xyz * scale[..., None]
 
 
-def synthesize_imu(seq: Sequence, gravity: float = 9.81) -> Tuple[np.ndarray, np.ndarray]:
+def synthesize_imu(seq: Segment, gravity: float = 9.81) -> Tuple[np.ndarray, np.ndarray]:
     """(gyro, acc), each (N, 3) float64: the IMU that the ground truth of ``seq`` implies under the
     zero-order-hold integration (see the module doc)."""
     n = len(seq)
@@ -88,5 +88,5 @@ class GroundTruthImu(Method):
     def __init__(self, gravity: float = 9.81) -> None:
         self.gravity = gravity
 
-    def refine(self, seq: Sequence) -> Tuple[np.ndarray, np.ndarray]:
+    def refine(self, seq: Segment) -> Tuple[np.ndarray, np.ndarray]:
         return synthesize_imu(seq, self.gravity)

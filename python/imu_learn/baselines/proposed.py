@@ -34,7 +34,7 @@ from torch import nn
 
 from imu_learn.baselines.base import FitSettings, Method
 from imu_learn.core.batches import AugmentConfig, Batch, BatchConfig, BatchSampler, batch_seed
-from imu_learn.data.types import Sequence
+from imu_learn.data.types import Segment
 from imu_learn.infer.windowing import Windowing, apply
 from imu_learn.nn.device import pick_device
 from imu_learn.nn.losses import LossConfig, imu_loss
@@ -51,14 +51,14 @@ def default_augment() -> AugmentConfig:
     return DataConfig().augment
 
 
-def imu_stats(seqs: List[Sequence]) -> Tuple[Tensor, Tensor]:
+def imu_stats(seqs: List[Segment]) -> Tuple[Tensor, Tensor]:
     """Per-channel mean and std (6,) float32 of the raw IMU (gyro then acc) of ``seqs``."""
     raw = np.concatenate([np.c_[s.gyro, s.acc] for s in seqs])
     return (torch.as_tensor(raw.mean(0), dtype=torch.float32),
             torch.as_tensor(np.maximum(raw.std(0), 1e-6), dtype=torch.float32))
 
 
-def start_refiner_fit(method: Method, train: List[Sequence], settings: FitSettings) -> Tuple[List[Sequence], Tensor, Tensor]:
+def start_refiner_fit(method: Method, train: List[Segment], settings: FitSettings) -> Tuple[List[Segment], Tensor, Tensor]:
     """What a sample refiner's ``fit`` starts with: the training sequences longer than the window
     (a ValueError naming the method when there is none), ``method.window`` and ``method.device``
     set from ``settings``, torch seeded, and the input normalisation (:func:`imu_stats`)."""
@@ -80,8 +80,8 @@ def slice_batch(b: Batch, a: int, e: int) -> Batch:
 
 def train_refiner(
     model: nn.Module,
-    train: List[Sequence],
-    val: List[Sequence],
+    train: List[Segment],
+    val: List[Segment],
     settings: FitSettings,
     batch_config: BatchConfig,
     loss_fn: LossFn,
@@ -187,7 +187,7 @@ class Proposed(Method):
                                 bias=b.bias if training else None, cfg=self.config.loss)
         return loss
 
-    def fit(self, train: List[Sequence], val: List[Sequence], settings: FitSettings = FitSettings()) -> Dict[str, list]:
+    def fit(self, train: List[Segment], val: List[Segment], settings: FitSettings = FitSettings()) -> Dict[str, list]:
         c = self.config
         train, mean, std = start_refiner_fit(self, train, settings)
         W = self.window
@@ -201,7 +201,7 @@ class Proposed(Method):
         self._steps = int(settings.steps)
         return log
 
-    def refine(self, seq: Sequence) -> Tuple[np.ndarray, np.ndarray]:
+    def refine(self, seq: Segment) -> Tuple[np.ndarray, np.ndarray]:
         gyro, acc, _ = apply(self.model, seq.gyro, seq.acc, Windowing.for_training_window(self.window))
         return gyro, acc
 

@@ -35,19 +35,19 @@ import json
 import math
 from pathlib import Path
 from typing import Dict, List, Tuple
-from typing import Sequence as Seq
+from typing import Segment as Seq
 
 import numpy as np
 
 from imu_learn.baselines.base import FitSettings, Method
 from imu_learn.core.integration import PAPER_FRACTIONS, integrate_windows, window_labels
 from imu_learn.core.quat import rotation_angle
-from imu_learn.data.types import Sequence
+from imu_learn.data.types import Segment
 
 GOLDEN = (math.sqrt(5.0) - 1.0) / 2.0
 
 
-def median_period_ns(seq: Sequence) -> float:
+def median_period_ns(seq: Segment) -> float:
     t = np.asarray(seq.t_ns, dtype=np.int64)
     return float(np.median(np.diff(t))) if len(t) > 1 else 0.0
 
@@ -62,12 +62,12 @@ def resample(t_ns: np.ndarray, x: np.ndarray, tau: float, period_ns: float) -> n
     return np.stack([np.interp(tq, t, x[:, c]) for c in range(x.shape[1])], axis=1)
 
 
-def shifted(seq: Sequence, tau: float) -> Sequence:
+def shifted(seq: Segment, tau: float) -> Segment:
     """``seq`` with gyro and accelerometer resampled at t + tau samples (ground truth unchanged)."""
     if tau == 0.0:
         return seq
     per = median_period_ns(seq)
-    return Sequence(seq.name, seq.t_ns, resample(seq.t_ns, seq.gyro, tau, per),
+    return Segment(seq.name, seq.t_ns, resample(seq.t_ns, seq.gyro, tau, per),
                     resample(seq.t_ns, seq.acc, tau, per), seq.p, seq.v, seq.q_wxyz)
 
 
@@ -75,7 +75,7 @@ class RotationWindows:
     """Training (or validation) windows and their ground-truth rotation increments, so the gyro
     residual cost of any offset is one resample plus one integration per sequence."""
 
-    def __init__(self, seqs: Seq[Sequence], window: int, max_windows: int, gravity: float = 9.81) -> None:
+    def __init__(self, seqs: Seq[Segment], window: int, max_windows: int, gravity: float = 9.81) -> None:
         usable = [s for s in seqs if len(s) > window + 1]
         total = sum(len(s) - window for s in usable)
         self.stride = max(1, math.ceil(total / max_windows)) if max_windows > 0 else 1
@@ -93,7 +93,7 @@ class RotationWindows:
         out = []
         for s, per, lab in self.items:
             g = resample(s.t_ns, s.gyro, tau, per)
-            ss = Sequence(s.name, s.t_ns, g, s.acc, s.p, s.v, s.q_wxyz)
+            ss = Segment(s.name, s.t_ns, g, s.acc, s.p, s.v, s.q_wxyz)
             inc = integrate_windows(ss, lab.starts, lab.horizons)
             out.append(rotation_angle(lab.dq_wxyz, inc.dq_wxyz).ravel())
         return np.concatenate(out) if out else np.zeros(0)
@@ -145,11 +145,11 @@ class Timing(Method):
         self.huber_rot = float(huber_rot)
         self.tau = 0.0
 
-    def refine(self, seq: Sequence) -> Tuple[np.ndarray, np.ndarray]:
+    def refine(self, seq: Segment) -> Tuple[np.ndarray, np.ndarray]:
         s = shifted(seq, self.tau)
         return np.ascontiguousarray(s.gyro, dtype=np.float64), np.ascontiguousarray(s.acc, dtype=np.float64)
 
-    def fit(self, train: List[Sequence], val: List[Sequence], settings: FitSettings = FitSettings()) -> Dict[str, list]:
+    def fit(self, train: List[Segment], val: List[Segment], settings: FitSettings = FitSettings()) -> Dict[str, list]:
         if not any(len(s) > settings.window for s in train):  # the data shape every method is given
             raise ValueError(f"no training sequence is longer than the window ({settings.window} samples)")
         window = int(self.window)

@@ -75,7 +75,7 @@ from torch import nn
 from imu_learn.baselines.base import FitSettings, Method, PosePrediction, poses_from_imu, sample_rate_hz
 from imu_learn.core.batches import BatchConfig, BatchSampler, batch_seed
 from imu_learn.core.quat import quat_rotate
-from imu_learn.data.types import Sequence
+from imu_learn.data.types import Segment
 from imu_learn.nn.device import pick_device
 
 Tensor = torch.Tensor
@@ -219,7 +219,7 @@ class TlioStyle(Method):
 
     # ------------------------------------------------------------------ training
 
-    def _windows(self, world: List[np.ndarray], seqs: List[Sequence], seq_index: np.ndarray, start: np.ndarray,
+    def _windows(self, world: List[np.ndarray], seqs: List[Segment], seq_index: np.ndarray, start: np.ndarray,
                  rng: Optional[np.random.Generator]) -> Tuple[np.ndarray, np.ndarray]:
         """Inputs (B, W, 6) and targets (B, 3) in the local frame (plus a random yaw when ``rng``)."""
         W = self.window
@@ -233,7 +233,7 @@ class TlioStyle(Method):
         Rt = np.swapaxes(rot_z(yaw), -1, -2)
         return to_local(x, yaw), np.einsum("bij,bj->bi", Rt, d)
 
-    def fit(self, train: List[Sequence], val: List[Sequence], settings: FitSettings = FitSettings()) -> Dict[str, list]:
+    def fit(self, train: List[Segment], val: List[Segment], settings: FitSettings = FitSettings()) -> Dict[str, list]:
         """Train on windows of W = round(window_s · rate) samples for ``settings.steps`` steps: the
         first ``mse_fraction`` with MSE, the rest with the NLL. Log keys: ``train_loss`` (each step's
         loss, of its phase), ``phase`` ("mse"/"nll" per step), ``val_mse``, ``val_nll``, ``val_step``,
@@ -353,7 +353,7 @@ class TlioStyle(Method):
         Rg = rot_z(yaw[0])
         return Rg @ d[0], Rg @ np.diag(np.exp(lv[0])) @ Rg.T
 
-    def _seq_state(self, seq: Sequence) -> dict:
+    def _seq_state(self, seq: Segment) -> dict:
         """Per-sequence cache: world-frame IMU (ground-truth orientation), each window-end yaw, and
         the world-frame displacement of every window start computed so far (NaN: not yet)."""
         h = hashlib.blake2b(digest_size=16)
@@ -368,7 +368,7 @@ class TlioStyle(Method):
                                 "yaw": yaw_of_quat(seq.q_wxyz), "d": np.full((n_win, 3), np.nan)}
         return self._cache[key]
 
-    def window_displacements(self, seq: Sequence, starts: np.ndarray) -> np.ndarray:
+    def window_displacements(self, seq: Segment, starts: np.ndarray) -> np.ndarray:
         """World-frame displacement estimates (S, 3) of the W-sample windows starting at ``starts``
         (samples s .. s+W-1, i.e. p_{s+W} - p_s), orientation from the sequence's ground truth."""
         W = self.window
@@ -384,7 +384,7 @@ class TlioStyle(Method):
             st["d"][need] = np.einsum("bij,bj->bi", rot_z(yaw), d)
         return st["d"][s]
 
-    def predict(self, seq: Sequence, starts: np.ndarray, n: int, gravity: float = 9.81) -> PosePrediction:
+    def predict(self, seq: Segment, starts: np.ndarray, n: int, gravity: float = 9.81) -> PosePrediction:
         """Rotation: the gyro integrated from the ground-truth start; position: chained network
         windows (see the module docstring for n ≠ W); no velocity."""
         k = np.asarray(starts, dtype=np.int64)

@@ -55,7 +55,7 @@ import math
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Callable, Dict, List, Optional, Tuple
-from typing import Sequence as Seq
+from typing import Segment as Seq
 
 import numpy as np
 import torch
@@ -64,7 +64,7 @@ from scipy.signal import butter, sosfiltfilt
 from imu_learn.baselines.base import FitSettings, Method
 from imu_learn.baselines.timing import RotationWindows, fit_offset, median_period_ns, shifted
 from imu_learn.core.integration import PAPER_FRACTIONS, window_labels
-from imu_learn.data.types import Sequence
+from imu_learn.data.types import Segment
 from imu_learn.nn.integration import prefix_quat_product
 from imu_learn.nn.so3 import quat_conj, quat_mul, quat_rotate, so3_exp, so3_log
 
@@ -73,7 +73,7 @@ Tensor = torch.Tensor
 DEFAULT_CUTOFFS: Tuple[Optional[float], ...] = (None, 40.0, 20.0, 10.0, 5.0)
 
 
-def sample_rate(seq: Sequence) -> float:
+def sample_rate(seq: Segment) -> float:
     """Sampling rate [Hz] from the median sample period."""
     return 1e9 / median_period_ns(seq)
 
@@ -149,7 +149,7 @@ class _Windows:
 class _Data:
     """Per-sequence raw arrays plus window labels, so windows can be re-gathered for any cutoff."""
 
-    def __init__(self, seqs: Seq[Sequence], window: int, max_windows: int, gravity: float, order: int = 2) -> None:
+    def __init__(self, seqs: Seq[Segment], window: int, max_windows: int, gravity: float, order: int = 2) -> None:
         self.order = order
         self.items = []
         usable = [s for s in seqs if len(s) > window + 1]
@@ -360,7 +360,7 @@ class Traditional(Method):
 
     # -- applying the model ---------------------------------------------------------------------
 
-    def refine(self, seq: Sequence) -> Tuple[np.ndarray, np.ndarray]:
+    def refine(self, seq: Segment) -> Tuple[np.ndarray, np.ndarray]:
         p = self.params
         seq = shifted(seq, p.time_offset)
         fs = sample_rate(seq)
@@ -373,7 +373,7 @@ class Traditional(Method):
 
     # -- fitting --------------------------------------------------------------------------------
 
-    def fit(self, train: List[Sequence], val: List[Sequence], settings: FitSettings = FitSettings()) -> Dict[str, list]:
+    def fit(self, train: List[Segment], val: List[Segment], settings: FitSettings = FitSettings()) -> Dict[str, list]:
         torch.manual_seed(settings.seed)
         window = int(self.window or settings.window)
         tau, tau_log = 0.0, {}
@@ -429,7 +429,7 @@ class Traditional(Method):
         }
         return log
 
-    def _fit_time_offset(self, train: List[Sequence], val: List[Sequence], window: int,
+    def _fit_time_offset(self, train: List[Segment], val: List[Segment], window: int,
                          gravity: float) -> Tuple[float, Dict[str, list]]:
         """The temporal calibration: tau [samples] by the timing baseline's 1-D search on the raw
         gyro's rotation residuals over ``offset_window``-sample training windows (short, for the

@@ -24,13 +24,13 @@ from typing import Dict, List, Tuple
 import numpy as np
 
 from imu_learn.baselines.base import FitSettings, Method, PosePrediction, poses_from_imu, sample_rate_hz
-from imu_learn.data.types import Sequence
+from imu_learn.data.types import Segment
 
 FORMAT = "imu_learn.baselines.zero_displacement.v1"
 WINDOW_S = 1.0  # as tlio-style's window
 
 
-def displacement_variances(seqs: List[Sequence], window: int) -> Tuple[float, float, int]:
+def displacement_variances(seqs: List[Segment], window: int) -> Tuple[float, float, int]:
     """(σ_h², σ_v², number of windows): the mean square displacement over every ``window``-sample
     window of the sequences (one per start sample), horizontal axes pooled."""
     sq = np.zeros(3)
@@ -61,7 +61,7 @@ class ZeroDisplacement(Method):
         self.var_v = 1.0  # σ_v² [m²]
         self.windows = 0
 
-    def fit(self, train: List[Sequence], val: List[Sequence], settings: FitSettings = FitSettings()) -> Dict[str, list]:
+    def fit(self, train: List[Segment], val: List[Segment], settings: FitSettings = FitSettings()) -> Dict[str, list]:
         self.rate_hz = sample_rate_hz(train)
         self.window = max(2, int(round(WINDOW_S * self.rate_hz)))
         self.var_h, self.var_v, self.windows = displacement_variances(train, self.window)
@@ -73,7 +73,7 @@ class ZeroDisplacement(Method):
         """The fusion hook's regressor (as :meth:`TlioStyle.regress_window`): (0, Σ), world frame."""
         return np.zeros(3), np.diag([self.var_h, self.var_h, self.var_v])
 
-    def predict(self, seq: Sequence, starts: np.ndarray, n: int, gravity: float = 9.81) -> PosePrediction:
+    def predict(self, seq: Segment, starts: np.ndarray, n: int, gravity: float = 9.81) -> PosePrediction:
         k = np.asarray(starts, dtype=np.int64)
         q = poses_from_imu(seq, seq.gyro, seq.acc, k.astype(np.uint64), int(n), gravity).q_wxyz
         return PosePrediction(q_wxyz=q, p=np.asarray(seq.p, dtype=np.float64)[k].copy(), v=None)

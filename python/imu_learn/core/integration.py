@@ -2,12 +2,12 @@
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Sequence as Seq
+from typing import Segment as Seq
 
 import numpy as np
 
 from imu_learn import _imu_core as core
-from imu_learn.data.types import Sequence
+from imu_learn.data.types import Segment
 from imu_learn.errors import InvalidInputError
 
 PAPER_FRACTIONS = (0.2, 0.4, 0.6, 0.8, 1.0)
@@ -46,7 +46,7 @@ def preintegrate(t_ns: np.ndarray, gyro: np.ndarray, acc: np.ndarray) -> Increme
 
 
 def window_labels(
-    seq: Sequence, window: int, stride: int = 1, fractions: Seq[float] = PAPER_FRACTIONS, gravity: float = 9.81
+    seq: Segment, window: int, stride: int = 1, fractions: Seq[float] = PAPER_FRACTIONS, gravity: float = 9.81
 ) -> WindowLabels:
     """Ground-truth Δq/Δβ/Δγ for every window (start step ``stride``) at ``fractions`` of ``window``."""
     d = core.window_labels(
@@ -67,7 +67,7 @@ def _indices(x: np.ndarray, name: str) -> np.ndarray:
     return np.ascontiguousarray(a, dtype=np.uint64 if np.issubdtype(a.dtype, np.unsignedinteger) else np.int64)
 
 
-def integrate_windows(seq: Sequence, starts: np.ndarray, horizons: np.ndarray) -> WindowLabels:
+def integrate_windows(seq: Segment, starts: np.ndarray, horizons: np.ndarray) -> WindowLabels:
     """IMU-side Δq/Δβ/Δγ for the given windows and horizons (same layout as :func:`window_labels`).
 
     Horizons must lie in 1..N-1 and each start leave room for the longest (N samples in ``seq``);

@@ -43,7 +43,7 @@ from typing import Any, Callable, Dict, Iterator, List, Optional, Tuple, TypeVar
 
 import numpy as np
 
-from imu_learn.data.types import Sequence
+from imu_learn.data.types import Segment
 from imu_learn.errors import CacheError
 from imu_learn.util.atomic import atomic_write_bytes
 from imu_learn.util.digest import file_sha256
@@ -82,7 +82,7 @@ def rebuild_hint(folder: Path, manifest: Optional[Dict[str, Any]] = None) -> str
 # segment files
 
 
-def write_segment(folder: Path, stem: str, seq: Sequence, labels: Dict[str, np.ndarray]) -> Dict[str, str]:
+def write_segment(folder: Path, stem: str, seq: Segment, labels: Dict[str, np.ndarray]) -> Dict[str, str]:
     """Write one segment's arrays to ``<folder>/<stem>.<sha256 prefix>.npz``; returns the manifest's
     ``file`` and ``sha256`` for it. The name changes with the content, so a rebuild never
     overwrites a file the current manifest still lists: until the new manifest replaces it, the
@@ -110,7 +110,7 @@ def segment_problem(folder: Path, seg: Dict[str, Any]) -> Optional[str]:
 
 def read_segment(folder: Path, seg: Dict[str, Any], manifest: Optional[Dict[str, Any]] = None,
                  with_labels: bool = True) -> tuple:
-    """(Sequence, labels) of manifest entry ``seg``, after checking the file against its sha256;
+    """(Segment, labels) of manifest entry ``seg``, after checking the file against its sha256;
     labels is None when not ``with_labels`` (their arrays are then not read)."""
     path = folder / seg["file"]
     problem = segment_problem(folder, seg)
@@ -118,7 +118,7 @@ def read_segment(folder: Path, seg: Dict[str, Any], manifest: Optional[Dict[str,
         raise CacheError(f"{problem}; {rebuild_hint(folder, manifest)}")
     try:
         with np.load(path) as z:
-            seq = Sequence(name=seg["name"], **{k: z[k] for k in SEQUENCE_KEYS})
+            seq = Segment(name=seg["name"], **{k: z[k] for k in SEQUENCE_KEYS})
             labels = {k: z[f"label_{k}"] for k in LABEL_KEYS} if with_labels else None
     except (OSError, KeyError, ValueError) as e:
         raise CacheError(f"{path}: unreadable cache file ({e}); {rebuild_hint(folder, manifest)}") from e
@@ -234,7 +234,7 @@ def remove_unlisted_segments(folder: Path, manifest: Dict[str, Any]) -> None:
 
 
 def load_cache(folder: Path) -> List[tuple]:
-    """All (Sequence, labels) pairs of a cache, in manifest order; a truncated or modified file is
+    """All (Segment, labels) pairs of a cache, in manifest order; a truncated or modified file is
     a CacheError naming it."""
     folder = Path(folder)
     manifest = read_manifest(folder)

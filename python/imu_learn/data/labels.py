@@ -30,7 +30,7 @@ from imu_learn.data.cache import (
 )
 from imu_learn.data.datasets import find_recordings
 from imu_learn.data.loading import AlignOptions, load_recording
-from imu_learn.data.types import Sequence as SeqType
+from imu_learn.data.types import Segment as SeqType
 from imu_learn.errors import TooShortError
 
 LOG = logging.getLogger("imu_learn.data.labels")

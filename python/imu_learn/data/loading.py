@@ -9,7 +9,7 @@ import numpy as np
 
 from imu_learn import _imu_core as core
 from imu_learn.data.formats import asl, blackbird, detect_format, fetch, read_recording
-from imu_learn.data.types import GroundTruth, ImuData, Recording, Sequence
+from imu_learn.data.types import GroundTruth, ImuData, Recording, Segment
 
 PathLike = Union[str, Path]
 
@@ -45,7 +45,7 @@ def align(
     name: str = "",
     sources: Tuple[Optional[PathLike], Optional[PathLike]] = (None, None),
 ) -> Recording:
-    """Interpolate ground truth onto the IMU stamps; one ``Sequence`` per gap-free segment.
+    """Interpolate ground truth onto the IMU stamps; one ``Segment`` per gap-free segment.
 
     ``sources``: the (IMU, ground-truth) files the data came from, named by alignment errors
     (:class:`~imu_learn.errors.NoOverlapError` and the other :class:`~imu_learn.errors.AlignmentError`).
@@ -67,7 +67,7 @@ def align(
         gt_source=gt_source,
     )
     seqs = [
-        Sequence(name=f"{name}#{i}" if len(segs) > 1 else name, **seg)  # type: ignore[arg-type]
+        Segment(name=f"{name}#{i}" if len(segs) > 1 else name, **seg)  # type: ignore[arg-type]
         for i, seg in enumerate(segs)
     ]
     return Recording(name=name, segments=seqs, report=report)
@@ -117,8 +117,8 @@ def load_sequence(
     allow_float_timestamps: bool = False,
     imu_topic: Optional[str] = None,
     groundtruth_topic: Optional[str] = None,
-) -> List[Sequence]:
-    """Load a recording as a list of aligned ``Sequence`` segments (one unless ground truth has gaps).
+) -> List[Segment]:
+    """Load a recording as a list of aligned ``Segment`` segments (one unless ground truth has gaps).
 
     ``format``: "auto", "euroc", "tum-vi", "asl", "blackbird", "broad", "kaist" or "rosbag" (a ROS 1
     ``.bag`` or a ROS 2 bag folder).

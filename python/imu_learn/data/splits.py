@@ -34,7 +34,7 @@ import re
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Dict, List, Optional, Tuple
-from typing import Sequence as Seq
+from typing import Segment as Seq
 
 import numpy as np
 
@@ -42,7 +42,7 @@ from imu_learn.data.config import DataConfig, RootConfig
 from imu_learn.data.datasets import DATASETS, find_recordings
 from imu_learn.data.labels import RecordingSource, cached_segments
 from imu_learn.data.loading import AlignOptions, load_sequence
-from imu_learn.data.types import Sequence
+from imu_learn.data.types import Segment
 from imu_learn.errors import (
     ConfigError,
     DataPathError,  # noqa: F401  (defined with every error class)
@@ -185,7 +185,7 @@ def find_all(roots: List[RootConfig], data_root: Optional[Path] = None) -> Dict[
     return found
 
 
-def cut(segments: List[Sequence], start: float, stop: float, name: str) -> List[Sequence]:
+def cut(segments: List[Segment], start: float, stop: float, name: str) -> List[Segment]:
     """The part [start, stop) (fractions of the recording's total time span) of its segments."""
     if (start, stop) == (0.0, 1.0):
         return list(segments)
@@ -201,7 +201,7 @@ def cut(segments: List[Sequence], start: float, stop: float, name: str) -> List[
             continue
         a, b = int(idx[0]), int(idx[-1]) + 1
         out.append(
-            Sequence(
+            Segment(
                 name=f"{s.name}[{start:g}:{stop:g}]",
                 t_ns=s.t_ns[a:b], gyro=s.gyro[a:b], acc=s.acc[a:b], p=s.p[a:b], v=s.v[a:b], q_wxyz=s.q_wxyz[a:b],
             )
@@ -219,7 +219,7 @@ def recording_source(name: str, path: Path, root: RootConfig, groundtruth: Optio
 
 
 def from_label_cache(data: DataConfig, entries: Dict[str, List[SplitEntry]],
-                     found: Dict[str, Tuple[Path, RootConfig]], gt_paths: Dict[int, Path]) -> Dict[str, List[Sequence]]:
+                     found: Dict[str, Tuple[Path, RootConfig]], gt_paths: Dict[int, Path]) -> Dict[str, List[Segment]]:
     """``data.cache``: the aligned segments of every recording the split names, by name, from the
     label cache (rebuilt there first where missing or stale, see :func:`cached_segments`)."""
     names = [e.name for s in SPLITS for e in entries[s] if e.name in found]
@@ -231,12 +231,12 @@ def from_label_cache(data: DataConfig, entries: Dict[str, List[SplitEntry]],
 
 @dataclass
 class Split:
-    train: List[Sequence]
-    val: List[Sequence]
-    test: List[Sequence]
+    train: List[Segment]
+    val: List[Segment]
+    test: List[Segment]
     record: Dict[str, object]
 
-    def __getitem__(self, key: str) -> List[Sequence]:
+    def __getitem__(self, key: str) -> List[Segment]:
         return getattr(self, key)
 
 
@@ -251,15 +251,15 @@ def make_split(data: DataConfig, min_len: Optional[int] = None) -> Split:
     found = find_all(data.roots, root_dir)
     gt_paths = groundtruth_paths(data.roots, root_dir)
     min_len = data.window + 1 if min_len is None else min_len
-    cache: Dict[str, List[Sequence]] = {}
+    cache: Dict[str, List[Segment]] = {}
     if data.cache:  # the label cache's aligned segments instead of the raw files
         cache = from_label_cache(data, entries, found, gt_paths)
-    result: Dict[str, List[Sequence]] = {}
+    result: Dict[str, List[Segment]] = {}
     record: Dict[str, object] = {"rule": "by sequence; NAME[a:b] is a time block (fractions of the duration)",
                                  "data_root": str(root_dir) if root_dir is not None else None,
                                  "cache": data.cache or None}
     for split in SPLITS:
-        seqs: List[Sequence] = []
+        seqs: List[Segment] = []
         rows = []
         for e in entries[split]:
             if e.name not in found:

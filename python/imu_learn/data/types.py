@@ -1,7 +1,7 @@
 """Plain containers for IMU data, ground truth and aligned sequences.
 
 Quaternions are Hamilton, body(IMU) -> world. The core and these classes store them w,x,y,z and
-say so in the name (``q_wxyz``); ``Sequence.q_xyzw`` converts through :func:`imu_learn.core.quat.wxyz_to_xyzw`.
+say so in the name (``q_wxyz``); ``Segment.q_xyzw`` converts through :func:`imu_learn.core.quat.wxyz_to_xyzw`.
 """
 from __future__ import annotations
 
@@ -39,7 +39,7 @@ class GroundTruth:
 
 
 @dataclass(frozen=True)
-class Sequence:
+class Segment:
     """IMU samples with ground truth interpolated onto the same stamps (one gap-free segment)."""
 
     name: str

@@ -23,7 +23,7 @@ from scipy.stats import chi2
 
 from imu_learn.core.integration import integrate_windows, window_labels
 from imu_learn.core.quat import quat_conj, quat_mul
-from imu_learn.data.types import Sequence
+from imu_learn.data.types import Segment
 
 SIGMAS = (1, 2, 3)
 BLOCKS = {"all": slice(0, 9), "rot": slice(0, 3), "vel": slice(3, 6), "pos": slice(6, 9)}
@@ -83,7 +83,7 @@ class Residuals:
     n: int
 
 
-def residuals(seq: Sequence, gyro: np.ndarray, acc: np.ndarray, starts: np.ndarray, n: int,
+def residuals(seq: Segment, gyro: np.ndarray, acc: np.ndarray, starts: np.ndarray, n: int,
               gravity: float = 9.81) -> Residuals:
     """Ground truth minus IMU increments over n samples from each start, as (δθ, δβ, δγ) (M, 9)."""
     from scipy.spatial.transform import Rotation
@@ -91,7 +91,7 @@ def residuals(seq: Sequence, gyro: np.ndarray, acc: np.ndarray, starts: np.ndarr
     from imu_learn.core.quat import wxyz_to_xyzw
 
     starts = np.asarray(starts, dtype=np.uint64)
-    imu = Sequence(seq.name, seq.t_ns, np.ascontiguousarray(gyro), np.ascontiguousarray(acc), seq.p, seq.v, seq.q_wxyz)
+    imu = Segment(seq.name, seq.t_ns, np.ascontiguousarray(gyro), np.ascontiguousarray(acc), seq.p, seq.v, seq.q_wxyz)
     est = integrate_windows(imu, starts, np.array([n], dtype=np.uint64))
     gt = _labels_at(seq, starts, n, gravity)
     dq = quat_mul(gt.dq_wxyz, quat_conj(est.dq_wxyz[:, 0]))
@@ -107,7 +107,7 @@ class _Labels:
     dp: np.ndarray
 
 
-def _labels_at(seq: Sequence, starts: np.ndarray, n: int, gravity: float) -> _Labels:
+def _labels_at(seq: Segment, starts: np.ndarray, n: int, gravity: float) -> _Labels:
     """Ground-truth increments of the windows [s, s + n] (window_labels at stride 1, picked)."""
     lab = window_labels(seq, n, 1, [1.0], gravity)
     idx = np.searchsorted(lab.starts, starts)
@@ -116,7 +116,7 @@ def _labels_at(seq: Sequence, starts: np.ndarray, n: int, gravity: float) -> _La
     return _Labels(lab.dq_wxyz[idx, 0], lab.dv[idx, 0], lab.dp[idx, 0])
 
 
-def window_covariances(seq: Sequence, gyro: np.ndarray, acc: np.ndarray, var: np.ndarray, starts: np.ndarray,
+def window_covariances(seq: Segment, gyro: np.ndarray, acc: np.ndarray, var: np.ndarray, starts: np.ndarray,
                        n: int) -> np.ndarray:
     """Σ (M, 9, 9) of each window's increments under per-sample variances ``var`` (N, 6), float64,
     by imu_core's propagation (:func:`imu_learn.core.covariance.increment_covariance`), one window at a time
@@ -142,7 +142,7 @@ def datasheet_variances(t_ns: np.ndarray, gyro_noise_density: float, acc_noise_d
                            np.repeat((acc_noise_density ** 2 / dt)[:, None], 3, 1)], axis=1)
 
 
-def calibrate(seq: Sequence, gyro: np.ndarray, acc: np.ndarray, var: np.ndarray, starts: np.ndarray, n: int,
+def calibrate(seq: Segment, gyro: np.ndarray, acc: np.ndarray, var: np.ndarray, starts: np.ndarray, n: int,
               gravity: float = 9.81) -> Dict[str, np.ndarray]:
     """NEES per block (:func:`nees_blocks`) of the windows of n samples at ``starts`` for the IMU
     (gyro, acc) with per-sample variances ``var``."""
@@ -165,7 +165,7 @@ def format_table(rows: List[Dict[str, object]]) -> List[str]:
     return lines
 
 
-def evaluate_calibration(model, seqs: List[Sequence], horizons: List[int], stride: int, startup_bias_s: float,
+def evaluate_calibration(model, seqs: List[Segment], horizons: List[int], stride: int, startup_bias_s: float,
                          gyro_noise_density: float, acc_noise_density: float, gravity: float = 9.81,
                          ) -> List[Dict[str, object]]:
     """The calibration rows of the evaluation report: raw IMU and ``model``'s refined IMU, each with

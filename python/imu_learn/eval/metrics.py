@@ -23,13 +23,13 @@ from __future__ import annotations
 
 import math
 from typing import Any, Dict, List, Optional, Tuple
-from typing import Sequence as Seq
+from typing import Segment as Seq
 
 import numpy as np
 
 from imu_learn.core.integration import integrate_windows, preintegrate, window_labels
 from imu_learn.core.quat import quat_conj, quat_log, quat_mul, quat_rotate
-from imu_learn.data.types import Sequence
+from imu_learn.data.types import Segment
 from imu_learn.errors import InvalidInputError
 from imu_learn.eval.protocol import VARIANTS
 
@@ -46,27 +46,27 @@ def rmse(x: np.ndarray) -> float:
     return float(np.sqrt(np.mean(x * x))) if x.size else float("nan")
 
 
-def with_imu(seq: Sequence, gyro: np.ndarray, acc: np.ndarray, name: Optional[str] = None) -> Sequence:
+def with_imu(seq: Segment, gyro: np.ndarray, acc: np.ndarray, name: Optional[str] = None) -> Segment:
     """The same sequence (ground truth, stamps) with its gyro/acc replaced."""
     gyro = np.ascontiguousarray(gyro, dtype=np.float64)
     acc = np.ascontiguousarray(acc, dtype=np.float64)
     if gyro.shape != seq.gyro.shape or acc.shape != seq.acc.shape:
         raise InvalidInputError(f"gyro/acc of shape {gyro.shape}/{acc.shape} do not match the sequence's {seq.gyro.shape}")
-    return Sequence(seq.name if name is None else name, seq.t_ns, gyro, acc, seq.p, seq.v, seq.q_wxyz)
+    return Segment(seq.name if name is None else name, seq.t_ns, gyro, acc, seq.p, seq.v, seq.q_wxyz)
 
 
-def remove_bias(seq: Sequence, gyro_bias: np.ndarray, acc_bias: np.ndarray) -> Sequence:
+def remove_bias(seq: Segment, gyro_bias: np.ndarray, acc_bias: np.ndarray) -> Segment:
     """``seq`` with a constant bias subtracted from its gyro and accelerometer."""
     return with_imu(seq, seq.gyro - np.asarray(gyro_bias)[None], seq.acc - np.asarray(acc_bias)[None])
 
 
-def index_at(seq: Sequence, seconds: float) -> int:
+def index_at(seq: Segment, seconds: float) -> int:
     """First sample index at or after ``seconds`` from the sequence start."""
     return int(np.searchsorted(seq.t_ns, seq.t_ns[0] + int(round(seconds * 1e9))))
 
 
 def relative_pose_errors(
-    seq: Sequence, n: int, stride: int = 1, gravity: float = GRAVITY, first: int = 0, last: Optional[int] = None
+    seq: Segment, n: int, stride: int = 1, gravity: float = GRAVITY, first: int = 0, last: Optional[int] = None
 ) -> Dict[str, np.ndarray]:
     """Per-window errors of dead reckoning over ``n`` samples from the ground-truth state.
 
@@ -93,7 +93,7 @@ def relative_pose_errors(
 
 
 def relative_pose_rmse(
-    seq: Sequence, n: int, stride: int = 1, gravity: float = GRAVITY, first: int = 0, last: Optional[int] = None
+    seq: Segment, n: int, stride: int = 1, gravity: float = GRAVITY, first: int = 0, last: Optional[int] = None
 ) -> Dict[str, float]:
     """RMSE of :func:`relative_pose_errors`: ``rot_rad``, ``rot_deg``, ``trans_m``, ``windows``."""
     e = relative_pose_errors(seq, n, stride, gravity, first, last)
@@ -101,7 +101,7 @@ def relative_pose_rmse(
     return {"rot_rad": r, "rot_deg": math.degrees(r), "trans_m": rmse(e["trans_m"]), "windows": int(e["starts"].size)}
 
 
-def relative_pose_rmse_many(seqs: Seq[Sequence], n: int, stride: int = 1, gravity: float = GRAVITY,
+def relative_pose_rmse_many(seqs: Seq[Segment], n: int, stride: int = 1, gravity: float = GRAVITY,
                             first_s: float = 0.0) -> Dict[str, float]:
     """RMSE pooled over the windows of several sequences (each from ``first_s`` seconds in)."""
     rots, trans = [], []
@@ -118,7 +118,7 @@ def relative_pose_rmse_many(seqs: Seq[Sequence], n: int, stride: int = 1, gravit
 # start-up bias
 
 
-def _residuals(seq: Sequence, starts: np.ndarray, n: int, labels, bg: np.ndarray, ba: np.ndarray) -> Tuple[np.ndarray, np.ndarray]:
+def _residuals(seq: Segment, starts: np.ndarray, n: int, labels, bg: np.ndarray, ba: np.ndarray) -> Tuple[np.ndarray, np.ndarray]:
     s = remove_bias(seq, bg, ba)
     inc = integrate_windows(s, starts, np.array([n], dtype=np.uint64))
     r_rot = quat_log(quat_mul(quat_conj(inc.dq_wxyz[:, 0]), labels.dq_wxyz[:, 0]))
@@ -142,7 +142,7 @@ def _gauss_newton(f, x: np.ndarray, eps: float, iters: int, tol: float) -> np.nd
 
 
 def fit_startup_bias(
-    seq: Sequence,
+    seq: Segment,
     seconds: float = 10.0,
     window_s: float = 1.0,
     gravity: float = GRAVITY,
@@ -151,7 +151,7 @@ def fit_startup_bias(
     """Constant (gyro_bias [rad/s], acc_bias [m/s²]) fitted on the first ``seconds`` against ground
     truth, by least squares through the integration over ``window_s`` windows (see module doc)."""
     m = index_at(seq, seconds) + 1
-    sub = Sequence(seq.name, seq.t_ns[:m], seq.gyro[:m], seq.acc[:m], seq.p[:m], seq.v[:m], seq.q_wxyz[:m])
+    sub = Segment(seq.name, seq.t_ns[:m], seq.gyro[:m], seq.acc[:m], seq.p[:m], seq.v[:m], seq.q_wxyz[:m])
     if len(sub) < 3:
         raise InvalidInputError(f"{seq.name}: fewer than 3 samples in the first {seconds} s")
     rate = (len(sub) - 1) / max(sub.duration_s, 1e-9)
@@ -176,8 +176,8 @@ def fit_startup_bias(
 
 
 def without_fitted_bias(
-    seqs: Seq[Sequence], seconds: Optional[float] = None, gravity: float = GRAVITY,
-) -> Tuple[List[Sequence], Dict[str, Dict[str, list]]]:
+    seqs: Seq[Segment], seconds: Optional[float] = None, gravity: float = GRAVITY,
+) -> Tuple[List[Segment], Dict[str, Dict[str, list]]]:
     """Each sequence with its own constant bias (:func:`fit_startup_bias` on its first ``seconds``;
     None: the whole sequence) subtracted, and the biases by sequence name."""
     fixed, biases = [], {}
@@ -188,7 +188,7 @@ def without_fitted_bias(
     return fixed, biases
 
 
-def variant_table(seqs: Seq[Sequence], fixed: Seq[Sequence], horizons: Seq[int], stride: int,
+def variant_table(seqs: Seq[Segment], fixed: Seq[Segment], horizons: Seq[int], stride: int,
                   startup_bias_s: float, gravity: float = GRAVITY) -> Dict[str, Dict[str, Dict[str, float]]]:
     """The final table's cells: ``{variant: {str(n): relative_pose_rmse_many(...)}}`` for the two
     variants of :data:`imu_learn.eval.protocol.VARIANTS`, open loop (``seqs``) and start-up bias
@@ -227,7 +227,7 @@ def simulate_sequence(
     p0: Seq[float] = (0.0, 0.0, 0.0),
     gravity: float = GRAVITY,
     name: str = "synthetic",
-) -> Sequence:
+) -> Segment:
     """The trajectory whose exact IMU signal (under the core's zero-order-hold integration) is
     ``gyro``/``acc``: ground truth from preintegration of the whole record from the initial state."""
     inc = preintegrate(t_ns, gyro, acc)
@@ -237,5 +237,5 @@ def simulate_sequence(
     q = quat_mul(q0, inc.dq_wxyz)
     v = np.asarray(v0)[None] + g[None] * tt + quat_rotate(q0, inc.dv)
     p = np.asarray(p0)[None] + np.asarray(v0)[None] * tt + 0.5 * g[None] * tt * tt + quat_rotate(q0, inc.dp)
-    return Sequence(name, np.ascontiguousarray(t_ns, dtype=np.int64), np.asarray(gyro, dtype=np.float64),
+    return Segment(name, np.ascontiguousarray(t_ns, dtype=np.int64), np.asarray(gyro, dtype=np.float64),
                     np.asarray(acc, dtype=np.float64), p, v, q)

@@ -3,7 +3,7 @@
 Open loop means: the samples as they are (no bias removed, nothing fitted on ground truth), integrated
 from the ground-truth initial state by the core's zero-order hold (sample i held over [t_i, t_{i+1}),
 exact SO(3) exponential; :func:`imu_learn.core.integration.preintegrate` / ``integrate_windows``).
-Per gap-free segment of a recording (a :class:`~imu_learn.data.types.Sequence`), from its first sample:
+Per gap-free segment of a recording (a :class:`~imu_learn.data.types.Segment`), from its first sample:
 
 * **AOE** (absolute orientation error; Brossard, Bonnabel, Barrau 2020, *Denoising IMU Gyroscopes with
   Deep Learning for Open-Loop Attitude Estimation*): the gyro integrated over the whole segment from the
@@ -39,7 +39,7 @@ import numpy as np
 
 from imu_learn.core.integration import integrate_windows, preintegrate
 from imu_learn.core.quat import quat_conj, quat_mul, quat_rotate, rotation_angle
-from imu_learn.data.types import Sequence
+from imu_learn.data.types import Segment
 
 PEER_WINDOW_S = 1.0  # AirIMU's window [s]
 
@@ -54,7 +54,7 @@ def _rotmat(q_wxyz: np.ndarray) -> np.ndarray:
     ], -2)
 
 
-def open_loop_attitude(seq: Sequence, gyro: Optional[np.ndarray] = None) -> np.ndarray:
+def open_loop_attitude(seq: Segment, gyro: Optional[np.ndarray] = None) -> np.ndarray:
     """Orientation (N, 4) w,x,y,z of ``gyro`` (default ``seq.gyro``) integrated over the whole segment from
     the ground-truth orientation at its first sample (row 0 is that orientation)."""
     g = seq.gyro if gyro is None else gyro
@@ -68,7 +68,7 @@ def yaw_error(q_gt: np.ndarray, q_hat: np.ndarray) -> np.ndarray:
     return np.arctan2(e[..., 1, 0], e[..., 0, 0])
 
 
-def attitude_errors(seq: Sequence, gyro: Optional[np.ndarray] = None) -> Dict[str, np.ndarray]:
+def attitude_errors(seq: Segment, gyro: Optional[np.ndarray] = None) -> Dict[str, np.ndarray]:
     """Per-sample open-loop errors of one segment: ``angle_rad`` (N,) and ``yaw_rad`` (N,)."""
     q_hat = open_loop_attitude(seq, gyro)
     return {"angle_rad": rotation_angle(seq.q_wxyz, q_hat), "yaw_rad": yaw_error(seq.q_wxyz, q_hat)}
@@ -86,7 +86,7 @@ def covered(t_ns: np.ndarray, gt_t_ns: np.ndarray, max_gap_s: float) -> np.ndarr
     return exact | (inside & (hi - lo <= int(round(max_gap_s * 1e9))))
 
 
-def masked_aoe(seq: Sequence, gyro: np.ndarray, mask: np.ndarray) -> Dict[str, float]:
+def masked_aoe(seq: Segment, gyro: np.ndarray, mask: np.ndarray) -> Dict[str, float]:
     """AOE over a whole recording whose ground truth has gaps (AirIMU's ``--mask``, Brossard's TUM-VI
     protocol): ``seq`` is ONE segment spanning the gaps (ground truth interpolated across them, e.g.
     loaded with a large ``AlignOptions.max_gap_s``), the gyro integrated through the gaps from the first
@@ -101,24 +101,24 @@ def masked_aoe(seq: Sequence, gyro: np.ndarray, mask: np.ndarray) -> Dict[str, f
             "yaw_aoe_deg": math.degrees(float(np.sqrt(np.mean(y * y)))), "samples": int(m.sum()), "bridged": int((~m).sum())}
 
 
-def window_samples(seq: Sequence, seconds: float = PEER_WINDOW_S) -> int:
+def window_samples(seq: Segment, seconds: float = PEER_WINDOW_S) -> int:
     """round(seconds · rate) samples, rate = 1 / median sample period (at least 1)."""
     rate = 1e9 / float(np.median(np.diff(np.asarray(seq.t_ns, dtype=np.int64))))
     return max(1, int(round(seconds * rate)))
 
 
-def peer_window_starts(seq: Sequence, w: int) -> np.ndarray:
+def peer_window_starts(seq: Segment, w: int) -> np.ndarray:
     """Non-overlapping consecutive window starts 0, w, 2w, ... with k + w <= N - 1."""
     return np.arange(0, len(seq) - int(w), int(w), dtype=np.int64)
 
 
-def window_errors(seq: Sequence, gyro: np.ndarray, acc: np.ndarray, w: int, gravity: float = 9.81,
+def window_errors(seq: Segment, gyro: np.ndarray, acc: np.ndarray, w: int, gravity: float = 9.81,
                   starts: Optional[np.ndarray] = None) -> Dict[str, np.ndarray]:
     """Per-window errors over ``w`` samples from the ground-truth state: ``rot_rad``, ``trans_m``, ``starts``."""
     k = peer_window_starts(seq, w) if starts is None else np.asarray(starts, dtype=np.int64)
     if k.size == 0:
         return {"rot_rad": np.zeros(0), "trans_m": np.zeros(0), "starts": k}
-    s = Sequence(seq.name, seq.t_ns, np.ascontiguousarray(gyro, dtype=np.float64),
+    s = Segment(seq.name, seq.t_ns, np.ascontiguousarray(gyro, dtype=np.float64),
                  np.ascontiguousarray(acc, dtype=np.float64), seq.p, seq.v, seq.q_wxyz)
     inc = integrate_windows(s, k, np.array([int(w)], dtype=np.int64))
     qk, dt = seq.q_wxyz[k], inc.dt[:, 0, None]
@@ -144,7 +144,7 @@ class PeerErrors:
     segments: int = 0
 
 
-def segment_errors(seq: Sequence, gyro: np.ndarray, acc: np.ndarray, gravity: float = 9.81,
+def segment_errors(seq: Segment, gyro: np.ndarray, acc: np.ndarray, gravity: float = 9.81,
                    position: bool = True) -> Dict[str, Any]:
     """All peer errors of one refined (or raw) segment, open loop."""
     w = window_samples(seq)

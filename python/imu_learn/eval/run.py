@@ -31,7 +31,7 @@ import time
 from dataclasses import asdict, dataclass, field, fields
 from pathlib import Path
 from typing import Any, Callable, Dict, List, Optional, Tuple
-from typing import Sequence as Seq
+from typing import Segment as Seq
 
 import numpy as np
 
@@ -39,7 +39,7 @@ from imu_learn.baselines.base import FitSettings, Method, PosePrediction, poses_
 from imu_learn.baselines.registry import DEFAULT_METHODS, REGISTRY, load_method_class, method_file, safe_name  # noqa: F401
 from imu_learn.core.quat import rotation_angle
 from imu_learn.data.splits import split_signature
-from imu_learn.data.types import Sequence
+from imu_learn.data.types import Segment
 from imu_learn.errors import (
     ConfigError,
     ImuError,
@@ -223,7 +223,7 @@ class CheckpointRefiner(Method):
         sp = (self.config.get("data") or {}).get("split") or {}
         return {k: list(sp.get(k) or []) for k in ("train", "val", "test")}
 
-    def refine(self, seq: Sequence) -> Tuple[np.ndarray, np.ndarray]:
+    def refine(self, seq: Segment) -> Tuple[np.ndarray, np.ndarray]:
         from imu_learn.infer.windowing import apply
 
         gyro, acc, _ = apply(self.model, seq.gyro, seq.acc)
@@ -249,12 +249,12 @@ def check_checkpoint_split(m: CheckpointRefiner, test_entries: List[str]) -> Non
 # metrics
 
 
-def window_starts(seq: Sequence, n: int, stride: int, first: int) -> np.ndarray:
+def window_starts(seq: Segment, n: int, stride: int, first: int) -> np.ndarray:
     """Starts first, first+stride, ... with k + n <= len - 1 (the end state is a ground-truth sample)."""
     return np.arange(int(first), len(seq) - int(n), int(stride), dtype=np.int64)
 
 
-def pose_errors(seq: Sequence, starts: np.ndarray, n: int, pred: PosePrediction) -> Dict[str, np.ndarray]:
+def pose_errors(seq: Segment, starts: np.ndarray, n: int, pred: PosePrediction) -> Dict[str, np.ndarray]:
     """Per-window errors of ``pred`` (end states of windows of n samples) against the ground truth
     of ``seq``: ``rot_rad``, ``trans_m`` (nan without p), ``vel_mps`` (nan without v)."""
     j = np.asarray(starts, dtype=np.int64) + int(n)
@@ -265,7 +265,7 @@ def pose_errors(seq: Sequence, starts: np.ndarray, n: int, pred: PosePrediction)
     return {"rot_rad": rot, "trans_m": trans, "vel_mps": vel}
 
 
-def sample_rate(seq: Sequence) -> float:
+def sample_rate(seq: Segment) -> float:
     return 1e9 / float(np.median(np.diff(np.asarray(seq.t_ns, dtype=np.int64))))
 
 
@@ -277,7 +277,7 @@ def curve_seconds(e: EvalSettings) -> List[float]:
     return [float(x) for x in np.geomspace(e.curve_min_s, e.curve_max_s, e.curve_count)]
 
 
-def horizon_plan(seq: Sequence, e: EvalSettings) -> Dict[str, Any]:
+def horizon_plan(seq: Segment, e: EvalSettings) -> Dict[str, Any]:
     """Horizons [samples] to evaluate on ``seq``: the table's n, and seconds -> samples."""
     rate = sample_rate(seq)
     secs = sorted(set([1.0] + list(e.airimu_s) + curve_seconds(e)))
@@ -289,7 +289,7 @@ def is_refiner(method: Method) -> bool:
     return type(method).predict is Method.predict
 
 
-def evaluate_sequence(method: Method, seq: Sequence, horizons: Seq[int], stride: int, startup_bias_s: float,
+def evaluate_sequence(method: Method, seq: Segment, horizons: Seq[int], stride: int, startup_bias_s: float,
                       gravity: float = 9.81, peers: Optional[Dict[str, Any]] = None
                       ) -> Tuple[Dict[Tuple[str, int], Dict[str, np.ndarray]], Dict[str, Any]]:
     """Errors of ``method`` on ``seq``: {(variant, n): per-window errors} and the fitted start-up bias.
@@ -330,7 +330,7 @@ def evaluate_sequence(method: Method, seq: Sequence, horizons: Seq[int], stride:
     return out, bias
 
 
-def _peer_errors(method: Method, base: Sequence, refiner: bool, gravity: float) -> Dict[str, Any]:
+def _peer_errors(method: Method, base: Segment, refiner: bool, gravity: float) -> Dict[str, Any]:
     """Open-loop peer errors of one segment (``base``: the refined samples of a refiner, the raw input
     of a regressor)."""
     from imu_learn.eval import peers
@@ -523,7 +523,7 @@ def _bias_row(name: str, seg: str, rec: str, bias: Dict[str, Any]) -> Dict[str, 
             **{f"acc_bias_{a}": b for a, b in zip("xyz", bias["acc"])}}
 
 
-def _evaluate_all(rows: _Rows, test: List[Sequence], plans: Dict[str, Dict[str, Any]], stride: int, bias_s: float,
+def _evaluate_all(rows: _Rows, test: List[Segment], plans: Dict[str, Dict[str, Any]], stride: int, bias_s: float,
                   gravity: float, progress: bool, peer_out: Optional[Dict[Tuple[str, str], Any]] = None
                   ) -> Tuple[Dict[Tuple[str, str, str, int], List[Dict[str, np.ndarray]]], List[Dict[str, Any]]]:
     """Every row on every test segment: per-window errors by (method, variant, recording, n), the
@@ -559,7 +559,7 @@ def _evaluate_all(rows: _Rows, test: List[Sequence], plans: Dict[str, Dict[str, 
     return errors, biases
 
 
-def _calibration(rows: _Rows, test: List[Sequence], e: EvalSettings, stride: int, bias_s: float,
+def _calibration(rows: _Rows, test: List[Segment], e: EvalSettings, stride: int, bias_s: float,
                  gravity: float) -> List[Dict[str, Any]]:
     """The calibration table of a ``--checkpoint`` with a covariance head (else none)."""
     ck = rows.checkpoint
@@ -572,7 +572,7 @@ def _calibration(rows: _Rows, test: List[Sequence], e: EvalSettings, stride: int
                                 e.gyro_noise_density, e.acc_noise_density, gravity)
 
 
-def _per_recording(test: List[Sequence], plans: Dict[str, Dict[str, Any]]) -> Tuple[Dict[str, float], Dict[str, Any]]:
+def _per_recording(test: List[Segment], plans: Dict[str, Dict[str, Any]]) -> Tuple[Dict[str, float], Dict[str, Any]]:
     """Sample rate and horizon plan (seconds -> samples) of each test recording."""
     rates: Dict[str, float] = {}
     for s in test:

@@ -419,7 +419,7 @@ def calibrated_input(path: Path, t_ns: np.ndarray, gyro: np.ndarray, acc: np.nda
     """(gyro, acc, label): the IMU through a fit ``imu-learn evaluate`` saved (``<out>/methods/timing.json``,
     ``traditional+timing.json``, ...; the method is the file's name), the floor a learned input is judged by."""
     from imu_learn.baselines.registry import REGISTRY, load_method_class
-    from imu_learn.data.types import Sequence
+    from imu_learn.data.types import Segment
 
     name = Path(path).stem
     if name not in REGISTRY:
@@ -430,7 +430,7 @@ def calibrated_input(path: Path, t_ns: np.ndarray, gyro: np.ndarray, acc: np.nda
     method = load_method_class(name)().load(Path(path))
     n = len(t_ns)
     z = np.zeros((n, 3))
-    seq = Sequence(name, t_ns, gyro, acc, z, z, np.tile([1.0, 0.0, 0.0, 0.0], (n, 1)))  # no ground truth: refine reads IMU only
+    seq = Segment(name, t_ns, gyro, acc, z, z, np.tile([1.0, 0.0, 0.0, 0.0], (n, 1)))  # no ground truth: refine reads IMU only
     g, a = method.refine(seq)
     return np.ascontiguousarray(g), np.ascontiguousarray(a), f"{name} ({Path(path).name})"
 

@@ -215,10 +215,10 @@ def imu_input(name: str, seq, artefact: str, cache: Dict[Tuple[str, str], object
 def bias_prior_mean(scn: ScenarioSpec, seq, gyro: np.ndarray, acc: np.ndarray, gravity: float):
     if scn.bias_prior == "zero":
         return None
-    from imu_learn.data.types import Sequence
+    from imu_learn.data.types import Segment
     from imu_learn.eval.metrics import fit_startup_bias
 
-    bg, ba = fit_startup_bias(Sequence(seq.name, seq.t_ns, gyro, acc, seq.p, seq.v, seq.q_wxyz),
+    bg, ba = fit_startup_bias(Segment(seq.name, seq.t_ns, gyro, acc, seq.p, seq.v, seq.q_wxyz),
                               scn.startup_bias_s, gravity=gravity)
     return np.r_[bg, ba]
 

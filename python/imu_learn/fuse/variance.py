@@ -7,7 +7,7 @@ interval of K samples. If the sample errors are not white (vibration that cancel
 that propagated covariance is wrong by a factor; this module measures the factor from data.
 
 Method (:func:`interval_residuals`, :func:`scale_from_residuals`): over consecutive intervals of K
-samples of an aligned :class:`~imu_learn.data.types.Sequence` (stride K, no overlap),
+samples of an aligned :class:`~imu_learn.data.types.Segment` (stride K, no overlap),
 
 * the residual of the refined samples' preintegrated increments against ground truth's
   (:func:`imu_learn.core.integration.integrate_windows` and :func:`~imu_learn.core.integration.window_labels`,
@@ -38,7 +38,7 @@ from scipy.spatial.transform import Rotation
 
 from imu_learn.core.covariance import interval_covariances
 from imu_learn.core.integration import integrate_windows, window_labels
-from imu_learn.data.types import Sequence
+from imu_learn.data.types import Segment
 from imu_learn.errors import InvalidInputError
 
 log = logging.getLogger(__name__)
@@ -76,7 +76,7 @@ class VarianceScale:
                 "k_acc_mean": self.k_acc_mean, "intervals": self.n}
 
 
-def interval_residuals(seq: Sequence, var: np.ndarray, K: int = 20, gravity: float = 9.81) -> IntervalResiduals:
+def interval_residuals(seq: Segment, var: np.ndarray, K: int = 20, gravity: float = 9.81) -> IntervalResiduals:
     """Residuals and predicted variances over consecutive intervals of ``K`` samples of ``seq``.
 
     ``seq``: the refined IMU with ground truth on its stamps; ``var`` (N, 6): per-sample discrete-time
@@ -133,19 +133,19 @@ def scale_from_residuals(parts: Iterable[IntervalResiduals]) -> VarianceScale:
     return VarianceScale(kg, ka, kg_mean, ka_mean, len(cat))
 
 
-def sequence_residuals(seq: Sequence, var: np.ndarray, K: int = 20, gravity: float = 9.81,
+def sequence_residuals(seq: Segment, var: np.ndarray, K: int = 20, gravity: float = 9.81,
                        skip_s: float = 0.0) -> IntervalResiduals:
     """:func:`interval_residuals` of one sequence after its first ``skip_s`` seconds, bias removed."""
     s = 0
     if skip_s > 0:
         s = int(np.searchsorted(seq.t_ns, seq.t_ns[0] + int(round(skip_s * 1e9))))
     if s:
-        seq = Sequence(seq.name, seq.t_ns[s:], seq.gyro[s:], seq.acc[s:], seq.p[s:], seq.v[s:], seq.q_wxyz[s:])
+        seq = Segment(seq.name, seq.t_ns[s:], seq.gyro[s:], seq.acc[s:], seq.p[s:], seq.v[s:], seq.q_wxyz[s:])
         var = np.asarray(var)[s:]
     return remove_bias(interval_residuals(seq, var, K, gravity))
 
 
-def calibrate_model(model, sequences: Iterable[Sequence], K: int = 20, gravity: float = 9.81,
+def calibrate_model(model, sequences: Iterable[Segment], K: int = 20, gravity: float = 9.81,
                     skip_s: float = 0.0) -> Dict[str, object]:
     """Refine each (raw) sequence with ``model`` (a refiner with a covariance head) and calibrate its
     variances over ``K``-sample intervals: ``{"per_sequence": {name: VarianceScale}, "pooled":
@@ -158,7 +158,7 @@ def calibrate_model(model, sequences: Iterable[Sequence], K: int = 20, gravity: 
     parts = []
     for seq in sequences:
         g, a, var = apply(model, seq.gyro, seq.acc, variance=True)
-        refined = Sequence(seq.name, seq.t_ns, g, a, seq.p, seq.v, seq.q_wxyz)
+        refined = Segment(seq.name, seq.t_ns, g, a, seq.p, seq.v, seq.q_wxyz)
         res = sequence_residuals(refined, var, K, gravity, skip_s)
         if len(res) == 0:
             log.warning(f"{seq.name}: shorter than one interval of {K} samples, skipped")

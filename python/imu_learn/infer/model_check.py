@@ -29,7 +29,7 @@ import numpy as np
 from imu_learn.data.formats import read_recording
 from imu_learn.data.loading import AlignOptions, align
 from imu_learn.data.types import ImuData
-from imu_learn.data.types import Sequence as Seq
+from imu_learn.data.types import Segment as Seq
 from imu_learn.eval.metrics import GRAVITY, variant_table, without_fitted_bias
 from imu_learn.eval.protocol import VARIANTS
 from imu_learn.infer.refine import refine_arrays

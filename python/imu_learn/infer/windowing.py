@@ -48,7 +48,7 @@ import numpy as np
 import torch
 from torch import nn
 
-from imu_learn.data.types import Sequence
+from imu_learn.data.types import Segment
 from imu_learn.errors import InvalidInputError
 
 DEFAULT_WINDOW = 200  # data.window's default: the training window of a model that names none
@@ -214,7 +214,7 @@ def apply(model: nn.Module, gyro: np.ndarray, acc: np.ndarray, windowing: Option
             None if var is None else var.astype(np.float64))
 
 
-def refine_sequence(model: nn.Module, seq: Sequence, windowing: Optional[Windowing] = None) -> Sequence:
+def refine_sequence(model: nn.Module, seq: Segment, windowing: Optional[Windowing] = None) -> Segment:
     """``seq`` with its IMU refined by the rule (timestamps and ground truth kept)."""
     g, a, _ = apply(model, seq.gyro, seq.acc, windowing)
-    return Sequence(seq.name, seq.t_ns, g, a, seq.p, seq.v, seq.q_wxyz)
+    return Segment(seq.name, seq.t_ns, g, a, seq.p, seq.v, seq.q_wxyz)

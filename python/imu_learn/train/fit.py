@@ -68,14 +68,14 @@ from dataclasses import asdict, dataclass, field
 from datetime import datetime
 from pathlib import Path
 from typing import Any, Callable, Dict, List, Optional, Tuple
-from typing import Sequence as Seq
+from typing import Segment as Seq
 
 import numpy as np
 import torch
 
 from imu_learn.core.batches import Batch, BatchSampler, batch_seed
 from imu_learn.data.splits import Split, make_split, split_signature, write_split
-from imu_learn.data.types import Sequence
+from imu_learn.data.types import Segment
 from imu_learn.eval.metrics import floor_ratios, index_at, relative_pose_rmse_many, variant_table, without_fitted_bias
 from imu_learn.eval.protocol import VARIANT_LABELS, VARIANTS
 from imu_learn.infer import windowing
@@ -96,7 +96,7 @@ StepHook = Callable[[int, float], None]
 # small helpers
 
 
-def norm_stats(seqs: Seq[Sequence]) -> tuple:
+def norm_stats(seqs: Seq[Segment]) -> tuple:
     x = np.concatenate([np.concatenate([s.gyro, s.acc], axis=1) for s in seqs], axis=0)
     mean = x.mean(axis=0)
     std = np.maximum(x.std(axis=0), 1e-6)
@@ -221,7 +221,7 @@ def init_from(model: ImuRefiner, path: Path) -> None:
         raise ConfigError(f"optim.init: {path}: {e}") from None
 
 
-def without_startup_bias(seqs: Seq[Sequence], cfg: RunConfig) -> Tuple[List[Sequence], Dict[str, Any]]:
+def without_startup_bias(seqs: Seq[Segment], cfg: RunConfig) -> Tuple[List[Segment], Dict[str, Any]]:
     """Each sequence with its own start-up bias (fitted on its first ``data.startup_bias_s``
     seconds against ground truth) subtracted, and the biases by sequence name."""
     return without_fitted_bias(seqs, cfg.data.startup_bias_s, cfg.data.gravity)
@@ -236,7 +236,7 @@ def without_device_bias(split: Split, cfg: RunConfig) -> Split:
                  split.test, split.record)
 
 
-def bias_removed_pose(seqs: Seq[Sequence], n: int, cfg: RunConfig) -> Dict[str, float]:
+def bias_removed_pose(seqs: Seq[Segment], n: int, cfg: RunConfig) -> Dict[str, float]:
     """Relative pose RMSE over ``n`` samples with each sequence's start-up bias removed (the
     final table's second protocol); windows from ``data.startup_bias_s`` on when the sequence is
     long enough for that, else from its start (short validation blocks still get a score)."""
@@ -257,7 +257,7 @@ class ValidationPose:
     Selecting on the reported protocol matters because the validation loss also scores the
     device's own constant bias, which the bias-aware model passes through by design."""
 
-    def __init__(self, seqs: Seq[Sequence], cfg: RunConfig) -> None:
+    def __init__(self, seqs: Seq[Segment], cfg: RunConfig) -> None:
         self.seqs, self.cfg = list(seqs), cfg
         self.horizons = list(cfg.optim.select_horizons) or [cfg.data.window]
         self.keys = ("rot_rad",) if cfg.optim.select_terms == "rot" else ("rot_rad", "trans_m")
@@ -272,7 +272,7 @@ class ValidationPose:
         # 0, and carried in the checkpoint so a resumed run scores the same way)
         self.reference: Optional[List[float]] = None
 
-    def _scores(self, seqs: List[Sequence], n: int) -> List[Dict[str, float]]:
+    def _scores(self, seqs: List[Segment], n: int) -> List[Dict[str, float]]:
         return [bias_removed_pose([seqs[i] for i in g], n, self.cfg) for g in self.groups]
 
     @torch.no_grad()
@@ -300,7 +300,7 @@ class ValidationPose:
         return out
 
 
-def refine_sequence(model: ImuRefiner, seq: Sequence, cfg: RunConfig) -> Sequence:
+def refine_sequence(model: ImuRefiner, seq: Segment, cfg: RunConfig) -> Segment:
     """The model applied to a whole sequence by the one windowing rule
     (:mod:`imu_learn.infer.windowing`) for a model trained on ``cfg.data.window``: the same rule
     ``imu-learn refine``, evaluate, fuse and model_check apply to the saved checkpoint."""
@@ -312,7 +312,7 @@ def recording_of(segment_name: str) -> str:
     return segment_name.split("#")[0]
 
 
-def _cells(seqs: List[Sequence], fixed: List[Sequence], cfg: RunConfig) -> Dict[str, Any]:
+def _cells(seqs: List[Segment], fixed: List[Segment], cfg: RunConfig) -> Dict[str, Any]:
     d = cfg.data
     return variant_table(seqs, fixed, d.eval_horizons, d.eval_stride, d.startup_bias_s, d.gravity)
 
@@ -351,7 +351,7 @@ def floor_start(cfg: RunConfig, split: Split) -> Tuple[RunConfig, Optional[Tuple
     return dataclasses.replace(cfg, model=model), calib
 
 
-def timing_floor(split: Split, cfg: RunConfig) -> Tuple[List[Sequence], float]:
+def timing_floor(split: Split, cfg: RunConfig) -> Tuple[List[Segment], float]:
     """The ``timing`` floor of the final table: the raw test IMU resampled at the one time offset
     [samples] fitted on the run's training split (validation only keeps it or not), as
     :mod:`imu_learn.baselines.timing` does; returns the shifted test sequences and the offset."""
@@ -360,12 +360,12 @@ def timing_floor(split: Split, cfg: RunConfig) -> Tuple[List[Sequence], float]:
 
     m = Timing()
     m.fit(list(split.train), list(split.val), FitSettings(window=cfg.data.window, gravity=cfg.data.gravity))
-    test = [Sequence(s.name, s.t_ns, *m.refine(s), s.p, s.v, s.q_wxyz) for s in split.test]
+    test = [Segment(s.name, s.t_ns, *m.refine(s), s.p, s.v, s.q_wxyz) for s in split.test]
     return test, m.tau
 
 
-def evaluate_table(raw_seqs: List[Sequence], model_seqs: List[Sequence], cfg: RunConfig,
-                   timing_seqs: Optional[List[Sequence]] = None) -> Dict[str, Any]:
+def evaluate_table(raw_seqs: List[Segment], model_seqs: List[Segment], cfg: RunConfig,
+                   timing_seqs: Optional[List[Segment]] = None) -> Dict[str, Any]:
     """Relative pose RMSE (rot deg, trans m) at ``data.eval_horizons``, raw (and, given
     ``timing_seqs``, the timing floor) vs model, open loop vs bias removed: pooled over every window
     of the test split (``rows``) and per test recording (``per_recording``, as the paper's Table II
@@ -489,7 +489,7 @@ def _optimizer(model: ImuRefiner, cfg: RunConfig) -> torch.optim.Optimizer:
     return torch.optim.Adam([p for p in model.parameters() if p.requires_grad], lr=cfg.optim.lr)
 
 
-def new_state(cfg: RunConfig, train_seqs: Seq[Sequence], device: torch.device,
+def new_state(cfg: RunConfig, train_seqs: Seq[Segment], device: torch.device,
               calib: Optional[Tuple[np.ndarray, np.ndarray]] = None) -> TrainState:
     """A fresh model (seeded by ``cfg.seed``, normalised on ``train_seqs``, ``optim.init``'s weights
     when set) and its optimiser."""
