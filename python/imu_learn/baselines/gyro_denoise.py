@@ -28,7 +28,7 @@ from __future__ import annotations
 
 from pathlib import Path
 from typing import Dict, List, Optional, Tuple
-from typing import Segment as Seq
+from typing import Sequence as Seq
 
 import numpy as np
 import torch

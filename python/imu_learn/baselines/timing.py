@@ -35,7 +35,7 @@ import json
 import math
 from pathlib import Path
 from typing import Dict, List, Tuple
-from typing import Segment as Seq
+from typing import Sequence as Seq
 
 import numpy as np
 

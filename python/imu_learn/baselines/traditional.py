@@ -55,7 +55,7 @@ import math
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Callable, Dict, List, Optional, Tuple
-from typing import Segment as Seq
+from typing import Sequence as Seq
 
 import numpy as np
 import torch

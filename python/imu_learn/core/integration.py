@@ -2,7 +2,7 @@
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Segment as Seq
+from typing import Sequence as Seq
 
 import numpy as np
 

@@ -23,7 +23,7 @@ from __future__ import annotations
 
 import math
 from typing import Any, Dict, List, Optional, Tuple
-from typing import Segment as Seq
+from typing import Sequence as Seq
 
 import numpy as np
 

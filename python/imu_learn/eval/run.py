@@ -31,7 +31,7 @@ import time
 from dataclasses import asdict, dataclass, field, fields
 from pathlib import Path
 from typing import Any, Callable, Dict, List, Optional, Tuple
-from typing import Segment as Seq
+from typing import Sequence as Seq
 
 import numpy as np
 

@@ -68,7 +68,7 @@ from dataclasses import asdict, dataclass, field
 from datetime import datetime
 from pathlib import Path
 from typing import Any, Callable, Dict, List, Optional, Tuple
-from typing import Segment as Seq
+from typing import Sequence as Seq
 
 import numpy as np
 import torch
