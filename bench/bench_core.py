@@ -28,9 +28,8 @@ import numpy as np  # noqa: E402
 
 HERE = Path(__file__).resolve().parent
 REPO = HERE.parent
-sys.path.insert(0, str(HERE))
 
-import numpy_reference as nr  # noqa: E402
+from imu_learn.core import numpy_reference as nr  # noqa: E402
 from imu_learn.util.machine import cpu_name  # noqa: E402
 
 SEQUENCES = ("MH_01_easy", "V1_01_easy")

@@ -1,4 +1,5 @@
-"""The numpy reference of bench/ (used for the speed comparison) against GTSAM and a plain loop.
+"""The numpy reference of the core (imu_learn.core.numpy_reference: bench_core.py times the core
+against it) against GTSAM and a plain loop.
 
 GTSAM's ``PreintegratedImuMeasurementsManifold`` with zero bias is the definition of the scheme
 (sample i held over [t_i, t_{i+1}); per sample dp += dv*dt + 1/2 R a dt^2, dv += R a dt,
@@ -6,16 +7,14 @@ R <- R Exp(w dt)); the reference has to agree with it to 1e-9 for the benchmark 
 """
 from __future__ import annotations
 
-import sys
 from pathlib import Path
 
 import numpy as np
 import pytest
 
-REPO = Path(__file__).resolve().parent.parent
-sys.path.insert(0, str(REPO / "bench"))
+from imu_learn.core import numpy_reference as nr
 
-import numpy_reference as nr  # noqa: E402
+REPO = Path(__file__).resolve().parent.parent
 
 gtsam = pytest.importorskip("gtsam")
 

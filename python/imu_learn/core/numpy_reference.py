@@ -12,8 +12,9 @@ g = [0, 0, -gravity]. Sample i is held over [t_i, t_{i+1}); row j of a preintegr
 
 which is GTSAM's ``PreintegratedImuMeasurementsManifold`` with zero bias.
 
-Used by tests/test_numpy_reference.py (against GTSAM) and bench/bench_core.py (timings).
-Imports nothing from imu_learn, so it runs without the compiled module.
+The oracle of the Rust core: tests/test_numpy_reference.py checks it against GTSAM and a plain
+loop, bench/bench_core.py times the core against it. numpy only: it imports nothing else from
+imu_learn, so it shares no code (and no mistake) with what it checks.
 """
 from __future__ import annotations
 
