@@ -35,7 +35,7 @@ stage started (interpreter, imports, inputs), "process peak MiB" the child's who
 
 Thread counts are set explicitly and printed: torch 1 (``--torch-threads``), rayon from
 ``RAYON_NUM_THREADS`` (default 1). The trajectory is closed-form and bounded (a Lissajous path with
-a wobbling yaw, built from tests/synthetic.py's quaternion helpers), the IMU its exact specific force
+a wobbling yaw, built from imu_learn.data.synthetic's quaternion helpers), the IMU its exact specific force
 and body rate plus seeded white noise and a constant bias.
 """
 from __future__ import annotations
@@ -57,7 +57,6 @@ from typing import Dict, List, Optional
 
 HERE = Path(__file__).resolve().parent
 REPO = HERE.parent
-sys.path.insert(0, str(REPO / "tests"))  # tests/synthetic.py: stamps and the quaternion helpers
 
 from imu_learn.util.machine import cpu_name  # noqa: E402
 
@@ -94,7 +93,7 @@ def trajectory(t):
     Specific force: R^T (a_world + g z)."""
     import numpy as np
 
-    from synthetic import G, axis_angle, qconj, qmul, rotate
+    from imu_learn.data.synthetic import G, axis_angle, qconj, qmul, rotate
 
     tilt = np.array([1.0, -1.0, 0.0]) / math.sqrt(2.0)
     psi, dpsi = 0.3 * t + 0.4 * np.sin(0.7 * t), 0.3 + 0.28 * np.cos(0.7 * t)
@@ -127,8 +126,8 @@ def write_recording(rec: Path, seconds: int, seed: int = 0) -> Dict[str, float]:
     import polars as pl
 
     from imu_learn import _imu_core as core
+    from imu_learn.data.synthetic import stamps
     from imu_learn.util.atomic import atomic_write_bytes, atomic_write_path, atomic_write_text
-    from synthetic import stamps
 
     t_ns = stamps(seconds)
     n = len(t_ns)

@@ -3,6 +3,7 @@ import numpy as np
 import pytest
 from scipy.stats import chi2
 
+from imu_learn.data.synthetic import G, moving, qconj, qmul, rotate
 from imu_learn.data.types import Segment
 from imu_learn.eval.calibration import (
     BLOCKS,
@@ -14,7 +15,6 @@ from imu_learn.eval.calibration import (
     summarise,
     summarise_nees,
 )
-from synthetic import G, moving, qconj, qmul, rotate
 
 
 def test_nees_of_gaussian_draws_is_chi_square():

@@ -11,13 +11,13 @@ import torch
 from imu_learn.baselines.base import Method, PosePrediction, Raw
 from imu_learn.baselines.noise_floor import NOISE_FLOOR_NAME, synthesize_imu
 from imu_learn.cli import evaluate as ev_cli
+from imu_learn.data.synthetic import AXIS, DT, G, axis_angle, moving, qmul, spin
 from imu_learn.data.types import Segment
 from imu_learn.errors import ConfigError, InvalidInputError
 from imu_learn.eval import run as ev
 from imu_learn.eval.metrics import with_imu
 from imu_learn.nn.model import ImuRefiner, ModelConfig
 from imu_learn.train.checkpoint import save_checkpoint
-from synthetic import AXIS, DT, G, axis_angle, moving, qmul, spin
 
 torch.set_num_threads(1)
 

@@ -11,6 +11,8 @@ import pytest
 import imu_learn as il
 from imu_learn.data.datasets import find_recordings
 from imu_learn.data.formats import detect_format, fetch, read_imu_source, read_recording, write_imu
+from imu_learn.data.synthetic import FETCH_T0 as T0
+from imu_learn.data.synthetic import IMU_HEADER, fetch_row, write_fetch_recording
 from imu_learn.errors import (
     ColumnCountError,
     HeaderError,
@@ -19,8 +21,6 @@ from imu_learn.errors import (
     ParseError,
     TimestampError,
 )
-from synthetic import FETCH_T0 as T0
-from synthetic import IMU_HEADER, fetch_row, write_fetch_recording
 
 
 def test_float_stamp_is_parsed_exactly():

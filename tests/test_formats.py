@@ -79,7 +79,7 @@ def make_rosbag(root: Path) -> Path:
 
 def make_fetch(root: Path) -> Path:
     """A Fetch (Debias_IMU) recording: float-notation stamps, IMU and mocap (tests/synthetic.py)."""
-    from synthetic import write_fetch_recording
+    from imu_learn.data.synthetic import write_fetch_recording
 
     return write_fetch_recording(root, name="")
 

@@ -9,6 +9,7 @@ gtsam = pytest.importorskip("gtsam")
 from crops import CROP, REPO  # noqa: E402  (the `crop` fixture, conftest.py, is this recording)
 from imu_learn.cli.fuse import main as fuse_main  # noqa: E402
 from imu_learn.data.formats.asl import read_leica, read_sensor_yaml  # noqa: E402
+from imu_learn.data.synthetic import spin_and_climb  # noqa: E402
 from imu_learn.errors import ConfigError  # noqa: E402
 from imu_learn.fuse import (  # noqa: E402
     ImuNoise,
@@ -22,7 +23,6 @@ from imu_learn.fuse import (  # noqa: E402
 from imu_learn.fuse.config import FuseConfig, RecordingSpec, ScenarioSpec, load, validate  # noqa: E402
 from imu_learn.fuse.run import run_experiment  # noqa: E402
 from imu_learn.fuse.score import score  # noqa: E402
-from synthetic import spin_and_climb  # noqa: E402
 
 
 def start_of(seq):

@@ -6,9 +6,9 @@ import pytest
 
 gtsam = pytest.importorskip("gtsam")
 
+from imu_learn.data.synthetic import spin_and_climb  # noqa: E402
 from imu_learn.fuse import ImuNoise, PositionFixes, fuse  # noqa: E402
 from imu_learn.fuse.graph import IncrementalFusion  # noqa: E402
-from synthetic import spin_and_climb  # noqa: E402
 
 
 def noisy_run(seed=3):

@@ -29,7 +29,7 @@ torch.set_num_threads(1)
 
 # The closed-form trajectory (tests/synthetic.py); the shipped crop is conftest.py's `crop` fixture.
 from crops import CROP, REPO  # noqa: E402
-from synthetic import spin_and_climb  # noqa: E402
+from imu_learn.data.synthetic import spin_and_climb  # noqa: E402
 
 
 def noisy_case(seed=3):

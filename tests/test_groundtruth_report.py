@@ -12,8 +12,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from imu_learn.data.synthetic import G, axis_angle, qconj, qmul, rotate, stamps
 from imu_learn.data.types import Segment
-from synthetic import G, axis_angle, qconj, qmul, rotate, stamps
 
 REPO = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(REPO / "bench"))

@@ -2,7 +2,7 @@
 import numpy as np
 
 import imu_learn as il
-from synthetic import qconj, qmul, rotate
+from imu_learn.data.synthetic import qconj, qmul, rotate
 
 
 def rotate_inv(q, v):

@@ -5,10 +5,10 @@ import torch
 
 from imu_learn.baselines.base import poses_from_imu
 from imu_learn.baselines.noise_floor import NOISE_FLOOR_NAME, GroundTruthImu, quat_log, synthesize_imu
+from imu_learn.data.synthetic import AXIS, DT, G, axis_angle, moving, qconj, qmul, spin
 from imu_learn.data.types import Segment
 from imu_learn.errors import InvalidInputError
 from imu_learn.eval.run import evaluate_sequence, pose_errors, window_starts
-from synthetic import AXIS, DT, G, axis_angle, moving, qconj, qmul, spin
 
 torch.set_num_threads(1)
 

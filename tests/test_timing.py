@@ -9,9 +9,9 @@ import pytest
 
 from imu_learn.baselines.base import FitSettings
 from imu_learn.baselines.timing import Timing, resample, shifted
+from imu_learn.data.synthetic import DT, stamps
 from imu_learn.data.types import Segment
 from imu_learn.eval.metrics import floor_ratios, simulate_sequence
-from synthetic import DT, stamps
 
 SETTINGS = FitSettings(window=100, seed=0)
 

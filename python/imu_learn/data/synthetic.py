@@ -1,7 +1,9 @@
-"""Closed-form trajectories and an independent quaternion oracle for the tests.
+"""Synthetic recordings with a known answer: closed-form trajectories, their exact IMU, a Fetch
+recorder's files, and an independent quaternion oracle (numpy only).
 
-Deliberately not imu_learn.core.quat: rotation here is the sandwich product q (0, v) q* built on a
-plain Hamilton product, so the tests do not check the package's algebra against itself.
+The tests check the package against these, and bench/bench_scale.py builds its long recordings
+from them. Deliberately not imu_learn.core.quat: rotation here is the sandwich product q (0, v) q*
+built on a plain Hamilton product, so the package's algebra is not checked against itself.
 Quaternions are w,x,y,z; stamps are exact 200 Hz nanoseconds.
 """
 from __future__ import annotations
@@ -79,14 +81,14 @@ def spin_and_climb(n=2000, dt_ns=5_000_000, w=0.5, a=0.2, g=9.81):
     """Yaw at w rad/s about the gravity axis while climbing with a [m/s^2]: body-frame gyro and
     specific force are constant, so zero-order-hold preintegration is exact; closed-form pose.
     Returns t [ns] from 0, gyro, acc, p (n, 3) and body-to-world matrices R (n, 3, 3)."""
-    from scipy.spatial.transform import Rotation
-
     t = np.arange(n, dtype=np.int64) * dt_ns
     ts = t * 1e-9
     gyro = np.tile([0.0, 0.0, w], (n, 1))
     acc = np.tile([0.0, 0.0, g + a], (n, 1))
     p = np.c_[np.zeros(n), np.zeros(n), 0.5 * a * ts**2]
-    R = Rotation.from_rotvec(np.c_[np.zeros(n), np.zeros(n), w * ts]).as_matrix()
+    c, s = np.cos(w * ts), np.sin(w * ts)
+    R = np.zeros((n, 3, 3))
+    R[:, 0, 0], R[:, 0, 1], R[:, 1, 0], R[:, 1, 1], R[:, 2, 2] = c, -s, s, c, 1.0
     return t, gyro, acc, p, R
 
 
