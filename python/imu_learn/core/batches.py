@@ -11,8 +11,7 @@ from typing import Iterable, List, Tuple
 import numpy as np
 
 from imu_learn import _imu_core as core
-from imu_learn.core.integration import PAPER_FRACTIONS
-from imu_learn.data.types import Segment
+from imu_learn.core.integration import PAPER_FRACTIONS, SegmentArrays
 
 
 @dataclass(frozen=True)
@@ -57,7 +56,7 @@ class Batch:
     horizons: np.ndarray
 
 
-def _core_set(seqs: Iterable[Segment]):
+def _core_set(seqs: Iterable[SegmentArrays]):
     parts: List[tuple] = []
     for s in seqs:
         parts.append(
@@ -83,7 +82,7 @@ def batch_seed(seed: int, rank: int, step: int) -> int:
 class BatchSampler:
     """Holds the sequences once in Rust; each call draws a fresh augmented batch."""
 
-    def __init__(self, seqs: Iterable[Segment], config: BatchConfig = BatchConfig()) -> None:
+    def __init__(self, seqs: Iterable[SegmentArrays], config: BatchConfig = BatchConfig()) -> None:
         self.config = config
         self._set = _core_set(seqs)
 
@@ -98,6 +97,6 @@ class BatchSampler:
         return Batch(**self._set.eval_windows(c.window, int(stride), list(c.fractions), c.gravity))
 
 
-def make_batch(seqs: Iterable[Segment], config: BatchConfig, seed: int) -> Batch:
+def make_batch(seqs: Iterable[SegmentArrays], config: BatchConfig, seed: int) -> Batch:
     """One augmented batch; the same seed gives the same batch whatever the thread count."""
     return BatchSampler(seqs, config).sample(seed)

@@ -2,15 +2,27 @@
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Protocol
 from typing import Sequence as Seq
 
 import numpy as np
 
 from imu_learn import _imu_core as core
-from imu_learn.data.types import Segment
 from imu_learn.errors import InvalidInputError
 
 PAPER_FRACTIONS = (0.2, 0.4, 0.6, 0.8, 1.0)
+
+
+class SegmentArrays(Protocol):
+    """What the core reads of a segment: its arrays (:class:`imu_learn.data.types.Segment` has them;
+    the core sits below data and takes anything that does)."""
+
+    t_ns: np.ndarray
+    gyro: np.ndarray
+    acc: np.ndarray
+    p: np.ndarray
+    v: np.ndarray
+    q_wxyz: np.ndarray
 
 
 @dataclass(frozen=True)
@@ -46,7 +58,7 @@ def preintegrate(t_ns: np.ndarray, gyro: np.ndarray, acc: np.ndarray) -> Increme
 
 
 def window_labels(
-    seq: Segment, window: int, stride: int = 1, fractions: Seq[float] = PAPER_FRACTIONS, gravity: float = 9.81
+    seq: SegmentArrays, window: int, stride: int = 1, fractions: Seq[float] = PAPER_FRACTIONS, gravity: float = 9.81
 ) -> WindowLabels:
     """Ground-truth Δq/Δβ/Δγ for every window (start step ``stride``) at ``fractions`` of ``window``."""
     d = core.window_labels(
@@ -67,7 +79,7 @@ def _indices(x: np.ndarray, name: str) -> np.ndarray:
     return np.ascontiguousarray(a, dtype=np.uint64 if np.issubdtype(a.dtype, np.unsignedinteger) else np.int64)
 
 
-def integrate_windows(seq: Segment, starts: np.ndarray, horizons: np.ndarray) -> WindowLabels:
+def integrate_windows(seq: SegmentArrays, starts: np.ndarray, horizons: np.ndarray) -> WindowLabels:
     """IMU-side Δq/Δβ/Δγ for the given windows and horizons (same layout as :func:`window_labels`).
 
     Horizons must lie in 1..N-1 and each start leave room for the longest (N samples in ``seq``);
