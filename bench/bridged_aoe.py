@@ -38,7 +38,7 @@ def main() -> None:
             inputs[name] = load_method_class(name)().load(Path(a.method_dir) / f"{safe_name(name)}.json")
     model = None
     if a.checkpoint:
-        from imu_learn.train.checkpoint import load_model
+        from imu_learn.infer.checkpoint import load_model
         model = load_model(Path(a.checkpoint))
         inputs[f"model {Path(a.checkpoint).stem}"] = model
     for rec in a.recordings:

@@ -33,7 +33,7 @@ def main(argv=None) -> int:
 
     from imu_learn.data.loading import load_recording
     from imu_learn.fuse.variance import calibrate_model
-    from imu_learn.train.checkpoint import load_model
+    from imu_learn.infer.checkpoint import load_model
 
     torch.set_num_threads(a.threads)
     model = load_model(a.checkpoint)

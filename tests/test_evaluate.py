@@ -17,7 +17,7 @@ from imu_learn.errors import ConfigError, InvalidInputError
 from imu_learn.eval import run as ev
 from imu_learn.eval.metrics import with_imu
 from imu_learn.nn.model import ImuRefiner, ModelConfig
-from imu_learn.train.checkpoint import save_checkpoint
+from imu_learn.infer.checkpoint import save_checkpoint
 
 torch.set_num_threads(1)
 

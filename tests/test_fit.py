@@ -18,7 +18,7 @@ import torch
 from imu_learn.cli import fit as fit_cli
 from imu_learn.nn.model import ImuRefiner, ModelConfig
 from imu_learn.train import fit
-from imu_learn.train.checkpoint import load_checkpoint
+from imu_learn.infer.checkpoint import load_checkpoint
 from imu_learn.train.config import ConfigError, RunConfig, build_config, load_config, read_toml
 
 REPO = Path(__file__).resolve().parent.parent
@@ -425,7 +425,7 @@ def test_select_reference_start_scores_against_the_untrained_floor(tmp_path):
 def test_init_from_a_checkpoint_older_than_a_model_arg(tmp_path, full_run):
     """optim.init from a checkpoint written before model.start / fir_init_tau / calib existed: the missing
     args are their defaults, so the init is accepted (the shipped models are such checkpoints)."""
-    from imu_learn.train.checkpoint import write_checkpoint
+    from imu_learn.infer.checkpoint import write_checkpoint
 
     state = load_checkpoint(full_run / "best.pt")
     for k in ("start", "fir_init_tau", "calib"):

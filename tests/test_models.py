@@ -3,7 +3,7 @@ device through the CLI, is small, has a complete model card, and does not make i
 
 The parametrised tests run over ``models/*.pt`` as found at collection time (none: no cases), and
 models/README.md is checked against the folder both ways, so a model it names cannot go missing
-silently. The same checks, and ``python -m imu_learn.train.checkpoint strip``, are exercised on a
+silently. The same checks, and ``imu-learn checkpoint strip``, are exercised on a
 throwaway checkpoint from a few training steps on the crops, so they are tested before any model
 is shipped.
 """
@@ -23,7 +23,7 @@ from imu_learn.cli import fit as fit_cli
 from imu_learn.cli.checkpoint import main as checkpoint_main
 from imu_learn.cli.refine import main as refine_main
 from imu_learn.infer.model_check import compare_with_raw, format_comparison
-from imu_learn.train.checkpoint import (
+from imu_learn.infer.checkpoint import (
     CheckpointError,
     describe,
     load_checkpoint,
@@ -127,7 +127,7 @@ def claimed(state, t_ns: np.ndarray):
 def test_shipped_model_is_small_and_loads(ckpt):
     assert ckpt.stat().st_size < MAX_MODEL_BYTES, f"{ckpt.name}: {ckpt.stat().st_size / 1e6:.2f} MB"
     state = load_checkpoint(ckpt)
-    assert state["optimizer"] is None, f"{ckpt.name}: strip it (python -m imu_learn.train.checkpoint strip)"
+    assert state["optimizer"] is None, f"{ckpt.name}: strip it (imu-learn checkpoint strip)"
     load_model(ckpt)
 
 

@@ -80,7 +80,7 @@ SHIPPED = sorted((REPO / "models").glob("*.pt"))
 @pytest.mark.parametrize("path", SHIPPED, ids=[p.name for p in SHIPPED])
 def test_shipped_checkpoint_stores_no_machine_path(path):
     pytest.importorskip("torch")
-    from imu_learn.train.checkpoint import load_checkpoint
+    from imu_learn.infer.checkpoint import load_checkpoint
 
     state = load_checkpoint(path)
     plain = {k: v for k, v in state.items() if k != "model"}  # everything but the weights
@@ -99,7 +99,7 @@ def test_rewritten_checkpoint_keeps_its_weights_bit_identical(path, tmp_path):
     """The rewrite changed only the stored config: every tensor equals the one shipped before, byte
     for byte (dtype, shape and data), and every other entry but the config and the new digest."""
     torch = pytest.importorskip("torch")
-    from imu_learn.train.checkpoint import DIGEST_KEY, load_checkpoint
+    from imu_learn.infer.checkpoint import DIGEST_KEY, load_checkpoint
 
     rel = path.relative_to(REPO).as_posix()
     try:

@@ -30,7 +30,7 @@ from imu_learn.cli import labels as labels_cli
 from imu_learn.data import cache
 from imu_learn.errors import CacheError
 from imu_learn.nn.model import ImuRefiner, ModelConfig
-from imu_learn.train.checkpoint import CheckpointError, load_checkpoint, save_checkpoint
+from imu_learn.infer.checkpoint import CheckpointError, load_checkpoint, save_checkpoint
 
 torch.set_num_threads(1)
 
@@ -644,7 +644,7 @@ def test_fuse_sigterm_midway_then_rerun(tmp_path):
     out = tmp_path / "out"
     marker = tmp_path / "fired"
     config = fuse_config(tmp_path / "a.toml", 0.1)
-    proc = faulty_cli("*_smoothed.tum*", 1, "pause", marker, "imu_learn.fuse", "--config", config, "--out", out)
+    proc = faulty_cli("*_smoothed.tum*", 1, "pause", marker, "imu_learn.cli", "fuse", "--config", config, "--out", out)
     signal_midway(proc, marker, signal.SIGTERM)
     assert proc.returncode == -signal.SIGTERM
     assert not (out / "results.json").exists()  # the run had not finished

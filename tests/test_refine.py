@@ -17,7 +17,7 @@ from imu_learn.cli.refine import main
 from imu_learn.infer.refine import refine_arrays
 from imu_learn.infer.windowing import window_plan
 from imu_learn.nn.model import ImuRefiner, ModelConfig
-from imu_learn.train.checkpoint import save_checkpoint
+from imu_learn.infer.checkpoint import save_checkpoint
 
 torch.set_num_threads(1)
 
@@ -143,7 +143,7 @@ def test_cli_refines_an_asl_folder(tmp_path, ckpt, imu):
     t, g, a = imu
     t2, g2, a2 = core.read_asl_imu(str(written))
     np.testing.assert_array_equal(t2, t)
-    from imu_learn.train.checkpoint import load_model
+    from imu_learn.infer.checkpoint import load_model
 
     rg, ra = refine_arrays(load_model(ckpt), g, a, window=1000, overlap=200)
     np.testing.assert_array_equal(g2, rg)  # shortest round-trip text: exact
@@ -223,7 +223,7 @@ def test_kaist_keeps_every_other_column(tmp_path, ckpt):
         assert len(r1) == 17 and r1[:8] == r0[:8] and r1[14:] == r0[14:]
     g0 = np.array([[float(x) for x in r[8:11]] for r in old])
     a0 = np.array([[float(x) for x in r[11:14]] for r in old])
-    from imu_learn.train.checkpoint import load_model
+    from imu_learn.infer.checkpoint import load_model
 
     rg, ra = refine_arrays(load_model(ckpt), g0, a0, window=128, overlap=32)
     _t, g1, a1 = core.read_kaist_imu(str(out / "sensor_data" / "xsens_imu.csv"))
@@ -247,7 +247,7 @@ def test_blackbird_hdf5_copy_with_imu_replaced(tmp_path, ckpt):
     out = tmp_path / "out"
     assert main(["--checkpoint", str(ckpt), "--input", str(src), "--out", str(out), "--quiet"]) == 0
     assert sha(src / "data.hdf5") == before
-    from imu_learn.train.checkpoint import load_model
+    from imu_learn.infer.checkpoint import load_model
 
     rg, ra = refine_arrays(load_model(ckpt), g, a)
     with h5py.File(out / "data.hdf5", "r") as f:
@@ -272,7 +272,7 @@ def test_broad_mat_copy_with_imu_replaced(tmp_path, ckpt):
     assert main(["--checkpoint", str(ckpt), "--input", str(src), "--out", str(out), "--quiet"]) == 0
     assert sha(src) == before
     m = scipy_io.loadmat(out / "01_trial.mat")
-    from imu_learn.train.checkpoint import load_model
+    from imu_learn.infer.checkpoint import load_model
 
     rg, ra = refine_arrays(load_model(ckpt), g, a)
     np.testing.assert_array_equal(m["imu_gyr"], rg)

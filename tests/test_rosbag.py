@@ -246,7 +246,7 @@ def test_existing_ros2_output_folder_is_refused(bags, tmp_path):
 def cov_refined(bags, tmp_path_factory):
     """Each bag refined by the shipped covariance model with --fill-covariance, and what
     refine_with_variance gives for the recording (gyro, acc, variances)."""
-    from imu_learn.train.checkpoint import load_model
+    from imu_learn.infer.checkpoint import load_model
 
     out = tmp_path_factory.mktemp("cov_refined")
     for kind in KINDS:
@@ -298,7 +298,7 @@ def test_fill_covariance_changes_nothing_else(bags, cov_refined, kind):
 
 
 def test_fill_covariance_needs_a_covariance_head(bags, tmp_path, capsys):
-    from imu_learn.train.checkpoint import save_checkpoint
+    from imu_learn.infer.checkpoint import save_checkpoint
 
     ckpt = tmp_path / "no_head.pt"
     save_checkpoint(ckpt, random_model(), {"test": True}, epoch=1, step=1, best_metric=None)
@@ -391,7 +391,7 @@ def test_truncated_bag(bags, tmp_path, kind):
 
 
 def test_cli_prints_one_line_naming_bag_and_topic(bags, tmp_path, capsys):
-    from imu_learn.train.checkpoint import save_checkpoint
+    from imu_learn.infer.checkpoint import save_checkpoint
 
     ckpt = tmp_path / "m.pt"
     save_checkpoint(ckpt, random_model(), {"test": True}, epoch=1, step=1, best_metric=None)

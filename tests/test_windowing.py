@@ -21,7 +21,7 @@ from imu_learn.infer import windowing
 from imu_learn.infer.refine import refine_arrays, refine_with_variance
 from imu_learn.infer.windowing import Windowing, window_plan
 from imu_learn.nn.model import ImuRefiner, ModelConfig
-from imu_learn.train.checkpoint import load_model, save_checkpoint
+from imu_learn.infer.checkpoint import load_model, save_checkpoint
 from imu_learn.train.config import RunConfig
 
 torch.set_num_threads(1)
@@ -81,7 +81,7 @@ def through_every_path(path: Path, t, g, a, tmp_path: Path, monkeypatch) -> dict
     from imu_learn.baselines.proposed import Proposed
     from imu_learn.cli.refine import main as refine_cli
     from imu_learn.eval.run import CheckpointRefiner
-    from imu_learn.fuse.run import imu_input
+    from imu_learn.fuse.experiments.batch import imu_input
     from imu_learn.infer import model_check
     from imu_learn.train import fit
 
@@ -179,7 +179,7 @@ def test_empty_sequence_and_bad_rules(imu):
 
 def test_variances_are_stitched_by_the_same_rule(imu):
     """refine_with_variance and fuse's learned-covariance input: identical samples and variances."""
-    from imu_learn.fuse.run import imu_input
+    from imu_learn.fuse.experiments.batch import imu_input
 
     t, g, a = imu
     seq = as_sequence(t, g, a)

@@ -17,7 +17,7 @@ Two ways in:
 
 ``refine`` applies the model by the one windowing rule (:mod:`imu_learn.infer.windowing`: windows
 of the training length, half overlap, centre crop), as fit, evaluate, refine and fuse do. ``save`` writes an ordinary imu_learn
-checkpoint (:mod:`imu_learn.train.checkpoint`), which ``python -m imu_learn.refine`` and
+checkpoint (:mod:`imu_learn.infer.checkpoint`), which ``python -m imu_learn.refine`` and
 ``from_checkpoint`` read as well.
 
 :func:`train_refiner` is the training loop shared with the AirIMU-style baseline.
@@ -170,7 +170,7 @@ class Proposed(Method):
     @classmethod
     def from_checkpoint(cls, path: Path, device: str = "cpu") -> Proposed:
         """The model of an ``imu_learn.fit`` checkpoint (or of :meth:`save`)."""
-        from imu_learn.train.checkpoint import load_checkpoint, model_from_checkpoint
+        from imu_learn.infer.checkpoint import load_checkpoint, model_from_checkpoint
 
         state = load_checkpoint(Path(path), map_location="cpu")
         model = model_from_checkpoint(state)
@@ -206,7 +206,7 @@ class Proposed(Method):
         return gyro, acc
 
     def save(self, path: Path) -> None:
-        from imu_learn.train.checkpoint import save_checkpoint
+        from imu_learn.infer.checkpoint import save_checkpoint
 
         cfg = dict(self.run_config)
         cfg.setdefault("data", {})

@@ -1,5 +1,5 @@
 """``imu-learn checkpoint info|strip``: what a checkpoint holds, or a small copy for shipping
-(:mod:`imu_learn.train.checkpoint`)."""
+(:mod:`imu_learn.infer.checkpoint`)."""
 from __future__ import annotations
 
 import argparse
@@ -30,7 +30,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace, rest: List[str], keep: Callable[[Any], None]) -> int:
-    from imu_learn.train.checkpoint import describe, load_checkpoint, strip_checkpoint
+    from imu_learn.infer.checkpoint import describe, load_checkpoint, strip_checkpoint
 
     if args.action == "strip":
         strip_checkpoint(args.src, args.dst)

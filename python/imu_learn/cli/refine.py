@@ -41,7 +41,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 def run(args: argparse.Namespace, rest: List[str], keep: Callable[[Any], None]) -> int:
     from imu_learn.infer.refine import refine_recording, require_covariance_head
     from imu_learn.nn.device import pick_device
-    from imu_learn.train.checkpoint import load_model
+    from imu_learn.infer.checkpoint import load_model
 
     try:
         device = pick_device(args.device)

@@ -210,7 +210,7 @@ class CheckpointRefiner(Method):
     def __init__(self, path: Path, device: str = "cpu") -> None:
         import torch
 
-        from imu_learn.train.checkpoint import load_checkpoint, model_from_checkpoint
+        from imu_learn.infer.checkpoint import load_checkpoint, model_from_checkpoint
 
         self.path = Path(path)
         state = load_checkpoint(self.path, map_location=device)

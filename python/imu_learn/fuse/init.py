@@ -203,7 +203,7 @@ def checkpoint_bias(path: Union[str, Path, None]) -> Tuple[np.ndarray, str]:
     under ``extra``: ``{"gyro": [3], "acc": [3]}``) when it carries one, else zeros."""
     if path is None:
         return np.zeros(6), "zero (no checkpoint)"
-    from imu_learn.train.checkpoint import load_checkpoint
+    from imu_learn.infer.checkpoint import load_checkpoint
 
     state = load_checkpoint(Path(path))
     dev = state.get("device_bias") or (state.get("extra") or {}).get("device_bias")

@@ -217,7 +217,7 @@ def model_card(model: ImuRefiner, state: Dict[str, Any], checkpoint: Path, files
 
 def export(checkpoint: Path, out: Path, window: int = 200, opset: int = 17, seed: int = 0) -> Dict[str, Any]:
     """Write model.ts, model.onnx and model.json into ``out``; returns the JSON card."""
-    from imu_learn.train.checkpoint import load_checkpoint, model_from_checkpoint
+    from imu_learn.infer.checkpoint import load_checkpoint, model_from_checkpoint
 
     if window < 2:
         raise InvalidInputError(f"--window must be >= 2, got {window}")

@@ -35,7 +35,7 @@ from imu_learn.eval.protocol import VARIANTS
 from imu_learn.infer.refine import refine_arrays
 from imu_learn.infer.windowing import windowing_of
 from imu_learn.nn.device import pick_device
-from imu_learn.train.checkpoint import load_checkpoint, model_from_checkpoint
+from imu_learn.infer.checkpoint import load_checkpoint, model_from_checkpoint
 
 PathLike = Union[str, Path]
 

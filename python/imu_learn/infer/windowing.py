@@ -10,7 +10,7 @@ bit-identical refined samples through each of them (tests/test_windowing.py).
 The window (:class:`Windowing`). ``window`` is the checkpoint's training window (its config's
 ``data.window``, :func:`windowing_of_config`), ``overlap = window // 2``, ``batch = 16`` windows per
 forward pass: the model never sees more context than it was trained with, and each sample keeps at
-least ``window // 4`` samples of context on either side. :func:`imu_learn.train.checkpoint.model_from_checkpoint`
+least ``window // 4`` samples of context on either side. :func:`imu_learn.infer.checkpoint.model_from_checkpoint`
 attaches this rule to the model it loads (:func:`attach`); a model built in memory without one
 (:func:`windowing_of`) gets the rule of the default training window (``data.window = 200``).
 Callers may override window or overlap (``imu-learn refine --window/--overlap``), but every

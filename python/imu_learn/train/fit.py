@@ -23,7 +23,7 @@ What a run does:
   batches the uninterrupted one would have.
 * after every epoch: loss on fixed, non-augmented validation windows (``BatchSampler.eval_windows``,
   stride ``data.val_stride``); ``best.pt`` when it improves, then ``last.pt`` (both atomic, via
-  :mod:`imu_learn.train.checkpoint`: model args and weights incl. normalisation, optimiser, full config,
+  :mod:`imu_learn.infer.checkpoint`: model args and weights incl. normalisation, optimiser, full config,
   epoch, step, best metric, code version, and the metrics history); ``RUN/metrics.csv`` rewritten
   (atomically) with one row per epoch so far; TensorBoard scalars in ``RUN/tb`` when the ``tensorboard`` package is
   installed (it is optional; without it nothing is written there).
@@ -82,7 +82,7 @@ from imu_learn.infer import windowing
 from imu_learn.nn.device import pick_device
 from imu_learn.nn.losses import imu_loss
 from imu_learn.nn.model import ImuRefiner, ModelConfig
-from imu_learn.train.checkpoint import load_checkpoint, load_model, model_from_checkpoint, save_checkpoint
+from imu_learn.infer.checkpoint import load_checkpoint, load_model, model_from_checkpoint, save_checkpoint
 from imu_learn.train.config import ConfigError, RunConfig, build_config, read_toml, to_toml
 from imu_learn.util.atomic import atomic_write_text
 
