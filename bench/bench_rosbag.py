@@ -5,8 +5,8 @@ machine and printed as a markdown table, for ROS 1, ROS 2 sqlite3 and ROS 2 mcap
 - write: messages/s of ``write_imu`` (every message of the bag copied, the IMU ones re-encoded
   with new vectors), and IMU messages/s of that write.
 
-The bags are the test fixtures (tests/rosbag_fixtures.py: the shipped MH_04_difficult crop's IMU,
-ground truth as three pose topics, positions, images every 5 s), written to a temporary folder.
+The bags are the test fixtures' (imu_learn.data.sample_bags from the shipped MH_04_difficult crop:
+its IMU, ground truth as three pose topics, positions, images every 5 s), written to a temporary folder.
 
     python bench/bench_rosbag.py [--repeat 3] [--quick]
 
@@ -22,11 +22,11 @@ import tempfile
 import time
 from pathlib import Path
 
-REPO = Path(__file__).resolve().parent.parent
-sys.path.insert(0, str(REPO / "tests"))
+from imu_learn.data.formats import rosbag
+from imu_learn.data.sample_bags import KINDS, write_sample_bag
 
-from imu_learn.data.formats import rosbag  # noqa: E402
-from rosbag_fixtures import KINDS, write_fixture_bag  # noqa: E402
+REPO = Path(__file__).resolve().parent.parent
+CROP = REPO / "datasets" / "euroc" / "MH_04_difficult"
 
 
 def best_of(repeat: int, fn) -> float:
@@ -45,7 +45,7 @@ def total_messages(bag: Path) -> int:
 
 
 def measure(folder: Path, kind: str, repeat: int, seconds: float) -> dict:
-    bag = write_fixture_bag(folder, kind, seconds=seconds)
+    bag = write_sample_bag(folder, kind, CROP, seconds=seconds)
     src = rosbag.read_imu_source(bag, "/imu0")
     n_imu, n_all = len(src.t_ns), total_messages(bag)
     read_s = best_of(repeat, lambda: rosbag.read_imu(bag, "/imu0"))
