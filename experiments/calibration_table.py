@@ -2,7 +2,11 @@
 ... --checkpoint <model with a covariance head>`` writes the full per-recording table into its
 report.md; this prints the pooled rows of several reports side by side).
 
-    python bench/calibration_table.py reports/calibration_{euroc,tumvi,blackbird,broad}/result.json [--n 200]
+    python experiments/calibration_table.py reports/calibration_{euroc,tumvi,blackbird,broad}/result.json [--n 200]
+
+Writes: the pooled calibration table of docs/experiments/uncertainty.md ("Calibration on held-out
+data"). Data: the result.json of ``imu-learn evaluate --checkpoint <covariance model>`` runs
+(EuRoC, TUM-VI, Blackbird, BROAD; their configs in configs/).
 """
 from __future__ import annotations
 

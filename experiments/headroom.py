@@ -19,7 +19,11 @@ never gets:
 * ``ground truth (noise floor)`` where the ground truth has no velocity: an IMU synthesised from
   the ground truth itself; what remains is label noise.
 
-    python bench/headroom.py --config configs/euroc_paper.toml      # IMU_LEARN_DATA sets the data root
+    python experiments/headroom.py --config configs/euroc_paper.toml      # IMU_LEARN_DATA sets the data root
+
+Writes: docs/experiments/headroom_euroc.md (--config configs/euroc_paper.toml) and
+docs/experiments/headroom_tumvi.md (--config configs/tumvi.toml). Data: the config's test
+recordings under the data root ($IMU_LEARN_DATA).
 """
 from __future__ import annotations
 
@@ -37,7 +41,7 @@ from imu_learn.baselines.noise_floor import synthesize_imu
 from imu_learn.baselines.traditional import Traditional
 from imu_learn.data.splits import make_split
 from imu_learn.data.types import Segment
-from imu_learn.eval.metrics import relative_pose_rmse_many, with_imu, without_fitted_bias
+from imu_learn.score.metrics import relative_pose_rmse_many, with_imu, without_fitted_bias
 from imu_learn.train.config import load_config
 from imu_learn.train.fit import recording_of
 

@@ -1,16 +1,20 @@
 """Train several variants x seeds of ``python -m imu_learn.fit`` side by side, then print each run's
 validation choice: the variant table behind the README's "what we tried".
 
-    python bench/sweep.py --config configs/euroc_paper.toml --seeds 0 1 2 --jobs 12 \\
+    python experiments/sweep.py --config configs/euroc_paper.toml --seeds 0 1 2 --jobs 12 \\
         paper= \\
         fir="--model.fir_taps 5 --optim.lr 1e-3"
 
 Each ``NAME=OVERRIDES`` becomes runs ``<prefix>NAME_s<seed>`` (``--name``), trained with
 ``--config CONFIG --seed S --data.split.test []`` plus the overrides: the test split is not loaded
 at all, so no test figure is seen while choosing (score the chosen runs afterwards with
-``bench/seed_table.py``). Up to ``--jobs`` runs at once; each run's output goes to
+``experiments/seed_table.py``). Up to ``--jobs`` runs at once; each run's output goes to
 ``<runs_dir>/<run>.log``. Prints, per run, the best epoch and its validation score, then per
 variant the mean and spread of the score over seeds. Exit status 1 if any run failed.
+
+Writes: the variant tables of docs/experiments/learning.md ("The variants, three seeds each") and
+the runs behind docs/experiments/tumvi_seed_table.md. Data: the config's train and validation
+recordings under the data root.
 """
 from __future__ import annotations
 

@@ -2,12 +2,16 @@
 whose motion capture drops out (TUM-VI): the gyro integrated open loop from the first sample through
 every gap, the error counted only where motion capture measured (eval.peers.masked_aoe).
 
-    IMU_LEARN_DATA=<root> python bench/bridged_aoe.py --recordings tum-vi/dataset-room2_512_16 \
+    IMU_LEARN_DATA=<root> python experiments/bridged_aoe.py --recordings tum-vi/dataset-room2_512_16 \
         tum-vi/dataset-room4_512_16 --checkpoint models/tumvi_bmi160.pt \
         --method-dir reports/tumvi/methods          # saved fits of `imu-learn evaluate` (optional)
 
 Prints one line per recording and input: AOE (RMSE) [deg], mean error angle [deg], yaw AOE [deg],
 samples counted and bridged.
+
+Writes: the bridged-AOE figures of docs/experiments/learning.md ("Starting from the floor") and
+models/tumvi_bmi160.md. Data: TUM-VI dataset-room2_512_16 and dataset-room4_512_16 under the data
+root; the shipped models/tumvi_bmi160.pt.
 """
 from __future__ import annotations
 

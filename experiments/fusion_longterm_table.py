@@ -1,6 +1,6 @@
 """The long-term navigation table across fusion experiments (README "Inertial-aided navigation"):
 
-    python bench/fusion_longterm_table.py reports/fuse_euroc/results.json reports/fuse_tumvi/results.json ...
+    python experiments/fusion_longterm_table.py reports/fuse_euroc/results.json reports/fuse_tumvi/results.json ...
 
 One row per experiment x aiding setting, one column pair per IMU input: position RMSE [m] over the
 whole trajectory, causal / smoothed, averaged over the experiment's test recordings (EuRoC's MH_01
@@ -9,6 +9,10 @@ noise seed's average over the recordings, then mean ± std over the seeds that e
 the row has ("seeds"; an unfinished experiment counts only those). The paired table counts wins
 over every run pair there is. Prints markdown (the
 table is transposed against the issue's sketch, inputs as columns, so it fits a page).
+
+Writes: the long-term navigation tables of docs/experiments/fusion.md and
+docs/experiments/uncertainty.md. Data: the results.json of ``imu-learn fuse --config
+configs/fuse_<data>.toml`` runs (reports/fuse_*).
 """
 from __future__ import annotations
 
@@ -17,7 +21,7 @@ import json
 from pathlib import Path
 from typing import Dict, List
 
-from imu_learn.fuse.run import NOT_IN_AVERAGE, average, complete_seeds, mean_std, runs_by_cell
+from imu_learn.fuse.experiments.batch import NOT_IN_AVERAGE, average, complete_seeds, mean_std, runs_by_cell
 
 
 def rows_of(name: str, runs: Dict[str, dict], inputs: List[str]) -> List[List[str]]:

@@ -1,6 +1,6 @@
 """k_gyro, k_acc of a covariance head over keyframe intervals (imu_learn.fuse.variance), per recording and pooled.
 
-    OMP_NUM_THREADS=1 python bench/variance_scale.py --checkpoint models/euroc_adis16448_cov.pt \
+    OMP_NUM_THREADS=1 python experiments/variance_scale.py --checkpoint models/euroc_adis16448_cov.pt \
         --data-root ../shared/data --K 20 \
         euroc/MH_01_easy euroc/MH_03_medium euroc/MH_05_difficult euroc/V2_01_easy euroc/V2_03_difficult
 
@@ -8,6 +8,11 @@ Each recording is DIR[=GROUNDTRUTH] relative to --data-root (EuRoC default groun
 mav0/state_groundtruth_estimate0/data.csv, the files of configs/euroc_paper.toml). Prints one line
 per recording and the pooled line; ``--json FILE`` writes them too. The k to pass to
 ``imu-learn fuse --variance-scale`` is the pooled robust pair (k_gyro, k_acc).
+
+Writes: docs/experiments/navigate.md, "Calibrating the learned variances over the keyframe
+interval" (the pooled k behind ``imu-learn navigate --variance-scale``). Data: the EuRoC flights
+listed above under --data-root; models/euroc_adis16448_cov.pt. The calibration itself is the
+library's (imu_learn.fuse.variance.calibrate_model); this runs it over recordings and prints.
 """
 from __future__ import annotations
 

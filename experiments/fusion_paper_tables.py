@@ -1,12 +1,15 @@
 """The paper's long-term navigation tables (its Tables I and III) beside ours, from a fusion
 experiment's results:
 
-    python bench/fusion_paper_tables.py [reports/fuse_euroc/results.json] [--scenario vo_10hz]
+    python experiments/fusion_paper_tables.py [reports/fuse_euroc/results.json] [--scenario vo_10hz]
 
 Our analogue of the paper's visual-inertial setting is the simulated 10 Hz relative-pose aiding
 (no absolute fix, so the position drifts as in visual odometry): full-trajectory position RMSE
 [m], causal (live) and smoothed, for each IMU input on each test flight, then the average over
 the flights (the paper's Table III "EuRoC" column); mean ± std over the noise seeds. Prints markdown.
+
+Writes: docs/experiments/fusion.md, "Beside the paper's Tables I and III". Data: the results.json
+of ``imu-learn fuse --config configs/fuse_euroc.toml`` (reports/fuse_euroc).
 """
 from __future__ import annotations
 
@@ -15,7 +18,7 @@ import json
 from pathlib import Path
 from typing import Dict, List
 
-from imu_learn.fuse.run import NOT_IN_AVERAGE, average, cell_text, complete_seeds, runs_by_cell
+from imu_learn.fuse.experiments.batch import NOT_IN_AVERAGE, average, cell_text, complete_seeds, runs_by_cell
 
 # Quoted from the paper (Zhang et al., Table I: positional RMSE [m] over the entire trajectories,
 # the processed IMU fused with visual data; VINS as reported by its authors). MH_02 has no IMU here.

@@ -1,16 +1,20 @@
 """How well EuRoC's Leica MS50 positions and the ground truth agree (imu_learn.fuse's real aiding):
 
-    IMU_LEARN_DATA=<data root> python bench/leica_agreement.py [euroc/MH_01_easy]
+    IMU_LEARN_DATA=<data root> python experiments/leica_agreement.py [euroc/MH_01_easy]
 
 Each Leica fix (the prism, world frame) is compared with the ground-truth body position at the
 same stamp plus the body-to-prism lever arm (``leica0/sensor.yaml`` T_BS) rotated into the world:
 residual RMSE with the lever arm, without it, with a lever arm fitted by least squares, and after
 fitting a constant time offset. Prints a markdown table.
+
+Writes: the Leica figures of docs/experiments/fusion.md ("Using `imu-learn fuse`") and
+configs/fuse_euroc.toml's time_offset_s. Data: EuRoC MH_01_easy with its leica0 folder under the
+data root.
 """
 from __future__ import annotations
 
+import argparse
 import os
-import sys
 from pathlib import Path
 
 import numpy as np
@@ -61,4 +65,6 @@ def main(rel: str = "euroc/MH_01_easy") -> None:
 
 
 if __name__ == "__main__":
-    main(*sys.argv[1:])
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("recording", nargs="?", default="euroc/MH_01_easy", help="relative to $IMU_LEARN_DATA")
+    main(ap.parse_args().recording)

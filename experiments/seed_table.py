@@ -7,7 +7,11 @@ and model, open loop and start-up bias removed, at ``data.eval_horizons``, poole
 recording), writes ``RUN/test_results.json`` atomically, and prints a markdown table: mean and
 spread (sample standard deviation, and min–max) over the runs (seeds).
 
-    python bench/seed_table.py --config configs/tumvi.toml runs/tumvi_s0 runs/tumvi_s1 runs/tumvi_s2
+    python experiments/seed_table.py --config configs/tumvi.toml runs/tumvi_s0 runs/tumvi_s1 runs/tumvi_s2
+
+Writes: docs/experiments/euroc_seed_table.md and docs/experiments/tumvi_seed_table.md (and the seed
+rows of table2_euroc.md / table2_tumvi.md). Data: finished runs of ``imu-learn fit`` (e.g. made by
+experiments/sweep.py) and the config's test recordings under the data root.
 """
 from __future__ import annotations
 
@@ -21,8 +25,8 @@ from typing import Any, Dict, List
 import torch
 
 from imu_learn.data.splits import make_split
-from imu_learn.infer.windowing import refine_sequence
 from imu_learn.infer.checkpoint import load_checkpoint, model_from_checkpoint
+from imu_learn.infer.windowing import refine_sequence
 from imu_learn.train.config import load_config
 from imu_learn.train.fit import evaluate_table
 from imu_learn.util.atomic import atomic_write_bytes

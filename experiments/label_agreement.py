@@ -7,7 +7,11 @@ gyro/accelerometer bias removed, fitted by least squares over the whole sequence
 on what a constant-bias calibration can do; what remains is noise, time-varying bias, ground-truth
 noise and the velocity derivation of pose-only ground truth).
 
-    python bench/label_agreement.py [--data ../shared/data/euroc]
+    python experiments/label_agreement.py [--data ../shared/data/euroc]
+
+Writes: docs/experiments/alignment.md, "How well do real IMU and ground-truth labels agree?".
+Data: the EuRoC flights under --data (default: the shipped crops' folder layout, full files under
+the data root).
 """
 from __future__ import annotations
 

@@ -11,7 +11,10 @@
    to both: in-sample rows show how much of a flight's error a linear model explains, cross rows
    whether that is a property of the IMU (it transfers) or of the flight (it does not).
 
-    python bench/euroc_groundtruth.py [--data ../shared/data/euroc]
+    python experiments/euroc_groundtruth.py [--data ../shared/data/euroc]
+
+Writes: docs/experiments/alignment.md, "EuRoC ground truth". Data: EuRoC MH_01_easy and V1_01_easy
+with their extra ground-truth files (groundtruth_pose.tum, groundtruth_state_20hz.csv); 1-4 min.
 """
 from __future__ import annotations
 
@@ -23,7 +26,7 @@ import numpy as np
 import imu_learn as il
 from imu_learn.baselines.traditional import Traditional
 from imu_learn.core.quat import quat_conj, quat_mul, xyzw_to_wxyz
-from imu_learn.eval.metrics import with_imu
+from imu_learn.score.metrics import with_imu
 from imu_learn.train import fit
 from imu_learn.train.config import build_config
 
