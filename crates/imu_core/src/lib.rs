@@ -3,10 +3,12 @@
 //! Data flows one way: `io` (files → `ImuSamples` / `GroundTruth`) → `align` (→ `Sequence`s) →
 //! `labels` (Δq/Δβ/Δγ from ground truth) and `batch` (augmented training windows), with
 //! `integrate` (Δq/Δβ/Δγ from IMU samples), `covariance` (their covariance under per-sample
-//! noise) and `so3` as the shared maths. Nothing here knows Python; the bindings live in `python`
+//! noise) and `so3` as the shared maths; `allan` characterises a sensor's noise (overlapping Allan
+//! deviation and its slope fits). Nothing here knows Python; the bindings live in `python`
 //! behind the `python` feature.
 
 pub mod align;
+pub mod allan;
 pub mod batch;
 pub mod covariance;
 pub mod error;
