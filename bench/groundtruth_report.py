@@ -36,7 +36,7 @@ from scipy.signal import savgol_filter
 import imu_learn as il
 from imu_learn.core.quat import quat_conj, quat_mul, quat_rotate
 from imu_learn.data.formats import read_recording
-from imu_learn.eval.metrics import fit_startup_bias, index_at, relative_pose_errors, remove_bias, rmse, with_imu
+from imu_learn.score.metrics import fit_startup_bias, index_at, relative_pose_errors, remove_bias, rmse, with_imu
 from imu_learn.util.atomic import atomic_write_text
 
 EUROC = ("MH_01_easy", "MH_03_medium", "MH_04_difficult", "MH_05_difficult", "V1_01_easy", "V1_03_difficult",

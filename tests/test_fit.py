@@ -121,7 +121,7 @@ def test_bias_removed_pose_of_raw_matches_the_final_table_protocol():
     sequence changes its open-loop error but (almost) not the bias-removed one."""
     import numpy as np
 
-    from imu_learn.eval.metrics import relative_pose_rmse_many, simulate_sequence, with_imu
+    from imu_learn.score.metrics import relative_pose_rmse_many, simulate_sequence, with_imu
 
     cfg = build_config({}, {"data.startup_bias_s": 5.0, "data.val_stride": 20})
     rng = np.random.default_rng(3)
@@ -160,7 +160,7 @@ def test_train_bias_remove_takes_a_constant_bias_out_of_train_and_val_only():
     import numpy as np
 
     from imu_learn.data.splits import Split
-    from imu_learn.eval.metrics import simulate_sequence, with_imu
+    from imu_learn.score.metrics import simulate_sequence, with_imu
 
     rng = np.random.default_rng(5)
     n = 4001  # 20 s at 200 Hz

@@ -1,11 +1,11 @@
-"""Relative pose error and start-up bias fitting (imu_learn.eval.metrics)."""
+"""Relative pose error and start-up bias fitting (imu_learn.score.metrics)."""
 import math
 
 import numpy as np
 import pytest
 
 import imu_learn as il
-from imu_learn.eval.metrics import (
+from imu_learn.score.metrics import (
     fit_startup_bias,
     relative_pose_errors,
     relative_pose_rmse,

@@ -11,7 +11,7 @@ from imu_learn.baselines.base import FitSettings
 from imu_learn.baselines.timing import Timing, resample, shifted
 from imu_learn.data.synthetic import DT, stamps
 from imu_learn.data.types import Segment
-from imu_learn.eval.metrics import floor_ratios, simulate_sequence
+from imu_learn.score.metrics import floor_ratios, simulate_sequence
 
 SETTINGS = FitSettings(window=100, seed=0)
 

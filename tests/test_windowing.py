@@ -193,7 +193,7 @@ def test_variances_are_stitched_by_the_same_rule(imu):
 def test_model_selection_scores_the_rule_it_will_be_applied_with(imu):
     """fit's val_pose score equals the metric computed on refine_arrays' output."""
     from imu_learn import AlignOptions, load_recording
-    from imu_learn.eval.metrics import with_imu
+    from imu_learn.score.metrics import with_imu
     from imu_learn.train import fit
 
     rec = load_recording(CROP, "euroc", groundtruth=GT, options=AlignOptions(max_gap_s=0.05))

@@ -1,2 +1,3 @@
-"""Evaluation: metrics, the fit-and-score protocol over the baselines registry, reports,
-calibration of learned covariances."""
+"""Evaluation (``imu-learn evaluate``): the fit-and-score protocol over the baselines registry, the
+peers' metrics, reports, calibration of learned covariances. The metrics themselves live in
+:mod:`imu_learn.score`."""

@@ -12,7 +12,7 @@ from datetime import datetime
 from pathlib import Path
 from typing import Any, Dict, List, Optional, Tuple
 
-from imu_learn.eval.protocol import (
+from imu_learn.score.protocol import (
     FLOOR_METHODS,
     PROTOCOL,
     REFERENCE_METHODS,

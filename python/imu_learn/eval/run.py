@@ -13,7 +13,7 @@ Usage::
     python -m imu_learn.evaluate --config configs/eval_euroc.toml --fit.steps 100 --eval.stride 20 \\
         --data.split.test '["V1_01_easy"]'                                  # dotted overrides
 
-The protocol (what is fitted on what, what each metric is) is :data:`imu_learn.eval.protocol.PROTOCOL`,
+The protocol (what is fitted on what, what each metric is) is :data:`imu_learn.score.protocol.PROTOCOL`,
 which every report prints.
 
 Output: ``<reports_dir>/<name>/`` (default ``reports/<config name>``) with ``report.md``, CSV
@@ -46,8 +46,8 @@ from imu_learn.errors import (
     MethodError,
     one_line,
 )
-from imu_learn.eval.metrics import fit_startup_bias, index_at, remove_bias, rmse, with_imu
-from imu_learn.eval.protocol import VARIANTS
+from imu_learn.score.metrics import fit_startup_bias, index_at, remove_bias, rmse, with_imu
+from imu_learn.score.protocol import VARIANTS
 from imu_learn.settings import hints_of, merge, nest
 from imu_learn.train.config import (
     RunConfig,

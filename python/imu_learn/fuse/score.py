@@ -12,7 +12,7 @@ import numpy as np
 from scipy.spatial.transform import Rotation
 
 from imu_learn.core.quat import rotation_angle, xyzw_to_wxyz
-from imu_learn.eval.metrics import rmse
+from imu_learn.score.metrics import rmse
 
 from .aiding import outage_mask
 from .graph import FusionResult

@@ -4,7 +4,7 @@
 reader values, :func:`imu_learn.infer.refine.refine_arrays` with the checkpoint's windowing rule,
 :mod:`imu_learn.infer.windowing`, the rule fit selected and scored it with),
 puts ground truth on the raw and on the refined IMU by the same alignment (so both have identical
-segments and stamps), and scores both with the final table's metric (:mod:`imu_learn.eval.metrics`,
+segments and stamps), and scores both with the final table's metric (:mod:`imu_learn.score.metrics`,
 as ``fit.evaluate_table`` does): relative pose RMSE over n IMU samples, windows every ``stride``
 samples from ``startup_bias_s`` seconds into each segment on, open loop and with a start-up bias
 (fitted on each input's first ``startup_bias_s`` seconds against ground truth, raw and refined
@@ -30,8 +30,8 @@ from imu_learn.data.formats import read_recording
 from imu_learn.data.loading import AlignOptions, align
 from imu_learn.data.types import ImuData
 from imu_learn.data.types import Segment as Seq
-from imu_learn.eval.metrics import GRAVITY, variant_table, without_fitted_bias
-from imu_learn.eval.protocol import VARIANTS
+from imu_learn.score.metrics import GRAVITY, variant_table, without_fitted_bias
+from imu_learn.score.protocol import VARIANTS
 from imu_learn.infer.refine import refine_arrays
 from imu_learn.infer.windowing import windowing_of
 from imu_learn.nn.device import pick_device

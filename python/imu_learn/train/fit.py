@@ -37,7 +37,7 @@ What a run does:
   resume, exit status 130. Known errors (config, data, checkpoint, missing files, a full disk or a
   read-only run folder) print one line and exit with status 2; every file of the run folder is
   written atomically (:mod:`imu_learn.util.atomic`), so what is there after any failure is complete.
-* at the end: relative pose error on the held-out test split (:mod:`imu_learn.eval.metrics`) for the
+* at the end: relative pose error on the held-out test split (:mod:`imu_learn.score.metrics`) for the
   raw IMU, for the timing floor (the raw IMU resampled at the one time offset fitted on the training
   split, :mod:`imu_learn.baselines.timing`) and for the best-validation model, judged against the
   better of raw and timing in each cell ("model/floor"), over ``data.eval_horizons`` IMU samples (default 10
@@ -76,8 +76,8 @@ import torch
 from imu_learn.core.batches import Batch, BatchSampler, batch_seed
 from imu_learn.data.splits import Split, make_split, split_signature, write_split
 from imu_learn.data.types import Segment
-from imu_learn.eval.metrics import floor_ratios, index_at, relative_pose_rmse_many, variant_table, without_fitted_bias
-from imu_learn.eval.protocol import VARIANT_LABELS, VARIANTS
+from imu_learn.score.metrics import floor_ratios, index_at, relative_pose_rmse_many, variant_table, without_fitted_bias
+from imu_learn.score.protocol import VARIANT_LABELS, VARIANTS
 from imu_learn.infer import windowing
 from imu_learn.nn.device import pick_device
 from imu_learn.nn.losses import imu_loss
@@ -370,7 +370,7 @@ def evaluate_table(raw_seqs: List[Segment], model_seqs: List[Segment], cfg: RunC
     ``timing_seqs``, the timing floor) vs model, open loop vs bias removed: pooled over every window
     of the test split (``rows``) and per test recording (``per_recording``, as the paper's Table II
     lists sequences). ``vs_floor``: the model's ratio to the best of the floor rows (raw, timing)
-    per cell (:func:`imu_learn.eval.metrics.floor_ratios`)."""
+    per cell (:func:`imu_learn.score.metrics.floor_ratios`)."""
     out: Dict[str, Any] = {"rows": {}, "per_recording": {}, "startup_bias": {}}
     rows = [("raw", raw_seqs)] + ([("timing", timing_seqs)] if timing_seqs is not None else []) + [("model", model_seqs)]
     for row, seqs in rows:

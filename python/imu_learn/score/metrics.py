@@ -31,7 +31,7 @@ from imu_learn.core.integration import integrate_windows, preintegrate, window_l
 from imu_learn.core.quat import quat_conj, quat_log, quat_mul, quat_rotate
 from imu_learn.data.types import Segment
 from imu_learn.errors import InvalidInputError
-from imu_learn.eval.protocol import VARIANTS
+from imu_learn.score.protocol import VARIANTS
 
 GRAVITY = 9.81
 
@@ -191,7 +191,7 @@ def without_fitted_bias(
 def variant_table(seqs: Seq[Segment], fixed: Seq[Segment], horizons: Seq[int], stride: int,
                   startup_bias_s: float, gravity: float = GRAVITY) -> Dict[str, Dict[str, Dict[str, float]]]:
     """The final table's cells: ``{variant: {str(n): relative_pose_rmse_many(...)}}`` for the two
-    variants of :data:`imu_learn.eval.protocol.VARIANTS`, open loop (``seqs``) and start-up bias
+    variants of :data:`imu_learn.score.protocol.VARIANTS`, open loop (``seqs``) and start-up bias
     removed (``fixed``, from :func:`without_fitted_bias`), windows every ``stride`` samples from
     ``startup_bias_s`` seconds on."""
     return {variant: {str(int(n)): relative_pose_rmse_many(ss, int(n), stride, gravity, first_s=startup_bias_s)

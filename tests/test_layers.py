@@ -1,0 +1,136 @@
+"""The package's parts import one way: each part imports only itself and the parts below it (the
+order is docs/README.md's "Code layout"). Every import counts, at module level or inside a function,
+relative ones resolved; a function-local import is only for an optional heavy dependency (torch,
+gtsam, matplotlib, rosbags), never to hide an import against the order."""
+from __future__ import annotations
+
+import ast
+from pathlib import Path
+from typing import Iterator, List, Optional, Set, Tuple
+
+PKG = Path(__file__).resolve().parents[1] / "python" / "imu_learn"
+README = Path(__file__).resolve().parents[1] / "docs" / "README.md"
+
+# Lowest first. A part is a subpackage or a top-level module of imu_learn; "api" is imu_learn/__init__.py
+# (the public API, which re-exports core and data); "stages" the `python -m imu_learn.<stage>` shims.
+ORDER = (
+    "errors", "_imu_core", "util", "settings",
+    "core", "data", "api", "score", "nn", "infer", "baselines", "train", "eval",
+    "fuse", "cli", "stages",
+)
+STAGES = ("fit", "refine", "export", "labels", "evaluate")
+
+# Imports against the order that are known and being removed: (file under imu_learn/, imported part).
+# Empty: fuse/ no longer reaches the CLI layer (it did for its one-line error wording).
+KNOWN_EXCEPTIONS: Set[Tuple[str, str]] = set()
+
+
+def part_of(module: str) -> str:
+    """The part of a dotted imu_learn module name."""
+    parts = module.split(".")
+    assert parts[0] == "imu_learn", module
+    if len(parts) == 1:
+        return "api"
+    if len(parts) == 2 and parts[1] in STAGES:
+        return "stages"
+    return parts[1]
+
+
+def module_of(path: Path) -> Tuple[str, bool]:
+    rel = path.relative_to(PKG.parent).with_suffix("")
+    parts = list(rel.parts)
+    is_pkg = parts[-1] == "__init__"
+    if is_pkg:
+        parts.pop()
+    return ".".join(parts), is_pkg
+
+
+def is_submodule(name: str) -> bool:
+    """Whether ``imu_learn.<name>`` is a module or subpackage (the Rust extension included)."""
+    return (PKG / name).is_dir() or any(PKG.glob(f"{name}.*"))
+
+
+def imported(path: Path, source: Optional[str] = None) -> Iterator[Tuple[int, str]]:
+    """(line, absolute module name) of every import in ``path`` (or ``source`` as if it were that
+    file), function-local included, relative ones resolved."""
+    name, is_pkg = module_of(path)
+    package = name if is_pkg else name.rsplit(".", 1)[0]
+    text = path.read_text() if source is None else source
+    for node in ast.walk(ast.parse(text, str(path))):
+        if isinstance(node, ast.Import):
+            for a in node.names:
+                yield node.lineno, a.name
+        elif isinstance(node, ast.ImportFrom):
+            base = node.module or ""
+            if node.level:
+                up = package.split(".")
+                up = up[: len(up) - (node.level - 1)]
+                base = ".".join(up + ([base] if base else []))
+            if base == "imu_learn":  # `from imu_learn import x`: x may be a part (a subpackage)
+                for a in node.names:
+                    target = f"imu_learn.{a.name}"
+                    yield node.lineno, target if is_submodule(a.name) else base
+            else:
+                yield node.lineno, base
+
+
+def violations() -> List[str]:
+    rank = {p: i for i, p in enumerate(ORDER)}
+    out = []
+    for path in sorted(PKG.rglob("*.py")):
+        rel = path.relative_to(PKG).as_posix()
+        src = part_of(module_of(path)[0])
+        for line, target in imported(path):
+            if target != "imu_learn" and not target.startswith("imu_learn."):
+                continue
+            dst = part_of(target)
+            if dst == src or (rel, dst) in KNOWN_EXCEPTIONS:
+                continue
+            if rank[dst] > rank[src]:
+                out.append(f"python/imu_learn/{rel}:{line}: {src} imports {dst} ({target}), which is above it")
+    return out
+
+
+def parts_on_disk() -> List[str]:
+    return sorted({part_of(module_of(p)[0]) for p in PKG.rglob("*.py")} | {"_imu_core"})
+
+
+def test_every_part_has_a_place_in_the_order():
+    missing = [p for p in parts_on_disk() if p not in ORDER]
+    assert not missing, f"parts with no place in ORDER (tests/test_layers.py, docs/README.md): {missing}"
+
+
+def test_imports_follow_the_order():
+    found = violations()
+    assert not found, "imports against the order " + " -> ".join(ORDER) + ":\n" + "\n".join(found)
+
+
+def test_known_exceptions_are_still_needed():
+    """An exception no import needs any more goes from the list."""
+    used = set()
+    for path in sorted(PKG.rglob("*.py")):
+        rel = path.relative_to(PKG).as_posix()
+        for _, target in imported(path):
+            if target.startswith("imu_learn."):
+                used.add((rel, part_of(target)))
+    stale = sorted(KNOWN_EXCEPTIONS - used)
+    assert not stale, f"known exceptions no import needs (remove them): {stale}"
+
+
+def readme_order() -> Optional[List[str]]:
+    for line in README.read_text().splitlines():
+        if line.startswith("Import order"):
+            return [p.strip(" `.") for p in line.split(":", 1)[1].split("->")]
+    return None
+
+
+def test_the_order_is_the_documented_one():
+    assert readme_order() == list(ORDER), "docs/README.md's 'Import order:' line and ORDER differ"
+
+
+def test_the_checker_sees_function_local_and_relative_imports():
+    src = "from __future__ import annotations\nfrom . import x\ndef f():\n    from ..cli import main\n"
+    got = {t: line for line, t in imported(PKG / "core" / "probe.py", src)}
+    assert got == {"__future__": 1, "imu_learn.core": 2, "imu_learn.cli": 4}
+    assert part_of("imu_learn") == "api" and part_of("imu_learn.fit") == "stages"
+    assert part_of("imu_learn.train.fit") == "train"
