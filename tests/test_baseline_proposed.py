@@ -7,9 +7,9 @@ import torch
 
 from imu_learn.baselines.base import FitSettings
 from imu_learn.baselines.proposed import Proposed, ProposedConfig
+from imu_learn.infer.checkpoint import load_model, save_checkpoint
 from imu_learn.infer.refine import refine_arrays
 from imu_learn.nn.model import ImuRefiner, ModelConfig
-from imu_learn.infer.checkpoint import load_model, save_checkpoint
 
 torch.set_num_threads(1)
 

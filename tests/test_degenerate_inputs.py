@@ -186,8 +186,8 @@ def test_dataset_folder_without_recordings(tmp_path, dataset, looked_for):
 
 @pytest.fixture(scope="module")
 def checkpoint(tmp_path_factory):
-    from imu_learn.nn.model import ImuRefiner, ModelConfig
     from imu_learn.infer.checkpoint import save_checkpoint
+    from imu_learn.nn.model import ImuRefiner, ModelConfig
 
     torch.manual_seed(0)
     model = ImuRefiner(ModelConfig(hidden=8, fc=8), mean=torch.zeros(6), std=torch.ones(6))

@@ -15,9 +15,9 @@ from imu_learn.data.synthetic import AXIS, DT, G, axis_angle, moving, qmul, spin
 from imu_learn.data.types import Segment
 from imu_learn.errors import ConfigError, InvalidInputError
 from imu_learn.eval import run as ev
-from imu_learn.score.metrics import with_imu
-from imu_learn.nn.model import ImuRefiner, ModelConfig
 from imu_learn.infer.checkpoint import save_checkpoint
+from imu_learn.nn.model import ImuRefiner, ModelConfig
+from imu_learn.score.metrics import with_imu
 
 torch.set_num_threads(1)
 

@@ -9,8 +9,8 @@ import torch
 
 from imu_learn import _imu_core as core
 from imu_learn.cli.export import main
-from imu_learn.nn.model import ImuRefiner, ModelConfig
 from imu_learn.infer.checkpoint import load_model, save_checkpoint
+from imu_learn.nn.model import ImuRefiner, ModelConfig
 
 torch.set_num_threads(1)
 

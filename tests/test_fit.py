@@ -16,9 +16,9 @@ import pytest
 import torch
 
 from imu_learn.cli import fit as fit_cli
+from imu_learn.infer.checkpoint import load_checkpoint
 from imu_learn.nn.model import ImuRefiner, ModelConfig
 from imu_learn.train import fit
-from imu_learn.infer.checkpoint import load_checkpoint
 from imu_learn.train.config import ConfigError, RunConfig, build_config, load_config, read_toml
 
 REPO = Path(__file__).resolve().parent.parent

@@ -8,8 +8,8 @@ import pytest
 
 from imu_learn.data import cache, labels, splits
 from imu_learn.errors import CacheError
-from imu_learn.train import fit
 from imu_learn.infer.checkpoint import load_checkpoint
+from imu_learn.train import fit
 from imu_learn.train.config import build_config
 
 FIELDS = ("t_ns", "gyro", "acc", "p", "v", "q_wxyz")

@@ -22,7 +22,6 @@ from imu_learn import load_recording
 from imu_learn.cli import fit as fit_cli
 from imu_learn.cli.checkpoint import main as checkpoint_main
 from imu_learn.cli.refine import main as refine_main
-from imu_learn.infer.model_check import compare_with_raw, format_comparison
 from imu_learn.infer.checkpoint import (
     CheckpointError,
     describe,
@@ -31,6 +30,7 @@ from imu_learn.infer.checkpoint import (
     strip_checkpoint,
     write_checkpoint,
 )
+from imu_learn.infer.model_check import compare_with_raw, format_comparison
 
 torch.set_num_threads(1)
 

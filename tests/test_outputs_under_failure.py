@@ -29,8 +29,8 @@ from imu_learn.baselines.base import Raw
 from imu_learn.cli import labels as labels_cli
 from imu_learn.data import cache
 from imu_learn.errors import CacheError
-from imu_learn.nn.model import ImuRefiner, ModelConfig
 from imu_learn.infer.checkpoint import CheckpointError, load_checkpoint, save_checkpoint
+from imu_learn.nn.model import ImuRefiner, ModelConfig
 
 torch.set_num_threads(1)
 

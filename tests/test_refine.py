@@ -14,10 +14,10 @@ import torch
 from crops import whole_pass
 from imu_learn import _imu_core as core
 from imu_learn.cli.refine import main
+from imu_learn.infer.checkpoint import save_checkpoint
 from imu_learn.infer.refine import refine_arrays
 from imu_learn.infer.windowing import window_plan
 from imu_learn.nn.model import ImuRefiner, ModelConfig
-from imu_learn.infer.checkpoint import save_checkpoint
 
 torch.set_num_threads(1)
 

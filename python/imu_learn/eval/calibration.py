@@ -174,8 +174,8 @@ def evaluate_calibration(model, seqs: List[Segment], horizons: List[int], stride
     per-sample variances, and under their mean over the sequence per channel ("learned mean": a
     constant noise level, which separates how well the head tracks the motion from its overall
     scale); per test sequence and pooled over all of them ("all test")."""
-    from imu_learn.score.metrics import fit_startup_bias, index_at, remove_bias, with_imu
     from imu_learn.infer.refine import refine_with_variance
+    from imu_learn.score.metrics import fit_startup_bias, index_at, remove_bias, with_imu
 
     pooled: Dict[tuple, Dict[str, List[np.ndarray]]] = {}
     rows: List[Dict[str, object]] = []

@@ -30,12 +30,12 @@ from imu_learn.data.formats import read_recording
 from imu_learn.data.loading import AlignOptions, align
 from imu_learn.data.types import ImuData
 from imu_learn.data.types import Segment as Seq
-from imu_learn.score.metrics import GRAVITY, variant_table, without_fitted_bias
-from imu_learn.score.protocol import VARIANTS
+from imu_learn.infer.checkpoint import load_checkpoint, model_from_checkpoint
 from imu_learn.infer.refine import refine_arrays
 from imu_learn.infer.windowing import windowing_of
 from imu_learn.nn.device import pick_device
-from imu_learn.infer.checkpoint import load_checkpoint, model_from_checkpoint
+from imu_learn.score.metrics import GRAVITY, variant_table, without_fitted_bias
+from imu_learn.score.protocol import VARIANTS
 
 PathLike = Union[str, Path]
 

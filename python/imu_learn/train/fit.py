@@ -76,13 +76,13 @@ import torch
 from imu_learn.core.batches import Batch, BatchSampler, batch_seed
 from imu_learn.data.splits import Split, make_split, split_signature, write_split
 from imu_learn.data.types import Segment
-from imu_learn.score.metrics import floor_ratios, index_at, relative_pose_rmse_many, variant_table, without_fitted_bias
-from imu_learn.score.protocol import VARIANT_LABELS, VARIANTS
 from imu_learn.infer import windowing
+from imu_learn.infer.checkpoint import load_checkpoint, load_model, model_from_checkpoint, save_checkpoint
 from imu_learn.nn.device import pick_device
 from imu_learn.nn.losses import imu_loss
 from imu_learn.nn.model import ImuRefiner, ModelConfig
-from imu_learn.infer.checkpoint import load_checkpoint, load_model, model_from_checkpoint, save_checkpoint
+from imu_learn.score.metrics import floor_ratios, index_at, relative_pose_rmse_many, variant_table, without_fitted_bias
+from imu_learn.score.protocol import VARIANT_LABELS, VARIANTS
 from imu_learn.train.config import ConfigError, RunConfig, build_config, read_toml, to_toml
 from imu_learn.util.atomic import atomic_write_text
 
