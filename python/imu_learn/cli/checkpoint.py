@@ -8,6 +8,7 @@ from pathlib import Path
 from typing import Any, Callable, List, Optional, Sequence
 
 from imu_learn.cli.common import run_command
+from imu_learn.util.extras import require_extra
 
 DESCRIPTION = """Inspect a checkpoint (info: JSON on stdout) or write a copy keeping only what inference needs
 (strip: no optimiser state or metrics history; loads everywhere a checkpoint does, cannot be resumed)."""
@@ -30,6 +31,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace, rest: List[str], keep: Callable[[Any], None]) -> int:
+    require_extra("train", "imu-learn checkpoint")
     from imu_learn.infer.checkpoint import describe, load_checkpoint, strip_checkpoint
 
     if args.action == "strip":

@@ -10,6 +10,7 @@ from typing import Any, Callable, List, Optional, Sequence
 from imu_learn.baselines.registry import REGISTRY
 from imu_learn.cli.common import add_data_root, run_command
 from imu_learn.errors import ConfigError
+from imu_learn.util.extras import require_extra
 
 OVERRIDES = True
 DESCRIPTION = """Fit methods on the train split and evaluate them on the held-out test split (paper
@@ -36,6 +37,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 def run(args: argparse.Namespace, rest: List[str], keep: Callable[[Any], None]) -> int:
     t0 = time.time()
+    require_extra("eval", "imu-learn evaluate")  # before any fitting: its report needs polars and matplotlib
     if any(a == "--data.data_root" or a.startswith("--data.data_root=") for a in rest):
         raise ConfigError("--data.data_root: set the data root with --data-root DIR (or IMU_LEARN_DATA)")
     if args.data_root:

@@ -6,6 +6,7 @@ from pathlib import Path
 from typing import Any, Callable, List, Optional, Sequence
 
 from imu_learn.cli.common import run_command
+from imu_learn.util.extras import require_extra
 
 DESCRIPTION = """Export a refiner to TorchScript (model.ts) and ONNX (model.onnx) with a JSON card (model.json:
 inputs, outputs, units, normalisation, and each export's largest difference from the torch model)."""
@@ -21,6 +22,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace, rest: List[str], keep: Callable[[Any], None]) -> int:
+    require_extra("export", "imu-learn export")
     from imu_learn.infer.export import export, summary
 
     card = export(args.checkpoint, args.out, args.window, args.opset)

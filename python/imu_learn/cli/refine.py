@@ -8,6 +8,7 @@ from typing import Any, Callable, List, Optional, Sequence
 
 from imu_learn.cli.common import run_command
 from imu_learn.errors import ConfigError
+from imu_learn.util.extras import require_extra
 
 DESCRIPTION = """Write a recording's IMU refined by a trained model, in the input's own format (ASL/EuRoC
 CSV, TUM-VI, Blackbird, BROAD, KAIST, ROS 1/2 bags). The input is never written. Prints the file
@@ -39,9 +40,10 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace, rest: List[str], keep: Callable[[Any], None]) -> int:
+    require_extra("train", "imu-learn refine")
+    from imu_learn.infer.checkpoint import load_model
     from imu_learn.infer.refine import refine_recording, require_covariance_head
     from imu_learn.nn.device import pick_device
-    from imu_learn.infer.checkpoint import load_model
 
     try:
         device = pick_device(args.device)

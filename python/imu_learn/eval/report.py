@@ -21,6 +21,7 @@ from imu_learn.score.protocol import (
     VARIANTS,
 )
 from imu_learn.util.atomic import atomic_write_bytes, atomic_write_text
+from imu_learn.util.extras import require
 
 # ---------------------------------------------------------------------------------------------
 # quoted figures (copied from publications; never our measurements)
@@ -207,8 +208,7 @@ def write_png(path: Path, fig: Any, dpi: int) -> None:
 
 def plot_curves(result: Dict[str, Any], curves: List[Dict[str, Any]], out_dir: Path) -> List[str]:
     """One PNG per variant: position / rotation / velocity RMSE against horizon, log-log, a curve per method."""
-    import matplotlib
-
+    matplotlib = require("matplotlib", "eval", "the report's plots")
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 

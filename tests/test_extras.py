@@ -1,0 +1,36 @@
+"""A stage whose optional dependency is missing stops at once with one line naming the extra
+(imu_learn.util.extras), not with a ModuleNotFoundError traceback after the work."""
+from __future__ import annotations
+
+import subprocess
+import sys
+
+import pytest
+
+from imu_learn.errors import MissingExtraError
+from imu_learn.util.extras import EXTRAS, require, require_extra
+
+
+def test_require_names_the_package_and_the_extra(monkeypatch):
+    monkeypatch.setitem(sys.modules, "matplotlib", None)  # what an absent package looks like to import
+    with pytest.raises(MissingExtraError) as e:
+        require_extra("eval", "imu-learn evaluate")
+    assert str(e.value) == "imu-learn evaluate needs matplotlib, the eval extra: pip install 'imu-learn[eval]'"
+    assert require("numpy", "eval", "x").__name__ == "numpy"
+
+
+def test_every_extra_names_packages_of_pyproject():
+    assert set(EXTRAS) <= {"train", "fuse", "eval", "export", "bags"}
+
+
+@pytest.mark.parametrize("blocked", ["matplotlib", "polars"])
+def test_evaluate_without_its_extra_is_one_line_before_any_work(tmp_path, blocked):
+    out = tmp_path / "report"
+    code = (f"import sys; sys.modules[{blocked!r}] = None\n"
+            "from imu_learn.cli import main\n"
+            f"sys.exit(main(['evaluate', '--methods', 'raw', '--out', {str(out)!r}]))\n")
+    r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)
+    assert r.returncode == 2, r.stderr[-2000:]
+    assert r.stderr.splitlines() == [f"imu-learn evaluate: error: MissingExtraError: imu-learn evaluate needs "
+                                     f"{blocked}, the eval extra: pip install 'imu-learn[eval]'"]
+    assert not out.exists()  # nothing fitted, nothing written
