@@ -1,4 +1,5 @@
-"""bench/groundtruth_report.py's fits on synthetic recordings with a known answer.
+"""The ground-truth check (imu_learn.eval.groundtruth, ``imu-learn groundtruth``): its fits on
+synthetic recordings with a known answer, and the command on the shipped crops.
 
 The IMU is the exact, instantaneous angular rate (point samples at their stamps, plus a bias and a
 little noise) of a closed-form wobbling rotation; the ground truth is the same motion seen from a
@@ -6,19 +7,19 @@ body frame rotated by R_off and stamped τ late: q_gt(t) = q_imu(t − τ) ⊗ q
 """
 from __future__ import annotations
 
-import sys
 from pathlib import Path
 
 import numpy as np
 import pytest
 
+from imu_learn.cli.groundtruth import main as groundtruth_main
 from imu_learn.data.synthetic import G, axis_angle, qconj, qmul, rotate, stamps
-from imu_learn.data.types import Segment
+from imu_learn.data.types import GroundTruth, ImuData, Segment
+from imu_learn.errors import ImuError, TooShortError
+from imu_learn.eval import groundtruth as gr
 
 REPO = Path(__file__).resolve().parent.parent
-sys.path.insert(0, str(REPO / "bench"))
-
-import groundtruth_report as gr  # noqa: E402
+EUROC = REPO / "datasets" / "euroc"
 
 BIAS = np.array([0.01, -0.02, 0.03])
 OFF_AXIS, OFF_ANGLE = np.array([0.3, -1.0, 0.5]), np.radians(3.0)
@@ -83,9 +84,56 @@ def test_fit_offset_sees_no_offset_where_there_is_none():
 def test_fit_lever_arm_recovers_a_known_lever_arm():
     lever = np.array([0.05, -0.03, 0.02])
     seq = recording(0.0, lever=lever)
-    # IMU rotated into the GT body frame, as score_gt does with the fitted R_off
+    # IMU rotated into the GT body frame, as check does with the fitted R_off
     r = rotation_matrix(axis_angle(OFF_AXIS, OFF_ANGLE))
     seq = Segment(seq.name, seq.t_ns, seq.gyro @ r, seq.acc @ r, seq.p, seq.v, seq.q_wxyz)
     est, se = gr.fit_lever_arm([seq], r.T @ BIAS)
     np.testing.assert_allclose(est, lever, atol=2e-3)
     assert np.all(se < 2e-3)
+
+
+def test_check_of_a_synthetic_recording_names_its_frame_and_clock():
+    seq = recording(0.0075)
+    imu = ImuData(seq.t_ns, seq.gyro, seq.acc)
+    gt = GroundTruth(seq.t_ns, seq.p, seq.q_wxyz)
+    row, off = gr.check(imu, gt, "synthetic", "gt")
+    assert row.off_deg == pytest.approx(3.0, abs=0.05)
+    assert row.tau_ms == pytest.approx(7.5, abs=0.5)
+    assert row.verdict.startswith("rotated 3.0° off the IMU, GT +") and row.verdict.endswith(" ms late")
+    assert row.after_rot[0] < row.n200[0]  # R_off applied: the rotation agrees better
+
+
+def test_check_of_a_recording_shorter_than_one_window_is_a_typed_error():
+    seq = recording(0.0, seconds=0.5)  # shorter than alignment's shortest segment
+    with pytest.raises(ImuError):
+        gr.check(ImuData(seq.t_ns, seq.gyro, seq.acc), GroundTruth(seq.t_ns, seq.p, seq.q_wxyz), "short", "gt")
+    seq = recording(0.0, seconds=1.5)
+    every2 = slice(None, None, 2)  # 100 Hz: 1.5 s aligns, but holds no window of 200 samples
+    imu = ImuData(seq.t_ns[every2], seq.gyro[every2], seq.acc[every2])
+    with pytest.raises(TooShortError, match="needs more than 200"):
+        gr.check(imu, GroundTruth(seq.t_ns, seq.p, seq.q_wxyz), "short", "gt")
+
+
+def test_command_on_a_crop_says_its_ground_truth_is_in_the_imu_frame(capsys):
+    assert groundtruth_main(["--input", str(EUROC / "MH_04_difficult")]) == 0
+    out = capsys.readouterr().out.splitlines()
+    assert out[0].startswith("MH_04_difficult / its own ground truth: 200 Hz, 12001 IMU samples in 1 segment(s)")
+    assert out[-2] == "  verdict: IMU frame"
+    assert out[-1].startswith("MH_04_difficult: use its own ground truth (IMU frame; 1 s rot")
+
+
+def test_command_picks_the_ground_truth_that_agrees_best(capsys):
+    rec = EUROC / "V1_01_easy"
+    argv = ["--input", str(rec), "--groundtruth", str(rec / "groundtruth_pose.tum"),
+            "--groundtruth", str(rec / "groundtruth_state_20hz.csv")]
+    assert groundtruth_main(argv) == 0
+    out = capsys.readouterr().out.splitlines()
+    assert "  verdict: rotated 1.1° off the IMU" in out
+    assert out[-1].startswith("V1_01_easy: use groundtruth_state_20hz.csv (IMU frame;")
+    assert out[-1].endswith("others groundtruth_pose.tum: 0.486°")
+
+
+def test_command_errors_are_one_line(tmp_path, capsys):
+    assert groundtruth_main(["--input", str(tmp_path / "nowhere")]) == 2
+    err = capsys.readouterr().err.splitlines()
+    assert len(err) == 1 and err[0].startswith("imu-learn groundtruth: error: FileNotFoundError:")

@@ -1,31 +1,28 @@
-"""Which ground truth does each recording's own IMU agree with, and in which body frame is it?
+"""Which ground truth does a recording's own IMU agree with, and in which body frame is it?
 
-For every EuRoC / TUM-VI recording under the data root and every ground-truth file it has:
+For one ground-truth file of a recording (``imu-learn groundtruth --input REC``; the report over
+every EuRoC / TUM-VI / Fetch recording is experiments/groundtruth_report.py):
 
-* bias-removed relative pose RMSE (rotation [deg], translation [m]; ``metrics.relative_pose_errors``)
-  over 10 and 200 IMU samples (0.05 s, 1 s), every window. The bias: one constant gyro + accel bias
-  per recording, fitted over the *whole* recording as in ``bench/label_agreement.py`` (medians of
-  10-sample window residuals / Δt, pooled over the segments);
+* bias-removed relative pose RMSE (rotation [deg], translation [m]; ``score.metrics.relative_pose_errors``)
+  over 10 and 200 IMU samples (0.05 s, 1 s at 200 Hz), every window. The bias: one constant gyro +
+  accel bias per recording, fitted over the *whole* recording as in experiments/label_agreement.py
+  (medians of 10-sample window residuals / Δt, pooled over the segments);
 * R_off (GT body -> IMU: ω_imu ≈ R_off ω_gt + b_g) and τ (IMU sample at its stamp t ≈ GT(t + τ),
   so τ > 0: GT stamps late), fitted jointly: Kabsch (bias = centring term) on 10-sample mean rates
   for every whole-sample shift within ±100 ms, the best one refined by a parabola. The metric's
-  integrator holds sample k over [t_k, t_k+1], i.e. it sees the IMU half a period late; the table
-  also scores with the GT shifted by τ − dt/2, which undoes that;
+  integrator holds sample k over [t_k, t_k+1], i.e. it sees the IMU half a period late; the check
+  also scores with the GT shifted by τ − dt/2, which undoes that. A ground robot turns about z
+  only, so the gyro leaves R_off's yaw free: ``yaw_from_acc`` fits R_off on specific force instead;
 * the lever arm r of the IMU origin in the GT body frame, by least squares on
   S(R a_imu) − S(p̈_gt) − g = S(R (ω̇× + ω×ω×)) r + S(R) b_a  (world frame; S: one Savitzky-Golay
   smoother on every term, so the equation stays exact), with R_off and τ applied;
-* TUM-VI: mocap orientation noise σ at its own stamps (gyro vs. mocap relative rotation over
+* motion capture: orientation noise σ at its own stamps (gyro vs. mocap relative rotation over
   h = 1..10 mocap samples, RMSE² = 2σ² + k h²); raw-gyro bias-removed rotation drift at 5 s / 20 s;
-  mocap gaps and how much of each room survives per ``max_gap_s``.
-
-    python bench/groundtruth_report.py [--data ../shared/data] [--out docs/groundtruth.md]
+  gaps and how much of a recording survives per ``max_gap_s``.
 """
 from __future__ import annotations
 
-import argparse
 import math
-import os
-import time
 from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import List, Optional, Tuple
@@ -33,57 +30,57 @@ from typing import List, Optional, Tuple
 import numpy as np
 from scipy.signal import savgol_filter
 
-import imu_learn as il
+from imu_learn.core.integration import integrate_windows, window_labels
 from imu_learn.core.quat import quat_conj, quat_mul, quat_rotate
 from imu_learn.data.formats import read_recording
+from imu_learn.data.loading import AlignOptions, align
+from imu_learn.data.types import GroundTruth, ImuData, Segment
+from imu_learn.errors import TooShortError
 from imu_learn.score.metrics import fit_startup_bias, index_at, relative_pose_errors, remove_bias, rmse, with_imu
-from imu_learn.util.atomic import atomic_write_text
 
-EUROC = ("MH_01_easy", "MH_03_medium", "MH_04_difficult", "MH_05_difficult", "V1_01_easy", "V1_03_difficult",
-         "V2_01_easy", "V2_02_medium", "V2_03_difficult")
-TUMVI = tuple(f"dataset-room{i}_512_16" for i in range(1, 6))
-EUROC_GT = ("mav0/state_groundtruth_estimate0/data.csv", "groundtruth_pose.tum", "groundtruth_state_20hz.csv",
-            "groundtruth_original_euroc.csv")
-TUMVI_GT = ("mav0/mocap0/data.csv",)
-FETCH = ("01_square", "03_um", "04_eight", "06_right_turn", "07_left_turn", "08_origin")
-FETCH_GT = ("mav0/mocap0/data.csv",)
-FETCH_GAP_S = 0.1  # the Fetch mocap has gaps up to 70 ms in every recording
-GAPS_S = (0.05, 0.1, 0.3, 0.5)
-DRIFT_GAP_S = 0.3  # TUM-VI segments for the 5 s / 20 s drift (windows must fit inside one segment)
+MIN_SAMPLES = 200  # the longest scored window (n=200): a shorter recording cannot be checked
+DRIFT_GAP_S = 0.3  # segments for the 5 s / 20 s drift (windows must fit inside one segment)
 G = 9.81
+
+
+@dataclass(frozen=True)
+class CheckOptions:
+    """``max_gap_s``: split the ground truth at gaps longer than this (None: :func:`default_gap_s`);
+    ``yaw_from_acc``: fit R_off on specific force (a ground robot, turning about z only)."""
+
+    max_gap_s: Optional[float] = None
+    yaw_from_acc: bool = False
 
 
 # ---------------------------------------------------------------------------------------------
 # loading
 
 
-def is_fetch(root: Path) -> bool:
-    return root.parent.name == "fetch"
+def read(root: Path, groundtruth: Optional[Path] = None, fmt: str = "auto", imu_topic: Optional[str] = None,
+         groundtruth_topic: Optional[str] = None) -> Tuple[ImuData, GroundTruth]:
+    """The IMU and one ground truth of a recording (``groundtruth``: a file, else the format's own)."""
+    return read_recording(Path(root), fmt, groundtruth=groundtruth, imu_topic=imu_topic,
+                          groundtruth_topic=groundtruth_topic)
 
 
-def read(root: Path, gt_rel: str) -> Tuple[il.ImuData, il.GroundTruth]:
-    fmt = "fetch" if is_fetch(root) else "euroc"
-    return read_recording(root, fmt, groundtruth=root / gt_rel)
-
-
-def gt_rate_hz(gt: il.GroundTruth) -> float:
+def gt_rate_hz(gt: GroundTruth) -> float:
     return 1e9 / float(np.median(np.diff(gt.t_ns)))
 
 
-def default_gap_s(gt: il.GroundTruth) -> float:
+def default_gap_s(gt: GroundTruth) -> float:
     """0.05 s, or 1.5 ground-truth periods for sparse ground truth (the 20 Hz ASL state)."""
     return max(0.05, 1.5 / gt_rate_hz(gt))
 
 
-def segments(imu: il.ImuData, gt: il.GroundTruth, max_gap_s: float, shift_s: float = 0.0,
-             r_off: Optional[np.ndarray] = None) -> List[il.Segment]:
+def segments(imu: ImuData, gt: GroundTruth, max_gap_s: float, shift_s: float = 0.0,
+             r_off: Optional[np.ndarray] = None) -> List[Segment]:
     """Aligned gap-free segments; optionally GT stamps moved by −shift_s and the IMU rotated into
     the GT body frame (ω_gt = R_offᵀ ω_imu)."""
     if shift_s:
         gt = replace(gt, t_ns=gt.t_ns - int(round(shift_s * 1e9)))
     if r_off is not None:
         imu = replace(imu, gyro=imu.gyro @ r_off, acc=imu.acc @ r_off)
-    return il.align(imu, gt, il.AlignOptions(max_gap_s=max_gap_s)).segments
+    return align(imu, gt, AlignOptions(max_gap_s=max_gap_s)).segments
 
 
 # ---------------------------------------------------------------------------------------------
@@ -101,23 +98,23 @@ def exp_q(v: np.ndarray) -> np.ndarray:
     return np.concatenate([np.cos(a / 2), np.sinc(a / (2 * np.pi)) * v / 2], -1)
 
 
-def fit_bias(segs: List[il.Segment], n: int = 10) -> Tuple[np.ndarray, np.ndarray]:
+def fit_bias(segs: List[Segment], n: int = 10) -> Tuple[np.ndarray, np.ndarray]:
     """Whole-recording constant (gyro, accel) bias: medians of n-sample window residuals / Δt over
     all segments, the accelerometer one with the gyro bias removed (label_agreement's fit)."""
     rg, ra = [], []
     for s in segs:
-        lab = il.window_labels(s, window=n, stride=n, fractions=[1.0])
-        imu = il.integrate_windows(s, lab.starts, lab.horizons)
+        lab = window_labels(s, window=n, stride=n, fractions=[1.0])
+        imu = integrate_windows(s, lab.starts, lab.horizons)
         rg.append(log_q(quat_mul(quat_conj(lab.dq_wxyz[:, 0]), imu.dq_wxyz[:, 0])) / lab.dt[:, :1])
     bg = np.median(np.concatenate(rg), axis=0)
     for s in segs:
-        lab = il.window_labels(s, window=n, stride=n, fractions=[1.0])
-        imu = il.integrate_windows(with_imu(s, s.gyro - bg, s.acc), lab.starts, lab.horizons)
+        lab = window_labels(s, window=n, stride=n, fractions=[1.0])
+        imu = integrate_windows(with_imu(s, s.gyro - bg, s.acc), lab.starts, lab.horizons)
         ra.append((imu.dv[:, 0] - lab.dv[:, 0]) / lab.dt[:, :1])
     return bg, np.median(np.concatenate(ra), axis=0)
 
 
-def pooled_errors(segs: List[il.Segment], n: int, stride: int = 1, from_s: float = 0.0) -> Tuple[float, float]:
+def pooled_errors(segs: List[Segment], n: int, stride: int = 1, from_s: float = 0.0) -> Tuple[float, float]:
     """(rotation RMSE [deg], translation RMSE [m]) over all windows of n samples that start at least
     ``from_s`` after the first segment's start."""
     t0 = segs[0].t_ns[0]
@@ -130,11 +127,11 @@ def pooled_errors(segs: List[il.Segment], n: int, stride: int = 1, from_s: float
     return math.degrees(rmse(np.concatenate(rot))), rmse(np.concatenate(trans))
 
 
-def bias_removed(segs: List[il.Segment], bg: np.ndarray, ba: np.ndarray) -> List[il.Segment]:
+def bias_removed(segs: List[Segment], bg: np.ndarray, ba: np.ndarray) -> List[Segment]:
     return [remove_bias(s, bg, ba) for s in segs]
 
 
-def bias_removed_score(segs: List[il.Segment], n: int) -> Tuple[float, float]:
+def bias_removed_score(segs: List[Segment], n: int) -> Tuple[float, float]:
     """(rot [deg], trans [m]) RMSE over n samples with the whole-recording bias removed."""
     return pooled_errors(bias_removed(segs, *fit_bias(segs)), n)
 
@@ -143,7 +140,7 @@ def bias_removed_score(segs: List[il.Segment], n: int) -> Tuple[float, float]:
 # rotation / time offset
 
 
-def mean_rates(seq: il.Segment, m: int) -> Tuple[np.ndarray, np.ndarray]:
+def mean_rates(seq: Segment, m: int) -> Tuple[np.ndarray, np.ndarray]:
     """Mean angular rates over m-sample windows (stride 1): IMU (Σ ω dt / Σ dt) and ground truth
     (Log(q_kᵀ q_k+m) / Δt), both in their own body frames; rows k = 0 .. len − m − 1."""
     dt = np.diff(seq.t_ns) * 1e-9
@@ -189,7 +186,7 @@ class Offset:
         return self.tau_s - self.hold_s
 
 
-def fit_offset(segs: List[il.Segment], m: int = 10, max_shift: int = 20) -> Offset:
+def fit_offset(segs: List[Segment], m: int = 10, max_shift: int = 20) -> Offset:
     """Constant rotation + gyro bias (Kabsch) and time offset (shift grid + parabola) between the
     gyro and the ground truth's angular rate. The rates are compared under the integrator's
     zero-order hold (sample k held on [t_k, t_k+1]); τ adds back the half period, so it is the
@@ -205,7 +202,7 @@ def fit_offset(segs: List[il.Segment], m: int = 10, max_shift: int = 20) -> Offs
     return Offset(r, c, (shift + 0.5) * dt, 0.5 * dt, math.sqrt(cost))
 
 
-def fit_acc_rotation(segs: List[il.Segment], half: int = 15) -> np.ndarray:
+def fit_acc_rotation(segs: List[Segment], half: int = 15) -> np.ndarray:
     """GT body -> IMU rotation from specific force (Kabsch, bias = centring term): the smoothed
     accelerometer vs. R_gtᵀ (p̈_gt + g). For a ground robot, which turns about z only, the gyro fixes
     the tilt but not the yaw of R_off; gravity and the horizontal accelerations fix both."""
@@ -244,7 +241,7 @@ def rotation_matrices(q: np.ndarray) -> np.ndarray:
     return np.stack([quat_rotate(q, np.broadcast_to(e, (len(q), 3))) for e in np.eye(3)], axis=2)
 
 
-def lever_rows(seq: il.Segment, gyro_bias: np.ndarray, half: int) -> Tuple[np.ndarray, np.ndarray]:
+def lever_rows(seq: Segment, gyro_bias: np.ndarray, half: int) -> Tuple[np.ndarray, np.ndarray]:
     """Rows of  S(R a_imu) − S(p̈) − g = S(R (ω̇× + ω×ω×)) r + S(R) b_a  in the world frame, S one
     smoothing filter applied to every term alike (the equation stays exact); edges dropped."""
     dt = float(np.median(np.diff(seq.t_ns))) * 1e-9
@@ -260,7 +257,7 @@ def lever_rows(seq: il.Segment, gyro_bias: np.ndarray, half: int) -> Tuple[np.nd
     return design[keep].reshape(-1, 6), y[keep].reshape(-1)
 
 
-def fit_lever_arm(segs: List[il.Segment], gyro_bias: np.ndarray, half: int = 20) -> Tuple[np.ndarray, np.ndarray]:
+def fit_lever_arm(segs: List[Segment], gyro_bias: np.ndarray, half: int = 20) -> Tuple[np.ndarray, np.ndarray]:
     """Lever arm r [m] of the IMU in the (IMU-aligned) GT body frame and its standard error."""
     rows = [lever_rows(s, gyro_bias, half) for s in segs if len(s) > 4 * half]
     a, y = np.concatenate([r[0] for r in rows]), np.concatenate([r[1] for r in rows])
@@ -270,10 +267,10 @@ def fit_lever_arm(segs: List[il.Segment], gyro_bias: np.ndarray, half: int = 20)
 
 
 # ---------------------------------------------------------------------------------------------
-# TUM-VI noise floor and gaps
+# motion-capture noise floor and gaps
 
 
-def mocap_noise(imu: il.ImuData, gt: il.GroundTruth, off: Offset, hs=tuple(range(1, 11))) -> Tuple[float, List[float], float]:
+def mocap_noise(imu: ImuData, gt: GroundTruth, off: Offset, hs=tuple(range(1, 11))) -> Tuple[float, List[float], float]:
     """σ of the mocap orientation [deg] at its own stamps: relative rotation over h mocap samples vs.
     the bias-removed gyro (midpoint rule, time offset and R_off applied); RMSE(h)² = 2σ² + k h².
     Also the lag-1 autocorrelation of the h = 1 errors: −0.5 for white orientation noise."""
@@ -301,20 +298,20 @@ def mocap_noise(imu: il.ImuData, gt: il.GroundTruth, off: Offset, hs=tuple(range
     return math.sqrt(max(slope_fit[1], 0.0) / 2), errs, lag1
 
 
-def gap_stats(gt: il.GroundTruth) -> Tuple[int, int, float, float]:
+def gap_stats(gt: GroundTruth) -> Tuple[int, int, float, float]:
     """(gaps > 50 ms, gaps > 0.3 s, longest gap [s], time in gaps > 50 ms [s])."""
     d = np.diff(gt.t_ns) * 1e-9
     return int((d > 0.05).sum()), int((d > 0.3).sum()), float(d.max()), float(d[d > 0.05].sum())
 
 
-def survival(imu: il.ImuData, gt: il.GroundTruth, max_gap_s: float) -> Tuple[float, int, float, float, float]:
+def survival(imu: ImuData, gt: GroundTruth, max_gap_s: float) -> Tuple[float, int, float, float, float]:
     """(fraction of IMU samples kept, segments, longest segment [s], bias-removed rot [deg] / trans [m] at n=200)."""
     segs = segments(imu, gt, max_gap_s)
     kept = sum(len(s) for s in segs) / len(imu)
     return (kept, len(segs), max(s.duration_s for s in segs), *bias_removed_score(segs, 200))
 
 
-def drift(imu: il.ImuData, gt: il.GroundTruth) -> dict:
+def drift(imu: ImuData, gt: GroundTruth) -> dict:
     """Bias-removed raw-gyro rotation RMSE [deg] at 5 s and 20 s (windows every 10 samples from
     10 s on), bias from the first 10 s (fit_startup_bias) and from the whole recording."""
     segs = segments(imu, gt, DRIFT_GAP_S)
@@ -332,7 +329,10 @@ def drift(imu: il.ImuData, gt: il.GroundTruth) -> dict:
 
 
 @dataclass
-class Row:
+class GroundTruthCheck:
+    """What the check found for one ground truth of a recording (scores: bias-removed relative pose
+    RMSE, (rotation [deg], translation [m])); ``verdict`` says it in words."""
+
     recording: str
     gt: str
     rate_hz: float
@@ -360,53 +360,38 @@ class Row:
 def gt_label(gt_rel: str) -> str:
     """``mav0/mocap0/data.csv`` -> ``mocap0``; a file beside ``mav0`` keeps its name."""
     parts = Path(gt_rel).parts
-    return parts[1] if parts[0] == "mav0" else parts[-1]
+    return parts[1] if parts[0] == "mav0" and len(parts) > 1 else parts[-1]
 
 
-def score_gt(root: Path, gt_rel: str) -> Tuple[Row, il.ImuData, il.GroundTruth, Offset]:
-    """Everything the main table says about one ground-truth file (plus what the TUM-VI part needs)."""
-    imu, gt = read(root, gt_rel)
-    gap = FETCH_GAP_S if is_fetch(root) else default_gap_s(gt)
+def check(imu: ImuData, gt: GroundTruth, recording: str, label: str,
+          options: CheckOptions = CheckOptions()) -> Tuple[GroundTruthCheck, Offset]:
+    """Everything the check says about one ground truth of a recording (the module doc), and the
+    fitted offset (the mocap noise needs it)."""
+    gap = options.max_gap_s if options.max_gap_s is not None else default_gap_s(gt)
     segs = segments(imu, gt, gap)
+    longest = max((len(s) for s in segs), default=0)
+    if longest <= MIN_SAMPLES:
+        raise TooShortError(f"{recording}: the longest stretch of IMU samples with ground truth ({label}) holds "
+                            f"{longest} samples; the check needs more than {MIN_SAMPLES} (1 s windows), "
+                            f"raise max_gap_s (now {gap:g} s) if the ground truth has gaps",
+                            samples=longest, needed=MIN_SAMPLES + 1)
     off = fit_offset(segs)
-    if is_fetch(root):  # the gyro leaves the yaw of R_off free (rotation about z only): take the accelerometer's
+    if options.yaw_from_acc:  # the gyro leaves the yaw of R_off free (rotation about z only): take the accelerometer's
         off = replace(off, r_off=fit_acc_rotation(segs))
     rotated = segments(imu, gt, gap, r_off=off.r_off)
     held = segments(imu, gt, gap, shift_s=off.integrator_shift_s, r_off=off.r_off)
     lever, lever_se = fit_lever_arm(segments(imu, gt, gap, shift_s=off.tau_s, r_off=off.r_off),
                                     off.r_off.T @ off.gyro_bias)
     angle, axis = angle_axis(off.r_off)
-    row = Row(root.name, gt_label(gt_rel), gt_rate_hz(gt), sum(len(s) for s in segs), len(segs),
+    row = GroundTruthCheck(recording, label, gt_rate_hz(gt), sum(len(s) for s in segs), len(segs),
               bias_removed_score(segs, 10), bias_removed_score(segs, 200), angle, axis, 1e3 * off.tau_s,
               bias_removed_score(rotated, 200), bias_removed_score(held, 200), 100 * lever, 100 * lever_se)
-    return row, imu, gt, off
+    return row, off
 
 
-# ---------------------------------------------------------------------------------------------
-# report
-
-
-def fmt_vec(v: np.ndarray, p: int = 2) -> str:
-    return "(" + ", ".join(f"{x:+.{p}f}" for x in v) + ")"
-
-
-def main_table(rows: List[Row], best: dict) -> List[str]:
-    out = ["| recording | GT file | rate [Hz] | samples (segs) | n=10 rot [°] / trans [m] | n=200 rot [°] / trans [m] "
-           "| R_off [°] (axis) | τ [ms] | n=200 after R_off | n=200 after R_off + shift τ − dt/2 "
-           "| lever arm [cm] ± se | verdict |", "|" + "---|" * 12]
-    for r in rows:
-        mark = " **best**" if best[r.recording] is r else ""
-        out.append(f"| {r.recording} | {r.gt} | {r.rate_hz:.0f} | {r.samples} ({r.n_segments}) | "
-                   f"{r.n10[0]:.4f} / {r.n10[1]:.5f} | {r.n200[0]:.3f} / {r.n200[1]:.4f} | "
-                   f"{r.off_deg:.2f} {fmt_vec(r.off_axis)} | {r.tau_ms:+.1f} | "
-                   f"{r.after_rot[0]:.3f} / {r.after_rot[1]:.4f} | {r.after_hold[0]:.3f} / {r.after_hold[1]:.4f} | "
-                   f"{fmt_vec(r.lever_cm, 1)} ± {np.max(r.lever_se_cm):.1f} | {r.verdict}{mark} |")
-    return out
-
-
-def pick_best(rows: List[Row]) -> dict:
+def pick_best(rows: List[GroundTruthCheck]) -> dict:
     """Per recording, the GT file with the lowest bias-removed rotation RMSE over 1 s (a later
-    candidate must beat an earlier one by 2 %: ties go to the ASL layout's own file)."""
+    candidate must beat an earlier one by 2 %: ties go to the first, the layout's own file)."""
     best: dict = {}
     for r in rows:
         if r.recording not in best or r.n200[0] < 0.98 * best[r.recording].n200[0]:
@@ -414,110 +399,11 @@ def pick_best(rows: List[Row]) -> dict:
     return best
 
 
-def summary_line(rec: str, rows: List[Row], best: Row) -> str:
+def summary_line(rec: str, rows: List[GroundTruthCheck], best: GroundTruthCheck) -> str:
     others = "; ".join(f"{r.gt}: {r.n200[0]:.3f}°" for r in rows if r.recording == rec and r is not best)
     return (f"{rec}: use {best.gt} ({best.verdict}; 1 s rot {best.n200[0]:.3f}°, trans {best.n200[1]:.4f} m)"
             + (f" — others {others}" if others else ""))
 
 
-def tumvi_frame(rows: List[Row]) -> str:
-    """One line: which body frame mocap0 is, from the fitted rotation, lever arm and time offset."""
-    offs = [r.off_deg for r in rows]
-    arms = [float(np.linalg.norm(r.lever_cm)) for r in rows]
-    taus = [r.tau_ms for r in rows]
-    frame = "the IMU frame" if max(offs) < 0.5 and max(arms) < 2 else "NOT the IMU frame"
-    return (f"TUM-VI mocap0 is {frame}: R_off {min(offs):.2f}–{max(offs):.2f}°, lever arm |r| {min(arms):.1f}–"
-            f"{max(arms):.1f} cm, τ {min(taus):+.1f}…{max(taus):+.1f} ms over {len(rows)} rooms.")
-
-
-def fetch_frame(rows: List[Row]) -> List[str]:
-    """The Fetch mocap body frame against the IMU, in a few lines."""
-    if not rows:
-        return []
-    offs = [r.off_deg for r in rows]
-    taus = [r.tau_ms for r in rows]
-    return ["", "## Fetch mocap0 body frame", "",
-            f"Fetch (Debias_IMU) mocap0 against the IMU over {len(rows)} recordings, segments at max_gap_s = "
-            f"{FETCH_GAP_S} (the mocap has gaps up to 70 ms): R_off {min(offs):.2f}–{max(offs):.2f}° "
-            f"(fitted on specific force: the robot turns about z only, so the gyro leaves R_off's yaw free), "
-            f"τ {min(taus):+.1f}…{max(taus):+.1f} ms. The pose is used as it is (no rotation, no time offset)."]
-
-
-def noise_table(tum: List[Tuple[Row, il.ImuData, il.GroundTruth, Offset]]) -> List[str]:
-    out = ["", "## TUM-VI mocap0: noise floor", "",
-           "σ: mocap orientation noise at the mocap's own 120 Hz stamps (RMSE of gyro vs. mocap relative rotation "
-           "over h = 1..10 samples, fitted as RMSE² = 2σ² + k h²). Drift: raw gyro, bias removed, rotation RMSE "
-           f"over 5 s / 20 s, windows every 10 samples from 10 s on, segments at max_gap_s = {DRIFT_GAP_S}.", "",
-           "| room | σ mocap [°] | RMSE h=1 / 2 / 5 / 10 [°] | lag-1 autocorr. h=1 (white: −0.5) "
-           "| 5 s start-up bias [°] | 20 s start-up bias [°] | 5 s whole-rec. bias [°] | 20 s whole-rec. bias [°] |",
-           "|" + "---|" * 8]
-    for row, imu, gt, off in tum:
-        sigma, errs, lag1 = mocap_noise(imu, gt, off)
-        d = drift(imu, gt)
-        out.append(f"| {row.recording} | {sigma:.4f} | {errs[0]:.4f} / {errs[1]:.4f} / {errs[4]:.4f} / {errs[9]:.4f} "
-                   f"| {lag1:+.2f} | {d['startup_5s']:.3f} | {d['startup_20s']:.3f} | {d['whole_5s']:.3f} "
-                   f"| {d['whole_20s']:.3f} |")
-    return out
-
-
-def gap_table(tum: List[Tuple[Row, il.ImuData, il.GroundTruth, Offset]]) -> List[str]:
-    out = ["", "## TUM-VI mocap0: gaps and what survives per max_gap_s", "",
-           "kept = IMU samples inside segments (min_segment_s = 1); score = bias-removed rot [°] / trans [m] at n=200 "
-           "on those segments (gaps bridged by interpolation show up here).", "",
-           "| room | gaps > 50 ms | gaps > 0.3 s | longest [s] | time in gaps [s] | "
-           + " | ".join(f"max_gap {g} s: kept, segs, longest seg [s], score" for g in GAPS_S) + " |",
-           "|" + "---|" * (5 + len(GAPS_S))]
-    ok = dict.fromkeys(GAPS_S, True)
-    for row, imu, gt, _ in tum:
-        n50, n300, longest, total = gap_stats(gt)
-        cells = [survival(imu, gt, g) for g in GAPS_S]
-        for g, c in zip(GAPS_S, cells):
-            ok[g] &= c[3] <= 1.05 * cells[0][3]
-        out.append(f"| {row.recording} | {n50} | {n300} | {longest:.2f} | {total:.2f} | " + " | ".join(
-            f"{100 * kept:.1f} %, {nseg}, {seg_s:.0f}, {rot:.3f} / {trans:.4f}" for kept, nseg, seg_s, rot, trans in cells)
-            + " |")
-    good = max(g for g in GAPS_S if ok[g])
-    return out + ["", f"Largest max_gap_s whose 1 s rotation score stays within 5 % of max_gap 0.05's in every room: "
-                  f"**{good}**."]
-
-
-def main() -> None:
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--data", type=Path, default=Path(os.environ.get("IMU_LEARN_DATA", "../shared/data")))
-    ap.add_argument("--out", type=Path, default=Path("docs/groundtruth.md"))
-    args = ap.parse_args()
-    start = time.time()
-    jobs = [(args.data / "euroc" / r, EUROC_GT) for r in EUROC] + [(args.data / "tum-vi" / r, TUMVI_GT) for r in TUMVI]
-    jobs += [(args.data / "fetch" / r, FETCH_GT) for r in FETCH]
-    results = []
-    for root, cands in jobs:
-        for gt_rel in cands:
-            if (root / gt_rel).is_file():
-                results.append(score_gt(root, gt_rel))
-                r = results[-1][0]
-                print(f"{r.recording} / {r.gt}: n=200 rot {r.n200[0]:.3f}°, R_off {r.off_deg:.2f}°, "
-                      f"τ {r.tau_ms:+.1f} ms, lever {fmt_vec(r.lever_cm, 1)} cm ({time.time() - start:.0f} s)", flush=True)
-    rows = [x[0] for x in results]
-    best = pick_best(rows)
-    tum = [x for x in results if x[0].recording in TUMVI]
-    tum_lines = ["", "## TUM-VI body frame", "", tumvi_frame([x[0] for x in tum])] + noise_table(tum) + gap_table(tum)
-    tum_lines += fetch_frame([x[0] for x in results if x[0].recording in FETCH])
-    lines = ["# Ground truth vs. own IMU", "",
-             f"Generated by `bench/groundtruth_report.py` in {time.time() - start:.0f} s (method: its docstring).", "",
-             "Bias: one constant gyro + accelerometer bias per recording, fitted on the whole recording (medians "
-             "of 10-sample window residuals, as bench/label_agreement.py). Relative pose RMSE over every window "
-             "(stride 1) of n IMU samples. R_off maps GT-body vectors to the IMU frame (axis in either frame); "
-             "τ > 0: GT stamps late (IMU(t) ≈ GT(t + τ)). Segments at max_gap_s = 0.05 (0.075 for the 20 Hz "
-             "state). Lever arm: IMU origin in the GT body frame. Best = lowest rot n=200 per recording (ties to "
-             "the ASL layout's own file). The metric's integrator holds IMU sample k over [t_k, t_k+1], half a "
-             "period after it was taken; the column 'after R_off + shift τ − dt/2' undoes that.", ""]
-    lines += main_table(rows, best) + tum_lines
-    lines += ["", "## Per recording", ""] + [f"- {summary_line(rec, rows, b)}" for rec, b in best.items()]
-    text = "\n".join(lines) + "\n"
-    atomic_write_text(args.out, text)
-    print(text)
-    print(f"wrote {args.out} in {time.time() - start:.0f} s")
-
-
-if __name__ == "__main__":
-    main()
+def fmt_vec(v: np.ndarray, p: int = 2) -> str:
+    return "(" + ", ".join(f"{x:+.{p}f}" for x in v) + ")"

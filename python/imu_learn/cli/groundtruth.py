@@ -1,0 +1,83 @@
+"""``imu-learn groundtruth --input REC``: which ground truth of a recording its own IMU agrees with,
+and in which body frame it is (:mod:`imu_learn.eval.groundtruth`)."""
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+from typing import Any, Callable, List, Optional, Sequence
+
+from imu_learn.cli.common import run_command
+
+DESCRIPTION = """Check a recording's ground truth against its own IMU, before training on it or scoring with it:
+bias-removed relative pose RMSE over 10 and 200 IMU samples, the rotation R_off from the ground
+truth's body frame to the IMU's and the time offset tau (fitted on the angular rates), the scores
+again with R_off and tau applied, and the lever arm of the IMU in the ground truth's body frame.
+A ground truth in the IMU frame, on the IMU's clock, shows R_off below 0.5 deg, |tau| below 2.5 ms
+and no lever arm. With several --groundtruth files, the last line names the one that agrees best.
+The method: the module doc of imu_learn.eval.groundtruth."""
+EPILOG = """examples:
+  imu-learn groundtruth --input datasets/euroc/MH_04_difficult
+  imu-learn groundtruth --input datasets/euroc/V1_01_easy --groundtruth datasets/euroc/V1_01_easy/groundtruth_pose.tum \\
+      --groundtruth datasets/euroc/V1_01_easy/groundtruth_state_20hz.csv
+  imu-learn groundtruth --input robot/run1 --format fetch --max-gap-s 0.1 --yaw-from-acc"""
+
+
+def add_arguments(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--input", type=Path, required=True, metavar="REC", help="the recording (folder, file or bag)")
+    p.add_argument("--groundtruth", type=Path, action="append", metavar="FILE",
+                   help="a ground-truth file to check (repeat for several; default: the format's own)")
+    p.add_argument("--format", default="auto", help="the recording's layout (default: detected)")
+    p.add_argument("--max-gap-s", type=float, default=None, metavar="S",
+                   help="split at ground-truth gaps longer than S (default 0.05, or 1.5 periods of sparse ground truth)")
+    p.add_argument("--yaw-from-acc", action="store_true",
+                   help="fit R_off on specific force (a ground robot turning about z only: the gyro leaves its yaw free)")
+    p.add_argument("--imu-topic", help="rosbag: the sensor_msgs/msg/Imu topic (default: the bag's only one)")
+    p.add_argument("--groundtruth-topic", help="rosbag: the pose topic (default: the bag's only one)")
+
+
+def label(rec: Path, gt: Optional[Path]) -> str:
+    if gt is None:
+        return "its own ground truth"
+    from imu_learn.eval.groundtruth import gt_label
+
+    try:
+        return gt_label(str(gt.resolve().relative_to(rec.resolve())))
+    except ValueError:  # not inside the recording
+        return str(gt)
+
+
+def describe(row: Any) -> List[str]:
+    from imu_learn.eval.groundtruth import fmt_vec
+
+    def score(s) -> str:
+        return f"rot {s[0]:.3f}°, trans {s[1]:.4f} m"
+
+    return [f"{row.recording} / {row.gt}: {row.rate_hz:.0f} Hz, {row.samples} IMU samples in {row.n_segments} segment(s)",
+            f"  bias-removed RMSE over 10 samples: rot {row.n10[0]:.4f}°, trans {row.n10[1]:.5f} m; "
+            f"over 200 samples: {score(row.n200)}",
+            f"  R_off (GT body -> IMU): {row.off_deg:.2f}° about {fmt_vec(row.off_axis)}; "
+            f"tau {row.tau_ms:+.1f} ms (> 0: GT stamps late)",
+            f"  over 200 samples after R_off: {score(row.after_rot)}; after R_off and the GT shifted by tau - dt/2: "
+            f"{score(row.after_hold)}",
+            f"  lever arm (IMU origin in the GT body frame): {fmt_vec(row.lever_cm, 1)} cm ± {max(row.lever_se_cm):.1f}",
+            f"  verdict: {row.verdict}"]
+
+
+def run(args: argparse.Namespace, rest: List[str], keep: Callable[[Any], None]) -> int:
+    from imu_learn.eval.groundtruth import CheckOptions, check, pick_best, read, summary_line
+
+    options = CheckOptions(max_gap_s=args.max_gap_s, yaw_from_acc=args.yaw_from_acc)
+    rows = []
+    for gt_file in args.groundtruth or [None]:
+        imu, gt = read(args.input, gt_file, args.format, args.imu_topic, args.groundtruth_topic)
+        row, _ = check(imu, gt, args.input.name, label(args.input, gt_file), options)
+        rows.append(row)
+        print("\n".join(describe(row)), flush=True)
+    best = pick_best(rows)[args.input.name]
+    print(summary_line(args.input.name, rows, best))
+    return 0
+
+
+def main(argv: Optional[Sequence[str]] = None) -> int:
+    """``imu-learn groundtruth ARGV``."""
+    return run_command("groundtruth", argv)
