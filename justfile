@@ -48,9 +48,13 @@ fit *args="":
 evaluate *args="":
     {{py}} -m imu_learn.cli evaluate {{args}}
 
-# Fuse raw and refined IMU with aiding in a GTSAM factor graph; e.g. just fuse --config configs/fuse_euroc.toml --data-root DIR
+# The fusion experiments of a config (IMU with aiding in a GTSAM factor graph); e.g. just fuse --config configs/fuse_euroc.toml --data-root DIR
 fuse *args="":
     {{py}} -m imu_learn.cli fuse {{args}}
+
+# Navigate a recording with its aiding file, no ground truth; e.g. just navigate --input REC --aiding FILE --aiding-kind relative-pose
+navigate *args="":
+    {{py}} -m imu_learn.cli navigate {{args}}
 
 # Write refined IMU in the input's own format: just refine CKPT IN OUT
 refine checkpoint input output *args="":

@@ -1,6 +1,6 @@
 """Online fusion latency, measured now on this machine and printed as a markdown table.
 
-Each recording is streamed sample by sample (``imu_learn.fuse.online.stream``): the raw sample, the
+Each recording is streamed sample by sample (``imu_learn.fuse.experiments.online.stream``): the raw sample, the
 input's refiner (``raw`` passes it through; ``proposed``: the causal model's ``step()``; ``learned``:
 ``WindowedStepper``, the bidirectional covariance model run once per completed window of the
 checkpoint's windowing rule, releasing that window's settled samples with their variances, plus the
@@ -50,7 +50,7 @@ def default_checkpoint() -> str:
 
 def recordings(data_root: str, quick: bool):
     """(label, FuseConfig, RecordingSpec) of the crop and, where present, the whole recording."""
-    from imu_learn.fuse.config import FuseConfig, RecordingSpec
+    from imu_learn.fuse.experiments.config import FuseConfig, RecordingSpec
 
     spec = RecordingSpec("euroc/V1_01_easy", "euroc", "euroc/V1_01_easy/groundtruth_state_20hz.csv", max_gap_s=0.06)
     out = [("V1_01_easy crop (shipped)", FuseConfig(data_root=str(REPO / "datasets")), spec)]
@@ -116,9 +116,9 @@ def main(argv=None) -> int:
     from scipy.spatial.transform import Rotation
 
     from imu_learn.core.quat import wxyz_to_xyzw
-    from imu_learn.fuse.config import ScenarioSpec
-    from imu_learn.fuse.online import load_causal_model, load_learned_model, machine, score_online, stream
-    from imu_learn.fuse.run import aiding_rng, load_recording_for_fusion, make_aiding
+    from imu_learn.fuse.experiments.config import ScenarioSpec
+    from imu_learn.fuse.experiments.online import load_causal_model, load_learned_model, machine, score_online, stream
+    from imu_learn.fuse.experiments.batch import aiding_rng, load_recording_for_fusion, make_aiding
 
     ckpt = args.checkpoint if args.checkpoint is not None else default_checkpoint()
     model = None

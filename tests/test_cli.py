@@ -84,7 +84,7 @@ def test_help_lists_every_subcommand():
                        timeout=120)
     assert r.returncode == 0 and r.stderr == ""
     listed = [line.split()[0] for line in r.stdout.split("commands:\n")[1].split("\n\n")[0].splitlines()]
-    assert listed == ["labels", "fit", "evaluate", "refine", "export", "fuse", "checkpoint"] == list(COMMANDS)
+    assert listed == ["labels", "fit", "evaluate", "refine", "export", "fuse", "navigate", "groundtruth", "checkpoint"] == list(COMMANDS)
 
 
 @pytest.mark.parametrize("name", list(COMMANDS))
@@ -116,7 +116,7 @@ def test_pyproject_declares_the_console_script():
     assert project["scripts"] == {"imu-learn": "imu_learn.cli:main"}
 
 
-@pytest.mark.parametrize("stage", ["fit", "refine", "evaluate", "labels", "export", "fuse"])
+@pytest.mark.parametrize("stage", ["fit", "refine", "evaluate", "labels", "export"])
 def test_python_dash_m_stage_is_the_same_command(stage):
     r = subprocess.run([sys.executable, "-m", f"imu_learn.{stage}", "--help"], capture_output=True, text=True,
                        env=ENV, timeout=120)
@@ -146,7 +146,7 @@ def test_missing_input_file(tmp_path, capsys):
 
 def test_bad_config_key_or_option_value(tmp_path, capsys):
     from imu_learn.eval.run import EvalSettings
-    from imu_learn.fuse.config import FuseConfig
+    from imu_learn.fuse.experiments.config import FuseConfig
     from imu_learn.train.config import OptimConfig
 
     assert_error(["labels", "euroc", "--dataset-dir", CROP.parent, "--out", tmp_path / "c", "--window", "0", "-q"], capsys,

@@ -20,8 +20,8 @@ from imu_learn.fuse import (  # noqa: E402
     simulate_position,
     simulate_relative_pose,
 )
-from imu_learn.fuse.config import FuseConfig, RecordingSpec, ScenarioSpec, load, validate  # noqa: E402
-from imu_learn.fuse.run import run_experiment  # noqa: E402
+from imu_learn.fuse.experiments.config import FuseConfig, RecordingSpec, ScenarioSpec, load, validate  # noqa: E402
+from imu_learn.fuse.experiments.batch import run_experiment  # noqa: E402
 from imu_learn.fuse.score import score  # noqa: E402
 
 
@@ -198,7 +198,7 @@ def test_config_rejects_unknown_keys_inputs_and_kinds(tmp_path):
 def test_every_shipped_fusion_config_loads(path):
     """The configs whose commands docs/ quotes must parse: unknown keys, inputs or kinds are errors."""
     from imu_learn.cli.fuse import config_kind
-    from imu_learn.fuse import gnss_run
+    from imu_learn.fuse.experiments import gnss as gnss_run
 
     if config_kind(path) is None:
         cfg = load(path)
@@ -238,7 +238,7 @@ def test_experiment_on_the_shipped_crop_writes_results_and_resumes(shipped, tmp_
 
 
 def test_a_changed_scenario_reruns_only_its_own_runs(shipped, tmp_path, monkeypatch):
-    import imu_learn.fuse.run as run_mod
+    import imu_learn.fuse.experiments.batch as run_mod
 
     rec = RecordingSpec(CROP, "euroc", CROP + "/mav0/state_groundtruth_estimate0/data.csv")
     a, b = ScenarioSpec("a", "position", 1.0, 0.1), ScenarioSpec("b", "position", 0.5, 0.1)
@@ -255,7 +255,7 @@ def test_a_changed_scenario_reruns_only_its_own_runs(shipped, tmp_path, monkeypa
 
 
 def test_a_graph_gtsam_cannot_solve_is_recorded_as_failed_and_the_rest_runs(shipped, tmp_path, monkeypatch):
-    import imu_learn.fuse.run as run_mod
+    import imu_learn.fuse.experiments.batch as run_mod
 
     real = run_mod.fuse
 
@@ -320,7 +320,7 @@ def test_trajectories_read_by_evo_give_the_reported_rmse(shipped, crop, tmp_path
 
 
 def test_a_recording_can_name_its_own_model_and_a_missing_one_fails_before_any_run(shipped, tmp_path):
-    from imu_learn.fuse.run import artefact_of, run_hash
+    from imu_learn.fuse.experiments.batch import artefact_of, run_hash
 
     own = RecordingSpec(CROP, "euroc", CROP + "/mav0/state_groundtruth_estimate0/data.csv", checkpoint=str(tmp_path / "nope.pt"))
     other = RecordingSpec(CROP, "euroc", CROP + "/mav0/state_groundtruth_estimate0/data.csv")
@@ -336,7 +336,7 @@ def test_a_recording_can_name_its_own_model_and_a_missing_one_fails_before_any_r
 
 
 def test_simulated_aiding_runs_once_per_noise_seed_and_the_table_gives_mean_and_std(shipped, tmp_path):
-    from imu_learn.fuse.run import seeds_of
+    from imu_learn.fuse.experiments.batch import seeds_of
 
     rec = RecordingSpec(CROP, "euroc", CROP + "/mav0/state_groundtruth_estimate0/data.csv")
     cfg = validate(FuseConfig(init="groundtruth", name="t", data_root=str(shipped), inputs=["raw"], recordings=[rec], seeds=[3, 7],
@@ -387,7 +387,7 @@ def test_any_evaluate_method_that_outputs_imu_is_an_input_and_end_to_end_is_not(
 def test_nhc_scenario_adds_the_constraint_and_leaves_other_runs_hashes_alone(shipped, tmp_path, monkeypatch):
     """scenarios.nhc_sigma_mps > 0 adds the non-holonomic constraint at the keyframes (an extra_factors
     hook reaches fuse); 0 (the default) leaves the run's hash as it was before the option existed."""
-    import imu_learn.fuse.run as run_mod
+    import imu_learn.fuse.experiments.batch as run_mod
 
     rec = RecordingSpec(CROP, "euroc", CROP + "/mav0/state_groundtruth_estimate0/data.csv")
     plain, nhc = ScenarioSpec("p", "position", 1.0, 0.1), ScenarioSpec("n", "position", 1.0, 0.1, nhc_sigma_mps=0.05)

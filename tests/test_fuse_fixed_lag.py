@@ -12,9 +12,9 @@ from imu_learn.data.synthetic import spin_and_climb  # noqa: E402
 from imu_learn.errors import ConfigError, InvalidInputError  # noqa: E402
 from imu_learn.fuse import PositionFixes, graph  # noqa: E402
 from imu_learn.fuse.aiding import RelativePoses  # noqa: E402
-from imu_learn.fuse.config import FuseConfig, RecordingSpec, ScenarioSpec, load, validate  # noqa: E402
+from imu_learn.fuse.experiments.config import FuseConfig, RecordingSpec, ScenarioSpec, load, validate  # noqa: E402
 from imu_learn.fuse.graph import DEFAULT_LAG_S, SETTLE_S, IncrementalFusion, fuse  # noqa: E402
-from imu_learn.fuse.run import ESTIMATOR, estimator, run_experiment, run_hash  # noqa: E402
+from imu_learn.fuse.experiments.batch import ESTIMATOR, estimator, run_experiment, run_hash  # noqa: E402
 
 
 def noisy_climb(seconds: float, gap=None, seed: int = 3):

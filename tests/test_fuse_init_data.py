@@ -15,11 +15,11 @@ from crops import CROP  # noqa: E402
 from imu_learn.core.quat import wxyz_to_xyzw  # noqa: E402
 from imu_learn.fuse import init as initial  # noqa: E402
 from imu_learn.fuse.aiding import simulate_position, simulate_relative_pose  # noqa: E402
-from imu_learn.fuse.config import FuseConfig, RecordingSpec, ScenarioSpec, validate  # noqa: E402
+from imu_learn.fuse.experiments.config import FuseConfig, RecordingSpec, ScenarioSpec, validate  # noqa: E402
 from imu_learn.fuse.graph import PriorSigmas  # noqa: E402
 from imu_learn.fuse.inmotion import data_start  # noqa: E402
 from imu_learn.fuse.noise import ImuNoise  # noqa: E402
-from imu_learn.fuse.run import run_experiment, run_hash  # noqa: E402
+from imu_learn.fuse.experiments.batch import run_experiment, run_hash  # noqa: E402
 from imu_learn.fuse.score import umeyama  # noqa: E402
 
 
@@ -157,6 +157,8 @@ def test_cli_init_overrides_the_config_and_is_refused_where_it_does_not_apply(sh
     online = json.loads((tmp_path / "o" / "online.json").read_text())["runs"]["MH_04_difficult|g|raw|s0"]
     assert "yaw hypotheses" in online["init"]["heading_source"] and online["causal"]["pos_rmse_m"] < 1.0
     capsys.readouterr()
-    assert fuse_main(["--input", str(shipped / CROP), "--aiding", str(cfg), "--aiding-kind", "position",
-                      "--init", "data", "--out", str(tmp_path / "n")]) == 2
-    assert "--init: only with --config" in capsys.readouterr().err
+    from imu_learn.cli import main
+
+    with pytest.raises(SystemExit):  # the navigator has no --init: it always starts from the data
+        main(["navigate", "--input", str(shipped / CROP), "--aiding", str(cfg), "--aiding-kind", "position",
+              "--init", "data", "--out", str(tmp_path / "n")])

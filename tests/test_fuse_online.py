@@ -14,7 +14,7 @@ from imu_learn.cli.fuse import parser  # noqa: E402
 from imu_learn.errors import ConfigError, InvalidInputError  # noqa: E402
 from imu_learn.fuse import PositionFixes, apply_outages, fuse, simulate_relative_pose  # noqa: E402
 from imu_learn.fuse.graph import IncrementalFusion  # noqa: E402
-from imu_learn.fuse.online import (  # noqa: E402
+from imu_learn.fuse.experiments.online import (  # noqa: E402
     CausalStepper,
     WindowedStepper,
     load_causal_model,
@@ -23,7 +23,7 @@ from imu_learn.fuse.online import (  # noqa: E402
 )
 from imu_learn.infer.refine import refine_arrays  # noqa: E402
 from imu_learn.nn.model import ImuRefiner, ModelConfig  # noqa: E402
-from imu_learn.train.checkpoint import save_checkpoint  # noqa: E402
+from imu_learn.infer.checkpoint import save_checkpoint  # noqa: E402
 
 torch.set_num_threads(1)
 
@@ -194,8 +194,8 @@ def test_cli_online_streams_raw_and_a_causal_model_and_writes_online_json(shippe
     # iSAM2 updates: at every 1 Hz fix but the one at sample 0 (it joins the priors), and at the end
     assert raw["update"]["count"] == raw["aiding_count"]
     # the same causal RMSE as the batch run of this recording and aiding
-    from imu_learn.fuse.config import load
-    from imu_learn.fuse.run import aiding_rng, load_recording_for_fusion, make_aiding
+    from imu_learn.fuse.experiments.config import load
+    from imu_learn.fuse.experiments.batch import aiding_rng, load_recording_for_fusion, make_aiding
     from imu_learn.fuse.score import score
 
     cfg = load(cfg_file)
@@ -247,6 +247,9 @@ def test_help_documents_every_option_and_gives_an_example(capsys):
     for o in options:
         assert o in text
     assert "examples:" in text and "imu-learn fuse --config configs/fuse_euroc.toml" in text and "--online" in text
+    # at most 20 options, each with one meaning; no mode of another command, no bench script
+    assert len([a for a in ap._actions if a.help != "==SUPPRESS=="]) <= 20
+    assert "bench/" not in text and "imu-learn navigate" in text and "--aiding" not in text
 
 
 # --------------------------------------------------------------------------------------------

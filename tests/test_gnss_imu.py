@@ -396,7 +396,7 @@ def synthetic_drive(tmp_path: Path, heading_deg: float = 30.0, seconds: float = 
 
 
 def test_experiment_on_a_synthetic_drive(tmp_path):
-    from imu_learn.fuse import gnss_run
+    from imu_learn.fuse.experiments import gnss as gnss_run
 
     synthetic_drive(tmp_path)
     cfg = gnss_run.GnssRunConfig(name="synthetic", data_root=str(tmp_path), imu="rec/imu.csv", pos="rec/gnss.pos",

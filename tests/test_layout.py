@@ -135,9 +135,9 @@ sys.meta_path.insert(0, NoTorch())
 
 
 @pytest.mark.parametrize("module", [
-    "imu_learn", "imu_learn.cli", "imu_learn.fuse", "imu_learn.fuse.run", "imu_learn.fuse.config",
+    "imu_learn", "imu_learn.cli", "imu_learn.fuse", "imu_learn.fuse.experiments.batch", "imu_learn.fuse.experiments.config",
     "imu_learn.data.formats", "imu_learn.data.splits", "imu_learn.data.labels", "imu_learn.data.cache",
-    "imu_learn.eval.metrics", "imu_learn.train.config", "imu_learn.baselines.registry",
+    "imu_learn.score.metrics", "imu_learn.train.config", "imu_learn.baselines.registry",
 ])
 def test_imports_without_torch(module):
     """The readers, labels, configs, metrics and fusion import with torch absent (the `fuse` extra)."""

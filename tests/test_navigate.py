@@ -1,4 +1,4 @@
-"""``imu-learn fuse --input``: a recording navigated with real aiding and no ground truth
+"""``imu-learn navigate``: a recording navigated with real aiding and no ground truth
 (imu_learn.fuse.navigate), its aiding reader (fuse/tum.py), extrinsic reader (fuse/extrinsics.py)
 and data-derived first state (fuse/init.py). Ground truth is used here only to make aiding and to
 check the answer, never by the navigator (its file is left out of the recording it reads)."""
@@ -257,7 +257,7 @@ def test_cli_navigates_the_crop_without_ground_truth(crop_without_groundtruth, t
 
     monkeypatch.setattr(gt_module, "read_groundtruth", no_groundtruth)
     out = tmp_path / "out"
-    rc = main(["fuse", "--input", str(rec), "--aiding", str(tum), "--aiding-kind", kind, "--extrinsics", str(yaml),
+    rc = main(["navigate", "--input", str(rec), "--aiding", str(tum), "--aiding-kind", kind, "--extrinsics", str(yaml),
                "--out", str(out)])
     cap = capsys.readouterr()
     assert rc == 0, cap.err
@@ -278,7 +278,7 @@ def test_cli_navigates_the_crop_without_ground_truth(crop_without_groundtruth, t
 def test_cli_scores_with_groundtruth_and_gaps(crop_without_groundtruth, tmp_path, capsys):
     rec, tum, yaml = crop_without_groundtruth
     out = tmp_path / "out"
-    rc = main(["fuse", "--input", str(rec), "--aiding", str(tum), "--aiding-kind", "relative-pose", "--extrinsics",
+    rc = main(["navigate", "--input", str(rec), "--aiding", str(tum), "--aiding-kind", "relative-pose", "--extrinsics",
                str(yaml), "--out", str(out), "--groundtruth", str(SHIPPED / CROP / GT_REL), "--gaps", "20:10,40:5"])
     cap = capsys.readouterr()
     assert rc == 0, cap.err
@@ -296,22 +296,25 @@ def test_cli_scores_with_groundtruth_and_gaps(crop_without_groundtruth, tmp_path
 def test_cli_input_errors_are_one_line(crop_without_groundtruth, tmp_path, capsys):
     rec, tum, yaml = crop_without_groundtruth
     bad = write(tmp_path / "bad.tum", tum.read_text().replace("\n", "\nx 0 0 0 0 0 0 1\n", 1))
-    base = ["fuse", "--input", str(rec), "--aiding-kind", "relative-pose", "--out", str(tmp_path / "o")]
+    base = ["navigate", "--input", str(rec), "--aiding-kind", "relative-pose", "--out", str(tmp_path / "o")]
     assert main(base + ["--aiding", str(bad), "--extrinsics", str(yaml)]) == 2
     err = capsys.readouterr().err
-    assert err == (f"imu-learn fuse: error: NotNumericError: {bad}:2: column 1 (t): 'x' is not a number of seconds\n")
+    assert err == (f"imu-learn navigate: error: NotNumericError: {bad}:2: column 1 (t): 'x' is not a number of seconds\n")
     late = write(tmp_path / "late.tum", "1.0 0 0 0 0 0 0 1\n2.0 0 0 0 0 0 0 1\n")
     assert main(base + ["--aiding", str(late)]) == 2
     assert "AidingOverlapError" in capsys.readouterr().err
     no_tbs = write(tmp_path / "cam.yaml", "sensor_type: camera\n")
     assert main(base + ["--aiding", str(tum), "--extrinsics", str(no_tbs)]) == 2
-    assert capsys.readouterr().err.startswith(f"imu-learn fuse: error: ExtrinsicsError: {no_tbs}: no T_BS entry")
-    assert main(["fuse", "--input", str(rec), "--aiding", str(tum)]) == 2
+    assert capsys.readouterr().err.startswith(f"imu-learn navigate: error: ExtrinsicsError: {no_tbs}: no T_BS entry")
+    assert main(["navigate", "--input", str(rec), "--aiding", str(tum)]) == 2
     assert "--aiding-kind" in capsys.readouterr().err
-    assert main(["fuse", "--config", str(tmp_path / "x.toml"), "--aiding-kind", "pose"]) == 2
-    assert "--aiding-kind: only with --input" in capsys.readouterr().err
-    with pytest.raises(SystemExit) as e:
-        main(["fuse", "--input", str(rec), "--config", str(tmp_path / "x.toml")])
+    # imu-learn fuse runs a config's experiments: a recording there is a one-line error naming navigate
+    assert main(["fuse", "--input", str(rec), "--aiding", str(tum), "--aiding-kind", "pose"]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and err.startswith("imu-learn fuse: error: ConfigError: --input:")
+    assert "imu-learn navigate" in err
+    with pytest.raises(SystemExit) as e:  # and the navigator takes no config
+        main(["navigate", "--input", str(rec), "--config", str(tmp_path / "x.toml")])
     assert e.value.code == 2
     assert not (tmp_path / "o").exists()
 
@@ -324,7 +327,7 @@ def test_real_orbslam2_trajectory_on_mh04(tmp_path, capsys):
     rec = SHARED / "euroc" / "MH_04_difficult"
     vo = SHARED / "euroc-vo" / "orbslam2_stereo" / "trial0" / "MH04.txt"
     out = tmp_path / "out"
-    rc = main(["fuse", "--input", str(rec), "--aiding", str(vo), "--aiding-kind", "relative-pose", "--extrinsics",
+    rc = main(["navigate", "--input", str(rec), "--aiding", str(vo), "--aiding-kind", "relative-pose", "--extrinsics",
                str(SHARED / "euroc-vo" / "cam0_sensor.yaml"), "--out", str(out), "--groundtruth", str(rec / GT_REL)])
     assert rc == 0, capsys.readouterr().err
     sc = json.loads((out / "summary.json").read_text())["scores"]
@@ -378,7 +381,7 @@ def car_recording(root: Path, yaw_deg: float = 40.0, roll_deg: float = 3.0, seed
 def test_position_aiding_sets_the_heading_from_the_track(tmp_path, capsys):
     rec, fixes, truth = car_recording(tmp_path, yaw_deg=40.0)
     out = tmp_path / "out"
-    rc = main(["fuse", "--input", str(rec), "--aiding", str(fixes), "--aiding-kind", "position", "--out", str(out),
+    rc = main(["navigate", "--input", str(rec), "--aiding", str(fixes), "--aiding-kind", "position", "--out", str(out),
                "--groundtruth", str(truth)])
     assert rc == 0, capsys.readouterr().err
     s = json.loads((out / "summary.json").read_text())
@@ -413,7 +416,7 @@ def test_rtklib_fixes_are_position_aiding_with_their_own_sigmas(tmp_path, capsys
         rows.append(f"{stamp} {x[0]:.4f} {x[1]:.4f} {x[2]:.4f} 1 20 0.0100 0.0100 0.0100 0.0000 0.0000 0.0000 0.00 10.0")
     pos = write(tmp_path / "car.pos", "\n".join(rows) + "\n")
     out = tmp_path / "out"
-    rc = main(["fuse", "--input", str(rec), "--aiding", str(pos), "--aiding-format", "rtklib", "--aiding-kind",
+    rc = main(["navigate", "--input", str(rec), "--aiding", str(pos), "--aiding-format", "rtklib", "--aiding-kind",
                "position", "--out", str(out), "--groundtruth", str(truth), "--gaps", "8:1"])
     assert rc == 0, capsys.readouterr().err
     s = json.loads((out / "summary.json").read_text())
@@ -422,8 +425,8 @@ def test_rtklib_fixes_are_position_aiding_with_their_own_sigmas(tmp_path, capsys
     assert yaw == pytest.approx(-120.0, abs=2.0)
     assert s["scores"]["smoothed"]["pos_rmse_m"] < 0.05
     with pytest.raises(SystemExit):  # rtklib holds positions only
-        main(["fuse", "--input", str(rec), "--aiding", str(pos), "--aiding-format", "rtklib", "--aiding-kind", "px"])
-    assert main(["fuse", "--input", str(rec), "--aiding", str(pos), "--aiding-format", "rtklib", "--aiding-kind",
+        main(["navigate", "--input", str(rec), "--aiding", str(pos), "--aiding-format", "rtklib", "--aiding-kind", "px"])
+    assert main(["navigate", "--input", str(rec), "--aiding", str(pos), "--aiding-format", "rtklib", "--aiding-kind",
                  "pose", "--out", str(tmp_path / "o2")]) == 2
     assert "rtklib holds positions" in capsys.readouterr().err
 
@@ -443,7 +446,7 @@ def test_cli_learned_input_covariance_and_displacements(crop_without_groundtruth
     rec, tum, yaml = crop_without_groundtruth
     cov = SHIPPED.parent / "models" / "euroc_adis16448_cov.pt"
     out = tmp_path / "out"
-    rc = main(["fuse", "--input", str(rec), "--aiding", str(tum), "--aiding-kind", "pose", "--extrinsics", str(yaml),
+    rc = main(["navigate", "--input", str(rec), "--aiding", str(tum), "--aiding-kind", "pose", "--extrinsics", str(yaml),
                "--checkpoint", str(cov), "--displacement", str(tmp_path / "tlio-style.pt"), "--out", str(out)])
     cap = capsys.readouterr()
     assert rc == 0, cap.err
@@ -452,7 +455,7 @@ def test_cli_learned_input_covariance_and_displacements(crop_without_groundtruth
     assert "learned covariance" in s["imu_input"] and "displacements of tlio-style.pt" in s["imu_input"]
     assert s["counts"]["extra_factors"] > 0
     assert aligned_rmse(out / "smoothed.tum", SHIPPED / CROP / GT_REL) < 0.1
-    rc = main(["fuse", "--input", str(rec), "--aiding", str(tum), "--aiding-kind", "pose", "--extrinsics", str(yaml),
+    rc = main(["navigate", "--input", str(rec), "--aiding", str(tum), "--aiding-kind", "pose", "--extrinsics", str(yaml),
                "--displacement", str(tmp_path / "missing.pt"), "--out", str(tmp_path / "o2")])
     assert rc == 2 and "missing.pt not found" in capsys.readouterr().err
 
@@ -466,7 +469,7 @@ def test_cli_displacement_takes_the_zero_displacement_floor(crop_without_groundt
     m.save(tmp_path / "zero-displacement.json")
     rec, tum, yaml = crop_without_groundtruth
     out = tmp_path / "out"
-    rc = main(["fuse", "--input", str(rec), "--aiding", str(tum), "--aiding-kind", "pose", "--extrinsics", str(yaml),
+    rc = main(["navigate", "--input", str(rec), "--aiding", str(tum), "--aiding-kind", "pose", "--extrinsics", str(yaml),
                "--displacement", str(tmp_path / "zero-displacement.json"), "--out", str(out)])
     assert rc == 0, capsys.readouterr().err
     s = json.loads((out / "summary.json").read_text())
@@ -483,7 +486,7 @@ def test_cli_calibration_applies_a_saved_floor_fit(crop_without_groundtruth, tmp
     m.tau = 0.5
     m.save(tmp_path / "timing.json")
     rec, tum, yaml = crop_without_groundtruth
-    base = ["fuse", "--input", str(rec), "--aiding", str(tum), "--aiding-kind", "pose", "--extrinsics", str(yaml)]
+    base = ["navigate", "--input", str(rec), "--aiding", str(tum), "--aiding-kind", "pose", "--extrinsics", str(yaml)]
     assert main([*base, "--calibration", str(tmp_path / "timing.json"), "--out", str(tmp_path / "o")]) == 0
     capsys.readouterr()
     s = json.loads((tmp_path / "o" / "summary.json").read_text())
@@ -520,7 +523,7 @@ def test_variance_scale_multiplies_the_learned_variances_and_needs_a_covariance_
         with pytest.raises(ConfigError, match="--variance-scale"):
             NavigateOptions(aiding_kind="pose", variance_scale=bad).check()
     rec, tum, yaml = crop_without_groundtruth
-    base = ["fuse", "--input", str(rec), "--aiding", str(tum), "--aiding-kind", "pose", "--extrinsics", str(yaml)]
+    base = ["navigate", "--input", str(rec), "--aiding", str(tum), "--aiding-kind", "pose", "--extrinsics", str(yaml)]
     assert main([*base, "--checkpoint", str(models / "euroc_adis16448.pt"), "--variance-scale", "0.1,0.2",
                  "--out", str(tmp_path / "o")]) == 2
     assert "has no covariance head" in capsys.readouterr().err

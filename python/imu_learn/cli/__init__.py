@@ -5,7 +5,9 @@
     imu-learn evaluate          fit every method on a train split and score it on a test split
     imu-learn refine            write refined IMU in the input's own format
     imu-learn export            TorchScript / ONNX of a checkpoint
-    imu-learn fuse              fuse IMU with aiding in a factor graph
+    imu-learn fuse              fusion experiments of a config (factor graph)
+    imu-learn navigate          navigate a recording with its aiding file
+    imu-learn groundtruth       check a recording's ground truth against its own IMU
     imu-learn checkpoint        inspect (info) or strip a checkpoint
 
 ``python -m imu_learn.<stage>`` is the same as ``imu-learn <stage>``. Each subcommand lives in

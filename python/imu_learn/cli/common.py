@@ -34,7 +34,9 @@ COMMANDS: Dict[str, str] = {
     "evaluate": "fit every method on a train split, score it on a test split",
     "refine": "write refined IMU with a checkpoint, in the input's own format",
     "export": "export a checkpoint to TorchScript and ONNX",
-    "fuse": "fuse IMU with aiding in a GTSAM factor graph",
+    "fuse": "fusion experiments of a config: IMU with aiding in a GTSAM factor graph",
+    "navigate": "navigate a recording with its aiding file (no ground truth)",
+    "groundtruth": "check a recording's ground truth against its own IMU (frame, time offset, lever arm)",
     "checkpoint": "inspect (info) or strip a checkpoint",
 }
 

@@ -1,6 +1,6 @@
 """Navigate a user's recording: IMU fused with real aiding, no ground truth at run time.
 
-``imu-learn fuse --input REC --aiding FILE --aiding-kind {position,pose,relative-pose}`` runs
+``imu-learn navigate --input REC --aiding FILE --aiding-kind {position,pose,relative-pose}`` runs
 :func:`navigate`: it reads the recording's IMU only (the layouts of :mod:`imu_learn.data.formats`;
 ground truth is never opened), the aiding file (:mod:`.tum`), the extrinsic (:mod:`.extrinsics`),
 optionally refines the IMU with a checkpoint (:mod:`imu_learn.infer.refine`), builds the first state
@@ -398,7 +398,7 @@ def refined_input(checkpoint: Optional[Path], gyro: np.ndarray, acc: np.ndarray,
             raise ConfigError("--variance-scale scales a covariance head's variances: it needs --checkpoint")
         return gyro, acc, None, "raw"
     from imu_learn.infer.windowing import apply
-    from imu_learn.train.checkpoint import load_model
+    from imu_learn.infer.checkpoint import load_model
 
     model = load_model(Path(checkpoint))
     if model.cov_head is None:
@@ -449,14 +449,30 @@ def displacement_hook(path: Path, t_ns: np.ndarray, gyro: np.ndarray, acc: np.nd
     return displacement_factors_for(model, t_ns, np.ascontiguousarray(gyro), np.ascontiguousarray(acc), update_s)
 
 
-def navigate(input: Path, aiding_file: Path, out: Path, opts: NavigateOptions = NavigateOptions(),
-             fmt: str = "auto", extrinsics: Optional[Path] = None, checkpoint: Optional[Path] = None,
-             groundtruth: Optional[Path] = None, displacement: Optional[Path] = None,
-             calibration: Optional[Path] = None) -> Dict[str, object]:
-    """Fuse the recording ``input``'s IMU with ``aiding_file`` and write ``out``/{causal.tum,
-    smoothed.tum, plot.png, summary.json}; returns the summary (module docstring)."""
+@dataclass(frozen=True)
+class Sources:
+    """The files :func:`navigate` reads: the recording ``input`` (its IMU only, layout ``fmt``), the
+    ``aiding`` file, and optionally the aiding sensor's ``extrinsics``, a ``checkpoint`` refining the
+    IMU (or a ``calibration`` fit of ``imu-learn evaluate``), a ``displacement`` model, and a
+    ``groundtruth`` file to score the result with afterwards."""
+
+    input: Path
+    aiding: Path
+    fmt: str = "auto"
+    extrinsics: Optional[Path] = None
+    checkpoint: Optional[Path] = None
+    groundtruth: Optional[Path] = None
+    displacement: Optional[Path] = None
+    calibration: Optional[Path] = None
+
+
+def navigate(src: Sources, out: Path, opts: NavigateOptions = NavigateOptions()) -> Dict[str, object]:
+    """Fuse the recording's IMU with its aiding file and write ``out``/{causal.tum, smoothed.tum,
+    plot.png, summary.json}; returns the summary (module docstring)."""
     from .graph import PriorSigmas, chain_factors, fuse
 
+    input, aiding_file, fmt, extrinsics = src.input, src.aiding, src.fmt, src.extrinsics
+    checkpoint, groundtruth, displacement, calibration = src.checkpoint, src.groundtruth, src.displacement, src.calibration
     t_start = time.perf_counter()
     opts.check()
     if opts.aiding_kind != "position" and extrinsics is None:
@@ -542,7 +558,7 @@ def navigate(input: Path, aiding_file: Path, out: Path, opts: NavigateOptions = 
     kf_t = t_fused[res.kf_idx]
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
-    from .run import write_trajectory
+    from .experiments.batch import write_trajectory
 
     write_trajectory(out / "causal.tum", kf_t, res.causal_p, res.causal_R)
     write_trajectory(out / "smoothed.tum", kf_t, res.smoothed_p, res.smoothed_R)

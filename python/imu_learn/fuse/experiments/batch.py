@@ -30,7 +30,7 @@ from imu_learn.errors import ConfigError, InvalidInputError
 from imu_learn.util.atomic import atomic_write_path, atomic_write_text
 from imu_learn.util.digest import file_sha256
 
-from .aiding import (
+from ..aiding import (
     aiding_gaps,
     apply_outages,
     bag_position_source,
@@ -41,12 +41,12 @@ from .aiding import (
     simulate_relative_pose,
 )
 from .config import LEARNED_COV_INPUTS, LEARNED_INPUT, FuseConfig, RecordingSpec, ScenarioSpec
-from .displacement import FACTOR_INPUTS, TLIO_INPUT, displacement_factors_for
-from .graph import SETTLE_S, chain_factors, fuse
-from .inmotion import AlignSettings, crop, data_start, from_sample
-from .noise import ImuNoise
-from .plots import plot_setting, runs_of
-from .score import score
+from ..displacement import FACTOR_INPUTS, TLIO_INPUT, displacement_factors_for
+from ..graph import SETTLE_S, chain_factors, fuse
+from ..inmotion import AlignSettings, crop, data_start, from_sample
+from ..noise import ImuNoise
+from ..plots import plot_setting, runs_of
+from ..score import score
 
 # Changes with the estimator in graph.py, so results of an older estimator are not resumed.
 ESTIMATOR = "isam2-gn-at-aiding-resolve-after-2s-qr+lm-qr"
@@ -181,7 +181,7 @@ def load_processor(name: str, path: str, cache: Dict[Tuple[str, str], object]) -
                     f" (python -m imu_learn.evaluate with the '{name}' method writes it to <report>/methods/)")
             raise FileNotFoundError(f"{name}: {path} not found{hint}")
         if name == "proposed" or name in LEARNED_COV_INPUTS:
-            from imu_learn.train.checkpoint import load_model
+            from imu_learn.infer.checkpoint import load_model
 
             model = load_model(Path(path))
             if name in LEARNED_COV_INPUTS and model.cov_head is None:
@@ -216,7 +216,7 @@ def bias_prior_mean(scn: ScenarioSpec, seq, gyro: np.ndarray, acc: np.ndarray, g
     if scn.bias_prior == "zero":
         return None
     from imu_learn.data.types import Segment
-    from imu_learn.eval.metrics import fit_startup_bias
+    from imu_learn.score.metrics import fit_startup_bias
 
     bg, ba = fit_startup_bias(Segment(seq.name, seq.t_ns, gyro, acc, seq.p, seq.v, seq.q_wxyz),
                               scn.startup_bias_s, gravity=gravity)
@@ -471,7 +471,7 @@ def run_one(cfg: FuseConfig, out: Path, seq, noise: ImuNoise, R0: np.ndarray, sc
                                      cfg.displacement_update_s))
     nhc = None
     if scn.nhc_sigma_mps > 0:  # wheeled platform: the non-holonomic constraint at every keyframe
-        from .nhc import NhcSettings, nhc_callback
+        from ..nhc import NhcSettings, nhc_callback
 
         nhc = nhc_callback(NhcSettings(scn.nhc_sigma_mps, scn.nhc_sigma_mps), np.ascontiguousarray(gyro[s0:]))
     extra = chain_factors(hook, nhc)
@@ -500,8 +500,8 @@ def first_state(cfg: FuseConfig, seq, noise: ImuNoise, R0: np.ndarray, aiding, g
     """The run's first fused sample and state: ground truth's (``cfg.init = "groundtruth"``, the
     graph's tight default prior) or the data's (:func:`imu_learn.fuse.inmotion.data_start`)."""
     if cfg.init == "groundtruth":
-        from .graph import PriorSigmas
-        from .inmotion import DataStart
+        from ..graph import PriorSigmas
+        from ..inmotion import DataStart
 
         return DataStart(0, 0, R0, seq.p[0], seq.v[0], np.zeros(6) if bias0 is None else bias0, PriorSigmas(), False,
                          {"source": "ground truth: pose and velocity of the first sample"})
@@ -572,7 +572,7 @@ def first_state_label(cfg: FuseConfig) -> str:
     """What every table says of its runs' first state."""
     if cfg.init == "groundtruth":
         return ("First state: **a prior from ground truth** (pose and velocity at the first sample; the controlled "
-                "setting, `init = \"groundtruth\"`; the default `init = \"data\"` and `imu-learn fuse --input` start from "
+                "setting, `init = \"groundtruth\"`; the default `init = \"data\"` and `imu-learn navigate` start from "
                 "the data alone).")
     return ("First state: from the data alone (`init = \"data\"`, fuse/inmotion.py): levelled from the accelerometer; "
             "position fixes: heading from yaw hypotheses fitted to the first fixes, the run scored from the end of that "

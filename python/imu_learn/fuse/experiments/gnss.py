@@ -27,7 +27,6 @@ from __future__ import annotations
 import json
 import logging
 import math
-import sys
 import time
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
@@ -41,10 +40,10 @@ from imu_learn.errors import ConfigError, InvalidInputError
 from imu_learn.settings import DATA_ROOT_ENV, from_dict, merge, nest, read_toml
 from imu_learn.util.atomic import atomic_write_text
 
-from .graph import IncrementalFusion, PriorSigmas, chain_factors
-from .nhc import NhcSettings, calibrate_lever, nhc_callback
-from .noise import ImuNoise
-from .rtklib import GnssFixes, RtkSolution, fixes_on_imu, normal_gravity, read_pos
+from ..graph import IncrementalFusion, PriorSigmas, chain_factors
+from ..nhc import NhcSettings, calibrate_lever, nhc_callback
+from ..noise import ImuNoise
+from ..rtklib import GnssFixes, RtkSolution, fixes_on_imu, normal_gravity, read_pos
 
 log = logging.getLogger(__name__)
 VARIANTS = ("raw", "raw+nhc")
@@ -525,8 +524,3 @@ def summary_lines(res: Dict[str, object], cfg: GnssRunConfig) -> List[str]:
                      f"{_f(r['live']['outside_rms_m'])} m ({r['seconds']:.0f} s)")
     return lines
 
-
-if __name__ == "__main__":  # a thin shim: the experiment is ``imu-learn fuse --config <gnss-outages config>``
-    from imu_learn.cli import main
-
-    sys.exit(main(["fuse", *sys.argv[1:]]))

@@ -50,8 +50,8 @@ import numpy as np
 
 from imu_learn.errors import ConfigError, InvalidInputError
 
-from .graph import DEFAULT_LAG_S, FusionResult, IncrementalFusion, PriorSigmas
-from .noise import ImuNoise
+from ..graph import DEFAULT_LAG_S, FusionResult, IncrementalFusion, PriorSigmas
+from ..noise import ImuNoise
 
 log = logging.getLogger(__name__)
 
@@ -120,7 +120,7 @@ class CausalStepper:
 def load_causal_model(path: Path, hint: str = ""):
     """A causal checkpoint's model; a bidirectional one is a :class:`ConfigError` (``hint`` is
     appended to its message)."""
-    from imu_learn.train.checkpoint import load_model
+    from imu_learn.infer.checkpoint import load_model
 
     model = load_model(Path(path))
     if not model.cfg.causal:
@@ -257,7 +257,7 @@ class WindowedStepper:
 def load_learned_model(path: Path):
     """The ``learned`` input's model: a bidirectional refiner with a covariance head; anything else is a
     :class:`ConfigError`."""
-    from imu_learn.train.checkpoint import load_model
+    from imu_learn.infer.checkpoint import load_model
 
     model = load_model(Path(path))
     if model.cfg.causal or getattr(model, "cov_head", None) is None:
@@ -444,8 +444,8 @@ def score_online(res: OnlineResult, t_ns: np.ndarray, p_gt: np.ndarray, q_wxyz_g
     keyframes, drift in each outage), plus the position RMSE of the causal state at every sample;
     from sample ``first`` on (a data start's alignment window is not scored), SE(3)-aligned first
     with ``align`` (relative aiding started from the data; the per-sample RMSE is then left out)."""
-    from .inmotion import crop
-    from .score import score
+    from ..inmotion import crop
+    from ..score import score
 
     s = dict(score(crop(res.as_fusion_result(), 0, first), t_ns, p_gt, q_wxyz_gt, outages, align=align)["causal"])
     if not align:
@@ -481,7 +481,7 @@ def _select(names: Optional[Sequence[str]], available: List[str], what: str) -> 
 def _causal_models(cfg, specs: list, checkpoint: Optional[str]) -> Tuple[Dict[str, object], Dict[str, str]]:
     """Every recording's causal model for ``proposed``, loaded (and checked causal) before any run:
     the models by checkpoint path, and each recording's checkpoint path."""
-    from . import run as runmod
+    from . import batch as runmod
 
     models: Dict[str, object] = {}
     ckpt_of: Dict[str, str] = {}
@@ -499,7 +499,7 @@ def _causal_models(cfg, specs: list, checkpoint: Optional[str]) -> Tuple[Dict[st
 def _learned_models(cfg, specs: list) -> Tuple[Dict[str, object], Dict[str, str]]:
     """Every recording's ``learned`` model (the config's covariance_checkpoint: bidirectional, with a
     covariance head), loaded and checked before any run: the models by path, and each recording's path."""
-    from . import run as runmod
+    from . import batch as runmod
 
     models: Dict[str, object] = {}
     ckpt_of: Dict[str, str] = {}
@@ -517,8 +517,8 @@ def _displacement_hook(cfg, spec, seq, s0: int = 0) -> Optional[Callable]:
     """The ``learned`` input's displacement factors where the device has a tlio-style model (as the
     batch run adds them, on the raw IMU; the hook reads only samples before the current keyframe),
     else None."""
-    from . import run as runmod
-    from .displacement import TLIO_INPUT, displacement_factors_for
+    from . import batch as runmod
+    from ..displacement import TLIO_INPUT, displacement_factors_for
 
     path = runmod.displacement_artefact(cfg, spec)
     if not path:
@@ -534,7 +534,7 @@ def _bias_prior(cfg, scn, seq, name: str, model, refined: Dict[str, tuple]) -> O
     will see: the causal refinement of the first seconds, which refine_arrays gives (up to float32
     rounding), or for ``learned`` the windowed one, which ``apply`` gives (idem); ``refined`` caches
     them per recording."""
-    from . import run as runmod
+    from . import batch as runmod
 
     if scn.bias_prior == "zero":
         return None
@@ -578,8 +578,8 @@ def _stream_recording(cfg, spec, scns: list, inputs: Sequence[str], models: Dict
 
     from imu_learn.core.quat import wxyz_to_xyzw
 
-    from . import run as runmod
-    from .inmotion import from_sample
+    from . import batch as runmod
+    from ..inmotion import from_sample
 
     rname = Path(spec.path).name
     seq, noise, leica = runmod.load_recording_for_fusion(cfg, spec)
@@ -643,7 +643,7 @@ def run_online(cfg, out: Path, checkpoint: Optional[str] = None, recordings: Opt
     draw as the batch experiment's runs of that seed)."""
     from imu_learn.util.atomic import atomic_write_text
 
-    from . import run as runmod
+    from . import batch as runmod
 
     bad = [i for i in inputs if i not in STREAMABLE]
     if bad or not inputs:

@@ -12,7 +12,7 @@ from typing import List, Optional, Tuple
 from imu_learn.errors import ConfigError
 from imu_learn.settings import DATA_ROOT_ENV, from_dict, read_toml
 
-from .graph import DEFAULT_LAG_S
+from ..graph import DEFAULT_LAG_S
 
 # "raw+learned-cov" / "proposed+learned-cov": the raw or refined samples, each weighted in the
 # graph by its own noise variances from a refiner's covariance head (covariance_checkpoint) instead
@@ -136,7 +136,7 @@ def imu_methods() -> List[str]:
     from imu_learn.baselines.base import Method
     from imu_learn.baselines.registry import REGISTRY, load_method_class
 
-    from .displacement import FACTOR_INPUTS
+    from ..displacement import FACTOR_INPUTS
 
     names = list(INPUTS) + list(FACTOR_INPUTS)  # the raw IMU plus learned displacement factors
     for name in REGISTRY:

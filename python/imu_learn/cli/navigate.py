@@ -1,0 +1,182 @@
+"""``imu-learn navigate``: a user's recording navigated with its real aiding file, no ground truth at
+run time (:mod:`imu_learn.fuse.navigate`)."""
+from __future__ import annotations
+
+import argparse
+from dataclasses import replace
+from pathlib import Path
+from typing import Any, Callable, List, Optional, Sequence
+
+from imu_learn.cli.common import run_command
+from imu_learn.errors import ConfigError
+
+DESCRIPTION = """Navigate one recording with its real aiding file (a camera trajectory as relative or absolute
+poses, or position fixes), no ground truth needed: the first state comes from the data (attitude
+levelled from the accelerometer, heading from the first pose or from the track, position and velocity
+from the first aiding), under a loose prior, and the IMU is fused with the aiding in a GTSAM factor
+graph. Writes causal.tum and smoothed.tum (t tx ty tz qx qy qz qw, body = IMU frame), plot.png and
+summary.json to --out and prints a one-line summary; --groundtruth only scores the result afterwards.
+GNSS/IMU logs (the gnss-imu format) take --imu-rotation-rpy-deg, --imu-delay-s, --lever-arm and, on
+wheels, --nhc."""
+
+EPILOG = """examples:
+  imu-learn navigate --input <data>/euroc/MH_04_difficult --aiding <ORB-SLAM2 trajectory>.txt \\
+      --aiding-kind relative-pose --extrinsics <data>/euroc-vo/cam0_sensor.yaml \\
+      --checkpoint models/euroc_adis16448.pt --out out/MH_04
+      a recording navigated with camera poses, no ground truth
+      -> out/MH_04/{causal.tum,smoothed.tum,plot.png,summary.json}
+  imu-learn navigate --input <data>/gnss-imu/drive/imu.csv --format gnss-imu --aiding <data>/gnss-imu/drive/gnss.pos \\
+      --aiding-kind position --aiding-format rtklib --imu-rotation-rpy-deg 180,-6.79,185.35 --nhc
+      a car's IMU log with its RTKLIB solution, the non-holonomic constraint on
+"""
+
+
+def add_arguments(ap: argparse.ArgumentParser) -> None:
+    from imu_learn.fuse.navigate import AIDING_FORMATS, KINDS, NavigateOptions
+
+    d = NavigateOptions()
+    ap.add_argument("--input", type=Path, required=True, metavar="REC",
+                    help="the recording (a folder or file the loaders read, e.g. an EuRoC ASL folder); only its IMU "
+                         "is read, never its ground truth")
+    ap.add_argument("--aiding", type=Path, default=None, metavar="FILE", help="the aiding file (required)")
+    ap.add_argument("--aiding-kind", choices=KINDS, default=None,
+                    help="(required) relative-pose: between consecutive poses (any visual odometry; no world frame "
+                         "needed); pose: absolute poses in the aiding's own world, levelled at the start (a SLAM's "
+                         "globally consistent trajectory: re-anchors after gaps); position: position fixes (heading "
+                         "from the track)")
+    ap.add_argument("--out", type=Path, default=None, metavar="DIR", help="output folder (default out/<REC's name>)")
+    ap.add_argument("--format", default=None, metavar="F",
+                    help="the recording's layout (default auto: asl/euroc, tum-vi, blackbird, broad, kaist, fetch, "
+                         "rosbag, gnss-imu: an IMU .csv with its RTKLIB .csv.tag)")
+    ap.add_argument("--aiding-format", choices=AIDING_FORMATS, default=None,
+                    help="tum (t tx ty tz qx qy qz qw, seconds; default), csv (the same with commas), asl (ns, p, "
+                         "q_wxyz), rtklib (.pos; with --aiding-kind position)")
+    ap.add_argument("--checkpoint", default=None, metavar="PT",
+                    help="refine the IMU with this checkpoint before fusing (its device bias, if it carries one, is "
+                         "the bias prior; with a covariance head its per-sample variances weight the IMU)")
+    ap.add_argument("--displacement", type=Path, default=None, metavar="PT",
+                    help="a tlio-style displacement model (imu-learn evaluate --methods tlio-style writes "
+                         "<out>/methods/tlio-style.pt): its 1 s displacements of the raw IMU join the graph as "
+                         "factors; with a --checkpoint that has a covariance head this is the 'learned' input; or its "
+                         "floor <out>/methods/zero-displacement.json (the device stays put, with the fitted spread)")
+    ap.add_argument("--variance-scale", default=None, metavar="G,A",
+                    help="multiply the covariance head's per-sample gyro and acc variances by G and A (a --checkpoint "
+                         "with a covariance head only; imu_learn.fuse.variance.calibrate_model calibrates them over "
+                         "the keyframe interval)")
+    ap.add_argument("--calibration", type=Path, default=None, metavar="FILE",
+                    help="apply a fit imu-learn evaluate saved (<out>/methods/timing.json, traditional+timing.json) "
+                         "to the IMU instead of a checkpoint: the simple floor a learned input is judged against")
+    ap.add_argument("--extrinsics", type=Path, default=None, metavar="YAML",
+                    help="the aiding sensor's Kalibr/ASL sensor.yaml: T_BS, sensor to body (IMU); camera poses are "
+                         "moved into the IMU frame with it (without: the aiding is taken as body poses)")
+    ap.add_argument("--groundtruth", type=Path, default=None, metavar="FILE",
+                    help="score the result afterwards (TUM or ASL): RMSE after SE(3) alignment for camera aiding, "
+                         "without alignment for position fixes; the visual-only error beside it")
+    ap.add_argument("--keyframe-hz", type=float, default=None, metavar="HZ",
+                    help=f"keyframe grid besides the aiding's own samples (default {d.keyframe_hz:g})")
+    ap.add_argument("--gaps", default=None, metavar="START:DUR,...",
+                    help="drop the aiding inside these windows (seconds from the first IMU sample), e.g. 30:10,70:10")
+    ap.add_argument("--aiding-hz", type=float, default=None, metavar="HZ",
+                    help="thin the aiding to this rate (default: every row)")
+    ap.add_argument("--sigma-rot-deg", type=float, default=None, metavar="DEG",
+                    help=f"pose factors' rotation sigma (default relative {d.rel_sigma_rot_deg:g}, absolute "
+                         f"{d.pose_sigma_rot_deg:g})")
+    ap.add_argument("--sigma-m", type=float, default=None, metavar="M",
+                    help=f"pose factors' translation / position fixes' sigma (default relative "
+                         f"{d.rel_sigma_trans_m:g}, absolute {d.pose_sigma_m:g}, position {d.position_sigma_m:g})")
+    ap.add_argument("--max-relative-gap-s", type=float, default=None, metavar="S",
+                    help=f"consecutive poses further apart are not chained (default {d.max_relative_gap_s:g})")
+    ap.add_argument("--lag-s", type=float, default=None, metavar="S",
+                    help="the causal estimate's fixed-lag window (default: the factor graph's)")
+    ap.add_argument("--imu-rotation-rpy-deg", default=None, metavar="R,P,Y",
+                    help="the IMU's mounting: roll, pitch, yaw [deg] of the body frame relative to the IMU frame "
+                         "(Groves' convention, rtklibexplorer/GNSS_IMU's imu_misalign); gyro and acc are rotated "
+                         "into the body frame, whose x-axis the track heading and --nhc take as forward")
+    ap.add_argument("--imu-delay-s", type=float, default=None, metavar="S",
+                    help="added to every IMU stamp: a logging delay (e.g. -0.125 on rtklibexplorer's drive)")
+    ap.add_argument("--lever-arm", default=None, metavar="X,Y,Z",
+                    help="position aiding: the antenna from the IMU in the body frame [m] (instead of --extrinsics)")
+    ap.add_argument("--nhc", action="store_true", default=None,
+                    help="wheeled platforms: the non-holonomic constraint (no sideways or vertical velocity in the "
+                         f"body frame; sigma {d.nhc_sigma_lat_mps:g} / {d.nhc_sigma_vert_mps:g} m/s) at every keyframe")
+    ap.add_argument("--imu-noise", default=None, metavar="GND,AND,GRW,ARW",
+                    help="the IMU's gyro and acc noise densities and random walks (rad/s/sqrt(Hz), m/s^2/sqrt(Hz), "
+                         "rad/s^2/sqrt(Hz), m/s^3/sqrt(Hz)); default: the recording's sensor.yaml, else built in "
+                         "(EuRoC's ADIS16448)")
+    ap.add_argument("--threads", type=int, default=None, metavar="N",
+                    help="torch threads for the --checkpoint's model (default: torch's own)")
+
+
+def require_gtsam(command: str) -> None:
+    """A :class:`MissingExtraError` naming the ``fuse`` extra when GTSAM (the factor graph) is not installed."""
+    try:
+        import gtsam  # noqa: F401
+    except ImportError:
+        from imu_learn.errors import MissingExtraError
+
+        raise MissingExtraError(f"imu-learn {command} needs gtsam, the fuse extra: pip install 'imu-learn[fuse]'") from None
+
+
+def set_torch_threads(threads: Optional[int]) -> None:
+    """``torch.set_num_threads(threads)`` (nothing when None; a :class:`ConfigError` below 1)."""
+    if threads is None:
+        return
+    if threads < 1:
+        raise ConfigError(f"--threads: must be >= 1, got {threads}")
+    import torch
+
+    torch.set_num_threads(threads)
+
+
+def parser() -> argparse.ArgumentParser:
+    """The full ``imu-learn navigate`` parser (common flags included)."""
+    from imu_learn.cli.common import parser as common_parser
+
+    return common_parser("navigate")
+
+
+def options(args: argparse.Namespace):
+    """The :class:`~imu_learn.fuse.navigate.NavigateOptions` the command line asks for."""
+    from imu_learn.fuse.navigate import NavigateOptions, parse_gaps, parse_vector
+
+    if args.aiding is None or args.aiding_kind is None:
+        raise ConfigError("--input needs --aiding FILE and --aiding-kind {position,pose,relative-pose}")
+    o = NavigateOptions(aiding_kind=args.aiding_kind, aiding_format=args.aiding_format or "tum")
+    plain = {"keyframe_hz": args.keyframe_hz, "aiding_hz": args.aiding_hz, "max_relative_gap_s": args.max_relative_gap_s,
+             "lag_s": args.lag_s, "imu_delay_s": args.imu_delay_s}
+    o = replace(o, **{k: v for k, v in plain.items() if v is not None})
+    if args.gaps is not None:
+        o = replace(o, gaps=parse_gaps(args.gaps))
+    for name, n in (("imu_rotation_rpy_deg", 3), ("lever_arm", 3), ("imu_noise", 4), ("variance_scale", 2)):
+        text = getattr(args, name)
+        if text is not None:
+            o = replace(o, **{name: parse_vector(text, n, f"--{name.replace('_', '-')}")})
+    if args.nhc:
+        o = replace(o, nhc=True)
+    if args.sigma_rot_deg is not None:
+        o = replace(o, **{"rel_sigma_rot_deg" if o.aiding_kind == "relative-pose" else "pose_sigma_rot_deg":
+                          args.sigma_rot_deg})
+    if args.sigma_m is not None:
+        key = {"relative-pose": "rel_sigma_trans_m", "pose": "pose_sigma_m", "position": "position_sigma_m"}
+        o = replace(o, **{key[o.aiding_kind]: args.sigma_m})
+    return o
+
+
+def run(args: argparse.Namespace, rest: List[str], keep: Callable[[Any], None]) -> int:
+    from imu_learn.fuse.navigate import Sources, navigate, one_line
+
+    o = options(args)
+    set_torch_threads(args.threads)
+    require_gtsam("navigate")
+    out = args.out or Path("out") / args.input.name
+    keep(f"nothing is written to {out} before the fusion ends")
+    src = Sources(args.input, args.aiding, fmt=args.format or "auto", extrinsics=args.extrinsics,
+                  checkpoint=None if args.checkpoint is None else Path(args.checkpoint), groundtruth=args.groundtruth,
+                  displacement=args.displacement, calibration=args.calibration)
+    print(one_line(navigate(src, out, o)))
+    return 0
+
+
+def main(argv: Optional[Sequence[str]] = None) -> int:
+    """``imu-learn navigate ARGV``."""
+    return run_command("navigate", argv)
