@@ -134,7 +134,7 @@ fn second_difference_energy(s: &[f64], m: usize) -> f64 {
 /// at cluster sizes `m` (each 1 ≤ m ≤ n/2; see [`cluster_sizes`]). Axes run one after the other
 /// (one cumulative sum in memory), the cluster sizes in parallel.
 pub fn overlapping_adev(samples: &[f64], axes: usize, period_s: f64, m: &[usize]) -> Result<AllanDeviation> {
-    if axes == 0 || samples.len() % axes != 0 {
+    if axes == 0 || !samples.len().is_multiple_of(axes) {
         return Err(ImuError::invalid(format!(
             "samples must be (N, k) with k >= 1; got {} values for k = {axes}",
             samples.len()

@@ -131,6 +131,20 @@ pub enum ImuError {
         found: usize,
     },
 
+    /// A row (or the header) ends before a column the caller's column map reads.
+    #[error(
+        "{}:{line}:{column}: field {field:?} is missing: the line has {found} fields, the column map \
+         reads column {column}",
+        path.display()
+    )]
+    MissingColumn {
+        path: PathBuf,
+        line: usize,
+        column: usize,
+        field: String,
+        found: usize,
+    },
+
     #[error("{}:{line}:{column}: field {field:?} = {value:?} is not a number", path.display())]
     NotNumeric {
         path: PathBuf,
@@ -203,6 +217,14 @@ pub enum ImuError {
     /// left after alignment, ...).
     #[error("{0}")]
     Alignment(String),
+
+    /// A unit the caller named is not one the core knows (`what`: "time", "gyro", "acc").
+    #[error("unknown {what} unit {value:?}; expected one of {allowed}")]
+    UnknownUnit {
+        what: &'static str,
+        value: String,
+        allowed: &'static str,
+    },
 
     /// Arrays or settings passed in by the caller are inconsistent (shapes, lengths, ranges).
     #[error("{0}")]

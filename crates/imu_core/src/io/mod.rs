@@ -6,6 +6,7 @@
 //! where a complete one used to be.
 
 pub mod asl;
+pub mod columns;
 pub mod kaist;
 pub mod table;
 pub mod tum;

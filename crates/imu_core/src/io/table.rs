@@ -94,11 +94,11 @@ pub fn read_bytes(path: &Path) -> Result<Vec<u8>> {
 
 const BOM: &[u8] = b"\xEF\xBB\xBF";
 
-fn strip_bom(bytes: &[u8]) -> &[u8] {
+pub(crate) fn strip_bom(bytes: &[u8]) -> &[u8] {
     bytes.strip_prefix(BOM).unwrap_or(bytes)
 }
 
-fn strip_cr(line: &[u8]) -> &[u8] {
+pub(crate) fn strip_cr(line: &[u8]) -> &[u8] {
     line.strip_suffix(b"\r").unwrap_or(line)
 }
 
@@ -301,7 +301,7 @@ fn field_names(header: Option<&str>, spec: &TableSpec, n_columns: usize) -> Vec<
 
 /// Line-aligned byte ranges of `body`; one range for small inputs, where threads cost more than
 /// they save.
-fn split_chunks(body: &[u8]) -> Vec<(usize, usize)> {
+pub(crate) fn split_chunks(body: &[u8]) -> Vec<(usize, usize)> {
     const MIN_CHUNK: usize = 64 * 1024;
     let threads = rayon::current_num_threads().max(1);
     let n = (body.len() / MIN_CHUNK).clamp(1, threads * 4);
@@ -324,15 +324,15 @@ fn split_chunks(body: &[u8]) -> Vec<(usize, usize)> {
     out
 }
 
-fn is_blank(line: &[u8]) -> bool {
+pub(crate) fn is_blank(line: &[u8]) -> bool {
     line.iter().all(|b| b.is_ascii_whitespace())
 }
 
-fn is_comment(line: &[u8]) -> bool {
+pub(crate) fn is_comment(line: &[u8]) -> bool {
     line.iter().find(|b| !b.is_ascii_whitespace()) == Some(&b'#')
 }
 
-fn trim_field(f: &[u8]) -> &[u8] {
+pub(crate) fn trim_field(f: &[u8]) -> &[u8] {
     let start = f.iter().position(|&b| b != b' ' && b != b'\t').unwrap_or(f.len());
     let end = f
         .iter()

@@ -81,6 +81,13 @@ fn build(py: Python<'_>, err: &ImuError) -> PyResult<PyErr> {
         ImuError::Io { .. } => Ok(PyOSError::new_err(msg)),
         ImuError::Header { path, line, .. } => parse_error::<HeaderError>(py, msg, path, *line, None, None),
         ImuError::ColumnCount { path, line, .. } => parse_error::<ColumnCountError>(py, msg, path, *line, None, None),
+        ImuError::MissingColumn {
+            path,
+            line,
+            column,
+            field,
+            ..
+        } => parse_error::<ColumnCountError>(py, msg, path, *line, Some(*column), Some(field)),
         ImuError::NotNumeric {
             path,
             line,
@@ -114,6 +121,6 @@ fn build(py: Python<'_>, err: &ImuError) -> PyResult<PyErr> {
             alignment_error::<NoOverlapError>(py, &msg, imu.as_deref(), gt.as_deref())
         }
         ImuError::Alignment(_) => Ok(AlignmentError::new_err(msg)),
-        ImuError::InvalidInput(_) => Ok(InvalidInputError::new_err(msg)),
+        ImuError::InvalidInput(_) | ImuError::UnknownUnit { .. } => Ok(InvalidInputError::new_err(msg)),
     }
 }

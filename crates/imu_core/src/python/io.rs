@@ -6,6 +6,7 @@ use numpy::{PyArray1, PyArray2, PyReadonlyArray1, PyReadonlyArray2};
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
 
+use crate::io::columns::{self, CsvFormat};
 use crate::io::{asl, kaist, tum, ReadOptions};
 use crate::python::arrays::{out1, out2, rows, slice1};
 use crate::python::errors::to_py;
@@ -143,7 +144,42 @@ fn read_kaist_pose(py: Python<'_>, path: PathBuf, allow_float_timestamps: bool) 
     gt_out(py, g)
 }
 
+#[pyfunction]
+fn read_csv_columns<'py>(
+    py: Python<'py>,
+    path: PathBuf,
+    columns: &str,
+    time_unit: &str,
+    gyro_unit: &str,
+    acc_unit: &str,
+) -> PyResult<ImuArrays<'py>> {
+    let fmt = CsvFormat::parse(columns, time_unit, gyro_unit, acc_unit).map_err(to_py)?;
+    let s = py.allow_threads(|| columns::read_imu(&path, &fmt)).map_err(to_py)?;
+    imu_out(py, s)
+}
+
+#[pyfunction]
+#[allow(clippy::too_many_arguments)]
+fn write_csv_columns(
+    py: Python<'_>,
+    original: PathBuf,
+    out: PathBuf,
+    gyro: PyReadonlyArray2<'_, f64>,
+    acc: PyReadonlyArray2<'_, f64>,
+    columns: &str,
+    time_unit: &str,
+    gyro_unit: &str,
+    acc_unit: &str,
+) -> PyResult<()> {
+    let fmt = CsvFormat::parse(columns, time_unit, gyro_unit, acc_unit).map_err(to_py)?;
+    let (g, a) = (rows::<3>(&gyro, "gyro")?, rows::<3>(&acc, "acc")?);
+    py.allow_threads(|| columns::write_imu(&original, &out, &fmt, g, a))
+        .map_err(to_py)
+}
+
 pub fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
+    m.add_function(wrap_pyfunction!(read_csv_columns, m)?)?;
+    m.add_function(wrap_pyfunction!(write_csv_columns, m)?)?;
     m.add_function(wrap_pyfunction!(read_asl_imu, m)?)?;
     m.add_function(wrap_pyfunction!(read_asl_imu_header, m)?)?;
     m.add_function(wrap_pyfunction!(write_asl_imu, m)?)?;

@@ -2,6 +2,7 @@
 //! the GIL released around the Rust work, and every core error mapped to its Python class.
 //! The Python-facing documentation is `python/imu_learn/_imu_core.pyi`.
 
+mod allan;
 mod arrays;
 mod errors;
 mod io;
@@ -12,6 +13,7 @@ use pyo3::prelude::*;
 #[pymodule]
 fn _imu_core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add("__version__", env!("CARGO_PKG_VERSION"))?;
+    allan::register(m)?;
     io::register(m)?;
     numerics::register(m)?;
     Ok(())
