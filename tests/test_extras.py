@@ -23,7 +23,7 @@ def test_every_extra_names_packages_of_pyproject():
     assert set(EXTRAS) <= {"train", "fuse", "eval", "export", "bags"}
 
 
-@pytest.mark.parametrize("blocked", ["matplotlib", "polars"])
+@pytest.mark.parametrize("blocked", ["torch", "polars", "matplotlib"])
 def test_evaluate_without_its_extra_is_one_line_before_any_work(tmp_path, blocked):
     out = tmp_path / "report"
     code = (f"import sys; sys.modules[{blocked!r}] = None\n"

@@ -34,7 +34,9 @@ from torch import nn
 
 from imu_learn.baselines.base import FitSettings, Method
 from imu_learn.core.batches import AugmentConfig, Batch, BatchConfig, BatchSampler, batch_seed
+from imu_learn.data.config import DataConfig
 from imu_learn.data.types import Segment
+from imu_learn.infer.checkpoint import load_checkpoint, model_from_checkpoint, save_checkpoint
 from imu_learn.infer.windowing import Windowing, apply
 from imu_learn.nn.device import pick_device
 from imu_learn.nn.losses import LossConfig, imu_loss
@@ -46,8 +48,6 @@ LossFn = Callable[[nn.Module, Batch, torch.device, bool], Tensor]
 
 def default_augment() -> AugmentConfig:
     """The augmentation of ``imu_learn.fit``'s default run."""
-    from imu_learn.data.config import DataConfig
-
     return DataConfig().augment
 
 
@@ -170,8 +170,6 @@ class Proposed(Method):
     @classmethod
     def from_checkpoint(cls, path: Path, device: str = "cpu") -> Proposed:
         """The model of an ``imu_learn.fit`` checkpoint (or of :meth:`save`)."""
-        from imu_learn.infer.checkpoint import load_checkpoint, model_from_checkpoint
-
         state = load_checkpoint(Path(path), map_location="cpu")
         model = model_from_checkpoint(state)
         cfg = state.get("config") or {}
@@ -206,8 +204,6 @@ class Proposed(Method):
         return gyro, acc
 
     def save(self, path: Path) -> None:
-        from imu_learn.infer.checkpoint import save_checkpoint
-
         cfg = dict(self.run_config)
         cfg.setdefault("data", {})
         cfg["data"] = {**cfg["data"], "window": self.window}

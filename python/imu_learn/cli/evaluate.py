@@ -10,6 +10,8 @@ from typing import Any, Callable, List, Optional, Sequence
 from imu_learn.baselines.registry import REGISTRY
 from imu_learn.cli.common import add_data_root, run_command
 from imu_learn.errors import ConfigError
+from imu_learn.eval import report
+from imu_learn.eval.run import load_eval_config, run_evaluation
 from imu_learn.util.extras import require_extra
 
 OVERRIDES = True
@@ -42,9 +44,6 @@ def run(args: argparse.Namespace, rest: List[str], keep: Callable[[Any], None]) 
         raise ConfigError("--data.data_root: set the data root with --data-root DIR (or IMU_LEARN_DATA)")
     if args.data_root:
         rest = [*rest, "--data.data_root", args.data_root]
-    from imu_learn.eval import report
-    from imu_learn.eval.run import load_eval_config, run_evaluation
-
     res = load_eval_config(args.config, rest)  # no --config: defaults, data = the fit defaults (crops)
     methods = [m.strip() for m in args.methods.split(",") if m.strip()] if args.methods else list(res.cfg.methods)
     for m in methods:

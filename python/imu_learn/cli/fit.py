@@ -8,6 +8,7 @@ from typing import Any, Callable, List, Optional, Sequence
 
 from imu_learn.cli.common import add_data_root, run_command
 from imu_learn.errors import ConfigError
+from imu_learn.train.config import parse_overrides, to_toml
 from imu_learn.util.extras import require_extra
 
 OVERRIDES = True
@@ -35,8 +36,6 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 def run(args: argparse.Namespace, rest: List[str], keep: Callable[[Any], None],
         on_step: Optional[Callable[[int, float], None]] = None) -> int:
     require_extra("train", "imu-learn fit")
-    from imu_learn.train.config import parse_overrides, to_toml
-
     overrides = parse_overrides(rest)
     if "data.data_root" in overrides:
         raise ConfigError("--data.data_root: set the data root with --data-root DIR (or IMU_LEARN_DATA)")

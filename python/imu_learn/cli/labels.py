@@ -6,6 +6,9 @@ from pathlib import Path
 from typing import Any, Callable, List, Optional, Sequence
 
 from imu_learn.cli.common import DATA_ROOT_ENV, data_root_default, run_command
+from imu_learn.data import labels as label_cache
+from imu_learn.data.datasets import DATASETS
+from imu_learn.data.loading import AlignOptions
 
 DESCRIPTION = f"""Build the label cache of a dataset: read every recording, align ground truth to the IMU
 stamps, compute the Δq/Δβ/Δγ labels of every window (Rust, in parallel) and write them to
@@ -22,9 +25,6 @@ EPILOG = """examples:
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
-    from imu_learn.data.datasets import DATASETS
-    from imu_learn.data.loading import AlignOptions
-
     p.add_argument("dataset", choices=DATASETS, metavar="DATASET", help=f"one of {', '.join(DATASETS)}")
     where = p.add_mutually_exclusive_group()
     where.add_argument("--data-root", metavar="DIR", default=None,
@@ -48,16 +48,14 @@ def dataset_dir(args: argparse.Namespace) -> Path:
 
 
 def run(args: argparse.Namespace, rest: List[str], keep: Callable[[Any], None]) -> int:
-    from imu_learn.data.labels import AlignOptions, build_cache, summary
-
     out = args.out or Path("cache") / args.dataset
     keep(f"finished recordings are kept in {out}; run again to resume")
-    m = build_cache(
+    m = label_cache.build_cache(
         args.dataset, dataset_dir(args), out, window=args.window, stride=args.stride, gravity=args.gravity,
         options=AlignOptions(max_gap_s=args.max_gap), rebuild=args.rebuild, progress=not args.quiet,
         topics={"imu_topic": args.imu_topic, "groundtruth_topic": args.groundtruth_topic},
     )
-    print(summary(m, out))
+    print(label_cache.summary(m, out))
     return 0
 
 

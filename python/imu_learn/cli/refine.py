@@ -7,6 +7,7 @@ from pathlib import Path
 from typing import Any, Callable, List, Optional, Sequence
 
 from imu_learn.cli.common import run_command
+from imu_learn.data.formats import FORMATS
 from imu_learn.errors import ConfigError
 from imu_learn.util.extras import require_extra
 
@@ -19,8 +20,6 @@ EPILOG = """examples:
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
-    from imu_learn.data.formats import FORMATS
-
     p.add_argument("--checkpoint", required=True, type=Path, metavar="PT", help="imu_learn checkpoint (.pt)")
     p.add_argument("--input", required=True, type=Path, metavar="PATH",
                    help="recording folder, IMU file or ROS bag (never written)")

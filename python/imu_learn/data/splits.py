@@ -49,6 +49,7 @@ from imu_learn.errors import (
     TooShortError,
 )
 from imu_learn.settings import DATA_ROOT_ENV
+from imu_learn.util.atomic import atomic_write_bytes
 
 SPLITS = ("train", "val", "test")
 _BLOCK = re.compile(r"^(?P<name>.+?)\[(?P<a>[^:\]]*):(?P<b>[^\]]*)\]$")
@@ -305,8 +306,6 @@ def make_split(data: DataConfig, min_len: Optional[int] = None) -> Split:
 
 
 def write_split(split: Split, path: Path) -> None:
-    from imu_learn.util.atomic import atomic_write_bytes
-
     text = json.dumps(split.record, indent=2)
     atomic_write_bytes(Path(path), lambda f: f.write(text.encode()))
 

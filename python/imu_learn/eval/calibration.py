@@ -21,9 +21,12 @@ import numpy as np
 import torch
 from scipy.stats import chi2
 
+from imu_learn.core.covariance import increment_covariance
 from imu_learn.core.integration import integrate_windows, window_labels
-from imu_learn.core.quat import quat_conj, quat_mul
+from imu_learn.core.quat import quat_conj, quat_mul, wxyz_to_xyzw
 from imu_learn.data.types import Segment
+from imu_learn.infer.refine import refine_with_variance
+from imu_learn.score.metrics import fit_startup_bias, index_at, remove_bias, with_imu
 
 SIGMAS = (1, 2, 3)
 BLOCKS = {"all": slice(0, 9), "rot": slice(0, 3), "vel": slice(3, 6), "pos": slice(6, 9)}
@@ -88,8 +91,6 @@ def residuals(seq: Segment, gyro: np.ndarray, acc: np.ndarray, starts: np.ndarra
     """Ground truth minus IMU increments over n samples from each start, as (δθ, δβ, δγ) (M, 9)."""
     from scipy.spatial.transform import Rotation
 
-    from imu_learn.core.quat import wxyz_to_xyzw
-
     starts = np.asarray(starts, dtype=np.uint64)
     imu = Segment(seq.name, seq.t_ns, np.ascontiguousarray(gyro), np.ascontiguousarray(acc), seq.p, seq.v, seq.q_wxyz)
     est = integrate_windows(imu, starts, np.array([n], dtype=np.uint64))
@@ -121,8 +122,6 @@ def window_covariances(seq: Segment, gyro: np.ndarray, acc: np.ndarray, var: np.
     """Σ (M, 9, 9) of each window's increments under per-sample variances ``var`` (N, 6), float64,
     by imu_core's propagation (:func:`imu_learn.core.covariance.increment_covariance`), one window at a time
     (each costs O(n), so windows of 20 s are as cheap per sample as those of 50 ms)."""
-    from imu_learn.core.covariance import increment_covariance
-
     g = np.ascontiguousarray(gyro, dtype=np.float64)
     a = np.ascontiguousarray(acc, dtype=np.float64)
     v = np.ascontiguousarray(var, dtype=np.float64)
@@ -174,9 +173,6 @@ def evaluate_calibration(model, seqs: List[Segment], horizons: List[int], stride
     per-sample variances, and under their mean over the sequence per channel ("learned mean": a
     constant noise level, which separates how well the head tracks the motion from its overall
     scale); per test sequence and pooled over all of them ("all test")."""
-    from imu_learn.infer.refine import refine_with_variance
-    from imu_learn.score.metrics import fit_startup_bias, index_at, remove_bias, with_imu
-
     pooled: Dict[tuple, Dict[str, List[np.ndarray]]] = {}
     rows: List[Dict[str, object]] = []
     for seq in seqs:

@@ -12,6 +12,7 @@ from datetime import datetime
 from pathlib import Path
 from typing import Any, Dict, List, Optional, Tuple
 
+from imu_learn.eval.peers import PEER_KEYS
 from imu_learn.score.protocol import (
     FLOOR_METHODS,
     PROTOCOL,
@@ -398,8 +399,6 @@ def _md_calibration(r: Dict[str, Any]) -> List[str]:
 
 def peers_table(result: Dict[str, Any]) -> List[Dict[str, Any]]:
     """The peers' open-loop rows per (method, recording), then each method's mean over recordings."""
-    from imu_learn.eval.peers import PEER_KEYS
-
     rows = list(result.get("peers") or [])
     out: List[Dict[str, Any]] = []
     for m in result["methods"]:

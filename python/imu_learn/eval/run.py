@@ -36,9 +36,19 @@ from typing import Sequence as Seq
 import numpy as np
 
 from imu_learn.baselines.base import FitSettings, Method, PosePrediction, poses_from_imu
+from imu_learn.baselines.noise_floor import NOISE_FLOOR_NAME, GroundTruthImu
 from imu_learn.baselines.registry import DEFAULT_METHODS, REGISTRY, load_method_class, method_file, safe_name  # noqa: F401
 from imu_learn.core.quat import rotation_angle
-from imu_learn.data.splits import split_signature
+from imu_learn.data.formats import read_recording
+from imu_learn.data.splits import (
+    data_root_dir,
+    find_all,
+    groundtruth_paths,
+    make_split,
+    parse_entry,
+    resolve_path,
+    split_signature,
+)
 from imu_learn.data.types import Segment
 from imu_learn.errors import (
     ConfigError,
@@ -46,6 +56,8 @@ from imu_learn.errors import (
     MethodError,
     one_line,
 )
+from imu_learn.eval import peers, report
+from imu_learn.eval.peers import PeerErrors, add_segment, summarise
 from imu_learn.score.metrics import fit_startup_bias, index_at, remove_bias, rmse, with_imu
 from imu_learn.score.protocol import VARIANTS
 from imu_learn.settings import hints_of, merge, nest
@@ -130,8 +142,6 @@ class Resolved:
 
 
 def _resolve_base(base: str, cfg_path: Optional[Path]) -> Path:
-    from imu_learn.data.splits import resolve_path
-
     p = Path(base).expanduser()
     if not p.is_absolute() and cfg_path is not None and (cfg_path.parent / p).exists():
         return cfg_path.parent / p
@@ -231,8 +241,6 @@ class CheckpointRefiner(Method):
 
 
 def _recording(label: str) -> str:
-    from imu_learn.data.splits import parse_entry
-
     return parse_entry(label).name
 
 
@@ -333,8 +341,6 @@ def evaluate_sequence(method: Method, seq: Segment, horizons: Seq[int], stride: 
 def _peer_errors(method: Method, base: Segment, refiner: bool, gravity: float) -> Dict[str, Any]:
     """Open-loop peer errors of one segment (``base``: the refined samples of a refiner, the raw input
     of a regressor)."""
-    from imu_learn.eval import peers
-
     if refiner:
         return peers.segment_errors(base, base.gyro, base.acc, gravity, position=not method.rotation_only)
     w = peers.window_samples(base)
@@ -353,9 +359,6 @@ def _peer_errors(method: Method, base: Segment, refiner: bool, gravity: float) -
 
 def _ground_truth_kinds(run: RunConfig, test_entries: List[str]) -> Dict[str, str]:
     """Recording -> "pose-only (velocity derived)" or "with velocity", for the test recordings."""
-    from imu_learn.data.formats import read_recording
-    from imu_learn.data.splits import data_root_dir, find_all, groundtruth_paths
-
     root_dir = data_root_dir(run.data)
     found = find_all(run.data.roots, root_dir)
     gt_paths = groundtruth_paths(run.data.roots, root_dir)
@@ -510,8 +513,6 @@ def _add_checkpoint(rows: _Rows, checkpoint: Path, settings: FitSettings, test_e
 
 def _add_noise_floor(rows: _Rows, noise_floor: str, gt_kinds: Dict[str, str], gravity: float) -> None:
     """The ground-truth IMU row (``eval.noise_floor``; "auto": where a test ground truth is pose-only)."""
-    from imu_learn.baselines.noise_floor import NOISE_FLOOR_NAME, GroundTruthImu
-
     if noise_floor == "always" or (noise_floor == "auto" and any(k.startswith("pose-only") for k in gt_kinds.values())):
         rows.add(NOISE_FLOOR_NAME, GroundTruthImu(gravity),
                  {"status": "reference (synthesised from the test ground truth)"})
@@ -531,7 +532,6 @@ def _evaluate_all(rows: _Rows, test: List[Segment], plans: Dict[str, Dict[str, A
     (when given) collects the open-loop peer errors by (method, recording), segments pooled."""
     from tqdm import tqdm
 
-    from imu_learn.eval.peers import PeerErrors, add_segment
 
     errors: Dict[Tuple[str, str, str, int], List[Dict[str, np.ndarray]]] = {}
     biases: List[Dict[str, Any]] = []
@@ -598,8 +598,6 @@ def _error_rows(errors: Dict[Tuple[str, str, str, int], List[Dict[str, np.ndarra
 
 def _peer_rows(rows: _Rows, peer_out: Dict[Tuple[str, str], Any], recordings: List[str]) -> List[Dict[str, Any]]:
     """One row per (method, test recording): the peers' open-loop metrics (:mod:`imu_learn.eval.peers`)."""
-    from imu_learn.eval.peers import summarise
-
     return [{"method": name, "sequence": rec, **summarise(peer_out[(name, rec)])}
             for name, _ in rows.methods for rec in recordings if (name, rec) in peer_out]
 
@@ -647,8 +645,6 @@ def run_evaluation(res: Resolved, methods: List[str], out_dir: Path, reuse: bool
     ``t_start``: when the command started (wall time is measured from it; default now)."""
     import torch
 
-    from imu_learn.data.splits import make_split
-    from imu_learn.eval import report
 
     t_start = time.time() if t_start is None else t_start
     cfg, data = res.cfg, res.run.data

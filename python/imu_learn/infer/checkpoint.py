@@ -30,6 +30,7 @@ import torch
 
 from imu_learn._imu_core import __version__
 from imu_learn.errors import CheckpointError  # noqa: F401  (defined with every error class)
+from imu_learn.infer.windowing import attach, windowing_of_config
 from imu_learn.nn.model import ImuRefiner, ModelConfig
 from imu_learn.util.atomic import atomic_write_bytes
 
@@ -122,8 +123,6 @@ def load_checkpoint(path: Path, map_location: str = "cpu") -> Dict[str, Any]:
 def model_from_checkpoint(state: Dict[str, Any]) -> ImuRefiner:
     """The checkpoint's model in eval mode, with its windowing rule attached (the training window:
     :func:`imu_learn.infer.windowing.windowing_of_config`), so every path applies it alike."""
-    from imu_learn.infer.windowing import attach, windowing_of_config
-
     model = ImuRefiner(ModelConfig(**state["model_args"]))
     model.load_state_dict(state["model"])
     model.eval()

@@ -29,6 +29,7 @@ import numpy as np
 import torch
 
 from imu_learn.errors import InvalidInputError
+from imu_learn.infer.checkpoint import load_checkpoint, model_from_checkpoint
 from imu_learn.nn.model import ImuRefiner
 from imu_learn.util.atomic import atomic_write_path, atomic_write_text
 from imu_learn.util.digest import file_sha256
@@ -217,8 +218,6 @@ def model_card(model: ImuRefiner, state: Dict[str, Any], checkpoint: Path, files
 
 def export(checkpoint: Path, out: Path, window: int = 200, opset: int = 17, seed: int = 0) -> Dict[str, Any]:
     """Write model.ts, model.onnx and model.json into ``out``; returns the JSON card."""
-    from imu_learn.infer.checkpoint import load_checkpoint, model_from_checkpoint
-
     if window < 2:
         raise InvalidInputError(f"--window must be >= 2, got {window}")
     state = load_checkpoint(Path(checkpoint))

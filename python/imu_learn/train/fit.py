@@ -73,6 +73,9 @@ from typing import Sequence as Seq
 import numpy as np
 import torch
 
+from imu_learn.baselines.base import FitSettings
+from imu_learn.baselines.timing import Timing
+from imu_learn.baselines.traditional import TraditionalTiming
 from imu_learn.core.batches import Batch, BatchSampler, batch_seed
 from imu_learn.data.splits import Split, make_split, split_signature, write_split
 from imu_learn.data.types import Segment
@@ -324,20 +327,14 @@ def floor_start(cfg: RunConfig, split: Split) -> Tuple[RunConfig, Optional[Tuple
     (None for "timing"): the untrained model is then that floor (without traditional's low-pass filter)."""
     import dataclasses
 
-    from imu_learn.baselines.base import FitSettings
-
     settings = FitSettings(window=cfg.data.window, gravity=cfg.data.gravity, seed=cfg.seed)
     max_shift = float(cfg.model.fir_taps // 2)
     calib = None
     if cfg.model.start == "timing":
-        from imu_learn.baselines.timing import Timing
-
         m = Timing(max_shift=max_shift)
         m.fit(list(split.train), list(split.val), settings)
         tau = m.tau
     else:
-        from imu_learn.baselines.traditional import TraditionalTiming
-
         t = TraditionalTiming(cutoffs_hz=(None,), max_shift=max_shift)
         t.fit(list(split.train), list(split.val), settings)
         p = t.params
@@ -355,9 +352,6 @@ def timing_floor(split: Split, cfg: RunConfig) -> Tuple[List[Segment], float]:
     """The ``timing`` floor of the final table: the raw test IMU resampled at the one time offset
     [samples] fitted on the run's training split (validation only keeps it or not), as
     :mod:`imu_learn.baselines.timing` does; returns the shifted test sequences and the offset."""
-    from imu_learn.baselines.base import FitSettings
-    from imu_learn.baselines.timing import Timing
-
     m = Timing()
     m.fit(list(split.train), list(split.val), FitSettings(window=cfg.data.window, gravity=cfg.data.gravity))
     test = [Segment(s.name, s.t_ns, *m.refine(s), s.p, s.v, s.q_wxyz) for s in split.test]

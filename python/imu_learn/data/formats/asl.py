@@ -9,7 +9,7 @@ import numpy as np
 
 from imu_learn import _imu_core as core
 from imu_learn.data.types import GroundTruth, ImuData
-from imu_learn.errors import InvalidInputError
+from imu_learn.errors import InvalidInputError, ParseError
 from imu_learn.util.atomic import atomic_write_path
 
 from .groundtruth import read_groundtruth
@@ -127,8 +127,6 @@ def read_sensor_yaml(path: Path) -> dict:
     """An ASL ``sensor.yaml``: its scalar ``key: value`` entries (numbers as float, the rest as
     str) and ``T_BS`` as a 4x4 list of rows. Only the subset of YAML these files use (no YAML
     library needed); a malformed ``T_BS`` is a :class:`ParseError` naming the file and line."""
-    from imu_learn.errors import ParseError
-
     path = Path(path)
     lines = path.read_text().splitlines()
     out: dict = {}

@@ -41,8 +41,10 @@ from imu_learn.errors import (
     TimestampError,
     TooFewRowsError,
 )
+from imu_learn.util.atomic import atomic_write_bytes, atomic_write_text
 
 from .fields import number
+from .groundtruth import read_groundtruth
 from .source import ImuSource
 
 log = logging.getLogger(__name__)
@@ -266,8 +268,6 @@ def read_recording(path: Path, groundtruth: Optional[Path] = None, allow_float_t
                    ) -> Tuple[ImuData, GroundTruth]:
     """The layout's common signature. These logs carry no ground-truth pose (the RTK fixes are
     position aiding: :mod:`imu_learn.fuse.rtklib`), so a ground truth must be given explicitly."""
-    from .groundtruth import read_groundtruth
-
     f = _imu_file(path)
     if groundtruth is None:
         raise InvalidInputError(f"{f}: a {NAME} log has no ground-truth pose; pass one explicitly (TUM or ASL)")
@@ -285,8 +285,6 @@ def read_imu_source(path: Path) -> ImuSource:
 def write_imu(src: ImuSource, out: Path, gyro: np.ndarray, acc: np.ndarray, g: float = STANDARD_GRAVITY) -> None:
     """``out``: ``src``'s CSV with gyro and acc replaced (back in g and deg/s), the IMU counter and
     the cut first/last lines kept as they were, and its time tag copied beside it (both atomically)."""
-    from imu_learn.util.atomic import atomic_write_bytes, atomic_write_text
-
     rows, _lines, skipped = read_csv(src.imu_file)
     g_dps = np.rad2deg(np.asarray(gyro, dtype=np.float64))
     a_g = np.asarray(acc, dtype=np.float64) / g
