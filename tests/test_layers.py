@@ -45,9 +45,14 @@ def module_of(path: Path) -> Tuple[str, bool]:
     return ".".join(parts), is_pkg
 
 
-def is_submodule(name: str) -> bool:
-    """Whether ``imu_learn.<name>`` is a module or subpackage (the Rust extension included)."""
-    return (PKG / name).is_dir() or any(PKG.glob(f"{name}.*"))
+def is_submodule(dotted: str) -> bool:
+    """Whether ``dotted`` names one of the package's modules or subpackages (the Rust extension
+    included)."""
+    parts = dotted.split(".")
+    if parts[0] != "imu_learn" or len(parts) < 2:
+        return False
+    where = PKG.joinpath(*parts[1:-1])
+    return (where / parts[-1]).is_dir() or any(where.glob(f"{parts[-1]}.*"))
 
 
 def imported(path: Path, source: Optional[str] = None) -> Iterator[Tuple[int, str]]:
@@ -66,12 +71,9 @@ def imported(path: Path, source: Optional[str] = None) -> Iterator[Tuple[int, st
                 up = package.split(".")
                 up = up[: len(up) - (node.level - 1)]
                 base = ".".join(up + ([base] if base else []))
-            if base == "imu_learn":  # `from imu_learn import x`: x may be a part (a subpackage)
-                for a in node.names:
-                    target = f"imu_learn.{a.name}"
-                    yield node.lineno, target if is_submodule(a.name) else base
-            else:
-                yield node.lineno, base
+            for a in node.names:  # `from imu_learn.x import y`: y may be a module
+                target = f"{base}.{a.name}"
+                yield node.lineno, target if is_submodule(target) else base
 
 
 def violations() -> List[str]:
@@ -88,7 +90,7 @@ def violations() -> List[str]:
                 continue
             if rank[dst] > rank[src]:
                 out.append(f"python/imu_learn/{rel}:{line}: {src} imports {dst} ({target}), which is above it")
-    return out
+    return list(dict.fromkeys(out))
 
 
 def parts_on_disk() -> List[str]:
@@ -115,6 +117,69 @@ def test_known_exceptions_are_still_needed():
                 used.add((rel, part_of(target)))
     stale = sorted(KNOWN_EXCEPTIONS - used)
     assert not stale, f"known exceptions no import needs (remove them): {stale}"
+
+
+HEAVY = ("torch", "gtsam", "matplotlib", "rosbags")  # optional: each stage names its extra
+# Files whose function-local imports of the package are being moved to module level by the
+# restructuring of fuse/ and its commands; the list goes when that work lands.
+LOCAL_IMPORTS_PENDING = ("fuse/", "cli/fuse.py", "cli/navigate.py")
+
+
+def split_imports(path: Path) -> Tuple[List[Tuple[int, str]], List[Tuple[int, str]]]:
+    """(module-level, function-local) imports of ``path`` as (line, absolute module name)."""
+    local_lines = set()
+    for fn in ast.walk(ast.parse(path.read_text())):
+        if isinstance(fn, (ast.FunctionDef, ast.AsyncFunctionDef)):
+            local_lines |= {n.lineno for n in ast.walk(fn) if isinstance(n, (ast.Import, ast.ImportFrom))}
+    top, local = [], []
+    for line, target in imported(path):
+        (local if line in local_lines else top).append((line, target))
+    return top, local
+
+
+def heavy_modules() -> Set[str]:
+    """The package's modules that import an optional heavy dependency at module level, directly or
+    through the package's modules they import at module level."""
+    paths = {module_of(p)[0]: p for p in PKG.rglob("*.py")}
+    deps = {}
+    for name, p in paths.items():
+        top, _ = split_imports(p)
+        deps[name] = {t for _, t in top}
+    heavy = {n for n, ts in deps.items() if any(t.split(".")[0] in HEAVY for t in ts)}
+    grew = True
+    while grew:
+        grew = False
+        for n, ts in deps.items():
+            if n not in heavy and any(owner(t, paths) in heavy for t in ts):
+                heavy.add(n)
+                grew = True
+    return heavy
+
+
+def owner(target: str, paths) -> str:
+    """The module of an imported name (``imu_learn.a.b.name`` -> ``imu_learn.a.b``)."""
+    while target and target not in paths:
+        target = target.rsplit(".", 1)[0] if "." in target else ""
+    return target
+
+
+def test_function_local_imports_only_hold_back_optional_dependencies():
+    """A function imports one of the package's modules only when that module brings in torch, GTSAM,
+    matplotlib or rosbags and the importing module does not have them already."""
+    paths = {module_of(p)[0]: p for p in PKG.rglob("*.py")}
+    heavy = heavy_modules()
+    found = []
+    for name, path in sorted(paths.items()):
+        rel = path.relative_to(PKG).as_posix()
+        if rel.startswith(LOCAL_IMPORTS_PENDING):
+            continue
+        for line, target in split_imports(path)[1]:
+            if target.split(".")[0] != "imu_learn":
+                continue
+            mod = owner(target, paths) or target
+            if mod not in heavy or name in heavy:
+                found.append(f"python/imu_learn/{rel}:{line}: {target} (import it at module level)")
+    assert not found, "function-local imports of the package's own modules:\n" + "\n".join(dict.fromkeys(found))
 
 
 def readme_order() -> Optional[List[str]]:

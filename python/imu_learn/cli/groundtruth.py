@@ -7,6 +7,7 @@ from pathlib import Path
 from typing import Any, Callable, List, Optional, Sequence
 
 from imu_learn.cli.common import run_command
+from imu_learn.eval.groundtruth import CheckOptions, check, fmt_vec, gt_label, pick_best, read, summary_line
 
 DESCRIPTION = """Check a recording's ground truth against its own IMU, before training on it or scoring with it:
 bias-removed relative pose RMSE over 10 and 200 IMU samples, the rotation R_off from the ground
@@ -38,8 +39,6 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 def label(rec: Path, gt: Optional[Path]) -> str:
     if gt is None:
         return "its own ground truth"
-    from imu_learn.eval.groundtruth import gt_label
-
     try:
         return gt_label(str(gt.resolve().relative_to(rec.resolve())))
     except ValueError:  # not inside the recording
@@ -47,8 +46,6 @@ def label(rec: Path, gt: Optional[Path]) -> str:
 
 
 def describe(row: Any) -> List[str]:
-    from imu_learn.eval.groundtruth import fmt_vec
-
     def score(s) -> str:
         return f"rot {s[0]:.3f}°, trans {s[1]:.4f} m"
 
@@ -64,8 +61,6 @@ def describe(row: Any) -> List[str]:
 
 
 def run(args: argparse.Namespace, rest: List[str], keep: Callable[[Any], None]) -> int:
-    from imu_learn.eval.groundtruth import CheckOptions, check, pick_best, read, summary_line
-
     options = CheckOptions(max_gap_s=args.max_gap_s, yaw_from_acc=args.yaw_from_acc)
     rows = []
     for gt_file in args.groundtruth or [None]:

@@ -35,6 +35,7 @@ from typing import Sequence as Seq
 
 import numpy as np
 
+from imu_learn._imu_core import __version__
 from imu_learn.baselines.base import FitSettings, Method, PosePrediction, poses_from_imu
 from imu_learn.baselines.noise_floor import NOISE_FLOOR_NAME, GroundTruthImu
 from imu_learn.baselines.registry import DEFAULT_METHODS, REGISTRY, load_method_class, method_file, safe_name  # noqa: F401
@@ -379,9 +380,7 @@ def _versions() -> Dict[str, str]:
     import polars
     import torch
 
-    import imu_learn
-
-    v = {"imu_learn": imu_learn.__version__, "torch": torch.__version__, "numpy": np.__version__,
+    v = {"imu_learn": __version__, "torch": torch.__version__, "numpy": np.__version__,
          "polars": polars.__version__, "python": platform.python_version()}
     try:
         import matplotlib
