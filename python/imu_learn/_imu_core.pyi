@@ -53,6 +53,36 @@ def read_kaist_imu(path: _Path, allow_float_timestamps: bool = False) -> Tuple[_
 def read_kaist_pose(path: _Path, allow_float_timestamps: bool = False) -> Dict[str, Optional[_F64]]:
     """KAIST ``global_pose.csv`` -> {t_ns, p, q_wxyz, v=None, ...}."""
 
+def read_csv_columns(path: _Path, columns: str, time_unit: str, gyro_unit: str, acc_unit: str) -> Tuple[_I64, _F64, _F64]:
+    """A user's IMU CSV -> (t_ns, gyro [rad/s], acc [m/s^2]). columns: the file's column order,
+    ``t,gx,gy,gz,ax,ay,az`` with ``_`` for a column to skip (later columns are ignored); time_unit
+    s|ms|us|ns (integer or float text, read exactly), gyro_unit rad/s|deg/s, acc_unit m/s2|g
+    (9.80665). Delimiter (; , tab or whitespace), a header line and '#' comments are found in the
+    file. Errors name path:line:column and the field: ColumnCountError (a line shorter than the
+    map), NotNumericError, NonFiniteError, TimestampError (not strictly increasing),
+    TooFewRowsError; InvalidInputError for an unknown unit or a bad column map."""
+
+def write_csv_columns(
+    original: _Path, out: _Path, gyro: _F64, acc: _F64, columns: str, time_unit: str, gyro_unit: str, acc_unit: str
+) -> None:
+    """Write ``out``: ``original`` (read as read_csv_columns does) with its gyro and acc fields replaced
+    by gyro [rad/s] / acc [m/s^2] (one row per sample), in the file's own units; header, comments,
+    time and every other column keep their text. Atomic (temp file + rename)."""
+
+def allan_deviation(
+    samples: _F64, period_s: float, per_decade: int = 20, m: Optional[npt.NDArray[np.uint64]] = None
+) -> Dict[str, np.ndarray]:
+    """Overlapping Allan deviation of rate samples (N, k) of period period_s -> {m (T,) uint64 cluster
+    sizes (default: per_decade log-spaced from 1 to N/2), tau_s (T,), n_clusters (T,) = N // m,
+    rel_err (T,) = 1/sqrt(2 (N/m - 1)), adev (T, k)}. Cumulative sums, O(N) per cluster size, the
+    GIL released."""
+
+def allan_fit(tau_s: _F64, adev: _F64, rel_err: _F64) -> Dict[str, object]:
+    """Slope fits of each axis of adev (T, k) -> {white: {value (k,) N at tau = 1 s on the -1/2
+    line, rel_err, tau_lo, tau_hi, points}, random_walk: {... K at tau = 3 s on the +1/2 line},
+    bias_instability (k,) = min adev / 0.664, tau_bias, bias_rel_err, bias_observed (bool: the
+    minimum is not the last usable point)}. NaN (points 0) where a line has no region."""
+
 def align(
     imu_t_ns: _I64, gyro: _F64, acc: _F64, gt_t_ns: _I64, p: _F64, q_wxyz: _F64, v: Optional[_F64],
     max_gap_ns: int, min_segment_samples: int, velocity_half_window: int,
