@@ -51,12 +51,6 @@ class PosePrediction:
     v: Optional[np.ndarray] = None
 
 
-def sample_rate_hz(seqs: List[Segment]) -> float:
-    """Median sample rate [Hz] over the sequences' sample periods (the displacement baselines' window)."""
-    dts = np.concatenate([np.diff(np.asarray(s.t_ns, dtype=np.int64)) for s in seqs if len(s) > 1])
-    return 1e9 / float(np.median(dts))
-
-
 def poses_from_imu(
     seq: Segment, gyro: np.ndarray, acc: np.ndarray, starts: np.ndarray, n: int, gravity: float = 9.81
 ) -> PosePrediction:

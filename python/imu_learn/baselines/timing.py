@@ -42,14 +42,9 @@ import numpy as np
 from imu_learn.baselines.base import FitSettings, Method
 from imu_learn.core.integration import PAPER_FRACTIONS, integrate_windows, window_labels
 from imu_learn.core.quat import rotation_angle
-from imu_learn.data.types import Segment
+from imu_learn.data.types import Segment, median_period_ns
 
 GOLDEN = (math.sqrt(5.0) - 1.0) / 2.0
-
-
-def median_period_ns(seq: Segment) -> float:
-    t = np.asarray(seq.t_ns, dtype=np.int64)
-    return float(np.median(np.diff(t))) if len(t) > 1 else 0.0
 
 
 def resample(t_ns: np.ndarray, x: np.ndarray, tau: float, period_ns: float) -> np.ndarray:
@@ -66,7 +61,7 @@ def shifted(seq: Segment, tau: float) -> Segment:
     """``seq`` with gyro and accelerometer resampled at t + tau samples (ground truth unchanged)."""
     if tau == 0.0:
         return seq
-    per = median_period_ns(seq)
+    per = median_period_ns(seq.t_ns)
     return Segment(seq.name, seq.t_ns, resample(seq.t_ns, seq.gyro, tau, per),
                     resample(seq.t_ns, seq.acc, tau, per), seq.p, seq.v, seq.q_wxyz)
 
@@ -83,7 +78,7 @@ class RotationWindows:
         for s in usable:
             lab = window_labels(s, window, self.stride, PAPER_FRACTIONS, gravity)
             if len(lab.starts):
-                self.items.append((s, median_period_ns(s), lab))
+                self.items.append((s, median_period_ns(s.t_ns), lab))
 
     def __len__(self) -> int:
         return sum(len(lab.starts) for _, _, lab in self.items)

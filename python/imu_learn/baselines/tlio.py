@@ -72,10 +72,10 @@ import numpy as np
 import torch
 from torch import nn
 
-from imu_learn.baselines.base import FitSettings, Method, PosePrediction, poses_from_imu, sample_rate_hz
+from imu_learn.baselines.base import FitSettings, Method, PosePrediction, poses_from_imu
 from imu_learn.core.batches import BatchConfig, BatchSampler, batch_seed
 from imu_learn.core.quat import quat_rotate
-from imu_learn.data.types import Segment
+from imu_learn.data.types import Segment, sample_rate_hz
 from imu_learn.nn.device import pick_device
 
 Tensor = torch.Tensor
@@ -240,7 +240,7 @@ class TlioStyle(Method):
         ``best_step``, ``window``, ``mse_steps``, ``nll_steps``."""
         c = self.config
         self.device = pick_device(settings.device)
-        self.rate_hz = sample_rate_hz(train)
+        self.rate_hz = sample_rate_hz(*(s.t_ns for s in train))
         W = self.window = max(2, int(round(c.window_s * self.rate_hz)))
         train = [s for s in train if len(s) > W]
         val = [s for s in (val or []) if len(s) > W]

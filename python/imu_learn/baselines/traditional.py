@@ -62,20 +62,15 @@ import torch
 from scipy.signal import butter, sosfiltfilt
 
 from imu_learn.baselines.base import FitSettings, Method
-from imu_learn.baselines.timing import RotationWindows, fit_offset, median_period_ns, shifted
+from imu_learn.baselines.timing import RotationWindows, fit_offset, shifted
 from imu_learn.core.integration import PAPER_FRACTIONS, window_labels
-from imu_learn.data.types import Segment
+from imu_learn.data.types import Segment, sample_rate_hz
 from imu_learn.nn.integration import prefix_quat_product
 from imu_learn.nn.so3 import quat_conj, quat_mul, quat_rotate, so3_exp, so3_log
 
 Tensor = torch.Tensor
 
 DEFAULT_CUTOFFS: Tuple[Optional[float], ...] = (None, 40.0, 20.0, 10.0, 5.0)
-
-
-def sample_rate(seq: Segment) -> float:
-    """Sampling rate [Hz] from the median sample period."""
-    return 1e9 / median_period_ns(seq)
 
 
 def lowpass(x: np.ndarray, fs: float, cutoff_hz: Optional[float], order: int = 2) -> np.ndarray:
@@ -164,7 +159,7 @@ class _Data:
             dt = np.empty(len(t))
             dt[:-1] = np.diff(t) * 1e-9
             dt[-1] = dt[-2]
-            self.items.append((s, sample_rate(s), dt, lab))
+            self.items.append((s, sample_rate_hz(s.t_ns), dt, lab))
         self.horizons = [int(h) for h in self.items[0][3].horizons] if self.items else []
         self.window = window
         self._cache: Dict[Tuple[str, Optional[float]], List[np.ndarray]] = {}
@@ -363,7 +358,7 @@ class Traditional(Method):
     def refine(self, seq: Segment) -> Tuple[np.ndarray, np.ndarray]:
         p = self.params
         seq = shifted(seq, p.time_offset)
-        fs = sample_rate(seq)
+        fs = sample_rate_hz(seq.t_ns)
         g_f = lowpass(seq.gyro, fs, p.cutoff_gyro, self.filter_order)
         ag_f = lowpass(seq.acc, fs, p.cutoff_gyro, self.filter_order)
         a_f = lowpass(seq.acc, fs, p.cutoff_acc, self.filter_order)

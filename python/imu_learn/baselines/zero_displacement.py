@@ -23,8 +23,8 @@ from typing import Dict, List, Tuple
 
 import numpy as np
 
-from imu_learn.baselines.base import FitSettings, Method, PosePrediction, poses_from_imu, sample_rate_hz
-from imu_learn.data.types import Segment
+from imu_learn.baselines.base import FitSettings, Method, PosePrediction, poses_from_imu
+from imu_learn.data.types import Segment, sample_rate_hz
 
 FORMAT = "imu_learn.baselines.zero_displacement.v1"
 WINDOW_S = 1.0  # as tlio-style's window
@@ -62,7 +62,7 @@ class ZeroDisplacement(Method):
         self.windows = 0
 
     def fit(self, train: List[Segment], val: List[Segment], settings: FitSettings = FitSettings()) -> Dict[str, list]:
-        self.rate_hz = sample_rate_hz(train)
+        self.rate_hz = sample_rate_hz(*(s.t_ns for s in train))
         self.window = max(2, int(round(WINDOW_S * self.rate_hz)))
         self.var_h, self.var_v, self.windows = displacement_variances(train, self.window)
         # train_loss: the mean square displacement [m²] that predicting zero leaves on the training windows

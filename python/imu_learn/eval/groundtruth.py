@@ -34,7 +34,7 @@ from imu_learn.core.integration import integrate_windows, window_labels
 from imu_learn.core.quat import quat_conj, quat_mul, quat_rotate
 from imu_learn.data.formats import read_recording
 from imu_learn.data.loading import AlignOptions, align
-from imu_learn.data.types import GroundTruth, ImuData, Segment
+from imu_learn.data.types import GroundTruth, ImuData, Segment, median_period_ns, sample_rate_hz
 from imu_learn.errors import TooShortError
 from imu_learn.score.metrics import fit_startup_bias, index_at, relative_pose_errors, remove_bias, rmse, with_imu
 
@@ -64,7 +64,7 @@ def read(root: Path, groundtruth: Optional[Path] = None, fmt: str = "auto", imu_
 
 
 def gt_rate_hz(gt: GroundTruth) -> float:
-    return 1e9 / float(np.median(np.diff(gt.t_ns)))
+    return sample_rate_hz(gt.t_ns)
 
 
 def default_gap_s(gt: GroundTruth) -> float:
@@ -210,7 +210,7 @@ def fit_acc_rotation(segs: List[Segment], half: int = 15) -> np.ndarray:
     for s in segs:
         if len(s) <= 4 * half:
             continue
-        dt = float(np.median(np.diff(s.t_ns))) * 1e-9
+        dt = median_period_ns(s.t_ns) * 1e-9
         smooth = lambda x: savgol_filter(x, 2 * half + 1, 2, axis=0)  # noqa: E731
         f_world = np.gradient(np.gradient(smooth(s.p), dt, axis=0), dt, axis=0) + np.array([0.0, 0.0, G])
         f_body = np.einsum("nji,nj->ni", rotation_matrices(s.q_wxyz), f_world)
@@ -244,7 +244,7 @@ def rotation_matrices(q: np.ndarray) -> np.ndarray:
 def lever_rows(seq: Segment, gyro_bias: np.ndarray, half: int) -> Tuple[np.ndarray, np.ndarray]:
     """Rows of  S(R a_imu) − S(p̈) − g = S(R (ω̇× + ω×ω×)) r + S(R) b_a  in the world frame, S one
     smoothing filter applied to every term alike (the equation stays exact); edges dropped."""
-    dt = float(np.median(np.diff(seq.t_ns))) * 1e-9
+    dt = median_period_ns(seq.t_ns) * 1e-9
     smooth = lambda x: savgol_filter(x, 2 * half + 1, 2, axis=0)  # noqa: E731
     rot = rotation_matrices(seq.q_wxyz)
     w = seq.gyro - gyro_bias

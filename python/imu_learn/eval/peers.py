@@ -39,7 +39,7 @@ import numpy as np
 
 from imu_learn.core.integration import integrate_windows, preintegrate
 from imu_learn.core.quat import quat_conj, quat_mul, quat_rotate, rotation_angle
-from imu_learn.data.types import Segment
+from imu_learn.data.types import Segment, sample_rate_hz
 
 PEER_WINDOW_S = 1.0  # AirIMU's window [s]
 
@@ -102,8 +102,8 @@ def masked_aoe(seq: Segment, gyro: np.ndarray, mask: np.ndarray) -> Dict[str, fl
 
 
 def window_samples(seq: Segment, seconds: float = PEER_WINDOW_S) -> int:
-    """round(seconds · rate) samples, rate = 1 / median sample period (at least 1)."""
-    rate = 1e9 / float(np.median(np.diff(np.asarray(seq.t_ns, dtype=np.int64))))
+    """round(seconds · rate) samples, rate = :func:`imu_learn.data.types.sample_rate_hz` (at least 1)."""
+    rate = sample_rate_hz(seq.t_ns)
     return max(1, int(round(seconds * rate)))
 
 

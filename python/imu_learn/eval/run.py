@@ -50,7 +50,7 @@ from imu_learn.data.splits import (
     resolve_path,
     split_signature,
 )
-from imu_learn.data.types import Segment
+from imu_learn.data.types import Segment, sample_rate_hz
 from imu_learn.errors import (
     ConfigError,
     ImuError,
@@ -274,10 +274,6 @@ def pose_errors(seq: Segment, starts: np.ndarray, n: int, pred: PosePrediction) 
     return {"rot_rad": rot, "trans_m": trans, "vel_mps": vel}
 
 
-def sample_rate(seq: Segment) -> float:
-    return 1e9 / float(np.median(np.diff(np.asarray(seq.t_ns, dtype=np.int64))))
-
-
 def seconds_to_samples(seconds: float, rate: float) -> int:
     return max(1, int(round(seconds * rate)))
 
@@ -288,7 +284,7 @@ def curve_seconds(e: EvalSettings) -> List[float]:
 
 def horizon_plan(seq: Segment, e: EvalSettings) -> Dict[str, Any]:
     """Horizons [samples] to evaluate on ``seq``: the table's n, and seconds -> samples."""
-    rate = sample_rate(seq)
+    rate = sample_rate_hz(seq.t_ns)
     secs = sorted(set([1.0] + list(e.airimu_s) + curve_seconds(e)))
     by_s = {float(s): seconds_to_samples(s, rate) for s in secs}
     return {"rate_hz": rate, "by_s": by_s, "n": sorted(set(int(n) for n in e.horizons) | set(by_s.values()))}

@@ -31,7 +31,7 @@ from typing import List, Optional, Sequence, Tuple
 
 import numpy as np
 
-from imu_learn.data.types import GroundTruth, ImuData
+from imu_learn.data.types import GroundTruth, ImuData, sample_rate_hz
 from imu_learn.errors import (
     ColumnCountError,
     HeaderError,
@@ -91,7 +91,7 @@ class GnssImuLog:
     @property
     def rate_hz(self) -> float:
         """The median sample rate on the GPS time scale."""
-        return 1e9 / float(np.median(np.diff(self.imu.t_ns)))
+        return sample_rate_hz(self.imu.t_ns)
 
 
 def read_tag(path: Path) -> TimeTag:
