@@ -116,9 +116,11 @@ def main(argv=None) -> int:
     from scipy.spatial.transform import Rotation
 
     from imu_learn.core.quat import wxyz_to_xyzw
-    from imu_learn.fuse.experiments.config import ScenarioSpec
-    from imu_learn.fuse.experiments.online import load_causal_model, load_learned_model, machine, score_online, stream
     from imu_learn.fuse.experiments.batch import aiding_rng, load_recording_for_fusion, make_aiding
+    from imu_learn.fuse.experiments.config import ScenarioSpec
+    from imu_learn.fuse.experiments.online import machine, score_online, stream
+    from imu_learn.fuse.settings import FusionSettings
+    from imu_learn.infer.streaming import load_causal_model, load_learned_model
 
     ckpt = args.checkpoint if args.checkpoint is not None else default_checkpoint()
     model = None
@@ -155,8 +157,8 @@ def main(argv=None) -> int:
         R0 = Rotation.from_quat(wxyz_to_xyzw(seq.q_wxyz[0])).as_matrix()
         for name in inputs:
             hook = displacement_hook(tlio, seq) if name == "learned" else None
-            res = stream(seq.t_ns, seq.gyro, seq.acc, (R0, seq.p[0], seq.v[0]), [aiding], models[name], noise,
-                         cfg.gravity, cfg.keyframe_hz, extra_factors=hook)
+            res = stream(seq.t_ns, seq.gyro, seq.acc, (R0, seq.p[0], seq.v[0]), [aiding], models[name],
+                         FusionSettings(noise, cfg.gravity, cfg.keyframe_hz), extra_factors=hook)
             st = res.stats()
             sc = score_online(res, seq.t_ns, seq.p, seq.q_wxyz)
             rows.append((label, name, st, sc))

@@ -256,8 +256,8 @@ def fuse_runner(seq, extra: Dict[str, object], lag_s: float, smoothing: str):
     graph.IncrementalFusion._update = timed_update
 
     def run() -> None:
-        res = fuse(seq.t_ns, seq.gyro, seq.acc, (R0, seq.p[0], seq.v[0]), [fixes], ImuNoise(), lag_s=lag_s,
-                   smoothing=smoothing)
+        res = fuse(seq.t_ns, seq.gyro, seq.acc, (R0, seq.p[0], seq.v[0]), [fixes],
+                   graph.FusionSettings(ImuNoise(), lag_s=lag_s, smoothing=smoothing))
         err = res.smoothed_p - seq.p[res.kf_idx]
         err_c = res.causal_p - seq.p[res.kf_idx]
         extra.update(keyframes=len(res.kf_idx), fixes=len(fixes), counts=res.counts, lag_s=lag_s, smoothing=smoothing,
@@ -440,7 +440,7 @@ def main(argv: Optional[List[str]] = None) -> int:
     args = ap.parse_args(argv)
     os.environ.setdefault("RAYON_NUM_THREADS", "1")
     if args.fuse_lag is None:
-        from imu_learn.fuse.graph import DEFAULT_LAG_S
+        from imu_learn.fuse.settings import DEFAULT_LAG_S
 
         args.fuse_lag = DEFAULT_LAG_S
     if args.child:

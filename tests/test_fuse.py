@@ -20,8 +20,8 @@ from imu_learn.fuse import (  # noqa: E402
     simulate_position,
     simulate_relative_pose,
 )
-from imu_learn.fuse.experiments.config import FuseConfig, RecordingSpec, ScenarioSpec, load, validate  # noqa: E402
 from imu_learn.fuse.experiments.batch import run_experiment  # noqa: E402
+from imu_learn.fuse.experiments.config import FuseConfig, RecordingSpec, ScenarioSpec, load, validate  # noqa: E402
 from imu_learn.fuse.score import score  # noqa: E402
 
 
@@ -154,7 +154,7 @@ def test_noise_free_fixes_pin_a_bias_that_dead_reckoning_cannot(crop):
 def test_exact_imu_and_perfect_fixes_recover_the_closed_form_trajectory():
     t, gyro, acc, p, R = spin_and_climb()
     fixes = PositionFixes(np.arange(0, len(t), 200), p[::200], 1e-4, np.zeros(3), "exact")
-    res = fuse(t, gyro, acc, (R[0], p[0], np.zeros(3)), [fixes], gravity=9.81)
+    res = fuse(t, gyro, acc, (R[0], p[0], np.zeros(3)), [fixes])
     for est_p, est_R in ((res.causal_p, res.causal_R), (res.smoothed_p, res.smoothed_R)):
         assert np.abs(est_p - p[res.kf_idx]).max() < 1e-6
         assert np.abs(est_R - R[res.kf_idx]).max() < 1e-7

@@ -297,6 +297,7 @@ def coast_through_a_gap(gap_s, iterations=1, seed=3, sigma=0.02, resolve_after_s
     fixes at 1 Hz for the first 2 s and the last 3 s only: ``gap_s`` seconds without aiding."""
     from imu_learn.data.synthetic import spin_and_climb
     from imu_learn.fuse.graph import fuse
+    from imu_learn.fuse.settings import FusionSettings
 
     rng = np.random.default_rng(seed)
     dur = gap_s + 5
@@ -305,7 +306,8 @@ def coast_through_a_gap(gap_s, iterations=1, seed=3, sigma=0.02, resolve_after_s
     acc = acc + 0.05 + rng.normal(0, 0.02, acc.shape)
     idx = np.round(np.r_[0.0, 1.0, 2.0, np.arange(gap_s + 2, dur + 1e-9, 1.0)] * 200).astype(np.int64)
     fixes = PositionFixes(idx, p[idx] + rng.normal(0, sigma, (len(idx), 3)), sigma, np.zeros(3), "start and end")
-    res = fuse(t, gyro, acc, (R[0], p[0], np.zeros(3)), [fixes], iterations=iterations, resolve_after_s=resolve_after_s)
+    res = fuse(t, gyro, acc, (R[0], p[0], np.zeros(3)), [fixes],
+               FusionSettings(iterations=iterations, resolve_after_s=resolve_after_s))
     kf = res.kf_idx
     at = {int(s): int(np.searchsorted(kf, s)) for s in idx}
     err_c = np.linalg.norm(res.causal_p - p[kf], axis=1)

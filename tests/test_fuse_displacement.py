@@ -141,8 +141,8 @@ def tiny_tlio(crop_split, tmp_path_factory):
 
 
 def test_tlio_style_is_a_fusion_input_that_adds_factors(shipped, tiny_tlio, tmp_path):
-    from imu_learn.fuse.experiments.config import FuseConfig, RecordingSpec, ScenarioSpec, imu_methods, validate
     from imu_learn.fuse.experiments.batch import run_experiment
+    from imu_learn.fuse.experiments.config import FuseConfig, RecordingSpec, ScenarioSpec, imu_methods, validate
 
     m, methods = tiny_tlio
     assert "tlio-style" in imu_methods()
@@ -186,8 +186,8 @@ def test_learned_input_is_refined_samples_with_learned_variances_plus_displaceme
     """`learned`: the covariance checkpoint's refined samples and variances, plus the tlio-style factors
     where <methods_dir>/tlio-style.pt exists (regressed from the raw samples); without that model, no
     displacement factors and the same samples."""
-    from imu_learn.fuse.experiments.config import FuseConfig, RecordingSpec, ScenarioSpec, imu_methods, validate
     from imu_learn.fuse.experiments.batch import run_experiment
+    from imu_learn.fuse.experiments.config import FuseConfig, RecordingSpec, ScenarioSpec, imu_methods, validate
 
     m, methods = tiny_tlio
     assert "learned" in imu_methods()

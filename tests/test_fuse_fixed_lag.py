@@ -12,9 +12,10 @@ from imu_learn.data.synthetic import spin_and_climb  # noqa: E402
 from imu_learn.errors import ConfigError, InvalidInputError  # noqa: E402
 from imu_learn.fuse import PositionFixes, graph  # noqa: E402
 from imu_learn.fuse.aiding import RelativePoses  # noqa: E402
-from imu_learn.fuse.experiments.config import FuseConfig, RecordingSpec, ScenarioSpec, load, validate  # noqa: E402
-from imu_learn.fuse.graph import DEFAULT_LAG_S, SETTLE_S, IncrementalFusion, fuse  # noqa: E402
 from imu_learn.fuse.experiments.batch import ESTIMATOR, estimator, run_experiment, run_hash  # noqa: E402
+from imu_learn.fuse.experiments.config import FuseConfig, RecordingSpec, ScenarioSpec, load, validate  # noqa: E402
+from imu_learn.fuse.graph import IncrementalFusion, fuse  # noqa: E402
+from imu_learn.fuse.settings import DEFAULT_LAG_S, SETTLE_S, FusionSettings  # noqa: E402
 
 
 def noisy_climb(seconds: float, gap=None, seed: int = 3):
@@ -33,7 +34,7 @@ def noisy_climb(seconds: float, gap=None, seed: int = 3):
 
 
 def run(t, gyro, acc, R, fixes, lag_s, aiding=None):
-    return fuse(t, gyro, acc, (R[0], np.zeros(3), np.zeros(3)), aiding or [fixes], lag_s=lag_s)
+    return fuse(t, gyro, acc, (R[0], np.zeros(3), np.zeros(3)), aiding or [fixes], FusionSettings(lag_s=lag_s))
 
 
 def rmse(a, b):
@@ -80,8 +81,9 @@ def test_the_window_stays_bounded_as_the_recording_grows():
     """After the first SETTLE_S (held whole), the smoother holds the last lag_s of keyframes (3
     variables each), whatever the length; the whole-graph iSAM2 holds every keyframe so far."""
     t, gyro, acc, p, R, fixes = noisy_climb(SETTLE_S + 40.0)
-    inc = IncrementalFusion(t, (R[0], np.zeros(3), np.zeros(3)), [fixes], lag_s=2.0, predict_between=False)
-    whole = IncrementalFusion(t, (R[0], np.zeros(3), np.zeros(3)), [fixes], lag_s=np.inf, predict_between=False)
+    inc = IncrementalFusion(t, (R[0], np.zeros(3), np.zeros(3)), [fixes], FusionSettings(lag_s=2.0), predict_between=False)
+    whole = IncrementalFusion(t, (R[0], np.zeros(3), np.zeros(3)), [fixes], FusionSettings(lag_s=np.inf),
+                             predict_between=False)
     sizes, whole_sizes, slots = [], [], []
     for seconds in (SETTLE_S + 10, SETTLE_S + 20, SETTLE_S + 40):
         upto = min(len(t), int(seconds * 200) + 1)
@@ -109,7 +111,7 @@ def test_a_factor_reaching_before_the_window_is_left_to_the_smoothing_pass(monke
 def test_lag_must_be_positive_and_the_config_takes_it(tmp_path):
     t, gyro, acc, p, R, fixes = noisy_climb(2.0)
     with pytest.raises(InvalidInputError, match="lag_s"):
-        IncrementalFusion(t, (R[0], np.zeros(3), np.zeros(3)), [fixes], lag_s=0.0)
+        IncrementalFusion(t, (R[0], np.zeros(3), np.zeros(3)), [fixes], FusionSettings(lag_s=0.0))
     f = tmp_path / "f.toml"
     f.write_text('lag_s = inf\n[[recordings]]\npath = "x"\n[[scenarios]]\nname = "g"\n')
     assert load(f).lag_s == np.inf
@@ -161,8 +163,8 @@ def test_window_smoothing_keeps_no_graph_and_is_the_fixed_lag_smoothed_estimate(
     last estimate in the window: better than the causal one, near the batch pass's."""
     t, gyro, acc, p, R, fixes = noisy_climb(SETTLE_S + 30.0)
     batch = run(t, gyro, acc, R, fixes, DEFAULT_LAG_S)
-    inc = IncrementalFusion(t, (R[0], np.zeros(3), np.zeros(3)), [fixes], lag_s=DEFAULT_LAG_S, predict_between=False,
-                            smoothing="window")
+    inc = IncrementalFusion(t, (R[0], np.zeros(3), np.zeros(3)), [fixes], FusionSettings(smoothing="window"),
+                            predict_between=False)
     feed(inc, t, gyro, acc, len(t))
     assert inc._full.size() == 0
     win = inc.smooth()
@@ -171,7 +173,7 @@ def test_window_smoothing_keeps_no_graph_and_is_the_fixed_lag_smoothed_estimate(
     assert rmse(win.smoothed_p, gt) < 0.8 * rmse(win.causal_p, gt)
     assert rmse(win.smoothed_p, gt) < 1.5 * rmse(batch.smoothed_p, gt)
     with pytest.raises(InvalidInputError, match="smoothing"):
-        IncrementalFusion(t, (R[0], np.zeros(3), np.zeros(3)), [fixes], smoothing="fast")
+        IncrementalFusion(t, (R[0], np.zeros(3), np.zeros(3)), [fixes], FusionSettings(smoothing="fast"))
 
 
 def test_the_batch_pass_runs_on_a_deep_stack_and_its_errors_reach_the_caller():

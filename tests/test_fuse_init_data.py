@@ -15,12 +15,12 @@ from crops import CROP  # noqa: E402
 from imu_learn.core.quat import wxyz_to_xyzw  # noqa: E402
 from imu_learn.fuse import init as initial  # noqa: E402
 from imu_learn.fuse.aiding import simulate_position, simulate_relative_pose  # noqa: E402
+from imu_learn.fuse.experiments.batch import run_experiment, run_hash  # noqa: E402
 from imu_learn.fuse.experiments.config import FuseConfig, RecordingSpec, ScenarioSpec, validate  # noqa: E402
-from imu_learn.fuse.graph import PriorSigmas  # noqa: E402
 from imu_learn.fuse.inmotion import data_start  # noqa: E402
 from imu_learn.fuse.noise import ImuNoise  # noqa: E402
-from imu_learn.fuse.experiments.batch import run_experiment, run_hash  # noqa: E402
 from imu_learn.fuse.score import umeyama  # noqa: E402
+from imu_learn.fuse.settings import FusionSettings, PriorSigmas  # noqa: E402
 
 
 def test_umeyama_recovers_a_rigid_motion():
@@ -82,7 +82,7 @@ def test_a_data_start_settles_on_the_heading_of_the_fixes_frame(crop, turn_deg):
     assert st.score_from > st.start and not st.align and "yaw" in st.info["heading_source"]
     s0 = st.start
     res = fuse(crop.t_ns[s0:], crop.gyro[s0:], crop.acc[s0:], (st.R, st.p, st.v), [from_sample(fixes, s0)],
-               ImuNoise(), 9.81, 10.0, prior=st.prior, bias0=st.bias)
+               FusionSettings(ImuNoise(), 9.81, 10.0, st.prior), bias0=st.bias)
     res = crop_result(res, s0, st.score_from)
     assert res.kf_idx[0] >= st.score_from
     R_gt = Rz @ Rotation.from_quat(wxyz_to_xyzw(crop.q_wxyz[res.kf_idx[-1]])).as_matrix()

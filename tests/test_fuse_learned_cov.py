@@ -9,6 +9,7 @@ gtsam = pytest.importorskip("gtsam")
 from imu_learn.data.synthetic import spin_and_climb  # noqa: E402
 from imu_learn.fuse import ImuNoise, PositionFixes, fuse  # noqa: E402
 from imu_learn.fuse.graph import IncrementalFusion  # noqa: E402
+from imu_learn.fuse.settings import FusionSettings  # noqa: E402
 
 
 def noisy_run(seed=3):
@@ -32,8 +33,8 @@ def test_the_datasheet_as_per_sample_variances_gives_the_datasheet_result():
     the whole estimate (causal and smoothed) must agree to round-off."""
     t, gyro, acc, p, R, fixes = noisy_run()
     noise = ImuNoise()
-    a = fuse(t, gyro, acc, (R[0], p[0], np.zeros(3)), [fixes], noise)
-    b = fuse(t, gyro, acc, (R[0], p[0], np.zeros(3)), [fixes], noise, var=datasheet_var(t, noise))
+    a = fuse(t, gyro, acc, (R[0], p[0], np.zeros(3)), [fixes], FusionSettings(noise))
+    b = fuse(t, gyro, acc, (R[0], p[0], np.zeros(3)), [fixes], FusionSettings(noise), var=datasheet_var(t, noise))
     assert np.abs(a.smoothed_p - b.smoothed_p).max() < 1e-9
     assert np.abs(a.causal_p - b.causal_p).max() < 1e-9
     assert np.abs(a.smoothed_bias - b.smoothed_bias).max() < 1e-9
@@ -50,7 +51,7 @@ def test_each_imu_factor_carries_the_covariance_propagated_over_its_own_interval
     rng = np.random.default_rng(5)
     var = np.c_[(rng.uniform(1e-3, 3e-2, (len(t), 3))) ** 2, (rng.uniform(1e-2, 3e-1, (len(t), 3))) ** 2]
     noise = ImuNoise(gyro_random_walk=1e-12, acc_random_walk=1e-12)  # no bias walk leaking into the block
-    inc = IncrementalFusion(t, (R[0], p[0], np.zeros(3)), [fixes], noise)
+    inc = IncrementalFusion(t, (R[0], p[0], np.zeros(3)), [fixes], FusionSettings(noise))
     for s in range(21):  # keyframe 1 is sample 20: the factor covers samples 0..19
         inc.add_sample(t[s], gyro[s], acc[s], var[s])
     factor = next(inc._graph.at(i) for i in range(inc._graph.size())
@@ -76,8 +77,8 @@ def test_a_large_learned_variance_lets_the_fixes_win():
     t, gyro, acc, p, R, fixes = noisy_run()
     exact = PositionFixes(fixes.idx, p[fixes.idx], 1e-3, np.zeros(3), "exact")
     noise = ImuNoise()
-    sheet = fuse(t, gyro, acc, (R[0], p[0], np.zeros(3)), [exact], noise)
-    loose = fuse(t, gyro, acc, (R[0], p[0], np.zeros(3)), [exact], noise, var=1e4 * datasheet_var(t, noise))
+    sheet = fuse(t, gyro, acc, (R[0], p[0], np.zeros(3)), [exact], FusionSettings(noise))
+    loose = fuse(t, gyro, acc, (R[0], p[0], np.zeros(3)), [exact], FusionSettings(noise), var=1e4 * datasheet_var(t, noise))
     at_fix = np.isin(sheet.kf_idx, exact.idx)
     err = lambda r: np.abs(r.smoothed_p[at_fix] - p[r.kf_idx[at_fix]]).max()  # noqa: E731
     assert err(loose) <= err(sheet)

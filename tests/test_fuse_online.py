@@ -13,17 +13,13 @@ from imu_learn.cli.fuse import main as fuse_main  # noqa: E402
 from imu_learn.cli.fuse import parser  # noqa: E402
 from imu_learn.errors import ConfigError, InvalidInputError  # noqa: E402
 from imu_learn.fuse import PositionFixes, apply_outages, fuse, simulate_relative_pose  # noqa: E402
+from imu_learn.fuse.experiments.online import stream  # noqa: E402
 from imu_learn.fuse.graph import IncrementalFusion  # noqa: E402
-from imu_learn.fuse.experiments.online import (  # noqa: E402
-    CausalStepper,
-    WindowedStepper,
-    load_causal_model,
-    load_learned_model,
-    stream,
-)
-from imu_learn.infer.refine import refine_arrays  # noqa: E402
-from imu_learn.nn.model import ImuRefiner, ModelConfig  # noqa: E402
+from imu_learn.fuse.settings import FusionSettings  # noqa: E402
 from imu_learn.infer.checkpoint import save_checkpoint  # noqa: E402
+from imu_learn.infer.refine import refine_arrays  # noqa: E402
+from imu_learn.infer.streaming import CausalStepper, WindowedStepper, load_causal_model, load_learned_model  # noqa: E402
+from imu_learn.nn.model import ImuRefiner, ModelConfig  # noqa: E402
 
 torch.set_num_threads(1)
 
@@ -194,8 +190,8 @@ def test_cli_online_streams_raw_and_a_causal_model_and_writes_online_json(shippe
     # iSAM2 updates: at every 1 Hz fix but the one at sample 0 (it joins the priors), and at the end
     assert raw["update"]["count"] == raw["aiding_count"]
     # the same causal RMSE as the batch run of this recording and aiding
-    from imu_learn.fuse.experiments.config import load
     from imu_learn.fuse.experiments.batch import aiding_rng, load_recording_for_fusion, make_aiding
+    from imu_learn.fuse.experiments.config import load
     from imu_learn.fuse.score import score
 
     cfg = load(cfg_file)
@@ -205,7 +201,8 @@ def test_cli_online_streams_raw_and_a_causal_model_and_writes_online_json(shippe
 
     from imu_learn.core.quat import wxyz_to_xyzw
     R0 = Rotation.from_quat(wxyz_to_xyzw(seq.q_wxyz[0])).as_matrix()
-    batch = fuse(seq.t_ns, seq.gyro, seq.acc, (R0, seq.p[0], seq.v[0]), [aiding], noise, cfg.gravity, cfg.keyframe_hz)
+    batch = fuse(seq.t_ns, seq.gyro, seq.acc, (R0, seq.p[0], seq.v[0]), [aiding],
+                 FusionSettings(noise, cfg.gravity, cfg.keyframe_hz))
     assert raw["causal"]["pos_rmse_m"] == pytest.approx(score(batch, seq.t_ns, seq.p, seq.q_wxyz)["causal"]["pos_rmse_m"],
                                                         abs=1e-12)
 

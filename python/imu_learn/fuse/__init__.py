@@ -13,10 +13,11 @@ GTSAM factor graph and score the trajectory against ground truth.
   (``python -m imu_learn.fuse --config configs/fuse_euroc.toml``).
 """
 from .aiding import PositionFixes, RelativePoses, apply_outages, leica_fixes, simulate_position, simulate_relative_pose
-from .graph import FusionResult, fuse
+from .graph import FusionResult, IncrementalFusion, fuse
 from .noise import ImuNoise
+from .settings import FusionSettings, PriorSigmas
 
 __all__ = [
-    "FusionResult", "ImuNoise", "PositionFixes", "RelativePoses", "apply_outages", "fuse", "leica_fixes",
+    "FusionResult", "FusionSettings", "ImuNoise", "IncrementalFusion", "PositionFixes", "PriorSigmas", "RelativePoses", "apply_outages", "fuse", "leica_fixes",
     "simulate_position", "simulate_relative_pose",
 ]

@@ -125,7 +125,7 @@ class DisplacementFactors:
         minus the bias the graph predicted this interval with."""
         a, b = int(fusion.kf_idx[k0]), int(fusion.kf_idx[k0 + 1])
         R0 = np.asarray(fusion.causal_R[k0], dtype=np.float64)
-        bg = np.asarray(fusion._bias.gyroscope(), dtype=np.float64)  # the interval's bias estimate
+        bg = fusion.bias[:3]  # the interval's bias estimate
         dt = np.diff(self.t_ns[a:b + 1]) * 1e-9
         inc = _exp_so3((self.gyro[a:b - 1] - bg) * dt[:b - 1 - a, None]) if b - a > 1 else np.zeros((0, 3, 3))
         R = self.R

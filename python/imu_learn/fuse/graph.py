@@ -28,7 +28,7 @@ from __future__ import annotations
 
 import time
 from dataclasses import dataclass, field
-from typing import Callable, Dict, List, Optional
+from typing import Callable, Dict, Iterable, List, Optional, Tuple
 from typing import Sequence as Seq
 
 import numpy as np
@@ -36,30 +36,7 @@ import numpy as np
 from imu_learn.errors import InvalidInputError
 
 from .aiding import PositionFixes, RelativePoses, epochs
-from .noise import ImuNoise
-
-
-@dataclass(frozen=True)
-class PriorSigmas:
-    """The first state's prior: pose and velocity from ground truth (tight), bias zero (loose)."""
-
-    rot_rad: float = 1e-3
-    pos_m: float = 1e-3
-    vel_mps: float = 1e-2
-    bias_gyro: float = 0.1  # rad/s: EuRoC's ADIS16448 starts with up to ~0.08 rad/s
-    bias_acc: float = 0.5  # m/s^2
-    # When set: heading [rad] apart from roll/pitch (rot_rad), both in the navigation frame (a levelled
-    # start whose heading is less known than its tilt); None: rot_rad about every body axis.
-    yaw_rad: Optional[float] = None
-
-    def pose_noise(self, R0: np.ndarray, gtsam):
-        """The first pose's prior noise model (GTSAM's Pose3 tangent: body rotation, then position)."""
-        if self.yaw_rad is None:
-            return gtsam.noiseModel.Diagonal.Sigmas(np.r_[[self.rot_rad] * 3, [self.pos_m] * 3])
-        R0 = np.asarray(R0, dtype=np.float64)
-        cov = np.diag(np.r_[[self.rot_rad ** 2] * 2, self.yaw_rad ** 2, [self.pos_m ** 2] * 3])
-        cov[:3, :3] = R0.T @ cov[:3, :3] @ R0  # R = R0 Exp(xi): a world-frame angle is R0 xi
-        return gtsam.noiseModel.Gaussian.Covariance(cov)
+from .settings import SETTLE_S, FusionSettings
 
 
 @dataclass
@@ -162,20 +139,7 @@ def _aiding_by_sample(aiding: Seq) -> tuple:
     return fixes_at, between_at
 
 
-# The causal estimate's window [s] (keyframes this recent stay in the fixed-lag smoother): chosen by
-# measurement (docs/scale.md). Shorter windows cost less per update; a window shorter than the gap
-# between fixes marginalises states no fix has corrected yet (their prior is then the IMU's alone).
-DEFAULT_LAG_S = 10.0
 _NO_LAG = 1e15  # [s]: a smoother lag no recording reaches
-# [s] The first seconds stay in the window whatever the lag: attitude and bias are still settling
-# there, and marginalised at those estimates they stay wrong in the prior on the window (EuRoC V1_01
-# with 1 Hz fixes and a 30 s outage: causal RMSE 6.1 m with lag 10 s from the start, 2.87 m as the
-# whole graph with the first 30 s held).
-SETTLE_S = 30.0
-# The smoothed estimate: "batch", Levenberg-Marquardt over the whole graph (every factor kept: memory
-# and time linear, docs/scale.md); "window", each keyframe's last estimate in the fixed-lag window
-# (no graph kept, no batch pass).
-SMOOTHING = ("batch", "window")
 
 
 def isam2_params():
@@ -276,23 +240,9 @@ class IncrementalFusion:
     iSAM2 over the whole graph, whose updates grow with it. Every factor is also kept for the
     smoothing pass, which starts from each keyframe's last estimate in the window."""
 
-    def __init__(
-        self,
-        t_ns: np.ndarray,
-        start_pose: tuple,
-        aiding: Seq = (),
-        noise: ImuNoise = ImuNoise(),
-        gravity: float = 9.81,
-        keyframe_hz: float = 10.0,
-        prior: PriorSigmas = PriorSigmas(),
-        bias0: Optional[np.ndarray] = None,
-        iterations: int = 1,
-        predict_between: bool = True,
-        resolve_after_s: float = 2.0,
-        extra_factors: Optional[Callable] = None,
-        lag_s: float = DEFAULT_LAG_S,
-        smoothing: str = "batch",
-    ) -> None:
+    def __init__(self, t_ns: np.ndarray, start_pose: tuple, aiding: Seq = (),
+                 settings: FusionSettings = FusionSettings(), bias0: Optional[np.ndarray] = None,
+                 predict_between: bool = True, extra_factors: Optional[Callable] = None) -> None:
         import gtsam
         from gtsam.symbol_shorthand import B, V, X
 
@@ -302,25 +252,25 @@ class IncrementalFusion:
             raise InvalidInputError(f"fusion needs N >= 2 sample stamps; got shape {t_ns.shape}")
         self._t_start = time.perf_counter()
         self.t_ns = t_ns
-        self._stamps = t_ns.tolist()
+        self.stamps = t_ns.tolist()  # the samples' stamps [ns] as ints
         self._n_samples = len(t_ns)
-        self.iterations = int(iterations)
+        self.settings = settings
+        self.iterations = int(settings.iterations)
+        resolve_after_s = settings.resolve_after_s
         self.resolve_after_ns = int(round(resolve_after_s * 1e9)) if np.isfinite(resolve_after_s) else 2 ** 62
         self._last_update_ns = int(t_ns[0])
         self.predict_between = bool(predict_between)
-        kf = keyframes(t_ns, keyframe_hz, aiding)
+        kf = keyframes(t_ns, settings.keyframe_hz, aiding)
         self.kf_idx = kf
         self._kf_list = [int(s) for s in kf]
         self._key_of = {int(s): k for k, s in enumerate(kf)}
         self._fixes_at, self._between_at = _aiding_by_sample(aiding)
-        self._params = noise.gtsam_params(gravity)
-        if smoothing not in SMOOTHING:
-            raise InvalidInputError(f"smoothing: one of {', '.join(SMOOTHING)}, got {smoothing!r}")
-        self.smoothing = smoothing
-        self._start_solver(lag_s)
+        self._params = settings.noise.gtsam_params(settings.gravity)
+        self.smoothing = settings.smoothing
+        self._start_solver(settings.lag_s)
         self._kf_t = ((t_ns[kf] - t_ns[0]) * 1e-9).tolist()  # each keyframe's time [s]: the smoother's stamps
         self._full = gtsam.NonlinearFactorGraph()
-        pose0, v0, b0 = self._start_with_prior(start_pose, prior, bias0)
+        pose0, v0, b0 = self._start_with_prior(start_pose, settings.prior, bias0)
 
         K = len(kf)
         self.causal_p, self.causal_R = np.zeros((K, 3)), np.zeros((K, 3, 3))
@@ -362,7 +312,7 @@ class IncrementalFusion:
         else:
             self._isam = gtsam.ISAM2(isam2_params())
 
-    def _start_with_prior(self, start_pose: tuple, prior: PriorSigmas, bias0: Optional[np.ndarray]) -> tuple:
+    def _start_with_prior(self, start_pose: tuple, prior, bias0: Optional[np.ndarray]) -> tuple:
         """The first keyframe's state (pose, velocity, bias) and its prior factors in a new pending graph."""
         gtsam, B, V, X = self._gtsam, self._B, self._V, self._X
         R0, p0, v0 = start_pose
@@ -384,6 +334,12 @@ class IncrementalFusion:
     @property
     def done(self) -> bool:
         return self.n == len(self.t_ns)
+
+    @property
+    def bias(self) -> np.ndarray:
+        """(6,) gyro then acc: the bias estimate the IMU prediction uses now (the last update's, or
+        the prior's mean before the first)."""
+        return np.r_[self._bias.gyroscope(), self._bias.accelerometer()]
 
     def _add_aiding(self, k: int, s: int) -> int:
         gtsam, X = self._gtsam, self._X
@@ -422,8 +378,8 @@ class IncrementalFusion:
         bias random walk stays the datasheet's."""
         n = self.n
         t = int(t_ns)
-        if n >= self._n_samples or t != self._stamps[n]:
-            expected = "none (the stream has ended)" if n >= self._n_samples else str(self._stamps[n])
+        if n >= self._n_samples or t != self.stamps[n]:
+            expected = "none (the stream has ended)" if n >= self._n_samples else str(self.stamps[n])
             raise InvalidInputError(f"sample {n}: stamp {t} ns, expected {expected}")
         gtsam = self._gtsam
         if n:
@@ -485,7 +441,7 @@ class IncrementalFusion:
             for f in range(self._graph.size()):
                 self._full.add(self._graph.at(f))
         if self.windowed:
-            self._update_window(coast, (t_ns - self._stamps[0]) * 1e-9, (self._last_update_ns - self._stamps[0]) * 1e-9)
+            self._update_window(coast, (t_ns - self.stamps[0]) * 1e-9, (self._last_update_ns - self.stamps[0]) * 1e-9)
         else:
             self._update_whole(coast)
         self.counts["isam2_updates"] += 1
@@ -605,45 +561,49 @@ def chain_factors(*hooks: Optional[Callable]) -> Optional[Callable]:
     return lambda fusion, k, s: [f for h in live for f in h(fusion, k, s)]
 
 
-def fuse(
-    t_ns: np.ndarray,
-    gyro: np.ndarray,
-    acc: np.ndarray,
-    start_pose: tuple,
-    aiding: Seq = (),
-    noise: ImuNoise = ImuNoise(),
-    gravity: float = 9.81,
-    keyframe_hz: float = 10.0,
-    prior: PriorSigmas = PriorSigmas(),
-    bias0: Optional[np.ndarray] = None,
-    iterations: int = 1,
-    resolve_after_s: float = 2.0,
-    var: Optional[np.ndarray] = None,
-    extra_factors: Optional[Callable] = None,
-    lag_s: float = DEFAULT_LAG_S,
-    smoothing: str = "batch",
-) -> FusionResult:
-    """Fuse IMU samples (N, 3) with ``aiding`` (:class:`PositionFixes`, :class:`RelativePoses`).
-    ``start_pose`` = (R0 (3, 3), p0 (3,), v0 (3,)) of sample 0 (from ground truth: the prior);
-    ``bias0`` (6,) gyro then accelerometer, the bias prior's mean (zero when None); ``iterations``:
-    iSAM2 steps at each aiding epoch (1 + relinearising extra updates); ``resolve_after_s``: after a
-    coast longer than this, the graph so far is re-solved in batch (see
-    :class:`IncrementalFusion`); ``var`` (N, 6): per-sample noise variances instead of the
-    datasheet's white noise (:meth:`IncrementalFusion.add_sample`); ``lag_s``: the causal
-    estimate's fixed-lag window [s] (inf: iSAM2 over the whole graph); ``smoothing``: "batch" (LM over
-    the whole graph) or "window" (no batch pass, see :meth:`IncrementalFusion.smooth`). The recording streamed
-    through :class:`IncrementalFusion` sample by sample, then smoothed."""
+# One sample as the graph takes it: (sample index, gyro [rad/s] (3,), acc [m/s^2] (3,), its noise variances
+# (6,) [gyro (rad/s)^2, acc (m/s^2)^2] or None for the datasheet's); more fields may follow (feed passes
+# the item on as it is).
+Sample = Tuple[int, np.ndarray, np.ndarray, Optional[np.ndarray]]
+
+
+def feed(fusion: IncrementalFusion, samples: Iterable[Sample],
+         on_state: Optional[Callable[[Sample, Optional[CausalState]], None]] = None) -> None:
+    """The loop over :meth:`IncrementalFusion.add_sample`: every sample of ``samples`` (in order: sample
+    indices 0, 1, ... of the fusion's stamps), and ``on_state(sample, state)`` after each."""
+    stamps = fusion.stamps
+    for item in samples:
+        state = fusion.add_sample(stamps[item[0]], item[1], item[2], item[3])
+        if on_state is not None:
+            on_state(item, state)
+
+
+def samples_of(gyro: np.ndarray, acc: np.ndarray, var: Optional[np.ndarray] = None) -> Iterable[Sample]:
+    """The rows of ``gyro``, ``acc`` (N, 3) and ``var`` (N, 6, or None) as :data:`Sample` items."""
+    if var is None:
+        return ((s, gyro[s], acc[s], None) for s in range(len(gyro)))
+    return ((s, gyro[s], acc[s], var[s]) for s in range(len(gyro)))
+
+
+def fuse(t_ns: np.ndarray, gyro: np.ndarray, acc: np.ndarray, start_pose: tuple, aiding: Seq = (),
+         settings: FusionSettings = FusionSettings(), bias0: Optional[np.ndarray] = None,
+         var: Optional[np.ndarray] = None, extra_factors: Optional[Callable] = None) -> FusionResult:
+    """Fuse IMU samples (N, 3) with ``aiding`` (:class:`PositionFixes`, :class:`RelativePoses`, ...)
+    under ``settings``. ``start_pose`` = (R0 (3, 3), p0 (3,), v0 (3,)) of sample 0 (the prior's mean);
+    ``bias0`` (6,) gyro then accelerometer, the bias prior's mean (zero when None); ``var`` (N, 6):
+    per-sample noise variances instead of the datasheet's white noise
+    (:meth:`IncrementalFusion.add_sample`); ``extra_factors``: the graph's hook for factors beyond the
+    aiding (:mod:`imu_learn.fuse.factors`). The recording streamed through
+    :class:`IncrementalFusion` sample by sample (:func:`feed`), then smoothed."""
     t_ns = np.asarray(t_ns, dtype=np.int64)
     if len(t_ns) < 2 or gyro.shape != (len(t_ns), 3) or acc.shape != gyro.shape:
         raise InvalidInputError(f"fuse needs N >= 2 samples with gyro and acc (N, 3); got {gyro.shape}, {acc.shape}")
     t_start = time.perf_counter()
-    inc = IncrementalFusion(t_ns, start_pose, aiding, noise, gravity, keyframe_hz, prior, bias0, iterations,
-                            predict_between=False, resolve_after_s=resolve_after_s, extra_factors=extra_factors,
-                            lag_s=lag_s, smoothing=smoothing)
+    inc = IncrementalFusion(t_ns, start_pose, aiding, settings, bias0, predict_between=False,
+                            extra_factors=extra_factors)
     if var is not None and np.shape(var) != (len(t_ns), 6):
         raise InvalidInputError(f"fuse: var must be (N, 6) = ({len(t_ns)}, 6), got {np.shape(var)}")
-    for s in range(len(t_ns)):
-        inc.add_sample(t_ns[s], gyro[s], acc[s], None if var is None else var[s])
+    feed(inc, samples_of(gyro, acc, var))
     res = inc.smooth()
     res.seconds = time.perf_counter() - t_start
     return res

@@ -32,8 +32,9 @@ from imu_learn.errors import InvalidInputError
 
 from . import init as initial
 from .aiding import PositionFixes, RelativePoses
-from .graph import PriorSigmas, fuse
+from .graph import fuse
 from .noise import ImuNoise
+from .settings import FusionSettings, PriorSigmas
 
 # The first state's prior after the alignment: roll and pitch levelled (3 deg), position from the fixes;
 # the heading as loose as a hypothesis' basin (1.5 pi / n_yaw, 34 deg with 8): a short window of fixes
@@ -106,13 +107,14 @@ def yaw_hypotheses(t_ns, gyro, acc, fixes: PositionFixes, R_level: np.ndarray, s
     sl = slice(0, end + 1)
     prior = PriorSigmas(rot_rad=float(np.deg2rad(LEVEL_SIGMA_DEG)), yaw_rad=1.5 * np.pi / settings.n_yaw,
                         pos_m=max(5 * fixes.sigma_m, 1.0), vel_mps=STILL_VEL_MPS if still else 2.0)
+    fusion = FusionSettings(noise, gravity, keyframe_hz, prior, lag_s=np.inf)
     fits = []
     for yaw in np.arange(settings.n_yaw) * 2 * np.pi / settings.n_yaw:
         R0 = initial.rot_z(float(yaw)) @ R_level
         p0 = fixes.p[0] - R0 @ fixes.lever
         try:
-            res = fuse(t_ns[sl], gyro[sl], acc[sl], (R0, p0, np.zeros(3)), [win], noise, gravity, keyframe_hz, prior=prior,
-                       bias0=bias0, var=None if var is None else var[sl], lag_s=np.inf)
+            res = fuse(t_ns[sl], gyro[sl], acc[sl], (R0, p0, np.zeros(3)), [win], fusion, bias0=bias0,
+                       var=None if var is None else var[sl])
         except RuntimeError:  # GTSAM could not solve this hypothesis: it does not win
             continue
         fits.append((_fix_residual_rms(res, win), float(yaw), res))

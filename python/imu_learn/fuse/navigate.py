@@ -397,8 +397,8 @@ def refined_input(checkpoint: Optional[Path], gyro: np.ndarray, acc: np.ndarray,
         if variance_scale is not None:
             raise ConfigError("--variance-scale scales a covariance head's variances: it needs --checkpoint")
         return gyro, acc, None, "raw"
-    from imu_learn.infer.windowing import apply
     from imu_learn.infer.checkpoint import load_model
+    from imu_learn.infer.windowing import apply
 
     model = load_model(Path(checkpoint))
     if model.cov_head is None:
@@ -469,7 +469,8 @@ class Sources:
 def navigate(src: Sources, out: Path, opts: NavigateOptions = NavigateOptions()) -> Dict[str, object]:
     """Fuse the recording's IMU with its aiding file and write ``out``/{causal.tum, smoothed.tum,
     plot.png, summary.json}; returns the summary (module docstring)."""
-    from .graph import PriorSigmas, chain_factors, fuse
+    from .graph import chain_factors, fuse
+    from .settings import FusionSettings, PriorSigmas
 
     input, aiding_file, fmt, extrinsics = src.input, src.aiding, src.fmt, src.extrinsics
     checkpoint, groundtruth, displacement, calibration = src.checkpoint, src.groundtruth, src.displacement, src.calibration
@@ -531,7 +532,9 @@ def navigate(src: Sources, out: Path, opts: NavigateOptions = NavigateOptions())
     at_rest = st.info["still_s"] >= 1.0 and opts.aiding_kind != "position"  # position aiding starts moving
     prior = PriorSigmas(rot_rad=float(np.deg2rad(opts.prior_rot_deg)), pos_m=opts.prior_pos_m,
                         vel_mps=0.05 if at_rest else opts.prior_vel_mps)
-    kw: Dict[str, object] = {} if opts.lag_s is None else {"lag_s": opts.lag_s}
+    settings = FusionSettings(noise, opts.gravity, opts.keyframe_hz, prior,
+                              **({} if opts.lag_s is None else {"lag_s": opts.lag_s}))
+    kw: Dict[str, object] = {}
     hooks = []
     if opts.nhc:
         from .nhc import NhcSettings, nhc_callback
@@ -549,8 +552,7 @@ def navigate(src: Sources, out: Path, opts: NavigateOptions = NavigateOptions())
              f"of {aiding_file}")
     try:
         res = fuse(t_ns[sel], np.ascontiguousarray(gyro[sel]), np.ascontiguousarray(acc[sel]),
-                   (st.R_WB, st.p, st.v), [aiding], noise=noise, gravity=opts.gravity, keyframe_hz=opts.keyframe_hz,
-                   prior=prior, bias0=bias0, **kw)
+                   (st.R_WB, st.p, st.v), [aiding], settings, bias0=bias0, **kw)
     except RuntimeError as e:  # GTSAM's IndeterminateLinearSystemException and kin
         raise AidingError(f"{aiding_file}: the factor graph could not be solved: {' '.join(str(e).split())[:300]}",
                           str(aiding_file), opts.aiding_kind) from None

@@ -40,13 +40,14 @@ from ..aiding import (
     simulate_position,
     simulate_relative_pose,
 )
-from .config import LEARNED_COV_INPUTS, LEARNED_INPUT, FuseConfig, RecordingSpec, ScenarioSpec
 from ..displacement import FACTOR_INPUTS, TLIO_INPUT, displacement_factors_for
-from ..graph import SETTLE_S, chain_factors, fuse
+from ..graph import chain_factors, fuse
 from ..inmotion import AlignSettings, crop, data_start, from_sample
 from ..noise import ImuNoise
 from ..plots import plot_setting, runs_of
 from ..score import score
+from ..settings import SETTLE_S, FusionSettings
+from .config import LEARNED_COV_INPUTS, LEARNED_INPUT, FuseConfig, RecordingSpec, ScenarioSpec
 
 # Changes with the estimator in graph.py, so results of an older estimator are not resumed.
 ESTIMATOR = "isam2-gn-at-aiding-resolve-after-2s-qr+lm-qr"
@@ -476,9 +477,9 @@ def run_one(cfg: FuseConfig, out: Path, seq, noise: ImuNoise, R0: np.ndarray, sc
         nhc = nhc_callback(NhcSettings(scn.nhc_sigma_mps, scn.nhc_sigma_mps), np.ascontiguousarray(gyro[s0:]))
     extra = chain_factors(hook, nhc)
     try:
-        res = fuse(seq.t_ns[s0:], gyro[s0:], acc[s0:], (start.R, start.p, start.v), [from_sample(aiding, s0)], noise,
-                   cfg.gravity, cfg.keyframe_hz, prior=start.prior, bias0=start.bias,
-                   var=None if var is None else var[s0:], extra_factors=extra, lag_s=cfg.lag_s)
+        res = fuse(seq.t_ns[s0:], gyro[s0:], acc[s0:], (start.R, start.p, start.v), [from_sample(aiding, s0)],
+                   FusionSettings(noise, cfg.gravity, cfg.keyframe_hz, start.prior, lag_s=cfg.lag_s), bias0=start.bias,
+                   var=None if var is None else var[s0:], extra_factors=extra)
     except RuntimeError as e:  # GTSAM's IndeterminateLinearSystemException and kin
         return {**head, "failed": " ".join(str(e).split())[:300]}
     # keyframes in the recording's samples; a data start's alignment window is neither written nor scored
@@ -500,8 +501,8 @@ def first_state(cfg: FuseConfig, seq, noise: ImuNoise, R0: np.ndarray, aiding, g
     """The run's first fused sample and state: ground truth's (``cfg.init = "groundtruth"``, the
     graph's tight default prior) or the data's (:func:`imu_learn.fuse.inmotion.data_start`)."""
     if cfg.init == "groundtruth":
-        from ..graph import PriorSigmas
         from ..inmotion import DataStart
+        from ..settings import PriorSigmas
 
         return DataStart(0, 0, R0, seq.p[0], seq.v[0], np.zeros(6) if bias0 is None else bias0, PriorSigmas(), False,
                          {"source": "ground truth: pose and velocity of the first sample"})

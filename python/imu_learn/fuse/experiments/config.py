@@ -12,7 +12,7 @@ from typing import List, Optional, Tuple
 from imu_learn.errors import ConfigError
 from imu_learn.settings import DATA_ROOT_ENV, from_dict, read_toml
 
-from ..graph import DEFAULT_LAG_S
+from ..settings import DEFAULT_LAG_S
 
 # "raw+learned-cov" / "proposed+learned-cov": the raw or refined samples, each weighted in the
 # graph by its own noise variances from a refiner's covariance head (covariance_checkpoint) instead

@@ -40,10 +40,11 @@ from imu_learn.errors import ConfigError, InvalidInputError
 from imu_learn.settings import DATA_ROOT_ENV, from_dict, merge, nest, read_toml
 from imu_learn.util.atomic import atomic_write_text
 
-from ..graph import IncrementalFusion, PriorSigmas, chain_factors
+from ..graph import IncrementalFusion, chain_factors, feed, samples_of
 from ..nhc import NhcSettings, calibrate_lever, nhc_callback
 from ..noise import ImuNoise
 from ..rtklib import GnssFixes, RtkSolution, fixes_on_imu, normal_gravity, read_pos
+from ..settings import FusionSettings, PriorSigmas
 
 log = logging.getLogger(__name__)
 VARIANTS = ("raw", "raw+nhc")
@@ -298,22 +299,24 @@ def run_variant(cfg: GnssRunConfig, variant: str, t: np.ndarray, gyro: np.ndarra
                                                   math.radians(n.max_yaw_rate_dps)), gyro))
     extra = chain_factors(*callbacks)
     t0 = time.perf_counter()
-    inc = IncrementalFusion(t, (start["R0"], start["p0"], start["v0"]), [fixes], noise, gravity, cfg.keyframe_hz,
-                            prior, bias0, predict_between=True, resolve_after_s=cfg.resolve_after_s,
-                            extra_factors=extra, lag_s=cfg.lag_s)
+    settings = FusionSettings(noise, gravity, cfg.keyframe_hz, prior, resolve_after_s=cfg.resolve_after_s,
+                              lag_s=cfg.lag_s)
+    inc = IncrementalFusion(t, (start["R0"], start["p0"], start["v0"]), [fixes], settings, bias0, predict_between=True,
+                            extra_factors=extra)
     want = set(int(i) for i in eval_idx)
     live: Dict[int, np.ndarray] = {}
     diag = set(int(i) for i in diag_idx)
     live_nav: Dict[int, tuple] = {}
     lever = np.asarray(cfg.lever_gnss_m, dtype=np.float64)
-    for s in range(len(t)):
-        st = inc.add_sample(t[s], gyro[s], acc[s])
+
+    def observe(sample, st) -> None:
+        s = sample[0]
         if s in want:
             live[s] = st.p + st.R @ lever
-        if s in diag:
-            # IncrementalFusion's current bias (the one its live prediction uses; no public accessor)
-            b = inc._bias
-            live_nav[s] = (st.R.copy(), st.v.copy(), np.r_[b.gyroscope(), b.accelerometer()])
+        if s in diag:  # with the bias the live prediction uses
+            live_nav[s] = (st.R.copy(), st.v.copy(), inc.bias)
+
+    feed(inc, samples_of(gyro, acc), observe)
     res = inc.smooth()
     seconds = time.perf_counter() - t0
     params = noise.gtsam_params(gravity)

@@ -49,222 +49,18 @@ from typing import Callable, Dict, List, Optional, Sequence, Tuple
 import numpy as np
 
 from imu_learn.errors import ConfigError, InvalidInputError
+from imu_learn.infer.streaming import WindowedStepper, load_causal_model, load_learned_model, make_stepper
 
-from ..graph import DEFAULT_LAG_S, FusionResult, IncrementalFusion, PriorSigmas
-from ..noise import ImuNoise
+from ..graph import FusionResult, IncrementalFusion, feed
+from ..settings import FusionSettings
 
 log = logging.getLogger(__name__)
 
-# One refined sample as a refiner releases it to the fusion: (sample index, gyro [rad/s] (3,),
-# acc [m/s^2] (3,), its noise variances (6,) [gyro (rad/s)^2, acc (m/s^2)^2] or None for the datasheet's).
-Released = Tuple[int, np.ndarray, np.ndarray, Optional[np.ndarray]]
 
 ONLINE_INPUTS = ("raw", "proposed")  # streamed by default (--online without --inputs)
 # every input that streams: "learned" on request (it needs the config's covariance_checkpoint)
 STREAMABLE = ONLINE_INPUTS + ("learned",)
 
-
-class CausalStepper:
-    """The causal model applied one sample at a time with its LSTM state carried over. As in
-    :func:`imu_learn.refine.refine_arrays`, the network runs in float32 and its correction is added
-    to the float64 raw sample.
-
-    The step runs with oneDNN (mkldnn) off: its LSTM primitive costs about 200 us per call whatever
-    the length, which for one time step is most of the step (measured on 2 cores: 580-940 us per
-    step with it, 370-390 us without); torch's native LSTM kernel then runs instead. Both are float32;
-    they differ from the whole-sequence forward by float32 rounding (tests/test_fuse_online.py)."""
-
-    def __init__(self, model, native_lstm: bool = True) -> None:
-        import torch
-
-        if not getattr(model, "cfg", None) or not model.cfg.causal:
-            raise ConfigError("the model is bidirectional (it needs future samples); online refinement needs a "
-                              "causal checkpoint (trained with --model.causal true)")
-        self._torch = torch
-        self._mkldnn = torch.backends.mkldnn
-        self.native_lstm = native_lstm
-        self.model = model.eval()
-        self.state = None
-        self._n = 0  # samples pushed
-
-    def warm_up(self) -> None:
-        """One step on a zero sample with a throwaway state (torch's first call allocates)."""
-        state = self.state
-        self.step(np.zeros(3), np.zeros(3))
-        self.state = state
-
-    def step(self, gyro: np.ndarray, acc: np.ndarray) -> Tuple[np.ndarray, np.ndarray]:
-        raw = np.concatenate((gyro, acc)).astype(np.float64, copy=False)
-        x = self._torch.from_numpy(raw.astype(np.float32))[None]
-        was = self._mkldnn.enabled
-        self._mkldnn.enabled = was and not self.native_lstm
-        try:
-            y, self.state = self.model.step(x, self.state)
-        finally:
-            self._mkldnn.enabled = was
-        refined = raw + (y - x)[0].numpy().astype(np.float64)
-        return refined[:3], refined[3:]
-
-    def push(self, gyro: np.ndarray, acc: np.ndarray) -> List[Released]:
-        """The stepper as a refiner of the stream: the sample, refined at once (no variances)."""
-        i = self._n
-        self._n = i + 1
-        g, a = self.step(gyro, acc)
-        return [(i, g, a, None)]
-
-    def finish(self) -> List[Released]:
-        """Nothing is held back."""
-        return []
-
-
-def load_causal_model(path: Path, hint: str = ""):
-    """A causal checkpoint's model; a bidirectional one is a :class:`ConfigError` (``hint`` is
-    appended to its message)."""
-    from imu_learn.infer.checkpoint import load_model
-
-    model = load_model(Path(path))
-    if not model.cfg.causal:
-        raise ConfigError(f"{path}: a bidirectional checkpoint (it needs future samples); online refinement needs a "
-                          f"causal one (trained with --model.causal true){hint}")
-    return model
-
-
-class WindowedStepper:
-    """A bidirectional refiner with a covariance head (the ``learned`` input) applied to a stream by
-    the one windowing rule of :mod:`imu_learn.infer.windowing`: sample by sample, with the same output
-    as the offline ``apply(model, gyro, acc, variance=True)`` on the whole recording, without knowing
-    where the recording ends.
-
-    :meth:`push` buffers a raw sample and returns the samples it settled; :meth:`finish` (the stream
-    has ended) returns the rest. A sample is released once its source window (the window of
-    :func:`~imu_learn.infer.windowing.window_plan` it is kept from) has completed and is the same
-    whatever the recording's length N turns out to be: with m samples in, those are the samples on
-    which the plans for N = m and N = m + 1 agree (for N > m + 1 the kept ranges only grow;
-    :meth:`_settled`), so a window's centre samples wait for the window's end and the end of its
-    successor's overlap: an algorithmic delay of up to 3/4 of a window inside the recording (the
-    first window's first samples and the tail released by :meth:`finish` wait up to a whole window:
-    the plan's outer windows keep their outer edges). Each window runs
-    through :func:`~imu_learn.infer.windowing.corrections` alone (a batch of one window; the offline
-    pass stacks 16, hence float32 rounding differences), when its first samples are released: at the
-    sample that completes it, or at :meth:`finish` for the plan's last window (moved back to end at
-    N) or a recording shorter than a window. Refined = raw (float64) + the model's float32
-    correction; variances (6,) [(rad/s)^2, (m/s^2)^2] as float64, as ``apply`` gives them.
-
-    Memory is bounded: the raw samples and window outputs still needed (about two windows)."""
-
-    def __init__(self, model, windowing=None) -> None:
-        from imu_learn.infer.windowing import Windowing, windowing_of
-
-        if getattr(getattr(model, "cfg", None), "causal", False):
-            raise ConfigError("the model is causal; the windowed refiner is for a bidirectional model with a "
-                              "covariance head (step a causal one with CausalStepper)")
-        if getattr(model, "cov_head", None) is None:
-            raise ConfigError("the model has no covariance head (a refiner fitted with model.covariance = true); "
-                              "the 'learned' input fuses its per-sample variances")
-        self.model = model.eval()
-        self.windowing = windowing if windowing is not None else windowing_of(model)
-        self._one = Windowing(self.windowing.window, self.windowing.overlap, 1)  # one window per forward
-        self.W, self.S = self.windowing.window, self.windowing.window - self.windowing.overlap
-        self.n = 0  # samples pushed
-        self.released = 0  # samples released
-        self.model_calls = 0
-        self._buf = np.zeros((4 * self.W + 2 * self.S, 6))  # raw samples [_off, n)
-        self._off = 0
-        self._out: Dict[int, Tuple[np.ndarray, np.ndarray]] = {}  # window start -> (corrections, variances)
-
-    def warm_up(self) -> None:
-        """One forward on a zero window (torch's first call allocates); no state changes."""
-        from imu_learn.infer.windowing import corrections
-
-        corrections(self.model, np.zeros((self.W, 6), dtype=np.float32), self._one, variance=True)
-
-    def _tail(self, n: int) -> List[Tuple[int, int, int, int]]:
-        """The last windows of ``window_plan(n)`` (start, end, keep_from, keep_to): the plan of the
-        samples from a window start b at least two strides before the last full window ending by n - 1,
-        shifted by b (the plan's starts are multiples of the stride, so its windows from b on are these),
-        without the window at b whose keep_from the shift loses (its samples are released already)."""
-        from imu_learn.infer.windowing import window_plan
-
-        W, S = self.W, self.S
-        b = max(0, ((n - 1 - W) // S) * S - 2 * S) if n > W else 0
-        plan = window_plan(n - b, W, self.windowing.overlap)
-        return [(s + b, e + b, kf + b, kt + b) for s, e, kf, kt in (plan[1:] if b else plan)]
-
-    def _settled(self, m: int) -> Tuple[int, List[Tuple[int, int, int, int]]]:
-        """(bound, windows): with m samples in and more possibly to come, samples [0, bound) have the
-        same source window in ``window_plan(N)`` for every N >= m, and that window has ended; windows:
-        the plan's complete windows near the bound (for N = m + 1)."""
-        nxt = [w for w in self._tail(m + 1) if w[1] <= m]  # every window but the last (it ends at m + 1)
-        if not nxt:
-            return 0, []
-        s_last, kt_next = nxt[-1][0], nxt[-1][3]
-        kt_now = next(kt for s, _e, _kf, kt in self._tail(m) if s == s_last)
-        return min(kt_now, kt_next), nxt
-
-    def _window(self, s: int, e: int) -> Tuple[np.ndarray, np.ndarray]:
-        """Window [s, e)'s float32 corrections and variances (L, 6), computed once."""
-        if s not in self._out:
-            from imu_learn.infer.windowing import corrections
-
-            raw32 = self._buf[s - self._off : e - self._off].astype(np.float32)
-            self._out[s] = corrections(self.model, raw32, self._one, variance=True)
-            self.model_calls += 1
-        return self._out[s]
-
-    def _release(self, bound: int, windows: Sequence[Tuple[int, int, int, int]]) -> List[Released]:
-        """Samples [released, bound), each from its plan window, refined, with its variances."""
-        out: List[Released] = []
-        for s, e, kf, kt in windows:
-            lo, hi = max(self.released, kf), min(bound, kt)
-            if lo >= hi:
-                continue
-            if lo != self.released:
-                raise RuntimeError(f"windowed refiner: sample {self.released} has no window (next kept from {lo})")
-            corr, var = self._window(s, e)
-            refined = self._buf[lo - self._off : hi - self._off] + corr[lo - s : hi - s].astype(np.float64)
-            var64 = var[lo - s : hi - s].astype(np.float64)
-            out += [(lo + j, refined[j, :3], refined[j, 3:], var64[j]) for j in range(hi - lo)]
-            self.released = hi
-        if self.released != bound:
-            raise RuntimeError(f"windowed refiner: released {self.released} of {bound} settled samples")
-        for s in [s for s in self._out if s + self.W <= self.released]:  # used up
-            del self._out[s]
-        return out
-
-    def _append(self, row: np.ndarray) -> None:
-        """Store a raw sample; when the buffer is full drop what no window or release needs any more."""
-        if self.n - self._off == len(self._buf):
-            keep = min(self.released, max(0, self.n - self.W - self.S))
-            self._buf[: self.n - keep] = self._buf[keep - self._off : self.n - self._off]
-            self._off = keep
-        self._buf[self.n - self._off] = row
-        self.n += 1
-
-    def push(self, gyro: np.ndarray, acc: np.ndarray) -> List[Released]:
-        """Take raw sample number :attr:`n` (gyro [rad/s], acc [m/s^2] (3,)); returns the samples it
-        settles, in order (often none; about half a window's worth when it completes a window)."""
-        self._append(np.concatenate((gyro, acc)))
-        bound, windows = self._settled(self.n)
-        return self._release(bound, windows) if bound > self.released else []
-
-    def finish(self) -> List[Released]:
-        """The stream has ended at N = :attr:`n` samples: the rest by ``window_plan(N)`` itself."""
-        if self.n == 0:
-            return []
-        return self._release(self.n, self._tail(self.n))
-
-
-def load_learned_model(path: Path):
-    """The ``learned`` input's model: a bidirectional refiner with a covariance head; anything else is a
-    :class:`ConfigError`."""
-    from imu_learn.infer.checkpoint import load_model
-
-    model = load_model(Path(path))
-    if model.cfg.causal or getattr(model, "cov_head", None) is None:
-        raise ConfigError(f"{path}: the 'learned' input needs a bidirectional refiner with a covariance head "
-                          f"(model.covariance = true, e.g. models/euroc_adis16448_cov.pt); this one is "
-                          f"{'causal' if model.cfg.causal else 'without a covariance head'}")
-    return model
 
 
 def latency_stats(ns: np.ndarray) -> Dict[str, float]:
@@ -355,28 +151,15 @@ class OnlineResult:
                             np.full((K, 3), np.nan), np.full((K, 6), np.nan), self.wall_s, dict(self.counts))
 
 
-def stream(
-    t_ns: np.ndarray,
-    gyro: np.ndarray,
-    acc: np.ndarray,
-    start_pose: tuple,
-    aiding: Sequence = (),
-    model=None,
-    noise: ImuNoise = ImuNoise(),
-    gravity: float = 9.81,
-    keyframe_hz: float = 10.0,
-    prior: PriorSigmas = PriorSigmas(),
-    bias0: Optional[np.ndarray] = None,
-    iterations: int = 1,
-    resolve_after_s: float = 2.0,
-    lag_s: float = DEFAULT_LAG_S,
-    extra_factors: Optional[Callable] = None,
-) -> OnlineResult:
+def stream(t_ns: np.ndarray, gyro: np.ndarray, acc: np.ndarray, start_pose: tuple, aiding: Sequence = (),
+           model=None, settings: FusionSettings = FusionSettings(), bias0: Optional[np.ndarray] = None,
+           extra_factors: Optional[Callable] = None) -> OnlineResult:
     """Stream raw samples ``gyro``, ``acc`` (N, 3) with stamps ``t_ns`` through a refiner and
-    :class:`IncrementalFusion`, timing each arrival's whole path. ``model``: None (raw), a causal
-    model (stepped: :class:`CausalStepper`), or a bidirectional model with a covariance head
-    (``learned``: :class:`WindowedStepper`; its variances weight the IMU factors). ``extra_factors``:
-    the graph's hook (e.g. learned displacement factors, :mod:`.displacement`)."""
+    :class:`IncrementalFusion` (under ``settings``), timing each arrival's whole path. ``model``: None
+    (raw), a causal model (stepped: :class:`~imu_learn.infer.streaming.CausalStepper`), or a
+    bidirectional model with a covariance head (``learned``:
+    :class:`~imu_learn.infer.streaming.WindowedStepper`; its variances weight the IMU factors).
+    ``extra_factors``: the graph's hook (e.g. learned displacement factors, :mod:`imu_learn.fuse.factors`)."""
     t_ns = np.asarray(t_ns, dtype=np.int64)
     gyro = np.asarray(gyro, dtype=np.float64)
     acc = np.asarray(acc, dtype=np.float64)
@@ -387,8 +170,7 @@ def stream(
     if stepper is not None:
         stepper.warm_up()
     t0 = time.perf_counter()
-    fusion = IncrementalFusion(t_ns, start_pose, aiding, noise, gravity, keyframe_hz, prior, bias0, iterations,
-                               resolve_after_s=resolve_after_s, lag_s=lag_s, extra_factors=extra_factors)
+    fusion = IncrementalFusion(t_ns, start_pose, aiding, settings, bias0, extra_factors=extra_factors)
     setup_s = time.perf_counter() - t0
     lat = np.zeros(n, dtype=np.int64)
     is_kf = np.zeros(n, dtype=bool)
@@ -396,29 +178,16 @@ def stream(
     p = np.zeros((n, 3))
     at = np.full(n, -1, dtype=np.int64)
     ran = np.zeros(n, dtype=bool)
-    stamps = t_ns.tolist()
-    clock = time.perf_counter_ns
-    calls = getattr(stepper, "model_calls", 0)
+
+    def observe(item, state) -> None:
+        i, s = item[0], item[4]  # the sample, and the arrival that released it
+        is_kf[s] |= state.keyframe
+        upd[s] |= state.updated
+        p[i] = state.p
+        at[i] = s
+
     wall0 = time.perf_counter()
-    for s in range(n):
-        g, a = gyro[s], acc[s]  # the sample as it arrives (a view: no work)
-        c0 = clock()
-        if stepper is None:
-            out: Sequence[Released] = ((s, g, a, None),)
-        else:
-            out = stepper.push(g, a)
-            if s == n - 1:
-                out = out + stepper.finish()
-        for i, gi, ai, vi in out:
-            state = fusion.add_sample(stamps[i], gi, ai, vi)
-            is_kf[s] |= state.keyframe
-            upd[s] |= state.updated
-            p[i] = state.p
-            at[i] = s
-        c1 = clock()
-        lat[s] = c1 - c0
-        if calls != getattr(stepper, "model_calls", 0):
-            ran[s], calls = True, stepper.model_calls
+    feed(fusion, _arrivals(stepper, gyro, acc, lat, ran), observe)
     wall_s = time.perf_counter() - wall0
     if (at < 0).any():
         raise RuntimeError(f"stream: {int((at < 0).sum())} samples were never released to the fusion")
@@ -428,14 +197,28 @@ def stream(
                         at if windowed else None, ran if windowed else None)
 
 
-def make_stepper(model):
-    """The refiner a model is streamed with: None (raw) for None, :class:`CausalStepper` for a causal
-    model, :class:`WindowedStepper` for a bidirectional one (it needs a covariance head)."""
-    if model is None:
-        return None
-    if getattr(getattr(model, "cfg", None), "causal", False):
-        return CausalStepper(model)
-    return WindowedStepper(model)
+def _arrivals(stepper, gyro: np.ndarray, acc: np.ndarray, lat: np.ndarray, ran: np.ndarray):
+    """The samples the refiner releases at each arrival, as (index, gyro, acc, var, arrival); each
+    arrival's wall time, from before the refiner to after the fusion of the last sample it released
+    (the generator resumes once the consumer is done with it), goes to ``lat``; ``ran``: whether the
+    refiner ran its model in that arrival's path."""
+    clock = time.perf_counter_ns
+    n = len(gyro)
+    calls = getattr(stepper, "model_calls", 0)
+    for s in range(n):
+        g, a = gyro[s], acc[s]  # the sample as it arrives (a view: no work)
+        c0 = clock()
+        if stepper is None:
+            yield s, g, a, None, s
+        else:
+            out = stepper.push(g, a)
+            if s == n - 1:
+                out = out + stepper.finish()
+            for i, gi, ai, vi in out:
+                yield i, gi, ai, vi, s
+        lat[s] = clock() - c0
+        if calls != getattr(stepper, "model_calls", 0):
+            ran[s], calls = True, stepper.model_calls
 
 
 def score_online(res: OnlineResult, t_ns: np.ndarray, p_gt: np.ndarray, q_wxyz_gt: np.ndarray,
@@ -517,8 +300,8 @@ def _displacement_hook(cfg, spec, seq, s0: int = 0) -> Optional[Callable]:
     """The ``learned`` input's displacement factors where the device has a tlio-style model (as the
     batch run adds them, on the raw IMU; the hook reads only samples before the current keyframe),
     else None."""
-    from . import batch as runmod
     from ..displacement import TLIO_INPUT, displacement_factors_for
+    from . import batch as runmod
 
     path = runmod.displacement_artefact(cfg, spec)
     if not path:
@@ -578,8 +361,8 @@ def _stream_recording(cfg, spec, scns: list, inputs: Sequence[str], models: Dict
 
     from imu_learn.core.quat import wxyz_to_xyzw
 
-    from . import batch as runmod
     from ..inmotion import from_sample
+    from . import batch as runmod
 
     rname = Path(spec.path).name
     seq, noise, leica = runmod.load_recording_for_fusion(cfg, spec)
@@ -608,8 +391,9 @@ def _stream_recording(cfg, spec, scns: list, inputs: Sequence[str], models: Dict
                 # a fresh hook per run: it holds the run's orientation estimates
                 hook = _displacement_hook(cfg, spec, seq, s0) if name == "learned" and with_displacement else None
                 res = stream(seq.t_ns[s0:], seq.gyro[s0:], seq.acc[s0:], (start.R, start.p, start.v),
-                             [from_sample(aiding, s0)], model, noise, cfg.gravity, cfg.keyframe_hz, prior=start.prior,
-                             bias0=start.bias, lag_s=cfg.lag_s, extra_factors=hook)
+                             [from_sample(aiding, s0)], model,
+                             FusionSettings(noise, cfg.gravity, cfg.keyframe_hz, start.prior, lag_s=cfg.lag_s),
+                             bias0=start.bias, extra_factors=hook)
             except (RuntimeError, InvalidInputError) as e:  # GTSAM's exceptions; no heading could be aligned
                 runs[key] = {"recording": rname, "scenario": scn.name, "input": name,
                              "failed": " ".join(str(e).split())[:300]}
