@@ -142,3 +142,37 @@ def test_default_config_keeps_working_with_a_data_root_set(roots, monkeypatch):
     assert split.record["test"][0]["path"] == str(REPO / "datasets" / "euroc" / "V1_01_easy")
     monkeypatch.delenv(ENV)
     assert make_split(load_config().data).record["data_root"] is None
+
+
+@pytest.mark.parametrize("cli, env, config, expected", [
+    ("/cli", "/env", "/cfg", "/cli"),
+    (None, "/env", "/cfg", "/env"),
+    (None, "", "/cfg", "/cfg"),  # an empty variable is no value
+    (None, None, "/cfg", "/cfg"),
+    (None, None, None, ""),
+    ("/cli", None, None, "/cli"),
+])
+def test_one_data_root_rule(monkeypatch, cli, env, config, expected):
+    """resolve_data_root: the command line, then IMU_LEARN_DATA, then the config (every config calls it)."""
+    from imu_learn.data.config import resolve_data_root
+
+    if env is None:
+        monkeypatch.delenv(ENV, raising=False)
+    else:
+        monkeypatch.setenv(ENV, env)
+    assert resolve_data_root(cli, config) == expected
+
+
+def test_training_and_evaluate_configs_follow_the_rule(roots, monkeypatch):
+    """The fit config and the evaluate config (which embeds one) resolve the data root alike."""
+    good, empty, _ = roots
+    monkeypatch.setenv(ENV, str(empty))
+    base = {"data": {"data_root": str(good)}}
+    from imu_learn.train.config import build_config
+
+    assert build_config(base, {}).data.data_root == str(empty)  # the variable beats the config
+    assert build_config(base, {"data.data_root": "/cli"}).data.data_root == "/cli"  # the command line beats both
+    monkeypatch.delenv(ENV)
+    assert build_config(base, {}).data.data_root == str(good)
+    res = ev.load_eval_config(None, ["--data.data_root", "/cli"])
+    assert res.run.data.data_root == "/cli"

@@ -5,8 +5,9 @@ import argparse
 from pathlib import Path
 from typing import Any, Callable, List, Optional, Sequence
 
-from imu_learn.cli.common import DATA_ROOT_ENV, data_root_default, run_command
+from imu_learn.cli.common import DATA_ROOT_ENV, run_command
 from imu_learn.data import labels as label_cache
+from imu_learn.data.config import resolve_data_root
 from imu_learn.data.datasets import DATASETS
 from imu_learn.data.loading import AlignOptions
 
@@ -44,7 +45,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 def dataset_dir(args: argparse.Namespace) -> Path:
     if args.dataset_dir is not None:
         return args.dataset_dir
-    return Path(args.data_root or data_root_default() or "datasets") / args.dataset
+    return Path(resolve_data_root(args.data_root) or "datasets") / args.dataset
 
 
 def run(args: argparse.Namespace, rest: List[str], keep: Callable[[Any], None]) -> int:

@@ -1,12 +1,20 @@
 """Which recordings a run reads and how they are windowed: ``[data]`` of a run config. No torch."""
 from __future__ import annotations
 
+import os
 from dataclasses import dataclass, field
-from typing import List
+from typing import List, Optional
 
 from imu_learn.core.batches import AugmentConfig, BatchConfig
 from imu_learn.core.integration import PAPER_FRACTIONS
-from imu_learn.settings import DATA_ROOT_ENV  # noqa: F401  (re-exported: the data root's variable)
+from imu_learn.settings import DATA_ROOT_ENV
+
+
+def resolve_data_root(command_line: Optional[str] = None, config: Optional[str] = None) -> str:
+    """The one data-root rule of every config (training, evaluate, fusion) and of ``imu-learn labels``:
+    the command line's ``--data-root``, else the environment variable ``IMU_LEARN_DATA`` (when set and
+    not empty), else the config's ``data_root``; "" when none is set."""
+    return command_line or os.environ.get(DATA_ROOT_ENV, "") or config or ""
 
 
 @dataclass

@@ -19,12 +19,11 @@ against the dataclass fields and every value against the field's type; a bad one
 """
 from __future__ import annotations
 
-import os
 from dataclasses import asdict, dataclass, field, fields, is_dataclass
 from pathlib import Path
 from typing import Any, Dict, List, Sequence
 
-from imu_learn.data.config import DataConfig, RootConfig, SplitConfig  # noqa: F401  (re-exported)
+from imu_learn.data.config import DataConfig, RootConfig, SplitConfig, resolve_data_root  # noqa: F401  (re-exported)
 from imu_learn.errors import ConfigError
 from imu_learn.nn.config import REFINE_CHANNELS, LossConfig, ModelConfig
 from imu_learn.settings import (  # noqa: F401  (re-exported: the stages' settings helpers)
@@ -125,13 +124,11 @@ def parse_overrides(args: Sequence[str]) -> Dict[str, Any]:
 def build_config(base: Dict[str, Any], overrides: Dict[str, Any]) -> RunConfig:
     """Defaults, then ``base`` (a TOML dict or a saved config), then dotted overrides.
 
-    ``data.data_root``: an explicit ``data.data_root`` override wins, else the environment variable
-    ``IMU_LEARN_DATA`` (when set and not empty), else ``base``'s value."""
-    env_root = os.environ.get(DATA_ROOT_ENV, "")
-    if env_root and "data.data_root" not in overrides:
-        overrides = {**overrides, "data.data_root": env_root}
+    ``data.data_root`` follows :func:`imu_learn.data.config.resolve_data_root`: a ``data.data_root``
+    override (the command line's ``--data-root``) wins, else ``IMU_LEARN_DATA``, else ``base``'s value."""
     merged = merge(asdict(RunConfig()), base)
-    merged = merge(merged, nest(overrides))
+    root = resolve_data_root(overrides.get("data.data_root"), merged["data"]["data_root"])
+    merged = merge(merged, nest({**overrides, "data.data_root": root}))
     cfg = from_dict(RunConfig, merged)
     validate(cfg)
     return cfg
