@@ -103,12 +103,6 @@ class TraditionalParams:
     def identity(cls) -> TraditionalParams:
         return cls(np.eye(3), np.zeros(3), np.zeros((3, 3)), np.eye(3), np.zeros(3))
 
-    def gyro_vector(self) -> np.ndarray:
-        return np.concatenate([(self.M_g - np.eye(3)).ravel(), self.b_g, self.G.ravel()])
-
-    def acc_vector(self) -> np.ndarray:
-        return np.concatenate([(self.M_a - np.eye(3)).ravel(), self.b_a])
-
 
 def _gyro_model(theta: Tensor, g_m: Tensor, a_m: Tensor) -> Tensor:
     """θ (..., 21) = (M_g − I, b_g, G) row-major; inputs (B, W, 3) -> (..., B, W, 3)."""

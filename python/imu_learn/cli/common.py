@@ -15,7 +15,6 @@ import argparse
 import contextlib
 import importlib
 import logging
-import os
 import sys
 from typing import Any, Callable, Dict, Iterator, List, Optional, Sequence, Union
 
@@ -132,7 +131,3 @@ def run_command(name: str, argv: Optional[Sequence[str]] = None, **hooks: Any) -
         said = [s for s in said if s]
         sys.stderr.write(f"{prog(name)}: interrupted{'; ' + '; '.join(said) if said else ''}\n")
         return EXIT_INTERRUPTED
-
-
-def data_root_default() -> Optional[str]:
-    return os.environ.get(DATA_ROOT_ENV) or None

@@ -49,9 +49,6 @@ PAPER_TABLE2: Dict[str, Dict[str, Tuple[Optional[float], float]]] = {
     "Average": {"Tr.": (0.0169, 0.0146), "Gyro-Denoising": (None, 0.0092), "TLIO": (0.0092, 0.0093),
                 "End-to-End learning": (0.0101, 0.0120), "Pr.": (0.0050, 0.0072)},
 }
-# Our method names that correspond to the paper's columns (for the side-by-side note only).
-PAPER_COLUMN_FOR = {"traditional": "Tr.", "gyro-denoise": "Gyro-Denoising", "end-to-end": "End-to-End learning",
-                    "proposed": "Pr.", "tlio-style": "TLIO"}
 
 AIRIMU_NOTE = (
     "AirIMU (Qiu et al., arXiv:2310.04874, https://airimu.github.io/) publishes EuRoC figures (1 s "

@@ -50,7 +50,7 @@ import numpy as np
 from imu_learn.data import formats
 from imu_learn.data.formats import ImuSource
 from imu_learn.errors import InvalidInputError
-from imu_learn.infer.windowing import Windowing, apply, corrections, windowing_of
+from imu_learn.infer.windowing import Windowing, apply, windowing_of
 from imu_learn.nn.model import ImuRefiner
 
 FORMATS = ("auto", *formats.FORMATS)
@@ -64,13 +64,6 @@ FORMATS = ("auto", *formats.FORMATS)
 def _rule(model: ImuRefiner, window: Optional[int], overlap: Optional[int], batch: Optional[int]) -> Windowing:
     """The model's rule (:func:`windowing_of`) with the caller's overrides (None: the rule's)."""
     return windowing_of(model).replace(window, overlap, batch)
-
-
-def refine_corrections(model: ImuRefiner, imu32: np.ndarray, window: Optional[int] = None,
-                       overlap: Optional[int] = None, batch: Optional[int] = None,
-                       progress: bool = False) -> np.ndarray:
-    """Corrections (N, 6) float32 = model output - input, by :mod:`imu_learn.infer.windowing`."""
-    return corrections(model, imu32, _rule(model, window, overlap, batch), progress)[0]
 
 
 def refine_arrays(
