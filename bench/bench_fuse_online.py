@@ -88,7 +88,7 @@ def displacement_hook(tlio, seq):
     """A fresh displacement-factor hook of the tlio-style model for one run (None without a model)."""
     if tlio is None:
         return None
-    from imu_learn.fuse.displacement import displacement_factors_for
+    from imu_learn.fuse.factors.displacement import displacement_factors_for
 
     return displacement_factors_for(tlio, seq.t_ns, seq.gyro, seq.acc)
 

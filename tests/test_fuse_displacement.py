@@ -1,4 +1,4 @@
-"""Learned displacement factors in the fusion graph (imu_learn.fuse.displacement): the factor's
+"""Learned displacement factors in the fusion graph (imu_learn.fuse.factors.displacement): the factor's
 Jacobians, a closed-form trajectory, the causal orientation the network is fed, and the
 ``tlio-style`` fusion input in the experiment runner."""
 import json
@@ -13,7 +13,7 @@ from gtsam.symbol_shorthand import X  # noqa: E402
 from scipy.spatial.transform import Rotation  # noqa: E402
 
 from imu_learn.fuse import fuse  # noqa: E402
-from imu_learn.fuse.displacement import (  # noqa: E402
+from imu_learn.fuse.factors.displacement import (  # noqa: E402
     DisplacementFactors,
     displacement_error,
     displacement_factor,

@@ -7,6 +7,7 @@ import json
 import math
 import os
 import struct
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -24,7 +25,8 @@ from imu_learn.errors import (
     TimestampError,
     TooFewRowsError,
 )
-from imu_learn.fuse import nhc, rtklib
+from imu_learn.fuse import rtklib
+from imu_learn.fuse.factors import nhc
 
 START_S, FRAC = 1752003261, 0.854
 
@@ -349,7 +351,7 @@ def test_nhc_callback_rate_and_turns():
     class Inc:
         t_ns = np.arange(50) * 10_000_000
 
-    cb = nhc.nhc_callback(nhc.NhcSettings(every_s=0.1, max_yaw_rate=0.5), gyro)
+    cb = nhc.nhc_callback(nhc.NhcSettings(every_s=0.1, max_yaw_rate_dps=math.degrees(0.5)), gyro)
     got = [s for s in range(50) if cb(Inc, s, s)]
     assert got == [0, 10, 21, 31, 41]
     with pytest.raises(InvalidInputError):
@@ -405,7 +407,7 @@ def test_experiment_on_a_synthetic_drive(tmp_path):
                                  outages=gnss_run.OutageCfg(first_s=15.0, duration_s=10.0, period_s=30.0,
                                                             end_margin_s=2.0))
     cfg.noise.gyro_noise_density, cfg.noise.acc_noise_density = 1e-4, 1e-3
-    cfg.nhc.lever_from = "raw"  # fitted on the raw run: a straight drive leaves it at zero
+    cfg.nhc = replace(cfg.nhc, lever_from="raw")  # fitted on the raw run: a straight drive leaves it at zero
     res = gnss_run.experiment(cfg)
     fit = res["runs"]["raw+nhc"]["nhc_lever_fit"]
     assert "too little yaw/roll rate" in fit["fallback"] and fit["lever_m"] == [0.0, 0.0, 0.0]

@@ -283,7 +283,7 @@ class IncrementalFusion:
             # Factors tied to a keyframe already marginalised (e.g. a relative pose reaching back further
             # than the lag): left out of the causal estimate (the batch smoothing pass has them).
             self.counts["factors_before_window"] = 0
-        # Factors beyond the aiding (e.g. learned displacements, fuse/displacement.py): called as
+        # Factors beyond the aiding (imu_learn.fuse.factors.ExtraFactors, e.g. learned displacements): called as
         # extra_factors(self, k, s) at keyframe k (sample s) before its update, it returns factors to
         # add there; they count as new information (iSAM2 updates at that keyframe).
         self._extra_factors = extra_factors
@@ -550,15 +550,6 @@ class IncrementalFusion:
         counts = {k: v for k, v in self.counts.items() if k != "isam2_updates"}
         return FusionResult(self.kf_idx, self.causal_p, self.causal_R, smoothed_p, smoothed_R, smoothed_v, smoothed_b,
                             time.perf_counter() - self._t_start, counts)
-
-
-def chain_factors(*hooks: Optional[Callable]) -> Optional[Callable]:
-    """One ``extra_factors`` hook of several (None entries left out): each one's factors at every keyframe,
-    in order; None when there is none."""
-    live = [h for h in hooks if h is not None]
-    if len(live) <= 1:
-        return live[0] if live else None
-    return lambda fusion, k, s: [f for h in live for f in h(fusion, k, s)]
 
 
 # One sample as the graph takes it: (sample index, gyro [rad/s] (3,), acc [m/s^2] (3,), its noise variances

@@ -57,8 +57,13 @@ from imu_learn.util.atomic import atomic_write_bytes, atomic_write_text
 from . import init as initial
 from .aiding import AbsolutePoses, PositionFixes, RelativePoses, snap_to_samples
 from .extrinsics import inverse, read_t_bs
+from .factors import chain
+from .factors.displacement import displacement_factors_for
+from .factors.nhc import NhcSettings, nhc_callback
+from .graph import fuse
 from .noise import ImuNoise
 from .score import umeyama
+from .settings import FusionSettings, PriorSigmas
 from .tum import Trajectory, check_overlap, read_trajectory
 
 log = logging.getLogger(__name__)
@@ -440,8 +445,6 @@ def displacement_hook(path: Path, t_ns: np.ndarray, gyro: np.ndarray, acc: np.nd
     or of its floor ``zero-displacement`` (a ``.json`` file: zero displacement with the fitted spread)."""
     from imu_learn.baselines.registry import load_method_class
 
-    from .displacement import displacement_factors_for
-
     if not Path(path).is_file():
         raise FileNotFoundError(f"--displacement: {path} not found (imu-learn evaluate --methods tlio-style writes it)")
     name = "zero-displacement" if Path(path).suffix.lower() == ".json" else "tlio-style"
@@ -469,9 +472,6 @@ class Sources:
 def navigate(src: Sources, out: Path, opts: NavigateOptions = NavigateOptions()) -> Dict[str, object]:
     """Fuse the recording's IMU with its aiding file and write ``out``/{causal.tum, smoothed.tum,
     plot.png, summary.json}; returns the summary (module docstring)."""
-    from .graph import chain_factors, fuse
-    from .settings import FusionSettings, PriorSigmas
-
     input, aiding_file, fmt, extrinsics = src.input, src.aiding, src.fmt, src.extrinsics
     checkpoint, groundtruth, displacement, calibration = src.checkpoint, src.groundtruth, src.displacement, src.calibration
     t_start = time.perf_counter()
@@ -537,15 +537,13 @@ def navigate(src: Sources, out: Path, opts: NavigateOptions = NavigateOptions())
     kw: Dict[str, object] = {}
     hooks = []
     if opts.nhc:
-        from .nhc import NhcSettings, nhc_callback
-
         hooks.append(nhc_callback(NhcSettings(opts.nhc_sigma_lat_mps, opts.nhc_sigma_vert_mps),
                                   np.ascontiguousarray(gyro[sel])))
     if displacement is not None:
         hooks.append(displacement_hook(Path(displacement), t_ns[sel], raw_gyro[sel], raw_acc[sel]))
         imu_input += f" + displacements of {Path(displacement).name}"
     if hooks:
-        kw["extra_factors"] = chain_factors(*hooks)
+        kw["extra_factors"] = chain(*hooks)
     if var is not None:
         kw["var"] = np.ascontiguousarray(var[sel])
     log.info(f"fusing {len(t_ns) - s0} IMU samples ({imu_input}) with {len(aiding)} {opts.aiding_kind} measurements "

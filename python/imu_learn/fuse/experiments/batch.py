@@ -40,8 +40,10 @@ from ..aiding import (
     simulate_position,
     simulate_relative_pose,
 )
-from ..displacement import FACTOR_INPUTS, TLIO_INPUT, displacement_factors_for
-from ..graph import chain_factors, fuse
+from ..factors import chain
+from ..factors.displacement import FACTOR_INPUTS, TLIO_INPUT, displacement_factors_for
+from ..factors.nhc import NhcSettings, nhc_callback
+from ..graph import fuse
 from ..inmotion import AlignSettings, crop, data_start, from_sample
 from ..noise import ImuNoise
 from ..plots import plot_setting, runs_of
@@ -472,10 +474,8 @@ def run_one(cfg: FuseConfig, out: Path, seq, noise: ImuNoise, R0: np.ndarray, sc
                                      cfg.displacement_update_s))
     nhc = None
     if scn.nhc_sigma_mps > 0:  # wheeled platform: the non-holonomic constraint at every keyframe
-        from ..nhc import NhcSettings, nhc_callback
-
         nhc = nhc_callback(NhcSettings(scn.nhc_sigma_mps, scn.nhc_sigma_mps), np.ascontiguousarray(gyro[s0:]))
-    extra = chain_factors(hook, nhc)
+    extra = chain(hook, nhc)
     try:
         res = fuse(seq.t_ns[s0:], gyro[s0:], acc[s0:], (start.R, start.p, start.v), [from_sample(aiding, s0)],
                    FusionSettings(noise, cfg.gravity, cfg.keyframe_hz, start.prior, lag_s=cfg.lag_s), bias0=start.bias,

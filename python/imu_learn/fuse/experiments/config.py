@@ -72,7 +72,7 @@ class ScenarioSpec:
     # removed" protocol assumes an estimator has, e.g. from a static start).
     bias_prior: str = "zero"
     startup_bias_s: float = 10.0
-    # Wheeled platforms: the non-holonomic constraint (fuse/nhc.py: no sideways or vertical velocity of
+    # Wheeled platforms: the non-holonomic constraint (fuse/factors/nhc.py: no sideways or vertical velocity of
     # the body frame) at every keyframe, with these sigmas [m/s]; 0 = off.
     nhc_sigma_mps: float = 0.0
 
@@ -119,7 +119,7 @@ class FuseConfig:
     # For the "+learned-cov" inputs: a refiner checkpoint with a covariance head (model.covariance),
     # e.g. fitted with optim.trainable = "covariance" on the "proposed" checkpoint.
     covariance_checkpoint: str = ""
-    # For "tlio-style" (raw IMU plus learned displacement factors, fuse/displacement.py; its model is
+    # For "tlio-style" (raw IMU plus learned displacement factors, fuse/factors/displacement.py; its model is
     # <methods_dir>/tlio-style.pt): one factor per network window ending every this many seconds.
     displacement_update_s: float = 1.0
     recordings: List[RecordingSpec] = field(default_factory=list)
@@ -136,7 +136,7 @@ def imu_methods() -> List[str]:
     from imu_learn.baselines.base import Method
     from imu_learn.baselines.registry import REGISTRY, load_method_class
 
-    from ..displacement import FACTOR_INPUTS
+    from ..factors.displacement import FACTOR_INPUTS
 
     names = list(INPUTS) + list(FACTOR_INPUTS)  # the raw IMU plus learned displacement factors
     for name in REGISTRY:

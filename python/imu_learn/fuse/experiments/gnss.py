@@ -19,7 +19,7 @@ is withheld; its fixed ones (Q = 1) are the truth. Scores, per outage: RMS, maxi
 horizontal error of the antenna, live (the causal estimate at each withheld epoch's IMU sample, IMU
 prediction from the last update) and smoothed (the batch solution, carried from the keyframe before
 by the IMU with its smoothed bias); and the RMS at the used fixed epochs outside outages. Variants:
-``raw`` and, for a wheeled vehicle, ``raw+nhc`` (:mod:`imu_learn.fuse.nhc`).
+``raw`` and, for a wheeled vehicle, ``raw+nhc`` (:mod:`imu_learn.fuse.factors.nhc`).
 Writes ``<out_dir>/results.json`` and ``<out_dir>/table.md`` (atomically).
 """
 from __future__ import annotations
@@ -28,9 +28,9 @@ import json
 import logging
 import math
 import time
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
-from typing import Callable, Dict, List, Optional, Sequence, Tuple
+from typing import Dict, List, Optional, Sequence, Tuple
 
 import numpy as np
 from scipy.spatial.transform import Rotation
@@ -40,8 +40,10 @@ from imu_learn.errors import ConfigError, InvalidInputError
 from imu_learn.settings import DATA_ROOT_ENV, from_dict, merge, nest, read_toml
 from imu_learn.util.atomic import atomic_write_text
 
-from ..graph import IncrementalFusion, chain_factors, feed, samples_of
-from ..nhc import NhcSettings, calibrate_lever, nhc_callback
+from ..factors import chain
+from ..factors.nhc import NhcSettings, calibrate_lever, nhc_callback
+from ..factors.velocity import velocity_callback
+from ..graph import IncrementalFusion, feed, samples_of
 from ..noise import ImuNoise
 from ..rtklib import GnssFixes, RtkSolution, fixes_on_imu, normal_gravity, read_pos
 from ..settings import FusionSettings, PriorSigmas
@@ -61,16 +63,15 @@ class NoiseCfg:
     source: str = "config"
 
 
-@dataclass
-class NhcCfg:
-    sigma_lat: float = 0.1
-    sigma_vert: float = 0.1
-    lever: List[float] = field(default_factory=lambda: [0.0, 0.0, 0.0])
-    # "config": ``lever`` as given; "raw": fitted on the ``raw`` variant's smoothed estimate (which
-    # used only the fixes outside the outages) by :func:`imu_learn.fuse.nhc.calibrate_lever`.
-    lever_from: str = "config"
-    every_s: float = 0.0
+@dataclass(frozen=True)
+class NhcCfg(NhcSettings):
+    """The ``[nhc]`` table: :class:`~imu_learn.fuse.factors.nhc.NhcSettings`, and where its lever comes
+    from: ``lever_from = "config"``, ``lever`` as given; ``"raw"``, fitted on the ``raw`` variant's
+    smoothed estimate (which used only the fixes outside the outages) by
+    :func:`imu_learn.fuse.factors.nhc.calibrate_lever`."""
+
     max_yaw_rate_dps: float = 1e9
+    lever_from: str = "config"
 
 
 @dataclass
@@ -257,26 +258,6 @@ def _carry(params, nav, bias, gyro, acc, t_ns, a: int, b: int):
     return pim.predict(nav, bias)
 
 
-def velocity_callback(fixes: GnssFixes, sol: RtkSolution, sigma: float, float_gain: float) -> Callable:
-    """An ``extra_factors`` callback adding a velocity prior at each fix's keyframe (the epoch's
-    ENU velocity; sigma times ``float_gain`` for float epochs)."""
-    import gtsam
-    from gtsam.symbol_shorthand import V
-
-    if sol.vel_enu is None:
-        raise InvalidInputError(f"{sol.path}: velocity_sigma_mps > 0 but the file has no velocity columns")
-    at = {int(s): (sol.vel_enu[e], sigma * (1.0 if q == 1 else float_gain))
-          for s, e, q in zip(fixes.idx, fixes.epoch, fixes.q)}
-
-    def extra(inc, k: int, s: int) -> list:
-        if s not in at:
-            return []
-        v, sg = at[s]
-        return [gtsam.PriorFactorVector(V(k), v, gtsam.noiseModel.Isotropic.Sigma(3, sg))]
-
-    return extra
-
-
 def run_variant(cfg: GnssRunConfig, variant: str, t: np.ndarray, gyro: np.ndarray, acc: np.ndarray,
                 fixes: GnssFixes, start: Dict[str, object], noise: ImuNoise, gravity: float,
                 eval_idx: np.ndarray, sol: RtkSolution, diag_idx: Sequence[int] = (),
@@ -293,11 +274,9 @@ def run_variant(cfg: GnssRunConfig, variant: str, t: np.ndarray, gyro: np.ndarra
     if cfg.velocity_sigma_mps > 0:
         callbacks.append(velocity_callback(fixes, sol, cfg.velocity_sigma_mps, cfg.float_gain))
     if variant == "raw+nhc":
-        n = cfg.nhc
-        lever_nhc = tuple(n.lever) if nhc_lever is None else tuple(float(x) for x in nhc_lever)
-        callbacks.append(nhc_callback(NhcSettings(n.sigma_lat, n.sigma_vert, lever_nhc, n.every_s,
-                                                  math.radians(n.max_yaw_rate_dps)), gyro))
-    extra = chain_factors(*callbacks)
+        lever_nhc = tuple(cfg.nhc.lever) if nhc_lever is None else tuple(float(x) for x in nhc_lever)
+        callbacks.append(nhc_callback(replace(cfg.nhc, lever=lever_nhc), gyro))
+    extra = chain(*callbacks)
     t0 = time.perf_counter()
     settings = FusionSettings(noise, gravity, cfg.keyframe_hz, prior, resolve_after_s=cfg.resolve_after_s,
                               lag_s=cfg.lag_s)

@@ -300,7 +300,7 @@ def _displacement_hook(cfg, spec, seq, s0: int = 0) -> Optional[Callable]:
     """The ``learned`` input's displacement factors where the device has a tlio-style model (as the
     batch run adds them, on the raw IMU; the hook reads only samples before the current keyframe),
     else None."""
-    from ..displacement import TLIO_INPUT, displacement_factors_for
+    from ..factors.displacement import TLIO_INPUT, displacement_factors_for
     from . import batch as runmod
 
     path = runmod.displacement_artefact(cfg, spec)

@@ -41,7 +41,7 @@ from typing import Callable, List, Tuple
 
 import numpy as np
 
-from .aiding import epochs
+from ..aiding import epochs
 
 TLIO_INPUT = "tlio-style"  # the learned displacement model (the `learned` input adds its factors)
 FACTOR_INPUTS = (TLIO_INPUT, "zero-displacement")  # fusion inputs that add displacement factors to the raw IMU

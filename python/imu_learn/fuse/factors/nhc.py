@@ -16,6 +16,7 @@ against numerical derivatives). It plugs into :class:`imu_learn.fuse.graph.Incre
 """
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 from typing import Callable, List, Optional, Sequence
 
@@ -28,17 +29,24 @@ from imu_learn.errors import InvalidInputError
 class NhcSettings:
     """Sigmas [m/s] of the body-frame lateral and vertical velocity; ``lever`` [m]: the constrained
     point from the IMU, body frame; ``every_s``: one factor per keyframe at most this often
-    (0: every keyframe); ``max_yaw_rate``: [rad/s] no factor while turning faster (skids)."""
+    (0: every keyframe); ``max_yaw_rate_dps``: [deg/s] no factor while turning faster (skids). The
+    one NHC settings type: the navigator's ``--nhc``, an experiment scenario's ``nhc_sigma_mps`` and
+    the GNSS outage config's ``[nhc]`` table all build one."""
 
     sigma_lat: float = 0.1
     sigma_vert: float = 0.1
     lever: Sequence[float] = (0.0, 0.0, 0.0)
     every_s: float = 0.0
-    max_yaw_rate: float = float("inf")
+    max_yaw_rate_dps: float = float("inf")
 
     def __post_init__(self) -> None:
-        if not (self.sigma_lat > 0 and self.sigma_vert > 0 and self.every_s >= 0 and self.max_yaw_rate > 0):
-            raise InvalidInputError(f"NHC: sigmas and max_yaw_rate must be > 0, every_s >= 0: {self}")
+        if not (self.sigma_lat > 0 and self.sigma_vert > 0 and self.every_s >= 0 and self.max_yaw_rate_dps > 0):
+            raise InvalidInputError(f"NHC: sigmas and max_yaw_rate_dps must be > 0, every_s >= 0: {self}")
+
+    @property
+    def max_yaw_rate(self) -> float:
+        """``max_yaw_rate_dps`` in rad/s."""
+        return math.radians(self.max_yaw_rate_dps)
 
 
 def skew(w: np.ndarray) -> np.ndarray:
@@ -89,6 +97,7 @@ def nhc_callback(settings: NhcSettings, gyro: Optional[np.ndarray] = None,
     term and the turn test (the same samples the graph integrates)."""
     from gtsam.symbol_shorthand import V, X
 
+    max_yaw_rate = settings.max_yaw_rate
     state = {"last_ns": None}
     period_ns = int(round(settings.every_s * 1e9))
 
@@ -96,7 +105,7 @@ def nhc_callback(settings: NhcSettings, gyro: Optional[np.ndarray] = None,
         if active is not None and not active[s]:
             return []
         w = None if gyro is None else gyro[s]
-        if w is not None and abs(w[2]) > settings.max_yaw_rate:
+        if w is not None and abs(w[2]) > max_yaw_rate:
             return []
         t = int(inc.t_ns[s])
         if period_ns and state["last_ns"] is not None and t - state["last_ns"] < period_ns:
