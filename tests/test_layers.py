@@ -199,3 +199,17 @@ def test_the_checker_sees_function_local_and_relative_imports():
     assert got == {"__future__": 1, "imu_learn.core": 2, "imu_learn.cli": 4}
     assert part_of("imu_learn") == "api" and part_of("imu_learn.fit") == "stages"
     assert part_of("imu_learn.train.fit") == "train"
+
+
+def test_stage_modules_only_dispatch_to_the_cli():
+    """``python -m imu_learn.<stage>`` is ``imu-learn <stage>``: each top-level stage module is the
+    dispatcher into imu_learn.cli and nothing else (the stage's code is in its part, its options in
+    imu_learn/cli/<stage>.py), and nothing imports it."""
+    top = {p.stem for p in PKG.glob("*.py")} - {"__init__", "errors", "settings"}
+    assert top == set(STAGES), f"top-level modules that are not stage dispatchers: {sorted(top - set(STAGES))}"
+    for stage in STAGES:
+        tree = ast.parse((PKG / f"{stage}.py").read_text())
+        body = [n for n in tree.body if not (isinstance(n, ast.Expr) and isinstance(n.value, ast.Constant))]
+        assert len(body) == 1 and isinstance(body[0], ast.If) and "__main__" in ast.unparse(body[0].test), stage
+        assert f'main(["{stage}", *sys.argv[1:]])' in ast.unparse(body[0]).replace("'", '"'), stage
+        assert (PKG / "cli" / f"{stage}.py").exists(), stage

@@ -23,7 +23,8 @@ from typing import Optional
 import numpy as np
 
 from imu_learn import _imu_core as core
-from imu_learn.data.types import ImuData, median_period_ns
+from imu_learn.core.integration import ImuArrays
+from imu_learn.core.stamps import median_period_ns
 
 DEFAULT_PER_DECADE = 20
 BIAS_INSTABILITY_FACTOR = 0.6642829925998278  # sqrt(2 ln 2 / pi)
@@ -81,7 +82,7 @@ def allan_deviation(
     return AllanDeviation(d["tau_s"], d["m"], d["n_clusters"], d["rel_err"], d["adev"], float(period_s), len(x))
 
 
-def imu_allan_deviation(imu: ImuData, per_decade: int = DEFAULT_PER_DECADE) -> AllanDeviation:
+def imu_allan_deviation(imu: ImuArrays, per_decade: int = DEFAULT_PER_DECADE) -> AllanDeviation:
     """Allan deviation of an IMU's six axes (gyro x, y, z [rad/s], then acc x, y, z [m/s^2]) at the
     median sample period."""
     period_s = median_period_ns(imu.t_ns) * 1e-9

@@ -13,13 +13,19 @@ from imu_learn.errors import InvalidInputError
 PAPER_FRACTIONS = (0.2, 0.4, 0.6, 0.8, 1.0)
 
 
-class SegmentArrays(Protocol):
-    """What the core reads of a segment: its arrays (:class:`imu_learn.data.types.Segment` has them;
-    the core sits below data and takes anything that does)."""
+class ImuArrays(Protocol):
+    """What the core reads of IMU samples (:class:`imu_learn.data.types.ImuData` has them; the core
+    sits below data and takes anything that does)."""
 
     t_ns: np.ndarray
     gyro: np.ndarray
     acc: np.ndarray
+
+
+class SegmentArrays(ImuArrays, Protocol):
+    """What the core reads of a segment: IMU samples and ground truth on the same stamps
+    (:class:`imu_learn.data.types.Segment` has them)."""
+
     p: np.ndarray
     v: np.ndarray
     q_wxyz: np.ndarray
