@@ -213,3 +213,21 @@ def test_stage_modules_only_dispatch_to_the_cli():
         assert len(body) == 1 and isinstance(body[0], ast.If) and "__main__" in ast.unparse(body[0].test), stage
         assert f'main(["{stage}", *sys.argv[1:]])' in ast.unparse(body[0]).replace("'", '"'), stage
         assert (PKG / "cli" / f"{stage}.py").exists(), stage
+
+
+# Packages a function may import: the optional heavy dependencies, the other optional extras'
+# packages, and two required but slow ones only their readers need (scipy, h5py: ~0.2-0.4 s each).
+LAZY = HEAVY + ("polars", "onnxruntime", "ruamel", "tensorboard", "scipy", "h5py")
+
+
+def test_function_local_imports_of_other_packages_only_for_lazy_ones():
+    found = []
+    for path in sorted(PKG.rglob("*.py")):
+        rel = path.relative_to(PKG).as_posix()
+        if rel.startswith(LOCAL_IMPORTS_PENDING):
+            continue
+        for line, target in split_imports(path)[1]:
+            top = target.split(".")[0]
+            if top not in ("imu_learn", "__future__") and top not in LAZY:
+                found.append(f"python/imu_learn/{rel}:{line}: {target} (import it at module level)")
+    assert not found, "function-local imports of packages that are neither optional nor slow:\n" + "\n".join(found)

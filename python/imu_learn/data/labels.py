@@ -13,6 +13,8 @@ from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any, Callable, Dict, List, Optional, Sequence, Tuple
 
+from tqdm import tqdm
+
 from imu_learn._imu_core import __version__
 from imu_learn.core.integration import PAPER_FRACTIONS, window_labels
 from imu_learn.data.cache import (
@@ -132,7 +134,6 @@ def build_cache(
         "source_root": str(root.resolve()), "recordings": [],
     }
     try:
-        from tqdm import tqdm
         bar = tqdm(recordings, desc=f"labels {dataset}", unit="rec", disable=not progress, file=sys.stderr)
     except ImportError:  # tqdm is a dependency, but a missing bar must not stop the job
         bar = recordings

@@ -7,6 +7,7 @@ not at all), ``report.md`` last.
 """
 from __future__ import annotations
 
+import json
 import math
 from datetime import datetime
 from pathlib import Path
@@ -466,8 +467,6 @@ def markdown(result: Dict[str, Any], rel: List[Dict[str, Any]], air: List[Dict[s
 
 
 def write_report(out_dir: Path, result: Dict[str, Any]) -> None:
-    import json
-
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
     rel = relative_pose_table(result)

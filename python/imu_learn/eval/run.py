@@ -25,6 +25,8 @@ from __future__ import annotations
 import json
 import logging
 import math
+import platform
+import random
 import re
 import sys
 import time
@@ -34,6 +36,7 @@ from typing import Any, Callable, Dict, List, Optional, Tuple
 from typing import Sequence as Seq
 
 import numpy as np
+from tqdm import tqdm
 
 from imu_learn._imu_core import __version__
 from imu_learn.baselines.base import FitSettings, Method, PosePrediction, poses_from_imu
@@ -371,8 +374,6 @@ def _ground_truth_kinds(run: RunConfig, test_entries: List[str]) -> Dict[str, st
 
 
 def _versions() -> Dict[str, str]:
-    import platform
-
     import polars
     import torch
 
@@ -388,8 +389,6 @@ def _versions() -> Dict[str, str]:
 
 
 def _seed_all(seed: int) -> None:
-    import random
-
     import torch
 
     random.seed(seed)
@@ -525,8 +524,6 @@ def _evaluate_all(rows: _Rows, test: List[Segment], plans: Dict[str, Dict[str, A
     """Every row on every test segment: per-window errors by (method, variant, recording, n), the
     fitted start-up biases; each row's evaluation time goes into its record (``eval_s``). ``peer_out``
     (when given) collects the open-loop peer errors by (method, recording), segments pooled."""
-    from tqdm import tqdm
-
 
     errors: Dict[Tuple[str, str, str, int], List[Dict[str, np.ndarray]]] = {}
     biases: List[Dict[str, Any]] = []

@@ -47,6 +47,7 @@ from typing import Any, List, Mapping, Optional, Tuple
 import numpy as np
 import torch
 from torch import nn
+from tqdm import tqdm
 
 from imu_learn.data.types import Segment
 from imu_learn.errors import InvalidInputError
@@ -141,8 +142,6 @@ def _device_of(model: nn.Module) -> torch.device:
 
 
 def _progress(total: int, enabled: bool, desc: str):
-    from tqdm import tqdm
-
     return tqdm(total=total, disable=not enabled, desc=desc, unit="sample", unit_scale=True, file=sys.stderr)
 
 

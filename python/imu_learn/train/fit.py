@@ -57,6 +57,7 @@ from __future__ import annotations
 
 import contextlib
 import csv
+import dataclasses
 import io
 import json
 import logging
@@ -72,6 +73,7 @@ from typing import Sequence as Seq
 
 import numpy as np
 import torch
+from tqdm import tqdm
 
 from imu_learn.baselines.base import FitSettings
 from imu_learn.baselines.timing import Timing
@@ -325,8 +327,6 @@ def floor_start(cfg: RunConfig, split: Split) -> Tuple[RunConfig, Optional[Tuple
     recordings (validation keeps its offset or not) and return ``cfg`` with ``model.fir_init_tau`` (and
     ``model.calib``) set, plus the calibration (A (6, 6), c (6,)) for :meth:`ImuRefiner.set_calibration`
     (None for "timing"): the untrained model is then that floor (without traditional's low-pass filter)."""
-    import dataclasses
-
     settings = FitSettings(window=cfg.data.window, gravity=cfg.data.gravity, seed=cfg.seed)
     max_shift = float(cfg.model.fir_taps // 2)
     calib = None
@@ -608,8 +608,6 @@ def train(
     ``on_step(step, loss)`` is called after every finished optimiser step (tests use it to
     interrupt at a chosen step). KeyboardInterrupt propagates after ``last.pt`` is saved.
     """
-    from tqdm import tqdm
-
     dist, device = setup_device(cfg)
     run_dir = Path(run_dir)
     split, sampler, validation = prepare_data(cfg, split)

@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import functools
 import os
+import shutil
 import stat
 import tempfile
 from pathlib import Path
@@ -149,8 +150,6 @@ def atomic_write_dir(path: PathLike, fill: Callable[[Path], None], replace: bool
         _fsync_tree(tmp)
         os.rename(tmp, path)  # fails rather than merging if path appeared meanwhile
     except BaseException as e:
-        import shutil
-
         shutil.rmtree(holder, ignore_errors=True)
         if isinstance(e, OSError) and (e.filename is None or str(e.filename).startswith(str(holder))):
             raise _named(e, path) from e
@@ -160,8 +159,6 @@ def atomic_write_dir(path: PathLike, fill: Callable[[Path], None], replace: bool
 
 
 def _replace_dir(path: Path, fill: Callable[[Path], None]) -> None:
-    import shutil
-
     holder = Path(tempfile.mkdtemp(prefix=f".{path.name}.", suffix=".old", dir=path.parent))
     aside = holder / path.name
     os.rename(path, aside)

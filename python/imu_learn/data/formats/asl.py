@@ -170,8 +170,6 @@ def read_leica(path: Path):
     itself) -> ``(t_ns (N,), p (N, 3), lever_arm (3,))``: ``p`` is the tracked prism in the world
     frame, ``lever_arm`` the prism's position in the body frame (``T_BS`` translation of
     ``leica0/sensor.yaml``; zeros when the file is absent). Strict parsing in the Rust core."""
-    import numpy as np
-
     path = Path(path)
     csv = path if path.is_file() else path / LEICA_FILE
     if not csv.exists():

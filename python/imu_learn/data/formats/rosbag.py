@@ -19,6 +19,8 @@ the other binary containers (Blackbird's HDF5, BROAD's MAT).
 from __future__ import annotations
 
 import logging
+import sqlite3
+import struct
 from contextlib import contextmanager
 from pathlib import Path
 from typing import Callable, Dict, Iterator, List, Optional, Tuple
@@ -128,9 +130,6 @@ def _unreadable(bag: Path, err: BaseException, topic: Optional[str] = None) -> E
 
 def _reader_errors() -> Tuple[type, ...]:
     """Every exception ``rosbags`` (and the storage below it) raises for an unreadable bag."""
-    import sqlite3
-    import struct
-
     from rosbags.highlevel import AnyReaderError
     from rosbags.rosbag1 import ReaderError as Reader1Error
     from rosbags.rosbag2 import ReaderError as Reader2Error
