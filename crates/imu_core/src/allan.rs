@@ -426,7 +426,9 @@ mod tests {
     fn blocked_sums_equal_the_plain_sum_across_block_edges() {
         // Several blocks (MIN_BLOCK 8192), cluster sizes around a block and up to N/2.
         let n = 40_001;
-        let s: Vec<f64> = (0..n).map(|i| ((i as f64) * 0.618).sin() * 3.0 + (i % 7) as f64).collect();
+        let s: Vec<f64> = (0..n)
+            .map(|i| ((i as f64) * 0.618).sin() * 3.0 + (i % 7) as f64)
+            .collect();
         let m = [1, 2, 7, 8191, 8192, 8193, 12_345, 19_999, 20_000];
         let got = second_differences(&s, &m);
         for (j, &mi) in m.iter().enumerate() {
