@@ -34,3 +34,14 @@ def test_evaluate_without_its_extra_is_one_line_before_any_work(tmp_path, blocke
     assert r.stderr.splitlines() == [f"imu-learn evaluate: error: MissingExtraError: imu-learn evaluate needs "
                                      f"{blocked}, the eval extra: pip install 'imu-learn[eval]'"]
     assert not out.exists()  # nothing fitted, nothing written
+
+
+def test_the_library_entry_checks_too(tmp_path, monkeypatch):
+    """run_evaluation (what the command calls) checks the eval extra itself, before fitting anything."""
+    from imu_learn.eval.run import load_eval_config, run_evaluation
+
+    res = load_eval_config(None, [])
+    monkeypatch.setitem(sys.modules, "matplotlib", None)
+    with pytest.raises(MissingExtraError, match=r"evaluate needs matplotlib, the eval extra"):
+        run_evaluation(res, ["raw"], tmp_path / "report")
+    assert not (tmp_path / "report").exists()

@@ -182,8 +182,7 @@ def curve_table(result: Dict[str, Any]) -> List[Dict[str, Any]]:
 
 
 def _write_csv(path: Path, rows: List[Dict[str, Any]]) -> None:
-    import polars as pl
-
+    pl = require("polars", "eval", "the report's tables")
     if not rows:
         atomic_write_text(path, "")
         return

@@ -75,6 +75,7 @@ from imu_learn.train.config import (
     split_overrides,
 )
 from imu_learn.util.atomic import atomic_write_path, atomic_write_text
+from imu_learn.util.extras import require_extra
 
 logger = logging.getLogger(__name__)
 CHECKPOINT_NAME = "proposed (fit run)"  # the row of a --checkpoint
@@ -635,8 +636,8 @@ def run_evaluation(res: Resolved, methods: List[str], out_dir: Path, reuse: bool
                    t_start: Optional[float] = None) -> Dict[str, Any]:
     """Fit (or reuse) the methods, evaluate them on the test split, write the report; returns the result.
     ``t_start``: when the command started (wall time is measured from it; default now)."""
+    require_extra("eval", "evaluate")  # torch, and polars and matplotlib for the report
     import torch
-
 
     t_start = time.time() if t_start is None else t_start
     cfg, data = res.cfg, res.run.data

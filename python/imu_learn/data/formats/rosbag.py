@@ -139,7 +139,6 @@ def _reader_errors() -> Tuple[type, ...]:
             EOFError, KeyError, IndexError, UnicodeDecodeError, AssertionError)
 
 
-
 def require_rosbags(path: Path) -> None:
     """:class:`MissingExtraError` naming the bag when ``rosbags`` (the ``bags`` extra) is absent."""
     try:
