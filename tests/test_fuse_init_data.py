@@ -74,14 +74,13 @@ def test_a_data_start_settles_on_the_heading_of_the_fixes_frame(crop, turn_deg):
     sample with an unknown 0.08 rad/s gyro bias: the fixes resolve it, which is what this checks.)"""
     from imu_learn.fuse.graph import fuse
     from imu_learn.fuse.inmotion import crop as crop_result
-    from imu_learn.fuse.inmotion import from_sample
 
     Rz = Rotation.from_euler("z", turn_deg, degrees=True).as_matrix()
     fixes = simulate_position(crop.t_ns, crop.p @ Rz.T, 1.0, 0.05, np.random.default_rng(0))
     st = data_start(crop.t_ns, crop.gyro, crop.acc, fixes, ImuNoise(), 9.81, 10.0)
     assert st.score_from > st.start and not st.align and "yaw" in st.info["heading_source"]
     s0 = st.start
-    res = fuse(crop.t_ns[s0:], crop.gyro[s0:], crop.acc[s0:], (st.R, st.p, st.v), [from_sample(fixes, s0)],
+    res = fuse(crop.t_ns[s0:], crop.gyro[s0:], crop.acc[s0:], (st.R, st.p, st.v), [fixes.since(s0)],
                FusionSettings(ImuNoise(), 9.81, 10.0, st.prior), bias0=st.bias)
     res = crop_result(res, s0, st.score_from)
     assert res.kf_idx[0] >= st.score_from

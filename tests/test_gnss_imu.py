@@ -25,7 +25,7 @@ from imu_learn.errors import (
     TimestampError,
     TooFewRowsError,
 )
-from imu_learn.fuse import rtklib
+from imu_learn.fuse.aiding import PositionFixes, rtklib
 from imu_learn.fuse.factors import nhc
 
 START_S, FRAC = 1752003261, 0.854
@@ -303,7 +303,7 @@ def test_graph_uses_per_fix_sigmas():
     fixes_at, _ = _aiding_by_sample([fx])
     for s, row in ((3, sig[0]), (7, sig[1])):
         np.testing.assert_allclose(fixes_at[s][0][2].sigmas(), row)
-    plain = rtklib.PositionFixes(np.array([3]), np.zeros((1, 3)), 0.5, np.zeros(3), "t")
+    plain = PositionFixes(np.array([3]), np.zeros((1, 3)), 0.5, np.zeros(3), "t")
     np.testing.assert_allclose(_aiding_by_sample([plain])[0][3][0][2].sigmas(), [0.5] * 3)
     bad = rtklib.GnssFixes(np.array([3, 7]), np.zeros((2, 3)), 0.5, np.zeros(3), "t", sigmas=sig[:1])
     with pytest.raises(InvalidInputError, match="per-fix sigmas"):

@@ -26,9 +26,9 @@ from imu_learn.errors import (
     TooFewRowsError,
 )
 from imu_learn.fuse import init
-from imu_learn.fuse.extrinsics import inverse, read_t_bs
+from imu_learn.fuse.aiding.extrinsics import inverse, read_t_bs
+from imu_learn.fuse.aiding.tum import check_overlap, read_trajectory, read_tum, seconds_to_ns
 from imu_learn.fuse.navigate import interpolate_groundtruth, umeyama
-from imu_learn.fuse.tum import check_overlap, read_trajectory, read_tum, seconds_to_ns
 
 # EuRoC cam0's T_BS (camera to body = IMU), as in every EuRoC sensor.yaml of cam0 (Burri et al. 2016).
 CAM0_YAML = """%YAML:1.0
@@ -402,7 +402,7 @@ def test_rtklib_fixes_are_position_aiding_with_their_own_sigmas(tmp_path, capsys
     into ENU at the first epoch, each fix with its sigmas, heading from the track."""
     import time
 
-    from imu_learn.fuse.rtklib import ecef_to_enu_rotation, llh_to_ecef
+    from imu_learn.fuse.aiding.rtklib import ecef_to_enu_rotation, llh_to_ecef
 
     rec, fixes, truth = car_recording(tmp_path, yaw_deg=-120.0)
     tr = read_tum(fixes, need_orientation=False)

@@ -18,7 +18,7 @@ from scipy.spatial.transform import Rotation
 from imu_learn.cli import main
 from imu_learn.data import formats
 from imu_learn.data.formats import gnss_imu
-from imu_learn.fuse import rtklib
+from imu_learn.fuse.aiding import rtklib
 
 G_UNIT = 9.80665
 START_S = 1752003261  # the tag's start [s, GPST since 1970]

@@ -8,8 +8,8 @@ from imu_learn import _imu_core as core
 from imu_learn.data.formats import rosbag
 from imu_learn.errors import BagTopicError
 from imu_learn.fuse.aiding import bag_position_source, leica_fixes
-from imu_learn.fuse.experiments.config import FuseConfig, RecordingSpec, ScenarioSpec, validate
 from imu_learn.fuse.experiments.batch import run_experiment
+from imu_learn.fuse.experiments.config import FuseConfig, RecordingSpec, ScenarioSpec, validate
 from rosbag_fixtures import GT_CSV, KINDS, bag_name, write_fixture_bag
 
 

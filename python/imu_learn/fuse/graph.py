@@ -35,7 +35,7 @@ import numpy as np
 
 from imu_learn.errors import InvalidInputError
 
-from .aiding import PositionFixes, RelativePoses, epochs
+from .aiding import AbsolutePoses, PositionFixes, RelativePoses, epochs
 from .settings import SETTLE_S, FusionSettings
 
 
@@ -111,8 +111,6 @@ def _aiding_by_sample(aiding: Seq) -> tuple:
     ``{s: [(p, lever, model)]}`` and relative poses ``{j: [(i, Pose3, model)]}`` (absolute poses
     there too, as ``(None, Pose3, model)``)."""
     import gtsam
-
-    from .aiding import AbsolutePoses
 
     fixes_at: Dict[int, List] = {}
     between_at: Dict[int, List] = {}

@@ -151,7 +151,7 @@ def data_start(t_ns, gyro, acc, aiding, noise: ImuNoise, gravity: float, keyfram
         return DataStart(s0, s0, R_level, np.zeros(3), v, b0, prior, True, info)
     if not isinstance(aiding, PositionFixes):
         raise InvalidInputError(f"init = \"data\": no data start for {type(aiding).__name__} aiding")
-    fixes = from_sample(aiding, s0)
+    fixes = aiding.since(s0)
     sl = slice(s0, None)
     end, res, h_info = yaw_hypotheses(t_ns[sl], gyro[sl], acc[sl], fixes, R_level, still, b0, noise,
                                       gravity, keyframe_hz, None if var is None else var[sl], settings)
@@ -181,19 +181,6 @@ def level_start(t_ns, gyro, acc, gravity: float, b0: np.ndarray, gyro_bias_from_
             "still_s": round(float((t_ns[e] - t_ns[a]) * 1e-9), 3),
             "gyro_bias_source": "the gyro's mean at rest" if gyro_bias_from_rest else "the scenario's bias prior"}
     return a, R_level, True, info
-
-
-def from_sample(aiding, s0: int):
-    """The aiding with sample indices counted from ``s0`` (the run's first fused sample); what comes
-    before it is left out."""
-    if s0 == 0:
-        return aiding
-    if isinstance(aiding, PositionFixes):
-        keep = aiding.idx >= s0
-        return replace(aiding, idx=aiding.idx[keep] - s0, p=aiding.p[keep])
-    keep = aiding.i >= s0
-    return replace(aiding, i=aiding.i[keep] - s0, j=aiding.j[keep] - s0, R_ij=aiding.R_ij[keep],
-                   t_ij=aiding.t_ij[keep])
 
 
 def crop(res, start: int, first: int):

@@ -2,7 +2,7 @@
 
 ``imu-learn navigate --input REC --aiding FILE --aiding-kind {position,pose,relative-pose}`` runs
 :func:`navigate`: it reads the recording's IMU only (the layouts of :mod:`imu_learn.data.formats`;
-ground truth is never opened), the aiding file (:mod:`.tum`), the extrinsic (:mod:`.extrinsics`),
+ground truth is never opened), the aiding file (:mod:`.aiding.tum`), the extrinsic (:mod:`.aiding.extrinsics`),
 optionally refines the IMU with a checkpoint (:mod:`imu_learn.infer.refine`), builds the first state
 from the data (:mod:`.init`) and fuses with :func:`imu_learn.fuse.graph.fuse` under a loose prior.
 It writes ``causal.tum`` and ``smoothed.tum`` (``t tx ty tz qx qy qz qw``, seconds, body = IMU
@@ -27,7 +27,7 @@ A = C0 is ``T_A_Bk = T_C0_Ck T_BS^-1``, and the body motion between two frames
   done here.
 * ``position``: position fixes in their own world frame, taken as gravity-aligned (z up): a
   TUM/CSV/ASL file of positions (one sigma, ``position_sigma_m``), or an RTKLIB ``.pos`` file
-  (:mod:`imu_learn.fuse.rtklib`: local ENU at its first epoch, each fix with its own sigmas, float
+  (:mod:`imu_learn.fuse.aiding.rtklib`: local ENU at its first epoch, each fix with its own sigmas, float
   solutions down-weighted). The extrinsic's translation, when given, is the antenna's lever arm.
   Roll and pitch are levelled at the IMU's start; the heading comes from the track once moving
   faster than 1 m/s (:func:`.init.track_start`: the body x-axis along the velocity, as GNSS/INS
@@ -55,8 +55,11 @@ from imu_learn.errors import AidingError, ConfigError, InvalidInputError
 from imu_learn.util.atomic import atomic_write_bytes, atomic_write_text
 
 from . import init as initial
-from .aiding import AbsolutePoses, PositionFixes, RelativePoses, snap_to_samples
-from .extrinsics import inverse, read_t_bs
+from .aiding import AbsolutePoses, OutageWindow, PositionFixes, RelativePoses, snap_to_samples
+from .aiding.extrinsics import inverse, read_t_bs
+from .aiding.outages import in_windows
+from .aiding.rtklib import fixes_on_imu, normal_gravity, read_pos
+from .aiding.tum import Trajectory, check_overlap, read_trajectory
 from .factors import chain
 from .factors.displacement import displacement_factors_for
 from .factors.nhc import NhcSettings, nhc_callback
@@ -64,7 +67,6 @@ from .graph import fuse
 from .noise import ImuNoise
 from .score import umeyama
 from .settings import FusionSettings, PriorSigmas
-from .tum import Trajectory, check_overlap, read_trajectory
 
 log = logging.getLogger(__name__)
 
@@ -96,7 +98,7 @@ class NavigateOptions:
     prior_pos_m: float = 0.1
     prior_vel_mps: float = 0.5
     level_s: float = 2.0
-    gaps: Tuple[Tuple[float, float], ...] = ()  # (start_s, duration_s) from the first IMU sample: aiding dropped
+    gaps: Tuple[OutageWindow, ...] = ()  # seconds from the first IMU sample: aiding dropped
     aiding_hz: Optional[float] = None  # thin the aiding to at most this rate (None: every row)
     lag_s: Optional[float] = None  # the causal fixed-lag window (None: the graph's default)
     # the IMU as mounted: roll, pitch, yaw [deg] of the body frame relative to the IMU frame
@@ -161,7 +163,7 @@ def parse_vector(text: str, n: int, option: str) -> Tuple[float, ...]:
     return v
 
 
-def parse_gaps(text: str) -> Tuple[Tuple[float, float], ...]:
+def parse_gaps(text: str) -> Tuple[OutageWindow, ...]:
     """``"30:10,60:10"`` -> ((30.0, 10.0), (60.0, 10.0)): START:DURATION seconds from the first IMU sample."""
     out = []
     for part in (p.strip() for p in text.split(",")):
@@ -171,7 +173,7 @@ def parse_gaps(text: str) -> Tuple[Tuple[float, float], ...]:
         try:
             if not sep:
                 raise ValueError
-            out.append((float(a), float(b)))
+            out.append(OutageWindow(float(a), float(b)))
         except ValueError:
             raise ConfigError(f"--gaps: {part!r} is not START:DURATION (seconds)") from None
     return tuple(out)
@@ -191,13 +193,6 @@ def body_poses(traj: Trajectory, T_BS: Optional[np.ndarray]) -> Tuple[np.ndarray
         return R, p.copy()
     T_SB = inverse(T_BS)
     return R @ T_SB[:3, :3], p + R @ T_SB[:3, 3]
-
-
-def _in_windows(rel_s: np.ndarray, windows: Sequence[Tuple[float, float]]) -> np.ndarray:
-    inside = np.zeros(len(rel_s), dtype=bool)
-    for start, dur in windows:
-        inside |= (rel_s >= start) & (rel_s < start + dur)
-    return inside
 
 
 def thin(t_ns: np.ndarray, rate_hz: Optional[float]) -> np.ndarray:
@@ -238,7 +233,7 @@ def select_rows(traj: Trajectory, imu_t_ns: np.ndarray, T_BS: Optional[np.ndarra
     dropped["shared_sample"] = int(shared.sum())
     keep &= seen
     rel_s = (traj.t_ns - int(imu_t_ns[0])) * 1e-9
-    in_gap = keep & _in_windows(rel_s, opts.gaps)
+    in_gap = keep & in_windows(rel_s, opts.gaps)
     dropped["in_gaps"] = int(in_gap.sum())
     keep &= ~in_gap
     idx = np.flatnonzero(keep)
@@ -285,14 +280,12 @@ def read_aiding(path: Path, opts: NavigateOptions) -> Trajectory:
 
 def rtklib_rows(path: Path, imu_t_ns: np.ndarray, lever: np.ndarray, opts: NavigateOptions):
     """(GnssFixes on the IMU's samples with their own per-fix sigmas, AidingRows, the RtkSolution) of an RTKLIB
-    ``.pos`` file (:mod:`imu_learn.fuse.rtklib`: local ENU at the first epoch; fixed and float
+    ``.pos`` file (:mod:`imu_learn.fuse.aiding.rtklib`: local ENU at the first epoch; fixed and float
     solutions, float down-weighted), without the fixes inside ``opts.gaps``."""
-    from .rtklib import fixes_on_imu, read_pos
-
     sol = read_pos(Path(path))
     fixes = fixes_on_imu(sol, imu_t_ns, lever)
     rel_s = (imu_t_ns[fixes.idx] - int(imu_t_ns[0])) * 1e-9
-    in_gap = _in_windows(rel_s, opts.gaps)
+    in_gap = in_windows(rel_s, opts.gaps)
     fixes = fixes.select(~in_gap, dropped_outage=int(in_gap.sum()))
     if len(fixes) < 2:
         raise AidingError(f"{path}: {len(fixes)} usable fix(es) inside the IMU's span", str(path), "position")
@@ -306,7 +299,7 @@ def rtklib_rows(path: Path, imu_t_ns: np.ndarray, lever: np.ndarray, opts: Navig
 def build_aiding(rows: AidingRows, s0: int, R_WA: np.ndarray, lever: np.ndarray, opts: NavigateOptions,
                  label: str, source: str, gnss=None):
     """The graph's aiding object for the rows, sample indices counted from ``s0`` (the first fused sample)."""
-    idx = rows.sample - s0
+    idx = rows.sample
     if opts.aiding_kind == "relative-pose":
         gap = np.diff(rows.t_ns) * 1e-9
         ok = gap <= opts.max_relative_gap_s
@@ -316,26 +309,21 @@ def build_aiding(rows: AidingRows, s0: int, R_WA: np.ndarray, lever: np.ndarray,
         t_ij = np.einsum("nki,nk->ni", Ri, rows.p[j] - rows.p[i])
         a = RelativePoses(idx[i], idx[j], R_ij, t_ij, float(np.deg2rad(opts.rel_sigma_rot_deg)),
                           float(opts.rel_sigma_trans_m),
-                          f"{label}: relative poses, sigma {opts.rel_sigma_rot_deg:g} deg / {opts.rel_sigma_trans_m:g} m")
+                          f"{label}: relative poses, sigma {opts.rel_sigma_rot_deg:g} deg / {opts.rel_sigma_trans_m:g} m"
+                          ).since(s0)
         return a, {"relative_poses": int(len(i)), "not_chained_over_gaps": int((~ok).sum())}
     if opts.aiding_kind == "pose":
         R = np.einsum("ij,njk->nik", R_WA, rows.R)
         p = rows.p @ R_WA.T
         a = AbsolutePoses(idx, R, p, float(np.deg2rad(opts.pose_sigma_rot_deg)), float(opts.pose_sigma_m),
                           f"{label}: absolute poses, sigma {opts.pose_sigma_rot_deg:g} deg / {opts.pose_sigma_m:g} m",
-                          source)
+                          source).since(s0)
         return a, {"absolute_poses": int(len(idx))}
-    keep = idx >= 0  # fixes before the start (the track heading's first fast fix) are left out
-    if gnss is not None:
-        from dataclasses import replace
-
-        g = gnss.select(keep)
-        a = replace(g, idx=g.idx - s0)
-    else:
-        a = PositionFixes(idx[keep], (rows.p @ R_WA.T)[keep], float(opts.position_sigma_m),
-                          np.asarray(lever, dtype=np.float64), f"{label}: positions, sigma {opts.position_sigma_m:g} m",
-                          source)
-    return a, {"position_fixes": int(len(a)), "fixes_before_start": int((~keep).sum())}
+    # fixes before the start (the track heading's first fast fix) are left out
+    fixes = gnss if gnss is not None else PositionFixes(
+        idx, rows.p @ R_WA.T, float(opts.position_sigma_m), np.asarray(lever, dtype=np.float64),
+        f"{label}: positions, sigma {opts.position_sigma_m:g} m", source)
+    return fixes.since(s0), {"position_fixes": int((idx >= s0).sum()), "fixes_before_start": int((idx < s0).sum())}
 
 
 def start_state(t_ns, gyro, acc, rows: AidingRows, s0: int, bias0: np.ndarray, opts: NavigateOptions
@@ -499,8 +487,6 @@ def navigate(src: Sources, out: Path, opts: NavigateOptions = NavigateOptions())
     if opts.aiding_format == "rtklib":
         from dataclasses import replace
 
-        from .rtklib import normal_gravity
-
         gnss, rows, sol = rtklib_rows(aiding_file, t_ns, lever, opts)
         rows_read = len(rows.sample) + sum(rows.dropped.values())
         # geodetic fixes: the normal gravity at their origin (9.797 m/s^2 on the drive, not 9.81)
@@ -661,12 +647,12 @@ def score_against(groundtruth: Path, opts: NavigateOptions, kf_t: np.ndarray, re
         raise AidingError(f"{groundtruth}: fewer than 3 keyframes inside the ground truth's time span", str(groundtruth))
     out: Dict[str, object] = {"aligned": align, "alignment": "SE(3) Umeyama, no scale (evo_ape -a)" if align else "none"}
     rel_s = (kf_t[inside] - t0_ns) * 1e-9
-    in_gap = _in_windows(rel_s, opts.gaps)
+    in_gap = in_windows(rel_s, opts.gaps)
     for kind, p, R in (("causal", res.causal_p, res.causal_R), ("smoothed", res.smoothed_p, res.smoothed_R)):
         s, e, _, _ = _errors(p[inside], R[inside], p_gt, R_gt, align)
         if opts.gaps:
             s["gaps"] = [{"start_s": a, "duration_s": d,
-                          "rmse_m": float(np.sqrt(np.mean(e[m] ** 2))) if (m := _in_windows(rel_s, [(a, d)])).any()
+                          "rmse_m": float(np.sqrt(np.mean(e[m] ** 2))) if (m := in_windows(rel_s, [(a, d)])).any()
                           else None, "max_m": float(e[m].max()) if m.any() else None} for a, d in opts.gaps]
             s["outside_gaps_rmse_m"] = float(np.sqrt(np.mean(e[~in_gap] ** 2))) if (~in_gap).any() else None
         out[kind] = s

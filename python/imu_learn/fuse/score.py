@@ -14,7 +14,7 @@ from scipy.spatial.transform import Rotation
 from imu_learn.core.quat import rotation_angle, xyzw_to_wxyz
 from imu_learn.score.metrics import rmse
 
-from .aiding import outage_mask
+from .aiding.outages import in_windows, outage_mask
 from .graph import FusionResult
 
 
@@ -49,7 +49,7 @@ def score(res: FusionResult, t_ns: np.ndarray, p_gt: np.ndarray, q_wxyz_gt: np.n
         e = np.linalg.norm(p - p_gt[idx], axis=1)
         per: List[Dict[str, float]] = []
         for start, dur in outages:
-            m = (rel_s >= start) & (rel_s < start + dur)
+            m = in_windows(rel_s, [(start, dur)])
             per.append({"start_s": float(start), "duration_s": float(dur), "rmse_m": rmse(e[m]),
                         "max_m": float(e[m].max()) if m.any() else float("nan")})
         out[name] = {

@@ -44,7 +44,7 @@ from ..factors import chain
 from ..factors.displacement import FACTOR_INPUTS, TLIO_INPUT, displacement_factors_for
 from ..factors.nhc import NhcSettings, nhc_callback
 from ..graph import fuse
-from ..inmotion import AlignSettings, crop, data_start, from_sample
+from ..inmotion import AlignSettings, crop, data_start
 from ..noise import ImuNoise
 from ..plots import plot_setting, runs_of
 from ..score import score
@@ -477,7 +477,7 @@ def run_one(cfg: FuseConfig, out: Path, seq, noise: ImuNoise, R0: np.ndarray, sc
         nhc = nhc_callback(NhcSettings(scn.nhc_sigma_mps, scn.nhc_sigma_mps), np.ascontiguousarray(gyro[s0:]))
     extra = chain(hook, nhc)
     try:
-        res = fuse(seq.t_ns[s0:], gyro[s0:], acc[s0:], (start.R, start.p, start.v), [from_sample(aiding, s0)],
+        res = fuse(seq.t_ns[s0:], gyro[s0:], acc[s0:], (start.R, start.p, start.v), [aiding.since(s0)],
                    FusionSettings(noise, cfg.gravity, cfg.keyframe_hz, start.prior, lag_s=cfg.lag_s), bias0=start.bias,
                    var=None if var is None else var[s0:], extra_factors=extra)
     except RuntimeError as e:  # GTSAM's IndeterminateLinearSystemException and kin

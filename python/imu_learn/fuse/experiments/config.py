@@ -7,11 +7,12 @@ from __future__ import annotations
 import os
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import List, Optional, Tuple
+from typing import List, Optional
 
 from imu_learn.errors import ConfigError
 from imu_learn.settings import DATA_ROOT_ENV, from_dict, read_toml
 
+from ..aiding.outages import OutageWindow, windows
 from ..settings import DEFAULT_LAG_S
 
 # "raw+learned-cov" / "proposed+learned-cov": the raw or refined samples, each weighted in the
@@ -76,8 +77,8 @@ class ScenarioSpec:
     # the body frame) at every keyframe, with these sigmas [m/s]; 0 = off.
     nhc_sigma_mps: float = 0.0
 
-    def outage_windows(self) -> List[Tuple[float, float]]:
-        return [(float(o[0]), float(o[1])) for o in self.outages]
+    def outage_windows(self) -> List[OutageWindow]:
+        return windows(self.outages)
 
 
 @dataclass

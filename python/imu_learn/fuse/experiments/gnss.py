@@ -12,7 +12,7 @@ the gyro; the graph starts at the first fixed (Q = 1) epoch faster than ``yaw_mi
 the body x-axis turned onto that epoch's velocity heading; position and velocity: that epoch);
 bias prior zero (or ``bias_prior = "still"``: the still start's mean gyro, and the accelerometer's
 excess over normal gravity along the specific force). The fixes (RTKLIB
-``.pos``, :mod:`imu_learn.fuse.rtklib`) enter with their own sigmas and lever arm; the outage
+``.pos``, :mod:`imu_learn.fuse.aiding.rtklib`) enter with their own sigmas and lever arm; the outage
 schedule is the peer's: ``duration_s`` outages every ``period_s`` from ``first_s`` after the first
 GNSS epoch, each ending at least ``end_margin_s`` before its last. Every epoch inside an outage
 is withheld; its fixed ones (Q = 1) are the truth. Scores, per outage: RMS, maximum and end
@@ -40,12 +40,13 @@ from imu_learn.errors import ConfigError, InvalidInputError
 from imu_learn.settings import DATA_ROOT_ENV, from_dict, merge, nest, read_toml
 from imu_learn.util.atomic import atomic_write_text
 
+from ..aiding import GnssFixes, OutageWindow
+from ..aiding.rtklib import RtkSolution, fixes_on_imu, normal_gravity, read_pos
 from ..factors import chain
 from ..factors.nhc import NhcSettings, calibrate_lever, nhc_callback
 from ..factors.velocity import velocity_callback
 from ..graph import IncrementalFusion, feed, samples_of
 from ..noise import ImuNoise
-from ..rtklib import GnssFixes, RtkSolution, fixes_on_imu, normal_gravity, read_pos
 from ..settings import FusionSettings, PriorSigmas
 
 log = logging.getLogger(__name__)
@@ -180,14 +181,14 @@ class EarthImuNoise(ImuNoise):
         return p
 
 
-def outage_windows(sol: RtkSolution, o: OutageCfg) -> List[Tuple[int, int]]:
-    """The peer's schedule as [start, end) ns windows: from the first epoch + ``first_s``, every
-    ``period_s``, each ending by the last epoch - ``end_margin_s`` (the peer's ``end_coast``)."""
+def outage_windows(sol: RtkSolution, o: OutageCfg) -> List[OutageWindow]:
+    """The peer's schedule, in seconds from the first epoch: from ``first_s``, every ``period_s``, each
+    ending by the last epoch - ``end_margin_s`` (the peer's ``end_coast``)."""
     t0, t_last = int(sol.t_ns[0]), int(sol.t_ns[-1])
     out = []
     s = o.first_s
     while t0 + s * 1e9 + o.duration_s * 1e9 <= t_last - o.end_margin_s * 1e9:
-        out.append((t0 + int(round(s * 1e9)), t0 + int(round((s + o.duration_s) * 1e9))))
+        out.append(OutageWindow(s, o.duration_s))
         s += o.period_s
     return out
 
@@ -349,7 +350,7 @@ def experiment(cfg: GnssRunConfig) -> Dict[str, object]:
     start = initial_state(cfg, imu_log, sol, gravity)
     s0 = int(start["s0"])
     t, gyro, acc = imu_log.imu.t_ns[s0:], imu_log.imu.gyro[s0:], imu_log.imu.acc[s0:]
-    windows = outage_windows(sol, cfg.outages)
+    windows = [w.bounds_ns(int(sol.t_ns[0])) for w in outage_windows(sol, cfg.outages)]  # [start, end) ns
     all_fixes = fixes_on_imu(sol, t, cfg.lever_gnss_m, cfg.qualities, cfg.float_gain, sigma_floor_m=cfg.sigma_floor_m)
     truth_all = fixes_on_imu(sol, t, cfg.lever_gnss_m, (1,), sigma_floor_m=cfg.sigma_floor_m)
     ts_fix = t[all_fixes.idx]

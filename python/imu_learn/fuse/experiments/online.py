@@ -51,6 +51,7 @@ import numpy as np
 from imu_learn.errors import ConfigError, InvalidInputError
 from imu_learn.infer.streaming import WindowedStepper, load_causal_model, load_learned_model, make_stepper
 
+from ..aiding import OutageWindow
 from ..graph import FusionResult, IncrementalFusion, feed
 from ..settings import FusionSettings
 
@@ -361,7 +362,6 @@ def _stream_recording(cfg, spec, scns: list, inputs: Sequence[str], models: Dict
 
     from imu_learn.core.quat import wxyz_to_xyzw
 
-    from ..inmotion import from_sample
     from . import batch as runmod
 
     rname = Path(spec.path).name
@@ -391,7 +391,7 @@ def _stream_recording(cfg, spec, scns: list, inputs: Sequence[str], models: Dict
                 # a fresh hook per run: it holds the run's orientation estimates
                 hook = _displacement_hook(cfg, spec, seq, s0) if name == "learned" and with_displacement else None
                 res = stream(seq.t_ns[s0:], seq.gyro[s0:], seq.acc[s0:], (start.R, start.p, start.v),
-                             [from_sample(aiding, s0)], model,
+                             [aiding.since(s0)], model,
                              FusionSettings(noise, cfg.gravity, cfg.keyframe_hz, start.prior, lag_s=cfg.lag_s),
                              bias0=start.bias, extra_factors=hook)
             except (RuntimeError, InvalidInputError) as e:  # GTSAM's exceptions; no heading could be aligned
@@ -403,7 +403,7 @@ def _stream_recording(cfg, spec, scns: list, inputs: Sequence[str], models: Dict
             st = res.stats()
             shift = (seq.t_ns[s0] - seq.t_ns[0]) * 1e-9  # outages count from the recording's first sample
             sc = score_online(res, seq.t_ns[s0:], seq.p[s0:], seq.q_wxyz[s0:],
-                              [(a - shift, d) for a, d in scn.outage_windows()], start.score_from - s0, start.align)
+                              [OutageWindow(a - shift, d) for a, d in scn.outage_windows()], start.score_from - s0, start.align)
             for o in sc["outages"]:
                 o["start_s"] += shift
             runs[key] = {"recording": rname, "scenario": scn.name, "input": name, "seed": scn_seed,

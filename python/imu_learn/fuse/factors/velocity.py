@@ -7,7 +7,8 @@ from typing import Callable
 
 from imu_learn.errors import InvalidInputError
 
-from ..rtklib import GnssFixes, RtkSolution
+from ..aiding.rtklib import RtkSolution
+from ..aiding.types import GnssFixes
 
 
 def velocity_callback(fixes: GnssFixes, sol: RtkSolution, sigma: float, float_gain: float) -> Callable:

@@ -41,7 +41,8 @@ from imu_learn.errors import (
     TooFewRowsError,
 )
 
-from .aiding import PositionFixes, snap_to_samples
+from .sampling import snap_to_samples
+from .types import GnssFixes
 
 log = logging.getLogger(__name__)
 
@@ -73,25 +74,6 @@ class RtkSolution:
 
     def __len__(self) -> int:
         return len(self.t_ns)
-
-
-@dataclass(frozen=True)
-class GnssFixes(PositionFixes):
-    """:class:`PositionFixes` with per-fix sigmas: ``sigmas`` (M, 3) [m] along the world axes (the
-    graph builds a diagonal noise model per fix from them; ``sigma_m`` is then only a label) and
-    ``q`` (M,) the RTKLIB quality flag of each fix and ``epoch`` (M,) its row in the
-    :class:`RtkSolution`. Use :meth:`select` to subset (dataclasses' ``replace`` would keep the
-    per-fix arrays whole)."""
-
-    sigmas: Optional[np.ndarray] = None
-    q: Optional[np.ndarray] = None
-    epoch: Optional[np.ndarray] = None
-
-    def select(self, keep: np.ndarray, dropped_outage: int = 0) -> GnssFixes:
-        keep = np.asarray(keep, dtype=bool)
-        return GnssFixes(self.idx[keep], self.p[keep], self.sigma_m, self.lever, self.label, self.source,
-                         self.dropped_outside, self.dropped_unmatched, self.dropped_outage + int(dropped_outage),
-                         *(None if a is None else a[keep] for a in (self.sigmas, self.q, self.epoch)))
 
 
 # --- WGS-84 ----------------------------------------------------------------------------------------

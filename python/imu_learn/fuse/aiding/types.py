@@ -1,0 +1,191 @@
+"""The aiding measurements the factor graph takes, each tied to IMU sample indices: position fixes
+(:class:`PositionFixes`, and :class:`GnssFixes` with per-fix sigmas), relative poses
+(:class:`RelativePoses`) and absolute poses (:class:`AbsolutePoses`). Each subsets with
+:meth:`select` (every per-measurement array together, dropped measurements counted) and is
+re-indexed from a run's first fused sample with :meth:`since`."""
+from __future__ import annotations
+
+from dataclasses import dataclass, replace
+from typing import Dict, Optional, Union
+
+import numpy as np
+
+from imu_learn.errors import AidingError
+
+
+@dataclass(frozen=True)
+class PositionFixes:
+    """Positions of a point ``lever`` [m] (body frame) in the world frame at IMU samples ``idx``.
+    ``source``: the file they were read from ("" when simulated). ``dropped_outside`` /
+    ``dropped_unmatched``: real fixes left out because they lie outside the IMU's time span / have
+    no IMU sample of their own (see the module's time rules); ``dropped_outage``: fixes removed by
+    :func:`apply_outages`."""
+
+    idx: np.ndarray
+    p: np.ndarray
+    sigma_m: float
+    lever: np.ndarray
+    label: str
+    source: str = ""
+    dropped_outside: int = 0
+    dropped_unmatched: int = 0
+    dropped_outage: int = 0
+
+    def __len__(self) -> int:
+        return len(self.idx)
+
+    def select(self, keep: np.ndarray, dropped_outage: int = 0) -> PositionFixes:
+        """The fixes where ``keep`` (M,) is True; ``dropped_outage`` is added to the count."""
+        keep = np.asarray(keep, dtype=bool)
+        return replace(self, idx=self.idx[keep], p=self.p[keep], dropped_outage=self.dropped_outage + int(dropped_outage))
+
+    def since(self, s0: int) -> PositionFixes:
+        """The fixes from sample ``s0`` on, their indices counted from it (a run's first fused sample)."""
+        if s0 == 0:
+            return self
+        kept = self.select(self.idx >= s0)
+        return replace(kept, idx=kept.idx - s0)
+
+
+@dataclass(frozen=True)
+class RelativePoses:
+    """Body pose at sample ``j`` relative to sample ``i``: rotation ``R_ij`` and translation
+    ``t_ij`` (in frame i), with isotropic rotation [rad] and translation [m] sigmas."""
+
+    i: np.ndarray
+    j: np.ndarray
+    R_ij: np.ndarray
+    t_ij: np.ndarray
+    sigma_rot_rad: float
+    sigma_trans_m: float
+    label: str
+    dropped_outage: int = 0  # relative poses removed by apply_outages
+
+    def __len__(self) -> int:
+        return len(self.i)
+
+    def select(self, keep: np.ndarray, dropped_outage: int = 0) -> RelativePoses:
+        """The relative poses where ``keep`` (M,) is True; ``dropped_outage`` is added to the count."""
+        keep = np.asarray(keep, dtype=bool)
+        return replace(self, i=self.i[keep], j=self.j[keep], R_ij=self.R_ij[keep], t_ij=self.t_ij[keep],
+                       dropped_outage=self.dropped_outage + int(dropped_outage))
+
+    def since(self, s0: int) -> RelativePoses:
+        """The relative poses starting from sample ``s0`` on, their indices counted from it."""
+        if s0 == 0:
+            return self
+        kept = self.select(self.i >= s0)
+        return replace(kept, i=kept.i - s0, j=kept.j - s0)
+
+
+
+
+@dataclass(frozen=True)
+class AbsolutePoses:
+    """Body poses in the navigation frame at IMU samples ``idx``: rotations ``R`` (M, 3, 3) and
+    positions ``p`` (M, 3), e.g. a camera trajectory moved into the IMU frame and its world rotated
+    into the navigation frame (:mod:`imu_learn.fuse.navigate`); isotropic rotation [rad] and
+    translation [m] sigmas. Each becomes a prior factor on its keyframe's pose. ``i`` and ``j`` are
+    both ``idx`` (the keyframe rule reads every non-position aiding's samples from them).
+    The navigator drops the rows inside its gaps before it builds them."""
+
+    idx: np.ndarray
+    R: np.ndarray
+    p: np.ndarray
+    sigma_rot_rad: float
+    sigma_trans_m: float
+    label: str
+    source: str = ""
+    dropped_outage: int = 0
+
+    @property
+    def i(self) -> np.ndarray:
+        return self.idx
+
+    @property
+    def j(self) -> np.ndarray:
+        return self.idx
+
+    def __len__(self) -> int:
+        return len(self.idx)
+
+    def select(self, keep: np.ndarray, dropped_outage: int = 0) -> AbsolutePoses:
+        """The poses where ``keep`` (M,) is True; ``dropped_outage`` is added to the count."""
+        keep = np.asarray(keep, dtype=bool)
+        return replace(self, idx=self.idx[keep], R=self.R[keep], p=self.p[keep],
+                       dropped_outage=self.dropped_outage + int(dropped_outage))
+
+    def since(self, s0: int) -> AbsolutePoses:
+        """The poses from sample ``s0`` on, their indices counted from it."""
+        if s0 == 0:
+            return self
+        kept = self.select(self.idx >= s0)
+        return replace(kept, idx=kept.idx - s0)
+
+
+@dataclass(frozen=True)
+class GnssFixes(PositionFixes):
+    """:class:`PositionFixes` with per-fix sigmas: ``sigmas`` (M, 3) [m] along the world axes (the
+    graph builds a diagonal noise model per fix from them; ``sigma_m`` is then only a label) and
+    ``q`` (M,) the RTKLIB quality flag of each fix and ``epoch`` (M,) its row in the
+    :class:`~imu_learn.fuse.aiding.rtklib.RtkSolution`. :meth:`select` subsets them with the fixes
+    (dataclasses' ``replace`` alone would keep the per-fix arrays whole)."""
+
+    sigmas: Optional[np.ndarray] = None
+    q: Optional[np.ndarray] = None
+    epoch: Optional[np.ndarray] = None
+
+    def select(self, keep: np.ndarray, dropped_outage: int = 0) -> GnssFixes:
+        keep = np.asarray(keep, dtype=bool)
+        return GnssFixes(self.idx[keep], self.p[keep], self.sigma_m, self.lever, self.label, self.source,
+                         self.dropped_outside, self.dropped_unmatched, self.dropped_outage + int(dropped_outage),
+                         *(None if a is None else a[keep] for a in (self.sigmas, self.q, self.epoch)))
+
+
+Aiding = Union[PositionFixes, RelativePoses, AbsolutePoses]
+
+
+def aiding_samples(aiding: Aiding) -> np.ndarray:
+    """The IMU samples the aiding constrains, sorted, each once (a relative pose: both ends)."""
+    if isinstance(aiding, PositionFixes):
+        return np.unique(np.asarray(aiding.idx, dtype=np.int64))
+    return np.unique(np.concatenate([aiding.i, aiding.j]).astype(np.int64))
+
+
+def aiding_gaps(aiding: Aiding, t_ns: np.ndarray) -> Dict[str, Optional[float]]:
+    """Seconds without aiding, for the runner to record (JSON-ready): ``longest_s``, the longest
+    time between consecutive aiding epochs, and ``longest_start_s`` where it starts (from the first
+    sample; both None with fewer than two epochs); ``before_first_s`` from the first IMU sample to
+    the first epoch and ``after_last_s`` from the last epoch to the last sample (each the whole
+    span when there is no epoch)."""
+    t_ns = np.asarray(t_ns, dtype=np.int64)
+    span = (int(t_ns[-1]) - int(t_ns[0])) * 1e-9
+    s = aiding_samples(aiding)
+    out: Dict[str, Optional[float]] = {"longest_s": None, "longest_start_s": None, "before_first_s": span,
+                                       "after_last_s": span}
+    if len(s):
+        t = t_ns[s]
+        out["before_first_s"] = (int(t[0]) - int(t_ns[0])) * 1e-9
+        out["after_last_s"] = (int(t_ns[-1]) - int(t[-1])) * 1e-9
+    if len(s) >= 2:
+        d = np.diff(t)
+        k = int(np.argmax(d))
+        out["longest_s"] = float(d[k]) * 1e-9
+        out["longest_start_s"] = (int(t[k]) - int(t_ns[0])) * 1e-9
+    return out
+
+
+def check_aiding(aiding: Aiding, label: str) -> Aiding:
+    """``aiding`` unchanged when it has at least one measurement; else :class:`AidingError` naming
+    ``label`` (the recording and scenario), the aiding, and what removed its measurements."""
+    if len(aiding) > 0:
+        return aiding
+    source = getattr(aiding, "source", "") or None
+    dropped = [f"{n} {why}" for n, why in (
+        (aiding.dropped_outage, "inside the outages"),
+        (getattr(aiding, "dropped_outside", 0), "outside the IMU's time span"),
+        (getattr(aiding, "dropped_unmatched", 0), "without an IMU sample of their own"),
+    ) if n]
+    why = f": dropped {', '.join(dropped)}" if dropped else ""
+    raise AidingError(f"{label}: no aiding measurement left ({aiding.label}{', ' + source if source else ''}){why}",
+                      source, label)
