@@ -9,8 +9,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from imu_learn.data.formats import fetch
-from imu_learn.data.formats.csv_columns import STANDARD_GRAVITY, read_csv_columns, write_csv_columns
+from imu_learn.data.formats import csv_columns, fetch
+from imu_learn.data.formats.csv_columns import STANDARD_GRAVITY, CsvColumns, read_csv_columns, write_csv_columns
 from imu_learn.errors import (
     ColumnCountError,
     InvalidInputError,
@@ -159,3 +159,16 @@ def test_too_few_rows_and_unknown_units_and_maps(tmp_path):
             read_csv_columns(f, **{**USER, **kw})
     with pytest.raises(FileNotFoundError):
         read_csv_columns(tmp_path / "none.csv", **USER)
+
+
+def test_an_imu_source_for_refine_round_trips(tmp_path):
+    orig = fetch.read_imu(fetch_like(tmp_path))
+    user = tmp_path / "mine.csv"
+    rewrite_as_user(orig, user)
+    layout = CsvColumns(**USER)
+    src = csv_columns.read_imu_source(user, layout)
+    assert (src.fmt, src.imu_file, src.root, src.rel) == ("csv-columns", user, tmp_path, Path("mine.csv"))
+    out = tmp_path / "out" / "mine.csv"
+    out.parent.mkdir()
+    csv_columns.write_imu(src, out, src.gyro + 1e-3, src.acc, layout)
+    np.testing.assert_allclose(read_csv_columns(out, **USER).gyro, src.gyro + 1e-3, rtol=1e-15)

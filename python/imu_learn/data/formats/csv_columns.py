@@ -29,6 +29,9 @@ from imu_learn import _imu_core as core
 from imu_learn.data.types import ImuData
 from imu_learn.util.atomic import atomic_write_path
 
+from .source import ImuSource
+
+NAME = "csv-columns"
 DEFAULT_COLUMNS = "t,gx,gy,gz,ax,ay,az"
 TIME_UNITS = ("s", "ms", "us", "ns")
 GYRO_UNITS = ("rad/s", "deg/s")
@@ -78,3 +81,15 @@ def write_csv_columns(
     atomic_write_path(
         out, lambda tmp: core.write_csv_columns(str(original), str(tmp), g, a, columns, time_unit, gyro_unit, acc_unit)
     )
+
+
+def read_imu_source(path: Path, layout: CsvColumns) -> ImuSource:
+    """A user's CSV as refine takes it: the file stands alone (its folder is the recording's)."""
+    path = Path(path)
+    imu = read_csv_columns(path, *layout.args())
+    return ImuSource(NAME, path, path.parent, Path(path.name), imu.t_ns, imu.gyro, imu.acc)
+
+
+def write_imu(src: ImuSource, out: Path, gyro: np.ndarray, acc: np.ndarray, layout: CsvColumns) -> None:
+    """``out``: ``src``'s CSV with gyro and acc replaced, in its own columns and units."""
+    write_csv_columns(src.imu_file, out, gyro, acc, *layout.args())
