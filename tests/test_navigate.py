@@ -505,20 +505,22 @@ def test_variance_scale_multiplies_the_learned_variances_and_needs_a_covariance_
     """--variance-scale G,A multiplies the covariance head's gyro and acc variances (fuse/variance.py calibrates
     them over the keyframe interval); without a covariance head, without a checkpoint or not G,A > 0: refused."""
     from imu_learn.errors import ConfigError
-    from imu_learn.fuse.navigate import NavigateOptions, refined_input
+    from imu_learn.fuse.inputs import checkpoint_input
+    from imu_learn.fuse.navigate import NavigateOptions
 
     models = SHIPPED.parent / "models"
     rng = np.random.default_rng(0)
     gyro, acc = rng.normal(0, 0.1, (400, 3)), rng.normal(0, 0.5, (400, 3)) + [0.0, 0.0, 9.81]
-    g1, a1, v1, _ = refined_input(models / "euroc_adis16448_cov.pt", gyro, acc)
-    g2, a2, v2, label = refined_input(models / "euroc_adis16448_cov.pt", gyro, acc, (0.1, 0.25))
+    t = np.arange(400, dtype=np.int64) * 5_000_000
+    g1, a1, v1, _ = checkpoint_input(models / "euroc_adis16448_cov.pt", t, gyro, acc)
+    g2, a2, v2, label = checkpoint_input(models / "euroc_adis16448_cov.pt", t, gyro, acc, (0.1, 0.25))
     np.testing.assert_array_equal(g1, g2)
     np.testing.assert_allclose(v2, v1 * np.array([0.1] * 3 + [0.25] * 3), rtol=1e-12)
     assert "scaled by 0.1 (gyro), 0.25 (acc)" in label
     with pytest.raises(ConfigError, match="no covariance head"):
-        refined_input(models / "euroc_adis16448.pt", gyro, acc, (0.1, 0.25))
+        checkpoint_input(models / "euroc_adis16448.pt", t, gyro, acc, (0.1, 0.25))
     with pytest.raises(ConfigError, match="needs --checkpoint"):
-        refined_input(None, gyro, acc, (0.1, 0.25))
+        checkpoint_input(None, t, gyro, acc, (0.1, 0.25))
     for bad in ((0.0, 1.0), (1.0, float("nan")), (1.0,)):
         with pytest.raises(ConfigError, match="--variance-scale"):
             NavigateOptions(aiding_kind="pose", variance_scale=bad).check()

@@ -81,7 +81,7 @@ def through_every_path(path: Path, t, g, a, tmp_path: Path, monkeypatch) -> dict
     from imu_learn.baselines.proposed import Proposed
     from imu_learn.cli.refine import main as refine_cli
     from imu_learn.eval.run import CheckpointRefiner
-    from imu_learn.fuse.experiments.batch import imu_input
+    from imu_learn.fuse.inputs import imu_input
     from imu_learn.infer import model_check
     from imu_learn.train import fit
 
@@ -179,7 +179,7 @@ def test_empty_sequence_and_bad_rules(imu):
 
 def test_variances_are_stitched_by_the_same_rule(imu):
     """refine_with_variance and fuse's learned-covariance input: identical samples and variances."""
-    from imu_learn.fuse.experiments.batch import imu_input
+    from imu_learn.fuse.inputs import imu_input
 
     t, g, a = imu
     seq = as_sequence(t, g, a)

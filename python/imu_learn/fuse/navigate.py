@@ -61,9 +61,9 @@ from .aiding.outages import in_windows
 from .aiding.rtklib import fixes_on_imu, normal_gravity, read_pos
 from .aiding.tum import Trajectory, check_overlap, read_trajectory
 from .factors import chain
-from .factors.displacement import displacement_factors_for
 from .factors.nhc import NhcSettings, nhc_callback
 from .graph import fuse
+from .inputs import checkpoint_input, displacement_hook, displacement_model, method_input
 from .noise import ImuNoise
 from .score import umeyama
 from .settings import FusionSettings, PriorSigmas
@@ -379,67 +379,6 @@ def position_start(t_ns, gyro, acc, rows: AidingRows, lever: np.ndarray, bias0: 
     return s0, initial.InitialState(R0, rows.p[e] - R0 @ lever, v0, bias0, np.eye(3), info)
 
 
-def refined_input(checkpoint: Optional[Path], gyro: np.ndarray, acc: np.ndarray,
-                  variance_scale: Optional[Tuple[float, float]] = None):
-    """(gyro, acc, per-sample variances or None, label): the IMU refined by ``checkpoint`` (raw without
-    one), weighted by its covariance head's variances when it has one (the ``learned`` input's samples).
-    ``variance_scale`` (k_gyro, k_acc), dimensionless: multiplies the head's gyro and acc variances
-    (:mod:`.variance` calibrates them over the keyframe interval); a :class:`ConfigError` without a
-    covariance head."""
-    if checkpoint is None:
-        if variance_scale is not None:
-            raise ConfigError("--variance-scale scales a covariance head's variances: it needs --checkpoint")
-        return gyro, acc, None, "raw"
-    from imu_learn.infer.checkpoint import load_model
-    from imu_learn.infer.windowing import apply
-
-    model = load_model(Path(checkpoint))
-    if model.cov_head is None:
-        if variance_scale is not None:
-            raise ConfigError(f"--variance-scale: {Path(checkpoint).name} has no covariance head (model.covariance)")
-        g, a, _ = apply(model, gyro, acc)
-        return g, a, None, f"refined by {Path(checkpoint).name}"
-    g, a, var = apply(model, gyro, acc, variance=True)
-    label = f"refined by {Path(checkpoint).name}, weighted by its learned covariance"
-    if variance_scale is not None:
-        kg, ka = (float(x) for x in variance_scale)
-        var = var * np.repeat([kg, ka], 3)
-        label += f" scaled by {kg:g} (gyro), {ka:g} (acc)"
-    return g, a, var, label
-
-
-def calibrated_input(path: Path, t_ns: np.ndarray, gyro: np.ndarray, acc: np.ndarray):
-    """(gyro, acc, label): the IMU through a fit ``imu-learn evaluate`` saved (``<out>/methods/timing.json``,
-    ``traditional+timing.json``, ...; the method is the file's name), the floor a learned input is judged by."""
-    from imu_learn.baselines.registry import REGISTRY, load_method_class
-    from imu_learn.data.types import Segment
-
-    name = Path(path).stem
-    if name not in REGISTRY:
-        raise ConfigError(f"--calibration: {path}: the file name must be a method's ({', '.join(REGISTRY)}), as "
-                          "imu-learn evaluate writes it")
-    if not Path(path).is_file():
-        raise FileNotFoundError(f"--calibration: {path} not found (imu-learn evaluate --methods {name} writes it)")
-    method = load_method_class(name)().load(Path(path))
-    n = len(t_ns)
-    z = np.zeros((n, 3))
-    seq = Segment(name, t_ns, gyro, acc, z, z, np.tile([1.0, 0.0, 0.0, 0.0], (n, 1)))  # no ground truth: refine reads IMU only
-    g, a = method.refine(seq)
-    return np.ascontiguousarray(g), np.ascontiguousarray(a), f"{name} ({Path(path).name})"
-
-
-def displacement_hook(path: Path, t_ns: np.ndarray, gyro: np.ndarray, acc: np.ndarray, update_s: float = 1.0):
-    """The graph's ``extra_factors`` hook of a saved tlio-style model (its displacements of the raw IMU),
-    or of its floor ``zero-displacement`` (a ``.json`` file: zero displacement with the fitted spread)."""
-    from imu_learn.baselines.registry import load_method_class
-
-    if not Path(path).is_file():
-        raise FileNotFoundError(f"--displacement: {path} not found (imu-learn evaluate --methods tlio-style writes it)")
-    name = "zero-displacement" if Path(path).suffix.lower() == ".json" else "tlio-style"
-    model = load_method_class(name)().load(Path(path))
-    return displacement_factors_for(model, t_ns, np.ascontiguousarray(gyro), np.ascontiguousarray(acc), update_s)
-
-
 @dataclass(frozen=True)
 class Sources:
     """The files :func:`navigate` reads: the recording ``input`` (its IMU only, layout ``fmt``), the
@@ -502,10 +441,10 @@ def navigate(src: Sources, out: Path, opts: NavigateOptions = NavigateOptions())
             raise ConfigError("--calibration and --checkpoint both refine the IMU: pass one")
         if opts.variance_scale is not None:
             raise ConfigError("--variance-scale scales a covariance head's variances: not with --calibration")
-        gyro, acc, imu_input = calibrated_input(Path(calibration), t_ns, gyro, acc)
+        gyro, acc, imu_input = method_input(Path(calibration), t_ns, gyro, acc)
         var = None
     else:
-        gyro, acc, var, imu_input = refined_input(checkpoint, gyro, acc, opts.variance_scale)
+        gyro, acc, var, imu_input = checkpoint_input(checkpoint, t_ns, gyro, acc, opts.variance_scale)
     if opts.aiding_kind == "position":
         s0, st = position_start(t_ns, gyro, acc, rows, lever, bias0, opts)
     else:
@@ -526,7 +465,7 @@ def navigate(src: Sources, out: Path, opts: NavigateOptions = NavigateOptions())
         hooks.append(nhc_callback(NhcSettings(opts.nhc_sigma_lat_mps, opts.nhc_sigma_vert_mps),
                                   np.ascontiguousarray(gyro[sel])))
     if displacement is not None:
-        hooks.append(displacement_hook(Path(displacement), t_ns[sel], raw_gyro[sel], raw_acc[sel]))
+        hooks.append(displacement_hook(displacement_model(Path(displacement)), t_ns[sel], raw_gyro[sel], raw_acc[sel]))
         imu_input += f" + displacements of {Path(displacement).name}"
     if hooks:
         kw["extra_factors"] = chain(*hooks)

@@ -41,15 +41,15 @@ from ..aiding import (
     simulate_relative_pose,
 )
 from ..factors import chain
-from ..factors.displacement import FACTOR_INPUTS, TLIO_INPUT, displacement_factors_for
 from ..factors.nhc import NhcSettings, nhc_callback
 from ..graph import fuse
 from ..inmotion import AlignSettings, crop, data_start
+from ..inputs import FACTOR_INPUTS, LEARNED_COV_INPUTS, LEARNED_INPUT, TLIO_INPUT, displacement_hook, imu_input, load
 from ..noise import ImuNoise
 from ..plots import plot_setting, runs_of
 from ..score import score
 from ..settings import SETTLE_S, FusionSettings
-from .config import LEARNED_COV_INPUTS, LEARNED_INPUT, FuseConfig, RecordingSpec, ScenarioSpec
+from .config import FuseConfig, RecordingSpec, ScenarioSpec
 
 # Changes with the estimator in graph.py, so results of an older estimator are not resumed.
 ESTIMATOR = "isam2-gn-at-aiding-resolve-after-2s-qr+lm-qr"
@@ -104,7 +104,7 @@ def displacement_of(cfg: FuseConfig, spec: RecordingSpec, name: str, processors:
     if name in FACTOR_INPUTS:
         return processors.get((name, artefact_of(cfg, spec, name)))
     if name == LEARNED_INPUT and displacement_artefact(cfg, spec):
-        return load_processor(TLIO_INPUT, displacement_artefact(cfg, spec), processors)
+        return load(TLIO_INPUT, displacement_artefact(cfg, spec), processors)
     return None
 
 
@@ -173,46 +173,6 @@ def load_recording_for_fusion(cfg: FuseConfig, spec: RecordingSpec):
     if spec.aiding_topic:  # a bag's position / pose topic in the Leica's place
         leica = bag_position_source(path, spec.aiding_topic, spec.aiding_lever)
     return seq, noise, leica
-
-
-def load_processor(name: str, path: str, cache: Dict[Tuple[str, str], object]) -> object:
-    """The refiner ("proposed"), or the fitted ``imu_learn.evaluate`` method (calibration and the
-    others) in ``path``, loaded once."""
-    if (name, path) not in cache:
-        if not Path(path).is_file():
-            hint = ("" if name == "proposed" else
-                    f" (python -m imu_learn.evaluate with the '{name}' method writes it to <report>/methods/)")
-            raise FileNotFoundError(f"{name}: {path} not found{hint}")
-        if name == "proposed" or name in LEARNED_COV_INPUTS:
-            from imu_learn.infer.checkpoint import load_model
-
-            model = load_model(Path(path))
-            if name in LEARNED_COV_INPUTS and model.cov_head is None:
-                raise ConfigError(f"{name}: {path} has no covariance head (a model fitted with model.covariance = true)")
-            cache[(name, path)] = model
-        else:
-            from imu_learn.baselines.registry import load_method_class
-
-            cache[(name, path)] = load_method_class(name)().load(Path(path))
-    return cache[(name, path)]
-
-
-def imu_input(name: str, seq, artefact: str, cache: Dict[Tuple[str, str], object]
-              ) -> Tuple[np.ndarray, np.ndarray, Optional[np.ndarray]]:
-    """(gyro, acc, per-sample variances or None for the datasheet's noise) of one input."""
-    if name == "raw":
-        return seq.gyro, seq.acc, None
-    proc = load_processor(name, artefact, cache)
-    from imu_learn.infer.windowing import apply  # the checkpoint's windowing rule, as refine/evaluate/fit
-
-    if name in LEARNED_COV_INPUTS:
-        gyro, acc, var = apply(proc, seq.gyro, seq.acc, variance=True)
-        # The head's variances are a function of the raw samples (the model's input) either way.
-        return (seq.gyro, seq.acc, var) if name == "raw+learned-cov" else (gyro, acc, var)
-    if name != "proposed":
-        return (*proc.refine(seq), None)
-    gyro, acc, _ = apply(proc, seq.gyro, seq.acc)
-    return gyro, acc, None
 
 
 def bias_prior_mean(scn: ScenarioSpec, seq, gyro: np.ndarray, acc: np.ndarray, gravity: float):
@@ -288,7 +248,7 @@ def run_experiment(cfg: FuseConfig, out: Path, log: Callable[[str], None] = prin
     for spec in cfg.recordings:  # a missing model fails here, before any run
         for name in run_inputs:
             if name != "raw":
-                load_processor(name, artefact_of(cfg, spec, name), processors)
+                load(name, artefact_of(cfg, spec, name), processors)
     wanted = {run_key(spec, scn, name, seed): run_hash(cfg, spec, scn, name, seed)
               for spec in cfg.recordings for scn in cfg.scenarios for seed in seeds_of(cfg, scn) for name in cfg.inputs}
     total = len(wanted)
@@ -470,7 +430,7 @@ def run_one(cfg: FuseConfig, out: Path, seq, noise: ImuNoise, R0: np.ndarray, sc
     # The displacement network regresses from the raw samples it was trained on (tlio-style's input
     # is the raw IMU; "learned" fuses refined samples beside it).
     hook = (None if displacement is None else
-            displacement_factors_for(displacement, seq.t_ns[s0:], seq.gyro[s0:], seq.acc[s0:],
+            displacement_hook(displacement, seq.t_ns[s0:], seq.gyro[s0:], seq.acc[s0:],
                                      cfg.displacement_update_s))
     nhc = None
     if scn.nhc_sigma_mps > 0:  # wheeled platform: the non-holonomic constraint at every keyframe

@@ -13,17 +13,9 @@ from imu_learn.errors import ConfigError
 from imu_learn.settings import DATA_ROOT_ENV, from_dict, read_toml
 
 from ..aiding.outages import OutageWindow, windows
+from ..inputs import FACTOR_INPUTS, INPUTS
 from ..settings import DEFAULT_LAG_S
 
-# "raw+learned-cov" / "proposed+learned-cov": the raw or refined samples, each weighted in the
-# graph by its own noise variances from a refiner's covariance head (covariance_checkpoint) instead
-# of the datasheet's white noise; the pair separates the refined samples' effect from the covariance's.
-# "learned": the one learned input (issue 24): the device model's refined samples weighted by its learned
-# covariance (covariance_checkpoint, as proposed+learned-cov), plus the tlio-style displacement factors
-# where the device has that model (<methods_dir>/tlio-style.pt; regressed from the raw samples).
-LEARNED_INPUT = "learned"
-LEARNED_COV_INPUTS = ("raw+learned-cov", "proposed+learned-cov", LEARNED_INPUT)
-INPUTS = ("raw", "traditional", "proposed") + LEARNED_COV_INPUTS
 KINDS = ("position", "relative_pose", "leica")
 # The first state of every run: "data" (fuse/inmotion.py: levelled from the accelerometer, heading from
 # yaw hypotheses fitted to the first fixes, or a gauge for relative aiding; no ground truth at run time)
@@ -136,8 +128,6 @@ def imu_methods() -> List[str]:
     samples (its class has its own ``refine``; End-to-End regresses poses and is not one)."""
     from imu_learn.baselines.base import Method
     from imu_learn.baselines.registry import REGISTRY, load_method_class
-
-    from ..factors.displacement import FACTOR_INPUTS
 
     names = list(INPUTS) + list(FACTOR_INPUTS)  # the raw IMU plus learned displacement factors
     for name in REGISTRY:

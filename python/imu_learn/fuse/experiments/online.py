@@ -301,15 +301,15 @@ def _displacement_hook(cfg, spec, seq, s0: int = 0) -> Optional[Callable]:
     """The ``learned`` input's displacement factors where the device has a tlio-style model (as the
     batch run adds them, on the raw IMU; the hook reads only samples before the current keyframe),
     else None."""
-    from ..factors.displacement import TLIO_INPUT, displacement_factors_for
+    from ..inputs import TLIO_INPUT, displacement_hook, load
     from . import batch as runmod
 
     path = runmod.displacement_artefact(cfg, spec)
     if not path:
         return None
-    proc = runmod.load_processor(TLIO_INPUT, path, {})
+    proc = load(TLIO_INPUT, path)
     log.info("learned: displacement factors from %s", path)
-    return displacement_factors_for(proc, seq.t_ns[s0:], seq.gyro[s0:], seq.acc[s0:], cfg.displacement_update_s)
+    return displacement_hook(proc, seq.t_ns[s0:], seq.gyro[s0:], seq.acc[s0:], cfg.displacement_update_s)
 
 
 def _bias_prior(cfg, scn, seq, name: str, model, refined: Dict[str, tuple]) -> Optional[np.ndarray]:

@@ -43,10 +43,6 @@ import numpy as np
 
 from ..aiding import epochs
 
-TLIO_INPUT = "tlio-style"  # the learned displacement model (the `learned` input adds its factors)
-FACTOR_INPUTS = (TLIO_INPUT, "zero-displacement")  # fusion inputs that add displacement factors to the raw IMU
-# (the second is the first's simple floor: zero displacement, baselines/zero_displacement.py)
-
 # (world-frame IMU samples (L, 6), orientation of the last sample (3, 3)) -> (d̂ (3,), Σ (3, 3)), world frame
 Regressor = Callable[[np.ndarray, np.ndarray], Tuple[np.ndarray, np.ndarray]]
 

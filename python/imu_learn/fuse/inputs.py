@@ -1,0 +1,158 @@
+"""The IMU inputs fusion takes, by name and file: one resolver for every entry point (the experiments
+by a config's input names, the navigator by ``--checkpoint`` / ``--calibration`` / ``--displacement``).
+
+* :func:`load` loads what a name's file holds, once per (name, file): a refiner checkpoint
+  (``proposed`` and the learned-covariance inputs; a covariance head is required by the latter) or a
+  method ``imu-learn evaluate`` fitted and saved (``traditional``, ``timing``, ``tlio-style``, ...);
+* :func:`apply` turns the raw samples into the input's samples and, for the learned-covariance
+  inputs, their per-sample noise variances (:data:`Imu`); ``raw`` is the samples as they are;
+* :func:`displacement_hook` is the graph's factor hook of a displacement model (``tlio-style`` or its
+  floor ``zero-displacement``), regressed from the raw samples;
+* :func:`checkpoint_input` and :func:`method_input` are the navigator's two ways of refining a
+  recording (a checkpoint, or a saved fit), each with the label its summary carries.
+
+Checkpoints run through the one windowing rule (:func:`imu_learn.infer.windowing.apply`), as refine,
+evaluate and fit apply them.
+"""
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Dict, Optional, Tuple
+
+import numpy as np
+
+from imu_learn.data.types import Segment
+from imu_learn.errors import ConfigError
+
+# "raw+learned-cov" / "proposed+learned-cov": the raw or refined samples, each weighted in the
+# graph by its own noise variances from a refiner's covariance head (covariance_checkpoint) instead
+# of the datasheet's white noise; the pair separates the refined samples' effect from the covariance's.
+# "learned": the one learned input: the device model's refined samples weighted by its learned
+# covariance (as proposed+learned-cov), plus the tlio-style displacement factors where the device has
+# that model (<methods_dir>/tlio-style.pt; regressed from the raw samples).
+LEARNED_INPUT = "learned"
+LEARNED_COV_INPUTS = ("raw+learned-cov", "proposed+learned-cov", LEARNED_INPUT)
+INPUTS = ("raw", "traditional", "proposed") + LEARNED_COV_INPUTS
+TLIO_INPUT = "tlio-style"  # the learned displacement model (the `learned` input adds its factors)
+# fusion inputs that add displacement factors to the raw IMU (the second is the first's simple floor:
+# zero displacement, baselines/zero_displacement.py)
+FACTOR_INPUTS = (TLIO_INPUT, "zero-displacement")
+
+# (gyro (N, 3), acc (N, 3), per-sample variances (N, 6) or None for the datasheet's white noise)
+Imu = Tuple[np.ndarray, np.ndarray, Optional[np.ndarray]]
+Cache = Dict[Tuple[str, str], object]
+
+
+def is_refiner(name: str) -> bool:
+    """Whether input ``name``'s file is a refiner checkpoint (else a saved method, or nothing for raw)."""
+    return name == "proposed" or name in LEARNED_COV_INPUTS
+
+
+def load(name: str, path: str, cache: Optional[Cache] = None) -> object:
+    """The refiner (``proposed``, the learned-covariance inputs) or the fitted ``imu-learn evaluate``
+    method (every other input) in ``path``, loaded once per ``cache``."""
+    cache = {} if cache is None else cache
+    if (name, path) not in cache:
+        if not Path(path).is_file():
+            hint = ("" if name == "proposed" else
+                    f" (python -m imu_learn.evaluate with the '{name}' method writes it to <report>/methods/)")
+            raise FileNotFoundError(f"{name}: {path} not found{hint}")
+        if is_refiner(name):
+            from imu_learn.infer.checkpoint import load_model
+
+            model = load_model(Path(path))
+            if name in LEARNED_COV_INPUTS and model.cov_head is None:
+                raise ConfigError(f"{name}: {path} has no covariance head (a model fitted with model.covariance = true)")
+            cache[(name, path)] = model
+        else:
+            from imu_learn.baselines.registry import load_method_class
+
+            cache[(name, path)] = load_method_class(name)().load(Path(path))
+    return cache[(name, path)]
+
+
+def apply(name: str, model, seq: Segment) -> Imu:
+    """Input ``name``'s samples of the raw ``seq`` through its loaded ``model`` (None for raw)."""
+    if name == "raw":
+        return seq.gyro, seq.acc, None
+    from imu_learn.infer.windowing import apply as apply_windows  # the checkpoint's windowing rule
+
+    if name in LEARNED_COV_INPUTS:
+        gyro, acc, var = apply_windows(model, seq.gyro, seq.acc, variance=True)
+        # The head's variances are a function of the raw samples (the model's input) either way.
+        return (seq.gyro, seq.acc, var) if name == "raw+learned-cov" else (gyro, acc, var)
+    if name != "proposed":
+        return (*model.refine(seq), None)
+    gyro, acc, _ = apply_windows(model, seq.gyro, seq.acc)
+    return gyro, acc, None
+
+
+def imu_input(name: str, seq: Segment, path: str, cache: Optional[Cache] = None) -> Imu:
+    """Input ``name`` of ``seq``, its model loaded from ``path`` ("" for raw)."""
+    return apply(name, None if name == "raw" else load(name, path, cache), seq)
+
+
+def imu_only(name: str, t_ns: np.ndarray, gyro: np.ndarray, acc: np.ndarray) -> Segment:
+    """A recording's IMU as a :class:`Segment` without ground truth (zeros: refiners read the IMU only)."""
+    n = len(t_ns)
+    z = np.zeros((n, 3))
+    return Segment(name, t_ns, gyro, acc, z, z, np.tile([1.0, 0.0, 0.0, 0.0], (n, 1)))
+
+
+def checkpoint_input(checkpoint: Optional[Path], t_ns: np.ndarray, gyro: np.ndarray, acc: np.ndarray,
+                     variance_scale: Optional[Tuple[float, float]] = None) -> Tuple[np.ndarray, np.ndarray,
+                                                                                    Optional[np.ndarray], str]:
+    """(gyro, acc, per-sample variances or None, label): the IMU refined by ``checkpoint`` (raw without
+    one; ``proposed``), weighted by its covariance head's variances when it has one
+    (``proposed+learned-cov``, the ``learned`` input's samples). ``variance_scale`` (k_gyro, k_acc),
+    dimensionless: multiplies the head's gyro and acc variances (:mod:`.variance` calibrates them over
+    the keyframe interval); a :class:`ConfigError` without a covariance head."""
+    if checkpoint is None:
+        if variance_scale is not None:
+            raise ConfigError("--variance-scale scales a covariance head's variances: it needs --checkpoint")
+        return gyro, acc, None, "raw"
+    model = load("proposed", str(checkpoint))
+    seq = imu_only(Path(checkpoint).stem, t_ns, gyro, acc)
+    if model.cov_head is None:
+        if variance_scale is not None:
+            raise ConfigError(f"--variance-scale: {Path(checkpoint).name} has no covariance head (model.covariance)")
+        g, a, _ = apply("proposed", model, seq)
+        return g, a, None, f"refined by {Path(checkpoint).name}"
+    g, a, var = apply("proposed+learned-cov", model, seq)
+    label = f"refined by {Path(checkpoint).name}, weighted by its learned covariance"
+    if variance_scale is not None:
+        kg, ka = (float(x) for x in variance_scale)
+        var = var * np.repeat([kg, ka], 3)
+        label += f" scaled by {kg:g} (gyro), {ka:g} (acc)"
+    return g, a, var, label
+
+
+def method_input(path: Path, t_ns: np.ndarray, gyro: np.ndarray, acc: np.ndarray) -> Tuple[np.ndarray, np.ndarray, str]:
+    """(gyro, acc, label): the IMU through a fit ``imu-learn evaluate`` saved (``<out>/methods/timing.json``,
+    ``traditional+timing.json``, ...; the method is the file's name), the floor a learned input is judged by."""
+    from imu_learn.baselines.registry import REGISTRY
+
+    name = Path(path).stem
+    if name not in REGISTRY:
+        raise ConfigError(f"--calibration: {path}: the file name must be a method's ({', '.join(REGISTRY)}), as "
+                          "imu-learn evaluate writes it")
+    if not Path(path).is_file():
+        raise FileNotFoundError(f"--calibration: {path} not found (imu-learn evaluate --methods {name} writes it)")
+    g, a, _ = apply(name, load(name, str(path)), imu_only(name, t_ns, gyro, acc))
+    return np.ascontiguousarray(g), np.ascontiguousarray(a), f"{name} ({Path(path).name})"
+
+
+def displacement_model(path: Path, cache: Optional[Cache] = None):
+    """A saved ``tlio-style`` model, or its floor ``zero-displacement`` (a ``.json`` file: zero
+    displacement with the fitted spread)."""
+    if not Path(path).is_file():
+        raise FileNotFoundError(f"--displacement: {path} not found (imu-learn evaluate --methods tlio-style writes it)")
+    return load("zero-displacement" if Path(path).suffix.lower() == ".json" else TLIO_INPUT, str(path), cache)
+
+
+def displacement_hook(model, t_ns: np.ndarray, gyro: np.ndarray, acc: np.ndarray, update_s: float = 1.0):
+    """The graph's factor hook of a displacement ``model``, regressed from the raw samples ``gyro``,
+    ``acc`` (the network's training input) every ``update_s`` seconds."""
+    from .factors.displacement import displacement_factors_for
+
+    return displacement_factors_for(model, t_ns, np.ascontiguousarray(gyro), np.ascontiguousarray(acc), update_s)
