@@ -1,1 +1,2 @@
-"""Training: the run configuration, the loop with its validation and selection, checkpoints."""
+"""Training: the run configuration, the loop with its validation and selection (checkpoints are
+written and read through :mod:`imu_learn.infer.checkpoint`)."""
