@@ -1,7 +1,8 @@
 """The package's parts import one way: each part imports only itself and the parts below it (the
 order is docs/README.md's "Code layout"). Every import counts, at module level or inside a function,
-relative ones resolved; a function-local import is only for an optional heavy dependency (torch,
-gtsam, matplotlib, rosbags), never to hide an import against the order."""
+relative ones resolved. A function-local import is only for an optional heavy dependency (torch,
+gtsam, matplotlib, rosbags; LAZY adds the other extras' packages and scipy/h5py), never to hide an
+import against the order; each stage names its missing extra in one line (tests/test_extras.py)."""
 from __future__ import annotations
 
 import ast
