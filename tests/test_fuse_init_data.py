@@ -1,4 +1,4 @@
-"""The experiment runner's first state from the data (fuse/inmotion.py, ``init = "data"``, the
+"""The experiment runner's first state from the data (fuse/start/data.py, ``init = "data"``, the
 default): rest detection, the heading prior's frame, rigid alignment, and the heading the yaw
 hypotheses find on the real crop, against ground truth and against the same fixes turned about z."""
 from __future__ import annotations
@@ -13,14 +13,14 @@ pytest.importorskip("gtsam")
 
 from crops import CROP  # noqa: E402
 from imu_learn.core.quat import wxyz_to_xyzw  # noqa: E402
-from imu_learn.fuse import init as initial  # noqa: E402
 from imu_learn.fuse.aiding import simulate_position, simulate_relative_pose  # noqa: E402
 from imu_learn.fuse.experiments.batch import run_experiment, run_hash  # noqa: E402
 from imu_learn.fuse.experiments.config import FuseConfig, RecordingSpec, ScenarioSpec, validate  # noqa: E402
-from imu_learn.fuse.inmotion import data_start  # noqa: E402
 from imu_learn.fuse.noise import ImuNoise  # noqa: E402
 from imu_learn.fuse.score import umeyama  # noqa: E402
 from imu_learn.fuse.settings import FusionSettings, PriorSigmas  # noqa: E402
+from imu_learn.fuse.start import level as initial  # noqa: E402
+from imu_learn.fuse.start.data import data_start  # noqa: E402
 
 
 def test_umeyama_recovers_a_rigid_motion():
@@ -73,7 +73,7 @@ def test_a_data_start_settles_on_the_heading_of_the_fixes_frame(crop, turn_deg):
     start's own heading can be tens of degrees off on this crop, which is in flight from its first
     sample with an unknown 0.08 rad/s gyro bias: the fixes resolve it, which is what this checks.)"""
     from imu_learn.fuse.graph import fuse
-    from imu_learn.fuse.inmotion import crop as crop_result
+    from imu_learn.fuse.score import crop as crop_result
 
     Rz = Rotation.from_euler("z", turn_deg, degrees=True).as_matrix()
     fixes = simulate_position(crop.t_ns, crop.p @ Rz.T, 1.0, 0.05, np.random.default_rng(0))

@@ -1,6 +1,6 @@
 """``imu-learn navigate``: a recording navigated with real aiding and no ground truth
 (imu_learn.fuse.navigate), its aiding reader (fuse/tum.py), extrinsic reader (fuse/extrinsics.py)
-and data-derived first state (fuse/init.py). Ground truth is used here only to make aiding and to
+and data-derived first state (fuse/start/). Ground truth is used here only to make aiding and to
 check the answer, never by the navigator (its file is left out of the recording it reads)."""
 from __future__ import annotations
 
@@ -25,10 +25,12 @@ from imu_learn.errors import (
     TimestampError,
     TooFewRowsError,
 )
-from imu_learn.fuse import init
 from imu_learn.fuse.aiding.extrinsics import inverse, read_t_bs
 from imu_learn.fuse.aiding.tum import check_overlap, read_trajectory, read_tum, seconds_to_ns
+from imu_learn.fuse.inputs import checkpoint_bias
 from imu_learn.fuse.navigate import interpolate_groundtruth, umeyama
+from imu_learn.fuse.score import convergence
+from imu_learn.fuse.start import level as init
 
 # EuRoC cam0's T_BS (camera to body = IMU), as in every EuRoC sensor.yaml of cam0 (Burri et al. 2016).
 CAM0_YAML = """%YAML:1.0
@@ -195,13 +197,13 @@ def test_convergence_is_the_time_from_which_causal_stays_near_smoothed():
     c[:30, 0] = 1.0
     c[50, 0] = 0.2  # a late excursion
     R = np.repeat(np.eye(3)[None], 100, 0)
-    conv = init.convergence(t, c, R, p, R, pos_m=0.1)
+    conv = convergence(t, c, R, p, R, pos_m=0.1)
     assert conv["position_s"] == pytest.approx(5.1) and conv["rotation_s"] == 0.0
     assert conv["converged_s"] == pytest.approx(5.1)
 
 
 def test_a_checkpoint_without_a_device_bias_gives_zero_bias():
-    b, source = init.checkpoint_bias(SHIPPED.parent / "models" / "euroc_adis16448.pt")
+    b, source = checkpoint_bias(SHIPPED.parent / "models" / "euroc_adis16448.pt")
     assert np.all(b == 0) and "no device bias" in source
 
 

@@ -17,7 +17,7 @@ evaluate and fit apply them.
 from __future__ import annotations
 
 from pathlib import Path
-from typing import Dict, Optional, Tuple
+from typing import Dict, Optional, Tuple, Union
 
 import numpy as np
 
@@ -156,3 +156,19 @@ def displacement_hook(model, t_ns: np.ndarray, gyro: np.ndarray, acc: np.ndarray
     from .factors.displacement import displacement_factors_for
 
     return displacement_factors_for(model, t_ns, np.ascontiguousarray(gyro), np.ascontiguousarray(acc), update_s)
+
+
+def checkpoint_bias(path: Union[str, Path, None]) -> Tuple[np.ndarray, str]:
+    """(bias (6,) gyro then acc, where it came from): the checkpoint's ``device_bias`` (top level or
+    under ``extra``: ``{"gyro": [3], "acc": [3]}``) when it carries one, else zeros."""
+    if path is None:
+        return np.zeros(6), "zero (no checkpoint)"
+    from imu_learn.infer.checkpoint import load_checkpoint
+
+    state = load_checkpoint(Path(path))
+    dev = state.get("device_bias") or (state.get("extra") or {}).get("device_bias")
+    if isinstance(dev, dict) and "gyro" in dev and "acc" in dev:
+        b = np.r_[np.asarray(dev["gyro"], dtype=np.float64).reshape(3), np.asarray(dev["acc"], dtype=np.float64).reshape(3)]
+        if np.all(np.isfinite(b)):
+            return b, f"the checkpoint's device bias ({path})"
+    return np.zeros(6), f"zero (the checkpoint {Path(path).name} carries no device bias)"

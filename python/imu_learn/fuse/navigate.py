@@ -4,7 +4,7 @@
 :func:`navigate`: it reads the recording's IMU only (the layouts of :mod:`imu_learn.data.formats`;
 ground truth is never opened), the aiding file (:mod:`.aiding.tum`), the extrinsic (:mod:`.aiding.extrinsics`),
 optionally refines the IMU with a checkpoint (:mod:`imu_learn.infer.refine`), builds the first state
-from the data (:mod:`.init`) and fuses with :func:`imu_learn.fuse.graph.fuse` under a loose prior.
+from the data (:mod:`.start`) and fuses with :func:`imu_learn.fuse.graph.fuse` under a loose prior.
 It writes ``causal.tum`` and ``smoothed.tum`` (``t tx ty tz qx qy qz qw``, seconds, body = IMU
 frame, at the graph's keyframes), ``plot.png`` and ``summary.json`` to the output folder.
 
@@ -20,7 +20,7 @@ A = C0 is ``T_A_Bk = T_C0_Ck T_BS^-1``, and the body motion between two frames
   first pose). Rows further apart than ``max_relative_gap_s`` are not chained: a visual system
   that lost track reports no motion across the gap, and the IMU alone carries it.
 * ``pose``: a prior factor on each aided body pose in the navigation frame W. A is rotated into W by
-  ``R_WA``, estimated once at the start from the levelled attitude (:func:`.init.world_from_aiding`):
+  ``R_WA``, estimated once at the start from the levelled attitude (:func:`.start.level.level_aiding`):
   its tilt error (the accelerometer bias over g, ~0.1-0.5 deg) then stays in every absolute pose
   and pulls against gravity; the absolute poses' rotation sigma is loose for that reason
   (``pose_sigma_rot_deg``). Estimating ``R_WA`` inside the graph would remove the error but is not
@@ -30,7 +30,7 @@ A = C0 is ``T_A_Bk = T_C0_Ck T_BS^-1``, and the body motion between two frames
   (:mod:`imu_learn.fuse.aiding.rtklib`: local ENU at its first epoch, each fix with its own sigmas, float
   solutions down-weighted). The extrinsic's translation, when given, is the antenna's lever arm.
   Roll and pitch are levelled at the IMU's start; the heading comes from the track once moving
-  faster than 1 m/s (:func:`.init.track_start`: the body x-axis along the velocity, as GNSS/INS
+  faster than 1 m/s (:func:`.start.track.track_start`: the body x-axis along the velocity, as GNSS/INS
   filters for cars do), where fusion starts.
 
 Scoring (``groundtruth``, optional, read only after fusion and only for the report): ground truth
@@ -44,7 +44,7 @@ from __future__ import annotations
 import json
 import logging
 import time
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict, dataclass
 from pathlib import Path
 from typing import Dict, Optional, Sequence, Tuple
 
@@ -54,19 +54,20 @@ from scipy.spatial.transform import Rotation, Slerp
 from imu_learn.errors import AidingError, ConfigError, InvalidInputError
 from imu_learn.util.atomic import atomic_write_bytes, atomic_write_text
 
-from . import init as initial
 from .aiding import AbsolutePoses, OutageWindow, PositionFixes, RelativePoses, snap_to_samples
 from .aiding.extrinsics import inverse, read_t_bs
 from .aiding.outages import in_windows
 from .aiding.rtklib import fixes_on_imu, normal_gravity, read_pos
 from .aiding.tum import Trajectory, check_overlap, read_trajectory
+from .aiding.types import AidingRows
 from .factors import chain
 from .factors.nhc import NhcSettings, nhc_callback
 from .graph import fuse
-from .inputs import checkpoint_input, displacement_hook, displacement_model, method_input
+from .inputs import checkpoint_bias, checkpoint_input, displacement_hook, displacement_model, method_input
 from .noise import ImuNoise
-from .score import umeyama
+from .score import convergence, umeyama
 from .settings import FusionSettings, PriorSigmas
+from .start.aiding import pose_start, position_start
 
 log = logging.getLogger(__name__)
 
@@ -205,19 +206,6 @@ def thin(t_ns: np.ndarray, rate_hz: Optional[float]) -> np.ndarray:
     return keep
 
 
-@dataclass
-class AidingRows:
-    """The aiding rows the run uses: their IMU sample (index into the full IMU), stamp, and body
-    pose / position in the aiding's world A; ``dropped``: rows left out and why."""
-
-    sample: np.ndarray
-    t_ns: np.ndarray
-    imu_t_ns: np.ndarray  # the stamp of each row's IMU sample (where the graph puts it)
-    p: np.ndarray
-    R: Optional[np.ndarray]
-    dropped: Dict[str, int] = field(default_factory=dict)
-
-
 def select_rows(traj: Trajectory, imu_t_ns: np.ndarray, T_BS: Optional[np.ndarray], opts: NavigateOptions) -> AidingRows:
     """The aiding rows tied to IMU samples (:func:`imu_learn.fuse.aiding.snap_to_samples`), thinned
     and without the rows inside ``opts.gaps``."""
@@ -326,59 +314,6 @@ def build_aiding(rows: AidingRows, s0: int, R_WA: np.ndarray, lever: np.ndarray,
     return fixes.since(s0), {"position_fixes": int((idx >= s0).sum()), "fixes_before_start": int((idx < s0).sum())}
 
 
-def start_state(t_ns, gyro, acc, rows: AidingRows, s0: int, bias0: np.ndarray, opts: NavigateOptions
-                ) -> initial.InitialState:
-    """The first fused sample's state from the data (:mod:`.init`)."""
-    R_level, info = initial.attitude_from_accelerometer(t_ns[s0:], gyro[s0:], acc[s0:], opts.gravity,
-                                                        acc_bias=bias0[3:], level_s=opts.level_s)
-    if rows.R is not None:
-        # gravity in the aiding's frame from the first seconds (the aiding's own acceleration removed):
-        # works while moving, where the accelerometer alone is tilted by the motion
-        up_A, g_info = initial.gravity_in_aiding(t_ns[s0:], acc[s0:] , rows.t_ns, rows.p, rows.R,
-                                                 window_s=max(opts.level_s, 3.0), acc_bias=bias0[3:])
-        R_WA, R_WB = initial.level_aiding(up_A, rows.R[0])
-        info["accelerometer_only"] = {k: info.pop(k) for k in ("attitude_source", "roll_deg", "pitch_deg",
-                                                               "levelled_over_s")}
-        tilt = np.degrees(np.arccos(np.clip((R_WB.T @ [0, 0, 1]) @ (R_level.T @ [0, 0, 1]), -1, 1)))
-        info.update(g_info)
-        info["accelerometer_only"]["tilt_difference_deg"] = round(float(tilt), 3)
-        info["heading_source"] = "the first aiding pose's yaw (moved into the IMU frame with the extrinsic)"
-    else:
-        R_WA, R_WB = np.eye(3), R_level
-        info["heading_source"] = ("none yet (position-only aiding): zero yaw under a loose prior; the fixes resolve it "
-                                  "once the track moves")
-    p_W = rows.p @ R_WA.T
-    t_rel = (rows.t_ns - rows.t_ns[0]) * 1e-9
-    if info["still_s"] >= 1.0:
-        v = np.zeros(3)
-        info["velocity_source"] = "zero (still start)"
-    else:
-        k = int(np.searchsorted(t_rel, 0.2))
-        k = min(max(k, 1), len(t_rel) - 1)
-        v = (p_W[k] - p_W[0]) / max(t_rel[k], 1e-3)
-        info["velocity_source"] = f"aiding finite difference over the first {t_rel[k]:.2f} s"
-    info["position_source"] = "the first aiding row"
-    info["R_WA_deg_from_identity"] = round(float(np.rad2deg(Rotation.from_matrix(R_WA).magnitude())), 3)
-    return initial.InitialState(R_WB, p_W[0], v, bias0, R_WA, info)
-
-
-def position_start(t_ns, gyro, acc, rows: AidingRows, lever: np.ndarray, bias0: np.ndarray, opts: NavigateOptions
-                   ) -> Tuple[int, initial.InitialState]:
-    """(first fused sample, first state) for position-only aiding: levelled at the IMU's start,
-    heading from the track once moving (:func:`.init.track_start`)."""
-    R_level, info = initial.attitude_from_accelerometer(t_ns, gyro, acc, opts.gravity, acc_bias=bias0[3:],
-                                                        level_s=opts.level_s)
-    still = info["still_s"] >= 1.0
-    level_end = int(np.searchsorted(t_ns, int(t_ns[0]) + int(round(info["levelled_over_s"] * 1e9))))
-    # the gyro's mean over a still start is its bias: used to carry the attitude to the start
-    gb = gyro[:level_end].mean(axis=0) if still else bias0[:3]
-    s0, e, R0, v0, h_info = initial.track_start(t_ns, gyro, rows.sample, rows.p, R_level, level_end, gb)
-    info.update(h_info)
-    info["velocity_source"] = "the track's central difference at the first fast fix"
-    info["position_source"] = "the first fast fix (minus the lever arm)"
-    return s0, initial.InitialState(R0, rows.p[e] - R0 @ lever, v0, bias0, np.eye(3), info)
-
-
 @dataclass(frozen=True)
 class Sources:
     """The files :func:`navigate` reads: the recording ``input`` (its IMU only, layout ``fmt``), the
@@ -434,7 +369,7 @@ def navigate(src: Sources, out: Path, opts: NavigateOptions = NavigateOptions())
         traj = read_aiding(aiding_file, opts)
         rows = select_rows(traj, t_ns, T_BS, opts)
         rows_read = len(traj)
-    bias0, bias_source = initial.checkpoint_bias(checkpoint)
+    bias0, bias_source = checkpoint_bias(checkpoint)
     raw_gyro, raw_acc = gyro, acc
     if calibration is not None:
         if checkpoint is not None:
@@ -446,10 +381,11 @@ def navigate(src: Sources, out: Path, opts: NavigateOptions = NavigateOptions())
     else:
         gyro, acc, var, imu_input = checkpoint_input(checkpoint, t_ns, gyro, acc, opts.variance_scale)
     if opts.aiding_kind == "position":
-        s0, st = position_start(t_ns, gyro, acc, rows, lever, bias0, opts)
+        st = position_start(t_ns, gyro, acc, rows, lever, bias0, opts.gravity, opts.level_s)
+        s0 = st.start
     else:
         s0 = int(rows.sample[0])
-        st = start_state(t_ns, gyro, acc, rows, s0, bias0, opts)
+        st = pose_start(t_ns, gyro, acc, rows, s0, bias0, opts.gravity, opts.level_s)
     aiding, counts = build_aiding(rows, s0, st.R_WA, lever, opts, Path(aiding_file).name, str(aiding_file), gnss)
     if len(aiding) == 0:
         raise AidingError(f"{aiding_file}: no aiding measurement left to fuse", str(aiding_file), opts.aiding_kind)
@@ -475,7 +411,7 @@ def navigate(src: Sources, out: Path, opts: NavigateOptions = NavigateOptions())
              f"of {aiding_file}")
     try:
         res = fuse(t_ns[sel], np.ascontiguousarray(gyro[sel]), np.ascontiguousarray(acc[sel]),
-                   (st.R_WB, st.p, st.v), [aiding], settings, bias0=bias0, **kw)
+                   st.pose, [aiding], settings, bias0=bias0, **kw)
     except RuntimeError as e:  # GTSAM's IndeterminateLinearSystemException and kin
         raise AidingError(f"{aiding_file}: the factor graph could not be solved: {' '.join(str(e).split())[:300]}",
                           str(aiding_file), opts.aiding_kind) from None
@@ -487,7 +423,7 @@ def navigate(src: Sources, out: Path, opts: NavigateOptions = NavigateOptions())
 
     write_trajectory(out / "causal.tum", kf_t, res.causal_p, res.causal_R)
     write_trajectory(out / "smoothed.tum", kf_t, res.smoothed_p, res.smoothed_R)
-    conv = initial.convergence(kf_t * 1e-9, res.causal_p, res.causal_R, res.smoothed_p, res.smoothed_R)
+    conv = convergence(kf_t * 1e-9, res.causal_p, res.causal_R, res.smoothed_p, res.smoothed_R)
     summary: Dict[str, object] = {
         "input": str(input), "imu_file": imu_file, "imu_input": imu_input, "noise": noise.source if var is None else "learned per-sample variances"
         + ("" if opts.variance_scale is None else " x variance_scale"),

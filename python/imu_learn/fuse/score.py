@@ -5,7 +5,8 @@ ground truth's frame, or a ground-truth first state); after a rigid SE(3) alignm
 ``evo_ape -a``) where it does not (relative aiding started from the data)."""
 from __future__ import annotations
 
-from typing import Dict, List, Tuple
+from dataclasses import replace
+from typing import Dict, List, Optional, Tuple
 from typing import Sequence as Seq
 
 import numpy as np
@@ -59,3 +60,34 @@ def score(res: FusionResult, t_ns: np.ndarray, p_gt: np.ndarray, q_wxyz_gt: np.n
             "outages": per,
         }
     return out
+
+
+def convergence(t_s: np.ndarray, causal_p: np.ndarray, causal_R: np.ndarray, smoothed_p: np.ndarray,
+                smoothed_R: np.ndarray, pos_m: float = 0.1, rot_deg: float = 1.0) -> Dict[str, object]:
+    """When the causal estimate settles: the first time (seconds from ``t_s[0]``) from which it
+    stays within ``pos_m`` and ``rot_deg`` of the smoothed estimate at every later keyframe (None
+    when it never does), for position and rotation separately and together."""
+    t = np.asarray(t_s, dtype=np.float64) - float(t_s[0])
+    dp = np.linalg.norm(causal_p - smoothed_p, axis=1)
+    dr = np.rad2deg(np.linalg.norm((Rotation.from_matrix(causal_R).inv()
+                                    * Rotation.from_matrix(smoothed_R)).as_rotvec(), axis=1))
+
+    def settled(bad: np.ndarray) -> Optional[float]:
+        if bad[-1]:
+            return None
+        last_bad = np.flatnonzero(bad)
+        return float(t[last_bad[-1] + 1]) if len(last_bad) else 0.0
+
+    return {"pos_tol_m": pos_m, "rot_tol_deg": rot_deg, "position_s": settled(dp > pos_m),
+            "rotation_s": settled(dr > rot_deg), "converged_s": settled((dp > pos_m) | (dr > rot_deg)),
+            "causal_minus_smoothed_pos_rms_m": float(np.sqrt(np.mean(dp ** 2))),
+            "causal_minus_smoothed_rot_rms_deg": float(np.sqrt(np.mean(dr ** 2)))}
+
+
+def crop(res, start: int, first: int):
+    """The result of a run fused from sample ``start``, its keyframes counted in the recording's samples,
+    from the keyframe at sample ``first`` on (the scored part)."""
+    k = res.kf_idx + start >= first
+    return replace(res, kf_idx=res.kf_idx[k] + start, causal_p=res.causal_p[k], causal_R=res.causal_R[k],
+                   smoothed_p=res.smoothed_p[k], smoothed_R=res.smoothed_R[k], smoothed_v=res.smoothed_v[k],
+                   smoothed_bias=res.smoothed_bias[k])

@@ -5,7 +5,7 @@
 re-indexed from a run's first fused sample with :meth:`since`."""
 from __future__ import annotations
 
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, field, replace
 from typing import Dict, Optional, Union
 
 import numpy as np
@@ -189,3 +189,16 @@ def check_aiding(aiding: Aiding, label: str) -> Aiding:
     why = f": dropped {', '.join(dropped)}" if dropped else ""
     raise AidingError(f"{label}: no aiding measurement left ({aiding.label}{', ' + source if source else ''}){why}",
                       source, label)
+
+
+@dataclass
+class AidingRows:
+    """The aiding rows the run uses: their IMU sample (index into the full IMU), stamp, and body
+    pose / position in the aiding's world A; ``dropped``: rows left out and why."""
+
+    sample: np.ndarray
+    t_ns: np.ndarray
+    imu_t_ns: np.ndarray  # the stamp of each row's IMU sample (where the graph puts it)
+    p: np.ndarray
+    R: Optional[np.ndarray]
+    dropped: Dict[str, int] = field(default_factory=dict)

@@ -43,12 +43,13 @@ from ..aiding import (
 from ..factors import chain
 from ..factors.nhc import NhcSettings, nhc_callback
 from ..graph import fuse
-from ..inmotion import AlignSettings, crop, data_start
 from ..inputs import FACTOR_INPUTS, LEARNED_COV_INPUTS, LEARNED_INPUT, TLIO_INPUT, displacement_hook, imu_input, load
 from ..noise import ImuNoise
 from ..plots import plot_setting, runs_of
-from ..score import score
+from ..score import crop, score
 from ..settings import SETTLE_S, FusionSettings
+from ..start import Start, groundtruth_start
+from ..start.data import AlignSettings, data_start
 from .config import FuseConfig, RecordingSpec, ScenarioSpec
 
 # Changes with the estimator in graph.py, so results of an older estimator are not resumed.
@@ -408,7 +409,7 @@ def run_one(cfg: FuseConfig, out: Path, seq, noise: ImuNoise, R0: np.ndarray, sc
             bag: Optional[Path] = None) -> dict:
     """Fuse one input with one aiding; its scores (or ``failed``) and its trajectories on disk.
     ``R0``: ground truth's first attitude, the first state with ``cfg.init = "groundtruth"`` (else
-    the run starts from the data: :func:`imu_learn.fuse.inmotion.data_start`); ``displacement``: a
+    the run starts from the data: :func:`imu_learn.fuse.start.data.data_start`); ``displacement``: a
     fitted tlio-style model whose displacements join the graph as factors; ``bag``: the recording's
     bag, when it is one (the trajectories are then written as its kind of bag too)."""
     rname, _, name = key.split("|")[:3]
@@ -457,15 +458,11 @@ def run_one(cfg: FuseConfig, out: Path, seq, noise: ImuNoise, R0: np.ndarray, sc
 
 
 def first_state(cfg: FuseConfig, seq, noise: ImuNoise, R0: np.ndarray, aiding, gyro: np.ndarray, acc: np.ndarray,
-                bias0: Optional[np.ndarray], var: Optional[np.ndarray]):
+                bias0: Optional[np.ndarray], var: Optional[np.ndarray]) -> Start:
     """The run's first fused sample and state: ground truth's (``cfg.init = "groundtruth"``, the
-    graph's tight default prior) or the data's (:func:`imu_learn.fuse.inmotion.data_start`)."""
+    graph's tight default prior) or the data's (:func:`imu_learn.fuse.start.data.data_start`)."""
     if cfg.init == "groundtruth":
-        from ..inmotion import DataStart
-        from ..settings import PriorSigmas
-
-        return DataStart(0, 0, R0, seq.p[0], seq.v[0], np.zeros(6) if bias0 is None else bias0, PriorSigmas(), False,
-                         {"source": "ground truth: pose and velocity of the first sample"})
+        return groundtruth_start(R0, seq.p[0], seq.v[0], bias0)
     st = data_start(seq.t_ns, gyro, acc, aiding, noise, cfg.gravity, cfg.keyframe_hz, bias0, var,
                     align_settings(cfg))
     return replace(st, info=json_ready(st.info))
@@ -535,7 +532,7 @@ def first_state_label(cfg: FuseConfig) -> str:
         return ("First state: **a prior from ground truth** (pose and velocity at the first sample; the controlled "
                 "setting, `init = \"groundtruth\"`; the default `init = \"data\"` and `imu-learn navigate` start from "
                 "the data alone).")
-    return ("First state: from the data alone (`init = \"data\"`, fuse/inmotion.py): levelled from the accelerometer; "
+    return ("First state: from the data alone (`init = \"data\"`, fuse/start/data.py): levelled from the accelerometer; "
             "position fixes: heading from yaw hypotheses fitted to the first fixes, the run scored from the end of that "
             "alignment window; relative poses: zero yaw at the origin, scores after a rigid SE(3) alignment.")
 

@@ -17,7 +17,7 @@ from ..inputs import FACTOR_INPUTS, INPUTS
 from ..settings import DEFAULT_LAG_S
 
 KINDS = ("position", "relative_pose", "leica")
-# The first state of every run: "data" (fuse/inmotion.py: levelled from the accelerometer, heading from
+# The first state of every run: "data" (fuse/start/data.py: levelled from the accelerometer, heading from
 # yaw hypotheses fitted to the first fixes, or a gauge for relative aiding; no ground truth at run time)
 # or "groundtruth" (pose and velocity of the first sample from ground truth: the controlled setting,
 # labelled as such in every table).
@@ -99,7 +99,7 @@ class FuseConfig:
     lag_s: float = DEFAULT_LAG_S
     init: str = "data"  # INITS
     # init = "data" with position fixes: the heading's alignment window ends at the first fix this far
-    # [m] (horizontally) from the first fix (fuse/inmotion.py; a ground robot in a small room needs less)
+    # [m] (horizontally) from the first fix (fuse/start/data.py; a ground robot in a small room needs less)
     align_travel_m: float = 2.0
     inputs: List[str] = field(default_factory=lambda: ["raw", "proposed"])
     checkpoint: str = "models/euroc_adis16448.pt"  # for "proposed" (relative to the working directory)

@@ -35,7 +35,7 @@ from typing import Dict, List, Optional, Sequence, Tuple
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-from imu_learn.data.formats.gnss_imu import GnssImuLog, mounting_rotation, read_imu_log
+from imu_learn.data.formats.gnss_imu import mounting_rotation, read_imu_log
 from imu_learn.errors import ConfigError, InvalidInputError
 from imu_learn.settings import DATA_ROOT_ENV, from_dict, merge, nest, read_toml
 from imu_learn.util.atomic import atomic_write_text
@@ -48,6 +48,7 @@ from ..factors.velocity import velocity_callback
 from ..graph import IncrementalFusion, feed, samples_of
 from ..noise import ImuNoise
 from ..settings import FusionSettings, PriorSigmas
+from ..start.track import GnssStartSettings, gnss_start
 
 log = logging.getLogger(__name__)
 VARIANTS = ("raw", "raw+nhc")
@@ -193,60 +194,6 @@ def outage_windows(sol: RtkSolution, o: OutageCfg) -> List[OutageWindow]:
     return out
 
 
-def level(acc_mean: np.ndarray) -> np.ndarray:
-    """A body-to-ENU rotation with the mean specific force ``acc_mean`` pointing up (yaw arbitrary)."""
-    r, _ = Rotation.align_vectors([[0.0, 0.0, 1.0]], [acc_mean / np.linalg.norm(acc_mean)])
-    return r.as_matrix()
-
-
-def initial_state(cfg: GnssRunConfig, imu_log: GnssImuLog, sol: RtkSolution, gravity: float) -> Dict[str, object]:
-    """The start sample, attitude, position, velocity and gyro bias guess, from the data alone."""
-    imu = imu_log.imu
-    t = imu.t_ns
-    n_level = int(np.searchsorted(t, t[0] + int(cfg.level_s * 1e9)))
-    if n_level < 10:
-        raise InvalidInputError(f"level_s {cfg.level_s} s holds {n_level} IMU samples")
-    speed = np.linalg.norm(sol.vel_enu[:, :2], axis=1) if sol.vel_enu is not None else None
-    if speed is not None:
-        during = (sol.t_ns >= t[0]) & (sol.t_ns <= t[n_level - 1])
-        if during.any() and speed[during].max() > cfg.still_max_speed_mps:
-            raise InvalidInputError(f"{sol.path}: the first {cfg.level_s} s of the IMU are not still (GNSS speed up "
-                                    f"to {speed[during].max():.2f} m/s): lower level_s")
-    f_still = imu.acc[:n_level].mean(axis=0)
-    R_lvl = level(f_still)
-    gyro_still = imu.gyro[:n_level].mean(axis=0)
-    moving = (sol.q == 1) & (sol.t_ns > t[n_level - 1])
-    if speed is None:
-        raise InvalidInputError(f"{sol.path}: no velocity columns: the heading at the start needs them")
-    moving &= speed > cfg.yaw_min_speed_mps
-    if not moving.any():
-        raise InvalidInputError(f"{sol.path}: no fixed epoch faster than {cfg.yaw_min_speed_mps} m/s after the still "
-                                "start")
-    e = int(np.flatnonzero(moving)[0])
-    s0 = int(np.clip(np.searchsorted(t, sol.t_ns[e]), 0, len(t) - 1))
-    # The levelled attitude carried to the start by the gyro (minus the still start's mean rate).
-    R = Rotation.from_matrix(R_lvl)
-    dt = np.diff(t[n_level - 1:s0 + 1]) * 1e-9
-    for w, h in zip(imu.gyro[n_level - 1:s0] - gyro_still, dt):
-        R = R * Rotation.from_rotvec(w * h)
-    Rm = R.as_matrix()
-    v = sol.vel_enu[e]
-    heading_body = math.atan2(Rm[1, 0], Rm[0, 0])  # body x-axis, from east towards north
-    heading_vel = math.atan2(v[1], v[0])
-    R0 = Rotation.from_euler("z", heading_vel - heading_body).as_matrix() @ Rm
-    lever = np.asarray(cfg.lever_gnss_m, dtype=np.float64)
-    p0 = sol.enu[e] + v * (t[s0] - sol.t_ns[e]) * 1e-9 - R0 @ lever
-    # At rest the specific force's norm is gravity's: the excess along it is an accelerometer bias
-    # (the part the still start can tell; horizontal biases look like tilt there).
-    acc_bias_still = (np.linalg.norm(f_still) - gravity) * f_still / np.linalg.norm(f_still)
-    return {"s0": s0, "epoch": e, "R0": R0, "p0": p0, "v0": v.copy(), "gyro_still": gyro_still,
-            "acc_bias_still": acc_bias_still,
-            "start_s_after_first_epoch": (int(t[s0]) - int(sol.t_ns[0])) * 1e-9,
-            "speed_mps": float(speed[e]), "still_samples": n_level,
-            "acc_still_std": imu.acc[:n_level].std(axis=0).tolist(),
-            "gyro_still_std": imu.gyro[:n_level].std(axis=0).tolist()}
-
-
 def _carry(params, nav, bias, gyro, acc, t_ns, a: int, b: int):
     """``nav`` at sample ``a`` carried by the IMU (bias ``bias``) to sample ``b`` >= a."""
     import gtsam
@@ -347,7 +294,8 @@ def experiment(cfg: GnssRunConfig) -> Dict[str, object]:
                           cfg.noise.acc_random_walk, source=cfg.noise.source,
                           omega_earth=(0.0, OMEGA_EARTH * math.cos(lat), OMEGA_EARTH * math.sin(lat))
                           if cfg.earth_rate else (0.0, 0.0, 0.0))
-    start = initial_state(cfg, imu_log, sol, gravity)
+    start = gnss_start(imu_log.imu, sol, gravity, GnssStartSettings(cfg.level_s, cfg.still_max_speed_mps,
+                                                                    cfg.yaw_min_speed_mps, tuple(cfg.lever_gnss_m)))
     s0 = int(start["s0"])
     t, gyro, acc = imu_log.imu.t_ns[s0:], imu_log.imu.gyro[s0:], imu_log.imu.acc[s0:]
     windows = [w.bounds_ns(int(sol.t_ns[0])) for w in outage_windows(sol, cfg.outages)]  # [start, end) ns

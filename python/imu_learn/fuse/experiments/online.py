@@ -228,8 +228,7 @@ def score_online(res: OnlineResult, t_ns: np.ndarray, p_gt: np.ndarray, q_wxyz_g
     keyframes, drift in each outage), plus the position RMSE of the causal state at every sample;
     from sample ``first`` on (a data start's alignment window is not scored), SE(3)-aligned first
     with ``align`` (relative aiding started from the data; the per-sample RMSE is then left out)."""
-    from ..inmotion import crop
-    from ..score import score
+    from ..score import crop, score
 
     s = dict(score(crop(res.as_fusion_result(), 0, first), t_ns, p_gt, q_wxyz_gt, outages, align=align)["causal"])
     if not align:

@@ -2,10 +2,10 @@
 at run time, as the navigator (:mod:`imu_learn.fuse.navigate`) starts a user's recording.
 
 * **Roll and pitch** are levelled from the accelerometer. Where the recording comes to rest within its
-  first 30 s (:func:`.init.first_rest`: EuRoC's machine-hall flights sit on the ground after a hand-held
+  first 30 s (:func:`.level.first_rest`: EuRoC's machine-hall flights sit on the ground after a hand-held
   excitation), the run starts there: levelled over the rest, the gyro's mean there is the gyro bias
   prior's mean, velocity zero (a static alignment). Otherwise it starts at the first sample, levelled
-  over the first seconds (:func:`.init.attitude_from_accelerometer`; the motion tilts it).
+  over the first seconds (:func:`.level.attitude_from_accelerometer`; the motion tilts it).
 * **Position fixes** (simulated GNSS, a laser tracker) fix position but not heading, and a drone or a
   hand-held rig does not move along its x-axis, so the car's "heading from the track" does not apply.
   The heading comes from **competing yaw hypotheses** (in-motion alignment): the alignment window,
@@ -23,18 +23,19 @@ at run time, as the navigator (:mod:`imu_learn.fuse.navigate`) starts a user's r
 """
 from __future__ import annotations
 
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, replace
 from typing import Dict, Optional, Tuple
 
 import numpy as np
 
 from imu_learn.errors import InvalidInputError
 
-from . import init as initial
-from .aiding import PositionFixes, RelativePoses
-from .graph import fuse
-from .noise import ImuNoise
-from .settings import FusionSettings, PriorSigmas
+from ..aiding import PositionFixes, RelativePoses
+from ..graph import fuse
+from ..noise import ImuNoise
+from ..settings import FusionSettings, PriorSigmas
+from . import level as initial
+from .types import Start
 
 # The first state's prior after the alignment: roll and pitch levelled (3 deg), position from the fixes;
 # the heading as loose as a hypothesis' basin (1.5 pi / n_yaw, 34 deg with 8): a short window of fixes
@@ -59,23 +60,6 @@ class AlignSettings:
     def tag(self) -> str:
         """What the runs' hashes carry of these settings."""
         return f"data-v2-yaw{self.n_yaw}-travel{self.min_travel_m:g}-fixes{self.min_fixes}-level{self.level_s:g}"
-
-
-@dataclass
-class DataStart:
-    """The first fused sample (``start``) and its state (``R``, ``p``, ``v``, ``bias`` (6,)), its
-    ``prior``, the first sample scored (``score_from``), whether scores are SE(3)-aligned (``align``),
-    and where each came from (``info``); samples count from the recording's first."""
-
-    start: int
-    score_from: int
-    R: np.ndarray
-    p: np.ndarray
-    v: np.ndarray
-    bias: np.ndarray
-    prior: PriorSigmas
-    align: bool
-    info: Dict[str, object] = field(default_factory=dict)
 
 
 def alignment_window(fixes: PositionFixes, min_travel_m: float, min_fixes: int) -> int:
@@ -133,7 +117,7 @@ def yaw_hypotheses(t_ns, gyro, acc, fixes: PositionFixes, R_level: np.ndarray, s
 
 def data_start(t_ns, gyro, acc, aiding, noise: ImuNoise, gravity: float, keyframe_hz: float,
                bias0: Optional[np.ndarray] = None, var: Optional[np.ndarray] = None,
-               settings: AlignSettings = AlignSettings()) -> DataStart:
+               settings: AlignSettings = AlignSettings()) -> Start:
     """The first state of one run from its IMU samples and its aiding alone (module docstring)."""
     b0 = np.zeros(6) if bias0 is None else np.asarray(bias0, dtype=np.float64)
     s0, R_level, still, info = level_start(t_ns, gyro, acc, gravity, b0, bias0 is None, settings)
@@ -148,7 +132,7 @@ def data_start(t_ns, gyro, acc, aiding, noise: ImuNoise, gravity: float, keyfram
             info["velocity_source"] = f"the first relative pose's translation over {dt:.2f} s"
         info["heading_source"] = "zero yaw at the origin (relative aiding: a gauge; scores SE(3)-aligned)"
         prior = replace(RELATIVE_PRIOR, vel_mps=STILL_VEL_MPS if still else RELATIVE_PRIOR.vel_mps)
-        return DataStart(s0, s0, R_level, np.zeros(3), v, b0, prior, True, info)
+        return Start(s0, s0, R_level, np.zeros(3), v, b0, prior, True, info)
     if not isinstance(aiding, PositionFixes):
         raise InvalidInputError(f"init = \"data\": no data start for {type(aiding).__name__} aiding")
     fixes = aiding.since(s0)
@@ -160,7 +144,7 @@ def data_start(t_ns, gyro, acc, aiding, noise: ImuNoise, gravity: float, keyfram
     info["scored_from_s"] = round(float((t_ns[s0 + end] - t_ns[0]) * 1e-9), 3)
     prior = replace(ALIGNED_PRIOR, yaw_rad=1.5 * np.pi / settings.n_yaw,
                     vel_mps=STILL_VEL_MPS if still else ALIGNED_PRIOR.vel_mps)
-    return DataStart(s0, s0 + end, res.smoothed_R[0], res.smoothed_p[0], res.smoothed_v[0], b0, prior, False, info)
+    return Start(s0, s0 + end, res.smoothed_R[0], res.smoothed_p[0], res.smoothed_v[0], b0, prior, False, info)
 
 
 def level_start(t_ns, gyro, acc, gravity: float, b0: np.ndarray, gyro_bias_from_rest: bool, settings: AlignSettings
@@ -181,12 +165,3 @@ def level_start(t_ns, gyro, acc, gravity: float, b0: np.ndarray, gyro_bias_from_
             "still_s": round(float((t_ns[e] - t_ns[a]) * 1e-9), 3),
             "gyro_bias_source": "the gyro's mean at rest" if gyro_bias_from_rest else "the scenario's bias prior"}
     return a, R_level, True, info
-
-
-def crop(res, start: int, first: int):
-    """The result of a run fused from sample ``start``, its keyframes counted in the recording's samples,
-    from the keyframe at sample ``first`` on (the scored part)."""
-    k = res.kf_idx + start >= first
-    return replace(res, kf_idx=res.kf_idx[k] + start, causal_p=res.causal_p[k], causal_R=res.causal_R[k],
-                   smoothed_p=res.smoothed_p[k], smoothed_R=res.smoothed_R[k], smoothed_v=res.smoothed_v[k],
-                   smoothed_bias=res.smoothed_bias[k])

@@ -1,33 +1,24 @@
-"""The navigator's first state from the data alone (no ground truth): attitude, heading, position,
-velocity and biases, each with where it came from; and how long the estimate takes to converge.
+"""Levelling: roll and pitch from the accelerometer, and the aiding's world levelled.
 
 * **Roll and pitch** are levelled from the accelerometer: at rest it measures the specific force
   ``f_B = R_WB^T (0, 0, g)``, so ``roll = atan2(f_y, f_z)`` and ``pitch = atan2(-f_x, hypot(f_y,
   f_z))`` (:func:`level`). The mean is taken over the **still start** when the recording has one
   (:func:`still_start`: the run of 0.25 s blocks from the first sample whose gyro and accelerometer
-  spread stay below thresholds and whose mean stays where it started, at least ``min_still_s`` long), else over the first ``level_s``
-  seconds, where the vehicle's own accelerations tilt the estimate (``attitude_source`` says which).
-  A known accelerometer bias (checkpoint) is removed first.
-* **Heading** comes from pose aiding: the aiding's world frame A (for a camera trajectory, the first
-  camera's frame) is not gravity-aligned, so the rotation from A to the navigation frame W (z up) is
-  estimated from the levelled attitude and the aiding's first body orientation at the same time:
-  ``R_WA = R_WB0 R_AB0^T`` with ``R_WB0``'s yaw chosen so that ``R_WA`` has zero yaw
-  (:func:`world_from_aiding`): W is A levelled, the body's first heading is the aiding's.
-  Position-only aiding gives no heading until the track moves (see :mod:`imu_learn.fuse.navigate`).
-* **Position and velocity** from the first aiding poses (velocity: their finite difference over
-  the first ``velocity_s`` seconds, zero on a still start).
-* **Biases** from the checkpoint when it carries a device bias (``device_bias``: gyro and acc),
-  else zero (:func:`checkpoint_bias`).
-* **Convergence** (:func:`convergence`): the first time from which the causal estimate stays
-  within ``pos_m`` / ``rot_deg`` of the smoothed one (the best the data allows in hindsight): how
-  long the loose start takes to settle; no ground truth involved.
+  spread stay below thresholds and whose mean stays where it started, at least ``min_still_s``
+  long), else over the first ``level_s`` seconds, where the vehicle's own accelerations tilt the
+  estimate (``attitude_source`` says which; :func:`attitude_from_accelerometer`). A known
+  accelerometer bias (checkpoint) is removed first. :func:`first_rest` finds a rest after the start.
+* **Gravity from pose aiding**: the aiding's world frame A (for a camera trajectory, the first
+  camera's frame) is not gravity-aligned; gravity in A comes from the accelerometer rotated by the
+  aiding's attitude, minus the aiding's own acceleration (:func:`gravity_in_aiding`, which works while
+  moving), and A is levelled into the navigation frame W (z up) keeping its heading
+  (:func:`level_aiding`; :func:`world_from_aiding` from a levelled attitude instead): W is A
+  levelled, the body's first heading is the aiding's.
 """
 from __future__ import annotations
 
 import logging
-from dataclasses import dataclass, field
-from pathlib import Path
-from typing import Dict, Optional, Tuple, Union
+from typing import Dict, Optional, Tuple
 
 import numpy as np
 from scipy.spatial.transform import Rotation
@@ -45,20 +36,6 @@ GYRO_STILL = 0.02
 ACC_STILL = 0.08
 ACC_NORM_TOL = 0.3
 ACC_MEAN_DRIFT = 0.1  # [m/s^2] a block's mean further than this from the first block's: moving
-
-
-@dataclass
-class InitialState:
-    """``R_WB`` (3, 3), ``p`` (3,), ``v`` (3,) of the first fused sample in the navigation frame W;
-    ``bias`` (6,) gyro then acc; ``R_WA`` (3, 3) the aiding world's rotation into W (identity for
-    aiding already in W); ``info``: where each came from (JSON-ready)."""
-
-    R_WB: np.ndarray
-    p: np.ndarray
-    v: np.ndarray
-    bias: np.ndarray
-    R_WA: np.ndarray = field(default_factory=lambda: np.eye(3))
-    info: Dict[str, object] = field(default_factory=dict)
 
 
 def block_edges(t_ns: np.ndarray, n_blocks: int) -> np.ndarray:
@@ -198,22 +175,6 @@ def level_aiding(up_A: np.ndarray, R_AB0: np.ndarray) -> Tuple[np.ndarray, np.nd
     return R_WA, R_WA @ R_AB0
 
 
-def checkpoint_bias(path: Union[str, Path, None]) -> Tuple[np.ndarray, str]:
-    """(bias (6,) gyro then acc, where it came from): the checkpoint's ``device_bias`` (top level or
-    under ``extra``: ``{"gyro": [3], "acc": [3]}``) when it carries one, else zeros."""
-    if path is None:
-        return np.zeros(6), "zero (no checkpoint)"
-    from imu_learn.infer.checkpoint import load_checkpoint
-
-    state = load_checkpoint(Path(path))
-    dev = state.get("device_bias") or (state.get("extra") or {}).get("device_bias")
-    if isinstance(dev, dict) and "gyro" in dev and "acc" in dev:
-        b = np.r_[np.asarray(dev["gyro"], dtype=np.float64).reshape(3), np.asarray(dev["acc"], dtype=np.float64).reshape(3)]
-        if np.all(np.isfinite(b)):
-            return b, f"the checkpoint's device bias ({path})"
-    return np.zeros(6), f"zero (the checkpoint {Path(path).name} carries no device bias)"
-
-
 def attitude_from_accelerometer(t_ns: np.ndarray, gyro: np.ndarray, acc: np.ndarray, gravity: float = 9.81,
                                 acc_bias: Optional[np.ndarray] = None, level_s: float = 2.0,
                                 min_still_s: float = 1.0) -> Tuple[np.ndarray, Dict[str, object]]:
@@ -231,59 +192,3 @@ def attitude_from_accelerometer(t_ns: np.ndarray, gyro: np.ndarray, acc: np.ndar
     info = {"attitude_source": source, "still_s": round(still, 3), "roll_deg": round(float(np.rad2deg(roll)), 3),
             "pitch_deg": round(float(np.rad2deg(pitch)), 3), "levelled_over_s": round(float(t[m][-1]), 3)}
     return R, info
-
-
-def convergence(t_s: np.ndarray, causal_p: np.ndarray, causal_R: np.ndarray, smoothed_p: np.ndarray,
-                smoothed_R: np.ndarray, pos_m: float = 0.1, rot_deg: float = 1.0) -> Dict[str, object]:
-    """When the causal estimate settles: the first time (seconds from ``t_s[0]``) from which it
-    stays within ``pos_m`` and ``rot_deg`` of the smoothed estimate at every later keyframe (None
-    when it never does), for position and rotation separately and together."""
-    t = np.asarray(t_s, dtype=np.float64) - float(t_s[0])
-    dp = np.linalg.norm(causal_p - smoothed_p, axis=1)
-    dr = np.rad2deg(np.linalg.norm((Rotation.from_matrix(causal_R).inv()
-                                    * Rotation.from_matrix(smoothed_R)).as_rotvec(), axis=1))
-
-    def settled(bad: np.ndarray) -> Optional[float]:
-        if bad[-1]:
-            return None
-        last_bad = np.flatnonzero(bad)
-        return float(t[last_bad[-1] + 1]) if len(last_bad) else 0.0
-
-    return {"pos_tol_m": pos_m, "rot_tol_deg": rot_deg, "position_s": settled(dp > pos_m),
-            "rotation_s": settled(dr > rot_deg), "converged_s": settled((dp > pos_m) | (dr > rot_deg)),
-            "causal_minus_smoothed_pos_rms_m": float(np.sqrt(np.mean(dp ** 2))),
-            "causal_minus_smoothed_rot_rms_deg": float(np.sqrt(np.mean(dr ** 2)))}
-
-
-def track_start(t_ns: np.ndarray, gyro: np.ndarray, fix_idx: np.ndarray, fix_p: np.ndarray, R_level: np.ndarray,
-                level_end: int, gyro_bias: np.ndarray, min_speed_mps: float = 1.0
-                ) -> Tuple[int, int, np.ndarray, np.ndarray, Dict[str, object]]:
-    """Heading from a position track, as GNSS/INS filters set it (and
-    :func:`imu_learn.fuse.gnss_run.initial_state` for the car): the first fix after the levelling
-    window (IMU sample ``level_end``) whose horizontal speed (central difference of the fixes)
-    exceeds ``min_speed_mps``; the levelled attitude carried there by the gyro (minus ``gyro_bias``),
-    then turned about z so that the body x-axis points along the track (a vehicle moving along its
-    x-axis: a car, a walker's forward axis). Returns (start sample, fix number, R_WB, v, info)."""
-    fix_idx = np.asarray(fix_idx, dtype=np.int64)
-    tf = (t_ns[fix_idx] - int(t_ns[0])) * 1e-9
-    v = np.gradient(fix_p, tf, axis=0) if len(tf) >= 2 else np.zeros_like(fix_p)
-    speed = np.linalg.norm(v[:, :2], axis=1)
-    moving = (fix_idx >= level_end) & (speed > min_speed_mps)
-    if not moving.any():
-        raise InvalidInputError(f"position aiding: no fix faster than {min_speed_mps:g} m/s after the levelling window: "
-                                "the heading cannot be set from the track")
-    e = int(np.flatnonzero(moving)[0])
-    s0 = int(fix_idx[e])
-    R = Rotation.from_matrix(R_level)
-    dt = np.diff(t_ns[level_end:s0 + 1]) * 1e-9
-    if len(dt):
-        steps = Rotation.from_rotvec((gyro[level_end:s0] - np.asarray(gyro_bias)) * dt[:, None])
-        for step in steps:
-            R = R * step
-    Rm = R.as_matrix()
-    turn = float(np.arctan2(v[e, 1], v[e, 0]) - np.arctan2(Rm[1, 0], Rm[0, 0]))
-    R0 = rot_z(turn) @ Rm
-    info = {"heading_source": f"the track once moving: fix {e} at {tf[e]:.2f} s, {speed[e]:.2f} m/s (> "
-                              f"{min_speed_mps:g}); body x-axis along the velocity",
-            "start_after_first_sample_s": round(float(tf[e]), 3)}
-    return s0, e, R0, v[e].copy(), info

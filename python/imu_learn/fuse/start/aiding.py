@@ -1,0 +1,67 @@
+"""The navigator's first state from its aiding, no ground truth: pose aiding levels its world with
+gravity seen in it and takes the first pose's heading (:func:`pose_start`); position aiding takes the
+heading from the track once moving (:func:`position_start`)."""
+from __future__ import annotations
+
+import numpy as np
+from scipy.spatial.transform import Rotation
+
+from ..aiding.types import AidingRows
+from . import level as initial
+from .track import track_start
+from .types import Start
+
+
+def pose_start(t_ns, gyro, acc, rows: AidingRows, s0: int, bias0: np.ndarray, gravity: float, level_s: float
+               ) -> Start:
+    """Sample ``s0``'s state from the data and pose (or position) aiding ``rows``: roll and pitch from
+    gravity in the aiding's frame (:func:`.level.gravity_in_aiding`), heading from the first pose,
+    position and velocity from the first rows (zero velocity on a still start)."""
+    R_level, info = initial.attitude_from_accelerometer(t_ns[s0:], gyro[s0:], acc[s0:], gravity,
+                                                        acc_bias=bias0[3:], level_s=level_s)
+    if rows.R is not None:
+        # gravity in the aiding's frame from the first seconds (the aiding's own acceleration removed):
+        # works while moving, where the accelerometer alone is tilted by the motion
+        up_A, g_info = initial.gravity_in_aiding(t_ns[s0:], acc[s0:] , rows.t_ns, rows.p, rows.R,
+                                                 window_s=max(level_s, 3.0), acc_bias=bias0[3:])
+        R_WA, R_WB = initial.level_aiding(up_A, rows.R[0])
+        info["accelerometer_only"] = {k: info.pop(k) for k in ("attitude_source", "roll_deg", "pitch_deg",
+                                                               "levelled_over_s")}
+        tilt = np.degrees(np.arccos(np.clip((R_WB.T @ [0, 0, 1]) @ (R_level.T @ [0, 0, 1]), -1, 1)))
+        info.update(g_info)
+        info["accelerometer_only"]["tilt_difference_deg"] = round(float(tilt), 3)
+        info["heading_source"] = "the first aiding pose's yaw (moved into the IMU frame with the extrinsic)"
+    else:
+        R_WA, R_WB = np.eye(3), R_level
+        info["heading_source"] = ("none yet (position-only aiding): zero yaw under a loose prior; the fixes resolve it "
+                                  "once the track moves")
+    p_W = rows.p @ R_WA.T
+    t_rel = (rows.t_ns - rows.t_ns[0]) * 1e-9
+    if info["still_s"] >= 1.0:
+        v = np.zeros(3)
+        info["velocity_source"] = "zero (still start)"
+    else:
+        k = int(np.searchsorted(t_rel, 0.2))
+        k = min(max(k, 1), len(t_rel) - 1)
+        v = (p_W[k] - p_W[0]) / max(t_rel[k], 1e-3)
+        info["velocity_source"] = f"aiding finite difference over the first {t_rel[k]:.2f} s"
+    info["position_source"] = "the first aiding row"
+    info["R_WA_deg_from_identity"] = round(float(np.rad2deg(Rotation.from_matrix(R_WA).magnitude())), 3)
+    return Start(s0, s0, R_WB, p_W[0], v, bias0, info=info, R_WA=R_WA)
+
+
+def position_start(t_ns, gyro, acc, rows: AidingRows, lever: np.ndarray, bias0: np.ndarray, gravity: float,
+                   level_s: float) -> Start:
+    """The first state for position-only aiding ``rows``: levelled at the IMU's start, heading from the
+    track once moving (:func:`.track.track_start`), where the run starts."""
+    R_level, info = initial.attitude_from_accelerometer(t_ns, gyro, acc, gravity, acc_bias=bias0[3:],
+                                                        level_s=level_s)
+    still = info["still_s"] >= 1.0
+    level_end = int(np.searchsorted(t_ns, int(t_ns[0]) + int(round(info["levelled_over_s"] * 1e9))))
+    # the gyro's mean over a still start is its bias: used to carry the attitude to the start
+    gb = gyro[:level_end].mean(axis=0) if still else bias0[:3]
+    s0, e, R0, v0, h_info = track_start(t_ns, gyro, rows.sample, rows.p, R_level, level_end, gb)
+    info.update(h_info)
+    info["velocity_source"] = "the track's central difference at the first fast fix"
+    info["position_source"] = "the first fast fix (minus the lever arm)"
+    return Start(s0, s0, R0, rows.p[e] - R0 @ lever, v0, bias0, info=info)
