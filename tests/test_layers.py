@@ -16,7 +16,7 @@ README = Path(__file__).resolve().parents[1] / "docs" / "README.md"
 # (the public API, which re-exports core and data); "stages" the `python -m imu_learn.<stage>` shims.
 ORDER = (
     "errors", "_imu_core", "util", "settings",
-    "core", "data", "api", "score", "nn", "infer", "baselines", "train", "eval",
+    "core", "data", "api", "score", "nn", "infer", "baselines", "calib", "train", "eval",
     "fuse", "cli", "stages",
 )
 STAGES = ("fit", "refine", "export", "labels", "evaluate")

@@ -243,3 +243,8 @@ class ExtrinsicsError(ParseError):
 # GNSS/IMU (fuse)
 class SolutionQualityError(ParseError):
     """An RTKLIB solution row has a quality flag Q outside 1-6 or an unusable standard deviation."""
+
+
+# device profiles (calib)
+class ProfileError(ParseError):
+    """A device profile (``profile.json``) is malformed; ``path`` names the file, ``field`` the entry."""

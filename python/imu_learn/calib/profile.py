@@ -1,0 +1,350 @@
+"""A device profile: what ``imu-learn calibrate`` learned about one IMU, as one self-describing JSON
+file (``profile.json``), and the floor it applies (:meth:`Profile.apply`).
+
+Conventions (also written into the file's ``conventions`` entry, so the file explains itself):
+
+* body frame = the IMU's own axes; world frame = the reference's gravity-aligned frame, z up;
+  quaternions (where any appear) Hamilton, w,x,y,z, body -> world.
+* time offset: the corrected sample at stamp t is the recorded signal at ``t + time_offset_s``
+  (linear interpolation, ends held); ``floor.time_offset`` is the same in samples of the input's
+  median period, which is what :meth:`Profile.apply` uses.
+* gyroscope: ``w = M_g (LP_g(w_m) - b_g) - G LP_g(a_m)`` [rad/s]; accelerometer:
+  ``a = M_a (LP_a(a_m) - b_a)`` [m/s^2]; ``M`` 3x3 (scale on the diagonal, misalignment off it),
+  ``b`` bias in the measured units, ``G`` the g-sensitivity [rad/s per m/s^2], ``LP`` a zero-phase
+  Butterworth low-pass (``floor.cutoff_*``, null: none). This is ``imu-learn evaluate``'s
+  ``traditional+timing`` method; ``floor`` holds that method's own parameter dict (its
+  ``to_dict``), and :meth:`Profile.apply` gives the same samples bit for bit as its ``refine``.
+* noise in Kalibr's units: white-noise densities [rad/s/sqrt(Hz)], [m/s^2/sqrt(Hz)]; bias random
+  walks [rad/s^2/sqrt(Hz)], [m/s^3/sqrt(Hz)]; bias instability [rad/s], [m/s^2].
+
+Every estimate carries its uncertainty (one standard deviation; null where none could be given)
+and, for the noise, its source: ``residuals`` (calibrated IMU against the reference trajectory),
+``allan`` (Allan deviation of still stretches) or ``datasheet``.
+
+Errors: :meth:`Profile.load` raises :class:`imu_learn.errors.ProfileError` naming the file and the
+field. No torch here: applying a profile needs numpy and scipy only.
+"""
+from __future__ import annotations
+
+import json
+import math
+from dataclasses import dataclass, field
+from datetime import datetime, timezone
+from pathlib import Path
+from typing import Any, Dict, List, Optional, Tuple, Union
+
+import numpy as np
+
+from imu_learn.baselines.timing import resample
+from imu_learn.core.stamps import median_period_ns, sample_rate_hz
+from imu_learn.errors import ProfileError
+from imu_learn.util.atomic import atomic_write_text
+
+PROFILE_FORMAT = "imu-learn device profile"
+PROFILE_VERSION = 1
+FLOOR_METHOD = "traditional+timing"
+NOISE_KEYS = ("gyroscope_noise_density", "gyroscope_random_walk",
+              "accelerometer_noise_density", "accelerometer_random_walk")
+NOISE_UNITS = {
+    "gyroscope_noise_density": "rad/s/sqrt(Hz)", "gyroscope_random_walk": "rad/s^2/sqrt(Hz)",
+    "accelerometer_noise_density": "m/s^2/sqrt(Hz)", "accelerometer_random_walk": "m/s^3/sqrt(Hz)",
+    "gyroscope_bias_instability": "rad/s", "accelerometer_bias_instability": "m/s^2",
+}
+SOURCES = ("residuals", "allan", "datasheet")
+CONVENTIONS = {
+    "body_frame": "the IMU's own axes",
+    "world_frame": "the reference's gravity-aligned frame, z up",
+    "quaternion": "Hamilton, w,x,y,z, body -> world",
+    "time_offset": "corrected(t) = recorded(t + time_offset_s), linear interpolation, ends held",
+    "gyroscope_model": "w = M_g (LP_g(w_m) - b_g) - G LP_g(a_m)",
+    "accelerometer_model": "a = M_a (LP_a(a_m) - b_a)",
+    "uncertainty": "one standard deviation; null where none could be given",
+}
+UNITS = {"gyroscope": "rad/s", "accelerometer": "m/s^2", "time": "s", "g_sensitivity": "rad/s per m/s^2"}
+
+Number = Optional[float]
+
+
+def _num(x: Any) -> Number:
+    """A float for JSON: NaN and inf become null."""
+    if x is None:
+        return None
+    x = float(x)
+    return x if math.isfinite(x) else None
+
+
+def _arr(x: Any) -> Any:
+    a = np.asarray(x, dtype=np.float64)
+    return [_arr(r) for r in a] if a.ndim > 1 else [_num(v) for v in a]
+
+
+@dataclass
+class Affine:
+    """One sensor's affine calibration: ``matrix`` (3, 3) and ``bias`` (3,) in ``unit`` (see the
+    module's conventions), each with a standard deviation of the same shape (NaN: unknown)."""
+
+    matrix: np.ndarray
+    bias: np.ndarray
+    unit: str
+    matrix_std: np.ndarray = field(default_factory=lambda: np.full((3, 3), np.nan))
+    bias_std: np.ndarray = field(default_factory=lambda: np.full(3, np.nan))
+
+    def to_dict(self) -> Dict[str, Any]:
+        return {"unit": self.unit, "matrix": _arr(self.matrix), "matrix_std": _arr(self.matrix_std),
+                "bias": _arr(self.bias), "bias_std": _arr(self.bias_std)}
+
+
+@dataclass
+class NoiseTerm:
+    """One noise figure: per axis (NaN where an axis gave none), the one scalar Kalibr takes
+    (``value``: the root mean square over the axes that gave one), its standard deviation, unit and
+    source, and what it came from (``detail``: e.g. the τ range of the fit)."""
+
+    per_axis: np.ndarray
+    value: float
+    std: float
+    unit: str
+    source: str
+    detail: Dict[str, Any] = field(default_factory=dict)
+
+    def to_dict(self) -> Dict[str, Any]:
+        return {"value": _num(self.value), "std": _num(self.std), "unit": self.unit, "source": self.source,
+                "per_axis": _arr(self.per_axis), "detail": self.detail}
+
+
+@dataclass
+class Profile:
+    """A device's calibration and noise (module doc). ``floor`` is the ``traditional+timing``
+    parameter dict that :meth:`apply` runs; ``gyro``/``acc`` restate its matrices and biases with
+    their uncertainties."""
+
+    device: str
+    sample_rate_hz: float
+    time_offset_s: float
+    time_offset_s_std: float
+    gyro: Affine
+    acc: Affine
+    g_sensitivity: np.ndarray
+    gravity_mps2: float
+    gravity_mps2_std: float
+    floor: Dict[str, Any]
+    noise: Dict[str, NoiseTerm] = field(default_factory=dict)
+    noise_estimates: List[Dict[str, Any]] = field(default_factory=list)  # every estimate, chosen or not
+    sources: List[Dict[str, Any]] = field(default_factory=list)  # recordings and the spans used
+    unobservable: List[Dict[str, str]] = field(default_factory=list)  # {"what", "why"}
+    fit_log: Dict[str, Any] = field(default_factory=dict)
+    version: int = PROFILE_VERSION
+    created: str = field(default_factory=lambda: datetime.now(timezone.utc).isoformat(timespec="seconds"))
+
+    # -- the floor --------------------------------------------------------------------------------
+
+    def apply(self, t_ns: np.ndarray, gyro: np.ndarray, acc: np.ndarray) -> Tuple[np.ndarray, np.ndarray]:
+        """Floor-calibrated (gyro, acc), each (N, 3) float64: the time offset, then the low-pass and
+        the affine model, exactly as ``traditional+timing``'s ``refine`` (same operations in the same
+        order, so the same bits). A profile without a floor (noise only) returns copies."""
+        gyro = np.asarray(gyro, dtype=np.float64)
+        acc = np.asarray(acc, dtype=np.float64)
+        if not self.floor:
+            return gyro.copy(), acc.copy()
+        return apply_floor(self.floor, np.asarray(t_ns, dtype=np.int64), gyro, acc)
+
+    @property
+    def has_floor(self) -> bool:
+        return bool(self.floor)
+
+    # -- persistence ------------------------------------------------------------------------------
+
+    def to_dict(self) -> Dict[str, Any]:
+        return {
+            "format": PROFILE_FORMAT, "version": self.version, "created": self.created, "device": self.device,
+            "conventions": CONVENTIONS, "units": UNITS,
+            "sample_rate_hz": _num(self.sample_rate_hz),
+            "time_offset_s": _num(self.time_offset_s), "time_offset_s_std": _num(self.time_offset_s_std),
+            "gyroscope": self.gyro.to_dict(), "accelerometer": self.acc.to_dict(),
+            "g_sensitivity_rad_s_per_mps2": _arr(self.g_sensitivity),
+            "gravity_mps2": _num(self.gravity_mps2), "gravity_mps2_std": _num(self.gravity_mps2_std),
+            "noise": {k: v.to_dict() for k, v in self.noise.items()},
+            "noise_estimates": self.noise_estimates,
+            "floor": self.floor, "sources": self.sources, "unobservable": self.unobservable, "fit_log": self.fit_log,
+        }
+
+    def save(self, path: Union[str, Path]) -> None:
+        """Write ``path`` atomically (a reader sees the old file or the new one)."""
+        atomic_write_text(Path(path), json.dumps(self.to_dict(), indent=2, allow_nan=False) + "\n")
+
+    @classmethod
+    def load(cls, path: Union[str, Path]) -> Profile:
+        """Read a profile; a missing file is FileNotFoundError, anything malformed a
+        :class:`ProfileError` naming the file and the field."""
+        path = Path(path)
+        text = path.read_text()
+        try:
+            d = json.loads(text)
+        except json.JSONDecodeError as e:
+            raise ProfileError(f"{path}:{e.lineno}: not JSON ({e.msg})", str(path), e.lineno, e.colno) from None
+        return cls.from_dict(d, str(path))
+
+    @classmethod
+    def from_dict(cls, d: Any, where: str = "<profile>") -> Profile:
+        r = _Reader(d, where)
+        if not isinstance(d, dict) or d.get("format") != PROFILE_FORMAT:
+            raise ProfileError(f"{where}: not an imu-learn device profile (field 'format' is not "
+                               f"{PROFILE_FORMAT!r})", where, field="format")
+        version = int(r.number("version"))
+        if version > PROFILE_VERSION:
+            raise ProfileError(f"{where}: field 'version': profile version {version} is newer than this imu-learn "
+                               f"reads ({PROFILE_VERSION}); upgrade imu-learn", where, field="version")
+        floor = r.get("floor", dict, {})
+        if floor:
+            _check_floor(floor, where)
+        noise = {k: r.noise(k) for k in r.get("noise", dict, {})}
+        return cls(
+            device=r.get("device", str), sample_rate_hz=r.number("sample_rate_hz"),
+            time_offset_s=r.number("time_offset_s"), time_offset_s_std=r.number("time_offset_s_std", True),
+            gyro=r.affine("gyroscope"), acc=r.affine("accelerometer"),
+            g_sensitivity=r.array("g_sensitivity_rad_s_per_mps2", (3, 3)),
+            gravity_mps2=r.number("gravity_mps2", True), gravity_mps2_std=r.number("gravity_mps2_std", True),
+            floor=floor, noise=noise, noise_estimates=r.get("noise_estimates", list, []),
+            sources=r.get("sources", list, []), unobservable=r.get("unobservable", list, []),
+            fit_log=r.get("fit_log", dict, {}), version=version, created=r.get("created", str, ""),
+        )
+
+    def kalibr(self) -> Dict[str, Optional[float]]:
+        """The four Kalibr noise figures (None where the profile has none)."""
+        return {k: (_num(self.noise[k].value) if k in self.noise else None) for k in NOISE_KEYS}
+
+
+class _Reader:
+    """Typed access to a profile dict; every failure is a ProfileError naming the file and field."""
+
+    def __init__(self, d: Any, where: str) -> None:
+        self.d = d if isinstance(d, dict) else {}
+        self.where = where
+
+    def fail(self, key: str, what: str) -> ProfileError:
+        return ProfileError(f"{self.where}: field {key!r}: {what}", self.where, field=key)
+
+    def get(self, key: str, kind: type, default: Any = ..., d: Optional[dict] = None) -> Any:
+        d = self.d if d is None else d
+        if key not in d:
+            if default is ...:
+                raise self.fail(key, "missing")
+            return default
+        v = d[key]
+        if not isinstance(v, kind):
+            raise self.fail(key, f"expected {kind.__name__}, got {type(v).__name__}")
+        return v
+
+    def number(self, key: str, nullable: bool = False, d: Optional[dict] = None) -> float:
+        d = self.d if d is None else d
+        if key not in d:
+            raise self.fail(key, "missing")
+        v = d[key]
+        if v is None and nullable:
+            return math.nan
+        if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v):
+            raise self.fail(key, f"expected a finite number, got {v!r}")
+        return float(v)
+
+    def array(self, key: str, shape: Tuple[int, ...], d: Optional[dict] = None, nullable: bool = False) -> np.ndarray:
+        d = self.d if d is None else d
+        if key not in d:
+            raise self.fail(key, "missing")
+        try:
+            raw = d[key]
+            a = np.array(raw if not nullable else _nulls_to_nan(raw), dtype=np.float64)
+        except (TypeError, ValueError):
+            raise self.fail(key, f"expected numbers of shape {shape}") from None
+        if a.shape != shape or (not nullable and not np.all(np.isfinite(a))):
+            raise self.fail(key, f"expected finite numbers of shape {shape}, got shape {a.shape}")
+        return a
+
+    def affine(self, key: str) -> Affine:
+        d = self.get(key, dict)
+        sub = _Reader(d, self.where)
+        sub.fail = lambda k, what: self.fail(f"{key}.{k}", what)  # type: ignore[method-assign]
+        return Affine(sub.array("matrix", (3, 3)), sub.array("bias", (3,)), sub.get("unit", str),
+                      sub.array("matrix_std", (3, 3), nullable=True), sub.array("bias_std", (3,), nullable=True))
+
+    def noise(self, key: str) -> NoiseTerm:
+        d = self.get(key, dict, d=self.get("noise", dict))
+        sub = _Reader(d, self.where)
+        sub.fail = lambda k, what: self.fail(f"noise.{key}.{k}", what)  # type: ignore[method-assign]
+        source = sub.get("source", str)
+        if source not in SOURCES:
+            raise sub.fail("source", f"expected one of {', '.join(SOURCES)}, got {source!r}")
+        return NoiseTerm(sub.array("per_axis", (3,), nullable=True), sub.number("value"), sub.number("std", True),
+                         sub.get("unit", str), source, sub.get("detail", dict, {}))
+
+
+def _nulls_to_nan(x: Any) -> Any:
+    if isinstance(x, list):
+        return [_nulls_to_nan(v) for v in x]
+    return math.nan if x is None else x
+
+
+def _check_floor(floor: Dict[str, Any], where: str) -> None:
+    def fail(k: str, what: str) -> ProfileError:
+        return ProfileError(f"{where}: field 'floor.{k}': {what}", where, field=f"floor.{k}")
+
+    if floor.get("method") != FLOOR_METHOD:
+        raise fail("method", f"expected {FLOOR_METHOD!r}, got {floor.get('method')!r}")
+    for k, shape in (("M_g", (3, 3)), ("b_g", (3,)), ("G", (3, 3)), ("M_a", (3, 3)), ("b_a", (3,))):
+        try:
+            a = np.asarray(floor[k], dtype=np.float64)
+        except KeyError:
+            raise fail(k, "missing") from None
+        except (TypeError, ValueError):
+            raise fail(k, f"expected numbers of shape {shape}") from None
+        if a.shape != shape or not np.all(np.isfinite(a)):
+            raise fail(k, f"expected finite numbers of shape {shape}")
+    for k in ("cutoff_gyro", "cutoff_acc"):
+        v = floor.get(k)
+        if v is not None and (isinstance(v, bool) or not isinstance(v, (int, float)) or not v > 0):
+            raise fail(k, f"expected a positive cutoff [Hz] or null, got {v!r}")
+    t = floor.get("time_offset", 0.0)
+    if isinstance(t, bool) or not isinstance(t, (int, float)) or not math.isfinite(t):
+        raise fail("time_offset", f"expected a finite number of samples, got {t!r}")
+
+
+def lowpass(x: np.ndarray, fs: float, cutoff_hz: Optional[float], order: int = 2) -> np.ndarray:
+    """The floor's zero-phase Butterworth low-pass, as ``baselines.traditional.lowpass`` (the same
+    calls, so the same bits; that module imports torch for its fit, this one must not)."""
+    from scipy.signal import butter, sosfiltfilt
+
+    x = np.asarray(x, dtype=np.float64)
+    if cutoff_hz is None or cutoff_hz >= 0.5 * fs:
+        return x.copy()
+    sos = butter(order, cutoff_hz, btype="low", fs=fs, output="sos")
+    padlen = 3 * (2 * len(sos) + 1)
+    if len(x) <= padlen:
+        return x.copy()
+    return sosfiltfilt(sos, x, axis=0)
+
+
+def apply_floor(floor: Dict[str, Any], t_ns: np.ndarray, gyro: np.ndarray, acc: np.ndarray) -> Tuple[np.ndarray, np.ndarray]:
+    """``traditional+timing``'s ``refine`` on raw arrays, from its parameter dict ``floor``."""
+    a = lambda k: np.asarray(floor[k], dtype=np.float64)  # noqa: E731
+    tau = float(floor.get("time_offset", 0.0))
+    order = int(floor.get("filter_order", 2))
+    if tau != 0.0:
+        per = median_period_ns(t_ns)
+        gyro, acc = resample(t_ns, gyro, tau, per), resample(t_ns, acc, tau, per)
+    fs = sample_rate_hz(t_ns)
+    g_f = lowpass(gyro, fs, floor.get("cutoff_gyro"), order)
+    ag_f = lowpass(acc, fs, floor.get("cutoff_gyro"), order)
+    a_f = lowpass(acc, fs, floor.get("cutoff_acc"), order)
+    g_out = (g_f - a("b_g")) @ a("M_g").T - ag_f @ a("G").T
+    a_out = (a_f - a("b_a")) @ a("M_a").T
+    return np.ascontiguousarray(g_out), np.ascontiguousarray(a_out)
+
+
+def noise_only(device: str, sample_rate: float, noise: Dict[str, NoiseTerm], **extra: Any) -> Profile:
+    """A profile with noise and no floor (a still recording without a reference): identity
+    calibration, nothing applied."""
+    nan3, nan33 = np.full(3, np.nan), np.full((3, 3), np.nan)
+    return Profile(device=device, sample_rate_hz=sample_rate, time_offset_s=0.0, time_offset_s_std=math.nan,
+                   gyro=Affine(np.eye(3), np.zeros(3), UNITS["gyroscope"], nan33.copy(), nan3.copy()),
+                   acc=Affine(np.eye(3), np.zeros(3), UNITS["accelerometer"], nan33.copy(), nan3.copy()),
+                   g_sensitivity=np.zeros((3, 3)), gravity_mps2=math.nan if "gravity" not in extra else extra.pop("gravity"),
+                   gravity_mps2_std=math.nan, floor={}, noise=noise, **extra)
