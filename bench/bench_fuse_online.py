@@ -118,7 +118,8 @@ def main(argv=None) -> int:
     from imu_learn.core.quat import wxyz_to_xyzw
     from imu_learn.fuse.experiments.batch import aiding_rng, load_recording_for_fusion, make_aiding
     from imu_learn.fuse.experiments.config import ScenarioSpec
-    from imu_learn.fuse.experiments.online import machine, score_online, stream
+    from imu_learn.fuse.experiments.online import machine, stream
+    from imu_learn.fuse.score import score_online
     from imu_learn.fuse.settings import FusionSettings
     from imu_learn.infer.streaming import load_causal_model, load_learned_model
 

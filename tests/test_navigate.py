@@ -28,8 +28,7 @@ from imu_learn.errors import (
 from imu_learn.fuse.aiding.extrinsics import inverse, read_t_bs
 from imu_learn.fuse.aiding.tum import check_overlap, read_trajectory, read_tum, seconds_to_ns
 from imu_learn.fuse.inputs import checkpoint_bias
-from imu_learn.fuse.navigate import interpolate_groundtruth, umeyama
-from imu_learn.fuse.score import convergence
+from imu_learn.fuse.score import convergence, interpolate_groundtruth, umeyama
 from imu_learn.fuse.start import level as init
 
 # EuRoC cam0's T_BS (camera to body = IMU), as in every EuRoC sensor.yaml of cam0 (Burri et al. 2016).

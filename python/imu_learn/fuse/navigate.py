@@ -41,18 +41,16 @@ positions) is scored the same way beside it.
 """
 from __future__ import annotations
 
-import json
 import logging
 import time
 from dataclasses import asdict, dataclass
 from pathlib import Path
-from typing import Dict, Optional, Sequence, Tuple
+from typing import Dict, Optional, Tuple
 
 import numpy as np
-from scipy.spatial.transform import Rotation, Slerp
+from scipy.spatial.transform import Rotation
 
 from imu_learn.errors import AidingError, ConfigError, InvalidInputError
-from imu_learn.util.atomic import atomic_write_bytes, atomic_write_text
 
 from .aiding import AbsolutePoses, OutageWindow, PositionFixes, RelativePoses, snap_to_samples
 from .aiding.extrinsics import inverse, read_t_bs
@@ -65,7 +63,8 @@ from .factors.nhc import NhcSettings, nhc_callback
 from .graph import fuse
 from .inputs import checkpoint_bias, checkpoint_input, displacement_hook, displacement_model, method_input
 from .noise import ImuNoise
-from .score import convergence, umeyama
+from .output import plot_navigation, write_json, write_trajectory
+from .score import convergence, score_against
 from .settings import FusionSettings, PriorSigmas
 from .start.aiding import pose_start, position_start
 
@@ -419,8 +418,6 @@ def navigate(src: Sources, out: Path, opts: NavigateOptions = NavigateOptions())
     kf_t = t_fused[res.kf_idx]
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
-    from .experiments.batch import write_trajectory
-
     write_trajectory(out / "causal.tum", kf_t, res.causal_p, res.causal_R)
     write_trajectory(out / "smoothed.tum", kf_t, res.smoothed_p, res.smoothed_R)
     conv = convergence(kf_t * 1e-9, res.causal_p, res.causal_R, res.smoothed_p, res.smoothed_R)
@@ -447,14 +444,15 @@ def navigate(src: Sources, out: Path, opts: NavigateOptions = NavigateOptions())
     }
     scores = None
     if groundtruth is not None:
-        scores = score_against(groundtruth, opts, kf_t, res, rows, st.R_WA, int(t_ns[0]))
+        scores = score_against(groundtruth, kf_t, res, rows, st.R_WA, int(t_ns[0]), opts.aiding_kind != "position",
+                               opts.gaps)
         summary["groundtruth"] = str(groundtruth)
         summary["scores"] = scores
-    if plot(out / "plot.png", f"{Path(input).name}: {aiding.label}", kf_t, res, rows, st.R_WA, scores, opts.gaps,
+    if plot_navigation(out / "plot.png", f"{Path(input).name}: {aiding.label}", kf_t, res, rows, st.R_WA, scores, opts.gaps,
             int(t_ns[0])):
         summary["outputs"]["plot"] = str(out / "plot.png")
     summary["seconds"] = round(time.perf_counter() - t_start, 2)
-    atomic_write_text(out / "summary.json", json.dumps(summary, indent=1))
+    write_json(out / "summary.json", summary)
     return summary
 
 
@@ -476,114 +474,3 @@ def one_line(summary: Dict[str, object]) -> str:
     return text + f" -> {Path(str(s['outputs']['smoothed'])).parent} ({s['seconds']:.0f} s)"
 
 
-# --------------------------------------------------------------------------------------------
-# Scoring against ground truth (optional; read after fusion, for the report only)
-# --------------------------------------------------------------------------------------------
-
-
-def interpolate_groundtruth(gt, t_ns: np.ndarray):
-    """Ground truth at ``t_ns`` inside its span: (mask of stamps inside, p (M, 3), R (M, 3, 3))."""
-    g_t = np.asarray(gt.t_ns, dtype=np.int64)
-    inside = (t_ns >= g_t[0]) & (t_ns <= g_t[-1])
-    t = t_ns[inside]
-    x = (t - g_t[0]).astype(np.float64)
-    xp = (g_t - g_t[0]).astype(np.float64)
-    p = np.stack([np.interp(x, xp, gt.p[:, k]) for k in range(3)], axis=1)
-    q = np.asarray(gt.q_wxyz)[:, [1, 2, 3, 0]]
-    R = Slerp(xp, Rotation.from_quat(q))(x).as_matrix()
-    return inside, p, R
-
-
-def _errors(p_est, R_est, p_gt, R_gt, align: bool, R_al=None, t_al=None):
-    if align and R_al is None:
-        R_al, t_al = umeyama(p_est, p_gt)
-    if not align:
-        R_al, t_al = np.eye(3), np.zeros(3)
-    p = p_est @ R_al.T + t_al
-    e = np.linalg.norm(p - p_gt, axis=1)
-    out = {"pos_rmse_m": float(np.sqrt(np.mean(e ** 2))), "pos_max_m": float(e.max()), "n": int(len(e))}
-    if R_est is not None:
-        dR = Rotation.from_matrix(np.einsum("nki,nkj->nij", R_gt, np.einsum("ij,njk->nik", R_al, R_est)))
-        out["rot_rmse_deg"] = float(np.rad2deg(np.sqrt(np.mean(dR.magnitude() ** 2))))
-    return out, e, R_al, t_al
-
-
-def score_against(groundtruth: Path, opts: NavigateOptions, kf_t: np.ndarray, res, rows: AidingRows,
-                  R_WA: np.ndarray, t0_ns: int) -> Dict[str, object]:
-    """Position (and rotation) RMSE of the causal and smoothed trajectories, and of the aiding alone,
-    against ``groundtruth`` (module docstring: aligned or not), plus the error inside each gap
-    (``opts.gaps``: seconds from ``t0_ns``, the first IMU sample)."""
-    from imu_learn.data.formats.groundtruth import read_groundtruth
-
-    gt = read_groundtruth(Path(groundtruth))
-    align = opts.aiding_kind != "position"
-    inside, p_gt, R_gt = interpolate_groundtruth(gt, kf_t)
-    if inside.sum() < 3:
-        raise AidingError(f"{groundtruth}: fewer than 3 keyframes inside the ground truth's time span", str(groundtruth))
-    out: Dict[str, object] = {"aligned": align, "alignment": "SE(3) Umeyama, no scale (evo_ape -a)" if align else "none"}
-    rel_s = (kf_t[inside] - t0_ns) * 1e-9
-    in_gap = in_windows(rel_s, opts.gaps)
-    for kind, p, R in (("causal", res.causal_p, res.causal_R), ("smoothed", res.smoothed_p, res.smoothed_R)):
-        s, e, _, _ = _errors(p[inside], R[inside], p_gt, R_gt, align)
-        if opts.gaps:
-            s["gaps"] = [{"start_s": a, "duration_s": d,
-                          "rmse_m": float(np.sqrt(np.mean(e[m] ** 2))) if (m := in_windows(rel_s, [(a, d)])).any()
-                          else None, "max_m": float(e[m].max()) if m.any() else None} for a, d in opts.gaps]
-            s["outside_gaps_rmse_m"] = float(np.sqrt(np.mean(e[~in_gap] ** 2))) if (~in_gap).any() else None
-        out[kind] = s
-    # the aiding alone (its body positions, in W) at its own stamps, aligned the same way
-    a_in, a_p_gt, a_R_gt = interpolate_groundtruth(gt, rows.t_ns)
-    if a_in.sum() >= 3:
-        p_a = (rows.p @ R_WA.T)[a_in]
-        R_a = None if rows.R is None else np.einsum("ij,njk->nik", R_WA, rows.R)[a_in]
-        out["aiding_only"], _, _, _ = _errors(p_a, R_a, a_p_gt, a_R_gt, align)
-        # the fused trajectories at the same stamps (the aiding's samples are keyframes)
-        pos = {int(t): k for k, t in enumerate(kf_t)}
-        ks = np.array([pos[int(t)] for t in rows.imu_t_ns[a_in] if int(t) in pos])
-        if len(ks) >= 3:
-            for kind, p, R in (("causal", res.causal_p, res.causal_R), ("smoothed", res.smoothed_p, res.smoothed_R)):
-                gi, gp, gR = interpolate_groundtruth(gt, kf_t[ks])
-                out[f"{kind}_at_aiding_stamps"], _, _, _ = _errors(p[ks][gi], R[ks][gi], gp, gR, align)
-    return out
-
-
-# --------------------------------------------------------------------------------------------
-# The plot
-# --------------------------------------------------------------------------------------------
-
-
-def plot(out_png: Path, title: str, kf_t: np.ndarray, res, rows: AidingRows, R_WA: np.ndarray,
-         scores: Optional[dict], gaps: Sequence[Tuple[float, float]], t0_ns: int) -> bool:
-    """Top view of the causal and smoothed trajectories and the aiding, and the causal estimate's
-    distance from the smoothed one over time (gaps shaded). False (nothing written) without matplotlib."""
-    try:
-        import matplotlib
-    except ImportError:
-        return False
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    fig, (top, err) = plt.subplots(1, 2, figsize=(13, 5))
-    pa = rows.p @ R_WA.T
-    top.plot(pa[:, 0], pa[:, 1], ".", ms=1.5, color="grey", label="aiding (body)")
-    top.plot(res.causal_p[:, 0], res.causal_p[:, 1], "-", lw=1, label="causal")
-    top.plot(res.smoothed_p[:, 0], res.smoothed_p[:, 1], "--", lw=1, label="smoothed")
-    top.set(xlabel="x [m]", ylabel="y [m]", title="top view (navigation frame, z up)")
-    top.axis("equal")
-    top.legend(fontsize=7)
-    t = (kf_t - t0_ns) * 1e-9
-    err.plot(t, np.linalg.norm(res.causal_p - res.smoothed_p, axis=1), lw=1, label="|causal - smoothed| [m]")
-    for start, dur in gaps:
-        err.axvspan(start, start + dur, color="grey", alpha=0.2, lw=0)
-    sub = ""
-    if scores:
-        sub = (f"\n{'aligned' if scores['aligned'] else 'unaligned'} position RMSE against ground truth: causal "
-               f"{scores['causal']['pos_rmse_m']:.3f} m, smoothed {scores['smoothed']['pos_rmse_m']:.3f} m")
-    err.set(xlabel="time from the first IMU sample [s]", ylabel="[m]", yscale="log")
-    err.set_title("causal estimate against the smoothed one" + sub, fontsize=9)
-    err.legend(fontsize=7)
-    fig.suptitle(title, fontsize=9)
-    fig.tight_layout()
-    atomic_write_bytes(out_png, lambda f: fig.savefig(f, format="png", dpi=90))
-    plt.close(fig)
-    return True

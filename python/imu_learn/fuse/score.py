@@ -1,4 +1,4 @@
-"""Scores of a fused trajectory against ground truth at its keyframes: position RMSE [m], rotation
+"""Scoring, in one place. Scores of a fused trajectory against ground truth at its keyframes: position RMSE [m], rotation
 RMSE [deg], and for each outage the RMSE and maximum of the position error inside it (how far the
 estimate coasts without aiding). Unaligned where the aiding fixes the world frame (positions in
 ground truth's frame, or a ground-truth first state); after a rigid SE(3) alignment (:func:`umeyama`,
@@ -6,13 +6,15 @@ ground truth's frame, or a ground-truth first state); after a rigid SE(3) alignm
 from __future__ import annotations
 
 from dataclasses import replace
-from typing import Dict, List, Optional, Tuple
+from pathlib import Path
+from typing import Dict, List, Optional, Sequence, Tuple
 from typing import Sequence as Seq
 
 import numpy as np
-from scipy.spatial.transform import Rotation
+from scipy.spatial.transform import Rotation, Slerp
 
 from imu_learn.core.quat import rotation_angle, xyzw_to_wxyz
+from imu_learn.errors import AidingError
 from imu_learn.score.metrics import rmse
 
 from .aiding.outages import in_windows, outage_mask
@@ -91,3 +93,89 @@ def crop(res, start: int, first: int):
     return replace(res, kf_idx=res.kf_idx[k] + start, causal_p=res.causal_p[k], causal_R=res.causal_R[k],
                    smoothed_p=res.smoothed_p[k], smoothed_R=res.smoothed_R[k], smoothed_v=res.smoothed_v[k],
                    smoothed_bias=res.smoothed_bias[k])
+
+
+def score_online(res, t_ns: np.ndarray, p_gt: np.ndarray, q_wxyz_gt: np.ndarray,
+                 outages: Sequence[Tuple[float, float]] = (), first: int = 0, align: bool = False) -> Dict[str, object]:
+    """The causal scores of :func:`imu_learn.fuse.score.score` (position and rotation RMSE at the
+    keyframes, drift in each outage), plus the position RMSE of the causal state at every sample;
+    from sample ``first`` on (a data start's alignment window is not scored), SE(3)-aligned first
+    with ``align`` (relative aiding started from the data; the per-sample RMSE is then left out)."""
+    s = dict(score(crop(res.as_fusion_result(), 0, first), t_ns, p_gt, q_wxyz_gt, outages, align=align)["causal"])
+    if not align:
+        s["pos_rmse_every_sample_m"] = float(np.sqrt(np.mean(np.sum((res.p[first:] - p_gt[first:]) ** 2, axis=1))))
+    return s
+
+
+def error_stats(e: np.ndarray) -> Dict[str, float]:
+    """RMS, maximum and last of the errors ``e`` [m] (NaN when there are none), and their number."""
+    if len(e) == 0:
+        return {"rms_m": float("nan"), "max_m": float("nan"), "end_m": float("nan"), "n": 0}
+    return {"rms_m": float(np.sqrt(np.mean(e ** 2))), "max_m": float(e.max()), "end_m": float(e[-1]), "n": int(len(e))}
+
+
+def interpolate_groundtruth(gt, t_ns: np.ndarray):
+    """Ground truth at ``t_ns`` inside its span: (mask of stamps inside, p (M, 3), R (M, 3, 3))."""
+    g_t = np.asarray(gt.t_ns, dtype=np.int64)
+    inside = (t_ns >= g_t[0]) & (t_ns <= g_t[-1])
+    t = t_ns[inside]
+    x = (t - g_t[0]).astype(np.float64)
+    xp = (g_t - g_t[0]).astype(np.float64)
+    p = np.stack([np.interp(x, xp, gt.p[:, k]) for k in range(3)], axis=1)
+    q = np.asarray(gt.q_wxyz)[:, [1, 2, 3, 0]]
+    R = Slerp(xp, Rotation.from_quat(q))(x).as_matrix()
+    return inside, p, R
+
+
+def _errors(p_est, R_est, p_gt, R_gt, align: bool, R_al=None, t_al=None):
+    if align and R_al is None:
+        R_al, t_al = umeyama(p_est, p_gt)
+    if not align:
+        R_al, t_al = np.eye(3), np.zeros(3)
+    p = p_est @ R_al.T + t_al
+    e = np.linalg.norm(p - p_gt, axis=1)
+    out = {"pos_rmse_m": float(np.sqrt(np.mean(e ** 2))), "pos_max_m": float(e.max()), "n": int(len(e))}
+    if R_est is not None:
+        dR = Rotation.from_matrix(np.einsum("nki,nkj->nij", R_gt, np.einsum("ij,njk->nik", R_al, R_est)))
+        out["rot_rmse_deg"] = float(np.rad2deg(np.sqrt(np.mean(dR.magnitude() ** 2))))
+    return out, e, R_al, t_al
+
+
+def score_against(groundtruth: Path, kf_t: np.ndarray, res, rows, R_WA: np.ndarray, t0_ns: int, align: bool,
+                  gaps: Seq[Tuple[float, float]] = ()) -> Dict[str, object]:
+    """Position (and rotation) RMSE of the causal and smoothed trajectories of a navigated recording
+    (``res``, at keyframe stamps ``kf_t``), and of its aiding ``rows`` alone (their world rotated into
+    the navigation frame by ``R_WA``), against the ``groundtruth`` file interpolated at their stamps;
+    after a rigid SE(3) alignment (Umeyama, no scale: ``evo_ape -a``) with ``align``, else as they are;
+    plus the error inside each gap (``gaps``: seconds from ``t0_ns``, the first IMU sample)."""
+    from imu_learn.data.formats.groundtruth import read_groundtruth
+
+    gt = read_groundtruth(Path(groundtruth))
+    inside, p_gt, R_gt = interpolate_groundtruth(gt, kf_t)
+    if inside.sum() < 3:
+        raise AidingError(f"{groundtruth}: fewer than 3 keyframes inside the ground truth's time span", str(groundtruth))
+    out: Dict[str, object] = {"aligned": align, "alignment": "SE(3) Umeyama, no scale (evo_ape -a)" if align else "none"}
+    rel_s = (kf_t[inside] - t0_ns) * 1e-9
+    in_gap = in_windows(rel_s, gaps)
+    for kind, p, R in (("causal", res.causal_p, res.causal_R), ("smoothed", res.smoothed_p, res.smoothed_R)):
+        s, e, _, _ = _errors(p[inside], R[inside], p_gt, R_gt, align)
+        if gaps:
+            s["gaps"] = [{"start_s": a, "duration_s": d,
+                          "rmse_m": float(np.sqrt(np.mean(e[m] ** 2))) if (m := in_windows(rel_s, [(a, d)])).any()
+                          else None, "max_m": float(e[m].max()) if m.any() else None} for a, d in gaps]
+            s["outside_gaps_rmse_m"] = float(np.sqrt(np.mean(e[~in_gap] ** 2))) if (~in_gap).any() else None
+        out[kind] = s
+    # the aiding alone (its body positions, in W) at its own stamps, aligned the same way
+    a_in, a_p_gt, a_R_gt = interpolate_groundtruth(gt, rows.t_ns)
+    if a_in.sum() >= 3:
+        p_a = (rows.p @ R_WA.T)[a_in]
+        R_a = None if rows.R is None else np.einsum("ij,njk->nik", R_WA, rows.R)[a_in]
+        out["aiding_only"], _, _, _ = _errors(p_a, R_a, a_p_gt, a_R_gt, align)
+        # the fused trajectories at the same stamps (the aiding's samples are keyframes)
+        pos = {int(t): k for k, t in enumerate(kf_t)}
+        ks = np.array([pos[int(t)] for t in rows.imu_t_ns[a_in] if int(t) in pos])
+        if len(ks) >= 3:
+            for kind, p, R in (("causal", res.causal_p, res.causal_R), ("smoothed", res.smoothed_p, res.smoothed_R)):
+                gi, gp, gR = interpolate_groundtruth(gt, kf_t[ks])
+                out[f"{kind}_at_aiding_stamps"], _, _, _ = _errors(p[ks][gi], R[ks][gi], gp, gR, align)
+    return out

@@ -24,10 +24,9 @@ from typing import Callable, Dict, List, Optional, Tuple
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-from imu_learn import _imu_core as core
-from imu_learn.core.quat import wxyz_to_xyzw, xyzw_to_wxyz
+from imu_learn.core.quat import wxyz_to_xyzw
 from imu_learn.errors import ConfigError, InvalidInputError
-from imu_learn.util.atomic import atomic_write_path, atomic_write_text
+from imu_learn.util.atomic import atomic_write_text
 from imu_learn.util.digest import file_sha256
 
 from ..aiding import (
@@ -45,7 +44,7 @@ from ..factors.nhc import NhcSettings, nhc_callback
 from ..graph import fuse
 from ..inputs import FACTOR_INPUTS, LEARNED_COV_INPUTS, LEARNED_INPUT, TLIO_INPUT, displacement_hook, imu_input, load
 from ..noise import ImuNoise
-from ..plots import plot_setting, runs_of
+from ..output import plot_setting, read_runs, runs_of, write_json, write_trajectory, write_trajectory_bag
 from ..score import crop, score
 from ..settings import SETTLE_S, FusionSettings
 from ..start import Start, groundtruth_start
@@ -200,26 +199,6 @@ def make_aiding(scn: ScenarioSpec, seq, leica, rng: np.random.Generator):
         a = leica_fixes(t, p, lever, seq.t_ns, scn.rate_hz or None, scn.sigma_m, source=source)
     # AidingOverlapError (Leica outside the IMU segment) above; AidingError when outages leave nothing
     return check_aiding(apply_outages(a, seq.t_ns, scn.outage_windows()), f"{seq.name}|{scn.name}")
-
-
-def write_trajectory(path: Path, t_ns: np.ndarray, p: np.ndarray, R: np.ndarray) -> None:
-    path.parent.mkdir(parents=True, exist_ok=True)
-    q_wxyz = xyzw_to_wxyz(Rotation.from_matrix(R).as_quat())
-    t_ns, p, q_wxyz = np.ascontiguousarray(t_ns, dtype=np.int64), np.ascontiguousarray(p), np.ascontiguousarray(q_wxyz)
-    atomic_write_path(path, lambda tmp: core.write_tum(str(tmp), t_ns, p, q_wxyz))
-
-
-def write_trajectory_bag(base: Path, t_ns: np.ndarray, p: np.ndarray, R: np.ndarray, like: Path,
-                         topic: str = "/imu_learn/odometry") -> Path:
-    """The trajectory as ``nav_msgs/msg/Odometry`` on ``topic`` (poses only) in a bag of the
-    recording ``like``'s kind: ``base.bag`` for ROS 1, the folder ``base`` for ROS 2 (same storage
-    plugin). Returns the bag written."""
-    from imu_learn.data.formats.rosbag import output_bag_path, write_odometry
-
-    path = output_bag_path(base, like)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    write_odometry(path, topic, t_ns, p, xyzw_to_wxyz(Rotation.from_matrix(R).as_quat()), like=like)
-    return path
 
 
 def bag_of(cfg: FuseConfig, spec: RecordingSpec) -> Optional[Path]:
@@ -390,20 +369,6 @@ class RunQueue:
                  f"{r['smoothed']['pos_rmse_m']:.3f} m ({r['seconds']:.0f} s)"))
 
 
-def read_runs(path: Path, log: Callable[[str], None]) -> Dict[str, dict]:
-    """The runs recorded in ``path`` (results.json or online.json); none when there is no file, and
-    none, said through ``log``, when it cannot be read (its runs are done again and it is
-    rewritten)."""
-    if not path.exists():
-        return {}
-    try:
-        runs = json.loads(path.read_text()).get("runs", {})
-    except (OSError, UnicodeDecodeError, json.JSONDecodeError, AttributeError) as e:
-        log(f"imu_learn.fuse: {path}: unreadable ({type(e).__name__}: {e}); its runs are done again")
-        return {}
-    return runs if isinstance(runs, dict) else {}
-
-
 def run_one(cfg: FuseConfig, out: Path, seq, noise: ImuNoise, R0: np.ndarray, scn: ScenarioSpec, aiding, key: str,
             gyro: np.ndarray, acc: np.ndarray, var: Optional[np.ndarray] = None, displacement=None,
             bag: Optional[Path] = None) -> dict:
@@ -473,7 +438,7 @@ def json_ready(info: Dict[str, object]) -> Dict[str, object]:
 
 
 def save_results(path: Path, cfg: FuseConfig, results: Dict[str, dict]) -> None:
-    atomic_write_text(path, json.dumps({"config": asdict(cfg), "runs": results}, indent=1))
+    write_json(path, {"config": asdict(cfg), "runs": results})
 
 
 def runs_by_cell(results: Dict[str, dict]) -> Dict[Tuple[str, str, str], List[dict]]:

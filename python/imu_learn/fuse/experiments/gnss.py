@@ -47,6 +47,8 @@ from ..factors.nhc import NhcSettings, calibrate_lever, nhc_callback
 from ..factors.velocity import velocity_callback
 from ..graph import IncrementalFusion, feed, samples_of
 from ..noise import ImuNoise
+from ..output import write_json
+from ..score import error_stats
 from ..settings import FusionSettings, PriorSigmas
 from ..start.track import GnssStartSettings, gnss_start
 
@@ -276,12 +278,6 @@ def start_error(live: tuple, smoothed: tuple, f_mean: np.ndarray, duration_s: fl
             "dv_mps": dv, "da_mps2": da, "drift_acc_m": 0.5 * da * duration_s ** 2, "drift_vel_m": dv * duration_s}
 
 
-def _stats(e: np.ndarray) -> Dict[str, float]:
-    if len(e) == 0:
-        return {"rms_m": float("nan"), "max_m": float("nan"), "end_m": float("nan"), "n": 0}
-    return {"rms_m": float(np.sqrt(np.mean(e ** 2))), "max_m": float(e.max()), "end_m": float(e[-1]), "n": int(len(e))}
-
-
 def experiment(cfg: GnssRunConfig) -> Dict[str, object]:
     root = cfg.root()
     imu_path = root / cfg.imu
@@ -344,7 +340,7 @@ def experiment(cfg: GnssRunConfig) -> Dict[str, object]:
         for kind in ("live", "smoothed"):
             est = np.array([r[kind][int(s)] for s in eval_idx])
             herr = np.linalg.norm(est[:, :2] - truth_all.p[:, :2], axis=1)
-            per = [dict(_stats(herr[which == w]), start_s=(a - int(sol.t_ns[0])) * 1e-9)
+            per = [dict(error_stats(herr[which == w]), start_s=(a - int(sol.t_ns[0])) * 1e-9)
                    for w, (a, _b) in enumerate(windows)]
             outside = herr[which < 0]
             out[kind] = {"outages": per,
@@ -440,7 +436,7 @@ def apply_override(cfg: GnssRunConfig, item: str) -> None:
 def write_results(res: Dict[str, object], cfg: GnssRunConfig, out: Path) -> Tuple[Path, Path]:
     """``out``/results.json and ``out``/table.md, atomically; returns their paths."""
     out = Path(out)
-    atomic_write_text(out / "results.json", json.dumps(res, indent=1, default=float) + "\n")
+    write_json(out / "results.json", res)
     atomic_write_text(out / "table.md", table(res, cfg))
     return out / "results.json", out / "table.md"
 

@@ -37,7 +37,6 @@ a config's recordings x scenarios this way (:func:`run_online`) and writes ``<ou
 """
 from __future__ import annotations
 
-import json
 import logging
 import os
 import platform
@@ -53,6 +52,8 @@ from imu_learn.infer.streaming import WindowedStepper, load_causal_model, load_l
 
 from ..aiding import OutageWindow
 from ..graph import FusionResult, IncrementalFusion, feed
+from ..output import read_runs, write_json
+from ..score import score_online
 from ..settings import FusionSettings
 
 log = logging.getLogger(__name__)
@@ -220,20 +221,6 @@ def _arrivals(stepper, gyro: np.ndarray, acc: np.ndarray, lat: np.ndarray, ran: 
         lat[s] = clock() - c0
         if calls != getattr(stepper, "model_calls", 0):
             ran[s], calls = True, stepper.model_calls
-
-
-def score_online(res: OnlineResult, t_ns: np.ndarray, p_gt: np.ndarray, q_wxyz_gt: np.ndarray,
-                 outages: Sequence[Tuple[float, float]] = (), first: int = 0, align: bool = False) -> Dict[str, object]:
-    """The causal scores of :func:`imu_learn.fuse.score.score` (position and rotation RMSE at the
-    keyframes, drift in each outage), plus the position RMSE of the causal state at every sample;
-    from sample ``first`` on (a data start's alignment window is not scored), SE(3)-aligned first
-    with ``align`` (relative aiding started from the data; the per-sample RMSE is then left out)."""
-    from ..score import crop, score
-
-    s = dict(score(crop(res.as_fusion_result(), 0, first), t_ns, p_gt, q_wxyz_gt, outages, align=align)["causal"])
-    if not align:
-        s["pos_rmse_every_sample_m"] = float(np.sqrt(np.mean(np.sum((res.p[first:] - p_gt[first:]) ** 2, axis=1))))
-    return s
 
 
 def machine() -> Dict[str, object]:
@@ -424,9 +411,6 @@ def run_online(cfg, out: Path, checkpoint: Optional[str] = None, recordings: Opt
     config's covariance_checkpoint (:class:`WindowedStepper`) with, where the device has a tlio-style
     model, its displacement factors. Simulated aiding uses the config's first noise seed (the same
     draw as the batch experiment's runs of that seed)."""
-    from imu_learn.util.atomic import atomic_write_text
-
-    from . import batch as runmod
 
     bad = [i for i in inputs if i not in STREAMABLE]
     if bad or not inputs:
@@ -444,11 +428,11 @@ def run_online(cfg, out: Path, checkpoint: Optional[str] = None, recordings: Opt
             models.update(loaded)
             ckpt_of.update({(name, rec): path for rec, path in paths.items()})
     res_path = Path(out) / "online.json"
-    runs = runmod.read_runs(res_path, log)
+    runs = read_runs(res_path, log)
     info = machine()
 
     def save() -> None:
-        atomic_write_text(res_path, json.dumps({"machine": info, "config": asdict(cfg), "runs": runs}, indent=1))
+        write_json(res_path, {"machine": info, "config": asdict(cfg), "runs": runs})
 
     for spec in specs:
         _stream_recording(cfg, spec, scns, inputs, models, ckpt_of, runs, save, log)
