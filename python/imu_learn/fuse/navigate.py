@@ -43,7 +43,7 @@ from __future__ import annotations
 
 import logging
 import time
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, replace
 from pathlib import Path
 from typing import Dict, Optional, Tuple
 
@@ -66,6 +66,7 @@ from .noise import ImuNoise
 from .output import plot_navigation, write_json, write_trajectory
 from .score import convergence, score_against
 from .settings import FusionSettings, PriorSigmas
+from .start import Start
 from .start.aiding import pose_start, position_start
 
 log = logging.getLogger(__name__)
@@ -330,19 +331,23 @@ class Sources:
     calibration: Optional[Path] = None
 
 
-def navigate(src: Sources, out: Path, opts: NavigateOptions = NavigateOptions()) -> Dict[str, object]:
-    """Fuse the recording's IMU with its aiding file and write ``out``/{causal.tum, smoothed.tum,
-    plot.png, summary.json}; returns the summary (module docstring)."""
-    input, aiding_file, fmt, extrinsics = src.input, src.aiding, src.fmt, src.extrinsics
-    checkpoint, groundtruth, displacement, calibration = src.checkpoint, src.groundtruth, src.displacement, src.calibration
-    t_start = time.perf_counter()
-    opts.check()
-    if opts.aiding_kind != "position" and extrinsics is None:
-        log.warning("no --extrinsics: the aiding's poses are taken as body (IMU) poses")
-    T_BS = read_t_bs(extrinsics) if extrinsics is not None else None
-    if opts.lever_arm is not None and T_BS is not None:
-        raise ConfigError("--lever-arm and --extrinsics both give the antenna's lever arm: pass one")
-    t_ns, gyro, acc, noise, imu_file = read_imu(input, fmt)
+@dataclass
+class Imu:
+    """The recording's IMU as the navigator fuses it: stamps (delay applied), samples rotated into the
+    body frame by ``mounting`` (None: as read), the noise model, and the file they came from."""
+
+    t_ns: np.ndarray
+    gyro: np.ndarray
+    acc: np.ndarray
+    noise: ImuNoise
+    file: str
+    mounting: Optional[np.ndarray] = None
+
+
+def read_body_imu(src: Sources, opts: NavigateOptions) -> Imu:
+    """The recording's IMU in the body frame (``--imu-rotation-rpy-deg``), its stamps moved by
+    ``--imu-delay-s``, with ``--imu-noise`` or the recording's own noise model."""
+    t_ns, gyro, acc, noise, imu_file = read_imu(src.input, src.fmt)
     mounting = None
     if opts.imu_rotation_rpy_deg is not None:
         from imu_learn.data.formats.gnss_imu import mounting_rotation
@@ -353,107 +358,134 @@ def navigate(src: Sources, out: Path, opts: NavigateOptions = NavigateOptions())
         t_ns = t_ns + int(round(opts.imu_delay_s * 1e9))
     if opts.imu_noise is not None:
         noise = ImuNoise(*opts.imu_noise, source="--imu-noise")
-    lever = T_BS[:3, 3] if (T_BS is not None and opts.aiding_kind == "position") else np.zeros(3)
-    if opts.lever_arm is not None:
-        lever = np.asarray(opts.lever_arm, dtype=np.float64)
-    gnss = None
-    if opts.aiding_format == "rtklib":
-        from dataclasses import replace
+    return Imu(t_ns, gyro, acc, noise, imu_file, mounting)
 
-        gnss, rows, sol = rtklib_rows(aiding_file, t_ns, lever, opts)
-        rows_read = len(rows.sample) + sum(rows.dropped.values())
+
+def aiding_rows(src: Sources, opts: NavigateOptions, t_ns: np.ndarray, T_BS: Optional[np.ndarray],
+                lever: np.ndarray) -> Tuple[AidingRows, int, Optional[object], NavigateOptions]:
+    """(the rows used, the rows read, the GNSS fixes of an RTKLIB file or None, the options with the
+    gravity of geodetic fixes)."""
+    if opts.aiding_format == "rtklib":
+        gnss, rows, sol = rtklib_rows(src.aiding, t_ns, lever, opts)
         # geodetic fixes: the normal gravity at their origin (9.797 m/s^2 on the drive, not 9.81)
         opts = replace(opts, gravity=round(normal_gravity(sol.origin_llh[0], sol.origin_llh[2]), 6))
-    else:
-        traj = read_aiding(aiding_file, opts)
-        rows = select_rows(traj, t_ns, T_BS, opts)
-        rows_read = len(traj)
-    bias0, bias_source = checkpoint_bias(checkpoint)
-    raw_gyro, raw_acc = gyro, acc
-    if calibration is not None:
-        if checkpoint is not None:
+        return rows, len(rows.sample) + sum(rows.dropped.values()), gnss, opts
+    traj = read_aiding(src.aiding, opts)
+    return select_rows(traj, t_ns, T_BS, opts), len(traj), None, opts
+
+
+def imu_input(src: Sources, opts: NavigateOptions, imu: Imu) -> Tuple[np.ndarray, np.ndarray, Optional[np.ndarray], str]:
+    """(gyro, acc, per-sample variances or None, label): the IMU as fused, through ``--calibration`` or
+    ``--checkpoint`` (:mod:`.inputs`)."""
+    if src.calibration is not None:
+        if src.checkpoint is not None:
             raise ConfigError("--calibration and --checkpoint both refine the IMU: pass one")
         if opts.variance_scale is not None:
             raise ConfigError("--variance-scale scales a covariance head's variances: not with --calibration")
-        gyro, acc, imu_input = method_input(Path(calibration), t_ns, gyro, acc)
-        var = None
-    else:
-        gyro, acc, var, imu_input = checkpoint_input(checkpoint, t_ns, gyro, acc, opts.variance_scale)
+        gyro, acc, label = method_input(Path(src.calibration), imu.t_ns, imu.gyro, imu.acc)
+        return gyro, acc, None, label
+    return checkpoint_input(src.checkpoint, imu.t_ns, imu.gyro, imu.acc, opts.variance_scale)
+
+
+def navigate(src: Sources, out: Path, opts: NavigateOptions = NavigateOptions()) -> Dict[str, object]:
+    """Fuse the recording's IMU with its aiding file and write ``out``/{causal.tum, smoothed.tum,
+    plot.png, summary.json}; returns the summary (module docstring)."""
+    t_start = time.perf_counter()
+    opts.check()
+    if opts.aiding_kind != "position" and src.extrinsics is None:
+        log.warning("no --extrinsics: the aiding's poses are taken as body (IMU) poses")
+    T_BS = read_t_bs(src.extrinsics) if src.extrinsics is not None else None
+    if opts.lever_arm is not None and T_BS is not None:
+        raise ConfigError("--lever-arm and --extrinsics both give the antenna's lever arm: pass one")
+    imu = read_body_imu(src, opts)
+    t_ns = imu.t_ns
+    lever = T_BS[:3, 3] if (T_BS is not None and opts.aiding_kind == "position") else np.zeros(3)
+    if opts.lever_arm is not None:
+        lever = np.asarray(opts.lever_arm, dtype=np.float64)
+    rows, rows_read, gnss, opts = aiding_rows(src, opts, t_ns, T_BS, lever)
+    bias0, bias_source = checkpoint_bias(src.checkpoint)
+    gyro, acc, var, label = imu_input(src, opts, imu)
     if opts.aiding_kind == "position":
         st = position_start(t_ns, gyro, acc, rows, lever, bias0, opts.gravity, opts.level_s)
-        s0 = st.start
     else:
-        s0 = int(rows.sample[0])
-        st = pose_start(t_ns, gyro, acc, rows, s0, bias0, opts.gravity, opts.level_s)
-    aiding, counts = build_aiding(rows, s0, st.R_WA, lever, opts, Path(aiding_file).name, str(aiding_file), gnss)
+        st = pose_start(t_ns, gyro, acc, rows, int(rows.sample[0]), bias0, opts.gravity, opts.level_s)
+    s0 = st.start
+    aiding, counts = build_aiding(rows, s0, st.R_WA, lever, opts, Path(src.aiding).name, str(src.aiding), gnss)
     if len(aiding) == 0:
-        raise AidingError(f"{aiding_file}: no aiding measurement left to fuse", str(aiding_file), opts.aiding_kind)
-    sel = slice(s0, None)
+        raise AidingError(f"{src.aiding}: no aiding measurement left to fuse", str(src.aiding), opts.aiding_kind)
     at_rest = st.info["still_s"] >= 1.0 and opts.aiding_kind != "position"  # position aiding starts moving
-    prior = PriorSigmas(rot_rad=float(np.deg2rad(opts.prior_rot_deg)), pos_m=opts.prior_pos_m,
-                        vel_mps=0.05 if at_rest else opts.prior_vel_mps)
-    settings = FusionSettings(noise, opts.gravity, opts.keyframe_hz, prior,
-                              **({} if opts.lag_s is None else {"lag_s": opts.lag_s}))
-    kw: Dict[str, object] = {}
-    hooks = []
-    if opts.nhc:
-        hooks.append(nhc_callback(NhcSettings(opts.nhc_sigma_lat_mps, opts.nhc_sigma_vert_mps),
-                                  np.ascontiguousarray(gyro[sel])))
-    if displacement is not None:
-        hooks.append(displacement_hook(displacement_model(Path(displacement)), t_ns[sel], raw_gyro[sel], raw_acc[sel]))
-        imu_input += f" + displacements of {Path(displacement).name}"
-    if hooks:
-        kw["extra_factors"] = chain(*hooks)
-    if var is not None:
-        kw["var"] = np.ascontiguousarray(var[sel])
-    log.info(f"fusing {len(t_ns) - s0} IMU samples ({imu_input}) with {len(aiding)} {opts.aiding_kind} measurements "
-             f"of {aiding_file}")
-    try:
-        res = fuse(t_ns[sel], np.ascontiguousarray(gyro[sel]), np.ascontiguousarray(acc[sel]),
-                   st.pose, [aiding], settings, bias0=bias0, **kw)
-    except RuntimeError as e:  # GTSAM's IndeterminateLinearSystemException and kin
-        raise AidingError(f"{aiding_file}: the factor graph could not be solved: {' '.join(str(e).split())[:300]}",
-                          str(aiding_file), opts.aiding_kind) from None
-    t_fused = t_ns[sel]
-    kf_t = t_fused[res.kf_idx]
+    st = replace(st, prior=PriorSigmas(rot_rad=float(np.deg2rad(opts.prior_rot_deg)), pos_m=opts.prior_pos_m,
+                                       vel_mps=0.05 if at_rest else opts.prior_vel_mps))
+    if src.displacement is not None:
+        label += f" + displacements of {Path(src.displacement).name}"
+    res = fuse_run(src, opts, imu, (gyro, acc, var), st, aiding, label)
+    kf_t = t_ns[s0:][res.kf_idx]
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
     write_trajectory(out / "causal.tum", kf_t, res.causal_p, res.causal_R)
     write_trajectory(out / "smoothed.tum", kf_t, res.smoothed_p, res.smoothed_R)
-    conv = convergence(kf_t * 1e-9, res.causal_p, res.causal_R, res.smoothed_p, res.smoothed_R)
     summary: Dict[str, object] = {
-        "input": str(input), "imu_file": imu_file, "imu_input": imu_input, "noise": noise.source if var is None else "learned per-sample variances"
+        "input": str(src.input), "imu_file": imu.file, "imu_input": label,
+        "noise": imu.noise.source if var is None else "learned per-sample variances"
         + ("" if opts.variance_scale is None else " x variance_scale"),
-        "aiding": str(aiding_file), "aiding_kind": opts.aiding_kind, "aiding_format": opts.aiding_format,
-        "aiding_label": aiding.label, "extrinsics": None if extrinsics is None else str(extrinsics),
-        "checkpoint": None if checkpoint is None else str(checkpoint),
-        "displacement": None if displacement is None else str(displacement),
-        "calibration": None if calibration is None else str(calibration),
+        "aiding": str(src.aiding), "aiding_kind": opts.aiding_kind, "aiding_format": opts.aiding_format,
+        "aiding_label": aiding.label, "extrinsics": _text(src.extrinsics), "checkpoint": _text(src.checkpoint),
+        "displacement": _text(src.displacement), "calibration": _text(src.calibration),
         "variance_scale": None if opts.variance_scale is None else [float(x) for x in opts.variance_scale],
         "aiding_rows_read": int(rows_read), "aiding_rows_used": int(len(rows.sample)), "aiding_dropped": rows.dropped,
         **counts, "keyframes": int(len(res.kf_idx)),
-        "imu_samples_before_start": s0, "duration_s": round(float((t_fused[-1] - t_fused[0]) * 1e-9), 3),
+        "imu_samples_before_start": s0, "duration_s": round(float((t_ns[-1] - t_ns[s0]) * 1e-9), 3),
         "init": {**st.info, "bias0": [round(float(b), 6) for b in st.bias], "bias_source": bias_source,
-                 "prior": asdict(prior)},
-        "convergence": conv, "counts": res.counts, "seconds_fusion": round(res.seconds, 2),
+                 "prior": asdict(st.prior)},
+        "convergence": convergence(kf_t * 1e-9, res.causal_p, res.causal_R, res.smoothed_p, res.smoothed_R),
+        "counts": res.counts, "seconds_fusion": round(res.seconds, 2),
         "options": {k: (list(map(list, v)) if k == "gaps" else v) for k, v in asdict(opts).items()},
-        "imu_mounting": None if mounting is None else np.round(mounting, 6).tolist(),
+        "imu_mounting": None if imu.mounting is None else np.round(imu.mounting, 6).tolist(),
         "lever_arm_m": [round(float(x), 4) for x in lever],
         "final_bias": [round(float(b), 6) for b in res.smoothed_bias[-1]],
         "outputs": {"causal": str(out / "causal.tum"), "smoothed": str(out / "smoothed.tum")},
     }
     scores = None
-    if groundtruth is not None:
-        scores = score_against(groundtruth, kf_t, res, rows, st.R_WA, int(t_ns[0]), opts.aiding_kind != "position",
+    if src.groundtruth is not None:
+        scores = score_against(src.groundtruth, kf_t, res, rows, st.R_WA, int(t_ns[0]), opts.aiding_kind != "position",
                                opts.gaps)
-        summary["groundtruth"] = str(groundtruth)
+        summary["groundtruth"] = str(src.groundtruth)
         summary["scores"] = scores
-    if plot_navigation(out / "plot.png", f"{Path(input).name}: {aiding.label}", kf_t, res, rows, st.R_WA, scores, opts.gaps,
-            int(t_ns[0])):
+    if plot_navigation(out / "plot.png", f"{Path(src.input).name}: {aiding.label}", kf_t, res, rows, st.R_WA, scores,
+                       opts.gaps, int(t_ns[0])):
         summary["outputs"]["plot"] = str(out / "plot.png")
     summary["seconds"] = round(time.perf_counter() - t_start, 2)
     write_json(out / "summary.json", summary)
     return summary
+
+
+def _text(path: Optional[Path]) -> Optional[str]:
+    return None if path is None else str(path)
+
+
+def fuse_run(src: Sources, opts: NavigateOptions, imu: Imu, fused: tuple, st: Start, aiding, label: str):
+    """The factor graph from the start sample on: the IMU as fused (``fused``: gyro, acc, variances or
+    None), the aiding, ``--nhc`` and ``--displacement``'s factors (regressed from the raw IMU)."""
+    gyro, acc, var = fused
+    sel = slice(st.start, None)
+    settings = FusionSettings(imu.noise, opts.gravity, opts.keyframe_hz, st.prior,
+                              **({} if opts.lag_s is None else {"lag_s": opts.lag_s}))
+    hooks = []
+    if opts.nhc:
+        hooks.append(nhc_callback(NhcSettings(opts.nhc_sigma_lat_mps, opts.nhc_sigma_vert_mps),
+                                  np.ascontiguousarray(gyro[sel])))
+    if src.displacement is not None:
+        hooks.append(displacement_hook(displacement_model(Path(src.displacement)), imu.t_ns[sel], imu.gyro[sel],
+                                       imu.acc[sel]))
+    log.info(f"fusing {len(imu.t_ns) - st.start} IMU samples ({label}) with {len(aiding)} {opts.aiding_kind} "
+             f"measurements of {src.aiding}")
+    try:
+        return fuse(imu.t_ns[sel], np.ascontiguousarray(gyro[sel]), np.ascontiguousarray(acc[sel]), st.pose, [aiding],
+                    settings, bias0=st.bias, var=None if var is None else np.ascontiguousarray(var[sel]),
+                    extra_factors=chain(*hooks))
+    except RuntimeError as e:  # GTSAM's IndeterminateLinearSystemException and kin
+        raise AidingError(f"{src.aiding}: the factor graph could not be solved: {' '.join(str(e).split())[:300]}",
+                          str(src.aiding), opts.aiding_kind) from None
 
 
 def one_line(summary: Dict[str, object]) -> str:
