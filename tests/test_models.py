@@ -86,8 +86,9 @@ def card_sections(text: str):
 
 def refine_and_check_crop(ckpt: Path, crop: Path, out: Path) -> np.ndarray:
     """Refine ``crop`` with ``ckpt`` through the CLI entry point; the output must be the input's ASL
-    format (same header, same stamps) with finite values. Returns the refined (N, 6)."""
-    assert refine_main(["--checkpoint", str(ckpt), "--input", str(crop), "--out", str(out), "--quiet"]) == 0
+    format (same header, same stamps) with finite values. Returns the refined (N, 6). A model without
+    a crop of its own rate (Blackbird, BROAD, Fetch) runs on the EuRoC crop with --force."""
+    assert refine_main(["--checkpoint", str(ckpt), "--input", str(crop), "--out", str(out), "--quiet", "--force"]) == 0
     src, dst = crop / IMU_REL, out / IMU_REL
     assert dst.is_file()
     assert core.read_asl_imu_header(str(dst)) == core.read_asl_imu_header(str(src))

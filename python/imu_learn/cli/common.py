@@ -18,6 +18,8 @@ import logging
 import sys
 from typing import Any, Callable, Dict, Iterator, List, Optional, Sequence, Union
 
+from imu_learn.data.formats import USER_CSV
+from imu_learn.data.formats.csv_columns import ACC_UNITS, DEFAULT_COLUMNS, GYRO_UNITS, TIME_UNITS, CsvColumns
 from imu_learn.errors import ImuError, one_line
 from imu_learn.settings import DATA_ROOT_ENV
 
@@ -96,6 +98,35 @@ def add_data_root(p: argparse.ArgumentParser, what: str) -> None:
     p.add_argument("--data-root", metavar="DIR", default=None,
                    help=f"the data root {what} are relative to (default: ${DATA_ROOT_ENV}, else the config's "
                         "data_root; this flag beats both)")
+
+
+# The CsvColumns fields the options of a user's own IMU CSV set (--columns, --time-unit, ...).
+_CSV_FIELDS = ("columns", "time_unit", "gyro_unit", "acc_unit")
+
+
+def add_imu_input_options(p: argparse.ArgumentParser) -> None:
+    """The options of a user's own IMU CSV, the same on every command that reads IMU; any of them
+    (or ``--format csv-columns``) makes the input such a CSV. :func:`csv_layout` reads them back,
+    :func:`imu_learn.data.formats.read_imu_source` / ``read_recording`` (``columns=``) read the file."""
+    g = p.add_argument_group(
+        "a user's own IMU CSV",
+        f"any of these (or --format {USER_CSV}) reads --input as a CSV of your own; its delimiter\n"
+        "(comma, semicolon, tab, spaces), header and # comments are found in the file; what is written\n"
+        "back keeps its columns and units")
+    g.add_argument("--columns", metavar="MAP", default=None,
+                   help=f"the file's column order, each of t,gx,gy,gz,ax,ay,az once, _ skips a column "
+                        f"(default {DEFAULT_COLUMNS}); columns after the last named are ignored")
+    g.add_argument("--time-unit", choices=TIME_UNITS, default=None,
+                   help="unit of the time column, integer or float text (default ns)")
+    g.add_argument("--gyro-unit", choices=GYRO_UNITS, default=None, help="default rad/s")
+    g.add_argument("--acc-unit", choices=ACC_UNITS, default=None, help="default m/s2 (g: 9.80665 m/s2)")
+
+
+def csv_layout(args: argparse.Namespace) -> Optional[CsvColumns]:
+    """The user's-CSV layout the options of :func:`add_imu_input_options` give (unset ones take
+    CsvColumns' defaults), or None when none is given."""
+    given = {k: getattr(args, k) for k in _CSV_FIELDS if getattr(args, k, None) is not None}
+    return CsvColumns(**given) if given else None
 
 
 def parser(name: str) -> argparse.ArgumentParser:

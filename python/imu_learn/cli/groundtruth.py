@@ -6,8 +6,9 @@ import argparse
 from pathlib import Path
 from typing import Any, Callable, List, Optional, Sequence
 
-from imu_learn.cli.common import run_command
-from imu_learn.eval.groundtruth import CheckOptions, check, fmt_vec, gt_label, pick_best, read, summary_line
+from imu_learn.cli.common import add_imu_input_options, csv_layout, run_command
+from imu_learn.data.formats import read_recording
+from imu_learn.eval.groundtruth import CheckOptions, check, fmt_vec, gt_label, pick_best, summary_line
 
 DESCRIPTION = """Check a recording's ground truth against its own IMU, before training on it or scoring with it:
 bias-removed relative pose RMSE over 10 and 200 IMU samples, the rotation R_off from the ground
@@ -20,7 +21,8 @@ EPILOG = """examples:
   imu-learn groundtruth --input datasets/euroc/MH_04_difficult
   imu-learn groundtruth --input datasets/euroc/V1_01_easy --groundtruth datasets/euroc/V1_01_easy/groundtruth_pose.tum \\
       --groundtruth datasets/euroc/V1_01_easy/groundtruth_state_20hz.csv
-  imu-learn groundtruth --input robot/run1 --format fetch --max-gap-s 0.1 --yaw-from-acc"""
+  imu-learn groundtruth --input robot/run1 --format fetch --max-gap-s 0.1 --yaw-from-acc
+  imu-learn groundtruth --input my_imu.csv --columns t,_,gx,gy,gz,ax,ay,az --time-unit s --groundtruth mocap.tum"""
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
@@ -34,6 +36,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help="fit R_off on specific force (a ground robot turning about z only: the gyro leaves its yaw free)")
     p.add_argument("--imu-topic", help="rosbag: the sensor_msgs/msg/Imu topic (default: the bag's only one)")
     p.add_argument("--groundtruth-topic", help="rosbag: the pose topic (default: the bag's only one)")
+    add_imu_input_options(p)
 
 
 def label(rec: Path, gt: Optional[Path]) -> str:
@@ -63,8 +66,10 @@ def describe(row: Any) -> List[str]:
 def run(args: argparse.Namespace, rest: List[str], keep: Callable[[Any], None]) -> int:
     options = CheckOptions(max_gap_s=args.max_gap_s, yaw_from_acc=args.yaw_from_acc)
     rows = []
+    columns = csv_layout(args)
     for gt_file in args.groundtruth or [None]:
-        imu, gt = read(args.input, gt_file, args.format, args.imu_topic, args.groundtruth_topic)
+        imu, gt = read_recording(args.input, args.format, groundtruth=gt_file, imu_topic=args.imu_topic,
+                                 groundtruth_topic=args.groundtruth_topic, columns=columns)
         row, _ = check(imu, gt, args.input.name, label(args.input, gt_file), options)
         rows.append(row)
         print("\n".join(describe(row)), flush=True)

@@ -1,32 +1,55 @@
-"""``imu-learn refine``: a recording's IMU refined by a checkpoint, in the input's own format
-(the windowing and writing are :mod:`imu_learn.infer.refine`)."""
+"""``imu-learn refine``: a recording's IMU through a device profile's floor or a trained model, in the
+input's own format (:mod:`imu_learn.infer.rewrite` writes it, :mod:`imu_learn.infer.refine` runs a
+model, :meth:`imu_learn.calib.profile.Profile.apply` the floor, :mod:`imu_learn.infer.rates` checks
+that they were made for the recording's rate and device)."""
 from __future__ import annotations
 
 import argparse
+import logging
 from pathlib import Path
-from typing import Any, Callable, List, Optional, Sequence
+from typing import Any, Callable, List, Optional, Sequence, Tuple
 
-from imu_learn.cli.common import run_command
-from imu_learn.data.formats import FORMATS
+from imu_learn.calib.profile import Profile
+from imu_learn.cli.common import add_imu_input_options, csv_layout, run_command
+from imu_learn.data.formats import FORMATS, USER_CSV, ImuSource, read_imu_source
+from imu_learn.data.types import sample_rate_hz
 from imu_learn.errors import ConfigError
+from imu_learn.infer import rates
+from imu_learn.infer.rewrite import Step, rewrite_recording
 from imu_learn.util.extras import require_extra
 
-DESCRIPTION = """Write a recording's IMU refined by a trained model, in the input's own format (ASL/EuRoC
-CSV, TUM-VI, Blackbird, BROAD, KAIST, ROS 1/2 bags). The input is never written. Prints the file
-written to stdout."""
+logger = logging.getLogger(__name__)
+
+DESCRIPTION = """Write a recording's IMU refined by a device profile (the floor: time offset and affine calibration,
+from imu-learn calibrate) or by a trained model (with the profile it was trained on top of, if any), in the
+input's own format (ASL/EuRoC CSV, TUM-VI, Blackbird, BROAD, KAIST, Fetch, GNSS/IMU CSV, ROS 1/2 bags, or
+a CSV of your own: --columns and the units). The input is never written. A recording sampled more than 5 %
+off the rate the profile or model was made for is refused (--force applies it anyway); one of another
+device is a warning. Prints the file written to stdout."""
 EPILOG = """examples:
   imu-learn refine --checkpoint models/euroc_adis16448.pt --input datasets/euroc/MH_01_easy --out refined_mh01
+  imu-learn refine --profile calib/profile.json --input my_imu.csv --columns t,_,gz,gy,gx,az,ay,ax \\
+      --time-unit s --gyro-unit deg/s --acc-unit g --out my_imu_refined.csv
   imu-learn refine --checkpoint models/euroc_adis16448_cov.pt --input run.bag --out run_refined.bag --fill-covariance"""
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
-    p.add_argument("--checkpoint", required=True, type=Path, metavar="PT", help="imu_learn checkpoint (.pt)")
+    what = p.add_mutually_exclusive_group(required=True)
+    what.add_argument("--checkpoint", type=Path, metavar="PT",
+                      help="a trained model (.pt); one trained on top of a profile applies that profile first")
+    what.add_argument("--profile", type=Path, metavar="JSON",
+                      help="a device profile (imu-learn calibrate's profile.json): applies its floor (no torch needed)")
     p.add_argument("--input", required=True, type=Path, metavar="PATH",
                    help="recording folder, IMU file or ROS bag (never written)")
     p.add_argument("--out", required=True, type=Path, metavar="PATH",
                    help="folder, or a file (or bag) of the input's kind")
-    p.add_argument("--format", default="auto", choices=("auto", *FORMATS))
+    p.add_argument("--format", default="auto", choices=("auto", *FORMATS, USER_CSV))
     p.add_argument("--imu-topic", help="ROS bags: the sensor_msgs/msg/Imu topic (default: the bag's only one)")
+    p.add_argument("--force", action="store_true",
+                   help="refine a recording whose rate is more than 5 %% off the profile's or model's (a warning)")
+    p.add_argument("--imu-name", metavar="NAME",
+                   help="the recording's device, checked against the profile's or model's (default: the dataset "
+                        "its format belongs to, else not checked)")
     p.add_argument("--window", type=int, help="samples per window (default: the checkpoint's training window; "
                                               "imu_learn.infer.windowing)")
     p.add_argument("--overlap", type=int, help="overlap of consecutive windows (default: half the window)")
@@ -36,29 +59,84 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--fill-covariance", action="store_true",
                    help="ROS bags, a checkpoint with a covariance head: write each IMU message's angular_velocity / "
                         "linear_acceleration covariance as the diagonal of its predicted per-sample variances")
+    add_imu_input_options(p)
 
 
-def run(args: argparse.Namespace, rest: List[str], keep: Callable[[Any], None]) -> int:
-    require_extra("train", "imu-learn refine")
-    from imu_learn.infer.checkpoint import load_model
-    from imu_learn.infer.refine import refine_recording, require_covariance_head
+def profile_step(profile: Profile) -> Step:
+    def step(t_ns, gyro, acc):
+        g, a = profile.apply(t_ns, gyro, acc)
+        return g, a, None
+
+    return step
+
+
+def describe_profile(profile: Profile, where: str) -> str:
+    return f"profile {where} (device {profile.device!r}, {rates.hz(profile.sample_rate_hz)})"
+
+
+def from_profile(args: argparse.Namespace) -> Tuple[List[Step], List[rates.MadeFor], str]:
+    """The floor of ``--profile``: its step, what it was made for, and its words for the summary line."""
+    profile = Profile.load(args.profile)
+    made = rates.MadeFor(f"profile {args.profile}", profile.sample_rate_hz, profile.device)
+    return [profile_step(profile)], [made], f"the floor of {describe_profile(profile, str(args.profile))}"
+
+
+def from_checkpoint(args: argparse.Namespace) -> Tuple[List[Step], List[rates.MadeFor], str]:
+    """The model of ``--checkpoint`` (after the profile it carries, if any): its steps, what it was
+    made for, and its words for the summary line."""
+    require_extra("train", "imu-learn refine --checkpoint")
+    from imu_learn.infer.checkpoint import imu_record, load_checkpoint, model_from_checkpoint
+    from imu_learn.infer.refine import model_step, require_covariance_head
     from imu_learn.nn.device import pick_device
 
     try:
         device = pick_device(args.device)
     except RuntimeError as e:  # torch's own message for a device string it does not know
         raise ConfigError(f"--device: {e}") from e
-    model = load_model(args.checkpoint).to(device)
+    state = load_checkpoint(args.checkpoint)
+    model = model_from_checkpoint(state).to(device)
     if args.fill_covariance:
         require_covariance_head(model, args.checkpoint)
-    target = refine_recording(
-        model, args.input, args.out, args.format, args.window, args.overlap, args.copy_folder,
-        args.batch, progress=not args.quiet, imu_topic=args.imu_topic, fill_covariance=args.fill_covariance,
-    )
+    record = imu_record(state)
+    steps: List[Step] = []
+    words = []
+    if record["profile"]:
+        profile = Profile.from_dict(record["profile"], f"{args.checkpoint} (its profile)")
+        steps.append(profile_step(profile))
+        words.append(f"after its {describe_profile(profile, 'carried')}")
+    steps.append(model_step(model, args.window, args.overlap, args.batch, not args.quiet, args.fill_covariance))
+    made = rates.MadeFor(f"model {args.checkpoint}", record["sample_rate_hz"], record["device"])
     rule = model.windowing.replace(args.window, args.overlap, args.batch)
     kind = f"causal, chunks of {rule.window}" if model.cfg.causal else f"window {rule.window}, overlap {rule.overlap}"
-    cov = "; covariance fields: learned per-sample variances" if args.fill_covariance else ""
-    print(f"refined IMU ({kind}, {device}{cov}) written to {target}")
+    rate = "rate unknown" if not made.sample_rate_hz else rates.hz(made.sample_rate_hz)
+    words = [f"model {args.checkpoint}: {kind}, {device}, made for {made.device or 'an unknown device'} at {rate}",
+             *words]
+    if args.fill_covariance:
+        words.append("covariance fields: learned per-sample variances")
+    return steps, [made], "; ".join(words)
+
+
+def check_recording(args: argparse.Namespace, src: ImuSource, made_for: Sequence[rates.MadeFor]) -> Optional[float]:
+    """The recording's rate (None: no stamps); stops on a rate more than 5 % off (unless --force)
+    and logs a warning line for each mismatch it lets through."""
+    rate = sample_rate_hz(src.t_ns) if src.t_ns is not None else None
+    device = rates.recording_device(src.fmt, args.format, args.imu_name)
+    for line in rates.check(str(args.input), rate, device, made_for, args.force):
+        logger.warning(line)
+    for line in rates.unchecked(rate, made_for):
+        logger.info(line)
+    return rate
+
+
+def run(args: argparse.Namespace, rest: List[str], keep: Callable[[Any], None]) -> int:
+    if args.fill_covariance and args.checkpoint is None:
+        raise ConfigError("--fill-covariance needs a --checkpoint with a covariance head")
+    steps, made_for, words = from_profile(args) if args.profile is not None else from_checkpoint(args)
+    src = read_imu_source(args.input, args.format, args.imu_topic, csv_layout(args))
+    rate = check_recording(args, src, made_for)
+    target = rewrite_recording(src, args.input, args.out, steps, args.copy_folder, args.fill_covariance)
+    at = f"recording at {rates.hz(rate)}" if rate else "recording without stamps"
+    print(f"refined IMU ({words}; {at}) written to {target}")
     return 0
 
 

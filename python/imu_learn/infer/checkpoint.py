@@ -17,6 +17,14 @@ those (the result still loads everywhere a checkpoint does, but cannot be resume
 
     imu-learn checkpoint strip runs/NAME/best.pt models/NAME.pt
     imu-learn checkpoint info models/NAME.pt      # what a checkpoint holds, for a model card
+
+What the model is for (:func:`imu_record`): a checkpoint records the IMU it was trained on,
+``sample_rate_hz`` (the one sample-rate rule, :func:`imu_learn.data.types.sample_rate_hz`, over the
+training segments) and ``device`` (``data.device`` of the run config, else the training datasets'
+names, e.g. ``euroc``), and, for a model trained on top of a device profile, ``profile`` (the
+profile's content, applied before the model). Checkpoints written before that carry none of them;
+their rate comes from their config: the training datasets' nominal rates (:data:`DATASET_RATE_HZ`).
+``config["device"]`` is where the run trained (cpu, cuda), not the IMU.
 """
 from __future__ import annotations
 
@@ -24,19 +32,26 @@ import hashlib
 import json
 import os
 from pathlib import Path
-from typing import Any, Dict, Optional
+from typing import Any, Dict, List, Optional, Sequence
 
 import torch
 
 from imu_learn._imu_core import __version__
+from imu_learn.data.types import Segment, sample_rate_hz
 from imu_learn.errors import CheckpointError  # noqa: F401  (defined with every error class)
 from imu_learn.infer.windowing import attach, windowing_of_config
 from imu_learn.nn.model import ImuRefiner, ModelConfig
 from imu_learn.util.atomic import atomic_write_bytes
 
 FORMAT = "imu_learn.checkpoint.v1"
-# What a stripped (shipped) checkpoint keeps: everything inference and a model card need.
+# What the model is for (module doc), kept at the top level of a checkpoint when known.
+RECORD_KEYS = ("sample_rate_hz", "device", "profile")
+# What a stripped (shipped) checkpoint keeps: everything inference and a model card need (and the
+# record's keys where the source has them).
 STRIPPED_KEYS = ("format", "code_version", "model_args", "model", "config", "epoch", "step", "best_metric")
+# The nominal IMU rate of each public dataset [Hz], for checkpoints that record no rate of their own.
+DATASET_RATE_HZ: Dict[str, float] = {"euroc": 200.0, "tum-vi": 200.0, "blackbird": 100.0, "fetch": 100.0,
+                                     "broad": 285.7}
 STRIPPED_EXTRA = ("best_epoch", "elapsed_s", "world_size")
 DIGEST_KEY = "digest"
 
@@ -50,7 +65,9 @@ def save_checkpoint(
     best_metric: Optional[float],
     optimizer: Optional[torch.optim.Optimizer] = None,
     extra: Optional[Dict[str, Any]] = None,
+    record: Optional[Dict[str, Any]] = None,
 ) -> None:
+    """``record``: what the model is for (:func:`training_record`; module doc), stored at the top level."""
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
     state = {
@@ -65,7 +82,59 @@ def save_checkpoint(
         "best_metric": None if best_metric is None else float(best_metric),
         "extra": extra or {},
     }
+    state.update({k: v for k, v in (record or {}).items() if k in RECORD_KEYS and v is not None})
     write_checkpoint(path, state)
+
+
+# --------------------------------------------------------------------------------------------
+# What a model is for: the IMU's rate and device
+# --------------------------------------------------------------------------------------------
+
+
+def dataset_names(config: Optional[Dict[str, Any]]) -> List[str]:
+    """The datasets a run config trained on, in order: each root's format where it names a dataset
+    (euroc, tum-vi, blackbird, broad, fetch), else its path's first folder."""
+    data = (config or {}).get("data") or {}
+    names: List[str] = []
+    for root in data.get("roots") or []:
+        if not isinstance(root, dict):
+            continue
+        fmt, path = str(root.get("format") or ""), str(root.get("path") or "")
+        name = fmt if fmt in DATASET_RATE_HZ else (Path(path).parts[0] if path and not Path(path).is_absolute() else fmt)
+        if name and name not in names:
+            names.append(name)
+    return names
+
+
+def configured_device(config: Optional[Dict[str, Any]]) -> Optional[str]:
+    """``data.device`` of a run config, else its datasets' names joined by ``+`` (None: neither)."""
+    data = (config or {}).get("data") or {}
+    if isinstance(data.get("device"), str) and data["device"]:
+        return data["device"]
+    return "+".join(dataset_names(config)) or None
+
+
+def training_record(segments: Sequence[Segment], config: Optional[Dict[str, Any]],
+                    profile: Optional[Dict[str, Any]] = None) -> Dict[str, Any]:
+    """What a new checkpoint records of its training IMU: the one sample-rate rule over the training
+    segments' stamps, the device (:func:`configured_device`), and the profile it trained on top of."""
+    rate = sample_rate_hz(*(s.t_ns for s in segments))
+    return {"sample_rate_hz": rate if rate > 0 else None, "device": configured_device(config), "profile": profile}
+
+
+def imu_record(state: Dict[str, Any]) -> Dict[str, Any]:
+    """What a loaded checkpoint is for: ``sample_rate_hz`` (None: unknown), ``device`` (None:
+    unknown), ``profile`` (a dict or None) and ``source``: "recorded" (written with the checkpoint)
+    or "config" (an older checkpoint: its training datasets' nominal rate, :data:`DATASET_RATE_HZ`;
+    unknown where they disagree or none is known)."""
+    cfg = state.get("config") or {}
+    if state.get("sample_rate_hz") is not None:
+        return {"sample_rate_hz": float(state["sample_rate_hz"]), "device": state.get("device"),
+                "profile": state.get("profile"), "source": "recorded"}
+    rates = {DATASET_RATE_HZ.get(n) for n in dataset_names(cfg)}
+    rate = rates.pop() if len(rates) == 1 else None
+    return {"sample_rate_hz": rate, "device": state.get("device") or configured_device(cfg),
+            "profile": state.get("profile"), "source": "config"}
 
 
 def content_digest(state: Dict[str, Any]) -> str:
@@ -162,6 +231,7 @@ def strip_checkpoint(src: Path, dst: Path) -> Dict[str, Any]:
         raise CheckpointError(f"{dst}: is the source checkpoint; write the stripped copy elsewhere")
     state = load_checkpoint(src)
     out: Dict[str, Any] = {k: state.get(k) for k in STRIPPED_KEYS}
+    out.update({k: state[k] for k in RECORD_KEYS if state.get(k) is not None})
     out["config"] = without_machine_paths(state.get("config") or {})
     out["model"] = {k: v.detach().cpu().clone() for k, v in state["model"].items()}
     out["optimizer"] = None
@@ -193,5 +263,7 @@ def describe(state: Dict[str, Any]) -> Dict[str, Any]:
         "split": data.get("split"),
         "roots": [r.get("path") for r in data.get("roots") or []],
         "window": data.get("window"),
+        "imu": {k: v for k, v in imu_record(state).items() if k != "profile"},
+        "profile": (state.get("profile") or {}).get("device"),
         "extra": {k: v for k, v in (state.get("extra") or {}).items() if k not in ("history", "partial")},
     }

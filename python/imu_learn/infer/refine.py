@@ -1,9 +1,10 @@
 """Apply a trained refiner to a recording and write the refined IMU in the input's own format.
 
-    imu-learn refine --checkpoint CKPT --input IN --out OUT
-        [--format auto|asl|euroc|tum-vi|blackbird|broad|kaist|rosbag] [--imu-topic TOPIC]
+    imu-learn refine (--checkpoint CKPT | --profile PROFILE | both) --input IN --out OUT
+        [--format auto|asl|euroc|tum-vi|blackbird|broad|kaist|fetch|gnss-imu|rosbag|csv-columns]
+        [--columns MAP --time-unit U --gyro-unit U --acc-unit U] [--imu-topic TOPIC]
         [--window W --overlap O] [--device auto|cpu|cuda] [--batch 16] [--copy-folder]
-        [--fill-covariance] [--quiet]
+        [--fill-covariance] [--force] [--imu-name NAME] [--quiet]
 
 Only the IMU is read (no ground truth needed); timestamps and everything but gyro/acc are kept:
 
@@ -29,6 +30,13 @@ Only the IMU is read (no ground truth needed); timestamps and everything but gyr
   off-diagonals 0) of that sample's predicted discrete-time variances, (rad/s)^2 and (m/s^2)^2
   (:func:`refine_with_variance`); orientation_covariance is kept.
 
+- A user's own CSV (``--columns`` and the units, :mod:`imu_learn.data.formats.csv_columns`): OUT
+  is the same file with only the six IMU fields replaced, in the file's own columns and units.
+
+A device profile's floor (``--profile``, or the one a checkpoint carries) runs before the model;
+the recording's rate and device are checked against both first (:mod:`imu_learn.infer.rates`).
+Where the output goes and what is refused: :mod:`imu_learn.infer.rewrite`.
+
 Each layout's module in :mod:`imu_learn.data.formats` reads and writes it; every file is written to a
 temporary file beside its target and renamed into place (:mod:`imu_learn.util.atomic`). The input is
 never written: an OUT that resolves to the input file (or, with ``--copy-folder``, the input
@@ -40,20 +48,20 @@ Windowing: :mod:`imu_learn.infer.windowing`, the one rule every path applies a c
 """
 from __future__ import annotations
 
-import os
-import shutil
 from pathlib import Path
 from typing import Optional, Tuple
 
 import numpy as np
 
 from imu_learn.data import formats
-from imu_learn.data.formats import ImuSource
 from imu_learn.errors import InvalidInputError
+from imu_learn.infer.rewrite import Step, output_file, rewrite_recording
 from imu_learn.infer.windowing import Windowing, apply, windowing_of
 from imu_learn.nn.model import ImuRefiner
 
-FORMATS = ("auto", *formats.FORMATS)
+FORMATS = ("auto", *formats.FORMATS, formats.USER_CSV)
+__all__ = ["FORMATS", "model_step", "output_file", "refine_arrays", "refine_recording", "refine_with_variance",
+           "require_covariance_head"]
 
 
 # --------------------------------------------------------------------------------------------
@@ -100,33 +108,22 @@ def refine_with_variance(
 
 
 # --------------------------------------------------------------------------------------------
-# Where the refined IMU goes (reading and writing each layout is imu_learn.data.formats' job)
+# A recording in its own format (where it goes and what is refused: imu_learn.infer.rewrite)
 # --------------------------------------------------------------------------------------------
 
 
-def output_file(src: ImuSource, out: Path) -> Path:
-    """The file to write for OUT: OUT itself when it names a file of the input's kind, else the
-    input's relative path under the folder OUT."""
-    if out.suffix.lower() == src.imu_file.suffix.lower() and not out.is_dir():
-        return out
-    return out / src.rel
+def model_step(model: ImuRefiner, window: Optional[int] = None, overlap: Optional[int] = None,
+               batch: Optional[int] = None, progress: bool = False, variance: bool = False) -> Step:
+    """The model as one step of :func:`imu_learn.infer.rewrite.rewrite_recording` (``variance``:
+    with the covariance head's per-sample variances)."""
 
+    def step(_t_ns: Optional[np.ndarray], gyro: np.ndarray, acc: np.ndarray):
+        if variance:
+            return refine_with_variance(model, gyro, acc, window, overlap, batch, progress)
+        g, a = refine_arrays(model, gyro, acc, window, overlap, batch, progress)
+        return g, a, None
 
-def _same(a: Path, b: Path) -> bool:
-    try:
-        if a.exists() and b.exists():
-            return os.path.samefile(a, b)
-    except OSError:
-        pass
-    return a.resolve() == b.resolve()
-
-
-def _inside(child: Path, parent: Path) -> bool:
-    try:
-        child.resolve().relative_to(parent.resolve())
-        return True
-    except ValueError:
-        return False
+    return step
 
 
 def refine_recording(
@@ -147,30 +144,8 @@ def refine_recording(
     per-sample variances (the model needs a covariance head)."""
     input, output = Path(input), Path(output)
     src = formats.read_imu_source(input, fmt, imu_topic)
-    if fill_covariance and src.fmt != formats.rosbag.NAME:
-        raise InvalidInputError(f"--fill-covariance writes the covariance fields of a ROS bag's IMU messages; "
-                                f"{input} is {src.fmt}, not a bag")
-    if copy_folder and src.fmt == formats.rosbag.NAME:
-        raise InvalidInputError("--copy-folder does not apply to ROS bags: the output bag holds every topic already")
-    if copy_folder:
-        if output.suffix.lower() == src.imu_file.suffix.lower() and not output.is_dir():
-            raise InvalidInputError(f"--copy-folder needs OUT to be a folder, got {output}")
-        if _same(output, src.root) or _inside(output, src.root) or _inside(src.root, output):
-            raise InvalidInputError(f"--copy-folder: OUT {output} and the input folder {src.root} overlap")
-        if output.exists() and (not output.is_dir() or any(output.iterdir())):
-            raise InvalidInputError(f"--copy-folder: {output} exists and is not an empty folder")
-    target = output_file(src, output)
-    if _same(target, src.imu_file) or _same(output, input):
-        raise InvalidInputError(f"refusing to overwrite the input: OUT {output} is the input {input}")
-    if fill_covariance:
-        gyro, acc, var = refine_with_variance(model, src.gyro, src.acc, window, overlap, batch, progress)
-        formats.rosbag.write_imu(src, target, gyro, acc, variances=var)
-        return target
-    gyro, acc = refine_arrays(model, src.gyro, src.acc, window, overlap, batch, progress)
-    if copy_folder:
-        shutil.copytree(src.root, output, dirs_exist_ok=True)
-    formats.write_imu(src, target, gyro, acc)
-    return target
+    step = model_step(model, window, overlap, batch, progress, variance=fill_covariance)
+    return rewrite_recording(src, input, output, [step], copy_folder, fill_covariance)
 
 
 def require_covariance_head(model: ImuRefiner, checkpoint: Path) -> None:

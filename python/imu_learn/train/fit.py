@@ -82,7 +82,13 @@ from imu_learn.core.batches import Batch, BatchSampler, batch_seed
 from imu_learn.data.splits import Split, make_split, split_signature, write_split
 from imu_learn.data.types import Segment
 from imu_learn.infer import windowing
-from imu_learn.infer.checkpoint import load_checkpoint, load_model, model_from_checkpoint, save_checkpoint
+from imu_learn.infer.checkpoint import (
+    load_checkpoint,
+    load_model,
+    model_from_checkpoint,
+    save_checkpoint,
+    training_record,
+)
 from imu_learn.nn.device import pick_device
 from imu_learn.nn.losses import imu_loss
 from imu_learn.nn.model import ImuRefiner, ModelConfig
@@ -450,6 +456,7 @@ class TrainState:
     elapsed0: float = 0.0  # seconds run before a resume
     t_start: float = field(default_factory=time.time)
     validation: Optional[Validation] = None  # its pose score's reference is saved with the state
+    record: Dict[str, Any] = field(default_factory=dict)  # the training IMU's rate and device (checkpoint.training_record)
 
     def elapsed(self) -> float:
         return self.elapsed0 + time.time() - self.t_start
@@ -525,7 +532,7 @@ def save_state(path: Path, ts: TrainState, cfg_dict: Dict[str, Any], dist: Dist)
              "select_reference": None if pose is None else pose.reference,
              "world_size": dist.world}
     with deferred_interrupt():
-        save_checkpoint(path, ts.model, cfg_dict, ts.epochs_done, ts.step, ts.best, ts.opt, extra)
+        save_checkpoint(path, ts.model, cfg_dict, ts.epochs_done, ts.step, ts.best, ts.opt, extra, ts.record)
 
 
 def train_step(net: torch.nn.Module, ts: TrainState, sampler: BatchSampler, cfg: RunConfig, rank: int,
@@ -626,6 +633,7 @@ def train(
     spe = cfg.optim.steps_per_epoch
     total = cfg.optim.epochs * spe
     cfg_dict = cfg.to_dict()
+    ts.record = training_record(split.train, cfg_dict)
     tb = _tb_writer(run_dir) if dist.main else None
     bar = tqdm(total=total, initial=ts.step, desc="fit", unit="step", disable=not (progress and dist.main),
                dynamic_ncols=True, mininterval=1.0)

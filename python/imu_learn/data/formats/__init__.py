@@ -11,6 +11,12 @@ Each of :mod:`.asl` (EuRoC, TUM-VI), :mod:`.blackbird`, :mod:`.broad`, :mod:`.fe
 - ``write_imu(src, out, gyro, acc)``: ``src``'s IMU file written to ``out`` with gyro and acc
   replaced and everything else kept, atomically (:mod:`imu_learn.util.atomic`).
 
+A user's own CSV (:mod:`.csv_columns`: the file's column order and units given by the caller, format
+name ``csv-columns``) is no layout of its own: :func:`read_imu_source` and :func:`read_recording` take
+it with ``columns=`` (a :class:`CsvColumns`), the one input resolver every command that reads IMU
+calls (the CLI's options: :func:`imu_learn.cli.common.add_imu_input_options`). Its
+:class:`ImuSource` carries the layout, so :func:`write_imu` writes the user's columns and units back.
+
 The strict parsing of text formats happens in the Rust core; the modules here only find the files
 of a layout and, for binary containers (HDF5, MAT), read arrays with h5py / scipy and hand them to
 the same Rust alignment path.
@@ -26,7 +32,9 @@ import numpy as np
 from imu_learn.data.types import GroundTruth, ImuData
 from imu_learn.errors import InvalidInputError
 
-from . import asl, blackbird, broad, fetch, gnss_imu, kaist, rosbag
+from . import asl, blackbird, broad, csv_columns, fetch, gnss_imu, kaist, rosbag
+from .csv_columns import CsvColumns
+from .groundtruth import read_groundtruth
 from .source import ImuSource
 
 # The names ``format=`` / ``--format`` accept, each with its layout's module.
@@ -49,7 +57,11 @@ FORMATS: Dict[str, ModuleType] = {
 # ``.csv.tag`` beside it) is asked before KAIST and ASL, which would claim a ``.csv``.
 DETECTION_ORDER: Tuple[ModuleType, ...] = (rosbag, broad, blackbird, gnss_imu, kaist, fetch, asl)
 
-__all__ = ["FORMATS", "ImuSource", "detect_format", "layout", "read_imu_source", "read_recording", "write_imu"]
+# A user's CSV read by its column map (``--format csv-columns``, or implied by ``columns=``).
+USER_CSV = csv_columns.NAME
+
+__all__ = ["FORMATS", "USER_CSV", "CsvColumns", "ImuSource", "detect_format", "layout", "read_imu_source",
+           "read_recording", "write_imu"]
 
 
 def detect_format(path: Path) -> str:
@@ -86,6 +98,23 @@ def _topics(module: ModuleType, **topics: Optional[str]) -> Dict[str, str]:
     return given
 
 
+def user_csv(format: str = "auto", columns: Optional[CsvColumns] = None) -> Optional[CsvColumns]:
+    """The layout of a user's CSV when the input is one (``columns`` given, or ``format`` is
+    ``csv-columns``: then the default map ``t,gx,gy,gz,ax,ay,az`` in ns, rad/s, m/s^2), else None."""
+    if columns is None:
+        return CsvColumns() if format == USER_CSV else None
+    if format not in ("auto", USER_CSV):
+        raise InvalidInputError(f"the column map and units describe a user's CSV (format {USER_CSV}); "
+                                f"the {format} format has its own layout")
+    return columns
+
+
+def _no_topics(**topics: Optional[str]) -> None:
+    given = [k for k, v in topics.items() if v is not None]
+    if given:
+        raise InvalidInputError(f"{', '.join(given)} only apply to ROS bags, not to a user's CSV")
+
+
 def read_recording(
     path: Path,
     format: str = "auto",
@@ -93,21 +122,42 @@ def read_recording(
     allow_float_timestamps: bool = False,
     imu_topic: Optional[str] = None,
     groundtruth_topic: Optional[str] = None,
+    columns: Optional[CsvColumns] = None,
 ) -> Tuple[ImuData, GroundTruth]:
+    """The IMU and ground truth of a recording in any layout, or of a user's CSV (``columns``;
+    its ground truth is the file ``groundtruth``, a TUM trajectory or an ASL state / pose CSV)."""
     path = _existing(path)
+    csv = user_csv(format, columns)
+    if csv is not None:
+        _no_topics(imu_topic=imu_topic, groundtruth_topic=groundtruth_topic)
+        if groundtruth is None:
+            raise InvalidInputError(f"{path}: a user's CSV holds the IMU only; name its reference trajectory "
+                                    "(--groundtruth FILE: TUM, or an ASL state or pose CSV)")
+        src = csv_columns.read_imu_source(path, csv)
+        imu = ImuData(t_ns=src.t_ns, gyro=src.gyro, acc=src.acc)
+        return imu, read_groundtruth(_existing(groundtruth), allow_float_timestamps)
     module = layout(path, format)
     topics = _topics(module, imu_topic=imu_topic, groundtruth_topic=groundtruth_topic)
     return module.read_recording(path, groundtruth=groundtruth, allow_float_timestamps=allow_float_timestamps,
                                  **topics)
 
 
-def read_imu_source(path: Path, format: str = "auto", imu_topic: Optional[str] = None) -> ImuSource:
-    """The IMU of a recording (no ground truth needed) and where it lives, for refine."""
+def read_imu_source(path: Path, format: str = "auto", imu_topic: Optional[str] = None,
+                    columns: Optional[CsvColumns] = None) -> ImuSource:
+    """The one input resolver: the IMU of a recording (no ground truth needed) and where it lives,
+    in any layout (``format``: a name of :data:`FORMATS`, ``csv-columns`` or ``auto``) or a user's
+    CSV (``columns``: its column map and units, carried by the source for :func:`write_imu`)."""
     path = _existing(path)
+    csv = user_csv(format, columns)
+    if csv is not None:
+        _no_topics(imu_topic=imu_topic)
+        return csv_columns.read_imu_source(path, csv)
     module = layout(path, format)
     return module.read_imu_source(path, **_topics(module, imu_topic=imu_topic))
 
 
 def write_imu(src: ImuSource, out: Path, gyro: np.ndarray, acc: np.ndarray) -> None:
-    """Write ``src``'s IMU file to ``out`` in its own layout with ``gyro`` / ``acc`` replaced."""
-    FORMATS[src.fmt].write_imu(src, Path(out), gyro, acc)
+    """Write ``src``'s IMU file to ``out`` in its own layout with ``gyro`` / ``acc`` replaced (a
+    user's CSV in its own columns and units)."""
+    module = csv_columns if src.fmt == USER_CSV else FORMATS[src.fmt]
+    module.write_imu(src, Path(out), gyro, acc)

@@ -22,11 +22,13 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Optional
 
 import numpy as np
 
 from imu_learn import _imu_core as core
 from imu_learn.data.types import ImuData
+from imu_learn.errors import InvalidInputError
 from imu_learn.util.atomic import atomic_write_path
 
 from .source import ImuSource
@@ -84,12 +86,18 @@ def write_csv_columns(
 
 
 def read_imu_source(path: Path, layout: CsvColumns) -> ImuSource:
-    """A user's CSV as refine takes it: the file stands alone (its folder is the recording's)."""
+    """A user's CSV as refine takes it: the file stands alone (its folder is the recording's); the
+    source carries ``layout``, so :func:`write_imu` writes the user's columns and units back."""
     path = Path(path)
+    if path.is_dir():
+        raise InvalidInputError(f"{path}: a folder; a user's CSV (--columns) is one file")
     imu = read_csv_columns(path, *layout.args())
-    return ImuSource(NAME, path, path.parent, Path(path.name), imu.t_ns, imu.gyro, imu.acc)
+    return ImuSource(NAME, path, path.parent, Path(path.name), imu.t_ns, imu.gyro, imu.acc, layout=layout)
 
 
-def write_imu(src: ImuSource, out: Path, gyro: np.ndarray, acc: np.ndarray, layout: CsvColumns) -> None:
-    """``out``: ``src``'s CSV with gyro and acc replaced, in its own columns and units."""
+def write_imu(src: ImuSource, out: Path, gyro: np.ndarray, acc: np.ndarray,
+              layout: Optional[CsvColumns] = None) -> None:
+    """``out``: ``src``'s CSV with gyro and acc replaced, in its own columns and units (``layout``:
+    the source's own when None)."""
+    layout = layout or src.layout or CsvColumns()
     write_csv_columns(src.imu_file, out, gyro, acc, *layout.args())

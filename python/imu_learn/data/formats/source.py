@@ -3,9 +3,12 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Optional
+from typing import TYPE_CHECKING, Optional
 
 import numpy as np
+
+if TYPE_CHECKING:  # the user's-CSV layout (csv_columns imports this module)
+    from .csv_columns import CsvColumns
 
 
 @dataclass(frozen=True)
@@ -24,3 +27,4 @@ class ImuSource:
     gyro: np.ndarray  # (N, 3) float64 [rad/s]
     acc: np.ndarray  # (N, 3) float64 [m/s^2]
     topic: Optional[str] = None  # the bag topic the IMU was read from (ROS bags only)
+    layout: Optional[CsvColumns] = None  # a user's CSV: its columns and units (written back in them)

@@ -1,0 +1,80 @@
+"""Is a model or a device profile made for this recording? Its sample rate and its device.
+
+A model (:func:`imu_learn.infer.checkpoint.imu_record`) and a device profile record the IMU they
+were made from: its sample rate and its device. Applied to a recording whose rate (the one
+sample-rate rule, :func:`imu_learn.data.types.sample_rate_hz`) is more than :data:`TOLERANCE` off,
+:func:`check` stops with one line naming both rates (an :class:`InvalidInputError`: exit 2 from
+the CLI); ``force`` turns that into a warning line. A recording of another device is a warning
+line. An unknown rate or device on either side is not checked (the caller says so in an info line).
+
+The recording's device is the name the user gives it (``--imu-name``), else the dataset its format
+belongs to (blackbird, broad, fetch, kaist; ``--format euroc`` / ``tum-vi``), else unknown.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import List, Optional, Sequence
+
+from imu_learn.errors import InvalidInputError
+
+TOLERANCE = 0.05  # the largest relative difference of two rates taken as the same rate
+# Formats that only one device writes: their name is the device's (the dataset's) name.
+DEVICE_FORMATS = ("euroc", "tum-vi", "blackbird", "broad", "kaist", "fetch")
+
+
+@dataclass(frozen=True)
+class MadeFor:
+    """What a model or profile was made from: ``what`` names it in messages ("model
+    models/euroc_adis16448.pt"); ``sample_rate_hz`` / ``device`` None where unknown."""
+
+    what: str
+    sample_rate_hz: Optional[float]
+    device: Optional[str]
+
+
+def hz(rate: float) -> str:
+    """A rate as the messages print it: ``200 Hz``, ``285.7 Hz``, ``99.98 Hz``."""
+    return f"{rate:.4g} Hz"
+
+
+def recording_device(fmt: str, given_format: str = "auto", name: Optional[str] = None) -> Optional[str]:
+    """The device of a recording read as ``fmt`` (its layout) with ``--format given_format``:
+    ``name`` when given, else the dataset name of a one-device format, else None (unknown)."""
+    if name:
+        return name
+    for f in (given_format, fmt):
+        if f in DEVICE_FORMATS:
+            return f
+    return None
+
+
+def _same_device(recording: str, made_for: str) -> bool:
+    return recording.lower() in {d.strip().lower() for d in made_for.split("+")}
+
+
+def check(recording: str, rate_hz: Optional[float], device: Optional[str], made_for: Sequence[MadeFor],
+          force: bool = False) -> List[str]:
+    """The warning lines for applying each of ``made_for`` to a recording (``recording`` names it)
+    of rate ``rate_hz`` and ``device``; raises :class:`InvalidInputError` (one line, both rates)
+    for a rate more than :data:`TOLERANCE` off unless ``force``."""
+    warnings: List[str] = []
+    for m in made_for:
+        if rate_hz and m.sample_rate_hz and abs(rate_hz - m.sample_rate_hz) > TOLERANCE * m.sample_rate_hz:
+            line = (f"{recording} is sampled at {hz(rate_hz)} but {m.what} is for {hz(m.sample_rate_hz)} "
+                    f"(more than {TOLERANCE * 100:.0f} % off)")
+            if not force:
+                raise InvalidInputError(f"{line}; use a model or profile made at this rate, or --force to apply it anyway")
+            warnings.append(f"{line}; applied anyway (--force)")
+        if device and m.device and not _same_device(device, m.device):
+            warnings.append(f"{recording} is from device {device!r} but {m.what} was made for {m.device!r}; check it "
+                            "on your recording first (docs/refine.md)")
+    return warnings
+
+
+def unchecked(rate_hz: Optional[float], made_for: Sequence[MadeFor]) -> List[str]:
+    """Info lines for what :func:`check` could not check (a rate unknown on either side)."""
+    lines = [f"{m.what} records no sample rate: the recording's rate is not checked"
+             for m in made_for if not m.sample_rate_hz]
+    if not rate_hz and made_for:
+        lines.append("the recording has no stamps of its own: its rate is not checked")
+    return lines

@@ -1,0 +1,95 @@
+"""A recording written back in its own format with its IMU replaced: where the output goes, what is
+refused before any work, and the steps (a device profile's floor, a model) applied in order. No
+torch here: ``imu-learn refine --profile`` runs without it (a model's step is
+:func:`imu_learn.infer.refine.model_step`).
+
+Each layout's module in :mod:`imu_learn.data.formats` writes its file back (a user's CSV in its own
+columns and units); every file is written to a temporary file beside its target and renamed into
+place (:mod:`imu_learn.util.atomic`). The input is never written: an OUT that resolves to the input
+file (or, with ``copy_folder``, the input folder) is refused.
+"""
+from __future__ import annotations
+
+import os
+import shutil
+from pathlib import Path
+from typing import Callable, Optional, Sequence, Tuple
+
+import numpy as np
+
+from imu_learn.data import formats
+from imu_learn.data.formats import ImuSource
+from imu_learn.errors import InvalidInputError
+
+# One step of a refinement: (t_ns or None, gyro, acc) -> (gyro, acc, per-sample variances (N, 6) or None).
+Step = Callable[[Optional[np.ndarray], np.ndarray, np.ndarray], Tuple[np.ndarray, np.ndarray, Optional[np.ndarray]]]
+
+
+def output_file(src: ImuSource, out: Path) -> Path:
+    """The file to write for OUT: OUT itself when it names a file of the input's kind, else the
+    input's relative path under the folder OUT."""
+    if out.suffix.lower() == src.imu_file.suffix.lower() and not out.is_dir():
+        return out
+    return out / src.rel
+
+
+def _same(a: Path, b: Path) -> bool:
+    try:
+        if a.exists() and b.exists():
+            return os.path.samefile(a, b)
+    except OSError:
+        pass
+    return a.resolve() == b.resolve()
+
+
+def _inside(child: Path, parent: Path) -> bool:
+    try:
+        child.resolve().relative_to(parent.resolve())
+        return True
+    except ValueError:
+        return False
+
+
+def check_output(src: ImuSource, input: Path, output: Path, copy_folder: bool = False,
+                 fill_covariance: bool = False) -> Path:
+    """The file (or ROS 2 bag folder) that refining ``src`` (read from ``input``) into ``output``
+    writes; every refusal is raised here, before any work."""
+    input, output = Path(input), Path(output)
+    if fill_covariance and src.fmt != formats.rosbag.NAME:
+        raise InvalidInputError(f"--fill-covariance writes the covariance fields of a ROS bag's IMU messages; "
+                                f"{input} is {src.fmt}, not a bag")
+    if copy_folder and src.fmt == formats.rosbag.NAME:
+        raise InvalidInputError("--copy-folder does not apply to ROS bags: the output bag holds every topic already")
+    if copy_folder:
+        if output.suffix.lower() == src.imu_file.suffix.lower() and not output.is_dir():
+            raise InvalidInputError(f"--copy-folder needs OUT to be a folder, got {output}")
+        if _same(output, src.root) or _inside(output, src.root) or _inside(src.root, output):
+            raise InvalidInputError(f"--copy-folder: OUT {output} and the input folder {src.root} overlap")
+        if output.exists() and (not output.is_dir() or any(output.iterdir())):
+            raise InvalidInputError(f"--copy-folder: {output} exists and is not an empty folder")
+    target = output_file(src, output)
+    if _same(target, src.imu_file) or _same(output, input):
+        raise InvalidInputError(f"refusing to overwrite the input: OUT {output} is the input {input}")
+    return target
+
+
+def rewrite_recording(src: ImuSource, input: Path, output: Path, steps: Sequence[Step], copy_folder: bool = False,
+                      fill_covariance: bool = False) -> Path:
+    """``src`` with its IMU passed through ``steps`` in order, written to ``output`` in the input's
+    own format (``copy_folder``: the whole input folder copied first; ``fill_covariance``: a bag's
+    IMU covariance fields get the last step's variances). Returns the file (or ROS 2 bag folder)
+    written."""
+    target = check_output(src, input, output, copy_folder, fill_covariance)
+    gyro, acc, var = src.gyro, src.acc, None
+    for step in steps:
+        gyro, acc, v = step(src.t_ns, gyro, acc)
+        var = v if v is not None else var
+    if fill_covariance:
+        if var is None:
+            raise InvalidInputError("--fill-covariance needs a model with a covariance head")
+        formats.rosbag.write_imu(src, target, gyro, acc, variances=var)
+        return target
+    if copy_folder:
+        shutil.copytree(src.root, Path(output), dirs_exist_ok=True)
+    formats.write_imu(src, target, gyro, acc)
+    return target

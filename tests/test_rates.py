@@ -1,0 +1,186 @@
+"""A model or profile is for the rate and device it was made from: what checkpoints record
+(imu_learn.infer.checkpoint: new ones from the training data, old ones from their config), the
+5 % rule (imu_learn.infer.rates), and ``imu-learn refine`` refusing a recording of another rate in
+one line naming both rates (exit 2; ``--force`` proceeds with a warning) and warning for another
+device."""
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+import torch
+
+from imu_learn import _imu_core as core
+from imu_learn.cli import fit as fit_cli
+from imu_learn.cli.checkpoint import main as checkpoint_main
+from imu_learn.cli.refine import main as refine_main
+from imu_learn.data.formats import fetch
+from imu_learn.data.types import Segment
+from imu_learn.errors import InvalidInputError
+from imu_learn.infer import rates
+from imu_learn.infer.checkpoint import (
+    describe,
+    imu_record,
+    load_checkpoint,
+    save_checkpoint,
+    strip_checkpoint,
+    training_record,
+)
+from imu_learn.nn.model import ImuRefiner, ModelConfig
+
+torch.set_num_threads(1)
+
+REPO = Path(__file__).resolve().parent.parent
+MODELS = REPO / "models"
+EUROC = REPO / "datasets" / "euroc" / "MH_04_difficult"
+TUMVI = REPO / "datasets" / "tum-vi" / "dataset-room2_512_16"
+IMU_REL = Path("mav0") / "imu0" / "data.csv"
+
+SHIPPED = {  # checkpoint: (rate from its config, device)
+    "euroc_adis16448.pt": (200.0, "euroc"),
+    "euroc_adis16448_cov.pt": (200.0, "euroc"),
+    "euroc_adis16448_openloop.pt": (200.0, "euroc"),
+    "tumvi_bmi160.pt": (200.0, "tum-vi"),
+    "blackbird_clover.pt": (100.0, "blackbird"),
+    "blackbird_clover_calibrated.pt": (100.0, "blackbird"),
+    "fetch_debias.pt": (100.0, "fetch"),
+    "broad_handheld.pt": (285.7, "broad"),
+}
+
+
+def fetch_crop(root: Path, every: int = 2, n: int = 1200) -> Path:
+    """A 100 Hz recording in the Fetch layout: the EuRoC crop's motion, every other sample."""
+    t, g, a = core.read_asl_imu(str(EUROC / IMU_REL))
+    t, g, a = t[: n * every : every], g[: n * every : every], a[: n * every : every]
+    f = root / IMU_REL
+    f.parent.mkdir(parents=True)
+    rows = [fetch.format_row(int(float(t[k])), [*g[k], *a[k]]) for k in range(len(t))]
+    f.write_text("# timestamp, wx, wy, wz, ax, ay, az\n" + "\n".join(rows) + "\n")
+    return root
+
+
+def refine(args, capsys):
+    rc = refine_main([str(x) for x in args])
+    cap = capsys.readouterr()
+    return rc, cap.out, cap.err
+
+
+# ---- the rule ----------------------------------------------------------------------------------
+
+
+def test_five_percent_both_ways_and_one_line_naming_both_rates():
+    made = [rates.MadeFor("model m.pt", 200.0, "euroc")]
+    assert rates.check("rec", 209.9, None, made) == []
+    assert rates.check("rec", 190.1, None, made) == []
+    for off in (210.1, 189.9, 100.0):
+        with pytest.raises(InvalidInputError) as e:
+            rates.check("rec", off, None, made)
+        msg = str(e.value)
+        assert "\n" not in msg and "200 Hz" in msg and rates.hz(off) in msg and "--force" in msg
+    (line,) = rates.check("rec", 100.0, None, made, force=True)
+    assert "100 Hz" in line and "200 Hz" in line and "--force" in line
+    # a profile is checked alike; a rate unknown on either side is not checked (an info line says so)
+    prof = rates.MadeFor("profile p.json", 285.7, "broad")
+    with pytest.raises(InvalidInputError, match="285.7 Hz"):
+        rates.check("rec", 200.0, None, [prof])
+    assert rates.check("rec", None, None, made) == rates.check("rec", 100.0, None, [rates.MadeFor("m", None, None)]) == []
+    assert len(rates.unchecked(None, [rates.MadeFor("m", None, None)])) == 2
+
+
+def test_another_device_is_one_warning_line():
+    made = [rates.MadeFor("model m.pt", 200.0, "euroc+tum-vi")]
+    assert rates.check("rec", 200.0, "tum-vi", made) == rates.check("rec", 200.0, "EuRoC", made) == []
+    (line,) = rates.check("rec", 200.0, "fetch", made)
+    assert "'fetch'" in line and "'euroc+tum-vi'" in line and "\n" not in line
+    assert rates.recording_device("asl") is None  # EuRoC and TUM-VI share ASL: the layout does not tell
+    assert rates.recording_device("asl", "tum-vi") == "tum-vi"
+    assert rates.recording_device("fetch") == "fetch"
+    assert rates.recording_device("csv-columns", "auto", "my-imu") == "my-imu"
+
+
+# ---- what checkpoints record ---------------------------------------------------------------------
+
+
+@pytest.mark.parametrize("name", sorted(SHIPPED))
+def test_shipped_models_get_their_rate_from_their_config(name):
+    rec = imu_record(load_checkpoint(MODELS / name))
+    assert (rec["sample_rate_hz"], rec["device"], rec["source"]) == (*SHIPPED[name], "config")
+
+
+def test_a_new_checkpoint_records_rate_and_device_and_strip_keeps_them(tmp_path):
+    t = 1_000_000_000 + np.arange(500, dtype=np.int64) * 5_000_000  # 200 Hz
+    t[100:] += 1  # one odd period does not move the median
+    z = np.zeros((500, 3))
+    seg = Segment("s", t, z, z, z, z, np.tile([1.0, 0, 0, 0], (500, 1)))
+    cfg = {"data": {"roots": [{"path": "mine/run1", "format": "asl"}], "window": 50}}
+    record = training_record([seg], cfg)
+    assert record == {"sample_rate_hz": pytest.approx(200.0), "device": "mine", "profile": None}
+    cfg_named = {"data": {**cfg["data"], "device": "my-imu"}}
+    assert training_record([seg], cfg_named)["device"] == "my-imu"
+    ck = tmp_path / "ck.pt"
+    save_checkpoint(ck, ImuRefiner(ModelConfig(hidden=8, fc=8, layers=1)), cfg, 1, 1, None, record=record)
+    state = load_checkpoint(ck)
+    assert imu_record(state)["source"] == "recorded" and state["device"] == "mine"
+    assert "profile" not in state  # only what is known is stored
+    small = strip_checkpoint(ck, tmp_path / "small.pt")
+    assert imu_record(small) == imu_record(state)
+    assert describe(load_checkpoint(tmp_path / "small.pt"))["imu"] == {
+        "sample_rate_hz": pytest.approx(200.0), "device": "mine", "source": "recorded"}
+
+
+def test_fit_records_the_training_rate_and_dataset(tmp_path, capsys):
+    run = tmp_path / "run"
+    assert fit_cli.main([
+        "--out", str(run), "--quiet", "--data.window", "50", "--data.batch_size", "4", "--data.val_stride", "400",
+        "--data.eval_stride", "400", "--model.hidden", "8", "--model.fc", "8", "--model.layers", "1",
+        "--optim.steps_per_epoch", "1", "--optim.epochs", "1", "--seed", "1", "--threads", "1",
+    ]) == 0
+    state = load_checkpoint(run / "last.pt")
+    assert state["sample_rate_hz"] == pytest.approx(200.0, rel=1e-3) and state["device"] == "euroc"
+    capsys.readouterr()
+    assert checkpoint_main(["info", str(run / "last.pt")]) == 0
+    assert '"source": "recorded"' in capsys.readouterr().out
+
+
+# ---- imu-learn refine ------------------------------------------------------------------------------
+
+
+def test_euroc_model_on_a_100_hz_fetch_crop_stops_in_one_line(tmp_path, capsys):
+    rec = fetch_crop(tmp_path / "fetch_rec")
+    out = tmp_path / "out"
+    rc, stdout, err = refine(["--checkpoint", MODELS / "euroc_adis16448.pt", "--input", rec, "--out", out], capsys)
+    assert rc == 2 and stdout == "" and err.count("\n") == 1, err
+    assert err.startswith("imu-learn refine: error: ") and "200 Hz" in err and "100 Hz" in err
+    assert not out.exists()
+    # --force: refined, with one warning line for the rate and one for the device
+    rc, stdout, err = refine(["--checkpoint", MODELS / "euroc_adis16448.pt", "--input", rec, "--out", out,
+                              "--force", "--quiet"], capsys)
+    assert rc == 0 and (out / IMU_REL).is_file()
+    warnings = [ln for ln in err.splitlines() if ln.startswith("imu-learn refine: warning: ")]
+    assert len(warnings) == 2 and "100 Hz" in warnings[0] and "'fetch'" in warnings[1], err
+    assert "100 Hz" in stdout and "200 Hz" in stdout  # the summary line names the model's and the recording's rates
+
+
+def test_a_model_of_the_recordings_rate_and_device_runs_without_a_word(tmp_path, capsys):
+    rec = fetch_crop(tmp_path / "fetch_rec")
+    rc, stdout, err = refine(["--checkpoint", MODELS / "fetch_debias.pt", "--input", rec, "--out", tmp_path / "o",
+                              "--quiet"], capsys)
+    assert rc == 0 and err == "" and "fetch at 100 Hz" in stdout
+
+
+def test_same_rate_another_device_warns_once(tmp_path, capsys):
+    args = ["--checkpoint", MODELS / "tumvi_bmi160.pt", "--input", EUROC, "--out", tmp_path / "o", "--quiet"]
+    rc, _out, err = refine(args, capsys)
+    assert rc == 0 and err == ""  # an ASL folder does not say which device wrote it
+    rc, _out, err = refine([*args[:-2], tmp_path / "o2", "--format", "euroc", "--quiet"], capsys)
+    assert rc == 0 and err.count("\n") == 1 and "'euroc'" in err and "'tum-vi'" in err, err
+    rc, _out, err = refine([*args[:-2], tmp_path / "o3", "--imu-name", "tum-vi", "--quiet"], capsys)
+    assert rc == 0 and err == ""
+
+
+def test_a_checkpoint_without_a_rate_is_applied_with_an_info_line(tmp_path, capsys):
+    ck = tmp_path / "ck.pt"
+    save_checkpoint(ck, ImuRefiner(ModelConfig(hidden=8, fc=8, layers=1)), {"test": True}, 1, 1, None)
+    rc, _out, err = refine(["--checkpoint", ck, "--input", TUMVI, "--out", tmp_path / "o"], capsys)
+    assert rc == 0 and "records no sample rate" in err and "warning" not in err, err
