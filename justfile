@@ -32,7 +32,7 @@ test-fast *args="":
 
 # Property tests of every imu_core reader with many cases (release); prints the cases each property ran
 fuzz cases="50000":
-    PROPTEST_CASES={{cases}} cargo test --release -p imu_core --test prop_readers -- --nocapture
+    PROPTEST_CASES={{cases}} cargo test --release -p imu_core --test prop_readers --test io_columns -- --nocapture
 
 # Lint: rustfmt, clippy (no warnings), ruff
 lint:
