@@ -1,16 +1,23 @@
 """Inertial-aided navigation: fuse an IMU stream (raw, or refined by a checkpoint) with aiding in a
-GTSAM factor graph and score the trajectory against ground truth.
+GTSAM factor graph, and score the trajectory. One home per concern:
 
-* :mod:`.noise`   the IMU's noise densities and random walks (a dataset's ``sensor.yaml`` or the
-  config) as GTSAM preintegration parameters;
-* :mod:`.aiding`  aiding measurements: real (EuRoC's Leica laser tracker) and simulated from ground
-  truth (GNSS-like position, VO-like relative pose), with outages;
-* :mod:`.graph`   the factor graph (``CombinedImuFactor`` between keyframes, aiding factors, a
-  ground-truth prior on the first state), solved by iSAM2 keyframe by keyframe (causal) and
-  refined at the end (smoothed);
-* :mod:`.score`   position and rotation RMSE, and the drift inside each outage;
-* :mod:`.config`, :mod:`.run` the experiment: recordings x IMU inputs x aiding scenarios
-  (``python -m imu_learn.fuse --config configs/fuse_euroc.toml``).
+* :mod:`.settings`  what the graph runs with (:class:`FusionSettings`: noise, gravity, keyframes, the
+  first state's prior, the estimator); :mod:`.noise` the IMU's noise densities;
+* :mod:`.graph`     the factor graph (:class:`IncrementalFusion`, causal iSAM2 / fixed-lag and the
+  smoothing pass) and the one loop over its samples (:func:`~.graph.feed`, :func:`fuse`);
+* :mod:`.factors`   factors beyond the IMU and the aiding, through one hook (NHC, learned
+  displacements, GNSS velocities);
+* :mod:`.aiding`    the measurement types, the time rules, simulation, real fixes, outages, and the
+  readers (TUM, RTKLIB, extrinsics);
+* :mod:`.inputs`    an IMU input by name or file: samples, variances, displacement hook;
+* :mod:`.start`     the first state (one type): ground truth, from the data, from the aiding;
+* :mod:`.score`     every score; :mod:`.output` every file written (trajectories, results, plots);
+* :mod:`.navigate`  a user's recording with its aiding file (``imu-learn navigate``);
+* :mod:`.experiments` the experiments of a config (``imu-learn fuse --config``): batch, online,
+  GNSS outages;
+* :mod:`.variance`  a covariance head's variances calibrated over the keyframe interval.
+
+GTSAM (the ``fuse`` extra) is imported where the graph is built.
 """
 from .aiding import PositionFixes, RelativePoses, apply_outages, leica_fixes, simulate_position, simulate_relative_pose
 from .graph import FusionResult, IncrementalFusion, fuse

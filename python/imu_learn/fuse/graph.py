@@ -17,7 +17,7 @@ keeps iSAM2 over the whole graph (each update's cost grows with the graph: quadr
 estimator the fusion tables were first written with.
 
 :class:`IncrementalFusion` holds the graph and takes the IMU one sample at a time (the online mode,
-:mod:`imu_learn.fuse.online`, streams through it); :func:`fuse` is a loop over a recording's samples
+:mod:`imu_learn.fuse.experiments.online`, streams through it); :func:`fuse` is a loop over a recording's samples
 through it followed by the smoothing pass.
 
 GTSAM's ``CombinedImuFactor`` takes its default (tangent-space, first-order) preintegration; over
@@ -117,7 +117,7 @@ def _aiding_by_sample(aiding: Seq) -> tuple:
     for a in aiding:
         if isinstance(a, PositionFixes):
             model = gtsam.noiseModel.Isotropic.Sigma(3, a.sigma_m)
-            # Per-fix sigmas (M, 3) where the aiding has them (fuse/rtklib.py's GnssFixes), else sigma_m.
+            # Per-fix sigmas (M, 3) where the aiding has them (aiding.GnssFixes), else sigma_m.
             sig = getattr(a, "sigmas", None)
             if sig is not None and np.shape(sig) != (len(a.idx), 3):
                 raise InvalidInputError(f"{a.label}: per-fix sigmas {np.shape(sig)}, expected ({len(a.idx)}, 3)")

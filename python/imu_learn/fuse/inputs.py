@@ -21,8 +21,11 @@ from typing import Dict, Optional, Tuple, Union
 
 import numpy as np
 
+from imu_learn.baselines.registry import REGISTRY, load_method_class
 from imu_learn.data.types import Segment
 from imu_learn.errors import ConfigError
+
+from .factors.displacement import displacement_factors_for
 
 # "raw+learned-cov" / "proposed+learned-cov": the raw or refined samples, each weighted in the
 # graph by its own noise variances from a refiner's covariance head (covariance_checkpoint) instead
@@ -65,8 +68,6 @@ def load(name: str, path: str, cache: Optional[Cache] = None) -> object:
                 raise ConfigError(f"{name}: {path} has no covariance head (a model fitted with model.covariance = true)")
             cache[(name, path)] = model
         else:
-            from imu_learn.baselines.registry import load_method_class
-
             cache[(name, path)] = load_method_class(name)().load(Path(path))
     return cache[(name, path)]
 
@@ -130,8 +131,6 @@ def checkpoint_input(checkpoint: Optional[Path], t_ns: np.ndarray, gyro: np.ndar
 def method_input(path: Path, t_ns: np.ndarray, gyro: np.ndarray, acc: np.ndarray) -> Tuple[np.ndarray, np.ndarray, str]:
     """(gyro, acc, label): the IMU through a fit ``imu-learn evaluate`` saved (``<out>/methods/timing.json``,
     ``traditional+timing.json``, ...; the method is the file's name), the floor a learned input is judged by."""
-    from imu_learn.baselines.registry import REGISTRY
-
     name = Path(path).stem
     if name not in REGISTRY:
         raise ConfigError(f"--calibration: {path}: the file name must be a method's ({', '.join(REGISTRY)}), as "
@@ -153,8 +152,6 @@ def displacement_model(path: Path, cache: Optional[Cache] = None):
 def displacement_hook(model, t_ns: np.ndarray, gyro: np.ndarray, acc: np.ndarray, update_s: float = 1.0):
     """The graph's factor hook of a displacement ``model``, regressed from the raw samples ``gyro``,
     ``acc`` (the network's training input) every ``update_s`` seconds."""
-    from .factors.displacement import displacement_factors_for
-
     return displacement_factors_for(model, t_ns, np.ascontiguousarray(gyro), np.ascontiguousarray(acc), update_s)
 
 

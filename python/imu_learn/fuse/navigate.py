@@ -50,6 +50,9 @@ from typing import Dict, Optional, Tuple
 import numpy as np
 from scipy.spatial.transform import Rotation
 
+from imu_learn.data import formats
+from imu_learn.data.formats.asl import imu_sensor_yaml
+from imu_learn.data.formats.gnss_imu import mounting_rotation
 from imu_learn.errors import AidingError, ConfigError, InvalidInputError
 
 from .aiding import AbsolutePoses, OutageWindow, PositionFixes, RelativePoses, snap_to_samples
@@ -109,7 +112,7 @@ class NavigateOptions:
     imu_delay_s: float = 0.0
     # position aiding: the antenna from the IMU, body frame [m] (instead of an extrinsic's translation)
     lever_arm: Optional[Tuple[float, float, float]] = None
-    # the non-holonomic constraint of a wheeled vehicle (:mod:`.nhc`): no sideways / vertical body velocity
+    # the non-holonomic constraint of a wheeled vehicle (:mod:`.factors.nhc`): no sideways / vertical body velocity
     nhc: bool = False
     nhc_sigma_lat_mps: float = 0.1
     nhc_sigma_vert_mps: float = 0.1
@@ -249,9 +252,6 @@ def select_rows(traj: Trajectory, imu_t_ns: np.ndarray, T_BS: Optional[np.ndarra
 
 def read_imu(path: Path, fmt: str = "auto"):
     """(t_ns, gyro, acc, noise, source file) of a recording: the IMU only (no ground truth is read)."""
-    from imu_learn.data import formats
-    from imu_learn.data.formats.asl import imu_sensor_yaml
-
     src = formats.read_imu_source(Path(path), fmt)
     if src.t_ns is None:
         raise InvalidInputError(f"{path}: the recording has no IMU stamps of its own; navigation needs them")
@@ -350,8 +350,6 @@ def read_body_imu(src: Sources, opts: NavigateOptions) -> Imu:
     t_ns, gyro, acc, noise, imu_file = read_imu(src.input, src.fmt)
     mounting = None
     if opts.imu_rotation_rpy_deg is not None:
-        from imu_learn.data.formats.gnss_imu import mounting_rotation
-
         mounting = mounting_rotation(opts.imu_rotation_rpy_deg)
         gyro, acc = np.ascontiguousarray(gyro @ mounting.T), np.ascontiguousarray(acc @ mounting.T)
     if opts.imu_delay_s:

@@ -12,6 +12,7 @@ from pathlib import Path
 
 import numpy as np
 
+from imu_learn.data.formats.asl import read_sensor_yaml
 from imu_learn.errors import InvalidInputError
 
 SENSOR_KEYS = {
@@ -40,8 +41,6 @@ class ImuNoise:
     @classmethod
     def from_sensor_yaml(cls, path: Path) -> ImuNoise:
         """The four densities of an ASL ``mav0/imu0/sensor.yaml``."""
-        from imu_learn.data.formats.asl import read_sensor_yaml
-
         y = read_sensor_yaml(Path(path))
         missing = [v for v in SENSOR_KEYS.values() if not isinstance(y.get(v), float)]
         if missing:

@@ -17,6 +17,8 @@ from imu_learn import _imu_core as core
 from imu_learn.core.quat import xyzw_to_wxyz
 from imu_learn.util.atomic import atomic_write_bytes, atomic_write_path, atomic_write_text
 
+from .aiding.tum import read_tum
+
 
 def write_trajectory(path: Path, t_ns: np.ndarray, p: np.ndarray, R: np.ndarray) -> None:
     path.parent.mkdir(parents=True, exist_ok=True)
@@ -76,11 +78,11 @@ def plot_setting(out_png: Path, title: str, t_ns: np.ndarray, p_gt: np.ndarray,
         for path, style, kind in ((causal, "-", "causal"), (smoothed, "--", "smoothed")):
             if not path.exists():
                 continue
-            tr = core.read_tum(str(path))
-            idx = np.clip(np.searchsorted(t_ns, tr["t_ns"]), 0, len(t_ns) - 1)
-            e = np.linalg.norm(tr["p"] - p_gt[idx], axis=1)
-            top.plot(tr["p"][:, 0], tr["p"][:, 1], style, color=color, lw=1, label=f"{name} {kind}")
-            err.plot((tr["t_ns"] - t0) * 1e-9, e, style, color=color, lw=1, label=f"{name} {kind}")
+            tr = read_tum(path)
+            idx = np.clip(np.searchsorted(t_ns, tr.t_ns), 0, len(t_ns) - 1)
+            e = np.linalg.norm(tr.p - p_gt[idx], axis=1)
+            top.plot(tr.p[:, 0], tr.p[:, 1], style, color=color, lw=1, label=f"{name} {kind}")
+            err.plot((tr.t_ns - t0) * 1e-9, e, style, color=color, lw=1, label=f"{name} {kind}")
     for start, dur in outages:
         err.axvspan(start, start + dur, color="grey", alpha=0.2, lw=0)
     top.set(xlabel="x [m]", ylabel="y [m]", title="top view")

@@ -14,6 +14,7 @@ import numpy as np
 from scipy.spatial.transform import Rotation, Slerp
 
 from imu_learn.core.quat import rotation_angle, xyzw_to_wxyz
+from imu_learn.data.formats.groundtruth import read_groundtruth
 from imu_learn.errors import AidingError
 from imu_learn.score.metrics import rmse
 
@@ -148,8 +149,6 @@ def score_against(groundtruth: Path, kf_t: np.ndarray, res, rows, R_WA: np.ndarr
     the navigation frame by ``R_WA``), against the ``groundtruth`` file interpolated at their stamps;
     after a rigid SE(3) alignment (Umeyama, no scale: ``evo_ape -a``) with ``align``, else as they are;
     plus the error inside each gap (``gaps``: seconds from ``t0_ns``, the first IMU sample)."""
-    from imu_learn.data.formats.groundtruth import read_groundtruth
-
     gt = read_groundtruth(Path(groundtruth))
     inside, p_gt, R_gt = interpolate_groundtruth(gt, kf_t)
     if inside.sum() < 3:

@@ -19,6 +19,7 @@ from typing import Optional, Union
 
 import numpy as np
 
+from imu_learn.data.formats.asl import read_sensor_yaml
 from imu_learn.errors import ExtrinsicsError, ParseError
 
 ROTATION_TOL = 1e-3  # |R^T R - I| and |det R - 1| above this: not a rotation (calibrations print ~1e-9)
@@ -34,8 +35,6 @@ def _line_of(lines: list, key: str) -> Optional[int]:
 
 def read_t_bs(path: Union[str, Path]) -> np.ndarray:
     """The 4x4 ``T_BS`` (sensor to body) of a Kalibr/ASL ``sensor.yaml`` (module docstring)."""
-    from imu_learn.data.formats.asl import read_sensor_yaml
-
     path = Path(path)
     src = str(path)
     if not path.is_file():

@@ -24,8 +24,13 @@ from typing import Callable, Dict, List, Optional, Tuple
 import numpy as np
 from scipy.spatial.transform import Rotation
 
+from imu_learn.baselines.registry import method_file
 from imu_learn.core.quat import wxyz_to_xyzw
+from imu_learn.data.formats.asl import imu_sensor_yaml, leica_file, read_leica
+from imu_learn.data.loading import AlignOptions, load_recording
+from imu_learn.data.types import Segment
 from imu_learn.errors import ConfigError, InvalidInputError
+from imu_learn.score.metrics import fit_startup_bias
 from imu_learn.util.atomic import atomic_write_text
 from imu_learn.util.digest import file_sha256
 
@@ -88,8 +93,6 @@ def artefact_of(cfg: FuseConfig, spec: RecordingSpec, name: str) -> str:
         return spec.traditional or cfg.traditional
     if name == "raw":
         return ""
-    from imu_learn.baselines.registry import method_file
-
     return str(method_file(Path(spec.methods_dir or cfg.methods_dir), name))
 
 
@@ -152,9 +155,6 @@ def aiding_rng(seed: Optional[int], rname: str, scn: ScenarioSpec) -> np.random.
 
 def load_recording_for_fusion(cfg: FuseConfig, spec: RecordingSpec):
     """The recording's longest gap-free segment, its noise model, and its Leica fixes (or None)."""
-    from imu_learn import AlignOptions, load_recording
-    from imu_learn.data.formats.asl import imu_sensor_yaml, leica_file, read_leica
-
     root = cfg.root()
     path = root / spec.path
     gt = root / spec.groundtruth if spec.groundtruth else None
@@ -178,9 +178,6 @@ def load_recording_for_fusion(cfg: FuseConfig, spec: RecordingSpec):
 def bias_prior_mean(scn: ScenarioSpec, seq, gyro: np.ndarray, acc: np.ndarray, gravity: float):
     if scn.bias_prior == "zero":
         return None
-    from imu_learn.data.types import Segment
-    from imu_learn.score.metrics import fit_startup_bias
-
     bg, ba = fit_startup_bias(Segment(seq.name, seq.t_ns, gyro, acc, seq.p, seq.v, seq.q_wxyz),
                               scn.startup_bias_s, gravity=gravity)
     return np.r_[bg, ba]

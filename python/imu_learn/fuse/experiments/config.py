@@ -9,6 +9,8 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import List, Optional
 
+from imu_learn.baselines.base import Method
+from imu_learn.baselines.registry import REGISTRY, load_method_class
 from imu_learn.errors import ConfigError
 from imu_learn.settings import DATA_ROOT_ENV, from_dict, read_toml
 
@@ -126,9 +128,6 @@ class FuseConfig:
 def imu_methods() -> List[str]:
     """Every input name: raw, proposed, and each ``imu_learn.evaluate`` method whose output is IMU
     samples (its class has its own ``refine``; End-to-End regresses poses and is not one)."""
-    from imu_learn.baselines.base import Method
-    from imu_learn.baselines.registry import REGISTRY, load_method_class
-
     names = list(INPUTS) + list(FACTOR_INPUTS)  # the raw IMU plus learned displacement factors
     for name in REGISTRY:
         if name in names or name == "raw":

@@ -47,14 +47,18 @@ from typing import Callable, Dict, List, Optional, Sequence, Tuple
 
 import numpy as np
 
+from imu_learn.core.quat import wxyz_to_xyzw
 from imu_learn.errors import ConfigError, InvalidInputError
 from imu_learn.infer.streaming import WindowedStepper, load_causal_model, load_learned_model, make_stepper
+from imu_learn.util.machine import cpu_name
 
 from ..aiding import OutageWindow
 from ..graph import FusionResult, IncrementalFusion, feed
+from ..inputs import TLIO_INPUT, displacement_hook, load
 from ..output import read_runs, write_json
 from ..score import score_online
 from ..settings import FusionSettings
+from . import batch as runmod
 
 log = logging.getLogger(__name__)
 
@@ -227,8 +231,6 @@ def machine() -> Dict[str, object]:
     """What the latencies were measured on."""
     import torch
 
-    from imu_learn.util.machine import cpu_name
-
     cpu = cpu_name()
     try:
         cores = len(os.sched_getaffinity(0))
@@ -251,8 +253,6 @@ def _select(names: Optional[Sequence[str]], available: List[str], what: str) -> 
 def _causal_models(cfg, specs: list, checkpoint: Optional[str]) -> Tuple[Dict[str, object], Dict[str, str]]:
     """Every recording's causal model for ``proposed``, loaded (and checked causal) before any run:
     the models by checkpoint path, and each recording's checkpoint path."""
-    from . import batch as runmod
-
     models: Dict[str, object] = {}
     ckpt_of: Dict[str, str] = {}
     for spec in specs:
@@ -269,8 +269,6 @@ def _causal_models(cfg, specs: list, checkpoint: Optional[str]) -> Tuple[Dict[st
 def _learned_models(cfg, specs: list) -> Tuple[Dict[str, object], Dict[str, str]]:
     """Every recording's ``learned`` model (the config's covariance_checkpoint: bidirectional, with a
     covariance head), loaded and checked before any run: the models by path, and each recording's path."""
-    from . import batch as runmod
-
     models: Dict[str, object] = {}
     ckpt_of: Dict[str, str] = {}
     for spec in specs:
@@ -287,9 +285,6 @@ def _displacement_hook(cfg, spec, seq, s0: int = 0) -> Optional[Callable]:
     """The ``learned`` input's displacement factors where the device has a tlio-style model (as the
     batch run adds them, on the raw IMU; the hook reads only samples before the current keyframe),
     else None."""
-    from ..inputs import TLIO_INPUT, displacement_hook, load
-    from . import batch as runmod
-
     path = runmod.displacement_artefact(cfg, spec)
     if not path:
         return None
@@ -304,8 +299,6 @@ def _bias_prior(cfg, scn, seq, name: str, model, refined: Dict[str, tuple]) -> O
     will see: the causal refinement of the first seconds, which refine_arrays gives (up to float32
     rounding), or for ``learned`` the windowed one, which ``apply`` gives (idem); ``refined`` caches
     them per recording."""
-    from . import batch as runmod
-
     if scn.bias_prior == "zero":
         return None
     if name == "proposed" and "proposed" not in refined:
@@ -345,10 +338,6 @@ def _stream_recording(cfg, spec, scns: list, inputs: Sequence[str], models: Dict
     """Every scenario x input of one recording, each run stored in ``runs`` and saved as it ends."""
     import torch
     from scipy.spatial.transform import Rotation
-
-    from imu_learn.core.quat import wxyz_to_xyzw
-
-    from . import batch as runmod
 
     rname = Path(spec.path).name
     seq, noise, leica = runmod.load_recording_for_fusion(cfg, spec)
@@ -421,10 +410,10 @@ def run_online(cfg, out: Path, checkpoint: Optional[str] = None, recordings: Opt
     scns = [s for s in cfg.scenarios if s.name in scn_names]
     models: Dict[str, object] = {}
     ckpt_of: Dict[Tuple[str, str], str] = {}  # (input, recording) -> checkpoint path
-    for name, load in (("proposed", lambda: _causal_models(cfg, specs, checkpoint)),
-                       ("learned", lambda: _learned_models(cfg, specs))):
+    for name, load_models in (("proposed", lambda: _causal_models(cfg, specs, checkpoint)),
+                              ("learned", lambda: _learned_models(cfg, specs))):
         if name in inputs:
-            loaded, paths = load()
+            loaded, paths = load_models()
             models.update(loaded)
             ckpt_of.update({(name, rec): path for rec, path in paths.items()})
     res_path = Path(out) / "online.json"

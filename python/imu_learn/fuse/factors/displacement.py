@@ -4,7 +4,7 @@ factor per completed network window, from the ``tlio-style`` method of ``imu_lea
 (:mod:`imu_learn.baselines.tlio`), fused with the scenario's aiding as every other input.
 
 TLIO (Liu et al., RA-L 2020) fuses its network's displacements in a stochastic-cloning EKF; ours
-is the factor graph of :mod:`.graph` (iSAM2 causal, batch LM smoothed), so the measurement model is
+is the factor graph of :mod:`imu_learn.fuse.graph` (iSAM2 causal, batch LM smoothed), so the measurement model is
 the same but the estimator is not.
 
 Factor (:func:`displacement_factor`, a ``gtsam.CustomFactor`` on the poses X(i), X(j) of the
