@@ -184,3 +184,16 @@ def test_groundtruth_reads_a_users_csv_as_its_own_layout(tmp_path, capsys):
     assert mine[1:-1] == own[1:-1]  # the same figures; only the names differ
     assert groundtruth_main(["--input", str(src), *USER_ARGS]) == 2
     assert "--groundtruth" in capsys.readouterr().err
+
+
+def test_model_check_on_a_users_csv_is_the_folders(tmp_path):
+    from imu_learn.infer.model_check import compare_with_raw
+
+    src = user_csv(tmp_path / "mine.csv", every=1, n=12001)
+    ckpt = REPO / "models" / "euroc_adis16448.pt"
+    mine = compare_with_raw(ckpt, src, groundtruth=GT, columns=USER)
+    own = compare_with_raw(ckpt, EUROC, "euroc", groundtruth=GT)
+    assert mine["samples"] == own["samples"]
+    for proto in own["ratio"]:
+        for n in own["ratio"][proto]:
+            assert mine["ratio"][proto][n] == pytest.approx(own["ratio"][proto][n], rel=1e-9)

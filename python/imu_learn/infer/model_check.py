@@ -26,7 +26,7 @@ from typing import Any, Dict, List, Optional, Sequence, Union
 
 import numpy as np
 
-from imu_learn.data.formats import read_recording
+from imu_learn.data.formats import CsvColumns, read_recording
 from imu_learn.data.loading import AlignOptions, align
 from imu_learn.data.types import ImuData
 from imu_learn.data.types import Segment as Seq
@@ -60,6 +60,7 @@ def compare_with_raw(
     gravity: Optional[float] = None,
     max_gap_s: float = 0.05,
     device: str = "cpu",
+    columns: Optional[CsvColumns] = None,
 ) -> Dict[str, Any]:
     """Raw vs refined relative pose RMSE of one recording (see the module docstring).
 
@@ -67,7 +68,8 @@ def compare_with_raw(
     ``T[protocol][str(n)]`` is ``{"rot_rad", "rot_deg", "trans_m", "windows"}`` for protocol
     ``open_loop`` or ``bias_removed`` and ``R[protocol][str(n)] = {"rot", "trans"}`` is refined / raw
     (below 1: the model helps). ``window``/``overlap`` override the checkpoint's windowing rule (None: its own);
-    ``max_gap_s`` splits the recording at ground-truth gaps as :class:`imu_learn.AlignOptions`.
+    ``max_gap_s`` splits the recording at ground-truth gaps as :class:`imu_learn.AlignOptions`;
+    ``columns``: the recording is a user's CSV of this layout (its ground truth is ``groundtruth``).
     """
     state = load_checkpoint(Path(checkpoint))
     data = (state.get("config") or {}).get("data") or {}
@@ -76,7 +78,8 @@ def compare_with_raw(
     gravity = float(gravity if gravity is not None else data.get("gravity", GRAVITY))
 
     model = model_from_checkpoint(state).to(pick_device(device))
-    imu, gt = read_recording(Path(recording_path), format, None if groundtruth is None else Path(groundtruth))
+    imu, gt = read_recording(Path(recording_path), format, None if groundtruth is None else Path(groundtruth),
+                             columns=columns)
     rule = windowing_of(model).replace(window, overlap)
     gyro, acc = refine_arrays(model, imu.gyro, imu.acc, window=rule.window, overlap=rule.overlap)
     options = AlignOptions(max_gap_s=max_gap_s)
