@@ -77,7 +77,7 @@ def test_a_data_start_settles_on_the_heading_of_the_fixes_frame(crop, turn_deg):
 
     Rz = Rotation.from_euler("z", turn_deg, degrees=True).as_matrix()
     fixes = simulate_position(crop.t_ns, crop.p @ Rz.T, 1.0, 0.05, np.random.default_rng(0))
-    st = data_start(crop.t_ns, crop.gyro, crop.acc, fixes, ImuNoise(), 9.81, 10.0)
+    st = data_start(crop.t_ns, crop.gyro, crop.acc, fixes, FusionSettings(ImuNoise(), 9.81, 10.0))
     assert st.score_from > st.start and not st.align and "yaw" in st.info["heading_source"]
     s0 = st.start
     res = fuse(crop.t_ns[s0:], crop.gyro[s0:], crop.acc[s0:], (st.R, st.p, st.v), [fixes.since(s0)],
@@ -95,7 +95,7 @@ def test_a_data_start_settles_on_the_heading_of_the_fixes_frame(crop, turn_deg):
 
 def test_relative_aiding_starts_at_the_origin_and_is_scored_aligned(crop):
     rel = simulate_relative_pose(crop.t_ns, crop.p, crop.q_wxyz, 10.0, 0.1, 0.01, np.random.default_rng(0))
-    st = data_start(crop.t_ns, crop.gyro, crop.acc, rel, ImuNoise(), 9.81, 10.0)
+    st = data_start(crop.t_ns, crop.gyro, crop.acc, rel, FusionSettings(ImuNoise(), 9.81, 10.0))
     assert st.align and st.score_from == st.start and np.all(st.p == 0.0) and abs(_yaw(st.R)) < 1e-9
     R_gt = Rotation.from_quat(wxyz_to_xyzw(crop.q_wxyz[st.start])).as_matrix()
     tilt = np.rad2deg(np.arccos(np.clip((st.R.T @ [0, 0, 1]) @ (R_gt.T @ [0, 0, 1]), -1.0, 1.0)))

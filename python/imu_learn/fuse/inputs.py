@@ -58,7 +58,7 @@ def load(name: str, path: str, cache: Optional[Cache] = None) -> object:
     if (name, path) not in cache:
         if not Path(path).is_file():
             hint = ("" if name == "proposed" else
-                    f" (python -m imu_learn.evaluate with the '{name}' method writes it to <report>/methods/)")
+                    f" (imu-learn evaluate with the '{name}' method writes it to <report>/methods/)")
             raise FileNotFoundError(f"{name}: {path} not found{hint}")
         if is_refiner(name):
             from imu_learn.infer.checkpoint import load_model

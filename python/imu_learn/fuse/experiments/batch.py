@@ -17,7 +17,7 @@ import json
 import os
 import sys
 import zlib
-from dataclasses import asdict, replace
+from dataclasses import asdict, dataclass, replace
 from pathlib import Path
 from typing import Callable, Dict, List, Optional, Tuple
 
@@ -272,8 +272,8 @@ def _submit_recording(cfg: FuseConfig, out: Path, spec: RecordingSpec, run_input
                     continue
                 gyro, acc, var = inputs[name]
                 displacement = displacement_of(cfg, spec, name, processors)
-                runs.submit(key, seed, (cfg, out, seq, noise, R0, scn, aiding, key, gyro, acc, var),
-                            {"displacement": displacement, "bag": bag_of(cfg, spec)})
+                runs.submit(key, seed, (cfg, out, Run(key, seq, noise, R0, scn, aiding, (gyro, acc, var), displacement,
+                                                      bag_of(cfg, spec))), {})
             label = label or (aiding.label if aiding is not None else None)
         if label is not None:  # drawn from the first seed's trajectories
             stem = run_key(spec, scn, "{input}", seeds_of(cfg, scn)[0]).replace("|", "_")
@@ -366,14 +366,32 @@ class RunQueue:
                  f"{r['smoothed']['pos_rmse_m']:.3f} m ({r['seconds']:.0f} s)"))
 
 
-def run_one(cfg: FuseConfig, out: Path, seq, noise: ImuNoise, R0: np.ndarray, scn: ScenarioSpec, aiding, key: str,
-            gyro: np.ndarray, acc: np.ndarray, var: Optional[np.ndarray] = None, displacement=None,
-            bag: Optional[Path] = None) -> dict:
-    """Fuse one input with one aiding; its scores (or ``failed``) and its trajectories on disk.
-    ``R0``: ground truth's first attitude, the first state with ``cfg.init = "groundtruth"`` (else
-    the run starts from the data: :func:`imu_learn.fuse.start.data.data_start`); ``displacement``: a
-    fitted tlio-style model whose displacements join the graph as factors; ``bag``: the recording's
-    bag, when it is one (the trajectories are then written as its kind of bag too)."""
+@dataclass
+class Run:
+    """One run of the experiment: its ``key`` (recording|scenario|input[|seed]), the recording's segment
+    ``seq`` and noise model, ground truth's first attitude ``R0`` (the first state with
+    ``cfg.init = "groundtruth"``; else the run starts from the data:
+    :func:`imu_learn.fuse.start.data.data_start`), the scenario and its aiding, the input's samples
+    ``imu`` (gyro, acc, per-sample variances or None), a fitted displacement model whose displacements
+    join the graph as factors (or None), and the recording's bag when it is one (the trajectories are
+    then written as its kind of bag too)."""
+
+    key: str
+    seq: object
+    noise: ImuNoise
+    R0: np.ndarray
+    scn: ScenarioSpec
+    aiding: object
+    imu: tuple
+    displacement: object = None
+    bag: Optional[Path] = None
+
+
+def run_one(cfg: FuseConfig, out: Path, run: Run) -> dict:
+    """Fuse one input with one aiding; its scores (or ``failed``) and its trajectories on disk."""
+    key, seq, noise, R0, scn, aiding, displacement, bag = (run.key, run.seq, run.noise, run.R0, run.scn, run.aiding,
+                                                            run.displacement, run.bag)
+    gyro, acc, var = run.imu
     rname, _, name = key.split("|")[:3]
     head = {"recording": rname, "scenario": scn.name, "input": name, "aiding": aiding.label,
             "aiding_count": len(aiding), "aiding_gaps": aiding_gaps(aiding, seq.t_ns),
@@ -425,7 +443,7 @@ def first_state(cfg: FuseConfig, seq, noise: ImuNoise, R0: np.ndarray, aiding, g
     graph's tight default prior) or the data's (:func:`imu_learn.fuse.start.data.data_start`)."""
     if cfg.init == "groundtruth":
         return groundtruth_start(R0, seq.p[0], seq.v[0], bias0)
-    st = data_start(seq.t_ns, gyro, acc, aiding, noise, cfg.gravity, cfg.keyframe_hz, bias0, var,
+    st = data_start(seq.t_ns, gyro, acc, aiding, FusionSettings(noise, cfg.gravity, cfg.keyframe_hz), bias0, var,
                     align_settings(cfg))
     return replace(st, info=json_ready(st.info))
 

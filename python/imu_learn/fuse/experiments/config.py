@@ -105,10 +105,10 @@ class FuseConfig:
     align_travel_m: float = 2.0
     inputs: List[str] = field(default_factory=lambda: ["raw", "proposed"])
     checkpoint: str = "models/euroc_adis16448.pt"  # for "proposed" (relative to the working directory)
-    # For "traditional": the calibration `python -m imu_learn.evaluate` fitted on the train split
+    # For "traditional": the calibration `imu-learn evaluate` fitted on the train split
     # (<report>/methods/traditional.json).
     traditional: str = "reports/euroc_paper/methods/traditional.json"
-    # For any other method of `python -m imu_learn.evaluate` that outputs IMU samples (e.g.
+    # For any other method of `imu-learn evaluate` that outputs IMU samples (e.g.
     # "gyro-denoise", "airimu-style"): <methods_dir>/<name>.pt, as evaluate wrote it.
     methods_dir: str = ""
     # For the "+learned-cov" inputs: a refiner checkpoint with a covariance head (model.covariance),

@@ -4,7 +4,7 @@ rtklibexplorer/GNSS_IMU's experiment (its loosely coupled EKF is the peer) on ou
 ``imu-learn fuse --config configs/fuse_gnss_drive.toml --data-root DIR``: a config with
 ``kind = "gnss-outages"`` is routed here by :mod:`imu_learn.cli.fuse` (:func:`load_config`,
 :func:`apply_override` for ``--set``, :func:`experiment`, :func:`write_results`); this module
-only logs (``python -m imu_learn.fuse.gnss_run ...`` is a shim for the same command).
+only logs.
 
 Initialisation from the data alone: roll and pitch levelled from the accelerometer's mean over a
 still start (``level_s`` seconds, checked still against the fixes' speed), carried to the start by
@@ -208,14 +208,31 @@ def _carry(params, nav, bias, gyro, acc, t_ns, a: int, b: int):
     return pim.predict(nav, bias)
 
 
-def run_variant(cfg: GnssRunConfig, variant: str, t: np.ndarray, gyro: np.ndarray, acc: np.ndarray,
-                fixes: GnssFixes, start: Dict[str, object], noise: ImuNoise, gravity: float,
-                eval_idx: np.ndarray, sol: RtkSolution, diag_idx: Sequence[int] = (),
+@dataclass
+class Drive:
+    """What every variant fuses: the IMU from the start sample on (``t``, ``gyro``, ``acc``), the fixes
+    used (outside the outages) and their solution ``sol``, the ``start`` (:func:`gnss_start`), the noise
+    model and gravity."""
+
+    t: np.ndarray
+    gyro: np.ndarray
+    acc: np.ndarray
+    fixes: GnssFixes
+    sol: RtkSolution
+    start: Dict[str, object]
+    noise: ImuNoise
+    gravity: float
+
+
+def run_variant(cfg: GnssRunConfig, variant: str, drive: Drive, eval_idx: np.ndarray, diag_idx: Sequence[int] = (),
                 nhc_lever: Optional[np.ndarray] = None) -> Dict[str, object]:
-    """Fuse (IMU from the start sample on) and return the antenna's live and smoothed ENU position
-    at the samples ``eval_idx`` (indices into ``t``), the live and smoothed attitude and velocity
-    at the samples ``diag_idx`` (the outage starts), and the run's counts and time."""
+    """Fuse the drive and return the antenna's live and smoothed ENU position at the samples
+    ``eval_idx`` (indices into ``drive.t``), the live and smoothed attitude and velocity at the samples
+    ``diag_idx`` (the outage starts), and the run's counts and time."""
     import gtsam
+
+    t, gyro, acc, fixes, sol = drive.t, drive.gyro, drive.acc, drive.fixes, drive.sol
+    start, noise, gravity = drive.start, drive.noise, drive.gravity
 
     prior = PriorSigmas(math.radians(cfg.prior_rot_deg), cfg.prior_pos_m, cfg.prior_vel_mps, cfg.prior_bias_gyro,
                         cfg.prior_bias_acc)
@@ -327,7 +344,7 @@ def experiment(cfg: GnssRunConfig) -> Dict[str, object]:
             except InvalidInputError as e:  # e.g. a straight drive: keep the config's lever
                 nhc_lever, nhc_fit = None, {"lever_m": list(cfg.nhc.lever), "fallback": str(e)}
                 log.warning("%s: %s; NHC lever from the config %s", cfg.name, e, cfg.nhc.lever)
-        r = run_variant(cfg, variant, t, gyro, acc, fixes, start, noise, gravity, eval_idx, sol, diag_idx,
+        r = run_variant(cfg, variant, Drive(t, gyro, acc, fixes, sol, start, noise, gravity), eval_idx, diag_idx,
                         nhc_lever if variant == "raw+nhc" else None)
         if variant == "raw":
             raw_res = r["result"]

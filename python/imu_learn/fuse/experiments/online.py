@@ -31,7 +31,7 @@ ones equal them up to float32 rounding of the batched forward, tests/test_fuse_o
 the device has a tlio-style model, the same displacement factors (``extra_factors``; they read only
 raw samples before the current keyframe, which have arrived). No smoothing runs online.
 
-``python -m imu_learn.fuse --config configs/fuse_euroc.toml --online --checkpoint CAUSAL.pt`` runs
+``imu-learn fuse --config configs/fuse_euroc.toml --online --checkpoint CAUSAL.pt`` runs
 a config's recordings x scenarios this way (:func:`run_online`) and writes ``<out>/online.json``;
 ``--inputs raw,learned`` streams the config's covariance_checkpoint as ``learned``.
 """
@@ -394,7 +394,7 @@ def run_online(cfg, out: Path, checkpoint: Optional[str] = None, recordings: Opt
                scenarios: Optional[Sequence[str]] = None, inputs: Sequence[str] = ONLINE_INPUTS,
                log: Callable[[str], None] = print) -> Dict[str, dict]:
     """Stream each selected recording x scenario x input of ``cfg`` (a
-    :class:`~imu_learn.fuse.config.FuseConfig`) and write ``<out>/online.json``, atomically after
+    :class:`~imu_learn.fuse.experiments.config.FuseConfig`) and write ``<out>/online.json``, atomically after
     every run, merged with the runs already there (a run named again is measured again).
     ``checkpoint`` (a causal one) beats the config's models for ``proposed``; ``learned`` streams the
     config's covariance_checkpoint (:class:`WindowedStepper`) with, where the device has a tlio-style

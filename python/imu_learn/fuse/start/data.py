@@ -32,7 +32,6 @@ from imu_learn.errors import InvalidInputError
 
 from ..aiding import PositionFixes, RelativePoses
 from ..graph import fuse
-from ..noise import ImuNoise
 from ..settings import FusionSettings, PriorSigmas
 from . import level as initial
 from .types import Start
@@ -80,18 +79,20 @@ def _fix_residual_rms(res, fixes: PositionFixes) -> float:
     return float(np.sqrt(np.mean(np.sum((p - fixes.p) ** 2, axis=1))))
 
 
-def yaw_hypotheses(t_ns, gyro, acc, fixes: PositionFixes, R_level: np.ndarray, still: bool,
-                   bias0: np.ndarray, noise: ImuNoise, gravity: float, keyframe_hz: float, var: Optional[np.ndarray],
-                   settings: AlignSettings) -> Tuple[int, object, Dict[str, object]]:
-    """(window's last sample, the winning hypothesis' FusionResult over the window, info). Each
-    hypothesis starts at zero velocity, held to it at rest and loosely (2 m/s) otherwise."""
+def yaw_hypotheses(imu: tuple, fixes: PositionFixes, R_level: np.ndarray, still: bool, bias0: np.ndarray,
+                   fusion: FusionSettings, settings: AlignSettings) -> Tuple[int, object, Dict[str, object]]:
+    """(window's last sample, the winning hypothesis' FusionResult over the window, info), from the
+    IMU ``imu`` = (t_ns, gyro, acc, per-sample variances or None) fused under ``fusion`` (its noise,
+    gravity and keyframes; each hypothesis its own prior, over the whole window). Each hypothesis
+    starts at zero velocity, held to it at rest and loosely (2 m/s) otherwise."""
+    t_ns, gyro, acc, var = imu
     e = alignment_window(fixes, settings.min_travel_m, settings.min_fixes)
     end = int(fixes.idx[e])
-    win = replace(fixes, idx=fixes.idx[:e + 1], p=fixes.p[:e + 1])
+    win = fixes.select(np.arange(len(fixes)) <= e)
     sl = slice(0, end + 1)
     prior = PriorSigmas(rot_rad=float(np.deg2rad(LEVEL_SIGMA_DEG)), yaw_rad=1.5 * np.pi / settings.n_yaw,
                         pos_m=max(5 * fixes.sigma_m, 1.0), vel_mps=STILL_VEL_MPS if still else 2.0)
-    fusion = FusionSettings(noise, gravity, keyframe_hz, prior, lag_s=np.inf)
+    fusion = replace(fusion, prior=prior, lag_s=np.inf)
     fits = []
     for yaw in np.arange(settings.n_yaw) * 2 * np.pi / settings.n_yaw:
         R0 = initial.rot_z(float(yaw)) @ R_level
@@ -115,12 +116,12 @@ def yaw_hypotheses(t_ns, gyro, acc, fixes: PositionFixes, R_level: np.ndarray, s
     return end, best, info
 
 
-def data_start(t_ns, gyro, acc, aiding, noise: ImuNoise, gravity: float, keyframe_hz: float,
-               bias0: Optional[np.ndarray] = None, var: Optional[np.ndarray] = None,
-               settings: AlignSettings = AlignSettings()) -> Start:
-    """The first state of one run from its IMU samples and its aiding alone (module docstring)."""
+def data_start(t_ns, gyro, acc, aiding, fusion: FusionSettings, bias0: Optional[np.ndarray] = None,
+               var: Optional[np.ndarray] = None, settings: AlignSettings = AlignSettings()) -> Start:
+    """The first state of one run from its IMU samples and its aiding alone (module docstring); the
+    yaw hypotheses are fused with ``fusion``'s noise, gravity and keyframes."""
     b0 = np.zeros(6) if bias0 is None else np.asarray(bias0, dtype=np.float64)
-    s0, R_level, still, info = level_start(t_ns, gyro, acc, gravity, b0, bias0 is None, settings)
+    s0, R_level, still, info = level_start(t_ns, gyro, acc, fusion.gravity, b0, bias0 is None, settings)
     if isinstance(aiding, RelativePoses):
         v = np.zeros(3)
         info["velocity_source"] = "zero (at rest)"
@@ -137,8 +138,8 @@ def data_start(t_ns, gyro, acc, aiding, noise: ImuNoise, gravity: float, keyfram
         raise InvalidInputError(f"init = \"data\": no data start for {type(aiding).__name__} aiding")
     fixes = aiding.since(s0)
     sl = slice(s0, None)
-    end, res, h_info = yaw_hypotheses(t_ns[sl], gyro[sl], acc[sl], fixes, R_level, still, b0, noise,
-                                      gravity, keyframe_hz, None if var is None else var[sl], settings)
+    end, res, h_info = yaw_hypotheses((t_ns[sl], gyro[sl], acc[sl], None if var is None else var[sl]), fixes, R_level,
+                                      still, b0, fusion, settings)
     info.update(h_info)
     info["position_source"] = info["velocity_source"] = "the winning hypothesis' smoothed first state"
     info["scored_from_s"] = round(float((t_ns[s0 + end] - t_ns[0]) * 1e-9), 3)
