@@ -532,3 +532,24 @@ def test_variance_scale_multiplies_the_learned_variances_and_needs_a_covariance_
     assert "has no covariance head" in capsys.readouterr().err
     assert main([*base, "--variance-scale", "0.1", "--out", str(tmp_path / "o2")]) == 2
     assert "--variance-scale: expected 2" in capsys.readouterr().err
+
+
+def test_without_gtsam_both_commands_say_the_extra_in_one_line(tmp_path):
+    """GTSAM is the fuse extra: without it, navigate and fuse end in one line naming it, no traceback."""
+    import subprocess
+    import sys
+
+    block = ("import importlib.abc, sys\n"
+             "class No(importlib.abc.MetaPathFinder):\n"
+             "    def find_spec(self, name, path=None, target=None):\n"
+             "        if name.split('.')[0] == 'gtsam':\n"
+             "            raise ImportError('gtsam is blocked in this test')\n"
+             "sys.meta_path.insert(0, No())\n"
+             "from imu_learn.cli import main\n"
+             "sys.exit(main(sys.argv[1:]))\n")
+    cfg = write(tmp_path / "f.toml", 'inputs = ["raw"]\n[[recordings]]\npath = "x"\n[[scenarios]]\nname = "g"\n')
+    for argv in (["fuse", "--config", str(cfg)],
+                 ["navigate", "--input", str(tmp_path), "--aiding", str(cfg), "--aiding-kind", "pose"]):
+        r = subprocess.run([sys.executable, "-c", block, *argv], capture_output=True, text=True, timeout=120)
+        assert r.returncode == 2 and r.stderr.count("\n") == 1, r.stderr
+        assert "MissingExtraError" in r.stderr and "imu-learn[fuse]" in r.stderr
