@@ -143,6 +143,17 @@ def test_fit_records_the_training_rate_and_dataset(tmp_path, capsys):
     assert '"source": "recorded"' in capsys.readouterr().out
 
 
+def test_evaluates_learned_method_records_its_training_rate(crop_split, tmp_path):
+    from imu_learn.baselines.base import FitSettings
+    from imu_learn.baselines.proposed import Proposed, ProposedConfig
+
+    m = Proposed(ProposedConfig(model=ModelConfig(hidden=8, layers=1, fc=8), evals=1))
+    m.fit([crop_split[0]], [crop_split[1]], FitSettings(window=50, batch_size=4, steps=2, seed=0))
+    m.save(tmp_path / "p.pt")
+    rec = imu_record(load_checkpoint(tmp_path / "p.pt"))
+    assert rec["source"] == "recorded" and rec["sample_rate_hz"] == pytest.approx(200.0, rel=1e-3)
+
+
 # ---- imu-learn refine ------------------------------------------------------------------------------
 
 

@@ -36,7 +36,7 @@ from imu_learn.baselines.base import FitSettings, Method
 from imu_learn.core.batches import AugmentConfig, Batch, BatchConfig, BatchSampler, batch_seed
 from imu_learn.data.config import DataConfig
 from imu_learn.data.types import Segment
-from imu_learn.infer.checkpoint import load_checkpoint, model_from_checkpoint, save_checkpoint
+from imu_learn.infer.checkpoint import load_checkpoint, model_from_checkpoint, save_checkpoint, training_record
 from imu_learn.infer.windowing import Windowing, apply
 from imu_learn.nn.device import pick_device
 from imu_learn.nn.losses import LossConfig, imu_loss
@@ -188,6 +188,7 @@ class Proposed(Method):
     def fit(self, train: List[Segment], val: List[Segment], settings: FitSettings = FitSettings()) -> Dict[str, list]:
         c = self.config
         train, mean, std = start_refiner_fit(self, train, settings)
+        self.record = training_record(train, None)  # the training IMU's rate, saved with the checkpoint
         W = self.window
         self.model = ImuRefiner(c.model, mean=mean, std=std)
         augment = c.augment if c.augment is not None else default_augment()
@@ -208,7 +209,7 @@ class Proposed(Method):
         cfg.setdefault("data", {})
         cfg["data"] = {**cfg["data"], "window": self.window}
         save_checkpoint(Path(path), self.model, cfg, epoch=0, step=getattr(self, "_steps", 0),
-                        best_metric=getattr(self, "_best", None))
+                        best_metric=getattr(self, "_best", None), record=getattr(self, "record", None))
 
     def load(self, path: Path) -> Proposed:
         m = Proposed.from_checkpoint(path, device=str(self.device))
