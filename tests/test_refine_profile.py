@@ -1,0 +1,68 @@
+"""``imu-learn refine --profile``: the floor ``evaluate`` fits (traditional+timing) written as a
+device profile and applied by refine gives evaluate's own samples bit for bit, in the recording's
+own format (with set parameters; with parameters fitted on the MH_01 crop, slow)."""
+from __future__ import annotations
+
+import math
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from imu_learn import _imu_core as core
+from imu_learn.baselines.base import FitSettings
+from imu_learn.baselines.traditional import TraditionalTiming
+from imu_learn.calib.profile import Affine, Profile
+from imu_learn.cli.refine import main as refine_main
+from imu_learn.data.types import Segment, sample_rate_hz
+
+REPO = Path(__file__).resolve().parent.parent
+MH04 = REPO / "datasets" / "euroc" / "MH_04_difficult"
+IMU_REL = Path("mav0") / "imu0" / "data.csv"
+
+
+def as_profile(m: TraditionalTiming, rate: float, device: str) -> Profile:
+    fl = m.to_dict()
+    return Profile(device=device, sample_rate_hz=rate, time_offset_s=float(fl["time_offset"]) / rate,
+                   time_offset_s_std=math.nan, gyro=Affine(np.asarray(fl["M_g"]), np.asarray(fl["b_g"]), "rad/s"),
+                   acc=Affine(np.asarray(fl["M_a"]), np.asarray(fl["b_a"]), "m/s^2"),
+                   g_sensitivity=np.asarray(fl["G"]), gravity_mps2=9.81, gravity_mps2_std=math.nan, floor=fl)
+
+
+def refined_as_evaluate(m: TraditionalTiming, tmp_path: Path, capsys) -> None:
+    """``m`` as a profile through ``imu-learn refine --profile`` on the MH_04 crop: its ASL output is
+    ``m.refine`` of the recording's whole IMU, bit for bit."""
+    as_profile(m, 200.0, "euroc").save(tmp_path / "profile.json")
+    out = tmp_path / "MH_04_floor"
+    assert refine_main(["--profile", str(tmp_path / "profile.json"), "--input", str(MH04), "--out", str(out),
+                        "--format", "euroc"]) == 0
+    cap = capsys.readouterr()
+    assert cap.err == "" and "recording at 200 Hz" in cap.out
+    t, g, a = core.read_asl_imu(str(MH04 / IMU_REL))
+    t2, g2, a2 = core.read_asl_imu(str(out / IMU_REL))
+    n = len(t)
+    want_g, want_a = m.refine(Segment("MH_04", t, g, a, np.zeros((n, 3)), np.zeros((n, 3)),
+                                      np.tile([1.0, 0, 0, 0], (n, 1))))
+    assert np.array_equal(t2, t)
+    assert np.array_equal(g2, want_g) and np.array_equal(a2, want_a)  # shortest round-trip text: exact
+    assert np.abs(g2 - g).max() > 1e-3
+
+
+def test_refine_with_a_profile_is_the_floors_refine_bit_for_bit(tmp_path, capsys):
+    rng = np.random.default_rng(5)
+    m = TraditionalTiming()
+    p = m.params
+    p.M_g, p.b_g = np.eye(3) + 0.01 * rng.standard_normal((3, 3)), 0.01 * rng.standard_normal(3)
+    p.G = 1e-3 * rng.standard_normal((3, 3))
+    p.M_a, p.b_a = np.eye(3) + 0.01 * rng.standard_normal((3, 3)), 0.1 * rng.standard_normal(3)
+    p.cutoff_gyro, p.cutoff_acc, p.time_offset = 30.0, 15.0, 0.54
+    refined_as_evaluate(m, tmp_path, capsys)
+
+
+@pytest.mark.slow
+def test_refine_with_a_profile_is_evaluates_fitted_floor_bit_for_bit(crop_split, tmp_path, capsys):
+    train, val = crop_split  # the MH_01 crop
+    m = TraditionalTiming()
+    m.fit([train], [val], FitSettings(seed=0))
+    assert abs(m.params.time_offset) > 0.01 and sample_rate_hz(train.t_ns) == pytest.approx(200.0, rel=1e-3)
+    refined_as_evaluate(m, tmp_path, capsys)
