@@ -84,7 +84,7 @@ def test_help_lists_every_subcommand():
                        timeout=120)
     assert r.returncode == 0 and r.stderr == ""
     listed = [line.split()[0] for line in r.stdout.split("commands:\n")[1].split("\n\n")[0].splitlines()]
-    assert listed == ["labels", "fit", "evaluate", "refine", "export", "fuse", "navigate", "groundtruth", "checkpoint"] == list(COMMANDS)
+    assert listed == ["labels", "fit", "evaluate", "refine", "export", "fuse", "navigate", "groundtruth", "calibrate", "checkpoint"] == list(COMMANDS)
 
 
 @pytest.mark.parametrize("name", list(COMMANDS))

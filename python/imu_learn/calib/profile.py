@@ -73,6 +73,23 @@ def _num(x: Any) -> Number:
     return x if math.isfinite(x) else None
 
 
+def clean(x: Any) -> Any:
+    """``x`` as strict JSON values: numpy arrays and numbers as lists and floats, NaN and inf as null."""
+    if isinstance(x, dict):
+        return {str(k): clean(v) for k, v in x.items()}
+    if isinstance(x, (list, tuple)):
+        return [clean(v) for v in x]
+    if isinstance(x, np.ndarray):
+        return clean(x.tolist())
+    if isinstance(x, (bool, np.bool_)):
+        return bool(x)
+    if isinstance(x, (np.integer,)):
+        return int(x)
+    if isinstance(x, (float, np.floating)):
+        return _num(x)
+    return x
+
+
 def _arr(x: Any) -> Any:
     a = np.asarray(x, dtype=np.float64)
     return [_arr(r) for r in a] if a.ndim > 1 else [_num(v) for v in a]
@@ -109,7 +126,7 @@ class NoiseTerm:
 
     def to_dict(self) -> Dict[str, Any]:
         return {"value": _num(self.value), "std": _num(self.std), "unit": self.unit, "source": self.source,
-                "per_axis": _arr(self.per_axis), "detail": self.detail}
+                "per_axis": _arr(self.per_axis), "detail": clean(self.detail)}
 
 
 @dataclass
@@ -164,8 +181,9 @@ class Profile:
             "g_sensitivity_rad_s_per_mps2": _arr(self.g_sensitivity),
             "gravity_mps2": _num(self.gravity_mps2), "gravity_mps2_std": _num(self.gravity_mps2_std),
             "noise": {k: v.to_dict() for k, v in self.noise.items()},
-            "noise_estimates": self.noise_estimates,
-            "floor": self.floor, "sources": self.sources, "unobservable": self.unobservable, "fit_log": self.fit_log,
+            "noise_estimates": clean(self.noise_estimates),
+            "floor": clean(self.floor), "sources": clean(self.sources), "unobservable": self.unobservable,
+            "fit_log": clean(self.fit_log),
         }
 
     def save(self, path: Union[str, Path]) -> None:

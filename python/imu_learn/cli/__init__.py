@@ -8,6 +8,7 @@
     imu-learn fuse              fusion experiments of a config (factor graph)
     imu-learn navigate          navigate a recording with its aiding file
     imu-learn groundtruth       check a recording's ground truth against its own IMU
+    imu-learn calibrate         a device profile and Kalibr's imu.yaml from recordings
     imu-learn checkpoint        inspect (info) or strip a checkpoint
 
 ``python -m imu_learn.<stage>`` is the same as ``imu-learn <stage>``. Each subcommand lives in

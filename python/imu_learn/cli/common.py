@@ -38,6 +38,7 @@ COMMANDS: Dict[str, str] = {
     "fuse": "fusion experiments of a config: IMU with aiding in a GTSAM factor graph",
     "navigate": "navigate a recording with its aiding file (no ground truth)",
     "groundtruth": "check a recording's ground truth against its own IMU (frame, time offset, lever arm)",
+    "calibrate": "a device profile (time offset, calibration, noise; Kalibr imu.yaml) from recordings",
     "checkpoint": "inspect (info) or strip a checkpoint",
 }
 

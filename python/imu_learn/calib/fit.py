@@ -1,0 +1,165 @@
+"""The floor against a reference: ``imu-learn evaluate``'s ``traditional+timing`` fit (the same
+class, settings and seeding, so the same parameters), the spread of its parameters between the
+recordings, and gravity.
+
+Uncertainty: the floor is refitted on each group of segments alone (a group is a recording; a
+single recording is cut into four time blocks), and the standard deviation of a parameter is the
+spread of the per-group values over sqrt(groups): the standard error of a mean of independent
+fits. It includes what really differs between recordings (EuRoC's gyro bias changes from flight to
+flight), which is the uncertainty a user of the profile on a new recording faces. The group fits
+share the main fit's window budget (``max_windows`` / groups each, at least 200), so all of them
+together cost about one more fit; fewer windows add estimation noise to each group's value, which
+makes the spread, if anything, larger.
+
+Gravity: with the floor applied, over windows of ``window`` samples, the vertical velocity change
+the reference saw against the one the calibrated accelerometer explains (attitude from the
+reference, the zero-order hold): g = -Σ(Δv_ref − Σ R_i a_i dt)_z / Σ T per window; its spread
+over groups as above. The floor itself fixes g (``settings.gravity``) and fits the accelerometer
+scale against it: the two are nearly degenerate, so this value is a consistency check of the
+floor, not an independent measurement (the profile says so).
+
+torch is imported here (the floor's fit needs it); nothing else in calib imports this module at
+module level.
+"""
+from __future__ import annotations
+
+import math
+import random
+from dataclasses import dataclass
+from typing import Callable, Dict, List, Optional, Sequence, Tuple
+
+import numpy as np
+import torch
+
+from imu_learn.baselines.base import FitSettings
+from imu_learn.baselines.traditional import TraditionalTiming
+from imu_learn.calib.profile import apply_floor
+from imu_learn.core.quat import quat_rotate
+from imu_learn.data.splits import cut
+from imu_learn.data.types import Segment, median_period_ns
+
+Progress = Callable[[str], None]
+
+
+@dataclass
+class FloorFit:
+    """The floor's parameter dict (TraditionalTiming.to_dict), its fit log, and per parameter the
+    standard deviation over groups (same shapes as in the dict; NaN with fewer than two groups)."""
+
+    floor: Dict[str, object]
+    log: Dict[str, list]
+    std: Dict[str, np.ndarray]
+    groups: List[Dict[str, object]]
+
+
+def seed_all(seed: int) -> None:
+    """What ``imu-learn evaluate`` seeds before each method's fit."""
+    random.seed(seed)
+    np.random.seed(seed % (2**32))
+    torch.manual_seed(seed)
+
+
+def fit_once(train: List[Segment], val: List[Segment], settings: FitSettings,
+             max_windows: Optional[int] = None) -> Tuple[TraditionalTiming, Dict[str, list]]:
+    """``imu-learn evaluate``'s fit of the floor (``max_windows``: the method's default unless given)."""
+    torch.set_num_threads(settings.threads)
+    seed_all(settings.seed)
+    method = TraditionalTiming() if max_windows is None else TraditionalTiming(max_windows=max_windows)
+    log = method.fit(list(train), list(val), settings) or {}
+    return method, log
+
+
+GROUP_MIN_WINDOWS = 200
+PARAMS = ("M_g", "b_g", "G", "M_a", "b_a", "time_offset")
+
+
+def group_segments(train: Sequence[Segment], val: Sequence[Segment], groups: Sequence[str],
+                   val_groups: Sequence[str]) -> Dict[str, Tuple[List[Segment], List[Segment]]]:
+    out: Dict[str, Tuple[List[Segment], List[Segment]]] = {}
+    for s, g in zip(train, groups):
+        out.setdefault(g, ([], []))[0].append(s)
+    for s, g in zip(val, val_groups):
+        if g in out:
+            out[g][1].append(s)
+    return out
+
+
+def time_blocks(segments: Sequence[Segment], k: int = 4) -> Dict[str, Tuple[List[Segment], List[Segment]]]:
+    """One recording's segments cut into ``k`` blocks of equal time (``block1`` .. ``blockk``)."""
+    name = segments[0].name if segments else ""
+    return {f"block{i + 1}": (cut(list(segments), i / k, (i + 1) / k, name), []) for i in range(k)}
+
+
+def fit_floor(train: List[Segment], val: List[Segment], settings: FitSettings, groups: Sequence[str],
+              val_groups: Sequence[str], progress: Progress = lambda s: None) -> FloorFit:
+    """The floor on all of ``train`` (``val`` for its selection), then on each group alone."""
+    progress(f"fitting the floor (traditional+timing) on {len(train)} segments, {sum(len(s) for s in train)} samples")
+    method, log = fit_once(train, val, settings)
+    floor = method.to_dict()
+    per = group_segments(train, val, groups, val_groups)
+    if len(per) < 2:  # one recording: four time blocks of it
+        per = time_blocks(train)
+    values: Dict[str, List[np.ndarray]] = {k: [] for k in PARAMS}
+    info = []
+    usable = {g: tv for g, tv in per.items() if any(len(s) > settings.window + 1 for s in tv[0])}
+    for i, (g, (tr, va)) in enumerate(usable.items()):
+        progress(f"uncertainty: refitting on {g} alone ({i + 1}/{len(usable)})")
+        m, _ = fit_once(tr, va, settings, max(GROUP_MIN_WINDOWS, method.max_windows // len(usable)))
+        d = m.to_dict()
+        for k in PARAMS:
+            values[k].append(np.asarray(d[k], dtype=np.float64))
+        info.append({"group": g, "segments": len(tr), "samples": int(sum(len(s) for s in tr)),
+                     "time_offset_samples": float(d["time_offset"]), "b_g": list(d["b_g"]), "b_a": list(d["b_a"])})
+    std = {k: (np.std(np.stack(v), axis=0, ddof=1) / math.sqrt(len(v)) if len(v) >= 2 else np.full(np.shape(floor[k]), np.nan))
+           for k, v in values.items()}
+    return FloorFit(floor, log, std, info)
+
+
+def world_specific_force_sums(seg: Segment, acc: np.ndarray) -> np.ndarray:
+    """Cumulative Σ R_i a_i dt (N, 3), row j = the sum over samples 0..j-1 (the zero-order hold)."""
+    dt = (np.diff(seg.t_ns.astype(np.int64)) * 1e-9)[:, None]
+    f = quat_rotate(seg.q_wxyz[:-1], acc[:-1]) * dt
+    return np.concatenate([np.zeros((1, 3)), np.cumsum(f, axis=0)])
+
+
+def gravity_per_window(seg: Segment, acc: np.ndarray, window: int) -> np.ndarray:
+    """Gravity [m/s^2] implied by each non-overlapping window of ``window`` samples."""
+    n = len(seg)
+    if n <= window:
+        return np.zeros(0)
+    c = world_specific_force_sums(seg, acc)
+    i0 = np.arange(0, n - window, window)
+    i1 = i0 + window
+    T = (seg.t_ns[i1] - seg.t_ns[i0]).astype(np.float64) * 1e-9
+    dv = seg.v[i1] - seg.v[i0]
+    return -(dv[:, 2] - (c[i1, 2] - c[i0, 2])) / T
+
+
+def fit_gravity(segments: Sequence[Segment], floor: Dict[str, object], groups: Sequence[str],
+                window_s: float = 1.0) -> Tuple[float, float, Dict[str, float]]:
+    """(g, its standard deviation over groups, g per group) from the floor-calibrated accelerometer."""
+    per: Dict[str, List[np.ndarray]] = {}
+    for s, g in zip(segments, groups):
+        window = max(2, int(round(window_s / (median_period_ns(s.t_ns) * 1e-9))))
+        _, acc = apply_floor(floor, s.t_ns, s.gyro, s.acc)
+        per.setdefault(g, []).append(gravity_per_window(s, acc, window))
+    means = {g: float(np.median(np.concatenate(v))) for g, v in per.items() if sum(len(x) for x in v)}
+    if not means:
+        return math.nan, math.nan, {}
+    allw = np.concatenate([x for v in per.values() for x in v])
+    g = float(np.median(allw))
+    vals = np.array(list(means.values()))
+    std = float(np.std(vals, ddof=1) / math.sqrt(len(vals))) if len(vals) >= 2 else float(
+        1.4826 * np.median(np.abs(allw - g)) / math.sqrt(len(allw)))
+    return g, std, means
+
+
+def calibrated(segments: Sequence[Segment], floor: Dict[str, object], lowpass: bool) -> List[Tuple[np.ndarray, np.ndarray]]:
+    """Each segment's floor-calibrated (gyro, acc); ``lowpass=False`` leaves the floor's filter out
+    (the noise is measured on the unfiltered samples)."""
+    f = dict(floor) if lowpass else {**floor, "cutoff_gyro": None, "cutoff_acc": None}
+    return [apply_floor(f, s.t_ns, s.gyro, s.acc) for s in segments]
+
+
+def optional_std(std: Optional[Dict[str, np.ndarray]], key: str, shape: Tuple[int, ...]) -> np.ndarray:
+    return np.asarray(std[key]) if std and key in std else np.full(shape, np.nan)

@@ -1,0 +1,44 @@
+"""A profile's noise as Kalibr's ``imu.yaml`` (the file Kalibr, OpenVINS, VINS-Fusion and ORB-SLAM3
+read): the four noise figures in continuous time, the update rate they were measured at, and a
+rostopic placeholder. Each figure's line says where it came from (residuals, Allan deviation of
+still stretches, or an upper bound). Written by hand (no YAML library needed), read back by any
+YAML parser (tests/test_calibrate.py parses it with PyYAML)."""
+from __future__ import annotations
+
+import math
+from pathlib import Path
+from typing import Union
+
+from imu_learn.calib.profile import NOISE_KEYS, NOISE_UNITS, Profile
+from imu_learn.util.atomic import atomic_write_text
+
+ROSTOPIC_PLACEHOLDER = "/imu0"
+
+
+def _value(x: float) -> str:
+    return ".nan" if x is None or not math.isfinite(x) else f"{x:.4e}"
+
+
+def kalibr_yaml(profile: Profile, rostopic: str = ROSTOPIC_PLACEHOLDER) -> str:
+    """The text of ``imu.yaml`` for ``profile`` (a figure the profile lacks is ``.nan``, said in its
+    comment: fill it in before Kalibr reads it)."""
+    lines = [
+        "# IMU noise model in Kalibr's form (continuous time; discretise with update_rate)",
+        f"# device: {profile.device}; written by imu-learn calibrate from profile.json ({profile.created})",
+    ]
+    for key in NOISE_KEYS:
+        term = profile.noise.get(key)
+        if term is None:
+            why = "not measured: fill in a value (e.g. the datasheet's)"
+        else:
+            kind = term.detail.get("kind", "fit")
+            why = f"{term.source}, {kind}" + (f", +-{term.std:.1e}" if term.std is not None and math.isfinite(term.std) else "")
+        value = _value(term.value if term is not None else math.nan)
+        lines.append(f"{key}: {value}  # [{NOISE_UNITS[key]}] {why}")
+    lines.append(f"rostopic: {rostopic}  # placeholder: your IMU topic")
+    lines.append(f"update_rate: {profile.sample_rate_hz:.6g}  # [Hz]")
+    return "\n".join(lines) + "\n"
+
+
+def write_kalibr_yaml(profile: Profile, path: Union[str, Path], rostopic: str = ROSTOPIC_PLACEHOLDER) -> None:
+    atomic_write_text(Path(path), kalibr_yaml(profile, rostopic))

@@ -1,0 +1,198 @@
+"""``imu-learn calibrate``'s work: recordings in, a device profile and its files out.
+
+With a reference (segments with ground truth): the floor (:mod:`imu_learn.calib.fit`, torch), its
+spread between recordings, gravity, the noise from the residuals (:func:`noise.residual_noise`)
+and from still stretches (:func:`noise.still_stretches`, :func:`noise.allan_noise`). Without one
+(a still recording's IMU alone): the noise from its still stretches only. Writes, each atomically,
+``profile.json``, ``imu.yaml`` (Kalibr) and ``calibration.png`` into the output folder.
+"""
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+from typing import Any, Callable, Dict, List, Optional, Sequence, Tuple
+
+import numpy as np
+
+from imu_learn.baselines.base import FitSettings
+from imu_learn.calib import noise as nz
+from imu_learn.calib.kalibr import write_kalibr_yaml
+from imu_learn.calib.plot import plot_calibration
+from imu_learn.calib.profile import NOISE_KEYS, NOISE_UNITS, UNITS, Affine, NoiseTerm, Profile, noise_only
+from imu_learn.core.stamps import median_period_ns, sample_rate_hz
+from imu_learn.data.types import Segment
+from imu_learn.errors import InvalidInputError
+
+Progress = Callable[[str], None]
+
+
+@dataclass
+class StillPiece:
+    """IMU samples of a recording without a reference (gap-free)."""
+
+    name: str
+    t_ns: np.ndarray
+    gyro: np.ndarray
+    acc: np.ndarray
+
+
+@dataclass
+class CalibInputs:
+    """What calibrate fits: ``train``/``val`` segments with their reference (``groups``: the
+    recording of each), IMU-only pieces, the floor's settings, the device name and the sources."""
+
+    train: List[Segment] = field(default_factory=list)
+    val: List[Segment] = field(default_factory=list)
+    groups: List[str] = field(default_factory=list)
+    val_groups: List[str] = field(default_factory=list)
+    imu_only: List[StillPiece] = field(default_factory=list)
+    settings: FitSettings = FitSettings()
+    device: str = "unknown"
+    sources: List[Dict[str, Any]] = field(default_factory=list)
+
+
+@dataclass(frozen=True)
+class CalibOptions:
+    min_still_s: float = 10.0  # total still time the Allan noise needs (τ = 1 s with ~10 clusters)
+    still: nz.StillSettings = nz.StillSettings()
+    plot: bool = True
+
+
+@dataclass
+class CalibResult:
+    profile: Profile
+    files: Dict[str, Path]
+    residual_before: Optional[nz.ResidualNoise]
+    residual_after: Optional[nz.ResidualNoise]
+    allan: Optional[nz.AllanNoise]
+    seconds: float
+
+
+def _rate(ts: Sequence[np.ndarray]) -> float:
+    rates = [sample_rate_hz(t) for t in ts if len(t) > 1]
+    if not rates:
+        raise InvalidInputError("calibrate: no recording has two samples")
+    return float(np.median(rates))
+
+
+def still_pieces(inp: CalibInputs, settings: nz.StillSettings) -> List[Tuple[str, np.ndarray, np.ndarray, np.ndarray]]:
+    """Still stretches of every segment and IMU-only piece, raw samples (name, t_ns, gyro, acc)."""
+    out = []
+    named = [(g, s.t_ns, s.gyro, s.acc) for s, g in zip(inp.train + inp.val, inp.groups + inp.val_groups)]
+    named += [(p.name, p.t_ns, p.gyro, p.acc) for p in inp.imu_only]
+    for name, t, g, a in named:
+        for i0, i1 in nz.still_stretches(t, g, a, settings):
+            out.append((name, t[i0:i1], g[i0:i1], a[i0:i1]))
+    return out
+
+
+def noise_terms(chosen: Dict[str, Tuple[nz.Estimate, float, float]]) -> Dict[str, NoiseTerm]:
+    out = {}
+    for name, (c, value, std) in chosen.items():
+        out[name] = NoiseTerm(c.per_axis, value, std, NOISE_UNITS[name], c.source,
+                              {"kind": c.kind, **{k: v for k, v in c.detail.items()}})
+    return out
+
+
+def bias_instability(cands: List[nz.Estimate]) -> Dict[str, NoiseTerm]:
+    out = {}
+    for c in cands:
+        if c.name.endswith("bias_instability") and np.isfinite(c.per_axis).any():
+            out[c.name] = NoiseTerm(c.per_axis, nz._rms(c.per_axis), nz._rms_std(c.per_axis, c.std),
+                                    NOISE_UNITS[c.name], c.source, {"kind": c.kind, **c.detail})
+    return out
+
+
+def estimate_dicts(cands: List[nz.Estimate]) -> List[Dict[str, Any]]:
+    return [NoiseTerm(c.per_axis, nz._rms(c.per_axis), math.nan, NOISE_UNITS[c.name], c.source,
+                      {"kind": c.kind, **c.detail}).to_dict() | {"name": c.name} for c in cands]
+
+
+def unobservable(has_ref: bool, allan: Optional[nz.AllanNoise], noise: Dict[str, NoiseTerm],
+                 options: CalibOptions) -> List[Dict[str, str]]:
+    """What could not be observed, and why (the profile's ``unobservable``)."""
+    out = []
+    if not has_ref:
+        out.append({"what": "time offset, affine calibration (scale, misalignment, bias), g-sensitivity, gravity",
+                    "why": "no reference trajectory: a recording's IMU alone gives its noise only"})
+    else:
+        out.append({"what": "gravity magnitude (independently of the accelerometer scale)",
+                    "why": "the floor fixes g and fits the accelerometer's scale against it; the two are nearly "
+                           "degenerate, so gravity_mps2 is a consistency check of the floor"})
+    still_s = allan.seconds if allan else 0.0
+    if still_s < options.min_still_s:
+        out.append({"what": "noise from the Allan deviation of still stretches",
+                    "why": f"needs still stretches of >= {options.min_still_s:g} s in total; found {still_s:.1f} s"})
+    for key in NOISE_KEYS:
+        t = noise.get(key)
+        if t is None:
+            out.append({"what": key, "why": "no estimate: neither a reference nor a still stretch"})
+        elif t.detail.get("kind") == "upper bound":
+            out.append({"what": key, "why": f"no fit found it ({t.source}: no region of its slope, or its "
+                        "uncertainty above half its value); the value written is an upper bound, min over τ of "
+                        "the Allan deviation on the term's line" + (
+                            "; motion-correlated errors (vibration, reference noise, calibration errors that vary "
+                            "with the motion) dominate the residuals" if t.source == "residuals" else "")})
+    return out
+
+
+def floor_profile(inp: CalibInputs, progress: Progress) -> Tuple[Profile, nz.ResidualNoise, nz.ResidualNoise]:
+    """The floor part of the profile (with the reference) and the residuals before/after it."""
+    from imu_learn.calib import fit as ff  # torch: only where the floor is fitted
+
+    fit = ff.fit_floor(inp.train, inp.val, inp.settings, inp.groups, inp.val_groups, progress)
+    f, std = fit.floor, fit.std
+    segs, groups = inp.train + inp.val, inp.groups + inp.val_groups
+    progress("gravity and the residual noise")
+    g, g_std, g_per = ff.fit_gravity(segs, f, groups)
+    ident = {"method": f["method"], "M_g": np.eye(3).tolist(), "b_g": [0.0] * 3, "G": np.zeros((3, 3)).tolist(),
+             "M_a": np.eye(3).tolist(), "b_a": [0.0] * 3, "cutoff_gyro": None, "cutoff_acc": None, "time_offset": 0.0}
+    before = nz.residual_noise(segs, ff.calibrated(segs, ident, False), inp.settings.gravity)
+    after = nz.residual_noise(segs, ff.calibrated(segs, f, False), inp.settings.gravity)
+    rate = _rate([s.t_ns for s in segs])
+    period = float(np.median([median_period_ns(s.t_ns) for s in segs])) * 1e-9
+    prof = Profile(
+        device=inp.device, sample_rate_hz=rate,
+        time_offset_s=float(f["time_offset"]) * period, time_offset_s_std=float(std["time_offset"]) * period,
+        gyro=Affine(np.asarray(f["M_g"]), np.asarray(f["b_g"]), UNITS["gyroscope"], std["M_g"], std["b_g"]),
+        acc=Affine(np.asarray(f["M_a"]), np.asarray(f["b_a"]), UNITS["accelerometer"], std["M_a"], std["b_a"]),
+        g_sensitivity=np.asarray(f["G"]), gravity_mps2=g, gravity_mps2_std=g_std, floor=f,
+        fit_log={"floor": fit.log, "groups": fit.groups, "gravity_per_group": g_per,
+                 "floor_gravity_mps2": inp.settings.gravity, "floor_settings": asdict(inp.settings),
+                 "g_sensitivity_std": std["G"]},
+    )
+    return prof, before, after
+
+
+def calibrate(inp: CalibInputs, out_dir: Path, options: CalibOptions = CalibOptions(),
+              progress: Progress = lambda s: None) -> CalibResult:
+    """Fit the profile of ``inp`` and write its files into ``out_dir``."""
+    t0 = time.time()
+    has_ref = bool(inp.train)
+    if not has_ref and not inp.imu_only:
+        raise InvalidInputError("calibrate: no recording to calibrate from")
+    before = after = None
+    if has_ref:
+        prof, before, after = floor_profile(inp, progress)
+    else:
+        prof = noise_only(inp.device, _rate([p.t_ns for p in inp.imu_only]), {})
+    progress("still stretches and their Allan deviation")
+    pieces = still_pieces(inp, options.still)
+    allan = nz.allan_noise(pieces)
+    cands = nz.candidates(after, allan, options.min_still_s)
+    noise = noise_terms(nz.choose(cands, NOISE_KEYS))
+    prof.noise = {**noise, **bias_instability(cands)}
+    prof.noise_estimates = estimate_dicts(cands)
+    prof.sources = inp.sources + ([{"still_stretches": allan.stretches, "still_s": round(allan.seconds, 3)}] if allan else [])
+    prof.unobservable = unobservable(has_ref, allan, noise, options)
+    out_dir.mkdir(parents=True, exist_ok=True)
+    files = {"profile": out_dir / "profile.json", "kalibr": out_dir / "imu.yaml"}
+    prof.save(files["profile"])
+    write_kalibr_yaml(prof, files["kalibr"])
+    if options.plot:
+        progress("plot")
+        if plot_calibration(out_dir / "calibration.png", inp.device, before, after, allan):
+            files["plot"] = out_dir / "calibration.png"
+    return CalibResult(prof, files, before, after, allan, time.time() - t0)

@@ -1,0 +1,186 @@
+"""``imu-learn calibrate``: a device profile from recordings with a reference trajectory (or a still
+recording alone), written as profile.json, Kalibr's imu.yaml and calibration.png
+(:mod:`imu_learn.calib.run` does the work)."""
+from __future__ import annotations
+
+import argparse
+import logging
+import re
+import sys
+from pathlib import Path
+from typing import Any, Callable, List, Optional, Sequence, Tuple
+
+from imu_learn.baselines.base import FitSettings
+from imu_learn.calib.run import CalibInputs, CalibOptions, StillPiece, calibrate
+from imu_learn.cli.common import add_data_root, run_command
+from imu_learn.data.formats import FORMATS, detect_format, read_imu_source, read_recording
+from imu_learn.data.loading import load_sequence
+from imu_learn.data.splits import cut, make_split
+from imu_learn.errors import ConfigError
+from imu_learn.eval.run import load_eval_config
+from imu_learn.infer.rates import recording_device
+from imu_learn.settings import read_toml
+from imu_learn.train.config import load_config
+
+logger = logging.getLogger(__name__)
+
+DESCRIPTION = """Calibrate an IMU against a reference trajectory (ground truth, motion capture, or a TUM trajectory
+from VIO via --groundtruth; or a config's training split via --config): the time offset and the
+gyroscope/accelerometer affine calibration (scale, misalignment, bias; evaluate's traditional+timing
+floor, with the same settings), gravity, and the noise: white-noise densities and bias random walks
+from the residuals against the reference and from the Allan deviation of still stretches. A still
+recording without a reference (--imu-only) gives the noise alone. Writes OUT/profile.json (every
+parameter with its uncertainty, the recordings and spans used, what could not be observed),
+OUT/imu.yaml (Kalibr's noise file, read by Kalibr, OpenVINS, VINS-Fusion, ORB-SLAM3) and
+OUT/calibration.png; `imu-learn refine --profile OUT/profile.json` applies the floor.
+The method: the module docs of imu_learn.calib.noise and imu_learn.calib.fit."""
+EPILOG = """examples:
+  imu-learn calibrate --config configs/eval_euroc_paper.toml --data-root DATA --out calib/euroc
+  imu-learn calibrate --input datasets/euroc/MH_01_easy --out calib/mh01
+  imu-learn calibrate --input robot/run1 --groundtruth robot/run1_vio.tum --device my-imu --out calib/robot
+  imu-learn calibrate --imu-only --input DATA/broad/04_undisturbed_slow_rotation_with_breaks_A.mat --out calib/broad"""
+
+
+def add_arguments(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--input", type=Path, action="append", metavar="REC",
+                   help="a recording (folder, file or bag) with its reference; repeat for several")
+    p.add_argument("--groundtruth", type=Path, action="append", metavar="FILE",
+                   help="the reference of the --input of the same position (TUM 't x y z qx qy qz qw' or ASL; "
+                        "default: the format's own ground truth)")
+    p.add_argument("--config", type=Path, metavar="TOML",
+                   help="a fit or evaluate config: its training split (validation for the floor's selection), "
+                        "with evaluate's settings")
+    p.add_argument("--format", default="auto", choices=("auto", *FORMATS), help="the recordings' layout (default: detected)")
+    p.add_argument("--imu-only", action="store_true",
+                   help="read each --input's IMU alone (no reference): the noise from its still stretches only")
+    p.add_argument("--device", metavar="NAME", help="the device's name in the profile (default: the dataset a "
+                                                    "one-device format belongs to, else the first recording's name)")
+    p.add_argument("--val-fraction", type=float, default=0.15, metavar="F",
+                   help="with --input: the last F of each recording selects the floor's filter and offset, as the "
+                        "configs' splits do (default 0.15; 0: the training windows select)")
+    p.add_argument("--min-still-s", type=float, default=10.0, metavar="S",
+                   help="total still time the Allan noise needs (default 10)")
+    p.add_argument("--no-plot", action="store_true", help="no calibration.png")
+    p.add_argument("--out", type=Path, required=True, metavar="DIR", help="output folder")
+    add_data_root(p, "the config's recordings")
+
+
+def group_name(segment_name: str) -> str:
+    """The recording a segment came from (``MH_01_easy#2[0:0.85]`` -> ``MH_01_easy``)."""
+    return re.split(r"[#\[]", segment_name, maxsplit=1)[0]
+
+
+def from_config(args: argparse.Namespace) -> CalibInputs:
+    """The config's train/val split and evaluate's FitSettings for it."""
+    overrides = ["--data.data_root", args.data_root] if args.data_root else []
+    if "base" in read_toml(args.config):  # an evaluate config: its base holds the data
+        res = load_eval_config(args.config, overrides)
+        data, settings = res.run.data, res.fit_settings()
+    else:
+        run = load_config(args.config, overrides)
+        data = run.data
+        settings = FitSettings(window=data.window, seed=run.seed, gravity=data.gravity)
+    split = make_split(data)
+    sources = [{**row, "role": role} for role in ("train", "val") for row in split.record[role]]
+    device = args.device or _device(data.roots[0].format if data.roots else "auto", split.train[0].name)
+    return CalibInputs(split.train, split.val, [group_name(s.name) for s in split.train],
+                       [group_name(s.name) for s in split.val], [], settings, device, sources)
+
+
+def _device(fmt: str, name: str) -> str:
+    return recording_device(fmt) or group_name(name)
+
+
+def _cut(segments: list, frac: float) -> Tuple[list, list]:
+    if frac <= 0:
+        return list(segments), []
+    name = group_name(segments[0].name)
+    return cut(segments, 0.0, 1.0 - frac, name), cut(segments, 1.0 - frac, 1.0, name)
+
+
+def from_inputs(args: argparse.Namespace) -> CalibInputs:
+    gts: List[Optional[Path]] = list(args.groundtruth or [])
+    if len(gts) > len(args.input):
+        raise ConfigError(f"--groundtruth: {len(gts)} given for {len(args.input)} --input")
+    gts += [None] * (len(args.input) - len(gts))
+    inp = CalibInputs(settings=FitSettings())
+    fmt0 = None
+    for path in [*args.input, *(g for g in gts if g is not None)]:
+        if not path.exists():
+            raise FileNotFoundError(2, "No such file or directory", str(path))
+    for path, gt in zip(args.input, gts):
+        fmt = args.format if args.format != "auto" else detect_format(path)
+        fmt0 = fmt0 or fmt
+        if args.imu_only:
+            inp.imu_only.append(imu_piece(path, args.format))
+            inp.sources.append({"recording": str(path), "format": fmt, "role": "noise (IMU only)"})
+            continue
+        segs = load_sequence(path, args.format, gt)
+        tr, va = _cut(segs, args.val_fraction)
+        inp.train += tr
+        inp.val += va
+        inp.groups += [str(path)] * len(tr)
+        inp.val_groups += [str(path)] * len(va)
+        inp.sources.append({"recording": str(path), "format": fmt, "groundtruth": str(gt) if gt else "the format's own",
+                            "train": [_span(s) for s in tr], "val": [_span(s) for s in va]})
+    first = inp.train[0].name if inp.train else inp.imu_only[0].name
+    inp.device = args.device or _device(fmt0 or "auto", first)
+    return inp
+
+
+def _span(s: Any) -> dict:
+    return {"segment": s.name, "t0_ns": int(s.t_ns[0]), "t1_ns": int(s.t_ns[-1]), "samples": len(s)}
+
+
+def imu_piece(path: Path, fmt: str) -> StillPiece:
+    """A recording's IMU alone (a layout without stamps of its own, BROAD, reads them with its ground truth)."""
+    src = read_imu_source(path, fmt)
+    if src.t_ns is not None:
+        return StillPiece(path.stem if path.is_file() else path.name, src.t_ns, src.gyro, src.acc)
+    imu, _ = read_recording(path, fmt)
+    return StillPiece(path.stem, imu.t_ns, imu.gyro, imu.acc)
+
+
+def run(args: argparse.Namespace, rest: List[str], keep: Callable[[Any], None]) -> int:
+    if bool(args.input) == bool(args.config):
+        raise ConfigError("give --input REC (repeatable) or --config TOML, not both and not neither")
+    if args.config and args.imu_only:
+        raise ConfigError("--imu-only reads --input recordings, not a config's split")
+    say = (lambda s: None) if args.quiet else (lambda s: logger.info("%s", s))
+    say("reading the recordings")
+    inp = from_config(args) if args.config else from_inputs(args)
+    keep(f"{args.out} keeps only complete files (each written atomically)")
+    res = calibrate(inp, args.out, CalibOptions(min_still_s=args.min_still_s, plot=not args.no_plot), say)
+    p = res.profile
+    for line in summary(p):
+        print(line)
+    for name, path in res.files.items():
+        print(f"{name}: {path}")
+    print(f"calibrate took {res.seconds:.1f} s")
+    sys.stdout.flush()
+    return 0
+
+
+def summary(p: Any) -> List[str]:
+    lines = [f"device {p.device}: {p.sample_rate_hz:.4g} Hz"]
+    if p.has_floor:
+        lines.append(f"time offset {p.time_offset_s * 1e3:+.3f} ms (+-{p.time_offset_s_std * 1e3:.3f}); "
+                     f"gyro bias {_vec(p.gyro.bias)} rad/s; acc bias {_vec(p.acc.bias)} m/s^2; "
+                     f"gravity {p.gravity_mps2:.4f} m/s^2")
+    for k, t in p.noise.items():
+        lines.append(f"{k}: {t.value:.3e} {t.unit} ({t.source}, {t.detail.get('kind', 'fit')})")
+    for u in p.unobservable:
+        lines.append(f"not observed: {u['what']}: {u['why']}")
+    return lines
+
+
+def _vec(v: Any) -> str:
+    return "[" + ", ".join(f"{x:+.4f}" for x in v) + "]"
+
+
+def main(argv: Optional[Sequence[str]] = None) -> int:
+    """``imu-learn calibrate ARGV``."""
+    return run_command("calibrate", argv)
+
+
+__all__ = ["add_arguments", "run", "main"]

@@ -1,0 +1,111 @@
+"""``imu-learn calibrate`` end to end on the shipped MH_01_easy crop: the files it writes (a profile
+that loads, whose floor is ``traditional+timing`` fitted as evaluate fits it and applies as its
+refine; Kalibr's imu.yaml; the plot), a still recording alone (noise only), and its one-line
+errors."""
+from __future__ import annotations
+
+import json
+import math
+from pathlib import Path
+
+import numpy as np
+import pytest
+import yaml
+
+from imu_learn.calib.profile import NOISE_KEYS, Profile
+from imu_learn.cli import main
+
+REPO = Path(__file__).resolve().parents[1]
+CROP = REPO / "datasets" / "euroc" / "MH_01_easy"
+
+
+def run(argv, capsys):
+    rc = main([str(a) for a in argv])
+    cap = capsys.readouterr()
+    return rc, cap.out, cap.err
+
+
+@pytest.fixture(scope="module")
+def calibrated(tmp_path_factory):
+    out = tmp_path_factory.mktemp("cal") / "mh01"
+    rc = main(["calibrate", "--input", str(CROP), "--out", str(out), "--quiet"])
+    assert rc == 0
+    return out
+
+
+@pytest.mark.slow  # the floor's fit, five times (one minute or more)
+def test_writes_a_profile_kalibr_yaml_and_a_plot(calibrated):
+    out = calibrated
+    assert {p.name for p in out.iterdir()} == {"profile.json", "imu.yaml", "calibration.png"}
+    p = Profile.load(out / "profile.json")
+    assert p.device == "MH_01_easy" and p.sample_rate_hz == pytest.approx(200.0, rel=1e-3)
+    assert p.has_floor and p.floor["method"] == "traditional+timing"
+    assert abs(p.time_offset_s) < 0.015 and np.isfinite(p.time_offset_s_std)  # tau within the search, +-3 samples
+    assert np.all(np.isfinite(p.gyro.bias_std)) and np.all(np.isfinite(p.acc.matrix_std))  # four time blocks
+    assert p.gravity_mps2 == pytest.approx(9.81, abs=0.05)
+    assert set(NOISE_KEYS) <= set(p.noise) and all(t.value > 0 for t in p.noise.values())
+    assert {u["what"] for u in p.unobservable} >= {"noise from the Allan deviation of still stretches"} or p.noise[
+        "gyroscope_noise_density"].source == "allan"
+    d = json.loads((out / "profile.json").read_text())
+    assert d["sources"][0]["train"] and d["sources"][0]["val"]  # the spans used
+    k = yaml.safe_load((out / "imu.yaml").read_text())
+    for key in NOISE_KEYS:
+        assert k[key] == pytest.approx(p.noise[key].value, rel=1e-4)
+    assert k["update_rate"] == pytest.approx(200.0, rel=1e-3)
+    assert (out / "calibration.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+
+
+@pytest.mark.slow
+def test_the_floor_is_evaluates_fit_and_applies_as_its_refine(calibrated):
+    """The same TraditionalTiming, settings and seeding on the same split give the same parameter
+    dict; the profile's apply is its refine."""
+    from imu_learn.baselines.base import FitSettings
+    from imu_learn.calib.fit import fit_once
+    from imu_learn.data.loading import load_sequence
+    from imu_learn.data.splits import cut
+
+    p = Profile.load(calibrated / "profile.json")
+    segs = load_sequence(CROP)
+    train, val = cut(segs, 0.0, 0.85, "MH_01_easy"), cut(segs, 0.85, 1.0, "MH_01_easy")
+    method, _ = fit_once(train, val, FitSettings())
+    assert json.loads(json.dumps(method.to_dict())) == p.floor
+    s = segs[0]
+    g, a = method.refine(s)
+    g2, a2 = p.apply(s.t_ns, s.gyro, s.acc)
+    assert np.array_equal(g, g2) and np.array_equal(a, a2)
+
+
+def test_a_still_recording_alone_gives_the_noise_only(tmp_path, capsys):
+    rng = np.random.default_rng(0)
+    n = 200 * 40
+    t = 10**18 + np.arange(n, dtype=np.int64) * 5_000_000
+    gyro = rng.standard_normal((n, 3)) * 2e-4 * math.sqrt(200)
+    acc = rng.standard_normal((n, 3)) * 2e-3 * math.sqrt(200) + [0.0, 0.0, 9.81]
+    rec = tmp_path / "still" / "mav0" / "imu0"
+    rec.mkdir(parents=True)
+    rows = "\n".join(f"{ti}," + ",".join(f"{v:.17g}" for v in (*g, *x)) for ti, g, x in zip(t, gyro, acc))
+    (rec / "data.csv").write_text("#timestamp [ns],w_RS_S_x [rad s^-1],w_RS_S_y [rad s^-1],w_RS_S_z [rad s^-1],"
+                                  "a_RS_S_x [m s^-2],a_RS_S_y [m s^-2],a_RS_S_z [m s^-2]\n" + rows + "\n")
+    rc, out, err = run(["calibrate", "--imu-only", "--input", tmp_path / "still", "--device", "bench-imu",
+                        "--out", tmp_path / "out", "--quiet"], capsys)
+    assert (rc, err) == (0, "")
+    p = Profile.load(tmp_path / "out" / "profile.json")
+    assert not p.has_floor and p.device == "bench-imu"
+    assert p.noise["gyroscope_noise_density"].source == "allan"
+    assert p.noise["gyroscope_noise_density"].value == pytest.approx(2e-4, rel=0.2)
+    assert p.noise["accelerometer_noise_density"].value == pytest.approx(2e-3, rel=0.2)
+    assert any("no reference" in u["why"] for u in p.unobservable)
+    assert "gyroscope_noise_density" in out
+
+
+@pytest.mark.parametrize("argv,expected", [
+    (["--out", "x"], "ConfigError: give --input REC (repeatable) or --config TOML, not both and not neither"),
+    (["--input", "nowhere", "--out", "x"], "FileNotFoundError"),
+    (["--input", CROP, "--groundtruth", "a.tum", "--groundtruth", "b.tum", "--out", "x"],
+     "ConfigError: --groundtruth: 2 given for 1 --input"),
+])
+def test_errors_are_one_line(argv, expected, capsys, tmp_path, monkeypatch):
+    monkeypatch.chdir(tmp_path)
+    rc, _, err = run(["calibrate", *argv, "--quiet"], capsys)
+    assert rc == 2 and err.startswith(f"imu-learn calibrate: error: {expected}") and err.count("\n") == 1
+    assert not (tmp_path / "x").exists()
