@@ -66,3 +66,19 @@ def test_refine_with_a_profile_is_evaluates_fitted_floor_bit_for_bit(crop_split,
     m.fit([train], [val], FitSettings(seed=0))
     assert abs(m.params.time_offset) > 0.01 and sample_rate_hz(train.t_ns) == pytest.approx(200.0, rel=1e-3)
     refined_as_evaluate(m, tmp_path, capsys)
+
+
+def test_a_recording_without_stamps_cannot_take_a_profiles_time_offset(tmp_path, capsys):
+    scipy_io = pytest.importorskip("scipy.io")
+    rng = np.random.default_rng(1)
+    src = tmp_path / "01_trial.mat"
+    scipy_io.savemat(src, {"imu_gyr": rng.normal(0, 0.3, (300, 3)), "imu_acc": rng.normal(0, 1, (300, 3)),
+                           "opt_quat": np.tile([1.0, 0, 0, 0], (300, 1)), "opt_pos": np.zeros((300, 3)),
+                           "sampling_rate": 286.0})
+    m = TraditionalTiming()
+    as_profile(m, 285.7, "broad").save(tmp_path / "profile.json")
+    assert refine_main(["--profile", str(tmp_path / "profile.json"), "--input", str(src), "--out",
+                        str(tmp_path / "out")]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "no stamps" in err, err
+    assert not (tmp_path / "out").exists()

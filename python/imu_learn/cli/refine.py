@@ -6,14 +6,15 @@ from __future__ import annotations
 
 import argparse
 import logging
+from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Callable, List, Optional, Sequence, Tuple
+from typing import Any, Callable, List, Optional, Sequence
 
 from imu_learn.calib.profile import Profile
 from imu_learn.cli.common import add_imu_input_options, csv_layout, run_command
 from imu_learn.data.formats import FORMATS, USER_CSV, ImuSource, read_imu_source
 from imu_learn.data.types import sample_rate_hz
-from imu_learn.errors import ConfigError
+from imu_learn.errors import ConfigError, InvalidInputError
 from imu_learn.infer import rates
 from imu_learn.infer.rewrite import Step, rewrite_recording
 from imu_learn.util.extras import require_extra
@@ -62,6 +63,17 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     add_imu_input_options(p)
 
 
+@dataclass
+class Plan:
+    """What refine applies: the steps in order, what they were made for (rate and device), the words
+    of the summary line, and whether a step needs the recording's stamps (a profile's time offset)."""
+
+    steps: List[Step] = field(default_factory=list)
+    made_for: List[rates.MadeFor] = field(default_factory=list)
+    words: List[str] = field(default_factory=list)
+    needs_stamps: bool = False
+
+
 def profile_step(profile: Profile) -> Step:
     def step(t_ns, gyro, acc):
         g, a = profile.apply(t_ns, gyro, acc)
@@ -74,16 +86,16 @@ def describe_profile(profile: Profile, where: str) -> str:
     return f"profile {where} (device {profile.device!r}, {rates.hz(profile.sample_rate_hz)})"
 
 
-def from_profile(args: argparse.Namespace) -> Tuple[List[Step], List[rates.MadeFor], str]:
-    """The floor of ``--profile``: its step, what it was made for, and its words for the summary line."""
+def from_profile(args: argparse.Namespace) -> Plan:
+    """The floor of ``--profile``."""
     profile = Profile.load(args.profile)
     made = rates.MadeFor(f"profile {args.profile}", profile.sample_rate_hz, profile.device)
-    return [profile_step(profile)], [made], f"the floor of {describe_profile(profile, str(args.profile))}"
+    return Plan([profile_step(profile)], [made], [f"the floor of {describe_profile(profile, str(args.profile))}"],
+                needs_stamps=True)
 
 
-def from_checkpoint(args: argparse.Namespace) -> Tuple[List[Step], List[rates.MadeFor], str]:
-    """The model of ``--checkpoint`` (after the profile it carries, if any): its steps, what it was
-    made for, and its words for the summary line."""
+def from_checkpoint(args: argparse.Namespace) -> Plan:
+    """The model of ``--checkpoint``, after the profile it carries, if any."""
     require_extra("train", "imu-learn refine --checkpoint")
     from imu_learn.infer.checkpoint import imu_record, load_checkpoint, model_from_checkpoint
     from imu_learn.infer.refine import model_step, require_covariance_head
@@ -98,32 +110,34 @@ def from_checkpoint(args: argparse.Namespace) -> Tuple[List[Step], List[rates.Ma
     if args.fill_covariance:
         require_covariance_head(model, args.checkpoint)
     record = imu_record(state)
-    steps: List[Step] = []
-    words = []
-    if record["profile"]:
-        profile = Profile.from_dict(record["profile"], f"{args.checkpoint} (its profile)")
-        steps.append(profile_step(profile))
-        words.append(f"after its {describe_profile(profile, 'carried')}")
-    steps.append(model_step(model, args.window, args.overlap, args.batch, not args.quiet, args.fill_covariance))
     made = rates.MadeFor(f"model {args.checkpoint}", record["sample_rate_hz"], record["device"])
     rule = model.windowing.replace(args.window, args.overlap, args.batch)
     kind = f"causal, chunks of {rule.window}" if model.cfg.causal else f"window {rule.window}, overlap {rule.overlap}"
     rate = "rate unknown" if not made.sample_rate_hz else rates.hz(made.sample_rate_hz)
-    words = [f"model {args.checkpoint}: {kind}, {device}, made for {made.device or 'an unknown device'} at {rate}",
-             *words]
+    plan = Plan(made_for=[made],
+                words=[f"model {args.checkpoint}: {kind}, {device}, made for {made.device or 'an unknown device'} "
+                       f"at {rate}"])
+    if record["profile"]:
+        profile = Profile.from_dict(record["profile"], f"{args.checkpoint} (its profile)")
+        plan.steps.append(profile_step(profile))
+        plan.words.append(f"after its {describe_profile(profile, 'carried')}")
+        plan.needs_stamps = True
+    plan.steps.append(model_step(model, args.window, args.overlap, args.batch, not args.quiet, args.fill_covariance))
     if args.fill_covariance:
-        words.append("covariance fields: learned per-sample variances")
-    return steps, [made], "; ".join(words)
+        plan.words.append("covariance fields: learned per-sample variances")
+    return plan
 
 
-def check_recording(args: argparse.Namespace, src: ImuSource, made_for: Sequence[rates.MadeFor]) -> Optional[float]:
+def check_recording(args: argparse.Namespace, src: ImuSource, plan: Plan) -> Optional[float]:
     """The recording's rate (None: no stamps); stops on a rate more than 5 % off (unless --force)
     and logs a warning line for each mismatch it lets through."""
+    if src.t_ns is None and plan.needs_stamps:
+        raise InvalidInputError(f"{args.input} has no stamps of its own ({src.fmt}); a profile's time offset needs them")
     rate = sample_rate_hz(src.t_ns) if src.t_ns is not None else None
     device = rates.recording_device(src.fmt, args.format, args.imu_name)
-    for line in rates.check(str(args.input), rate, device, made_for, args.force):
+    for line in rates.check(str(args.input), rate, device, plan.made_for, args.force):
         logger.warning(line)
-    for line in rates.unchecked(rate, made_for):
+    for line in rates.unchecked(rate, plan.made_for):
         logger.info(line)
     return rate
 
@@ -131,12 +145,12 @@ def check_recording(args: argparse.Namespace, src: ImuSource, made_for: Sequence
 def run(args: argparse.Namespace, rest: List[str], keep: Callable[[Any], None]) -> int:
     if args.fill_covariance and args.checkpoint is None:
         raise ConfigError("--fill-covariance needs a --checkpoint with a covariance head")
-    steps, made_for, words = from_profile(args) if args.profile is not None else from_checkpoint(args)
+    plan = from_profile(args) if args.profile is not None else from_checkpoint(args)
     src = read_imu_source(args.input, args.format, args.imu_topic, csv_layout(args))
-    rate = check_recording(args, src, made_for)
-    target = rewrite_recording(src, args.input, args.out, steps, args.copy_folder, args.fill_covariance)
+    rate = check_recording(args, src, plan)
+    target = rewrite_recording(src, args.input, args.out, plan.steps, args.copy_folder, args.fill_covariance)
     at = f"recording at {rates.hz(rate)}" if rate else "recording without stamps"
-    print(f"refined IMU ({words}; {at}) written to {target}")
+    print(f"refined IMU ({'; '.join(plan.words)}; {at}) written to {target}")
     return 0
 
 

@@ -19,7 +19,7 @@ class ImuSource:
     with only gyro and acc replaced, so everything else in the file is kept as it is.
     """
 
-    fmt: str  # the layout's name (asl, blackbird, broad, kaist): the module that writes it back
+    fmt: str  # the layout's name (asl, blackbird, broad, kaist, ..., csv-columns): the module that writes it back
     imu_file: Path  # the file that holds the IMU
     root: Path  # the recording's folder (what refine's --copy-folder copies)
     rel: Path  # imu_file relative to root (where the IMU goes under an output folder)
