@@ -9,8 +9,12 @@ from pathlib import Path
 from typing import Any, Callable, List, Optional, Sequence
 
 from imu_learn.cli.common import add_data_root, run_command
+from imu_learn.cli.common import parser as common_parser
 from imu_learn.cli.navigate import require_gtsam, set_torch_threads
 from imu_learn.errors import ConfigError
+from imu_learn.fuse.experiments import batch, gnss, online
+from imu_learn.fuse.experiments.config import load
+from imu_learn.settings import read_toml
 
 DESCRIPTION = """Fusion experiments: fuse IMU inputs (raw, a calibration, a trained model's refinement) with
 aiding in a GTSAM factor graph and score the trajectories against ground truth, for every recording x
@@ -92,15 +96,11 @@ def add_arguments(ap: argparse.ArgumentParser) -> None:
 
 def parser() -> argparse.ArgumentParser:
     """The full ``imu-learn fuse`` parser (common flags included)."""
-    from imu_learn.cli.common import parser as common_parser
-
     return common_parser("fuse")
 
 
 def config_kind(path: Path) -> Optional[str]:
     """The config's ``kind`` (None for the fusion experiment's configs, which have none)."""
-    from imu_learn.settings import read_toml
-
     kind = read_toml(Path(path)).get("kind")
     if kind is not None and kind != GNSS_KIND:
         raise ConfigError(f"{path}: kind: {GNSS_KIND!r} or none (the fusion experiment), got {kind!r}")
@@ -114,8 +114,6 @@ def gnss_outages(args: argparse.Namespace, keep: Callable[[Any], None]) -> int:
     if wrong:
         raise ConfigError(f"{', '.join(wrong)}: not with a kind = \"{GNSS_KIND}\" config")
     require_gtsam("fuse")
-    from imu_learn.fuse.experiments import gnss
-
     cfg = gnss.load_config(args.config, args.data_root)
     for item in args.set_values or []:
         gnss.apply_override(cfg, item)
@@ -151,8 +149,6 @@ def run(args: argparse.Namespace, rest: List[str], keep: Callable[[Any], None]) 
     if args.threads is not None and args.threads < 1:
         raise ConfigError(f"--threads: must be >= 1, got {args.threads}")
     require_gtsam("fuse")
-    from imu_learn.fuse.experiments.config import load
-
     cfg = load(args.config, args.data_root)
     if args.init is not None:
         cfg.init = args.init
@@ -160,17 +156,13 @@ def run(args: argparse.Namespace, rest: List[str], keep: Callable[[Any], None]) 
     if args.threads is not None or args.online:
         set_torch_threads(args.threads or 1)
     if args.online:
-        from imu_learn.fuse.experiments.online import ONLINE_INPUTS, run_online
-
         keep(f"the runs so far are in {out / 'online.json'}")
-        run_online(cfg, out, args.checkpoint, args.recordings, args.scenarios, args.inputs or ONLINE_INPUTS,
+        online.run_online(cfg, out, args.checkpoint, args.recordings, args.scenarios, args.inputs or online.ONLINE_INPUTS,
                    log=lambda m: print(m, flush=True))
         print(f"wrote {out / 'online.json'}")
     else:
-        from imu_learn.fuse.experiments.batch import run_experiment
-
         keep(f"results so far are in {out / 'results.json'} (rerun to resume)")
-        run_experiment(cfg, out, only_inputs=args.inputs, jobs=args.jobs)
+        batch.run_experiment(cfg, out, only_inputs=args.inputs, jobs=args.jobs)
         print(f"wrote {out / 'table.md'}")
     return 0
 

@@ -14,9 +14,11 @@ from __future__ import annotations
 import functools
 import hashlib
 import json
+import multiprocessing
 import os
 import sys
 import zlib
+from concurrent.futures import ProcessPoolExecutor, as_completed
 from dataclasses import asdict, dataclass, replace
 from pathlib import Path
 from typing import Callable, Dict, List, Optional, Tuple
@@ -26,6 +28,7 @@ from scipy.spatial.transform import Rotation
 
 from imu_learn.baselines.registry import method_file
 from imu_learn.core.quat import wxyz_to_xyzw
+from imu_learn.data.formats import rosbag
 from imu_learn.data.formats.asl import imu_sensor_yaml, leica_file, read_leica
 from imu_learn.data.loading import AlignOptions, load_recording
 from imu_learn.data.types import Segment
@@ -200,8 +203,6 @@ def make_aiding(scn: ScenarioSpec, seq, leica, rng: np.random.Generator):
 
 def bag_of(cfg: FuseConfig, spec: RecordingSpec) -> Optional[Path]:
     """The recording's bag (its trajectories are written as bags of the same kind), or None."""
-    from imu_learn.data.formats import rosbag
-
     path = cfg.root() / spec.path
     return path if spec.format == rosbag.NAME or (spec.format == "auto" and rosbag.detect(path)) else None
 
@@ -316,9 +317,6 @@ class RunQueue:
 
     def __enter__(self) -> RunQueue:
         if self.jobs > 1:
-            import multiprocessing
-            from concurrent.futures import ProcessPoolExecutor
-
             self._env = {k: os.environ.get(k) for k in SINGLE_THREAD_ENV}
             os.environ.update({k: "1" for k in SINGLE_THREAD_ENV})
             self._pool = ProcessPoolExecutor(self.jobs, mp_context=multiprocessing.get_context("spawn"),
@@ -350,8 +348,6 @@ class RunQueue:
             self._futures[self._pool.submit(run_one, *args, **kwargs)] = (key, seed, self.count)
 
     def _collect(self) -> None:
-        from concurrent.futures import as_completed
-
         for fut in as_completed(self._futures):
             key, seed, n = self._futures[fut]
             self._record(key, seed, n, fut.result())

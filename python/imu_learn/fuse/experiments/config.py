@@ -1,18 +1,19 @@
 """The fusion experiment's configuration (``configs/fuse_*.toml``): recordings x IMU inputs x
 aiding scenarios. Keys and value types are checked as for ``imu_learn.fit`` configs
 (:func:`imu_learn.train.config.from_dict`); paths of recordings are relative to the data root
-(``data_root``, else the environment variable ``IMU_LEARN_DATA``; ``--data-root`` beats both)."""
+(the one data-root rule, :func:`imu_learn.data.config.resolve_data_root`: ``--data-root``, else the
+environment variable ``IMU_LEARN_DATA``, else the config's ``data_root``)."""
 from __future__ import annotations
 
-import os
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import List, Optional
 
 from imu_learn.baselines.base import Method
 from imu_learn.baselines.registry import REGISTRY, load_method_class
+from imu_learn.data.config import resolve_data_root
 from imu_learn.errors import ConfigError
-from imu_learn.settings import DATA_ROOT_ENV, from_dict, read_toml
+from imu_learn.settings import from_dict, read_toml
 
 from ..aiding.outages import OutageWindow, windows
 from ..inputs import FACTOR_INPUTS, INPUTS
@@ -122,7 +123,7 @@ class FuseConfig:
     noise: NoiseSpec = field(default_factory=NoiseSpec)
 
     def root(self) -> Path:
-        return Path(self.data_root or os.environ.get(DATA_ROOT_ENV, "") or ".")
+        return Path(self.data_root or ".")
 
 
 def imu_methods() -> List[str]:
@@ -183,6 +184,5 @@ def validate(cfg: FuseConfig) -> FuseConfig:
 def load(path: Optional[Path], data_root: Optional[str] = None) -> FuseConfig:
     d = read_toml(Path(path)) if path else {}
     cfg = from_dict(FuseConfig, d)
-    if data_root:
-        cfg.data_root = data_root
+    cfg.data_root = resolve_data_root(data_root, cfg.data_root)  # the one data-root rule
     return validate(cfg)

@@ -35,9 +35,10 @@ from typing import Dict, List, Optional, Sequence, Tuple
 import numpy as np
 from scipy.spatial.transform import Rotation
 
+from imu_learn.data.config import resolve_data_root
 from imu_learn.data.formats.gnss_imu import mounting_rotation, read_imu_log
 from imu_learn.errors import ConfigError, InvalidInputError
-from imu_learn.settings import DATA_ROOT_ENV, from_dict, merge, nest, read_toml
+from imu_learn.settings import from_dict, merge, nest, read_toml
 from imu_learn.util.atomic import atomic_write_text
 
 from ..aiding import GnssFixes, OutageWindow
@@ -140,15 +141,12 @@ class GnssRunConfig:
     peer: PeerCfg = field(default_factory=PeerCfg)
 
     def root(self) -> Path:
-        import os
-
-        return Path(self.data_root or os.environ.get(DATA_ROOT_ENV, "") or ".")
+        return Path(self.data_root or ".")
 
 
 def load_config(path: Path, data_root: Optional[str] = None) -> GnssRunConfig:
     cfg = from_dict(GnssRunConfig, read_toml(Path(path)))
-    if data_root:
-        cfg.data_root = data_root
+    cfg.data_root = resolve_data_root(data_root, cfg.data_root)  # the one data-root rule
     if cfg.kind != KIND:
         raise ConfigError(f"{path}: kind: {KIND!r} for this experiment, got {cfg.kind!r}")
     check(cfg, path)
