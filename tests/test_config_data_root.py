@@ -176,3 +176,22 @@ def test_training_and_evaluate_configs_follow_the_rule(roots, monkeypatch):
     assert build_config(base, {}).data.data_root == str(good)
     res = ev.load_eval_config(None, ["--data.data_root", "/cli"])
     assert res.run.data.data_root == "/cli"
+
+
+@pytest.mark.parametrize("name", ["fuse_euroc.toml", "fuse_gnss_drive.toml"])
+def test_fusion_configs_follow_the_rule(tmp_path, monkeypatch, name):
+    """Both kinds of fusion config resolve the data root as the training configs do."""
+    from imu_learn.fuse.experiments import config as fuse_config
+    from imu_learn.fuse.experiments import gnss
+
+    load = gnss.load_config if "gnss" in name else fuse_config.load
+    text = (REPO / "configs" / name).read_text()
+    cfg_file = tmp_path / name
+    cfg_file.write_text('data_root = "/cfg"\n' + "\n".join(
+        line for line in text.splitlines() if not line.startswith("data_root")))
+    monkeypatch.setenv(ENV, "/env")
+    assert load(cfg_file, None).data_root == "/env"  # the variable beats the config
+    assert load(cfg_file, "/cli").data_root == "/cli"  # the command line beats both
+    monkeypatch.delenv(ENV)
+    assert load(cfg_file, None).data_root == "/cfg"
+    assert str(load(cfg_file, None).root()) == "/cfg"
