@@ -35,7 +35,7 @@ REPO = Path(__file__).resolve().parent.parent
 # python -m imu_learn.fit --config configs/euroc_paper.toml --name euroc_causal_s0 --model.causal true --model.fir_taps 0
 CAUSAL_CANDIDATES = ("runs/euroc_causal_s0/best.pt",)
 # The learned input of configs/fuse_euroc_learned.toml: its covariance model, and the tlio-style model
-# its displacement factors come from (written by python -m imu_learn.evaluate, see docs/fusion.md).
+# its displacement factors come from (written by imu-learn evaluate, see docs/experiments/fusion.md).
 LEARNED_DEFAULT = "models/euroc_adis16448_cov.pt"
 DISPLACEMENT_DEFAULT = "reports/euroc_paper_tlio/methods/tlio-style.pt"
 INPUTS = ("raw", "proposed", "learned")

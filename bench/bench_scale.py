@@ -17,9 +17,9 @@ stage's alone; the parent also watches the child's resident memory and stops it 
   ``load_sequence`` is parse + align;
 - ``window_labels``  ``imu_learn.window_labels(seq, 200, 10)`` on the aligned sequence (the label
   computation alone);
-- ``labels_cli``  ``python -m imu_learn.labels euroc --root ... --rebuild``: parse, align, labels and
+- ``labels_cli``  ``imu-learn labels euroc --root ... --rebuild``: parse, align, labels and
   the ``.npz`` cache, as the CLI runs them;
-- ``refine``  ``python -m imu_learn.refine`` with ``models/euroc_adis16448.pt`` on the CPU, writing a
+- ``refine``  ``imu-learn refine`` with ``models/euroc_adis16448.pt`` on the CPU, writing a
   refined copy of the IMU file;
 - ``fuse``    ``imu_learn.fuse.fuse`` on the raw IMU with simulated 1 Hz position fixes (sigma 0.1 m,
   10 Hz keyframes, the EuRoC ADIS16448 noise model: the ``gnss_1hz`` scenario of
@@ -62,7 +62,7 @@ from imu_learn.util.machine import cpu_name  # noqa: E402
 
 STAGES = ("parse", "align", "window_labels", "labels_cli", "refine", "fuse")
 DEFAULT_HOURS = "1/6,1,10"
-DEFAULT_FUSE_HOURS = "1/4,1/2,1,2"  # the fixed-lag causal estimate is linear (docs/scale.md)
+DEFAULT_FUSE_HOURS = "1/4,1/2,1,2"  # the fixed-lag causal estimate is linear (docs/experiments/scale.md)
 QUICK_HOURS = "1/60,1/12"
 CHECKPOINT = REPO / "models" / "euroc_adis16448.pt"
 GENERATOR_VERSION = 1  # bump when the synthetic recording changes: cached ones are rewritten

@@ -1,4 +1,4 @@
-"""The calibration summary of docs/uncertainty.md from evaluation reports (``python -m imu_learn.evaluate
+"""The calibration summary of docs/experiments/uncertainty.md from evaluation reports (``imu-learn evaluate
 ... --checkpoint <model with a covariance head>`` writes the full per-recording table into its
 report.md; this prints the pooled rows of several reports side by side).
 

@@ -55,8 +55,8 @@ def test_it_predicts_no_motion_with_the_fitted_spread_in_every_heading(tmp_path)
 def test_zero_displacement_is_a_fusion_input_that_adds_factors(shipped, crop_split, tmp_path):
     pytest.importorskip("gtsam")
     from imu_learn.baselines.registry import method_file
-    from imu_learn.fuse.experiments.config import FuseConfig, RecordingSpec, ScenarioSpec, imu_methods, validate
     from imu_learn.fuse.experiments.batch import run_experiment
+    from imu_learn.fuse.experiments.config import FuseConfig, RecordingSpec, ScenarioSpec, imu_methods, validate
 
     assert "zero-displacement" in imu_methods()
     m = ZeroDisplacement()

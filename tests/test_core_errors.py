@@ -1,6 +1,6 @@
 """Arguments the Rust core is given from Python are checked before anything is sized or indexed by
 them: a huge, negative or zero horizon, starts past the end, a huge batch are typed errors naming
-the argument, never a pyo3 PanicException or an abort (issue 22.5). Each case runs in a child
+the argument, never a pyo3 PanicException or an abort. Each case runs in a child
 process too, so an abort (which would kill pytest itself) shows up as a failure, not a crash."""
 import subprocess
 import sys

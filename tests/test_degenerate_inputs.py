@@ -1,4 +1,4 @@
-"""Empty and degenerate inputs (issue 13): each gets its own typed error naming the file and what is
+"""Empty and degenerate inputs: each gets its own typed error naming the file and what is
 wrong, from the Python API and from every CLI (one line on stderr, non-zero exit, no traceback)."""
 import os
 import re

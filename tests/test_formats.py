@@ -78,7 +78,7 @@ def make_rosbag(root: Path) -> Path:
 
 
 def make_fetch(root: Path) -> Path:
-    """A Fetch (Debias_IMU) recording: float-notation stamps, IMU and mocap (tests/synthetic.py)."""
+    """A Fetch (Debias_IMU) recording: float-notation stamps, IMU and mocap (imu_learn.data.synthetic)."""
     from imu_learn.data.synthetic import write_fetch_recording
 
     return write_fetch_recording(root, name="")

@@ -293,7 +293,7 @@ def test_aiding_gaps_report_the_longest_stretch_without_aiding():
 
 
 def coast_through_a_gap(gap_s, iterations=1, seed=3, sigma=0.02, resolve_after_s=2.0):
-    """The closed-form spin-and-climb of tests/synthetic.py with a biased, noisy IMU and position
+    """The closed-form spin-and-climb of imu_learn.data.synthetic with a biased, noisy IMU and position
     fixes at 1 Hz for the first 2 s and the last 3 s only: ``gap_s`` seconds without aiding."""
     from imu_learn.data.synthetic import spin_and_climb
     from imu_learn.fuse.graph import fuse

@@ -19,7 +19,7 @@ from imu_learn.fuse.settings import DEFAULT_LAG_S, SETTLE_S, FusionSettings  # n
 
 
 def noisy_climb(seconds: float, gap=None, seed: int = 3):
-    """tests/synthetic.py's spin-and-climb with a biased, noisy IMU and 1 Hz fixes (sigma 2 cm);
+    """imu_learn.data.synthetic's spin-and-climb with a biased, noisy IMU and 1 Hz fixes (sigma 2 cm);
     ``gap`` = (start_s, length_s): no fixes there."""
     rng = np.random.default_rng(seed)
     t, gyro, acc, p, R = spin_and_climb(n=int(seconds * 200) + 1)
@@ -61,7 +61,7 @@ def test_a_shorter_lag_stays_close_to_the_whole_graph_estimate(gap, lag_s):
     (0.034-0.048 m aided, 0.08-0.19 m with the coast), the two causal trajectories within 0.06 m of
     each other everywhere, the smoothed ones (batch LM from either start) within 0.0001 m RMSE. A lag
     shorter than the coast is not that close (lag 2 or 5 s with the 10 s coast and nothing held:
-    causal RMSE up to 1.8 times, docs/scale.md)."""
+    causal RMSE up to 1.8 times, docs/experiments/scale.md)."""
     t, gyro, acc, p, R, fixes = noisy_climb(40.0, gap)
     whole = run(t, gyro, acc, R, fixes, np.inf)
     lag = run(t, gyro, acc, R, fixes, lag_s)

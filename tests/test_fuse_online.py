@@ -23,7 +23,7 @@ from imu_learn.nn.model import ImuRefiner, ModelConfig  # noqa: E402
 
 torch.set_num_threads(1)
 
-# The closed-form trajectory (tests/synthetic.py); the shipped crop is conftest.py's `crop` fixture.
+# The closed-form trajectory (imu_learn.data.synthetic); the shipped crop is conftest.py's `crop` fixture.
 from crops import CROP, REPO  # noqa: E402
 from imu_learn.data.synthetic import spin_and_climb  # noqa: E402
 

@@ -50,7 +50,7 @@ EUROC = REPO / "datasets" / "euroc" / "MH_04_difficult"
 TUMVI = REPO / "datasets" / "tum-vi" / "dataset-room2_512_16"
 # Test crop per device: (recording, format, ground truth, max ground-truth gap [s]). MH_04 is a
 # test flight of EuRoC's standard split with EuRoC's 200 Hz full-state ground truth (V1_01's is
-# 20 Hz, interpolated onto the IMU stamps, which hides timing: docs/headroom_euroc.md); room2 is a
+# 20 Hz, interpolated onto the IMU stamps, which hides timing: docs/experiments/headroom_euroc.md); room2 is a
 # test room of TUM-VI's standard split.
 CROPS = {
     "euroc": (EUROC, "euroc", EUROC / "mav0" / "state_groundtruth_estimate0" / "data.csv", 0.05),

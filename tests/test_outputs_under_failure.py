@@ -1,4 +1,4 @@
-"""Outputs under failure (issue 13): refine, labels, fit, evaluate and fuse, interrupted by a failing
+"""Outputs under failure: refine, labels, fit, evaluate and fuse, interrupted by a failing
 writer (ENOSPC midway through a file), a signal, a full or a read-only file system, leave every
 output either as it was or complete; damaged label caches and checkpoints are refused or rebuilt;
 two labels runs on one cache take turns.

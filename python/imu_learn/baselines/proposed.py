@@ -17,7 +17,7 @@ Two ways in:
 
 ``refine`` applies the model by the one windowing rule (:mod:`imu_learn.infer.windowing`: windows
 of the training length, half overlap, centre crop), as fit, evaluate, refine and fuse do. ``save`` writes an ordinary imu_learn
-checkpoint (:mod:`imu_learn.infer.checkpoint`), which ``python -m imu_learn.refine`` and
+checkpoint (:mod:`imu_learn.infer.checkpoint`), which ``imu-learn refine`` and
 ``from_checkpoint`` read as well.
 
 :func:`train_refiner` is the training loop shared with the AirIMU-style baseline.

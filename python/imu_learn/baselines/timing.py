@@ -3,7 +3,7 @@
 Why a fitted offset and not the midpoint rule. The evaluation integrates with a zero-order hold:
 sample i acts over [t_i, t_i+1]. A sensor that reports the rate *at* t_i is then half a sample
 early on average; replacing each sample by the mean of it and the next (the midpoint rule) fixes
-that, and docs/headroom_euroc.md measured it explains most of what the shipped EuRoC model gained.
+that, and docs/experiments/headroom_euroc.md measured it explains most of what the shipped EuRoC model gained.
 The midpoint rule is the special case tau = 0.5 sample of resampling at t + tau; a fitted tau also
 absorbs a real clock offset between the IMU and the ground truth (a temporal calibration, as Kalibr
 fits for cameras) or a device whose samples are already interval means (tau ~ 0), and it costs a

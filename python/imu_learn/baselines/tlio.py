@@ -54,7 +54,7 @@ velocity. The position for a window of n samples from start k (W = the net's win
   never see; where k + n < W the first window of the recording is used. At n = 10 (the paper's
   Table II) this is an average-velocity estimate, not an integration, and is scored as such.
 
-Fusion (:mod:`imu_learn.fuse.displacement`): the same network on the graph's causal orientation
+Fusion (:mod:`imu_learn.fuse.factors.displacement`): the same network on the graph's causal orientation
 estimate, its displacement and covariance as relative-position factors between keyframes
 (:meth:`TlioStyle.regress_window`).
 

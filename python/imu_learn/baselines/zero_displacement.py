@@ -7,7 +7,7 @@ with the spread the training recordings' displacements have about zero as its co
     σ_h² = mean over training windows of (d_x² + d_y²) / 2     σ_v² = mean of d_z²
 
 (world frame, gravity along z; horizontal axes pooled, so Σ is the same in every heading and in
-TLIO's local gravity-aligned frame). It reads no IMU sample: in fusion (:mod:`imu_learn.fuse.displacement`,
+TLIO's local gravity-aligned frame). It reads no IMU sample: in fusion (:mod:`imu_learn.fuse.factors.displacement`,
 the input ``zero-displacement``: the raw IMU plus these factors every 1 s) it is a motion prior
 fitted to how far the training recordings' device moves in a second, the part of a learned
 displacement model that needs no learning. A learned displacement model counts where it beats this.

@@ -22,7 +22,7 @@ replaced only when a run has finished, so until then readers see the previous co
 unfinished run's progress goes to ``manifest.partial.json``, which the next run resumes from.
 Loading checks every segment file against the sha256 the manifest recorded, so a truncated or
 modified file is refused with a :class:`CacheError` naming it rather than read as good labels;
-``python -m imu_learn.labels`` rebuilds such a recording (saying so). A re-run skips recordings
+``imu-learn labels`` rebuilds such a recording (saying so). A re-run skips recordings
 whose cached files match their source fingerprint, settings and digests, rebuilds stale ones, and
 refuses a cache written by another format version unless told to rebuild. Two ``labels`` runs on
 one folder take turns (the second waits for the lock, saying so).

@@ -33,7 +33,7 @@ class RootConfig:
     # raise it for sparse ground truth, e.g. 0.06 for EuRoC's 20 Hz ASL state files.
     max_gap_s: float = 0.05
     # Added to the ground truth's stamps (AlignOptions.gt_time_offset_s) where its clock is measured
-    # to be off the IMU's (bench/groundtruth_report.py: a ground truth late by tau gets -tau).
+    # to be off the IMU's (imu-learn groundtruth: a ground truth late by tau gets -tau).
     gt_time_offset_s: float = 0.0
     # format = "rosbag": the IMU and ground-truth topics (empty: each bag's only one).
     imu_topic: str = ""

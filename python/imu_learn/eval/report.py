@@ -272,7 +272,7 @@ def protocol_text() -> str:
 
 def _md_head(r: Dict[str, Any]) -> List[str]:
     return [f"# Evaluation report: {r['config_name']}", "",
-            f"Written {datetime.now().strftime('%Y-%m-%d %H:%M:%S')} by `python -m imu_learn.evaluate`"
+            f"Written {datetime.now().strftime('%Y-%m-%d %H:%M:%S')} by `imu-learn evaluate`"
             f"{' --config ' + r['config_path'] if r.get('config_path') else ''}; "
             f"wall time **{r['wall_s']:.1f} s** (from the start of the command to writing this report; "
             "fitting included, imports not).", "",

@@ -1,4 +1,4 @@
-"""Evaluate IMU methods on held-out sequences: ``python -m imu_learn.evaluate``.
+"""Evaluate IMU methods on held-out sequences: ``imu-learn evaluate``.
 
 Reproduces the paper's Section V experiments (Table II: relative translation / rotation RMSE over
 ten IMU frames; the integration-error-against-horizon figure) for any set of methods, plus
@@ -6,11 +6,11 @@ AirIMU's short-horizon figures, and writes a report folder.
 
 Usage::
 
-    python -m imu_learn.evaluate --config configs/eval_default.toml        # the shipped crops
-    python -m imu_learn.evaluate --config configs/eval_euroc.toml --methods raw,traditional
-    python -m imu_learn.evaluate --config configs/eval_euroc.toml --checkpoint runs/euroc/best.pt
-    python -m imu_learn.evaluate --config configs/eval_euroc.toml --reuse  # reuse fitted methods
-    python -m imu_learn.evaluate --config configs/eval_euroc.toml --fit.steps 100 --eval.stride 20 \\
+    imu-learn evaluate --config configs/eval_default.toml        # the shipped crops
+    imu-learn evaluate --config configs/eval_euroc.toml --methods raw,traditional
+    imu-learn evaluate --config configs/eval_euroc.toml --checkpoint runs/euroc/best.pt
+    imu-learn evaluate --config configs/eval_euroc.toml --reuse  # reuse fitted methods
+    imu-learn evaluate --config configs/eval_euroc.toml --fit.steps 100 --eval.stride 20 \\
         --data.split.test '["V1_01_easy"]'                                  # dotted overrides
 
 The protocol (what is fitted on what, what each metric is) is :data:`imu_learn.score.protocol.PROTOCOL`,

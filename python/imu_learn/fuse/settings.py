@@ -13,7 +13,7 @@ from imu_learn.errors import InvalidInputError
 from .noise import ImuNoise
 
 # The causal estimate's window [s] (keyframes this recent stay in the fixed-lag smoother): chosen by
-# measurement (docs/scale.md). Shorter windows cost less per update; a window shorter than the gap
+# measurement (docs/experiments/scale.md). Shorter windows cost less per update; a window shorter than the gap
 # between fixes marginalises states no fix has corrected yet (their prior is then the IMU's alone).
 DEFAULT_LAG_S = 10.0
 # [s] The first seconds stay in the window whatever the lag: attitude and bias are still settling
@@ -22,7 +22,7 @@ DEFAULT_LAG_S = 10.0
 # whole graph with the first 30 s held).
 SETTLE_S = 30.0
 # The smoothed estimate: "batch", Levenberg-Marquardt over the whole graph (every factor kept: memory
-# and time linear, docs/scale.md); "window", each keyframe's last estimate in the fixed-lag window
+# and time linear, docs/experiments/scale.md); "window", each keyframe's last estimate in the fixed-lag window
 # (no graph kept, no batch pass).
 SMOOTHING = ("batch", "window")
 

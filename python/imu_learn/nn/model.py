@@ -78,7 +78,7 @@ class ImuRefiner(nn.Module):
             # taps' mean is taken out in _fir): it can shape and shift a signal in time but cannot
             # scale it or mix axes. A full 6x6 filter with DC gain was measured to learn scale and
             # misalignment of the training flights that made the validation flights' rotation over
-            # 1 s worse (docs/learning.md).
+            # 1 s worse (docs/experiments/learning.md).
             self.fir = nn.Conv1d(6, 6, cfg.fir_taps, groups=6, bias=False)
             nn.init.zeros_(self.fir.weight)
             if cfg.fir_init_tau:

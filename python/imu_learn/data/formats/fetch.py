@@ -11,7 +11,7 @@ unless asked); parsing here is plain Python, strict, with a typed error
 (:mod:`imu_learn.errors`) naming file, line, column and field for a bad row.
 
 Ground truth is the mocap pose. Its body frame, measured against the IMU on all six recordings
-(docs/groundtruth.md, docs/datasets.md): the axes agree within a few degrees (gravity and the
+(docs/experiments/groundtruth.md, docs/datasets.md): the axes agree within a few degrees (gravity and the
 horizontal accelerations fix the tilt to ~1° and the yaw to -3…+6°; the gyro alone cannot, the
 robot turns about z only), and the stamps within 0…9 ms, so the pose is used as it is.
 """

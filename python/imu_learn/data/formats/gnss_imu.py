@@ -18,7 +18,7 @@ kept sample's onto the end, linearly in between (the counter's clock scaled to R
 is logged and refused when it is off 1 by more than ``MAX_CLOCK_SCALE_ERROR``).
 
 Stamps come out as int64 ns of GPS time written as seconds since 1970 without leap seconds: the
-scale of the RTKLIB ``.pos`` files read by :mod:`imu_learn.fuse.rtklib` ("GPST" date and time).
+scale of the RTKLIB ``.pos`` files read by :mod:`imu_learn.fuse.aiding.rtklib` ("GPST" date and time).
 """
 from __future__ import annotations
 
@@ -267,7 +267,7 @@ def _imu_file(path: Path) -> Path:
 def read_recording(path: Path, groundtruth: Optional[Path] = None, allow_float_timestamps: bool = False
                    ) -> Tuple[ImuData, GroundTruth]:
     """The layout's common signature. These logs carry no ground-truth pose (the RTK fixes are
-    position aiding: :mod:`imu_learn.fuse.rtklib`), so a ground truth must be given explicitly."""
+    position aiding: :mod:`imu_learn.fuse.aiding.rtklib`), so a ground truth must be given explicitly."""
     f = _imu_file(path)
     if groundtruth is None:
         raise InvalidInputError(f"{f}: a {NAME} log has no ground-truth pose; pass one explicitly (TUM or ASL)")

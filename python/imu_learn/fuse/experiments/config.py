@@ -62,7 +62,7 @@ class ScenarioSpec:
     sigma_rot_deg: float = 0.1  # relative_pose
     sigma_trans_m: float = 0.01  # relative_pose
     outages: List[List[float]] = field(default_factory=list)
-    time_offset_s: float = 0.0  # leica: added to the fixes' stamps (bench/leica_agreement.py measures it)
+    time_offset_s: float = 0.0  # leica: added to the fixes' stamps (experiments/leica_agreement.py measures it)
     # The bias prior's mean: "zero", or "startup": each input's constant bias fitted against ground
     # truth on its first startup_bias_s seconds (the initialisation the evaluation's "start-up bias
     # removed" protocol assumes an estimator has, e.g. from a static start).
