@@ -7,7 +7,7 @@ from dataclasses import replace
 from pathlib import Path
 from typing import Any, Callable, List, Optional, Sequence
 
-from imu_learn.cli.common import run_command
+from imu_learn.cli.common import add_imu_input_options, csv_layout, run_command
 from imu_learn.errors import ConfigError
 
 DESCRIPTION = """Navigate one recording with its real aiding file (a camera trajectory as relative or absolute
@@ -25,9 +25,13 @@ EPILOG = """examples:
       --checkpoint models/euroc_adis16448.pt --out out/MH_04
       a recording navigated with camera poses, no ground truth
       -> out/MH_04/{causal.tum,smoothed.tum,plot.png,summary.json}
-  imu-learn navigate --input <data>/gnss-imu/drive/imu.csv --format gnss-imu --aiding <data>/gnss-imu/drive/gnss.pos \\
-      --aiding-kind position --aiding-format rtklib --imu-rotation-rpy-deg 180,-6.79,185.35 --nhc
-      a car's IMU log with its RTKLIB solution, the non-holonomic constraint on
+  imu-learn navigate --input <data>/gnss-imu/drive/imu.csv --aiding <data>/gnss-imu/drive/gnss.pos \\
+      --imu-rotation-rpy-deg 180,-6.79,185.35 --nhc --profile calib/profile.json
+      a car's IMU log with its RTKLIB solution (found by its content: positions), the non-holonomic
+      constraint on, the noise of the device's profile; also writes causal_llh.csv, smoothed_llh.csv,
+      track.kml and track.geojson
+  imu-learn navigate --input run.bag --aiding run.bag --aiding-topic /gps/fix
+      a bag's IMU with its NavSatFix topic; the trajectories also go into causal.bag and smoothed.bag
 """
 
 
@@ -38,19 +42,29 @@ def add_arguments(ap: argparse.ArgumentParser) -> None:
     ap.add_argument("--input", type=Path, required=True, metavar="REC",
                     help="the recording (a folder or file the loaders read, e.g. an EuRoC ASL folder); only its IMU "
                          "is read, never its ground truth")
-    ap.add_argument("--aiding", type=Path, default=None, metavar="FILE", help="the aiding file (required)")
+    ap.add_argument("--aiding", type=Path, default=None, metavar="FILE",
+                    help="the aiding file, or a ROS bag with --aiding-topic (required)")
+    ap.add_argument("--aiding-topic", default=None, metavar="TOPIC",
+                    help="the aiding's topic when --aiding is a ROS bag: geometry_msgs PoseStamped / TransformStamped, "
+                         "nav_msgs Odometry (poses), PointStamped (positions) or sensor_msgs NavSatFix (GNSS fixes "
+                         "with their covariance; --aiding-kind position implied)")
     ap.add_argument("--aiding-kind", choices=KINDS, default=None,
-                    help="(required) relative-pose: between consecutive poses (any visual odometry; no world frame "
+                    help="relative-pose: between consecutive poses (any visual odometry; no world frame "
                          "needed); pose: absolute poses in the aiding's own world, levelled at the start (a SLAM's "
                          "globally consistent trajectory: re-anchors after gaps); position: position fixes (heading "
-                         "from the track)")
+                         "from the track). Required unless the aiding is GNSS fixes (an RTKLIB .pos, a NavSatFix "
+                         "topic): those are positions")
     ap.add_argument("--out", type=Path, default=None, metavar="DIR", help="output folder (default out/<REC's name>)")
     ap.add_argument("--format", default=None, metavar="F",
                     help="the recording's layout (default auto: asl/euroc, tum-vi, blackbird, broad, kaist, fetch, "
                          "rosbag, gnss-imu: an IMU .csv with its RTKLIB .csv.tag)")
     ap.add_argument("--aiding-format", choices=AIDING_FORMATS, default=None,
-                    help="tum (t tx ty tz qx qy qz qw, seconds; default), csv (the same with commas), asl (ns, p, "
-                         "q_wxyz), rtklib (.pos; with --aiding-kind position)")
+                    help="auto (default: by the file's content), tum (t tx ty tz qx qy qz qw, seconds), csv (the same "
+                         "with commas), asl (ns, p, q_wxyz), rtklib (.pos: GNSS positions), bag (a ROS bag topic)")
+    ap.add_argument("--profile", type=Path, default=None, metavar="JSON",
+                    help="a device profile (imu-learn calibrate's profile.json): the IMU noise the graph assumes, and "
+                         "its floor (time offset, affine calibration) applied to the IMU unless --checkpoint or "
+                         "--calibration refines it")
     ap.add_argument("--checkpoint", default=None, metavar="PT",
                     help="refine the IMU with this checkpoint before fusing (its device bias, if it carries one, is "
                          "the bias prior; with a covariance head its per-sample variances weight the IMU)")
@@ -101,10 +115,11 @@ def add_arguments(ap: argparse.ArgumentParser) -> None:
                          f"body frame; sigma {d.nhc_sigma_lat_mps:g} / {d.nhc_sigma_vert_mps:g} m/s) at every keyframe")
     ap.add_argument("--imu-noise", default=None, metavar="GND,AND,GRW,ARW",
                     help="the IMU's gyro and acc noise densities and random walks (rad/s/sqrt(Hz), m/s^2/sqrt(Hz), "
-                         "rad/s^2/sqrt(Hz), m/s^3/sqrt(Hz)); default: the recording's sensor.yaml, else built in "
-                         "(EuRoC's ADIS16448)")
+                         "rad/s^2/sqrt(Hz), m/s^3/sqrt(Hz)); default: --profile's, else the recording's sensor.yaml, "
+                         "else built in (EuRoC's ADIS16448, with a warning)")
     ap.add_argument("--threads", type=int, default=None, metavar="N",
                     help="torch threads for the --checkpoint's model (default: torch's own)")
+    add_imu_input_options(ap)
 
 
 def require_gtsam(command: str) -> None:
@@ -139,9 +154,11 @@ def options(args: argparse.Namespace):
     """The :class:`~imu_learn.fuse.navigate.NavigateOptions` the command line asks for."""
     from imu_learn.fuse.navigate import NavigateOptions, parse_gaps, parse_vector
 
-    if args.aiding is None or args.aiding_kind is None:
-        raise ConfigError("--input needs --aiding FILE and --aiding-kind {position,pose,relative-pose}")
-    o = NavigateOptions(aiding_kind=args.aiding_kind, aiding_format=args.aiding_format or "tum")
+    if args.aiding is None:
+        raise ConfigError("--input needs --aiding FILE (and --aiding-kind {position,pose,relative-pose} unless it is "
+                          "GNSS fixes)")
+    # the kind None: found from the aiding by imu_learn.fuse.navigate.resolve_aiding (GNSS fixes are positions)
+    o = NavigateOptions(aiding_kind=args.aiding_kind, aiding_format=args.aiding_format or "auto")
     plain = {"keyframe_hz": args.keyframe_hz, "aiding_hz": args.aiding_hz, "max_relative_gap_s": args.max_relative_gap_s,
              "lag_s": args.lag_s, "imu_delay_s": args.imu_delay_s}
     o = replace(o, **{k: v for k, v in plain.items() if v is not None})
@@ -154,11 +171,13 @@ def options(args: argparse.Namespace):
     if args.nhc:
         o = replace(o, nhc=True)
     if args.sigma_rot_deg is not None:
+        if o.aiding_kind is None:
+            raise ConfigError("--sigma-rot-deg weighs poses: give --aiding-kind pose or relative-pose")
         o = replace(o, **{"rel_sigma_rot_deg" if o.aiding_kind == "relative-pose" else "pose_sigma_rot_deg":
                           args.sigma_rot_deg})
     if args.sigma_m is not None:
         key = {"relative-pose": "rel_sigma_trans_m", "pose": "pose_sigma_m", "position": "position_sigma_m"}
-        o = replace(o, **{key[o.aiding_kind]: args.sigma_m})
+        o = replace(o, **{key[o.aiding_kind or "position"]: args.sigma_m})
     return o
 
 
@@ -170,10 +189,11 @@ def run(args: argparse.Namespace, rest: List[str], keep: Callable[[Any], None]) 
     require_gtsam("navigate")
     out = args.out or Path("out") / args.input.name
     keep(f"nothing is written to {out} before the fusion ends")
-    src = Sources(args.input, args.aiding, fmt=args.format or "auto", extrinsics=args.extrinsics,
+    src = Sources(args.input, args.aiding, fmt=args.format or "auto", aiding_topic=args.aiding_topic,
+                  columns=csv_layout(args), profile=args.profile, extrinsics=args.extrinsics,
                   checkpoint=None if args.checkpoint is None else Path(args.checkpoint), groundtruth=args.groundtruth,
                   displacement=args.displacement, calibration=args.calibration)
-    print(one_line(navigate(src, out, o)))
+    print(one_line(navigate(src, out, o, progress=not args.quiet)))
     return 0
 
 

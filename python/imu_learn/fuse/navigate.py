@@ -42,6 +42,7 @@ positions) is scored the same way beside it.
 from __future__ import annotations
 
 import logging
+import sys
 import time
 from dataclasses import asdict, dataclass, replace
 from pathlib import Path
@@ -49,24 +50,34 @@ from typing import Dict, Optional, Tuple
 
 import numpy as np
 from scipy.spatial.transform import Rotation
+from tqdm import tqdm
 
+from imu_learn.calib.profile import Profile
 from imu_learn.data import formats
+from imu_learn.data.formats import rosbag
 from imu_learn.data.formats.asl import imu_sensor_yaml
+from imu_learn.data.formats.csv_columns import CsvColumns
 from imu_learn.data.formats.gnss_imu import mounting_rotation
+from imu_learn.data.types import sample_rate_hz
 from imu_learn.errors import AidingError, ConfigError, InvalidInputError
+from imu_learn.infer import rates
 
+from . import geo
 from .aiding import AbsolutePoses, OutageWindow, PositionFixes, RelativePoses, snap_to_samples
+from .aiding import bag as bag_aiding
+from .aiding.detect import FORMATS as DETECTED_FORMATS
+from .aiding.detect import detect as detect_aiding
 from .aiding.extrinsics import inverse, read_t_bs
 from .aiding.outages import in_windows
-from .aiding.rtklib import fixes_on_imu, normal_gravity, read_pos
+from .aiding.rtklib import RtkSolution, fixes_on_imu, normal_gravity, read_pos
 from .aiding.tum import Trajectory, check_overlap, read_trajectory
 from .aiding.types import AidingRows
 from .factors import chain
 from .factors.nhc import NhcSettings, nhc_callback
-from .graph import fuse
+from .graph import IncrementalFusion, feed, samples_of
 from .inputs import checkpoint_bias, checkpoint_input, displacement_hook, displacement_model, method_input
-from .noise import ImuNoise
-from .output import plot_navigation, write_json, write_trajectory
+from .noise import ImuNoise, from_profile
+from .output import plot_navigation, write_json, write_trajectory, write_trajectory_bag
 from .score import convergence, score_against
 from .settings import FusionSettings, PriorSigmas
 from .start import Start
@@ -75,7 +86,9 @@ from .start.aiding import pose_start, position_start
 log = logging.getLogger(__name__)
 
 KINDS = ("position", "pose", "relative-pose")
-AIDING_FORMATS = ("tum", "csv", "asl", "rtklib")
+AIDING_FORMATS = ("auto",) + DETECTED_FORMATS  # auto: by content (:mod:`.aiding.detect`)
+GEODETIC_FORMATS = ("rtklib",)  # and a bag's NavSatFix topic
+PROGRESS_DELAY_S = 3.0  # the progress bar shows on runs longer than this
 
 
 @dataclass(frozen=True)
@@ -83,7 +96,7 @@ class NavigateOptions:
     """How :func:`navigate` reads and weighs the aiding (defaults: a stereo visual SLAM at 20 Hz)."""
 
     aiding_kind: str = "relative-pose"
-    aiding_format: str = "tum"
+    aiding_format: str = "tum"  # or auto: by the file's content (:func:`resolve_aiding`)
     keyframe_hz: float = 10.0
     gravity: float = 9.81
     # relative-pose factors between consecutive rows. ORB-SLAM2 stereo on EuRoC, frame to frame (50 ms)
@@ -250,27 +263,40 @@ def select_rows(traj: Trajectory, imu_t_ns: np.ndarray, T_BS: Optional[np.ndarra
 # --------------------------------------------------------------------------------------------
 
 
-def read_imu(path: Path, fmt: str = "auto"):
-    """(t_ns, gyro, acc, noise, source file) of a recording: the IMU only (no ground truth is read)."""
-    src = formats.read_imu_source(Path(path), fmt)
+def read_imu(path: Path, fmt: str = "auto", columns: Optional[CsvColumns] = None):
+    """(t_ns, gyro, acc, the recording's own noise (its sensor.yaml) or None, source file, layout) of
+    a recording, or of a user's CSV (``columns``): the IMU only (no ground truth is read)."""
+    src = formats.read_imu_source(Path(path), fmt, columns=columns)
     if src.t_ns is None:
         raise InvalidInputError(f"{path}: the recording has no IMU stamps of its own; navigation needs them")
     yaml = imu_sensor_yaml(src.root) if src.fmt == "asl" else None
-    noise = ImuNoise.from_sensor_yaml(yaml) if yaml is not None else ImuNoise()
-    return np.asarray(src.t_ns, dtype=np.int64), np.asarray(src.gyro), np.asarray(src.acc), noise, str(src.imu_file)
+    noise = ImuNoise.from_sensor_yaml(yaml) if yaml is not None else None
+    return (np.asarray(src.t_ns, dtype=np.int64), np.asarray(src.gyro), np.asarray(src.acc), noise,
+            str(src.imu_file), src.fmt)
 
 
-def read_aiding(path: Path, opts: NavigateOptions) -> Trajectory:
-    """The aiding file as a :class:`Trajectory` (poses, or positions for ``position``; RTKLIB: see
-    :func:`rtklib_rows`)."""
-    return read_trajectory(path, opts.aiding_format, need_orientation=opts.aiding_kind != "position")
+def read_aiding(src: Sources, opts: NavigateOptions) -> Trajectory:
+    """The aiding file (or bag topic) as a :class:`Trajectory` (poses, or positions for ``position``;
+    geodetic fixes: see :func:`gnss_rows`)."""
+    need = opts.aiding_kind != "position"
+    if opts.aiding_format == "bag":
+        return bag_aiding.read_trajectory(Path(src.aiding), str(src.aiding_topic), need_orientation=need)
+    return read_trajectory(src.aiding, opts.aiding_format, need_orientation=need)
 
 
-def rtklib_rows(path: Path, imu_t_ns: np.ndarray, lever: np.ndarray, opts: NavigateOptions):
-    """(GnssFixes on the IMU's samples with their own per-fix sigmas, AidingRows, the RtkSolution) of an RTKLIB
-    ``.pos`` file (:mod:`imu_learn.fuse.aiding.rtklib`: local ENU at the first epoch; fixed and float
-    solutions, float down-weighted), without the fixes inside ``opts.gaps``."""
-    sol = read_pos(Path(path))
+def read_geodetic(src: Sources, opts: NavigateOptions) -> RtkSolution:
+    """Geodetic fixes in local ENU at their first epoch: an RTKLIB ``.pos`` file or a bag's NavSatFix topic."""
+    if opts.aiding_format == "bag":
+        return bag_aiding.read_navsat(Path(src.aiding), str(src.aiding_topic), opts.position_sigma_m)
+    return read_pos(Path(src.aiding))
+
+
+def gnss_rows(src: Sources, imu_t_ns: np.ndarray, lever: np.ndarray, opts: NavigateOptions):
+    """(GnssFixes on the IMU's samples with their own per-fix sigmas, AidingRows, the RtkSolution) of
+    geodetic fixes (:func:`read_geodetic`; RTKLIB: fixed and float solutions, float down-weighted),
+    without the fixes inside ``opts.gaps``."""
+    path = src.aiding
+    sol = read_geodetic(src, opts)
     fixes = fixes_on_imu(sol, imu_t_ns, lever)
     rel_s = (imu_t_ns[fixes.idx] - int(imu_t_ns[0])) * 1e-9
     in_gap = in_windows(rel_s, opts.gaps)
@@ -319,11 +345,15 @@ class Sources:
     """The files :func:`navigate` reads: the recording ``input`` (its IMU only, layout ``fmt``), the
     ``aiding`` file, and optionally the aiding sensor's ``extrinsics``, a ``checkpoint`` refining the
     IMU (or a ``calibration`` fit of ``imu-learn evaluate``), a ``displacement`` model, and a
-    ``groundtruth`` file to score the result with afterwards."""
+    ``groundtruth`` file to score the result with afterwards; ``profile``, a device profile giving
+    the IMU noise and, without a checkpoint or calibration, its floor."""
 
     input: Path
     aiding: Path
     fmt: str = "auto"
+    aiding_topic: Optional[str] = None  # the aiding's topic when ``aiding`` is a ROS bag
+    columns: Optional[CsvColumns] = None  # ``input`` is a user's CSV of this layout
+    profile: Optional[Path] = None  # a device profile (imu-learn calibrate): noise and floor
     extrinsics: Optional[Path] = None
     checkpoint: Optional[Path] = None
     groundtruth: Optional[Path] = None
@@ -342,33 +372,69 @@ class Imu:
     noise: ImuNoise
     file: str
     mounting: Optional[np.ndarray] = None
+    floor: Optional[str] = None  # the profile whose floor was applied (sensor frame, before the mounting)
+
+
+def imu_noise(src: Sources, opts: NavigateOptions, own: Optional[ImuNoise], profile: Optional[Profile]) -> ImuNoise:
+    """The noise the graph assumes: ``--imu-noise``, else the profile's, else the recording's
+    sensor.yaml, else the built-in device's (one warning line naming it)."""
+    if opts.imu_noise is not None:
+        return ImuNoise(*opts.imu_noise, source="--imu-noise")
+    if profile is not None:
+        return from_profile(profile.kalibr(), str(src.profile))
+    if own is not None:
+        return own
+    noise = ImuNoise()
+    log.warning(f"no --profile or --imu-noise: the IMU noise is the built-in EuRoC ADIS16448's (gyro "
+                f"{noise.gyro_noise_density:g} rad/s/sqrt(Hz), acc {noise.acc_noise_density:g} m/s^2/sqrt(Hz)); "
+                "imu-learn calibrate writes your device's")
+    return noise
+
+
+def load_profile(src: Sources, t_ns: np.ndarray, fmt: str) -> Optional[Profile]:
+    """The device profile, its rate and device checked against the recording's (warnings only)."""
+    if src.profile is None:
+        return None
+    profile = Profile.load(src.profile)
+    made = rates.MadeFor(f"profile {src.profile}", profile.sample_rate_hz, profile.device)
+    for line in rates.check(Path(src.input).name, sample_rate_hz(t_ns), rates.recording_device(fmt, src.fmt),
+                            [made], force=True):
+        log.warning(line)
+    return profile
 
 
 def read_body_imu(src: Sources, opts: NavigateOptions) -> Imu:
-    """The recording's IMU in the body frame (``--imu-rotation-rpy-deg``), its stamps moved by
-    ``--imu-delay-s``, with ``--imu-noise`` or the recording's own noise model."""
-    t_ns, gyro, acc, noise, imu_file = read_imu(src.input, src.fmt)
+    """The recording's IMU (through the profile's floor when there is one and no checkpoint or
+    calibration) in the body frame (``--imu-rotation-rpy-deg``), its stamps moved by
+    ``--imu-delay-s``, with its noise (:func:`imu_noise`)."""
+    t_ns, gyro, acc, own, imu_file, fmt = read_imu(src.input, src.fmt, src.columns)
+    profile = load_profile(src, t_ns, fmt)
+    noise = imu_noise(src, opts, own, profile)
+    floor = None
+    if profile is not None and profile.has_floor and src.checkpoint is None and src.calibration is None:
+        gyro, acc = profile.apply(t_ns, gyro, acc)
+        floor = str(src.profile)
+    elif profile is not None and profile.has_floor:
+        log.info(f"{src.profile}: its noise only (the IMU is refined by --checkpoint / --calibration, not its floor)")
     mounting = None
     if opts.imu_rotation_rpy_deg is not None:
         mounting = mounting_rotation(opts.imu_rotation_rpy_deg)
         gyro, acc = np.ascontiguousarray(gyro @ mounting.T), np.ascontiguousarray(acc @ mounting.T)
     if opts.imu_delay_s:
         t_ns = t_ns + int(round(opts.imu_delay_s * 1e9))
-    if opts.imu_noise is not None:
-        noise = ImuNoise(*opts.imu_noise, source="--imu-noise")
-    return Imu(t_ns, gyro, acc, noise, imu_file, mounting)
+    return Imu(t_ns, gyro, acc, noise, imu_file, mounting, floor)
 
 
 def aiding_rows(src: Sources, opts: NavigateOptions, t_ns: np.ndarray, T_BS: Optional[np.ndarray],
                 lever: np.ndarray) -> Tuple[AidingRows, int, Optional[object], NavigateOptions]:
-    """(the rows used, the rows read, the GNSS fixes of an RTKLIB file or None, the options with the
-    gravity of geodetic fixes)."""
-    if opts.aiding_format == "rtklib":
-        gnss, rows, sol = rtklib_rows(src.aiding, t_ns, lever, opts)
+    """(the rows used, the rows read, (the GNSS fixes, their solution) of geodetic aiding or None, the
+    options with the gravity of geodetic fixes)."""
+    if is_geodetic(src, opts):
+        gnss, rows, sol = gnss_rows(src, t_ns, lever, opts)
         # geodetic fixes: the normal gravity at their origin (9.797 m/s^2 on the drive, not 9.81)
         opts = replace(opts, gravity=round(normal_gravity(sol.origin_llh[0], sol.origin_llh[2]), 6))
-        return rows, len(rows.sample) + sum(rows.dropped.values()), gnss, opts
-    traj = read_aiding(src.aiding, opts)
+        return rows, len(rows.sample) + sum(rows.dropped.values()), (gnss, sol), opts
+    traj = read_aiding(src, opts)
     return select_rows(traj, t_ns, T_BS, opts), len(traj), None, opts
 
 
@@ -382,13 +448,48 @@ def imu_input(src: Sources, opts: NavigateOptions, imu: Imu) -> Tuple[np.ndarray
             raise ConfigError("--variance-scale scales a covariance head's variances: not with --calibration")
         gyro, acc, label = method_input(Path(src.calibration), imu.t_ns, imu.gyro, imu.acc)
         return gyro, acc, None, label
-    return checkpoint_input(src.checkpoint, imu.t_ns, imu.gyro, imu.acc, opts.variance_scale)
+    gyro, acc, var, label = checkpoint_input(src.checkpoint, imu.t_ns, imu.gyro, imu.acc, opts.variance_scale)
+    if imu.floor is not None:
+        label = f"the floor of profile {Path(imu.floor).parent.name or imu.floor}"
+    return gyro, acc, var, label
 
 
-def navigate(src: Sources, out: Path, opts: NavigateOptions = NavigateOptions()) -> Dict[str, object]:
+def is_geodetic(src: Sources, opts: NavigateOptions) -> bool:
+    """Whether the aiding is geodetic fixes (an RTKLIB file or a bag's NavSatFix topic)."""
+    return opts.aiding_format in GEODETIC_FORMATS or (
+        opts.aiding_format == "bag" and bag_aiding.is_geodetic(Path(src.aiding), str(src.aiding_topic)))
+
+
+def resolve_aiding(src: Sources, opts: NavigateOptions, kind: Optional[str]) -> NavigateOptions:
+    """``opts`` with the aiding's format found from its content when ``auto`` (:mod:`.aiding.detect`)
+    and its kind: ``kind`` when given, else ``position`` for geodetic fixes (they are nothing else);
+    a :class:`ConfigError` for any other aiding without a kind, or a bag without a topic."""
+    if opts.aiding_format == "auto":
+        opts = replace(opts, aiding_format=detect_aiding(Path(src.aiding)))
+    if opts.aiding_format == "bag" and not src.aiding_topic:
+        raise ConfigError(f"--aiding {src.aiding} is a ROS bag: name its topic with --aiding-topic "
+                          "(PoseStamped, Odometry, TransformStamped, PointStamped or NavSatFix)")
+    if opts.aiding_format != "bag" and src.aiding_topic:
+        raise ConfigError(f"--aiding-topic: {src.aiding} is not a ROS bag (format {opts.aiding_format})")
+    if kind is not None and kind != "position" and opts.aiding_format == "bag" and is_geodetic(src, opts):
+        raise ConfigError(f"{src.aiding} topic {src.aiding_topic} holds GNSS fixes: use it with --aiding-kind position")
+    if kind is None:
+        if not is_geodetic(src, opts):
+            raise ConfigError(f"--aiding-kind {{{','.join(KINDS)}}}: say what {Path(src.aiding).name} holds "
+                              f"(its format, {opts.aiding_format}, does not)")
+        kind = "position"
+    return replace(opts, aiding_kind=kind)
+
+
+def navigate(src: Sources, out: Path, opts: NavigateOptions = NavigateOptions(),
+             progress: bool = False) -> Dict[str, object]:
     """Fuse the recording's IMU with its aiding file and write ``out``/{causal.tum, smoothed.tum,
-    plot.png, summary.json}; returns the summary (module docstring)."""
+    plot.png, summary.json} (and the geodetic tracks of GNSS aiding, the bags of bag aiding: see
+    :func:`write_outputs`); returns the summary (module docstring). ``progress``: a bar on stderr for
+    runs longer than a few seconds. ``opts.aiding_kind`` None: from the aiding
+    (:func:`resolve_aiding`)."""
     t_start = time.perf_counter()
+    opts = resolve_aiding(src, opts, opts.aiding_kind)
     opts.check()
     if opts.aiding_kind != "position" and src.extrinsics is None:
         log.warning("no --extrinsics: the aiding's poses are taken as body (IMU) poses")
@@ -408,7 +509,8 @@ def navigate(src: Sources, out: Path, opts: NavigateOptions = NavigateOptions())
     else:
         st = pose_start(t_ns, gyro, acc, rows, int(rows.sample[0]), bias0, opts.gravity, opts.level_s)
     s0 = st.start
-    aiding, counts = build_aiding(rows, s0, st.R_WA, lever, opts, Path(src.aiding).name, str(src.aiding), gnss)
+    aiding, counts = build_aiding(rows, s0, st.R_WA, lever, opts, Path(src.aiding).name, str(src.aiding),
+                                  None if gnss is None else gnss[0])
     if len(aiding) == 0:
         raise AidingError(f"{src.aiding}: no aiding measurement left to fuse", str(src.aiding), opts.aiding_kind)
     at_rest = st.info["still_s"] >= 1.0 and opts.aiding_kind != "position"  # position aiding starts moving
@@ -416,7 +518,7 @@ def navigate(src: Sources, out: Path, opts: NavigateOptions = NavigateOptions())
                                        vel_mps=0.05 if at_rest else opts.prior_vel_mps))
     if src.displacement is not None:
         label += f" + displacements of {Path(src.displacement).name}"
-    res = fuse_run(src, opts, imu, (gyro, acc, var), st, aiding, label)
+    res = fuse_run(src, opts, imu, (gyro, acc, var), st, aiding, label, progress)
     kf_t = t_ns[s0:][res.kf_idx]
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
@@ -426,6 +528,8 @@ def navigate(src: Sources, out: Path, opts: NavigateOptions = NavigateOptions())
         "input": str(src.input), "imu_file": imu.file, "imu_input": label,
         "noise": imu.noise.source if var is None else "learned per-sample variances"
         + ("" if opts.variance_scale is None else " x variance_scale"),
+        "imu_noise": imu.noise.to_dict(), "profile": _text(src.profile), "profile_floor": imu.floor is not None,
+        "aiding_topic": src.aiding_topic,
         "aiding": str(src.aiding), "aiding_kind": opts.aiding_kind, "aiding_format": opts.aiding_format,
         "aiding_label": aiding.label, "extrinsics": _text(src.extrinsics), "checkpoint": _text(src.checkpoint),
         "displacement": _text(src.displacement), "calibration": _text(src.calibration),
@@ -442,7 +546,9 @@ def navigate(src: Sources, out: Path, opts: NavigateOptions = NavigateOptions())
         "lever_arm_m": [round(float(x), 4) for x in lever],
         "final_bias": [round(float(b), 6) for b in res.smoothed_bias[-1]],
         "outputs": {"causal": str(out / "causal.tum"), "smoothed": str(out / "smoothed.tum")},
+        **frames(src, opts, None if gnss is None else gnss[1]),
     }
+    summary["outputs"].update(write_outputs(src, out, kf_t, res, None if gnss is None else gnss[1]))
     scores = None
     if src.groundtruth is not None:
         scores = score_against(src.groundtruth, kf_t, res, rows, st.R_WA, int(t_ns[0]), opts.aiding_kind != "position",
@@ -461,9 +567,53 @@ def _text(path: Optional[Path]) -> Optional[str]:
     return None if path is None else str(path)
 
 
-def fuse_run(src: Sources, opts: NavigateOptions, imu: Imu, fused: tuple, st: Start, aiding, label: str):
+def frames(src: Sources, opts: NavigateOptions, sol: Optional[RtkSolution]) -> Dict[str, object]:
+    """What the trajectories' frame and stamps are, for summary.json: the ENU origin of geodetic
+    fixes, and the time system of the stamps."""
+    if sol is None:
+        return {"frame": "the aiding's world, gravity-aligned (z up)",
+                "time_system": "the recording's IMU clock (seconds as read), the aiding on the same clock"}
+    lat, lon, h = sol.origin_llh
+    origin = {"latitude_deg": lat, "longitude_deg": lon, "height_m": h,
+              "what": "WGS-84, ellipsoidal height; the first fix of the aiding"}
+    if opts.aiding_format == "rtklib":
+        ts = ("GPST: GPS time, seconds since 1970-01-01 00:00:00 without leap seconds (RTKLIB's stamps; the IMU "
+              "on the same scale)")
+    else:
+        ts = f"the header stamps of {src.aiding_topic} (the bag's clock: usually UTC or the recorder's system time)"
+    return {"frame": "local east-north-up (x east, y north, z up) at enu_origin", "enu_origin": origin,
+            "time_system": ts}
+
+
+def write_outputs(src: Sources, out: Path, kf_t: np.ndarray, res, sol: Optional[RtkSolution]) -> Dict[str, str]:
+    """The files beside the TUM ones: with geodetic aiding the causal and smoothed tracks as
+    latitude/longitude/height CSVs (``causal_llh.csv``, ``smoothed_llh.csv``), ``track.kml`` and
+    ``track.geojson``; with a ROS bag as input or aiding both trajectories as nav_msgs/Odometry on
+    ``/imu_learn/odometry`` in bags of that bag's kind (``causal.bag``/``smoothed.bag`` for ROS 1,
+    the folders ``causal_bag``/``smoothed_bag`` for ROS 2). Returns {name: path}."""
+    written: Dict[str, str] = {}
+    tracks = {"causal": (res.causal_p, res.causal_R), "smoothed": (res.smoothed_p, res.smoothed_R)}
+    if sol is not None:
+        llh = {k: geo.enu_to_llh(p, sol.origin_llh) for k, (p, _R) in tracks.items()}
+        for k, v in llh.items():
+            geo.write_llh_csv(out / f"{k}_llh.csv", kf_t, v)
+            written[f"{k}_llh"] = str(out / f"{k}_llh.csv")
+        geo.write_kml(out / "track.kml", Path(src.input).name, llh)
+        geo.write_geojson(out / "track.geojson", {k: (kf_t, v) for k, v in llh.items()})
+        written.update(kml=str(out / "track.kml"), geojson=str(out / "track.geojson"))
+    like = next((Path(p) for p in (src.input, src.aiding) if rosbag.detect(Path(p))), None)
+    if like is not None:
+        ros1 = rosbag.is_ros1(rosbag.bag_path(like))
+        for k, (p, R) in tracks.items():
+            written[f"{k}_bag"] = str(write_trajectory_bag(out / (k if ros1 else f"{k}_bag"), kf_t, p, R, like=like))
+    return written
+
+
+def fuse_run(src: Sources, opts: NavigateOptions, imu: Imu, fused: tuple, st: Start, aiding, label: str,
+             progress: bool = False):
     """The factor graph from the start sample on: the IMU as fused (``fused``: gyro, acc, variances or
-    None), the aiding, ``--nhc`` and ``--displacement``'s factors (regressed from the raw IMU)."""
+    None), the aiding, ``--nhc`` and ``--displacement``'s factors (regressed from the raw IMU); the
+    samples streamed as :func:`imu_learn.fuse.graph.fuse` streams them, with a progress bar."""
     gyro, acc, var = fused
     sel = slice(st.start, None)
     settings = FusionSettings(imu.noise, opts.gravity, opts.keyframe_hz, st.prior,
@@ -477,10 +627,20 @@ def fuse_run(src: Sources, opts: NavigateOptions, imu: Imu, fused: tuple, st: St
                                        imu.acc[sel]))
     log.info(f"fusing {len(imu.t_ns) - st.start} IMU samples ({label}) with {len(aiding)} {opts.aiding_kind} "
              f"measurements of {src.aiding}")
+    t_ns = imu.t_ns[sel]
     try:
-        return fuse(imu.t_ns[sel], np.ascontiguousarray(gyro[sel]), np.ascontiguousarray(acc[sel]), st.pose, [aiding],
-                    settings, bias0=st.bias, var=None if var is None else np.ascontiguousarray(var[sel]),
-                    extra_factors=chain(*hooks))
+        t0 = time.perf_counter()
+        inc = IncrementalFusion(t_ns, st.pose, [aiding], settings, st.bias, predict_between=False,
+                                extra_factors=chain(*hooks))
+        with tqdm(total=len(t_ns), desc="navigate", unit="sample", unit_scale=True, delay=PROGRESS_DELAY_S,
+                  disable=not progress, file=sys.stderr, leave=False) as bar:
+            feed(inc, samples_of(np.ascontiguousarray(gyro[sel]), np.ascontiguousarray(acc[sel]),
+                                 None if var is None else np.ascontiguousarray(var[sel])),
+                 on_state=lambda *_: bar.update(1))
+            bar.set_description("navigate: smoothing")
+            res = inc.smooth()
+        res.seconds = time.perf_counter() - t0
+        return res
     except RuntimeError as e:  # GTSAM's IndeterminateLinearSystemException and kin
         raise AidingError(f"{src.aiding}: the factor graph could not be solved: {' '.join(str(e).split())[:300]}",
                           str(src.aiding), opts.aiding_kind) from None

@@ -9,12 +9,14 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Dict, Optional
 
 import numpy as np
 
 from imu_learn.data.formats.asl import read_sensor_yaml
 from imu_learn.errors import InvalidInputError
 
+BUILT_IN = "EuRoC ADIS16448 sensor.yaml (built-in)"
 SENSOR_KEYS = {
     "gyro_noise_density": "gyroscope_noise_density",
     "acc_noise_density": "accelerometer_noise_density",
@@ -30,7 +32,7 @@ class ImuNoise:
     gyro_random_walk: float = 1.9393e-5
     acc_random_walk: float = 3.0e-3
     integration_sigma: float = 1e-4  # [m/s^2/sqrt(Hz)]-like slack on position integration (GTSAM's default style)
-    source: str = "EuRoC ADIS16448 sensor.yaml (built-in)"
+    source: str = BUILT_IN
 
     def __post_init__(self) -> None:
         for k in ("gyro_noise_density", "acc_noise_density", "gyro_random_walk", "acc_random_walk"):
@@ -47,6 +49,10 @@ class ImuNoise:
             raise InvalidInputError(f"{path}: no numeric {', '.join(missing)}")
         return cls(**{k: float(y[v]) for k, v in SENSOR_KEYS.items()}, source=str(path))
 
+    def to_dict(self) -> dict:
+        """The four densities under Kalibr's names, and where they came from (summary.json)."""
+        return {**{v: float(getattr(self, k)) for k, v in SENSOR_KEYS.items()}, "source": self.source}
+
     def gtsam_params(self, gravity: float):
         """``PreintegrationCombinedParams`` for a z-up world with gravity ``gravity`` [m/s^2]."""
         import gtsam
@@ -59,3 +65,15 @@ class ImuNoise:
         p.setBiasOmegaCovariance(self.gyro_random_walk ** 2 * eye)
         p.setBiasAccCovariance(self.acc_random_walk ** 2 * eye)
         return p
+
+
+def from_profile(kalibr: Dict[str, Optional[float]], where: str) -> ImuNoise:
+    """The noise of a device profile (:meth:`imu_learn.calib.profile.Profile.kalibr`: Kalibr's four
+    names); a figure the profile lacks is the built-in one, and the source says which."""
+    ours = {v: k for k, v in SENSOR_KEYS.items()}
+    missing = [name for name in ours if kalibr.get(name) is None]
+    values = {ours[name]: float(v) for name, v in kalibr.items() if name in ours and v is not None}
+    source = f"profile {where}"
+    if missing:
+        source += f" ({', '.join(missing)}: built-in EuRoC ADIS16448)"
+    return ImuNoise(**values, source=source)

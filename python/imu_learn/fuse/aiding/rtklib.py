@@ -124,6 +124,23 @@ def normal_gravity(lat_deg: float, h: float) -> float:
 
 # --- reader ----------------------------------------------------------------------------------------
 
+def looks_like_pos(lines: Sequence[str]) -> bool:
+    """Whether the first lines of a file are an RTKLIB solution's: ``%`` comment lines, the last of
+    which names the time system and RTKLIB's position columns (any time system: the reader then says
+    which it takes)."""
+    hdr = None
+    for line in lines:
+        if line.startswith("%"):
+            hdr = line
+        elif line.strip():
+            break
+    if hdr is None:
+        return False
+    tokens = hdr.lstrip("%").split()
+    return bool(tokens) and tokens[0] in ("GPST", "UTC", "JST") and (
+        all(c in tokens for c in LLH_COLS) or all(c in tokens for c in ECEF_COLS) or "Q" in tokens)
+
+
 def _time_ns(tokens: Sequence[str], p: str, lineno: int) -> int:
     a, b = tokens
     if "/" in a:  # YYYY/MM/DD HH:MM:SS.sss

@@ -1,0 +1,178 @@
+"""``imu-learn navigate`` for a real device with GNSS: an RTKLIB ``.pos`` found by its content (no
+--aiding-format, no --aiding-kind), the tracks written as latitude/longitude/height, KML and GeoJSON
+(WGS-84 ENU -> geodetic, the inverse of the reader's geodetic -> ENU), the ENU origin and the time
+system in summary.json, the IMU noise (and floor) of a device profile, the one warning line of the
+built-in noise, and the progress bar. On the synthetic car of tests/test_navigate_gnss.py."""
+from __future__ import annotations
+
+import json
+import xml.etree.ElementTree as ET
+
+import numpy as np
+import pytest
+from test_navigate_gnss import DELAY_S, H0, LAT0, LEVER, LON0, RPY, run, synthetic_car
+
+from imu_learn.calib.profile import NoiseTerm, Profile, noise_only
+from imu_learn.fuse import geo
+from imu_learn.fuse.aiding import rtklib
+from imu_learn.fuse.aiding.detect import detect
+from imu_learn.fuse.noise import BUILT_IN
+
+NOISE = {"gyroscope_noise_density": 1e-4, "accelerometer_noise_density": 1e-3, "gyroscope_random_walk": 1e-5,
+         "accelerometer_random_walk": 1e-4}
+
+
+def car_args(imu, pos, out):
+    return ["--input", imu, "--aiding", pos, "--imu-rotation-rpy-deg", ",".join(map(str, RPY)), "--imu-delay-s",
+            -DELAY_S, "--lever-arm", ",".join(map(str, LEVER)), "--keyframe-hz", 4, "--out", out]
+
+
+def write_profile(path, floor=None):
+    terms = {k: NoiseTerm(np.full(3, v), v, v / 10, "", "residuals") for k, v in NOISE.items()}
+    prof = noise_only("test-car", 100.0, terms)
+    if floor is not None:
+        prof.floor = floor
+    prof.save(path)
+    return path
+
+
+# --- geodesy ---------------------------------------------------------------------------------------
+
+def test_enu_to_geodetic_round_trips_with_the_readers_geodetic_to_enu():
+    rng = np.random.default_rng(0)
+    for origin in ((LAT0, LON0, H0), (-33.9, 151.2, 40.0), (78.2, 15.6, 10.0), (0.0, 0.0, 0.0)):
+        enu = rng.uniform(-20_000, 20_000, (500, 3)) * [1, 1, 0.02]
+        llh = geo.enu_to_llh(enu, origin)
+        back = geo.llh_to_enu(llh, origin)
+        assert np.abs(back - enu).max() < 1e-6  # < 1 micrometre (the brief: < 1 mm)
+        # the reader's own formulas: ECEF of each point, then its scalar ECEF -> geodetic
+        x = rtklib.llh_to_ecef(llh[:5, 0], llh[:5, 1], llh[:5, 2])
+        for k in range(5):
+            assert np.allclose(rtklib.ecef_to_llh(x[k]), llh[k], rtol=0, atol=1e-9)
+
+
+def test_the_pos_file_is_found_by_its_content(tmp_path):
+    _imu, pos, _ = synthetic_car(tmp_path, seconds=6.0)
+    assert detect(pos) == "rtklib"
+    renamed = tmp_path / "fixes.txt"
+    renamed.write_text(pos.read_text())
+    assert detect(renamed) == "rtklib"  # the name plays no part
+    (tmp_path / "a.tum").write_text("# t x y z qx qy qz qw\n1.0 0 0 0 0 0 0 1\n")
+    (tmp_path / "a.csv").write_text("t,x,y,z,qx,qy,qz,qw\n1.0,0,0,0,0,0,0,1\n")
+    (tmp_path / "a_asl.csv").write_text("#timestamp,px,py,pz,qw,qx,qy,qz\n1403636579758555392,0,0,0,1,0,0,0\n")
+    assert [detect(tmp_path / n) for n in ("a.tum", "a.csv", "a_asl.csv")] == ["tum", "csv", "asl"]
+    (tmp_path / "run.bag").write_bytes(b"")
+    assert detect(tmp_path / "run.bag") == "bag"
+    utc = tmp_path / "utc.pos"
+    utc.write_text(pos.read_text().replace("%  GPST ", "%  UTC  "))
+    assert detect(utc) == "rtklib"  # then the reader says it takes GPST only
+    with pytest.raises(FileNotFoundError):
+        detect(tmp_path / "none.pos")
+
+
+# --- the car through imu-learn navigate ------------------------------------------------------------
+
+def test_gnss_run_writes_geodetic_tracks_origin_and_time_system(tmp_path, capsys):
+    imu, pos, _ = synthetic_car(tmp_path, seconds=16.0)
+    out = tmp_path / "nav"
+    rc, stdout, err = run(car_args(imu, pos, out) + ["--imu-noise", "1e-4,1e-3,1e-5,1e-4", "--quiet"], capsys)
+    assert rc == 0, err
+    assert err == ""  # --quiet, and --imu-noise given: no warning, no bar
+    s = json.loads((out / "summary.json").read_text())
+    assert s["aiding_format"] == "rtklib" and s["aiding_kind"] == "position"
+    o = s["enu_origin"]
+    origin = rtklib.read_pos(pos).origin_llh  # the first fix: the antenna, at LEVER from the IMU near LAT0, LON0, H0
+    assert (o["latitude_deg"], o["longitude_deg"], o["height_m"]) == pytest.approx(origin, abs=1e-9)
+    assert np.allclose(geo.llh_to_enu(np.array([origin]), (LAT0, LON0, H0))[0][:2], 0.0, atol=1.0)
+    assert s["time_system"].startswith("GPST") and "east-north-up" in s["frame"]
+    assert s["imu_noise"]["source"] == "--imu-noise" and s["imu_noise"]["gyroscope_noise_density"] == 1e-4
+    for name in ("causal_llh.csv", "smoothed_llh.csv", "track.kml", "track.geojson"):
+        assert (out / name).is_file(), name
+        assert s["outputs"][{"track.kml": "kml", "track.geojson": "geojson"}.get(name, name[:-4])] == str(out / name)
+    tum = np.loadtxt(out / "smoothed.tum", ndmin=2)
+    llh = np.loadtxt(out / "smoothed_llh.csv", delimiter=",", skiprows=1, ndmin=2)
+    assert (out / "smoothed_llh.csv").read_text().splitlines()[0] == "t_s,latitude_deg,longitude_deg,height_m"
+    np.testing.assert_allclose(llh[:, 0], tum[:, 0], rtol=0, atol=1e-6)
+    enu = geo.llh_to_enu(llh[:, 1:], origin)
+    assert np.abs(enu - tum[:, 1:4]).max() < 1e-3  # 10 decimals of a degree, 0.1 mm of height
+    # KML: parses, one LineString per track, lon,lat,h triples equal to the CSV
+    root = ET.parse(out / "track.kml").getroot()
+    ns = {"k": geo.KML_NS}
+    marks = root.findall(".//k:Placemark", ns)
+    assert [m.find("k:name", ns).text for m in marks] == ["causal", "smoothed"]
+    coords = np.array([[float(v) for v in c.split(",")]
+                       for c in marks[1].find(".//k:LineString/k:coordinates", ns).text.split()])
+    assert np.all(np.abs(coords[:, [1, 0, 2]] - llh[:, 1:]).max(axis=0) <= [1e-8, 1e-8, 1e-3])
+    # GeoJSON: a FeatureCollection of LineStrings in lon, lat order
+    gj = json.loads((out / "track.geojson").read_text())
+    assert gj["type"] == "FeatureCollection" and len(gj["features"]) == 2
+    for f in gj["features"]:
+        assert f["type"] == "Feature" and f["geometry"]["type"] == "LineString"
+        c = np.asarray(f["geometry"]["coordinates"])
+        assert c.shape[1] == 3 and len(c) >= 2
+        assert np.all(np.abs(c[:, 0] - LON0) < 0.01) and np.all(np.abs(c[:, 1] - LAT0) < 0.01)  # lon first
+    np.testing.assert_allclose(np.asarray(gj["features"][1]["geometry"]["coordinates"])[:, [1, 0]], llh[:, 1:3],
+                               atol=1e-8)
+
+
+def test_noise_from_a_profile_else_one_warning_naming_the_built_in(tmp_path, capsys):
+    imu, pos, _ = synthetic_car(tmp_path, seconds=14.0)
+    rc, _out, err = run(car_args(imu, pos, tmp_path / "plain") + ["--quiet"], capsys)
+    assert rc == 0, err
+    warnings = [ln for ln in err.splitlines() if "warning" in ln]
+    assert len(warnings) == 1 and "built-in EuRoC ADIS16448" in warnings[0] and "--profile" in warnings[0], err
+    s = json.loads((tmp_path / "plain" / "summary.json").read_text())
+    assert s["imu_noise"]["source"] == BUILT_IN and s["profile"] is None
+    prof = write_profile(tmp_path / "calib" / "profile.json")
+    rc, _out, err = run(car_args(imu, pos, tmp_path / "prof") + ["--quiet", "--profile", prof], capsys)
+    assert rc == 0, err
+    assert err == ""
+    s = json.loads((tmp_path / "prof" / "summary.json").read_text())
+    assert s["imu_noise"] == {**NOISE, "source": f"profile {prof}"}
+    assert s["profile"] == str(prof) and s["profile_floor"] is False and s["imu_input"] == "raw"
+
+
+def test_a_profiles_floor_is_applied_in_the_imu_frame(tmp_path, capsys):
+    """The car's gyro carries a bias in the IMU frame; the profile's floor removes it: the bias the
+    graph estimates is then near zero, against the bias itself (in the body frame) without it."""
+    from imu_learn.baselines.traditional import TraditionalTiming
+    from imu_learn.data.formats import gnss_imu
+
+    imu, pos, _ = synthetic_car(tmp_path, seconds=14.0)
+    b = np.array([0.02, -0.015, 0.01])  # rad/s, IMU frame
+    lines = imu.read_text().split("\n")
+    for i in range(1, len(lines) - 1):
+        c = lines[i].split(",")
+        c[3:6] = [f"{float(v) + np.degrees(bk):.6f}" for v, bk in zip(c[3:6], b)]
+        lines[i] = ",".join(c)
+    imu.write_text("\n".join(lines))
+    m = TraditionalTiming()
+    m.params.b_g = b.copy()
+    m.params.cutoff_gyro = m.params.cutoff_acc = None
+    m.params.time_offset = 0.0
+    prof = write_profile(tmp_path / "calib" / "profile.json", floor=m.to_dict())
+    assert Profile.load(prof).has_floor
+    args = car_args(imu, pos, tmp_path / "floor") + ["--quiet", "--profile", prof]
+    rc, _out, err = run(args, capsys)
+    assert rc == 0, err
+    s = json.loads((tmp_path / "floor" / "summary.json").read_text())
+    assert s["profile_floor"] is True and "floor of profile" in s["imu_input"]
+    assert np.abs(s["final_bias"][:3]).max() < 0.003, s["final_bias"]
+    rc, _out, err = run(car_args(imu, pos, tmp_path / "raw") + ["--quiet", "--imu-noise", "1e-4,1e-3,1e-5,1e-4"],
+                        capsys)
+    assert rc == 0, err
+    raw = json.loads((tmp_path / "raw" / "summary.json").read_text())
+    np.testing.assert_allclose(raw["final_bias"][:3], gnss_imu.mounting_rotation(RPY) @ b, atol=0.003)
+
+
+def test_progress_bar_on_stderr_unless_quiet(tmp_path, capsys, monkeypatch):
+    from imu_learn.fuse import navigate
+
+    monkeypatch.setattr(navigate, "PROGRESS_DELAY_S", 0.0)  # a short run shows its bar too
+    imu, pos, _ = synthetic_car(tmp_path, seconds=12.0)
+    noise = ["--imu-noise", "1e-4,1e-3,1e-5,1e-4"]
+    rc, _out, err = run(car_args(imu, pos, tmp_path / "a") + noise, capsys)
+    assert rc == 0, err
+    assert "navigate" in err and "sample" in err
+    rc, _out, err = run(car_args(imu, pos, tmp_path / "b") + noise + ["--quiet"], capsys)
+    assert rc == 0 and err == ""
