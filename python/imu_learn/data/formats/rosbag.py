@@ -339,6 +339,29 @@ def read_positions(path: Path, topic: str) -> Tuple[np.ndarray, np.ndarray]:
     return t_ns, p
 
 
+NAVSAT_TYPE = "sensor_msgs/msg/NavSatFix"
+
+
+def read_navsat(path: Path, topic: str) -> Tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """(t_ns (N,), latitude/longitude/altitude (N, 3) [deg, deg, m], position_covariance (N, 3, 3)
+    [m^2, east-north-up], position_covariance_type (N,), status.status (N,)) of a
+    ``sensor_msgs/msg/NavSatFix`` topic, by header stamp: GNSS aiding for :mod:`imu_learn.fuse`."""
+    bag = bag_path(path)
+    with open_bag(bag, topic) as reader:
+        conns = _connections(reader, bag, topic, (NAVSAT_TYPE,))
+        t, llh, cov, kind, status = [], [], [], [], []
+        for msg in _messages(reader, conns):
+            t.append(_stamp_ns(msg))
+            llh.append((msg.latitude, msg.longitude, msg.altitude))
+            cov.append(np.asarray(msg.position_covariance, dtype=np.float64).reshape(3, 3))
+            kind.append(int(msg.position_covariance_type))
+            status.append(int(msg.status.status))
+    t_ns = np.asarray(t, dtype=np.int64)
+    _check_stamps(t_ns, bag, topic)
+    return (t_ns, np.asarray(llh, dtype=np.float64).reshape(-1, 3), np.asarray(cov).reshape(-1, 3, 3),
+            np.asarray(kind, dtype=np.int64), np.asarray(status, dtype=np.int64))
+
+
 def read_recording(
     path: Path,
     groundtruth: Optional[Path] = None,
