@@ -176,3 +176,29 @@ def test_progress_bar_on_stderr_unless_quiet(tmp_path, capsys, monkeypatch):
     assert "navigate" in err and "sample" in err
     rc, _out, err = run(car_args(imu, pos, tmp_path / "b") + noise + ["--quiet"], capsys)
     assert rc == 0 and err == ""
+
+
+# --- a cut of the real drive -----------------------------------------------------------------------
+
+from test_navigate_gnss import DRIVE, crop_drive  # noqa: E402
+
+
+@pytest.mark.skipif(not (DRIVE / "imu_1934.csv").is_file(), reason="the gnss-imu drive is not on this machine "
+                    "(set IMU_LEARN_DATA to the data root)")
+def test_real_drive_cut_from_its_pos_file_alone(tmp_path, capsys):
+    imu = crop_drive(tmp_path, 50.0)
+    pos = DRIVE / "gnss_1934_sf.pos"
+    out = tmp_path / "drive"
+    rc, stdout, err = run(["--input", imu, "--aiding", pos, "--imu-rotation-rpy-deg", "180,-6.79,185.35",
+                           "--imu-delay-s", -0.125, "--out", out, "--quiet"], capsys)
+    assert rc == 0, err
+    s = json.loads((out / "summary.json").read_text())
+    assert s["aiding_format"] == "rtklib" and s["aiding_kind"] == "position"
+    first = next(ln for ln in pos.read_text().splitlines() if not ln.startswith("%")).split()
+    o = s["enu_origin"]
+    assert [o["latitude_deg"], o["longitude_deg"], o["height_m"]] == [float(v) for v in first[2:5]]
+    root = ET.parse(out / "track.kml").getroot()
+    assert len(root.findall(f".//{{{geo.KML_NS}}}LineString")) == 2
+    gj = json.loads((out / "track.geojson").read_text())
+    c = np.asarray(gj["features"][1]["geometry"]["coordinates"])
+    assert np.all(np.abs(c[:, 0] - o["longitude_deg"]) < 0.01) and np.all(np.abs(c[:, 1] - o["latitude_deg"]) < 0.01)
