@@ -109,3 +109,24 @@ def test_errors_are_one_line(argv, expected, capsys, tmp_path, monkeypatch):
     rc, _, err = run(["calibrate", *argv, "--quiet"], capsys)
     assert rc == 2 and err.startswith(f"imu-learn calibrate: error: {expected}") and err.count("\n") == 1
     assert not (tmp_path / "x").exists()
+
+
+def test_a_users_csv_in_other_units(tmp_path, capsys):
+    """A still IMU in a CSV of the user's own (other column order, float seconds, deg/s, g): the
+    same noise as in SI units."""
+    rng = np.random.default_rng(1)
+    n = 200 * 40
+    t = 1.7e9 + np.arange(n) * 0.005
+    gyro = rng.standard_normal((n, 3)) * 2e-4 * math.sqrt(200)
+    acc = rng.standard_normal((n, 3)) * 2e-3 * math.sqrt(200) + [0.0, 0.0, 9.80665]
+    rows = [f"{ti:.6f};" + ";".join(f"{v:.12g}" for v in (*(a / 9.80665), *np.degrees(g)))
+            for ti, g, a in zip(t, gyro, acc)]
+    (tmp_path / "imu.csv").write_text("time;ax;ay;az;gx;gy;gz\n" + "\n".join(rows) + "\n")
+    rc, out, err = run(["calibrate", "--imu-only", "--input", tmp_path / "imu.csv", "--columns", "t,ax,ay,az,gx,gy,gz",
+                        "--time-unit", "s", "--gyro-unit", "deg/s", "--acc-unit", "g", "--out", tmp_path / "out",
+                        "--quiet", "--no-plot"], capsys)
+    assert (rc, err) == (0, "")
+    p = Profile.load(tmp_path / "out" / "profile.json")
+    assert p.device == "imu" and p.sample_rate_hz == pytest.approx(200.0, rel=1e-4)
+    assert p.noise["gyroscope_noise_density"].value == pytest.approx(2e-4, rel=0.2)
+    assert p.noise["accelerometer_noise_density"].value == pytest.approx(2e-3, rel=0.2)

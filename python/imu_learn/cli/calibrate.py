@@ -12,11 +12,12 @@ from typing import Any, Callable, List, Optional, Sequence, Tuple
 
 from imu_learn.baselines.base import FitSettings
 from imu_learn.calib.run import CalibInputs, CalibOptions, StillPiece, calibrate
-from imu_learn.cli.common import add_data_root, run_command
-from imu_learn.data.formats import FORMATS, detect_format, read_imu_source, read_recording
-from imu_learn.data.loading import load_sequence
+from imu_learn.cli.common import add_data_root, add_imu_input_options, csv_layout, run_command
+from imu_learn.data.formats import FORMATS, USER_CSV, detect_format, read_imu_source, read_recording, user_csv
+from imu_learn.data.loading import AlignOptions, align
 from imu_learn.data.splits import cut, make_split
 from imu_learn.errors import ConfigError
+from imu_learn.eval.groundtruth import default_gap_s
 from imu_learn.eval.run import load_eval_config
 from imu_learn.infer.rates import recording_device
 from imu_learn.settings import read_toml
@@ -50,7 +51,11 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--config", type=Path, metavar="TOML",
                    help="a fit or evaluate config: its training split (validation for the floor's selection), "
                         "with evaluate's settings")
-    p.add_argument("--format", default="auto", choices=("auto", *FORMATS), help="the recordings' layout (default: detected)")
+    p.add_argument("--format", default="auto", choices=("auto", *FORMATS, USER_CSV),
+                   help="the recordings' layout (default: detected)")
+    p.add_argument("--max-gap-s", type=float, default=None, metavar="S",
+                   help="with --input: split at reference gaps longer than S (default 0.05, or 1.5 periods of a "
+                        "sparse reference such as a 20 Hz VIO trajectory)")
     p.add_argument("--imu-only", action="store_true",
                    help="read each --input's IMU alone (no reference): the noise from its still stretches only")
     p.add_argument("--device", metavar="NAME", help="the device's name in the profile (default: the dataset a "
@@ -63,6 +68,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--no-plot", action="store_true", help="no calibration.png")
     p.add_argument("--out", type=Path, required=True, metavar="DIR", help="output folder")
     add_data_root(p, "the config's recordings")
+    add_imu_input_options(p)
 
 
 def group_name(segment_name: str) -> str:
@@ -105,17 +111,19 @@ def from_inputs(args: argparse.Namespace) -> CalibInputs:
     gts += [None] * (len(args.input) - len(gts))
     inp = CalibInputs(settings=FitSettings())
     fmt0 = None
+    columns = csv_layout(args)
     for path in [*args.input, *(g for g in gts if g is not None)]:
         if not path.exists():
             raise FileNotFoundError(2, "No such file or directory", str(path))
     for path, gt in zip(args.input, gts):
-        fmt = args.format if args.format != "auto" else detect_format(path)
+        csv = user_csv(args.format, columns)
+        fmt = USER_CSV if csv is not None else args.format if args.format != "auto" else detect_format(path)
         fmt0 = fmt0 or fmt
         if args.imu_only:
-            inp.imu_only.append(imu_piece(path, args.format))
+            inp.imu_only.append(imu_piece(path, args.format, columns))
             inp.sources.append({"recording": str(path), "format": fmt, "role": "noise (IMU only)"})
             continue
-        segs = load_sequence(path, args.format, gt)
+        segs = reference_segments(path, args.format, gt, columns, args.max_gap_s)
         tr, va = _cut(segs, args.val_fraction)
         inp.train += tr
         inp.val += va
@@ -132,9 +140,17 @@ def _span(s: Any) -> dict:
     return {"segment": s.name, "t0_ns": int(s.t_ns[0]), "t1_ns": int(s.t_ns[-1]), "samples": len(s)}
 
 
-def imu_piece(path: Path, fmt: str) -> StillPiece:
+def reference_segments(path: Path, fmt: str, gt: Optional[Path], columns: Any, max_gap_s: Optional[float]) -> list:
+    """A recording's gap-free segments with its reference on the IMU stamps."""
+    imu, ref = read_recording(path, fmt, gt, columns=columns)
+    gap = max_gap_s if max_gap_s is not None else default_gap_s(ref)
+    name = path.stem if path.is_file() else path.name
+    return align(imu, ref, AlignOptions(max_gap_s=gap), name=name).segments
+
+
+def imu_piece(path: Path, fmt: str, columns: Any = None) -> StillPiece:
     """A recording's IMU alone (a layout without stamps of its own, BROAD, reads them with its ground truth)."""
-    src = read_imu_source(path, fmt)
+    src = read_imu_source(path, fmt, columns=columns)
     if src.t_ns is not None:
         return StillPiece(path.stem if path.is_file() else path.name, src.t_ns, src.gyro, src.acc)
     imu, _ = read_recording(path, fmt)
