@@ -36,6 +36,7 @@ import numpy as np
 from imu_learn.errors import InvalidInputError
 
 from .aiding import AbsolutePoses, PositionFixes, RelativePoses, epochs
+from .factors import held
 from .settings import SETTLE_S, FusionSettings
 
 
@@ -456,7 +457,7 @@ class IncrementalFusion:
         for _ in range(self.iterations - 1):
             self._isam.update()
         if coast:
-            est = gtsam.LevenbergMarquardtOptimizer(self._full, self._isam.calculateEstimate(), lm_params()).optimize()
+            est = held.optimize(self._full, self._isam.calculateEstimate(), lm_params())
             self._isam = gtsam.ISAM2(self._isam.params())
             self._isam.update(self._full, est)
 
@@ -532,7 +533,7 @@ class IncrementalFusion:
         initial = self._initial if self.windowed else self._isam.calculateEstimate()
         if self.smoothing == "batch":
             full = self._full
-            est = deep_stack(lambda: gtsam.LevenbergMarquardtOptimizer(full, initial, lm_params()).optimize(),
+            est = deep_stack(lambda: held.optimize(full, initial, lm_params()),
                              len(self._kf_list))
         else:
             est = initial

@@ -1,6 +1,7 @@
 """Factors beyond the IMU and the aiding, each joining the graph through the one hook
 :class:`ExtraFactors`: :mod:`.nhc` (the non-holonomic constraint of a wheeled vehicle),
-:mod:`.displacement` (learned displacements, TLIO-style) and :mod:`.velocity` (GNSS velocities)."""
+:mod:`.displacement` (learned displacements, TLIO-style) and :mod:`.velocity` (GNSS velocities).
+:mod:`.held` solves a graph with such Python factors by Levenberg-Marquardt at a native graph's cost."""
 from __future__ import annotations
 
 from typing import Any, List, Optional, Protocol
