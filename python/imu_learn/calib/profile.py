@@ -60,6 +60,8 @@ CONVENTIONS = {
     "accelerometer_model": "a = M_a (LP_a(a_m) - b_a)",
     "uncertainty": "one standard deviation; null where none could be given",
 }
+FRAMES = {"body": "the IMU's own axes (gyro, acc and every matrix and bias here)",
+          "world": "the reference trajectory's frame, gravity along -z"}
 UNITS = {"gyroscope": "rad/s", "accelerometer": "m/s^2", "time": "s", "g_sensitivity": "rad/s per m/s^2"}
 
 Number = Optional[float]
@@ -174,7 +176,7 @@ class Profile:
     def to_dict(self) -> Dict[str, Any]:
         return {
             "format": PROFILE_FORMAT, "version": self.version, "created": self.created, "device": self.device,
-            "conventions": CONVENTIONS, "units": UNITS,
+            "conventions": CONVENTIONS, "frames": FRAMES, "units": UNITS,
             "sample_rate_hz": _num(self.sample_rate_hz),
             "time_offset_s": _num(self.time_offset_s), "time_offset_s_std": _num(self.time_offset_s_std),
             "gyroscope": self.gyro.to_dict(), "accelerometer": self.acc.to_dict(),
