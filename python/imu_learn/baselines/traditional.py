@@ -59,8 +59,9 @@ from typing import Sequence as Seq
 
 import numpy as np
 import torch
-from scipy.signal import butter, sosfiltfilt
 
+from imu_learn.baselines import affine
+from imu_learn.baselines.affine import TraditionalParams, lowpass  # noqa: F401  (lowpass: re-exported)
 from imu_learn.baselines.base import FitSettings, Method
 from imu_learn.baselines.timing import RotationWindows, fit_offset, shifted
 from imu_learn.core.integration import PAPER_FRACTIONS, window_labels
@@ -71,37 +72,6 @@ from imu_learn.nn.so3 import quat_conj, quat_mul, quat_rotate, so3_exp, so3_log
 Tensor = torch.Tensor
 
 DEFAULT_CUTOFFS: Tuple[Optional[float], ...] = (None, 40.0, 20.0, 10.0, 5.0)
-
-
-def lowpass(x: np.ndarray, fs: float, cutoff_hz: Optional[float], order: int = 2) -> np.ndarray:
-    """Zero-phase Butterworth low-pass of each column of x (N, C); ``None`` (or a cutoff at or above
-    Nyquist, or a signal too short for the filter's padding) returns x unchanged."""
-    x = np.asarray(x, dtype=np.float64)
-    if cutoff_hz is None or cutoff_hz >= 0.5 * fs:
-        return x.copy()
-    sos = butter(order, cutoff_hz, btype="low", fs=fs, output="sos")
-    padlen = 3 * (2 * len(sos) + 1)
-    if len(x) <= padlen:
-        return x.copy()
-    return sosfiltfilt(sos, x, axis=0)
-
-
-@dataclass
-class TraditionalParams:
-    """Fitted parameters (float64 arrays) and the chosen cutoffs [Hz] (None: no filter)."""
-
-    M_g: np.ndarray
-    b_g: np.ndarray
-    G: np.ndarray
-    M_a: np.ndarray
-    b_a: np.ndarray
-    cutoff_gyro: Optional[float] = None
-    cutoff_acc: Optional[float] = None
-    time_offset: float = 0.0  # [samples]: IMU resampled at t + time_offset·dt before the model
-
-    @classmethod
-    def identity(cls) -> TraditionalParams:
-        return cls(np.eye(3), np.zeros(3), np.zeros((3, 3)), np.eye(3), np.zeros(3))
 
 
 def _gyro_model(theta: Tensor, g_m: Tensor, a_m: Tensor) -> Tensor:
@@ -350,15 +320,7 @@ class Traditional(Method):
     # -- applying the model ---------------------------------------------------------------------
 
     def refine(self, seq: Segment) -> Tuple[np.ndarray, np.ndarray]:
-        p = self.params
-        seq = shifted(seq, p.time_offset)
-        fs = sample_rate_hz(seq.t_ns)
-        g_f = lowpass(seq.gyro, fs, p.cutoff_gyro, self.filter_order)
-        ag_f = lowpass(seq.acc, fs, p.cutoff_gyro, self.filter_order)
-        a_f = lowpass(seq.acc, fs, p.cutoff_acc, self.filter_order)
-        gyro = (g_f - p.b_g) @ p.M_g.T - ag_f @ p.G.T
-        acc = (a_f - p.b_a) @ p.M_a.T
-        return np.ascontiguousarray(gyro), np.ascontiguousarray(acc)
+        return affine.apply(self.params, seq.t_ns, seq.gyro, seq.acc, self.filter_order)
 
     # -- fitting --------------------------------------------------------------------------------
 
@@ -462,10 +424,8 @@ class Traditional(Method):
         d = json.loads(Path(path).read_text())
         if d.get("method") != self.name:
             raise ValueError(f"{path} holds {d.get('method')!r} parameters, not {self.name!r}")
-        a = lambda k: np.asarray(d[k], dtype=np.float64)  # noqa: E731
         self.filter_order = int(d.get("filter_order", self.filter_order))
-        self.params = TraditionalParams(a("M_g"), a("b_g"), a("G"), a("M_a"), a("b_a"), d["cutoff_gyro"], d["cutoff_acc"],
-                                        float(d.get("time_offset", 0.0)))
+        self.params = TraditionalParams.from_dict(d)
         return self
 
 

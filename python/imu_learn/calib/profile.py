@@ -35,8 +35,8 @@ from typing import Any, Dict, List, Optional, Tuple, Union
 
 import numpy as np
 
-from imu_learn.baselines.timing import resample
-from imu_learn.core.stamps import median_period_ns, sample_rate_hz
+from imu_learn.baselines import affine
+from imu_learn.baselines.affine import TraditionalParams
 from imu_learn.errors import ProfileError
 from imu_learn.util.atomic import atomic_write_text
 
@@ -327,36 +327,10 @@ def _check_floor(floor: Dict[str, Any], where: str) -> None:
         raise fail("time_offset", f"expected a finite number of samples, got {t!r}")
 
 
-def lowpass(x: np.ndarray, fs: float, cutoff_hz: Optional[float], order: int = 2) -> np.ndarray:
-    """The floor's zero-phase Butterworth low-pass, as ``baselines.traditional.lowpass`` (the same
-    calls, so the same bits; that module imports torch for its fit, this one must not)."""
-    from scipy.signal import butter, sosfiltfilt
-
-    x = np.asarray(x, dtype=np.float64)
-    if cutoff_hz is None or cutoff_hz >= 0.5 * fs:
-        return x.copy()
-    sos = butter(order, cutoff_hz, btype="low", fs=fs, output="sos")
-    padlen = 3 * (2 * len(sos) + 1)
-    if len(x) <= padlen:
-        return x.copy()
-    return sosfiltfilt(sos, x, axis=0)
-
-
 def apply_floor(floor: Dict[str, Any], t_ns: np.ndarray, gyro: np.ndarray, acc: np.ndarray) -> Tuple[np.ndarray, np.ndarray]:
-    """``traditional+timing``'s ``refine`` on raw arrays, from its parameter dict ``floor``."""
-    a = lambda k: np.asarray(floor[k], dtype=np.float64)  # noqa: E731
-    tau = float(floor.get("time_offset", 0.0))
-    order = int(floor.get("filter_order", 2))
-    if tau != 0.0:
-        per = median_period_ns(t_ns)
-        gyro, acc = resample(t_ns, gyro, tau, per), resample(t_ns, acc, tau, per)
-    fs = sample_rate_hz(t_ns)
-    g_f = lowpass(gyro, fs, floor.get("cutoff_gyro"), order)
-    ag_f = lowpass(acc, fs, floor.get("cutoff_gyro"), order)
-    a_f = lowpass(acc, fs, floor.get("cutoff_acc"), order)
-    g_out = (g_f - a("b_g")) @ a("M_g").T - ag_f @ a("G").T
-    a_out = (a_f - a("b_a")) @ a("M_a").T
-    return np.ascontiguousarray(g_out), np.ascontiguousarray(a_out)
+    """``traditional+timing``'s ``refine`` on raw arrays, from its parameter dict ``floor``
+    (the one torch-free home of the floor's application, :mod:`imu_learn.baselines.affine`)."""
+    return affine.apply(TraditionalParams.from_dict(floor), t_ns, gyro, acc, int(floor.get("filter_order", 2)))
 
 
 def noise_only(device: str, sample_rate: float, noise: Dict[str, NoiseTerm], **extra: Any) -> Profile:
