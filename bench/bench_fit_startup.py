@@ -9,7 +9,7 @@ V1_01_easy, needs the data root):
   timed), so fit loads the aligned segments from it and parses nothing.
 
 Each measurement runs in its own process (imports are excluded: both modes import the same
-modules; what is timed: ``fit.open_run`` (the split, the run folder) and ``fit.train`` up to the
+modules; what is timed: ``trainer.open_run`` (the split, the run folder) and ``trainer.train`` up to the
 end of step 1: sampler, validation windows and scores, model, first step), ``--repeat`` times, and prints the median, min and max; the time spent getting the split
 (``make_split``) is reported on its own as well::
 
@@ -34,31 +34,31 @@ ROOT = Path(__file__).resolve().parents[1]
 CHILD = r"""
 import json, sys, time
 from pathlib import Path
-from imu_learn.train import fit
+from imu_learn.train import trainer
 from imu_learn.train.config import parse_overrides
 
 class Stop(Exception):
     pass
 
 spent = {"split": 0.0}
-real = fit.make_split
+real = trainer.make_split
 def timed(*a, **k):
     t = time.perf_counter()
     try:
         return real(*a, **k)
     finally:
         spent["split"] += time.perf_counter() - t
-fit.make_split = timed
+trainer.make_split = timed
 
 def first_step(step, loss):
     raise Stop
 
 config, out, more = sys.argv[1], Path(sys.argv[2]), json.loads(sys.argv[3])
 t0 = time.perf_counter()
-cfg, _ = fit.resolve_config(Path(config), None, parse_overrides(more))
-run_dir, split = fit.open_run(cfg, None, out)
+cfg, _ = trainer.resolve_config(Path(config), None, parse_overrides(more))
+run_dir, split = trainer.open_run(cfg, None, out)
 try:
-    fit.train(cfg, run_dir, None, split, on_step=first_step, progress=False)
+    trainer.train(cfg, run_dir, None, split, on_step=first_step, progress=False)
 except Stop:
     pass
 else:

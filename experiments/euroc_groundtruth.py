@@ -3,7 +3,7 @@
 1. V1_01_easy ships two ground truths: ``groundtruth_pose.tum`` (200 Hz, via open_vins) and
    ``groundtruth_state_20hz.csv`` (the ASL full state, EuRoC's own ground truth in the IMU frame).
    Printed: how far apart their poses are at the same stamps, and how well the raw IMU agrees with
-   each (relative pose RMSE with the start-up bias removed, ``fit.bias_removed_pose``, the
+   each (relative pose RMSE with the start-up bias removed, ``trainer.bias_removed_pose``, the
    protocol of fit's final table). A constant rotation between them that the IMU does not share
    means one of them is not in the IMU frame.
 2. The traditional intrinsic calibration (scale, misalignment, bias, g-sensitivity, low-pass;
@@ -27,7 +27,7 @@ import imu_learn as il
 from imu_learn.baselines.traditional import Traditional
 from imu_learn.core.quat import quat_conj, quat_mul, xyzw_to_wxyz
 from imu_learn.score.metrics import with_imu
-from imu_learn.train import fit
+from imu_learn.train import trainer
 from imu_learn.train.config import build_config
 
 SPARSE = il.AlignOptions(max_gap_s=0.06)  # the ASL state file is 20 Hz
@@ -64,7 +64,7 @@ def main() -> None:
 
     def score(s) -> str:
         return " | ".join(f"n={n}: {r['rot_deg']:.4f} deg {r['trans_m']:.5f} m"
-                          for n in (10, 200) for r in [fit.bias_removed_pose([s], n, cfg)])
+                          for n in (10, 200) for r in [trainer.bias_removed_pose([s], n, cfg)])
 
     compare_files(args.data / "V1_01_easy")
     mh = load(args.data, "MH_01_easy", "groundtruth_pose.tum")

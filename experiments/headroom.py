@@ -43,7 +43,7 @@ from imu_learn.data.splits import make_split
 from imu_learn.data.types import Segment
 from imu_learn.score.metrics import relative_pose_rmse_many, with_imu, without_fitted_bias
 from imu_learn.train.config import load_config
-from imu_learn.train.fit import recording_of
+from imu_learn.train.trainer import recording_of
 
 
 def startup_removed(seqs: List[Segment], cfg, seconds: float) -> List[Segment]:

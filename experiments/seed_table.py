@@ -28,7 +28,7 @@ from imu_learn.data.splits import make_split
 from imu_learn.infer.checkpoint import load_checkpoint, model_from_checkpoint
 from imu_learn.infer.windowing import refine_sequence
 from imu_learn.train.config import load_config
-from imu_learn.train.fit import evaluate_table
+from imu_learn.train.trainer import evaluate_table
 from imu_learn.util.atomic import atomic_write_bytes
 
 

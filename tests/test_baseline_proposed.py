@@ -1,5 +1,5 @@
 """The proposed refiner as a Method, its own promises: training (normalisation from the train split,
-selection), refine through imu_learn.infer.refine's windows, checkpoints (ours and imu_learn.train.fit's).
+selection), refine through imu_learn.infer.refine's windows, checkpoints (ours and imu_learn.train.trainer's).
 What every method must do (shapes, save/load, determinism) is test_baselines_contract.py."""
 import numpy as np
 import pytest
@@ -63,7 +63,7 @@ def test_save_is_an_imu_learn_checkpoint(fitted, crop_split, tmp_path):
 
 
 def test_from_a_fit_style_checkpoint(crop_split, tmp_path):
-    """A checkpoint as imu_learn.train.fit writes it: the window comes from config.data.window."""
+    """A checkpoint as imu_learn.train.trainer writes it: the window comes from config.data.window."""
     _, val = crop_split
     torch.manual_seed(1)
     model = ImuRefiner(ModelConfig(hidden=8, layers=1, fc=8))

@@ -5,7 +5,8 @@ import shutil
 import pytest
 
 from imu_learn.cli import labels as labels_cli
-from imu_learn.data import cache, labels
+from imu_learn.data import cache
+from imu_learn.data import label_builder as labels
 from imu_learn.errors import CacheError
 from imu_learn.util.atomic import atomic_write_bytes
 

@@ -226,7 +226,7 @@ def test_malformed_input_file_fuse(tmp_path, bad_crop, capsys):
 # ---- one rule for everything else ------------------------------------------------------------
 
 def test_an_unknown_exception_is_a_traceback_not_a_line(tmp_path, monkeypatch):
-    import imu_learn.infer.export as export
+    import imu_learn.infer.exporters as export
 
     def boom(*a, **k):
         raise RuntimeError("a bug")
@@ -239,7 +239,7 @@ def test_an_unknown_exception_is_a_traceback_not_a_line(tmp_path, monkeypatch):
 def test_an_unknown_exception_prints_the_traceback_through_python_dash_m(tmp_path):
     # a directory where a checkpoint file is expected: whatever torch raises, it is either a known
     # error (one line) or a traceback, never a swallowed bug; refine no longer catches Exception
-    code = ("import sys, imu_learn.infer.export as e\n"
+    code = ("import sys, imu_learn.infer.exporters as e\n"
             "def boom(*a, **k): raise RuntimeError('a bug')\n"
             "e.export = boom\n"
             "from imu_learn.cli import main\n"
@@ -250,7 +250,7 @@ def test_an_unknown_exception_prints_the_traceback_through_python_dash_m(tmp_pat
 
 
 def test_ctrl_c_exits_130_and_says_what_was_kept(tmp_path, monkeypatch, capsys):
-    import imu_learn.data.labels as labels
+    import imu_learn.data.label_builder as labels
 
     def interrupted(*a, **k):
         raise KeyboardInterrupt
@@ -260,7 +260,7 @@ def test_ctrl_c_exits_130_and_says_what_was_kept(tmp_path, monkeypatch, capsys):
     rc, stdout, err = run(["labels", "euroc", "--out", out], capsys)
     assert (rc, stdout, err) == (130, "", f"imu-learn labels: interrupted; finished recordings are kept in {out}; "
                                           f"run again to resume\n")
-    import imu_learn.infer.export as export
+    import imu_learn.infer.exporters as export
 
     monkeypatch.setattr(export, "export", interrupted)
     rc, stdout, err = run(["export", "--checkpoint", MODEL, "--out", tmp_path / "e"], capsys)
@@ -287,12 +287,12 @@ def test_traceback_flag_reraises_a_known_error(tmp_path, capsys):
 
 def test_quiet_turns_progress_and_info_off(tmp_path, monkeypatch, capsys):
     """The wiring, with a stand-in build_cache that logs at info and warning and draws a bar."""
-    import imu_learn.data.labels as labels
+    import imu_learn.data.label_builder as labels
 
     def fake(dataset, root, out, *a, progress=True, **k):
         from tqdm import tqdm
 
-        log = logging.getLogger("imu_learn.data.labels")
+        log = logging.getLogger("imu_learn.data.label_builder")
         log.info("reading %s", root)
         for _ in tqdm(range(3), desc="fake bar", disable=not progress, file=sys.stderr):
             pass

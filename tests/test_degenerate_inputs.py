@@ -126,7 +126,7 @@ def test_recording_shorter_than_a_segment_names_both_files(tmp_path):
 # ---- window level: labels and the fit/evaluate split -----------------------------------------
 
 def test_labels_refuse_a_recording_shorter_than_one_window(tmp_path):
-    from imu_learn.data.labels import build_cache
+    from imu_learn.data.label_builder import build_cache
 
     seq = good(tmp_path / "data" / "seq", n=250)  # 1.245 s: aligns, but holds no 300-sample window
     with pytest.raises(TooShortError) as e:

@@ -1,4 +1,4 @@
-"""imu_learn.infer.export: TorchScript and ONNX reproduce the torch model on real IMU windows."""
+"""imu_learn.infer.exporters: TorchScript and ONNX reproduce the torch model on real IMU windows."""
 import json
 import warnings
 from pathlib import Path

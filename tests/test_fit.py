@@ -18,7 +18,7 @@ import torch
 from imu_learn.cli import fit as fit_cli
 from imu_learn.infer.checkpoint import load_checkpoint
 from imu_learn.nn.model import ImuRefiner, ModelConfig
-from imu_learn.train import fit
+from imu_learn.train import trainer
 from imu_learn.train.config import ConfigError, RunConfig, build_config, load_config, read_toml
 
 REPO = Path(__file__).resolve().parent.parent
@@ -117,7 +117,7 @@ def test_select_on_validation_pose(tmp_path, full_run, capsys):
 
 
 def test_bias_removed_pose_of_raw_matches_the_final_table_protocol():
-    """fit.bias_removed_pose is the final table's second protocol: a constant bias added to a
+    """trainer.bias_removed_pose is the final table's second protocol: a constant bias added to a
     sequence changes its open-loop error but (almost) not the bias-removed one."""
     import numpy as np
 
@@ -132,7 +132,7 @@ def test_bias_removed_pose_of_raw_matches_the_final_table_protocol():
     acc = np.array([0.0, 0.0, 9.81]) + np.sin(k * rng.uniform(0.5, 2.0, 3))
     s = simulate_sequence(t_ns, gyro, acc)  # ground truth whose exact IMU signal is gyro/acc
     b = with_imu(s, s.gyro + np.array([0.01, -0.02, 0.03]), s.acc + np.array([0.1, 0.0, -0.1]))
-    biased = fit.bias_removed_pose([b], 200, cfg)
+    biased = trainer.bias_removed_pose([b], 200, cfg)
     open_loop = relative_pose_rmse_many([b], 200, 20, first_s=5.0)
     assert open_loop["rot_deg"] > 1.0 and open_loop["trans_m"] > 0.01
     assert biased["rot_deg"] < 1e-6 and biased["trans_m"] < 1e-7
@@ -171,7 +171,7 @@ def test_train_bias_remove_takes_a_constant_bias_out_of_train_and_val_only():
     bg, ba = np.array([0.01, -0.02, 0.08]), np.array([0.1, 0.0, -0.1])
     b = with_imu(s, s.gyro + bg, s.acc + ba)
     cfg = build_config({}, {"data.train_bias": "remove"})
-    out = fit.without_device_bias(Split([b], [b], [b], {}), cfg)
+    out = trainer.without_device_bias(Split([b], [b], [b], {}), cfg)
     for seq in (out.train[0], out.val[0]):
         assert np.abs(seq.gyro - s.gyro).max() < 1e-6 and np.abs(seq.acc - s.acc).max() < 1e-5
     assert out.test[0] is b

@@ -6,10 +6,11 @@ import shutil
 import numpy as np
 import pytest
 
-from imu_learn.data import cache, labels, splits
+from imu_learn.data import cache, splits
+from imu_learn.data import label_builder as labels
 from imu_learn.errors import CacheError
 from imu_learn.infer.checkpoint import load_checkpoint
-from imu_learn.train import fit
+from imu_learn.train import trainer
 from imu_learn.train.config import build_config
 
 FIELDS = ("t_ns", "gyro", "acc", "p", "v", "q_wxyz")
@@ -56,7 +57,7 @@ def no_parsing(monkeypatch):
 
 def losses(cfg, split, run_dir):
     got = []
-    fit.train(cfg, run_dir, split=split, on_step=lambda step, loss: got.append(loss), progress=False)
+    trainer.train(cfg, run_dir, split=split, on_step=lambda step, loss: got.append(loss), progress=False)
     rows = [{k: v for k, v in r.items() if k != "elapsed_s"} for r in load_checkpoint(run_dir / "last.pt")["extra"]["history"]]
     return got, rows
 

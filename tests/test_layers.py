@@ -199,7 +199,7 @@ def test_the_checker_sees_function_local_and_relative_imports():
     got = {t: line for line, t in imported(PKG / "core" / "probe.py", src)}
     assert got == {"__future__": 1, "imu_learn.core": 2, "imu_learn.cli": 4}
     assert part_of("imu_learn") == "api" and part_of("imu_learn.fit") == "stages"
-    assert part_of("imu_learn.train.fit") == "train"
+    assert part_of("imu_learn.train.trainer") == "train"
 
 
 def test_stage_modules_only_dispatch_to_the_cli():

@@ -136,7 +136,7 @@ sys.meta_path.insert(0, NoTorch())
 
 @pytest.mark.parametrize("module", [
     "imu_learn", "imu_learn.cli", "imu_learn.fuse", "imu_learn.fuse.experiments.batch", "imu_learn.fuse.experiments.config",
-    "imu_learn.data.formats", "imu_learn.data.splits", "imu_learn.data.labels", "imu_learn.data.cache",
+    "imu_learn.data.formats", "imu_learn.data.splits", "imu_learn.data.label_builder", "imu_learn.data.cache",
     "imu_learn.score.metrics", "imu_learn.train.config", "imu_learn.baselines.registry",
 ])
 def test_imports_without_torch(module):

@@ -109,12 +109,12 @@ def test_floor_ratios_pick_the_lower_floor_per_cell():
 
 
 def test_fits_final_table_has_a_timing_row_and_judges_the_model_against_the_best_floor():
-    """train.fit's final table: raw, timing (offset fitted on the train split) and model rows, and
+    """train.trainer's final table: raw, timing (offset fitted on the train split) and model rows, and
     model/floor ratios against the lower of raw and timing. The "model" here is the exact IMU."""
     pytest.importorskip("torch")
     from imu_learn.data.splits import Split
     from imu_learn.train.config import build_config
-    from imu_learn.train.fit import evaluate_table, format_table, timing_floor
+    from imu_learn.train.trainer import evaluate_table, format_table, timing_floor
 
     cfg = build_config({}, {"data.window": 100, "data.startup_bias_s": 2.0, "data.eval_stride": 20})
     test = delayed(0.7, 16.0, name="test")

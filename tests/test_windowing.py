@@ -83,11 +83,11 @@ def through_every_path(path: Path, t, g, a, tmp_path: Path, monkeypatch) -> dict
     from imu_learn.eval.run import CheckpointRefiner
     from imu_learn.fuse.inputs import imu_input
     from imu_learn.infer import model_check
-    from imu_learn.train import fit
+    from imu_learn.train import trainer
 
     seq = as_sequence(t, g, a)
     out = {}
-    s = fit.refine_sequence(load_model(path), seq, run_config_of(path))
+    s = trainer.refine_sequence(load_model(path), seq, run_config_of(path))
     out["fit"] = np.c_[s.gyro, s.acc]
     out["evaluate --checkpoint"] = np.c_[CheckpointRefiner(path, "cpu").refine(seq)]
     out["proposed"] = np.c_[Proposed.from_checkpoint(path).refine(seq)]
@@ -151,13 +151,13 @@ def test_causal_chunks_with_carried_state_equal_one_whole_sequence_pass(imu):
 @pytest.mark.parametrize("causal", [False, True], ids=["bidirectional", "causal"])
 @pytest.mark.parametrize("n", [W - 37, W, W + 1, 2 * W + 1], ids=["shorter", "one window", "window+1", "2 windows+1"])
 def test_edge_lengths(imu, causal, n):
-    from imu_learn.train import fit
+    from imu_learn.train import trainer
 
     t, g, a = (x[:n] for x in imu)
     model = windowing.attach(small_model(causal, g, a), Windowing.for_training_window(W))
     cfg = replace(RunConfig(), data=replace(RunConfig().data, window=W))
     got = np.c_[refine_arrays(model, g, a)]
-    s = fit.refine_sequence(model, as_sequence(t, g, a), cfg)
+    s = trainer.refine_sequence(model, as_sequence(t, g, a), cfg)
     assert np.array_equal(np.c_[s.gyro, s.acc], got)
     plan = window_plan(n, W, W // 2)
     assert plan[0][2] == 0 and plan[-1][3] == n and all(p[3] == q[2] for p, q in zip(plan, plan[1:]))
@@ -196,14 +196,14 @@ def test_model_selection_scores_the_rule_it_will_be_applied_with(imu):
     """fit's val_pose score equals the metric computed on refine_arrays' output."""
     from imu_learn import AlignOptions, load_recording
     from imu_learn.score.metrics import with_imu
-    from imu_learn.train import fit
+    from imu_learn.train import trainer
 
     rec = load_recording(CROP, "euroc", groundtruth=GT, options=AlignOptions(max_gap_s=0.05))
     seq = max(rec.segments, key=len)
     model = small_model(False, seq.gyro, seq.acc)
     base = RunConfig()
     cfg = replace(base, data=replace(base.data, window=W), optim=replace(base.optim, select="val_pose"))
-    got = fit.ValidationPose([seq], cfg)(model, torch.device("cpu"))
+    got = trainer.ValidationPose([seq], cfg)(model, torch.device("cpu"))
     refined = with_imu(seq, *refine_arrays(model, seq.gyro, seq.acc, window=W, overlap=W // 2))
-    want = fit.bias_removed_pose([refined], W, cfg)
+    want = trainer.bias_removed_pose([refined], W, cfg)
     assert got[f"pose_rot_deg_n{W}"] == want["rot_deg"] and got[f"pose_trans_m_n{W}"] == want["trans_m"]

@@ -144,7 +144,7 @@ def train_refiner(
 class ProposedConfig:
     model: ModelConfig = field(default_factory=ModelConfig)
     loss: LossConfig = field(default_factory=LossConfig)
-    augment: Optional[AugmentConfig] = None  # None: imu_learn.train.fit's default augmentation
+    augment: Optional[AugmentConfig] = None  # None: imu_learn.train.trainer's default augmentation
     grad_clip: float = 1.0
     evals: int = 10  # validation checks over the run
     val_stride: int = 0  # validation window step [samples]; 0: window // 2

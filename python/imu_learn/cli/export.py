@@ -1,4 +1,4 @@
-"""``imu-learn export``: TorchScript, ONNX and a JSON card of a checkpoint (:mod:`imu_learn.infer.export`)."""
+"""``imu-learn export``: TorchScript, ONNX and a JSON card of a checkpoint (:mod:`imu_learn.infer.exporters`)."""
 from __future__ import annotations
 
 import argparse
@@ -23,7 +23,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 def run(args: argparse.Namespace, rest: List[str], keep: Callable[[Any], None]) -> int:
     require_extra("export", "imu-learn export")
-    from imu_learn.infer.export import export, summary
+    from imu_learn.infer.exporters import export, summary
 
     card = export(args.checkpoint, args.out, args.window, args.opset)
     print(summary(card, args.out))

@@ -1,4 +1,4 @@
-"""``imu-learn fit``: train the refiner (the training itself is :mod:`imu_learn.train.fit`)."""
+"""``imu-learn fit``: train the refiner (the training itself is :mod:`imu_learn.train.trainer`)."""
 from __future__ import annotations
 
 import argparse
@@ -41,13 +41,13 @@ def run(args: argparse.Namespace, rest: List[str], keep: Callable[[Any], None],
         raise ConfigError("--data.data_root: set the data root with --data-root DIR (or IMU_LEARN_DATA)")
     if args.data_root:
         overrides["data.data_root"] = args.data_root
-    from imu_learn.train import fit
+    from imu_learn.train import trainer
 
-    cfg, state = fit.resolve_config(args.config, args.resume, overrides)
+    cfg, state = trainer.resolve_config(args.config, args.resume, overrides)
     if args.print_config:
         sys.stdout.write(to_toml(cfg))
         return 0
-    run_dir, split = fit.open_run(cfg, state, args.resume if state is not None else args.out)
+    run_dir, split = trainer.open_run(cfg, state, args.resume if state is not None else args.out)
 
     def kept() -> str:
         if not (run_dir / "last.pt").exists():
@@ -55,7 +55,7 @@ def run(args: argparse.Namespace, rest: List[str], keep: Callable[[Any], None],
         return f"saved {run_dir / 'last.pt'}, continue with: imu-learn fit --resume {run_dir}"
 
     keep(kept)
-    results = fit.train(cfg, run_dir, state, split, on_step=on_step, progress=not args.quiet)
+    results = trainer.train(cfg, run_dir, state, split, on_step=on_step, progress=not args.quiet)
     if results and results.get("text"):
         print(results["text"])
     return 0

@@ -1,4 +1,4 @@
-"""``imu-learn labels DATASET``: the label cache of a dataset (:mod:`imu_learn.data.labels`)."""
+"""``imu-learn labels DATASET``: the label cache of a dataset (:mod:`imu_learn.data.label_builder`)."""
 from __future__ import annotations
 
 import argparse
@@ -6,7 +6,7 @@ from pathlib import Path
 from typing import Any, Callable, List, Optional, Sequence
 
 from imu_learn.cli.common import DATA_ROOT_ENV, run_command
-from imu_learn.data import labels as label_cache
+from imu_learn.data import label_builder as label_cache
 from imu_learn.data.config import resolve_data_root
 from imu_learn.data.datasets import DATASETS
 from imu_learn.data.loading import AlignOptions

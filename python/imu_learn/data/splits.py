@@ -40,7 +40,7 @@ import numpy as np
 
 from imu_learn.data.config import DataConfig, RootConfig
 from imu_learn.data.datasets import DATASETS, find_recordings
-from imu_learn.data.labels import RecordingSource, cached_segments
+from imu_learn.data.label_builder import RecordingSource, cached_segments
 from imu_learn.data.loading import AlignOptions, load_sequence
 from imu_learn.data.types import Segment
 from imu_learn.errors import (

@@ -20,7 +20,6 @@ the file's units; header, comments, time and every other column keep their text.
 """
 from __future__ import annotations
 
-from dataclasses import dataclass
 from pathlib import Path
 from typing import Optional
 
@@ -31,27 +30,13 @@ from imu_learn.data.types import ImuData
 from imu_learn.errors import InvalidInputError
 from imu_learn.util.atomic import atomic_write_path
 
-from .source import ImuSource
+from .source import DEFAULT_COLUMNS, CsvColumns, ImuSource  # noqa: F401  (the layout type lives with ImuSource)
 
 NAME = "csv-columns"
-DEFAULT_COLUMNS = "t,gx,gy,gz,ax,ay,az"
 TIME_UNITS = ("s", "ms", "us", "ns")
 GYRO_UNITS = ("rad/s", "deg/s")
 ACC_UNITS = ("m/s2", "g")
 STANDARD_GRAVITY = 9.80665
-
-
-@dataclass(frozen=True)
-class CsvColumns:
-    """How a user's CSV is laid out (the CLI's --columns / --time-unit / --gyro-unit / --acc-unit)."""
-
-    columns: str = DEFAULT_COLUMNS
-    time_unit: str = "ns"
-    gyro_unit: str = "rad/s"
-    acc_unit: str = "m/s2"
-
-    def args(self) -> tuple:
-        return (self.columns, self.time_unit, self.gyro_unit, self.acc_unit)
 
 
 def read_csv_columns(

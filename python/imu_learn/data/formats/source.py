@@ -3,12 +3,24 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 from pathlib import Path
-from typing import TYPE_CHECKING, Optional
+from typing import Optional
 
 import numpy as np
 
-if TYPE_CHECKING:  # the user's-CSV layout (csv_columns imports this module)
-    from .csv_columns import CsvColumns
+DEFAULT_COLUMNS = "t,gx,gy,gz,ax,ay,az"
+
+
+@dataclass(frozen=True)
+class CsvColumns:
+    """How a user's CSV is laid out (the CLI's --columns / --time-unit / --gyro-unit / --acc-unit)."""
+
+    columns: str = DEFAULT_COLUMNS
+    time_unit: str = "ns"
+    gyro_unit: str = "rad/s"
+    acc_unit: str = "m/s2"
+
+    def args(self) -> tuple:
+        return (self.columns, self.time_unit, self.gyro_unit, self.acc_unit)
 
 
 @dataclass(frozen=True)

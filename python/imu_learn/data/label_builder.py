@@ -35,7 +35,7 @@ from imu_learn.data.loading import AlignOptions, load_recording
 from imu_learn.data.types import Segment as SeqType
 from imu_learn.errors import TooShortError
 
-LOG = logging.getLogger("imu_learn.data.labels")
+LOG = logging.getLogger("imu_learn.data.label_builder")
 
 
 def source_files(path: Path) -> List[Path]:
