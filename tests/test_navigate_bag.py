@@ -8,6 +8,7 @@ import json
 
 import numpy as np
 import pytest
+
 from rosbag_fixtures import write_fixture_bag
 from test_navigate_gnss import DELAY_S, LEVER, RPY, run, synthetic_car
 

@@ -10,13 +10,13 @@ import xml.etree.ElementTree as ET
 
 import numpy as np
 import pytest
-from test_navigate_gnss import DELAY_S, H0, LAT0, LEVER, LON0, RPY, run, synthetic_car
 
 from imu_learn.calib.profile import NoiseTerm, Profile, noise_only
 from imu_learn.fuse import geo
 from imu_learn.fuse.aiding import rtklib
 from imu_learn.fuse.aiding.detect import detect
 from imu_learn.fuse.noise import BUILT_IN
+from test_navigate_gnss import DELAY_S, H0, LAT0, LEVER, LON0, RPY, run, synthetic_car
 
 NOISE = {"gyroscope_noise_density": 1e-4, "accelerometer_noise_density": 1e-3, "gyroscope_random_walk": 1e-5,
          "accelerometer_random_walk": 1e-4}

@@ -633,7 +633,7 @@ def fuse_run(src: Sources, opts: NavigateOptions, imu: Imu, fused: tuple, st: St
         inc = IncrementalFusion(t_ns, st.pose, [aiding], settings, st.bias, predict_between=False,
                                 extra_factors=chain(*hooks))
         with tqdm(total=len(t_ns), desc="navigate", unit="sample", unit_scale=True, delay=PROGRESS_DELAY_S,
-                  disable=not progress, file=sys.stderr, leave=False) as bar:
+                  mininterval=1.0, disable=not progress, file=sys.stderr, leave=False) as bar:
             feed(inc, samples_of(np.ascontiguousarray(gyro[sel]), np.ascontiguousarray(acc[sel]),
                                  None if var is None else np.ascontiguousarray(var[sel])),
                  on_state=lambda *_: bar.update(1))
