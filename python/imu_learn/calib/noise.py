@@ -27,9 +27,9 @@ A coefficient fitted to zero is *not observed* (NaN). What this cannot separate:
 errors (a vibrating platform, calibration errors that vary with the motion, a smoothed reference)
 that happen to fall on one of these slopes; that is why a still stretch, when there is one, wins.
 
-**Still stretches** (:func:`still_stretches`, :func:`allan_noise`): where the IMU itself is still
-(every axis's spread over ``window_s`` small against the quietest part of the recording and below
-absolute caps), the overlapping Allan deviation of the raw samples, pooled over the stretches
+**Still stretches** (:func:`allan_noise`): where the IMU itself is still (the package's one
+detector, :func:`imu_learn.core.still.still_stretches`: every axis's spread over ``window_s`` small
+against the quietest part of the recording and below absolute caps; no gravity check here), the overlapping Allan deviation of the raw samples, pooled over the stretches
 (variance weighted by cluster count), with the standard slope fits of the core
 (:func:`imu_learn.core.allan.fit_noise`: N at τ = 1 s on the −1/2 line, K at τ = 3 s on the +1/2
 line, B at the minimum).
@@ -45,6 +45,7 @@ import numpy as np
 from imu_learn.core.allan import AllanDeviation, NoiseFit, allan_deviation, fit_noise
 from imu_learn.core.quat import quat_conj, quat_log, quat_mul, quat_rotate
 from imu_learn.core.stamps import median_period_ns
+from imu_learn.core.still import StillSettings, moving_std, still_stretches  # noqa: F401  (the one detector)
 
 MAX_REL_ERR = 0.3
 MIN_RANDOM_WALK_TAU_S = 1.0  # a still stretch's +1/2 slope counts as a bias random walk from here up
@@ -176,65 +177,6 @@ def residual_noise(segments: Sequence, calibrated: Sequence[Tuple[np.ndarray, np
     period_s = float(np.median([median_period_ns(s.t_ns) for s in segments])) * 1e-9
     dg, da = pooled_allan(eg, period_s), pooled_allan(ea, period_s)
     return ResidualNoise(dg, da, power_law_fit(dg) if dg else None, power_law_fit(da) if da else None, secs)
-
-
-def moving_std(x: np.ndarray, n: int) -> np.ndarray:
-    """Standard deviation of each column over the n samples centred on each sample (edges: the
-    nearest full window)."""
-    x = np.asarray(x, dtype=np.float64)
-    if len(x) < n or n < 2:
-        return np.full(x.shape, np.inf)
-    c1 = np.concatenate([np.zeros((1, x.shape[1])), np.cumsum(x - x.mean(0), axis=0)])
-    c2 = np.concatenate([np.zeros((1, x.shape[1])), np.cumsum((x - x.mean(0)) ** 2, axis=0)])
-    s1, s2 = c1[n:] - c1[:-n], c2[n:] - c2[:-n]
-    sd = np.sqrt(np.maximum(s2 / n - (s1 / n) ** 2, 0.0))
-    lo = n // 2
-    out = np.empty_like(x)
-    out[lo:lo + len(sd)] = sd
-    out[:lo] = sd[0]
-    out[lo + len(sd):] = sd[-1]
-    return out
-
-
-@dataclass(frozen=True)
-class StillSettings:
-    """How still stretches are found: every axis's moving standard deviation over ``window_s`` below
-    ``factor`` × its 5th percentile over the recording and below the caps; stretches shorter than
-    ``min_s`` dropped, ``trim_s`` cut from each end (the motion's onset)."""
-
-    window_s: float = 1.0
-    factor: float = 3.0
-    gyro_cap: float = 0.05  # rad/s
-    acc_cap: float = 0.5  # m/s^2
-    min_s: float = 2.0
-    trim_s: float = 0.25
-
-
-def still_stretches(t_ns: np.ndarray, gyro: np.ndarray, acc: np.ndarray,
-                    settings: StillSettings = StillSettings()) -> List[Tuple[int, int]]:
-    """[i0, i1) index ranges where the IMU is still (by its own samples; see StillSettings)."""
-    if len(t_ns) < 4:
-        return []
-    period = median_period_ns(t_ns) * 1e-9
-    n = max(2, int(round(settings.window_s / period)))
-    sg, sa = moving_std(gyro, n).max(1), moving_std(acc, n).max(1)
-    if not np.isfinite(sg).any():
-        return []
-    thr_g = min(settings.factor * np.percentile(sg, 5), settings.gyro_cap)
-    thr_a = min(settings.factor * np.percentile(sa, 5), settings.acc_cap)
-    still = (sg <= thr_g) & (sa <= thr_a)
-    gaps = np.diff(np.asarray(t_ns, dtype=np.int64)) > 1.5 * median_period_ns(t_ns)
-    edges = np.flatnonzero(np.diff(np.r_[0, still.astype(np.int8), 0]))
-    trim = int(round(settings.trim_s / period))
-    out = []
-    for i0, i1 in zip(edges[::2], edges[1::2]):
-        i0, i1 = i0 + trim, i1 - trim
-        # a gap in the stamps ends a stretch: keep the longest gap-free part
-        cuts = np.r_[i0, np.flatnonzero(gaps[i0:max(i0, i1 - 1)]) + i0 + 1, i1]
-        a, b = max(zip(cuts[:-1], cuts[1:]), key=lambda ab: ab[1] - ab[0])
-        if (b - a) * period >= settings.min_s:
-            out.append((int(a), int(b)))
-    return out
 
 
 @dataclass

@@ -1,0 +1,182 @@
+"""Still stretches: where an IMU is at rest, found from its own samples, and the gyro bias they give.
+
+**The detector** (:func:`still_stretches`, the package's one): over a sliding window of ``window_s``
+centred on each sample, every axis's standard deviation (gyro and accelerometer) must be below
+``factor`` x its 5th percentile over the recording (the quietest part sets the scale: no device's
+noise is hard-coded) and below absolute caps (``gyro_cap`` rad/s, ``acc_cap`` m/s^2: a recording
+that never rests has no quiet part to compare with). With ``gravity`` set, the window's mean
+accelerometer norm must also lie within ``gravity_tol`` of it: a smooth acceleration or a tilted
+free fall is as quiet as rest, but not at gravity's magnitude. Stretches shorter than ``min_s`` are
+dropped, ``trim_s`` is cut from each end (the onset of motion), and a gap in the stamps ends a
+stretch (its longest gap-free part is kept). ``imu-learn calibrate`` finds the still stretches of
+its Allan deviation with it (no gravity check there), ``imu-learn refine --bias still`` the
+recording's own gyro bias (with it).
+
+**The gyro bias** (:func:`still_bias`): at rest the gyro measures the earth's rotation (at most
+7.3e-5 rad/s, left in the estimate) plus its bias, so the mean gyro over the still stretches is the
+bias, every axis observable. Its uncertainty: the white-noise part, ``std / sqrt(N)`` per axis from
+the samples' spread, and, with several stretches, the spread of their means (the bias moving over
+the recording). What is not observable: a rotation slower than the caps that does not change the
+accelerometer (a slow turn about gravity) reads as bias; the accelerometer's bias is seen only
+along gravity, as the norm of its mean minus gravity, from one still attitude (its other two
+components need the device at rest in several attitudes, and the scale error enters alike).
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Dict, List, Optional, Tuple
+
+import numpy as np
+
+from imu_learn.core.stamps import median_period_ns
+
+
+@dataclass(frozen=True)
+class StillSettings:
+    """How still stretches are found (module doc): every axis's moving standard deviation over
+    ``window_s`` below ``factor`` x its 5th percentile over the recording and below the caps; with
+    ``gravity`` [m/s^2] set, the window's mean accelerometer norm within ``gravity_tol`` of it;
+    stretches shorter than ``min_s`` dropped, ``trim_s`` cut from each end."""
+
+    window_s: float = 1.0
+    factor: float = 3.0
+    gyro_cap: float = 0.05  # rad/s
+    acc_cap: float = 0.5  # m/s^2
+    min_s: float = 2.0
+    trim_s: float = 0.25
+    gravity: Optional[float] = None  # m/s^2; None: the norm is not checked
+    gravity_tol: float = 0.3  # m/s^2
+
+
+def moving_mean(x: np.ndarray, n: int) -> np.ndarray:
+    """Mean of each column over the n samples centred on each sample (edges: the nearest full window)."""
+    x = np.asarray(x, dtype=np.float64)
+    x2 = x.reshape(len(x), -1)
+    if len(x2) < n or n < 1:
+        return np.full(x.shape, np.nan)
+    c = np.concatenate([np.zeros((1, x2.shape[1])), np.cumsum(x2, axis=0)])
+    m = (c[n:] - c[:-n]) / n
+    return _centre(m, len(x2), n).reshape(x.shape)
+
+
+def _centre(w: np.ndarray, length: int, n: int) -> np.ndarray:
+    lo = n // 2
+    out = np.empty((length, w.shape[1]))
+    out[lo:lo + len(w)] = w
+    out[:lo] = w[0]
+    out[lo + len(w):] = w[-1]
+    return out
+
+
+def moving_std(x: np.ndarray, n: int) -> np.ndarray:
+    """Standard deviation of each column over the n samples centred on each sample (edges: the
+    nearest full window)."""
+    x = np.asarray(x, dtype=np.float64)
+    if len(x) < n or n < 2:
+        return np.full(x.shape, np.inf)
+    c1 = np.concatenate([np.zeros((1, x.shape[1])), np.cumsum(x - x.mean(0), axis=0)])
+    c2 = np.concatenate([np.zeros((1, x.shape[1])), np.cumsum((x - x.mean(0)) ** 2, axis=0)])
+    s1, s2 = c1[n:] - c1[:-n], c2[n:] - c2[:-n]
+    sd = np.sqrt(np.maximum(s2 / n - (s1 / n) ** 2, 0.0))
+    return _centre(sd, len(x), n)
+
+
+def still_stretches(t_ns: np.ndarray, gyro: np.ndarray, acc: np.ndarray,
+                    settings: StillSettings = StillSettings()) -> List[Tuple[int, int]]:
+    """[i0, i1) index ranges where the IMU is still (by its own samples; see :class:`StillSettings`)."""
+    if len(t_ns) < 4:
+        return []
+    period = median_period_ns(t_ns) * 1e-9
+    n = max(2, int(round(settings.window_s / period)))
+    sg, sa = moving_std(gyro, n).max(1), moving_std(acc, n).max(1)
+    if not np.isfinite(sg).any():
+        return []
+    thr_g = min(settings.factor * np.percentile(sg, 5), settings.gyro_cap)
+    thr_a = min(settings.factor * np.percentile(sa, 5), settings.acc_cap)
+    still = (sg <= thr_g) & (sa <= thr_a)
+    if settings.gravity is not None:
+        norm = np.linalg.norm(moving_mean(acc, n), axis=1)
+        still &= np.abs(norm - settings.gravity) <= settings.gravity_tol
+    gaps = np.diff(np.asarray(t_ns, dtype=np.int64)) > 1.5 * median_period_ns(t_ns)
+    edges = np.flatnonzero(np.diff(np.r_[0, still.astype(np.int8), 0]))
+    trim = int(round(settings.trim_s / period))
+    out = []
+    for i0, i1 in zip(edges[::2], edges[1::2]):
+        i0, i1 = i0 + trim, i1 - trim
+        # a gap in the stamps ends a stretch: keep the longest gap-free part
+        cuts = np.r_[i0, np.flatnonzero(gaps[i0:max(i0, i1 - 1)]) + i0 + 1, i1]
+        a, b = max(zip(cuts[:-1], cuts[1:]), key=lambda ab: ab[1] - ab[0])
+        if (b - a) * period >= settings.min_s:
+            out.append((int(a), int(b)))
+    return out
+
+
+# The settings refine's still-stretch bias uses: the detector with the gravity check on.
+BIAS_SETTINGS = StillSettings(gravity=9.80665)
+
+
+@dataclass
+class StillBias:
+    """A recording's gyro bias from its still stretches (module doc). ``gyro_bias`` [rad/s] (3,),
+    None without a still stretch; ``gyro_bias_std`` its white-noise standard error per axis;
+    ``between_stretches`` the standard deviation of the stretches' means per axis (None with one);
+    ``acc_norm_minus_gravity`` [m/s^2] the accelerometer's mean norm over the stretches minus
+    gravity (its bias and scale error along gravity); ``stretches`` each used one's range."""
+
+    gyro_bias: Optional[np.ndarray]
+    gyro_bias_std: Optional[np.ndarray]
+    between_stretches: Optional[np.ndarray]
+    acc_norm_minus_gravity: Optional[float]
+    still_s: float
+    samples: int
+    stretches: List[Dict[str, float]]
+    settings: StillSettings
+
+    def to_dict(self) -> Dict[str, object]:
+        """Plain values for a summary (rad/s and m/s^2, with deg/s beside the bias)."""
+        def vec(x: Optional[np.ndarray]) -> Optional[List[float]]:
+            return None if x is None else [float(v) for v in x]
+
+        s = self.settings
+        return {
+            "gyro_bias_rad_s": vec(self.gyro_bias),
+            "gyro_bias_deg_s": vec(None if self.gyro_bias is None else np.rad2deg(self.gyro_bias)),
+            "gyro_bias_std_rad_s": vec(self.gyro_bias_std),
+            "between_stretches_std_rad_s": vec(self.between_stretches),
+            "acc_norm_minus_gravity_m_s2": self.acc_norm_minus_gravity,
+            "observable": "gyro bias: every axis; accelerometer bias: only along gravity (the norm above), "
+                          "from one still attitude",
+            "still_s": round(self.still_s, 3),
+            "samples": self.samples,
+            "stretches": self.stretches,
+            "detector": {"window_s": s.window_s, "factor_of_5th_percentile": s.factor, "gyro_std_cap_rad_s": s.gyro_cap,
+                         "acc_std_cap_m_s2": s.acc_cap, "gravity_m_s2": s.gravity, "gravity_tol_m_s2": s.gravity_tol,
+                         "min_s": s.min_s, "trim_s": s.trim_s},
+        }
+
+
+def still_bias(t_ns: np.ndarray, gyro: np.ndarray, acc: np.ndarray,
+               settings: StillSettings = BIAS_SETTINGS) -> StillBias:
+    """The gyro bias of a recording from its still stretches (module doc)."""
+    t = np.asarray(t_ns, dtype=np.int64)
+    gyro, acc = np.asarray(gyro, dtype=np.float64), np.asarray(acc, dtype=np.float64)
+    found = still_stretches(t, gyro, acc, settings)
+    if not found:
+        return StillBias(None, None, None, None, 0.0, 0, [], settings)
+    g = np.concatenate([gyro[a:b] for a, b in found])
+    a_all = np.concatenate([acc[a:b] for a, b in found])
+    means = np.array([gyro[a:b].mean(0) for a, b in found])
+    info = [{"t0_s": round(float(t[a] - t[0]) * 1e-9, 3), "duration_s": round(float(t[b - 1] - t[a]) * 1e-9, 3),
+             "gyro_mean_rad_s": [float(v) for v in gyro[a:b].mean(0)]} for a, b in found]
+    gravity = settings.gravity if settings.gravity is not None else math.nan
+    return StillBias(
+        gyro_bias=g.mean(0),
+        gyro_bias_std=g.std(0, ddof=1) / math.sqrt(len(g)),
+        between_stretches=means.std(0, ddof=1) if len(found) > 1 else None,
+        acc_norm_minus_gravity=float(np.linalg.norm(a_all.mean(0)) - gravity) if math.isfinite(gravity) else None,
+        still_s=sum(float(t[b - 1] - t[a]) * 1e-9 for a, b in found),
+        samples=int(len(g)),
+        stretches=info,
+        settings=settings,
+    )
