@@ -16,6 +16,10 @@ levelled from the accelerometer, heading from the first pose or from the track, 
 from the first aiding), under a loose prior, and the IMU is fused with the aiding in a GTSAM factor
 graph. Writes causal.tum and smoothed.tum (t tx ty tz qx qy qz qw, body = IMU frame), plot.png and
 summary.json to --out and prints a one-line summary; --groundtruth only scores the result afterwards.
+GNSS fixes (an RTKLIB .pos, known by its content; a bag's NavSatFix topic) also give the tracks as
+latitude/longitude/height CSVs, KML and GeoJSON; a bag as input or aiding gets the trajectories back as
+nav_msgs/Odometry bags. The IMU noise comes from --imu-noise, a device profile (--profile, which also
+applies its floor), the recording's sensor.yaml, or the built-in ADIS16448's (with a warning).
 GNSS/IMU logs (the gnss-imu format) take --imu-rotation-rpy-deg, --imu-delay-s, --lever-arm and, on
 wheels, --nhc."""
 
