@@ -152,6 +152,9 @@ class Profile:
     sources: List[Dict[str, Any]] = field(default_factory=list)  # recordings and the spans used
     unobservable: List[Dict[str, str]] = field(default_factory=list)  # {"what", "why"}
     fit_log: Dict[str, Any] = field(default_factory=dict)
+    # the statistics of each recording it was fitted on (imu_learn.infer.guard.training_inputs), for
+    # refine's guard; written only when known
+    inputs: Dict[str, Any] = field(default_factory=dict)
     version: int = PROFILE_VERSION
     created: str = field(default_factory=lambda: datetime.now(timezone.utc).isoformat(timespec="seconds"))
 
@@ -186,6 +189,7 @@ class Profile:
             "noise_estimates": clean(self.noise_estimates),
             "floor": clean(self.floor), "sources": clean(self.sources), "unobservable": self.unobservable,
             "fit_log": clean(self.fit_log),
+            **({"inputs": clean(self.inputs)} if self.inputs else {}),
         }
 
     def save(self, path: Union[str, Path]) -> None:
@@ -226,7 +230,8 @@ class Profile:
             gravity_mps2=r.number("gravity_mps2", True), gravity_mps2_std=r.number("gravity_mps2_std", True),
             floor=floor, noise=noise, noise_estimates=r.get("noise_estimates", list, []),
             sources=r.get("sources", list, []), unobservable=r.get("unobservable", list, []),
-            fit_log=r.get("fit_log", dict, {}), version=version, created=r.get("created", str, ""),
+            fit_log=r.get("fit_log", dict, {}), inputs=r.get("inputs", dict, {}), version=version,
+            created=r.get("created", str, ""),
         )
 
     def kalibr(self) -> Dict[str, Optional[float]]:

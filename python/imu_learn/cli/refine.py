@@ -1,22 +1,25 @@
 """``imu-learn refine``: a recording's IMU through a device profile's floor or a trained model, in the
 input's own format (:mod:`imu_learn.infer.rewrite` writes it, :mod:`imu_learn.infer.refine` runs a
 model, :meth:`imu_learn.calib.profile.Profile.apply` the floor, :mod:`imu_learn.infer.rates` checks
-that they were made for the recording's rate and device)."""
+that they were made for the recording's rate and device, :mod:`imu_learn.infer.guard` whether the
+recording looks like their training data); ``--bias still`` removes the recording's own gyro bias
+from its still stretches (:func:`imu_learn.infer.rewrite.still_bias_step`). Writes a summary beside
+the output (:func:`imu_learn.infer.rewrite.summary_path`)."""
 from __future__ import annotations
 
 import argparse
 import logging
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Callable, List, Optional, Sequence
+from typing import Any, Callable, Dict, List, Optional, Sequence
 
 from imu_learn.calib.profile import Profile
 from imu_learn.cli.common import add_imu_input_options, csv_layout, run_command
 from imu_learn.data.formats import FORMATS, USER_CSV, ImuSource, read_imu_source
 from imu_learn.data.types import sample_rate_hz
 from imu_learn.errors import ConfigError, InvalidInputError
-from imu_learn.infer import rates
-from imu_learn.infer.rewrite import Step, rewrite_recording
+from imu_learn.infer import guard, rates
+from imu_learn.infer.rewrite import Step, measured, rewrite_recording, still_bias_step, summary_path, write_summary
 from imu_learn.util.extras import require_extra
 
 logger = logging.getLogger(__name__)
@@ -26,12 +29,16 @@ from imu-learn calibrate) or by a trained model (with the profile it was trained
 input's own format (ASL/EuRoC CSV, TUM-VI, Blackbird, BROAD, KAIST, Fetch, GNSS/IMU CSV, ROS 1/2 bags, or
 a CSV of your own: --columns and the units). The input is never written. A recording sampled more than 5 %
 off the rate the profile or model was made for is refused (--force applies it anyway); one of another
-device is a warning. Prints the file written to stdout."""
+device, or one whose statistics lie outside those of the training data (the guard), is a warning.
+--bias still removes the recording's own gyro bias, estimated from its still stretches. Prints the file
+written to stdout; OUT/summary.json (or OUT.summary.json beside a file) holds what was applied, the
+guard's figures and the bias estimate."""
 EPILOG = """examples:
   imu-learn refine --checkpoint models/euroc_adis16448.pt --input datasets/euroc/MH_01_easy --out refined_mh01
   imu-learn refine --profile calib/profile.json --input my_imu.csv --columns t,_,gz,gy,gx,az,ay,ax \\
       --time-unit s --gyro-unit deg/s --acc-unit g --out my_imu_refined.csv
-  imu-learn refine --checkpoint models/euroc_adis16448_cov.pt --input run.bag --out run_refined.bag --fill-covariance"""
+  imu-learn refine --checkpoint models/euroc_adis16448_cov.pt --input run.bag --out run_refined.bag --fill-covariance
+  imu-learn refine --profile calib/profile.json --input datasets/euroc/MH_01_easy --out mh01_floor --bias still"""
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
@@ -57,6 +64,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--batch", type=int, help="windows run at once (default 16)")
     p.add_argument("--device", default="auto", help="auto (cuda if available), cpu, cuda, cuda:1 ...")
     p.add_argument("--copy-folder", action="store_true", help="copy the whole input folder to OUT first")
+    p.add_argument("--bias", choices=("none", "still"), default="none",
+                   help="still: estimate the recording's own gyro bias from its still stretches and subtract it after "
+                        "the profile and model (docs/refine.md; the estimate goes into the summary)")
     p.add_argument("--fill-covariance", action="store_true",
                    help="ROS bags, a checkpoint with a covariance head: write each IMU message's angular_velocity / "
                         "linear_acceleration covariance as the diagonal of its predicted per-sample variances")
@@ -72,6 +82,9 @@ class Plan:
     made_for: List[rates.MadeFor] = field(default_factory=list)
     words: List[str] = field(default_factory=list)
     needs_stamps: bool = False
+    training: Optional[Dict[str, Any]] = None  # the statistics of the training data (guard), None: not recorded
+    gravity: float = 9.80665  # [m/s^2] for the still detector's norm check (a profile's own when it has one)
+    measured: Dict[str, Any] = field(default_factory=dict)  # what the steps measure as they run
 
 
 def profile_step(profile: Profile) -> Step:
@@ -90,8 +103,15 @@ def from_profile(args: argparse.Namespace) -> Plan:
     """The floor of ``--profile``."""
     profile = Profile.load(args.profile)
     made = rates.MadeFor(f"profile {args.profile}", profile.sample_rate_hz, profile.device)
-    return Plan([profile_step(profile)], [made], [f"the floor of {describe_profile(profile, str(args.profile))}"],
-                needs_stamps=True)
+    plan = Plan([profile_step(profile)], [made], [f"the floor of {describe_profile(profile, str(args.profile))}"],
+                needs_stamps=True, training=profile.inputs or None)
+    plan.gravity = _gravity(profile, plan.gravity)
+    return plan
+
+
+def _gravity(profile: Profile, default: float) -> float:
+    g = profile.gravity_mps2
+    return float(g) if g is not None and g == g and g > 0 else default
 
 
 def from_checkpoint(args: argparse.Namespace) -> Plan:
@@ -117,7 +137,10 @@ def from_checkpoint(args: argparse.Namespace) -> Plan:
     plan = Plan(made_for=[made],
                 words=[f"model {args.checkpoint}: {kind}, {device}, made for {made.device or 'an unknown device'} "
                        f"at {rate}"])
-    if record["profile"]:
+    if record["profile"] and record["profile_in_model"]:  # the model's own start: applied once, inside it
+        profile = Profile.from_dict(record["profile"], f"{args.checkpoint} (its profile)")
+        plan.words.append(f"on top of the floor of its {describe_profile(profile, 'carried')}, held by the model")
+    elif record["profile"]:
         profile = Profile.from_dict(record["profile"], f"{args.checkpoint} (its profile)")
         plan.steps.append(profile_step(profile))
         plan.words.append(f"after its {describe_profile(profile, 'carried')}")
@@ -142,15 +165,59 @@ def check_recording(args: argparse.Namespace, src: ImuSource, plan: Plan) -> Opt
     return rate
 
 
+def add_bias_step(args: argparse.Namespace, plan: Plan) -> None:
+    if args.bias == "still":
+        plan.steps.append(still_bias_step(plan.gravity, plan.measured))
+        plan.words.append("the recording's own gyro bias from its still stretches removed")
+        plan.needs_stamps = True
+
+
+def bias_entry(args: argparse.Namespace, plan: Plan) -> Dict[str, Any]:
+    """The summary's ``bias`` entry; logs one warning line when no still stretch was found."""
+    if args.bias != "still":
+        return {"method": "none"}
+    est = plan.measured["still"]
+    if est.gyro_bias is None:
+        logger.warning("--bias still: no still stretch in %s (docs/refine.md: the detector's thresholds); no bias "
+                       "subtracted", args.input)
+    return {"method": "still", "applied": est.gyro_bias is not None, **est.to_dict()}
+
+
+def guard_entry(args: argparse.Namespace, src: ImuSource, plan: Plan, rate: Optional[float]) -> Dict[str, Any]:
+    """The summary's ``guard`` entry; logs its warning (or info) line."""
+    what = f"model {args.checkpoint}" if args.checkpoint is not None else f"profile {args.profile}"
+    stats = guard.input_stats(src.t_ns, src.gyro, src.acc, rate)
+    entry, warning, info = guard.verdict(plan.training, stats, what, plan.measured.get("residual_rms"))
+    if warning:
+        logger.warning(warning)
+    if info and args.checkpoint is not None:  # a profile without them: said in the summary only (an affine floor)
+        logger.info(info)
+    return entry
+
+
 def run(args: argparse.Namespace, rest: List[str], keep: Callable[[Any], None]) -> int:
     if args.fill_covariance and args.checkpoint is None:
         raise ConfigError("--fill-covariance needs a --checkpoint with a covariance head")
     plan = from_profile(args) if args.profile is not None else from_checkpoint(args)
+    add_bias_step(args, plan)
     src = read_imu_source(args.input, args.format, args.imu_topic, csv_layout(args))
     rate = check_recording(args, src, plan)
     target = rewrite_recording(src, args.input, args.out, plan.steps, args.copy_folder, args.fill_covariance)
+    summary = {
+        "input": str(args.input), "output": str(target), "format": src.fmt,
+        "checkpoint": None if args.checkpoint is None else str(args.checkpoint),
+        "profile": None if args.profile is None else str(args.profile),
+        "applied": plan.words,
+        "made_for": [{"what": m.what, "sample_rate_hz": m.sample_rate_hz, "device": m.device} for m in plan.made_for],
+        "recording": {"sample_rate_hz": rate, "device": rates.recording_device(src.fmt, args.format, args.imu_name),
+                      "samples": int(len(src.gyro))},
+        "guard": guard_entry(args, src, plan, rate),
+        "bias": bias_entry(args, plan),
+    }
+    where = summary_path(args.out, target)
+    write_summary(where, summary)
     at = f"recording at {rates.hz(rate)}" if rate else "recording without stamps"
-    print(f"refined IMU ({'; '.join(plan.words)}; {at}) written to {target}")
+    print(f"refined IMU ({'; '.join(plan.words)}; {at}) written to {target}; summary {where}")
     return 0
 
 

@@ -121,8 +121,8 @@ class StillBias:
     """A recording's gyro bias from its still stretches (module doc). ``gyro_bias`` [rad/s] (3,),
     None without a still stretch; ``gyro_bias_std`` its white-noise standard error per axis;
     ``between_stretches`` the standard deviation of the stretches' means per axis (None with one);
-    ``acc_norm_minus_gravity`` [m/s^2] the accelerometer's mean norm over the stretches minus
-    gravity (its bias and scale error along gravity); ``stretches`` each used one's range."""
+    ``acc_norm_minus_gravity`` [m/s^2] the norm of the accelerometer's mean over each stretch (its
+    own attitude), averaged over the stretches by their samples, minus gravity (its bias and scale error along gravity); ``stretches`` each used one's range."""
 
     gyro_bias: Optional[np.ndarray]
     gyro_bias_std: Optional[np.ndarray]
@@ -165,7 +165,9 @@ def still_bias(t_ns: np.ndarray, gyro: np.ndarray, acc: np.ndarray,
     if not found:
         return StillBias(None, None, None, None, 0.0, 0, [], settings)
     g = np.concatenate([gyro[a:b] for a, b in found])
-    a_all = np.concatenate([acc[a:b] for a, b in found])
+    # each stretch's own attitude: the norm of its mean, weighted by its samples
+    norms = np.array([np.linalg.norm(acc[a:b].mean(0)) for a, b in found])
+    weights = np.array([b - a for a, b in found], dtype=np.float64)
     means = np.array([gyro[a:b].mean(0) for a, b in found])
     info = [{"t0_s": round(float(t[a] - t[0]) * 1e-9, 3), "duration_s": round(float(t[b - 1] - t[a]) * 1e-9, 3),
              "gyro_mean_rad_s": [float(v) for v in gyro[a:b].mean(0)]} for a, b in found]
@@ -174,7 +176,7 @@ def still_bias(t_ns: np.ndarray, gyro: np.ndarray, acc: np.ndarray,
         gyro_bias=g.mean(0),
         gyro_bias_std=g.std(0, ddof=1) / math.sqrt(len(g)),
         between_stretches=means.std(0, ddof=1) if len(found) > 1 else None,
-        acc_norm_minus_gravity=float(np.linalg.norm(a_all.mean(0)) - gravity) if math.isfinite(gravity) else None,
+        acc_norm_minus_gravity=float(np.average(norms, weights=weights) - gravity) if math.isfinite(gravity) else None,
         still_s=sum(float(t[b - 1] - t[a]) * 1e-9 for a, b in found),
         samples=int(len(g)),
         stretches=info,

@@ -22,7 +22,9 @@ What the model is for (:func:`imu_record`): a checkpoint records the IMU it was 
 ``sample_rate_hz`` (the one sample-rate rule, :func:`imu_learn.data.types.sample_rate_hz`, over the
 training segments) and ``device`` (``data.device`` of the run config, else the training datasets'
 names, e.g. ``euroc``), and, for a model trained on top of a device profile, ``profile`` (the
-profile's content, applied before the model). Checkpoints written before that carry none of them;
+profile's content, applied before the model; or, where ``model_args["start"]`` is "profile", held
+by the model itself as its fixed calibration and FIR shift, so applied once, inside it:
+:func:`imu_record`'s ``profile_in_model``). Checkpoints written before that carry none of them;
 their rate comes from their config: the training datasets' nominal rates (:data:`DATASET_RATE_HZ`).
 ``config["device"]`` is where the run trained (cpu, cuda), not the IMU.
 """
@@ -39,13 +41,16 @@ import torch
 from imu_learn._imu_core import __version__
 from imu_learn.data.types import Segment, sample_rate_hz
 from imu_learn.errors import CheckpointError  # noqa: F401  (defined with every error class)
-from imu_learn.infer.windowing import attach, windowing_of_config
+from imu_learn.infer import guard
+from imu_learn.infer.windowing import apply, attach, windowing_of_config
 from imu_learn.nn.model import ImuRefiner, ModelConfig
 from imu_learn.util.atomic import atomic_write_bytes
 
 FORMAT = "imu_learn.checkpoint.v1"
 # What the model is for (module doc), kept at the top level of a checkpoint when known.
-RECORD_KEYS = ("sample_rate_hz", "device", "profile")
+RECORD_KEYS = ("sample_rate_hz", "device", "profile", "inputs")
+# What the model adds is measured on at most this much of each training segment at each save [s].
+RESIDUAL_MAX_S = 120.0
 # What a stripped (shipped) checkpoint keeps: everything inference and a model card need (and the
 # record's keys where the source has them).
 STRIPPED_KEYS = ("format", "code_version", "model_args", "model", "config", "epoch", "step", "best_metric")
@@ -67,7 +72,8 @@ def save_checkpoint(
     extra: Optional[Dict[str, Any]] = None,
     record: Optional[Dict[str, Any]] = None,
 ) -> None:
-    """``record``: what the model is for (:func:`training_record`; module doc), stored at the top level."""
+    """``record``: what the model is for (:func:`training_record`; module doc), stored at the top level;
+    where it holds the training inputs, what ``model`` adds to them is measured now (:func:`with_residual`)."""
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
     state = {
@@ -83,6 +89,8 @@ def save_checkpoint(
         "extra": extra or {},
     }
     state.update({k: v for k, v in (record or {}).items() if k in RECORD_KEYS and v is not None})
+    if record and record.get("inputs") and record.get(PROBE_KEY):
+        state["inputs"] = with_residual(record["inputs"], model, record[PROBE_KEY], config)
     write_checkpoint(path, state)
 
 
@@ -115,26 +123,73 @@ def configured_device(config: Optional[Dict[str, Any]]) -> Optional[str]:
 
 
 def training_record(segments: Sequence[Segment], config: Optional[Dict[str, Any]],
-                    profile: Optional[Dict[str, Any]] = None) -> Dict[str, Any]:
+                    profile: Optional[Dict[str, Any]] = None, inputs: bool = False) -> Dict[str, Any]:
     """What a new checkpoint records of its training IMU: the one sample-rate rule over the training
-    segments' stamps, the device (:func:`configured_device`), and the profile it trained on top of."""
+    segments' stamps, the device (:func:`configured_device`), and the profile it trained on top of;
+    with ``inputs``, the statistics of the segments' IMU for refine's guard (:func:`training_inputs_record`)."""
     rate = sample_rate_hz(*(s.t_ns for s in segments))
-    return {"sample_rate_hz": rate if rate > 0 else None, "device": configured_device(config), "profile": profile}
+    record = {"sample_rate_hz": rate if rate > 0 else None, "device": configured_device(config), "profile": profile}
+    return {**record, **training_inputs_record(segments)} if inputs else record
+
+
+def training_inputs_record(segments: Sequence[Segment]) -> Dict[str, Any]:
+    """The record's statistics of each training segment's IMU (``inputs``,
+    :func:`imu_learn.infer.guard.training_inputs`), for refine's guard; ``PROBE_KEY`` holds the
+    segments' IMU (not saved) for :func:`save_checkpoint` to measure what the model adds to it."""
+    if not segments:
+        return {}
+    imu = [(s.name, s.t_ns, s.gyro, s.acc) for s in segments]
+    return {"inputs": guard.training_inputs(imu), PROBE_KEY: imu}
+
+
+PROBE_KEY = "_training_imu"
+
+
+def with_residual(inputs: Dict[str, Any], model: ImuRefiner, recordings: Sequence[Any],
+                  config: Optional[Dict[str, Any]]) -> Dict[str, Any]:
+    """``inputs`` with ``residual_rms``: per training recording (name, t_ns, gyro, acc), the RMS per
+    axis of what ``model`` adds (:func:`imu_learn.infer.guard.residual_rms`) over at most
+    :data:`RESIDUAL_MAX_S` of it, by the windowing rule of ``config`` (the model's mode is restored)."""
+    rule, was_training = windowing_of_config(config), model.training
+    model.eval()
+    out = []
+    try:
+        for name, t_ns, gyro, acc in recordings:
+            n = len(gyro)
+            if t_ns is not None and len(t_ns) > 1:
+                n = int(min(n, RESIDUAL_MAX_S * sample_rate_hz(t_ns) + 1))
+            g, a, _ = apply(model, gyro[:n], acc[:n], rule)
+            out.append({"name": name, **guard.residual_rms(gyro[:n], acc[:n], g, a)})
+    finally:
+        model.train(was_training)
+    return {**inputs, "residual_rms": out}
+
+
+def with_training_inputs(state: Dict[str, Any], recordings: Sequence[Any]) -> Dict[str, Any]:
+    """A loaded checkpoint ``state`` with the statistics of its training recordings (each (name,
+    t_ns, gyro, acc), read the way it was trained) and what its model adds to them: for a checkpoint
+    written before they were recorded (then :func:`write_checkpoint`)."""
+    model = model_from_checkpoint(state)
+    inputs = guard.training_inputs(recordings)
+    return {**state, "inputs": with_residual(inputs, model, recordings, state.get("config"))}
 
 
 def imu_record(state: Dict[str, Any]) -> Dict[str, Any]:
     """What a loaded checkpoint is for: ``sample_rate_hz`` (None: unknown), ``device`` (None:
-    unknown), ``profile`` (a dict or None) and ``source``: "recorded" (written with the checkpoint)
+    unknown), ``profile`` (a dict or None), ``inputs`` (its training statistics, None: not recorded)
+    and ``source``: "recorded" (written with the checkpoint)
     or "config" (an older checkpoint: its training datasets' nominal rate, :data:`DATASET_RATE_HZ`;
-    unknown where they disagree or none is known)."""
+    unknown where they disagree or none is known); ``profile_in_model``: the model holds the profile's
+    floor itself (``model_args["start"]`` = "profile"), so nothing applies it before the model."""
     cfg = state.get("config") or {}
+    in_model = (state.get("model_args") or {}).get("start") == "profile"
     if state.get("sample_rate_hz") is not None:
         return {"sample_rate_hz": float(state["sample_rate_hz"]), "device": state.get("device"),
-                "profile": state.get("profile"), "source": "recorded"}
+                "profile": state.get("profile"), "profile_in_model": in_model, "source": "recorded"}
     rates = {DATASET_RATE_HZ.get(n) for n in dataset_names(cfg)}
     rate = rates.pop() if len(rates) == 1 else None
     return {"sample_rate_hz": rate, "device": state.get("device") or configured_device(cfg),
-            "profile": state.get("profile"), "source": "config"}
+            "profile": state.get("profile"), "profile_in_model": in_model, "source": "config"}
 
 
 def content_digest(state: Dict[str, Any]) -> str:
@@ -263,7 +318,7 @@ def describe(state: Dict[str, Any]) -> Dict[str, Any]:
         "split": data.get("split"),
         "roots": [r.get("path") for r in data.get("roots") or []],
         "window": data.get("window"),
-        "imu": {k: v for k, v in imu_record(state).items() if k != "profile"},
+        "imu": {k: v for k, v in imu_record(state).items() if k not in ("profile", "profile_in_model")},
         "profile": (state.get("profile") or {}).get("device"),
         "extra": {k: v for k, v in (state.get("extra") or {}).items() if k not in ("history", "partial")},
     }

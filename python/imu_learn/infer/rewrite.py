@@ -7,19 +7,29 @@ Each layout's module in :mod:`imu_learn.data.formats` writes its file back (a us
 columns and units); every file is written to a temporary file beside its target and renamed into
 place (:mod:`imu_learn.util.atomic`). The input is never written: an OUT that resolves to the input
 file (or, with ``copy_folder``, the input folder) is refused.
+
+Two more steps live here: :func:`measured` records what a step adds (for refine's guard,
+:mod:`imu_learn.infer.guard`), and :func:`still_bias_step` removes the recording's own gyro bias,
+estimated from its still stretches (:mod:`imu_learn.core.still`) on what the steps before it give.
+:func:`summary_path` and :func:`write_summary` write refine's ``summary.json`` beside the output.
 """
 from __future__ import annotations
 
+import json
 import os
 import shutil
+from dataclasses import replace
 from pathlib import Path
-from typing import Callable, Optional, Sequence, Tuple
+from typing import Any, Callable, Dict, Optional, Sequence, Tuple
 
 import numpy as np
 
+from imu_learn.core.still import BIAS_SETTINGS, still_bias
 from imu_learn.data import formats
 from imu_learn.data.formats import ImuSource
 from imu_learn.errors import InvalidInputError
+from imu_learn.infer.guard import residual_rms
+from imu_learn.util.atomic import atomic_write_text
 
 # One step of a refinement: (t_ns or None, gyro, acc) -> (gyro, acc, per-sample variances (N, 6) or None).
 Step = Callable[[Optional[np.ndarray], np.ndarray, np.ndarray], Tuple[np.ndarray, np.ndarray, Optional[np.ndarray]]]
@@ -93,3 +103,65 @@ def rewrite_recording(src: ImuSource, input: Path, output: Path, steps: Sequence
         shutil.copytree(src.root, Path(output), dirs_exist_ok=True)
     formats.write_imu(src, target, gyro, acc)
     return target
+
+
+def measured(step: Step, sink: Dict[str, Any]) -> Step:
+    """``step``, recording in ``sink["residual_rms"]`` the RMS per axis of what it adds
+    (:func:`imu_learn.infer.guard.residual_rms`)."""
+
+    def wrapped(t_ns: Optional[np.ndarray], gyro: np.ndarray, acc: np.ndarray):
+        g, a, v = step(t_ns, gyro, acc)
+        sink["residual_rms"] = residual_rms(gyro, acc, g, a)
+        return g, a, v
+
+    return wrapped
+
+
+def still_bias_step(gravity: float, sink: Dict[str, Any]) -> Step:
+    """The recording's own gyro bias, from its still stretches (:func:`imu_learn.core.still.still_bias`
+    with the accelerometer norm checked against ``gravity``), subtracted from what the steps before
+    give (after a profile's floor and a model it is the bias they leave: the floor's bias is the
+    device's average, this one the recording's). ``sink["still"]`` gets the estimate; without a
+    still stretch nothing is subtracted."""
+    settings = replace(BIAS_SETTINGS, gravity=float(gravity))
+
+    def step(t_ns: Optional[np.ndarray], gyro: np.ndarray, acc: np.ndarray):
+        if t_ns is None:
+            raise InvalidInputError("--bias still needs the recording's stamps")
+        est = still_bias(t_ns, gyro, acc, settings)
+        sink["still"] = est
+        if est.gyro_bias is None:
+            return gyro, acc, None
+        return gyro - est.gyro_bias, acc, None
+
+    return step
+
+
+def summary_path(out: Path, target: Path) -> Path:
+    """Where refine's summary goes: ``OUT/summary.json`` when OUT is a folder holding the output,
+    else ``OUT.summary.json`` beside the file (or ROS 2 bag folder) written."""
+    out, target = Path(out), Path(target)
+    if target.resolve() != out.resolve() and _inside(target, out):
+        return out / "summary.json"
+    return out.with_name(out.name + ".summary.json")
+
+
+def write_summary(path: Path, summary: Dict[str, Any]) -> None:
+    """``summary`` as JSON, atomically (NaN and inf as null)."""
+
+    def plain(x: Any) -> Any:
+        if isinstance(x, dict):
+            return {str(k): plain(v) for k, v in x.items()}
+        if isinstance(x, (list, tuple)):
+            return [plain(v) for v in x]
+        if isinstance(x, np.ndarray):
+            return plain(x.tolist())
+        if isinstance(x, np.bool_):
+            return bool(x)
+        if isinstance(x, (np.floating, float)):
+            return float(x) if np.isfinite(x) else None
+        if isinstance(x, np.integer):
+            return int(x)
+        return x
+
+    atomic_write_text(Path(path), json.dumps(plain(summary), indent=2, allow_nan=False) + "\n")
