@@ -21,7 +21,7 @@ from imu_learn.eval.groundtruth import default_gap_s
 from imu_learn.eval.run import load_eval_config
 from imu_learn.infer.rates import recording_device
 from imu_learn.settings import read_toml
-from imu_learn.train.config import load_config
+from imu_learn.train.config import build_config, load_config
 
 logger = logging.getLogger(__name__)
 
@@ -34,10 +34,14 @@ recording without a reference (--imu-only) gives the noise alone. Writes OUT/pro
 parameter with its uncertainty, the recordings and spans used, what could not be observed),
 OUT/imu.yaml (Kalibr's noise file, read by Kalibr, OpenVINS, VINS-Fusion, ORB-SLAM3) and
 OUT/calibration.png; `imu-learn refine --profile OUT/profile.json` applies the floor.
+--learned then trains a refiner on top of the profile on the same recordings (the validation split
+selects and judges it): OUT/model.pt when it beats the floor on validation, else OUT/model.not_shipped.pt
+and the profile stays the result (one line says which; OUT/learned.json the figures, OUT/fit the run).
 The method: the module docs of imu_learn.calib.noise and imu_learn.calib.fit."""
 EPILOG = """examples:
   imu-learn calibrate --config configs/eval_euroc_paper.toml --data-root DATA --out calib/euroc
   imu-learn calibrate --input datasets/euroc/MH_01_easy --out calib/mh01
+  imu-learn calibrate --input datasets/euroc/MH_01_easy --out calib/mh01 --learned --learned-epochs 3
   imu-learn calibrate --input robot/run1 --groundtruth robot/run1_vio.tum --device my-imu --out calib/robot
   imu-learn calibrate --imu-only --input DATA/broad/04_undisturbed_slow_rotation_with_breaks_A.mat --out calib/broad"""
 
@@ -66,6 +70,13 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--min-still-s", type=float, default=10.0, metavar="S",
                    help="total still time the Allan noise needs (default 10)")
     p.add_argument("--no-plot", action="store_true", help="no calibration.png")
+    p.add_argument("--learned", action="store_true",
+                   help="then train a refiner on top of the profile (imu-learn fit --model.start OUT/profile.json) on "
+                        "the same recordings; OUT/model.pt only when it beats the floor on validation "
+                        "(imu_learn.train.on_profile)")
+    p.add_argument("--learned-epochs", type=int, metavar="N",
+                   help="with --learned: epochs of training (default: the config's optim.epochs, 24 by default)")
+    p.add_argument("--seed", type=int, metavar="S", help="with --learned: the run's seed (default: the config's, 0)")
     p.add_argument("--out", type=Path, required=True, metavar="DIR", help="output folder")
     add_data_root(p, "the config's recordings")
     add_imu_input_options(p)
@@ -162,6 +173,7 @@ def run(args: argparse.Namespace, rest: List[str], keep: Callable[[Any], None]) 
         raise ConfigError("give --input REC (repeatable) or --config TOML, not both and not neither")
     if args.config and args.imu_only:
         raise ConfigError("--imu-only reads --input recordings, not a config's split")
+    check_learned(args)
     say = (lambda s: None) if args.quiet else (lambda s: logger.info("%s", s))
     say("reading the recordings")
     inp = from_config(args) if args.config else from_inputs(args)
@@ -174,7 +186,59 @@ def run(args: argparse.Namespace, rest: List[str], keep: Callable[[Any], None]) 
         print(f"{name}: {path}")
     print(f"calibrate took {res.seconds:.1f} s")
     sys.stdout.flush()
+    if args.learned:
+        learned(args, inp, res.files["profile"], say, keep)
     return 0
+
+
+def check_learned(args: argparse.Namespace) -> None:
+    """--learned's refusals, before any work."""
+    if not args.learned:
+        if args.learned_epochs is not None or args.seed is not None:
+            raise ConfigError("--learned-epochs and --seed set the --learned refiner's run; add --learned")
+        return
+    if args.imu_only:
+        raise ConfigError("--learned needs a reference trajectory; --imu-only gives the noise alone")
+    if args.learned_epochs is not None and args.learned_epochs < 1:
+        raise ConfigError(f"--learned-epochs: must be at least 1, got {args.learned_epochs}")
+    if (args.out / "fit" / "last.pt").exists():
+        raise ConfigError(f"{args.out / 'fit'}: already holds a refiner's run; remove it or choose another --out")
+
+
+def learned(args: argparse.Namespace, inp: CalibInputs, profile: Path, say: Callable[[str], None],
+            keep: Callable[[Any], None]) -> None:
+    """--learned: the refiner on top of ``profile``, its one line (imu_learn.train.on_profile)."""
+    from imu_learn.train.on_profile import config_on_profile, train_on_profile  # torch
+
+    base = learned_base(args)
+    cfg = config_on_profile(base, profile, args.learned_epochs or base.optim.epochs,
+                            base.seed if args.seed is None else args.seed)
+    keep(f"{profile} is the result so far; the refiner's run is in {args.out / 'fit'}")
+    res = train_on_profile(cfg, inp.train, inp.val, args.out, say, bar=not args.quiet)
+    print(res.line())
+    print(f"learned refiner took {res.seconds:.1f} s")
+
+
+def learned_base(args: argparse.Namespace) -> Any:
+    """The run config the refiner starts from: the --config's (a fit config, or an evaluate config's
+    base), else the defaults with data.roots and data.split naming the --input recordings and the
+    blocks calibrate cut (what the run's config.toml then says it trained on)."""
+    overrides = ["--data.data_root", str(args.data_root)] if args.data_root else []
+    if args.config:
+        if "base" in read_toml(args.config):
+            return load_eval_config(args.config, overrides).run
+        return load_config(args.config, overrides)
+    gts = list(args.groundtruth or []) + [None] * len(args.input)
+    f = args.val_fraction
+    roots, train, val = [], [], []
+    for path, gt in zip(args.input, gts):
+        name = path.stem if path.is_file() else path.name
+        roots.append({"path": str(path), "format": args.format if args.format != "auto" else detect_format(path),
+                      "groundtruth": str(gt) if gt else "", "max_gap_s": args.max_gap_s or 0.05})
+        train.append(name if f <= 0 else f"{name}[0:{1 - f:g}]")
+        val += [] if f <= 0 else [f"{name}[{1 - f:g}:1]"]
+    return build_config({}, {"data.roots": roots, "data.split.train": train, "data.split.val": val or train,
+                             "data.split.test": []})
 
 
 def summary(p: Any) -> List[str]:

@@ -5,6 +5,10 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 REFINE_CHANNELS = {"imu": [1.0] * 6, "gyro": [1.0, 1.0, 1.0, 0.0, 0.0, 0.0]}
+# Where training starts (ModelConfig.start); "profile": a device profile's floor as the fixed
+# calibration and FIR shift. A run config may also name the profile's file (PATH.json), which
+# `imu-learn fit` reads and replaces by "profile".
+MODEL_STARTS = ("raw", "timing", "traditional+timing", "profile")
 
 
 @dataclass
@@ -32,7 +36,10 @@ class ModelConfig:
     # |tau| <= fir_taps // 2), so the untrained model is the `timing` floor; "traditional+timing": that
     # shift plus a fixed affine calibration (calib = true: scale, misalignment, bias and g-sensitivity as
     # `traditional+timing` fits them, without its low-pass filter), so the untrained model is that floor
-    # and the network learns only what the floor leaves.
+    # and the network learns only what the floor leaves; "profile": the same with a device profile's floor
+    # (`imu-learn fit --model.start PATH/profile.json`, `imu-learn calibrate --learned`) instead of a fit,
+    # so the model holds that floor itself: the checkpoint carries the profile, and refine does not
+    # apply it again before the model.
     start: str = "raw"
     fir_init_tau: float = 0.0
     calib: bool = False  # a fixed affine calibration (buffers calib_A (6, 6), calib_c (6,)) before the network

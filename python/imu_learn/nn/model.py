@@ -14,7 +14,7 @@ from typing import List, Optional, Tuple
 import torch
 from torch import nn
 
-from imu_learn.nn.config import REFINE_CHANNELS, ModelConfig
+from imu_learn.nn.config import MODEL_STARTS, REFINE_CHANNELS, ModelConfig
 
 Tensor = torch.Tensor
 State = List[Tuple[Tensor, Tensor]]
@@ -41,8 +41,6 @@ def shift_taps(tau: float, taps: int) -> Tensor:
     w[k] -= 1.0
     return (w / FIR_GAIN).to(torch.float32)
 
-
-MODEL_STARTS = ("raw", "timing", "traditional+timing")
 
 
 class ImuRefiner(nn.Module):

@@ -25,7 +25,7 @@ from typing import Any, Dict, List, Sequence
 
 from imu_learn.data.config import DataConfig, RootConfig, SplitConfig, resolve_data_root  # noqa: F401  (re-exported)
 from imu_learn.errors import ConfigError
-from imu_learn.nn.config import REFINE_CHANNELS, LossConfig, ModelConfig
+from imu_learn.nn.config import MODEL_STARTS, REFINE_CHANNELS, LossConfig, ModelConfig
 from imu_learn.settings import (  # noqa: F401  (re-exported: the stages' settings helpers)
     DATA_ROOT_ENV,
     from_dict,
@@ -191,6 +191,9 @@ def validate(cfg: RunConfig) -> None:
          "covariance needs model.covariance = true and optim.init (the frozen refiner)")
     need(cfg.loss.w_nll >= 0, "loss.w_nll", f"must be >= 0, got {cfg.loss.w_nll}")
     need(cfg.loss.w_nll == 0 or cfg.model.covariance, "loss.w_nll", "needs model.covariance = true")
+    need(cfg.model.start in MODEL_STARTS or cfg.model.start.lower().endswith(".json"), "model.start",
+         f"must be one of {', '.join(MODEL_STARTS[:3])} or a device profile's path (profile.json), "
+         f"got {cfg.model.start!r}")
     need(cfg.model.refine in REFINE_CHANNELS, "model.refine",
          f"must be one of {', '.join(REFINE_CHANNELS)}, got {cfg.model.refine!r}")
 

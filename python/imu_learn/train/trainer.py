@@ -75,9 +75,11 @@ import numpy as np
 import torch
 from tqdm import tqdm
 
+from imu_learn.baselines.affine import TraditionalParams
 from imu_learn.baselines.base import FitSettings
 from imu_learn.baselines.timing import Timing
 from imu_learn.baselines.traditional import TraditionalTiming
+from imu_learn.calib.profile import Profile
 from imu_learn.core.batches import Batch, BatchSampler, batch_seed
 from imu_learn.data.splits import Split, make_split, split_signature, write_split
 from imu_learn.data.types import Segment
@@ -328,11 +330,25 @@ def _cells(seqs: List[Segment], fixed: List[Segment], cfg: RunConfig) -> Dict[st
     return variant_table(seqs, fixed, d.eval_horizons, d.eval_stride, d.startup_bias_s, d.gravity)
 
 
-def floor_start(cfg: RunConfig, split: Split) -> Tuple[RunConfig, Optional[Tuple[np.ndarray, np.ndarray]]]:
+Calibration = Tuple[np.ndarray, np.ndarray]  # A (6, 6), c (6,) for ImuRefiner.set_calibration
+
+
+def affine_calibration(p: TraditionalParams) -> Calibration:
+    """The fixed calibration of an affine floor: [gyro, acc] -> A @ [gyro, acc] + c."""
+    A = np.zeros((6, 6))
+    A[:3, :3], A[:3, 3:], A[3:, 3:] = p.M_g, -p.G, p.M_a
+    return A, np.concatenate([-p.M_g @ p.b_g, -p.M_a @ p.b_a])
+
+
+def floor_start(cfg: RunConfig, split: Split) -> Tuple[RunConfig, Optional[Calibration], Optional[Dict[str, Any]]]:
     """``model.start`` = "timing" or "traditional+timing": fit that floor on the split's training
     recordings (validation keeps its offset or not) and return ``cfg`` with ``model.fir_init_tau`` (and
     ``model.calib``) set, plus the calibration (A (6, 6), c (6,)) for :meth:`ImuRefiner.set_calibration`
-    (None for "timing"): the untrained model is then that floor (without traditional's low-pass filter)."""
+    (None for "timing"): the untrained model is then that floor (without traditional's low-pass filter).
+    ``model.start`` = a device profile's path: :func:`profile_start` (no fit; the third value is the
+    profile's dict, None otherwise)."""
+    if cfg.model.start not in ("timing", "traditional+timing"):
+        return profile_start(cfg)
     settings = FitSettings(window=cfg.data.window, gravity=cfg.data.gravity, seed=cfg.seed)
     max_shift = float(cfg.model.fir_taps // 2)
     calib = None
@@ -343,15 +359,44 @@ def floor_start(cfg: RunConfig, split: Split) -> Tuple[RunConfig, Optional[Tuple
     else:
         t = TraditionalTiming(cutoffs_hz=(None,), max_shift=max_shift)
         t.fit(list(split.train), list(split.val), settings)
-        p = t.params
-        A = np.zeros((6, 6))
-        A[:3, :3], A[:3, 3:], A[3:, 3:] = p.M_g, -p.G, p.M_a
-        calib = (A, np.concatenate([-p.M_g @ p.b_g, -p.M_a @ p.b_a]))
-        tau = p.time_offset
+        calib = affine_calibration(t.params)
+        tau = t.params.time_offset
     logger.info("model.start = %s: fitted on the train split, the FIR starts as a shift of %+.3f samples%s",
                 cfg.model.start, tau, "" if calib is None else " after the fixed affine calibration")
     model = dataclasses.replace(cfg.model, fir_init_tau=float(tau), calib=calib is not None)
-    return dataclasses.replace(cfg, model=model), calib
+    return dataclasses.replace(cfg, model=model), calib, None
+
+
+def profile_start(cfg: RunConfig) -> Tuple[RunConfig, Calibration, Dict[str, Any]]:
+    """``model.start`` = PATH to a device profile (``imu-learn calibrate``'s profile.json): its floor
+    (``traditional+timing``'s parameters) becomes the model's fixed calibration and FIR time shift,
+    as "traditional+timing" does after its fit, so the untrained model is that floor (without the
+    profile's low-pass filter, if it has one: a warning says so). ``model.start`` becomes
+    "profile" and ``model.fir_taps``, when 0, the fewest taps that hold the shift. The profile's dict
+    goes into the checkpoint (:func:`imu_learn.infer.checkpoint.training_record`); since the model
+    holds its floor, ``imu-learn refine`` does not apply it again."""
+    where = cfg.model.start
+    if where == "profile":
+        raise ConfigError("model.start = profile: name the device profile's file (PATH/profile.json)")
+    prof = Profile.load(where)
+    if not prof.has_floor:
+        raise ConfigError(f"model.start: {where} has no floor (a profile of the noise alone, from a recording "
+                          "without a reference)")
+    p = TraditionalParams.from_dict(prof.floor)
+    tau = float(p.time_offset)
+    need = 2 * math.ceil(abs(tau)) + 1 if tau else 0
+    taps = cfg.model.fir_taps or (max(3, need) if tau else 0)
+    if taps < need:
+        raise ConfigError(f"model.start: the time offset of {where} ({tau:+.3f} samples) needs model.fir_taps >= "
+                          f"{need}, got {cfg.model.fir_taps}")
+    cut = {k: v for k, v in (("gyro", p.cutoff_gyro), ("acc", p.cutoff_acc)) if v is not None}
+    if cut:
+        logger.warning("model.start: the low-pass filter of %s (%s) is not part of the model's start: the untrained "
+                       "model is its floor without it", where, ", ".join(f"{k} {v:g} Hz" for k, v in cut.items()))
+    logger.info("model.start = %s (device %s): the FIR (%d taps) starts as a shift of %+.3f samples after the "
+                "profile's fixed affine calibration", where, prof.device, taps, tau)
+    model = dataclasses.replace(cfg.model, start="profile", fir_taps=taps, fir_init_tau=tau, calib=True)
+    return dataclasses.replace(cfg, model=model), affine_calibration(p), prof.to_dict()
 
 
 def timing_floor(split: Split, cfg: RunConfig) -> Tuple[List[Segment], float]:
@@ -619,8 +664,9 @@ def train(
     run_dir = Path(run_dir)
     split, sampler, validation = prepare_data(cfg, split)
     calib = None
+    profile = None if state is None else state.get("profile")  # what the model holds (model.start = PATH.json)
     if state is None and cfg.model.start != "raw":
-        cfg, calib = floor_start(cfg, split)
+        cfg, calib, profile = floor_start(cfg, split)
     ts = new_state(cfg, split.train, device, calib) if state is None else resumed_state(cfg, state, device)
     if validation.pose is not None and state is not None:
         validation.pose.reference = (state.get("extra") or {}).get("select_reference")
@@ -633,7 +679,9 @@ def train(
     spe = cfg.optim.steps_per_epoch
     total = cfg.optim.epochs * spe
     cfg_dict = cfg.to_dict()
-    ts.record = training_record(split.train, cfg_dict)
+    ts.record = training_record(split.train, cfg_dict, profile=profile, inputs=True)  # inputs: refine's guard
+    if profile is not None:  # a model on top of a device profile is that device's
+        ts.record["device"] = profile.get("device") or ts.record["device"]
     tb = _tb_writer(run_dir) if dist.main else None
     bar = tqdm(total=total, initial=ts.step, desc="fit", unit="step", disable=not (progress and dist.main),
                dynamic_ncols=True, mininterval=1.0)

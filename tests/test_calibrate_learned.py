@@ -1,0 +1,165 @@
+"""A refiner trained on top of a device profile: ``imu-learn fit --model.start PATH/profile.json`` and
+``imu-learn calibrate --learned``.
+
+- Untrained, the model is the profile's floor: its fixed calibration and FIR shift are the
+  profile's, the learned part is zero. On the MH_04 crop with uniform stamps it equals
+  :meth:`Profile.apply` to float32 precision (the model runs in float32: 5e-7 rad/s, 5e-6 m/s^2 for
+  accelerations up to 14 m/s^2); with the crop's own stamps (periods of 4999936 and 5000192 ns) to
+  2e-5 rad/s and 5e-4 m/s^2, since the model shifts by samples and the profile by time.
+- The floor is applied once: the checkpoint carries the profile, and ``refine --checkpoint`` gives
+  the model's own output on the raw input (not the model after the profile's floor).
+- ``calibrate --learned`` end to end on the MH_01 crop (slow: the floor's fit dominates).
+"""
+from __future__ import annotations
+
+import json
+import math
+from pathlib import Path
+
+import numpy as np
+import pytest
+import torch
+
+from imu_learn import _imu_core as core
+from imu_learn.baselines.traditional import TraditionalTiming
+from imu_learn.calib.profile import Affine, Profile
+from imu_learn.cli import fit as fit_cli
+from imu_learn.cli import main
+from imu_learn.cli.refine import main as refine_main
+from imu_learn.data.types import Segment
+from imu_learn.infer.checkpoint import imu_record, load_checkpoint, load_model
+from imu_learn.infer.refine import refine_arrays
+from imu_learn.infer.windowing import Windowing, attach
+from imu_learn.train import trainer
+from imu_learn.train.config import build_config
+
+REPO = Path(__file__).resolve().parent.parent
+MH01 = REPO / "datasets" / "euroc" / "MH_01_easy"
+MH04 = REPO / "datasets" / "euroc" / "MH_04_difficult"
+IMU_REL = Path("mav0") / "imu0" / "data.csv"
+TINY = ["--quiet", "--data.window", "50", "--data.batch_size", "8", "--data.val_stride", "200",
+        "--data.eval_stride", "50", "--model.hidden", "8", "--model.fc", "8", "--model.layers", "1",
+        "--optim.steps_per_epoch", "4", "--seed", "7", "--threads", "1"]
+
+
+def profile_file(tmp_path: Path, time_offset: float = 0.54, cutoffs=(None, None)) -> Path:
+    """A profile with set floor parameters (a rotation-sized misalignment, biases, g-sensitivity)."""
+    rng = np.random.default_rng(5)
+    m = TraditionalTiming()
+    p = m.params
+    p.M_g, p.b_g = np.eye(3) + 0.01 * rng.standard_normal((3, 3)), 0.01 * rng.standard_normal(3)
+    p.G = 1e-3 * rng.standard_normal((3, 3))
+    p.M_a, p.b_a = np.eye(3) + 0.01 * rng.standard_normal((3, 3)), 0.1 * rng.standard_normal(3)
+    p.cutoff_gyro, p.cutoff_acc, p.time_offset = *cutoffs, time_offset
+    fl = m.to_dict()
+    prof = Profile(device="my-imu", sample_rate_hz=200.0, time_offset_s=time_offset / 200.0, time_offset_s_std=math.nan,
+                   gyro=Affine(p.M_g, p.b_g, "rad/s"), acc=Affine(p.M_a, p.b_a, "m/s^2"), g_sensitivity=p.G,
+                   gravity_mps2=9.81, gravity_mps2_std=math.nan, floor=fl)
+    path = tmp_path / "profile.json"
+    prof.save(path)
+    return path
+
+
+def crop_imu():
+    return core.read_asl_imu(str(MH04 / IMU_REL))
+
+
+def untrained(path: Path, window: int = 200):
+    cfg = build_config({}, {"model.start": str(path), "model.hidden": 8, "model.fc": 8, "model.layers": 1,
+                            "data.window": window})
+    cfg, calib, prof = trainer.profile_start(cfg)
+    t, g, a = crop_imu()
+    seg = Segment("x", t, g, a, np.zeros_like(g), np.zeros_like(g), np.tile([1.0, 0, 0, 0], (len(t), 1)))
+    model = trainer.new_state(cfg, [seg], torch.device("cpu"), calib).model.eval()
+    attach(model, Windowing.for_training_window(window))
+    return cfg, model, prof
+
+
+def test_the_untrained_model_on_a_profile_is_its_floor(tmp_path):
+    path = profile_file(tmp_path)
+    cfg, model, prof = untrained(path)
+    assert (cfg.model.start, cfg.model.fir_taps, cfg.model.fir_init_tau, cfg.model.calib) == ("profile", 3, 0.54, True)
+    assert prof == Profile.load(path).to_dict()
+    t, g, a = crop_imu()
+    mg, ma = refine_arrays(model, g, a)
+    uniform = t[0] + np.arange(len(t), dtype=np.int64) * 5_000_000
+    fg, fa = Profile.load(path).apply(uniform, g, a)
+    np.testing.assert_allclose(mg, fg, rtol=0, atol=5e-7)  # float32
+    np.testing.assert_allclose(ma, fa, rtol=0, atol=5e-6)
+    fg, fa = Profile.load(path).apply(t, g, a)  # the crop's own stamps: the profile shifts by time
+    np.testing.assert_allclose(mg, fg, rtol=0, atol=2e-5)
+    np.testing.assert_allclose(ma, fa, rtol=0, atol=5e-4)
+    assert np.abs(mg - g).max() > 1e-3  # the floor did something
+
+
+@pytest.mark.parametrize("more,expected", [
+    (["--model.fir_taps", "3"], "needs model.fir_taps >= 7"),
+    (["--model.start", "profile"], "name the device profile's file"),
+    (["--model.start", "traditional"], "model.start: must be one of raw, timing, traditional+timing or a device"),
+])
+def test_a_start_that_cannot_hold_the_floor_is_one_line(tmp_path, capsys, more, expected):
+    path = profile_file(tmp_path, time_offset=2.4)
+    argv = ["--out", str(tmp_path / "run"), *TINY, "--optim.epochs", "1", "--model.start", str(path), *more]
+    assert fit_cli.main(argv) == 2
+    err = capsys.readouterr().err
+    assert expected in err and err.count("\n") == 1
+
+
+def test_refine_applies_a_profile_started_model_once(tmp_path, capsys):
+    """fit --model.start PATH: the checkpoint carries the profile and says the model holds it;
+    refine --checkpoint gives the model's own output on the raw input, bit for bit in the ASL file."""
+    path = profile_file(tmp_path)
+    run = tmp_path / "run"
+    assert fit_cli.main(["--out", str(run), *TINY, "--optim.epochs", "1", "--optim.lr", "1e-2",
+                         "--model.start", str(path)]) == 0
+    state = load_checkpoint(run / "best.pt")
+    rec = imu_record(state)
+    assert rec["profile_in_model"] and rec["device"] == "my-imu"
+    assert Profile.from_dict(rec["profile"]).to_dict() == Profile.load(path).to_dict()
+    assert state["model_args"]["start"] == "profile" and state["config"]["model"]["start"] == "profile"
+    capsys.readouterr()
+    out = tmp_path / "refined"
+    assert refine_main(["--checkpoint", str(run / "best.pt"), "--input", str(MH04), "--out", str(out),
+                        "--format", "euroc", "--force", "--quiet"]) == 0
+    assert "held by the model" in capsys.readouterr().out
+    t, g, a = crop_imu()
+    t2, g2, a2 = core.read_asl_imu(str(out / IMU_REL))
+    model = load_model(run / "best.pt")
+    want_g, want_a = refine_arrays(model, g, a)
+    assert np.array_equal(t2, t) and np.array_equal(g2, want_g) and np.array_equal(a2, want_a)
+    twice_g, _ = refine_arrays(model, *Profile.load(path).apply(t, g, a))
+    assert np.abs(twice_g - want_g).max() > 1e-3  # what applying the floor twice would have given
+
+
+def test_learned_options_are_refused_before_any_work(tmp_path, capsys, monkeypatch):
+    monkeypatch.chdir(tmp_path)
+    for argv, expected in ((["--input", MH01, "--learned-epochs", "2"], "add --learned"),
+                           (["--input", MH01, "--imu-only", "--learned"], "--learned needs a reference trajectory")):
+        assert main(["calibrate", *map(str, argv), "--out", "x", "--quiet"]) == 2
+        err = capsys.readouterr().err
+        assert expected in err and err.count("\n") == 1
+        assert not (tmp_path / "x").exists()
+
+
+@pytest.mark.slow  # the floor's fit, five times (a minute or more on a loaded machine)
+def test_calibrate_learned_end_to_end(tmp_path, capsys):
+    """calibrate --learned on the MH_01 crop, 1 epoch of a tiny refiner: the profile, the run folder,
+    the model file named by the verdict (carrying the profile), learned.json and the one line."""
+    out = tmp_path / "cal"
+    rc = main(["calibrate", "--input", str(MH01), "--out", str(out), "--no-plot", "--quiet", "--learned",
+               "--learned-epochs", "1", "--seed", "3"])
+    cap = capsys.readouterr()
+    assert rc == 0, cap.err
+    line = [x for x in cap.out.splitlines() if x.startswith("learned refiner:")]
+    assert len(line) == 1
+    verdict = json.loads((out / "learned.json").read_text())
+    name = "model.pt" if verdict["beats_floor"] else "model.not_shipped.pt"
+    assert (out / name).is_file() and not (out / ({"model.pt", "model.not_shipped.pt"} - {name}).pop()).exists()
+    assert ("does NOT beat" in line[0]) != verdict["beats_floor"]
+    for f in ("config.toml", "split.json", "metrics.csv", "best.pt", "last.pt"):
+        assert (out / "fit" / f).is_file(), f
+    state = load_checkpoint(out / name)
+    assert imu_record(state)["profile_in_model"]
+    assert Profile.from_dict(state["profile"]).to_dict() == Profile.load(out / "profile.json").to_dict()
+    assert {c["protocol"] for c in verdict["cells"]} == {"open loop", "start-up bias removed"}
+    assert state["config"]["optim"]["epochs"] == 1 and state["config"]["seed"] == 3
