@@ -12,7 +12,10 @@ Jacobians, with GTSAM's retractions ``R <- R Exp(dtheta)``, ``p <- p + R dp`` an
 ``d(R^T v)/dtheta = [R^T v]_x`` (since ``Exp(-dtheta) R^T v ~ R^T v + (R^T v) x dtheta``),
 ``d/dp = 0`` and ``d/dv = R^T``; each restricted to rows y, z (tests/test_gnss_imu.py checks them
 against numerical derivatives). It plugs into :class:`imu_learn.fuse.graph.IncrementalFusion` /
-:func:`imu_learn.fuse.graph.fuse` through ``extra_factors`` (:func:`nhc_callback`).
+:func:`imu_learn.fuse.graph.fuse` through ``extra_factors`` (:func:`nhc_callback`). The causal solver
+calls it as it is; the batch smoothing pass holds it at a linearisation point as a native factor and
+relinearises it between Levenberg-Marquardt runs (:mod:`.held`: the Python call inside GTSAM's
+optimiser would copy the whole graph's values each time).
 """
 from __future__ import annotations
 
