@@ -7,8 +7,9 @@ GTSAM factor graph, and score the trajectory. One home per concern:
   smoothing pass) and the one loop over its samples (:func:`~.graph.feed`, :func:`fuse`);
 * :mod:`.factors`   factors beyond the IMU and the aiding, through one hook (NHC, learned
   displacements, GNSS velocities);
-* :mod:`.aiding`    the measurement types, the time rules, simulation, real fixes, outages, and the
-  readers (TUM, RTKLIB, extrinsics);
+* :mod:`.aiding`    the measurement types, the time rules, simulation, real fixes, outages, the
+  readers (TUM, RTKLIB, bag topics, extrinsics) and the one aiding-format detector;
+* :mod:`.geo`       a local ENU track back to WGS-84, and its CSV, KML and GeoJSON files;
 * :mod:`.inputs`    an IMU input by name or file: samples, variances, displacement hook;
 * :mod:`.start`     the first state (one type): ground truth, from the data, from the aiding;
 * :mod:`.score`     every score; :mod:`.output` every file written (trajectories, results, plots);

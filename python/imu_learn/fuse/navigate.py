@@ -6,7 +6,11 @@ ground truth is never opened), the aiding file (:mod:`.aiding.tum`), the extrins
 optionally refines the IMU with a checkpoint (:mod:`imu_learn.infer.refine`), builds the first state
 from the data (:mod:`.start`) and fuses with :func:`imu_learn.fuse.graph.fuse` under a loose prior.
 It writes ``causal.tum`` and ``smoothed.tum`` (``t tx ty tz qx qy qz qw``, seconds, body = IMU
-frame, at the graph's keyframes), ``plot.png`` and ``summary.json`` to the output folder.
+frame, at the graph's keyframes), ``plot.png`` and ``summary.json`` to the output folder; with GNSS
+fixes also the tracks on the globe (:mod:`.geo`), with a bag the trajectories as Odometry bags
+(:func:`write_outputs`). The aiding's format is found from its content (:mod:`.aiding.detect`); the
+IMU noise is ``--imu-noise``, a device profile's (which also applies its floor), the recording's
+sensor.yaml or the built-in device's (:func:`imu_noise`).
 
 Frames. A camera trajectory (ORB-SLAM2 and the like) gives ``T_C0_Ck``: camera k in the first
 camera's frame C0. With the camera-to-body extrinsic ``T_BS`` the body pose in that aiding world
