@@ -136,16 +136,19 @@ def from_checkpoint(args: argparse.Namespace) -> Plan:
     rate = "rate unknown" if not made.sample_rate_hz else rates.hz(made.sample_rate_hz)
     plan = Plan(made_for=[made],
                 words=[f"model {args.checkpoint}: {kind}, {device}, made for {made.device or 'an unknown device'} "
-                       f"at {rate}"])
+                       f"at {rate}"], training=record.get("inputs"))
     if record["profile"] and record["profile_in_model"]:  # the model's own start: applied once, inside it
         profile = Profile.from_dict(record["profile"], f"{args.checkpoint} (its profile)")
         plan.words.append(f"on top of the floor of its {describe_profile(profile, 'carried')}, held by the model")
+        plan.gravity = _gravity(profile, plan.gravity)
     elif record["profile"]:
         profile = Profile.from_dict(record["profile"], f"{args.checkpoint} (its profile)")
         plan.steps.append(profile_step(profile))
         plan.words.append(f"after its {describe_profile(profile, 'carried')}")
         plan.needs_stamps = True
-    plan.steps.append(model_step(model, args.window, args.overlap, args.batch, not args.quiet, args.fill_covariance))
+        plan.gravity = _gravity(profile, plan.gravity)
+    step = model_step(model, args.window, args.overlap, args.batch, not args.quiet, args.fill_covariance)
+    plan.steps.append(measured(step, plan.measured))  # what the model adds: the guard's residual
     if args.fill_covariance:
         plan.words.append("covariance fields: learned per-sample variances")
     return plan

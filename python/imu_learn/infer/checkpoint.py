@@ -185,11 +185,13 @@ def imu_record(state: Dict[str, Any]) -> Dict[str, Any]:
     in_model = (state.get("model_args") or {}).get("start") == "profile"
     if state.get("sample_rate_hz") is not None:
         return {"sample_rate_hz": float(state["sample_rate_hz"]), "device": state.get("device"),
-                "profile": state.get("profile"), "profile_in_model": in_model, "source": "recorded"}
+                "profile": state.get("profile"), "profile_in_model": in_model, "inputs": state.get("inputs"),
+                "source": "recorded"}
     rates = {DATASET_RATE_HZ.get(n) for n in dataset_names(cfg)}
     rate = rates.pop() if len(rates) == 1 else None
     return {"sample_rate_hz": rate, "device": state.get("device") or configured_device(cfg),
-            "profile": state.get("profile"), "profile_in_model": in_model, "source": "config"}
+            "profile": state.get("profile"), "profile_in_model": in_model, "inputs": state.get("inputs"),
+            "source": "config"}
 
 
 def content_digest(state: Dict[str, Any]) -> str:
@@ -318,7 +320,8 @@ def describe(state: Dict[str, Any]) -> Dict[str, Any]:
         "split": data.get("split"),
         "roots": [r.get("path") for r in data.get("roots") or []],
         "window": data.get("window"),
-        "imu": {k: v for k, v in imu_record(state).items() if k not in ("profile", "profile_in_model")},
+        "imu": {k: v for k, v in imu_record(state).items() if k not in ("profile", "profile_in_model", "inputs")},
+        "training_statistics": [r.get("name") for r in (state.get("inputs") or {}).get("recordings", [])] or None,
         "profile": (state.get("profile") or {}).get("device"),
         "extra": {k: v for k, v in (state.get("extra") or {}).items() if k not in ("history", "partial")},
     }
