@@ -66,6 +66,17 @@ def test_a_recording_compared_with_itself_passes_and_an_offset_does_not():
     assert not [d for d in calmer if "p01" in d["statistic"] or "p99" in d["statistic"] or "std" in d["statistic"]]
 
 
+def test_a_model_adding_far_more_than_on_its_training_data_warns():
+    t, g, a = core.read_asl_imu(str(CROPS / "MH_01_easy" / IMU_REL))
+    training = {**guard.training_inputs([("mh01", t, g, a)]),
+                "residual_rms": [{"name": "mh01", "gyro": [0.01] * 3, "acc": [0.1] * 3}]}
+    stats = guard.input_stats(t, g, a)
+    ok = {"gyro": [0.02] * 3, "acc": [0.3] * 3}  # within 3 x the training's
+    assert guard.verdict(training, stats, "model m", ok)[1] is None
+    entry, warning, _ = guard.verdict(training, stats, "model m", {"gyro": [0.01, 0.05, 0.01], "acc": [0.1] * 3})
+    assert entry["outside"][0]["statistic"] == "model_residual_rms_gyro[y]" and "model_residual_rms_gyro[y]" in warning
+
+
 def test_a_checkpoint_without_statistics_cannot_be_checked(tmp_path, capsys):
     rc, err, summary = refine(MODEL, CROPS / "MH_04_difficult", tmp_path / "o", capsys)
     assert rc == 0 and summary["guard"]["verdict"] == "unchecked"

@@ -109,3 +109,33 @@ def test_refine_bias_still_subtracts_the_estimate_and_writes_it_into_the_summary
         assert not summary["applied"] and summary["gyro_bias_rad_s"] is None
         assert np.array_equal(g_still, g_plain)
         assert err.count("no still stretch") == 1
+
+
+def test_refine_with_a_profile_removes_the_bias_without_torch_and_its_statistics_guard_it(tmp_path, capsys):
+    """A profile (here one without a floor: the identity) with --bias still: the output is the input
+    minus the estimate; statistics a profile carries are checked like a model's."""
+    import json
+    import math
+
+    from imu_learn.calib.profile import Affine, Profile
+    from imu_learn.cli.refine import main
+    from imu_learn.infer.guard import training_inputs
+
+    t, g, a = recording()
+    src = write_asl(tmp_path / "in", t, g, a)
+    eye = Affine(np.eye(3), np.zeros(3), "rad/s")
+    prof = Profile(device="synthetic", sample_rate_hz=200.0, time_offset_s=0.0, time_offset_s_std=math.nan, gyro=eye,
+                   acc=Affine(np.eye(3), np.zeros(3), "m/s^2"), g_sensitivity=np.zeros((3, 3)), gravity_mps2=synthetic.G,
+                   gravity_mps2_std=math.nan, floor={}, inputs=training_inputs([("synthetic", t, g, a)]))
+    prof.save(tmp_path / "profile.json")
+    assert Profile.load(tmp_path / "profile.json").inputs["recordings"][0]["name"] == "synthetic"
+    out = tmp_path / "out.csv"
+    assert main(["--profile", str(tmp_path / "profile.json"), "--input", str(src / IMU_REL), "--out", str(out),
+                 "--bias", "still"]) == 0
+    assert capsys.readouterr().err == ""
+    summary = json.loads((tmp_path / "out.csv.summary.json").read_text())
+    assert summary["guard"]["verdict"] == "like the training data"
+    est = np.array(summary["bias"]["gyro_bias_rad_s"])
+    assert np.all(np.abs(est - BIAS) < 4 * SIGMA_G / np.sqrt(summary["bias"]["samples"]))
+    _, g_out, a_out = core.read_asl_imu(str(out))
+    assert np.allclose(g_out, g - est, atol=1e-12) and np.array_equal(a_out, a)
