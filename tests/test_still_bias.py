@@ -139,3 +139,20 @@ def test_refine_with_a_profile_removes_the_bias_without_torch_and_its_statistics
     assert np.all(np.abs(est - BIAS) < 4 * SIGMA_G / np.sqrt(summary["bias"]["samples"]))
     _, g_out, a_out = core.read_asl_imu(str(out))
     assert np.allclose(g_out, g - est, atol=1e-12) and np.array_equal(a_out, a)
+
+
+def test_bias_still_on_a_recording_without_stamps_is_one_line(tmp_path, capsys):
+    pytest.importorskip("torch")
+    scipy_io = pytest.importorskip("scipy.io")
+    from imu_learn.cli.refine import main
+
+    rng = np.random.default_rng(1)
+    src = tmp_path / "01_trial.mat"
+    scipy_io.savemat(src, {"imu_gyr": rng.normal(0, 0.3, (300, 3)), "imu_acc": rng.normal(0, 1, (300, 3)),
+                           "opt_quat": np.tile([1.0, 0, 0, 0], (300, 1)), "opt_pos": np.zeros((300, 3)),
+                           "sampling_rate": 286.0})
+    model = REPO / "models" / "broad_handheld.pt"
+    assert main(["--checkpoint", str(model), "--input", str(src), "--out", str(tmp_path / "out"), "--bias", "still",
+                 "--device", "cpu"]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "no stamps" in err and "--bias still" in err, err

@@ -82,6 +82,7 @@ class Plan:
     made_for: List[rates.MadeFor] = field(default_factory=list)
     words: List[str] = field(default_factory=list)
     needs_stamps: bool = False
+    stamps_for: str = "a profile's time offset"  # what needs them, for the message
     training: Optional[Dict[str, Any]] = None  # the statistics of the training data (guard), None: not recorded
     gravity: float = 9.80665  # [m/s^2] for the still detector's norm check (a profile's own when it has one)
     measured: Dict[str, Any] = field(default_factory=dict)  # what the steps measure as they run
@@ -158,7 +159,7 @@ def check_recording(args: argparse.Namespace, src: ImuSource, plan: Plan) -> Opt
     """The recording's rate (None: no stamps); stops on a rate more than 5 % off (unless --force)
     and logs a warning line for each mismatch it lets through."""
     if src.t_ns is None and plan.needs_stamps:
-        raise InvalidInputError(f"{args.input} has no stamps of its own ({src.fmt}); a profile's time offset needs them")
+        raise InvalidInputError(f"{args.input} has no stamps of its own ({src.fmt}); {plan.stamps_for} needs them")
     rate = sample_rate_hz(src.t_ns) if src.t_ns is not None else None
     device = rates.recording_device(src.fmt, args.format, args.imu_name)
     for line in rates.check(str(args.input), rate, device, plan.made_for, args.force):
@@ -172,6 +173,7 @@ def add_bias_step(args: argparse.Namespace, plan: Plan) -> None:
     if args.bias == "still":
         plan.steps.append(still_bias_step(plan.gravity, plan.measured))
         plan.words.append("the recording's own gyro bias from its still stretches removed")
+        plan.stamps_for = plan.stamps_for if plan.needs_stamps else "--bias still (the detector's windows)"
         plan.needs_stamps = True
 
 
