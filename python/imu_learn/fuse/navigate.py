@@ -58,9 +58,8 @@ from tqdm import tqdm
 
 from imu_learn.calib.profile import Profile
 from imu_learn.data import formats
-from imu_learn.data.formats import rosbag
+from imu_learn.data.formats import CsvColumns, rosbag
 from imu_learn.data.formats.asl import imu_sensor_yaml
-from imu_learn.data.formats.csv_columns import CsvColumns
 from imu_learn.data.formats.gnss_imu import mounting_rotation
 from imu_learn.data.types import sample_rate_hz
 from imu_learn.errors import AidingError, ConfigError, InvalidInputError
