@@ -67,12 +67,12 @@ def crop_imu():
 def untrained(path: Path, window: int = 200):
     cfg = build_config({}, {"model.start": str(path), "model.hidden": 8, "model.fc": 8, "model.layers": 1,
                             "data.window": window})
-    cfg, calib, prof = trainer.profile_start(cfg)
+    cfg, start = trainer.profile_start(cfg)
     t, g, a = crop_imu()
     seg = Segment("x", t, g, a, np.zeros_like(g), np.zeros_like(g), np.tile([1.0, 0, 0, 0], (len(t), 1)))
-    model = trainer.new_state(cfg, [seg], torch.device("cpu"), calib).model.eval()
+    model = trainer.new_state(cfg, [seg], torch.device("cpu"), start).model.eval()
     attach(model, Windowing.for_training_window(window))
-    return cfg, model, prof
+    return cfg, model, start.profile
 
 
 def test_the_untrained_model_on_a_profile_is_its_floor(tmp_path):
@@ -90,6 +90,24 @@ def test_the_untrained_model_on_a_profile_is_its_floor(tmp_path):
     np.testing.assert_allclose(mg, fg, rtol=0, atol=2e-5)
     np.testing.assert_allclose(ma, fa, rtol=0, atol=5e-4)
     assert np.abs(mg - g).max() > 1e-3  # the floor did something
+
+
+def test_the_untrained_model_holds_the_profiles_low_pass_too(tmp_path):
+    """A profile with calibrate's usual acc low-pass (20 Hz at 200 Hz): the FIR holds the shift and the
+    filter (53 taps: below 1e-5 of its response left out); equal to Profile.apply away from the recording's
+    ends (the zero-phase filter pads them otherwise)."""
+    path = profile_file(tmp_path, cutoffs=(None, 20.0))
+    cfg, model, _ = untrained(path)
+    assert cfg.model.fir_taps == 53
+    t, g, a = crop_imu()
+    mg, ma = refine_arrays(model, g, a)
+    fg, fa = Profile.load(path).apply(t[0] + np.arange(len(t), dtype=np.int64) * 5_000_000, g, a)
+    inner = slice(40, -40)
+    np.testing.assert_allclose(mg[inner], fg[inner], rtol=0, atol=5e-7)
+    np.testing.assert_allclose(ma[inner], fa[inner], rtol=0, atol=1e-4)  # the left-out tail: 1e-5 of 14 m/s^2
+    (tmp_path / "nf").mkdir()
+    _, no_filter = Profile.load(profile_file(tmp_path / "nf")).apply(t, g, a)
+    assert np.abs(ma - no_filter)[inner].max() > 1e-2  # the filter is there
 
 
 @pytest.mark.parametrize("more,expected", [
@@ -117,6 +135,8 @@ def test_refine_applies_a_profile_started_model_once(tmp_path, capsys):
     assert rec["profile_in_model"] and rec["device"] == "my-imu"
     assert Profile.from_dict(rec["profile"]).to_dict() == Profile.load(path).to_dict()
     assert state["model_args"]["start"] == "profile" and state["config"]["model"]["start"] == "profile"
+    _, model0, _ = untrained(path, window=50)
+    assert torch.equal(state["model"]["fir.weight"], model0.fir.weight.detach())  # the floor's FIR stays fixed
     capsys.readouterr()
     out = tmp_path / "refined"
     assert refine_main(["--checkpoint", str(run / "best.pt"), "--input", str(MH04), "--out", str(out),

@@ -82,6 +82,10 @@ class ImuRefiner(nn.Module):
             if cfg.fir_init_tau:
                 with torch.no_grad():
                     self.fir.weight.copy_(shift_taps(cfg.fir_init_tau, cfg.fir_taps).expand(6, 1, -1))
+            # A device profile's floor (start = "profile": its shift and low-pass, set_fir_filter) stays
+            # fixed: the network learns what the floor leaves. Trained, 53 taps moved by Adam's ~lr each
+            # step made the validation pose error 23 times the floor's after one epoch on the MH_01 crop.
+            self.fir.weight.requires_grad_(cfg.start != "profile")
         else:
             self.fir = None
         if cfg.covariance:
@@ -182,6 +186,21 @@ class ImuRefiner(nn.Module):
             raise ValueError("set_calibration needs model.calib = true")
         self.calib_A.copy_(torch.as_tensor(A, dtype=torch.float32))
         self.calib_c.copy_(torch.as_tensor(c, dtype=torch.float32))
+
+    @torch.no_grad()
+    def set_fir_filter(self, filters: Tensor) -> None:
+        """The FIR branch as linear filters of unit DC gain, (6, fir_taps), one per channel, centred:
+        the untrained model's output is then ``sum_i filters[c, i] x[k + i - fir_taps // 2]`` per
+        channel c (after the fixed calibration); a device profile's time shift and low-pass
+        (:func:`imu_learn.train.trainer.profile_start`)."""
+        if self.fir is None:
+            raise ValueError("set_fir_filter needs the FIR branch (model.fir_taps >= 3)")
+        f = torch.as_tensor(filters, dtype=torch.float64)
+        k = self.cfg.fir_taps // 2
+        if f.shape != (6, self.cfg.fir_taps) or not bool(torch.allclose(f.sum(-1), torch.ones(6, dtype=f.dtype))):
+            raise ValueError(f"FIR filters: expected (6, {self.cfg.fir_taps}) of unit sum, got {tuple(f.shape)}")
+        f[:, k] -= 1.0  # the branch adds to its input: a residual of zero sum
+        self.fir.weight.copy_((f / FIR_GAIN).to(self.fir.weight.dtype)[:, None, :])
 
     @torch.no_grad()
     def step(self, sample: Tensor, state: Optional[State] = None) -> Tuple[Tensor, State]:

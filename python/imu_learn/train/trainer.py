@@ -75,9 +75,10 @@ import numpy as np
 import torch
 from tqdm import tqdm
 
+from imu_learn.baselines import affine
 from imu_learn.baselines.affine import TraditionalParams
 from imu_learn.baselines.base import FitSettings
-from imu_learn.baselines.timing import Timing
+from imu_learn.baselines.timing import Timing, resample
 from imu_learn.baselines.traditional import TraditionalTiming
 from imu_learn.calib.profile import Profile
 from imu_learn.core.batches import Batch, BatchSampler, batch_seed
@@ -340,13 +341,12 @@ def affine_calibration(p: TraditionalParams) -> Calibration:
     return A, np.concatenate([-p.M_g @ p.b_g, -p.M_a @ p.b_a])
 
 
-def floor_start(cfg: RunConfig, split: Split) -> Tuple[RunConfig, Optional[Calibration], Optional[Dict[str, Any]]]:
+def floor_start(cfg: RunConfig, split: Split) -> Tuple[RunConfig, Start]:
     """``model.start`` = "timing" or "traditional+timing": fit that floor on the split's training
     recordings (validation keeps its offset or not) and return ``cfg`` with ``model.fir_init_tau`` (and
     ``model.calib``) set, plus the calibration (A (6, 6), c (6,)) for :meth:`ImuRefiner.set_calibration`
     (None for "timing"): the untrained model is then that floor (without traditional's low-pass filter).
-    ``model.start`` = a device profile's path: :func:`profile_start` (no fit; the third value is the
-    profile's dict, None otherwise)."""
+    ``model.start`` = a device profile's path: :func:`profile_start` (no fit)."""
     if cfg.model.start not in ("timing", "traditional+timing"):
         return profile_start(cfg)
     settings = FitSettings(window=cfg.data.window, gravity=cfg.data.gravity, seed=cfg.seed)
@@ -364,17 +364,56 @@ def floor_start(cfg: RunConfig, split: Split) -> Tuple[RunConfig, Optional[Calib
     logger.info("model.start = %s: fitted on the train split, the FIR starts as a shift of %+.3f samples%s",
                 cfg.model.start, tau, "" if calib is None else " after the fixed affine calibration")
     model = dataclasses.replace(cfg.model, fir_init_tau=float(tau), calib=calib is not None)
-    return dataclasses.replace(cfg, model=model), calib, None
+    return dataclasses.replace(cfg, model=model), Start(calib)
 
 
-def profile_start(cfg: RunConfig) -> Tuple[RunConfig, Calibration, Dict[str, Any]]:
+# The FIR of a profile's start holds its low-pass to this much of the filter's absolute response
+# left outside the taps (the truncated filter is rescaled to unit DC, so the bias is kept exactly).
+FIR_TAIL = 1e-5
+
+
+@dataclass(frozen=True)
+class Start:
+    """What ``model.start`` sets in a new model: the fixed calibration (A (6, 6), c (6,)), the FIR
+    branch's filters (6, taps) and the device profile's dict (each None where not used)."""
+
+    calib: Optional[Calibration] = None
+    fir: Optional[np.ndarray] = None
+    profile: Optional[Dict[str, Any]] = None
+
+
+def floor_filters(p: TraditionalParams, rate_hz: float, most: int) -> Tuple[np.ndarray, float]:
+    """A floor's time shift and low-pass as one centred FIR per channel (gyro: ``cutoff_gyro``, acc:
+    ``cutoff_acc``): (6, 2K + 1) filters of unit sum and the absolute response they leave out, K the
+    fewest taps each side (at least the shift's, at most ``most``) leaving out below :data:`FIR_TAIL`.
+    From the response of :func:`imu_learn.baselines.affine.apply`'s own shift and filter to a unit
+    impulse on uniform stamps."""
+    c = 4 * max(most, 8)
+    t = np.arange(2 * c + 1, dtype=np.int64) * int(round(1e9 / rate_hz))
+    delta = np.zeros((len(t), 1))
+    delta[c] = 1.0
+    shifted = resample(t, delta, p.time_offset, float(t[1] - t[0]))
+    resp = [affine.lowpass(shifted, rate_hz, cut)[:, 0] for cut in (p.cutoff_gyro, p.cutoff_acc)]
+    shift = math.ceil(abs(p.time_offset))
+    k, tail = shift, math.inf
+    for k in range(shift, max(most, shift) + 1):
+        tail = max(float(np.abs(y).sum() - np.abs(y[c - k:c + k + 1]).sum()) for y in resp)
+        if tail < FIR_TAIL:
+            break
+    # out[j] = sum_m g_m x[j + m] with g_m = y[c - m]; the taps run m = -k .. k
+    taps = [y[c - k:c + k + 1][::-1] / y[c - k:c + k + 1].sum() for y in resp]
+    return np.stack([taps[0]] * 3 + [taps[1]] * 3), tail
+
+
+def profile_start(cfg: RunConfig) -> Tuple[RunConfig, Start]:
     """``model.start`` = PATH to a device profile (``imu-learn calibrate``'s profile.json): its floor
-    (``traditional+timing``'s parameters) becomes the model's fixed calibration and FIR time shift,
-    as "traditional+timing" does after its fit, so the untrained model is that floor (without the
-    profile's low-pass filter, if it has one: a warning says so). ``model.start`` becomes
-    "profile" and ``model.fir_taps``, when 0, the fewest taps that hold the shift. The profile's dict
-    goes into the checkpoint (:func:`imu_learn.infer.checkpoint.training_record`); since the model
-    holds its floor, ``imu-learn refine`` does not apply it again."""
+    (``traditional+timing``'s parameters) becomes the model's fixed calibration and its FIR filters
+    (the time shift, then the low-pass where the profile has one: :func:`floor_filters`), so the
+    untrained model is that floor. No fit. ``model.start`` becomes "profile"; ``model.fir_taps``, when
+    0, the fewest taps that hold the floor (at most a quarter of ``data.window`` each side, so the
+    windows refine keeps see no edge; beyond that a warning says how much of the filter is left out).
+    The profile's dict goes into the checkpoint (:func:`imu_learn.infer.checkpoint.training_record`);
+    since the model holds its floor, ``imu-learn refine`` does not apply it again."""
     where = cfg.model.start
     if where == "profile":
         raise ConfigError("model.start = profile: name the device profile's file (PATH/profile.json)")
@@ -384,19 +423,24 @@ def profile_start(cfg: RunConfig) -> Tuple[RunConfig, Calibration, Dict[str, Any
                           "without a reference)")
     p = TraditionalParams.from_dict(prof.floor)
     tau = float(p.time_offset)
-    need = 2 * math.ceil(abs(tau)) + 1 if tau else 0
-    taps = cfg.model.fir_taps or (max(3, need) if tau else 0)
-    if taps < need:
+    need = math.ceil(abs(tau))
+    if cfg.model.fir_taps and cfg.model.fir_taps // 2 < need:
         raise ConfigError(f"model.start: the time offset of {where} ({tau:+.3f} samples) needs model.fir_taps >= "
-                          f"{need}, got {cfg.model.fir_taps}")
-    cut = {k: v for k, v in (("gyro", p.cutoff_gyro), ("acc", p.cutoff_acc)) if v is not None}
-    if cut:
-        logger.warning("model.start: the low-pass filter of %s (%s) is not part of the model's start: the untrained "
-                       "model is its floor without it", where, ", ".join(f"{k} {v:g} Hz" for k, v in cut.items()))
-    logger.info("model.start = %s (device %s): the FIR (%d taps) starts as a shift of %+.3f samples after the "
-                "profile's fixed affine calibration", where, prof.device, taps, tau)
+                          f"{2 * need + 1}, got {cfg.model.fir_taps}")
+    most = cfg.model.fir_taps // 2 if cfg.model.fir_taps else max(cfg.data.window // 4, need)
+    fir, tail = floor_filters(p, prof.sample_rate_hz, most)
+    if cfg.model.fir_taps:  # the user's taps: the filters padded with zeros
+        pad = cfg.model.fir_taps // 2 - fir.shape[1] // 2
+        fir = np.pad(fir, ((0, 0), (pad, pad)))
+    if tail >= FIR_TAIL:
+        logger.warning("model.start: the low-pass filter of %s needs more than %d FIR taps; the untrained model "
+                       "leaves out %.2g of its response", where, fir.shape[1], tail)
+    taps = fir.shape[1] if fir.shape[1] > 1 else 0
+    logger.info("model.start = %s (device %s): the FIR (%d taps) starts as the floor's shift of %+.3f samples%s, "
+                "after its fixed affine calibration", where, prof.device, taps, tau,
+                "" if p.cutoff_gyro is None and p.cutoff_acc is None else " and its low-pass")
     model = dataclasses.replace(cfg.model, start="profile", fir_taps=taps, fir_init_tau=tau, calib=True)
-    return dataclasses.replace(cfg, model=model), affine_calibration(p), prof.to_dict()
+    return dataclasses.replace(cfg, model=model), Start(affine_calibration(p), fir if taps else None, prof.to_dict())
 
 
 def timing_floor(split: Split, cfg: RunConfig) -> Tuple[List[Segment], float]:
@@ -535,15 +579,16 @@ def _optimizer(model: ImuRefiner, cfg: RunConfig) -> torch.optim.Optimizer:
     return torch.optim.Adam([p for p in model.parameters() if p.requires_grad], lr=cfg.optim.lr)
 
 
-def new_state(cfg: RunConfig, train_seqs: Seq[Segment], device: torch.device,
-              calib: Optional[Tuple[np.ndarray, np.ndarray]] = None) -> TrainState:
+def new_state(cfg: RunConfig, train_seqs: Seq[Segment], device: torch.device, start: Start = Start()) -> TrainState:
     """A fresh model (seeded by ``cfg.seed``, normalised on ``train_seqs``, ``optim.init``'s weights
     when set) and its optimiser."""
     torch.manual_seed(cfg.seed)
     mean, std = norm_stats(train_seqs)
     model = ImuRefiner(cfg.model, mean, std)
-    if calib is not None:
-        model.set_calibration(torch.as_tensor(calib[0]), torch.as_tensor(calib[1]))
+    if start.calib is not None:
+        model.set_calibration(torch.as_tensor(start.calib[0]), torch.as_tensor(start.calib[1]))
+    if start.fir is not None:
+        model.set_fir_filter(torch.as_tensor(start.fir))
     if cfg.optim.init:
         init_from(model, Path(cfg.optim.init))
     if cfg.optim.trainable == "covariance":
@@ -663,11 +708,10 @@ def train(
     dist, device = setup_device(cfg)
     run_dir = Path(run_dir)
     split, sampler, validation = prepare_data(cfg, split)
-    calib = None
-    profile = None if state is None else state.get("profile")  # what the model holds (model.start = PATH.json)
+    start = Start(profile=None if state is None else state.get("profile"))  # a profile the model holds
     if state is None and cfg.model.start != "raw":
-        cfg, calib, profile = floor_start(cfg, split)
-    ts = new_state(cfg, split.train, device, calib) if state is None else resumed_state(cfg, state, device)
+        cfg, start = floor_start(cfg, split)
+    ts = new_state(cfg, split.train, device, start) if state is None else resumed_state(cfg, state, device)
     if validation.pose is not None and state is not None:
         validation.pose.reference = (state.get("extra") or {}).get("select_reference")
     ts.validation = validation
@@ -679,9 +723,9 @@ def train(
     spe = cfg.optim.steps_per_epoch
     total = cfg.optim.epochs * spe
     cfg_dict = cfg.to_dict()
-    ts.record = training_record(split.train, cfg_dict, profile=profile, inputs=True)  # inputs: refine's guard
-    if profile is not None:  # a model on top of a device profile is that device's
-        ts.record["device"] = profile.get("device") or ts.record["device"]
+    ts.record = training_record(split.train, cfg_dict, profile=start.profile, inputs=True)  # inputs: refine's guard
+    if start.profile is not None:  # a model on top of a device profile is that device's
+        ts.record["device"] = start.profile.get("device") or ts.record["device"]
     tb = _tb_writer(run_dir) if dist.main else None
     bar = tqdm(total=total, initial=ts.step, desc="fit", unit="step", disable=not (progress and dist.main),
                dynamic_ncols=True, mininterval=1.0)
