@@ -134,7 +134,7 @@ def test_cli_refines_an_asl_folder(tmp_path, ckpt, imu):
     assert r.returncode == 0, r.stderr
     assert {p: sha(p) for p in src.rglob("*") if p.is_file()} == before  # input untouched
     written = out / IMU_REL
-    assert sorted(p.relative_to(out) for p in out.rglob("*") if p.is_file()) == [IMU_REL]
+    assert sorted(p.relative_to(out) for p in out.rglob("*") if p.is_file()) == [IMU_REL, Path("summary.json")]
     orig_lines = (src / IMU_REL).read_text().splitlines()
     new_lines = written.read_text().splitlines()
     assert new_lines[0] == orig_lines[0]  # the original header line
