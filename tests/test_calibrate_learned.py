@@ -6,12 +6,14 @@
   :meth:`Profile.apply` to float32 precision (the model runs in float32: 5e-7 rad/s, 5e-6 m/s^2 for
   accelerations up to 14 m/s^2); with the crop's own stamps (periods of 4999936 and 5000192 ns) to
   2e-5 rad/s and 5e-4 m/s^2, since the model shifts by samples and the profile by time.
+- Only the network's residual on top of the floor is regularised (the start's regulariser is 0).
 - The floor is applied once: the checkpoint carries the profile, and ``refine --checkpoint`` gives
   the model's own output on the raw input (not the model after the profile's floor).
 - ``calibrate --learned`` end to end on the MH_01 crop (slow: the floor's fit dominates).
 """
 from __future__ import annotations
 
+import csv
 import json
 import math
 from pathlib import Path
@@ -129,7 +131,10 @@ def test_refine_applies_a_profile_started_model_once(tmp_path, capsys):
     path = profile_file(tmp_path)
     run = tmp_path / "run"
     assert fit_cli.main(["--out", str(run), *TINY, "--optim.epochs", "1", "--optim.lr", "1e-2",
-                         "--model.start", str(path)]) == 0
+                         "--model.start", str(path), "--optim.validate_start", "true"]) == 0
+    with open(run / "metrics.csv") as f:
+        epoch0 = next(csv.DictReader(f))
+    assert float(epoch0["val_reg"]) == 0.0  # the regulariser sees the network's residual, not the floor's correction
     state = load_checkpoint(run / "best.pt")
     rec = imu_record(state)
     assert rec["profile_in_model"] and rec["device"] == "my-imu"

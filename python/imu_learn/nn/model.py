@@ -169,6 +169,19 @@ class ImuRefiner(nn.Module):
         var = self.variance(x) if self.cov_head is not None else None
         return imu + std * self.channels.to(imu.dtype) * corr, var, new_state
 
+    @torch.no_grad()
+    def floor(self, imu: Tensor) -> Tensor:
+        """What the model starts from: the fixed calibration and the FIR branch alone (no network),
+        (B, W, 6) -> (B, W, 6). For start = "profile" that is the profile's floor, fixed in training,
+        and the loss regularises the network's residual on top of it (not the floor's own correction)."""
+        if self.cfg.calib:
+            cal = imu @ self.calib_A.to(imu.dtype).T + self.calib_c.to(imu.dtype)
+            imu = torch.where(self.channels.to(imu.dtype) > 0, cal, imu)
+        linear = self._fir((imu - self.mean.to(imu.dtype)) / self.std.to(imu.dtype))
+        if linear is None:
+            return imu
+        return imu + self.std.to(imu.dtype) * self.channels.to(imu.dtype) * linear
+
     def _fir(self, x: Tensor) -> Optional[Tensor]:
         """The FIR branch on normalised input (B, W, 6) -> (B, W, 6), or None when off. Not scaled
         by output_scale: its response is O(1) (a half-sample shift is ±1/2)."""

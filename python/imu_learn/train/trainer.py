@@ -207,12 +207,19 @@ def validation_loss(model: ImuRefiner, batch: Batch, cfg: RunConfig, device: tor
         imu = torch.from_numpy(np.ascontiguousarray(batch.imu[a:b], dtype=np.float32)).to(device)
         with torch.no_grad():
             refined, var = model(imu, with_variance=True)
-            _, terms = imu_loss(refined, imu, batch.dt[a:b], batch.dq_wxyz[a:b], batch.dv[a:b], batch.dp[a:b],
-                                horizons, batch.bias[a:b], cfg.loss, var)
+            _, terms = imu_loss(refined, reg_reference(model, imu), batch.dt[a:b], batch.dq_wxyz[a:b], batch.dv[a:b],
+                                batch.dp[a:b], horizons, batch.bias[a:b], cfg.loss, var)
         for k, v in terms.items():
             sums[k] = sums.get(k, 0.0) + float(v) * (b - a)
     model.train(was)
     return {k: v / n_total for k, v in sums.items()}
+
+
+def reg_reference(model: ImuRefiner, imu: torch.Tensor) -> torch.Tensor:
+    """What the loss's regulariser measures the refined samples against: the input, or, for a model on
+    top of a device profile (model.start = "profile"), the profile's floor the model holds, so only
+    the network's residual is regularised (the floor's own correction is not pulled back to raw)."""
+    return model.floor(imu) if model.cfg.start == "profile" else imu
 
 
 # The model args that may differ between optim.init's checkpoint and the model it initialises.
@@ -635,7 +642,8 @@ def train_step(net: torch.nn.Module, ts: TrainState, sampler: BatchSampler, cfg:
     horizons = [int(h) for h in b.horizons]
     imu = torch.from_numpy(np.ascontiguousarray(b.imu, dtype=np.float32)).to(device)
     refined, var = net(imu, with_variance=True)
-    loss, terms = imu_loss(refined, imu, b.dt, b.dq_wxyz, b.dv, b.dp, horizons, b.bias, cfg.loss, var)
+    loss, terms = imu_loss(refined, reg_reference(ts.model, imu), b.dt, b.dq_wxyz, b.dv, b.dp, horizons, b.bias,
+                           cfg.loss, var)
     ts.opt.zero_grad(set_to_none=True)
     loss.backward()
     if cfg.optim.grad_clip > 0:
