@@ -3,9 +3,9 @@
 
 Why: GTSAM's Python wrapper hands each ``CustomFactor`` call the optimiser's ``Values`` by copy
 whenever that ``Values`` lives in C++ (inside ``LevenbergMarquardtOptimizer``), so every call costs
-a copy of every variable of the graph: the batch pass over the car drive (5,120 keyframes, 15,000
-variables, 5,120 NHC factors) spent ~1 ms per call, most of the drive's 140 s against 14 s without
-NHC (docs/experiments/benchmarks.md). Called from Python with a Python-held ``Values`` the same
+a copy of every variable of the graph: in the batch pass over the car drive (6,635 keyframes,
+~20,000 variables, 6,635 NHC factors) milliseconds per call, nearly all of the drive's 896 s against
+14 s without NHC on a loaded machine (docs/experiments/benchmarks.md, 20 s now). Called from Python with a Python-held ``Values`` the same
 factor costs tens of microseconds (no copy).
 
 How: each Python factor is linearised here (Python-held values: no copy) and held as GTSAM's
@@ -21,7 +21,7 @@ from __future__ import annotations
 
 from typing import Any, List
 
-#: Relinearisations at most (the car drive settles in 2-3).
+#: Relinearisations at most (the car drive settles in 2 LM runs).
 MAX_RELINEARISATIONS = 10
 
 
