@@ -44,7 +44,7 @@ def random_head(model):
 
 def bench_refine(device: torch.device, reps: int):
     from imu_learn import _imu_core as core
-    from imu_learn.infer.refine import refine_arrays
+    from imu_learn.infer.refiner import refine_arrays
     from imu_learn.nn.model import ImuRefiner, ModelConfig
 
     _t, g, a = core.read_asl_imu(str(CROP / "mav0" / "imu0" / "data.csv"))

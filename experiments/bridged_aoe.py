@@ -55,7 +55,7 @@ def main() -> None:
             if m is None:
                 gyro = seq.gyro
             elif name.startswith("model "):
-                from imu_learn.infer.refine import refine_arrays
+                from imu_learn.infer.refiner import refine_arrays
                 gyro, _ = refine_arrays(m, seq.gyro, seq.acc)
             else:
                 gyro, _ = m.refine(seq)

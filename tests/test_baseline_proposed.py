@@ -1,5 +1,5 @@
 """The proposed refiner as a Method, its own promises: training (normalisation from the train split,
-selection), refine through imu_learn.infer.refine's windows, checkpoints (ours and imu_learn.train.trainer's).
+selection), refine through imu_learn.infer.refiner's windows, checkpoints (ours and imu_learn.train.trainer's).
 What every method must do (shapes, save/load, determinism) is test_baselines_contract.py."""
 import numpy as np
 import pytest
@@ -8,7 +8,7 @@ import torch
 from imu_learn.baselines.base import FitSettings
 from imu_learn.baselines.proposed import Proposed, ProposedConfig
 from imu_learn.infer.checkpoint import load_model, save_checkpoint
-from imu_learn.infer.refine import refine_arrays
+from imu_learn.infer.refiner import refine_arrays
 from imu_learn.nn.model import ImuRefiner, ModelConfig
 
 torch.set_num_threads(1)
@@ -54,7 +54,7 @@ def test_save_is_an_imu_learn_checkpoint(fitted, crop_split, tmp_path):
     _, val = crop_split
     f = tmp_path / "proposed.pt"
     m.save(f)
-    assert isinstance(load_model(f), ImuRefiner)  # readable by imu_learn.infer.refine's loader
+    assert isinstance(load_model(f), ImuRefiner)  # readable by imu_learn.infer.refiner's loader
     for m2 in (Proposed().load(f), Proposed.from_checkpoint(f)):
         assert m2.window == W and m2.model.cfg.hidden == 16
         g1, a1 = m.refine(val)

@@ -30,7 +30,7 @@ from imu_learn.cli import main
 from imu_learn.cli.refine import main as refine_main
 from imu_learn.data.types import Segment
 from imu_learn.infer.checkpoint import imu_record, load_checkpoint, load_model
-from imu_learn.infer.refine import refine_arrays
+from imu_learn.infer.refiner import refine_arrays
 from imu_learn.infer.windowing import Windowing, attach
 from imu_learn.train import trainer
 from imu_learn.train.config import build_config

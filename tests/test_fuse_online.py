@@ -17,7 +17,7 @@ from imu_learn.fuse.experiments.online import stream  # noqa: E402
 from imu_learn.fuse.graph import IncrementalFusion  # noqa: E402
 from imu_learn.fuse.settings import FusionSettings  # noqa: E402
 from imu_learn.infer.checkpoint import save_checkpoint  # noqa: E402
-from imu_learn.infer.refine import refine_arrays  # noqa: E402
+from imu_learn.infer.refiner import refine_arrays  # noqa: E402
 from imu_learn.infer.streaming import CausalStepper, WindowedStepper, load_causal_model, load_learned_model  # noqa: E402
 from imu_learn.nn.model import ImuRefiner, ModelConfig  # noqa: E402
 

@@ -1,4 +1,4 @@
-"""imu_learn.infer.refine: windowed refinement, stitching, and writing each format back unchanged but for the IMU."""
+"""imu_learn.infer.refiner: windowed refinement, stitching, and writing each format back unchanged but for the IMU."""
 import csv
 import hashlib
 import os
@@ -15,7 +15,7 @@ from crops import whole_pass
 from imu_learn import _imu_core as core
 from imu_learn.cli.refine import main
 from imu_learn.infer.checkpoint import save_checkpoint
-from imu_learn.infer.refine import refine_arrays
+from imu_learn.infer.refiner import refine_arrays
 from imu_learn.infer.windowing import window_plan
 from imu_learn.nn.model import ImuRefiner, ModelConfig
 

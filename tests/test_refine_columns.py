@@ -21,7 +21,7 @@ from imu_learn.data.formats import read_imu_source, read_recording
 from imu_learn.data.formats.csv_columns import STANDARD_GRAVITY, CsvColumns, read_csv_columns
 from imu_learn.errors import InvalidInputError
 from imu_learn.infer.checkpoint import load_model, save_checkpoint
-from imu_learn.infer.refine import refine_arrays
+from imu_learn.infer.refiner import refine_arrays
 from imu_learn.nn.model import ImuRefiner, ModelConfig
 
 torch.set_num_threads(1)

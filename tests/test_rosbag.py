@@ -22,7 +22,7 @@ from imu_learn.errors import (
     NotABagError,
     TruncatedBagError,
 )
-from imu_learn.infer.refine import refine_recording, refine_with_variance
+from imu_learn.infer.refiner import refine_recording, refine_with_variance
 from imu_learn.nn.model import ImuRefiner, ModelConfig
 from rosbag_fixtures import GT_CSV, IMU_CSV, KINDS, POSE_TOPICS, TOPICS, bag_name, write_fixture_bag
 

@@ -19,7 +19,7 @@ from imu_learn import _imu_core as core
 from imu_learn.data.types import Segment
 from imu_learn.infer import windowing
 from imu_learn.infer.checkpoint import load_model, save_checkpoint
-from imu_learn.infer.refine import refine_arrays, refine_with_variance
+from imu_learn.infer.refiner import refine_arrays, refine_with_variance
 from imu_learn.infer.windowing import Windowing, window_plan
 from imu_learn.nn.model import ImuRefiner, ModelConfig
 from imu_learn.train.config import RunConfig

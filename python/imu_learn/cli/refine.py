@@ -1,5 +1,5 @@
 """``imu-learn refine``: a recording's IMU through a device profile's floor or a trained model, in the
-input's own format (:mod:`imu_learn.infer.rewrite` writes it, :mod:`imu_learn.infer.refine` runs a
+input's own format (:mod:`imu_learn.infer.rewrite` writes it, :mod:`imu_learn.infer.refiner` runs a
 model, :meth:`imu_learn.calib.profile.Profile.apply` the floor, :mod:`imu_learn.infer.rates` checks
 that they were made for the recording's rate and device, :mod:`imu_learn.infer.guard` whether the
 recording looks like their training data); ``--bias still`` removes the recording's own gyro bias
@@ -119,7 +119,7 @@ def from_checkpoint(args: argparse.Namespace) -> Plan:
     """The model of ``--checkpoint``, after the profile it carries, if any."""
     require_extra("train", "imu-learn refine --checkpoint")
     from imu_learn.infer.checkpoint import imu_record, load_checkpoint, model_from_checkpoint
-    from imu_learn.infer.refine import model_step, require_covariance_head
+    from imu_learn.infer.refiner import model_step, require_covariance_head
     from imu_learn.nn.device import pick_device
 
     try:

@@ -25,7 +25,7 @@ from imu_learn.core.covariance import increment_covariance
 from imu_learn.core.integration import integrate_windows, window_labels
 from imu_learn.core.quat import quat_conj, quat_mul, wxyz_to_xyzw
 from imu_learn.data.types import Segment
-from imu_learn.infer.refine import refine_with_variance
+from imu_learn.infer.refiner import refine_with_variance
 from imu_learn.score.metrics import fit_startup_bias, index_at, remove_bias, with_imu
 
 SIGMAS = (1, 2, 3)

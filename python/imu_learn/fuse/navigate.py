@@ -3,7 +3,7 @@
 ``imu-learn navigate --input REC --aiding FILE --aiding-kind {position,pose,relative-pose}`` runs
 :func:`navigate`: it reads the recording's IMU only (the layouts of :mod:`imu_learn.data.formats`;
 ground truth is never opened), the aiding file (:mod:`.aiding.tum`), the extrinsic (:mod:`.aiding.extrinsics`),
-optionally refines the IMU with a checkpoint (:mod:`imu_learn.infer.refine`), builds the first state
+optionally refines the IMU with a checkpoint (:mod:`imu_learn.infer.refiner`), builds the first state
 from the data (:mod:`.start`) and fuses with :func:`imu_learn.fuse.graph.fuse` under a loose prior.
 It writes ``causal.tum`` and ``smoothed.tum`` (``t tx ty tz qx qy qz qw``, seconds, body = IMU
 frame, at the graph's keyframes), ``plot.png`` and ``summary.json`` to the output folder; with GNSS

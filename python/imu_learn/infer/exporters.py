@@ -201,7 +201,7 @@ def model_card(model: ImuRefiner, state: Dict[str, Any], checkpoint: Path, files
         "model_args": model.model_args(),
         "causal": bool(model.cfg.causal),
         "state": "each call starts from zero LSTM state; the bidirectional model needs context on both sides"
-        " (see imu_learn.infer.refine for windowing)",
+        " (see imu_learn.infer.refiner for windowing)",
         "trace_window": int(window),
         "dynamic_axes": {"batch": dynamic, "time": dynamic},
         "onnx_opset": int(opset),

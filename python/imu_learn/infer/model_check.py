@@ -1,7 +1,7 @@
 """Does a trained model improve a recording? Raw vs refined relative pose error on one recording.
 
 :func:`compare_with_raw` refines a recording's IMU exactly as ``imu-learn refine`` does (the same
-reader values, :func:`imu_learn.infer.refine.refine_arrays` with the checkpoint's windowing rule,
+reader values, :func:`imu_learn.infer.refiner.refine_arrays` with the checkpoint's windowing rule,
 :mod:`imu_learn.infer.windowing`, the rule fit selected and scored it with),
 puts ground truth on the raw and on the refined IMU by the same alignment (so both have identical
 segments and stamps), and scores both with the final table's metric (:mod:`imu_learn.score.metrics`,
@@ -31,7 +31,7 @@ from imu_learn.data.loading import AlignOptions, align
 from imu_learn.data.types import ImuData
 from imu_learn.data.types import Segment as Seq
 from imu_learn.infer.checkpoint import load_checkpoint, model_from_checkpoint
-from imu_learn.infer.refine import refine_arrays
+from imu_learn.infer.refiner import refine_arrays
 from imu_learn.infer.windowing import windowing_of
 from imu_learn.nn.device import pick_device
 from imu_learn.score.metrics import GRAVITY, variant_table, without_fitted_bias

@@ -1,7 +1,7 @@
 """A recording written back in its own format with its IMU replaced: where the output goes, what is
 refused before any work, and the steps (a device profile's floor, a model) applied in order. No
 torch here: ``imu-learn refine --profile`` runs without it (a model's step is
-:func:`imu_learn.infer.refine.model_step`).
+:func:`imu_learn.infer.refiner.model_step`).
 
 Each layout's module in :mod:`imu_learn.data.formats` writes its file back (a user's CSV in its own
 columns and units); every file is written to a temporary file beside its target and renamed into

@@ -302,7 +302,7 @@ def _bias_prior(cfg, scn, seq, name: str, model, refined: Dict[str, tuple]) -> O
     if scn.bias_prior == "zero":
         return None
     if name == "proposed" and "proposed" not in refined:
-        from imu_learn.infer.refine import refine_arrays
+        from imu_learn.infer.refiner import refine_arrays
 
         refined["proposed"] = refine_arrays(model, seq.gyro, seq.acc)
     if name == "learned" and "learned" not in refined:
