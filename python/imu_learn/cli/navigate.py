@@ -8,7 +8,18 @@ from pathlib import Path
 from typing import Any, Callable, List, Optional, Sequence
 
 from imu_learn.cli.common import add_imu_input_options, csv_layout, run_command
-from imu_learn.errors import ConfigError
+from imu_learn.cli.common import parser as common_parser
+from imu_learn.errors import ConfigError, MissingExtraError
+from imu_learn.fuse.navigate import (
+    AIDING_FORMATS,
+    KINDS,
+    NavigateOptions,
+    Sources,
+    navigate,
+    one_line,
+    parse_gaps,
+    parse_vector,
+)
 
 DESCRIPTION = """Navigate one recording with its real aiding file (a camera trajectory as relative or absolute
 poses, or position fixes), no ground truth needed: the first state comes from the data (attitude
@@ -40,8 +51,6 @@ EPILOG = """examples:
 
 
 def add_arguments(ap: argparse.ArgumentParser) -> None:
-    from imu_learn.fuse.navigate import AIDING_FORMATS, KINDS, NavigateOptions
-
     d = NavigateOptions()
     ap.add_argument("--input", type=Path, required=True, metavar="REC",
                     help="the recording (a folder or file the loaders read, e.g. an EuRoC ASL folder); only its IMU "
@@ -131,8 +140,6 @@ def require_gtsam(command: str) -> None:
     try:
         import gtsam  # noqa: F401
     except ImportError:
-        from imu_learn.errors import MissingExtraError
-
         raise MissingExtraError(f"imu-learn {command} needs gtsam, the fuse extra: pip install 'imu-learn[fuse]'") from None
 
 
@@ -149,15 +156,11 @@ def set_torch_threads(threads: Optional[int]) -> None:
 
 def parser() -> argparse.ArgumentParser:
     """The full ``imu-learn navigate`` parser (common flags included)."""
-    from imu_learn.cli.common import parser as common_parser
-
     return common_parser("navigate")
 
 
 def options(args: argparse.Namespace):
     """The :class:`~imu_learn.fuse.navigate.NavigateOptions` the command line asks for."""
-    from imu_learn.fuse.navigate import NavigateOptions, parse_gaps, parse_vector
-
     if args.aiding is None:
         raise ConfigError("--input needs --aiding FILE (and --aiding-kind {position,pose,relative-pose} unless it is "
                           "GNSS fixes)")
@@ -186,8 +189,6 @@ def options(args: argparse.Namespace):
 
 
 def run(args: argparse.Namespace, rest: List[str], keep: Callable[[Any], None]) -> int:
-    from imu_learn.fuse.navigate import Sources, navigate, one_line
-
     o = options(args)
     set_torch_threads(args.threads)
     require_gtsam("navigate")

@@ -15,6 +15,7 @@ from scipy.spatial.transform import Rotation
 
 from imu_learn import _imu_core as core
 from imu_learn.core.quat import xyzw_to_wxyz
+from imu_learn.data.formats.rosbag import output_bag_path, write_odometry
 from imu_learn.util.atomic import atomic_write_bytes, atomic_write_path, atomic_write_text
 
 from .aiding.tum import read_tum
@@ -32,8 +33,6 @@ def write_trajectory_bag(base: Path, t_ns: np.ndarray, p: np.ndarray, R: np.ndar
     """The trajectory as ``nav_msgs/msg/Odometry`` on ``topic`` (poses only) in a bag of the
     recording ``like``'s kind: ``base.bag`` for ROS 1, the folder ``base`` for ROS 2 (same storage
     plugin). Returns the bag written."""
-    from imu_learn.data.formats.rosbag import output_bag_path, write_odometry
-
     path = output_bag_path(base, like)
     path.parent.mkdir(parents=True, exist_ok=True)
     write_odometry(path, topic, t_ns, p, xyzw_to_wxyz(Rotation.from_matrix(R).as_quat()), like=like)

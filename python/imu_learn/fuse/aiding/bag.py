@@ -16,6 +16,8 @@ from pathlib import Path
 
 import numpy as np
 
+from imu_learn.data.formats import rosbag
+from imu_learn.data.formats.rosbag import POSE_TYPES, list_topics, read_groundtruth_topic, read_positions
 from imu_learn.errors import BagTopicError, InvalidInputError
 
 from .rtklib import RtkSolution, ecef_to_enu_rotation, llh_to_ecef
@@ -28,8 +30,6 @@ Q_FIX, Q_NONE = 1, 5  # the RTKLIB quality flags the fixes take (5 is not fused 
 
 def topic_type(bag: Path, topic: str) -> str:
     """The message type of ``topic``; :class:`BagTopicError` listing the bag's topics when absent."""
-    from imu_learn.data.formats.rosbag import list_topics
-
     topics = list_topics(bag)
     if topic not in topics:
         have = ", ".join(f"{t} ({ty})" for t, ty in topics.items()) or "none"
@@ -45,8 +45,6 @@ def is_geodetic(bag: Path, topic: str) -> bool:
 def read_trajectory(bag: Path, topic: str, need_orientation: bool = True) -> Trajectory:
     """A pose topic as a :class:`Trajectory` (quaternions x, y, z, w), or with ``need_orientation``
     False also a PointStamped topic (positions only). ``lines`` are the messages' 1-based indices."""
-    from imu_learn.data.formats.rosbag import POSE_TYPES, read_groundtruth_topic, read_positions
-
     kind = topic_type(bag, topic)
     if kind in POSE_TYPES:
         gt = read_groundtruth_topic(bag, topic)
@@ -65,9 +63,7 @@ def read_trajectory(bag: Path, topic: str, need_orientation: bool = True) -> Tra
 
 def read_navsat(bag: Path, topic: str, sigma_m: float) -> RtkSolution:
     """A NavSatFix topic as a solution in local ENU at its first fix (module docstring)."""
-    from imu_learn.data.formats.rosbag import read_navsat as read
-
-    t_ns, llh, cov, cov_type, status = read(bag, topic)
+    t_ns, llh, cov, cov_type, status = rosbag.read_navsat(bag, topic)
     where = f"{bag} topic {topic}"
     fix = status > NO_FIX
     if not fix.any():

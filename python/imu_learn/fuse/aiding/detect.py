@@ -13,6 +13,8 @@ from __future__ import annotations
 from pathlib import Path
 from typing import List
 
+from imu_learn.data.formats import rosbag
+
 from .rtklib import looks_like_pos
 
 FORMATS = ("tum", "csv", "asl", "rtklib", "bag")
@@ -27,8 +29,6 @@ def _head(path: Path) -> List[str]:
 
 def detect(path: Path) -> str:
     """The aiding format of ``path`` (module docstring); a missing file is FileNotFoundError."""
-    from imu_learn.data.formats import rosbag
-
     path = Path(path)
     if rosbag.detect(path):
         return "bag"

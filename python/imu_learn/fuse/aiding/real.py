@@ -8,6 +8,7 @@ from typing import Optional, Tuple
 
 import numpy as np
 
+from imu_learn.data.formats.rosbag import read_positions
 from imu_learn.errors import AidingError, AidingOverlapError, InvalidInputError
 
 from .sampling import snap_to_samples
@@ -70,8 +71,6 @@ def bag_position_source(bag, topic: str, lever=(0.0, 0.0, 0.0)) -> Tuple[np.ndar
     the position of a PoseStamped / TransformStamped / Odometry topic), in the form
     :func:`leica_fixes` takes: ``(t_ns, p, lever, source)``. ``lever``: the measured point in the
     body frame (a bag does not say it; the fuse config does). Header stamps; typed bag errors."""
-    from imu_learn.data.formats.rosbag import read_positions
-
     t_ns, p = read_positions(bag, topic)
     lever_arm = np.asarray(lever, dtype=np.float64).reshape(3)
     return t_ns, p, lever_arm, f"{bag} topic {topic}"
