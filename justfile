@@ -64,7 +64,7 @@ refine checkpoint input output *args="":
 labels dataset *args="":
     {{py}} -m imu_learn.cli labels {{dataset}} {{args}}
 
-# Print measured throughput: imu_core vs numpy/GTSAM/polars, training/refine/causal latency, online fusion latency, then cost against recording length (BENCH_SCALE_ARGS='--hours 1,10')
+# Print measured throughput: imu_core vs numpy/GTSAM/polars, training/refine/causal latency, online fusion latency, cost against recording length (BENCH_SCALE_ARGS='--hours 1,10'), then the Allan deviation of 10 h at 200 Hz against allantools
 bench *args="":
     {{py}} bench/bench_core.py {{args}}
     {{py}} bench/bench_learn.py
@@ -72,3 +72,4 @@ bench *args="":
     {{py}} bench/bench_fuse_online.py
     {{py}} bench/bench_rosbag.py {{ if args =~ '--quick' { '--quick' } else { '' } }}
     {{py}} bench/bench_scale.py {{ if args =~ '--quick' { '--quick' } else { '' } }} ${BENCH_SCALE_ARGS:-}
+    {{py}} bench/bench_allan.py {{ if args =~ '--quick' { '--hours 1 --repeats 1' } else { '' } }}
