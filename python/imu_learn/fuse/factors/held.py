@@ -4,7 +4,7 @@
 Why: GTSAM's Python wrapper hands each ``CustomFactor`` call the optimiser's ``Values`` by copy
 whenever that ``Values`` lives in C++ (inside ``LevenbergMarquardtOptimizer``), so every call costs
 a copy of every variable of the graph: in the batch pass over the car drive (6,635 keyframes,
-~20,000 variables, 6,635 NHC factors) milliseconds per call, nearly all of the drive's 896 s against
+~20,000 variables, 6,635 NHC factors) milliseconds per call, nearly all of the drive's 650 s against
 14 s without NHC on a loaded machine (docs/experiments/benchmarks.md, 20 s now). Called from Python with a Python-held ``Values`` the same
 factor costs tens of microseconds (no copy).
 
