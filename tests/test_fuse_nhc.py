@@ -82,7 +82,7 @@ def chain_graph(rng, n: int = 30, dt: float = 0.1):
     them (BetweenFactorPose3 from a curving drive) and an NHC factor at each; a perturbed start."""
     g, truth, initial = gtsam.NonlinearFactorGraph(), gtsam.Values(), gtsam.Values()
     settings = nhc.NhcSettings(0.1, 0.1, lever=(-0.2, 0.0, 0.9))
-    psi, p = 0.3, np.zeros(3)
+    psi, p, prev = 0.3, np.zeros(3), None
     for k in range(n):
         rate = 0.3 * math.sin(0.2 * k)
         R = gtsam.Rot3.Ypr(psi, 0.02 * math.sin(0.3 * k), 0.01)

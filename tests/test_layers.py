@@ -121,9 +121,6 @@ def test_known_exceptions_are_still_needed():
 
 
 HEAVY = ("torch", "gtsam", "matplotlib", "rosbags")  # optional: each stage names its extra
-# Files whose function-local imports of the package are being moved to module level by the
-# restructuring of fuse/ and its commands; the list goes when that work lands.
-LOCAL_IMPORTS_PENDING: Tuple[str, ...] = ("fuse/graph.py",)
 
 
 def split_imports(path: Path) -> Tuple[List[Tuple[int, str]], List[Tuple[int, str]]]:
@@ -172,8 +169,6 @@ def test_function_local_imports_only_hold_back_optional_dependencies():
     found = []
     for name, path in sorted(paths.items()):
         rel = path.relative_to(PKG).as_posix()
-        if rel.startswith(LOCAL_IMPORTS_PENDING):
-            continue
         for line, target in split_imports(path)[1]:
             if target.split(".")[0] != "imu_learn":
                 continue
@@ -225,8 +220,6 @@ def test_function_local_imports_of_other_packages_only_for_lazy_ones():
     found = []
     for path in sorted(PKG.rglob("*.py")):
         rel = path.relative_to(PKG).as_posix()
-        if rel.startswith(LOCAL_IMPORTS_PENDING):
-            continue
         for line, target in split_imports(path)[1]:
             top = target.split(".")[0]
             if top not in ("imu_learn", "__future__") and top not in LAZY:

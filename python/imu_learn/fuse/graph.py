@@ -26,6 +26,7 @@ preintegration by far less than the sensor noise (measured in tests/test_fuse.py
 """
 from __future__ import annotations
 
+import threading
 import time
 from dataclasses import dataclass, field
 from typing import Callable, Dict, Iterable, List, Optional, Tuple
@@ -179,8 +180,6 @@ STACK_PER_KEYFRAME = 1024
 def deep_stack(fn: Callable, keyframes: int):
     """``fn()`` run in a thread whose stack fits GTSAM's recursion over ``keyframes`` keyframes; its
     result, or its exception raised here."""
-    import threading
-
     size = max(64 << 20, int(keyframes) * STACK_PER_KEYFRAME)
     size = (size + (1 << 20) - 1) & ~((1 << 20) - 1)  # whole MiB
     out: Dict[str, object] = {}
@@ -529,7 +528,7 @@ class IncrementalFusion:
         with ``lag_s = inf``, iSAM2's final one)."""
         if not self.done:
             raise InvalidInputError(f"smooth() after the last sample: {self.n} of {len(self.t_ns)} added")
-        gtsam, X, V, B = self._gtsam, self._X, self._V, self._B
+        X, V, B = self._X, self._V, self._B
         initial = self._initial if self.windowed else self._isam.calculateEstimate()
         if self.smoothing == "batch":
             full = self._full
