@@ -9,7 +9,7 @@ from typing import Any, Callable, List, Optional, Sequence
 
 from imu_learn.cli.common import add_imu_input_options, csv_layout, run_command
 from imu_learn.cli.common import parser as common_parser
-from imu_learn.errors import ConfigError, MissingExtraError
+from imu_learn.errors import ConfigError
 from imu_learn.fuse.navigate import (
     AIDING_FORMATS,
     KINDS,
@@ -20,6 +20,7 @@ from imu_learn.fuse.navigate import (
     parse_gaps,
     parse_vector,
 )
+from imu_learn.util.extras import require
 
 DESCRIPTION = """Navigate one recording with its real aiding file (a camera trajectory as relative or absolute
 poses, or position fixes), no ground truth needed: the first state comes from the data (attitude
@@ -136,11 +137,9 @@ def add_arguments(ap: argparse.ArgumentParser) -> None:
 
 
 def require_gtsam(command: str) -> None:
-    """A :class:`MissingExtraError` naming the ``fuse`` extra when GTSAM (the factor graph) is not installed."""
-    try:
-        import gtsam  # noqa: F401
-    except ImportError:
-        raise MissingExtraError(f"imu-learn {command} needs gtsam, the fuse extra: pip install 'imu-learn[fuse]'") from None
+    """A :class:`MissingExtraError` naming the ``fuse`` extra when GTSAM (the factor graph) is not
+    installed (:func:`imu_learn.util.extras.require`, the one rule)."""
+    require("gtsam", "fuse", f"imu-learn {command}")
 
 
 def set_torch_threads(threads: Optional[int]) -> None:

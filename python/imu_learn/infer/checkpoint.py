@@ -88,10 +88,20 @@ def save_checkpoint(
         "best_metric": None if best_metric is None else float(best_metric),
         "extra": extra or {},
     }
+    record = measured_record(record, model, config)
     state.update({k: v for k, v in (record or {}).items() if k in RECORD_KEYS and v is not None})
-    if record and record.get("inputs") and record.get(PROBE_KEY):
-        state["inputs"] = with_residual(record["inputs"], model, record[PROBE_KEY], config)
     write_checkpoint(path, state)
+
+
+def measured_record(record: Optional[Dict[str, Any]], model: ImuRefiner,
+                    config: Optional[Dict[str, Any]]) -> Optional[Dict[str, Any]]:
+    """``record`` with what ``model`` adds to its training inputs measured (:func:`with_residual`) and
+    the training IMU it was measured on dropped; a record without that IMU is returned as it is. A
+    caller saving the same model twice (best.pt and last.pt of one epoch) measures once with this."""
+    if not (record and record.get("inputs") and record.get(PROBE_KEY)):
+        return record
+    rest = {k: v for k, v in record.items() if k != PROBE_KEY}
+    return {**rest, "inputs": with_residual(record["inputs"], model, record[PROBE_KEY], config)}
 
 
 # --------------------------------------------------------------------------------------------

@@ -88,6 +88,7 @@ from imu_learn.infer import windowing
 from imu_learn.infer.checkpoint import (
     load_checkpoint,
     load_model,
+    measured_record,
     model_from_checkpoint,
     save_checkpoint,
     training_record,
@@ -553,6 +554,7 @@ class TrainState:
     t_start: float = field(default_factory=time.time)
     validation: Optional[Validation] = None  # its pose score's reference is saved with the state
     record: Dict[str, Any] = field(default_factory=dict)  # the training IMU's rate and device (checkpoint.training_record)
+    measured: Optional[Tuple[int, Dict[str, Any]]] = None  # (step, record with the model's residual at that step)
 
     def elapsed(self) -> float:
         return self.elapsed0 + time.time() - self.t_start
@@ -628,8 +630,10 @@ def save_state(path: Path, ts: TrainState, cfg_dict: Dict[str, Any], dist: Dist)
     extra = {"history": ts.history, "partial": ts.partial, "best_epoch": ts.best_epoch, "elapsed_s": ts.elapsed(),
              "select_reference": None if pose is None else pose.reference,
              "world_size": dist.world}
+    if ts.measured is None or ts.measured[0] != ts.step:  # best.pt and last.pt of one step: measured once
+        ts.measured = (ts.step, measured_record(ts.record, ts.model, cfg_dict))
     with deferred_interrupt():
-        save_checkpoint(path, ts.model, cfg_dict, ts.epochs_done, ts.step, ts.best, ts.opt, extra, ts.record)
+        save_checkpoint(path, ts.model, cfg_dict, ts.epochs_done, ts.step, ts.best, ts.opt, extra, ts.measured[1])
 
 
 def train_step(net: torch.nn.Module, ts: TrainState, sampler: BatchSampler, cfg: RunConfig, rank: int,
