@@ -10,6 +10,7 @@ from typing import Any, Callable, List, Optional, Sequence
 from imu_learn.cli.common import add_imu_input_options, csv_layout, run_command
 from imu_learn.cli.common import parser as common_parser
 from imu_learn.errors import ConfigError
+from imu_learn.infer.rewrite import BIAS_METHODS
 from imu_learn.fuse.navigate import (
     AIDING_FORMATS,
     KINDS,
@@ -131,6 +132,11 @@ def add_arguments(ap: argparse.ArgumentParser) -> None:
                     help="the IMU's gyro and acc noise densities and random walks (rad/s/sqrt(Hz), m/s^2/sqrt(Hz), "
                          "rad/s^2/sqrt(Hz), m/s^3/sqrt(Hz)); default: --profile's, else the recording's sensor.yaml, "
                          "else built in (EuRoC's ADIS16448, with a warning)")
+    ap.add_argument("--bias", choices=BIAS_METHODS, default="none",
+                    help="still: estimate the recording's own gyro bias from its still stretches (refine's estimator), "
+                         "gravity: from gravity consistency (rates perpendicular to gravity only), on the IMU as "
+                         "fused (after --profile's floor, --checkpoint or --calibration), and subtract it before "
+                         "the fusion; the estimate goes into summary.json's bias (default none)")
     ap.add_argument("--threads", type=int, default=None, metavar="N",
                     help="torch threads for the --checkpoint's model (default: torch's own)")
     add_imu_input_options(ap)
@@ -176,6 +182,8 @@ def options(args: argparse.Namespace):
             o = replace(o, **{name: parse_vector(text, n, f"--{name.replace('_', '-')}")})
     if args.nhc:
         o = replace(o, nhc=True)
+    if args.bias != "none":
+        o = replace(o, bias=args.bias)
     if args.sigma_rot_deg is not None:
         if o.aiding_kind is None:
             raise ConfigError("--sigma-rot-deg weighs poses: give --aiding-kind pose or relative-pose")

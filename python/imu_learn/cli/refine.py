@@ -19,7 +19,8 @@ from imu_learn.data.formats import FORMATS, USER_CSV, ImuSource, read_imu_source
 from imu_learn.data.types import sample_rate_hz
 from imu_learn.errors import ConfigError, InvalidInputError
 from imu_learn.infer import guard, rates
-from imu_learn.infer.rewrite import Step, measured, rewrite_recording, still_bias_step, summary_path, write_summary
+from imu_learn.infer.rewrite import BIAS_METHODS, BIAS_WORDS, Step, bias_step, measured, rewrite_recording, summary_path, write_summary
+from imu_learn.infer.rewrite import bias_entry as own_bias_entry
 from imu_learn.util.extras import require_extra
 
 logger = logging.getLogger(__name__)
@@ -30,7 +31,8 @@ input's own format (ASL/EuRoC CSV, TUM-VI, Blackbird, BROAD, KAIST, Fetch, GNSS/
 a CSV of your own: --columns and the units). The input is never written. A recording sampled more than 5 %
 off the rate the profile or model was made for is refused (--force applies it anyway); one of another
 device, or one whose statistics lie outside those of the training data (the guard), is a warning.
---bias still removes the recording's own gyro bias, estimated from its still stretches. Prints the file
+--bias still removes the recording's own gyro bias, estimated from its still stretches (--bias gravity: from
+gravity consistency, the rates perpendicular to gravity only). Prints the file
 written to stdout; OUT/summary.json (or OUT.summary.json beside a file) holds what was applied, the
 guard's figures and the bias estimate."""
 EPILOG = """examples:
@@ -64,9 +66,10 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--batch", type=int, help="windows run at once (default 16)")
     p.add_argument("--device", default="auto", help="auto (cuda if available), cpu, cuda, cuda:1 ...")
     p.add_argument("--copy-folder", action="store_true", help="copy the whole input folder to OUT first")
-    p.add_argument("--bias", choices=("none", "still"), default="none",
+    p.add_argument("--bias", choices=BIAS_METHODS, default="none",
                    help="still: estimate the recording's own gyro bias from its still stretches and subtract it after "
-                        "the profile and model (docs/refine.md; the estimate goes into the summary)")
+                        "the profile and model; gravity: from gravity consistency over long windows (rates "
+                        "perpendicular to gravity only) (docs/refine.md; the estimate goes into the summary)")
     p.add_argument("--fill-covariance", action="store_true",
                    help="ROS bags, a checkpoint with a covariance head: write each IMU message's angular_velocity / "
                         "linear_acceleration covariance as the diagonal of its predicted per-sample variances")
@@ -170,22 +173,19 @@ def check_recording(args: argparse.Namespace, src: ImuSource, plan: Plan) -> Opt
 
 
 def add_bias_step(args: argparse.Namespace, plan: Plan) -> None:
-    if args.bias == "still":
-        plan.steps.append(still_bias_step(plan.gravity, plan.measured))
-        plan.words.append("the recording's own gyro bias from its still stretches removed")
-        plan.stamps_for = plan.stamps_for if plan.needs_stamps else "--bias still (the detector's windows)"
+    if args.bias != "none":
+        plan.steps.append(bias_step(args.bias, plan.gravity, plan.measured))
+        plan.words.append(BIAS_WORDS[args.bias])
+        plan.stamps_for = plan.stamps_for if plan.needs_stamps else f"--bias {args.bias} (the estimator's windows)"
         plan.needs_stamps = True
 
 
 def bias_entry(args: argparse.Namespace, plan: Plan) -> Dict[str, Any]:
-    """The summary's ``bias`` entry; logs one warning line when no still stretch was found."""
-    if args.bias != "still":
-        return {"method": "none"}
-    est = plan.measured["still"]
-    if est.gyro_bias is None:
-        logger.warning("--bias still: no still stretch in %s (docs/refine.md: the detector's thresholds); no bias "
-                       "subtracted", args.input)
-    return {"method": "still", "applied": est.gyro_bias is not None, **est.to_dict()}
+    """The summary's ``bias`` entry; logs one warning line when nothing could be estimated."""
+    entry, warning = own_bias_entry(args.bias, plan.measured, str(args.input))
+    if warning:
+        logger.warning(warning)
+    return entry
 
 
 def guard_entry(args: argparse.Namespace, src: ImuSource, plan: Plan, rate: Optional[float]) -> Dict[str, Any]:

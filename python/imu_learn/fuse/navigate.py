@@ -64,6 +64,7 @@ from imu_learn.data.formats.gnss_imu import mounting_rotation
 from imu_learn.data.types import sample_rate_hz
 from imu_learn.errors import AidingError, ConfigError, InvalidInputError
 from imu_learn.infer import rates
+from imu_learn.infer.rewrite import BIAS_METHODS, bias_entry, bias_step
 
 from . import geo
 from .aiding import AbsolutePoses, OutageWindow, PositionFixes, RelativePoses, snap_to_samples
@@ -137,10 +138,15 @@ class NavigateOptions:
     # multiply a covariance head's per-sample gyro and acc variances (the `learned` input) by these:
     # the head's variances calibrated over the keyframe interval (:mod:`.variance`; docs/navigate.md)
     variance_scale: Optional[Tuple[float, float]] = None
+    # the recording's own gyro bias, estimated on the IMU as fused and subtracted before the fusion:
+    # none, still (its still stretches) or gravity (gravity consistency); :mod:`imu_learn.infer.rewrite`
+    bias: str = "none"
 
     def check(self) -> None:
         if self.aiding_kind not in KINDS:
             raise ConfigError(f"--aiding-kind: one of {', '.join(KINDS)}, got {self.aiding_kind!r}")
+        if self.bias not in BIAS_METHODS:
+            raise ConfigError(f"--bias: one of {', '.join(BIAS_METHODS)}, got {self.bias!r}")
         if self.aiding_format not in AIDING_FORMATS:
             raise ConfigError(f"--aiding-format: one of {', '.join(AIDING_FORMATS)}, got {self.aiding_format!r}")
         for name in ("keyframe_hz", "rel_sigma_rot_deg", "rel_sigma_trans_m", "max_relative_gap_s",
@@ -507,6 +513,7 @@ def navigate(src: Sources, out: Path, opts: NavigateOptions = NavigateOptions(),
     rows, rows_read, gnss, opts = aiding_rows(src, opts, t_ns, T_BS, lever)
     bias0, bias_source = checkpoint_bias(src.checkpoint)
     gyro, acc, var, label = imu_input(src, opts, imu)
+    gyro, bias = own_bias(opts, t_ns, gyro, acc, str(src.input))
     if opts.aiding_kind == "position":
         st = position_start(t_ns, gyro, acc, rows, lever, bias0, opts.gravity, opts.level_s)
     else:
@@ -548,6 +555,7 @@ def navigate(src: Sources, out: Path, opts: NavigateOptions = NavigateOptions(),
         "imu_mounting": None if imu.mounting is None else np.round(imu.mounting, 6).tolist(),
         "lever_arm_m": [round(float(x), 4) for x in lever],
         "final_bias": [round(float(b), 6) for b in res.smoothed_bias[-1]],
+        "bias": bias,
         "outputs": {"causal": str(out / "causal.tum"), "smoothed": str(out / "smoothed.tum")},
         **frames(src, opts, None if gnss is None else gnss[1]),
     }
@@ -564,6 +572,21 @@ def navigate(src: Sources, out: Path, opts: NavigateOptions = NavigateOptions(),
     summary["seconds"] = round(time.perf_counter() - t_start, 2)
     write_json(out / "summary.json", summary)
     return summary
+
+
+def own_bias(opts: NavigateOptions, t_ns: np.ndarray, gyro: np.ndarray, acc: np.ndarray,
+             where: str) -> Tuple[np.ndarray, Dict[str, object]]:
+    """(the gyro with the recording's own bias removed, the summary's ``bias`` entry): ``opts.bias``
+    estimated on the IMU as fused (after the profile's floor or the model, in the body frame), the
+    estimator refine's ``--bias`` runs (:func:`imu_learn.infer.rewrite.bias_step`)."""
+    if opts.bias == "none":
+        return gyro, {"method": "none"}
+    sink: Dict[str, object] = {}
+    g, _, _ = bias_step(opts.bias, opts.gravity, sink)(t_ns, gyro, acc)
+    entry, warning = bias_entry(opts.bias, sink, where)
+    if warning:
+        log.warning(warning)
+    return g, entry
 
 
 def _text(path: Optional[Path]) -> Optional[str]:

@@ -10,7 +10,9 @@ file (or, with ``copy_folder``, the input folder) is refused.
 
 Two more steps live here: :func:`measured` records what a step adds (for refine's guard,
 :mod:`imu_learn.infer.guard`), and :func:`still_bias_step` removes the recording's own gyro bias,
-estimated from its still stretches (:mod:`imu_learn.core.still`) on what the steps before it give.
+estimated from its still stretches (:mod:`imu_learn.core.still`) on what the steps before it give;
+:func:`gravity_bias_step` from gravity consistency (:mod:`imu_learn.core.bias_gravity`); :func:`bias_step`
+picks one for ``--bias`` (refine's and navigate's) and :func:`bias_entry` writes its summary entry.
 :func:`summary_path` and :func:`write_summary` write refine's ``summary.json`` beside the output.
 """
 from __future__ import annotations
@@ -24,6 +26,7 @@ from typing import Any, Callable, Dict, Optional, Sequence, Tuple
 
 import numpy as np
 
+from imu_learn.core.bias_gravity import gravity_bias
 from imu_learn.core.still import BIAS_SETTINGS, still_bias
 from imu_learn.data import formats
 from imu_learn.data.formats import ImuSource
@@ -135,6 +138,56 @@ def still_bias_step(gravity: float, sink: Dict[str, Any]) -> Step:
         return gyro - est.gyro_bias, acc, None
 
     return step
+
+
+def gravity_bias_step(sink: Dict[str, Any]) -> Step:
+    """The recording's own gyro bias from gravity consistency (:func:`imu_learn.core.bias_gravity.gravity_bias`:
+    only the rates perpendicular to gravity are observed), an increment on what the steps before give,
+    subtracted from it. ``sink["gravity"]`` gets the estimate; on a recording too short for its
+    windows nothing is subtracted."""
+
+    def step(t_ns: Optional[np.ndarray], gyro: np.ndarray, acc: np.ndarray):
+        if t_ns is None:
+            raise InvalidInputError("--bias gravity needs the recording's stamps")
+        est = gravity_bias(t_ns, gyro, acc)
+        sink["gravity"] = est
+        if est.gyro_bias is None:
+            return gyro, acc, None
+        return gyro - est.gyro_bias, acc, None
+
+    return step
+
+
+# --bias METHOD: the recording's own gyro bias, estimated on what the steps before give
+BIAS_METHODS = ("none", "still", "gravity")
+BIAS_WORDS = {"still": "the recording's own gyro bias from its still stretches removed",
+              "gravity": "the recording's own gyro bias from gravity consistency removed (rates perpendicular "
+                         "to gravity only)"}
+
+
+def bias_step(method: str, gravity: float, sink: Dict[str, Any]) -> Step:
+    """The step of ``--bias METHOD`` (``still`` or ``gravity``)."""
+    if method == "still":
+        return still_bias_step(gravity, sink)
+    if method == "gravity":
+        return gravity_bias_step(sink)
+    raise InvalidInputError(f"--bias: one of {', '.join(BIAS_METHODS)}, got {method!r}")
+
+
+def bias_entry(method: str, sink: Dict[str, Any], where: str) -> Tuple[Dict[str, Any], Optional[str]]:
+    """(the summary's ``bias`` entry, a warning line naming ``where`` when nothing could be estimated,
+    else None)."""
+    if method == "none":
+        return {"method": "none"}, None
+    est = sink[method]
+    warning = None
+    if est.gyro_bias is None and method == "still":
+        warning = (f"--bias still: no still stretch in {where} (docs/refine.md: the detector's thresholds); no bias "
+                   "subtracted")
+    elif est.gyro_bias is None:
+        warning = (f"--bias gravity: {where} is shorter than {est.settings.min_windows} windows of "
+                   f"{est.settings.window_s:g} s; no bias subtracted")
+    return {"method": method, "applied": est.gyro_bias is not None, **est.to_dict()}, warning
 
 
 def summary_path(out: Path, target: Path) -> Path:
