@@ -91,11 +91,14 @@ def time_blocks(segments: Sequence[Segment], k: int = 4) -> Dict[str, Tuple[List
 
 
 def fit_floor(train: List[Segment], val: List[Segment], settings: FitSettings, groups: Sequence[str],
-              val_groups: Sequence[str], progress: Progress = lambda s: None) -> FloorFit:
-    """The floor on all of ``train`` (``val`` for its selection), then on each group alone."""
+              val_groups: Sequence[str], progress: Progress = lambda s: None, uncertainty: bool = True) -> FloorFit:
+    """The floor on all of ``train`` (``val`` for its selection), then on each group alone
+    (``uncertainty=False``: not; every standard deviation NaN)."""
     progress(f"fitting the floor (traditional+timing) on {len(train)} segments, {sum(len(s) for s in train)} samples")
     method, log = fit_once(train, val, settings)
     floor = method.to_dict()
+    if not uncertainty:
+        return FloorFit(floor, log, {k: np.full(np.shape(floor[k]), np.nan) for k in PARAMS}, [])
     per = group_segments(train, val, groups, val_groups)
     if len(per) < 2:  # one recording: four time blocks of it
         per = time_blocks(train)

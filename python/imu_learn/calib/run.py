@@ -138,11 +138,13 @@ def unobservable(has_ref: bool, allan: Optional[nz.AllanNoise], noise: Dict[str,
     return out
 
 
-def floor_profile(inp: CalibInputs, progress: Progress) -> Tuple[Profile, nz.ResidualNoise, nz.ResidualNoise]:
-    """The floor part of the profile (with the reference) and the residuals before/after it."""
+def floor_profile(inp: CalibInputs, progress: Progress,
+                  uncertainty: bool = True) -> Tuple[Profile, nz.ResidualNoise, nz.ResidualNoise]:
+    """The floor part of the profile (with the reference) and the residuals before/after it
+    (``uncertainty=False``: no refits per recording, the standard deviations NaN)."""
     from imu_learn.calib import fit as ff  # torch: only where the floor is fitted
 
-    fit = ff.fit_floor(inp.train, inp.val, inp.settings, inp.groups, inp.val_groups, progress)
+    fit = ff.fit_floor(inp.train, inp.val, inp.settings, inp.groups, inp.val_groups, progress, uncertainty)
     f, std = fit.floor, fit.std
     segs, groups = inp.train + inp.val, inp.groups + inp.val_groups
     progress("gravity and the residual noise")

@@ -5,7 +5,6 @@ from __future__ import annotations
 
 import argparse
 import logging
-import re
 import sys
 from pathlib import Path
 from typing import Any, Callable, List, Optional, Sequence, Tuple
@@ -15,7 +14,7 @@ from imu_learn.calib.run import CalibInputs, CalibOptions, StillPiece, calibrate
 from imu_learn.cli.common import add_data_root, add_imu_input_options, csv_layout, run_command
 from imu_learn.data.formats import FORMATS, USER_CSV, detect_format, read_imu_source, read_recording, user_csv
 from imu_learn.data.loading import AlignOptions, align
-from imu_learn.data.splits import cut, make_split
+from imu_learn.data.splits import cut, make_split, recording_name
 from imu_learn.errors import ConfigError
 from imu_learn.eval.groundtruth import default_gap_s
 from imu_learn.eval.run import load_eval_config
@@ -82,11 +81,6 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     add_imu_input_options(p)
 
 
-def group_name(segment_name: str) -> str:
-    """The recording a segment came from (``MH_01_easy#2[0:0.85]`` -> ``MH_01_easy``)."""
-    return re.split(r"[#\[]", segment_name, maxsplit=1)[0]
-
-
 def from_config(args: argparse.Namespace) -> CalibInputs:
     """The config's train/val split and evaluate's FitSettings for it."""
     overrides = ["--data.data_root", args.data_root] if args.data_root else []
@@ -100,18 +94,18 @@ def from_config(args: argparse.Namespace) -> CalibInputs:
     split = make_split(data)
     sources = [{**row, "role": role} for role in ("train", "val") for row in split.record[role]]
     device = args.device or _device(data.roots[0].format if data.roots else "auto", split.train[0].name)
-    return CalibInputs(split.train, split.val, [group_name(s.name) for s in split.train],
-                       [group_name(s.name) for s in split.val], [], settings, device, sources)
+    return CalibInputs(split.train, split.val, [recording_name(s.name) for s in split.train],
+                       [recording_name(s.name) for s in split.val], [], settings, device, sources)
 
 
 def _device(fmt: str, name: str) -> str:
-    return recording_device(fmt) or group_name(name)
+    return recording_device(fmt) or recording_name(name)
 
 
 def _cut(segments: list, frac: float) -> Tuple[list, list]:
     if frac <= 0:
         return list(segments), []
-    name = group_name(segments[0].name)
+    name = recording_name(segments[0].name)
     return cut(segments, 0.0, 1.0 - frac, name), cut(segments, 1.0 - frac, 1.0, name)
 
 

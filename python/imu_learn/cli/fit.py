@@ -8,6 +8,7 @@ from typing import Any, Callable, List, Optional, Sequence
 
 from imu_learn.cli.common import add_data_root, run_command
 from imu_learn.errors import ConfigError
+from imu_learn.infer.rates import recording_device
 from imu_learn.train.config import parse_overrides, to_toml
 from imu_learn.util.extras import require_extra
 
@@ -21,6 +22,8 @@ EPILOG = """examples:
   imu-learn fit --config configs/euroc.toml --data-root ~/data --name euroc1
   imu-learn fit --optim.lr 3e-4 --optim.epochs 50 --data.window 100 --model.hidden 32
   imu-learn fit --resume runs/euroc1 --optim.epochs 80     continue (only optim.epochs, device, threads)
+  imu-learn fit --config configs/fetch_all.toml --loro reports/loro_fetch --jobs 2
+                                                           leave-one-recording-out on top of the floor
   torchrun --nproc_per_node 4 -m imu_learn.fit --config configs/euroc.toml    several GPUs"""
 
 
@@ -31,6 +34,15 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--out", type=Path, metavar="DIR", help="run folder (default <runs_dir>/<name or timestamp>)")
     add_data_root(p, "the config's recording paths")
     p.add_argument("--print-config", action="store_true", help="print the resolved config as TOML and exit")
+    p.add_argument("--loro", type=Path, metavar="DIR",
+                   help="validate the recipe leave-one-recording-out instead of one run: each recording held out in turn, "
+                        "the floor fitted on the others and a refiner trained on top of it per seed, both scored on the "
+                        "held-out recording; DIR/loro.md and loro.json say whether a learned model beats the floor on "
+                        "every one (imu_learn.train.loro); a rerun continues")
+    p.add_argument("--seeds", type=int, nargs="+", default=[0, 1, 2], metavar="S", help="with --loro (default 0 1 2)")
+    p.add_argument("--recordings", nargs="+", metavar="NAME",
+                   help="with --loro: the recordings (default: the config's training and validation recordings)")
+    p.add_argument("--jobs", type=int, default=1, metavar="N", help="with --loro: runs at once (processes)")
 
 
 def run(args: argparse.Namespace, rest: List[str], keep: Callable[[Any], None],
@@ -47,6 +59,8 @@ def run(args: argparse.Namespace, rest: List[str], keep: Callable[[Any], None],
     if args.print_config:
         sys.stdout.write(to_toml(cfg))
         return 0
+    if args.loro is not None:
+        return run_loro(cfg, args)
     run_dir, split = trainer.open_run(cfg, state, args.resume if state is not None else args.out)
 
     def kept() -> str:
@@ -58,6 +72,18 @@ def run(args: argparse.Namespace, rest: List[str], keep: Callable[[Any], None],
     results = trainer.train(cfg, run_dir, state, split, on_step=on_step, progress=not args.quiet)
     if results and results.get("text"):
         print(results["text"])
+    return 0
+
+
+def run_loro(cfg: Any, args: argparse.Namespace) -> int:
+    if args.resume is not None:
+        raise ConfigError("--loro: not with --resume (a rerun with the same --loro DIR continues)")
+    from imu_learn.train import loro
+
+    device = (recording_device(cfg.data.roots[0].format) if cfg.data.roots else None) or cfg.name or "device"
+    settings = loro.LoroSettings(tuple(args.seeds), tuple(args.recordings or ()), max(1, args.jobs))
+    loro.run_loro(cfg, args.loro, settings, device, progress=lambda s: print(s, file=sys.stderr, flush=True))
+    print((args.loro / "loro.md").read_text())
     return 0
 
 

@@ -186,6 +186,11 @@ def find_all(roots: List[RootConfig], data_root: Optional[Path] = None) -> Dict[
     return found
 
 
+def recording_name(segment_name: str) -> str:
+    """The recording a segment came from (``MH_01_easy#2[0:0.85]`` -> ``MH_01_easy``)."""
+    return re.split(r"[#\[]", segment_name, maxsplit=1)[0]
+
+
 def cut(segments: List[Segment], start: float, stop: float, name: str) -> List[Segment]:
     """The part [start, stop) (fractions of the recording's total time span) of its segments."""
     if (start, stop) == (0.0, 1.0):

@@ -1,0 +1,262 @@
+"""Leave-one-recording-out validation of the one recipe: a refiner trained on top of the device
+profile's floor (``imu-learn fit --config C --loro OUT``).
+
+For each recording R of the device (the config's training and validation recordings, or those
+named): the fold's profile is the floor (``traditional+timing``, low-pass included: what
+``imu-learn calibrate`` fits, without its per-recording uncertainty refits) fitted on the other
+recordings, their first part fitting and their last part selecting (the config's own cut of each
+recording, else 85 / 15 %); the refiner is trained on top of that profile on the same parts exactly
+as ``imu-learn calibrate --learned`` trains it (:mod:`imu_learn.train.on_profile`: residual on the
+floor, so the untrained model is the floor; selected on the other recordings' validation parts
+against the floor, epoch 0 kept when no epoch beats it), once per seed; then both are scored on R,
+which neither saw: relative pose RMSE at ``data.eval_horizons``, rotation and translation, open loop
+and with R's start-up bias removed (:func:`imu_learn.train.on_profile.versus_floor`).
+
+The verdict (:func:`verdict`): a learned model ships for the device only when, on every held-out
+recording and in every cell, the mean over seeds of model / floor is below
+:data:`imu_learn.train.on_profile.BEAT` and no seed is above 1. Otherwise the profile alone ships.
+
+Files under OUT, each written atomically: ``<R>/profile.json`` (the fold's floor),
+``<R>/seed<S>/`` (``fit/`` the run, ``learned.json`` the validation verdict, ``heldout.json`` the
+held-out cells), ``loro.json`` (every cell, the summary and the verdict) and ``loro.md`` (the table a
+model card quotes). A rerun skips every fold whose ``heldout.json`` exists; a fold interrupted
+before that restarts from scratch.
+"""
+from __future__ import annotations
+
+import json
+import shutil
+import time
+from concurrent.futures import ProcessPoolExecutor, as_completed
+from dataclasses import dataclass, replace
+from multiprocessing import get_context
+from pathlib import Path
+from typing import Any, Callable, Dict, List, Sequence, Tuple
+
+from imu_learn.baselines.base import FitSettings
+from imu_learn.calib.profile import Profile
+from imu_learn.calib.run import CalibInputs, floor_profile
+from imu_learn.data.splits import make_split, parse_entry, recording_name
+from imu_learn.data.types import Segment
+from imu_learn.errors import ConfigError
+from imu_learn.infer.checkpoint import load_model
+from imu_learn.train import on_profile
+from imu_learn.train.config import RunConfig, build_config
+from imu_learn.util.atomic import atomic_write_text
+
+Progress = Callable[[str], None]
+DEFAULT_VAL_FRACTION = 0.15
+
+
+@dataclass(frozen=True)
+class LoroSettings:
+    seeds: Tuple[int, ...] = (0, 1, 2)
+    recordings: Tuple[str, ...] = ()  # default: the config's training and validation recordings
+    jobs: int = 1  # folds trained at once (processes; each with the config's threads)
+
+
+@dataclass
+class Fold:
+    """Recording ``held_out`` scored; the others' first parts ``train``, their last parts ``val``."""
+
+    held_out: str
+    train: List[Segment]
+    val: List[Segment]
+    test: List[Segment]
+
+    @property
+    def trained_on(self) -> List[str]:
+        return sorted({recording_name(s.name) for s in self.train})
+
+
+def recording_cuts(cfg: RunConfig, names: Sequence[str]) -> Dict[str, float]:
+    """Where each recording's training part ends: the config's own cut (the stop of its training
+    entry), else 1 - :data:`DEFAULT_VAL_FRACTION`."""
+    cuts = {}
+    for text in cfg.data.split.train:
+        e = parse_entry(text)
+        if e.start == 0.0 and e.stop < 1.0:
+            cuts[e.name] = e.stop
+    return {n: cuts.get(n, 1.0 - DEFAULT_VAL_FRACTION) for n in names}
+
+
+def loro_recordings(cfg: RunConfig, named: Sequence[str]) -> List[str]:
+    if named:
+        return list(dict.fromkeys(named))
+    out = [parse_entry(t).name for t in list(cfg.data.split.train) + list(cfg.data.split.val)]
+    return list(dict.fromkeys(out))
+
+
+def load_folds(cfg: RunConfig, names: Sequence[str]) -> List[Fold]:
+    """Every recording read once (its two parts) and the folds made of them."""
+    if len(names) < 2:
+        raise ConfigError(f"--loro: needs at least two recordings, got {list(names)} (name them with --recordings)")
+    cuts = recording_cuts(cfg, names)
+    split = {"train": [f"{n}[0:{cuts[n]:g}]" for n in names], "val": [f"{n}[{cuts[n]:g}:1]" for n in names], "test": []}
+    data_cfg = build_config(cfg.to_dict(), {f"data.split.{k}": v for k, v in split.items()}).data
+    loaded = make_split(data_cfg)
+    folds = []
+    for n in names:
+        tr = [s for s in loaded.train if recording_name(s.name) != n]
+        va = [s for s in loaded.val if recording_name(s.name) != n]
+        te = [s for s in loaded.train + loaded.val if recording_name(s.name) == n]
+        if not te:
+            raise ConfigError(f"--loro: recording {n} has no segment long enough to score")
+        folds.append(Fold(n, tr, va, te))
+    return folds
+
+
+def fold_profile(fold: Fold, cfg: RunConfig, path: Path, device: str) -> Path:
+    """The fold's floor as a device profile at ``path`` (kept when it exists)."""
+    if path.exists():
+        return path
+    settings = FitSettings(window=cfg.data.window, seed=cfg.seed, gravity=cfg.data.gravity, threads=cfg.threads)
+    inp = CalibInputs(fold.train, fold.val, [recording_name(s.name) for s in fold.train],
+                      [recording_name(s.name) for s in fold.val], [], settings, device,
+                      [{"recordings": fold.trained_on, "held_out": fold.held_out}])
+    prof, _, _ = floor_profile(inp, lambda s: None, uncertainty=False)
+    prof.sources = inp.sources
+    path.parent.mkdir(parents=True, exist_ok=True)
+    prof.save(path)
+    return path
+
+
+def fold_config(base: RunConfig, profile: Path, seed: int) -> RunConfig:
+    """The recipe: ``base``'s data, model, loss and optimiser settings on top of ``profile``
+    (:func:`on_profile.config_on_profile`), with the raw samples (the floor holds the device bias)."""
+    cfg = on_profile.config_on_profile(base, profile, base.optim.epochs, seed)
+    return build_config(cfg.to_dict(), {"data.train_bias": "keep"})
+
+
+def run_fold(base: RunConfig, fold: Fold, seed: int, out: Path, device: str) -> Dict[str, Any]:
+    """One (fold, seed): the profile, the run, its held-out cells (``heldout.json``)."""
+    seed_dir = out / fold.held_out / f"seed{seed}"
+    done = seed_dir / "heldout.json"
+    if done.exists():
+        return json.loads(done.read_text())
+    t0 = time.time()
+    profile_path = fold_profile(fold, base, out / fold.held_out / "profile.json", device)
+    cfg = fold_config(base, profile_path, seed)
+    if seed_dir.exists():
+        shutil.rmtree(seed_dir)  # an interrupted fold restarts
+    res = on_profile.train_on_profile(cfg, fold.train, fold.val, seed_dir, bar=False)
+    scored = replace(cfg, optim=replace(cfg.optim, select_horizons=list(cfg.data.eval_horizons)))
+    profile = Profile.load(profile_path)
+    cells = on_profile.versus_floor(load_model(res.run_dir / "best.pt"), profile, fold.test, scored)
+    row = {"held_out": fold.held_out, "seed": seed, "trained_on": fold.trained_on,
+           "best_epoch": res.best_epoch, "beats_floor_on_validation": res.beats_floor, "cells": cells,
+           "seconds": round(time.time() - t0, 1)}
+    atomic_write_text(done, json.dumps(row, indent=2) + "\n")
+    return row
+
+
+def _run_fold_job(args: Tuple[Dict[str, Any], Fold, int, str, str]) -> Dict[str, Any]:
+    cfg_dict, fold, seed, out, device = args
+    return run_fold(build_config(cfg_dict, {}), fold, seed, Path(out), device)
+
+
+def summarise(rows: Sequence[Dict[str, Any]]) -> List[Dict[str, Any]]:
+    """Per held-out recording and cell: the floor, the model over seeds, the ratios' mean and worst."""
+    by: Dict[Tuple[str, int, str], List[Dict[str, Any]]] = {}
+    for r in rows:
+        for c in r["cells"]:
+            by.setdefault((r["held_out"], c["n"], c["protocol"]), []).append(c)
+    out = []
+    for (rec, n, protocol), cs in by.items():
+        cell: Dict[str, Any] = {"held_out": rec, "n": n, "protocol": protocol, "seeds": len(cs),
+                                "floor": cs[0]["floor"]}
+        for term, key in (("rot", "rot_deg"), ("trans", "trans_m")):
+            ratios = [c[f"{term}_ratio"] for c in cs]
+            cell[f"{term}_ratio_mean"] = sum(ratios) / len(ratios)
+            cell[f"{term}_ratio_worst"] = max(ratios)
+            cell[f"model_{key}_mean"] = sum(c["model"][key] for c in cs) / len(cs)
+        out.append(cell)
+    return out
+
+
+def verdict(cells: Sequence[Dict[str, Any]]) -> Dict[str, Any]:
+    """Ships only when every cell's seed mean is below BEAT and no seed is above 1 (module doc)."""
+    losing = [c for c in cells if max(c["rot_ratio_worst"], c["trans_ratio_worst"]) > 1.0
+              or max(c["rot_ratio_mean"], c["trans_ratio_mean"]) >= on_profile.BEAT]
+    beaten = sorted({c["held_out"] for c in losing})
+    return {"ships": not losing and bool(cells), "recordings_not_beaten": beaten,
+            "rule": f"ships when, on every held-out recording and in every cell (rotation and translation, each horizon, "
+                    f"open loop and start-up bias removed), the seeds' mean model/floor is below {on_profile.BEAT} and "
+                    "no seed is above 1"}
+
+
+def _r(c: Dict[str, Any], term: str) -> str:
+    return f"{c[f'{term}_ratio_mean']:.3f} ({c[f'{term}_ratio_worst']:.3f})"
+
+
+def markdown(cells: Sequence[Dict[str, Any]], v: Dict[str, Any], seeds: Sequence[int]) -> str:
+    lines = [f"Leave-one-recording-out, seeds {', '.join(map(str, seeds))}: model / floor on each held-out recording "
+             "(mean over seeds, worst seed in brackets; below 1 is better than the floor).", "",
+             "| held out | n | protocol | floor rot [deg] | rot ratio | floor trans [m] | trans ratio |",
+             "|---|---|---|---|---|---|---|"]
+    for c in cells:
+        lines.append(f"| {c['held_out']} | {c['n']} | {c['protocol']} | {c['floor']['rot_deg']:.4g} | {_r(c, 'rot')} | "
+                     f"{c['floor']['trans_m']:.4g} | {_r(c, 'trans')} |")
+    if v.get("incomplete"):
+        said = f"Verdict: incomplete ({v['incomplete']}): no model ships on a partial validation; the profile alone ships."
+    elif v["ships"]:
+        said = "Verdict: the learned model beats the floor on every held-out recording: it ships."
+    else:
+        said = ("Verdict: the learned model does not beat the floor on every held-out recording (not on "
+                f"{', '.join(v['recordings_not_beaten'])}): the profile alone ships.")
+    lines += ["", said, ""]
+    return "\n".join(lines)
+
+
+def run_loro(base: RunConfig, out: Path, settings: LoroSettings, device: str,
+             progress: Progress = lambda s: None) -> Dict[str, Any]:
+    """Every (fold, seed) of ``base`` (module doc); returns what ``loro.json`` holds."""
+    t0 = time.time()
+    names = loro_recordings(base, settings.recordings)
+    folds = load_folds(base, names)
+    out.mkdir(parents=True, exist_ok=True)
+    jobs = [(f, s) for f in folds for s in settings.seeds]
+    progress(f"leave-one-recording-out: {len(folds)} recordings x {len(settings.seeds)} seeds = {len(jobs)} runs "
+             f"of {base.optim.epochs} x {base.optim.steps_per_epoch} steps, {settings.jobs} at once ({out})")
+    rows: List[Dict[str, Any]] = []
+    head = {"config": base.name, "device": device, "recordings": names, "seeds": list(settings.seeds),
+            "epochs": base.optim.epochs, "steps_per_epoch": base.optim.steps_per_epoch, "runs_total": len(jobs)}
+
+    def done(row: Dict[str, Any]) -> None:
+        rows.append(row)
+        rows.sort(key=lambda r: (names.index(r["held_out"]), r["seed"]))
+        worst = max(max(c["rot_ratio"], c["trans_ratio"]) for c in row["cells"])
+        progress(f"[{len(rows)}/{len(jobs)}] held out {row['held_out']}, seed {row['seed']}: best epoch "
+                 f"{row['best_epoch']}, worst model/floor {worst:.3f} ({row['seconds']:.0f} s)")
+        write_summary(out, head, rows, time.time() - t0)
+
+    if settings.jobs <= 1:
+        for f, s in jobs:
+            done(run_fold(base, f, s, out, device))
+    else:
+        # profiles first (one per fold), so that the seeds of a fold never fit it twice at once
+        args = [(base.to_dict(), f, s, str(out), device) for f, s in jobs]
+        with ProcessPoolExecutor(settings.jobs, mp_context=get_context("spawn")) as pool:
+            list(pool.map(_profile_job, [(base.to_dict(), f, str(out), device) for f in folds]))
+            for fut in as_completed([pool.submit(_run_fold_job, a) for a in args]):
+                done(fut.result())
+    return write_summary(out, head, rows, time.time() - t0)
+
+
+def write_summary(out: Path, head: Dict[str, Any], rows: List[Dict[str, Any]], seconds: float) -> Dict[str, Any]:
+    """``loro.json`` and ``loro.md`` from the runs so far (rewritten after each run; a verdict on
+    fewer runs than planned says so and never ships)."""
+    cells = summarise(rows)
+    v = verdict(cells)
+    complete = len(rows) == head["runs_total"]
+    if not complete:
+        v = {**v, "ships": False, "incomplete": f"{len(rows)} of {head['runs_total']} runs"}
+    result = {**head, "runs_done": len(rows), "verdict": v, "cells": cells, "runs": rows, "seconds": round(seconds, 1)}
+    atomic_write_text(out / "loro.json", json.dumps(result, indent=2) + "\n")
+    atomic_write_text(out / "loro.md", markdown(cells, v, head["seeds"]))
+    return result
+
+
+def _profile_job(args: Tuple[Dict[str, Any], Fold, str, str]) -> str:
+    cfg_dict, fold, out, device = args
+    return str(fold_profile(fold, build_config(cfg_dict, {}), Path(out) / fold.held_out / "profile.json", device))
