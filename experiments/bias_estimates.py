@@ -54,11 +54,37 @@ def aoe(r: Recording, bias: np.ndarray) -> Dict[str, float]:
     return {"aoe_deg": round(s["aoe_deg"], 3), "aoe_mean_deg": round(s["aoe_mean_deg"], 3)}
 
 
+def tilts(r: Recording) -> Dict[str, float]:
+    """What the accelerometer says about gravity, against ground truth (median over windows, deg):
+    the 1 s mean accelerometer against gravity's direction in the body frame (tilt read from the
+    body-frame samples), and the 10 s mean specific force in the world frame against the vertical
+    (what gravity consistency relies on)."""
+    from imu_learn.core.quat import quat_conj, quat_rotate
+    from imu_learn.data.types import sample_rate_hz
+
+    n = int(round(sample_rate_hz(r.seg.t_ns)))
+    up_body = quat_rotate(quat_conj(r.seg.q_wxyz), np.tile([0.0, 0.0, 1.0], (len(r.seg.t_ns), 1)))
+    f_world = quat_rotate(r.seg.q_wxyz, r.seg.acc)
+
+    def angle(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+        c = np.sum(a * b, -1) / (np.linalg.norm(a, axis=-1) * np.linalg.norm(b, axis=-1))
+        return np.degrees(np.arccos(np.clip(c, -1, 1)))
+
+    def means(x: np.ndarray, k: int) -> np.ndarray:
+        m = len(x) // k
+        return x[: m * k].reshape(m, k, 3).mean(1)
+
+    out = {"tilt_1s_body_deg": float(np.median(angle(means(r.seg.acc, n), means(up_body, n))))}
+    w = means(f_world, 10 * n)
+    out["tilt_10s_world_deg"] = float(np.median(angle(w, np.tile([0.0, 0.0, 1.0], (len(w), 1))))) if len(w) else None
+    return out
+
+
 def measure(r: Recording, mean: np.ndarray, estimators: Dict[str, Estimator]) -> Dict[str, object]:
     g0 = r.seg.gyro - mean[None]
     row: Dict[str, object] = {"recording": r.seg.name, "duration_s": round(r.seg.duration_s, 1),
                               "gt_bias_rad_s": [round(float(x), 6) for x in r.gyro_bias],
-                              "oracle": aoe(r, r.gyro_bias)}
+                              "oracle": aoe(r, r.gyro_bias), **tilts(r)}
     for name, est in estimators.items():
         inc = est(r, g0)
         bias = mean + (np.zeros(3) if inc is None else inc)

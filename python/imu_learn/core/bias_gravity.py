@@ -53,7 +53,7 @@ class GravitySettings:
     window_s: float = 10.0
     chunk_s: float = 120.0
     min_windows: int = 3
-    window_sigma: float = 0.2  # m/s^2
+    window_sigma: float = 0.5  # m/s^2 (chosen on the training recordings: docs/refine.md)
     prior_sigma: float = 0.01  # rad/s
     iters: int = 3
     max_gap_s: float = 0.1
