@@ -10,7 +10,10 @@ as ``imu-learn calibrate --learned`` trains it (:mod:`imu_learn.train.on_profile
 floor, so the untrained model is the floor; selected on the other recordings' validation parts
 against the floor, epoch 0 kept when no epoch beats it), once per seed; then both are scored on R,
 which neither saw: relative pose RMSE at ``data.eval_horizons``, rotation and translation, open loop
-and with R's start-up bias removed (:func:`imu_learn.train.on_profile.versus_floor`).
+and with R's start-up bias removed (:func:`imu_learn.train.on_profile.versus_floor`). What the recipe
+gives on R is the model where the fold's validation shipped it (at least 1 % better than the floor in
+every validation cell), else the profile alone (ratio 1): :func:`recipe_cells`; the model's own
+held-out cells are kept beside (``model_cells``), shipped or not.
 
 The verdict (:func:`verdict`): a learned model ships for the device only when, on every held-out
 recording and in every cell, the mean over seeds of model / floor is below
@@ -142,12 +145,22 @@ def run_fold(base: RunConfig, fold: Fold, seed: int, out: Path, device: str) -> 
     res = on_profile.train_on_profile(cfg, fold.train, fold.val, seed_dir, bar=False)
     scored = replace(cfg, optim=replace(cfg.optim, select_horizons=list(cfg.data.eval_horizons)))
     profile = Profile.load(profile_path)
-    cells = on_profile.versus_floor(load_model(res.run_dir / "best.pt"), profile, fold.test, scored)
+    model_cells = on_profile.versus_floor(load_model(res.run_dir / "best.pt"), profile, fold.test, scored)
     row = {"held_out": fold.held_out, "seed": seed, "trained_on": fold.trained_on,
-           "best_epoch": res.best_epoch, "beats_floor_on_validation": res.beats_floor, "cells": cells,
+           "best_epoch": res.best_epoch, "beats_floor_on_validation": res.beats_floor,
+           "cells": recipe_cells(model_cells, res.beats_floor), "model_cells": model_cells,
            "seconds": round(time.time() - t0, 1)}
     atomic_write_text(done, json.dumps(row, indent=2) + "\n")
     return row
+
+
+def recipe_cells(model_cells: List[Dict[str, Any]], shipped: bool) -> List[Dict[str, Any]]:
+    """What the recipe gives on the held-out recording: the model where the fold's validation
+    shipped it (``calibrate --learned``'s rule), else the profile, whose ratio to itself is 1."""
+    if shipped:
+        return model_cells
+    return [{**c, "model": dict(c["floor"]), "rot_ratio": 1.0, "trans_ratio": 1.0, "profile_alone": True}
+            for c in model_cells]
 
 
 def _run_fold_job(args: Tuple[Dict[str, Any], Fold, int, str, str]) -> Dict[str, Any]:
@@ -156,20 +169,22 @@ def _run_fold_job(args: Tuple[Dict[str, Any], Fold, int, str, str]) -> Dict[str,
 
 
 def summarise(rows: Sequence[Dict[str, Any]]) -> List[Dict[str, Any]]:
-    """Per held-out recording and cell: the floor, the model over seeds, the ratios' mean and worst."""
-    by: Dict[Tuple[str, int, str], List[Dict[str, Any]]] = {}
+    """Per held-out recording and cell: the floor, what the recipe gives over seeds (ratios' mean
+    and worst) and the model's own ratios, shipped or not (their mean)."""
+    by: Dict[Tuple[str, int, str], List[Tuple[Dict[str, Any], Dict[str, Any]]]] = {}
     for r in rows:
-        for c in r["cells"]:
-            by.setdefault((r["held_out"], c["n"], c["protocol"]), []).append(c)
+        for c, m in zip(r["cells"], r.get("model_cells", r["cells"])):
+            by.setdefault((r["held_out"], c["n"], c["protocol"]), []).append((c, m))
     out = []
     for (rec, n, protocol), cs in by.items():
         cell: Dict[str, Any] = {"held_out": rec, "n": n, "protocol": protocol, "seeds": len(cs),
-                                "floor": cs[0]["floor"]}
+                                "floor": cs[0][0]["floor"]}
         for term, key in (("rot", "rot_deg"), ("trans", "trans_m")):
-            ratios = [c[f"{term}_ratio"] for c in cs]
+            ratios = [c[f"{term}_ratio"] for c, _ in cs]
             cell[f"{term}_ratio_mean"] = sum(ratios) / len(ratios)
             cell[f"{term}_ratio_worst"] = max(ratios)
-            cell[f"model_{key}_mean"] = sum(c["model"][key] for c in cs) / len(cs)
+            cell[f"model_{key}_mean"] = sum(c["model"][key] for c, _ in cs) / len(cs)
+            cell[f"{term}_model_alone_mean"] = sum(m[f"{term}_ratio"] for _, m in cs) / len(cs)
         out.append(cell)
     return out
 
@@ -190,13 +205,16 @@ def _r(c: Dict[str, Any], term: str) -> str:
 
 
 def markdown(cells: Sequence[Dict[str, Any]], v: Dict[str, Any], seeds: Sequence[int]) -> str:
-    lines = [f"Leave-one-recording-out, seeds {', '.join(map(str, seeds))}: model / floor on each held-out recording "
-             "(mean over seeds, worst seed in brackets; below 1 is better than the floor).", "",
-             "| held out | n | protocol | floor rot [deg] | rot ratio | floor trans [m] | trans ratio |",
-             "|---|---|---|---|---|---|---|"]
+    lines = [f"Leave-one-recording-out, seeds {', '.join(map(str, seeds))}: on each held-out recording, what the recipe "
+             "gives (the model where its fold's validation shipped it, else the profile) over the floor: mean over seeds, "
+             "worst seed in brackets; below 1 is better than the floor. \"alone\": the trained model's own ratio, "
+             "shipped or not (mean over seeds).", "",
+             "| held out | n | protocol | floor rot [deg] | rot: recipe | rot: alone | floor trans [m] | trans: recipe | trans: alone |",
+             "|---|---|---|---|---|---|---|---|---|"]
     for c in cells:
         lines.append(f"| {c['held_out']} | {c['n']} | {c['protocol']} | {c['floor']['rot_deg']:.4g} | {_r(c, 'rot')} | "
-                     f"{c['floor']['trans_m']:.4g} | {_r(c, 'trans')} |")
+                     f"{c['rot_model_alone_mean']:.3f} | {c['floor']['trans_m']:.4g} | {_r(c, 'trans')} | "
+                     f"{c['trans_model_alone_mean']:.3f} |")
     if v.get("incomplete"):
         said = f"Verdict: incomplete ({v['incomplete']}): no model ships on a partial validation; the profile alone ships."
     elif v["ships"]:
