@@ -61,10 +61,9 @@ def test_a_short_recording_gives_no_estimate_and_chunks_cut_at_gaps():
 
 
 def test_refine_bias_gravity_subtracts_the_estimate(tmp_path, capsys):
+    from imu_learn.calib.profile import Affine, Profile
     from imu_learn.cli.refine import main
     from test_still_bias import IMU_REL, write_asl
-
-    from imu_learn.calib.profile import Affine, Profile
 
     t, g, a = turning(150.0)
     src = write_asl(tmp_path / "in", t, g, a)

@@ -50,3 +50,44 @@ def test_a_training_example_turns_signal_and_target_together():
     assert np.allclose(np.linalg.norm(ys.numpy(), axis=1), np.linalg.norm(res), rtol=1e-5)
     assert np.allclose(np.linalg.norm(xs[:, :, 3:].numpy(), axis=2).mean(), np.linalg.norm(x[:, 3:], axis=1).mean(),
                        rtol=0.02)
+
+
+def test_refine_bias_learned_subtracts_the_estimators_answer(tmp_path, capsys):
+    import json
+    import math
+
+    from imu_learn.calib.profile import Affine, Profile
+    from imu_learn.cli.refine import main
+    from test_still_bias import IMU_REL, write_asl
+
+    torch.manual_seed(0)
+    net = BiasNet()
+    torch.nn.init.normal_(net.head.weight, std=0.1)
+    save_bias_net(net, tmp_path / "b.pt", {"device": "test"})
+    t, g, a = imu(45.0)
+    src = write_asl(tmp_path / "in", t, g, a)
+    eye = Affine(np.eye(3), np.zeros(3), "rad/s")
+    prof = Profile(device="test", sample_rate_hz=200.0, time_offset_s=0.0, time_offset_s_std=math.nan, gyro=eye,
+                   acc=Affine(np.eye(3), np.zeros(3), "m/s^2"), g_sensitivity=np.zeros((3, 3)), gravity_mps2=9.80665,
+                   gravity_mps2_std=math.nan, floor={})
+    prof.save(tmp_path / "profile.json")
+    base = ["--profile", str(tmp_path / "profile.json"), "--input", str(src / IMU_REL)]
+    assert main([*base, "--out", str(tmp_path / "o.csv"), "--bias", "learned", "--bias-model", str(tmp_path / "b.pt")]) == 0
+    b = json.loads((tmp_path / "o.csv.summary.json").read_text())["bias"]
+    assert b["method"] == "learned" and b["applied"] and b["trained_on"] == "test"
+    _, g_out, _ = core_read(tmp_path / "o.csv")
+    assert np.allclose(g_out, g - np.array(b["gyro_bias_rad_s"]), atol=1e-6)
+    assert np.allclose(b["gyro_bias_rad_s"], predict_bias(net, t, g, a), atol=1e-7)
+    # refused in one line: no estimator, an estimator without --bias learned, a file that is not one
+    assert main([*base, "--out", str(tmp_path / "p.csv"), "--bias", "learned"]) == 2
+    assert main([*base, "--out", str(tmp_path / "p.csv"), "--bias-model", str(tmp_path / "b.pt")]) == 2
+    assert main([*base, "--out", str(tmp_path / "p.csv"), "--bias", "learned", "--bias-model",
+                 str(tmp_path / "profile.json")]) == 2
+    err = capsys.readouterr().err
+    assert "--bias learned needs --bias-model" in err and "cannot be read" in err and err.count("error:") == 3
+
+
+def core_read(path):
+    from imu_learn import _imu_core as core
+
+    return core.read_asl_imu(str(path))

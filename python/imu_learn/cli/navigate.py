@@ -10,7 +10,6 @@ from typing import Any, Callable, List, Optional, Sequence
 from imu_learn.cli.common import add_imu_input_options, csv_layout, run_command
 from imu_learn.cli.common import parser as common_parser
 from imu_learn.errors import ConfigError
-from imu_learn.infer.rewrite import BIAS_METHODS
 from imu_learn.fuse.navigate import (
     AIDING_FORMATS,
     KINDS,
@@ -21,6 +20,7 @@ from imu_learn.fuse.navigate import (
     parse_gaps,
     parse_vector,
 )
+from imu_learn.infer.rewrite import ESTIMATORS
 from imu_learn.util.extras import require
 
 DESCRIPTION = """Navigate one recording with its real aiding file (a camera trajectory as relative or absolute
@@ -132,7 +132,7 @@ def add_arguments(ap: argparse.ArgumentParser) -> None:
                     help="the IMU's gyro and acc noise densities and random walks (rad/s/sqrt(Hz), m/s^2/sqrt(Hz), "
                          "rad/s^2/sqrt(Hz), m/s^3/sqrt(Hz)); default: --profile's, else the recording's sensor.yaml, "
                          "else built in (EuRoC's ADIS16448, with a warning)")
-    ap.add_argument("--bias", choices=BIAS_METHODS, default="none",
+    ap.add_argument("--bias", choices=ESTIMATORS, default="none",
                     help="still: estimate the recording's own gyro bias from its still stretches (refine's estimator), "
                          "gravity: from gravity consistency (rates perpendicular to gravity only), on the IMU as "
                          "fused (after --profile's floor, --checkpoint or --calibration), and subtract it before "

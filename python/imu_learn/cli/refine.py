@@ -19,7 +19,16 @@ from imu_learn.data.formats import FORMATS, USER_CSV, ImuSource, read_imu_source
 from imu_learn.data.types import sample_rate_hz
 from imu_learn.errors import ConfigError, InvalidInputError
 from imu_learn.infer import guard, rates
-from imu_learn.infer.rewrite import BIAS_METHODS, BIAS_WORDS, Step, bias_step, measured, rewrite_recording, summary_path, write_summary
+from imu_learn.infer.rewrite import (
+    BIAS_METHODS,
+    BIAS_WORDS,
+    Step,
+    bias_step,
+    measured,
+    rewrite_recording,
+    summary_path,
+    write_summary,
+)
 from imu_learn.infer.rewrite import bias_entry as own_bias_entry
 from imu_learn.util.extras import require_extra
 
@@ -69,7 +78,11 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--bias", choices=BIAS_METHODS, default="none",
                    help="still: estimate the recording's own gyro bias from its still stretches and subtract it after "
                         "the profile and model; gravity: from gravity consistency over long windows (rates "
-                        "perpendicular to gravity only) (docs/refine.md; the estimate goes into the summary)")
+                        "perpendicular to gravity only); learned: the long-context estimator of --bias-model "
+                        "(docs/refine.md; the estimate goes into the summary)")
+    p.add_argument("--bias-model", type=Path, metavar="PT",
+                   help="--bias learned: the bias estimator (python -m imu_learn.train.bias_train writes one; "
+                        "models/bias/fetch_bias_net.pt for the Fetch robot's IMU)")
     p.add_argument("--fill-covariance", action="store_true",
                    help="ROS bags, a checkpoint with a covariance head: write each IMU message's angular_velocity / "
                         "linear_acceleration covariance as the diagonal of its predicted per-sample variances")
@@ -173,8 +186,12 @@ def check_recording(args: argparse.Namespace, src: ImuSource, plan: Plan) -> Opt
 
 
 def add_bias_step(args: argparse.Namespace, plan: Plan) -> None:
+    if args.bias_model is not None and args.bias != "learned":
+        raise ConfigError("--bias-model is the estimator of --bias learned")
+    if args.bias == "learned":
+        require_extra("train", "imu-learn refine --bias learned")
     if args.bias != "none":
-        plan.steps.append(bias_step(args.bias, plan.gravity, plan.measured))
+        plan.steps.append(bias_step(args.bias, plan.gravity, plan.measured, args.bias_model))
         plan.words.append(BIAS_WORDS[args.bias])
         plan.stamps_for = plan.stamps_for if plan.needs_stamps else f"--bias {args.bias} (the estimator's windows)"
         plan.needs_stamps = True

@@ -64,7 +64,7 @@ from imu_learn.data.formats.gnss_imu import mounting_rotation
 from imu_learn.data.types import sample_rate_hz
 from imu_learn.errors import AidingError, ConfigError, InvalidInputError
 from imu_learn.infer import rates
-from imu_learn.infer.rewrite import BIAS_METHODS, bias_entry, bias_step
+from imu_learn.infer.rewrite import ESTIMATORS, bias_entry, bias_step
 
 from . import geo
 from .aiding import AbsolutePoses, OutageWindow, PositionFixes, RelativePoses, snap_to_samples
@@ -145,8 +145,8 @@ class NavigateOptions:
     def check(self) -> None:
         if self.aiding_kind not in KINDS:
             raise ConfigError(f"--aiding-kind: one of {', '.join(KINDS)}, got {self.aiding_kind!r}")
-        if self.bias not in BIAS_METHODS:
-            raise ConfigError(f"--bias: one of {', '.join(BIAS_METHODS)}, got {self.bias!r}")
+        if self.bias not in ESTIMATORS:
+            raise ConfigError(f"--bias: one of {', '.join(ESTIMATORS)}, got {self.bias!r}")
         if self.aiding_format not in AIDING_FORMATS:
             raise ConfigError(f"--aiding-format: one of {', '.join(AIDING_FORMATS)}, got {self.aiding_format!r}")
         for name in ("keyframe_hz", "rel_sigma_rot_deg", "rel_sigma_trans_m", "max_relative_gap_s",

@@ -20,7 +20,7 @@ from __future__ import annotations
 import json
 import os
 import shutil
-from dataclasses import replace
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any, Callable, Dict, Optional, Sequence, Tuple
 
@@ -158,19 +158,64 @@ def gravity_bias_step(sink: Dict[str, Any]) -> Step:
     return step
 
 
-# --bias METHOD: the recording's own gyro bias, estimated on what the steps before give
-BIAS_METHODS = ("none", "still", "gravity")
+@dataclass
+class LearnedBias:
+    """The learned estimator's answer (:mod:`imu_learn.nn.bias_net`): ``gyro_bias`` [rad/s] (3,), None
+    on a recording shorter than its window."""
+
+    gyro_bias: Optional[np.ndarray]
+    model: str
+    window_s: float
+    record: Dict[str, Any]
+
+    def to_dict(self) -> Dict[str, object]:
+        b = self.gyro_bias
+        return {"gyro_bias_rad_s": None if b is None else [float(v) for v in b],
+                "gyro_bias_deg_s": None if b is None else [float(v) for v in np.rad2deg(b)],
+                "model": self.model, "window_s": self.window_s, "trained_on": self.record.get("device"),
+                "observable": "learned from the training recordings (a random bias injected per window); no "
+                              "uncertainty: docs/refine.md for where it helped"}
+
+
+def learned_bias_step(model: Path, sink: Dict[str, Any]) -> Step:
+    """The recording's own gyro bias from the learned long-context estimator ``model`` (torch is
+    imported here only), subtracted from what the steps before give (the floor it was trained on)."""
+
+    def step(t_ns: Optional[np.ndarray], gyro: np.ndarray, acc: np.ndarray):
+        from imu_learn.nn.bias_net import load_bias_net, predict_bias
+
+        if t_ns is None:
+            raise InvalidInputError("--bias learned needs the recording's stamps")
+        net, record = load_bias_net(model, with_record=True)
+        est = LearnedBias(predict_bias(net, t_ns, gyro, acc), str(model), net.cfg.window_s, record)
+        sink["learned"] = est
+        if est.gyro_bias is None:
+            return gyro, acc, None
+        return gyro - est.gyro_bias, acc, None
+
+    return step
+
+
+# --bias METHOD: the recording's own gyro bias, estimated on what the steps before give (navigate:
+# the estimators without a model)
+ESTIMATORS = ("none", "still", "gravity")
+BIAS_METHODS = ESTIMATORS + ("learned",)
 BIAS_WORDS = {"still": "the recording's own gyro bias from its still stretches removed",
               "gravity": "the recording's own gyro bias from gravity consistency removed (rates perpendicular "
-                         "to gravity only)"}
+                         "to gravity only)",
+              "learned": "the recording's own gyro bias from the learned estimator removed"}
 
 
-def bias_step(method: str, gravity: float, sink: Dict[str, Any]) -> Step:
-    """The step of ``--bias METHOD`` (``still`` or ``gravity``)."""
+def bias_step(method: str, gravity: float, sink: Dict[str, Any], model: Optional[Path] = None) -> Step:
+    """The step of ``--bias METHOD`` (``still``, ``gravity``, or ``learned`` with ``model``)."""
     if method == "still":
         return still_bias_step(gravity, sink)
     if method == "gravity":
         return gravity_bias_step(sink)
+    if method == "learned" and model is not None:
+        return learned_bias_step(Path(model), sink)
+    if method == "learned":
+        raise InvalidInputError("--bias learned needs --bias-model PATH (a bias estimator, imu_learn.train.bias_train)")
     raise InvalidInputError(f"--bias: one of {', '.join(BIAS_METHODS)}, got {method!r}")
 
 
@@ -184,6 +229,8 @@ def bias_entry(method: str, sink: Dict[str, Any], where: str) -> Tuple[Dict[str,
     if est.gyro_bias is None and method == "still":
         warning = (f"--bias still: no still stretch in {where} (docs/refine.md: the detector's thresholds); no bias "
                    "subtracted")
+    elif est.gyro_bias is None and method == "learned":
+        warning = f"--bias learned: {where} is shorter than the estimator's window of {est.window_s:g} s; no bias subtracted"
     elif est.gyro_bias is None:
         warning = (f"--bias gravity: {where} is shorter than {est.settings.min_windows} windows of "
                    f"{est.settings.window_s:g} s; no bias subtracted")

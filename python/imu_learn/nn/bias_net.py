@@ -11,6 +11,7 @@ the signal.
 """
 from __future__ import annotations
 
+import pickle
 from dataclasses import asdict, dataclass
 from pathlib import Path
 from typing import Optional
@@ -93,10 +94,18 @@ def save_bias_net(net: BiasNet, path: Path, record: dict) -> None:
                                                           "state": net.state_dict(), "record": record}, f))
 
 
-def load_bias_net(path) -> BiasNet:
-    state = torch.load(Path(path), map_location="cpu", weights_only=False)
+def load_bias_net(path, with_record: bool = False):
+    """The estimator saved at ``path`` (and, ``with_record``, what it was trained on)."""
+    from imu_learn.errors import InvalidInputError
+
+    try:
+        state = torch.load(Path(path), map_location="cpu", weights_only=False)
+    except (OSError, RuntimeError, EOFError, ValueError, pickle.UnpicklingError) as e:
+        raise InvalidInputError(f"--bias-model {path}: cannot be read ({e})") from e
+    if not isinstance(state, dict) or state.get("kind") != "bias_net":
+        raise InvalidInputError(f"--bias-model {path}: not a bias estimator (imu_learn.train.bias_train writes one)")
     cfg = dict(state["config"])
     cfg["channels"] = tuple(cfg["channels"])
     net = BiasNet(BiasNetConfig(**cfg))
     net.load_state_dict(state["state"])
-    return net.eval()
+    return (net.eval(), dict(state.get("record", {}))) if with_record else net.eval()
