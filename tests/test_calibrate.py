@@ -130,3 +130,13 @@ def test_a_users_csv_in_other_units(tmp_path, capsys):
     assert p.device == "imu" and p.sample_rate_hz == pytest.approx(200.0, rel=1e-4)
     assert p.noise["gyroscope_noise_density"].value == pytest.approx(2e-4, rel=0.2)
     assert p.noise["accelerometer_noise_density"].value == pytest.approx(2e-3, rel=0.2)
+
+
+def test_a_profile_names_recordings_relative_to_the_data_root(tmp_path):
+    from imu_learn.cli.calibrate import under_root
+
+    (tmp_path / "root" / "euroc" / "MH_01_easy").mkdir(parents=True)
+    assert under_root(str(tmp_path / "root" / "euroc" / "MH_01_easy"), tmp_path / "root") == "euroc/MH_01_easy"
+    assert under_root(str(tmp_path / "elsewhere"), tmp_path / "root") == str(tmp_path / "elsewhere")
+    assert under_root("euroc/MH_01_easy", tmp_path / "root") == "euroc/MH_01_easy"
+    assert under_root(None, tmp_path) is None and under_root(str(tmp_path), None) == str(tmp_path)

@@ -14,7 +14,7 @@ from imu_learn.calib.run import CalibInputs, CalibOptions, StillPiece, calibrate
 from imu_learn.cli.common import add_data_root, add_imu_input_options, csv_layout, run_command
 from imu_learn.data.formats import FORMATS, USER_CSV, detect_format, read_imu_source, read_recording, user_csv
 from imu_learn.data.loading import AlignOptions, align
-from imu_learn.data.splits import cut, make_split, recording_name
+from imu_learn.data.splits import cut, data_root_dir, make_split, recording_name
 from imu_learn.errors import ConfigError
 from imu_learn.eval.groundtruth import default_gap_s
 from imu_learn.eval.run import load_eval_config
@@ -92,10 +92,23 @@ def from_config(args: argparse.Namespace) -> CalibInputs:
         data = run.data
         settings = FitSettings(window=data.window, seed=run.seed, gravity=data.gravity)
     split = make_split(data)
-    sources = [{**row, "role": role} for role in ("train", "val") for row in split.record[role]]
+    root = data_root_dir(data)
+    sources = [{**row, "path": under_root(row.get("path"), root), "role": role}
+               for role in ("train", "val") for row in split.record[role]]
     device = args.device or _device(data.roots[0].format if data.roots else "auto", split.train[0].name)
     return CalibInputs(split.train, split.val, [recording_name(s.name) for s in split.train],
                        [recording_name(s.name) for s in split.val], [], settings, device, sources)
+
+
+def under_root(path: Any, root: Optional[Path]) -> Any:
+    """A recording's path relative to the data root when it lies under it (a profile names recordings
+    as a user's data root does, not as this machine's folders)."""
+    if isinstance(path, str) and root is not None and Path(path).is_absolute():
+        try:
+            return str(Path(path).resolve().relative_to(Path(root).resolve()))
+        except ValueError:
+            return path
+    return path
 
 
 def _device(fmt: str, name: str) -> str:
