@@ -23,7 +23,9 @@ deviation (the information's eigen-directions, in the body frame) so a reader se
 observed. The window means' spread around the model, ``window_sigma`` [m/s^2], weighs the data
 against that prior.
 
-**Where it does not hold.** A window whose mean acceleration is not small (a car accelerating for
+**Where it does not hold.** On an input whose bias is far above the prior (the raw IMU of a
+device with 0.08 rad/s, before its floor) the linearisation fails: use it after a profile's floor or
+a model. A window whose mean acceleration is not small (a car accelerating for
 tens of seconds, a lift) biases the estimate; the earth's rotation (7.3e-5 rad/s) is read as bias
 (its horizontal part). The identity f = a - g holds on a quadrotor too (thrust and drag are what the
 accelerometer measures), so the estimator is not excluded there by physics; what differs is that a
