@@ -514,6 +514,9 @@ def navigate(src: Sources, out: Path, opts: NavigateOptions = NavigateOptions(),
     bias0, bias_source = checkpoint_bias(src.checkpoint)
     gyro, acc, var, label = imu_input(src, opts, imu)
     gyro, bias = own_bias(opts, t_ns, gyro, acc, str(src.input))
+    if bias.get("applied") and np.any(bias0[:3]):  # the estimate replaces the device bias's gyro part
+        bias0 = np.r_[np.zeros(3), bias0[3:]]
+        bias_source += f"; gyro part zero: the recording's own bias ({opts.bias}) removed"
     if opts.aiding_kind == "position":
         st = position_start(t_ns, gyro, acc, rows, lever, bias0, opts.gravity, opts.level_s)
     else:
