@@ -66,3 +66,11 @@ def test_own_bias_on_a_resting_crop_is_refines_still_estimate():
     assert np.allclose(entry["gyro_bias_rad_s"], est.gyro_bias, atol=0)
     assert np.allclose(g, imu.gyro - est.gyro_bias, atol=0)
     assert own_bias(NavigateOptions(), imu.t_ns, imu.gyro, imu.acc, "MH_01")[1] == {"method": "none"}
+
+
+def test_the_prior_keeps_the_device_bias_only_where_the_estimate_saw_nothing():
+    from imu_learn.fuse.navigate import unobserved
+
+    assert np.array_equal(unobserved({"method": "still", "applied": True}), np.zeros((3, 3)))
+    P = unobserved({"directions_body": [[0, 0, 1], [1, 0, 0], [0, 1, 0]], "direction_observed": [False, True, True]})
+    assert np.array_equal(P @ np.array([0.1, 0.2, 0.3]), [0, 0, 0.3])

@@ -515,8 +515,8 @@ def navigate(src: Sources, out: Path, opts: NavigateOptions = NavigateOptions(),
     gyro, acc, var, label = imu_input(src, opts, imu)
     gyro, bias = own_bias(opts, t_ns, gyro, acc, str(src.input))
     if bias.get("applied") and np.any(bias0[:3]):  # the estimate replaces the device bias's gyro part
-        bias0 = np.r_[np.zeros(3), bias0[3:]]
-        bias_source += f"; gyro part zero: the recording's own bias ({opts.bias}) removed"
+        bias0 = np.r_[unobserved(bias) @ bias0[:3], bias0[3:]]
+        bias_source += f"; gyro part: only where the recording's own bias ({opts.bias}) was not observed"
     if opts.aiding_kind == "position":
         st = position_start(t_ns, gyro, acc, rows, lever, bias0, opts.gravity, opts.level_s)
     else:
@@ -590,6 +590,17 @@ def own_bias(opts: NavigateOptions, t_ns: np.ndarray, gyro: np.ndarray, acc: np.
     if warning:
         log.warning(warning)
     return g, entry
+
+
+def unobserved(entry: Dict[str, object]) -> np.ndarray:
+    """(3, 3) projection onto the body-frame directions a ``--bias`` estimate did not observe (gravity
+    consistency's weak directions; zero for the still stretches, which observe every axis)."""
+    dirs, seen = entry.get("directions_body"), entry.get("direction_observed")
+    P = np.zeros((3, 3))
+    for d, ok in zip(dirs or [], seen or []):
+        if not ok:
+            P += np.outer(d, d)
+    return P
 
 
 def _text(path: Optional[Path]) -> Optional[str]:
