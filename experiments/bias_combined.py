@@ -14,20 +14,34 @@ from imu_learn.core.bias_gravity import GravitySettings, gravity_bias
 from imu_learn.core.still import BIAS_SETTINGS, still_bias
 from imu_learn.train.bias_data import load_device, training_mean
 
-for sp in ["train","test"]:
-  for d in ["euroc","fetch","tumvi","broad"]:
-    recs=load_device(d,os.environ.get("IMU_LEARN_DATA", "data")); m=training_mean(recs["train"])
-    res={k:[] for k in ["mean","still","gravity","combo1","combo3"]}
-    for r in recs[sp]:
-        s=r.seg
-        if s.duration_s<30: continue
-        g0=s.gyro-m
-        st=still_bias(s.t_ns,g0,s.acc,replace(BIAS_SETTINGS,gravity=r.gravity)).gyro_bias
-        gr=gravity_bias(s.t_ns,g0,s.acc).gyro_bias
-        st0=np.zeros(3) if st is None else st
-        res["mean"].append(np.zeros(3)); res["still"].append(st0); res["gravity"].append(gr)
-        for k,ps in (("combo1",0.001),("combo3",0.003)):
-            if st is None: res[k].append(gr)
-            else: res[k].append(st+gravity_bias(s.t_ns,g0-st,s.acc,GravitySettings(prior_sigma=ps)).gyro_bias)
-        for k in res: res[k][-1]=np.linalg.norm(m+res[k][-1]-r.gyro_bias)
-    print(sp,d," ".join(f"{k} {np.mean(v)*1e3:.2f}" for k,v in res.items()),flush=True)
+
+def estimates(r, mean):
+    """{name: increment on the training mean (3,)} for one recording."""
+    s = r.seg
+    g0 = s.gyro - mean
+    st = still_bias(s.t_ns, g0, s.acc, replace(BIAS_SETTINGS, gravity=r.gravity)).gyro_bias
+    gr = gravity_bias(s.t_ns, g0, s.acc).gyro_bias
+    out = {"mean": np.zeros(3), "still": np.zeros(3) if st is None else st, "gravity": gr}
+    for name, sigma in (("still+gravity 0.001", 0.001), ("still+gravity 0.003", 0.003)):
+        out[name] = gr if st is None else st + gravity_bias(s.t_ns, g0 - st, s.acc,
+                                                             GravitySettings(prior_sigma=sigma)).gyro_bias
+    return out
+
+
+def main():
+    root = os.environ.get("IMU_LEARN_DATA", "data")
+    for device in ("euroc", "fetch", "tumvi", "broad"):
+        recs = load_device(device, root)
+        mean = training_mean(recs["train"])
+        for split in ("train", "test"):
+            errors = {}
+            for r in recs[split]:
+                if r.seg.duration_s < 30:
+                    continue
+                for name, inc in estimates(r, mean).items():
+                    errors.setdefault(name, []).append(np.linalg.norm(mean + inc - r.gyro_bias))
+            print(split, device, "  ".join(f"{k} {np.mean(v) * 1e3:.2f}" for k, v in errors.items()), flush=True)
+
+
+if __name__ == "__main__":
+    main()
