@@ -103,7 +103,7 @@ def main() -> None:
     ap.add_argument("--model", action="append", default=[], metavar="DEVICE=PT")
     args = ap.parse_args()
     models = dict(m.split("=", 1) for m in args.model)
-    root = os.environ.get("IMU_LEARN_DATA", "/work/shared/data")
+    root = os.environ.get("IMU_LEARN_DATA", "data")
     result = {}
     for dev in args.devices.split(","):
         t0 = time.time()

@@ -102,7 +102,7 @@ def main() -> None:
     ap.add_argument("--inject", type=float, default=0.01, help="the random bias's half range per axis [rad/s]")
     args = ap.parse_args()
     torch.set_num_threads(args.threads)
-    net, record = train(args.device, os.environ.get("IMU_LEARN_DATA", "/work/shared/data"), args.steps, args.seed,
+    net, record = train(args.device, os.environ.get("IMU_LEARN_DATA", "data"), args.steps, args.seed,
                        inject=args.inject)
     save_bias_net(net, args.out, record)
     print(f"written {args.out}: {record}")
