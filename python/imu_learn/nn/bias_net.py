@@ -21,6 +21,8 @@ import torch
 from torch import nn
 
 from imu_learn.core.stamps import median_period_ns
+from imu_learn.errors import InvalidInputError
+from imu_learn.util.atomic import atomic_write_bytes
 
 G = 9.80665
 
@@ -87,21 +89,19 @@ def predict_bias(net: BiasNet, t_ns: np.ndarray, gyro: np.ndarray, acc: np.ndarr
 
 def save_bias_net(net: BiasNet, path: Path, record: dict) -> None:
     """The estimator and what it was trained on (``record``), as one small torch file."""
-    from imu_learn.util.atomic import atomic_write_bytes
-
     cfg = asdict(net.cfg)
     atomic_write_bytes(Path(path), lambda f: torch.save({"kind": "bias_net", "config": cfg,
                                                           "state": net.state_dict(), "record": record}, f))
 
 
 def load_bias_net(path, with_record: bool = False):
-    """The estimator saved at ``path`` (and, ``with_record``, what it was trained on)."""
-    from imu_learn.errors import InvalidInputError
-
+    """The estimator saved at ``path`` (and, ``with_record``, what it was trained on); loaded with
+    ``weights_only=True`` (tensors, numbers, strings: no code runs from the file)."""
     try:
-        state = torch.load(Path(path), map_location="cpu", weights_only=False)
+        state = torch.load(Path(path), map_location="cpu", weights_only=True)
     except (OSError, RuntimeError, EOFError, ValueError, pickle.UnpicklingError) as e:
-        raise InvalidInputError(f"--bias-model {path}: cannot be read ({e})") from e
+        first = (str(e).strip().splitlines() or [""])[0][:160]
+        raise InvalidInputError(f"--bias-model {path}: cannot be read ({type(e).__name__}: {first})") from e
     if not isinstance(state, dict) or state.get("kind") != "bias_net":
         raise InvalidInputError(f"--bias-model {path}: not a bias estimator (imu_learn.train.bias_train writes one)")
     cfg = dict(state["config"])
