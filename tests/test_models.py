@@ -19,6 +19,7 @@ import torch
 
 from imu_learn import _imu_core as core
 from imu_learn import load_recording
+from imu_learn.calib.profile import Profile
 from imu_learn.cli import fit as fit_cli
 from imu_learn.cli.checkpoint import main as checkpoint_main
 from imu_learn.cli.refine import main as refine_main
@@ -326,3 +327,49 @@ def test_claimed_follows_the_models_config(run_dir):
     state["config"]["data"]["eval_horizons"] = [10, 200, 1000, 4000, 5000]
     state["model_args"]["refine"] = "gyro"
     assert claimed(state, t_ns) == ([10, 200, 1000, 4000], ("rot",))
+
+
+# ---------------------------------------------------------------------------------------------
+# what ships: a device's profile, and a learned model only where leave one recording out says so
+
+
+def what_ships():
+    """(profile folders, learned models) of models/README.md's "What ships" table."""
+    part = (MODELS / "README.md").read_text().split("## What ships", 1)[1].split("\n## ", 1)[0]
+    rows = [r for r in part.splitlines() if r.startswith("| ") and not r.startswith("| device")]
+    cells = [[c.strip() for c in r.strip("|").split("|")] for r in rows]
+    profiles = [re.findall(r"`([\w./-]+)`", c[1])[0] for c in cells]
+    models = [m for c in cells for m in re.findall(r"`([\w.-]+\.pt)`", c[2])]
+    return profiles, models
+
+
+RATIO = r"(\d+\.\d+) \((\d+\.\d+)\)"  # the loro table's "mean (worst)" cells
+
+
+def test_every_device_ships_a_profile_with_a_floor():
+    profiles, _ = what_ships()
+    assert len(profiles) >= 5
+    for folder in profiles:
+        prof = Profile.load(MODELS / folder / "profile.json")
+        assert prof.has_floor, folder
+        assert (MODELS / folder / "imu.yaml").is_file(), folder
+
+
+def test_a_learned_model_ships_only_with_leave_one_recording_out_beating_its_floor():
+    _, shipped = what_ships()
+    assert set(shipped) <= {c.name for c in CHECKPOINTS}
+    for ckpt in CHECKPOINTS:
+        text = ckpt.with_suffix(".md").read_text()
+        assert "## Leave one recording out" in text, f"{ckpt.name}: card has no leave-one-recording-out section"
+        if ckpt.name not in shipped:
+            assert "**Not shipped" in text, ckpt.name
+            continue
+        assert "**Ships.**" in text, ckpt.name
+        rows = [r for r in text.splitlines() if re.match(r"^\| \S+ \| \d+ \| (open loop|start-up bias removed) \|", r)]
+        held_out = {r.split("|")[1].strip() for r in rows}
+        assert len(held_out) >= 2 and len(rows) >= 4 * len(held_out), f"{ckpt.name}: no leave-one-recording-out table"
+        for r in rows:
+            pairs = re.findall(RATIO, r)
+            assert len(pairs) == 2, r
+            for mean, worst in pairs:
+                assert float(mean) < 0.99 and float(worst) <= 1.0, f"{ckpt.name}: loses to its floor: {r}"
