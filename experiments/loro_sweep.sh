@@ -8,7 +8,7 @@
 # WORK (default reports/loro) gets one folder per device (loro.md, loro.json, the folds' profiles and
 # runs); SECONDS caps each device's sweep (a rerun continues where it stopped). The training budgets
 # are the configs' own with the epochs below (measured on one H100 machine, 16 cores, all devices at
-# once: the figures in docs/experiments/learning.md). Without a GPU each run takes 3-6 min on one core.
+# once: the figures in docs/experiments/learning.md). Without a GPU each run takes about 2-6 min on one core (Blackbird 6 x 200 steps: 108 s of training).
 set -u
 WORK=${1:-reports/loro}
 LIMIT=${2:-0}
