@@ -1,6 +1,6 @@
 #!/usr/bin/env bash
 # Leave-one-recording-out validation of the one recipe (a refiner on top of the device's floor) for
-# the devices whose models ship (docs/experiments/learning.md, "Leave one recording out"): every
+# the devices whose models ship (docs/experiments/loro.md): every
 # recording of a device held out in turn, three seeds, `imu-learn fit --loro`.
 #
 #   IMU_LEARN_DATA=<data root> bash experiments/loro_sweep.sh [WORK [SECONDS]]
@@ -8,7 +8,7 @@
 # WORK (default reports/loro) gets one folder per device (loro.md, loro.json, the folds' profiles and
 # runs); SECONDS caps each device's sweep (a rerun continues where it stopped). The training budgets
 # are the configs' own with the epochs below (measured on one H100 machine, 16 cores, all devices at
-# once: the figures in docs/experiments/learning.md). Without a GPU each run takes about 2-6 min on one core (Blackbird 6 x 200 steps: 108 s of training).
+# once: the figures in docs/experiments/loro.md). Without a GPU each run takes about 2-6 min on one core (Blackbird 6 x 200 steps: 108 s of training).
 set -u
 WORK=${1:-reports/loro}
 LIMIT=${2:-0}
