@@ -12,12 +12,19 @@ corrected 20 Hz ASL state, as the config says) and TUM-VI rooms 2 and 4 of confi
   training split only: traditional+timing, fitted once and cached under OUT/profiles); ``floor +
   still``: that floor and the recording's own gyro bias from its still stretches, with no ground
   truth (what ``imu-learn refine --profile P --bias still`` writes: the same library steps, run on
-  the whole IMU file); ``model``: the shipped model as it is (models/euroc_adis16448_openloop.pt,
+  the whole IMU file); ``floor + still + offset``: the still estimate plus the mean, over the
+  TRAINING recordings, of their in-motion (oracle) bias minus their still estimate (the device's rest-to-
+  flight shift; no ground truth of the test recording); ``floor + gravity``: the floor and the recording's
+  bias from gravity consistency (``refine --profile P --bias gravity``: rates perpendicular to gravity
+  only); ``floor + still∥g + gravity⊥g``: the two combined in this script (not a refine option): the
+  still estimate along the mean gravity direction in the body frame (the axis gravity consistency
+  cannot see), the gravity estimate across it; ``model``: the shipped model as it is (models/euroc_adis16448_openloop.pt,
   models/tumvi_bmi160.pt; on the whole IMU file, as refine runs it); ``oracle bias``: the floor and
   the recording's whole constant gyro bias fitted on its ground truth (score.metrics.fit_startup_bias
   over each gap-free segment: an upper bound for any constant-bias estimate); ``oracle 10 s``: the
-  floor and a bias fitted on ground truth per 10 s block (what a bias that moves leaves);
-* why (every recording): the still estimate's distance to the oracle bias, and the ground truth's
+  floor and a bias fitted on ground truth per 10 s block (what a bias that moves leaves); ``oracle
+  affine``: the traditional calibration (scale, misalignment, bias) fitted on the recording itself;
+* why (every recording): the floor's, the still and the gravity estimate's distance to the oracle bias, and the ground truth's
   orientation noise from the residual of its relative rotation against the oracle-debiased gyro over
   short windows (1 sample to 0.5 s): its mean square grows linearly with the window from an
   intercept that is twice the ground truth's per-sample noise (and the AOE compares against noisy
@@ -27,7 +34,8 @@ corrected 20 Hz ASL state, as the config says) and TUM-VI rooms 2 and 4 of confi
 
 Prints one markdown table per dataset and writes OUT/results.json. Writes: docs/experiments/learning.md,
 "Flight by flight against the peers". Data: the EuRoC and TUM-VI recordings of the two configs under
-the data root. About 2 min on one core (the two profiles about 1 min of it, cached).
+the data root. About 6 min on one shared core with the profiles cached (EuRoC 3, TUM-VI 3); fitting them
+the first time adds about 20 s (EuRoC) and 3-12 min (TUM-VI, by the machine's load).
 """
 from __future__ import annotations
 
@@ -45,6 +53,7 @@ from typing import Any, Dict, List, Optional, Tuple
 import numpy as np
 
 from imu_learn.calib.profile import Profile
+from imu_learn.core.bias_gravity import gravity_bias
 from imu_learn.core.integration import preintegrate
 from imu_learn.core.quat import quat_conj, quat_mul, rotation_angle
 from imu_learn.core.still import BIAS_SETTINGS, still_bias
@@ -78,9 +87,10 @@ DATASETS = {
     "euroc": {"config": "configs/euroc_paper.toml", "model": "models/euroc_adis16448_openloop.pt"},
     "tumvi": {"config": "configs/tumvi.toml", "model": "models/tumvi_bmi160.pt"},
 }
-INPUTS = ("raw", "floor", "floor + still", "floor + still + offset", "model", "oracle bias", "oracle 10 s",
-          "oracle affine")
-OURS = ("raw", "floor", "floor + still", "floor + still + offset", "model")  # no ground truth of the recording
+INPUTS = ("raw", "floor", "floor + still", "floor + still + offset", "floor + gravity", "floor + still∥g + gravity⊥g",
+          "model", "oracle bias", "oracle 10 s", "oracle affine")
+OURS = ("raw", "floor", "floor + still", "floor + still + offset", "floor + gravity", "floor + still∥g + gravity⊥g",
+        "model")  # no ground truth of the recording
 
 
 # -- the floor ---------------------------------------------------------------------------------------
@@ -130,10 +140,17 @@ def whole_file_inputs(path: Path, profile: Profile, checkpoint: Path, offset: np
     src, fg, fa, est = floor_and_still(path, profile)
     t = np.asarray(src.t_ns, dtype=np.int64)
     sb = est.gyro_bias if est.gyro_bias is not None else np.zeros(3)
+    grav = gravity_bias(t, fg, fa)  # refine --profile P --bias gravity
+    gb = grav.gyro_bias if grav.gyro_bias is not None else np.zeros(3)
+    both = gb
+    if est.gyro_bias is not None and grav.gravity_body is not None:  # still along gravity, gravity across it
+        u = np.asarray(grav.gravity_body, dtype=np.float64) / np.linalg.norm(grav.gravity_body)
+        both = gb + u * float(u @ (sb - gb))
     return {"t_ns": t, "gyro": {"raw": np.asarray(src.gyro, dtype=np.float64), "floor": fg, "floor + still": fg - sb,
-                                "floor + still + offset": fg - sb - offset,
+                                "floor + still + offset": fg - sb - offset, "floor + gravity": fg - gb,
+                                "floor + still∥g + gravity⊥g": fg - both,
                                 "model": model_gyro(checkpoint, t, src.gyro, src.acc)},
-            "floor_acc": fa, "still": est}
+            "floor_acc": fa, "still": est, "gravity": grav, "combined": both}
 
 
 def still_offset(train: Dict[str, Tuple[Path, List[Segment]]], profile: Profile, gravity: float) -> Dict[str, Any]:
@@ -233,9 +250,12 @@ def gt_noise(segs: List[Segment], gyro: List[np.ndarray]) -> Dict[str, Any]:
 # -- scoring -------------------------------------------------------------------------------------------------
 
 def aoe_segments(segs: List[Segment], gyro: List[np.ndarray]) -> Dict[str, float]:
-    """AOE RMSE and mean [deg] pooled over gap-free segments (each from its own ground-truth start)."""
-    e = np.concatenate([attitude_errors(s, g)["angle_rad"] for s, g in zip(segs, gyro)])
-    return {"aoe_deg": math.degrees(float(np.sqrt(np.mean(e * e)))), "aoe_mean_deg": math.degrees(float(np.mean(e)))}
+    """AOE RMSE and mean, yaw AOE [deg] pooled over gap-free segments (each from its own ground-truth start)."""
+    errs = [attitude_errors(s, g) for s, g in zip(segs, gyro)]
+    e = np.concatenate([x["angle_rad"] for x in errs])
+    y = np.concatenate([x["yaw_rad"] for x in errs])
+    return {"aoe_deg": math.degrees(float(np.sqrt(np.mean(e * e)))), "aoe_mean_deg": math.degrees(float(np.mean(e))),
+            "yaw_aoe_deg": math.degrees(float(np.sqrt(np.mean(y * y))))}
 
 
 def oracle_affine(t: np.ndarray, raw_gyro: np.ndarray, raw_acc: np.ndarray, segs: List[Segment],
@@ -287,7 +307,7 @@ def recording(name: str, path: Path, segs: List[Segment], bridged: Optional[Tupl
         else:
             seg, mask = bridged
             r = masked_aoe(seg, g[at(t, seg.t_ns)], mask)
-            res["aoe"][key] = {"aoe_deg": r["aoe_deg"], "aoe_mean_deg": r["aoe_mean_deg"]}
+            res["aoe"][key] = {k: r[k] for k in ("aoe_deg", "aoe_mean_deg", "yaw_aoe_deg")}
             res["bridged"] = {"samples": r["samples"], "bridged": r["bridged"]}
     est = w["still"]
     res["still"] = {k: v for k, v in est.to_dict().items() if k in ("gyro_bias_rad_s", "still_s", "samples")}
@@ -296,6 +316,10 @@ def recording(name: str, path: Path, segs: List[Segment], bridged: Optional[Tupl
     res["oracle_bias_rad_s"] = [float(v) for v in b_or]
     res["still_minus_oracle_rad_s"] = None if est.gyro_bias is None else [float(v) for v in est.gyro_bias - b_or]
     res["still_minus_oracle_norm_rad_s"] = None if est.gyro_bias is None else float(np.linalg.norm(est.gyro_bias - b_or))
+    g = w["gravity"].gyro_bias
+    res["gravity_bias_rad_s"] = None if g is None else [float(v) for v in g]
+    res["combined_bias_rad_s"] = [float(v) for v in w["combined"]]
+    res["gravity_minus_oracle_norm_rad_s"] = None if g is None else float(np.linalg.norm(g - b_or))
     res["oracle_blocks_spread_rad_s"] = [float(v) for v in np.std(b_blk, axis=0)]
     res["gt_noise"] = gt_noise(segs, [w["gyro"]["oracle bias"][i] for i in idx])
     return res
@@ -336,6 +360,14 @@ def _fig(x: float, bold: bool) -> str:
     return f"**{x:.2f}**" if bold else f"{x:.2f}"
 
 
+def _vec(est: Optional[List[float]], ref: List[float]) -> str:
+    """est − ref per axis and its norm [rad/s] ("–": no estimate)."""
+    if est is None:
+        return "–"
+    d = np.asarray(est) - np.asarray(ref)
+    return "(" + ", ".join(f"{v:+.4f}" for v in d) + f") ({float(np.linalg.norm(d)):.4f})"
+
+
 def table(ds: str, rows: List[Dict[str, Any]]) -> str:
     """Rows = recordings; the peers' columns, then ours as mean / RMSE, bold where one of ours (not the
     oracles) beats a peer in that peer's own form."""
@@ -352,17 +384,18 @@ def table(ds: str, rows: List[Dict[str, Any]]) -> str:
             beat_s = not oracle and any(p.endswith("(RMSE)") and s < peers[p].get(n, -1) for p in peers)
             cells.append(f"{_fig(m, beat_m)} / {_fig(s, beat_s)}")
         lines.append("| " + " | ".join(cells) + " |")
-    why = ["", "| recording | floor − oracle bias [rad/s] (norm) | still: stretches, s, first at [s] | still − oracle bias [rad/s] (norm) | "
+    why = ["", "| recording | floor − oracle bias [rad/s] (norm) | still: stretches, s, first at [s] | still − oracle bias [rad/s] (norm) | gravity − oracle bias [rad/s] (norm) | still∥g + gravity⊥g − oracle [rad/s] (norm) | "
                "10 s blocks' bias spread [rad/s] | ground-truth noise [deg] | residual RMS 1 sample / 0.05 / 0.5 s [deg] |",
-           "|---|---|---|---|---|---|---|"]
+           "|---|---|---|---|---|---|---|---|---|"]
     for r in rows:
         st, gn = r["still"], r["gt_noise"]
-        d = r["still_minus_oracle_rad_s"]
-        dd = "–" if d is None else "(" + ", ".join(f"{v:+.4f}" for v in d) + f") ({r['still_minus_oracle_norm_rad_s']:.4f})"
+        dd = _vec(st["gyro_bias_rad_s"], r["oracle_bias_rad_s"])
         win = {x["window_s"]: x["rms_deg"] for x in gn["windows"]}
-        fo = r["oracle_bias_rad_s"]
-        fd = "(" + ", ".join(f"{-v:+.4f}" for v in fo) + f") ({float(np.linalg.norm(fo)):.4f})"
+        fd = _vec([0.0, 0.0, 0.0], r["oracle_bias_rad_s"])
         why.append(f"| {r['recording']} | {fd} | {st['stretches']}, {st['still_s']:.1f}, {st['first_t0_s']} | {dd} | "
+                   + _vec(r["gravity_bias_rad_s"], r["oracle_bias_rad_s"]) + " | "
+                   + _vec(r["combined_bias_rad_s"], r["oracle_bias_rad_s"])
+                   + " | "
                    + ", ".join(f"{v:.4f}" for v in r["oracle_blocks_spread_rad_s"])
                    + f" | {gn['gt_noise_rms_deg']:.3f} | {win[0.0]:.3f} / {win[0.05]:.3f} / {win[0.5]:.3f} |")
     return "\n".join(lines + why)
