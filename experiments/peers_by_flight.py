@@ -16,7 +16,7 @@ corrected 20 Hz ASL state, as the config says) and TUM-VI rooms 2 and 4 of confi
   TRAINING recordings, of their in-motion (oracle) bias minus their still estimate (the device's rest-to-
   flight shift; no ground truth of the test recording); ``floor + gravity``: the floor and the recording's
   bias from gravity consistency (``refine --profile P --bias gravity``: rates perpendicular to gravity
-  only); ``floor + still∥g + gravity⊥g``: the two combined in this script (not a refine option): the
+  only); ``floor + still∥g + gravity⊥g``: the two combined (``refine --profile P --bias still+gravity``): the
   still estimate along the mean gravity direction in the body frame (the axis gravity consistency
   cannot see), the gravity estimate across it; ``model``: the shipped model as it is (models/euroc_adis16448_openloop.pt,
   models/tumvi_bmi160.pt; on the whole IMU file, as refine runs it); ``oracle bias``: the floor and
@@ -62,6 +62,7 @@ from imu_learn.data.loading import AlignOptions, load_sequence
 from imu_learn.data.splits import data_root_dir, find_all, make_split, recording_name
 from imu_learn.data.types import Segment
 from imu_learn.eval.peers import attitude_errors, covered, masked_aoe
+from imu_learn.infer.rewrite import still_along_gravity
 from imu_learn.score.metrics import fit_startup_bias
 from imu_learn.train.config import load_config
 from imu_learn.util.atomic import atomic_write_text
@@ -142,10 +143,8 @@ def whole_file_inputs(path: Path, profile: Profile, checkpoint: Path, offset: np
     sb = est.gyro_bias if est.gyro_bias is not None else np.zeros(3)
     grav = gravity_bias(t, fg, fa)  # refine --profile P --bias gravity
     gb = grav.gyro_bias if grav.gyro_bias is not None else np.zeros(3)
-    both = gb
-    if est.gyro_bias is not None and grav.gravity_body is not None:  # still along gravity, gravity across it
-        u = np.asarray(grav.gravity_body, dtype=np.float64) / np.linalg.norm(grav.gravity_body)
-        both = gb + u * float(u @ (sb - gb))
+    both = still_along_gravity(est.gyro_bias, grav)  # refine --profile P --bias still+gravity
+    both = np.zeros(3) if both is None else both
     return {"t_ns": t, "gyro": {"raw": np.asarray(src.gyro, dtype=np.float64), "floor": fg, "floor + still": fg - sb,
                                 "floor + still + offset": fg - sb - offset, "floor + gravity": fg - gb,
                                 "floor + still∥g + gravity⊥g": fg - both,

@@ -86,3 +86,43 @@ def test_refine_bias_gravity_subtracts_the_estimate(tmp_path, capsys):
     assert main(["--profile", str(tmp_path / "profile.json"), "--input", str(src2 / IMU_REL), "--out",
                  str(tmp_path / "o2.csv"), "--bias", "gravity"]) == 0
     assert capsys.readouterr().err.count("--bias gravity:") == 1
+
+
+def test_still_along_gravity_takes_each_estimate_where_it_sees():
+    from types import SimpleNamespace
+
+    from imu_learn.infer.rewrite import still_along_gravity
+
+    grav = SimpleNamespace(gyro_bias=np.array([4.0, 5.0, 6.0]), gravity_body=np.array([0.0, 0.0, -9.8]))
+    assert np.allclose(still_along_gravity(np.array([1.0, 2.0, 3.0]), grav), [4.0, 5.0, 3.0])
+    tilted = SimpleNamespace(gyro_bias=np.zeros(3), gravity_body=np.array([1.0, 1.0, 0.0]))
+    assert np.allclose(still_along_gravity(np.array([2.0, 0.0, 5.0]), tilted), [1.0, 1.0, 0.0])
+    assert np.allclose(still_along_gravity(None, grav), grav.gyro_bias)
+    none = SimpleNamespace(gyro_bias=None, gravity_body=None)
+    assert np.allclose(still_along_gravity(np.array([1.0, 2.0, 3.0]), none), [1.0, 2.0, 3.0])
+    assert still_along_gravity(None, none) is None
+
+
+def test_refine_bias_still_plus_gravity_combines_the_two_estimates_it_reports(tmp_path):
+    from imu_learn.calib.profile import noise_only
+    from imu_learn.cli.refine import main
+    from test_still_bias import IMU_REL, write_asl
+
+    t, g, a = turning(150.0)
+    src = write_asl(tmp_path / "in", t, g, a)
+    noise_only("synthetic", RATE, {}).save(tmp_path / "profile.json")  # no floor: the samples as they are
+    outs = {}
+    for method in ("gravity", "still+gravity"):
+        out = tmp_path / f"{method}.csv"
+        assert main(["--profile", str(tmp_path / "profile.json"), "--input", str(src / IMU_REL), "--out", str(out),
+                     "--bias", method, "--quiet"]) == 0
+        outs[method] = json.loads((tmp_path / f"{method}.csv.summary.json").read_text())["bias"]
+    both = outs["still+gravity"]
+    assert both["method"] == "still+gravity" and both["applied"]
+    assert both["gravity"]["gyro_bias_rad_s"] == outs["gravity"]["gyro_bias_rad_s"]  # the same estimator, same input
+    u = np.array(both["gravity"]["gravity_direction_body"])
+    u = u / np.linalg.norm(u)
+    gb = np.array(both["gravity"]["gyro_bias_rad_s"])
+    sb = both["still"]["gyro_bias_rad_s"]
+    want = gb if sb is None else gb + u * (u @ (np.array(sb) - gb))
+    assert np.allclose(both["gyro_bias_rad_s"], want)

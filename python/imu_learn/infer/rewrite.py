@@ -158,6 +158,55 @@ def gravity_bias_step(sink: Dict[str, Any]) -> Step:
     return step
 
 
+def still_along_gravity(still: Optional[np.ndarray], grav: Any) -> Optional[np.ndarray]:
+    """The still stretches' bias along gravity's body direction and gravity consistency's across it
+    (gravity consistency cannot see the rate about gravity; the still estimate carries the rest-to-
+    motion change of the bias across it, docs/experiments/learning.md "Flight by flight against the
+    peers"); either alone where the other has none."""
+    if still is None:
+        return grav.gyro_bias
+    if grav.gyro_bias is None or grav.gravity_body is None:
+        return still
+    u = np.asarray(grav.gravity_body, dtype=np.float64)
+    u = u / np.linalg.norm(u)
+    return grav.gyro_bias + u * float(u @ (np.asarray(still) - grav.gyro_bias))
+
+
+@dataclass
+class CombinedBias:
+    """``--bias still+gravity``: :func:`still_along_gravity` of the two estimates."""
+
+    gyro_bias: Optional[np.ndarray]
+    still: Any
+    gravity: Any
+
+    def to_dict(self) -> Dict[str, object]:
+        b = self.gyro_bias
+        return {"gyro_bias_rad_s": None if b is None else [float(v) for v in b],
+                "gyro_bias_deg_s": None if b is None else [float(v) for v in np.rad2deg(b)],
+                "rule": "the still stretches' estimate along gravity, gravity consistency's across it (either alone "
+                        "where the other has none)",
+                "still": self.still.to_dict(), "gravity": self.gravity.to_dict()}
+
+
+def still_gravity_bias_step(gravity: float, sink: Dict[str, Any]) -> Step:
+    """Both estimators on what the steps before give, combined (:func:`still_along_gravity`) and
+    subtracted. ``sink["still+gravity"]`` gets the estimate."""
+    settings = replace(BIAS_SETTINGS, gravity=float(gravity))
+
+    def step(t_ns: Optional[np.ndarray], gyro: np.ndarray, acc: np.ndarray):
+        if t_ns is None:
+            raise InvalidInputError("--bias still+gravity needs the recording's stamps")
+        still, grav = still_bias(t_ns, gyro, acc, settings), gravity_bias(t_ns, gyro, acc)
+        est = CombinedBias(still_along_gravity(still.gyro_bias, grav), still, grav)
+        sink["still+gravity"] = est
+        if est.gyro_bias is None:
+            return gyro, acc, None
+        return gyro - est.gyro_bias, acc, None
+
+    return step
+
+
 @dataclass
 class LearnedBias:
     """The learned estimator's answer (:mod:`imu_learn.nn.bias_net`): ``gyro_bias`` [rad/s] (3,), None
@@ -198,20 +247,25 @@ def learned_bias_step(model: Path, sink: Dict[str, Any]) -> Step:
 
 # --bias METHOD: the recording's own gyro bias, estimated on what the steps before give (navigate:
 # the estimators without a model)
-ESTIMATORS = ("none", "still", "gravity")
+ESTIMATORS = ("none", "still", "gravity", "still+gravity")
 BIAS_METHODS = ESTIMATORS + ("learned",)
 BIAS_WORDS = {"still": "the recording's own gyro bias from its still stretches removed",
               "gravity": "the recording's own gyro bias from gravity consistency removed (rates perpendicular "
                          "to gravity only)",
+              "still+gravity": "the recording's own gyro bias removed: from its still stretches along gravity, from "
+                               "gravity consistency across it",
               "learned": "the recording's own gyro bias from the learned estimator removed"}
 
 
 def bias_step(method: str, gravity: float, sink: Dict[str, Any], model: Optional[Path] = None) -> Step:
-    """The step of ``--bias METHOD`` (``still``, ``gravity``, or ``learned`` with ``model``)."""
+    """The step of ``--bias METHOD`` (``still``, ``gravity``, ``still+gravity``, or ``learned`` with
+    ``model``)."""
     if method == "still":
         return still_bias_step(gravity, sink)
     if method == "gravity":
         return gravity_bias_step(sink)
+    if method == "still+gravity":
+        return still_gravity_bias_step(gravity, sink)
     if method == "learned" and model is not None:
         return learned_bias_step(Path(model), sink)
     if method == "learned":
@@ -229,6 +283,8 @@ def bias_entry(method: str, sink: Dict[str, Any], where: str) -> Tuple[Dict[str,
     if est.gyro_bias is None and method == "still":
         warning = (f"--bias still: no still stretch in {where} (docs/refine.md: the detector's thresholds); no bias "
                    "subtracted")
+    elif est.gyro_bias is None and method == "still+gravity":
+        warning = f"--bias still+gravity: neither a still stretch nor enough windows in {where}; no bias subtracted"
     elif est.gyro_bias is None and method == "learned":
         warning = f"--bias learned: {where} is shorter than the estimator's window of {est.window_s:g} s; no bias subtracted"
     elif est.gyro_bias is None:
