@@ -1,7 +1,11 @@
 """Still stretches and gravity consistency together (docs/experiments/learning.md, "Each recording's own
 bias"): the still estimate first, then gravity consistency on what it leaves with its prior narrowed to
 the still estimate's trust (0.001 or 0.003 rad/s); recordings without a still stretch get gravity
-consistency alone. Prints the mean bias error [mrad/s] per device and split, segments >= 30 s.
+consistency alone.
+
+Writes: nothing to disk; prints the table of the mean bias error [mrad/s] per device and split,
+segments >= 30 s.
+Data: the training and test recordings of Fetch, TUM-VI, EuRoC and BROAD under the data root.
 
     IMU_LEARN_DATA=<root> python experiments/bias_combined.py
 """

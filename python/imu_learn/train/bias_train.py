@@ -12,6 +12,7 @@ residual bias (its ground-truth fit minus the training mean). Loss: mean squared
 from __future__ import annotations
 
 import argparse
+import logging
 import os
 import time
 from typing import List, Tuple
@@ -21,6 +22,8 @@ import torch
 
 from imu_learn.nn.bias_net import BiasNet, BiasNetConfig, block_means, save_bias_net
 from imu_learn.train.bias_data import Recording, load_device, training_mean
+
+logger = logging.getLogger(__name__)
 
 
 def _rotations(n: int, rng: np.random.Generator) -> np.ndarray:
@@ -83,8 +86,8 @@ def train(device: str, data_root: str, steps: int, seed: int = 0, inject: float 
         sched.step()
         hist.append(loss.item())
         if step % log_every == 0:
-            print(f"{device} step {step}: rms {np.sqrt(np.mean(hist[-log_every:])):.3f} mrad/s "
-                  f"(injected alone {inject / np.sqrt(3) * 1e3:.2f}) {time.time() - t0:.0f} s", flush=True)
+            logger.info("%s step %d: rms %.3f mrad/s (injected alone %.2f) %.0f s", device, step,
+                        np.sqrt(np.mean(hist[-log_every:])), inject / np.sqrt(3) * 1e3, time.time() - t0)
     record = {"device": device, "training_segments": [r.seg.name for r in recs["train"]],
               "training_mean_rad_s": [float(v) for v in mean], "steps": steps, "seed": seed,
               "inject_rad_s": inject, "final_rms_mrad_s": float(np.sqrt(np.mean(hist[-log_every:]))),
@@ -101,11 +104,12 @@ def main() -> None:
     ap.add_argument("--threads", type=int, default=1)
     ap.add_argument("--inject", type=float, default=0.01, help="the random bias's half range per axis [rad/s]")
     args = ap.parse_args()
+    logging.basicConfig(level=logging.INFO, format="%(message)s")  # progress and the result on stderr
     torch.set_num_threads(args.threads)
     net, record = train(args.device, os.environ.get("IMU_LEARN_DATA", "data"), args.steps, args.seed,
                        inject=args.inject)
     save_bias_net(net, args.out, record)
-    print(f"written {args.out}: {record}")
+    logger.info("written %s: %s", args.out, record)
 
 
 if __name__ == "__main__":
