@@ -9,6 +9,9 @@ Printed and written (JSON): the bias error |estimate - ground-truth fit| [rad/s]
 (imu_learn.eval.peers: RMS and mean over the segment) of the raw gyro minus each estimate, and of the
 ground-truth fit (the oracle).
 
+Writes: the table of "Each recording's own bias" to stdout and every figure to --out (JSON).
+Data: the training and test recordings of Fetch, TUM-VI, EuRoC and BROAD under the data root.
+
     IMU_LEARN_DATA=<root> python experiments/bias_estimates.py --out reports/bias/estimates.json \
         [--devices fetch,tumvi,euroc,broad] [--splits test,train] [--model euroc=reports/bias/euroc.pt]
 """
