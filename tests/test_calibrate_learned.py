@@ -22,8 +22,8 @@ import numpy as np
 import pytest
 import torch
 
+from floors import set_floor
 from imu_learn import _imu_core as core
-from imu_learn.baselines.traditional import TraditionalTiming
 from imu_learn.calib.profile import Affine, Profile
 from imu_learn.cli import fit as fit_cli
 from imu_learn.cli import main
@@ -46,13 +46,8 @@ TINY = ["--quiet", "--data.window", "50", "--data.batch_size", "8", "--data.val_
 
 def profile_file(tmp_path: Path, time_offset: float = 0.54, cutoffs=(None, None)) -> Path:
     """A profile with set floor parameters (a rotation-sized misalignment, biases, g-sensitivity)."""
-    rng = np.random.default_rng(5)
-    m = TraditionalTiming()
+    m = set_floor(cutoffs, time_offset)
     p = m.params
-    p.M_g, p.b_g = np.eye(3) + 0.01 * rng.standard_normal((3, 3)), 0.01 * rng.standard_normal(3)
-    p.G = 1e-3 * rng.standard_normal((3, 3))
-    p.M_a, p.b_a = np.eye(3) + 0.01 * rng.standard_normal((3, 3)), 0.1 * rng.standard_normal(3)
-    p.cutoff_gyro, p.cutoff_acc, p.time_offset = *cutoffs, time_offset
     fl = m.to_dict()
     prof = Profile(device="my-imu", sample_rate_hz=200.0, time_offset_s=time_offset / 200.0, time_offset_s_std=math.nan,
                    gyro=Affine(p.M_g, p.b_g, "rad/s"), acc=Affine(p.M_a, p.b_a, "m/s^2"), g_sensitivity=p.G,

@@ -9,6 +9,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from floors import set_floor, write_broad_trial
 from imu_learn import _imu_core as core
 from imu_learn.baselines.base import FitSettings
 from imu_learn.baselines.traditional import TraditionalTiming
@@ -49,14 +50,7 @@ def refined_as_evaluate(m: TraditionalTiming, tmp_path: Path, capsys) -> None:
 
 
 def test_refine_with_a_profile_is_the_floors_refine_bit_for_bit(tmp_path, capsys):
-    rng = np.random.default_rng(5)
-    m = TraditionalTiming()
-    p = m.params
-    p.M_g, p.b_g = np.eye(3) + 0.01 * rng.standard_normal((3, 3)), 0.01 * rng.standard_normal(3)
-    p.G = 1e-3 * rng.standard_normal((3, 3))
-    p.M_a, p.b_a = np.eye(3) + 0.01 * rng.standard_normal((3, 3)), 0.1 * rng.standard_normal(3)
-    p.cutoff_gyro, p.cutoff_acc, p.time_offset = 30.0, 15.0, 0.54
-    refined_as_evaluate(m, tmp_path, capsys)
+    refined_as_evaluate(set_floor((30.0, 15.0), 0.54), tmp_path, capsys)
 
 
 @pytest.mark.slow
@@ -70,11 +64,7 @@ def test_refine_with_a_profile_is_evaluates_fitted_floor_bit_for_bit(crop_split,
 
 def test_a_recording_without_stamps_cannot_take_a_profiles_time_offset(tmp_path, capsys):
     scipy_io = pytest.importorskip("scipy.io")
-    rng = np.random.default_rng(1)
-    src = tmp_path / "01_trial.mat"
-    scipy_io.savemat(src, {"imu_gyr": rng.normal(0, 0.3, (300, 3)), "imu_acc": rng.normal(0, 1, (300, 3)),
-                           "opt_quat": np.tile([1.0, 0, 0, 0], (300, 1)), "opt_pos": np.zeros((300, 3)),
-                           "sampling_rate": 286.0})
+    src = write_broad_trial(tmp_path / "01_trial.mat", scipy_io)
     m = TraditionalTiming()
     as_profile(m, 285.7, "broad").save(tmp_path / "profile.json")
     assert refine_main(["--profile", str(tmp_path / "profile.json"), "--input", str(src), "--out",

@@ -8,6 +8,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from floors import write_broad_trial
 from imu_learn import _imu_core as core
 from imu_learn.core.still import StillSettings, still_bias, still_stretches
 from imu_learn.data import synthetic
@@ -146,11 +147,7 @@ def test_bias_still_on_a_recording_without_stamps_is_one_line(tmp_path, capsys):
     scipy_io = pytest.importorskip("scipy.io")
     from imu_learn.cli.refine import main
 
-    rng = np.random.default_rng(1)
-    src = tmp_path / "01_trial.mat"
-    scipy_io.savemat(src, {"imu_gyr": rng.normal(0, 0.3, (300, 3)), "imu_acc": rng.normal(0, 1, (300, 3)),
-                           "opt_quat": np.tile([1.0, 0, 0, 0], (300, 1)), "opt_pos": np.zeros((300, 3)),
-                           "sampling_rate": 286.0})
+    src = write_broad_trial(tmp_path / "01_trial.mat", scipy_io)
     model = REPO / "models" / "broad_handheld.pt"
     assert main(["--checkpoint", str(model), "--input", str(src), "--out", str(tmp_path / "out"), "--bias", "still",
                  "--device", "cpu"]) == 2
