@@ -134,7 +134,8 @@ def add_arguments(ap: argparse.ArgumentParser) -> None:
                          "else built in (EuRoC's ADIS16448, with a warning)")
     ap.add_argument("--bias", choices=ESTIMATORS, default="none",
                     help="still: estimate the recording's own gyro bias from its still stretches (refine's estimator), "
-                         "gravity: from gravity consistency (rates perpendicular to gravity only), on the IMU as "
+                         "gravity: from gravity consistency (rates perpendicular to gravity only), still+gravity: the "
+                         "still estimate along gravity and gravity's across it; each on the IMU as "
                          "fused (after --profile's floor, --checkpoint or --calibration), and subtract it before "
                          "the fusion; the estimate goes into summary.json's bias (default none)")
     ap.add_argument("--threads", type=int, default=None, metavar="N",

@@ -78,7 +78,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--bias", choices=BIAS_METHODS, default="none",
                    help="still: estimate the recording's own gyro bias from its still stretches and subtract it after "
                         "the profile and model; gravity: from gravity consistency over long windows (rates "
-                        "perpendicular to gravity only); learned: the long-context estimator of --bias-model "
+                        "perpendicular to gravity only); still+gravity: the still estimate along gravity, gravity's "
+                        "across it; learned: the long-context estimator of --bias-model "
                         "(docs/refine.md; the estimate goes into the summary)")
     p.add_argument("--bias-model", type=Path, metavar="PT",
                    help="--bias learned: the bias estimator (python -m imu_learn.train.bias_train writes one; "
