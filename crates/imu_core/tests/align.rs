@@ -1,3 +1,5 @@
+mod common;
+
 use imu_core::align::{align, derive_velocity, AlignOptions};
 use imu_core::so3::{angle_between, exp, quat_from_wxyz, quat_to_wxyz, xyzw_to_wxyz};
 use imu_core::{GroundTruth, ImuError, ImuSamples, QuatWxyz, Vec3};
@@ -289,8 +291,6 @@ fn unusable_inputs_give_clear_errors() {
 
 // ---- real data: EuRoC MH_01_easy ------------------------------------------------------------
 
-const DATA: &str = concat!(env!("CARGO_MANIFEST_DIR"), "/../../../shared/data");
-
 /// "1403636580.83856" → ns, exactly (no float round trip).
 fn tum_stamp_ns(s: &str) -> i64 {
     let (int, frac) = s.split_once('.').unwrap_or((s, ""));
@@ -330,13 +330,15 @@ fn read_tum(path: &str) -> GroundTruth {
 
 #[test]
 fn euroc_mh01_aligns_over_the_whole_ground_truth_span() {
-    let dir = format!("{DATA}/euroc/MH_01_easy");
-    if !std::path::Path::new(&dir).exists() {
-        eprintln!("skipping: {dir} not found");
+    let (imu_rel, gt_rel) = (
+        "euroc/MH_01_easy/mav0/imu0/data.csv",
+        "euroc/MH_01_easy/groundtruth_pose.tum",
+    );
+    if !(common::have(imu_rel) && common::have(gt_rel)) {
         return;
     }
-    let imu = read_euroc_imu(&format!("{dir}/mav0/imu0/data.csv"));
-    let gt = read_tum(&format!("{dir}/groundtruth_pose.tum"));
+    let imu = read_euroc_imu(common::data(imu_rel).to_str().unwrap());
+    let gt = read_tum(common::data(gt_rel).to_str().unwrap());
     let (seqs, rep) = align(&imu, &gt, &AlignOptions::default()).unwrap();
     println!(
         "MH_01: {} IMU samples, {} GT poses; kept {} in {} segment(s); dropped {} before, {} after, \

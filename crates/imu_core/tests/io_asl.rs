@@ -1,10 +1,13 @@
+mod common;
 mod io_common;
-use io_common as common;
 
-use common::*;
+// The data root and `have` (skip visibly, or fail under IMU_LEARN_REQUIRE_DATA=1) from the shared
+// helper; the rest (headers, row builders, message checks) from the readers' helpers.
+use common::{data, have};
 use imu_core::io::asl::{read_imu, read_imu_header, read_pose, read_state, write_imu, IMU_HEADER as LIB_IMU_HEADER};
 use imu_core::io::ReadOptions;
 use imu_core::{ImuError, ImuSamples};
+use io_common::*;
 
 fn strict() -> ReadOptions {
     ReadOptions::default()

@@ -1,11 +1,14 @@
+mod common;
 mod io_common;
-use io_common as common;
 
-use common::*;
+// The data root and `have` (skip visibly, or fail under IMU_LEARN_REQUIRE_DATA=1) from the shared
+// helper; the rest (headers, row builders, message checks) from the readers' helpers.
+use common::{data, have};
 use imu_core::error::TimestampProblem;
 use imu_core::io::tum::{read_tum, write_tum};
 use imu_core::io::ReadOptions;
 use imu_core::{GroundTruth, ImuError};
+use io_common::*;
 
 fn strict() -> ReadOptions {
     ReadOptions::default()

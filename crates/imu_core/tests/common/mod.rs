@@ -1,11 +1,61 @@
-//! Shared helpers for the integration tests: comparisons and a synthetic trajectory whose IMU
-//! signal is known in closed form.
+//! Shared helpers for the integration tests: comparisons, a synthetic trajectory whose IMU signal
+//! is known in closed form, and the real recordings' data root (`have`: a test on a recording the
+//! data root lacks says so on stderr, or fails where `IMU_LEARN_REQUIRE_DATA=1`).
 
 #![allow(dead_code)]
+
+use std::io::Write;
+use std::path::PathBuf;
 
 use imu_core::so3::{self, angle_between, arr3, quat_from_wxyz, quat_to_wxyz, v3};
 use imu_core::types::{gravity_vector, QuatWxyz, Sequence, Vec3};
 use nalgebra::{Matrix3, Vector3};
+
+/// Real recordings, outside the repository: the data root `IMU_LEARN_DATA` names (the README's
+/// layout), else `../shared/data` beside the checkout.
+pub const DATA: &str = concat!(env!("CARGO_MANIFEST_DIR"), "/../../../shared/data");
+
+/// Set to 1 (CI, which has the data root) and a test whose recording is missing fails instead of
+/// skipping.
+pub const REQUIRE_DATA: &str = "IMU_LEARN_REQUIRE_DATA";
+
+pub fn data_root() -> PathBuf {
+    std::env::var_os("IMU_LEARN_DATA")
+        .map(PathBuf::from)
+        .unwrap_or_else(|| PathBuf::from(DATA))
+}
+
+pub fn data(rel: &str) -> PathBuf {
+    data_root().join(rel)
+}
+
+fn data_required() -> bool {
+    std::env::var(REQUIRE_DATA).is_ok_and(|v| !v.is_empty() && v != "0")
+}
+
+/// Whether the data root holds `rel`. Where it does not, the test is skipped visibly: with
+/// `IMU_LEARN_REQUIRE_DATA=1` this panics (the test fails); otherwise it writes "skipped: <path>
+/// missing" to the process's stderr itself (not through `eprintln!`, which the test harness
+/// captures and shows only for a failing test) and returns false, for the test to return early.
+#[track_caller]
+pub fn have(rel: &str) -> bool {
+    let p = data(rel);
+    if p.exists() {
+        return true;
+    }
+    let msg = format!(
+        "{} missing (the data root is IMU_LEARN_DATA, else ../shared/data beside the checkout)",
+        p.display()
+    );
+    if data_required() {
+        panic!("{msg}; {REQUIRE_DATA} is set, so a missing recording fails the test");
+    }
+    let _ = writeln!(
+        std::io::stderr(),
+        "skipped: {msg}; set {REQUIRE_DATA}=1 to fail instead"
+    );
+    false
+}
 
 pub fn rot_err(a: QuatWxyz, b: QuatWxyz) -> f64 {
     angle_between(&quat_from_wxyz(a), &quat_from_wxyz(b))
