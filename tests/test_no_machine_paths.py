@@ -94,7 +94,32 @@ def test_shipped_checkpoint_stores_no_machine_path(path):
                 f"{path.name}: data.roots[{i}].{key} = {root[key]!r} is not relative to a data root"
 
 
-@pytest.mark.parametrize("path", SHIPPED, ids=[p.name for p in SHIPPED])
+def _rewritten() -> List[Path]:
+    """The shipped checkpoints that existed at BEFORE_REWRITE (the ones the rewrite touched).
+    Checkpoints shipped later never held a machine path, so they have no "before" to compare with;
+    test_shipped_checkpoint_stores_no_machine_path covers them. Empty where git or that commit is
+    missing (not a checkout, or a shallow one): then the test below is reported as skipped."""
+    try:
+        out = subprocess.run(["git", "ls-tree", "--name-only", BEFORE_REWRITE, "models/"], cwd=REPO,
+                             capture_output=True, check=True, text=True).stdout
+    except (OSError, subprocess.CalledProcessError):
+        return []
+    return [p for p in SHIPPED if p.relative_to(REPO).as_posix() in out.split("\n")]
+
+
+REWRITTEN = _rewritten()
+
+
+def test_the_rewritten_checkpoints_are_in_this_checkouts_history():
+    """The five checkpoints shipped at BEFORE_REWRITE are found there (so the test below runs on
+    each): a checkout whose history lost them would otherwise pass with nothing checked."""
+    if not (REPO / ".git").exists():
+        pytest.skip("not a git checkout")
+    assert sorted(p.name for p in REWRITTEN) == ["blackbird_clover.pt", "broad_handheld.pt", "euroc_adis16448.pt",
+                                                  "euroc_adis16448_cov.pt", "tumvi_bmi160.pt"]
+
+
+@pytest.mark.parametrize("path", REWRITTEN, ids=[p.name for p in REWRITTEN])
 def test_rewritten_checkpoint_keeps_its_weights_bit_identical(path, tmp_path):
     """The rewrite changed only the stored config: every tensor equals the one shipped before, byte
     for byte (dtype, shape and data), and every other entry but the config and the new digest."""
@@ -102,11 +127,8 @@ def test_rewritten_checkpoint_keeps_its_weights_bit_identical(path, tmp_path):
     from imu_learn.infer.checkpoint import DIGEST_KEY, load_checkpoint
 
     rel = path.relative_to(REPO).as_posix()
-    try:
-        old_bytes = subprocess.run(["git", "show", f"{BEFORE_REWRITE}:{rel}"], cwd=REPO, capture_output=True,
-                                   check=True).stdout
-    except (OSError, subprocess.CalledProcessError):
-        pytest.skip(f"{rel} at {BEFORE_REWRITE} is not in this checkout's history")
+    old_bytes = subprocess.run(["git", "show", f"{BEFORE_REWRITE}:{rel}"], cwd=REPO, capture_output=True,
+                               check=True).stdout
     (tmp_path / "old.pt").write_bytes(old_bytes)
     old = torch.load(tmp_path / "old.pt", weights_only=True)
     new = load_checkpoint(path)
