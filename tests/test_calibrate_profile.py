@@ -1,5 +1,7 @@
 """The device profile: JSON round trip, typed errors naming the file and field, and ``apply`` giving
-exactly what ``traditional+timing``'s ``refine`` gives (bit for bit)."""
+the model its conventions document (checked against :func:`documented_floor`, written here in plain
+numpy from calib/profile.py's module doc) and exactly what ``traditional+timing``'s ``refine``
+gives (bit for bit)."""
 from __future__ import annotations
 
 import json
@@ -12,6 +14,42 @@ from imu_learn.calib.profile import Affine, NoiseTerm, Profile, noise_only
 from imu_learn.data import synthetic as syn
 from imu_learn.data.types import Segment
 from imu_learn.errors import ProfileError
+
+
+def documented_floor(prof: Profile, t_ns: np.ndarray, gyro: np.ndarray, acc: np.ndarray):
+    """The oracle: ``prof``'s floor from the documented conventions alone, not the package's code.
+    corrected(t) = recorded(t + time_offset_s) by linear interpolation (ends held); then
+    w = M_g (LP_g(w_m) - b_g) - G LP_g(a_m) and a = M_a (LP_a(a_m) - b_a) with M, b, G the profile's
+    ``gyroscope``/``accelerometer``/``g_sensitivity`` entries, LP a zero-phase Butterworth low-pass of
+    the floor's cut-offs (transfer-function form and scipy's ``filtfilt``, not the package's sos)."""
+    from scipy.signal import butter, filtfilt
+
+    fl = prof.floor
+    ts = (np.asarray(t_ns, dtype=np.int64) - int(t_ns[0])) * 1e-9
+    fs = 1.0 / np.median(np.diff(ts))
+
+    def shifted(x):
+        return np.stack([np.interp(ts + prof.time_offset_s, ts, x[:, i]) for i in range(3)], axis=1)
+
+    def lp(x, cutoff):
+        if cutoff is None:
+            return x
+        b, a = butter(int(fl.get("filter_order", 2)), cutoff / (fs / 2))
+        return filtfilt(b, a, x, axis=0)
+
+    w_m, a_m = shifted(np.asarray(gyro, dtype=np.float64)), shifted(np.asarray(acc, dtype=np.float64))
+    M_g, b_g, G = prof.gyro.matrix, prof.gyro.bias, prof.g_sensitivity
+    M_a, b_a = prof.acc.matrix, prof.acc.bias
+    w = np.array([M_g @ (wi - b_g) - G @ ai for wi, ai in zip(lp(w_m, fl["cutoff_gyro"]), lp(a_m, fl["cutoff_gyro"]))])
+    a = np.array([M_a @ (ai - b_a) for ai in lp(a_m, fl["cutoff_acc"])])
+    return w, a
+
+
+def assert_documented(prof: Profile, t_ns, gyro, acc, g, a, atol: float = 1e-9) -> None:
+    """(g, a) is what the conventions give for ``prof`` on the raw (gyro, acc), to ``atol``."""
+    want_g, want_a = documented_floor(prof, t_ns, gyro, acc)
+    assert np.abs(g - want_g).max() < atol, np.abs(g - want_g).max()
+    assert np.abs(a - want_a).max() < atol, np.abs(a - want_a).max()
 
 
 def floor_method(seed: int = 0, tau: float = 0.37, cutoffs=(20.0, 10.0)):
@@ -40,7 +78,7 @@ def noisy_spin(seed: int = 1) -> Segment:
 def make_profile(floor: dict) -> Profile:
     nan3 = np.full(3, np.nan)
     return Profile(
-        device="test-imu", sample_rate_hz=200.0, time_offset_s=0.37 / 200, time_offset_s_std=1e-4,
+        device="test-imu", sample_rate_hz=200.0, time_offset_s=floor["time_offset"] / 200, time_offset_s_std=1e-4,
         gyro=Affine(np.asarray(floor["M_g"]), np.asarray(floor["b_g"]), "rad/s", np.full((3, 3), 1e-4), nan3.copy()),
         acc=Affine(np.asarray(floor["M_a"]), np.asarray(floor["b_a"]), "m/s^2"),
         g_sensitivity=np.asarray(floor["G"]), gravity_mps2=9.81, gravity_mps2_std=math.nan, floor=floor,
@@ -53,6 +91,8 @@ def make_profile(floor: dict) -> Profile:
 
 @pytest.mark.parametrize("tau,cutoffs", [(0.37, (20.0, 10.0)), (0.0, (None, None)), (-1.2, (40.0, None))])
 def test_apply_is_the_floor_bit_for_bit(tau, cutoffs, tmp_path):
+    """``apply`` is the documented model (the numpy oracle above: a transposed matrix, a negated
+    offset or a swapped cut-off fails it), and the same bits as the floor's ``refine``."""
     m = floor_method(tau=tau, cutoffs=cutoffs)
     s = noisy_spin()
     want_g, want_a = m.refine(s)
@@ -61,7 +101,9 @@ def test_apply_is_the_floor_bit_for_bit(tau, cutoffs, tmp_path):
     back = Profile.load(tmp_path / "profile.json")  # through JSON: float64 survives repr exactly
     for p in (prof, back):
         g, a = p.apply(s.t_ns, s.gyro, s.acc)
+        assert_documented(p, s.t_ns, s.gyro, s.acc, g, a)
         assert np.array_equal(g, want_g) and np.array_equal(a, want_a)
+    assert np.abs(g - s.gyro).max() > 1e-3 and np.abs(a - s.acc).max() > 1e-2  # the floor does something
 
 
 def test_round_trip_keeps_every_field(tmp_path):
