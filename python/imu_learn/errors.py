@@ -97,6 +97,17 @@ class InvalidInputError(ImuError, ValueError):
     """Arrays or settings given by the caller are inconsistent."""
 
 
+class ImplausibleInputError(InvalidInputError):
+    """A user's IMU CSV parses, but its numbers do not fit the column map and units given (a sample
+    rate no IMU has, gravity of 1 m/s^2, a gyro reading gravity, ...); the message names the likely
+    mistake and ``option`` the option that fixes it (``--time-unit``, ``--acc-unit``, ...)."""
+
+    def __init__(self, message: str, path: Optional[str] = None, option: Optional[str] = None) -> None:
+        super().__init__(message)
+        self.path = path
+        self.option = option
+
+
 class NoRecordingsError(InvalidInputError):
     """A dataset folder (``path``) holds no recording of the layout asked for."""
 
@@ -179,6 +190,7 @@ __all__ = [
     "NoOverlapError",
     "TooShortError",
     "InvalidInputError",
+    "ImplausibleInputError",
     "NoRecordingsError",
     "CacheError",
     "AidingError",

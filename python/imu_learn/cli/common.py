@@ -102,7 +102,7 @@ def add_data_root(p: argparse.ArgumentParser, what: str) -> None:
 
 
 # The CsvColumns fields the options of a user's own IMU CSV set (--columns, --time-unit, ...).
-_CSV_FIELDS = ("columns", "time_unit", "gyro_unit", "acc_unit")
+_CSV_FIELDS = ("columns", "time_unit", "gyro_unit", "acc_unit", "skip_bad_lines")
 
 
 def add_imu_input_options(p: argparse.ArgumentParser) -> None:
@@ -121,13 +121,17 @@ def add_imu_input_options(p: argparse.ArgumentParser) -> None:
                    help="unit of the time column, integer or float text (default ns)")
     g.add_argument("--gyro-unit", choices=GYRO_UNITS, default=None, help="default rad/s")
     g.add_argument("--acc-unit", choices=ACC_UNITS, default=None, help="default m/s2 (g: 9.80665 m/s2)")
+    g.add_argument("--skip-bad-lines", action="store_true", default=None,
+                   help="skip a line too short for the map or with a value that is not a number (a logger's "
+                        "truncated first or last line) instead of stopping; the count skipped is reported")
 
 
 def csv_layout(args: argparse.Namespace) -> Optional[CsvColumns]:
     """The user's-CSV layout the options of :func:`add_imu_input_options` give (unset ones take
-    CsvColumns' defaults), or None when none is given."""
+    CsvColumns' defaults), or None when none is given. Without --columns the default map is
+    assumed (``columns_named=False``: a file with more columns than it names is refused)."""
     given = {k: getattr(args, k) for k in _CSV_FIELDS if getattr(args, k, None) is not None}
-    return CsvColumns(**given) if given else None
+    return CsvColumns(**given, columns_named="columns" in given) if given else None
 
 
 def parser(name: str) -> argparse.ArgumentParser:

@@ -19,6 +19,11 @@
 //! strictly increase, `TooFewRows` below two samples, each naming file:line:column and the field;
 //! `UnknownUnit` and `InvalidInput` for a unit or a column map the core does not know.
 //!
+//! With [`CsvFormat::skip_bad_lines`] a line too short for the map or with a field that is not a
+//! finite number (a logger's truncated first or last line) is skipped instead, and
+//! [`read_imu_checked`] lists the lines skipped with what was wrong on each; the writer keeps such
+//! lines as they are. Stamps out of order stay an error.
+//!
 //! Rows are parsed in parallel over line-aligned chunks; as in [`super::table`], the first
 //! problem in file order is the one reported.
 
@@ -201,6 +206,8 @@ pub struct CsvFormat {
     pub time: TimeUnit,
     pub gyro: GyroUnit,
     pub acc: AccUnit,
+    /// Skip a line too short for the map or with a bad value instead of failing (module doc).
+    pub skip_bad_lines: bool,
 }
 
 impl CsvFormat {
@@ -211,7 +218,14 @@ impl CsvFormat {
             time: TimeUnit::parse(time)?,
             gyro: GyroUnit::parse(gyro)?,
             acc: AccUnit::parse(acc)?,
+            skip_bad_lines: false,
         })
+    }
+
+    /// The same format, skipping bad lines (or not).
+    pub fn with_skip_bad_lines(mut self, skip: bool) -> Self {
+        self.skip_bad_lines = skip;
+        self
     }
 }
 
@@ -283,6 +297,8 @@ struct Layout {
     header_line: Option<usize>,
     /// The header's (or a comment line's) names, one per file column.
     names: Vec<String>,
+    /// skip_bad_lines: lines above the header too short for the map (0-based line, fields found).
+    pre_skipped: Vec<(usize, usize)>,
 }
 
 fn is_number(f: &[u8]) -> bool {
@@ -298,11 +314,15 @@ fn names_of(line: &[u8], delim: Delimiter) -> Vec<String> {
         .collect()
 }
 
-/// Finds the delimiter and the header in the BOM-less `bytes`.
-fn detect_layout(bytes: &[u8], map: &ColumnMap) -> Layout {
+/// Finds the delimiter and the header in the BOM-less `bytes`. With `skip` (skip_bad_lines), a
+/// line too short for the map (a truncated first line) is passed over: the next one decides.
+fn detect_layout(bytes: &[u8], map: &ColumnMap, skip: bool) -> Layout {
     let mut pos = 0;
     let mut line_idx = 0;
     let mut last_comment: Option<&[u8]> = None;
+    // skip: the lines passed over, and where the first of them starts.
+    let mut short: Vec<(usize, usize)> = Vec::new();
+    let mut first_short: Option<(usize, usize)> = None;
     while pos < bytes.len() {
         let end = memchr::memchr(b'\n', &bytes[pos..]).map_or(bytes.len(), |i| pos + i);
         let line = strip_cr(&bytes[pos..end]);
@@ -314,6 +334,13 @@ fn detect_layout(bytes: &[u8], map: &ColumnMap) -> Layout {
             let delimiter = Delimiter::detect(line);
             let mut spans = Vec::new();
             field_spans(line, delimiter, &mut spans);
+            if skip && spans.len() < map.width() {
+                short.push((line_idx, spans.len()));
+                first_short.get_or_insert((pos, line_idx));
+                pos = next;
+                line_idx += 1;
+                continue;
+            }
             let header = !map
                 .at
                 .iter()
@@ -325,6 +352,7 @@ fn detect_layout(bytes: &[u8], map: &ColumnMap) -> Layout {
                     body_line: line_idx + 1,
                     header_line: Some(line_idx + 1),
                     names: names_of(line, delimiter),
+                    pre_skipped: short,
                 };
             }
             let names = last_comment
@@ -334,23 +362,28 @@ fn detect_layout(bytes: &[u8], map: &ColumnMap) -> Layout {
                 })
                 .filter(|n| n.len() >= map.width())
                 .unwrap_or_default();
+            // The lines passed over are rows of the body (skipped there, with their error).
+            let (body_start, body_line) = first_short.unwrap_or((pos, line_idx));
             return Layout {
                 delimiter,
-                body_start: pos,
-                body_line: line_idx,
+                body_start,
+                body_line,
                 header_line: None,
                 names,
+                pre_skipped: Vec::new(),
             };
         }
         pos = next;
         line_idx += 1;
     }
+    let (body_start, body_line) = first_short.unwrap_or((bytes.len(), line_idx));
     Layout {
         delimiter: Delimiter::Comma,
-        body_start: bytes.len(),
-        body_line: line_idx,
+        body_start,
+        body_line,
         header_line: None,
         names: Vec::new(),
+        pre_skipped: Vec::new(),
     }
 }
 
@@ -397,6 +430,10 @@ struct ChunkOut {
     lines: Vec<usize>,
     n_lines: usize,
     error: Option<Bad>,
+    /// Lines skipped (skip_bad_lines), in chunk order.
+    skipped: Vec<Bad>,
+    /// Fields of the chunk's first row.
+    first_fields: Option<usize>,
 }
 
 fn lossy(f: &[u8]) -> String {
@@ -470,7 +507,9 @@ fn parse_chunk(chunk: &[u8], fmt: &CsvFormat, delim: Delimiter) -> ChunkOut {
                 out.gyro.push(g);
                 out.acc.push(a);
                 out.lines.push(this);
+                out.first_fields.get_or_insert(spans.len());
             }
+            Err(kind) if fmt.skip_bad_lines => out.skipped.push(Bad { line: this, kind }),
             Err(kind) => {
                 out.error = Some(Bad { line: this, kind });
                 break;
@@ -486,6 +525,32 @@ struct Parsed {
     samples: ImuSamples,
     lines: Vec<usize>,
     layout: Layout,
+    /// Lines skipped (skip_bad_lines), file-wide 0-based, in file order.
+    skipped: Vec<Bad>,
+    /// Fields of the first row.
+    fields: usize,
+}
+
+/// A line skipped with [`CsvFormat::skip_bad_lines`].
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct SkippedLine {
+    /// 1-based line in the file.
+    pub line: usize,
+    /// The error the line would have raised (`file:line:column: field ...`).
+    pub problem: String,
+}
+
+/// A user's CSV as read, with what the plausibility checks of a caller need to know of the file.
+#[derive(Clone, Debug)]
+pub struct CsvRead {
+    /// Stamps [ns], gyro [rad/s], acc [m/s²].
+    pub samples: ImuSamples,
+    /// Lines skipped (skip_bad_lines only), in file order.
+    pub skipped: Vec<SkippedLine>,
+    /// The header's (or a comment line's) names, one per file column; empty without.
+    pub names: Vec<String>,
+    /// Fields of the first row read.
+    pub fields: usize,
 }
 
 fn to_error(path: &Path, layout: &Layout, fmt: &CsvFormat, bad: Bad) -> ImuError {
@@ -542,7 +607,24 @@ fn check_increasing(path: &Path, layout: &Layout, fmt: &CsvFormat, t: &[i64], li
 
 /// Parses the BOM-less `bytes` of `path`.
 fn parse(path: &Path, bytes: &[u8], fmt: &CsvFormat) -> Result<Parsed> {
-    let layout = detect_layout(bytes, &fmt.columns);
+    let layout = detect_layout(bytes, &fmt.columns, fmt.skip_bad_lines);
+    let first_missing = |found: usize| {
+        (0..7)
+            .filter(|&k| fmt.columns.at[k] >= found)
+            .min_by_key(|&k| fmt.columns.at[k])
+            .unwrap_or(0)
+    };
+    let mut skipped: Vec<Bad> = layout
+        .pre_skipped
+        .iter()
+        .map(|&(line, found)| Bad {
+            line,
+            kind: BadKind::Missing {
+                k: first_missing(found),
+                found,
+            },
+        })
+        .collect();
     if let Some(h) = layout.header_line {
         if layout.names.len() < fmt.columns.width() {
             let found = layout.names.len();
@@ -571,7 +653,13 @@ fn parse(path: &Path, bytes: &[u8], fmt: &CsvFormat) -> Result<Parsed> {
     };
     let mut lines = Vec::with_capacity(total);
     let mut offset = layout.body_line;
+    let mut fields = None;
     for out in outs {
+        fields = fields.or(out.first_fields);
+        skipped.extend(out.skipped.into_iter().map(|mut b| {
+            b.line += offset;
+            b
+        }));
         s.t_ns.extend_from_slice(&out.t);
         s.gyro.extend_from_slice(&out.gyro);
         s.acc.extend_from_slice(&out.acc);
@@ -599,6 +687,8 @@ fn parse(path: &Path, bytes: &[u8], fmt: &CsvFormat) -> Result<Parsed> {
         samples: s,
         lines,
         layout,
+        skipped,
+        fields: fields.unwrap_or(0),
     })
 }
 
@@ -607,6 +697,28 @@ pub fn read_imu(path: impl AsRef<Path>, fmt: &CsvFormat) -> Result<ImuSamples> {
     let path = path.as_ref();
     let bytes = table::read_bytes(path)?;
     Ok(parse(path, strip_bom(&bytes), fmt)?.samples)
+}
+
+/// Reads a user's IMU CSV as [`read_imu`] does, with the lines skipped (`fmt.skip_bad_lines`), the
+/// file's column names and its number of fields: what a caller's plausibility checks look at.
+pub fn read_imu_checked(path: impl AsRef<Path>, fmt: &CsvFormat) -> Result<CsvRead> {
+    let path = path.as_ref();
+    let bytes = table::read_bytes(path)?;
+    let p = parse(path, strip_bom(&bytes), fmt)?;
+    let skipped = p
+        .skipped
+        .into_iter()
+        .map(|b| SkippedLine {
+            line: b.line + 1,
+            problem: to_error(path, &p.layout, fmt, b).to_string(),
+        })
+        .collect();
+    Ok(CsvRead {
+        samples: p.samples,
+        skipped,
+        names: p.layout.names,
+        fields: p.fields,
+    })
 }
 
 fn check_finite(what: &str, i: usize, xs: &Vec3) -> Result<()> {

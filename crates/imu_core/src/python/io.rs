@@ -158,7 +158,38 @@ fn read_csv_columns<'py>(
     imu_out(py, s)
 }
 
+/// A user's CSV with what the plausibility checks need: {t_ns, gyro, acc, skipped: [(line, problem)],
+/// names: [str], fields: int}.
 #[pyfunction]
+#[pyo3(signature = (path, columns, time_unit, gyro_unit, acc_unit, skip_bad_lines=false))]
+fn read_csv_columns_checked<'py>(
+    py: Python<'py>,
+    path: PathBuf,
+    columns: &str,
+    time_unit: &str,
+    gyro_unit: &str,
+    acc_unit: &str,
+    skip_bad_lines: bool,
+) -> PyResult<Bound<'py, PyDict>> {
+    let fmt = CsvFormat::parse(columns, time_unit, gyro_unit, acc_unit)
+        .map_err(to_py)?
+        .with_skip_bad_lines(skip_bad_lines);
+    let r = py
+        .allow_threads(|| columns::read_imu_checked(&path, &fmt))
+        .map_err(to_py)?;
+    let d = PyDict::new(py);
+    d.set_item("t_ns", out1(py, r.samples.t_ns))?;
+    d.set_item("gyro", out2(py, r.samples.gyro)?)?;
+    d.set_item("acc", out2(py, r.samples.acc)?)?;
+    let skipped: Vec<(usize, String)> = r.skipped.into_iter().map(|s| (s.line, s.problem)).collect();
+    d.set_item("skipped", skipped)?;
+    d.set_item("names", r.names)?;
+    d.set_item("fields", r.fields)?;
+    Ok(d)
+}
+
+#[pyfunction]
+#[pyo3(signature = (original, out, gyro, acc, columns, time_unit, gyro_unit, acc_unit, skip_bad_lines=false))]
 #[allow(clippy::too_many_arguments)]
 fn write_csv_columns(
     py: Python<'_>,
@@ -170,8 +201,11 @@ fn write_csv_columns(
     time_unit: &str,
     gyro_unit: &str,
     acc_unit: &str,
+    skip_bad_lines: bool,
 ) -> PyResult<()> {
-    let fmt = CsvFormat::parse(columns, time_unit, gyro_unit, acc_unit).map_err(to_py)?;
+    let fmt = CsvFormat::parse(columns, time_unit, gyro_unit, acc_unit)
+        .map_err(to_py)?
+        .with_skip_bad_lines(skip_bad_lines);
     let (g, a) = (rows::<3>(&gyro, "gyro")?, rows::<3>(&acc, "acc")?);
     py.allow_threads(|| columns::write_imu(&original, &out, &fmt, g, a))
         .map_err(to_py)
@@ -179,6 +213,7 @@ fn write_csv_columns(
 
 pub fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(read_csv_columns, m)?)?;
+    m.add_function(wrap_pyfunction!(read_csv_columns_checked, m)?)?;
     m.add_function(wrap_pyfunction!(write_csv_columns, m)?)?;
     m.add_function(wrap_pyfunction!(read_asl_imu, m)?)?;
     m.add_function(wrap_pyfunction!(read_asl_imu_header, m)?)?;

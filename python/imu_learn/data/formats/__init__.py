@@ -16,6 +16,8 @@ name ``csv-columns``) is no layout of its own: :func:`read_imu_source` and :func
 it with ``columns=`` (a :class:`CsvColumns`), the one input resolver every command that reads IMU
 calls (the CLI's options: :func:`imu_learn.cli.common.add_imu_input_options`). Its
 :class:`ImuSource` carries the layout, so :func:`write_imu` writes the user's columns and units back.
+Both go through :func:`.csv_columns.read_imu_source`, which checks that the numbers fit the map and
+units (:mod:`imu_learn.data.input_checks`) before any work.
 
 The strict parsing of text formats happens in the Rust core; the modules here only find the files
 of a layout and, for binary containers (HDF5, MAT), read arrays with h5py / scipy and hand them to
@@ -102,7 +104,7 @@ def user_csv(format: str = "auto", columns: Optional[CsvColumns] = None) -> Opti
     """The layout of a user's CSV when the input is one (``columns`` given, or ``format`` is
     ``csv-columns``: then the default map ``t,gx,gy,gz,ax,ay,az`` in ns, rad/s, m/s^2), else None."""
     if columns is None:
-        return CsvColumns() if format == USER_CSV else None
+        return CsvColumns(columns_named=False) if format == USER_CSV else None
     if format not in ("auto", USER_CSV):
         raise InvalidInputError(f"the column map and units describe a user's CSV (format {USER_CSV}); "
                                 f"the {format} format has its own layout")
