@@ -1,6 +1,7 @@
 """``imu-learn refine --profile``: the floor ``evaluate`` fits (traditional+timing) written as a
-device profile and applied by refine gives evaluate's own samples bit for bit, in the recording's
-own format (with set parameters; with parameters fitted on the MH_01 crop, slow)."""
+device profile and applied by refine gives the model the profile's conventions document (the numpy
+oracle of test_calibrate_profile) and evaluate's own samples bit for bit, in the recording's own
+format (with set parameters; with parameters fitted on the MH_01 crop, slow)."""
 from __future__ import annotations
 
 import math
@@ -16,6 +17,7 @@ from imu_learn.baselines.traditional import TraditionalTiming
 from imu_learn.calib.profile import Affine, Profile
 from imu_learn.cli.refine import main as refine_main
 from imu_learn.data.types import Segment, sample_rate_hz
+from test_calibrate_profile import assert_documented
 
 REPO = Path(__file__).resolve().parent.parent
 MH04 = REPO / "datasets" / "euroc" / "MH_04_difficult"
@@ -32,19 +34,22 @@ def as_profile(m: TraditionalTiming, rate: float, device: str) -> Profile:
 
 def refined_as_evaluate(m: TraditionalTiming, tmp_path: Path, capsys) -> None:
     """``m`` as a profile through ``imu-learn refine --profile`` on the MH_04 crop: its ASL output is
-    ``m.refine`` of the recording's whole IMU, bit for bit."""
-    as_profile(m, 200.0, "euroc").save(tmp_path / "profile.json")
+    the documented model (an independent numpy oracle) and ``m.refine`` of the recording's whole
+    IMU, bit for bit."""
+    t, g, a = core.read_asl_imu(str(MH04 / IMU_REL))
+    prof = as_profile(m, sample_rate_hz(t), "euroc")  # 200.0026 Hz: the offset in seconds as calibrate writes it
+    prof.save(tmp_path / "profile.json")
     out = tmp_path / "MH_04_floor"
     assert refine_main(["--profile", str(tmp_path / "profile.json"), "--input", str(MH04), "--out", str(out),
                         "--format", "euroc"]) == 0
     cap = capsys.readouterr()
     assert cap.err == "" and "recording at 200 Hz" in cap.out
-    t, g, a = core.read_asl_imu(str(MH04 / IMU_REL))
     t2, g2, a2 = core.read_asl_imu(str(out / IMU_REL))
     n = len(t)
     want_g, want_a = m.refine(Segment("MH_04", t, g, a, np.zeros((n, 3)), np.zeros((n, 3)),
                                       np.tile([1.0, 0, 0, 0], (n, 1))))
     assert np.array_equal(t2, t)
+    assert_documented(prof, t, g, a, g2, a2)
     assert np.array_equal(g2, want_g) and np.array_equal(a2, want_a)  # shortest round-trip text: exact
     assert np.abs(g2 - g).max() > 1e-3
 
