@@ -25,7 +25,7 @@ from imu_learn.errors import (
     TimestampError,
     TooFewRowsError,
 )
-from imu_learn.fuse.aiding.extrinsics import inverse, read_t_bs
+from imu_learn.data.formats.extrinsics import inverse, read_t_bs
 from imu_learn.fuse.aiding.tum import check_overlap, read_trajectory, read_tum, seconds_to_ns
 from imu_learn.fuse.inputs import checkpoint_bias
 from imu_learn.fuse.score import convergence, interpolate_groundtruth, umeyama

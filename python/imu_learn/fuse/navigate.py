@@ -2,7 +2,7 @@
 
 ``imu-learn navigate --input REC --aiding FILE --aiding-kind {position,pose,relative-pose}`` runs
 :func:`navigate`: it reads the recording's IMU only (the layouts of :mod:`imu_learn.data.formats`;
-ground truth is never opened), the aiding file (:mod:`.aiding.tum`), the extrinsic (:mod:`.aiding.extrinsics`),
+ground truth is never opened), the aiding file (:mod:`.aiding.tum`), the extrinsic (:mod:`imu_learn.data.formats.extrinsics`),
 optionally refines the IMU with a checkpoint (:mod:`imu_learn.infer.refiner`), builds the first state
 from the data (:mod:`.start`) and fuses with :func:`imu_learn.fuse.graph.fuse` under a loose prior.
 It writes ``causal.tum`` and ``smoothed.tum`` (``t tx ty tz qx qy qz qw``, seconds, body = IMU
@@ -71,7 +71,7 @@ from .aiding import AbsolutePoses, OutageWindow, PositionFixes, RelativePoses, s
 from .aiding import bag as bag_aiding
 from .aiding.detect import FORMATS as DETECTED_FORMATS
 from .aiding.detect import detect as detect_aiding
-from .aiding.extrinsics import inverse, read_t_bs
+from imu_learn.data.formats.extrinsics import inverse, read_t_bs
 from .aiding.outages import in_windows
 from .aiding.rtklib import RtkSolution, fixes_on_imu, normal_gravity, read_pos
 from .aiding.tum import Trajectory, check_overlap, read_trajectory

@@ -6,7 +6,7 @@
 * :mod:`.simulate`: aiding simulated from ground truth; :mod:`.real`: the Leica and bag-topic fixes;
 * :mod:`.outages`: the one outage window type, and aiding without the measurements inside;
 * readers: :mod:`.tum` (trajectory files), :mod:`.rtklib` (RTKLIB solutions), :mod:`.bag` (ROS bag
-  topics: poses, positions, NavSatFix fixes), :mod:`.extrinsics` (a sensor's ``T_BS``); :mod:`.detect`
+  topics: poses, positions, NavSatFix fixes), :mod:`.detect`
   tells from a file's content which reader it takes.
 """
 from .outages import OutageWindow, apply_outages, clip_outages, outage_mask
