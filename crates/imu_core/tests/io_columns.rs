@@ -264,3 +264,85 @@ fn a_long_file_reads_in_parallel_chunks_with_the_right_lines() {
         "{e}"
     );
 }
+
+#[test]
+fn skip_bad_lines_passes_over_truncated_lines_and_lists_them() {
+    // A logger's log: the first line cut at its start (a single field: no delimiter to go by), a
+    // bad value in the middle, the last line cut short; many rows, so the parallel chunks meet.
+    let mut text = String::from("0.0041\n");
+    for i in 0..30_000 {
+        let _ = writeln!(text, "{}.{:03};0.1;0.2;0.3;0;0;1;ok", i / 1000, i % 1000);
+    }
+    text = text.replacen("12.345;0.1;0.2", "12.345;0.1;nan", 1);
+    text.push_str("30.000;0.1;0.");
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("log.csv");
+    std::fs::write(&path, &text).unwrap();
+    let strict = CsvFormat::parse("t,gx,gy,gz,ax,ay,az", "s", "rad/s", "m/s2").unwrap();
+    // Without the flag: the first bad line, as before.
+    let e = columns::read_imu(&path, &strict).unwrap_err();
+    assert!(matches!(&e, ImuError::MissingColumn { line: 1, .. }), "{e}");
+    let fmt = strict.clone().with_skip_bad_lines(true);
+    let r = columns::read_imu_checked(&path, &fmt).unwrap();
+    assert_eq!(r.samples.t_ns.len(), 30_000 - 1);
+    let lines: Vec<usize> = r.skipped.iter().map(|s| s.line).collect();
+    assert_eq!(lines, vec![1, 12_347, 30_002]);
+    assert!(r.skipped[0].problem.contains("log.csv:1:2: field \"gx\" is missing"), "{:?}", r.skipped[0]);
+    assert!(r.skipped[1].problem.contains("\"nan\" is not finite"), "{:?}", r.skipped[1]);
+    assert!(r.skipped[2].problem.contains("log.csv:30002:4: field \"gz\" is missing"), "{:?}", r.skipped[2]);
+    assert_eq!(r.fields, 8);
+    assert!(r.names.is_empty());
+    // The writer keeps the skipped lines as they were, and rewrites the rest.
+    let n = r.samples.t_ns.len();
+    let out = dir.path().join("out.csv");
+    columns::write_imu(&path, &out, &fmt, &vec![[1.0, 2.0, 3.0]; n], &r.samples.acc).unwrap();
+    let back = std::fs::read_to_string(&out).unwrap();
+    let (a, b): (Vec<&str>, Vec<&str>) = (text.lines().collect(), back.lines().collect());
+    assert_eq!(a.len(), b.len());
+    for l in [0, 12_346, 30_001] {
+        assert_eq!(a[l], b[l]);
+    }
+    assert_eq!(b[1], "0.000;1;2;3;0;0;1;ok");
+    assert!(columns::write_imu(&path, &out, &strict, &vec![[1.0, 2.0, 3.0]; n], &r.samples.acc).is_err());
+}
+
+#[test]
+fn skip_bad_lines_passes_over_a_truncated_line_above_the_header() {
+    let text = "t_s,wx\ntime,wx,wy,wz,ax,ay,az,temp\n0.0,0,0,0,0,0,9.8,20\n0.01,0,0,0,0,0,9.8,20\n";
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("h.csv");
+    std::fs::write(&path, text).unwrap();
+    let fmt = CsvFormat::parse("t,gx,gy,gz,ax,ay,az", "s", "rad/s", "m/s2")
+        .unwrap()
+        .with_skip_bad_lines(true);
+    let r = columns::read_imu_checked(&path, &fmt).unwrap();
+    assert_eq!(r.samples.t_ns, vec![0, 10_000_000]);
+    assert_eq!(r.skipped.iter().map(|s| s.line).collect::<Vec<_>>(), vec![1]);
+    assert_eq!(r.names[7], "temp");
+    assert_eq!(r.fields, 8);
+    // Stamps out of order stay an error.
+    std::fs::write(&path, format!("{text}0.005,0,0,0,0,0,9.8,20\n")).unwrap();
+    assert!(matches!(columns::read_imu_checked(&path, &fmt), Err(ImuError::Timestamp { line: 5, .. })));
+}
+
+proptest! {
+    #[test]
+    fn arbitrary_bytes_skipping_bad_lines_give_data_or_a_typed_error(
+        bytes in proptest::collection::vec(any::<u8>(), 0..400)
+    ) {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("x.csv");
+        std::fs::write(&path, &bytes).unwrap();
+        let fmt = CsvFormat::parse("t,gx,gy,gz,ax,ay,az", "s", "rad/s", "m/s2").unwrap().with_skip_bad_lines(true);
+        match columns::read_imu_checked(&path, &fmt) {
+            Ok(r) => {
+                prop_assert!(r.samples.t_ns.len() >= 2 && r.samples.t_ns.windows(2).all(|w| w[1] > w[0]));
+                prop_assert!(r.skipped.windows(2).all(|w| w[1].line > w[0].line));
+            }
+            Err(e) => prop_assert!(
+                matches!(e, ImuError::Timestamp { .. } | ImuError::TooFewRows { .. }),
+                "{e:?}"
+            ),
+        }
+    }
+}

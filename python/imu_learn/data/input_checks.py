@@ -77,9 +77,9 @@ GYRO_REST_NOISE_MAX_RAD_S = 0.05
 # a gyro at rest reading more than this (29 deg/s) is likely in deg/s (a warning: a turntable's
 # steady rotation is as quiet as rest);
 GYRO_REST_WARN_RAD_S = 0.5
-# a gyro stated in deg/s whose 99th percentile stays below this [rad/s] (1.1 deg/s) while the
+# a gyro stated in deg/s whose 99th percentile stays below this [rad/s] (2.9 deg/s) while the
 # accelerometer moves (its |acc| spread above ACC_MOVING_STD_MPS2) is likely in rad/s (a warning).
-GYRO_DEG_P99_MIN_RAD_S = 0.02
+GYRO_DEG_P99_MIN_RAD_S = 0.05
 ACC_MOVING_STD_MPS2 = 0.5
 
 _UNIT_NS = {"s": 1_000_000_000, "ms": 1_000_000, "us": 1_000, "ns": 1}

@@ -1,0 +1,222 @@
+"""A user's CSV mistakes never pass silently (imu_learn.data.input_checks, called by the one read of a
+user's CSV): each mistake a column map and its units let through stops a command with exit 2 and one
+line naming the mistake and the option that fixes it, or a warning where the data cannot decide; a
+correct file passes without a word; --skip-bad-lines skips a logger's truncated lines and counts them.
+
+The files are synthetic: 5 s at rest (gravity along z, a gyro bias, white noise), then 10 s of motion,
+at 200 Hz, written in the units and column order each test says."""
+from __future__ import annotations
+
+import logging
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from imu_learn.cli import main
+from imu_learn.data.formats import CsvColumns, read_imu_source, write_imu
+from imu_learn.data.formats.csv_columns import read_csv_columns
+from imu_learn.errors import ColumnCountError, ImplausibleInputError
+
+G = 9.80665
+RATE = 200.0
+T0_NS = 1_403_636_579_758_560_000  # a EuRoC stamp: Unix time in ns
+MAP = "t,gx,gy,gz,ax,ay,az"
+
+
+def samples(seconds_still: float = 5.0, seconds_moving: float = 10.0, seed: int = 0):
+    """Stamps [ns], gyro [rad/s], acc [m/s^2]: at rest, then turning (up to ~1.5 rad/s) and shaken."""
+    rng = np.random.default_rng(seed)
+    n_still, n_move = int(seconds_still * RATE), int(seconds_moving * RATE)
+    n = n_still + n_move
+    t = T0_NS + np.arange(n, dtype=np.int64) * int(1e9 / RATE)
+    gyro = np.tile([0.01, -0.005, 0.003], (n, 1)) + rng.normal(0, 0.002, (n, 3))
+    acc = np.tile([0.3, -0.2, G], (n, 1)) + rng.normal(0, 0.02, (n, 3))
+    s = np.arange(n_move) / RATE
+    gyro[n_still:] += np.c_[np.sin(2.1 * s), 0.8 * np.sin(1.3 * s + 1), 1.2 * np.cos(0.7 * s)]
+    acc[n_still:] += np.c_[2 * np.sin(3.1 * s), 1.5 * np.cos(2.3 * s), np.sin(1.7 * s)]
+    return t, gyro, acc
+
+
+def write(path: Path, t, gyro, acc, header: str = MAP, extra=None, time_text=str) -> Path:
+    """A CSV: header, then t, gyro, acc (and ``extra`` columns) as given, full precision."""
+    cols = [gyro, acc] + ([extra] if extra is not None else [])
+    body = np.concatenate(cols, axis=1)
+    lines = [header] + [",".join([time_text(int(ti))] + [repr(float(x)) for x in row]) for ti, row in zip(t, body)]
+    path.write_text("\n".join(lines) + "\n")
+    return path
+
+
+def calibrate(capsys, path: Path, *options: str):
+    """``imu-learn calibrate --imu-only --format csv-columns`` on ``path``: (exit code, stderr)."""
+    rc = main(["calibrate", "--imu-only", "--input", str(path), "--format", "csv-columns", "--out",
+               str(path.parent / "out"), "--no-plot", "--quiet", *options])
+    return rc, capsys.readouterr().err
+
+
+def refused(capsys, path: Path, *options: str) -> str:
+    """The one line calibrate stops with (exit 2, nothing written)."""
+    rc, err = calibrate(capsys, path, *options)
+    assert rc == 2, err
+    assert err.count("\n") == 1 and err.startswith("imu-learn calibrate: error: ImplausibleInputError: "), err
+    assert not (path.parent / "out").exists()
+    return err
+
+
+def test_a_correct_file_passes_silently(tmp_path, caplog):
+    t, g, a = samples()
+    f = write(tmp_path / "ok.csv", t, g, a)
+    with caplog.at_level(logging.INFO, logger="imu_learn"):
+        src = read_imu_source(f, columns=CsvColumns(MAP))
+        # in other units, named as such
+        f2 = write(tmp_path / "ok2.csv", t // 1000, np.degrees(g), a / G)
+        src2 = read_imu_source(f2, columns=CsvColumns(MAP, "us", "deg/s", "g"))
+    assert caplog.records == []
+    assert len(src.t_ns) == len(t) and src.skipped_lines == ()
+    np.testing.assert_allclose(src2.gyro, g, rtol=1e-12)
+    # and the format's default map (no --columns) for a file of seven columns
+    src3 = read_imu_source(f, columns=CsvColumns(columns_named=False))
+    assert len(src3.t_ns) == len(t)
+
+
+# 1. time unit ------------------------------------------------------------------------------------
+def test_microsecond_stamps_read_as_ns(tmp_path, capsys):
+    t, g, a = samples()
+    err = refused(capsys, write(tmp_path / "us.csv", t // 1000, g, a))
+    assert "the stamps step by 5000 ns (200 kHz) with --time-unit ns: they look like microseconds" in err
+    assert err.rstrip().endswith("add --time-unit us")
+
+
+def test_microsecond_stamps_read_as_ms(tmp_path, capsys):
+    t, g, a = samples()
+    boot = (t - t[0]) // 1000 + 123_456  # us since boot: 0.2 Hz in ms
+    err = refused(capsys, write(tmp_path / "boot.csv", boot, g, a), "--time-unit", "ms")
+    assert "(0.2 Hz) with --time-unit ms" in err and err.rstrip().endswith("add --time-unit us")
+    # Unix time in us read as ms does not even fit int64 ns: named the same way
+    err = refused(capsys, write(tmp_path / "epoch.csv", t // 1000, g, a), "--time-unit", "ms")
+    assert "epoch.csv:2: the stamp 1403636579758560 with --time-unit ms" in err
+    assert err.rstrip().endswith("add --time-unit us")
+
+
+# 2. acc unit -------------------------------------------------------------------------------------
+def test_acc_in_g_read_as_mps2(tmp_path, capsys):
+    t, g, a = samples()
+    err = refused(capsys, write(tmp_path / "g.csv", t, g, a / G))
+    assert "|acc| at rest is 1 m/s2" in err and err.rstrip().endswith("add --acc-unit g")
+
+
+def test_acc_in_mps2_read_as_g(tmp_path, capsys):
+    t, g, a = samples()
+    err = refused(capsys, write(tmp_path / "mps2.csv", t, g, a), "--acc-unit", "g")
+    assert "with --acc-unit g, near 9.81 g" in err and err.rstrip().endswith("add --acc-unit m/s2")
+
+
+# 3. gyro unit ------------------------------------------------------------------------------------
+def test_gyro_in_deg_read_as_rad(tmp_path, capsys):
+    t, g, a = samples()
+    err = refused(capsys, write(tmp_path / "deg.csv", t, np.degrees(g), a))
+    assert "faster than an IMU turns" in err and err.rstrip().endswith("add --gyro-unit deg/s")
+    # at rest alone: the gyro's noise, 57 times a gyro's in rad/s, gives it away
+    t, g, a = samples(seconds_still=15.0, seconds_moving=0.0)
+    g = g + np.random.default_rng(1).normal(0, 0.02, g.shape)  # 0.02 deg/s of noise... in deg/s
+    err = refused(capsys, write(tmp_path / "deg_rest.csv", t, np.degrees(g), a))
+    assert "noise at rest" in err and err.rstrip().endswith("add --gyro-unit deg/s")
+
+
+def test_gyro_in_rad_read_as_deg_is_a_warning(tmp_path, caplog):
+    t, g, a = samples()
+    f = write(tmp_path / "rad.csv", t, g, a)
+    with caplog.at_level(logging.WARNING, logger="imu_learn"):
+        read_imu_source(f, columns=CsvColumns(MAP, gyro_unit="deg/s"))
+    assert [r.levelno for r in caplog.records] == [logging.WARNING]
+    assert "drop --gyro-unit deg/s" in caplog.records[0].getMessage()
+
+
+# 4. gyro and acc swapped -------------------------------------------------------------------------
+def test_gyro_and_acc_swapped(tmp_path, capsys):
+    t, g, a = samples()
+    f = write(tmp_path / "swap.csv", t, a, g, header="t,ax,ay,az,gx,gy,gz")
+    err = refused(capsys, f, "--columns", MAP)
+    assert "gyro and acc look swapped" in err and "--columns t,ax,ay,az,gx,gy,gz" in err
+    # the same in g and deg/s
+    f = write(tmp_path / "swap2.csv", t, a / G, np.degrees(g))
+    err = refused(capsys, f, "--gyro-unit", "deg/s", "--acc-unit", "g")
+    assert "gyro and acc look swapped" in err
+
+
+# 5. a constant or integer column -----------------------------------------------------------------
+def test_a_constant_column_on_an_axis(tmp_path, capsys):
+    t, g, a = samples()
+    extra = np.c_[np.full(len(t), 25.0), np.random.default_rng(2).normal(0, 1, len(t))]
+    f = write(tmp_path / "const.csv", t, g, a, header="time,wx,wy,wz,ax,ay,az,temp,other", extra=extra)
+    err = refused(capsys, f, "--columns", "t,gx,gy,gz,ax,ay,_,az")
+    assert "column 8 (temp as az) holds 25 on every line" in err and "fix --columns" in err
+
+
+def test_an_integer_column_on_an_axis(tmp_path, capsys):
+    t, g, a = samples()
+    counts = np.round(a * 1000 / G)  # raw counts in mg
+    err = refused(capsys, write(tmp_path / "counts.csv", t, g, counts))
+    assert "column 5 (ax) holds integers only" in err and "fix --columns" in err
+
+
+# 6. more columns than the default map names ------------------------------------------------------
+def test_more_columns_than_the_default_map_names(tmp_path, capsys):
+    t, g, a = samples()
+    rng = np.random.default_rng(3)
+    extra = rng.normal(0, 1, (len(t), 10))
+    names = "timestamp,mag_x,mag_y,mag_z,gyro_x,gyro_y,gyro_z,acc_x,acc_y,acc_z," + ",".join(
+        f"aux{i}" for i in range(7))
+    body = np.c_[extra[:, :3], g, a, extra[:, 3:]]
+    f = tmp_path / "wide.csv"
+    f.write_text(names + "\n" + "\n".join(",".join([str(int(ti))] + [repr(float(x)) for x in row])
+                                          for ti, row in zip(t, body)) + "\n")
+    err = refused(capsys, f, "--acc-unit", "m/s2")
+    assert "wide.csv: has 17 columns; name them with --columns (e.g. --columns t,_,_,_,gx,gy,gz,ax,ay,az:" in err
+    # named, it reads
+    src = read_imu_source(f, columns=CsvColumns("t,_,_,_,gx,gy,gz,ax,ay,az"))
+    np.testing.assert_allclose(src.acc, a, rtol=1e-15)
+
+
+# 7. --skip-bad-lines -----------------------------------------------------------------------------
+def test_skip_bad_lines(tmp_path, capsys, caplog):
+    t, g, a = samples()
+    f = write(tmp_path / "log.csv", t, g, a)
+    lines = f.read_text().splitlines()
+    lines.insert(1, "60000,0.01,-0.0")  # the logger's first line, cut at its start
+    lines.append(f"{t[-1] + 5_000_000},0.0100,-0.00")  # its last line, cut by the power going off
+    f.write_text("\n".join(lines))
+    n = len(lines)
+    # without the flag: the exact error, naming file, line and field
+    rc, err = calibrate(capsys, f)
+    assert rc == 2 and err.startswith("imu-learn calibrate: error: ColumnCountError: ")
+    assert f"log.csv:2:4: field \"gz\" is missing" in err
+    with pytest.raises(ColumnCountError):
+        read_imu_source(f, columns=CsvColumns())
+    # with it: both skipped, counted in a warning and on the source
+    layout = CsvColumns(skip_bad_lines=True)
+    with caplog.at_level(logging.WARNING, logger="imu_learn"):
+        src = read_imu_source(f, columns=layout)
+    assert src.skipped_lines == (2, n)
+    np.testing.assert_array_equal(src.t_ns, t)
+    msg = caplog.records[0].getMessage()
+    assert "skipped 2 bad lines (--skip-bad-lines)" in msg and f"log.csv:{n}:4: field \"gz\" is missing" in msg
+    # the writer keeps them as they were
+    out = tmp_path / "out.csv"
+    write_imu(src, out, src.gyro * 2, src.acc)
+    back = out.read_text().splitlines()
+    assert back[1] == lines[1] and back[-1] == lines[-1] and back[0] == lines[0]
+    np.testing.assert_allclose(read_imu_source(out, columns=layout).gyro, 2 * src.gyro, rtol=1e-15)
+    # the CLI's flag
+    rc, err = calibrate(capsys, f, "--skip-bad-lines")
+    assert rc == 0 and err.startswith(f"imu-learn calibrate: warning: {f}: skipped 2 bad lines"), err
+
+
+def test_the_low_level_reader_stays_as_it_was(tmp_path):
+    """read_csv_columns (no checks) still reads what the checks refuse: the checks live in one place."""
+    t, g, a = samples()
+    f = write(tmp_path / "g.csv", t, g, a / G)
+    assert len(read_csv_columns(f)) == len(t)
+    with pytest.raises(ImplausibleInputError) as e:
+        read_imu_source(f, columns=CsvColumns())
+    assert e.value.option == "--acc-unit"
