@@ -260,3 +260,19 @@ class SolutionQualityError(ParseError):
 # device profiles (calib)
 class ProfileError(ParseError):
     """A device profile (``profile.json``) is malformed; ``path`` names the file, ``field`` the entry."""
+
+
+class ReferenceFrameError(ImuError, ValueError):
+    """A reference trajectory cannot be put into the IMU's frame and clock: its rotation does not follow
+    the IMU's, its lag is beyond the search, its motion leaves the rotation unobservable, or it holds
+    positions only. The message names the cause and the fix."""
+
+
+class ImplausibleProfileError(ImuError, ValueError):
+    """A fitted profile parameter lies outside what a MEMS IMU can be (``field`` names it), or the profile
+    does not lower the error against the reference on the held-back block: the symptom of a wrong frame,
+    unit or lag, not a finding. ``imu-learn calibrate --force`` writes it anyway, with a warning."""
+
+    def __init__(self, message: str, field: Optional[str] = None) -> None:
+        super().__init__(message)
+        self.field = field

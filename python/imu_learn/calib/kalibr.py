@@ -1,7 +1,7 @@
 """A profile's noise as Kalibr's ``imu.yaml`` (the file Kalibr, OpenVINS, VINS-Fusion and ORB-SLAM3
 read): the four noise figures in continuous time, the update rate they were measured at, and a
 rostopic placeholder. Each figure's line says where it came from (residuals, Allan deviation of
-still stretches, or an upper bound). Written by hand (no YAML library needed), read back by any
+still stretches, or, for a random walk no fit observed, the device-class default with its bound). Written by hand (no YAML library needed), read back by any
 YAML parser (tests/test_calibrate.py parses it with PyYAML)."""
 from __future__ import annotations
 
@@ -9,7 +9,7 @@ import math
 from pathlib import Path
 from typing import Union
 
-from imu_learn.calib.profile import NOISE_KEYS, NOISE_UNITS, Profile
+from imu_learn.calib.profile import CLASS_DEFAULT_SOURCE, NOISE_KEYS, NOISE_UNITS, Profile
 from imu_learn.util.atomic import atomic_write_text
 
 ROSTOPIC_PLACEHOLDER = "/imu0"
@@ -26,14 +26,17 @@ def kalibr_yaml(profile: Profile, rostopic: str = ROSTOPIC_PLACEHOLDER) -> str:
         "# IMU noise model in Kalibr's form (continuous time; discretise with update_rate)",
         f"# device: {profile.device}; written by imu-learn calibrate from profile.json ({profile.created})",
     ]
+    values = profile.kalibr()
     for key in NOISE_KEYS:
         term = profile.noise.get(key)
-        if term is None:
+        if profile.unobserved_noise(key):
+            why = f"not observed ({term.source} upper bound {_value(term.value)}): {CLASS_DEFAULT_SOURCE}"
+        elif term is None:
             why = "not measured: fill in a value (e.g. the datasheet's)"
         else:
             kind = term.detail.get("kind", "fit")
             why = f"{term.source}, {kind}" + (f", +-{term.std:.1e}" if term.std is not None and math.isfinite(term.std) else "")
-        value = _value(term.value if term is not None else math.nan)
+        value = _value(values[key] if values[key] is not None else math.nan)
         lines.append(f"{key}: {value}  # [{NOISE_UNITS[key]}] {why}")
     lines.append(f"rostopic: {rostopic}  # placeholder: your IMU topic")
     lines.append(f"update_rate: {profile.sample_rate_hz:.6g}  # [Hz]")

@@ -51,6 +51,11 @@ NOISE_UNITS = {
     "gyroscope_bias_instability": "rad/s", "accelerometer_bias_instability": "m/s^2",
 }
 SOURCES = ("residuals", "allan", "datasheet")
+# What a consumer of the profile (imu.yaml, navigate) uses for a bias random walk that no fit observed
+# (an Allan upper bound is a bound, not a value): Kalibr's published figures of a MEMS IMU (EuRoC's
+# ADIS16448 sensor.yaml), the same as the fusion's built-in noise.
+CLASS_DEFAULTS = {"gyroscope_random_walk": 1.9393e-5, "accelerometer_random_walk": 3.0e-3}
+CLASS_DEFAULT_SOURCE = "MEMS class default (EuRoC ADIS16448 sensor.yaml)"
 CONVENTIONS = {
     "body_frame": "the IMU's own axes",
     "world_frame": "the reference's gravity-aligned frame, z up",
@@ -155,6 +160,12 @@ class Profile:
     # the statistics of each recording it was fitted on (imu_learn.infer.guard.training_inputs), for
     # refine's guard; written only when known
     inputs: Dict[str, Any] = field(default_factory=dict)
+    # how the reference was moved into the IMU's frame (calib.reference.FrameFit.to_dict); empty: as given
+    reference: Dict[str, Any] = field(default_factory=dict)
+    # per floor parameter: {"observed": bool, "why": ...}; what was not observed keeps its prior
+    observed: Dict[str, Any] = field(default_factory=dict)
+    # the plausibility limits, the held-back block's errors and any check written through with --force
+    checks: Dict[str, Any] = field(default_factory=dict)
     version: int = PROFILE_VERSION
     created: str = field(default_factory=lambda: datetime.now(timezone.utc).isoformat(timespec="seconds"))
 
@@ -190,6 +201,7 @@ class Profile:
             "floor": clean(self.floor), "sources": clean(self.sources), "unobservable": self.unobservable,
             "fit_log": clean(self.fit_log),
             **({"inputs": clean(self.inputs)} if self.inputs else {}),
+            **{k: clean(getattr(self, k)) for k in ("reference", "observed", "checks") if getattr(self, k)},
         }
 
     def save(self, path: Union[str, Path]) -> None:
@@ -231,12 +243,20 @@ class Profile:
             floor=floor, noise=noise, noise_estimates=r.get("noise_estimates", list, []),
             sources=r.get("sources", list, []), unobservable=r.get("unobservable", list, []),
             fit_log=r.get("fit_log", dict, {}), inputs=r.get("inputs", dict, {}), version=version,
+            reference=r.get("reference", dict, {}), observed=r.get("observed", dict, {}), checks=r.get("checks", dict, {}),
             created=r.get("created", str, ""),
         )
 
     def kalibr(self) -> Dict[str, Optional[float]]:
-        """The four Kalibr noise figures (None where the profile has none)."""
-        return {k: (_num(self.noise[k].value) if k in self.noise else None) for k in NOISE_KEYS}
+        """The four Kalibr noise figures (None where the profile has none); a random walk that was not
+        observed (an upper bound) is the device-class default (:data:`CLASS_DEFAULTS`), never the bound."""
+        return {k: (CLASS_DEFAULTS[k] if self.unobserved_noise(k) else _num(self.noise[k].value) if k in self.noise
+                    else None) for k in NOISE_KEYS}
+
+    def unobserved_noise(self, key: str) -> bool:
+        """A random walk the profile only bounds (an Allan or residual upper bound)."""
+        t = self.noise.get(key)
+        return key in CLASS_DEFAULTS and t is not None and t.detail.get("kind") == "upper bound"
 
 
 class _Reader:

@@ -8,6 +8,7 @@ and from still stretches (:func:`noise.still_stretches`, :func:`noise.allan_nois
 """
 from __future__ import annotations
 
+import logging
 import math
 import time
 from dataclasses import asdict, dataclass, field
@@ -19,13 +20,16 @@ import numpy as np
 from imu_learn.baselines.base import FitSettings
 from imu_learn.calib import noise as nz
 from imu_learn.calib.kalibr import write_kalibr_yaml
+from imu_learn.calib.plausible import LIMITS, held_back_errors, held_back_findings, parameter_findings
 from imu_learn.calib.plot import plot_calibration
+from imu_learn.calib.reference import FrameFit
 from imu_learn.calib.profile import NOISE_KEYS, NOISE_UNITS, UNITS, Affine, NoiseTerm, Profile, noise_only
 from imu_learn.core.stamps import median_period_ns, sample_rate_hz
 from imu_learn.data.types import Segment
-from imu_learn.errors import InvalidInputError
+from imu_learn.errors import ImplausibleProfileError, InvalidInputError
 
 Progress = Callable[[str], None]
+logger = logging.getLogger(__name__)
 
 
 @dataclass
@@ -51,6 +55,7 @@ class CalibInputs:
     settings: FitSettings = FitSettings()
     device: str = "unknown"
     sources: List[Dict[str, Any]] = field(default_factory=list)
+    reference: Optional[FrameFit] = None  # how the reference was moved into the IMU's frame (--input)
 
 
 @dataclass(frozen=True)
@@ -58,6 +63,7 @@ class CalibOptions:
     min_still_s: float = 10.0  # total still time the Allan noise needs (τ = 1 s with ~10 clusters)
     still: nz.StillSettings = nz.StillSettings()
     plot: bool = True
+    force: bool = False  # write a profile that fails a plausibility check (with a warning)
 
 
 @dataclass
@@ -168,6 +174,38 @@ def floor_profile(inp: CalibInputs, progress: Progress,
     return prof, before, after
 
 
+def observed(ref: Optional[FrameFit]) -> Dict[str, Dict[str, Any]]:
+    """Per floor parameter: whether the reference observed it, and why not (profile.json's ``observed``)."""
+    yes = {"observed": True}
+    out = {k: dict(yes) for k in ("time_offset", "gyroscope.matrix", "gyroscope.bias", "g_sensitivity",
+                                  "accelerometer.matrix", "accelerometer.bias", "cutoff_gyro", "cutoff_acc")}
+    if ref is not None and ref.applied.get("lag"):
+        out["time_offset"] = {"observed": False, "why": f"the reference's stamps were {ref.lag_s * 1e3:+.0f} ms off the "
+                              "IMU's; the IMU's own offset cannot be told apart from the reference's latency"}
+    return out
+
+
+def plausibility(prof: Profile, inp: CalibInputs, options: CalibOptions, progress: Progress) -> Dict[str, Any]:
+    """The checks of :mod:`imu_learn.calib.plausible` on the fitted floor and on the held-back block;
+    a failure stops calibrate (:class:`ImplausibleProfileError`) unless ``options.force``."""
+    from imu_learn.calib import fit as ff  # torch: only where the floor is fitted
+
+    progress("checking the profile: plausibility and the held-back block")
+    found = parameter_findings(prof.floor, prof.gravity_mps2)
+    held = inp.val if inp.val else []
+    errs = held_back_errors(held, ff.calibrated(held, prof.floor, True), inp.settings.window, inp.settings.gravity)
+    found += held_back_findings(errs)
+    checks = {"limits": LIMITS, "held_back": errs, "failed": [f.line() for f in found], "forced": bool(found)}
+    if found and not options.force:
+        raise ImplausibleProfileError(f"calibrate: the profile is not written: {found[0].line()}"
+                                      + (f" (and {len(found) - 1} more)" if len(found) > 1 else "")
+                                      + "; check the reference's frame, units and clock (imu-learn groundtruth), or "
+                                      "write it anyway with --force", found[0].field)
+    for f in found:
+        logger.warning("written with --force although %s", f.line())
+    return checks
+
+
 def calibrate(inp: CalibInputs, out_dir: Path, options: CalibOptions = CalibOptions(),
               progress: Progress = lambda s: None) -> CalibResult:
     """Fit the profile of ``inp`` and write its files into ``out_dir``."""
@@ -178,6 +216,9 @@ def calibrate(inp: CalibInputs, out_dir: Path, options: CalibOptions = CalibOpti
     before = after = None
     if has_ref:
         prof, before, after = floor_profile(inp, progress)
+        prof.reference = inp.reference.to_dict() if inp.reference is not None else {}
+        prof.observed = observed(inp.reference)
+        prof.checks = plausibility(prof, inp, options, progress)
     else:
         prof = noise_only(inp.device, _rate([p.t_ns for p in inp.imu_only]), {})
     progress("still stretches and their Allan deviation")

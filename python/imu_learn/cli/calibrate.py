@@ -10,6 +10,7 @@ from pathlib import Path
 from typing import Any, Callable, List, Optional, Sequence, Tuple
 
 from imu_learn.baselines.base import FitSettings
+from imu_learn.calib.reference import FrameOptions, frame_lines, read_extrinsics, resolve_frame, to_imu_frame
 from imu_learn.calib.run import CalibInputs, CalibOptions, StillPiece, calibrate
 from imu_learn.cli.common import add_data_root, add_imu_input_options, csv_layout, run_command
 from imu_learn.data.formats import FORMATS, USER_CSV, detect_format, read_imu_source, read_recording, user_csv
@@ -59,6 +60,12 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--max-gap-s", type=float, default=None, metavar="S",
                    help="with --input: split at reference gaps longer than S (default 0.05, or 1.5 periods of a "
                         "sparse reference such as a 20 Hz VIO trajectory)")
+    p.add_argument("--extrinsics", type=Path, metavar="YAML",
+                   help="the reference sensor's known extrinsic (Kalibr / EuRoC sensor.yaml T_BS: the reference's "
+                        "frame in the IMU's); default: estimated from the rotation rates and written to profile.json")
+    p.add_argument("--force", action="store_true",
+                   help="write a profile that fails a plausibility check (scale, misalignment, bias, gravity, the "
+                        "held-back block), with a warning, instead of stopping")
     p.add_argument("--imu-only", action="store_true",
                    help="read each --input's IMU alone (no reference): the noise from its still stretches only")
     p.add_argument("--device", metavar="NAME", help="the device's name in the profile (default: the dataset a "
@@ -122,7 +129,9 @@ def _cut(segments: list, frac: float) -> Tuple[list, list]:
     return cut(segments, 0.0, 1.0 - frac, name), cut(segments, 1.0 - frac, 1.0, name)
 
 
-def from_inputs(args: argparse.Namespace) -> CalibInputs:
+def from_inputs(args: argparse.Namespace, say: Callable[[str], None] = lambda s: None) -> CalibInputs:
+    """The --input recordings: read, their reference checked against the IMU and moved into its frame
+    (:mod:`imu_learn.calib.reference`), then cut into the fitted and the held-back block."""
     gts: List[Optional[Path]] = list(args.groundtruth or [])
     if len(gts) > len(args.input):
         raise ConfigError(f"--groundtruth: {len(gts)} given for {len(args.input)} --input")
@@ -130,9 +139,11 @@ def from_inputs(args: argparse.Namespace) -> CalibInputs:
     inp = CalibInputs(settings=FitSettings())
     fmt0 = None
     columns = csv_layout(args)
-    for path in [*args.input, *(g for g in gts if g is not None)]:
+    for path in [*args.input, *(g for g in gts if g is not None), *([args.extrinsics] if args.extrinsics else [])]:
         if not path.exists():
             raise FileNotFoundError(2, "No such file or directory", str(path))
+    extrinsics = read_extrinsics(args.extrinsics) if args.extrinsics else None
+    pairs, names = [], []
     for path, gt in zip(args.input, gts):
         csv = user_csv(args.format, columns)
         fmt = USER_CSV if csv is not None else args.format if args.format != "auto" else detect_format(path)
@@ -141,14 +152,24 @@ def from_inputs(args: argparse.Namespace) -> CalibInputs:
             inp.imu_only.append(imu_piece(path, args.format, columns))
             inp.sources.append({"recording": str(path), "format": fmt, "role": "noise (IMU only)"})
             continue
-        segs = reference_segments(path, args.format, gt, columns, args.max_gap_s)
+        pairs.append(read_recording(path, args.format, gt, columns=columns))
+        names.append(path.stem if path.is_file() else path.name)
+        inp.sources.append({"recording": str(path), "format": fmt, "groundtruth": str(gt) if gt else "the format's own"})
+    if pairs:
+        say("checking the reference against the IMU (frame, lag, gravity, scale)")
+        inp.reference = resolve_frame(pairs, FrameOptions(), extrinsics, args.max_gap_s, names)
+        for line in frame_lines(inp.reference):
+            say(line)
+    for i, ((imu, ref), name, source) in enumerate(zip(pairs, names, inp.sources)):
+        ref = to_imu_frame(ref, inp.reference, i)
+        gap = args.max_gap_s if args.max_gap_s is not None else default_gap_s(ref)
+        segs = align(imu, ref, AlignOptions(max_gap_s=gap), name=name).segments
         tr, va = _cut(segs, args.val_fraction)
         inp.train += tr
         inp.val += va
-        inp.groups += [str(path)] * len(tr)
-        inp.val_groups += [str(path)] * len(va)
-        inp.sources.append({"recording": str(path), "format": fmt, "groundtruth": str(gt) if gt else "the format's own",
-                            "train": [_span(s) for s in tr], "val": [_span(s) for s in va]})
+        inp.groups += [source["recording"]] * len(tr)
+        inp.val_groups += [source["recording"]] * len(va)
+        source.update({"train": [_span(s) for s in tr], "val": [_span(s) for s in va]})
     first = inp.train[0].name if inp.train else inp.imu_only[0].name
     inp.device = args.device or _device(fmt0 or "auto", first)
     return inp
@@ -156,14 +177,6 @@ def from_inputs(args: argparse.Namespace) -> CalibInputs:
 
 def _span(s: Any) -> dict:
     return {"segment": s.name, "t0_ns": int(s.t_ns[0]), "t1_ns": int(s.t_ns[-1]), "samples": len(s)}
-
-
-def reference_segments(path: Path, fmt: str, gt: Optional[Path], columns: Any, max_gap_s: Optional[float]) -> list:
-    """A recording's gap-free segments with its reference on the IMU stamps."""
-    imu, ref = read_recording(path, fmt, gt, columns=columns)
-    gap = max_gap_s if max_gap_s is not None else default_gap_s(ref)
-    name = path.stem if path.is_file() else path.name
-    return align(imu, ref, AlignOptions(max_gap_s=gap), name=name).segments
 
 
 def imu_piece(path: Path, fmt: str, columns: Any = None) -> StillPiece:
@@ -183,9 +196,10 @@ def run(args: argparse.Namespace, rest: List[str], keep: Callable[[Any], None]) 
     check_learned(args)
     say = (lambda s: None) if args.quiet else (lambda s: logger.info("%s", s))
     say("reading the recordings")
-    inp = from_config(args) if args.config else from_inputs(args)
+    inp = from_config(args) if args.config else from_inputs(args, say)
     keep(f"{args.out} keeps only complete files (each written atomically)")
-    res = calibrate(inp, args.out, CalibOptions(min_still_s=args.min_still_s, plot=not args.no_plot), say)
+    res = calibrate(inp, args.out, CalibOptions(min_still_s=args.min_still_s, plot=not args.no_plot,
+                                                force=args.force), say)
     p = res.profile
     for line in summary(p):
         print(line)

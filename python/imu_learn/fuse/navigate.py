@@ -390,7 +390,8 @@ def imu_noise(src: Sources, opts: NavigateOptions, own: Optional[ImuNoise], prof
     if opts.imu_noise is not None:
         return ImuNoise(*opts.imu_noise, source="--imu-noise")
     if profile is not None:
-        return from_profile(profile.kalibr(), str(src.profile))
+        return from_profile(profile.kalibr(), str(src.profile),
+                            [k for k in profile.kalibr() if profile.unobserved_noise(k)])
     if own is not None:
         return own
     noise = ImuNoise()

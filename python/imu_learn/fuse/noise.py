@@ -9,7 +9,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Dict, Optional
+from typing import Dict, Optional, Sequence
 
 import numpy as np
 
@@ -67,13 +67,16 @@ class ImuNoise:
         return p
 
 
-def from_profile(kalibr: Dict[str, Optional[float]], where: str) -> ImuNoise:
+def from_profile(kalibr: Dict[str, Optional[float]], where: str, defaults: Sequence[str] = ()) -> ImuNoise:
     """The noise of a device profile (:meth:`imu_learn.calib.profile.Profile.kalibr`: Kalibr's four
-    names); a figure the profile lacks is the built-in one, and the source says which."""
+    names; ``defaults``: those of them that are the device-class default, not observed); a figure the
+    profile lacks is the built-in one, and the source says which."""
     ours = {v: k for k, v in SENSOR_KEYS.items()}
     missing = [name for name in ours if kalibr.get(name) is None]
     values = {ours[name]: float(v) for name, v in kalibr.items() if name in ours and v is not None}
     source = f"profile {where}"
+    if defaults:
+        source += f" ({', '.join(defaults)}: not observed, the MEMS class default)"
     if missing:
         source += f" ({', '.join(missing)}: built-in EuRoC ADIS16448)"
     return ImuNoise(**values, source=source)

@@ -1,0 +1,148 @@
+"""Calibrate from the references users have, scored where no fit has been: EuRoC's motion capture
+against ORB-SLAM2 stereo poses (left camera, first-camera world, no extrinsic given) and wrong
+references (rotated, late), each a profile of the same four flights scored open loop on unseen ones.
+
+For each reference kind: ``imu-learn calibrate --input F --groundtruth REF ...`` on MH_01, MH_03, MH_05
+and V2_01 (as a user runs it), then on each test flight ``imu-learn refine --profile P --bias
+still+gravity`` and the peers' open-loop figures of the refined IMU against the flight's ground truth
+(eval.peers: AOE RMSE, RO_RMSE and RP_RMSE over 1 s windows). The estimated extrinsic is compared with
+cam0's ``T_BS`` (euroc-vo/cam0_sensor.yaml).
+
+    IMU_LEARN_DATA=<root> python experiments/reference_kinds.py [--out reports/reference_kinds] [--trial 0]
+
+Data under the data root: euroc/<flight>, euroc-vo/orbslam2_stereo/trial<k>/<code>.txt,
+euroc-vo/cam0_sensor.yaml. Prints one markdown table; writes OUT/results.json. Writes:
+docs/experiments/references.md.
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import os
+import subprocess
+import sys
+import time
+from pathlib import Path
+from typing import Dict, List
+
+import numpy as np
+
+from imu_learn.core.quat import quat_mul, xyzw_to_wxyz, wxyz_to_xyzw
+from imu_learn.data.formats import read_imu_source, read_recording
+from imu_learn.data.formats.extrinsics import read_t_bs
+from imu_learn.data.loading import AlignOptions, align
+from imu_learn.eval.peers import PeerErrors, add_segment, segment_errors, summarise
+
+TRAIN = {"MH_01_easy": "MH01", "MH_03_medium": "MH03", "MH_05_difficult": "MH05", "V2_01_easy": "V201"}
+TEST = ["MH_04_difficult", "V1_03_difficult", "V2_02_medium"]
+
+
+def run(cmd: List[str]) -> subprocess.CompletedProcess:
+    print("$ " + " ".join(cmd), file=sys.stderr, flush=True)
+    return subprocess.run(cmd, capture_output=True, text=True)
+
+
+def rotated_tum(src: Path, dst: Path, deg: float, axis: np.ndarray, late_s: float = 0.0) -> Path:
+    """A TUM trajectory with its body frame rotated by ``deg`` about ``axis`` and stamps ``late_s`` late."""
+    rows = np.loadtxt(src, comments="#")
+    a = math.radians(deg)
+    q_rot = np.r_[math.cos(a / 2), math.sin(a / 2) * axis / np.linalg.norm(axis)]
+    q = quat_mul(xyzw_to_wxyz(rows[:, 4:8]), q_rot[None])
+    out = np.column_stack([rows[:, 0] + late_s, rows[:, 1:4], wxyz_to_xyzw(q)])
+    np.savetxt(dst, out, fmt="%.9f")
+    return dst
+
+
+def tum_of_groundtruth(flight: Path, dst: Path) -> Path:
+    _, gt = read_recording(flight)
+    np.savetxt(dst, np.column_stack([gt.t_ns * 1e-9, gt.p, wxyz_to_xyzw(gt.q_wxyz)]), fmt="%.9f")
+    return dst
+
+
+def score(flight: Path, refined: Path) -> Dict[str, float]:
+    imu, gt = read_recording(flight)
+    src = read_imu_source(refined)
+    e = PeerErrors()
+    for s in align(imu, gt, AlignOptions(max_gap_s=0.05)).segments:
+        i0 = int(np.searchsorted(src.t_ns, s.t_ns[0]))
+        g, a = src.gyro[i0:i0 + len(s)], src.acc[i0:i0 + len(s)]
+        add_segment(e, segment_errors(s, g, a))
+    return summarise(e)
+
+
+def main() -> int:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("--out", type=Path, default=Path("reports/reference_kinds"))
+    ap.add_argument("--trial", type=int, default=0)
+    ap.add_argument("--kinds", default="mocap,orbslam2,orbslam2+extrinsics,rot90,rot119,rot180,late100ms")
+    args = ap.parse_args()
+    root = Path(os.environ.get("IMU_LEARN_DATA", "datasets"))
+    out = args.out
+    out.mkdir(parents=True, exist_ok=True)
+    vo = root / "euroc-vo" / "orbslam2_stereo" / f"trial{args.trial}"
+    cam0 = root / "euroc-vo" / "cam0_sensor.yaml"
+    exe = [sys.executable, "-m", "imu_learn.cli"]
+    results: Dict[str, dict] = {}
+    for kind in args.kinds.split(","):
+        calib = out / kind
+        cmd = exe + ["calibrate", "--out", str(calib), "--no-plot", "--device", "euroc-adis16448"]
+        for flight, code in TRAIN.items():
+            f = root / "euroc" / flight
+            if kind == "mocap":
+                ref = tum_of_groundtruth(f, out / f"{flight}_gt.tum")
+            elif kind.startswith("orbslam2"):
+                ref = vo / f"{code}.txt"
+            elif kind.startswith("rot"):
+                ref = rotated_tum(tum_of_groundtruth(f, out / f"{flight}_gt.tum"), out / f"{flight}_{kind}.tum",
+                                  float(kind[3:]), np.array([1.0, 2.0, 3.0]))
+            else:
+                ref = rotated_tum(tum_of_groundtruth(f, out / f"{flight}_gt.tum"), out / f"{flight}_{kind}.tum",
+                                  0.0, np.array([0, 0, 1.0]), late_s=0.1)
+            cmd += ["--input", str(f), "--groundtruth", str(ref)]
+        if kind.endswith("+extrinsics"):
+            cmd += ["--extrinsics", str(cam0)]
+        t0 = time.time()
+        res = run(cmd)
+        row: dict = {"exit": res.returncode, "seconds": round(time.time() - t0, 1),
+                     "said": (res.stdout + res.stderr).strip().splitlines()[-12:]}
+        print(f"{kind}: exit {res.returncode} in {row['seconds']} s", file=sys.stderr)
+        profile = calib / "profile.json"
+        if res.returncode == 0 and profile.exists():
+            prof = json.loads(profile.read_text())
+            ref_fit = prof.get("reference") or {}
+            if "rotation_imu_from_reference" in ref_fit:
+                r = np.asarray(ref_fit["rotation_imu_from_reference"])
+                t_bs = read_t_bs(cam0)[:3, :3]
+                row["extrinsic_error_deg"] = math.degrees(math.acos(np.clip((np.trace(r @ t_bs.T) - 1) / 2, -1, 1)))
+            row["gyro_bias"] = prof["gyroscope"]["bias"]
+            row["acc_bias"] = prof["accelerometer"]["bias"]
+            row["acc_matrix"] = prof["accelerometer"]["matrix"]
+            row["floor"] = {k: prof["floor"].get(k) for k in ("time_offset", "cutoff_gyro", "cutoff_acc")}
+            for flight in TEST:
+                f = root / "euroc" / flight
+                dst = out / f"{kind}_{flight}"
+                r = run(exe + ["refine", "--profile", str(profile), "--input", str(f), "--out", str(dst),
+                               "--bias", "still+gravity", "--force"])
+                if r.returncode != 0:
+                    row[flight] = {"refine_exit": r.returncode, "said": r.stderr.strip()[-300:]}
+                    continue
+                row[flight] = score(f, dst)
+        results[kind] = row
+        (out / "results.json").write_text(json.dumps(results, indent=2, default=float))
+    print("| reference | exit | s | extrinsic err [deg] | " + " | ".join(f"{f[:5]} AOE / RO 1s / RP 1s" for f in TEST) + " |")
+    print("|---|---|---|---|" + "---|" * len(TEST))
+    for kind, row in results.items():
+        cells = []
+        for f in TEST:
+            s = row.get(f)
+            cells.append(f"{s['aoe_deg']:.2f}° / {s['ro_rmse_deg']:.3f}° / {100 * s['rp_rmse_m']:.2f} cm"
+                         if s and "aoe_deg" in s else "-")
+        ext = row.get("extrinsic_error_deg")
+        print(f"| {kind} | {row['exit']} | {row['seconds']} | {'-' if ext is None else f'{ext:.2f}'} | "
+              + " | ".join(cells) + " |")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,132 @@
+"""Is a fitted profile physically plausible, and does it help where it was not fitted?
+
+A profile outside what a MEMS IMU can be is the symptom of a wrong frame, unit or lag in the input,
+not a finding (design: references users have). ``imu-learn calibrate`` writes a profile only when
+every check here passes; otherwise it stops (exit 2) with one line naming the parameter and the
+likely cause; ``--force`` writes it with a warning.
+
+The limits (MEMS IMUs; :data:`LIMITS`, each documented in docs/your-device.md):
+
+* scale (each diagonal entry of M_g, M_a) within 0.8-1.25;
+* misalignment (each off-diagonal entry over its row's diagonal, as an angle) below 5°;
+* |gyro bias| below 0.1 rad/s per axis, |acc bias| below 1 m/s^2 per axis;
+* no row of a calibration matrix near zero (an axis that reads nothing);
+* the floor's gravity consistency within 5 % of 9.81 m/s^2;
+* on the held-back block (the validation segments, never fitted), the floor lowers the relative
+  rotation error over ``window`` samples against the raw IMU, and does not raise the translation
+  error by more than ``HELD_BACK_SLACK`` (the translation of a sparse reference is noisier than the
+  accelerometer, so a tie counts as no harm).
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Any, Dict, List, Optional, Sequence, Tuple
+
+import numpy as np
+
+from imu_learn.score.metrics import relative_pose_errors, rmse, with_imu
+
+LIMITS: Dict[str, Any] = {
+    "scale": (0.8, 1.25),
+    "misalignment_deg": 5.0,
+    "gyro_bias_rad_s": 0.1,
+    "acc_bias_mps2": 1.0,
+    "row_norm_min": 0.5,
+    "gravity_rel": 0.05,
+}
+HELD_BACK_SLACK = 1.02
+G = 9.81
+
+
+@dataclass
+class Finding:
+    """One failed check: ``field`` (profile.json's name), what was found and the likely cause."""
+
+    field: str
+    message: str
+
+    def line(self) -> str:
+        return f"{self.field}: {self.message}"
+
+
+def _matrix_findings(name: str, m: np.ndarray, unit_hint: str) -> List[Finding]:
+    out = []
+    lo, hi = LIMITS["scale"]
+    for i in range(3):
+        row = m[i]
+        if np.linalg.norm(row) < LIMITS["row_norm_min"]:
+            out.append(Finding(f"{name}.matrix[{i}]", f"row {i} is near zero (|row| {np.linalg.norm(row):.3g}): that "
+                                                      "axis reads nothing in the reference's motion; a constant or "
+                                                      "swapped column, or a frame the reference cannot resolve"))
+            continue
+        d = row[i]
+        if not lo <= d <= hi:
+            out.append(Finding(f"{name}.matrix[{i}][{i}]", f"scale {d:.4g} outside {lo}-{hi}: {unit_hint}"))
+        for j in range(3):
+            if j != i:
+                ang = math.degrees(math.atan2(abs(row[j]), abs(d)))
+                if ang >= LIMITS["misalignment_deg"]:
+                    out.append(Finding(f"{name}.matrix[{i}][{j}]", f"misalignment {ang:.1f}° (limit "
+                                       f"{LIMITS['misalignment_deg']:g}°): the reference is not in the IMU's frame, "
+                                       "or its motion does not excite this term"))
+    return out
+
+
+def parameter_findings(floor: Dict[str, Any], gravity_mps2: Optional[float]) -> List[Finding]:
+    """Every limit of the module doc that ``floor`` (the profile's parameter dict) breaks."""
+    out = _matrix_findings("gyroscope", np.asarray(floor["M_g"]), "a gyro unit off (deg/s read as rad/s: 57x) or a "
+                                                                   "reference rotation in another unit")
+    out += _matrix_findings("accelerometer", np.asarray(floor["M_a"]), "an acc unit off (g read as m/s^2: 9.8x) or a "
+                                                                       "reference position scale off (monocular VO)")
+    bg = np.abs(np.asarray(floor["b_g"]))
+    if np.any(bg >= LIMITS["gyro_bias_rad_s"]):
+        out.append(Finding("gyroscope.bias", f"|bias| {bg.max():.3g} rad/s (limit {LIMITS['gyro_bias_rad_s']:g}): a "
+                                             "reference in another frame, or a gyro unit off"))
+    ba = np.abs(np.asarray(floor["b_a"]))
+    if np.any(ba >= LIMITS["acc_bias_mps2"]):
+        out.append(Finding("accelerometer.bias", f"|bias| {ba.max():.3g} m/s^2 (limit {LIMITS['acc_bias_mps2']:g}): a "
+                                                 "reference world not levelled, a lever arm, or an acc unit off"))
+    if gravity_mps2 is not None and math.isfinite(gravity_mps2) and abs(gravity_mps2 / G - 1) > LIMITS["gravity_rel"]:
+        out.append(Finding("gravity_mps2", f"{gravity_mps2:.3f} m/s^2 after the profile (limit +-"
+                                           f"{100 * LIMITS['gravity_rel']:g} % of {G}): the acc unit, or a reference "
+                                           "whose world is not gravity-aligned or not metric"))
+    return out
+
+
+def held_back_errors(segs: Sequence[Any], calibrated: Sequence[Tuple[np.ndarray, np.ndarray]], n: int,
+                     gravity: float = G) -> Dict[str, float]:
+    """Relative rotation [deg] and translation [m] RMSE over ``n`` samples on ``segs`` (the held-back
+    block), raw and with each segment's ``calibrated`` (gyro, acc), stride n/2."""
+    raw_r, raw_t, cal_r, cal_t = [], [], [], []
+    stride = max(1, n // 2)
+    for s, (g, a) in zip(segs, calibrated):
+        if len(s) <= n:
+            continue
+        e0 = relative_pose_errors(s, n, stride, gravity)
+        e1 = relative_pose_errors(with_imu(s, g, a), n, stride, gravity)
+        raw_r.append(e0["rot_rad"])
+        raw_t.append(e0["trans_m"])
+        cal_r.append(e1["rot_rad"])
+        cal_t.append(e1["trans_m"])
+    if not raw_r:
+        return {}
+    return {"window_samples": n, "raw_rot_deg": math.degrees(rmse(np.concatenate(raw_r))),
+            "raw_trans_m": rmse(np.concatenate(raw_t)), "profile_rot_deg": math.degrees(rmse(np.concatenate(cal_r))),
+            "profile_trans_m": rmse(np.concatenate(cal_t))}
+
+
+def held_back_findings(errs: Dict[str, float]) -> List[Finding]:
+    """The held-back check of the module doc (nothing to say without a held-back block)."""
+    if not errs:
+        return []
+    out = []
+    if errs["profile_rot_deg"] > errs["raw_rot_deg"]:
+        out.append(Finding("held_back.rotation", f"the profile raises the rotation error on the held-back block "
+                                                 f"({errs['profile_rot_deg']:.3f}° against raw {errs['raw_rot_deg']:.3f}° "
+                                                 f"over {errs['window_samples']} samples)"))
+    if errs["profile_trans_m"] > HELD_BACK_SLACK * errs["raw_trans_m"]:
+        out.append(Finding("held_back.translation", f"the profile raises the translation error on the held-back "
+                                                    f"block ({errs['profile_trans_m']:.4f} m against raw "
+                                                    f"{errs['raw_trans_m']:.4f} m over {errs['window_samples']} samples)"))
+    return out

@@ -1,0 +1,449 @@
+"""A 6-DoF reference in any frame, moved into the IMU's: what ``imu-learn calibrate`` does to a
+VIO/SLAM trajectory (camera frame, first-camera world) or any pose file before it fits the floor.
+
+The chain (docs: your-device.md; design: a 6-DoF reference in an unknown frame):
+
+1. **Lag** from the cross-correlation of the angular-rate magnitudes |ω| (a magnitude does not depend
+   on the frame), over ``max_lag_s``; the peak's normalised correlation says whether the two
+   rotations are the same motion at all. A lag at the search's edge or a weak peak is refused.
+2. **Rotation** reference body -> IMU and the gyro bias from matched mean angular rates (Wahba's
+   problem by SVD, :func:`imu_learn.eval.groundtruth.fit_offset`, searched around the lag to a
+   fraction of a sample), its residual and, from blocks of windows resampled, its uncertainty.
+   Motion about one axis only leaves the rotation about that axis free: refused (give
+   ``--extrinsics``).
+3. **Gravity, scale and lever arm** in the reference's world by linear least squares over windows of
+   ``window_s``:  Σ R_WI f dt = s Δv_ref + Δ(R_WB (ω × r)) + g_up T,  unknowns the reference's
+   scale s (metres per reference unit), the lever arm r (IMU origin in the reference body frame) and g_up (the specific force
+   of rest, in the reference world). The world is then levelled (g_up to +z),
+   the scale applied where the reference is not metric (|s − 1| beyond 3 standard errors and 2 %)
+   and the lever arm where it is significant.
+4. The reference, rotated, levelled, scaled, moved to the IMU origin and put on the IMU's clock
+   (:func:`to_imu_frame`), is then an ordinary ground truth for the floor.
+
+A reference that is already in the IMU frame (rotation below ``identity_deg``, lag within the floor's
+own search, level, metric, no lever arm) is returned untouched, so a motion-capture profile stays
+what it was. With ``--extrinsics`` (Kalibr / EuRoC ``T_BS``) the rotation and lever arm are given,
+not fitted; the lag, gravity and scale still are.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Dict, List, Optional, Sequence, Tuple
+
+import numpy as np
+
+from imu_learn.core.quat import quat_conj, quat_mul, quat_rotate
+from imu_learn.data.formats.extrinsics import read_t_bs
+from imu_learn.data.types import GroundTruth, ImuData, Segment, sample_rate_hz
+from imu_learn.errors import ReferenceFrameError
+from imu_learn.eval.groundtruth import default_gap_s, fit_offset, kabsch, rotation_matrices, segments
+
+G = 9.81
+
+
+@dataclass(frozen=True)
+class FrameOptions:
+    """``max_lag_s``: the lag search of step 1; ``min_correlation``: the |ω| peak below which the
+    reference is not the IMU's motion; ``identity_deg``: a rotation below this is the IMU frame;
+    ``planar_ratio``: the smallest over the largest spread of the reference's rates below which the
+    motion turns about one axis only; ``window_s``: step 3's windows; ``floor_lag_s``: a lag within
+    this is left to the floor's own time-offset fit (its search, 3 samples at 200 Hz); an estimated lever
+    arm is applied when its norm is ``lever_sigmas`` standard errors and ``min_lever_m`` or more; a
+    world is levelled when it is tilted ``level_deg`` or more (below, the tilt cannot be told from the
+    accelerometer's bias: 0.34 m/s^2 tilts the estimate by 2°, and the floor's acc bias absorbs it)."""
+
+    max_lag_s: float = 1.0
+    min_correlation: float = 0.6
+    identity_deg: float = 0.5
+    planar_ratio: float = 0.02
+    max_rate_residual: float = 0.5
+    window_s: float = 1.0
+    floor_lag_s: float = 0.015
+    level_deg: float = 2.0
+    lever_sigmas: float = 5.0
+    min_lever_m: float = 0.02
+
+
+@dataclass
+class Extrinsics:
+    """A known reference body -> IMU transform: ``r_imu_ref`` (ω_imu = R ω_ref) and the IMU origin in
+    the reference body frame ``lever_m``."""
+
+    r_imu_ref: np.ndarray
+    lever_m: np.ndarray
+    source: str
+
+
+@dataclass
+class FrameFit:
+    """What step 1-3 found (module doc); ``in_imu_frame``: nothing to change."""
+
+    r_imu_ref: np.ndarray
+    rotation_deg: float
+    rotation_std_deg: float
+    rate_residual: float  # RMS [rad/s] of the rate fit, against ``rate_rms`` of the motion
+    rate_rms: float
+    lag_s: float
+    lag_correlation: float
+    gyro_bias: np.ndarray
+    scale: float
+    scale_std: float
+    lever_m: np.ndarray
+    lever_std_m: np.ndarray
+    tilt_deg: float  # the largest of the reference worlds' z from up
+    g_up: np.ndarray  # (recordings, 3): each recording's specific force of rest in its reference world
+    rate_hz: float
+    extrinsics: Optional[str] = None
+    applied: Dict[str, bool] = field(default_factory=dict)
+
+    @property
+    def in_imu_frame(self) -> bool:
+        return not any(self.applied.values())
+
+    def to_dict(self) -> Dict[str, Any]:
+        """profile.json's ``reference`` entry."""
+        return {
+            "rotation_imu_from_reference": self.r_imu_ref.tolist(), "rotation_deg": self.rotation_deg,
+            "rotation_std_deg": self.rotation_std_deg, "rate_residual_rad_s": self.rate_residual,
+            "rate_rms_rad_s": self.rate_rms, "lag_s": self.lag_s, "lag_correlation": self.lag_correlation,
+            "scale": self.scale, "scale_std": self.scale_std, "lever_arm_m": self.lever_m.tolist(),
+            "lever_arm_std_m": self.lever_std_m.tolist(), "world_tilt_deg": self.tilt_deg,
+            "gravity_in_reference_world": np.asarray(self.g_up).tolist(),
+            "reference_rate_hz": self.rate_hz, "extrinsics": self.extrinsics or "estimated",
+            "applied": dict(self.applied),
+        }
+
+
+# ---------------------------------------------------------------------------------------------
+# step 1: the lag from |ω|
+
+
+def _rates_on_grid(t_s: np.ndarray, q_wxyz: np.ndarray, grid: np.ndarray) -> np.ndarray:
+    """The reference's angular-rate magnitude on ``grid`` (finite differences of its orientation)."""
+    dq = quat_mul(quat_conj(q_wxyz[:-1]), q_wxyz[1:])
+    ang = 2 * np.arctan2(np.linalg.norm(dq[:, 1:], axis=1), np.abs(dq[:, 0]))
+    w = ang / np.maximum(np.diff(t_s), 1e-9)
+    return np.interp(grid, 0.5 * (t_s[1:] + t_s[:-1]), w)
+
+
+def fit_lag(imu: ImuData, ref: GroundTruth, max_lag_s: float, dt_s: float = 0.005) -> Tuple[float, float, bool]:
+    """(lag [s]: the IMU at t matches the reference at t + lag, normalised correlation of the peak, at
+    the search's edge) from |ω| on a common grid of ``dt_s``, smoothed to the reference's own rate."""
+    t_i, t_r = imu.t_ns * 1e-9, ref.t_ns * 1e-9
+    t0, t1 = max(t_i[0], t_r[0]), min(t_i[-1], t_r[-1])
+    if t1 - t0 < 4 * max_lag_s:
+        raise ReferenceFrameError(f"the reference overlaps the IMU for {max(t1 - t0, 0):.1f} s; the frame check "
+                                  f"needs {4 * max_lag_s:g} s: check both files' time units and clocks")
+    grid = np.arange(t0, t1, dt_s)
+    ref_period = float(np.median(np.diff(t_r)))
+    k = max(1, int(round(ref_period / dt_s)))
+    box = np.ones(k) / k
+    wi = np.convolve(np.interp(grid, t_i, np.linalg.norm(imu.gyro, axis=1)), box, "same")
+    wr = np.convolve(_rates_on_grid(t_r, ref.q_wxyz, grid), box, "same")
+    wi, wr = wi - wi.mean(), wr - wr.mean()
+    n = len(grid)
+    size = 1 << int(math.ceil(math.log2(2 * n)))
+    xc = np.fft.irfft(np.fft.rfft(wr, size) * np.conj(np.fft.rfft(wi, size)), size)
+    m = int(round(max_lag_s / dt_s))
+    lags = np.r_[0:m + 1, -m:0]
+    vals = np.r_[xc[:m + 1], xc[size - m:]]
+    overlap = n - np.abs(lags)
+    vals = vals / overlap
+    i = int(np.argmax(vals))
+    lag = lags[i]
+    a = wi[max(0, -lag):n - max(0, lag)]
+    b = wr[max(0, lag):n - max(0, -lag)] if lag >= 0 else wr[:n + lag]
+    corr = float(np.corrcoef(a, b)[0, 1]) if len(a) > 10 else 0.0
+    return float(lag * dt_s), corr, abs(lag) >= m - 1
+
+
+# ---------------------------------------------------------------------------------------------
+# step 2: the rotation
+
+
+def rate_window(imu_rate: float, ref_rate: float) -> int:
+    """Mean rates over at least two reference periods (a 20 Hz VO: 100 ms), at least 10 samples."""
+    return max(10, int(round(2 * imu_rate / max(ref_rate, 1e-9))))
+
+
+def rotation_spread(segs: Sequence[Segment], m: int, blocks: int = 20, seed: int = 0) -> float:
+    """Standard deviation [deg] of the fitted rotation over blocks of windows resampled (a bootstrap)."""
+    from imu_learn.eval.groundtruth import mean_rates
+
+    rates = [mean_rates(s, m) for s in segs if len(s) > 2 * m]
+    if not rates:
+        return math.nan
+    a = np.concatenate([r[0] for r in rates])
+    b = np.concatenate([r[1] for r in rates])
+    r0 = kabsch(a, b)[0]
+    edges = np.linspace(0, len(a), blocks + 1).astype(int)
+    rng = np.random.default_rng(seed)
+    angles = []
+    for _ in range(30):
+        pick = rng.integers(0, blocks, blocks)
+        idx = np.concatenate([np.arange(edges[j], edges[j + 1]) for j in pick])
+        r = kabsch(a[idx], b[idx])[0]
+        angles.append(_angle_deg(r @ r0.T))
+    return float(np.sqrt(np.mean(np.square(angles))))
+
+
+def _angle_deg(r: np.ndarray) -> float:
+    return math.degrees(math.acos(np.clip((np.trace(r) - 1) / 2, -1.0, 1.0)))
+
+
+def planar_ratio(segs: Sequence[Segment], m: int) -> float:
+    """Smallest over largest standard deviation of the reference's mean rates along its principal axes."""
+    from imu_learn.eval.groundtruth import mean_rates
+
+    b = np.concatenate([mean_rates(s, m)[1] for s in segs if len(s) > 2 * m])
+    sv = np.linalg.svd(b - b.mean(0), compute_uv=False)
+    return float(sv[-1] / max(sv[0], 1e-12))
+
+
+# ---------------------------------------------------------------------------------------------
+# step 3: gravity, scale, lever arm
+
+
+def _window_rows(s: Segment, r_imu_ref: np.ndarray, gyro_bias: np.ndarray, n: int) -> Tuple[np.ndarray, np.ndarray]:
+    """Rows of step 3's least squares over non-overlapping windows of ``n`` samples of one segment:
+    unknowns (s, r(3), g_up(3))."""
+    dt = np.diff(s.t_ns) * 1e-9
+    r_wb = rotation_matrices(s.q_wxyz)
+    r_wi = r_wb @ r_imu_ref.T
+    f_w = np.einsum("nij,nj->ni", r_wi, s.acc)[:-1] * dt[:, None]
+    c_f = np.concatenate([np.zeros((1, 3)), np.cumsum(f_w, 0)])
+    w_b = (s.gyro - gyro_bias) @ r_imu_ref  # in the reference body frame
+    lever_v = r_wb @ _skew(w_b)  # v_lever = R_WB (ω × r) = R_WB [ω]x r
+    starts = np.arange(0, len(s) - n, n)
+    ends = starts + n
+    rows, ys = [], []
+    for i0, i1 in zip(starts, ends):
+        t = (s.t_ns[i1] - s.t_ns[i0]) * 1e-9
+        a = np.zeros((3, 7))
+        a[:, 0] = s.v[i1] - s.v[i0]
+        a[:, 1:4] = lever_v[i1] - lever_v[i0]
+        a[:, 4:7] = np.eye(3) * t
+        rows.append(a)
+        ys.append(c_f[i1] - c_f[i0])
+    if not rows:
+        return np.zeros((0, 7)), np.zeros(0)
+    return np.concatenate(rows), np.concatenate(ys)
+
+
+def _skew(v: np.ndarray) -> np.ndarray:
+    z = np.zeros(len(v))
+    return np.stack([np.stack([z, -v[:, 2], v[:, 1]], -1), np.stack([v[:, 2], z, -v[:, 0]], -1),
+                     np.stack([-v[:, 1], v[:, 0], z], -1)], 1)
+
+
+def fit_gravity_scale_lever(recordings: Sequence[Sequence[Segment]], r_imu_ref: np.ndarray, gyro_bias: np.ndarray,
+                            window_s: float) -> Dict[str, np.ndarray]:
+    """Step 3 (module doc): x = (s, r, g_up of each recording: each has its own world) with standard
+    errors, robust (Huber reweighting). The acc bias is left to the floor: on a platform that stays
+    near level it is collinear with g_up (body z stays along world up), and |b_a| / g tilts the world
+    by a fraction of a degree at most."""
+    k = len(recordings)
+    rows, ys = [], []
+    for i, segs in enumerate(recordings):
+        for s in segs:
+            n = int(round(window_s / (np.median(np.diff(s.t_ns)) * 1e-9)))
+            if len(s) > n + 1:
+                a, y = _window_rows(s, r_imu_ref, gyro_bias, n)
+                wide = np.zeros((len(a), 4 + 3 * k))
+                wide[:, :4] = a[:, :4]
+                wide[:, 4 + 3 * i:7 + 3 * i] = a[:, 4:7]
+                rows.append(wide)
+                ys.append(y)
+    if not rows:
+        raise ReferenceFrameError(f"no stretch of the reference is longer than {window_s:g} s without a gap: "
+                                  "raise --max-gap-s")
+    a = np.concatenate(rows)
+    y = np.concatenate(ys)
+    if np.any(np.abs(a[:, 4:]).sum(0) == 0):
+        raise ReferenceFrameError(f"a recording has no stretch of the reference longer than {window_s:g} s without a "
+                                  "gap: raise --max-gap-s")
+    w = np.ones(len(y))
+    for _ in range(5):  # Huber on 3-vectors: a window with a loop-closure jump pulls only linearly
+        sw = np.sqrt(w)
+        x, *_ = np.linalg.lstsq(a * sw[:, None], y * sw, rcond=None)
+        res = (y - a @ x).reshape(-1, 3)
+        norm = np.linalg.norm(res, axis=1)
+        cap = 1.5 * np.median(norm) + 1e-12
+        w = np.repeat(np.minimum(1.0, cap / np.maximum(norm, 1e-12)), 3)
+    res = y - a @ x
+    s2 = float(np.sum(w * res**2) / max(1, len(y) - a.shape[1]))
+    cov = s2 * np.linalg.pinv((a * w[:, None]).T @ a)
+    se = np.sqrt(np.maximum(np.diag(cov), 0.0))
+    return {"scale": x[0], "scale_std": se[0], "lever": x[1:4], "lever_std": se[1:4],
+            "g_up": x[4:].reshape(k, 3)}
+
+
+def level_rotation(g_up: np.ndarray) -> np.ndarray:
+    """The smallest rotation taking ``g_up``'s direction to +z."""
+    u = g_up / np.linalg.norm(g_up)
+    z = np.array([0.0, 0.0, 1.0])
+    v, c = np.cross(u, z), float(u @ z)
+    if np.linalg.norm(v) < 1e-12:
+        return np.eye(3) if c > 0 else np.diag([1.0, -1.0, -1.0])
+    k = np.array([[0, -v[2], v[1]], [v[2], 0, -v[0]], [-v[1], v[0], 0]])
+    return np.eye(3) + k + k @ k / (1 + c)
+
+
+# ---------------------------------------------------------------------------------------------
+# the whole chain
+
+
+def resolve_frame(pairs: Sequence[Tuple[ImuData, GroundTruth]], options: FrameOptions = FrameOptions(),
+                  extrinsics: Optional[Extrinsics] = None, max_gap_s: Optional[float] = None,
+                  names: Optional[Sequence[str]] = None) -> FrameFit:
+    """Steps 1-3 over every (IMU, reference) pair of one device and one reference kind (one rig)."""
+    names = list(names or [f"recording {i + 1}" for i in range(len(pairs))])
+    lags = []
+    for (imu, ref), name in zip(pairs, names):
+        check_orientation(ref, name)
+        lag, corr, edge = fit_lag(imu, ref, options.max_lag_s)
+        if corr < options.min_correlation:
+            raise ReferenceFrameError(
+                f"{name}: the reference's rotation does not follow the IMU's (|w| correlation {corr:.2f} at its best "
+                f"lag, within +-{options.max_lag_s:g} s): a reference of another recording, a time unit off, or a "
+                "lag beyond the search; check the files (imu-learn groundtruth)")
+        if edge:
+            raise ReferenceFrameError(f"{name}: the reference lags the IMU by {lag:+.2f} s or more (the search's edge, "
+                                      f"+-{options.max_lag_s:g} s): put both on one clock")
+        lags.append((lag, corr))
+    lag = float(np.median([x[0] for x in lags]))
+    corr = float(min(x[1] for x in lags))
+    imu_rate = sample_rate_hz(pairs[0][0].t_ns)
+    ref_rate = float(np.median([sample_rate_hz(ref.t_ns) for _, ref in pairs]))
+    coarse = lag if abs(lag) > options.floor_lag_s else 0.0
+    per: List[List[Segment]] = []
+    for imu, ref in pairs:
+        gap = max_gap_s if max_gap_s is not None else default_gap_s(ref)
+        per.append(segments(imu, ref, gap, shift_s=coarse))
+    segs = [s for p in per for s in p]
+    if not segs:
+        raise ReferenceFrameError("no stretch of IMU samples with the reference: check --max-gap-s and the clocks")
+    m = rate_window(imu_rate, ref_rate)
+    ratio = planar_ratio(segs, m)
+    off = fit_offset(segs, m=m, max_shift=max(3, int(round(0.02 * imu_rate))))
+    w_rms = float(np.sqrt(np.mean(np.concatenate([np.sum(np.square(s.gyro - off.gyro_bias), 1) for s in segs]))))
+    if extrinsics is None:
+        if ratio < options.planar_ratio:
+            raise ReferenceFrameError(
+                f"the reference turns about one axis only (rate spread ratio {ratio:.3f}): the rotation between its "
+                "frame and the IMU is not observable from this motion; give --extrinsics FILE, or a reference "
+                "with tilting motion (planar wheel odometry observes yaw rate and speed only)")
+        if off.rms > options.max_rate_residual * w_rms:
+            raise ReferenceFrameError(
+                f"the reference's rotation rates do not match the IMU's in any frame (residual {off.rms:.3f} rad/s "
+                f"against {w_rms:.3f} rad/s of motion): a wrong file, unit or clock")
+        r_imu_ref, lever0 = off.r_off, np.zeros(3)
+        rot_std = rotation_spread(segs, m)
+    else:
+        r_imu_ref, lever0 = extrinsics.r_imu_ref, extrinsics.lever_m
+        rot_std = 0.0
+    gyro_bias = off.gyro_bias if extrinsics is None else _bias_given(segs, r_imu_ref, m)
+    sol = fit_gravity_scale_lever(per, r_imu_ref, gyro_bias, options.window_s)
+    g_up = sol["g_up"]
+    tilt = max(math.degrees(math.acos(np.clip(g[2] / max(np.linalg.norm(g), 1e-12), -1, 1))) for g in g_up)
+    rot_deg = _angle_deg(r_imu_ref)
+    scale_off = abs(sol["scale"] - 1) > max(0.02, 3 * sol["scale_std"])
+    lever_sig = (np.linalg.norm(sol["lever"]) > options.lever_sigmas * np.linalg.norm(sol["lever_std"])
+                 and np.linalg.norm(sol["lever"]) > options.min_lever_m)
+    lever = lever0 if extrinsics is not None else (sol["lever"] if lever_sig else np.zeros(3))
+    applied = {"rotation": rot_deg >= options.identity_deg or extrinsics is not None, "lag": coarse != 0.0,
+               "level": tilt >= options.level_deg, "scale": bool(scale_off),
+               "lever_arm": bool(np.linalg.norm(lever) > 0)}
+    return FrameFit(r_imu_ref, rot_deg, rot_std, off.rms, w_rms, coarse if coarse else lag, corr, gyro_bias,
+                    float(sol["scale"]), float(sol["scale_std"]), lever,
+                    np.zeros(3) if extrinsics is not None else sol["lever_std"], tilt, g_up, ref_rate, extrinsics.source if extrinsics else None, applied)
+
+
+def _bias_given(segs: Sequence[Segment], r_imu_ref: np.ndarray, m: int) -> np.ndarray:
+    from imu_learn.eval.groundtruth import mean_rates
+
+    rates = [mean_rates(s, m) for s in segs if len(s) > 2 * m]
+    a = np.concatenate([r[0] for r in rates])
+    b = np.concatenate([r[1] for r in rates])
+    return np.median(a - b @ r_imu_ref.T, axis=0)
+
+
+def check_orientation(ref: GroundTruth, name: str) -> None:
+    """A reference whose orientation never changes holds positions only (e.g. GNSS written as TUM)."""
+    dq = quat_mul(quat_conj(ref.q_wxyz[:1]), ref.q_wxyz)
+    spread = 2 * np.arcsin(np.clip(np.linalg.norm(dq[:, 1:], axis=1), 0, 1))
+    if float(np.max(spread)) < math.radians(0.5):
+        raise ReferenceFrameError(
+            f"{name}: the reference's orientation never changes (positions only, e.g. GNSS): calibrate needs "
+            "6-DoF poses to fit the affine floor; use imu-learn navigate with the positions as aiding, or "
+            "calibrate --imu-only for the noise")
+
+
+def to_imu_frame(ref: GroundTruth, fit: FrameFit, index: int) -> GroundTruth:
+    """The reference of recording ``index`` (in :func:`resolve_frame`'s order) as the IMU's pose in a
+    levelled, metric world on the IMU's clock (what the floor fits against); untouched when nothing
+    was applied."""
+    if fit.in_imu_frame:
+        return ref
+    ap = fit.applied
+    r_level = level_rotation(fit.g_up[index]) if ap.get("level") else np.eye(3)
+    q_level = _quat(r_level)
+    q_ref_imu = _quat(fit.r_imu_ref.T) if ap.get("rotation") else np.array([1.0, 0, 0, 0])
+    s = fit.scale if ap.get("scale") else 1.0
+    p_w = s * ref.p + (quat_rotate(ref.q_wxyz, np.broadcast_to(fit.lever_m, ref.p.shape)) if ap.get("lever_arm") else 0.0)
+    p = p_w @ r_level.T
+    q = quat_mul(q_level[None], quat_mul(ref.q_wxyz, q_ref_imu[None]))
+    t_ns = ref.t_ns - int(round(fit.lag_s * 1e9)) if ap.get("lag") else ref.t_ns
+    v = None if ref.v is None else (s * ref.v) @ r_level.T
+    return GroundTruth(t_ns=np.asarray(t_ns, dtype=np.int64), p=np.ascontiguousarray(p),
+                       q_wxyz=np.ascontiguousarray(q / np.linalg.norm(q, axis=1, keepdims=True)),
+                       v=None if ap.get("lever_arm") else v)
+
+
+def _quat(r: np.ndarray) -> np.ndarray:
+    """w,x,y,z of a rotation matrix (Shepperd)."""
+    t = np.trace(r)
+    if t > 0:
+        w = math.sqrt(1 + t) / 2
+        return np.array([w, (r[2, 1] - r[1, 2]) / (4 * w), (r[0, 2] - r[2, 0]) / (4 * w), (r[1, 0] - r[0, 1]) / (4 * w)])
+    i = int(np.argmax(np.diag(r)))
+    j, k = (i + 1) % 3, (i + 2) % 3
+    x = math.sqrt(max(1 + r[i, i] - r[j, j] - r[k, k], 0.0)) / 2
+    q = np.zeros(4)
+    q[1 + i] = x
+    q[0] = (r[k, j] - r[j, k]) / (4 * x)
+    q[1 + j] = (r[j, i] + r[i, j]) / (4 * x)
+    q[1 + k] = (r[k, i] + r[i, k]) / (4 * x)
+    return q if q[0] >= 0 else -q
+
+
+# ---------------------------------------------------------------------------------------------
+# --extrinsics
+
+
+def read_extrinsics(path: Path) -> Extrinsics:
+    """A Kalibr / EuRoC ``sensor.yaml``'s ``T_BS`` (the reference sensor's frame in the IMU body frame:
+    x_imu = R x_ref + t; :func:`imu_learn.data.formats.extrinsics.read_t_bs`): the rotation, and the
+    IMU origin in the reference body frame, R^T (0 - t)."""
+    t = read_t_bs(path)
+    r, p = t[:3, :3], t[:3, 3]
+    return Extrinsics(r, -r.T @ p, f"{path} (T_BS)")
+
+
+def frame_lines(fit: FrameFit) -> List[str]:
+    """What the check found, for the user (one line each)."""
+    ap = fit.applied
+    if fit.in_imu_frame:
+        return [f"reference: in the IMU frame (rotation {fit.rotation_deg:.2f}°, lag {fit.lag_s * 1e3:+.1f} ms, "
+                f"tilt {fit.tilt_deg:.2f}°, scale {fit.scale:.4f} ± {fit.scale_std:.4f})"]
+    out = [f"reference: rotation to the IMU {fit.rotation_deg:.2f}° ± {fit.rotation_std_deg:.2f}° "
+           f"({fit.extrinsics or 'estimated from rotation rates'}; rate residual {fit.rate_residual:.3f} rad/s)"]
+    out.append(f"reference: lag {fit.lag_s * 1e3:+.1f} ms (|w| correlation {fit.lag_correlation:.2f})"
+               + ("; moved onto the IMU's clock" if ap.get("lag") else "; left to the floor's time offset"))
+    out.append(f"reference: world tilted {fit.tilt_deg:.2f}° from gravity" + ("; levelled" if ap.get("level") else ""))
+    out.append(f"reference: scale {fit.scale:.4f} ± {fit.scale_std:.4f}" + ("; applied" if ap.get("scale") else "; metric"))
+    if ap.get("lever_arm"):
+        out.append(f"reference: IMU origin at ({', '.join(f'{x * 100:+.1f}' for x in fit.lever_m)}) cm in its body frame")
+    return out
