@@ -40,6 +40,7 @@ def flight(seconds=60.0, rate=200.0, seed=0, planar=False):
         for f in rng.uniform(0.1, 0.8, 3):
             w[:, i] += rng.uniform(0.2, 0.5) * np.sin(2 * math.pi * f * t + rng.uniform(0, 6))
     acc = np.tile([0.0, 0.0, 9.81], (len(t), 1)) + 0.5 * np.sin(2 * math.pi * 0.3 * t)[:, None] * [1, -1, 0.5]
+    acc[:, 1] += 0.4 * np.sin(2 * math.pi * 0.7 * t + 1.0)  # a second direction (a robot's centripetal)
     t_ns = (1e9 + t * 1e9).astype(np.int64)
     seg = simulate_sequence(t_ns, w, acc)
     bias = np.array([0.01, 0.0, 0.0])
@@ -110,11 +111,20 @@ def test_a_monocular_scale_is_estimated_and_applied():
     assert np.ptp(moved.p[:, 2]) == pytest.approx(np.ptp(seg.p[k, 2]), rel=0.03)
 
 
-def test_planar_motion_is_refused_without_extrinsics():
+def test_planar_motion_takes_the_rotation_from_specific_force():
     imu, seg = flight(planar=True)
-    ref = reference_of(seg, rot([1, 2, 3], 119))
+    r_true = rot([1, 2, 3], 119)
+    fit = resolve_frame([(imu, reference_of(seg, r_true))])
+    assert "specific force" in fit.method
+    assert angle_deg(fit.r_imu_ref @ r_true.T) < 1.0
+
+
+def test_planar_motion_without_horizontal_acceleration_is_refused():
+    imu, seg = flight(planar=True)
+    still = ImuData(imu.t_ns, imu.gyro, np.tile([0.0, 0.0, 9.81], (len(imu.t_ns), 1)))
+    seg = simulate_sequence(imu.t_ns, imu.gyro - [0.01, 0, 0], still.acc)
     with pytest.raises(ReferenceFrameError, match="one axis only.*--extrinsics"):
-        resolve_frame([(imu, ref)])
+        resolve_frame([(still, reference_of(seg, rot([1, 2, 3], 119)))])
 
 
 def test_positions_only_is_refused():

@@ -9,8 +9,10 @@ The chain (docs: your-device.md; design: a 6-DoF reference in an unknown frame):
 2. **Rotation** reference body -> IMU and the gyro bias from matched mean angular rates (Wahba's
    problem by SVD, :func:`imu_learn.eval.groundtruth.fit_offset`, searched around the lag to a
    fraction of a sample), its residual and, from blocks of windows resampled, its uncertainty.
-   Motion about one axis only leaves the rotation about that axis free: refused (give
-   ``--extrinsics``).
+   Motion about one axis only (a ground robot) leaves the rotation about that axis free: the
+   rotation then comes from specific force in a level world (gravity and the horizontal
+   accelerations), kept only where the rates agree with it and the horizontal accelerations fix it;
+   otherwise refused (give ``--extrinsics``).
 3. **Gravity, scale and lever arm** in the reference's world by linear least squares over windows of
    ``window_s``:  Σ R_WI f dt = s Δv_ref + Δ(R_WB (ω × r)) + g_up T,  unknowns the reference's
    scale s (metres per reference unit), the lever arm r (IMU origin in the reference body frame) and g_up (the specific force
@@ -46,9 +48,10 @@ G = 9.81
 @dataclass(frozen=True)
 class FrameOptions:
     """``max_lag_s``: the lag search of step 1; ``min_correlation``: the |ω| peak below which the
-    reference is not the IMU's motion; ``identity_deg``: a rotation below this is the IMU frame;
-    ``planar_ratio``: the smallest over the largest spread of the reference's rates below which the
-    motion turns about one axis only; ``window_s``: step 3's windows; ``floor_lag_s``: a lag within
+    reference is not the IMU's motion; ``identity_deg``: a rotation below this is left to the floor's
+    misalignment terms (the IMU frame); ``planar_ratio``: the smallest over the largest spread of the
+    reference's rates below which the motion turns about one axis only, as does a rotation whose
+    bootstrap spread exceeds ``max_rotation_std_deg`` (then the rotation comes from specific force); ``window_s``: step 3's windows; ``floor_lag_s``: a lag within
     this is left to the floor's own time-offset fit (its search, 3 samples at 200 Hz); an estimated lever
     arm is applied when its norm is ``lever_sigmas`` standard errors and ``min_lever_m`` or more; a
     world is levelled when it is tilted ``level_deg`` or more (below, the tilt cannot be told from the
@@ -56,8 +59,9 @@ class FrameOptions:
 
     max_lag_s: float = 1.0
     min_correlation: float = 0.6
-    identity_deg: float = 0.5
-    planar_ratio: float = 0.02
+    identity_deg: float = 1.0
+    planar_ratio: float = 0.1
+    max_rotation_std_deg: float = 2.0
     max_rate_residual: float = 0.5
     window_s: float = 1.0
     floor_lag_s: float = 0.015
@@ -95,7 +99,7 @@ class FrameFit:
     tilt_deg: float  # the largest of the reference worlds' z from up
     g_up: np.ndarray  # (recordings, 3): each recording's specific force of rest in its reference world
     rate_hz: float
-    extrinsics: Optional[str] = None
+    method: str = "estimated from rotation rates"  # or the --extrinsics file, or specific force (planar)
     applied: Dict[str, bool] = field(default_factory=dict)
 
     @property
@@ -111,7 +115,7 @@ class FrameFit:
             "scale": self.scale, "scale_std": self.scale_std, "lever_arm_m": self.lever_m.tolist(),
             "lever_arm_std_m": self.lever_std_m.tolist(), "world_tilt_deg": self.tilt_deg,
             "gravity_in_reference_world": np.asarray(self.g_up).tolist(),
-            "reference_rate_hz": self.rate_hz, "extrinsics": self.extrinsics or "estimated",
+            "reference_rate_hz": self.rate_hz, "rotation_from": self.method,
             "applied": dict(self.applied),
         }
 
@@ -329,27 +333,31 @@ def resolve_frame(pairs: Sequence[Tuple[ImuData, GroundTruth]], options: FrameOp
     ratio = planar_ratio(segs, m)
     off = fit_offset(segs, m=m, max_shift=max(3, int(round(0.02 * imu_rate))))
     w_rms = float(np.sqrt(np.mean(np.concatenate([np.sum(np.square(s.gyro - off.gyro_bias), 1) for s in segs]))))
+    method = extrinsics.source if extrinsics is not None else "estimated from rotation rates"
     if extrinsics is None:
-        if ratio < options.planar_ratio:
-            raise ReferenceFrameError(
-                f"the reference turns about one axis only (rate spread ratio {ratio:.3f}): the rotation between its "
-                "frame and the IMU is not observable from this motion; give --extrinsics FILE, or a reference "
-                "with tilting motion (planar wheel odometry observes yaw rate and speed only)")
         if off.rms > options.max_rate_residual * w_rms:
             raise ReferenceFrameError(
                 f"the reference's rotation rates do not match the IMU's in any frame (residual {off.rms:.3f} rad/s "
                 f"against {w_rms:.3f} rad/s of motion): a wrong file, unit or clock")
         r_imu_ref, lever0 = off.r_off, np.zeros(3)
         rot_std = rotation_spread(segs, m)
+        if ratio < options.planar_ratio or rot_std > options.max_rotation_std_deg:
+            r_imu_ref = planar_rotation(segs, m, off.rms, ratio)
+            rot_std, method = math.nan, "from specific force: the motion turns about one axis only"
     else:
         r_imu_ref, lever0 = extrinsics.r_imu_ref, extrinsics.lever_m
         rot_std = 0.0
-    gyro_bias = off.gyro_bias if extrinsics is None else _bias_given(segs, r_imu_ref, m)
+    gyro_bias = off.gyro_bias if method == "estimated from rotation rates" else _bias_given(segs, r_imu_ref, m)
     sol = fit_gravity_scale_lever(per, r_imu_ref, gyro_bias, options.window_s)
     g_up = sol["g_up"]
     tilt = max(math.degrees(math.acos(np.clip(g[2] / max(np.linalg.norm(g), 1e-12), -1, 1))) for g in g_up)
     rot_deg = _angle_deg(r_imu_ref)
-    scale_off = abs(sol["scale"] - 1) > max(0.02, 3 * sol["scale_std"])
+    if sol["scale"] < 3 * sol["scale_std"] or sol["scale"] <= 0.05:
+        raise ReferenceFrameError(
+            f"the reference's translation does not follow the accelerometer (scale {sol['scale']:.3f} ± "
+            f"{sol['scale_std']:.3f}): a mirrored axis, positions of another recording, or a reference that barely "
+            "moves; check the file (imu-learn groundtruth)")
+    scale_off = abs(sol["scale"] - 1) > max(0.02, 3 * sol["scale_std"]) and sol["scale_std"] < 0.1
     lever_sig = (np.linalg.norm(sol["lever"]) > options.lever_sigmas * np.linalg.norm(sol["lever_std"])
                  and np.linalg.norm(sol["lever"]) > options.min_lever_m)
     lever = lever0 if extrinsics is not None else (sol["lever"] if lever_sig else np.zeros(3))
@@ -358,7 +366,55 @@ def resolve_frame(pairs: Sequence[Tuple[ImuData, GroundTruth]], options: FrameOp
                "lever_arm": bool(np.linalg.norm(lever) > 0)}
     return FrameFit(r_imu_ref, rot_deg, rot_std, off.rms, w_rms, coarse if coarse else lag, corr, gyro_bias,
                     float(sol["scale"]), float(sol["scale_std"]), lever,
-                    np.zeros(3) if extrinsics is not None else sol["lever_std"], tilt, g_up, ref_rate, extrinsics.source if extrinsics else None, applied)
+                    np.zeros(3) if extrinsics is not None else sol["lever_std"], tilt, g_up, ref_rate, method, applied)
+
+
+def planar_rotation(segs: Sequence[Segment], m: int, rate_rms: float, ratio: float) -> np.ndarray:
+    """Motion about one axis (a ground robot) leaves the rotation about it free in the rates: the
+    rotation from specific force instead (gravity and the horizontal accelerations, in a level reference
+    world; :func:`imu_learn.eval.groundtruth.fit_acc_rotation`), kept only if the rates agree with it."""
+    from imu_learn.eval.groundtruth import fit_acc_rotation
+
+    horizontal = _horizontal_acc_rms(segs)
+    if horizontal < MIN_HORIZONTAL_ACC:
+        raise ReferenceFrameError(
+            f"the reference turns about one axis only (rate spread ratio {ratio:.3f}) with too little horizontal "
+            f"acceleration to fix the rest ({horizontal:.3f} m/s^2 RMS): the rotation between its frame and the IMU is "
+            "not observable from this motion; give --extrinsics FILE (planar wheel odometry observes yaw rate and "
+            "speed only)")
+    r = fit_acc_rotation(list(segs))
+    bias = _bias_given(segs, r, m)
+    res = _rate_residual(segs, r, bias, m)
+    if res > 2 * rate_rms + 0.01:
+        raise ReferenceFrameError(
+            f"the reference turns about one axis only (rate spread ratio {ratio:.3f}) and its specific force does not "
+            f"fix the rest (rate residual {res:.3f} rad/s with it): the rotation between its frame and the IMU is not "
+            "observable from this motion; give --extrinsics FILE (planar wheel odometry observes yaw rate and speed "
+            "only)")
+    return r
+
+
+MIN_HORIZONTAL_ACC = 0.05  # [m/s^2] RMS of the reference's horizontal acceleration that fixes a yaw
+
+
+def _horizontal_acc_rms(segs: Sequence[Segment]) -> float:
+    """RMS of the reference's horizontal acceleration (its velocity differentiated over 0.2 s)."""
+    out = []
+    for s in segs:
+        dt = np.median(np.diff(s.t_ns)) * 1e-9
+        k = max(1, int(round(0.2 / dt)))
+        if len(s) > 2 * k:
+            out.append((s.v[k:, :2] - s.v[:-k, :2]) / (k * dt))
+    return float(np.sqrt(np.mean(np.sum(np.concatenate(out) ** 2, axis=1)))) if out else 0.0
+
+
+def _rate_residual(segs: Sequence[Segment], r: np.ndarray, bias: np.ndarray, m: int) -> float:
+    from imu_learn.eval.groundtruth import mean_rates
+
+    rates = [mean_rates(s, m) for s in segs if len(s) > 2 * m]
+    a = np.concatenate([x[0] for x in rates])
+    b = np.concatenate([x[1] for x in rates])
+    return float(np.sqrt(np.mean(np.sum((a - bias - b @ r.T) ** 2, axis=1))))
 
 
 def _bias_given(segs: Sequence[Segment], r_imu_ref: np.ndarray, m: int) -> np.ndarray:
@@ -439,7 +495,7 @@ def frame_lines(fit: FrameFit) -> List[str]:
         return [f"reference: in the IMU frame (rotation {fit.rotation_deg:.2f}°, lag {fit.lag_s * 1e3:+.1f} ms, "
                 f"tilt {fit.tilt_deg:.2f}°, scale {fit.scale:.4f} ± {fit.scale_std:.4f})"]
     out = [f"reference: rotation to the IMU {fit.rotation_deg:.2f}° ± {fit.rotation_std_deg:.2f}° "
-           f"({fit.extrinsics or 'estimated from rotation rates'}; rate residual {fit.rate_residual:.3f} rad/s)"]
+           f"({fit.method}; rate residual {fit.rate_residual:.3f} rad/s)"]
     out.append(f"reference: lag {fit.lag_s * 1e3:+.1f} ms (|w| correlation {fit.lag_correlation:.2f})"
                + ("; moved onto the IMU's clock" if ap.get("lag") else "; left to the floor's time offset"))
     out.append(f"reference: world tilted {fit.tilt_deg:.2f}° from gravity" + ("; levelled" if ap.get("level") else ""))
