@@ -77,6 +77,10 @@ def test_a_correct_file_passes_silently(tmp_path, caplog):
     # and the format's default map (no --columns) for a file of seven columns
     src3 = read_imu_source(f, columns=CsvColumns(columns_named=False))
     assert len(src3.t_ns) == len(t)
+    # a delimiter at each line's end is no eighth column
+    f4 = tmp_path / "trailing.csv"
+    f4.write_text("".join(line + ",\n" for line in f.read_text().splitlines()))
+    assert len(read_imu_source(f4, columns=CsvColumns(columns_named=False)).t_ns) == len(t)
 
 
 # 1. time unit ------------------------------------------------------------------------------------
@@ -190,7 +194,7 @@ def test_skip_bad_lines(tmp_path, capsys, caplog):
     # without the flag: the exact error, naming file, line and field
     rc, err = calibrate(capsys, f)
     assert rc == 2 and err.startswith("imu-learn calibrate: error: ColumnCountError: ")
-    assert f"log.csv:2:4: field \"gz\" is missing" in err
+    assert "log.csv:2:4: field \"gz\" is missing" in err
     with pytest.raises(ColumnCountError):
         read_imu_source(f, columns=CsvColumns())
     # with it: both skipped, counted in a warning and on the source

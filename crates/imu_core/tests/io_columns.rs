@@ -287,9 +287,23 @@ fn skip_bad_lines_passes_over_truncated_lines_and_lists_them() {
     assert_eq!(r.samples.t_ns.len(), 30_000 - 1);
     let lines: Vec<usize> = r.skipped.iter().map(|s| s.line).collect();
     assert_eq!(lines, vec![1, 12_347, 30_002]);
-    assert!(r.skipped[0].problem.contains("log.csv:1:2: field \"gx\" is missing"), "{:?}", r.skipped[0]);
-    assert!(r.skipped[1].problem.contains("\"nan\" is not finite"), "{:?}", r.skipped[1]);
-    assert!(r.skipped[2].problem.contains("log.csv:30002:4: field \"gz\" is missing"), "{:?}", r.skipped[2]);
+    assert!(
+        r.skipped[0].problem.contains("log.csv:1:2: field \"gx\" is missing"),
+        "{:?}",
+        r.skipped[0]
+    );
+    assert!(
+        r.skipped[1].problem.contains("\"nan\" is not finite"),
+        "{:?}",
+        r.skipped[1]
+    );
+    assert!(
+        r.skipped[2]
+            .problem
+            .contains("log.csv:30002:4: field \"gz\" is missing"),
+        "{:?}",
+        r.skipped[2]
+    );
     assert_eq!(r.fields, 8);
     assert!(r.names.is_empty());
     // The writer keeps the skipped lines as they were, and rewrites the rest.
@@ -308,7 +322,7 @@ fn skip_bad_lines_passes_over_truncated_lines_and_lists_them() {
 
 #[test]
 fn skip_bad_lines_passes_over_a_truncated_line_above_the_header() {
-    let text = "t_s,wx\ntime,wx,wy,wz,ax,ay,az,temp\n0.0,0,0,0,0,0,9.8,20\n0.01,0,0,0,0,0,9.8,20\n";
+    let text = "t_s,wx\ntime,wx,wy,wz,ax,ay,az,temp\n0.0,0,0,0,0,0,9.8,20,\n0.01,0,0,0,0,0,9.8,20\n";
     let dir = tempfile::tempdir().unwrap();
     let path = dir.path().join("h.csv");
     std::fs::write(&path, text).unwrap();
@@ -322,7 +336,10 @@ fn skip_bad_lines_passes_over_a_truncated_line_above_the_header() {
     assert_eq!(r.fields, 8);
     // Stamps out of order stay an error.
     std::fs::write(&path, format!("{text}0.005,0,0,0,0,0,9.8,20\n")).unwrap();
-    assert!(matches!(columns::read_imu_checked(&path, &fmt), Err(ImuError::Timestamp { line: 5, .. })));
+    assert!(matches!(
+        columns::read_imu_checked(&path, &fmt),
+        Err(ImuError::Timestamp { line: 5, .. })
+    ));
 }
 
 proptest! {

@@ -507,7 +507,9 @@ fn parse_chunk(chunk: &[u8], fmt: &CsvFormat, delim: Delimiter) -> ChunkOut {
                 out.gyro.push(g);
                 out.acc.push(a);
                 out.lines.push(this);
-                out.first_fields.get_or_insert(spans.len());
+                // Trailing empty fields (a delimiter at the end of the line) are no columns.
+                out.first_fields
+                    .get_or_insert_with(|| spans.iter().rposition(|&(a, b)| b > a).map_or(0, |i| i + 1));
             }
             Err(kind) if fmt.skip_bad_lines => out.skipped.push(Bad { line: this, kind }),
             Err(kind) => {
@@ -549,7 +551,7 @@ pub struct CsvRead {
     pub skipped: Vec<SkippedLine>,
     /// The header's (or a comment line's) names, one per file column; empty without.
     pub names: Vec<String>,
-    /// Fields of the first row read.
+    /// Fields of the first row read, trailing empty ones (a delimiter at the line's end) left out.
     pub fields: usize,
 }
 
