@@ -67,6 +67,7 @@ from imu_learn.baselines.timing import RotationWindows, fit_offset, shifted
 from imu_learn.core.integration import PAPER_FRACTIONS, window_labels
 from imu_learn.data.types import Segment, sample_rate_hz
 from imu_learn.nn.so3 import quat_conj, quat_mul, so3_exp, so3_log
+from imu_learn.util.threads import thread_limits
 
 Tensor = torch.Tensor
 
@@ -199,42 +200,48 @@ class _RotResiduals:
         return _rot_jacobian(theta, r, self.w)
 
 
-def _skew(v: Tensor) -> Tensor:
-    """[v]× (..., 3, 3) of v (..., 3)."""
-    x, y, z = v.unbind(-1)
-    o = torch.zeros_like(x)
-    return torch.stack((torch.stack((o, -z, y), -1), torch.stack((z, o, -x), -1), torch.stack((-y, x, o), -1)), -2)
-
-
 def _so3_jacobian(phi: Tensor, inverse: bool) -> Tensor:
-    """The right Jacobian J_r(φ) of SO(3) (Exp(φ + δ) ≈ Exp(φ) Exp(J_r δ)), or its inverse, (..., 3, 3)."""
-    t2 = (phi * phi).sum(-1)[..., None, None]
+    """The right Jacobian J_r(φ) of SO(3) (Exp(φ + δ) ≈ Exp(φ) Exp(J_r δ)), or its inverse, (..., 3, 3):
+    J_r = I − c1 [φ]× + c2 [φ]×² with c1 = (1 − cos θ)/θ², c2 = (θ − sin θ)/θ³; J_r⁻¹ = I + ½ [φ]× +
+    (1/θ² − (1 + cos θ)/(2θ sin θ)) [φ]×²; [φ]×² = φφᵀ − θ² I. Written out entry by entry."""
+    x, y, z = phi.unbind(-1)
+    t2 = x * x + y * y + z * z
     small = t2 < 1e-8
     t2s = torch.where(small, torch.ones_like(t2), t2)
     t = torch.sqrt(t2s)
-    K = _skew(phi)
-    eye = torch.eye(3, dtype=phi.dtype)
-    if inverse:  # I + ½[φ]× + (1/θ² − (1 + cos θ)/(2θ sin θ)) [φ]×²
+    if inverse:
+        c1 = torch.full_like(t2, -0.5)
         c2 = torch.where(small, torch.full_like(t2, 1.0 / 12.0), 1.0 / t2s - (1.0 + torch.cos(t)) / (2.0 * t * torch.sin(t)))
-        return eye + 0.5 * K + c2 * (K @ K)
-    c1 = torch.where(small, 0.5 - t2 / 24.0, (1.0 - torch.cos(t)) / t2s)
-    c2 = torch.where(small, 1.0 / 6.0 - t2 / 120.0, (t - torch.sin(t)) / (t2s * t))
-    return eye - c1 * K + c2 * (K @ K)
+    else:
+        c1 = torch.where(small, 0.5 - t2 / 24.0, (1.0 - torch.cos(t)) / t2s)
+        c2 = torch.where(small, 1.0 / 6.0 - t2 / 120.0, (t - torch.sin(t)) / (t2s * t))
+    a = 1.0 - c2 * t2
+    cx, cy, cz = c1 * x, c1 * y, c1 * z
+    xy, xz, yz = c2 * x * y, c2 * x * z, c2 * y * z
+    return torch.stack((a + c2 * x * x, xy + cz, xz - cy, xy - cz, a + c2 * y * y, yz + cx, xz + cy, yz - cx,
+                        a + c2 * z * z), dim=-1).reshape(*phi.shape[:-1], 3, 3)
 
 
 def _quat_matrix(q: Tensor) -> Tensor:
     """Rotation matrix (..., 3, 3) of unit quaternions (..., 4) (w, x, y, z)."""
     w, x, y, z = q.unbind(-1)
-    return torch.stack((
-        torch.stack((1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)), -1),
-        torch.stack((2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)), -1),
-        torch.stack((2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)), -1),
-    ), -2)
+    xx, yy, zz, xy, xz, yz, wx, wy, wz = x * x, y * y, z * z, x * y, x * z, y * z, w * x, w * y, w * z
+    return torch.stack((1 - 2 * (yy + zz), 2 * (xy - wz), 2 * (xz + wy), 2 * (xy + wz), 1 - 2 * (xx + zz),
+                        2 * (yz - wx), 2 * (xz - wy), 2 * (yz + wx), 1 - 2 * (xx + yy)), dim=-1).reshape(*q.shape[:-1], 3, 3)
 
 
-def _before_horizons(horizons: Seq[int], W: int, dtype: torch.dtype) -> Tensor:
-    """(W, H) mask: sample k counts towards horizon h when k < h."""
-    return (torch.arange(W)[:, None] < torch.as_tensor(list(horizons))[None, :]).to(dtype)
+def _horizon_sums(A: Tensor, f: Tensor, horizons: Seq[int]) -> Tensor:
+    """Σ_{k<h} A_k ⊗ f_k (B, H, 3, 3, F) for A (B, W, 3, 3), f (B, W, F): one batched matrix product per
+    stretch between horizons, then chained."""
+    B, W = A.shape[:2]
+    At = A.reshape(B, W, 9).transpose(1, 2)
+    out, acc, prev = [], None, 0
+    for h in horizons:
+        seg = At[:, :, prev:h] @ f[:, prev:h]  # (B, 9, F)
+        acc = seg if acc is None else acc + seg
+        out.append(acc)
+        prev = h
+    return torch.stack(out, dim=1).reshape(B, len(out), 3, 3, f.shape[-1])
 
 
 def _rot_jacobian(theta: Tensor, r: Tensor, w: _Windows) -> Tensor:
@@ -249,11 +256,9 @@ def _rot_jacobian(theta: Tensor, r: Tensor, w: _Windows) -> Tensor:
     b = theta[9:12]
     phi = _gyro_model(theta[None], w.gyro, w.acc_g)[0] * w.dt.unsqueeze(-1)
     A = _quat_matrix(_prefix_rotations(so3_exp(phi))) @ _so3_jacobian(phi, False) * w.dt[..., None, None]  # (B, W, 3, 3)
-    mask = _before_horizons(w.horizons, W, theta.dtype)
-    H = mask.shape[1]
+    H = len(w.horizons)
     f = torch.cat((w.gyro - b, w.acc_g, torch.ones_like(w.dt).unsqueeze(-1)), dim=-1)  # (B, W, 7)
-    X = (A.unsqueeze(-1) * f[:, :, None, None, :]).reshape(B, W, 63)
-    S = (X.transpose(1, 2) @ mask).transpose(1, 2).reshape(B, H, 3, 3, 7)  # Σ_{k<h} A_k ⊗ f_k
+    S = _horizon_sums(A, f, w.horizons)  # Σ_{k<h} A_k ⊗ f_k
     dM, dG, A_h = S[..., :3].reshape(B, H, 3, 9), S[..., 3:6].reshape(B, H, 3, 9), S[..., 6]
     dpsi = torch.cat((dM, -(A_h @ M), -dG), dim=-1)  # (B, H, 3, 21)
     return -(_so3_jacobian(r.reshape(B, H, 3), True) @ dpsi).reshape(B * H * 3, 21)
@@ -299,20 +304,17 @@ class _VelResiduals:
         u_k = M_a (a_k − b_a)."""
         w = self.w
         B, W, _ = w.acc.shape
+        H = len(w.horizons)
         M = torch.eye(3, dtype=theta.dtype) + theta[:9].reshape(3, 3)
-        Rdt = self.Rm * w.dt[..., None, None]
-        u = w.acc - theta[9:12]
-        mask = _before_horizons(w.horizons, W, theta.dtype)
         T = torch.cat((torch.zeros_like(w.dt[:, :1]), torch.cumsum(w.dt, dim=1)), dim=1)  # t_m = Σ_{k<m} dt_k
-        hs = torch.as_tensor(list(w.horizons))
-        c = (0.5 * w.dt[:, :, None] + T[:, hs][:, None, :] - T[:, 1:, None]) * mask  # (B, W, H)
-        H = mask.shape[1]
-        f = torch.cat((u, torch.ones_like(w.dt).unsqueeze(-1)), dim=-1)  # (B, W, 4)
-        X = (Rdt.unsqueeze(-1) * f[:, :, None, None, :]).reshape(B, W, 36).transpose(1, 2)  # (B, 36, W)
+        # Δγ's weight ½ dt_k + t_h − t_{k+1} = t_h − s_k: Σ_{k<h} s_k (...) rides along as more columns
+        s = (T[:, 1:] - 0.5 * w.dt).unsqueeze(-1)
+        f = torch.cat((w.acc - theta[9:12], torch.ones_like(s)), dim=-1)  # (B, W, 4)
+        S = _horizon_sums(self.Rm * w.dt[..., None, None], torch.cat((f, s * f), dim=-1), w.horizons)
+        t_h = T[:, list(w.horizons)][:, :, None, None, None]
         out = []
-        for S in (X @ mask, torch.bmm(X, c)):  # Σ_{k<h} R_k dt_k ⊗ f_k, unweighted (Δβ) and weighted (Δγ)
-            S = S.transpose(1, 2).reshape(B, H, 3, 3, 4)
-            out.append(torch.cat((S[..., :3].reshape(B, H, 3, 9), -(S[..., 3] @ M)), dim=-1).reshape(-1, 12))
+        for Sx in (S[..., :4], t_h * S[..., :4] - S[..., 4:]):  # Δβ, Δγ
+            out.append(torch.cat((Sx[..., :3].reshape(B, H, 3, 9), -(Sx[..., 3] @ M)), dim=-1).reshape(-1, 12))
         return -torch.cat(out)
 
     def __call__(self, theta: Tensor) -> Tensor:
@@ -422,6 +424,7 @@ class Traditional(Method):
         fit_offset: bool = False,
         max_shift: float = 3.0,
         offset_window: int = 10,
+        threads: int = 1,
     ) -> None:
         self.cutoffs_hz = tuple(cutoffs_hz)
         self.filter_order = filter_order
@@ -434,6 +437,7 @@ class Traditional(Method):
         self.fit_offset = fit_offset
         self.max_shift = max_shift
         self.offset_window = offset_window
+        self.threads = threads
         self.params = TraditionalParams.identity()
 
     # -- applying the model ---------------------------------------------------------------------
@@ -444,6 +448,10 @@ class Traditional(Method):
     # -- fitting --------------------------------------------------------------------------------
 
     def fit(self, train: List[Segment], val: List[Segment], settings: FitSettings = FitSettings()) -> Dict[str, list]:
+        with thread_limits(min(self.threads, settings.threads)):
+            return self._fit(train, val, settings)
+
+    def _fit(self, train: List[Segment], val: List[Segment], settings: FitSettings) -> Dict[str, list]:
         torch.manual_seed(settings.seed)
         window = int(self.window or settings.window)
         tau, tau_log = 0.0, {}
@@ -503,6 +511,43 @@ class Traditional(Method):
             **tau_log,
         }
         return log
+
+    def refit(self, train: List[Segment], val: List[Segment], start: TraditionalParams,
+              settings: FitSettings = FitSettings()) -> Dict[str, list]:
+        """The affine parameters alone on other data (a part of what ``start`` was fitted on):
+        ``start``'s cutoffs kept (no grid, ``val`` selects nothing but the time offset), its parameters
+        the starting point of both stages; with ``fit_offset`` the time offset is searched again as
+        :meth:`fit` does. What calibrate's uncertainty refits per recording: the same estimator of
+        the affine model and the offset at a fraction of a fit's cost."""
+        with thread_limits(min(self.threads, settings.threads)):
+            return self._refit(train, val, start, settings)
+
+    def _refit(self, train: List[Segment], val: List[Segment], start: TraditionalParams,
+               settings: FitSettings) -> Dict[str, list]:
+        torch.manual_seed(settings.seed)
+        window = int(self.window or settings.window)
+        tau, tau_log = 0.0, {}
+        if self.fit_offset:
+            if not any(len(s) > window for s in train):
+                raise ValueError(f"no training sequence is longer than the window ({window} samples)")
+            tau, tau_log = self._fit_time_offset(train, val, self.offset_window, settings.gravity)
+            train = [shifted(s, tau) for s in train]
+        tr = _Data(train, window, self.max_windows, settings.gravity, self.filter_order)
+        if len(tr) == 0:
+            raise ValueError(f"no training sequence is longer than the window ({window} samples)")
+        w = tr.windows(start.cutoff_gyro, start.cutoff_acc)
+        g0 = np.concatenate([(start.M_g - np.eye(3)).ravel(), start.b_g, start.G.ravel()])
+        a0 = np.concatenate([(start.M_a - np.eye(3)).ravel(), start.b_a])
+        theta_g = _solve(_RotResiduals(w), g0, np.r_[0:9, 12:21], self.prior, self.huber_rot, self.max_iter)
+        with torch.no_grad():
+            vel = _VelResiduals(_gyro_model(torch.from_numpy(theta_g), w.gyro, w.acc_g), w)
+        theta_a = _solve(vel, a0, np.r_[0:9], self.prior, self.huber_vel, self.max_iter)
+        self.params = TraditionalParams(
+            M_g=np.eye(3) + theta_g[:9].reshape(3, 3), b_g=theta_g[9:12].copy(), G=theta_g[12:21].reshape(3, 3).copy(),
+            M_a=np.eye(3) + theta_a[:9].reshape(3, 3), b_a=theta_a[9:12].copy(),
+            cutoff_gyro=start.cutoff_gyro, cutoff_acc=start.cutoff_acc, time_offset=tau,
+        )
+        return {"train_windows": [len(tr)], "stride": [tr.stride], **tau_log}
 
     def _fit_time_offset(self, train: List[Segment], val: List[Segment], window: int,
                          gravity: float) -> Tuple[float, Dict[str, list]]:

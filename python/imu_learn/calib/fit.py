@@ -61,12 +61,22 @@ def seed_all(seed: int) -> None:
 
 def fit_once(train: List[Segment], val: List[Segment], settings: FitSettings,
              max_windows: Optional[int] = None) -> Tuple[TraditionalTiming, Dict[str, list]]:
-    """``imu-learn evaluate``'s fit of the floor (``max_windows``: the method's default unless given)."""
-    torch.set_num_threads(settings.threads)
+    """``imu-learn evaluate``'s fit of the floor (``max_windows``: the method's default unless given;
+    the method sizes its own threads: :class:`TraditionalTiming`'s ``threads``)."""
     seed_all(settings.seed)
     method = TraditionalTiming() if max_windows is None else TraditionalTiming(max_windows=max_windows)
     log = method.fit(list(train), list(val), settings) or {}
     return method, log
+
+
+def refit_once(method: TraditionalTiming, train: List[Segment], val: List[Segment], settings: FitSettings,
+               max_windows: int) -> TraditionalTiming:
+    """``method``'s floor refitted on a part of its data: the time offset searched again, the affine
+    parameters solved again from ``method``'s (its cutoffs kept; :meth:`TraditionalTiming.refit`)."""
+    seed_all(settings.seed)
+    m = TraditionalTiming(max_windows=max_windows)
+    m.refit(list(train), list(val), method.params, settings)
+    return m
 
 
 GROUP_MIN_WINDOWS = 200
@@ -107,7 +117,7 @@ def fit_floor(train: List[Segment], val: List[Segment], settings: FitSettings, g
     usable = {g: tv for g, tv in per.items() if any(len(s) > settings.window + 1 for s in tv[0])}
     for i, (g, (tr, va)) in enumerate(usable.items()):
         progress(f"uncertainty: refitting on {g} alone ({i + 1}/{len(usable)})")
-        m, _ = fit_once(tr, va, settings, max(GROUP_MIN_WINDOWS, method.max_windows // len(usable)))
+        m = refit_once(method, tr, va, settings, max(GROUP_MIN_WINDOWS, method.max_windows // len(usable)))
         d = m.to_dict()
         for k in PARAMS:
             values[k].append(np.asarray(d[k], dtype=np.float64))
