@@ -13,7 +13,7 @@
 //! - comment lines start with `#` (after optional whitespace) and are skipped, as are blank lines.
 //!
 //! Time is read from its decimal text exactly (no detour through f64) and rounded to the nearest
-//! ns, so float seconds keep every digit the file has. Gyro and acc are converted to rad/s and
+//! ns (ties to even on the digits), so float seconds keep every digit the file has. Gyro and acc are converted to rad/s and
 //! m/s² (deg → rad, g = 9.80665 m/s²). Errors are the core's: `MissingColumn` for a line shorter
 //! than the map, `NotNumeric`/`NonFinite` for a bad value, `Timestamp` for time that does not
 //! strictly increase, `TooFewRows` below two samples, each naming file:line:column and the field;
@@ -24,17 +24,23 @@
 //! [`read_imu_checked`] lists the lines skipped with what was wrong on each; the writer keeps such
 //! lines as they are. Stamps out of order stay an error.
 //!
-//! Rows are parsed in parallel over line-aligned chunks; as in [`super::table`], the first
-//! problem in file order is the one reported.
+//! This module finds the layout (delimiter, header, names) and the column map; the rows are read by
+//! the one row parser of [`super::table`] with that map, so delimiters, comments, blank lines,
+//! number rules, chunking and errors (the first problem in file order is the one reported) are
+//! those of every reader.
 
 use std::fmt::Write as _;
 use std::path::Path;
 
 use rayon::prelude::*;
 
-use super::table::{self, is_blank, is_comment, parse_decimal, split_chunks, strip_bom, strip_cr, trim_field, Decimal};
+pub use super::table::Delimiter;
+use super::table::{
+    self, classify, field_spans, field_texts, is_number, split_chunks, strip_bom, strip_cr, Bad, BadKind, BlankLines,
+    Comments, LineKind, RowRules, Width,
+};
 use super::write_atomic;
-use crate::error::{ImuError, Result, TimestampProblem, IMU_ROWS};
+use crate::error::{ImuError, Result, IMU_ROWS};
 use crate::types::{ImuSamples, Vec3};
 
 /// The quantities a column map must place, in the order [`ColumnMap::at`] keeps them.
@@ -229,60 +235,17 @@ impl CsvFormat {
     }
 }
 
-/// The field delimiter found in a file.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub enum Delimiter {
-    Comma,
-    Semicolon,
-    Tab,
-    Whitespace,
-}
-
-impl Delimiter {
-    fn detect(line: &[u8]) -> Self {
-        if line.contains(&b';') {
-            Delimiter::Semicolon
-        } else if line.contains(&b',') {
-            Delimiter::Comma
-        } else if line.contains(&b'\t') {
-            Delimiter::Tab
-        } else {
-            Delimiter::Whitespace
-        }
-    }
-}
-
-/// Byte ranges of the fields of `line` (trimmed of spaces and tabs for a delimiter character).
-fn field_spans(line: &[u8], delim: Delimiter, out: &mut Vec<(usize, usize)>) {
-    out.clear();
-    let by = |sep: u8, out: &mut Vec<(usize, usize)>| {
-        let mut start = 0;
-        for end in memchr::memchr_iter(sep, line).chain(std::iter::once(line.len())) {
-            let f = trim_field(&line[start..end]);
-            // `trim_field` returns a subslice: its offset within `line` locates it.
-            let a = f.as_ptr() as usize - line.as_ptr() as usize;
-            out.push((a, a + f.len()));
-            start = end + 1;
-        }
-    };
-    match delim {
-        Delimiter::Comma => by(b',', out),
-        Delimiter::Semicolon => by(b';', out),
-        Delimiter::Tab => by(b'\t', out),
-        Delimiter::Whitespace => {
-            let mut i = 0;
-            while i < line.len() {
-                if line[i].is_ascii_whitespace() {
-                    i += 1;
-                    continue;
-                }
-                let a = i;
-                while i < line.len() && !line[i].is_ascii_whitespace() {
-                    i += 1;
-                }
-                out.push((a, i));
-            }
-        }
+/// The delimiter of a user's file, from its first row: `;` if it has one, else `,`, else a tab,
+/// else runs of whitespace.
+fn detect_delimiter(line: &[u8]) -> Delimiter {
+    if line.contains(&b';') {
+        Delimiter::Semicolon
+    } else if line.contains(&b',') {
+        Delimiter::Comma
+    } else if line.contains(&b'\t') {
+        Delimiter::Tab
+    } else {
+        Delimiter::Whitespace
     }
 }
 
@@ -301,19 +264,6 @@ struct Layout {
     pre_skipped: Vec<(usize, usize)>,
 }
 
-fn is_number(f: &[u8]) -> bool {
-    fast_float2::parse::<f64, _>(f).is_ok()
-}
-
-fn names_of(line: &[u8], delim: Delimiter) -> Vec<String> {
-    let mut spans = Vec::new();
-    field_spans(line, delim, &mut spans);
-    spans
-        .iter()
-        .map(|&(a, b)| String::from_utf8_lossy(&line[a..b]).into_owned())
-        .collect()
-}
-
 /// Finds the delimiter and the header in the BOM-less `bytes`. With `skip` (skip_bad_lines), a
 /// line too short for the map (a truncated first line) is passed over: the next one decides.
 fn detect_layout(bytes: &[u8], map: &ColumnMap, skip: bool) -> Layout {
@@ -323,55 +273,56 @@ fn detect_layout(bytes: &[u8], map: &ColumnMap, skip: bool) -> Layout {
     // skip: the lines passed over, and where the first of them starts.
     let mut short: Vec<(usize, usize)> = Vec::new();
     let mut first_short: Option<(usize, usize)> = None;
+    let mut spans = Vec::new();
     while pos < bytes.len() {
         let end = memchr::memchr(b'\n', &bytes[pos..]).map_or(bytes.len(), |i| pos + i);
         let line = strip_cr(&bytes[pos..end]);
         let next = (end + 1).min(bytes.len());
-        if is_blank(line) {
-        } else if is_comment(line) {
-            last_comment = Some(line);
-        } else {
-            let delimiter = Delimiter::detect(line);
-            let mut spans = Vec::new();
-            field_spans(line, delimiter, &mut spans);
-            if skip && spans.len() < map.width() {
-                short.push((line_idx, spans.len()));
-                first_short.get_or_insert((pos, line_idx));
-                pos = next;
-                line_idx += 1;
-                continue;
-            }
-            let header = !map
-                .at
-                .iter()
-                .any(|&c| spans.get(c).is_some_and(|&(a, b)| is_number(&line[a..b])));
-            if header {
+        match classify(line, COMMENTS) {
+            LineKind::Blank => {}
+            LineKind::Comment => last_comment = Some(line),
+            LineKind::Row(line) => {
+                let delimiter = detect_delimiter(line);
+                field_spans(line, delimiter, &mut spans);
+                if skip && spans.len() < map.width() {
+                    short.push((line_idx, spans.len()));
+                    first_short.get_or_insert((pos, line_idx));
+                    pos = next;
+                    line_idx += 1;
+                    continue;
+                }
+                let header = !map
+                    .at
+                    .iter()
+                    .any(|&c| spans.get(c).is_some_and(|&(a, b)| is_number(&line[a..b])));
+                if header {
+                    return Layout {
+                        delimiter,
+                        body_start: next,
+                        body_line: line_idx + 1,
+                        header_line: Some(line_idx + 1),
+                        names: field_texts(line, delimiter),
+                        pre_skipped: short,
+                    };
+                }
+                let names = last_comment
+                    .map(|c| {
+                        let c = c.iter().position(|&b| b == b'#').map_or(c, |i| &c[i + 1..]);
+                        field_texts(c, delimiter)
+                    })
+                    .filter(|n| n.len() >= map.width())
+                    .unwrap_or_default();
+                // The lines passed over are rows of the body (skipped there, with their error).
+                let (body_start, body_line) = first_short.unwrap_or((pos, line_idx));
                 return Layout {
                     delimiter,
-                    body_start: next,
-                    body_line: line_idx + 1,
-                    header_line: Some(line_idx + 1),
-                    names: names_of(line, delimiter),
-                    pre_skipped: short,
+                    body_start,
+                    body_line,
+                    header_line: None,
+                    names,
+                    pre_skipped: Vec::new(),
                 };
             }
-            let names = last_comment
-                .map(|c| {
-                    let c = c.iter().position(|&b| b == b'#').map_or(c, |i| &c[i + 1..]);
-                    names_of(c, delimiter)
-                })
-                .filter(|n| n.len() >= map.width())
-                .unwrap_or_default();
-            // The lines passed over are rows of the body (skipped there, with their error).
-            let (body_start, body_line) = first_short.unwrap_or((pos, line_idx));
-            return Layout {
-                delimiter,
-                body_start,
-                body_line,
-                header_line: None,
-                names,
-                pre_skipped: Vec::new(),
-            };
         }
         pos = next;
         line_idx += 1;
@@ -387,6 +338,9 @@ fn detect_layout(bytes: &[u8], map: &ColumnMap, skip: bool) -> Layout {
     }
 }
 
+/// Comments in a user's file: whole lines starting with `#`.
+const COMMENTS: Comments = Comments::Lines;
+
 /// The name of file column `col` (0-based) that holds quantity `k`, for errors: the file's own
 /// name with the map's in parentheses (`wx_dps (gx)`), or the map's alone.
 fn field_name(layout: &Layout, k: usize, col: usize) -> String {
@@ -396,130 +350,31 @@ fn field_name(layout: &Layout, k: usize, col: usize) -> String {
     }
 }
 
-/// What went wrong on one line, before the file name and field name are attached.
-#[derive(Clone, Debug)]
-enum BadKind {
-    /// Quantity k's column is past the line's `found` fields.
-    Missing {
-        k: usize,
-        found: usize,
-    },
-    NotNumeric {
-        k: usize,
-        value: String,
-    },
-    NonFinite {
-        k: usize,
-        value: String,
-    },
+/// The names errors give the file's columns: [`field_name`] for mapped ones.
+fn column_names(layout: &Layout, map: &ColumnMap) -> Vec<String> {
+    (0..map.width())
+        .map(|c| match map.at.iter().position(|&a| a == c) {
+            Some(k) => field_name(layout, k, c),
+            None => format!("column {}", c + 1),
+        })
+        .collect()
 }
 
-#[derive(Clone, Debug)]
-struct Bad {
-    /// 0-based line index in the chunk (file-wide after the merge).
-    line: usize,
-    kind: BadKind,
-}
-
-#[derive(Default)]
-struct ChunkOut {
-    t: Vec<i64>,
-    gyro: Vec<Vec3>,
-    acc: Vec<Vec3>,
-    /// 0-based line index (in the chunk) of each row.
-    lines: Vec<usize>,
-    n_lines: usize,
-    error: Option<Bad>,
-    /// Lines skipped (skip_bad_lines), in chunk order.
-    skipped: Vec<Bad>,
-    /// Fields of the chunk's first row.
-    first_fields: Option<usize>,
-}
-
-fn lossy(f: &[u8]) -> String {
-    String::from_utf8_lossy(f).into_owned()
-}
-
-fn bad_number(k: usize, f: &[u8]) -> BadKind {
-    match fast_float2::parse::<f64, _>(f) {
-        Ok(x) if !x.is_finite() => BadKind::NonFinite { k, value: lossy(f) },
-        _ => BadKind::NotNumeric { k, value: lossy(f) },
-    }
-}
-
-/// One row: (t_ns, gyro, acc) in SI units.
-fn parse_row(
-    line: &[u8],
-    spans: &[(usize, usize)],
-    fmt: &CsvFormat,
-) -> std::result::Result<(i64, Vec3, Vec3), BadKind> {
+/// The shared parser state for a file of this layout and format.
+fn rules(layout: &Layout, fmt: &CsvFormat) -> RowRules {
     let at = &fmt.columns.at;
-    // The first quantity (in file order) past the end of the line is the missing one.
-    if let Some(k) = (0..7).filter(|&k| at[k] >= spans.len()).min_by_key(|&k| at[k]) {
-        return Err(BadKind::Missing { k, found: spans.len() });
+    RowRules {
+        delimiter: layout.delimiter,
+        comments: COMMENTS,
+        blank_lines: BlankLines::Skip,
+        width: Width::AtLeast(fmt.columns.width()),
+        time_col: at[0],
+        time_digits: fmt.time.ns_digits(),
+        float_ns: true,
+        values: at[1..].to_vec(),
+        trailing_junk: false,
+        skip_bad_lines: fmt.skip_bad_lines,
     }
-    let field = |k: usize| {
-        let (a, b) = spans[at[k]];
-        &line[a..b]
-    };
-    let f = field(0);
-    let t = match parse_decimal(f, fmt.time.ns_digits()) {
-        Decimal::Int(n) | Decimal::Frac(n) => n,
-        Decimal::Invalid | Decimal::OutOfRange => return Err(bad_number(0, f)),
-    };
-    let mut v = [0.0f64; 6];
-    for (i, x) in v.iter_mut().enumerate() {
-        let f = field(i + 1);
-        match fast_float2::parse::<f64, _>(f) {
-            Ok(y) if y.is_finite() => *x = y,
-            _ => return Err(bad_number(i + 1, f)),
-        }
-    }
-    let g = [fmt.gyro.to_si(v[0]), fmt.gyro.to_si(v[1]), fmt.gyro.to_si(v[2])];
-    let a = [fmt.acc.to_si(v[3]), fmt.acc.to_si(v[4]), fmt.acc.to_si(v[5])];
-    Ok((t, g, a))
-}
-
-fn parse_chunk(chunk: &[u8], fmt: &CsvFormat, delim: Delimiter) -> ChunkOut {
-    let est = chunk.len() / 64 + 1;
-    let mut out = ChunkOut {
-        t: Vec::with_capacity(est),
-        gyro: Vec::with_capacity(est),
-        acc: Vec::with_capacity(est),
-        lines: Vec::with_capacity(est),
-        ..ChunkOut::default()
-    };
-    let mut spans = Vec::with_capacity(fmt.columns.width() + 4);
-    let (mut pos, mut idx) = (0, 0);
-    while pos < chunk.len() {
-        let end = memchr::memchr(b'\n', &chunk[pos..]).map_or(chunk.len(), |i| pos + i);
-        let line = strip_cr(&chunk[pos..end]);
-        pos = end + 1;
-        let this = idx;
-        idx += 1;
-        if is_blank(line) || is_comment(line) {
-            continue;
-        }
-        field_spans(line, delim, &mut spans);
-        match parse_row(line, &spans, fmt) {
-            Ok((t, g, a)) => {
-                out.t.push(t);
-                out.gyro.push(g);
-                out.acc.push(a);
-                out.lines.push(this);
-                // Trailing empty fields (a delimiter at the end of the line) are no columns.
-                out.first_fields
-                    .get_or_insert_with(|| spans.iter().rposition(|&(a, b)| b > a).map_or(0, |i| i + 1));
-            }
-            Err(kind) if fmt.skip_bad_lines => out.skipped.push(Bad { line: this, kind }),
-            Err(kind) => {
-                out.error = Some(Bad { line: this, kind });
-                break;
-            }
-        }
-    }
-    out.n_lines = idx;
-    out
 }
 
 /// Rows of a file with their 1-based lines.
@@ -527,6 +382,8 @@ struct Parsed {
     samples: ImuSamples,
     lines: Vec<usize>,
     layout: Layout,
+    rules: RowRules,
+    names: Vec<String>,
     /// Lines skipped (skip_bad_lines), file-wide 0-based, in file order.
     skipped: Vec<Bad>,
     /// Fields of the first row.
@@ -555,142 +412,63 @@ pub struct CsvRead {
     pub fields: usize,
 }
 
-fn to_error(path: &Path, layout: &Layout, fmt: &CsvFormat, bad: Bad) -> ImuError {
-    let path = path.to_path_buf();
-    let line = bad.line + 1;
-    let at = &fmt.columns.at;
-    match bad.kind {
-        BadKind::Missing { k, found } => ImuError::MissingColumn {
-            path,
-            line,
-            column: at[k] + 1,
-            field: field_name(layout, k, at[k]),
-            found,
-        },
-        BadKind::NotNumeric { k, value } => ImuError::NotNumeric {
-            path,
-            line,
-            column: at[k] + 1,
-            field: field_name(layout, k, at[k]),
-            value,
-        },
-        BadKind::NonFinite { k, value } => ImuError::NonFinite {
-            path,
-            line,
-            column: at[k] + 1,
-            field: field_name(layout, k, at[k]),
-            value,
-        },
-    }
-}
-
-fn check_increasing(path: &Path, layout: &Layout, fmt: &CsvFormat, t: &[i64], lines: &[usize]) -> Result<()> {
-    for i in 1..t.len() {
-        let (prev, cur) = (t[i - 1], t[i]);
-        if cur <= prev {
-            let col = fmt.columns.at[0];
-            return Err(ImuError::Timestamp {
-                path: path.to_path_buf(),
-                line: lines[i],
-                column: col + 1,
-                field: field_name(layout, 0, col),
-                value: cur,
-                previous: prev,
-                problem: if cur == prev {
-                    TimestampProblem::Duplicate
-                } else {
-                    TimestampProblem::NotIncreasing
-                },
-            });
-        }
-    }
-    Ok(())
-}
-
 /// Parses the BOM-less `bytes` of `path`.
 fn parse(path: &Path, bytes: &[u8], fmt: &CsvFormat) -> Result<Parsed> {
     let layout = detect_layout(bytes, &fmt.columns, fmt.skip_bad_lines);
-    let first_missing = |found: usize| {
-        (0..7)
-            .filter(|&k| fmt.columns.at[k] >= found)
-            .min_by_key(|&k| fmt.columns.at[k])
-            .unwrap_or(0)
-    };
+    let rules = rules(&layout, fmt);
+    let names = column_names(&layout, &fmt.columns);
+    if let Some(h) = layout.header_line {
+        if layout.names.len() < fmt.columns.width() {
+            let bad = Bad {
+                line: h - 1,
+                kind: BadKind::Count {
+                    found: layout.names.len(),
+                },
+            };
+            return Err(rules.error(path, &names, bad));
+        }
+    }
     let mut skipped: Vec<Bad> = layout
         .pre_skipped
         .iter()
         .map(|&(line, found)| Bad {
             line,
-            kind: BadKind::Missing {
-                k: first_missing(found),
-                found,
-            },
+            kind: BadKind::Count { found },
         })
         .collect();
-    if let Some(h) = layout.header_line {
-        if layout.names.len() < fmt.columns.width() {
-            let found = layout.names.len();
-            let k = (0..7)
-                .filter(|&k| fmt.columns.at[k] >= found)
-                .min_by_key(|&k| fmt.columns.at[k])
-                .unwrap_or(0);
-            let bad = Bad {
-                line: h - 1,
-                kind: BadKind::Missing { k, found },
-            };
-            return Err(to_error(path, &layout, fmt, bad));
-        }
-    }
-    let body = &bytes[layout.body_start..];
-    let chunks = split_chunks(body);
-    let outs: Vec<ChunkOut> = chunks
-        .par_iter()
-        .map(|&(a, b)| parse_chunk(&body[a..b], fmt, layout.delimiter))
-        .collect();
-    let total: usize = outs.iter().map(|o| o.t.len()).sum();
-    let mut s = ImuSamples {
-        t_ns: Vec::with_capacity(total),
-        gyro: Vec::with_capacity(total),
-        acc: Vec::with_capacity(total),
-    };
-    let mut lines = Vec::with_capacity(total);
-    let mut offset = layout.body_line;
-    let mut fields = None;
-    for out in outs {
-        fields = fields.or(out.first_fields);
-        skipped.extend(out.skipped.into_iter().map(|mut b| {
-            b.line += offset;
-            b
-        }));
-        s.t_ns.extend_from_slice(&out.t);
-        s.gyro.extend_from_slice(&out.gyro);
-        s.acc.extend_from_slice(&out.acc);
-        lines.extend(out.lines.iter().map(|l| l + offset + 1));
-        if let Some(mut bad) = out.error {
-            // Every row so far lies above the bad line: a stamp out of order among them comes
-            // first in the file.
-            check_increasing(path, &layout, fmt, &s.t_ns, &lines)?;
-            bad.line += offset;
-            return Err(to_error(path, &layout, fmt, bad));
-        }
-        offset += out.n_lines;
-    }
-    check_increasing(path, &layout, fmt, &s.t_ns, &lines)?;
-    if s.t_ns.len() < IMU_ROWS.needed {
+    let rows = table::parse_rows(path, &bytes[layout.body_start..], layout.body_line, &rules, &names)?;
+    if rows.t_ns.len() < IMU_ROWS.needed {
         let t = table::Table {
             path: path.to_path_buf(),
-            t_ns: s.t_ns.clone(),
-            lines: lines.clone(),
+            t_ns: rows.t_ns.clone(),
+            lines: rows.lines.clone(),
             ..table::Table::default()
         };
         table::require_rows(&t, bytes, &IMU_ROWS)?;
     }
+    skipped.extend(rows.skipped);
+    let (gyro, acc) = rows
+        .values
+        .chunks_exact(6)
+        .map(|v| {
+            (
+                [fmt.gyro.to_si(v[0]), fmt.gyro.to_si(v[1]), fmt.gyro.to_si(v[2])],
+                [fmt.acc.to_si(v[3]), fmt.acc.to_si(v[4]), fmt.acc.to_si(v[5])],
+            )
+        })
+        .unzip();
     Ok(Parsed {
-        samples: s,
-        lines,
+        samples: ImuSamples {
+            t_ns: rows.t_ns,
+            gyro,
+            acc,
+        },
+        lines: rows.lines,
         layout,
+        rules,
+        names,
         skipped,
-        fields: fields.unwrap_or(0),
+        fields: rows.first_fields.unwrap_or(0),
     })
 }
 
@@ -712,7 +490,7 @@ pub fn read_imu_checked(path: impl AsRef<Path>, fmt: &CsvFormat) -> Result<CsvRe
         .into_iter()
         .map(|b| SkippedLine {
             line: b.line + 1,
-            problem: to_error(path, &p.layout, fmt, b).to_string(),
+            problem: p.rules.error(path, &p.names, b).to_string(),
         })
         .collect();
     Ok(CsvRead {
@@ -912,10 +690,10 @@ mod tests {
 
     #[test]
     fn delimiters_are_detected() {
-        assert_eq!(Delimiter::detect(b"1;2,5;3"), Delimiter::Semicolon);
-        assert_eq!(Delimiter::detect(b"a, b"), Delimiter::Comma);
-        assert_eq!(Delimiter::detect(b"a\tb c"), Delimiter::Tab);
-        assert_eq!(Delimiter::detect(b"a  b"), Delimiter::Whitespace);
+        assert_eq!(detect_delimiter(b"1;2,5;3"), Delimiter::Semicolon);
+        assert_eq!(detect_delimiter(b"a, b"), Delimiter::Comma);
+        assert_eq!(detect_delimiter(b"a\tb c"), Delimiter::Tab);
+        assert_eq!(detect_delimiter(b"a  b"), Delimiter::Whitespace);
         let mut s = Vec::new();
         field_spans(b" 1 , 2,3 ", Delimiter::Comma, &mut s);
         assert_eq!(s, vec![(1, 2), (5, 6), (7, 8)]);
