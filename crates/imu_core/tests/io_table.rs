@@ -7,6 +7,8 @@ use io_common as common;
 use common::*;
 use imu_core::error::TimestampProblem;
 use imu_core::io::asl::read_imu;
+use imu_core::io::columns::{self, CsvFormat};
+use imu_core::io::tum::{read_trajectory, read_tum, TrajectoryLayout, TrajectoryOptions};
 use imu_core::io::table::{read_table, Separator, TableSpec, TimeUnit};
 use imu_core::io::ReadOptions;
 use imu_core::ImuError;
@@ -231,6 +233,8 @@ fn crlf_bom_and_trailing_blank_lines_are_fine() {
     assert_eq!(imu.acc[2], [9.81, 0.01, -0.02]);
 }
 
+/// Dataset tables (ASL, KAIST) keep the strict rule: a blank line inside the data is a sign of a
+/// damaged or concatenated recording (the property tests of `parse_table` pin it too).
 #[test]
 fn blank_line_between_rows_is_an_error() {
     let dir = tempfile::tempdir().unwrap();
@@ -348,4 +352,108 @@ fn table_api_headerless_whitespace_with_fixed_names() {
     assert_eq!(t.t_ns, vec![1_500_000_000, 2_000_000_001]);
     assert_eq!(t.row(1), &[4.0, 5.0]);
     assert_eq!(t.lines, vec![2, 3]);
+}
+
+// ---------------------------------------------------------------------------------------------
+// One parser for every reader: the same rules give the same rows and the same errors whether a
+// file is read as a dataset table, as a user's CSV (column map) or as a trajectory.
+
+fn user_csv() -> CsvFormat {
+    CsvFormat::parse("t,gx,gy,gz,ax,ay,az", "ns", "rad/s", "m/s2").unwrap()
+}
+
+/// Blank lines are skipped by the user-CSV reader and the trajectory readers, wherever they are;
+/// only dataset tables reject one followed by a row (`blank_line_between_rows_is_an_error`).
+#[test]
+fn blank_lines_are_skipped_by_the_user_csv_and_trajectory_readers() {
+    let dir = tempfile::tempdir().unwrap();
+    let mut l = imu_lines(4);
+    l.insert(3, String::new());
+    l.insert(4, " \t ".into());
+    l.insert(1, String::new());
+    l.push(String::new());
+    let p = write(&dir, "a.csv", &join(&l));
+    let r = columns::read_imu_checked(&p, &user_csv()).unwrap();
+    assert_eq!(r.samples.len(), 4);
+    assert_eq!(r.samples.t_ns[3] - r.samples.t_ns[0], 15_000_000);
+    assert!(r.skipped.is_empty());
+    // The same file as a dataset table: the blank line after the header is followed by a row.
+    match read_imu(&p, &strict()).unwrap_err() {
+        ImuError::ColumnCount { line, found, .. } => assert_eq!((line, found), (2, 0)),
+        e => panic!("{e:?}"),
+    }
+
+    let text = "\n1.0 0 0 0 0 0 0 1\n\n\n2.0 1 0 0 0 0 0 1\n \n3.0 2 0 0 0 0 0 1\n\n";
+    let p = write(&dir, "t.tum", text);
+    assert_eq!(read_tum(&p, &strict()).unwrap().t_ns, vec![1_000_000_000, 2_000_000_000, 3_000_000_000]);
+    let opts = TrajectoryOptions {
+        layout: TrajectoryLayout::Tum,
+        positions_only: false,
+        allow_float_timestamps: false,
+    };
+    assert_eq!(read_trajectory(&p, &opts).unwrap().lines, vec![2, 5, 7]);
+}
+
+/// A bad field is the same error, at the same place, through either entry to the parser.
+#[test]
+fn bad_fields_are_the_same_error_in_the_table_and_the_user_csv_reader() {
+    let dir = tempfile::tempdir().unwrap();
+    for (bad, col) in [("abc", 4), ("", 6), ("nan", 2), ("-inf", 7), ("x1", 1)] {
+        let mut l = imu_lines(4);
+        let mut fields: Vec<String> = l[3].split(',').map(String::from).collect();
+        fields[col - 1] = bad.into();
+        l[3] = fields.join(",");
+        let p = write(&dir, "a.csv", &join(&l));
+        let table = read_imu(&p, &strict()).unwrap_err();
+        let user = columns::read_imu(&p, &user_csv()).unwrap_err();
+        let place = |e: &ImuError| match e {
+            ImuError::NotNumeric {
+                line, column, value, ..
+            } => ("NotNumeric", *line, *column, value.clone()),
+            ImuError::NonFinite {
+                line, column, value, ..
+            } => ("NonFinite", *line, *column, value.clone()),
+            e => panic!("{e:?}"),
+        };
+        assert_eq!(place(&table), place(&user), "{bad:?}");
+        assert_eq!(place(&table).1, 4);
+        assert_eq!(place(&table).2, col);
+        // Both name the field from the header; the user's reader adds the map's name.
+        let name = IMU_HEADER.split(',').nth(col - 1).unwrap().trim_start_matches('#').to_string();
+        assert_message(&table, &p, 4, Some(&name));
+        assert!(user.to_string().contains(&name), "{user}");
+    }
+}
+
+/// Time past the ns rounds half to even in every reader (the one decimal rule).
+#[test]
+fn time_past_the_ns_rounds_half_to_even_in_every_reader() {
+    let dir = tempfile::tempdir().unwrap();
+    // An exact half to the even ns below, one to the even ns above, just past a half up.
+    let stamps = ["1.0000000005", "1.0000000015", "1.00000000250001"];
+    let want = vec![1_000_000_000, 1_000_000_002, 1_000_000_003];
+    let user: String = stamps.iter().map(|t| format!("{t},0,0,0,0,0,9.8\n")).collect();
+    let p = write(&dir, "u.csv", &user);
+    let fmt = CsvFormat::parse("t,gx,gy,gz,ax,ay,az", "s", "rad/s", "m/s2").unwrap();
+    assert_eq!(columns::read_imu(&p, &fmt).unwrap().t_ns, want);
+    let tum: String = stamps.iter().map(|t| format!("{t} 0 0 0 0 0 0 1\n")).collect();
+    let p = write(&dir, "t.tum", &tum);
+    assert_eq!(read_tum(&p, &strict()).unwrap().t_ns, want);
+    let spec = TableSpec {
+        separator: Separator::Comma,
+        columns: vec![2],
+        time_unit: TimeUnit::Seconds,
+        header_line: false,
+        hash_comments: false,
+        names: Vec::new(),
+        allow_float_timestamps: false,
+    };
+    let p = write(&dir, "t.csv", &stamps.iter().map(|t| format!("{t},1\n")).collect::<String>());
+    assert_eq!(read_table(&p, &spec).unwrap().t_ns, want);
+    // Float-notation ns (allowed by the option) round the same way: 2.5 ns is 2 ns, 3.5 ns is 4.
+    let mut l = imu_lines(0);
+    l.push("25e-1,0.1,-0.2,0.3,9.81,0.01,-0.02".into());
+    l.push("3.5,0.1,-0.2,0.3,9.81,0.01,-0.02".into());
+    let p = write(&dir, "f.csv", &join(&l));
+    assert_eq!(read_imu(&p, &lenient()).unwrap().t_ns, vec![2, 4]);
 }

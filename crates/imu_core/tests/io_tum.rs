@@ -5,7 +5,7 @@ mod io_common;
 // helper; the rest (headers, row builders, message checks) from the readers' helpers.
 use common::{data, have};
 use imu_core::error::TimestampProblem;
-use imu_core::io::tum::{read_tum, write_tum};
+use imu_core::io::tum::{read_trajectory, read_tum, write_tum, TrajectoryLayout, TrajectoryOptions};
 use imu_core::io::ReadOptions;
 use imu_core::{GroundTruth, ImuError};
 use io_common::*;
@@ -256,4 +256,164 @@ fn write_tum_round_trips_bit_for_bit() {
     let mut bad = odd.clone();
     bad.q_wxyz.pop();
     assert!(matches!(write_tum(&out, &bad), Err(ImuError::InvalidInput(_))));
+}
+
+// ---------------------------------------------------------------------------------------------
+// One reader for ground truth and aiding trajectories: comments, blank lines, positions only,
+// stamps past nine decimals, the csv and asl layouts.
+
+fn traj(layout: TrajectoryLayout, positions_only: bool) -> TrajectoryOptions {
+    TrajectoryOptions {
+        layout,
+        positions_only,
+        allow_float_timestamps: false,
+    }
+}
+
+#[test]
+fn comments_and_blank_lines_anywhere_are_skipped() {
+    let dir = tempfile::tempdir().unwrap();
+    let text = "# t tx ty tz qx qy qz qw\n\n1.0 0 0 0 0 0 0 1\n\n  \n# note\n  # indented note\n2.0 1 0 0 0 0 0 1\n\n";
+    let p = write(&dir, "a.tum", text);
+    let gt = read_tum(&p, &strict()).unwrap();
+    assert_eq!(gt.t_ns, vec![1_000_000_000, 2_000_000_000]);
+    let tr = read_trajectory(&p, &traj(TrajectoryLayout::Tum, false)).unwrap();
+    assert_eq!(tr.t_ns, gt.t_ns);
+    assert_eq!(tr.lines, vec![3, 8]);
+    assert_eq!(tr.q_wxyz.as_deref(), Some(&gt.q_wxyz[..]));
+    // A blank line does not hide the row after it from the checks.
+    let p = write(&dir, "b.tum", "1.0 0 0 0 0 0 0 1\n\n1.1 0 0 nan 0 0 0 1\n");
+    match read_tum(&p, &strict()).unwrap_err() {
+        ImuError::NonFinite { line, column, field, .. } => assert_eq!((line, column, field.as_str()), (3, 4, "tz")),
+        e => panic!("{e:?}"),
+    }
+}
+
+#[test]
+fn trajectories_allow_a_comment_after_a_row_ground_truth_does_not() {
+    let dir = tempfile::tempdir().unwrap();
+    let p = write(
+        &dir,
+        "a.tum",
+        "1.0 0 0 0 0 0 0 1\n1.05 0.1 0 0 0 0 0 1  # a comment\n1.10 0.2 0 0 0 0 0 1#x\n",
+    );
+    let tr = read_trajectory(&p, &traj(TrajectoryLayout::Tum, false)).unwrap();
+    assert_eq!(tr.t_ns, vec![1_000_000_000, 1_050_000_000, 1_100_000_000]);
+    assert_eq!(tr.p[2], [0.2, 0.0, 0.0]);
+    // The ground-truth reader takes a '#' inside a row as a bad field.
+    assert!(matches!(
+        read_tum(&p, &strict()),
+        Err(ImuError::ColumnCount { line: 2, .. })
+    ));
+}
+
+#[test]
+fn four_columns_are_positions_only_where_the_caller_allows_them() {
+    let dir = tempfile::tempdir().unwrap();
+    let p = write(&dir, "p.tum", "# t x y z\n1.0 0 0 0\n2.0 1 2 3\n");
+    let tr = read_trajectory(&p, &traj(TrajectoryLayout::Tum, true)).unwrap();
+    assert_eq!(tr.t_ns, vec![1_000_000_000, 2_000_000_000]);
+    assert_eq!(tr.p, vec![[0.0; 3], [1.0, 2.0, 3.0]]);
+    assert!(tr.q_wxyz.is_none());
+    // Poses are still poses with the allowance.
+    let poses = write(&dir, "q.tum", "1.0 0 0 0 0 0 0 1\n2.0 1 2 3 0 0 0 1\n");
+    let tr = read_trajectory(&poses, &traj(TrajectoryLayout::Tum, true)).unwrap();
+    assert_eq!(tr.q_wxyz, Some(vec![[1.0, 0.0, 0.0, 0.0]; 2]));
+    // Without it (and for ground truth), 4 columns are a column-count error on the first row.
+    for err in [
+        read_trajectory(&p, &traj(TrajectoryLayout::Tum, false)).unwrap_err(),
+        read_tum(&p, &strict()).unwrap_err(),
+    ] {
+        match &err {
+            ImuError::ColumnCount {
+                line, expected, found, ..
+            } => assert_eq!((*line, *expected, *found), (2, 8, 4)),
+            e => panic!("{e:?}"),
+        }
+        assert_message(&err, &p, 2, None);
+    }
+    // One file, one width: a pose row after position rows is an error.
+    let p = write(&dir, "m.tum", "1.0 0 0 0\n2.0 1 2 3 0 0 0 1\n");
+    assert!(matches!(
+        read_trajectory(&p, &traj(TrajectoryLayout::Tum, true)),
+        Err(ImuError::ColumnCount {
+            line: 2,
+            expected: 4,
+            found: 8,
+            ..
+        })
+    ));
+}
+
+#[test]
+fn stamps_are_exact_and_digits_past_the_ns_round_half_to_even() {
+    let dir = tempfile::tempdir().unwrap();
+    const S: i64 = 1_403_636_579_000_000_000;
+    let rows = [
+        ("1403636579.763556", S + 763_556_000), // exact: no float rounding
+        ("1403636579.7635560015", S + 763_556_002), // an exact half: to the even ns (up)
+        ("1403636579.7635560035", S + 763_556_004),
+        ("1403636579.76355600650000000001", S + 763_556_007), // past the half: up
+        ("1403636579.7635560085", S + 763_556_008),         // an exact half: to the even ns (down)
+        ("1403636579.7635560094999", S + 763_556_009),      // below the half: down
+        ("1403636580", S + 1_000_000_000),
+        ("14036365.8000000001e2", S + 1_000_000_010), // exponent notation: exact too
+    ];
+    let text: String = rows.iter().map(|(t, _)| format!("{t} 0 0 0 0 0 0 1\n")).collect();
+    let want: Vec<i64> = rows.iter().map(|r| r.1).collect();
+    let p = write(&dir, "s.tum", &text);
+    assert_eq!(read_tum(&p, &strict()).unwrap().t_ns, want);
+    assert_eq!(
+        read_trajectory(&p, &traj(TrajectoryLayout::Tum, false)).unwrap().t_ns,
+        want
+    );
+    // Ties below the ns on either side of an even ns: 1.0000000005 s is 1 s, not 1 s + 1 ns, so
+    // it duplicates the stamp above it.
+    let p = write(&dir, "d.tum", "1.0 0 0 0 0 0 0 1\n1.0000000005 0 0 0 0 0 0 1\n");
+    match read_tum(&p, &strict()).unwrap_err() {
+        ImuError::Timestamp {
+            line, value, problem, ..
+        } => assert_eq!((line, value, problem), (2, 1_000_000_000, TimestampProblem::Duplicate)),
+        e => panic!("{e:?}"),
+    }
+}
+
+#[test]
+fn csv_and_asl_layouts_read_the_same_poses() {
+    let dir = tempfile::tempdir().unwrap();
+    let csv = write(
+        &dir,
+        "a.csv",
+        "t,x,y,z,qx,qy,qz,qw\n1.0,0,0,0,0,0,0,1\n\n2.0, 1, 0, 0, 1, 0, 0, 0 # note\n",
+    );
+    let asl = write(
+        &dir,
+        "b.csv",
+        "#timestamp,p,p,p,qw,qx,qy,qz\n1000000000,0,0,0,1,0,0,0\n2000000000,1,0,0,0,1,0,0\n",
+    );
+    let a = read_trajectory(&csv, &traj(TrajectoryLayout::Csv, false)).unwrap();
+    let b = read_trajectory(&asl, &traj(TrajectoryLayout::Asl, false)).unwrap();
+    assert_eq!(a.t_ns, vec![1_000_000_000, 2_000_000_000]);
+    assert_eq!((&a.t_ns, &a.p, &a.q_wxyz), (&b.t_ns, &b.p, &b.q_wxyz));
+    assert_eq!(a.q_wxyz.unwrap()[1], [0.0, 1.0, 0.0, 0.0]);
+    assert_eq!((a.lines, b.lines), (vec![2, 4], vec![2, 3]));
+    // asl stamps are integer ns; errors use the layout's names.
+    let bad = write(&dir, "c.csv", "1000000000,0,0,0,1,0,0,0\n2.0e9,1,0,0,0,1,0,0\n");
+    let err = read_trajectory(&bad, &traj(TrajectoryLayout::Asl, false)).unwrap_err();
+    assert!(matches!(err, ImuError::FloatTimestamp { line: 2, column: 1, .. }), "{err:?}");
+    let bad = write(&dir, "d.csv", "1000000000,0,0,0,1,0,0,0\n2000000000,1,0,0,x,1,0,0\n");
+    let err = read_trajectory(&bad, &traj(TrajectoryLayout::Asl, false)).unwrap_err();
+    assert_message(&err, &bad, 2, Some("qw"));
+    assert!(TrajectoryLayout::parse("kitti").is_err());
+    assert_eq!(TrajectoryLayout::parse("asl").unwrap(), TrajectoryLayout::Asl);
+}
+
+#[test]
+fn one_trajectory_row_is_too_few() {
+    let dir = tempfile::tempdir().unwrap();
+    let p = write(&dir, "one.tum", "# only a comment\n1.0 0 0 0 0 0 0 1\n");
+    match read_trajectory(&p, &traj(TrajectoryLayout::Tum, false)).unwrap_err() {
+        ImuError::TooFewRows { line, found, .. } => assert_eq!((line, found), (2, 1)),
+        e => panic!("{e:?}"),
+    }
 }

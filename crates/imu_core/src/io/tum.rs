@@ -1,36 +1,189 @@
-//! TUM trajectory text (`t[s] tx ty tz qx qy qz qw`), as OpenVINS' EuRoC `groundtruth_pose.tum`,
-//! and Blackbird's `stamped_groundtruth_imu.txt`, which appends `vx vy vz` (11 columns).
+//! Trajectories as text: TUM (`t[s] tx ty tz qx qy qz qw`), as OpenVINS' EuRoC
+//! `groundtruth_pose.tum` and every SLAM system's output, Blackbird's `stamped_groundtruth_imu.txt`
+//! (which appends `vx vy vz`, 11 columns), and the aiding layouts of [`read_trajectory`].
 //!
-//! Whitespace separated, '#' comment lines anywhere, timestamps in decimal seconds. There is no
-//! header naming the fields, so errors use the fixed names in [`FIELD_NAMES`]. Quaternions are
-//! x,y,z,w in the file and w,x,y,z in the core.
+//! One reader for all of them, on the shared row parser of [`super::table`]:
+//! - whitespace separated (TUM) or comma separated (`csv`, `asl` layouts);
+//! - `#` comment lines anywhere and blank lines anywhere are skipped; [`read_trajectory`] also
+//!   skips a `# ...` comment after a row's fields (hand-written and exported aiding files have
+//!   them). [`read_tum`], the ground-truth reader, takes a `#` inside a row as a bad field;
+//! - a comma-separated layout may start with a header line of names (no field a number), which is
+//!   skipped;
+//! - every row has the column count of the first row, which must be one the caller allows: 8
+//!   (`t x y z qx qy qz qw`), 11 for [`read_tum`] (with `vx vy vz`), 4 (`t x y z`, positions
+//!   only) where [`TrajectoryOptions::positions_only`] allows it;
+//! - stamps in seconds are converted to integer ns from their decimal text, never through f64:
+//!   `1403636579.763556` is `1403636579763556000` ns exactly; digits past the ninth decimal are
+//!   rounded half to even on the digits (`…0000000005` drops to the even ns below, anything past
+//!   the half rounds up). The `asl` layout's stamps are integer ns.
+//!
+//! Errors use the fixed names in [`FIELD_NAMES`] (TUM, `csv`) or [`ASL_POSE_FIELD_NAMES`].
+//! Quaternions are x,y,z,w in TUM files, w,x,y,z in `asl` files and always w,x,y,z in the core.
 
 use std::fmt::Write as _;
 use std::path::Path;
 
-use super::table::{self, Separator, TableSpec, TimeUnit};
+use super::table::{self, BlankLines, Comments, Delimiter, RowRules, Width};
 use super::{write_atomic, ReadOptions};
-use crate::error::{ImuError, Result, POSE_ROWS};
+use crate::error::{ImuError, Result, RowsNeeded, POSE_ROWS};
 use crate::so3::{wxyz_to_xyzw, xyzw_to_wxyz};
-use crate::types::GroundTruth;
+use crate::types::{GroundTruth, QuatWxyz, Vec3};
 
 /// Field names used in errors, in file column order.
 pub const FIELD_NAMES: [&str; 11] = ["timestamp", "tx", "ty", "tz", "qx", "qy", "qz", "qw", "vx", "vy", "vz"];
 
-/// Reads a TUM file with 8 columns (`v` is `None`) or 11 columns (`v` is `Some`).
-pub fn read_tum(path: impl AsRef<Path>, opts: &ReadOptions) -> Result<GroundTruth> {
-    let spec = TableSpec {
-        separator: Separator::Whitespace,
-        columns: vec![8, 11],
-        time_unit: TimeUnit::Seconds,
-        header_line: false,
-        hash_comments: true,
-        names: FIELD_NAMES.iter().map(|s| s.to_string()).collect(),
-        allow_float_timestamps: opts.allow_float_timestamps,
+/// Field names of the `asl` layout (EuRoC/Kalibr pose CSV), in file column order.
+pub const ASL_POSE_FIELD_NAMES: [&str; 8] = ["timestamp", "px", "py", "pz", "qw", "qx", "qy", "qz"];
+
+/// Trajectory files: two rows make the shortest span an aiding source can cover.
+pub const TRAJECTORY_ROWS: RowsNeeded = RowsNeeded {
+    what: "trajectory file",
+    unit: "row",
+    needed: 2,
+    why: "a trajectory spans at least two stamps",
+};
+
+/// How a trajectory file is laid out.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum TrajectoryLayout {
+    /// `t tx ty tz qx qy qz qw`, whitespace separated, t in seconds.
+    Tum,
+    /// The same columns separated by commas.
+    Csv,
+    /// An ASL CSV (EuRoC/Kalibr): `timestamp [ns], px, py, pz, qw, qx, qy, qz`.
+    Asl,
+}
+
+impl TrajectoryLayout {
+    /// `tum`, `csv` or `asl`.
+    pub fn parse(s: &str) -> Result<Self> {
+        match s.trim() {
+            "tum" => Ok(TrajectoryLayout::Tum),
+            "csv" => Ok(TrajectoryLayout::Csv),
+            "asl" => Ok(TrajectoryLayout::Asl),
+            _ => Err(ImuError::invalid(format!(
+                "trajectory layout {s:?}: one of tum, csv, asl"
+            ))),
+        }
+    }
+
+    fn delimiter(self) -> Delimiter {
+        match self {
+            TrajectoryLayout::Tum => Delimiter::Whitespace,
+            TrajectoryLayout::Csv | TrajectoryLayout::Asl => Delimiter::Comma,
+        }
+    }
+
+    fn names(self) -> &'static [&'static str] {
+        match self {
+            TrajectoryLayout::Asl => &ASL_POSE_FIELD_NAMES,
+            TrajectoryLayout::Tum | TrajectoryLayout::Csv => &FIELD_NAMES,
+        }
+    }
+
+    /// The quaternion of a row's values (after t) in core order.
+    fn quaternion(self, r: &[f64]) -> QuatWxyz {
+        match self {
+            TrajectoryLayout::Asl => [r[3], r[4], r[5], r[6]],
+            TrajectoryLayout::Tum | TrajectoryLayout::Csv => xyzw_to_wxyz([r[3], r[4], r[5], r[6]]),
+        }
+    }
+}
+
+/// What [`read_trajectory`] accepts.
+#[derive(Clone, Debug)]
+pub struct TrajectoryOptions {
+    pub layout: TrajectoryLayout,
+    /// Accept rows of 4 columns (`t x y z`: positions only) as well as 8.
+    pub positions_only: bool,
+    /// As [`ReadOptions::allow_float_timestamps`], for the `asl` layout's ns stamps.
+    pub allow_float_timestamps: bool,
+}
+
+/// A trajectory as read: stamps, positions, orientations where the file has them, and the
+/// 1-based line of each row.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct Trajectory {
+    pub t_ns: Vec<i64>,
+    pub p: Vec<Vec3>,
+    /// `None` for a file of positions only (4 columns).
+    pub q_wxyz: Option<Vec<QuatWxyz>>,
+    pub lines: Vec<usize>,
+}
+
+impl Trajectory {
+    pub fn len(&self) -> usize {
+        self.t_ns.len()
+    }
+    pub fn is_empty(&self) -> bool {
+        self.t_ns.is_empty()
+    }
+}
+
+/// The rows of a trajectory file in `layout` with one of the `allowed` column counts (module doc).
+fn read_rows(
+    path: &Path,
+    bytes: &[u8],
+    layout: TrajectoryLayout,
+    allowed: &[usize],
+    comments: Comments,
+    allow_float_timestamps: bool,
+) -> Result<table::Table> {
+    let bytes = table::strip_bom(bytes);
+    let delimiter = layout.delimiter();
+    let (mut body_start, mut body_line) = (0, 0);
+    if delimiter == Delimiter::Comma {
+        // A header of names: the first row when none of its fields is a number.
+        if let Some((pos, idx, line)) = table::first_row(bytes, comments) {
+            let mut spans = Vec::new();
+            table::field_spans(line, delimiter, &mut spans);
+            if spans.iter().all(|&(a, b)| !table::is_number(&line[a..b])) {
+                let end = memchr::memchr(b'\n', &bytes[pos..]).map_or(bytes.len(), |i| pos + i + 1);
+                (body_start, body_line) = (end, idx + 1);
+            }
+        }
+    }
+    let body = &bytes[body_start..];
+    let n_columns = table::pick_column_count(body, delimiter, comments, allowed);
+    let names: Vec<String> = (0..n_columns)
+        .map(|c| layout.names().get(c).map_or_else(|| format!("column {}", c + 1), |s| s.to_string()))
+        .collect();
+    let rules = RowRules {
+        delimiter,
+        comments,
+        blank_lines: BlankLines::Skip,
+        width: Width::Exact(n_columns),
+        time_col: 0,
+        time_digits: if layout == TrajectoryLayout::Asl { 0 } else { 9 },
+        float_ns: allow_float_timestamps,
+        values: (1..n_columns).collect(),
+        trailing_junk: false,
+        skip_bad_lines: false,
     };
+    let rows = table::parse_rows(path, body, body_line, &rules, &names)?;
+    Ok(table::Table {
+        path: path.to_path_buf(),
+        header: None,
+        names,
+        n_columns,
+        t_ns: rows.t_ns,
+        values: rows.values,
+        lines: rows.lines,
+    })
+}
+
+/// Reads a TUM ground-truth file with 8 columns (`v` is `None`) or 11 columns (`v` is `Some`).
+pub fn read_tum(path: impl AsRef<Path>, opts: &ReadOptions) -> Result<GroundTruth> {
     let path = path.as_ref();
     let bytes = table::read_bytes(path)?;
-    let t = table::parse_table(path, &bytes, &spec)?;
+    let t = read_rows(
+        path,
+        &bytes,
+        TrajectoryLayout::Tum,
+        &[8, 11],
+        Comments::Lines,
+        opts.allow_float_timestamps,
+    )?;
     table::require_rows(&t, &bytes, &POSE_ROWS)?;
     let n = t.len();
     let w = t.n_columns - 1;
@@ -51,6 +204,33 @@ pub fn read_tum(path: impl AsRef<Path>, opts: &ReadOptions) -> Result<GroundTrut
         q_wxyz: q,
         v: with_v.then_some(v),
         ..GroundTruth::default()
+    })
+}
+
+/// Reads a trajectory (poses, or positions where `opts.positions_only` allows them) in one of the
+/// layouts of [`TrajectoryLayout`] (module doc for the rules). Quaternions are returned as the
+/// file has them (not normalised), in w,x,y,z order.
+pub fn read_trajectory(path: impl AsRef<Path>, opts: &TrajectoryOptions) -> Result<Trajectory> {
+    let path = path.as_ref();
+    let bytes = table::read_bytes(path)?;
+    let allowed: &[usize] = if opts.positions_only { &[8, 4] } else { &[8] };
+    let t = read_rows(
+        path,
+        &bytes,
+        opts.layout,
+        allowed,
+        Comments::LinesAndTrailing,
+        opts.allow_float_timestamps,
+    )?;
+    table::require_rows(&t, &bytes, &TRAJECTORY_ROWS)?;
+    let w = t.n_columns - 1;
+    let p = t.values.chunks_exact(w).map(|r| [r[0], r[1], r[2]]).collect();
+    let q_wxyz = (t.n_columns == 8).then(|| t.values.chunks_exact(w).map(|r| opts.layout.quaternion(r)).collect());
+    Ok(Trajectory {
+        t_ns: t.t_ns,
+        p,
+        q_wxyz,
+        lines: t.lines,
     })
 }
 
