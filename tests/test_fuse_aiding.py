@@ -345,3 +345,71 @@ def test_the_first_fix_after_a_long_gap_settles_the_causal_estimate(seed):
     _t, fixes, res, idx, at, err_c, _err_s = coast_through_a_gap(40.0, seed=seed, iterations=3, resolve_after_s=np.inf)
     assert res.counts["resolves_after_coast"] == 0
     assert err_c[at[int(idx[3])]] > 100 * fixes.sigma_m
+
+
+# --------------------------------------------------------------------------------------------
+# aiding trajectories: read by the core's one trajectory reader (the TUM ground-truth reader's
+# rules), through imu_learn.fuse.aiding.tum
+
+
+def test_aiding_tum_skips_comments_and_blank_lines_like_the_core_ground_truth_reader(tmp_path):
+    from imu_learn import _imu_core as core
+    from imu_learn.fuse.aiding.tum import read_tum
+
+    f = tmp_path / "a.tum"
+    f.write_text("# t tx ty tz qx qy qz qw\n\n1.0 0 0 0 0 0 0 1\n\n   \n  # indented\n2.0 1 2 3 0 0 0 1\n"
+                 "3.0 2 2 3 0 0 0.6 0.8  # a comment after the row\n\n")
+    tr = read_tum(f)
+    assert tr.t_ns.dtype == np.int64 and tr.t_ns.tolist() == [10**9, 2 * 10**9, 3 * 10**9]
+    assert tr.lines.tolist() == [3, 7, 8] and tr.path == str(f)
+    assert tr.p.tolist() == [[0, 0, 0], [1, 2, 3], [2, 2, 3]]
+    assert np.allclose(tr.q_xyzw[2], [0, 0, 0.6, 0.8])
+    # the ground-truth reader (no comment after a row there) agrees on the same rows
+    f.write_text(f.read_text().replace("  # a comment after the row", ""))
+    gt = core.read_tum(str(f))
+    assert gt["t_ns"].tolist() == read_tum(f).t_ns.tolist()
+    assert np.allclose(gt["q_wxyz"][:, [1, 2, 3, 0]], read_tum(f).q_xyzw)
+
+
+def test_aiding_four_columns_are_positions_only_where_allowed(tmp_path):
+    from imu_learn.fuse.aiding.tum import read_trajectory, read_tum
+
+    f = tmp_path / "p.tum"
+    f.write_text("# t x y z\n1.0 0 0 0\n\n2.0 1 2 3\n")
+    tr = read_tum(f, need_orientation=False)
+    assert tr.q_xyzw is None and tr.p.tolist() == [[0, 0, 0], [1, 2, 3]] and tr.lines.tolist() == [2, 4]
+    with pytest.raises(il.ColumnCountError) as e:
+        read_tum(f)
+    assert (e.value.path, e.value.line, e.value.column) == (str(f), 2, None)
+    assert "expected 8 columns, found 4" in str(e.value)
+    c = tmp_path / "p.csv"
+    c.write_text("t,x,y,z\n1.0,0,0,0\n2.0,1,2,3\n")
+    assert read_trajectory(c, "csv", need_orientation=False).p.tolist() == tr.p.tolist()
+
+
+def test_aiding_stamps_are_exact_and_round_half_to_even_past_nine_decimals(tmp_path):
+    from imu_learn.fuse.aiding.tum import read_tum, seconds_to_ns
+
+    f = tmp_path / "s.tum"
+    stamps = ["1403636579.763556", "1403636579.7635560015", "1403636579.7635560025000001", "1403636579.7635560045"]
+    f.write_text("".join(f"{t} 0 0 0 0 0 0 1\n" for t in stamps))
+    base = 1403636579763556000
+    assert read_tum(f).t_ns.tolist() == [base, base + 2, base + 3, base + 4]
+    assert seconds_to_ns("1403636579.763556") == 1403636579763556000
+    assert seconds_to_ns("1.0000000005") == 10**9 and seconds_to_ns("1.0000000015") == 10**9 + 2
+    assert seconds_to_ns("-1.5") == -1_500_000_000 and seconds_to_ns("1.5e-3") == 1_500_000
+    with pytest.raises(ValueError):
+        seconds_to_ns("12:00")
+    with pytest.raises(OverflowError):
+        seconds_to_ns("nan")
+
+
+def test_aiding_quaternion_far_from_unit_length_names_its_line(tmp_path):
+    from imu_learn.errors import AidingQuaternionError
+    from imu_learn.fuse.aiding.tum import read_trajectory
+
+    f = tmp_path / "q.csv"
+    f.write_text("#timestamp,px,py,pz,qw,qx,qy,qz\n1000000000,0,0,0,1,0,0,0\n\n2000000000,0,0,0,2,0,0,0\n")
+    with pytest.raises(AidingQuaternionError) as e:
+        read_trajectory(f, "asl")
+    assert (e.value.path, e.value.line, e.value.column, e.value.field) == (str(f), 4, 5, "qw")

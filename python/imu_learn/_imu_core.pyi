@@ -42,7 +42,25 @@ def read_asl_position(path: _Path, allow_float_timestamps: bool = False) -> Tupl
     """ASL position file (EuRoC leica0: t, p_RS_R) -> (t_ns (N,), p (N, 3))."""
 
 def read_tum(path: _Path, allow_float_timestamps: bool = False) -> Dict[str, Optional[_F64]]:
-    """TUM trajectory (8 columns, or 11 with velocity) -> {t_ns, p, q_wxyz, v, ...}."""
+    """TUM ground truth (8 columns, or 11 with velocity) -> {t_ns, p, q_wxyz, v, ...}. '#' comment
+    lines and blank lines are skipped anywhere; stamps in seconds are exact (half to even past the
+    ns)."""
+
+def read_trajectory(
+    path: _Path, layout: str = "tum", positions_only: bool = False, allow_float_timestamps: bool = False
+) -> Dict[str, Optional[np.ndarray]]:
+    """Trajectory (aiding) file -> {t_ns (N,) int64, p (N, 3), q_wxyz (N, 4) as in the file (not
+    normalised) or None for positions only, lines (N,) int64: each row's 1-based line}. layout:
+    ``tum`` (t tx ty tz qx qy qz qw, white space, seconds), ``csv`` (the same, commas; a header line of
+    names is skipped), ``asl`` (timestamp [ns], px, py, pz, qw, qx, qy, qz). Comment lines, comments
+    after a row and blank lines are skipped; rows have 8 columns, or 4 (t x y z) with positions_only;
+    stamps in seconds are exact (half to even past the ns). Errors as read_tum's; InvalidInputError
+    for an unknown layout."""
+
+def seconds_to_ns(text: str) -> int:
+    """Decimal seconds -> integer ns by the readers' rule: exact decimal parsing, digits past the ns
+    rounded half to even. ValueError for text that is not a number, OverflowError for NaN, infinity
+    or a value outside the int64 ns range."""
 
 def write_tum(path: _Path, t_ns: _I64, p: _F64, q_wxyz: _F64) -> None:
     """Write a TUM trajectory atomically."""
@@ -58,16 +76,28 @@ def read_csv_columns(path: _Path, columns: str, time_unit: str, gyro_unit: str, 
     ``t,gx,gy,gz,ax,ay,az`` with ``_`` for a column to skip (later columns are ignored); time_unit
     s|ms|us|ns (integer or float text, read exactly), gyro_unit rad/s|deg/s, acc_unit m/s2|g
     (9.80665). Delimiter (; , tab or whitespace), a header line and '#' comments are found in the
-    file. Errors name path:line:column and the field: ColumnCountError (a line shorter than the
-    map), NotNumericError, NonFiniteError, TimestampError (not strictly increasing),
+    file; blank lines are skipped. Errors name path:line:column and the field: ColumnCountError (a
+    line shorter than the map), NotNumericError, NonFiniteError, TimestampError (not strictly increasing),
     TooFewRowsError; InvalidInputError for an unknown unit or a bad column map."""
 
+def read_csv_columns_checked(
+    path: _Path, columns: str, time_unit: str, gyro_unit: str, acc_unit: str, skip_bad_lines: bool = False
+) -> Dict[str, object]:
+    """A user's IMU CSV read as read_csv_columns does, with what plausibility checks need -> {t_ns,
+    gyro [rad/s], acc [m/s^2], skipped: [(line, problem)] (skip_bad_lines: lines too short for the map
+    or with a field that is not a finite number, passed over instead of raising, each with the error
+    it would have raised), names: [str] (the header's or a comment line's column names, [] without),
+    fields: int (fields of the first row, a trailing delimiter not counted)}. Stamps out of order
+    stay an error."""
+
 def write_csv_columns(
-    original: _Path, out: _Path, gyro: _F64, acc: _F64, columns: str, time_unit: str, gyro_unit: str, acc_unit: str
+    original: _Path, out: _Path, gyro: _F64, acc: _F64, columns: str, time_unit: str, gyro_unit: str, acc_unit: str,
+    skip_bad_lines: bool = False,
 ) -> None:
-    """Write ``out``: ``original`` (read as read_csv_columns does) with its gyro and acc fields replaced
-    by gyro [rad/s] / acc [m/s^2] (one row per sample), in the file's own units; header, comments,
-    time and every other column keep their text. Atomic (temp file + rename)."""
+    """Write ``out``: ``original`` (read as read_csv_columns_checked does, with skip_bad_lines) with its
+    gyro and acc fields replaced by gyro [rad/s] / acc [m/s^2] (one row per sample), in the file's own
+    units; header, comments, time, every other column and skipped lines keep their text. Atomic (temp
+    file + rename)."""
 
 def allan_deviation(
     samples: _F64, period_s: float, per_decade: int = 20, m: Optional[npt.NDArray[np.uint64]] = None

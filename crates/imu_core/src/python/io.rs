@@ -3,10 +3,13 @@
 use std::path::PathBuf;
 
 use numpy::{PyArray1, PyArray2, PyReadonlyArray1, PyReadonlyArray2};
+use pyo3::exceptions::{PyOverflowError, PyValueError};
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
 
 use crate::io::columns::{self, CsvFormat};
+use crate::io::table::{parse_decimal, Decimal};
+use crate::io::tum::{TrajectoryLayout, TrajectoryOptions};
 use crate::io::{asl, kaist, tum, ReadOptions};
 use crate::python::arrays::{out1, out2, rows, slice1};
 use crate::python::errors::to_py;
@@ -107,6 +110,47 @@ fn read_tum(py: Python<'_>, path: PathBuf, allow_float_timestamps: bool) -> PyRe
         .allow_threads(|| tum::read_tum(&path, &opts(allow_float_timestamps)))
         .map_err(to_py)?;
     gt_out(py, g)
+}
+
+/// A trajectory (aiding) file -> {t_ns, p, q_wxyz (None for positions only), lines}.
+#[pyfunction]
+#[pyo3(signature = (path, layout="tum", positions_only=false, allow_float_timestamps=false))]
+fn read_trajectory<'py>(
+    py: Python<'py>,
+    path: PathBuf,
+    layout: &str,
+    positions_only: bool,
+    allow_float_timestamps: bool,
+) -> PyResult<Bound<'py, PyDict>> {
+    let opts = TrajectoryOptions {
+        layout: TrajectoryLayout::parse(layout).map_err(to_py)?,
+        positions_only,
+        allow_float_timestamps,
+    };
+    let t = py
+        .allow_threads(|| tum::read_trajectory(&path, &opts))
+        .map_err(to_py)?;
+    let d = PyDict::new(py);
+    d.set_item("t_ns", out1(py, t.t_ns))?;
+    d.set_item("p", out2(py, t.p)?)?;
+    d.set_item("q_wxyz", t.q_wxyz.map(|q| out2(py, q)).transpose()?)?;
+    let lines: Vec<i64> = t.lines.into_iter().map(|l| l as i64).collect();
+    d.set_item("lines", out1(py, lines))?;
+    Ok(d)
+}
+
+/// Decimal seconds as integer ns, by the readers' rule (exact, half to even past the ns).
+#[pyfunction]
+fn seconds_to_ns(text: &str) -> PyResult<i64> {
+    let s = text.trim();
+    match parse_decimal(s.as_bytes(), 9) {
+        Decimal::Int(n) | Decimal::Frac(n) => Ok(n),
+        Decimal::OutOfRange => Err(PyOverflowError::new_err(format!("{s:?} s is out of the ns range"))),
+        Decimal::Invalid => match fast_float2::parse::<f64, _>(s) {
+            Ok(x) if !x.is_finite() => Err(PyOverflowError::new_err(format!("{s:?} is not finite"))),
+            _ => Err(PyValueError::new_err(format!("{s:?} is not a number of seconds"))),
+        },
+    }
 }
 
 #[pyfunction]
@@ -222,6 +266,8 @@ pub fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(read_asl_pose, m)?)?;
     m.add_function(wrap_pyfunction!(read_asl_position, m)?)?;
     m.add_function(wrap_pyfunction!(read_tum, m)?)?;
+    m.add_function(wrap_pyfunction!(read_trajectory, m)?)?;
+    m.add_function(wrap_pyfunction!(seconds_to_ns, m)?)?;
     m.add_function(wrap_pyfunction!(write_tum, m)?)?;
     m.add_function(wrap_pyfunction!(read_kaist_imu, m)?)?;
     m.add_function(wrap_pyfunction!(read_kaist_pose, m)?)?;

@@ -1,6 +1,7 @@
 """Aiding trajectories read from text files: poses (or positions) with their stamps, strictly.
 
-Three layouts, one parser (:func:`read_trajectory`):
+Three layouts, one reader: the core's (``imu_core::io::tum::read_trajectory``, through
+:func:`imu_learn._imu_core.read_trajectory`), the same reader that reads TUM ground truth:
 
 * ``tum``: ``t tx ty tz qx qy qz qw`` separated by white space, ``t`` in seconds (what evo, ORB-SLAM2
   and most SLAM systems write); positions only: ``t tx ty tz``;
@@ -8,45 +9,37 @@ Three layouts, one parser (:func:`read_trajectory`):
 * ``asl``: an ASL CSV (EuRoC/Kalibr): ``timestamp [ns], px, py, pz, qw, qx, qy, qz`` (quaternion
   scalar first), positions only: ``timestamp, px, py, pz``.
 
-Lines starting with ``#`` and blank lines are skipped (a trailing ``# ...`` comment too); a CSV
-header line of names (not numbers) is skipped when it is the first line that is not a comment.
-Every row must have the column count of the first row. Seconds are converted to integer
-nanoseconds from their decimal text (no float rounding: ``1403638127.295097`` is
-``1403638127295097000`` ns exactly).
+Lines starting with ``#`` and blank lines are skipped anywhere (a trailing ``# ...`` comment after a
+row's fields too); a CSV header line of names (not numbers) is skipped when it is the first line
+that is not a comment. Every row must have the column count of the first row. Seconds are
+converted to integer nanoseconds from their decimal text (no float rounding: ``1403638127.295097``
+is ``1403638127295097000`` ns exactly); digits past the ninth decimal round half to even on the
+digits (``1.0000000005`` is ``1000000000`` ns, ``1.0000000015`` is ``1000000002``).
 
 Errors (each a :class:`imu_learn.errors.ParseError` subclass with ``path``, the 1-based ``line``, the
 ``column`` and the ``field``): a row with another column count (:class:`ColumnCountError`), a cell
 that is not a number (:class:`NotNumericError`), NaN or infinity (:class:`NonFiniteError`), a stamp
 at or before the one before it (:class:`TimestampError`), a quaternion far from unit length
-(:class:`AidingQuaternionError`), fewer than two rows (:class:`TooFewRowsError`).
-:func:`check_overlap` raises :class:`AidingOverlapError` when the trajectory and the IMU share no
-time.
+(:class:`AidingQuaternionError`, checked once the file has parsed), fewer than two rows
+(:class:`TooFewRowsError`). :func:`check_overlap` raises :class:`AidingOverlapError` when the
+trajectory and the IMU share no time.
 """
 from __future__ import annotations
 
 import logging
-import math
 from dataclasses import dataclass
 from pathlib import Path
-from typing import List, Optional, Tuple, Union
+from typing import Optional, Tuple, Union
 
 import numpy as np
 
-from imu_learn.data.formats.fields import number
-from imu_learn.errors import (
-    AidingOverlapError,
-    AidingQuaternionError,
-    ColumnCountError,
-    NonFiniteError,
-    NotNumericError,
-    TimestampError,
-    TooFewRowsError,
-)
+from imu_learn import _imu_core as core
+from imu_learn.errors import AidingOverlapError, AidingQuaternionError
 
 log = logging.getLogger(__name__)
 
 LAYOUTS = ("tum", "csv", "asl")
-TUM_FIELDS = ("t", "tx", "ty", "tz", "qx", "qy", "qz", "qw")
+TUM_FIELDS = ("timestamp", "tx", "ty", "tz", "qx", "qy", "qz", "qw")
 ASL_FIELDS = ("timestamp", "px", "py", "pz", "qw", "qx", "qy", "qz")
 # A quaternion whose norm is further than this from 1 is an error, not a rounding to renormalise.
 QUAT_NORM_TOL = 1e-2
@@ -73,30 +66,10 @@ class Trajectory:
 
 
 def seconds_to_ns(text: str) -> int:
-    """Decimal seconds (``1403638127.295097``, ``-1.5``, ``12``) as integer ns, exactly; scientific
-    notation through float. ValueError for anything else (NaN / infinity included)."""
-    s = text.strip()
-    body = s[1:] if s[:1] in "+-" else s
-    if body and "e" not in body.lower() and body.replace(".", "", 1).isdigit():
-        whole, _, frac = body.partition(".")
-        frac = (frac + "000000000")[:9]
-        ns = int(whole or "0") * 1_000_000_000 + int(frac)
-        return -ns if s.startswith("-") else ns
-    v = float(s)
-    if not math.isfinite(v):
-        raise OverflowError(s)
-    return int(round(v * 1e9))
-
-
-def _is_header(cells: List[str]) -> bool:
-    def number(c: str) -> bool:
-        try:
-            float(c)
-            return True
-        except ValueError:
-            return False
-
-    return bool(cells) and not any(number(c) for c in cells)
+    """Decimal seconds (``1403638127.295097``, ``-1.5``, ``12``, ``1.5e-3``) as integer ns, exactly, by
+    the readers' rule (digits past the ninth decimal round half to even). ValueError for text that is
+    not a number; OverflowError for NaN, infinity or a value past the int64 ns range."""
+    return core.seconds_to_ns(text)
 
 
 def read_trajectory(path: Union[str, Path], layout: str = "tum", need_orientation: bool = True) -> Trajectory:
@@ -105,73 +78,23 @@ def read_trajectory(path: Union[str, Path], layout: str = "tum", need_orientatio
     (positions) are accepted too."""
     if layout not in LAYOUTS:
         raise ValueError(f"layout must be one of {LAYOUTS}, got {layout!r}")
-    path = Path(path)
     src = str(path)
-    names = ASL_FIELDS if layout == "asl" else TUM_FIELDS
-    sep = None if layout == "tum" else ","
-    rows: List[List[float]] = []
-    stamps: List[int] = []
-    lines: List[int] = []
-    ncol: Optional[int] = None
-    first_content = True
-    with open(path, encoding="utf-8", errors="replace") as f:
-        for lineno, raw in enumerate(f, start=1):
-            text = raw.split("#", 1)[0].strip()
-            if not text:
-                continue
-            cells = [c.strip() for c in text.split(sep)]
-            if first_content and sep is not None and _is_header(cells):
-                first_content = False
-                continue
-            first_content = False
-            if ncol is None:
-                allowed = (8,) if need_orientation else (4, 8)
-                if len(cells) not in allowed:
-                    want = " or ".join(str(a) for a in allowed)
-                    raise ColumnCountError(
-                        f"{src}:{lineno}: {len(cells)} columns, expected {want} ({' '.join(names[:max(allowed)])})",
-                        src, lineno, None, None)
-                ncol = len(cells)
-            elif len(cells) != ncol:
-                raise ColumnCountError(f"{src}:{lineno}: {len(cells)} columns, expected {ncol} like the first row",
-                                       src, lineno, None, None)
-            try:
-                stamp = int(cells[0]) if layout == "asl" else seconds_to_ns(cells[0])
-            except OverflowError:
-                raise NonFiniteError(f"{src}:{lineno}: column 1 ({names[0]}): {cells[0]!r} is not finite",
-                                     src, lineno, 1, names[0]) from None
-            except ValueError:
-                raise NotNumericError(f"{src}:{lineno}: column 1 ({names[0]}): {cells[0]!r} is not "
-                                      + ("an integer ns stamp" if layout == "asl" else "a number of seconds"),
-                                      src, lineno, 1, names[0]) from None
-            vals = []
-            for c, cell in enumerate(cells[1:], start=2):
-                vals.append(number(cell, src, lineno, c, names[c - 1]))
-            if stamps and stamp <= stamps[-1]:
-                prev = lines[-1]
-                raise TimestampError(
-                    f"{src}:{lineno}: stamp {cells[0]} is {'equal to' if stamp == stamps[-1] else 'before'} the "
-                    f"stamp on line {prev}: stamps must increase", src, lineno, 1, names[0])
-            if ncol == 8:
-                q = np.array(vals[3:])
-                norm = float(np.linalg.norm(q))
-                if abs(norm - 1.0) > QUAT_NORM_TOL:
-                    raise AidingQuaternionError(
-                        f"{src}:{lineno}: quaternion ({', '.join(names[4:])}) has norm {norm:.4g}, expected 1",
-                        src, lineno, 5, names[4])
-            stamps.append(stamp)
-            rows.append(vals)
-            lines.append(lineno)
-    if len(rows) < 2:
-        last = lines[-1] if lines else 0
-        raise TooFewRowsError(f"{src}: {len(rows)} trajectory row(s); at least 2 needed", src, last, None, None)
-    arr = np.asarray(rows, dtype=np.float64)
+    d = core.read_trajectory(src, layout, positions_only=not need_orientation)
+    lines = d["lines"]
     q = None
-    if ncol == 8:
-        q = arr[:, 3:7] if layout != "asl" else arr[:, [4, 5, 6, 3]]
-        q = q / np.linalg.norm(q, axis=1, keepdims=True)
-    return Trajectory(np.asarray(stamps, dtype=np.int64), arr[:, :3].copy(), q, src,
-                      np.asarray(lines, dtype=np.int64))
+    if d["q_wxyz"] is not None:
+        q = d["q_wxyz"][:, [1, 2, 3, 0]]
+        norm = np.linalg.norm(q, axis=1)
+        bad = np.flatnonzero(np.abs(norm - 1.0) > QUAT_NORM_TOL)
+        if len(bad):
+            i = int(bad[0])
+            names = ASL_FIELDS if layout == "asl" else TUM_FIELDS
+            line = int(lines[i])
+            raise AidingQuaternionError(
+                f"{src}:{line}: quaternion ({', '.join(names[4:])}) has norm {norm[i]:.4g}, expected 1",
+                src, line, 5, names[4])
+        q = q / norm[:, None]
+    return Trajectory(d["t_ns"], d["p"], q, src, lines)
 
 
 def read_tum(path: Union[str, Path], need_orientation: bool = True) -> Trajectory:
