@@ -8,8 +8,8 @@ use common::*;
 use imu_core::error::TimestampProblem;
 use imu_core::io::asl::read_imu;
 use imu_core::io::columns::{self, CsvFormat};
-use imu_core::io::tum::{read_trajectory, read_tum, TrajectoryLayout, TrajectoryOptions};
 use imu_core::io::table::{read_table, Separator, TableSpec, TimeUnit};
+use imu_core::io::tum::{read_trajectory, read_tum, TrajectoryLayout, TrajectoryOptions};
 use imu_core::io::ReadOptions;
 use imu_core::ImuError;
 
@@ -385,7 +385,10 @@ fn blank_lines_are_skipped_by_the_user_csv_and_trajectory_readers() {
 
     let text = "\n1.0 0 0 0 0 0 0 1\n\n\n2.0 1 0 0 0 0 0 1\n \n3.0 2 0 0 0 0 0 1\n\n";
     let p = write(&dir, "t.tum", text);
-    assert_eq!(read_tum(&p, &strict()).unwrap().t_ns, vec![1_000_000_000, 2_000_000_000, 3_000_000_000]);
+    assert_eq!(
+        read_tum(&p, &strict()).unwrap().t_ns,
+        vec![1_000_000_000, 2_000_000_000, 3_000_000_000]
+    );
     let opts = TrajectoryOptions {
         layout: TrajectoryLayout::Tum,
         positions_only: false,
@@ -419,7 +422,12 @@ fn bad_fields_are_the_same_error_in_the_table_and_the_user_csv_reader() {
         assert_eq!(place(&table).1, 4);
         assert_eq!(place(&table).2, col);
         // Both name the field from the header; the user's reader adds the map's name.
-        let name = IMU_HEADER.split(',').nth(col - 1).unwrap().trim_start_matches('#').to_string();
+        let name = IMU_HEADER
+            .split(',')
+            .nth(col - 1)
+            .unwrap()
+            .trim_start_matches('#')
+            .to_string();
         assert_message(&table, &p, 4, Some(&name));
         assert!(user.to_string().contains(&name), "{user}");
     }
@@ -448,7 +456,11 @@ fn time_past_the_ns_rounds_half_to_even_in_every_reader() {
         names: Vec::new(),
         allow_float_timestamps: false,
     };
-    let p = write(&dir, "t.csv", &stamps.iter().map(|t| format!("{t},1\n")).collect::<String>());
+    let p = write(
+        &dir,
+        "t.csv",
+        &stamps.iter().map(|t| format!("{t},1\n")).collect::<String>(),
+    );
     assert_eq!(read_table(&p, &spec).unwrap().t_ns, want);
     // Float-notation ns (allowed by the option) round the same way: 2.5 ns is 2 ns, 3.5 ns is 4.
     let mut l = imu_lines(0);

@@ -284,7 +284,9 @@ fn comments_and_blank_lines_anywhere_are_skipped() {
     // A blank line does not hide the row after it from the checks.
     let p = write(&dir, "b.tum", "1.0 0 0 0 0 0 0 1\n\n1.1 0 0 nan 0 0 0 1\n");
     match read_tum(&p, &strict()).unwrap_err() {
-        ImuError::NonFinite { line, column, field, .. } => assert_eq!((line, column, field.as_str()), (3, 4, "tz")),
+        ImuError::NonFinite {
+            line, column, field, ..
+        } => assert_eq!((line, column, field.as_str()), (3, 4, "tz")),
         e => panic!("{e:?}"),
     }
 }
@@ -350,12 +352,12 @@ fn stamps_are_exact_and_digits_past_the_ns_round_half_to_even() {
     let dir = tempfile::tempdir().unwrap();
     const S: i64 = 1_403_636_579_000_000_000;
     let rows = [
-        ("1403636579.763556", S + 763_556_000), // exact: no float rounding
+        ("1403636579.763556", S + 763_556_000),     // exact: no float rounding
         ("1403636579.7635560015", S + 763_556_002), // an exact half: to the even ns (up)
         ("1403636579.7635560035", S + 763_556_004),
         ("1403636579.76355600650000000001", S + 763_556_007), // past the half: up
-        ("1403636579.7635560085", S + 763_556_008),         // an exact half: to the even ns (down)
-        ("1403636579.7635560094999", S + 763_556_009),      // below the half: down
+        ("1403636579.7635560085", S + 763_556_008),           // an exact half: to the even ns (down)
+        ("1403636579.7635560094999", S + 763_556_009),        // below the half: down
         ("1403636580", S + 1_000_000_000),
         ("14036365.8000000001e2", S + 1_000_000_010), // exponent notation: exact too
     ];
@@ -400,7 +402,10 @@ fn csv_and_asl_layouts_read_the_same_poses() {
     // asl stamps are integer ns; errors use the layout's names.
     let bad = write(&dir, "c.csv", "1000000000,0,0,0,1,0,0,0\n2.0e9,1,0,0,0,1,0,0\n");
     let err = read_trajectory(&bad, &traj(TrajectoryLayout::Asl, false)).unwrap_err();
-    assert!(matches!(err, ImuError::FloatTimestamp { line: 2, column: 1, .. }), "{err:?}");
+    assert!(
+        matches!(err, ImuError::FloatTimestamp { line: 2, column: 1, .. }),
+        "{err:?}"
+    );
     let bad = write(&dir, "d.csv", "1000000000,0,0,0,1,0,0,0\n2000000000,1,0,0,x,1,0,0\n");
     let err = read_trajectory(&bad, &traj(TrajectoryLayout::Asl, false)).unwrap_err();
     assert_message(&err, &bad, 2, Some("qw"));

@@ -1,6 +1,7 @@
 //! One reader (and writer where users need one) per file format.
 //!
-//! Every reader goes through [`table`], so all formats share one set of rules for what a valid
+//! Every reader goes through the one row parser of [`table`] (dataset tables, a user's own CSV
+//! with its column map, trajectories), so all formats share one set of rules for what a valid
 //! file is and one shape of error (file, 1-based line and column, field name). Every writer goes
 //! through [`write_atomic`], so an interrupted write never leaves a half-written dataset file
 //! where a complete one used to be.
@@ -24,8 +25,8 @@ use crate::error::{ImuError, Result};
 pub struct ReadOptions {
     /// Accept nanosecond timestamps written in float notation (`1.40363657975856E+018`, as a
     /// spreadsheet round trip leaves them) instead of failing with `FloatTimestamp`. The stamp is
-    /// converted from its decimal text (no detour through f64) and rounded to the nearest ns.
-    /// Because such files come out of spreadsheets, this option also drops trailing junk lines a
+    /// converted from its decimal text (no detour through f64) and rounded to the nearest ns, ties
+    /// to even on the digits. Because such files come out of spreadsheets, this option also drops trailing junk lines a
     /// spreadsheet appends: lines after the last data row whose fields after the first are all
     /// empty (`,,,,,,`, `Step: 0.005 = 1/200,,,,,,`). A junk line followed by a data row is still
     /// an error.

@@ -268,10 +268,21 @@ pub(crate) fn is_number(f: &[u8]) -> bool {
 #[derive(Debug, Clone)]
 pub(crate) enum BadKind {
     /// The line has `found` fields, not what the width asks for.
-    Count { found: usize },
-    NotNumeric { col: usize, value: String },
-    NonFinite { col: usize, value: String },
-    FloatTimestamp { col: usize, value: String },
+    Count {
+        found: usize,
+    },
+    NotNumeric {
+        col: usize,
+        value: String,
+    },
+    NonFinite {
+        col: usize,
+        value: String,
+    },
+    FloatTimestamp {
+        col: usize,
+        value: String,
+    },
 }
 
 /// A bad line: what is wrong and where.
@@ -709,7 +720,6 @@ fn field_names(header: Option<&str>, spec: &TableSpec, n_columns: usize) -> Vec<
         .collect()
 }
 
-
 // ---------------------------------------------------------------------------------------------
 // Bytes and lines
 
@@ -1016,8 +1026,14 @@ mod tests {
         assert_eq!(parse_decimal(b"0.0000000025", 9), Decimal::Frac(2));
         assert_eq!(parse_decimal(b"-0.0000000005", 9), Decimal::Frac(0));
         assert_eq!(parse_decimal(b"-0.0000000015", 9), Decimal::Frac(-2));
-        assert_eq!(parse_decimal(b"1403636579.7635560005", 9), Decimal::Frac(1_403_636_579_763_556_000));
-        assert_eq!(parse_decimal(b"1403636579.7635560015", 9), Decimal::Frac(1_403_636_579_763_556_002));
+        assert_eq!(
+            parse_decimal(b"1403636579.7635560005", 9),
+            Decimal::Frac(1_403_636_579_763_556_000)
+        );
+        assert_eq!(
+            parse_decimal(b"1403636579.7635560015", 9),
+            Decimal::Frac(1_403_636_579_763_556_002)
+        );
         // Anything past the half, however far down, rounds up; below it, down.
         assert_eq!(parse_decimal(b"0.00000000050000000001", 9), Decimal::Frac(1));
         assert_eq!(parse_decimal(b"0.00000000049999999999", 9), Decimal::Frac(0));
@@ -1025,7 +1041,10 @@ mod tests {
         assert_eq!(parse_decimal(b"3.5", 0), Decimal::Frac(4));
         assert_eq!(parse_decimal(b"25e-1", 0), Decimal::Frac(2));
         assert_eq!(parse_decimal(b"5e-10", 9), Decimal::Frac(0));
-        assert_eq!(parse_decimal(b"1403636579.763556", 9), Decimal::Frac(1_403_636_579_763_556_000));
+        assert_eq!(
+            parse_decimal(b"1403636579.763556", 9),
+            Decimal::Frac(1_403_636_579_763_556_000)
+        );
     }
 
     #[test]

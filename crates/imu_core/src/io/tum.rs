@@ -146,7 +146,12 @@ fn read_rows(
     let body = &bytes[body_start..];
     let n_columns = table::pick_column_count(body, delimiter, comments, allowed);
     let names: Vec<String> = (0..n_columns)
-        .map(|c| layout.names().get(c).map_or_else(|| format!("column {}", c + 1), |s| s.to_string()))
+        .map(|c| {
+            layout
+                .names()
+                .get(c)
+                .map_or_else(|| format!("column {}", c + 1), |s| s.to_string())
+        })
         .collect();
     let rules = RowRules {
         delimiter,

@@ -127,9 +127,7 @@ fn read_trajectory<'py>(
         positions_only,
         allow_float_timestamps,
     };
-    let t = py
-        .allow_threads(|| tum::read_trajectory(&path, &opts))
-        .map_err(to_py)?;
+    let t = py.allow_threads(|| tum::read_trajectory(&path, &opts)).map_err(to_py)?;
     let d = PyDict::new(py);
     d.set_item("t_ns", out1(py, t.t_ns))?;
     d.set_item("p", out2(py, t.p)?)?;
