@@ -185,3 +185,14 @@ def test_the_held_back_block_must_not_get_worse():
         "held_back.rotation"]
     assert [f.field for f in held_back_findings({**base, "profile_rot_deg": 0.5, "profile_trans_m": 0.2})] == [
         "held_back.translation"]
+
+
+def test_a_sparse_reference_does_not_resolve_the_accelerometer():
+    from imu_learn.calib.reference import resolves_acceleration
+
+    assert resolves_acceleration(200.0, 1.0) and resolves_acceleration(120.0, 1.0)  # EuRoC, TUM-VI motion capture
+    assert resolves_acceleration(90.0, 2.0)  # Fetch: 90 Hz motion capture, a 100 Hz IMU's 200-sample window
+    assert not resolves_acceleration(20.0, 1.0) and not resolves_acceleration(30.0, 1.0)  # VO / SLAM
+    imu, seg = flight()
+    assert not resolve_frame([(imu, reference_of(seg, rate=20.0))]).resolves_acceleration
+    assert resolve_frame([(imu, reference_of(seg, rate=200.0))]).resolves_acceleration

@@ -87,6 +87,7 @@ from imu_learn.util.threads import thread_limits
 Tensor = torch.Tensor
 
 DEFAULT_CUTOFFS: Tuple[Optional[float], ...] = (None, 40.0, 20.0, 10.0, 5.0)
+ACC_BIAS_ONLY = 1e6  # ``acc_prior`` that holds M_a at the identity (|M_a - I| below 1e-9 on real data)
 
 
 def _gyro_model(theta: Tensor, g_m: Tensor, a_m: Tensor) -> Tensor:
@@ -462,6 +463,7 @@ class Traditional(Method):
         max_shift: float = 3.0,
         offset_window: int = 10,
         threads: int = 1,
+        acc_prior: Optional[float] = None,
     ) -> None:
         self.cutoffs_hz = tuple(cutoffs_hz)
         self.filter_order = filter_order
@@ -475,6 +477,9 @@ class Traditional(Method):
         self.max_shift = max_shift
         self.offset_window = offset_window
         self.threads = threads
+        # the prior on the accelerometer matrix (M_a - I); None: ``prior``. A large one (ACC_BIAS_ONLY) holds
+        # M_a at the identity: a reference that cannot resolve accelerations observes the acc bias only
+        self.acc_prior = acc_prior
         self.params = TraditionalParams.identity()
 
     # -- applying the model ---------------------------------------------------------------------
@@ -526,7 +531,8 @@ class Traditional(Method):
                 return _VelResiduals(None, w, held[w.key])
 
         theta_a, c_a, val_vel, wa = self._fit_at_best_cutoff(
-            vel, lambda c: tr.windows(c_g, c), lambda c: va.windows(c_g, c), grid, np.zeros(12), a_idx, self.huber_vel)
+            vel, lambda c: tr.windows(c_g, c), lambda c: va.windows(c_g, c), grid, np.zeros(12), a_idx, self.huber_vel,
+            self._acc_prior)
         # "before" = raw IMU (identity model, no filter) on the same windows
         raw = tr.windows(None, None)
         ident = _gyro_model(torch.zeros(21, dtype=torch.float64), raw.gyro, raw.acc_g)
@@ -578,7 +584,7 @@ class Traditional(Method):
         theta_g = _solve(_RotResiduals(w), g0, np.r_[0:9, 12:21], self.prior, self.huber_rot, self.max_iter)
         with torch.no_grad():
             vel = _VelResiduals(_gyro_model(torch.from_numpy(theta_g), w.gyro, w.acc_g), w)
-        theta_a = _solve(vel, a0, np.r_[0:9], self.prior, self.huber_vel, self.max_iter)
+        theta_a = _solve(vel, a0, np.r_[0:9], self._acc_prior, self.huber_vel, self.max_iter)
         self.params = TraditionalParams(
             M_g=np.eye(3) + theta_g[:9].reshape(3, 3), b_g=theta_g[9:12].copy(), G=theta_g[12:21].reshape(3, 3).copy(),
             M_a=np.eye(3) + theta_a[:9].reshape(3, 3), b_a=theta_a[9:12].copy(),
@@ -599,18 +605,24 @@ class Traditional(Method):
         kept = tau if got < zero else 0.0
         return kept, {"tau_samples": [kept], "tau_fitted": [tau], "tau_val_cost": [zero, got]}
 
+    @property
+    def _acc_prior(self) -> float:
+        return self.prior if self.acc_prior is None else self.acc_prior
+
     def _fit_at_best_cutoff(self, residuals: Callable, train_at: Callable, val_at: Callable, grid: list,
-                            theta0: np.ndarray, idx: np.ndarray, huber: float) -> tuple:
+                            theta0: np.ndarray, idx: np.ndarray, huber: float, prior: Optional[float] = None) -> tuple:
         """One stage of :meth:`fit`: solve at the grid's first cutoff, score every cutoff on the
-        validation windows, re-solve at the best one. Returns (theta, chosen cutoff, validation RMS
-        per cutoff, the training windows at the chosen cutoff)."""
+        validation windows, re-solve at the best one (``prior``: on ``idx``, default ``self.prior``).
+        Returns (theta, chosen cutoff, validation RMS per cutoff, the training windows at the chosen
+        cutoff)."""
+        prior = self.prior if prior is None else prior
         first = grid[0]
-        theta = _solve(residuals(train_at(first)), theta0, idx, self.prior, huber, self.max_iter)
+        theta = _solve(residuals(train_at(first)), theta0, idx, prior, huber, self.max_iter)
         val = [_rms(residuals(val_at(c)), theta) for c in grid]
         chosen = grid[int(np.argmin(val))]
         windows = train_at(chosen)
         if chosen != first:
-            theta = _solve(residuals(windows), theta, idx, self.prior, huber, self.max_iter)
+            theta = _solve(residuals(windows), theta, idx, prior, huber, self.max_iter)
         return theta, chosen, val, windows
 
     # -- persistence ----------------------------------------------------------------------------

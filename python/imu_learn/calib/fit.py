@@ -31,7 +31,7 @@ from __future__ import annotations
 import math
 import random
 from dataclasses import dataclass
-from typing import Callable, Dict, List, Optional, Sequence, Tuple
+from typing import Any, Callable, Dict, List, Optional, Sequence, Tuple
 
 import numpy as np
 import torch
@@ -65,11 +65,13 @@ def seed_all(seed: int) -> None:
 
 
 def fit_once(train: List[Segment], val: List[Segment], settings: FitSettings,
-             max_windows: Optional[int] = None) -> Tuple[TraditionalTiming, Dict[str, list]]:
+             max_windows: Optional[int] = None, terms: Optional[Dict[str, Any]] = None) -> Tuple[TraditionalTiming, Dict[str, list]]:
     """``imu-learn evaluate``'s fit of the floor (``max_windows``: the method's default unless given;
-    the method sizes its own threads: :class:`TraditionalTiming`'s ``threads``)."""
+    ``terms``: keywords of :class:`TraditionalTiming` that restrict it to what the reference observes,
+    e.g. no low-pass, the acc bias only; the method sizes its own threads: its ``threads``)."""
     seed_all(settings.seed)
-    method = TraditionalTiming() if max_windows is None else TraditionalTiming(max_windows=max_windows)
+    kw = dict(terms or {}, **({} if max_windows is None else {"max_windows": max_windows}))
+    method = TraditionalTiming(**kw)
     log = method.fit(list(train), list(val), settings) or {}
     return method, log
 
@@ -77,9 +79,10 @@ def fit_once(train: List[Segment], val: List[Segment], settings: FitSettings,
 def refit_once(method: TraditionalTiming, train: List[Segment], val: List[Segment], settings: FitSettings,
                max_windows: int) -> TraditionalTiming:
     """``method``'s floor refitted on a part of its data: the time offset searched again, the affine
-    parameters solved again from ``method``'s (its cutoffs kept; :meth:`TraditionalTiming.refit`)."""
+    parameters solved again from ``method``'s (its cutoffs and its acc prior kept;
+    :meth:`TraditionalTiming.refit`)."""
     seed_all(settings.seed)
-    m = TraditionalTiming(max_windows=max_windows)
+    m = TraditionalTiming(max_windows=max_windows, acc_prior=method.acc_prior)
     m.refit(list(train), list(val), method.params, settings)
     return m
 
@@ -106,11 +109,12 @@ def time_blocks(segments: Sequence[Segment], k: int = 4) -> Dict[str, Tuple[List
 
 
 def fit_floor(train: List[Segment], val: List[Segment], settings: FitSettings, groups: Sequence[str],
-              val_groups: Sequence[str], progress: Progress = lambda s: None, uncertainty: bool = True) -> FloorFit:
-    """The floor on all of ``train`` (``val`` for its selection), then on each group alone
-    (``uncertainty=False``: not; every standard deviation NaN)."""
+              val_groups: Sequence[str], progress: Progress = lambda s: None, uncertainty: bool = True,
+              terms: Optional[Dict[str, Any]] = None) -> FloorFit:
+    """The floor on all of ``train`` (``val`` for its selection; ``terms``: :func:`fit_once`'s), then on
+    each group alone (``uncertainty=False``: not; every standard deviation NaN)."""
     progress(f"fitting the floor (traditional+timing) on {len(train)} segments, {sum(len(s) for s in train)} samples")
-    method, log = fit_once(train, val, settings)
+    method, log = fit_once(train, val, settings, terms=terms)
     floor = method.to_dict()
     if not uncertainty:
         return FloorFit(floor, log, {k: np.full(np.shape(floor[k]), np.nan) for k in PARAMS}, [])

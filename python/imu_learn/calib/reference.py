@@ -36,6 +36,7 @@ from typing import Any, Dict, List, Optional, Sequence, Tuple
 
 import numpy as np
 
+from imu_learn.baselines.base import FitSettings
 from imu_learn.core.quat import quat_conj, quat_mul, quat_rotate
 from imu_learn.data.formats.extrinsics import read_t_bs
 from imu_learn.data.types import GroundTruth, ImuData, Segment, sample_rate_hz
@@ -55,7 +56,10 @@ class FrameOptions:
     this is left to the floor's own time-offset fit (its search, 3 samples at 200 Hz); an estimated lever
     arm is applied when its norm is ``lever_sigmas`` standard errors and ``min_lever_m`` or more; a
     world is levelled when it is tilted ``level_deg`` or more (below, the tilt cannot be told from the
-    accelerometer's bias: 0.34 m/s^2 tilts the estimate by 2°, and the floor's acc bias absorbs it)."""
+    accelerometer's bias: 0.34 m/s^2 tilts the estimate by 2°, and the floor's acc bias absorbs it);
+    the reference resolves the accelerometer's affine and the low-pass (:func:`resolves_acceleration`)
+    when the span its velocity is smoothed over is at most ``acc_span_fraction`` of the floor's window
+    ``floor_window_s``."""
 
     max_lag_s: float = 1.0
     min_correlation: float = 0.6
@@ -68,6 +72,8 @@ class FrameOptions:
     level_deg: float = 2.0
     lever_sigmas: float = 5.0
     min_lever_m: float = 0.02
+    floor_window_s: Optional[float] = None
+    acc_span_fraction: float = 0.15
 
 
 @dataclass
@@ -100,6 +106,7 @@ class FrameFit:
     g_up: np.ndarray  # (recordings, 3): each recording's specific force of rest in its reference world
     rate_hz: float
     method: str = "estimated from rotation rates"  # or the --extrinsics file, or specific force (planar)
+    resolves_acceleration: bool = True  # the acc scale/misalignment and the low-pass are observable
     applied: Dict[str, bool] = field(default_factory=dict)
 
     @property
@@ -116,6 +123,7 @@ class FrameFit:
             "lever_arm_std_m": self.lever_std_m.tolist(), "world_tilt_deg": self.tilt_deg,
             "gravity_in_reference_world": np.asarray(self.g_up).tolist(),
             "reference_rate_hz": self.rate_hz, "rotation_from": self.method,
+            "resolves_acceleration": self.resolves_acceleration,
             "applied": dict(self.applied),
         }
 
@@ -366,7 +374,23 @@ def resolve_frame(pairs: Sequence[Tuple[ImuData, GroundTruth]], options: FrameOp
                "lever_arm": bool(np.linalg.norm(lever) > 0)}
     return FrameFit(r_imu_ref, rot_deg, rot_std, off.rms, w_rms, coarse if coarse else lag, corr, gyro_bias,
                     float(sol["scale"]), float(sol["scale_std"]), lever,
-                    np.zeros(3) if extrinsics is not None else sol["lever_std"], tilt, g_up, ref_rate, method, applied)
+                    np.zeros(3) if extrinsics is not None else sol["lever_std"], tilt, g_up, ref_rate, method,
+                    resolves_acceleration(ref_rate, options.floor_window_s or FitSettings().window / imu_rate,
+                                          options.acc_span_fraction), applied)
+
+
+def resolves_acceleration(ref_rate_hz: float, window_s: float, fraction: float = FrameOptions.acc_span_fraction) -> bool:
+    """Whether a reference at ``ref_rate_hz`` can tell the accelerometer's scale and misalignment and
+    choose a low-pass: the velocity of a pose-only reference comes from a local quadratic over
+    2·h + 1 poses (:class:`imu_learn.data.loading.AlignOptions`, h = ``velocity_half_window``), which
+    attenuates every acceleration faster than that span; where the span is more than ``fraction`` of
+    the floor's window ``window_s`` (a 20 Hz VO: 0.45 s against 1 s) the smoothed reference
+    favours an accelerometer scaled down and low-passed, an artefact of the reference, not the IMU.
+    EuRoC's 200 Hz, TUM-VI's 120 Hz and Fetch's 90 Hz motion capture resolve it (0.05-0.1 s)."""
+    from imu_learn.data.loading import AlignOptions
+
+    span_s = (2 * AlignOptions().velocity_half_window + 1) / max(ref_rate_hz, 1e-9)
+    return span_s <= fraction * window_s
 
 
 def planar_rotation(segs: Sequence[Segment], m: int, rate_rms: float, ratio: float) -> np.ndarray:

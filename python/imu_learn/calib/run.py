@@ -150,7 +150,8 @@ def floor_profile(inp: CalibInputs, progress: Progress,
     (``uncertainty=False``: no refits per recording, the standard deviations NaN)."""
     from imu_learn.calib import fit as ff  # torch: only where the floor is fitted
 
-    fit = ff.fit_floor(inp.train, inp.val, inp.settings, inp.groups, inp.val_groups, progress, uncertainty)
+    fit = ff.fit_floor(inp.train, inp.val, inp.settings, inp.groups, inp.val_groups, progress, uncertainty,
+                       floor_terms(inp.reference))
     f, std = fit.floor, fit.std
     segs, groups = inp.train + inp.val, inp.groups + inp.val_groups
     progress("gravity and the residual noise")
@@ -174,11 +175,28 @@ def floor_profile(inp: CalibInputs, progress: Progress,
     return prof, before, after
 
 
+def floor_terms(ref: Optional[FrameFit]) -> Dict[str, Any]:
+    """What the floor may fit against this reference: everything, or (a reference that cannot resolve
+    accelerations, :func:`imu_learn.calib.reference.resolves_acceleration`) no low-pass and the acc bias
+    only, M_a held at the identity."""
+    from imu_learn.baselines.traditional import ACC_BIAS_ONLY  # torch: only where the floor is fitted
+
+    if ref is None or ref.resolves_acceleration:
+        return {}
+    return {"cutoffs_hz": (None,), "acc_prior": ACC_BIAS_ONLY}
+
+
 def observed(ref: Optional[FrameFit]) -> Dict[str, Dict[str, Any]]:
     """Per floor parameter: whether the reference observed it, and why not (profile.json's ``observed``)."""
     yes = {"observed": True}
     out = {k: dict(yes) for k in ("time_offset", "gyroscope.matrix", "gyroscope.bias", "g_sensitivity",
                                   "accelerometer.matrix", "accelerometer.bias", "cutoff_gyro", "cutoff_acc")}
+    if ref is not None and not ref.resolves_acceleration:
+        why = (f"the reference at {ref.rate_hz:.3g} Hz: its velocity, smoothed over several of its poses, attenuates "
+               "the accelerations the fit needs, so it would scale the accelerometer down and choose a low-pass "
+               "the IMU does not need; kept at the prior (identity, no filter)")
+        for k in ("accelerometer.matrix", "cutoff_gyro", "cutoff_acc"):
+            out[k] = {"observed": False, "why": why}
     if ref is not None and ref.applied.get("lag"):
         out["time_offset"] = {"observed": False, "why": f"the reference's stamps were {ref.lag_s * 1e3:+.0f} ms off the "
                               "IMU's; the IMU's own offset cannot be told apart from the reference's latency"}

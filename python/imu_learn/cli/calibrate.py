@@ -270,6 +270,13 @@ def summary(p: Any) -> List[str]:
                      f"gravity {p.gravity_mps2:.4f} m/s^2")
     for k, t in p.noise.items():
         lines.append(f"{k}: {t.value:.3e} {t.unit} ({t.source}, {t.detail.get('kind', 'fit')})")
+    if p.reference and not all(v is False for v in p.reference.get("applied", {}).values()):
+        r = p.reference
+        lines.append(f"reference moved into the IMU frame: rotation {r['rotation_deg']:.2f}° ({r['rotation_from']}), "
+                     f"applied: {', '.join(k for k, v in r['applied'].items() if v)}")
+    for k, o in p.observed.items():
+        if not o.get("observed", True):
+            lines.append(f"not observed: {k} (kept at its prior): {o['why']}")
     for u in p.unobservable:
         lines.append(f"not observed: {u['what']}: {u['why']}")
     return lines
