@@ -381,7 +381,7 @@ def test_aiding_four_columns_are_positions_only_where_allowed(tmp_path):
     with pytest.raises(il.ColumnCountError) as e:
         read_tum(f)
     assert (e.value.path, e.value.line, e.value.column) == (str(f), 2, None)
-    assert "expected 8 columns, found 4" in str(e.value)
+    assert str(e.value) == f"{f}:2: 4 columns, expected 8 (t tx ty tz qx qy qz qw)"
     c = tmp_path / "p.csv"
     c.write_text("t,x,y,z\n1.0,0,0,0\n2.0,1,2,3\n")
     assert read_trajectory(c, "csv", need_orientation=False).p.tolist() == tr.p.tolist()
@@ -413,3 +413,26 @@ def test_aiding_quaternion_far_from_unit_length_names_its_line(tmp_path):
     with pytest.raises(AidingQuaternionError) as e:
         read_trajectory(f, "asl")
     assert (e.value.path, e.value.line, e.value.column, e.value.field) == (str(f), 4, 5, "qw")
+
+
+@pytest.mark.parametrize("text, layout, cls, line, column, message", [
+    ("1.0 0 0 0 0 0 0 1\n\nx 0 0 0 0 0 0 1\n", "tum", il.NotNumericError, 3, 1,
+     "column 1 (t): 'x' is not a number of seconds"),
+    ("1.0 0 0 0 0 0 0 1\n1.1 0 0 0 q 0 0 1\n", "tum", il.NotNumericError, 2, 5, "column 5 (qx): 'q' is not a number"),
+    ("1.0 0 0 0 0 0 0 1\n1.1 0 inf 0 0 0 0 1\n", "tum", il.NonFiniteError, 2, 3, "column 3 (ty): 'inf' is not finite"),
+    ("1.0 0 0 0 0 0 0 1\n0.5 0 0 0 0 0 0 1\n", "tum", il.TimestampError, 2, 1,
+     "stamp 0.500000000 s is before the stamp before it (1.000000000 s): stamps must increase"),
+    ("1,0,0,0,1,0,0,0\n2.0e3,0,0,0,1,0,0,0\n", "asl", il.FloatTimestampError, 2, 1,
+     "column 1 (timestamp): '2.0e3' is not an integer ns stamp"),
+    ("t,x,y,z,qx,qy,qz,qw\n1.0,0,0,0,0,0,0,1\n", "csv", il.TooFewRowsError, 2, None,
+     "1 trajectory row(s); at least 2 needed"),
+])
+def test_aiding_errors_from_the_core_reader_keep_their_wording(tmp_path, text, layout, cls, line, column, message):
+    from imu_learn.fuse.aiding.tum import read_trajectory
+
+    f = tmp_path / "bad.txt"
+    f.write_text(text)
+    with pytest.raises(cls) as e:
+        read_trajectory(f, layout)
+    assert (e.value.path, e.value.line, e.value.column) == (str(f), line, column)
+    assert str(e.value).startswith(f"{f}:{line}: " if column else f"{f}: ") and str(e.value).endswith(message)

@@ -54,8 +54,10 @@ def read_trajectory(
     ``tum`` (t tx ty tz qx qy qz qw, white space, seconds), ``csv`` (the same, commas; a header line of
     names is skipped), ``asl`` (timestamp [ns], px, py, pz, qw, qx, qy, qz). Comment lines, comments
     after a row and blank lines are skipped; rows have 8 columns, or 4 (t x y z) with positions_only;
-    stamps in seconds are exact (half to even past the ns). Errors as read_tum's; InvalidInputError
-    for an unknown layout."""
+    stamps in seconds are exact (half to even past the ns). Errors as read_tum's, each also carrying
+    what it holds beyond its place: ``value`` (the field's text; the stamp [ns] for a TimestampError),
+    ``previous`` (TimestampError), ``expected``/``found`` (ColumnCountError), ``found`` rows
+    (TooFewRowsError); InvalidInputError for an unknown layout."""
 
 def seconds_to_ns(text: str) -> int:
     """Decimal seconds -> integer ns by the readers' rule: exact decimal parsing, digits past the ns

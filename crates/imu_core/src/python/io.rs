@@ -7,6 +7,7 @@ use pyo3::exceptions::{PyOverflowError, PyValueError};
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
 
+use crate::error::ImuError;
 use crate::io::columns::{self, CsvFormat};
 use crate::io::table::{parse_decimal, Decimal};
 use crate::io::tum::{TrajectoryLayout, TrajectoryOptions};
@@ -127,7 +128,9 @@ fn read_trajectory<'py>(
         positions_only,
         allow_float_timestamps,
     };
-    let t = py.allow_threads(|| tum::read_trajectory(&path, &opts)).map_err(to_py)?;
+    let t = py
+        .allow_threads(|| tum::read_trajectory(&path, &opts))
+        .map_err(|e| with_details(py, e))?;
     let d = PyDict::new(py);
     d.set_item("t_ns", out1(py, t.t_ns))?;
     d.set_item("p", out2(py, t.p)?)?;
@@ -135,6 +138,42 @@ fn read_trajectory<'py>(
     let lines: Vec<i64> = t.lines.into_iter().map(|l| l as i64).collect();
     d.set_item("lines", out1(py, lines))?;
     Ok(d)
+}
+
+/// The Python error for `err`, with what the error holds beyond its place as attributes, for a
+/// caller that words its own message: `value` (the field's text; the stamp [ns] for a
+/// `TimestampError`), `previous` (the stamp before it [ns]), `expected` and `found` (column
+/// counts; `found` rows for a `TooFewRowsError`).
+fn with_details(py: Python<'_>, err: ImuError) -> PyErr {
+    enum Attr {
+        Text(String),
+        Int(i64),
+        Count(usize),
+    }
+    let attrs: Vec<(&str, Attr)> = match &err {
+        ImuError::NotNumeric { value, .. }
+        | ImuError::NonFinite { value, .. }
+        | ImuError::FloatTimestamp { value, .. } => vec![("value", Attr::Text(value.clone()))],
+        ImuError::Timestamp { value, previous, .. } => {
+            vec![("value", Attr::Int(*value)), ("previous", Attr::Int(*previous))]
+        }
+        ImuError::ColumnCount { expected, found, .. } => {
+            vec![("expected", Attr::Count(*expected)), ("found", Attr::Count(*found))]
+        }
+        ImuError::TooFewRows { found, .. } => vec![("found", Attr::Count(*found))],
+        _ => Vec::new(),
+    };
+    let e = to_py(err);
+    let obj = e.value(py);
+    for (name, value) in attrs {
+        // An exception that refuses an attribute is still the right exception.
+        let _ = match value {
+            Attr::Text(s) => obj.setattr(name, s),
+            Attr::Int(i) => obj.setattr(name, i),
+            Attr::Count(n) => obj.setattr(name, n),
+        };
+    }
+    e
 }
 
 /// Decimal seconds as integer ns, by the readers' rule (exact, half to even past the ns).

@@ -34,12 +34,22 @@ from typing import Optional, Tuple, Union
 import numpy as np
 
 from imu_learn import _imu_core as core
-from imu_learn.errors import AidingOverlapError, AidingQuaternionError
+from imu_learn.errors import (
+    AidingOverlapError,
+    AidingQuaternionError,
+    ColumnCountError,
+    FloatTimestampError,
+    NonFiniteError,
+    NotNumericError,
+    ParseError,
+    TimestampError,
+    TooFewRowsError,
+)
 
 log = logging.getLogger(__name__)
 
 LAYOUTS = ("tum", "csv", "asl")
-TUM_FIELDS = ("timestamp", "tx", "ty", "tz", "qx", "qy", "qz", "qw")
+TUM_FIELDS = ("t", "tx", "ty", "tz", "qx", "qy", "qz", "qw")
 ASL_FIELDS = ("timestamp", "px", "py", "pz", "qw", "qx", "qy", "qz")
 # A quaternion whose norm is further than this from 1 is an error, not a rounding to renormalise.
 QUAT_NORM_TOL = 1e-2
@@ -72,6 +82,41 @@ def seconds_to_ns(text: str) -> int:
     return core.seconds_to_ns(text)
 
 
+def _stamp_text(ns: int, layout: str) -> str:
+    if layout == "asl":
+        return f"{ns} ns"
+    sign, m = ("-" if ns < 0 else ""), abs(ns)
+    return f"{sign}{m // 1_000_000_000}.{m % 1_000_000_000:09d} s"
+
+
+def _reworded(e: ParseError, src: str, layout: str) -> ParseError:
+    """The core reader's error in this module's wording (``path:line: column c (name): ...``), same
+    class, place and field; the reader's rules are the core's, only the message is worded here."""
+    names = ASL_FIELDS if layout == "asl" else TUM_FIELDS
+    col = e.column
+    name = names[col - 1] if col is not None and 1 <= col <= len(names) else e.field
+    where = f"{src}:{e.line}: column {col} ({name})"
+    value = getattr(e, "value", None)
+    if isinstance(e, FloatTimestampError):
+        msg = f"{where}: {value!r} is not an integer ns stamp"
+    elif isinstance(e, TimestampError):
+        prev = e.previous
+        msg = (f"{src}:{e.line}: stamp {_stamp_text(value, layout)} is {'equal to' if value == prev else 'before'} "
+               f"the stamp before it ({_stamp_text(prev, layout)}): stamps must increase")
+    elif isinstance(e, NotNumericError):
+        what = ("an integer ns stamp" if layout == "asl" else "a number of seconds") if col == 1 else "a number"
+        msg = f"{where}: {value!r} is not {what}"
+    elif isinstance(e, NonFiniteError):
+        msg = f"{where}: {value!r} is not finite"
+    elif isinstance(e, ColumnCountError):
+        msg = f"{src}:{e.line}: {e.found} columns, expected {e.expected} ({' '.join(names[:e.expected])})"
+    elif isinstance(e, TooFewRowsError):
+        msg = f"{src}: {e.found} trajectory row(s); at least 2 needed"
+    else:
+        return e
+    return type(e)(msg, e.path, e.line, col, name if col is not None else e.field)
+
+
 def read_trajectory(path: Union[str, Path], layout: str = "tum", need_orientation: bool = True) -> Trajectory:
     """The trajectory in ``path`` (module docstring: layouts, comments, errors). With
     ``need_orientation`` rows must carry a quaternion (8 columns); otherwise 4 columns
@@ -79,7 +124,10 @@ def read_trajectory(path: Union[str, Path], layout: str = "tum", need_orientatio
     if layout not in LAYOUTS:
         raise ValueError(f"layout must be one of {LAYOUTS}, got {layout!r}")
     src = str(path)
-    d = core.read_trajectory(src, layout, positions_only=not need_orientation)
+    try:
+        d = core.read_trajectory(src, layout, positions_only=not need_orientation)
+    except ParseError as e:
+        raise _reworded(e, src, layout) from None
     lines = d["lines"]
     q = None
     if d["q_wxyz"] is not None:
