@@ -135,6 +135,14 @@ def test_positions_only_is_refused():
         resolve_frame([(imu, ref)])
 
 
+def test_planar_odometry_is_refused():
+    imu, seg = flight(planar=True)
+    ref = reference_of(seg, rot([0, 0, 1], 119), lag_s=0.091)
+    ref = GroundTruth(ref.t_ns, ref.p * [1, 1, 0], ref.q_wxyz)  # yaw-only quaternions (planar motion), z = 0
+    with pytest.raises(ReferenceFrameError, match="planar.*wheel odometry"):
+        resolve_frame([(imu, ref)])
+
+
 def test_another_recordings_reference_is_refused():
     imu, seg = flight(seed=0)
     _, other = flight(seed=5)

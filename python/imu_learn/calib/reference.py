@@ -315,6 +315,7 @@ def resolve_frame(pairs: Sequence[Tuple[ImuData, GroundTruth]], options: FrameOp
     lags = []
     for (imu, ref), name in zip(pairs, names):
         check_orientation(ref, name)
+        check_not_odometry(ref, name)
         lag, corr, edge = fit_lag(imu, ref, options.max_lag_s)
         if corr < options.min_correlation:
             raise ReferenceFrameError(
@@ -459,6 +460,19 @@ def check_orientation(ref: GroundTruth, name: str) -> None:
             f"{name}: the reference's orientation never changes (positions only, e.g. GNSS): calibrate needs "
             "6-DoF poses to fit the affine floor; use imu-learn navigate with the positions as aiding, or "
             "calibrate --imu-only for the noise")
+
+
+def check_not_odometry(ref: GroundTruth, name: str) -> None:
+    """Planar wheel odometry (every orientation a yaw about the world's z, the height constant) observes
+    yaw rate and forward speed only: the affine floor would fit the IMU's roll and pitch axes against
+    zero."""
+    up = quat_rotate(ref.q_wxyz, np.broadcast_to([0.0, 0.0, 1.0], (len(ref.q_wxyz), 3)))
+    tilt = np.degrees(np.arccos(np.clip(up[:, 2], -1.0, 1.0)))
+    if float(np.max(tilt)) < 0.01 and float(np.ptp(ref.p[:, 2])) < 1e-6:
+        raise ReferenceFrameError(
+            f"{name}: the reference is planar (no roll, no pitch, a constant height: wheel odometry); it observes "
+            "yaw rate and forward speed only, not the affine floor; use it as aiding (imu-learn navigate --aiding "
+            "FILE --aiding-kind relative-pose), or calibrate --imu-only for the noise")
 
 
 def to_imu_frame(ref: GroundTruth, fit: FrameFit, index: int) -> GroundTruth:
