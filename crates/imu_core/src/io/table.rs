@@ -11,9 +11,9 @@
 //!   tabs trimmed) or by runs of whitespace.
 //! - Comment lines start with `#` (after optional whitespace), where the reader allows comments;
 //!   trajectories also allow a `# ...` comment after a row's fields.
-//! - Blank lines are skipped. Dataset tables read through [`TableSpec`] (ASL, KAIST, TUM ground
-//!   truth) are stricter: there a blank line is allowed only at the end of the file, since one
-//!   inside the data is a sign of a damaged or concatenated recording.
+//! - Blank lines are skipped. Dataset tables read through [`TableSpec`] (ASL, KAIST) are
+//!   stricter: there a blank line is allowed only at the end of the file, since one inside the
+//!   data is a sign of a damaged or concatenated recording.
 //! - A row has exactly the column count the layout picked (`ColumnCount` otherwise), or, for a
 //!   column map that ignores later columns, at least enough fields for every mapped column
 //!   (`MissingColumn` naming the first mapped column past the line's end).
