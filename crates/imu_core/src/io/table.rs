@@ -1,7 +1,7 @@
 //! The one row parser behind every reader: the dataset tables (ASL, TUM, KAIST, through
 //! [`TableSpec`]), a user's own CSV ([`super::columns`]) and aiding trajectories
 //! ([`super::tum::read_trajectory`]). Each reader finds its file's layout (delimiter, header,
-//! column count) and describes it as [`RowRules`]: a column map (which file column holds the
+//! column count) and describes it as `RowRules`: a column map (which file column holds the
 //! time, which ones the values, in the order they are returned) with the rules below; the chunk
 //! loop, the number rules and the errors live here once.
 //!
