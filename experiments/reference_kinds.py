@@ -28,7 +28,7 @@ from typing import Dict, List
 
 import numpy as np
 
-from imu_learn.core.quat import quat_mul, xyzw_to_wxyz, wxyz_to_xyzw
+from imu_learn.core.quat import quat_mul, wxyz_to_xyzw, xyzw_to_wxyz
 from imu_learn.data.formats import read_imu_source, read_recording
 from imu_learn.data.formats.extrinsics import read_t_bs
 from imu_learn.data.loading import AlignOptions, align

@@ -15,6 +15,7 @@ from scipy.spatial.transform import Rotation
 
 from crops import CROP, SHIPPED
 from imu_learn.cli import main
+from imu_learn.data.formats.extrinsics import inverse, read_t_bs
 from imu_learn.errors import (
     AidingOverlapError,
     AidingQuaternionError,
@@ -25,7 +26,6 @@ from imu_learn.errors import (
     TimestampError,
     TooFewRowsError,
 )
-from imu_learn.data.formats.extrinsics import inverse, read_t_bs
 from imu_learn.fuse.aiding.tum import check_overlap, read_trajectory, read_tum, seconds_to_ns
 from imu_learn.fuse.inputs import checkpoint_bias
 from imu_learn.fuse.score import convergence, interpolate_groundtruth, umeyama

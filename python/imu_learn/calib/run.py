@@ -22,8 +22,8 @@ from imu_learn.calib import noise as nz
 from imu_learn.calib.kalibr import write_kalibr_yaml
 from imu_learn.calib.plausible import LIMITS, held_back_errors, held_back_findings, parameter_findings
 from imu_learn.calib.plot import plot_calibration
-from imu_learn.calib.reference import FrameFit
 from imu_learn.calib.profile import NOISE_KEYS, NOISE_UNITS, UNITS, Affine, NoiseTerm, Profile, noise_only
+from imu_learn.calib.reference import FrameFit
 from imu_learn.core.stamps import median_period_ns, sample_rate_hz
 from imu_learn.data.types import Segment
 from imu_learn.errors import ImplausibleProfileError, InvalidInputError

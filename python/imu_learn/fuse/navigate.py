@@ -60,6 +60,7 @@ from imu_learn.calib.profile import Profile
 from imu_learn.data import formats
 from imu_learn.data.formats import CsvColumns, rosbag
 from imu_learn.data.formats.asl import imu_sensor_yaml
+from imu_learn.data.formats.extrinsics import inverse, read_t_bs
 from imu_learn.data.formats.gnss_imu import mounting_rotation
 from imu_learn.data.types import sample_rate_hz
 from imu_learn.errors import AidingError, ConfigError, InvalidInputError
@@ -71,7 +72,6 @@ from .aiding import AbsolutePoses, OutageWindow, PositionFixes, RelativePoses, s
 from .aiding import bag as bag_aiding
 from .aiding.detect import FORMATS as DETECTED_FORMATS
 from .aiding.detect import detect as detect_aiding
-from imu_learn.data.formats.extrinsics import inverse, read_t_bs
 from .aiding.outages import in_windows
 from .aiding.rtklib import RtkSolution, fixes_on_imu, normal_gravity, read_pos
 from .aiding.tum import Trajectory, check_overlap, read_trajectory
