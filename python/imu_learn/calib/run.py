@@ -153,6 +153,12 @@ def floor_profile(inp: CalibInputs, progress: Progress,
     fit = ff.fit_floor(inp.train, inp.val, inp.settings, inp.groups, inp.val_groups, progress, uncertainty,
                        floor_terms(inp.reference))
     f, std = fit.floor, fit.std
+    if inp.reference is not None and inp.reference.applied.get("lag"):
+        # the reference's stamps were moved by its own lag: what the floor finds on top is the IMU's offset
+        # plus the lag's rounding, not observable apart from the reference's latency: the prior, zero
+        fit.log["time_offset_fitted_on_the_moved_reference"] = [f["time_offset"]]
+        f = {**f, "time_offset": 0.0}
+        std = {**std, "time_offset": np.float64(np.nan)}
     segs, groups = inp.train + inp.val, inp.groups + inp.val_groups
     progress("gravity and the residual noise")
     g, g_std, g_per = ff.fit_gravity(segs, f, groups)
