@@ -10,6 +10,8 @@ from pathlib import Path
 from typing import Any, Callable, List, Optional, Sequence, Tuple
 
 from imu_learn.baselines.base import FitSettings
+from imu_learn.calib.positions import from_cli as positions_from_cli
+from imu_learn.calib.positions import is_positions_reference
 from imu_learn.calib.reference import FrameOptions, frame_lines, read_extrinsics, resolve_frame, to_imu_frame
 from imu_learn.calib.run import CalibInputs, CalibOptions, StillPiece, calibrate
 from imu_learn.cli.common import add_data_root, add_imu_input_options, csv_layout, run_command
@@ -196,10 +198,14 @@ def run(args: argparse.Namespace, rest: List[str], keep: Callable[[Any], None]) 
     check_learned(args)
     say = (lambda s: None) if args.quiet else (lambda s: logger.info("%s", s))
     say("reading the recordings")
-    inp = from_config(args) if args.config else from_inputs(args, say)
-    keep(f"{args.out} keeps only complete files (each written atomically)")
-    res = calibrate(inp, args.out, CalibOptions(min_still_s=args.min_still_s, plot=not args.no_plot,
-                                                force=args.force), say)
+    if args.input and not args.imu_only and any(is_positions_reference(g) for g in args.groundtruth or []):
+        keep(f"{args.out} keeps only complete files (each written atomically)")
+        res = positions_from_cli(args, say)  # positions only (GNSS): attitude from the navigator's smoother
+    else:
+        inp = from_config(args) if args.config else from_inputs(args, say)
+        keep(f"{args.out} keeps only complete files (each written atomically)")
+        res = calibrate(inp, args.out, CalibOptions(min_still_s=args.min_still_s, plot=not args.no_plot,
+                                                    force=args.force), say)
     p = res.profile
     for line in summary(p):
         print(line)

@@ -1,0 +1,522 @@
+"""A device profile from positions only (RTK GNSS, a NavSatFix track written as TUM, any positions-only
+trajectory): attitude is a latent state, estimated by the navigator.
+
+A reference of positions alone cannot be compared with the gyroscope directly
+(:func:`imu_learn.calib.reference.check_orientation` refuses it for the 6-DoF path). Here:
+
+1. ``imu-learn navigate``'s smoother (:func:`imu_learn.fuse.navigate.navigate`, batch pass over the
+   whole recording, the positions as aiding, no outages) estimates the attitude. Its smoothed
+   trajectory (keyframes at ``keyframe_hz``, body frame) is moved into the IMU's own frame
+   (``R_W_imu = R_W_body M``, body = M imu) and back onto the IMU's clock (minus the logging delay), and
+   aligned onto the IMU stamps (:func:`imu_learn.data.loading.align`: slerp, velocity from a local
+   quadratic fit of the positions) as a 6-DoF reference.
+2. The bias-only floor against it: :func:`imu_learn.calib.fit.fit_once` with ``terms`` holding every
+   matrix at the identity and G at zero (``prior`` and ``acc_prior`` = ``ACC_BIAS_ONLY``), no
+   low-pass (``cutoffs_hz=(None,)``) and no time offset (``fit_offset=False``): TraditionalTiming's own
+   windowed rotation and velocity residuals, robust (Huber), so the gyro bias is the robust mean of
+   ω_imu − ω_smoothed over its windows and the acc bias that of the velocity increments. Its standard
+   error: the same fit on ``blocks`` time blocks alone, spread / sqrt(blocks) (as calibrate's
+   uncertainty for one recording).
+3. The smoother again with that floor applied (a profile written beside the pass's outputs), a new fit
+   of what bias remains, added; repeated until every bias component changed by less than its standard
+   error, at most ``max_iterations`` passes.
+
+The mounting (which IMU axis is forward) matters to the navigator: it starts with the body x-axis along
+the track. Given (``imu_rotation_rpy_deg``) it is used as is; otherwise :func:`forward_mounting`
+estimates it from the data: the IMU's up from the accelerometer at the start, its forward from the
+horizontal specific force against the track's along- and cross-track accelerations. The logging delay
+(``imu_delay_s``) and the antenna's lever arm are the navigator's options and stay out of the profile
+(its time offset is 0 and not observed).
+
+What the profile says it observed (:func:`observed`): the gyro and accelerometer biases; the matrices,
+g-sensitivity, cutoffs and time offset are held at their priors. :func:`calibrate_positions` writes the
+profile with calibrate's own checks (:func:`imu_learn.calib.run.plausibility`), noise and files.
+"""
+from __future__ import annotations
+
+import math
+import tempfile
+import time
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+from typing import Any, Callable, Dict, List, Optional, Sequence, Tuple
+
+import numpy as np
+from scipy.spatial.transform import Rotation
+
+from imu_learn.baselines.base import FitSettings
+from imu_learn.calib.profile import UNITS, Affine, Profile
+from imu_learn.data.types import GroundTruth, ImuData, Segment
+from imu_learn.errors import InvalidInputError
+
+Progress = Callable[[str], None]
+
+WHY = "from positions via the navigator's smoothed attitude"
+BIAS_ONLY = 1e6  # the priors that hold M_g, G and M_a at the identity / zero (baselines.traditional.ACC_BIAS_ONLY)
+FLOOR_KEYS = ("time_offset", "gyroscope.matrix", "gyroscope.bias", "g_sensitivity", "accelerometer.matrix",
+              "accelerometer.bias", "cutoff_gyro", "cutoff_acc")
+
+
+@dataclass(frozen=True)
+class PositionsOptions:
+    """How the navigator runs over the recording (its options of the same names) and how the floor is
+    iterated."""
+
+    fmt: str = "auto"  # the recording's layout
+    imu_rotation_rpy_deg: Optional[Tuple[float, float, float]] = None  # None: :func:`forward_mounting`
+    imu_delay_s: float = 0.0
+    lever_arm: Optional[Tuple[float, float, float]] = None
+    imu_noise: Optional[Tuple[float, float, float, float]] = None  # None: the navigator's built-in figures
+    keyframe_hz: float = 10.0
+    nhc: bool = False
+    max_iterations: int = 4
+    blocks: int = 4
+    max_windows: Optional[int] = None  # the floor fit's window budget (None: TraditionalTiming's default)
+    val_fraction: float = 0.15  # the held-back block of the final reference (plausibility)
+
+
+@dataclass
+class PositionsFloor:
+    """The result: the floor dict (``TraditionalTiming.to_dict``), per parameter its standard error,
+    the ``observed`` dict, the ``reference`` dict for profile.json, each pass's log, and the final
+    reference as segments (``train``/``val``) with the gravity the fit used."""
+
+    floor: Dict[str, Any]
+    std: Dict[str, np.ndarray]
+    observed: Dict[str, Dict[str, Any]]
+    reference: Dict[str, Any]
+    passes: List[Dict[str, Any]]
+    train: List[Segment] = field(default_factory=list)
+    val: List[Segment] = field(default_factory=list)
+    gravity: float = 9.81
+
+
+# ------------------------------------------------------------------------------------------------
+# what a positions reference is
+
+
+def reference_format(path: Path) -> str:
+    """The aiding format of ``path`` (:func:`imu_learn.fuse.aiding.detect.detect`)."""
+    from imu_learn.fuse.aiding.detect import detect
+
+    return detect(Path(path))
+
+
+def is_positions_reference(path: Path) -> bool:
+    """Whether ``path`` holds positions only: an RTKLIB ``.pos`` file (by its content), or a TUM/CSV
+    trajectory with 4 columns or whose orientation never changes (check_orientation's rule)."""
+    from imu_learn.fuse.aiding.tum import read_trajectory
+
+    path = Path(path)
+    if not path.is_file():
+        return False
+    try:
+        fmt = reference_format(path)
+    except (OSError, ValueError):
+        return False
+    if fmt == "rtklib":
+        return True
+    if fmt not in ("tum", "csv"):
+        return False
+    try:
+        traj = read_trajectory(path, fmt, need_orientation=False)
+    except Exception:  # noqa: BLE001 - not a trajectory this reader takes: the 6-DoF path reports it
+        return False
+    if traj.q_xyzw is None:
+        return True
+    q = traj.q_xyzw
+    dots = np.abs(q @ q[0])
+    return bool(np.max(2 * np.arccos(np.clip(dots, -1, 1))) < math.radians(0.5))
+
+
+def read_fixes(path: Path) -> Tuple[np.ndarray, np.ndarray, float, str]:
+    """(t_ns, positions (M, 3) in a local z-up frame, gravity [m/s^2], format) of a positions file:
+    RTKLIB fixed and float epochs in ENU at the first epoch with the normal gravity there, or a
+    TUM/CSV's positions with the navigator's default gravity (9.81)."""
+    from imu_learn.fuse.aiding.rtklib import normal_gravity, read_pos
+    from imu_learn.fuse.aiding.tum import read_trajectory
+
+    fmt = reference_format(path)
+    if fmt == "rtklib":
+        sol = read_pos(Path(path))
+        keep = np.isin(sol.q, (1, 2))
+        return sol.t_ns[keep], sol.enu[keep], normal_gravity(sol.origin_llh[0], sol.origin_llh[2]), fmt
+    traj = read_trajectory(path, fmt, need_orientation=False)
+    return traj.t_ns, traj.p, 9.81, fmt
+
+
+# ------------------------------------------------------------------------------------------------
+# the mounting, from the data
+
+
+def forward_mounting(t_ns: np.ndarray, acc: np.ndarray, fix_t_ns: np.ndarray, fix_p: np.ndarray,
+                     gravity: float = 9.81, level_s: float = 2.0, min_speed: float = 3.0) -> Dict[str, Any]:
+    """The IMU's mounting estimated without a reference attitude: up = the mean specific force over the
+    first ``level_s`` (the vehicle at rest or cruising), forward = the horizontal direction in which the
+    levelled specific force follows the track's along-track acceleration (plus gravity along the
+    grade) while its left follows the cross-track one (speed times the turn rate), by least squares
+    over the fixes faster than ``min_speed``. Returns {"rpy_deg": roll, pitch, yaw of the body frame
+    (x forward, z up) relative to the IMU frame (the navigator's ``--imu-rotation-rpy-deg``),
+    "forward_imu", "up_imu", "fit_residual_mps2", "fixes_used"}."""
+    t = (np.asarray(t_ns, dtype=np.int64) - int(t_ns[0])) * 1e-9
+    tf = (np.asarray(fix_t_ns, dtype=np.int64) - int(t_ns[0])) * 1e-9
+    up = np.mean(acc[t <= t[0] + level_s], axis=0)
+    up = up / np.linalg.norm(up)
+    R_lev = _level_rotation(up)  # IMU -> a gravity-aligned frame (z up)
+    # the track: velocity and acceleration by central differences
+    v = np.gradient(fix_p, tf, axis=0)
+    a = np.gradient(v, tf, axis=0)
+    speed = np.linalg.norm(v[:, :2], axis=1)
+    heading = np.unwrap(np.arctan2(v[:, 1], v[:, 0]))
+    rate = np.gradient(heading, tf)
+    along = np.einsum("ij,ij->i", a[:, :2], v[:, :2]) / np.maximum(speed, 1e-9) + gravity * v[:, 2] / np.maximum(speed, 1e-9)
+    cross = speed * rate
+    # the IMU's levelled horizontal specific force, averaged over +-0.25 s around each fix
+    f = acc @ R_lev.T
+    c = np.concatenate([np.zeros((1, 3)), np.cumsum(f, axis=0)])
+    i0 = np.searchsorted(t, tf - 0.25)
+    i1 = np.searchsorted(t, tf + 0.25)
+    ok = (speed > min_speed) & (i1 - i0 > 2) & (tf > t[0]) & (tf < t[-1])
+    ok[:2] = ok[-2:] = False
+    if ok.sum() < 20:
+        raise InvalidInputError(f"positions: {int(ok.sum())} fixes faster than {min_speed:g} m/s; the IMU's forward "
+                                "axis cannot be found from the track (give the mounting)")
+    fh = (c[i1[ok]] - c[i0[ok]])[:, :2] / (i1[ok] - i0[ok])[:, None]
+    A = np.block([[along[ok][:, None], -cross[ok][:, None]], [cross[ok][:, None], along[ok][:, None]]])
+    y = np.concatenate([fh[:, 0], fh[:, 1]])
+    cs, *_ = np.linalg.lstsq(A, y, rcond=None)
+    res = float(np.sqrt(np.mean((A @ cs - y) ** 2)))
+    fwd_l = np.array([cs[0], cs[1], 0.0]) / max(np.hypot(cs[0], cs[1]), 1e-12)
+    fwd = R_lev.T @ fwd_l
+    M = np.stack([fwd, np.cross(up, fwd), up])  # body = M imu: x forward, y left, z up
+    yaw, pitch, roll = Rotation.from_matrix(M.T).as_euler("ZYX", degrees=True)
+    return {"rpy_deg": [float(roll), float(pitch), float(yaw)], "forward_imu": fwd.tolist(), "up_imu": up.tolist(),
+            "fit_residual_mps2": res, "fixes_used": int(ok.sum())}
+
+
+def _level_rotation(up: np.ndarray) -> np.ndarray:
+    """A rotation taking ``up`` (unit) onto +z."""
+    z = np.array([0.0, 0.0, 1.0])
+    v, c = np.cross(up, z), float(up @ z)
+    if np.linalg.norm(v) < 1e-12:
+        return np.eye(3) if c > 0 else np.diag([1.0, -1.0, -1.0])
+    k = np.array([[0, -v[2], v[1]], [v[2], 0, -v[0]], [-v[1], v[0], 0]])
+    return np.eye(3) + k + k @ k / (1 + c)
+
+
+# ------------------------------------------------------------------------------------------------
+# one pass: the smoother, its trajectory as a reference, the bias-only floor against it
+
+
+def bias_floor(b_g: Sequence[float], b_a: Sequence[float]) -> Dict[str, Any]:
+    """A ``traditional+timing`` floor dict with biases only (identity matrices, no G, no filter, no offset)."""
+    return {"method": "traditional+timing", "M_g": np.eye(3).tolist(), "b_g": [float(x) for x in b_g],
+            "G": np.zeros((3, 3)).tolist(), "M_a": np.eye(3).tolist(), "b_a": [float(x) for x in b_a],
+            "cutoff_gyro": None, "cutoff_acc": None, "filter_order": 2, "time_offset": 0.0}
+
+
+def _bias_profile(floor: Dict[str, Any], device: str, rate: float) -> Profile:
+    nan3, nan33 = np.full(3, np.nan), np.full((3, 3), np.nan)
+    return Profile(device=device, sample_rate_hz=rate, time_offset_s=0.0, time_offset_s_std=math.nan,
+                   gyro=Affine(np.eye(3), np.asarray(floor["b_g"]), UNITS["gyroscope"], nan33, nan3),
+                   acc=Affine(np.eye(3), np.asarray(floor["b_a"]), UNITS["accelerometer"], nan33, nan3),
+                   g_sensitivity=np.zeros((3, 3)), gravity_mps2=math.nan, gravity_mps2_std=math.nan, floor=floor)
+
+
+def smoother_pass(imu_path: Path, ref_path: Path, opts: PositionsOptions, rpy: Sequence[float],
+                  floor: Optional[Dict[str, Any]], out: Path, device: str, rate: float) -> Dict[str, Any]:
+    """The navigator over the whole recording (positions as aiding, no gaps), with ``floor`` applied
+    through a profile when given; returns its summary (the trajectories in ``out``)."""
+    from imu_learn.fuse.navigate import NavigateOptions, Sources, navigate
+    from imu_learn.fuse.noise import ImuNoise
+
+    out.mkdir(parents=True, exist_ok=True)
+    prof = None
+    if floor is not None:
+        prof = out / "floor_profile.json"
+        _bias_profile(floor, device, rate).save(prof)
+    n = ImuNoise()
+    noise = opts.imu_noise or (n.gyro_noise_density, n.acc_noise_density, n.gyro_random_walk, n.acc_random_walk)
+    nav = NavigateOptions(aiding_kind="position", aiding_format="auto", keyframe_hz=opts.keyframe_hz,
+                          imu_rotation_rpy_deg=tuple(float(x) for x in rpy), imu_delay_s=opts.imu_delay_s,
+                          lever_arm=None if opts.lever_arm is None else tuple(opts.lever_arm), nhc=opts.nhc,
+                          imu_noise=tuple(float(x) for x in noise))
+    return navigate(Sources(input=Path(imu_path), aiding=Path(ref_path), fmt=opts.fmt, profile=prof), out, nav)
+
+
+def smoothed_groundtruth(smoothed_tum: Path, mounting: np.ndarray, delay_s: float) -> GroundTruth:
+    """The navigator's smoothed trajectory (body frame, the delayed IMU clock) as the IMU's own pose on
+    the IMU's recorded clock: ``R_W_imu = R_W_body M``, stamps minus the delay; no velocity (aligning
+    derives it)."""
+    from imu_learn.core.quat import xyzw_to_wxyz
+    from imu_learn.fuse.aiding.tum import read_trajectory
+
+    tr = read_trajectory(smoothed_tum, "tum")
+    R = Rotation.from_quat(tr.q_xyzw).as_matrix() @ mounting
+    q = xyzw_to_wxyz(Rotation.from_matrix(R).as_quat())
+    q = q * np.where(q[:, :1] < 0, -1.0, 1.0)
+    return GroundTruth(t_ns=tr.t_ns - int(round(delay_s * 1e9)), p=tr.p.copy(), q_wxyz=q)
+
+
+def reference_segments(imu: ImuData, gt: GroundTruth, name: str) -> List[Segment]:
+    """The IMU with the reference on its stamps (gaps of more than 1.5 keyframe periods split)."""
+    from imu_learn.data.loading import AlignOptions, align
+    from imu_learn.eval.groundtruth import default_gap_s
+
+    return list(align(imu, gt, AlignOptions(max_gap_s=default_gap_s(gt)), name=name).segments)
+
+
+def fit_biases(train: List[Segment], val: List[Segment], settings: FitSettings, blocks: int = 4,
+               max_windows: Optional[int] = None) -> Tuple[Dict[str, Any], Dict[str, np.ndarray], Dict[str, Any]]:
+    """(bias-only floor, standard errors of b_g and b_a from ``blocks`` time blocks, the fit log):
+    :func:`imu_learn.calib.fit.fit_once` with the matrices held (module docstring)."""
+    from imu_learn.calib import fit as ff
+
+    terms = {"cutoffs_hz": (None,), "prior": BIAS_ONLY, "acc_prior": BIAS_ONLY, "fit_offset": False}
+    method, log = ff.fit_once(train, val, settings, max_windows, terms)
+    d = method.to_dict()
+    held = {"M_g": float(np.max(np.abs(np.asarray(d["M_g"]) - np.eye(3)))), "G": float(np.max(np.abs(d["G"]))),
+            "M_a": float(np.max(np.abs(np.asarray(d["M_a"]) - np.eye(3))))}
+    floor = bias_floor(d["b_g"], d["b_a"])
+    per: Dict[str, List[np.ndarray]] = {"b_g": [], "b_a": []}
+    for tr, _ in ff.time_blocks(train, blocks).values():
+        if not any(len(s) > settings.window + 1 for s in tr):
+            continue
+        m, _ = ff.fit_once(tr, [], settings, max_windows, terms)
+        per["b_g"].append(np.asarray(m.to_dict()["b_g"]))
+        per["b_a"].append(np.asarray(m.to_dict()["b_a"]))
+    k = len(per["b_g"])
+    std = {key: (np.std(np.stack(v), axis=0, ddof=1) / math.sqrt(k) if k >= 2 else np.full(3, np.nan))
+           for key, v in per.items()}
+    info = {"log": log, "held_at_prior_max_abs": held, "blocks": {k2: np.stack(v).tolist() for k2, v in per.items()} if k else {}}
+    return floor, std, info
+
+
+def observed() -> Dict[str, Dict[str, Any]]:
+    """profile.json's ``observed`` for a positions reference."""
+    out = {k: {"observed": False, "why": ""} for k in FLOOR_KEYS}
+    out["gyroscope.bias"] = {"observed": True, "why": WHY}
+    out["accelerometer.bias"] = {"observed": True, "why": WHY}
+    held = ("a positions-only reference: the attitude is the navigator's estimate, which already assumes an "
+            "identity {what}; kept at the prior ({prior})")
+    out["gyroscope.matrix"]["why"] = held.format(what="gyroscope scale and misalignment", prior="identity")
+    out["accelerometer.matrix"]["why"] = held.format(what="accelerometer scale and misalignment", prior="identity")
+    out["g_sensitivity"]["why"] = held.format(what="g-sensitivity", prior="zero")
+    for k in ("cutoff_gyro", "cutoff_acc"):
+        out[k]["why"] = ("a positions-only reference, smoothed through keyframes, cannot tell a low-pass the IMU needs; "
+                         "kept at the prior (no filter)")
+    out["time_offset"]["why"] = ("positions only: the IMU's offset cannot be told apart from the logging delay the "
+                                 "navigator was given (imu_delay_s in the reference entry); kept at 0")
+    return out
+
+
+def positions_floor(imu_path: Path, ref_path: Path, opts: PositionsOptions = PositionsOptions(),
+                    work: Optional[Path] = None, progress: Progress = lambda s: None,
+                    device: str = "unknown") -> PositionsFloor:
+    """The bias-only floor of the recording ``imu_path`` from the positions in ``ref_path``, with its
+    standard errors, observed flags and passes (module docstring). ``work``: where each pass's
+    navigator outputs go (default: a temporary folder, removed)."""
+    from imu_learn.core.stamps import sample_rate_hz
+    from imu_learn.data import formats
+    from imu_learn.data.formats.gnss_imu import mounting_rotation
+
+    imu_path, ref_path = Path(imu_path), Path(ref_path)
+    src = formats.read_imu_source(imu_path, opts.fmt)
+    if src.t_ns is None:
+        raise InvalidInputError(f"{imu_path}: the recording has no IMU stamps of its own; navigation needs them")
+    imu = ImuData(t_ns=np.asarray(src.t_ns, dtype=np.int64), gyro=np.asarray(src.gyro, dtype=np.float64),
+                  acc=np.asarray(src.acc, dtype=np.float64))
+    rate = float(sample_rate_hz(imu.t_ns))
+    fix_t, fix_p, gravity, ref_fmt = read_fixes(ref_path)
+    if opts.imu_rotation_rpy_deg is not None:
+        rpy, mount_info = [float(x) for x in opts.imu_rotation_rpy_deg], {"from": "given"}
+    else:
+        progress("positions: the IMU's forward axis from the track")
+        est = forward_mounting(imu.t_ns + int(round(opts.imu_delay_s * 1e9)), imu.acc, fix_t, fix_p, gravity)
+        rpy, mount_info = est["rpy_deg"], {"from": "estimated from the track (forward_mounting)", **est}
+    M = mounting_rotation(rpy)
+    name = imu_path.stem if imu_path.is_file() else imu_path.name
+    settings = FitSettings(gravity=gravity)
+    tmp = None
+    if work is None:
+        tmp = tempfile.TemporaryDirectory(prefix="imu-learn-positions-")
+        work = Path(tmp.name)
+    try:
+        floor: Optional[Dict[str, Any]] = None
+        total_g, total_a = np.zeros(3), np.zeros(3)
+        passes: List[Dict[str, Any]] = []
+        std: Dict[str, np.ndarray] = {}
+        train: List[Segment] = []
+        val: List[Segment] = []
+        for k in range(max(1, opts.max_iterations)):
+            t0 = time.perf_counter()
+            progress(f"positions: pass {k + 1}: the navigator's smoother over {name}"
+                     + (" with the floor so far" if floor is not None else ""))
+            summ = smoother_pass(imu_path, ref_path, opts, rpy, floor, Path(work) / f"pass{k + 1}", device, rate)
+            gt = smoothed_groundtruth(Path(summ["outputs"]["smoothed"]), M, opts.imu_delay_s)
+            segs = reference_segments(imu, gt, name)
+            if not segs:
+                raise InvalidInputError(f"{ref_path}: the navigator's smoothed trajectory gives no stretch of reference")
+            train, val = held_back(segs, opts.val_fraction)
+            applied = [_applied(s, floor) for s in train], [_applied(s, floor) for s in val]
+            progress(f"positions: pass {k + 1}: the biases against the smoothed attitude")
+            step, std, info = fit_biases(applied[0], applied[1], settings, opts.blocks, opts.max_windows)
+            d_g, d_a = np.asarray(step["b_g"]), np.asarray(step["b_a"])
+            total_g, total_a = total_g + d_g, total_a + d_a
+            floor = bias_floor(total_g, total_a)
+            fb = np.asarray(summ["final_bias"], dtype=np.float64)
+            passes.append({"pass": k + 1, "b_g": total_g.tolist(), "b_a": total_a.tolist(), "change_b_g": d_g.tolist(),
+                           "change_b_a": d_a.tolist(), "std_b_g": std["b_g"].tolist(), "std_b_a": std["b_a"].tolist(),
+                           "smoother_final_bias_imu": {"b_g": (M.T @ fb[:3]).tolist(), "b_a": (M.T @ fb[3:]).tolist()},
+                           "keyframes": summ["keyframes"], "fixes": summ.get("position_fixes"),
+                           "fit": {"held_at_prior_max_abs": info["held_at_prior_max_abs"], "blocks": info["blocks"]},
+                           "seconds": round(time.perf_counter() - t0, 1)})
+            progress(f"positions: pass {k + 1}: gyro bias {_vec(total_g)} rad/s (change {_vec(d_g)}, std "
+                     f"{_vec(std['b_g'])}), acc bias {_vec(total_a)} m/s^2 (change {_vec(d_a)}, std {_vec(std['b_a'])})")
+            if k > 0 and np.all(np.abs(d_g) < std["b_g"]) and np.all(np.abs(d_a) < std["b_a"]):
+                break
+        assert floor is not None
+        std_all = {"M_g": np.full((3, 3), np.nan), "b_g": std["b_g"], "G": np.full((3, 3), np.nan),
+                   "M_a": np.full((3, 3), np.nan), "b_a": std["b_a"], "time_offset": np.nan}
+        converged = len(passes) > 1 and all(abs(c) < s for c, s in zip(passes[-1]["change_b_g"] + passes[-1]["change_b_a"],
+                                                                         passes[-1]["std_b_g"] + passes[-1]["std_b_a"]))
+        reference = {
+            "kind": "positions", "file": str(ref_path), "format": ref_fmt,
+            "method": "attitude a latent state: the navigator's smoothed trajectory (positions as aiding, no outages) "
+                      "as the reference, the bias-only floor fitted against it, the smoother run again with it; "
+                      "repeated until the biases change by less than their standard error",
+            "navigator": {"imu_rotation_rpy_deg": rpy, "mounting": mount_info, "imu_delay_s": opts.imu_delay_s,
+                          "lever_arm_m": None if opts.lever_arm is None else list(opts.lever_arm),
+                          "imu_noise": None if opts.imu_noise is None else list(opts.imu_noise),
+                          "keyframe_hz": opts.keyframe_hz, "nhc": opts.nhc, "gravity_mps2": gravity},
+            "passes": len(passes), "converged": bool(converged),
+            "floor_fit": "calib.fit.fit_once, terms cutoffs_hz=(None,), prior=acc_prior=1e6 (M_g, G, M_a held), "
+                         "fit_offset=False",
+        }
+        return PositionsFloor(floor, std_all, observed(), reference, passes, train, val, gravity)
+    finally:
+        if tmp is not None:
+            tmp.cleanup()
+
+
+def held_back(segments: List[Segment], frac: float) -> Tuple[List[Segment], List[Segment]]:
+    """The fitted and the held-back block (the last ``frac`` of the recording), as calibrate cuts them."""
+    from imu_learn.data.splits import cut, recording_name
+
+    if frac <= 0:
+        return list(segments), []
+    name = recording_name(segments[0].name)
+    return cut(segments, 0.0, 1.0 - frac, name), cut(segments, 1.0 - frac, 1.0, name)
+
+
+def _applied(s: Segment, floor: Optional[Dict[str, Any]]) -> Segment:
+    """``s`` with the floor so far applied to its IMU (the next pass fits what bias remains)."""
+    from dataclasses import replace
+
+    from imu_learn.calib.profile import apply_floor
+
+    if floor is None:
+        return s
+    g, a = apply_floor(floor, s.t_ns, s.gyro, s.acc)
+    return replace(s, gyro=g, acc=a)
+
+
+def _vec(v: Any) -> str:
+    return "[" + ", ".join(f"{x:+.5f}" for x in np.asarray(v, dtype=np.float64)) + "]"
+
+
+# ------------------------------------------------------------------------------------------------
+# the profile
+
+
+def calibrate_positions(imu_path: Path, ref_path: Path, out_dir: Path, opts: PositionsOptions = PositionsOptions(),
+                        options: Any = None, device: Optional[str] = None, progress: Progress = lambda s: None,
+                        source: Optional[Dict[str, Any]] = None) -> Any:
+    """``imu-learn calibrate`` with a positions reference: :func:`positions_floor`, then the profile
+    as :func:`imu_learn.calib.run.calibrate` writes one after its floor (gravity, the residual and
+    Allan noise, the plausibility checks of :func:`imu_learn.calib.run.plausibility`, profile.json,
+    imu.yaml, calibration.png), with this floor, its observed flags and ``reference`` kind
+    "positions". The navigator's passes are kept in ``out_dir/positions/``. Returns a CalibResult."""
+    from imu_learn.calib import fit as ff
+    from imu_learn.calib import noise as nz
+    from imu_learn.calib import run as cr
+    from imu_learn.calib.kalibr import write_kalibr_yaml
+    from imu_learn.calib.plot import plot_calibration
+    from imu_learn.calib.profile import NOISE_KEYS
+
+    t_start = time.time()
+    options = options if options is not None else cr.CalibOptions()
+    imu_path, ref_path, out_dir = Path(imu_path), Path(ref_path), Path(out_dir)
+    name = imu_path.stem if imu_path.is_file() else imu_path.name
+    if device is None:
+        from imu_learn.infer.rates import recording_device
+
+        device = recording_device(opts.fmt) or name
+    res = positions_floor(imu_path, ref_path, opts, out_dir / "positions", progress, device)
+    groups = [str(imu_path)]
+    src = dict(source or {"recording": str(imu_path), "format": opts.fmt, "groundtruth": str(ref_path)})
+    src.update({"train": [_span(s) for s in res.train], "val": [_span(s) for s in res.val]})
+    inp = cr.CalibInputs(train=res.train, val=res.val, groups=groups * len(res.train), val_groups=groups * len(res.val),
+                         settings=FitSettings(gravity=res.gravity), device=device, sources=[src])
+    f, std = res.floor, res.std
+    segs, seg_groups = inp.train + inp.val, inp.groups + inp.val_groups
+    progress("gravity and the residual noise")
+    g, g_std, g_per = ff.fit_gravity(segs, f, seg_groups)
+    before = nz.residual_noise(segs, ff.calibrated(segs, bias_floor(np.zeros(3), np.zeros(3)), False), res.gravity)
+    after = nz.residual_noise(segs, ff.calibrated(segs, f, False), res.gravity)
+    prof = Profile(
+        device=device, sample_rate_hz=cr._rate([s.t_ns for s in segs]), time_offset_s=0.0, time_offset_s_std=math.nan,
+        gyro=Affine(np.eye(3), np.asarray(f["b_g"]), UNITS["gyroscope"], std["M_g"], std["b_g"]),
+        acc=Affine(np.eye(3), np.asarray(f["b_a"]), UNITS["accelerometer"], std["M_a"], std["b_a"]),
+        g_sensitivity=np.zeros((3, 3)), gravity_mps2=g, gravity_mps2_std=g_std, floor=f,
+        fit_log={"positions": res.passes, "gravity_per_group": g_per, "floor_gravity_mps2": res.gravity,
+                 "floor_settings": asdict(inp.settings), "g_sensitivity_std": std["G"]})
+    prof.reference = res.reference
+    prof.observed = res.observed
+    prof.checks = cr.plausibility(prof, inp, options, progress)
+    progress("still stretches and their Allan deviation")
+    allan = nz.allan_noise(cr.still_pieces(inp, options.still))
+    cands = nz.candidates(after, allan, options.min_still_s)
+    noise = cr.noise_terms(nz.choose(cands, NOISE_KEYS))
+    prof.noise = {**noise, **cr.bias_instability(cands)}
+    prof.noise_estimates = cr.estimate_dicts(cands)
+    prof.sources = inp.sources + ([{"still_stretches": allan.stretches, "still_s": round(allan.seconds, 3)}] if allan else [])
+    prof.unobservable = cr.unobservable(True, allan, noise, options) + [
+        {"what": k, "why": o["why"]} for k, o in res.observed.items() if not o["observed"]]
+    out_dir.mkdir(parents=True, exist_ok=True)
+    files = {"profile": out_dir / "profile.json", "kalibr": out_dir / "imu.yaml"}
+    prof.save(files["profile"])
+    write_kalibr_yaml(prof, files["kalibr"])
+    if options.plot:
+        progress("plot")
+        if plot_calibration(out_dir / "calibration.png", device, before, after, allan):
+            files["plot"] = out_dir / "calibration.png"
+    return cr.CalibResult(prof, files, before, after, allan, time.time() - t_start)
+
+
+def _span(s: Segment) -> Dict[str, Any]:
+    return {"segment": s.name, "t0_ns": int(s.t_ns[0]), "t1_ns": int(s.t_ns[-1]), "samples": len(s)}
+
+
+def from_cli(args: Any, progress: Progress = lambda s: None) -> Any:
+    """``imu-learn calibrate --input REC --groundtruth POSITIONS``: :func:`calibrate_positions` with the
+    command's options (one recording; ``--extrinsics``' translation is the antenna's lever arm)."""
+    from imu_learn.calib.run import CalibOptions
+    from imu_learn.errors import ConfigError
+
+    if len(args.input) != 1 or len(args.groundtruth or []) != 1:
+        raise ConfigError("calibrate with a positions reference (GNSS): one --input and its --groundtruth")
+    if args.learned:
+        raise ConfigError("--learned needs a 6-DoF reference; a positions reference gives the bias-only floor")
+    if args.format == "csv-columns" or any(getattr(args, k, None) is not None for k in ("columns", "time_unit")):
+        raise ConfigError("calibrate with a positions reference reads a recording's own layout, not a user's CSV")
+    lever = None
+    if args.extrinsics:
+        from imu_learn.data.formats.extrinsics import read_t_bs
+
+        lever = tuple(float(x) for x in read_t_bs(args.extrinsics)[:3, 3])
+    opts = PositionsOptions(fmt=args.format, lever_arm=lever, val_fraction=args.val_fraction)
+    progress(f"{args.groundtruth[0]}: positions only: the attitude from the navigator's smoother (calib.positions)")
+    return calibrate_positions(args.input[0], args.groundtruth[0], args.out, opts,
+                               CalibOptions(min_still_s=args.min_still_s, plot=not args.no_plot, force=args.force),
+                               args.device, progress)

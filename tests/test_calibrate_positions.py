@@ -1,0 +1,132 @@
+"""A device profile from positions only (imu_learn.calib.positions): attitude a latent state of the
+navigator's smoother, the bias-only floor fitted against its smoothed trajectory and iterated.
+
+Fast: a synthetic car (turns, grades, an IMU mounted upside down and yawed, constant gyro and acc
+biases, white noise) with 10 Hz position fixes (+2 cm noise) written as an ASL recording and a TUM
+positions file; the biases must come back. Slow (``-m slow``): ``imu-learn calibrate`` on the real car
+drive with its RTKLIB ``.pos`` file."""
+from __future__ import annotations
+
+import json
+import os
+from pathlib import Path
+
+import numpy as np
+import pytest
+from scipy.spatial.transform import Rotation
+
+from imu_learn.calib import positions as P
+from imu_learn.calib.profile import Profile
+from imu_learn.cli import main
+from imu_learn.data.formats.gnss_imu import mounting_rotation
+
+G = 9.81
+B_G = np.array([0.004, -0.003, 0.005])  # rad/s, IMU frame
+B_A = np.array([0.12, -0.08, 0.15])  # m/s^2, IMU frame
+RPY = (180.0, 0.0, 90.0)  # the IMU's mounting: body (x forward, z up) = M imu
+T0_NS = 1_000_000_000_000
+
+
+def synthetic_drive(folder: Path, seconds: float = 90.0, seed: int = 0):
+    """ASL recording ``folder/car`` (IMU with biases and noise) and ``folder/fixes.tum`` (positions)."""
+    rng = np.random.default_rng(seed)
+    fs, sub = 100, 10
+    dt = 1.0 / (fs * sub)
+    tt = np.arange(int(seconds * fs * sub) + 1) * dt
+    moving = np.clip((tt - 3.0) / 5.0, 0.0, 1.0)  # still for 3 s, then speeding up over 5 s
+    speed = moving * (8.0 + 2.0 * np.sin(0.3 * tt))
+    dspeed = np.gradient(speed, dt)
+    w = np.stack([0.04 * np.sin(2 * np.pi * tt / 5.0), 0.05 * np.sin(2 * np.pi * tt / 9.0),
+                  0.3 * np.sin(2 * np.pi * tt / 20.0) + 0.15 * np.sin(2 * np.pi * tt / 7.0)], axis=1) * moving[:, None]
+    R = np.empty((len(tt), 3, 3))
+    R[0] = Rotation.from_euler("z", 30, degrees=True).as_matrix()
+    steps = Rotation.from_rotvec(0.5 * (w[1:] + w[:-1]) * dt).as_matrix()
+    for k in range(1, len(tt)):
+        R[k] = R[k - 1] @ steps[k - 1]
+    v = R[:, :, 0] * speed[:, None]
+    p = np.concatenate([np.zeros((1, 3)), np.cumsum(0.5 * (v[1:] + v[:-1]) * dt, axis=0)])
+    f_body = np.cross(w, np.stack([speed, 0 * speed, 0 * speed], 1)) + np.stack([dspeed, 0 * speed, 0 * speed], 1)
+    f_body += np.einsum("nji,j->ni", R, np.array([0.0, 0.0, G]))
+    i = np.arange(0, len(tt), sub)
+    M = mounting_rotation(RPY)
+    gyro = w[i] @ M + B_G + rng.normal(0, 1e-3 * np.sqrt(fs), (len(i), 3))
+    acc = f_body[i] @ M + B_A + rng.normal(0, 1e-2 * np.sqrt(fs), (len(i), 3))
+    t_ns = T0_NS + np.round(tt[i] * 1e9).astype(np.int64)
+    rec = folder / "car"
+    (rec / "mav0" / "imu0").mkdir(parents=True)
+    with open(rec / "mav0" / "imu0" / "data.csv", "w") as fh:
+        fh.write("#timestamp [ns],w_RS_S_x [rad s^-1],w_RS_S_y [rad s^-1],w_RS_S_z [rad s^-1],"
+                 "a_RS_S_x [m s^-2],a_RS_S_y [m s^-2],a_RS_S_z [m s^-2]\n")
+        for t, g, a in zip(t_ns, gyro, acc):
+            fh.write(f"{t},{g[0]:.9f},{g[1]:.9f},{g[2]:.9f},{a[0]:.9f},{a[1]:.9f},{a[2]:.9f}\n")
+    k = np.arange(0, len(tt), fs * sub // 10)  # fixes at 10 Hz
+    noisy = p[k] + rng.normal(0, 0.02, (len(k), 3))
+    fixes = folder / "fixes.tum"
+    fixes.write_text("".join(f"{(T0_NS * 1e-9 + tt[j]):.6f} {x:.4f} {y:.4f} {z:.4f}\n" for j, (x, y, z) in zip(k, noisy)))
+    return rec, fixes
+
+
+def test_positions_reference_is_recognised(tmp_path):
+    rec, fixes = synthetic_drive(tmp_path, seconds=12.0)
+    assert P.is_positions_reference(fixes)
+    six = tmp_path / "pose.tum"
+    six.write_text("".join(f"{i * 0.1:.1f} 0 0 0 {np.sin(i * 0.05):.6f} 0 0 {np.cos(i * 0.05):.6f}\n" for i in range(50)))
+    assert not P.is_positions_reference(six)
+    const = tmp_path / "const.tum"  # positions written as TUM with a constant quaternion
+    const.write_text("".join(f"{i * 0.1:.1f} {i:.1f} 0 0 0 0 0 1\n" for i in range(50)))
+    assert P.is_positions_reference(const)
+
+
+def test_forward_axis_from_the_track(tmp_path):
+    rec, fixes = synthetic_drive(tmp_path, seconds=60.0)
+    from imu_learn.data import formats
+
+    src = formats.read_imu_source(rec)
+    t, p, g, fmt = P.read_fixes(fixes)
+    est = P.forward_mounting(src.t_ns, src.acc, t, p, g)
+    M = mounting_rotation(RPY)
+    fwd = np.asarray(est["forward_imu"])
+    assert np.degrees(np.arccos(np.clip(fwd @ M[0], -1, 1))) < 3.0  # the body x-axis in the IMU frame
+    assert np.degrees(np.arccos(np.clip(np.asarray(est["up_imu"]) @ M[2], -1, 1))) < 3.0
+
+
+def test_biases_from_positions(tmp_path):
+    rec, fixes = synthetic_drive(tmp_path, seconds=60.0)
+    opts = P.PositionsOptions(imu_noise=(1e-3, 1e-2, 1e-5, 1e-4), max_iterations=2, max_windows=300)
+    res = P.positions_floor(rec, fixes, opts, tmp_path / "work")
+    b_g, b_a = np.asarray(res.floor["b_g"]), np.asarray(res.floor["b_a"])
+    np.testing.assert_allclose(b_g, B_G, atol=5e-4)
+    np.testing.assert_allclose(b_a, B_A, atol=0.03)
+    assert np.all(np.isfinite(res.std["b_g"])) and np.all(res.std["b_g"] < 1e-3)
+    assert res.floor["M_g"] == np.eye(3).tolist() and res.floor["time_offset"] == 0.0
+    assert res.observed["gyroscope.bias"]["observed"] and res.observed["accelerometer.bias"]["observed"]
+    for k in ("gyroscope.matrix", "accelerometer.matrix", "g_sensitivity", "cutoff_gyro", "cutoff_acc", "time_offset"):
+        assert not res.observed[k]["observed"], k
+    assert res.reference["kind"] == "positions" and 1 <= len(res.passes) <= 2
+
+
+# --- the real drive ------------------------------------------------------------------------------
+
+DATA = Path(os.environ["IMU_LEARN_DATA"]) if os.environ.get("IMU_LEARN_DATA") else \
+    Path(__file__).resolve().parents[1].parent / "shared" / "data"
+DRIVE = DATA / "gnss-imu" / "drive_0708"
+
+
+@pytest.mark.slow
+def test_calibrate_the_drive_from_its_rtk_fixes(tmp_path, capsys):
+    if not (DRIVE / "imu_1934.csv").is_file():
+        pytest.skip("the gnss-imu drive is not on this machine (set IMU_LEARN_DATA to the data root)")
+    rc = main(["calibrate", "--input", str(DRIVE / "imu_1934.csv"), "--groundtruth", str(DRIVE / "gnss_1934_sf.pos"),
+               "--out", str(tmp_path / "cal"), "--no-plot"])
+    out = capsys.readouterr()
+    assert rc == 0, out.err
+    prof = Profile.load(tmp_path / "cal" / "profile.json")
+    assert prof.reference["kind"] == "positions"
+    assert prof.observed["gyroscope.bias"]["observed"] and prof.observed["accelerometer.bias"]["observed"]
+    for k in ("gyroscope.matrix", "accelerometer.matrix", "g_sensitivity", "cutoff_gyro", "cutoff_acc", "time_offset"):
+        assert not prof.observed[k]["observed"], k
+    np.testing.assert_array_equal(prof.gyro.matrix, np.eye(3))
+    assert prof.checks and not prof.checks["failed"]  # calibrate's plausibility checks ran and passed
+    assert np.all(np.abs(prof.gyro.bias) < 0.02) and np.all(np.abs(prof.acc.bias) < 0.5)
+    d = json.loads((tmp_path / "cal" / "profile.json").read_text())
+    assert d["reference"]["passes"] >= 1
