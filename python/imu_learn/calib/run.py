@@ -203,6 +203,11 @@ def observed(ref: Optional[FrameFit]) -> Dict[str, Dict[str, Any]]:
                "the IMU does not need; kept at the prior (identity, no filter)")
         for k in ("accelerometer.matrix", "cutoff_gyro", "cutoff_acc"):
             out[k] = {"observed": False, "why": why}
+    if ref is not None and ref.applied.get("level"):
+        out["accelerometer.bias"] = {
+            "observed": True, "partly": "along gravity only: across it the bias and the tilt of the reference's world "
+            f"(levelled by calibrate, {ref.tilt_deg:.1f}° off) are one and the same unless the attitude varies widely; "
+            "the levelling absorbs part of it (0.1 m/s^2 is 0.6° of tilt)"}
     if ref is not None and ref.applied.get("lag"):
         out["time_offset"] = {"observed": False, "why": f"the reference's stamps were {ref.lag_s * 1e3:+.0f} ms off the "
                               "IMU's; the IMU's own offset cannot be told apart from the reference's latency"}

@@ -1,0 +1,121 @@
+"""calibrate with the references users have, on the shipped EuRoC crop: its ground truth as given
+(the oracle), the same poses in another frame, world and clock, and as a sparse 20 Hz reference; a
+reference of another recording and a planar one are refused before any fit."""
+from __future__ import annotations
+
+import json
+import math
+from pathlib import Path
+
+import numpy as np
+import pytest
+from crops import EASY, SHIPPED
+
+from imu_learn.cli import main
+from imu_learn.core.quat import quat_mul, wxyz_to_xyzw
+from imu_learn.data.formats import read_recording
+
+pytestmark = pytest.mark.slow
+
+REC = SHIPPED / EASY
+R_TRUE_AXIS, R_TRUE_DEG = np.array([1.0, 2.0, 3.0]), 119.0
+
+
+def quat_axis_angle(axis: np.ndarray, deg: float) -> np.ndarray:
+    a = math.radians(deg) / 2
+    return np.r_[math.cos(a), math.sin(a) * axis / np.linalg.norm(axis)]
+
+
+def write_reference(path: Path, rotate=True, world_deg=0.0, late_s=0.0, every=1) -> Path:
+    """The crop's ground truth seen by a sensor rotated R_TRUE about the IMU (same origin), in a world
+    turned ``world_deg`` about x, its stamps ``late_s`` late, every ``every``-th pose, as TUM."""
+    _, gt = read_recording(REC)
+    q = gt.q_wxyz
+    if rotate:
+        q = quat_mul(q, quat_axis_angle(R_TRUE_AXIS, R_TRUE_DEG)[None])
+    qw = quat_axis_angle(np.array([1.0, 0, 0]), world_deg)
+    q = quat_mul(qw[None], q)
+    c, s = math.cos(math.radians(world_deg)), math.sin(math.radians(world_deg))
+    p = gt.p @ np.array([[1, 0, 0], [0, c, -s], [0, s, c]]).T
+    rows = np.column_stack([gt.t_ns * 1e-9 + late_s, p, wxyz_to_xyzw(q)])[::every]
+    np.savetxt(path, rows, fmt="%.9f")
+    return path
+
+
+def calibrate(out: Path, *extra: str) -> dict:
+    code = main(["calibrate", "--input", str(REC), "--out", str(out), "--no-plot", "--quiet", *extra])
+    assert code == 0
+    return json.loads((out / "profile.json").read_text())
+
+
+@pytest.fixture(scope="module")
+def oracle(tmp_path_factory) -> dict:
+    return calibrate(tmp_path_factory.mktemp("oracle"))
+
+
+def close(a, b, sa, sb, k=4.0, floor=0.0) -> bool:
+    a, b = np.asarray(a), np.asarray(b)
+    tol = k * np.sqrt(np.nan_to_num(np.asarray(sa)) ** 2 + np.nan_to_num(np.asarray(sb)) ** 2) + floor
+    return bool(np.all(np.abs(a - b) <= tol))
+
+
+def test_a_reference_in_another_frame_and_world_gives_the_oracles_profile(tmp_path, oracle):
+    ref = write_reference(tmp_path / "rotated.tum", world_deg=100.0)
+    p = calibrate(tmp_path / "out", "--groundtruth", str(ref))
+    r = p["reference"]
+    assert r["applied"]["rotation"] and r["applied"]["level"] and not r["applied"]["lag"]
+    angle = 2 * math.degrees(math.acos(min(1.0, abs(float(np.dot(
+        quat_from_matrix(np.asarray(r["rotation_imu_from_reference"])), quat_axis_angle(R_TRUE_AXIS, R_TRUE_DEG)))))))
+    assert angle < 0.3
+    assert r["world_tilt_deg"] == pytest.approx(100.0, abs=1.0)
+    g, og = p["gyroscope"], oracle["gyroscope"]
+    assert close(g["bias"], og["bias"], g["bias_std"], og["bias_std"], floor=2e-4)
+    assert close(g["matrix"], og["matrix"], g["matrix_std"], og["matrix_std"], floor=2e-3)
+    # along gravity (the crop's IMU x points up) the acc bias is the oracle's; across gravity it trades with
+    # the levelled world's tilt (0.1 m/s^2 per 0.6°), which a 60 s flight near level cannot tell apart
+    a, oa = np.asarray(p["accelerometer"]["bias"]), np.asarray(oracle["accelerometer"]["bias"])
+    assert abs(a[0] - oa[0]) < 0.03 and np.all(np.abs(a[1:] - oa[1:]) < 0.2)
+    assert "along gravity" in p["observed"]["accelerometer.bias"]["partly"]
+    assert p["time_offset_s"] == pytest.approx(oracle["time_offset_s"], abs=1e-3)
+    assert all(v["observed"] for v in p["observed"].values())
+
+
+def test_a_late_reference_is_moved_and_the_imus_offset_left_unobserved(tmp_path, oracle):
+    ref = write_reference(tmp_path / "late.tum", rotate=False, late_s=0.1)
+    p = calibrate(tmp_path / "out", "--groundtruth", str(ref))
+    assert p["reference"]["applied"]["lag"] and p["reference"]["lag_s"] == pytest.approx(0.1, abs=0.006)
+    assert p["time_offset_s"] == 0.0 and not p["observed"]["time_offset"]["observed"]
+    assert close(p["gyroscope"]["bias"], oracle["gyroscope"]["bias"], p["gyroscope"]["bias_std"],
+                 oracle["gyroscope"]["bias_std"], floor=5e-4)
+
+
+def test_a_20_hz_reference_fits_the_acc_bias_only(tmp_path, oracle):
+    ref = write_reference(tmp_path / "vo.tum", world_deg=100.0, every=10)
+    p = calibrate(tmp_path / "out", "--groundtruth", str(ref))
+    assert not p["reference"]["resolves_acceleration"]
+    assert np.allclose(p["accelerometer"]["matrix"], np.eye(3), atol=1e-6)
+    assert p["floor"]["cutoff_gyro"] is None and p["floor"]["cutoff_acc"] is None
+    assert {k for k, v in p["observed"].items() if not v["observed"]} == {
+        "accelerometer.matrix", "cutoff_gyro", "cutoff_acc"}
+    assert close(p["gyroscope"]["bias"], oracle["gyroscope"]["bias"], p["gyroscope"]["bias_std"],
+                 oracle["gyroscope"]["bias_std"], floor=5e-4)
+    assert np.all(np.abs(np.asarray(p["accelerometer"]["bias"])) < 0.3)
+
+
+def test_another_recordings_reference_is_refused_before_any_fit(tmp_path, capsys):
+    other = SHIPPED / "euroc/MH_04_difficult/mav0/state_groundtruth_estimate0/data.csv"
+    _, gt = read_recording(SHIPPED / "euroc/MH_04_difficult", groundtruth=other)
+    imu, _ = read_recording(REC)
+    t = gt.t_ns - gt.t_ns[0] + imu.t_ns[0]  # on the crop's clock: the same span, another flight
+    ref = tmp_path / "other.tum"
+    np.savetxt(ref, np.column_stack([t * 1e-9, gt.p, wxyz_to_xyzw(gt.q_wxyz)]), fmt="%.9f")
+    code = main(["calibrate", "--input", str(REC), "--groundtruth", str(ref), "--out", str(tmp_path / "out")])
+    err = capsys.readouterr().err
+    assert code == 2 and "ReferenceFrameError" in err and "does not follow the IMU" in err
+    assert len(err.strip().splitlines()) == 1 or "fitting the floor" not in err
+    assert not (tmp_path / "out" / "profile.json").exists()
+
+
+def quat_from_matrix(r: np.ndarray) -> np.ndarray:
+    from imu_learn.calib.reference import _quat
+    return _quat(r)
