@@ -15,8 +15,8 @@ pytest.importorskip("gtsam")
 from crops import CROP, SHIPPED  # noqa: E402
 from imu_learn.cli import main  # noqa: E402
 from imu_learn.core.still import BIAS_SETTINGS, still_bias  # noqa: E402
+from imu_learn.data.formats.extrinsics import read_t_bs  # noqa: E402
 from imu_learn.data.loading import read_imu  # noqa: E402
-from imu_learn.fuse.aiding.extrinsics import read_t_bs  # noqa: E402
 from imu_learn.fuse.aiding.tum import read_tum  # noqa: E402
 from test_navigate import CAM0_YAML, GT_REL, camera_trajectory_from_groundtruth, write  # noqa: E402
 
