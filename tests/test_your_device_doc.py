@@ -86,10 +86,11 @@ def rotation_error_1s(t_ns: np.ndarray, gyro: np.ndarray, gt) -> float:
     return float(np.mean(2 * np.arccos(np.clip(np.abs(d[:, 0]), 0, 1))))
 
 
-def test_the_page_has_the_four_steps():
+def test_the_page_has_the_five_steps():
     blocks = bash_blocks(PAGE.read_text())
     assert [b.split()[0:2] for b in blocks] == [["imu-learn", "calibrate"], ["cat", "calib/imu.yaml"],
-                                                ["imu-learn", "refine"], ["imu-learn", "navigate"]]
+                                                ["imu-learn", "refine"], ["imu-learn", "navigate"],
+                                                ["imu-learn", "groundtruth"]]
     assert "[your-device.md](your-device.md)" in (REPO / "docs" / "README.md").read_text()
 
 
