@@ -91,18 +91,25 @@ def test_forward_axis_from_the_track(tmp_path):
 
 
 def test_biases_from_positions(tmp_path):
+    from imu_learn.calib.run import CalibOptions
+
     rec, fixes = synthetic_drive(tmp_path, seconds=60.0)
     opts = P.PositionsOptions(imu_noise=(1e-3, 1e-2, 1e-5, 1e-4), max_iterations=2, max_windows=300)
-    res = P.positions_floor(rec, fixes, opts, tmp_path / "work")
-    b_g, b_a = np.asarray(res.floor["b_g"]), np.asarray(res.floor["b_a"])
-    np.testing.assert_allclose(b_g, B_G, atol=5e-4)
-    np.testing.assert_allclose(b_a, B_A, atol=0.03)
-    assert np.all(np.isfinite(res.std["b_g"])) and np.all(res.std["b_g"] < 1e-3)
-    assert res.floor["M_g"] == np.eye(3).tolist() and res.floor["time_offset"] == 0.0
-    assert res.observed["gyroscope.bias"]["observed"] and res.observed["accelerometer.bias"]["observed"]
+    res = P.calibrate_positions(rec, fixes, tmp_path / "cal", opts, CalibOptions(plot=False))
+    prof = Profile.load(tmp_path / "cal" / "profile.json")
+    np.testing.assert_allclose(prof.gyro.bias, B_G, atol=5e-4)
+    np.testing.assert_allclose(prof.acc.bias, B_A, atol=0.03)
+    assert np.all(np.isfinite(prof.gyro.bias_std)) and np.all(prof.gyro.bias_std < 1e-3)
+    np.testing.assert_array_equal(prof.gyro.matrix, np.eye(3))
+    np.testing.assert_array_equal(prof.acc.matrix, np.eye(3))
+    assert prof.floor["time_offset"] == 0.0 and prof.floor["cutoff_gyro"] is None
+    assert prof.observed["gyroscope.bias"] == {"observed": True, "why": P.WHY}
+    assert prof.observed["accelerometer.bias"]["observed"]
     for k in ("gyroscope.matrix", "accelerometer.matrix", "g_sensitivity", "cutoff_gyro", "cutoff_acc", "time_offset"):
-        assert not res.observed[k]["observed"], k
-    assert res.reference["kind"] == "positions" and 1 <= len(res.passes) <= 2
+        assert not prof.observed[k]["observed"], k
+    assert prof.reference["kind"] == "positions" and 1 <= prof.reference["passes"] <= 2
+    assert prof.checks and not prof.checks["failed"]  # calibrate's plausibility checks ran on it
+    assert res.profile.floor == prof.floor and (tmp_path / "cal" / "imu.yaml").is_file()
 
 
 # --- the real drive ------------------------------------------------------------------------------

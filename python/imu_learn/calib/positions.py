@@ -481,8 +481,7 @@ def calibrate_positions(imu_path: Path, ref_path: Path, out_dir: Path, opts: Pos
     prof.noise = {**noise, **cr.bias_instability(cands)}
     prof.noise_estimates = cr.estimate_dicts(cands)
     prof.sources = inp.sources + ([{"still_stretches": allan.stretches, "still_s": round(allan.seconds, 3)}] if allan else [])
-    prof.unobservable = cr.unobservable(True, allan, noise, options) + [
-        {"what": k, "why": o["why"]} for k, o in res.observed.items() if not o["observed"]]
+    prof.unobservable = cr.unobservable(True, allan, noise, options)
     out_dir.mkdir(parents=True, exist_ok=True)
     files = {"profile": out_dir / "profile.json", "kalibr": out_dir / "imu.yaml"}
     prof.save(files["profile"])
