@@ -73,3 +73,4 @@ bench *args="":
     {{py}} bench/bench_rosbag.py {{ if args =~ '--quick' { '--quick' } else { '' } }}
     {{py}} bench/bench_scale.py {{ if args =~ '--quick' { '--quick' } else { '' } }} ${BENCH_SCALE_ARGS:-}
     {{py}} bench/bench_allan.py {{ if args =~ '--quick' { '--hours 1 --repeats 1' } else { '' } }}
+    {{py}} bench/bench_calibrate.py {{ if args =~ '--quick' { '--quick' } else { '' } }}

@@ -55,9 +55,9 @@ before).
 
 Threads: the fit runs with ``threads`` torch threads (default 1, at most ``settings.threads``;
 :func:`imu_learn.util.threads.thread_limits`, restored afterwards). It is thousands of operations
-of a few milliseconds each: a second OpenMP thread gains little on an idle machine and, beside other
-CPU-bound work on two cores, made the fit 4-5× slower (every parallel region waits for its
-descheduled second thread).
+of a few milliseconds each: beside other CPU-bound work on two cores, two OpenMP threads made the
+EuRoC fit and its refits 4-5× slower than one (41-60 s against 9-14 s: every parallel region waits
+for its descheduled second thread); what a second thread gains on an idle machine was not measured.
 
 ``refit`` fits the affine parameters again on a part of the data with a fit's cutoffs kept and its
 parameters as the start (the time offset searched again): what calibrate's uncertainty needs per

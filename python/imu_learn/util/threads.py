@@ -6,10 +6,10 @@ core. On a small machine (two cores) that oversubscribes the cores as soon as tw
 once, and OpenMP makes it much worse when another process is busy: every parallel region ends at a
 barrier that waits for all its threads, so a region whose second thread has been descheduled waits
 for a scheduler slice (milliseconds) instead of microseconds. A fit made of thousands of small
-torch operations (the ``traditional`` floor) then took 41-60 s instead of 9-14 s on two cores
-beside two other CPU-bound jobs; with one torch thread it degrades only by the share of the CPU it
-gets. So the fits made of many small operations run with one torch thread
-(:func:`thread_limits`), and work that does scale sizes itself with :func:`cores`.
+torch operations (the ``traditional`` floor, EuRoC's five flights and their refits) took 41-60 s
+with two torch threads against 9-14 s with one, on two cores beside other engineers' builds (load
+5.5-7); with one thread it slows only by the share of the CPU it gets (its CPU time stays the same
+with a busy loop beside it). So such fits run with one torch thread (:func:`thread_limits`).
 
 What can be changed when:
 
