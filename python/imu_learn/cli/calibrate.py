@@ -171,7 +171,7 @@ def from_inputs(args: argparse.Namespace, say: Callable[[str], None] = lambda s:
         inp.val += va
         inp.groups += [source["recording"]] * len(tr)
         inp.val_groups += [source["recording"]] * len(va)
-        source.update({"train": [_span(s) for s in tr], "val": [_span(s) for s in va]})
+        source.update({"max_gap_s": gap, "train": [_span(s) for s in tr], "val": [_span(s) for s in va]})
     first = inp.train[0].name if inp.train else inp.imu_only[0].name
     inp.device = args.device or _device(fmt0 or "auto", first)
     return inp
@@ -237,7 +237,7 @@ def learned(args: argparse.Namespace, inp: CalibInputs, profile: Path, say: Call
     """--learned: the refiner on top of ``profile``, its one line (imu_learn.train.on_profile)."""
     from imu_learn.train.on_profile import config_on_profile, train_on_profile  # torch
 
-    base = learned_base(args)
+    base = learned_base(args, inp)
     cfg = config_on_profile(base, profile, args.learned_epochs or base.optim.epochs,
                             base.seed if args.seed is None else args.seed)
     keep(f"{profile} is the result so far; the refiner's run is in {args.out / 'fit'}")
@@ -246,10 +246,10 @@ def learned(args: argparse.Namespace, inp: CalibInputs, profile: Path, say: Call
     print(f"learned refiner took {res.seconds:.1f} s")
 
 
-def learned_base(args: argparse.Namespace) -> Any:
+def learned_base(args: argparse.Namespace, inp: CalibInputs) -> Any:
     """The run config the refiner starts from: the --config's (a fit config, or an evaluate config's
-    base), else the defaults with data.roots and data.split naming the --input recordings and the
-    blocks calibrate cut (what the run's config.toml then says it trained on)."""
+    base), else the defaults with data.roots and data.split naming the --input recordings, the gap
+    rule and the blocks calibrate cut (what the run's config.toml then says it trained on)."""
     overrides = ["--data.data_root", str(args.data_root)] if args.data_root else []
     if args.config:
         if "base" in read_toml(args.config):
@@ -258,10 +258,10 @@ def learned_base(args: argparse.Namespace) -> Any:
     gts = list(args.groundtruth or []) + [None] * len(args.input)
     f = args.val_fraction
     roots, train, val = [], [], []
-    for path, gt in zip(args.input, gts):
+    for path, gt, source in zip(args.input, gts, inp.sources):
         name = path.stem if path.is_file() else path.name
         roots.append({"path": str(path), "format": args.format if args.format != "auto" else detect_format(path),
-                      "groundtruth": str(gt) if gt else "", "max_gap_s": args.max_gap_s or 0.05})
+                      "groundtruth": str(gt) if gt else "", "max_gap_s": source["max_gap_s"]})
         train.append(name if f <= 0 else f"{name}[0:{1 - f:g}]")
         val += [] if f <= 0 else [f"{name}[{1 - f:g}:1]"]
     return build_config({}, {"data.roots": roots, "data.split.train": train, "data.split.val": val or train,
