@@ -30,6 +30,7 @@ from imu_learn.errors import ImplausibleProfileError, InvalidInputError
 
 Progress = Callable[[str], None]
 logger = logging.getLogger(__name__)
+TIME_OFFSET_PRIOR_SAMPLES = 0.5  # an unobserved time offset: the zero-order hold's half sample
 
 
 @dataclass
@@ -155,9 +156,11 @@ def floor_profile(inp: CalibInputs, progress: Progress,
     f, std = fit.floor, fit.std
     if inp.reference is not None and inp.reference.applied.get("lag"):
         # the reference's stamps were moved by its own lag: what the floor finds on top is the IMU's offset
-        # plus the lag's rounding, not observable apart from the reference's latency: the prior, zero
+        # plus the lag's rounding, not observable apart from the reference's latency: the prior, the
+        # zero-order hold's half sample (what an IMU on the reference's clock shows: a sample holds the rate
+        # at its start over the interval after it)
         fit.log["time_offset_fitted_on_the_moved_reference"] = [f["time_offset"]]
-        f = {**f, "time_offset": 0.0}
+        f = {**f, "time_offset": TIME_OFFSET_PRIOR_SAMPLES}
         std = {**std, "time_offset": np.float64(np.nan)}
     segs, groups = inp.train + inp.val, inp.groups + inp.val_groups
     progress("gravity and the residual noise")
@@ -210,7 +213,8 @@ def observed(ref: Optional[FrameFit]) -> Dict[str, Dict[str, Any]]:
             "the levelling absorbs part of it (0.1 m/s^2 is 0.6° of tilt)"}
     if ref is not None and ref.applied.get("lag"):
         out["time_offset"] = {"observed": False, "why": f"the reference's stamps were {ref.lag_s * 1e3:+.0f} ms off the "
-                              "IMU's; the IMU's own offset cannot be told apart from the reference's latency"}
+                              "IMU's; the IMU's own offset cannot be told apart from the reference's latency: the prior, the zero-order "
+                              "hold's half sample"}
     return out
 
 
