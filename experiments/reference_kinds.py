@@ -10,9 +10,9 @@ cam0's ``T_BS`` (euroc-vo/cam0_sensor.yaml).
 
     IMU_LEARN_DATA=<root> python experiments/reference_kinds.py [--out reports/reference_kinds] [--trial 0]
 
-Data under the data root: euroc/<flight>, euroc-vo/orbslam2_stereo/trial<k>/<code>.txt,
+Data: under the data root, euroc/<flight>, euroc-vo/orbslam2_stereo/trial<k>/<code>.txt,
 euroc-vo/cam0_sensor.yaml. Prints one markdown table; writes OUT/results.json. Writes:
-docs/experiments/references.md.
+docs/experiments/references.md ("6-DoF poses in another frame").
 """
 from __future__ import annotations
 
