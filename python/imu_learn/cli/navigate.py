@@ -20,7 +20,8 @@ from imu_learn.fuse.navigate import (
     parse_gaps,
     parse_vector,
 )
-from imu_learn.infer.rewrite import ESTIMATORS
+from imu_learn.infer.bias import choices as bias_choices
+from imu_learn.infer.bias import help_text as bias_help
 from imu_learn.util.extras import require
 
 DESCRIPTION = """Navigate one recording with its real aiding file (a camera trajectory as relative or absolute
@@ -132,12 +133,7 @@ def add_arguments(ap: argparse.ArgumentParser) -> None:
                     help="the IMU's gyro and acc noise densities and random walks (rad/s/sqrt(Hz), m/s^2/sqrt(Hz), "
                          "rad/s^2/sqrt(Hz), m/s^3/sqrt(Hz)); default: --profile's, else the recording's sensor.yaml, "
                          "else built in (EuRoC's ADIS16448, with a warning)")
-    ap.add_argument("--bias", choices=ESTIMATORS, default="none",
-                    help="still: estimate the recording's own gyro bias from its still stretches (refine's estimator), "
-                         "gravity: from gravity consistency (rates perpendicular to gravity only), still+gravity: the "
-                         "still estimate along gravity and gravity's across it; each on the IMU as "
-                         "fused (after --profile's floor, --checkpoint or --calibration), and subtract it before "
-                         "the fusion; the estimate goes into summary.json's bias (default none)")
+    ap.add_argument("--bias", choices=bias_choices(navigate=True), default="none", help=bias_help(navigate=True))
     ap.add_argument("--threads", type=int, default=None, metavar="N",
                     help="torch threads for the --checkpoint's model (default: torch's own)")
     add_imu_input_options(ap)

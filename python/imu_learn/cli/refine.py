@@ -2,8 +2,8 @@
 input's own format (:mod:`imu_learn.infer.rewrite` writes it, :mod:`imu_learn.infer.refiner` runs a
 model, :meth:`imu_learn.calib.profile.Profile.apply` the floor, :mod:`imu_learn.infer.rates` checks
 that they were made for the recording's rate and device, :mod:`imu_learn.infer.guard` whether the
-recording looks like their training data); ``--bias still`` removes the recording's own gyro bias
-from its still stretches (:func:`imu_learn.infer.rewrite.still_bias_step`). Writes a summary beside
+recording looks like their training data); ``--bias METHOD`` removes the recording's own gyro bias,
+bounded by the device's bias spread (:mod:`imu_learn.infer.bias`, the registry). Writes a summary beside
 the output (:func:`imu_learn.infer.rewrite.summary_path`)."""
 from __future__ import annotations
 
@@ -15,21 +15,14 @@ from typing import Any, Callable, Dict, List, Optional, Sequence
 
 from imu_learn.calib.profile import Profile
 from imu_learn.cli.common import add_imu_input_options, csv_layout, run_command
+from imu_learn.core.still import MEMS_PRIOR, BiasPrior
 from imu_learn.data.formats import FORMATS, USER_CSV, ImuSource, read_imu_source
 from imu_learn.data.types import sample_rate_hz
 from imu_learn.errors import ConfigError, InvalidInputError
 from imu_learn.infer import guard, rates
-from imu_learn.infer.rewrite import (
-    BIAS_METHODS,
-    BIAS_WORDS,
-    Step,
-    bias_step,
-    measured,
-    rewrite_recording,
-    summary_path,
-    write_summary,
-)
-from imu_learn.infer.rewrite import bias_entry as own_bias_entry
+from imu_learn.infer.bias import REGISTRY, bias_step, choices, help_text
+from imu_learn.infer.bias import bias_entry as own_bias_entry
+from imu_learn.infer.rewrite import Step, measured, rewrite_recording, summary_path, write_summary
 from imu_learn.util.extras import require_extra
 
 logger = logging.getLogger(__name__)
@@ -40,8 +33,9 @@ input's own format (ASL/EuRoC CSV, TUM-VI, Blackbird, BROAD, KAIST, Fetch, GNSS/
 a CSV of your own: --columns and the units). The input is never written. A recording sampled more than 5 %
 off the rate the profile or model was made for is refused (--force applies it anyway); one of another
 device, or one whose statistics lie outside those of the training data (the guard), is a warning.
---bias still removes the recording's own gyro bias, estimated from its still stretches (--bias gravity: from
-gravity consistency, the rates perpendicular to gravity only). Prints the file
+--bias auto removes the recording's own gyro bias, every estimator (still stretches, gravity consistency)
+and the device's bias spread combined by their uncertainties; an estimate far outside that spread is
+shrunk toward it or rejected. Prints the file
 written to stdout; OUT/summary.json (or OUT.summary.json beside a file) holds what was applied, the
 guard's figures and the bias estimate."""
 EPILOG = """examples:
@@ -49,7 +43,7 @@ EPILOG = """examples:
   imu-learn refine --profile calib/profile.json --input my_imu.csv --columns t,_,gz,gy,gx,az,ay,ax \\
       --time-unit s --gyro-unit deg/s --acc-unit g --out my_imu_refined.csv
   imu-learn refine --checkpoint models/euroc_adis16448_cov.pt --input run.bag --out run_refined.bag --fill-covariance
-  imu-learn refine --profile calib/profile.json --input datasets/euroc/MH_01_easy --out mh01_floor --bias still"""
+  imu-learn refine --profile calib/profile.json --input datasets/euroc/MH_01_easy --out mh01_floor --bias auto"""
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
@@ -75,14 +69,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--batch", type=int, help="windows run at once (default 16)")
     p.add_argument("--device", default="auto", help="auto (cuda if available), cpu, cuda, cuda:1 ...")
     p.add_argument("--copy-folder", action="store_true", help="copy the whole input folder to OUT first")
-    p.add_argument("--bias", choices=BIAS_METHODS, default="none",
-                   help="still: estimate the recording's own gyro bias from its still stretches and subtract it after "
-                        "the profile and model; gravity: from gravity consistency over long windows (rates "
-                        "perpendicular to gravity only); still+gravity: the still estimate along gravity, gravity's "
-                        "across it; learned: the long-context estimator of --bias-model "
-                        "(docs/refine.md; the estimate goes into the summary)")
+    p.add_argument("--bias", choices=choices(), default="none", help=help_text())
     p.add_argument("--bias-model", type=Path, metavar="PT",
-                   help="--bias learned: the bias estimator (python -m imu_learn.train.bias_train writes one; "
+                   help="--bias learned (and auto): the bias estimator (python -m imu_learn.train.bias_train writes one; "
                         "models/bias/fetch_bias_net.pt for the Fetch robot's IMU)")
     p.add_argument("--fill-covariance", action="store_true",
                    help="ROS bags, a checkpoint with a covariance head: write each IMU message's angular_velocity / "
@@ -102,6 +91,7 @@ class Plan:
     stamps_for: str = "a profile's time offset"  # what needs them, for the message
     training: Optional[Dict[str, Any]] = None  # the statistics of the training data (guard), None: not recorded
     gravity: float = 9.80665  # [m/s^2] for the still detector's norm check (a profile's own when it has one)
+    prior: BiasPrior = MEMS_PRIOR  # the device's bias spread after the steps (a profile's, else a MEMS gyro's)
     measured: Dict[str, Any] = field(default_factory=dict)  # what the steps measure as they run
 
 
@@ -124,7 +114,13 @@ def from_profile(args: argparse.Namespace) -> Plan:
     plan = Plan([profile_step(profile)], [made], [f"the floor of {describe_profile(profile, str(args.profile))}"],
                 needs_stamps=True, training=profile.inputs or None)
     plan.gravity = _gravity(profile, plan.gravity)
+    plan.prior = _prior(profile, str(args.profile))
     return plan
+
+
+def _prior(profile: Profile, where: str) -> BiasPrior:
+    """The device prior after ``profile``'s floor: zero mean, its gyroscope's bias spread."""
+    return BiasPrior.from_bias_std(profile.gyro.bias_std, f"the bias spread of profile {where}")
 
 
 def _gravity(profile: Profile, default: float) -> float:
@@ -159,12 +155,14 @@ def from_checkpoint(args: argparse.Namespace) -> Plan:
         profile = Profile.from_dict(record["profile"], f"{args.checkpoint} (its profile)")
         plan.words.append(f"on top of the floor of its {describe_profile(profile, 'carried')}, held by the model")
         plan.gravity = _gravity(profile, plan.gravity)
+        plan.prior = _prior(profile, f"{args.checkpoint} (its profile)")
     elif record["profile"]:
         profile = Profile.from_dict(record["profile"], f"{args.checkpoint} (its profile)")
         plan.steps.append(profile_step(profile))
         plan.words.append(f"after its {describe_profile(profile, 'carried')}")
         plan.needs_stamps = True
         plan.gravity = _gravity(profile, plan.gravity)
+        plan.prior = _prior(profile, f"{args.checkpoint} (its profile)")
     step = model_step(model, args.window, args.overlap, args.batch, not args.quiet, args.fill_covariance)
     plan.steps.append(measured(step, plan.measured))  # what the model adds: the guard's residual
     if args.fill_covariance:
@@ -187,19 +185,20 @@ def check_recording(args: argparse.Namespace, src: ImuSource, plan: Plan) -> Opt
 
 
 def add_bias_step(args: argparse.Namespace, plan: Plan) -> None:
-    if args.bias_model is not None and args.bias != "learned":
-        raise ConfigError("--bias-model is the estimator of --bias learned")
-    if args.bias == "learned":
-        require_extra("train", "imu-learn refine --bias learned")
+    if args.bias_model is not None and args.bias not in ("learned", "auto"):
+        raise ConfigError("--bias-model is the estimator of --bias learned (or one of auto's)")
+    if args.bias == "learned" or args.bias_model is not None:
+        require_extra("train", f"imu-learn refine --bias {args.bias} --bias-model")
     if args.bias != "none":
-        plan.steps.append(bias_step(args.bias, plan.gravity, plan.measured, args.bias_model))
-        plan.words.append(BIAS_WORDS[args.bias])
+        plan.steps.append(bias_step(args.bias, plan.gravity, plan.measured, args.bias_model, plan.prior))
+        plan.words.append(REGISTRY[args.bias].words)
         plan.stamps_for = plan.stamps_for if plan.needs_stamps else f"--bias {args.bias} (the estimator's windows)"
         plan.needs_stamps = True
 
 
 def bias_entry(args: argparse.Namespace, plan: Plan) -> Dict[str, Any]:
-    """The summary's ``bias`` entry; logs one warning line when nothing could be estimated."""
+    """The summary's ``bias`` entry; logs one warning line when nothing was estimated or the bound
+    shrank or rejected the estimate."""
     entry, warning = own_bias_entry(args.bias, plan.measured, str(args.input))
     if warning:
         logger.warning(warning)

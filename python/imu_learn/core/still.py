@@ -20,16 +20,84 @@ the recording). What is not observable: a rotation slower than the caps that doe
 accelerometer (a slow turn about gravity) reads as bias; the accelerometer's bias is seen only
 along gravity, as the norm of its mean minus gravity, from one still attitude (its other two
 components need the device at rest in several attitudes, and the scale error enters alike).
+
+**The still rule** (:func:`at_rest`, the package's one): quiet is not enough. A wheeled robot turning
+at a steady rate is as quiet as rest and keeps its accelerometer on gravity, so a window is at rest
+only where the gyro itself, not only its spread, lies near what the device's bias can be: ``|mean
+gyro - prior bias| <= k sigma`` on every axis (:data:`STILL_SIGMAS`, 3), sigma the prior's spread
+(:class:`BiasPrior`: a device profile's ``gyroscope.bias_std``, the device's bias spread, floored at
+:data:`BIAS_SPREAD_FLOOR` 5 mrad/s and capped at :data:`MEMS_BIAS_BOUND` 0.05 rad/s; without a profile
+the MEMS bound itself), and the mean accelerometer norm within :data:`ACC_NORM_TOL` (0.3 m/s^2, 3 %) of
+gravity. Refine's and navigate's ``--bias`` detector applies it to every window (with the
+recording's prior: :data:`BIAS_SETTINGS` plus ``prior``), navigate's still start to every 0.25 s block
+(:func:`imu_learn.fuse.start.level.block_is_still`, the MEMS prior); a recording has a still start
+when it rests at least :data:`MIN_STILL_START_S` from its first sample. ``imu-learn calibrate``'s
+Allan stretches keep the spread check only (the raw device's bias is what it fits).
 """
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
-from typing import Dict, List, Optional, Tuple
+from dataclasses import dataclass, field, replace
+from typing import Dict, List, Optional, Sequence, Tuple
 
 import numpy as np
 
 from imu_learn.core.stamps import median_period_ns
+
+# The still rule's constants (module doc).
+STILL_SIGMAS = 3.0  # |mean gyro - prior bias| within this many of the prior's sigmas
+BIAS_SPREAD_FLOOR = 0.005  # rad/s: the least bias spread a prior is given (a profile fitted on few recordings)
+MEMS_BIAS_BOUND = 0.05  # rad/s: a MEMS gyro's bias spread without a profile, and the most a profile's is taken as
+ACC_NORM_TOL = 0.3  # m/s^2: the mean accelerometer norm's distance from gravity at rest (3 % of g)
+MIN_STILL_START_S = 1.0  # s: a recording "has a still start" when it rests this long from its first sample
+STILL_MAX_SPEED_MPS = 0.1  # m/s: the most GNSS speed a still start allows (a GNSS start's check)
+
+
+def prior_spread(bias_std: Optional[Sequence[float]]) -> np.ndarray:
+    """(3,) rad/s: a profile's ``gyroscope.bias_std`` floored at :data:`BIAS_SPREAD_FLOOR` and capped at
+    :data:`MEMS_BIAS_BOUND` (NaN or None: the MEMS bound)."""
+    s = np.full(3, np.nan) if bias_std is None else np.asarray(bias_std, dtype=np.float64).reshape(3)
+    s = np.where(np.isfinite(s), s, MEMS_BIAS_BOUND)
+    return np.clip(s, BIAS_SPREAD_FLOOR, MEMS_BIAS_BOUND)
+
+
+@dataclass(frozen=True)
+class BiasPrior:
+    """What the device's gyro bias can be where an estimator runs: ``bias`` [rad/s] (3,) its mean
+    (zero after a profile's floor, which removed the device's own) and ``std`` [rad/s] (3,) its spread
+    (:func:`prior_spread`); ``source`` says where they came from."""
+
+    bias: Tuple[float, float, float] = (0.0, 0.0, 0.0)
+    std: Tuple[float, float, float] = (MEMS_BIAS_BOUND,) * 3
+    source: str = f"no profile: a MEMS gyro's bias spread, {MEMS_BIAS_BOUND:g} rad/s"
+
+    @classmethod
+    def from_bias_std(cls, bias_std: Optional[Sequence[float]], source: str, isotropic: bool = False) -> BiasPrior:
+        """Zero mean (after the floor), the spread of ``bias_std`` (``isotropic``: its largest axis on
+        every axis, for an IMU rotated into another frame)."""
+        s = prior_spread(bias_std)
+        s = np.full(3, s.max()) if isotropic else s
+        return cls((0.0, 0.0, 0.0), tuple(float(v) for v in s), source)
+
+    def to_dict(self) -> Dict[str, object]:
+        return {"bias_rad_s": [float(v) for v in self.bias], "std_rad_s": [float(v) for v in self.std],
+                "source": self.source, "spread_floor_rad_s": BIAS_SPREAD_FLOOR, "mems_bound_rad_s": MEMS_BIAS_BOUND}
+
+
+MEMS_PRIOR = BiasPrior()
+
+
+def at_rest(gyro_mean: np.ndarray, acc_norm: Optional[np.ndarray], gravity: Optional[float],
+            prior: BiasPrior = MEMS_PRIOR, sigmas: float = STILL_SIGMAS,
+            acc_tol: float = ACC_NORM_TOL) -> np.ndarray:
+    """THE still rule (module doc), on quiet windows: the mean gyro (..., 3) within ``sigmas`` of the
+    prior's spread of its bias on every axis, and (``gravity`` set) the mean accelerometer norm (...)
+    within ``acc_tol`` of ``gravity``. Returns a bool array (...)."""
+    g = np.asarray(gyro_mean, dtype=np.float64)
+    ok = np.all(np.abs(g - np.asarray(prior.bias)) <= sigmas * np.asarray(prior.std), axis=-1)
+    if gravity is not None and acc_norm is not None:
+        ok &= np.abs(np.asarray(acc_norm, dtype=np.float64) - gravity) <= acc_tol
+    return ok
 
 
 @dataclass(frozen=True)
@@ -46,7 +114,8 @@ class StillSettings:
     min_s: float = 2.0
     trim_s: float = 0.25
     gravity: Optional[float] = None  # m/s^2; None: the norm is not checked
-    gravity_tol: float = 0.3  # m/s^2
+    gravity_tol: float = ACC_NORM_TOL  # m/s^2
+    prior: Optional[BiasPrior] = None  # the still rule's gyro check (module doc); None: not checked
 
 
 def moving_mean(x: np.ndarray, n: int) -> np.ndarray:
@@ -94,10 +163,12 @@ def still_stretches(t_ns: np.ndarray, gyro: np.ndarray, acc: np.ndarray,
         return []
     thr_g = min(settings.factor * np.percentile(sg, 5), settings.gyro_cap)
     thr_a = min(settings.factor * np.percentile(sa, 5), settings.acc_cap)
-    still = (sg <= thr_g) & (sa <= thr_a)
-    if settings.gravity is not None:
-        norm = np.linalg.norm(moving_mean(acc, n), axis=1)
-        still &= np.abs(norm - settings.gravity) <= settings.gravity_tol
+    quiet = (sg <= thr_g) & (sa <= thr_a)
+    still = quiet
+    if settings.gravity is not None or settings.prior is not None:
+        norm = np.linalg.norm(moving_mean(acc, n), axis=1) if settings.gravity is not None else None
+        prior = settings.prior if settings.prior is not None else BiasPrior((0.0,) * 3, (np.inf,) * 3, "")
+        still = quiet & at_rest(moving_mean(gyro, n), norm, settings.gravity, prior, acc_tol=settings.gravity_tol)
     gaps = np.diff(np.asarray(t_ns, dtype=np.int64)) > 1.5 * median_period_ns(t_ns)
     edges = np.flatnonzero(np.diff(np.r_[0, still.astype(np.int8), 0]))
     trim = int(round(settings.trim_s / period))
@@ -112,8 +183,9 @@ def still_stretches(t_ns: np.ndarray, gyro: np.ndarray, acc: np.ndarray,
     return out
 
 
-# The settings refine's still-stretch bias uses: the detector with the gravity check on.
-BIAS_SETTINGS = StillSettings(gravity=9.80665)
+# The settings refine's and navigate's still-stretch bias uses: the detector with the still rule on
+# (gravity's norm and, unless a caller gives its own prior, the MEMS prior).
+BIAS_SETTINGS = StillSettings(gravity=9.80665, prior=MEMS_PRIOR)
 
 
 @dataclass
@@ -132,6 +204,8 @@ class StillBias:
     samples: int
     stretches: List[Dict[str, float]]
     settings: StillSettings
+    # quiet stretches (at gravity's norm) the still rule's gyro check refused: a steady turn, not rest
+    refused: List[Dict[str, object]] = field(default_factory=list)
 
     def to_dict(self) -> Dict[str, object]:
         """Plain values for a summary (rad/s and m/s^2, with deg/s beside the bias)."""
@@ -152,7 +226,10 @@ class StillBias:
             "stretches": self.stretches,
             "detector": {"window_s": s.window_s, "factor_of_5th_percentile": s.factor, "gyro_std_cap_rad_s": s.gyro_cap,
                          "acc_std_cap_m_s2": s.acc_cap, "gravity_m_s2": s.gravity, "gravity_tol_m_s2": s.gravity_tol,
-                         "min_s": s.min_s, "trim_s": s.trim_s},
+                         "min_s": s.min_s, "trim_s": s.trim_s,
+                         "gyro_within_sigmas_of_prior": None if s.prior is None else STILL_SIGMAS,
+                         "prior": None if s.prior is None else s.prior.to_dict()},
+            "refused_as_turning": self.refused,
         }
 
 
@@ -162,8 +239,9 @@ def still_bias(t_ns: np.ndarray, gyro: np.ndarray, acc: np.ndarray,
     t = np.asarray(t_ns, dtype=np.int64)
     gyro, acc = np.asarray(gyro, dtype=np.float64), np.asarray(acc, dtype=np.float64)
     found = still_stretches(t, gyro, acc, settings)
+    refused = _refused(t, gyro, acc, settings, found)
     if not found:
-        return StillBias(None, None, None, None, 0.0, 0, [], settings)
+        return StillBias(None, None, None, None, 0.0, 0, [], settings, refused)
     g = np.concatenate([gyro[a:b] for a, b in found])
     # each stretch's own attitude: the norm of its mean, weighted by its samples
     norms = np.array([np.linalg.norm(acc[a:b].mean(0)) for a, b in found])
@@ -181,4 +259,20 @@ def still_bias(t_ns: np.ndarray, gyro: np.ndarray, acc: np.ndarray,
         samples=int(len(g)),
         stretches=info,
         settings=settings,
+        refused=refused,
     )
+
+
+def _refused(t: np.ndarray, gyro: np.ndarray, acc: np.ndarray, settings: StillSettings,
+             found: List[Tuple[int, int]]) -> List[Dict[str, object]]:
+    """The quiet stretches the still rule's gyro check refused (found without the prior, overlapping
+    none found with it): each one's start, length and mean gyro."""
+    if settings.prior is None:
+        return []
+    out = []
+    for a, b in still_stretches(t, gyro, acc, replace(settings, prior=None)):
+        if any(a < d and c < b for c, d in found):
+            continue
+        out.append({"t0_s": round(float(t[a] - t[0]) * 1e-9, 3), "duration_s": round(float(t[b - 1] - t[a]) * 1e-9, 3),
+                    "gyro_mean_rad_s": [float(v) for v in gyro[a:b].mean(0)]})
+    return out

@@ -57,6 +57,7 @@ from scipy.spatial.transform import Rotation
 from tqdm import tqdm
 
 from imu_learn.calib.profile import Profile
+from imu_learn.core.still import MEMS_PRIOR, MIN_STILL_START_S, BiasPrior
 from imu_learn.data import formats
 from imu_learn.data.formats import CsvColumns, rosbag
 from imu_learn.data.formats.asl import imu_sensor_yaml
@@ -65,7 +66,8 @@ from imu_learn.data.formats.gnss_imu import mounting_rotation
 from imu_learn.data.types import sample_rate_hz
 from imu_learn.errors import AidingError, ConfigError, InvalidInputError
 from imu_learn.infer import rates
-from imu_learn.infer.rewrite import ESTIMATORS, bias_entry, bias_step
+from imu_learn.infer.bias import bias_entry, bias_step
+from imu_learn.infer.bias import choices as bias_choices
 
 from . import geo
 from .aiding import AbsolutePoses, OutageWindow, PositionFixes, RelativePoses, snap_to_samples
@@ -139,14 +141,14 @@ class NavigateOptions:
     # the head's variances calibrated over the keyframe interval (:mod:`.variance`; docs/navigate.md)
     variance_scale: Optional[Tuple[float, float]] = None
     # the recording's own gyro bias, estimated on the IMU as fused and subtracted before the fusion:
-    # none, still (its still stretches) or gravity (gravity consistency); :mod:`imu_learn.infer.rewrite`
+    # none or a name of the registry (:mod:`imu_learn.infer.bias`: auto, still, gravity, still+gravity)
     bias: str = "none"
 
     def check(self) -> None:
         if self.aiding_kind not in KINDS:
             raise ConfigError(f"--aiding-kind: one of {', '.join(KINDS)}, got {self.aiding_kind!r}")
-        if self.bias not in ESTIMATORS:
-            raise ConfigError(f"--bias: one of {', '.join(ESTIMATORS)}, got {self.bias!r}")
+        if self.bias not in bias_choices(navigate=True):
+            raise ConfigError(f"--bias: one of {', '.join(bias_choices(navigate=True))}, got {self.bias!r}")
         if self.aiding_format not in AIDING_FORMATS:
             raise ConfigError(f"--aiding-format: one of {', '.join(AIDING_FORMATS)}, got {self.aiding_format!r}")
         for name in ("keyframe_hz", "rel_sigma_rot_deg", "rel_sigma_trans_m", "max_relative_gap_s",
@@ -514,7 +516,7 @@ def navigate(src: Sources, out: Path, opts: NavigateOptions = NavigateOptions(),
     rows, rows_read, gnss, opts = aiding_rows(src, opts, t_ns, T_BS, lever)
     bias0, bias_source = checkpoint_bias(src.checkpoint)
     gyro, acc, var, label = imu_input(src, opts, imu)
-    gyro, bias = own_bias(opts, t_ns, gyro, acc, str(src.input))
+    gyro, bias = own_bias(opts, t_ns, gyro, acc, str(src.input), bias_prior(imu))
     if bias.get("applied") and np.any(bias0[:3]):  # the estimate replaces the device bias's gyro part
         bias0 = np.r_[unobserved(bias) @ bias0[:3], bias0[3:]]
         bias_source += f"; gyro part: only where the recording's own bias ({opts.bias}) was not observed"
@@ -527,7 +529,8 @@ def navigate(src: Sources, out: Path, opts: NavigateOptions = NavigateOptions(),
                                   None if gnss is None else gnss[0])
     if len(aiding) == 0:
         raise AidingError(f"{src.aiding}: no aiding measurement left to fuse", str(src.aiding), opts.aiding_kind)
-    at_rest = st.info["still_s"] >= 1.0 and opts.aiding_kind != "position"  # position aiding starts moving
+    # position aiding starts moving
+    at_rest = st.info["still_s"] >= MIN_STILL_START_S and opts.aiding_kind != "position"
     st = replace(st, prior=PriorSigmas(rot_rad=float(np.deg2rad(opts.prior_rot_deg)), pos_m=opts.prior_pos_m,
                                        vel_mps=0.05 if at_rest else opts.prior_vel_mps))
     if src.displacement is not None:
@@ -578,15 +581,25 @@ def navigate(src: Sources, out: Path, opts: NavigateOptions = NavigateOptions(),
     return summary
 
 
+def bias_prior(imu: Imu) -> BiasPrior:
+    """The device prior of ``--bias``: the bias spread of the profile whose floor was applied (its
+    largest axis on every axis when the IMU is rotated into the body frame), else a MEMS gyro's."""
+    if imu.floor is None:
+        return MEMS_PRIOR
+    profile = Profile.load(imu.floor)
+    return BiasPrior.from_bias_std(profile.gyro.bias_std, f"the bias spread of profile {imu.floor}",
+                                   isotropic=imu.mounting is not None)
+
+
 def own_bias(opts: NavigateOptions, t_ns: np.ndarray, gyro: np.ndarray, acc: np.ndarray,
-             where: str) -> Tuple[np.ndarray, Dict[str, object]]:
+             where: str, prior: BiasPrior = MEMS_PRIOR) -> Tuple[np.ndarray, Dict[str, object]]:
     """(the gyro with the recording's own bias removed, the summary's ``bias`` entry): ``opts.bias``
-    estimated on the IMU as fused (after the profile's floor or the model, in the body frame), the
-    estimator refine's ``--bias`` runs (:func:`imu_learn.infer.rewrite.bias_step`)."""
+    estimated on the IMU as fused (after the profile's floor or the model, in the body frame) and
+    bounded by ``prior``, the estimator refine's ``--bias`` runs (:func:`imu_learn.infer.bias.bias_step`)."""
     if opts.bias == "none":
         return gyro, {"method": "none"}
     sink: Dict[str, object] = {}
-    g, _, _ = bias_step(opts.bias, opts.gravity, sink)(t_ns, gyro, acc)
+    g, _, _ = bias_step(opts.bias, opts.gravity, sink, prior=prior)(t_ns, gyro, acc)
     entry, warning = bias_entry(opts.bias, sink, where)
     if warning:
         log.warning(warning)
@@ -595,7 +608,11 @@ def own_bias(opts: NavigateOptions, t_ns: np.ndarray, gyro: np.ndarray, acc: np.
 
 def unobserved(entry: Dict[str, object]) -> np.ndarray:
     """(3, 3) projection onto the body-frame directions a ``--bias`` estimate did not observe (gravity
-    consistency's weak directions; zero for the still stretches, which observe every axis)."""
+    consistency's weak directions; zero for the still stretches, which observe every axis): the
+    entry's ``unobserved_directions_body`` (:func:`imu_learn.infer.bias.bias_entry`, whatever the
+    estimator nests), else gravity consistency's own keys at its top level."""
+    if entry.get("unobserved_directions_body") is not None:
+        return sum((np.outer(d, d) for d in entry["unobserved_directions_body"]), np.zeros((3, 3)))
     dirs, seen = entry.get("directions_body"), entry.get("direction_observed")
     P = np.zeros((3, 3))
     for d, ok in zip(dirs or [], seen or []):

@@ -8,11 +8,9 @@ columns and units); every file is written to a temporary file beside its target 
 place (:mod:`imu_learn.util.atomic`). The input is never written: an OUT that resolves to the input
 file (or, with ``copy_folder``, the input folder) is refused.
 
-Two more steps live here: :func:`measured` records what a step adds (for refine's guard,
-:mod:`imu_learn.infer.guard`), and :func:`still_bias_step` removes the recording's own gyro bias,
-estimated from its still stretches (:mod:`imu_learn.core.still`) on what the steps before it give;
-:func:`gravity_bias_step` from gravity consistency (:mod:`imu_learn.core.bias_gravity`); :func:`bias_step`
-picks one for ``--bias`` (refine's and navigate's) and :func:`bias_entry` writes its summary entry.
+One more step lives here: :func:`measured` records what a step adds (for refine's guard,
+:mod:`imu_learn.infer.guard`). The ``--bias`` step (the recording's own gyro bias, refine's and
+navigate's) is the registry's: :mod:`imu_learn.infer.bias`.
 :func:`summary_path` and :func:`write_summary` write refine's ``summary.json`` beside the output.
 """
 from __future__ import annotations
@@ -20,22 +18,17 @@ from __future__ import annotations
 import json
 import os
 import shutil
-from dataclasses import dataclass, replace
 from pathlib import Path
-from typing import Any, Callable, Dict, Optional, Sequence, Tuple
+from typing import Any, Dict, Optional, Sequence
 
 import numpy as np
 
-from imu_learn.core.bias_gravity import gravity_bias
-from imu_learn.core.still import BIAS_SETTINGS, still_bias
 from imu_learn.data import formats
 from imu_learn.data.formats import ImuSource
 from imu_learn.errors import InvalidInputError
+from imu_learn.infer.bias import Step, still_along_gravity  # noqa: F401  (their home is infer.bias)
 from imu_learn.infer.guard import residual_rms
 from imu_learn.util.atomic import atomic_write_text
-
-# One step of a refinement: (t_ns or None, gyro, acc) -> (gyro, acc, per-sample variances (N, 6) or None).
-Step = Callable[[Optional[np.ndarray], np.ndarray, np.ndarray], Tuple[np.ndarray, np.ndarray, Optional[np.ndarray]]]
 
 
 def output_file(src: ImuSource, out: Path) -> Path:
@@ -118,179 +111,6 @@ def measured(step: Step, sink: Dict[str, Any]) -> Step:
         return g, a, v
 
     return wrapped
-
-
-def still_bias_step(gravity: float, sink: Dict[str, Any]) -> Step:
-    """The recording's own gyro bias, from its still stretches (:func:`imu_learn.core.still.still_bias`
-    with the accelerometer norm checked against ``gravity``), subtracted from what the steps before
-    give (after a profile's floor and a model it is the bias they leave: the floor's bias is the
-    device's average, this one the recording's). ``sink["still"]`` gets the estimate; without a
-    still stretch nothing is subtracted."""
-    settings = replace(BIAS_SETTINGS, gravity=float(gravity))
-
-    def step(t_ns: Optional[np.ndarray], gyro: np.ndarray, acc: np.ndarray):
-        if t_ns is None:
-            raise InvalidInputError("--bias still needs the recording's stamps")
-        est = still_bias(t_ns, gyro, acc, settings)
-        sink["still"] = est
-        if est.gyro_bias is None:
-            return gyro, acc, None
-        return gyro - est.gyro_bias, acc, None
-
-    return step
-
-
-def gravity_bias_step(sink: Dict[str, Any]) -> Step:
-    """The recording's own gyro bias from gravity consistency (:func:`imu_learn.core.bias_gravity.gravity_bias`:
-    only the rates perpendicular to gravity are observed), an increment on what the steps before give,
-    subtracted from it. ``sink["gravity"]`` gets the estimate; on a recording too short for its
-    windows nothing is subtracted."""
-
-    def step(t_ns: Optional[np.ndarray], gyro: np.ndarray, acc: np.ndarray):
-        if t_ns is None:
-            raise InvalidInputError("--bias gravity needs the recording's stamps")
-        est = gravity_bias(t_ns, gyro, acc)
-        sink["gravity"] = est
-        if est.gyro_bias is None:
-            return gyro, acc, None
-        return gyro - est.gyro_bias, acc, None
-
-    return step
-
-
-def still_along_gravity(still: Optional[np.ndarray], grav: Any) -> Optional[np.ndarray]:
-    """The still stretches' bias along gravity's body direction and gravity consistency's across it
-    (gravity consistency cannot see the rate about gravity; the still estimate carries the rest-to-
-    motion change of the bias across it, docs/experiments/learning.md "Flight by flight against the
-    peers"); either alone where the other has none."""
-    if still is None:
-        return grav.gyro_bias
-    if grav.gyro_bias is None or grav.gravity_body is None:
-        return still
-    u = np.asarray(grav.gravity_body, dtype=np.float64)
-    u = u / np.linalg.norm(u)
-    return grav.gyro_bias + u * float(u @ (np.asarray(still) - grav.gyro_bias))
-
-
-@dataclass
-class CombinedBias:
-    """``--bias still+gravity``: :func:`still_along_gravity` of the two estimates."""
-
-    gyro_bias: Optional[np.ndarray]
-    still: Any
-    gravity: Any
-
-    def to_dict(self) -> Dict[str, object]:
-        b = self.gyro_bias
-        return {"gyro_bias_rad_s": None if b is None else [float(v) for v in b],
-                "gyro_bias_deg_s": None if b is None else [float(v) for v in np.rad2deg(b)],
-                "rule": "the still stretches' estimate along gravity, gravity consistency's across it (either alone "
-                        "where the other has none)",
-                "still": self.still.to_dict(), "gravity": self.gravity.to_dict()}
-
-
-def still_gravity_bias_step(gravity: float, sink: Dict[str, Any]) -> Step:
-    """Both estimators on what the steps before give, combined (:func:`still_along_gravity`) and
-    subtracted. ``sink["still+gravity"]`` gets the estimate."""
-    settings = replace(BIAS_SETTINGS, gravity=float(gravity))
-
-    def step(t_ns: Optional[np.ndarray], gyro: np.ndarray, acc: np.ndarray):
-        if t_ns is None:
-            raise InvalidInputError("--bias still+gravity needs the recording's stamps")
-        still, grav = still_bias(t_ns, gyro, acc, settings), gravity_bias(t_ns, gyro, acc)
-        est = CombinedBias(still_along_gravity(still.gyro_bias, grav), still, grav)
-        sink["still+gravity"] = est
-        if est.gyro_bias is None:
-            return gyro, acc, None
-        return gyro - est.gyro_bias, acc, None
-
-    return step
-
-
-@dataclass
-class LearnedBias:
-    """The learned estimator's answer (:mod:`imu_learn.nn.bias_net`): ``gyro_bias`` [rad/s] (3,), None
-    on a recording shorter than its window."""
-
-    gyro_bias: Optional[np.ndarray]
-    model: str
-    window_s: float
-    record: Dict[str, Any]
-
-    def to_dict(self) -> Dict[str, object]:
-        b = self.gyro_bias
-        return {"gyro_bias_rad_s": None if b is None else [float(v) for v in b],
-                "gyro_bias_deg_s": None if b is None else [float(v) for v in np.rad2deg(b)],
-                "model": self.model, "window_s": self.window_s, "trained_on": self.record.get("device"),
-                "observable": "learned from the training recordings (a random bias injected per window); no "
-                              "uncertainty: docs/refine.md for where it helped"}
-
-
-def learned_bias_step(model: Path, sink: Dict[str, Any]) -> Step:
-    """The recording's own gyro bias from the learned long-context estimator ``model`` (torch is
-    imported here only), subtracted from what the steps before give (the floor it was trained on)."""
-
-    def step(t_ns: Optional[np.ndarray], gyro: np.ndarray, acc: np.ndarray):
-        from imu_learn.nn.bias_net import load_bias_net, predict_bias
-
-        if t_ns is None:
-            raise InvalidInputError("--bias learned needs the recording's stamps")
-        net, record = load_bias_net(model, with_record=True)
-        est = LearnedBias(predict_bias(net, t_ns, gyro, acc), str(model), net.cfg.window_s, record)
-        sink["learned"] = est
-        if est.gyro_bias is None:
-            return gyro, acc, None
-        return gyro - est.gyro_bias, acc, None
-
-    return step
-
-
-# --bias METHOD: the recording's own gyro bias, estimated on what the steps before give (navigate:
-# the estimators without a model)
-ESTIMATORS = ("none", "still", "gravity", "still+gravity")
-BIAS_METHODS = ESTIMATORS + ("learned",)
-BIAS_WORDS = {"still": "the recording's own gyro bias from its still stretches removed",
-              "gravity": "the recording's own gyro bias from gravity consistency removed (rates perpendicular "
-                         "to gravity only)",
-              "still+gravity": "the recording's own gyro bias removed: from its still stretches along gravity, from "
-                               "gravity consistency across it",
-              "learned": "the recording's own gyro bias from the learned estimator removed"}
-
-
-def bias_step(method: str, gravity: float, sink: Dict[str, Any], model: Optional[Path] = None) -> Step:
-    """The step of ``--bias METHOD`` (``still``, ``gravity``, ``still+gravity``, or ``learned`` with
-    ``model``)."""
-    if method == "still":
-        return still_bias_step(gravity, sink)
-    if method == "gravity":
-        return gravity_bias_step(sink)
-    if method == "still+gravity":
-        return still_gravity_bias_step(gravity, sink)
-    if method == "learned" and model is not None:
-        return learned_bias_step(Path(model), sink)
-    if method == "learned":
-        raise InvalidInputError("--bias learned needs --bias-model PATH (a bias estimator, imu_learn.train.bias_train)")
-    raise InvalidInputError(f"--bias: one of {', '.join(BIAS_METHODS)}, got {method!r}")
-
-
-def bias_entry(method: str, sink: Dict[str, Any], where: str) -> Tuple[Dict[str, Any], Optional[str]]:
-    """(the summary's ``bias`` entry, a warning line naming ``where`` when nothing could be estimated,
-    else None)."""
-    if method == "none":
-        return {"method": "none"}, None
-    est = sink[method]
-    warning = None
-    if est.gyro_bias is None and method == "still":
-        warning = (f"--bias still: no still stretch in {where} (docs/refine.md: the detector's thresholds); no bias "
-                   "subtracted")
-    elif est.gyro_bias is None and method == "still+gravity":
-        warning = f"--bias still+gravity: neither a still stretch nor enough windows in {where}; no bias subtracted"
-    elif est.gyro_bias is None and method == "learned":
-        warning = f"--bias learned: {where} is shorter than the estimator's window of {est.window_s:g} s; no bias subtracted"
-    elif est.gyro_bias is None:
-        warning = (f"--bias gravity: {where} is shorter than {est.settings.min_windows} windows of "
-                   f"{est.settings.window_s:g} s; no bias subtracted")
-    return {"method": method, "applied": est.gyro_bias is not None, **est.to_dict()}, warning
 
 
 def summary_path(out: Path, target: Path) -> Path:

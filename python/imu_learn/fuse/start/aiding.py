@@ -6,6 +6,8 @@ from __future__ import annotations
 import numpy as np
 from scipy.spatial.transform import Rotation
 
+from imu_learn.core.still import MIN_STILL_START_S
+
 from ..aiding.types import AidingRows
 from . import level as initial
 from .track import track_start
@@ -37,7 +39,7 @@ def pose_start(t_ns, gyro, acc, rows: AidingRows, s0: int, bias0: np.ndarray, gr
                                   "once the track moves")
     p_W = rows.p @ R_WA.T
     t_rel = (rows.t_ns - rows.t_ns[0]) * 1e-9
-    if info["still_s"] >= 1.0:
+    if info["still_s"] >= MIN_STILL_START_S:
         v = np.zeros(3)
         info["velocity_source"] = "zero (still start)"
     else:
@@ -56,7 +58,7 @@ def position_start(t_ns, gyro, acc, rows: AidingRows, lever: np.ndarray, bias0: 
     track once moving (:func:`.track.track_start`), where the run starts."""
     R_level, info = initial.attitude_from_accelerometer(t_ns, gyro, acc, gravity, acc_bias=bias0[3:],
                                                         level_s=level_s)
-    still = info["still_s"] >= 1.0
+    still = info["still_s"] >= MIN_STILL_START_S
     level_end = int(np.searchsorted(t_ns, int(t_ns[0]) + int(round(info["levelled_over_s"] * 1e9))))
     # the gyro's mean over a still start is its bias: used to carry the attitude to the start
     gb = gyro[:level_end].mean(axis=0) if still else bias0[:3]

@@ -28,6 +28,7 @@ from typing import Dict, Optional, Tuple
 
 import numpy as np
 
+from imu_learn.core.still import MIN_STILL_START_S
 from imu_learn.errors import InvalidInputError
 
 from ..aiding import PositionFixes, RelativePoses
@@ -156,7 +157,7 @@ def level_start(t_ns, gyro, acc, gravity: float, b0: np.ndarray, gyro_bias_from_
     if rest is None:
         R_level, info = initial.attitude_from_accelerometer(t_ns, gyro, acc, gravity, acc_bias=b0[3:],
                                                             level_s=settings.level_s)
-        return 0, R_level, info["still_s"] >= 1.0, info
+        return 0, R_level, info["still_s"] >= MIN_STILL_START_S, info
     a, e = rest
     _, _, R_level = initial.level(acc[a:e].mean(axis=0) - b0[3:])
     if gyro_bias_from_rest:

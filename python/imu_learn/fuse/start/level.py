@@ -23,18 +23,20 @@ from typing import Dict, Optional, Tuple
 import numpy as np
 from scipy.spatial.transform import Rotation
 
+from imu_learn.core.still import ACC_NORM_TOL, MEMS_PRIOR, at_rest
 from imu_learn.errors import InvalidInputError
 
 log = logging.getLogger(__name__)
 
 BLOCK_S = 0.25
 # A block is still when every gyro axis varies less than this [rad/s] and every accelerometer axis
-# less than ACC_STILL [m/s^2] (standard deviation inside the block), and the accelerometer's mean
-# norm is within ACC_NORM_TOL of gravity. EuRoC's ADIS16448 at rest on the ground: gyro ~0.003
-# rad/s, acc ~0.02-0.03 m/s^2 per sample; rotors spinning or the vehicle carried exceed both.
+# less than ACC_STILL [m/s^2] (standard deviation inside the block), and it passes the still rule
+# (imu_learn.core.still.at_rest: the mean gyro within 3 sigma of a MEMS gyro's bias spread, the
+# accelerometer's mean norm within ACC_NORM_TOL of gravity). EuRoC's ADIS16448 at rest on the
+# ground: gyro ~0.003 rad/s, acc ~0.02-0.03 m/s^2 per sample; rotors spinning or the vehicle carried
+# exceed both; a steady turn passes the spreads but not the rule.
 GYRO_STILL = 0.02
 ACC_STILL = 0.08
-ACC_NORM_TOL = 0.3
 ACC_MEAN_DRIFT = 0.1  # [m/s^2] a block's mean further than this from the first block's: moving
 
 
@@ -46,10 +48,11 @@ def block_edges(t_ns: np.ndarray, n_blocks: int) -> np.ndarray:
 
 def block_is_still(g: np.ndarray, a: np.ndarray, gravity: float) -> bool:
     """A block of gyro and accelerometer samples at rest: at least 3 samples, every axis' spread below
-    :data:`GYRO_STILL` / :data:`ACC_STILL`, the accelerometer's mean norm within :data:`ACC_NORM_TOL`
-    of gravity."""
+    :data:`GYRO_STILL` / :data:`ACC_STILL`, and the still rule (:func:`imu_learn.core.still.at_rest`
+    with a MEMS gyro's prior: the mean gyro near a bias, the accelerometer's mean norm within
+    :data:`ACC_NORM_TOL` of gravity)."""
     return bool(len(g) >= 3 and g.std(axis=0).max() <= GYRO_STILL and a.std(axis=0).max() <= ACC_STILL
-                and abs(np.linalg.norm(a.mean(axis=0)) - gravity) <= ACC_NORM_TOL)
+                and at_rest(g.mean(axis=0), np.linalg.norm(a.mean(axis=0)), gravity, MEMS_PRIOR, acc_tol=ACC_NORM_TOL))
 
 
 def _blocks(t_ns: np.ndarray, max_s: float) -> int:

@@ -12,6 +12,7 @@ from typing import Dict, Tuple
 import numpy as np
 from scipy.spatial.transform import Rotation
 
+from imu_learn.core.still import STILL_MAX_SPEED_MPS
 from imu_learn.errors import InvalidInputError
 
 from .level import level, rot_z
@@ -57,7 +58,7 @@ class GnssStartSettings:
     [m/s]; the speed from which the track gives the heading [m/s]; the antenna's ``lever`` [m], body."""
 
     level_s: float = 10.0
-    still_max_speed_mps: float = 0.1
+    still_max_speed_mps: float = STILL_MAX_SPEED_MPS
     yaw_min_speed_mps: float = 1.0
     lever: Tuple[float, float, float] = (0.0, 0.0, 0.0)
 

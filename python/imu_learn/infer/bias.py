@@ -1,0 +1,366 @@
+"""``--bias METHOD``: the registry of a recording's own gyro-bias estimators (refine's and navigate's),
+each estimate bounded by what the device's bias can be.
+
+**The registry** (:data:`REGISTRY`, name -> :class:`Estimator`): each estimator runs on what the steps
+before it give (a profile's floor, a model) and returns a :class:`BiasEstimate`: the estimate [rad/s],
+its information (the inverse covariance over the directions it observed; zero along those it did not),
+and its own summary. ``still`` (:func:`imu_learn.core.still.still_bias`, the still rule with the
+recording's prior), ``gravity`` (:func:`imu_learn.core.bias_gravity.gravity_bias`), ``still+gravity``
+(the still estimate along gravity, gravity consistency's across it), ``auto`` (every estimator without a
+model, with the prior, combined by their information) and ``learned`` (refine only; a model, torch).
+The command-line choices and their help are made from it (:func:`choices`, :func:`help_text`).
+
+**The bound** (:func:`bound`): the device prior (:class:`imu_learn.core.still.BiasPrior`: a profile's
+bias spread, else a MEMS gyro's) says how far a recording's bias can lie from the device's. For each
+observed direction u, z = |u.(b - b0)| / sqrt(u' P0 u + u' P u) (P0 the prior's covariance, P the
+estimate's). z <= :data:`ACCEPT_SIGMAS` (3): applied as estimated; up to :data:`REJECT_SIGMAS` (6):
+shrunk to the precision-weighted combination (P0^-1 + P^-1)^-1 (P0^-1 b0 + P^-1 b); beyond: rejected,
+nothing subtracted (the profile's bias kept). One log line and the summary's ``bias.bound`` say which
+and why. Uncertainties: the still estimate's white-noise standard error and the spread between its
+stretches, floored at :data:`STILL_STD_FLOOR` (a rest of seconds leaves 1-3 mrad/s on EuRoC's test
+flights: the bias moves from rest to motion); gravity consistency's per direction (its eigen-directions,
+observed where its data, not its prior, set them); the learned estimator's a fixed
+:data:`LEARNED_STD` (its held-out bias error on the Fetch robot).
+"""
+from __future__ import annotations
+
+import logging
+from dataclasses import dataclass, field, replace
+from pathlib import Path
+from typing import Any, Callable, Dict, List, Optional, Tuple
+
+import numpy as np
+
+from imu_learn.core.bias_gravity import gravity_bias
+from imu_learn.core.still import BIAS_SETTINGS, MEMS_PRIOR, STILL_SIGMAS, BiasPrior, still_bias
+from imu_learn.errors import InvalidInputError
+
+log = logging.getLogger(__name__)
+
+# One step of a refinement: (t_ns or None, gyro, acc) -> (gyro, acc, per-sample variances (N, 6) or None).
+Step = Callable[[Optional[np.ndarray], np.ndarray, np.ndarray], Tuple[np.ndarray, np.ndarray, Optional[np.ndarray]]]
+
+ACCEPT_SIGMAS = 3.0  # z at or below: the estimate applied as it is
+REJECT_SIGMAS = 6.0  # z above: rejected (nothing subtracted); between: shrunk toward the prior
+STILL_STD_FLOOR = 0.002  # rad/s: the least uncertainty of a still estimate (rest-to-motion change of the bias)
+LEARNED_STD = 0.003  # rad/s: the learned estimator's uncertainty (its held-out bias error on Fetch, 2.3 mrad/s)
+
+
+def _vec(x: Optional[np.ndarray]) -> Optional[List[float]]:
+    return None if x is None else [float(v) for v in np.ravel(x)]
+
+
+@dataclass
+class BiasEstimate:
+    """One estimator's answer: ``gyro_bias`` [rad/s] (3,) or None (nothing estimated; ``missing``
+    says why), ``information`` (3, 3) its inverse covariance over the directions it observed (zero
+    along the others), ``detail`` its own summary (a dict)."""
+
+    method: str
+    gyro_bias: Optional[np.ndarray]
+    information: np.ndarray
+    detail: Dict[str, Any]
+    missing: Optional[str] = None
+
+    @property
+    def std(self) -> Optional[np.ndarray]:
+        """(3,) per axis, inf on an axis it did not observe."""
+        if self.gyro_bias is None:
+            return None
+        d = np.diag(np.linalg.pinv(self.information, hermitian=True))
+        return np.where(np.diag(self.information) > 0, np.sqrt(np.maximum(d, 0.0)), np.inf)
+
+    def observed(self) -> Tuple[np.ndarray, np.ndarray]:
+        """(directions (k, 3), std (k,)): the eigen-directions of the information it observed."""
+        lam, vec = np.linalg.eigh(self.information)
+        keep = lam > 1e-12 * max(1.0, float(lam.max(initial=0.0)))
+        return vec.T[keep], 1.0 / np.sqrt(lam[keep])
+
+    def unobserved(self) -> np.ndarray:
+        """(3, 3) projection onto the body-frame directions it did not observe (the identity without an
+        estimate)."""
+        if self.gyro_bias is None:
+            return np.eye(3)
+        dirs, _ = self.observed()
+        return np.eye(3) - sum((np.outer(d, d) for d in dirs), np.zeros((3, 3)))
+
+
+def info_diag(std: np.ndarray) -> np.ndarray:
+    return np.diag(1.0 / np.asarray(std, dtype=np.float64) ** 2)
+
+
+# -- the estimators ---------------------------------------------------------------------------------
+
+
+@dataclass
+class Context:
+    """What an estimator gets besides the samples: gravity's magnitude [m/s^2] (the still rule's
+    norm check), the device prior, the learned estimator's model."""
+
+    gravity: float = 9.80665
+    prior: BiasPrior = MEMS_PRIOR
+    model: Optional[Path] = None
+
+
+def _still(ctx: Context, t_ns: np.ndarray, gyro: np.ndarray, acc: np.ndarray) -> BiasEstimate:
+    est = still_bias(t_ns, gyro, acc, replace(BIAS_SETTINGS, gravity=float(ctx.gravity), prior=ctx.prior))
+    detail = est.to_dict()
+    if est.gyro_bias is None:
+        why = "no still stretch in {where} (docs/refine.md: the detector's thresholds and the still rule)"
+        if est.refused:
+            top = max(max(abs(v) for v in r["gyro_mean_rad_s"]) for r in est.refused)
+            why = ("no still stretch in {where}: " + f"{len(est.refused)} quiet stretch(es) refused by the still "
+                   f"rule (mean gyro up to {top:.3f} rad/s, beyond {STILL_SIGMAS:g} sigma of the device's bias "
+                   "spread: a steady turn, not rest)")
+        return BiasEstimate("still", None, np.zeros((3, 3)), detail, why)
+    var = est.gyro_bias_std ** 2 + STILL_STD_FLOOR ** 2
+    if est.between_stretches is not None:
+        var = var + est.between_stretches ** 2
+    detail["std_rad_s"] = _vec(np.sqrt(var))
+    return BiasEstimate("still", est.gyro_bias, np.diag(1.0 / var), detail)
+
+
+def _gravity_info(grav: Any) -> np.ndarray:
+    if grav.gyro_bias is None or grav.directions is None:
+        return np.zeros((3, 3))
+    info = np.zeros((3, 3))
+    for d, s in zip(grav.directions, grav.direction_std):
+        if s <= grav.settings.observed_below:
+            info += np.outer(d, d) / s ** 2
+    return info
+
+
+def _gravity(ctx: Context, t_ns: np.ndarray, gyro: np.ndarray, acc: np.ndarray) -> BiasEstimate:
+    est = gravity_bias(t_ns, gyro, acc)
+    if est.gyro_bias is None:
+        s = est.settings
+        return BiasEstimate("gravity", None, np.zeros((3, 3)), est.to_dict(),
+                            "{where} is shorter than " + f"{s.min_windows} windows of {s.window_s:g} s")
+    return BiasEstimate("gravity", est.gyro_bias, _gravity_info(est), est.to_dict())
+
+
+def still_along_gravity(still: Optional[np.ndarray], grav: Any) -> Optional[np.ndarray]:
+    """The still stretches' bias along gravity's body direction and gravity consistency's across it
+    (gravity consistency cannot see the rate about gravity; the still estimate carries the rest-to-
+    motion change of the bias across it, docs/experiments/learning.md "Flight by flight against the
+    peers"); either alone where the other has none."""
+    if still is None:
+        return grav.gyro_bias
+    if grav.gyro_bias is None or grav.gravity_body is None:
+        return still
+    u = np.asarray(grav.gravity_body, dtype=np.float64)
+    u = u / np.linalg.norm(u)
+    return grav.gyro_bias + u * float(u @ (np.asarray(still) - grav.gyro_bias))
+
+
+def _still_gravity(ctx: Context, t_ns: np.ndarray, gyro: np.ndarray, acc: np.ndarray) -> BiasEstimate:
+    still, grav = _still(ctx, t_ns, gyro, acc), gravity_bias(t_ns, gyro, acc)
+    b = still_along_gravity(still.gyro_bias, grav)
+    g_info = _gravity_info(grav)
+    if still.gyro_bias is None:
+        info = g_info
+    elif grav.gyro_bias is None or grav.gravity_body is None:
+        info = still.information
+    else:  # the still estimate's information along gravity, gravity consistency's across it
+        u = np.asarray(grav.gravity_body, dtype=np.float64)
+        u = u / np.linalg.norm(u)
+        A, Q = np.outer(u, u), np.eye(3) - np.outer(u, u)
+        info = A @ still.information @ A + Q @ g_info @ Q
+    detail = {"gyro_bias_rad_s": _vec(b), "gyro_bias_deg_s": None if b is None else _vec(np.rad2deg(b)),
+              "rule": "the still stretches' estimate along gravity, gravity consistency's across it (either alone "
+                      "where the other has none)",
+              "still": still.detail, "gravity": grav.to_dict()}
+    missing = None if b is not None else "neither a still stretch nor enough windows in {where}"
+    return BiasEstimate("still+gravity", b, info if b is not None else np.zeros((3, 3)), detail, missing)
+
+
+def _learned(ctx: Context, t_ns: np.ndarray, gyro: np.ndarray, acc: np.ndarray) -> BiasEstimate:
+    from imu_learn.nn.bias_net import load_bias_net, predict_bias
+
+    if ctx.model is None:
+        raise InvalidInputError("--bias learned needs --bias-model PATH (a bias estimator, imu_learn.train.bias_train)")
+    net, record = load_bias_net(ctx.model, with_record=True)
+    b = predict_bias(net, t_ns, gyro, acc)
+    detail = {"gyro_bias_rad_s": _vec(b), "gyro_bias_deg_s": None if b is None else _vec(np.rad2deg(b)),
+              "model": str(ctx.model), "window_s": net.cfg.window_s, "trained_on": record.get("device"),
+              "std_rad_s": [LEARNED_STD] * 3,
+              "observable": "learned from the training recordings (a random bias injected per window); its "
+                            f"uncertainty taken as {LEARNED_STD:g} rad/s per axis (docs/refine.md)"}
+    if b is None:
+        return BiasEstimate("learned", None, np.zeros((3, 3)), detail,
+                            "{where} is shorter than " + f"the estimator's window of {net.cfg.window_s:g} s")
+    return BiasEstimate("learned", np.asarray(b, dtype=np.float64), info_diag(np.full(3, LEARNED_STD)), detail)
+
+
+def _auto(ctx: Context, t_ns: np.ndarray, gyro: np.ndarray, acc: np.ndarray) -> BiasEstimate:
+    parts = [_still(ctx, t_ns, gyro, acc), _gravity(ctx, t_ns, gyro, acc)]
+    if ctx.model is not None:
+        parts.append(_learned(ctx, t_ns, gyro, acc))
+    return combine(parts, ctx.prior)
+
+
+@dataclass(frozen=True)
+class Estimator:
+    """One ``--bias`` name: ``run(context, t_ns, gyro, acc)``, its summary line (``words``), its help
+    text, and where it is offered (``navigate``: without a model)."""
+
+    name: str
+    run: Callable[[Context, np.ndarray, np.ndarray, np.ndarray], BiasEstimate]
+    words: str
+    help: str
+    navigate: bool = True
+    needs_model: bool = False
+
+
+REGISTRY: Dict[str, Estimator] = {e.name: e for e in (
+    Estimator("auto", _auto, "the recording's own gyro bias removed: every estimator and the device prior combined by "
+              "their uncertainties",
+              "every estimator without a model (with --bias-model, the learned one too) and the device prior, "
+              "combined by their uncertainties (recommended)"),
+    Estimator("still", _still, "the recording's own gyro bias from its still stretches removed",
+              "the mean gyro over its still stretches (the still rule: quiet, at gravity's norm, the gyro within "
+              "3 sigma of the device's bias spread)"),
+    Estimator("gravity", _gravity, "the recording's own gyro bias from gravity consistency removed (rates "
+              "perpendicular to gravity only)",
+              "gravity consistency over 10 s windows (rates perpendicular to gravity only)"),
+    Estimator("still+gravity", _still_gravity, "the recording's own gyro bias removed: from its still stretches "
+              "along gravity, from gravity consistency across it",
+              "the still estimate along gravity, gravity's across it"),
+    Estimator("learned", _learned, "the recording's own gyro bias from the learned estimator removed",
+              "the long-context estimator of --bias-model", navigate=False, needs_model=True),
+)}
+
+
+def choices(navigate: bool = False) -> Tuple[str, ...]:
+    """The ``--bias`` names refine (or navigate) accepts: ``none`` and the registry's."""
+    return ("none",) + tuple(n for n, e in REGISTRY.items() if e.navigate or not navigate)
+
+
+def help_text(navigate: bool = False) -> str:
+    """``--bias``'s help, made from the registry (the same words for refine and navigate)."""
+    items = "; ".join(f"{n}: {e.help}" for n, e in REGISTRY.items() if e.navigate or not navigate)
+    where = ("on the IMU as fused (after --profile's floor, --checkpoint or --calibration), subtracted before the "
+             "fusion" if navigate else "after the profile and model")
+    return (f"the recording's own gyro bias, estimated {where} and bounded by the device's bias spread "
+            f"(the profile's; an estimate far from it is shrunk or rejected): {items}; none: nothing "
+            "(default). docs/refine.md; the estimate goes into the summary's bias")
+
+
+# -- the bound --------------------------------------------------------------------------------------
+
+
+def prior_information(prior: BiasPrior) -> np.ndarray:
+    return info_diag(np.asarray(prior.std))
+
+
+def combine(parts: List[BiasEstimate], prior: BiasPrior) -> BiasEstimate:
+    """``auto``: the estimates each bounded (:func:`bound`; rejected ones dropped) and the prior,
+    combined by their information (b = (L0 + sum Li)^-1 (L0 b0 + sum Li bi))."""
+    b0, L0 = np.asarray(prior.bias, dtype=np.float64), prior_information(prior)
+    used, info, num, details = [], np.zeros((3, 3)), np.zeros(3), {}
+    for p in parts:
+        verdict = bound(p, prior)
+        details[p.method] = {**p.detail, "bound": verdict.to_dict()}
+        if verdict.decision in ("applied", "shrunk"):
+            used.append(p.method)
+            info += p.information
+            num += p.information @ p.gyro_bias
+    detail: Dict[str, Any] = {"rule": "every estimate bounded by the prior, those kept and the prior combined by their "
+                                      "information (inverse covariances)", "used": used, **details}
+    if not used:
+        detail.update({"gyro_bias_rad_s": None, "gyro_bias_deg_s": None})
+        return BiasEstimate("auto", None, np.zeros((3, 3)), detail,
+                            "no estimator gave an estimate within the bound in {where}")
+    b = np.linalg.solve(L0 + info, L0 @ b0 + num)
+    detail.update({"gyro_bias_rad_s": _vec(b), "gyro_bias_deg_s": _vec(np.rad2deg(b))})
+    # the prior is in already: the combined estimate's own information is what the estimators gave
+    return BiasEstimate("auto", b, info, detail)
+
+
+@dataclass
+class Verdict:
+    """What :func:`bound` made of an estimate: ``decision`` (applied / shrunk / rejected / none),
+    ``z`` the largest distance from the prior in combined sigmas over its observed directions,
+    ``gyro_bias`` what is subtracted (None: nothing), ``why`` one line."""
+
+    decision: str
+    z: Optional[float]
+    gyro_bias: Optional[np.ndarray]
+    why: str
+    prior: BiasPrior = field(default_factory=lambda: MEMS_PRIOR)
+
+    def to_dict(self) -> Dict[str, Any]:
+        return {"decision": self.decision, "z_sigmas": None if self.z is None else round(float(self.z), 3),
+                "accept_sigmas": ACCEPT_SIGMAS, "reject_sigmas": REJECT_SIGMAS,
+                "subtracted_rad_s": _vec(self.gyro_bias), "why": self.why, "prior": self.prior.to_dict()}
+
+
+def bound(est: BiasEstimate, prior: BiasPrior) -> Verdict:
+    """The estimate against the device prior (module doc): applied, shrunk or rejected."""
+    if est.gyro_bias is None:
+        return Verdict("none", None, None, "no estimate: " + str(est.missing).replace(" in {where}", "").replace("{where}", "the recording"), prior)
+    b0 = np.asarray(prior.bias, dtype=np.float64)
+    P0 = np.diag(np.asarray(prior.std, dtype=np.float64) ** 2)
+    dirs, std = est.observed()
+    if est.method == "auto":  # the prior is in already: bounded against it only
+        std = np.zeros(len(dirs))
+    d = est.gyro_bias - b0
+    z = max((abs(float(u @ d)) / np.sqrt(float(u @ P0 @ u) + s ** 2) for u, s in zip(dirs, std)), default=0.0)
+    what = f"{z:.1f} sigma from the device prior ({prior.source})"
+    if z <= ACCEPT_SIGMAS:
+        return Verdict("applied", z, est.gyro_bias, f"{what}: within {ACCEPT_SIGMAS:g}, applied as estimated", prior)
+    if z <= REJECT_SIGMAS or est.method == "auto":
+        L0 = np.linalg.inv(P0)
+        b = np.linalg.solve(L0 + est.information, L0 @ b0 + est.information @ est.gyro_bias)
+        return Verdict("shrunk", z, b, f"{what}: beyond {ACCEPT_SIGMAS:g}, shrunk toward it (precision-weighted)", prior)
+    return Verdict("rejected", z, None, f"{what}: beyond {REJECT_SIGMAS:g}, rejected; the profile's bias kept "
+                   "(nothing subtracted)", prior)
+
+
+# -- the step and the summary ----------------------------------------------------------------------
+
+
+def bias_step(method: str, gravity: float, sink: Dict[str, Any], model: Optional[Path] = None,
+              prior: BiasPrior = MEMS_PRIOR) -> Step:
+    """The step of ``--bias METHOD``: the estimator of :data:`REGISTRY` on what the steps before give,
+    bounded (:func:`bound`) and subtracted. ``sink[method]`` gets the estimate, ``sink["bound"]`` the
+    verdict."""
+    if method not in REGISTRY:
+        raise InvalidInputError(f"--bias: one of {', '.join(choices())}, got {method!r}")
+    if REGISTRY[method].needs_model and model is None:
+        raise InvalidInputError(f"--bias {method} needs --bias-model PATH (a bias estimator, "
+                                "imu_learn.train.bias_train)")
+    ctx = Context(float(gravity), prior, None if model is None else Path(model))
+
+    def step(t_ns: Optional[np.ndarray], gyro: np.ndarray, acc: np.ndarray):
+        if t_ns is None:
+            raise InvalidInputError(f"--bias {method} needs the recording's stamps")
+        est = REGISTRY[method].run(ctx, t_ns, gyro, acc)
+        verdict = bound(est, prior)
+        sink[method], sink["bound"] = est, verdict
+        if verdict.gyro_bias is None:
+            return gyro, acc, None
+        return gyro - verdict.gyro_bias, acc, None
+
+    return step
+
+
+def bias_entry(method: str, sink: Dict[str, Any], where: str) -> Tuple[Dict[str, Any], Optional[str]]:
+    """(the summary's ``bias`` entry, the log line: a warning when nothing was subtracted, else an info
+    line saying how the bound took the estimate). The entry holds the estimator's own summary (its
+    ``gyro_bias_rad_s`` the estimate as made), ``applied`` (whether anything was subtracted), ``bound``
+    (the verdict and what was subtracted) and ``unobserved_directions_body`` (what the estimate did
+    not see: a prior keeps the device bias there)."""
+    if method == "none":
+        return {"method": "none"}, None
+    est: BiasEstimate = sink[method]
+    verdict: Verdict = sink["bound"]
+    dirs = np.linalg.eigh(est.unobserved())
+    unseen = [_vec(v) for lam, v in zip(dirs[0], dirs[1].T) if lam > 0.5]
+    entry = {"method": method, "applied": verdict.gyro_bias is not None, **est.detail,
+             "bound": verdict.to_dict(), "unobserved_directions_body": unseen}
+    if verdict.decision == "none":
+        return entry, f"--bias {method}: " + str(est.missing).replace("{where}", where) + "; no bias subtracted"
+    if verdict.decision == "rejected":
+        return entry, f"--bias {method}: the estimate in {where} is {verdict.why}"
+    return entry, None if verdict.decision == "applied" else f"--bias {method}: the estimate in {where} is {verdict.why}"
