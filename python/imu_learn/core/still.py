@@ -28,8 +28,9 @@ gyro - prior bias| <= k sigma`` on every axis (:data:`STILL_SIGMAS`, 3), sigma t
 (:class:`BiasPrior`: a device profile's ``gyroscope.bias_std``, the device's bias spread, floored at
 :data:`BIAS_SPREAD_FLOOR` 5 mrad/s and capped at :data:`MEMS_BIAS_BOUND` 0.05 rad/s; without a profile
 the MEMS bound itself), and the mean accelerometer norm within :data:`ACC_NORM_TOL` (0.3 m/s^2, 3 %) of
-gravity. Refine's and navigate's ``--bias`` detector applies it to every window (with the
-recording's prior: :data:`BIAS_SETTINGS` plus ``prior``), navigate's still start to every 0.25 s block
+gravity. Refine's and navigate's ``--bias`` detector applies it to each stretch it finds (the norm
+per window, the gyro on the stretch's mean; the recording's prior: :data:`BIAS_SETTINGS` plus
+``prior``), navigate's still start to every 0.25 s block
 (:func:`imu_learn.fuse.start.level.block_is_still`, the MEMS prior); a recording has a still start
 when it rests at least :data:`MIN_STILL_START_S` from its first sample. ``imu-learn calibrate``'s
 Allan stretches keep the spread check only (the raw device's bias is what it fits).
@@ -115,7 +116,7 @@ class StillSettings:
     trim_s: float = 0.25
     gravity: Optional[float] = None  # m/s^2; None: the norm is not checked
     gravity_tol: float = ACC_NORM_TOL  # m/s^2
-    prior: Optional[BiasPrior] = None  # the still rule's gyro check (module doc); None: not checked
+    prior: Optional[BiasPrior] = None  # the still rule's gyro check on each stretch (module doc); None: not checked
 
 
 def moving_mean(x: np.ndarray, n: int) -> np.ndarray:
@@ -153,7 +154,9 @@ def moving_std(x: np.ndarray, n: int) -> np.ndarray:
 
 def still_stretches(t_ns: np.ndarray, gyro: np.ndarray, acc: np.ndarray,
                     settings: StillSettings = StillSettings()) -> List[Tuple[int, int]]:
-    """[i0, i1) index ranges where the IMU is still (by its own samples; see :class:`StillSettings`)."""
+    """[i0, i1) index ranges where the IMU is still (by its own samples; see :class:`StillSettings`):
+    quiet windows at gravity's norm, joined into stretches; with ``settings.prior``, only the
+    stretches whose mean gyro passes the still rule (:func:`at_rest`)."""
     if len(t_ns) < 4:
         return []
     period = median_period_ns(t_ns) * 1e-9
@@ -163,12 +166,10 @@ def still_stretches(t_ns: np.ndarray, gyro: np.ndarray, acc: np.ndarray,
         return []
     thr_g = min(settings.factor * np.percentile(sg, 5), settings.gyro_cap)
     thr_a = min(settings.factor * np.percentile(sa, 5), settings.acc_cap)
-    quiet = (sg <= thr_g) & (sa <= thr_a)
-    still = quiet
-    if settings.gravity is not None or settings.prior is not None:
-        norm = np.linalg.norm(moving_mean(acc, n), axis=1) if settings.gravity is not None else None
-        prior = settings.prior if settings.prior is not None else BiasPrior((0.0,) * 3, (np.inf,) * 3, "")
-        still = quiet & at_rest(moving_mean(gyro, n), norm, settings.gravity, prior, acc_tol=settings.gravity_tol)
+    still = (sg <= thr_g) & (sa <= thr_a)
+    if settings.gravity is not None:
+        norm = np.linalg.norm(moving_mean(acc, n), axis=1)
+        still &= np.abs(norm - settings.gravity) <= settings.gravity_tol
     gaps = np.diff(np.asarray(t_ns, dtype=np.int64)) > 1.5 * median_period_ns(t_ns)
     edges = np.flatnonzero(np.diff(np.r_[0, still.astype(np.int8), 0]))
     trim = int(round(settings.trim_s / period))
@@ -180,6 +181,8 @@ def still_stretches(t_ns: np.ndarray, gyro: np.ndarray, acc: np.ndarray,
         a, b = max(zip(cuts[:-1], cuts[1:]), key=lambda ab: ab[1] - ab[0])
         if (b - a) * period >= settings.min_s:
             out.append((int(a), int(b)))
+    if settings.prior is not None:  # the still rule's gyro check, on each stretch's mean
+        out = [(a, b) for a, b in out if at_rest(gyro[a:b].mean(0), None, None, settings.prior)]
     return out
 
 

@@ -19,7 +19,7 @@ nothing subtracted (the profile's bias kept). One log line and the summary's ``b
 and why. Uncertainties: the still estimate's white-noise standard error and the spread between its
 stretches, floored at :data:`STILL_STD_FLOOR` (a rest of seconds leaves 1-3 mrad/s on EuRoC's test
 flights: the bias moves from rest to motion); gravity consistency's per direction (its eigen-directions,
-observed where its data, not its prior, set them); the learned estimator's a fixed
+the information its data gave; observed where its data, not its prior, set them); the learned estimator's a fixed
 :data:`LEARNED_STD` (its held-out bias error on the Fetch robot).
 """
 from __future__ import annotations
@@ -42,7 +42,7 @@ Step = Callable[[Optional[np.ndarray], np.ndarray, np.ndarray], Tuple[np.ndarray
 
 ACCEPT_SIGMAS = 3.0  # z at or below: the estimate applied as it is
 REJECT_SIGMAS = 6.0  # z above: rejected (nothing subtracted); between: shrunk toward the prior
-STILL_STD_FLOOR = 0.002  # rad/s: the least uncertainty of a still estimate (rest-to-motion change of the bias)
+STILL_STD_FLOOR = 0.003  # rad/s: the least uncertainty of a still estimate (rest-to-motion change of the bias)
 LEARNED_STD = 0.003  # rad/s: the learned estimator's uncertainty (its held-out bias error on Fetch, 2.3 mrad/s)
 
 
@@ -61,6 +61,7 @@ class BiasEstimate:
     information: np.ndarray
     detail: Dict[str, Any]
     missing: Optional[str] = None
+    unseen: Optional[np.ndarray] = None  # (3, 3) projection onto what it did not observe; None: from the information
 
     @property
     def std(self) -> Optional[np.ndarray]:
@@ -81,6 +82,8 @@ class BiasEstimate:
         estimate)."""
         if self.gyro_bias is None:
             return np.eye(3)
+        if self.unseen is not None:
+            return self.unseen
         dirs, _ = self.observed()
         return np.eye(3) - sum((np.outer(d, d) for d in dirs), np.zeros((3, 3)))
 
@@ -121,13 +124,21 @@ def _still(ctx: Context, t_ns: np.ndarray, gyro: np.ndarray, acc: np.ndarray) ->
 
 
 def _gravity_info(grav: Any) -> np.ndarray:
+    """The information its data gave (its eigen-directions' less its prior's), every direction."""
     if grav.gyro_bias is None or grav.directions is None:
         return np.zeros((3, 3))
     info = np.zeros((3, 3))
     for d, s in zip(grav.directions, grav.direction_std):
-        if s <= grav.settings.observed_below:
-            info += np.outer(d, d) / s ** 2
+        info += np.outer(d, d) * max(1.0 / s ** 2 - 1.0 / grav.settings.prior_sigma ** 2, 0.0)
     return info
+
+
+def _gravity_unseen(grav: Any) -> np.ndarray:
+    """Projection onto its directions its prior, not its data, set (``direction_observed`` false)."""
+    if grav.gyro_bias is None or grav.directions is None:
+        return np.eye(3)
+    return sum((np.outer(d, d) for d, s in zip(grav.directions, grav.direction_std)
+                if s > grav.settings.observed_below), np.zeros((3, 3)))
 
 
 def _gravity(ctx: Context, t_ns: np.ndarray, gyro: np.ndarray, acc: np.ndarray) -> BiasEstimate:
@@ -136,7 +147,7 @@ def _gravity(ctx: Context, t_ns: np.ndarray, gyro: np.ndarray, acc: np.ndarray) 
         s = est.settings
         return BiasEstimate("gravity", None, np.zeros((3, 3)), est.to_dict(),
                             "{where} is shorter than " + f"{s.min_windows} windows of {s.window_s:g} s")
-    return BiasEstimate("gravity", est.gyro_bias, _gravity_info(est), est.to_dict())
+    return BiasEstimate("gravity", est.gyro_bias, _gravity_info(est), est.to_dict(), unseen=_gravity_unseen(est))
 
 
 def still_along_gravity(still: Optional[np.ndarray], grav: Any) -> Optional[np.ndarray]:
@@ -157,8 +168,9 @@ def _still_gravity(ctx: Context, t_ns: np.ndarray, gyro: np.ndarray, acc: np.nda
     still, grav = _still(ctx, t_ns, gyro, acc), gravity_bias(t_ns, gyro, acc)
     b = still_along_gravity(still.gyro_bias, grav)
     g_info = _gravity_info(grav)
+    unseen = np.zeros((3, 3))
     if still.gyro_bias is None:
-        info = g_info
+        info, unseen = g_info, _gravity_unseen(grav)
     elif grav.gyro_bias is None or grav.gravity_body is None:
         info = still.information
     else:  # the still estimate's information along gravity, gravity consistency's across it
@@ -171,7 +183,7 @@ def _still_gravity(ctx: Context, t_ns: np.ndarray, gyro: np.ndarray, acc: np.nda
                       "where the other has none)",
               "still": still.detail, "gravity": grav.to_dict()}
     missing = None if b is not None else "neither a still stretch nor enough windows in {where}"
-    return BiasEstimate("still+gravity", b, info if b is not None else np.zeros((3, 3)), detail, missing)
+    return BiasEstimate("still+gravity", b, info if b is not None else np.zeros((3, 3)), detail, missing, unseen)
 
 
 def _learned(ctx: Context, t_ns: np.ndarray, gyro: np.ndarray, acc: np.ndarray) -> BiasEstimate:
@@ -253,28 +265,41 @@ def prior_information(prior: BiasPrior) -> np.ndarray:
     return info_diag(np.asarray(prior.std))
 
 
-def combine(parts: List[BiasEstimate], prior: BiasPrior) -> BiasEstimate:
-    """``auto``: the estimates each bounded (:func:`bound`; rejected ones dropped) and the prior,
-    combined by their information (b = (L0 + sum Li)^-1 (L0 b0 + sum Li bi))."""
+def combine(parts: List[BiasEstimate], prior: BiasPrior, with_prior: bool = False) -> BiasEstimate:
+    """``auto``: the estimates each bounded (:func:`bound`: shrunk ones enter as shrunk, rejected ones
+    are dropped), combined by their information, b = (sum Li)^+ sum Li bi, and the prior's mean
+    along the directions none observed. ``with_prior``: the prior averaged in everywhere,
+    b = (L0 + sum Li)^-1 (L0 b0 + sum Li bi) (measured worse: docs/refine.md)."""
     b0, L0 = np.asarray(prior.bias, dtype=np.float64), prior_information(prior)
-    used, info, num, details = [], np.zeros((3, 3)), np.zeros(3), {}
+    used, info, num, details, seen = [], np.zeros((3, 3)), np.zeros(3), {}, np.zeros((3, 3))
     for p in parts:
         verdict = bound(p, prior)
         details[p.method] = {**p.detail, "bound": verdict.to_dict()}
         if verdict.decision in ("applied", "shrunk"):
             used.append(p.method)
             info += p.information
-            num += p.information @ p.gyro_bias
-    detail: Dict[str, Any] = {"rule": "every estimate bounded by the prior, those kept and the prior combined by their "
-                                      "information (inverse covariances)", "used": used, **details}
+            num += p.information @ verdict.gyro_bias
+            seen += np.eye(3) - p.unobserved()
+    detail: Dict[str, Any] = {"rule": "every estimate bounded by the device prior, those kept combined by their "
+                                      "information (inverse covariances), the prior's mean where none observed"
+                                      + ("; the prior averaged in everywhere" if with_prior else ""),
+                              "used": used, **details}
     if not used:
         detail.update({"gyro_bias_rad_s": None, "gyro_bias_deg_s": None})
         return BiasEstimate("auto", None, np.zeros((3, 3)), detail,
                             "no estimator gave an estimate within the bound in {where}")
-    b = np.linalg.solve(L0 + info, L0 @ b0 + num)
+    if with_prior:
+        b = np.linalg.solve(L0 + info, L0 @ b0 + num)
+    else:
+        lam, vec = np.linalg.eigh(info)
+        keep = lam > 1e-12 * max(1.0, float(lam.max()))
+        V = vec[:, keep]
+        b = V @ ((V.T @ num) / lam[keep]) + (np.eye(3) - V @ V.T) @ b0
     detail.update({"gyro_bias_rad_s": _vec(b), "gyro_bias_deg_s": _vec(np.rad2deg(b))})
-    # the prior is in already: the combined estimate's own information is what the estimators gave
-    return BiasEstimate("auto", b, info, detail)
+    # bounded already, each: the combined estimate's own information is what the estimators gave
+    lam, vec = np.linalg.eigh(seen)
+    unseen = vec[:, lam < 1e-9] @ vec[:, lam < 1e-9].T
+    return BiasEstimate("auto", b, info, detail, unseen=unseen)
 
 
 @dataclass
@@ -302,14 +327,15 @@ def bound(est: BiasEstimate, prior: BiasPrior) -> Verdict:
     b0 = np.asarray(prior.bias, dtype=np.float64)
     P0 = np.diag(np.asarray(prior.std, dtype=np.float64) ** 2)
     dirs, std = est.observed()
-    if est.method == "auto":  # the prior is in already: bounded against it only
-        std = np.zeros(len(dirs))
+    if est.method == "auto":  # each part bounded already: the combination is applied as it is
+        return Verdict("applied", None, est.gyro_bias, "every estimate it combines bounded on its own (bound of each: "
+                       "its entry)", prior)
     d = est.gyro_bias - b0
     z = max((abs(float(u @ d)) / np.sqrt(float(u @ P0 @ u) + s ** 2) for u, s in zip(dirs, std)), default=0.0)
     what = f"{z:.1f} sigma from the device prior ({prior.source})"
     if z <= ACCEPT_SIGMAS:
         return Verdict("applied", z, est.gyro_bias, f"{what}: within {ACCEPT_SIGMAS:g}, applied as estimated", prior)
-    if z <= REJECT_SIGMAS or est.method == "auto":
+    if z <= REJECT_SIGMAS:
         L0 = np.linalg.inv(P0)
         b = np.linalg.solve(L0 + est.information, L0 @ b0 + est.information @ est.gyro_bias)
         return Verdict("shrunk", z, b, f"{what}: beyond {ACCEPT_SIGMAS:g}, shrunk toward it (precision-weighted)", prior)
