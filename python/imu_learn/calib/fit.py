@@ -30,12 +30,13 @@ from __future__ import annotations
 
 import math
 import random
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Any, Callable, Dict, List, Optional, Sequence, Tuple
 
 import numpy as np
 import torch
 
+from imu_learn.baselines.affine import ESTIMATES, Floor, TraditionalParams
 from imu_learn.baselines.base import FitSettings
 from imu_learn.baselines.traditional import TraditionalTiming
 from imu_learn.calib.profile import apply_floor
@@ -48,13 +49,19 @@ Progress = Callable[[str], None]
 
 @dataclass
 class FloorFit:
-    """The floor's parameter dict (TraditionalTiming.to_dict), its fit log, and per parameter the
-    standard deviation over groups (same shapes as in the dict; NaN with fewer than two groups)."""
+    """The floor (TraditionalTiming's), its fit log, and per parameter the standard deviation over
+    groups (``std``: the parameters' shapes; NaN with fewer than two groups). ``entries``: what
+    profile.json's ``fit_log`` says of the fit (default: the log and the groups; a reference source
+    that fits its floor otherwise says its own)."""
 
-    floor: Dict[str, object]
+    floor: Floor
     log: Dict[str, list]
-    std: Dict[str, np.ndarray]
+    std: TraditionalParams
     groups: List[Dict[str, object]]
+    entries: Optional[Dict[str, Any]] = field(default=None)
+
+    def log_entries(self) -> Dict[str, Any]:
+        return self.entries if self.entries is not None else {"floor": self.log, "groups": self.groups}
 
 
 def seed_all(seed: int) -> None:
@@ -88,7 +95,6 @@ def refit_once(method: TraditionalTiming, train: List[Segment], val: List[Segmen
 
 
 GROUP_MIN_WINDOWS = 200
-PARAMS = ("M_g", "b_g", "G", "M_a", "b_a", "time_offset")
 
 
 def group_segments(train: Sequence[Segment], val: Sequence[Segment], groups: Sequence[str],
@@ -115,26 +121,33 @@ def fit_floor(train: List[Segment], val: List[Segment], settings: FitSettings, g
     each group alone (``uncertainty=False``: not; every standard deviation NaN)."""
     progress(f"fitting the floor (traditional+timing) on {len(train)} segments, {sum(len(s) for s in train)} samples")
     method, log = fit_once(train, val, settings, terms=terms)
-    floor = method.to_dict()
+    floor = Floor.from_dict(method.to_dict())
     if not uncertainty:
-        return FloorFit(floor, log, {k: np.full(np.shape(floor[k]), np.nan) for k in PARAMS}, [])
+        return FloorFit(floor, log, TraditionalParams.unknown(), [])
     per = group_segments(train, val, groups, val_groups)
     if len(per) < 2:  # one recording: four time blocks of it
         per = time_blocks(train)
-    values: Dict[str, List[np.ndarray]] = {k: [] for k in PARAMS}
+    fits: List[TraditionalParams] = []
     info = []
     usable = {g: tv for g, tv in per.items() if any(len(s) > settings.window + 1 for s in tv[0])}
     for i, (g, (tr, va)) in enumerate(usable.items()):
         progress(f"uncertainty: refitting on {g} alone ({i + 1}/{len(usable)})")
         m = refit_once(method, tr, va, settings, max(GROUP_MIN_WINDOWS, method.max_windows // len(usable)))
-        d = m.to_dict()
-        for k in PARAMS:
-            values[k].append(np.asarray(d[k], dtype=np.float64))
+        p = TraditionalParams.from_dict(m.to_dict())
+        fits.append(p)
         info.append({"group": g, "segments": len(tr), "samples": int(sum(len(s) for s in tr)),
-                     "time_offset_samples": float(d["time_offset"]), "b_g": list(d["b_g"]), "b_a": list(d["b_a"])})
-    std = {k: (np.std(np.stack(v), axis=0, ddof=1) / math.sqrt(len(v)) if len(v) >= 2 else np.full(np.shape(floor[k]), np.nan))
-           for k, v in values.items()}
-    return FloorFit(floor, log, std, info)
+                     "time_offset_samples": float(p.time_offset), "b_g": p.b_g.tolist(), "b_a": p.b_a.tolist()})
+    return FloorFit(floor, log, spread(fits), info)
+
+
+def spread(fits: Sequence[TraditionalParams]) -> TraditionalParams:
+    """Per estimate, the standard error of the mean of ``fits`` (their spread over sqrt(n)); every
+    one NaN with fewer than two."""
+    if len(fits) < 2:
+        return TraditionalParams.unknown()
+    std = {k: np.std(np.stack([p.estimate(k) for p in fits]), axis=0, ddof=1) / math.sqrt(len(fits))
+           for k in ESTIMATES}
+    return TraditionalParams(**std)
 
 
 def world_specific_force_sums(seg: Segment, acc: np.ndarray) -> np.ndarray:
@@ -157,7 +170,7 @@ def gravity_per_window(seg: Segment, acc: np.ndarray, window: int) -> np.ndarray
     return -(dv[:, 2] - (c[i1, 2] - c[i0, 2])) / T
 
 
-def fit_gravity(segments: Sequence[Segment], floor: Dict[str, object], groups: Sequence[str],
+def fit_gravity(segments: Sequence[Segment], floor: Floor, groups: Sequence[str],
                 window_s: float = 1.0) -> Tuple[float, float, Dict[str, float]]:
     """(g, its standard deviation over groups, g per group) from the floor-calibrated accelerometer."""
     per: Dict[str, List[np.ndarray]] = {}
@@ -176,12 +189,11 @@ def fit_gravity(segments: Sequence[Segment], floor: Dict[str, object], groups: S
     return g, std, means
 
 
-def calibrated(segments: Sequence[Segment], floor: Dict[str, object], lowpass: bool) -> List[Tuple[np.ndarray, np.ndarray]]:
-    """Each segment's floor-calibrated (gyro, acc); ``lowpass=False`` leaves the floor's filter out
-    (the noise is measured on the unfiltered samples)."""
-    f = dict(floor) if lowpass else {**floor, "cutoff_gyro": None, "cutoff_acc": None}
-    return [apply_floor(f, s.t_ns, s.gyro, s.acc) for s in segments]
+def calibrated(segments: Sequence[Segment], floor: Any, lowpass: bool) -> List[Tuple[np.ndarray, np.ndarray]]:
+    """Each segment's floor-calibrated (gyro, acc) (``floor``: a Floor or its saved dict);
+    ``lowpass=False`` leaves the floor's filter out (the noise is measured on the unfiltered samples)."""
+    f = Floor.of(floor)
+    assert f is not None, "calibrated: no floor"
+    f = f if lowpass else f.without_lowpass()
+    return [f.apply(s.t_ns, s.gyro, s.acc) for s in segments]
 
-
-def optional_std(std: Optional[Dict[str, np.ndarray]], key: str, shape: Tuple[int, ...]) -> np.ndarray:
-    return np.asarray(std[key]) if std and key in std else np.full(shape, np.nan)

@@ -25,6 +25,7 @@ from typing import Any, Dict, List, Optional, Sequence, Tuple
 
 import numpy as np
 
+from imu_learn.baselines.affine import Floor, TraditionalParams
 from imu_learn.score.metrics import relative_pose_errors, rmse, with_imu
 
 LIMITS: Dict[str, Any] = {
@@ -73,17 +74,28 @@ def _matrix_findings(name: str, m: np.ndarray, unit_hint: str) -> List[Finding]:
     return out
 
 
-def parameter_findings(floor: Dict[str, Any], gravity_mps2: Optional[float]) -> List[Finding]:
-    """Every limit of the module doc that ``floor`` (the profile's parameter dict) breaks."""
-    out = _matrix_findings("gyroscope", np.asarray(floor["M_g"]), "a gyro unit off (deg/s read as rad/s: 57x) or a "
-                                                                   "reference rotation in another unit")
-    out += _matrix_findings("accelerometer", np.asarray(floor["M_a"]), "an acc unit off (g read as m/s^2: 9.8x) or a "
-                                                                       "reference position scale off (monocular VO)")
-    bg = np.abs(np.asarray(floor["b_g"]))
+def _params(floor: Any) -> TraditionalParams:
+    """The parameters of a Floor, of TraditionalParams, or of a (partial) saved dict (the rest identity)."""
+    if isinstance(floor, Floor):
+        return floor.params
+    if isinstance(floor, TraditionalParams):
+        return floor
+    return TraditionalParams.from_dict({**TraditionalParams.identity().to_dict(), **floor})
+
+
+def parameter_findings(floor: Any, gravity_mps2: Optional[float]) -> List[Finding]:
+    """Every limit of the module doc that ``floor`` (the profile's Floor, its parameters or saved
+    dict) breaks."""
+    p = _params(floor)
+    out = _matrix_findings("gyroscope", p.M_g, "a gyro unit off (deg/s read as rad/s: 57x) or a "
+                                               "reference rotation in another unit")
+    out += _matrix_findings("accelerometer", p.M_a, "an acc unit off (g read as m/s^2: 9.8x) or a "
+                                                    "reference position scale off (monocular VO)")
+    bg = np.abs(p.b_g)
     if np.any(bg >= LIMITS["gyro_bias_rad_s"]):
         out.append(Finding("gyroscope.bias", f"|bias| {bg.max():.3g} rad/s (limit {LIMITS['gyro_bias_rad_s']:g}): a "
                                              "reference in another frame, or a gyro unit off"))
-    ba = np.abs(np.asarray(floor["b_a"]))
+    ba = np.abs(p.b_a)
     if np.any(ba >= LIMITS["acc_bias_mps2"]):
         out.append(Finding("accelerometer.bias", f"|bias| {ba.max():.3g} m/s^2 (limit {LIMITS['acc_bias_mps2']:g}): a "
                                                  "reference world not levelled, a lever arm, or an acc unit off"))

@@ -29,32 +29,41 @@ horizontal specific force against the track's along- and cross-track acceleratio
 (its time offset is 0 and not observed).
 
 What the profile says it observed (:func:`observed`): the gyro and accelerometer biases; the matrices,
-g-sensitivity, cutoffs and time offset are held at their priors. :func:`calibrate_positions` writes the
-profile with calibrate's own checks (:func:`imu_learn.calib.run.plausibility`), noise and files.
+g-sensitivity, cutoffs and time offset are held at their priors. :class:`PositionsSource` is calibrate's
+reference source for positions (:mod:`imu_learn.calib.sources`): its recordings are the final pass's
+reference, its floor this bias-only one; :func:`calibrate_positions` writes the profile through
+:func:`imu_learn.calib.run.calibrate` (its checks, noise and files, as for every reference kind).
 """
 from __future__ import annotations
 
 import math
 import tempfile
 import time
-from dataclasses import asdict, dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
-from typing import Any, Callable, Dict, List, Optional, Sequence, Tuple
+from typing import TYPE_CHECKING, Any, Callable, Dict, List, Optional, Sequence, Tuple
 
 import numpy as np
 from scipy.spatial.transform import Rotation
 
+from imu_learn.baselines.affine import Floor, TraditionalParams
 from imu_learn.baselines.base import FitSettings
-from imu_learn.calib.profile import UNITS, Affine, Profile
+from imu_learn.calib.profile import Profile
+from imu_learn.calib.sources import OBSERVABLE, TRAIN, VAL, CalibInputs, Recording, Source, span
+from imu_learn.calib.sources import held_back as _held_back
 from imu_learn.data.types import GroundTruth, ImuData, Segment
 from imu_learn.errors import InvalidInputError
+
+if TYPE_CHECKING:
+    from imu_learn.calib.fit import FloorFit
 
 Progress = Callable[[str], None]
 
 WHY = "from positions via the navigator's smoothed attitude"
 BIAS_ONLY = 1e6  # the priors that hold M_g, G and M_a at the identity / zero (baselines.traditional.ACC_BIAS_ONLY)
-FLOOR_KEYS = ("time_offset", "gyroscope.matrix", "gyroscope.bias", "g_sensitivity", "accelerometer.matrix",
-              "accelerometer.bias", "cutoff_gyro", "cutoff_acc")
+FLOOR_KEYS = OBSERVABLE
+HELD = ("M_g", "G", "M_a")  # what the bias-only fit holds at its prior (the fit log's held_at_prior_max_abs)
+BIASES = ("b_g", "b_a")  # what it fits
 
 
 @dataclass(frozen=True)
@@ -77,12 +86,12 @@ class PositionsOptions:
 
 @dataclass
 class PositionsFloor:
-    """The result: the floor dict (``TraditionalTiming.to_dict``), per parameter its standard error,
-    the ``observed`` dict, the ``reference`` dict for profile.json, each pass's log, and the final
+    """The result: the floor, per parameter its standard error (NaN: held at its prior), the
+    ``observed`` dict, the ``reference`` dict for profile.json, each pass's log, and the final
     reference as segments (``train``/``val``) with the gravity the fit used."""
 
-    floor: Dict[str, Any]
-    std: Dict[str, np.ndarray]
+    floor: Floor
+    std: TraditionalParams
     observed: Dict[str, Dict[str, Any]]
     reference: Dict[str, Any]
     passes: List[Dict[str, Any]]
@@ -208,23 +217,17 @@ def _level_rotation(up: np.ndarray) -> np.ndarray:
 # one pass: the smoother, its trajectory as a reference, the bias-only floor against it
 
 
-def bias_floor(b_g: Sequence[float], b_a: Sequence[float]) -> Dict[str, Any]:
-    """A ``traditional+timing`` floor dict with biases only (identity matrices, no G, no filter, no offset)."""
-    return {"method": "traditional+timing", "M_g": np.eye(3).tolist(), "b_g": [float(x) for x in b_g],
-            "G": np.zeros((3, 3)).tolist(), "M_a": np.eye(3).tolist(), "b_a": [float(x) for x in b_a],
-            "cutoff_gyro": None, "cutoff_acc": None, "filter_order": 2, "time_offset": 0.0}
+def bias_floor(b_g: Sequence[float], b_a: Sequence[float]) -> Floor:
+    """A ``traditional+timing`` floor with biases only (identity matrices, no G, no filter, no offset)."""
+    return Floor(TraditionalParams.biases(b_g, b_a))
 
 
-def _bias_profile(floor: Dict[str, Any], device: str, rate: float) -> Profile:
-    nan3, nan33 = np.full(3, np.nan), np.full((3, 3), np.nan)
-    return Profile(device=device, sample_rate_hz=rate, time_offset_s=0.0, time_offset_s_std=math.nan,
-                   gyro=Affine(np.eye(3), np.asarray(floor["b_g"]), UNITS["gyroscope"], nan33, nan3),
-                   acc=Affine(np.eye(3), np.asarray(floor["b_a"]), UNITS["accelerometer"], nan33, nan3),
-                   g_sensitivity=np.zeros((3, 3)), gravity_mps2=math.nan, gravity_mps2_std=math.nan, floor=floor)
+def _bias_profile(floor: Floor, device: str, rate: float) -> Profile:
+    return Profile.of_floor(device, rate, 1.0 / rate, floor, TraditionalParams.unknown(), math.nan, math.nan)
 
 
 def smoother_pass(imu_path: Path, ref_path: Path, opts: PositionsOptions, rpy: Sequence[float],
-                  floor: Optional[Dict[str, Any]], out: Path, device: str, rate: float) -> Dict[str, Any]:
+                  floor: Optional[Floor], out: Path, device: str, rate: float) -> Dict[str, Any]:
     """The navigator over the whole recording (positions as aiding, no gaps), with ``floor`` applied
     through a profile when given; returns its summary (the trajectories in ``out``)."""
     from imu_learn.fuse.navigate import NavigateOptions, Sources, navigate
@@ -267,28 +270,29 @@ def reference_segments(imu: ImuData, gt: GroundTruth, name: str) -> List[Segment
 
 
 def fit_biases(train: List[Segment], val: List[Segment], settings: FitSettings, blocks: int = 4,
-               max_windows: Optional[int] = None) -> Tuple[Dict[str, Any], Dict[str, np.ndarray], Dict[str, Any]]:
-    """(bias-only floor, standard errors of b_g and b_a from ``blocks`` time blocks, the fit log):
+               max_windows: Optional[int] = None) -> Tuple[Floor, TraditionalParams, Dict[str, Any]]:
+    """(bias-only floor, its standard errors (of b_g and b_a from ``blocks`` time blocks; the rest, held
+    at the prior, NaN), the fit log):
     :func:`imu_learn.calib.fit.fit_once` with the matrices held (module docstring)."""
     from imu_learn.calib import fit as ff
 
     terms = {"cutoffs_hz": (None,), "prior": BIAS_ONLY, "acc_prior": BIAS_ONLY, "fit_offset": False}
     method, log = ff.fit_once(train, val, settings, max_windows, terms)
-    d = method.to_dict()
-    held = {"M_g": float(np.max(np.abs(np.asarray(d["M_g"]) - np.eye(3)))), "G": float(np.max(np.abs(d["G"]))),
-            "M_a": float(np.max(np.abs(np.asarray(d["M_a"]) - np.eye(3))))}
-    floor = bias_floor(d["b_g"], d["b_a"])
-    per: Dict[str, List[np.ndarray]] = {"b_g": [], "b_a": []}
+    p, prior = TraditionalParams.from_dict(method.to_dict()), TraditionalParams.identity()
+    held = {k: float(np.max(np.abs(p.estimate(k) - prior.estimate(k)))) for k in HELD}
+    floor = bias_floor(p.b_g, p.b_a)
+    per: List[TraditionalParams] = []
     for tr, _ in ff.time_blocks(train, blocks).values():
         if not any(len(s) > settings.window + 1 for s in tr):
             continue
         m, _ = ff.fit_once(tr, [], settings, max_windows, terms)
-        per["b_g"].append(np.asarray(m.to_dict()["b_g"]))
-        per["b_a"].append(np.asarray(m.to_dict()["b_a"]))
-    k = len(per["b_g"])
-    std = {key: (np.std(np.stack(v), axis=0, ddof=1) / math.sqrt(k) if k >= 2 else np.full(3, np.nan))
-           for key, v in per.items()}
-    info = {"log": log, "held_at_prior_max_abs": held, "blocks": {k2: np.stack(v).tolist() for k2, v in per.items()} if k else {}}
+        per.append(TraditionalParams.from_dict(m.to_dict()))
+    k = len(per)
+    values = {n: np.stack([q.estimate(n) for q in per]) for n in BIASES} if k else {}
+    std = TraditionalParams.unknown()  # what is held at its prior has none
+    if k >= 2:
+        std = replace(std, **{n: np.std(v, axis=0, ddof=1) / math.sqrt(k) for n, v in values.items()})
+    info = {"log": log, "held_at_prior_max_abs": held, "blocks": {n: v.tolist() for n, v in values.items()}}
     return floor, std, info
 
 
@@ -342,10 +346,10 @@ def positions_floor(imu_path: Path, ref_path: Path, opts: PositionsOptions = Pos
         tmp = tempfile.TemporaryDirectory(prefix="imu-learn-positions-")
         work = Path(tmp.name)
     try:
-        floor: Optional[Dict[str, Any]] = None
+        floor: Optional[Floor] = None
         total_g, total_a = np.zeros(3), np.zeros(3)
         passes: List[Dict[str, Any]] = []
-        std: Dict[str, np.ndarray] = {}
+        std = TraditionalParams.unknown()
         train: List[Segment] = []
         val: List[Segment] = []
         for k in range(max(1, opts.max_iterations)):
@@ -361,23 +365,21 @@ def positions_floor(imu_path: Path, ref_path: Path, opts: PositionsOptions = Pos
             applied = [_applied(s, floor) for s in train], [_applied(s, floor) for s in val]
             progress(f"positions: pass {k + 1}: the biases against the smoothed attitude")
             step, std, info = fit_biases(applied[0], applied[1], settings, opts.blocks, opts.max_windows)
-            d_g, d_a = np.asarray(step["b_g"]), np.asarray(step["b_a"])
+            d_g, d_a = step.params.b_g, step.params.b_a
             total_g, total_a = total_g + d_g, total_a + d_a
             floor = bias_floor(total_g, total_a)
             fb = np.asarray(summ["final_bias"], dtype=np.float64)
             passes.append({"pass": k + 1, "b_g": total_g.tolist(), "b_a": total_a.tolist(), "change_b_g": d_g.tolist(),
-                           "change_b_a": d_a.tolist(), "std_b_g": std["b_g"].tolist(), "std_b_a": std["b_a"].tolist(),
+                           "change_b_a": d_a.tolist(), "std_b_g": std.b_g.tolist(), "std_b_a": std.b_a.tolist(),
                            "smoother_final_bias_imu": {"b_g": (M.T @ fb[:3]).tolist(), "b_a": (M.T @ fb[3:]).tolist()},
                            "keyframes": summ["keyframes"], "fixes": summ.get("position_fixes"),
                            "fit": {"held_at_prior_max_abs": info["held_at_prior_max_abs"], "blocks": info["blocks"]},
                            "seconds": round(time.perf_counter() - t0, 1)})
             progress(f"positions: pass {k + 1}: gyro bias {_vec(total_g)} rad/s (change {_vec(d_g)}, std "
-                     f"{_vec(std['b_g'])}), acc bias {_vec(total_a)} m/s^2 (change {_vec(d_a)}, std {_vec(std['b_a'])})")
-            if k > 0 and np.all(np.abs(d_g) < std["b_g"]) and np.all(np.abs(d_a) < std["b_a"]):
+                     f"{_vec(std.b_g)}), acc bias {_vec(total_a)} m/s^2 (change {_vec(d_a)}, std {_vec(std.b_a)})")
+            if k > 0 and np.all(np.abs(d_g) < std.b_g) and np.all(np.abs(d_a) < std.b_a):
                 break
         assert floor is not None
-        std_all = {"M_g": np.full((3, 3), np.nan), "b_g": std["b_g"], "G": np.full((3, 3), np.nan),
-                   "M_a": np.full((3, 3), np.nan), "b_a": std["b_a"], "time_offset": np.nan}
         converged = len(passes) > 1 and all(abs(c) < s for c, s in zip(passes[-1]["change_b_g"] + passes[-1]["change_b_a"],
                                                                          passes[-1]["std_b_g"] + passes[-1]["std_b_a"]))
         reference = {
@@ -393,7 +395,7 @@ def positions_floor(imu_path: Path, ref_path: Path, opts: PositionsOptions = Pos
             "floor_fit": "calib.fit.fit_once, terms cutoffs_hz=(None,), prior=acc_prior=1e6 (M_g, G, M_a held), "
                          "fit_offset=False",
         }
-        return PositionsFloor(floor, std_all, observed(), reference, passes, train, val, gravity)
+        return PositionsFloor(floor, std, observed(), reference, passes, train, val, gravity)
     finally:
         if tmp is not None:
             tmp.cleanup()
@@ -401,23 +403,16 @@ def positions_floor(imu_path: Path, ref_path: Path, opts: PositionsOptions = Pos
 
 def held_back(segments: List[Segment], frac: float) -> Tuple[List[Segment], List[Segment]]:
     """The fitted and the held-back block (the last ``frac`` of the recording), as calibrate cuts them."""
-    from imu_learn.data.splits import cut, recording_name
-
-    if frac <= 0:
-        return list(segments), []
-    name = recording_name(segments[0].name)
-    return cut(segments, 0.0, 1.0 - frac, name), cut(segments, 1.0 - frac, 1.0, name)
+    return _held_back(segments, frac)
 
 
-def _applied(s: Segment, floor: Optional[Dict[str, Any]]) -> Segment:
+def _applied(s: Segment, floor: Optional[Floor]) -> Segment:
     """``s`` with the floor so far applied to its IMU (the next pass fits what bias remains)."""
     from dataclasses import replace
 
-    from imu_learn.calib.profile import apply_floor
-
     if floor is None:
         return s
-    g, a = apply_floor(floor, s.t_ns, s.gyro, s.acc)
+    g, a = floor.apply(s.t_ns, s.gyro, s.acc)
     return replace(s, gyro=g, acc=a)
 
 
@@ -426,81 +421,83 @@ def _vec(v: Any) -> str:
 
 
 # ------------------------------------------------------------------------------------------------
-# the profile
+# the reference source and the profile
+
+
+class PositionsSource(Source):
+    """calibrate's reference source for positions only (module doc): reading runs the smoother loop
+    (:func:`positions_floor`, each pass's navigator outputs in ``work``; None: a temporary folder), whose
+    final reference gives the recordings (one recording, its held-back block ``opts.val_fraction``) and
+    whose bias-only floor is this source's :meth:`fit_floor`. ``device``: None, the format's device or
+    the recording's name; ``entry``: profile.json's ``sources`` entry (default: the recording, its
+    format and the positions file)."""
+
+    kind = "positions"
+
+    def __init__(self, imu_path: Path, ref_path: Path, opts: PositionsOptions = PositionsOptions(),
+                 work: Optional[Path] = None, device: Optional[str] = None,
+                 entry: Optional[Dict[str, Any]] = None) -> None:
+        self.imu_path, self.ref_path, self.opts = Path(imu_path), Path(ref_path), opts
+        self.work, self.device, self.entry = work, device, entry
+        self.result: Optional[PositionsFloor] = None
+
+    def read(self, progress: Progress = lambda s: None) -> CalibInputs:
+        t0 = time.time()
+        progress(f"{self.ref_path}: positions only: the attitude from the navigator's smoother (calib.positions)")
+        name = self.imu_path.stem if self.imu_path.is_file() else self.imu_path.name
+        device = self.device
+        if device is None:
+            from imu_learn.infer.rates import recording_device
+
+            device = recording_device(self.opts.fmt) or name
+        res = self.result = positions_floor(self.imu_path, self.ref_path, self.opts, self.work, progress, device)
+        src = dict(self.entry or {"recording": str(self.imu_path), "format": self.opts.fmt,
+                                  "groundtruth": str(self.ref_path)})
+        src.update({"train": [span(s) for s in res.train], "val": [span(s) for s in res.val]})
+        observes = self.observes()
+        recordings = [Recording(str(self.imu_path), role, part, self.kind, observes)
+                      for role, part in ((TRAIN, res.train), (VAL, res.val)) if part]
+        return CalibInputs(recordings=recordings, settings=FitSettings(gravity=res.gravity), device=device,
+                           sources=[src], source=self, seconds=time.time() - t0)
+
+    def _result(self) -> PositionsFloor:
+        if self.result is None:
+            raise RuntimeError("PositionsSource: read() first (the smoother loop fits the floor)")
+        return self.result
+
+    def fit_floor(self, inp: CalibInputs, progress: Progress = lambda s: None, uncertainty: bool = True) -> FloorFit:
+        """The bias-only floor the smoother loop fitted, its standard errors and passes."""
+        from imu_learn.calib.fit import FloorFit
+
+        res = self._result()
+        return FloorFit(res.floor, {}, res.std, [], entries={"positions": res.passes})
+
+    def reference(self) -> Dict[str, Any]:
+        return self._result().reference
+
+    def observed(self) -> Dict[str, Dict[str, Any]]:
+        return observed()
 
 
 def calibrate_positions(imu_path: Path, ref_path: Path, out_dir: Path, opts: PositionsOptions = PositionsOptions(),
                         options: Any = None, device: Optional[str] = None, progress: Progress = lambda s: None,
                         source: Optional[Dict[str, Any]] = None) -> Any:
-    """``imu-learn calibrate`` with a positions reference: :func:`positions_floor`, then the profile
-    as :func:`imu_learn.calib.run.calibrate` writes one after its floor (gravity, the residual and
-    Allan noise, the plausibility checks of :func:`imu_learn.calib.run.plausibility`, profile.json,
-    imu.yaml, calibration.png), with this floor, its observed flags and ``reference`` kind
-    "positions". The navigator's passes are kept in ``out_dir/positions/``. Returns a CalibResult."""
-    from imu_learn.calib import fit as ff
-    from imu_learn.calib import noise as nz
+    """``imu-learn calibrate`` with a positions reference: :class:`PositionsSource`'s recordings and
+    floor through :func:`imu_learn.calib.run.calibrate` (gravity, the residual and Allan noise, the
+    plausibility checks, profile.json, imu.yaml, calibration.png), with its observed flags and
+    ``reference`` kind "positions". The navigator's passes are kept in ``out_dir/positions/``.
+    Returns a CalibResult."""
     from imu_learn.calib import run as cr
-    from imu_learn.calib.kalibr import write_kalibr_yaml
-    from imu_learn.calib.plot import plot_calibration
-    from imu_learn.calib.profile import NOISE_KEYS
 
-    t_start = time.time()
-    options = options if options is not None else cr.CalibOptions()
-    imu_path, ref_path, out_dir = Path(imu_path), Path(ref_path), Path(out_dir)
-    name = imu_path.stem if imu_path.is_file() else imu_path.name
-    if device is None:
-        from imu_learn.infer.rates import recording_device
-
-        device = recording_device(opts.fmt) or name
-    res = positions_floor(imu_path, ref_path, opts, out_dir / "positions", progress, device)
-    groups = [str(imu_path)]
-    src = dict(source or {"recording": str(imu_path), "format": opts.fmt, "groundtruth": str(ref_path)})
-    src.update({"train": [_span(s) for s in res.train], "val": [_span(s) for s in res.val]})
-    inp = cr.CalibInputs(train=res.train, val=res.val, groups=groups * len(res.train), val_groups=groups * len(res.val),
-                         settings=FitSettings(gravity=res.gravity), device=device, sources=[src])
-    f, std = res.floor, res.std
-    segs, seg_groups = inp.train + inp.val, inp.groups + inp.val_groups
-    progress("gravity and the residual noise")
-    g, g_std, g_per = ff.fit_gravity(segs, f, seg_groups)
-    before = nz.residual_noise(segs, ff.calibrated(segs, bias_floor(np.zeros(3), np.zeros(3)), False), res.gravity)
-    after = nz.residual_noise(segs, ff.calibrated(segs, f, False), res.gravity)
-    prof = Profile(
-        device=device, sample_rate_hz=cr._rate([s.t_ns for s in segs]), time_offset_s=0.0, time_offset_s_std=math.nan,
-        gyro=Affine(np.eye(3), np.asarray(f["b_g"]), UNITS["gyroscope"], std["M_g"], std["b_g"]),
-        acc=Affine(np.eye(3), np.asarray(f["b_a"]), UNITS["accelerometer"], std["M_a"], std["b_a"]),
-        g_sensitivity=np.zeros((3, 3)), gravity_mps2=g, gravity_mps2_std=g_std, floor=f,
-        fit_log={"positions": res.passes, "gravity_per_group": g_per, "floor_gravity_mps2": res.gravity,
-                 "floor_settings": asdict(inp.settings), "g_sensitivity_std": std["G"]})
-    prof.reference = res.reference
-    prof.observed = res.observed
-    prof.checks = cr.plausibility(prof, inp, options, progress)
-    progress("still stretches and their Allan deviation")
-    allan = nz.allan_noise(cr.still_pieces(inp, options.still))
-    cands = nz.candidates(after, allan, options.min_still_s)
-    noise = cr.noise_terms(nz.choose(cands, NOISE_KEYS))
-    prof.noise = {**noise, **cr.bias_instability(cands)}
-    prof.noise_estimates = cr.estimate_dicts(cands)
-    prof.sources = inp.sources + ([{"still_stretches": allan.stretches, "still_s": round(allan.seconds, 3)}] if allan else [])
-    prof.unobservable = cr.unobservable(True, allan, noise, options)
-    out_dir.mkdir(parents=True, exist_ok=True)
-    files = {"profile": out_dir / "profile.json", "kalibr": out_dir / "imu.yaml"}
-    prof.save(files["profile"])
-    write_kalibr_yaml(prof, files["kalibr"])
-    if options.plot:
-        progress("plot")
-        if plot_calibration(out_dir / "calibration.png", device, before, after, allan):
-            files["plot"] = out_dir / "calibration.png"
-    return cr.CalibResult(prof, files, before, after, allan, time.time() - t_start)
+    out_dir = Path(out_dir)
+    src = PositionsSource(imu_path, ref_path, opts, out_dir / "positions", device, source)
+    return cr.calibrate(src.read(progress), out_dir, options if options is not None else cr.CalibOptions(), progress)
 
 
-def _span(s: Segment) -> Dict[str, Any]:
-    return {"segment": s.name, "t0_ns": int(s.t_ns[0]), "t1_ns": int(s.t_ns[-1]), "samples": len(s)}
-
-
-def from_cli(args: Any, progress: Progress = lambda s: None) -> Any:
-    """``imu-learn calibrate --input REC --groundtruth POSITIONS``: :func:`calibrate_positions` with the
-    command's options (one recording; ``--extrinsics``' translation is the antenna's lever arm)."""
-    from imu_learn.calib.run import CalibOptions
+def source_from_cli(args: Any) -> PositionsSource:
+    """``imu-learn calibrate --input REC --groundtruth POSITIONS``'s source, with the command's options
+    (one recording; ``--extrinsics``' translation is the antenna's lever arm); the navigator's passes
+    in ``--out``/positions."""
     from imu_learn.errors import ConfigError
 
     if len(args.input) != 1 or len(args.groundtruth or []) != 1:
@@ -515,7 +512,4 @@ def from_cli(args: Any, progress: Progress = lambda s: None) -> Any:
 
         lever = tuple(float(x) for x in read_t_bs(args.extrinsics)[:3, 3])
     opts = PositionsOptions(fmt=args.format, lever_arm=lever, val_fraction=args.val_fraction)
-    progress(f"{args.groundtruth[0]}: positions only: the attitude from the navigator's smoother (calib.positions)")
-    return calibrate_positions(args.input[0], args.groundtruth[0], args.out, opts,
-                               CalibOptions(min_still_s=args.min_still_s, plot=not args.no_plot, force=args.force),
-                               args.device, progress)
+    return PositionsSource(args.input[0], args.groundtruth[0], opts, Path(args.out) / "positions", args.device)

@@ -35,14 +35,12 @@ from typing import Any, Dict, List, Optional, Tuple, Union
 
 import numpy as np
 
-from imu_learn.baselines import affine
-from imu_learn.baselines.affine import TraditionalParams
+from imu_learn.baselines.affine import Floor, TraditionalParams
 from imu_learn.errors import ProfileError
 from imu_learn.util.atomic import atomic_write_text
 
 PROFILE_FORMAT = "imu-learn device profile"
 PROFILE_VERSION = 1
-FLOOR_METHOD = "traditional+timing"
 NOISE_KEYS = ("gyroscope_noise_density", "gyroscope_random_walk",
               "accelerometer_noise_density", "accelerometer_random_walk")
 NOISE_UNITS = {
@@ -138,9 +136,10 @@ class NoiseTerm:
 
 @dataclass
 class Profile:
-    """A device's calibration and noise (module doc). ``floor`` is the ``traditional+timing``
-    parameter dict that :meth:`apply` runs; ``gyro``/``acc`` restate its matrices and biases with
-    their uncertainties."""
+    """A device's calibration and noise (module doc). ``floor`` is the ``traditional+timing`` floor
+    that :meth:`apply` runs, a :class:`~imu_learn.baselines.affine.Floor` (None: noise only; given
+    or assigned as its saved dict, it becomes one); ``gyro``/``acc``/``g_sensitivity``/
+    ``time_offset_s`` restate its parameters with their uncertainties (:meth:`of_floor` derives them)."""
 
     device: str
     sample_rate_hz: float
@@ -151,7 +150,7 @@ class Profile:
     g_sensitivity: np.ndarray
     gravity_mps2: float
     gravity_mps2_std: float
-    floor: Dict[str, Any]
+    floor: Optional[Floor]
     noise: Dict[str, NoiseTerm] = field(default_factory=dict)
     noise_estimates: List[Dict[str, Any]] = field(default_factory=list)  # every estimate, chosen or not
     sources: List[Dict[str, Any]] = field(default_factory=list)  # recordings and the spans used
@@ -169,6 +168,24 @@ class Profile:
     version: int = PROFILE_VERSION
     created: str = field(default_factory=lambda: datetime.now(timezone.utc).isoformat(timespec="seconds"))
 
+    def __setattr__(self, name: str, value: Any) -> None:
+        if name == "floor":
+            value = Floor.of(value)
+        super().__setattr__(name, value)
+
+    @classmethod
+    def of_floor(cls, device: str, sample_rate_hz: float, period_s: float, floor: Floor, std: TraditionalParams,
+                 gravity_mps2: float, gravity_mps2_std: float, **extra: Any) -> Profile:
+        """A profile whose time offset [s], affine calibrations and g-sensitivity are ``floor``'s
+        (its time offset in samples of ``period_s``), each with its standard deviation from ``std``."""
+        p = floor.params
+        return cls(
+            device=device, sample_rate_hz=sample_rate_hz,
+            time_offset_s=float(p.time_offset) * period_s, time_offset_s_std=float(std.time_offset) * period_s,
+            gyro=Affine(p.M_g.copy(), p.b_g.copy(), UNITS["gyroscope"], std.M_g, std.b_g),
+            acc=Affine(p.M_a.copy(), p.b_a.copy(), UNITS["accelerometer"], std.M_a, std.b_a),
+            g_sensitivity=p.G.copy(), gravity_mps2=gravity_mps2, gravity_mps2_std=gravity_mps2_std, floor=floor, **extra)
+
     # -- the floor --------------------------------------------------------------------------------
 
     def apply(self, t_ns: np.ndarray, gyro: np.ndarray, acc: np.ndarray) -> Tuple[np.ndarray, np.ndarray]:
@@ -177,13 +194,18 @@ class Profile:
         order, so the same bits). A profile without a floor (noise only) returns copies."""
         gyro = np.asarray(gyro, dtype=np.float64)
         acc = np.asarray(acc, dtype=np.float64)
-        if not self.floor:
+        if self.floor is None:
             return gyro.copy(), acc.copy()
-        return apply_floor(self.floor, np.asarray(t_ns, dtype=np.int64), gyro, acc)
+        return self.floor.apply(np.asarray(t_ns, dtype=np.int64), gyro, acc)
 
     @property
     def has_floor(self) -> bool:
-        return bool(self.floor)
+        return self.floor is not None
+
+    @property
+    def floor_dict(self) -> Dict[str, Any]:
+        """The floor's saved dict (empty: noise only)."""
+        return self.floor.to_dict() if self.floor is not None else {}
 
     # -- persistence ------------------------------------------------------------------------------
 
@@ -198,7 +220,7 @@ class Profile:
             "gravity_mps2": _num(self.gravity_mps2), "gravity_mps2_std": _num(self.gravity_mps2_std),
             "noise": {k: v.to_dict() for k, v in self.noise.items()},
             "noise_estimates": clean(self.noise_estimates),
-            "floor": clean(self.floor), "sources": clean(self.sources), "unobservable": self.unobservable,
+            "floor": clean(self.floor_dict), "sources": clean(self.sources), "unobservable": self.unobservable,
             "fit_log": clean(self.fit_log),
             **({"inputs": clean(self.inputs)} if self.inputs else {}),
             **{k: clean(getattr(self, k)) for k in ("reference", "observed", "checks") if getattr(self, k)},
@@ -232,7 +254,8 @@ class Profile:
                                f"reads ({PROFILE_VERSION}); upgrade imu-learn", where, field="version")
         floor = r.get("floor", dict, {})
         if floor:
-            _check_floor(floor, where)
+            Floor.check_dict(floor, lambda k, what: ProfileError(f"{where}: field 'floor.{k}': {what}", where,
+                                                                field=f"floor.{k}"))
         noise = {k: r.noise(k) for k in r.get("noise", dict, {})}
         return cls(
             device=r.get("device", str), sample_rate_hz=r.number("sample_rate_hz"),
@@ -328,34 +351,12 @@ def _nulls_to_nan(x: Any) -> Any:
     return math.nan if x is None else x
 
 
-def _check_floor(floor: Dict[str, Any], where: str) -> None:
-    def fail(k: str, what: str) -> ProfileError:
-        return ProfileError(f"{where}: field 'floor.{k}': {what}", where, field=f"floor.{k}")
-
-    if floor.get("method") != FLOOR_METHOD:
-        raise fail("method", f"expected {FLOOR_METHOD!r}, got {floor.get('method')!r}")
-    for k, shape in (("M_g", (3, 3)), ("b_g", (3,)), ("G", (3, 3)), ("M_a", (3, 3)), ("b_a", (3,))):
-        try:
-            a = np.asarray(floor[k], dtype=np.float64)
-        except KeyError:
-            raise fail(k, "missing") from None
-        except (TypeError, ValueError):
-            raise fail(k, f"expected numbers of shape {shape}") from None
-        if a.shape != shape or not np.all(np.isfinite(a)):
-            raise fail(k, f"expected finite numbers of shape {shape}")
-    for k in ("cutoff_gyro", "cutoff_acc"):
-        v = floor.get(k)
-        if v is not None and (isinstance(v, bool) or not isinstance(v, (int, float)) or not v > 0):
-            raise fail(k, f"expected a positive cutoff [Hz] or null, got {v!r}")
-    t = floor.get("time_offset", 0.0)
-    if isinstance(t, bool) or not isinstance(t, (int, float)) or not math.isfinite(t):
-        raise fail("time_offset", f"expected a finite number of samples, got {t!r}")
-
-
-def apply_floor(floor: Dict[str, Any], t_ns: np.ndarray, gyro: np.ndarray, acc: np.ndarray) -> Tuple[np.ndarray, np.ndarray]:
-    """``traditional+timing``'s ``refine`` on raw arrays, from its parameter dict ``floor``
-    (the one torch-free home of the floor's application, :mod:`imu_learn.baselines.affine`)."""
-    return affine.apply(TraditionalParams.from_dict(floor), t_ns, gyro, acc, int(floor.get("filter_order", 2)))
+def apply_floor(floor: Any, t_ns: np.ndarray, gyro: np.ndarray, acc: np.ndarray) -> Tuple[np.ndarray, np.ndarray]:
+    """``traditional+timing``'s ``refine`` on raw arrays, from ``floor`` (a :class:`Floor` or its saved
+    dict; the one torch-free home of the floor's application, :mod:`imu_learn.baselines.affine`)."""
+    f = Floor.of(floor)
+    assert f is not None, "apply_floor: no floor"
+    return f.apply(t_ns, gyro, acc)
 
 
 def noise_only(device: str, sample_rate: float, noise: Dict[str, NoiseTerm], **extra: Any) -> Profile:
@@ -366,4 +367,4 @@ def noise_only(device: str, sample_rate: float, noise: Dict[str, NoiseTerm], **e
                    gyro=Affine(np.eye(3), np.zeros(3), UNITS["gyroscope"], nan33.copy(), nan3.copy()),
                    acc=Affine(np.eye(3), np.zeros(3), UNITS["accelerometer"], nan33.copy(), nan3.copy()),
                    g_sensitivity=np.zeros((3, 3)), gravity_mps2=math.nan if "gravity" not in extra else extra.pop("gravity"),
-                   gravity_mps2_std=math.nan, floor={}, noise=noise, **extra)
+                   gravity_mps2_std=math.nan, floor=None, noise=noise, **extra)

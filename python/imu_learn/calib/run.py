@@ -1,9 +1,12 @@
 """``imu-learn calibrate``'s work: recordings in, a device profile and its files out.
 
-With a reference (segments with ground truth): the floor (:mod:`imu_learn.calib.fit`, torch), its
-spread between recordings, gravity, the noise from the residuals (:func:`noise.residual_noise`)
-and from still stretches (:func:`noise.still_stretches`, :func:`noise.allan_noise`). Without one
-(a still recording's IMU alone): the noise from its still stretches only. Writes, each atomically,
+The recordings come from a reference source (:mod:`imu_learn.calib.sources`: poses, positions, a
+config's split, still). With a reference (segments with ground truth): the floor the source fits
+(:meth:`Source.fit_floor <imu_learn.calib.sources.Source.fit_floor>`: the affine fit of
+:mod:`imu_learn.calib.fit`, torch, unless the source fits its own), its spread between recordings,
+gravity, the noise from the residuals (:func:`noise.residual_noise`) and from still stretches
+(:func:`noise.still_stretches`, :func:`noise.allan_noise`). Without one (a still recording's IMU
+alone): the noise from its still stretches only. Writes, each atomically,
 ``profile.json``, ``imu.yaml`` (Kalibr) and ``calibration.png`` into the output folder.
 """
 from __future__ import annotations
@@ -11,52 +14,24 @@ from __future__ import annotations
 import logging
 import math
 import time
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict, dataclass
 from pathlib import Path
 from typing import Any, Callable, Dict, List, Optional, Sequence, Tuple
 
 import numpy as np
 
-from imu_learn.baselines.base import FitSettings
+from imu_learn.baselines.affine import Floor, TraditionalParams
 from imu_learn.calib import noise as nz
 from imu_learn.calib.kalibr import write_kalibr_yaml
 from imu_learn.calib.plausible import LIMITS, held_back_errors, held_back_findings, parameter_findings
 from imu_learn.calib.plot import plot_calibration
-from imu_learn.calib.profile import NOISE_KEYS, NOISE_UNITS, UNITS, Affine, NoiseTerm, Profile, noise_only
-from imu_learn.calib.reference import FrameFit
+from imu_learn.calib.profile import NOISE_KEYS, NOISE_UNITS, NoiseTerm, Profile, noise_only
+from imu_learn.calib.sources import TIME_OFFSET_PRIOR_SAMPLES, CalibInputs, Recording, StillPiece
 from imu_learn.core.stamps import median_period_ns, sample_rate_hz
-from imu_learn.data.types import Segment
 from imu_learn.errors import ImplausibleProfileError, InvalidInputError
 
 Progress = Callable[[str], None]
 logger = logging.getLogger(__name__)
-TIME_OFFSET_PRIOR_SAMPLES = 0.5  # an unobserved time offset: the zero-order hold's half sample
-
-
-@dataclass
-class StillPiece:
-    """IMU samples of a recording without a reference (gap-free)."""
-
-    name: str
-    t_ns: np.ndarray
-    gyro: np.ndarray
-    acc: np.ndarray
-
-
-@dataclass
-class CalibInputs:
-    """What calibrate fits: ``train``/``val`` segments with their reference (``groups``: the
-    recording of each), IMU-only pieces, the floor's settings, the device name and the sources."""
-
-    train: List[Segment] = field(default_factory=list)
-    val: List[Segment] = field(default_factory=list)
-    groups: List[str] = field(default_factory=list)
-    val_groups: List[str] = field(default_factory=list)
-    imu_only: List[StillPiece] = field(default_factory=list)
-    settings: FitSettings = FitSettings()
-    device: str = "unknown"
-    sources: List[Dict[str, Any]] = field(default_factory=list)
-    reference: Optional[FrameFit] = None  # how the reference was moved into the IMU's frame (--input)
 
 
 @dataclass(frozen=True)
@@ -147,75 +122,27 @@ def unobservable(has_ref: bool, allan: Optional[nz.AllanNoise], noise: Dict[str,
 
 def floor_profile(inp: CalibInputs, progress: Progress,
                   uncertainty: bool = True) -> Tuple[Profile, nz.ResidualNoise, nz.ResidualNoise]:
-    """The floor part of the profile (with the reference) and the residuals before/after it
-    (``uncertainty=False``: no refits per recording, the standard deviations NaN)."""
+    """The floor part of the profile (with the reference): the floor its source fits, and the
+    residuals before/after it (``uncertainty=False``: no refits per recording, the standard
+    deviations NaN)."""
     from imu_learn.calib import fit as ff  # torch: only where the floor is fitted
 
-    fit = ff.fit_floor(inp.train, inp.val, inp.settings, inp.groups, inp.val_groups, progress, uncertainty,
-                       floor_terms(inp.reference))
+    fit = inp.source.fit_floor(inp, progress, uncertainty)
     f, std = fit.floor, fit.std
-    if inp.reference is not None and inp.reference.applied.get("lag"):
-        # the reference's stamps were moved by its own lag: what the floor finds on top is the IMU's offset
-        # plus the lag's rounding, not observable apart from the reference's latency: the prior, the
-        # zero-order hold's half sample (what an IMU on the reference's clock shows: a sample holds the rate
-        # at its start over the interval after it)
-        fit.log["time_offset_fitted_on_the_moved_reference"] = [f["time_offset"]]
-        f = {**f, "time_offset": TIME_OFFSET_PRIOR_SAMPLES}
-        std = {**std, "time_offset": np.float64(np.nan)}
     segs, groups = inp.train + inp.val, inp.groups + inp.val_groups
     progress("gravity and the residual noise")
     g, g_std, g_per = ff.fit_gravity(segs, f, groups)
-    ident = {"method": f["method"], "M_g": np.eye(3).tolist(), "b_g": [0.0] * 3, "G": np.zeros((3, 3)).tolist(),
-             "M_a": np.eye(3).tolist(), "b_a": [0.0] * 3, "cutoff_gyro": None, "cutoff_acc": None, "time_offset": 0.0}
+    ident = Floor(TraditionalParams.identity(), f.method, f.filter_order)
     before = nz.residual_noise(segs, ff.calibrated(segs, ident, False), inp.settings.gravity)
     after = nz.residual_noise(segs, ff.calibrated(segs, f, False), inp.settings.gravity)
     rate = _rate([s.t_ns for s in segs])
     period = float(np.median([median_period_ns(s.t_ns) for s in segs])) * 1e-9
-    prof = Profile(
-        device=inp.device, sample_rate_hz=rate,
-        time_offset_s=float(f["time_offset"]) * period, time_offset_s_std=float(std["time_offset"]) * period,
-        gyro=Affine(np.asarray(f["M_g"]), np.asarray(f["b_g"]), UNITS["gyroscope"], std["M_g"], std["b_g"]),
-        acc=Affine(np.asarray(f["M_a"]), np.asarray(f["b_a"]), UNITS["accelerometer"], std["M_a"], std["b_a"]),
-        g_sensitivity=np.asarray(f["G"]), gravity_mps2=g, gravity_mps2_std=g_std, floor=f,
-        fit_log={"floor": fit.log, "groups": fit.groups, "gravity_per_group": g_per,
-                 "floor_gravity_mps2": inp.settings.gravity, "floor_settings": asdict(inp.settings),
-                 "g_sensitivity_std": std["G"]},
+    prof = Profile.of_floor(
+        inp.device, rate, period, f, std, g, g_std,
+        fit_log={**fit.log_entries(), "gravity_per_group": g_per, "floor_gravity_mps2": inp.settings.gravity,
+                 "floor_settings": asdict(inp.settings), "g_sensitivity_std": std.G},
     )
     return prof, before, after
-
-
-def floor_terms(ref: Optional[FrameFit]) -> Dict[str, Any]:
-    """What the floor may fit against this reference: everything, or (a reference that cannot resolve
-    accelerations, :func:`imu_learn.calib.reference.resolves_acceleration`) no low-pass and the acc bias
-    only, M_a held at the identity."""
-    from imu_learn.baselines.traditional import ACC_BIAS_ONLY  # torch: only where the floor is fitted
-
-    if ref is None or ref.resolves_acceleration:
-        return {}
-    return {"cutoffs_hz": (None,), "acc_prior": ACC_BIAS_ONLY}
-
-
-def observed(ref: Optional[FrameFit]) -> Dict[str, Dict[str, Any]]:
-    """Per floor parameter: whether the reference observed it, and why not (profile.json's ``observed``)."""
-    yes = {"observed": True}
-    out = {k: dict(yes) for k in ("time_offset", "gyroscope.matrix", "gyroscope.bias", "g_sensitivity",
-                                  "accelerometer.matrix", "accelerometer.bias", "cutoff_gyro", "cutoff_acc")}
-    if ref is not None and not ref.resolves_acceleration:
-        why = (f"the reference at {ref.rate_hz:.3g} Hz: its velocity, smoothed over several of its poses, attenuates "
-               "the accelerations the fit needs, so it would scale the accelerometer down and choose a low-pass "
-               "the IMU does not need; kept at the prior (identity, no filter)")
-        for k in ("accelerometer.matrix", "cutoff_gyro", "cutoff_acc"):
-            out[k] = {"observed": False, "why": why}
-    if ref is not None and ref.applied.get("level"):
-        out["accelerometer.bias"] = {
-            "observed": True, "partly": "along gravity only: across it the bias and the tilt of the reference's world "
-            f"(levelled by calibrate, {ref.tilt_deg:.1f}° off) are one and the same unless the attitude varies widely; "
-            "the levelling absorbs part of it (0.1 m/s^2 is 0.6° of tilt)"}
-    if ref is not None and ref.applied.get("lag"):
-        out["time_offset"] = {"observed": False, "why": f"the reference's stamps were {ref.lag_s * 1e3:+.0f} ms off the "
-                              "IMU's; the IMU's own offset cannot be told apart from the reference's latency: the prior, the zero-order "
-                              "hold's half sample"}
-    return out
 
 
 def plausibility(prof: Profile, inp: CalibInputs, options: CalibOptions, progress: Progress) -> Dict[str, Any]:
@@ -224,6 +151,7 @@ def plausibility(prof: Profile, inp: CalibInputs, options: CalibOptions, progres
     from imu_learn.calib import fit as ff  # torch: only where the floor is fitted
 
     progress("checking the profile: plausibility and the held-back block")
+    assert prof.floor is not None
     found = parameter_findings(prof.floor, prof.gravity_mps2)
     held = inp.val if inp.val else []
     errs = held_back_errors(held, ff.calibrated(held, prof.floor, True), inp.settings.window, inp.settings.gravity)
@@ -242,15 +170,15 @@ def plausibility(prof: Profile, inp: CalibInputs, options: CalibOptions, progres
 def calibrate(inp: CalibInputs, out_dir: Path, options: CalibOptions = CalibOptions(),
               progress: Progress = lambda s: None) -> CalibResult:
     """Fit the profile of ``inp`` and write its files into ``out_dir``."""
-    t0 = time.time()
-    has_ref = bool(inp.train)
+    t0 = time.time() - inp.seconds
+    has_ref = inp.has_reference
     if not has_ref and not inp.imu_only:
         raise InvalidInputError("calibrate: no recording to calibrate from")
     before = after = None
     if has_ref:
         prof, before, after = floor_profile(inp, progress)
-        prof.reference = inp.reference.to_dict() if inp.reference is not None else {}
-        prof.observed = observed(inp.reference)
+        prof.reference = inp.source.reference()
+        prof.observed = inp.source.observed()
         prof.checks = plausibility(prof, inp, options, progress)
     else:
         prof = noise_only(inp.device, _rate([p.t_ns for p in inp.imu_only]), {})
@@ -272,3 +200,7 @@ def calibrate(inp: CalibInputs, out_dir: Path, options: CalibOptions = CalibOpti
         if plot_calibration(out_dir / "calibration.png", inp.device, before, after, allan):
             files["plot"] = out_dir / "calibration.png"
     return CalibResult(prof, files, before, after, allan, time.time() - t0)
+
+
+__all__ = ["CalibInputs", "CalibOptions", "CalibResult", "Recording", "StillPiece", "TIME_OFFSET_PRIOR_SAMPLES",
+           "calibrate", "floor_profile"]

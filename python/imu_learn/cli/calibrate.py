@@ -1,27 +1,22 @@
 """``imu-learn calibrate``: a device profile from recordings with a reference trajectory (or a still
-recording alone), written as profile.json, Kalibr's imu.yaml and calibration.png
-(:mod:`imu_learn.calib.run` does the work)."""
+recording alone), written as profile.json, Kalibr's imu.yaml and calibration.png. The command picks
+the reference source (:mod:`imu_learn.calib.sources`) from its options; :mod:`imu_learn.calib.run`
+does the work."""
 from __future__ import annotations
 
 import argparse
 import logging
 import sys
 from pathlib import Path
-from typing import Any, Callable, List, Optional, Sequence, Tuple
+from typing import Any, Callable, List, Optional, Sequence
 
-from imu_learn.baselines.base import FitSettings
-from imu_learn.calib.positions import from_cli as positions_from_cli
-from imu_learn.calib.positions import is_positions_reference
-from imu_learn.calib.reference import FrameOptions, frame_lines, read_extrinsics, resolve_frame, to_imu_frame
-from imu_learn.calib.run import CalibInputs, CalibOptions, StillPiece, calibrate
+from imu_learn.calib.positions import is_positions_reference, source_from_cli
+from imu_learn.calib.run import CalibInputs, CalibOptions, calibrate
+from imu_learn.calib.sources import ConfigSource, PosesSource, Source, StillSource, under_root
 from imu_learn.cli.common import add_data_root, add_imu_input_options, csv_layout, run_command
-from imu_learn.data.formats import FORMATS, USER_CSV, detect_format, read_imu_source, read_recording, user_csv
-from imu_learn.data.loading import AlignOptions, align
-from imu_learn.data.splits import cut, data_root_dir, make_split, recording_name
+from imu_learn.data.formats import FORMATS, USER_CSV, detect_format
 from imu_learn.errors import ConfigError
-from imu_learn.eval.groundtruth import default_gap_s
 from imu_learn.eval.run import load_eval_config
-from imu_learn.infer.rates import recording_device
 from imu_learn.settings import read_toml
 from imu_learn.train.config import build_config, load_config
 
@@ -90,104 +85,17 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     add_imu_input_options(p)
 
 
-def from_config(args: argparse.Namespace) -> CalibInputs:
-    """The config's train/val split and evaluate's FitSettings for it."""
-    overrides = ["--data.data_root", args.data_root] if args.data_root else []
-    if "base" in read_toml(args.config):  # an evaluate config: its base holds the data
-        res = load_eval_config(args.config, overrides)
-        data, settings = res.run.data, res.fit_settings()
-    else:
-        run = load_config(args.config, overrides)
-        data = run.data
-        settings = FitSettings(window=data.window, seed=run.seed, gravity=data.gravity)
-    split = make_split(data)
-    root = data_root_dir(data)
-    sources = [{**row, "path": under_root(row.get("path"), root), "role": role}
-               for role in ("train", "val") for row in split.record[role]]
-    device = args.device or _device(data.roots[0].format if data.roots else "auto", split.train[0].name)
-    return CalibInputs(split.train, split.val, [recording_name(s.name) for s in split.train],
-                       [recording_name(s.name) for s in split.val], [], settings, device, sources)
-
-
-def under_root(path: Any, root: Optional[Path]) -> Any:
-    """A recording's path relative to the data root when it lies under it (a profile names recordings
-    as a user's data root does, not as this machine's folders)."""
-    if isinstance(path, str) and root is not None and Path(path).is_absolute():
-        try:
-            return str(Path(path).resolve().relative_to(Path(root).resolve()))
-        except ValueError:
-            return path
-    return path
-
-
-def _device(fmt: str, name: str) -> str:
-    return recording_device(fmt) or recording_name(name)
-
-
-def _cut(segments: list, frac: float) -> Tuple[list, list]:
-    if frac <= 0:
-        return list(segments), []
-    name = recording_name(segments[0].name)
-    return cut(segments, 0.0, 1.0 - frac, name), cut(segments, 1.0 - frac, 1.0, name)
-
-
-def from_inputs(args: argparse.Namespace, say: Callable[[str], None] = lambda s: None) -> CalibInputs:
-    """The --input recordings: read, their reference checked against the IMU and moved into its frame
-    (:mod:`imu_learn.calib.reference`), then cut into the fitted and the held-back block."""
-    gts: List[Optional[Path]] = list(args.groundtruth or [])
-    if len(gts) > len(args.input):
-        raise ConfigError(f"--groundtruth: {len(gts)} given for {len(args.input)} --input")
-    gts += [None] * (len(args.input) - len(gts))
-    inp = CalibInputs(settings=FitSettings())
-    fmt0 = None
-    columns = csv_layout(args)
-    for path in [*args.input, *(g for g in gts if g is not None), *([args.extrinsics] if args.extrinsics else [])]:
-        if not path.exists():
-            raise FileNotFoundError(2, "No such file or directory", str(path))
-    extrinsics = read_extrinsics(args.extrinsics) if args.extrinsics else None
-    pairs, names = [], []
-    for path, gt in zip(args.input, gts):
-        csv = user_csv(args.format, columns)
-        fmt = USER_CSV if csv is not None else args.format if args.format != "auto" else detect_format(path)
-        fmt0 = fmt0 or fmt
-        if args.imu_only:
-            inp.imu_only.append(imu_piece(path, args.format, columns))
-            inp.sources.append({"recording": str(path), "format": fmt, "role": "noise (IMU only)"})
-            continue
-        pairs.append(read_recording(path, args.format, gt, columns=columns))
-        names.append(path.stem if path.is_file() else path.name)
-        inp.sources.append({"recording": str(path), "format": fmt, "groundtruth": str(gt) if gt else "the format's own"})
-    if pairs:
-        say("checking the reference against the IMU (frame, lag, gravity, scale)")
-        inp.reference = resolve_frame(pairs, FrameOptions(), extrinsics, args.max_gap_s, names)
-        for line in frame_lines(inp.reference):
-            say(line)
-    for i, ((imu, ref), name, source) in enumerate(zip(pairs, names, inp.sources)):
-        ref = to_imu_frame(ref, inp.reference, i)
-        gap = args.max_gap_s if args.max_gap_s is not None else default_gap_s(ref)
-        segs = align(imu, ref, AlignOptions(max_gap_s=gap), name=name).segments
-        tr, va = _cut(segs, args.val_fraction)
-        inp.train += tr
-        inp.val += va
-        inp.groups += [source["recording"]] * len(tr)
-        inp.val_groups += [source["recording"]] * len(va)
-        source.update({"max_gap_s": gap, "train": [_span(s) for s in tr], "val": [_span(s) for s in va]})
-    first = inp.train[0].name if inp.train else inp.imu_only[0].name
-    inp.device = args.device or _device(fmt0 or "auto", first)
-    return inp
-
-
-def _span(s: Any) -> dict:
-    return {"segment": s.name, "t0_ns": int(s.t_ns[0]), "t1_ns": int(s.t_ns[-1]), "samples": len(s)}
-
-
-def imu_piece(path: Path, fmt: str, columns: Any = None) -> StillPiece:
-    """A recording's IMU alone (a layout without stamps of its own, BROAD, reads them with its ground truth)."""
-    src = read_imu_source(path, fmt, columns=columns)
-    if src.t_ns is not None:
-        return StillPiece(path.stem if path.is_file() else path.name, src.t_ns, src.gyro, src.acc)
-    imu, _ = read_recording(path, fmt)
-    return StillPiece(path.stem, imu.t_ns, imu.gyro, imu.acc)
+def source_of(args: argparse.Namespace) -> Source:
+    """The reference source the options name: --config's split, --imu-only's still recordings, a
+    positions-only --groundtruth (GNSS), else poses (any frame)."""
+    if args.config:
+        return ConfigSource(args.config, args.data_root, args.device)
+    if args.imu_only:
+        return StillSource(args.input, args.format, csv_layout(args), args.device)
+    if any(is_positions_reference(g) for g in args.groundtruth or []):
+        return source_from_cli(args)  # positions only: attitude from the navigator's smoother
+    return PosesSource(args.input, args.groundtruth or [], args.format, csv_layout(args), args.extrinsics,
+                       args.max_gap_s, args.val_fraction, args.device)
 
 
 def run(args: argparse.Namespace, rest: List[str], keep: Callable[[Any], None]) -> int:
@@ -198,14 +106,15 @@ def run(args: argparse.Namespace, rest: List[str], keep: Callable[[Any], None]) 
     check_learned(args)
     say = (lambda s: None) if args.quiet else (lambda s: logger.info("%s", s))
     say("reading the recordings")
-    if args.input and not args.imu_only and any(is_positions_reference(g) for g in args.groundtruth or []):
+    source = source_of(args)
+    writes = source.kind == "positions"  # its reading runs the smoother, which writes into --out
+    if writes:
         keep(f"{args.out} keeps only complete files (each written atomically)")
-        res = positions_from_cli(args, say)  # positions only (GNSS): attitude from the navigator's smoother
-    else:
-        inp = from_config(args) if args.config else from_inputs(args, say)
+    inp = source.read(say)
+    if not writes:
         keep(f"{args.out} keeps only complete files (each written atomically)")
-        res = calibrate(inp, args.out, CalibOptions(min_still_s=args.min_still_s, plot=not args.no_plot,
-                                                    force=args.force), say)
+    res = calibrate(inp, args.out, CalibOptions(min_still_s=args.min_still_s, plot=not args.no_plot, force=args.force),
+                    say)
     p = res.profile
     for line in summary(p):
         print(line)
@@ -297,4 +206,4 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
     return run_command("calibrate", argv)
 
 
-__all__ = ["add_arguments", "run", "main"]
+__all__ = ["add_arguments", "run", "main", "source_of", "under_root"]  # under_root: where older code imports it

@@ -429,7 +429,7 @@ def profile_start(cfg: RunConfig) -> Tuple[RunConfig, Start]:
     if not prof.has_floor:
         raise ConfigError(f"model.start: {where} has no floor (a profile of the noise alone, from a recording "
                           "without a reference)")
-    p = TraditionalParams.from_dict(prof.floor)
+    p = prof.floor.params
     tau = float(p.time_offset)
     need = math.ceil(abs(tau))
     if cfg.model.fir_taps and cfg.model.fir_taps // 2 < need:

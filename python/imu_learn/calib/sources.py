@@ -1,0 +1,386 @@
+"""Where ``imu-learn calibrate``'s recordings come from: one source per reference kind, each reading
+its inputs into calibration recordings (:class:`Recording`, gathered in :class:`CalibInputs`),
+saying what profile.json records of them (``sources``, ``reference``, ``observed``) and fitting the
+floor they observe.
+
+* :class:`PosesSource`: a 6-DoF reference in any frame (``--input``, with ``--groundtruth`` or the
+  format's own ground truth): checked against the IMU and moved into its frame
+  (:func:`imu_learn.calib.reference.resolve_frame`, :func:`~imu_learn.calib.reference.to_imu_frame`),
+  aligned onto the IMU stamps, the last ``val_fraction`` of each recording held back.
+* :class:`ConfigSource`: a fit or evaluate config's train/val split, with evaluate's settings.
+* :class:`StillSource`: recordings without a reference (``--imu-only``): the noise of their still
+  stretches only.
+* :class:`imu_learn.calib.positions.PositionsSource`: positions only (GNSS); the navigator's smoother
+  makes the reference and fits the bias-only floor (it lives beside that loop).
+
+A new reference kind is a new :class:`Source`: :meth:`Source.read` yields its recordings; where the
+affine fit against them (:func:`imu_learn.calib.fit.fit_floor`, with :meth:`Source.floor_terms`) is
+not the floor it observes, it overrides :meth:`Source.fit_floor`, and says what its reference was
+(:meth:`Source.reference`) and what it observed (:meth:`Source.observed`).
+:func:`imu_learn.calib.run.calibrate` does the rest (gravity, the noise, the plausibility, the files)
+the same for every kind.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, replace
+from pathlib import Path
+from typing import TYPE_CHECKING, Any, Callable, Dict, List, Optional, Sequence, Tuple
+
+import numpy as np
+
+from imu_learn.baselines.base import FitSettings
+from imu_learn.data.splits import cut, recording_name
+from imu_learn.data.types import Segment
+from imu_learn.errors import ConfigError
+
+if TYPE_CHECKING:
+    from imu_learn.calib.fit import FloorFit
+    from imu_learn.calib.reference import FrameFit
+
+Progress = Callable[[str], None]
+
+TRAIN, VAL, NOISE = "train", "val", "noise"  # a recording's role
+TIME_OFFSET_PRIOR_SAMPLES = 0.5  # an unobserved time offset: the zero-order hold's half sample
+# profile.json's ``observed``: the floor's parameters a reference may or may not observe
+OBSERVABLE = ("time_offset", "gyroscope.matrix", "gyroscope.bias", "g_sensitivity", "accelerometer.matrix",
+              "accelerometer.bias", "cutoff_gyro", "cutoff_acc")
+
+
+@dataclass
+class StillPiece:
+    """IMU samples of a recording without a reference (gap-free)."""
+
+    name: str
+    t_ns: np.ndarray
+    gyro: np.ndarray
+    acc: np.ndarray
+
+
+@dataclass
+class Recording:
+    """One block of a recording as calibrate uses it: ``name`` (the recording, as profile.json's
+    ``sources`` name it; the group the floor's spread is taken over), ``role`` (``train``: fitted;
+    ``val``: held back, selects the floor's filter and offset and judges it; ``noise``: the IMU alone,
+    its still stretches), its ``segments`` (the reference on the IMU stamps; :class:`StillPiece` for
+    ``noise``), the reference ``kind`` (``poses``, ``positions``, ``none``) and what that reference
+    observes (``observes``: the keys of :data:`OBSERVABLE` it resolves; the noise always)."""
+
+    name: str
+    role: str
+    segments: List[Any]
+    kind: str = "poses"
+    observes: Tuple[str, ...] = OBSERVABLE
+
+
+def blocks(segments: Sequence[Any], names: Sequence[str], role: str, kind: str = "poses",
+           observes: Tuple[str, ...] = OBSERVABLE) -> List[Recording]:
+    """``segments`` (each of the recording ``names[i]``) as recordings of ``role``, consecutive
+    segments of one recording together."""
+    out: List[Recording] = []
+    for s, n in zip(segments, names):
+        if out and out[-1].name == n:
+            out[-1].segments.append(s)
+        else:
+            out.append(Recording(n, role, [s], kind, observes))
+    return out
+
+
+class CalibInputs:
+    """What calibrate fits: the recordings a :class:`Source` yielded, the floor's settings, the device,
+    profile.json's ``sources`` entries and the source itself (its floor, reference and observed).
+    ``seconds``: work the source already did while reading (a floor it fitted then).
+
+    The older form, parallel lists (``train``/``val`` segments with the recording of each in
+    ``groups``/``val_groups``, IMU-only pieces), gives the same recordings; ``train``, ``val``,
+    ``groups``, ``val_groups`` and ``imu_only`` are derived from the recordings."""
+
+    def __init__(self, train: Sequence[Segment] = (), val: Sequence[Segment] = (), groups: Sequence[str] = (),
+                 val_groups: Sequence[str] = (), imu_only: Sequence[StillPiece] = (),
+                 settings: FitSettings = FitSettings(), device: str = "unknown",
+                 sources: Optional[List[Dict[str, Any]]] = None, *, recordings: Optional[Sequence[Recording]] = None,
+                 source: Optional[Source] = None, seconds: float = 0.0) -> None:
+        if recordings is None:
+            recordings = (blocks(train, groups, TRAIN) + blocks(val, val_groups, VAL)
+                          + [Recording(p.name, NOISE, [p], "none", ()) for p in imu_only])
+        self.recordings: List[Recording] = list(recordings)
+        self.settings = settings
+        self.device = device
+        self.sources: List[Dict[str, Any]] = list(sources or [])
+        self.source: Source = source if source is not None else Source()
+        self.seconds = seconds
+
+    def _of(self, role: str) -> List[Recording]:
+        return [r for r in self.recordings if r.role == role]
+
+    @property
+    def train(self) -> List[Segment]:
+        return [s for r in self._of(TRAIN) for s in r.segments]
+
+    @property
+    def val(self) -> List[Segment]:
+        return [s for r in self._of(VAL) for s in r.segments]
+
+    @property
+    def groups(self) -> List[str]:
+        return [r.name for r in self._of(TRAIN) for _ in r.segments]
+
+    @property
+    def val_groups(self) -> List[str]:
+        return [r.name for r in self._of(VAL) for _ in r.segments]
+
+    @property
+    def imu_only(self) -> List[StillPiece]:
+        return [p for r in self._of(NOISE) for p in r.segments]
+
+    @property
+    def has_reference(self) -> bool:
+        return bool(self.train)
+
+
+class Source:
+    """A reference kind (module doc). This base reads nothing (its recordings are given) and fits the
+    affine floor against them, every parameter observed, the reference as given."""
+
+    kind = "poses"
+
+    def read(self, progress: Progress = lambda s: None) -> CalibInputs:
+        raise NotImplementedError(f"{type(self).__name__}.read")
+
+    def floor_terms(self) -> Dict[str, Any]:
+        """:func:`imu_learn.calib.fit.fit_once`'s ``terms``: what the floor may fit (all: none given)."""
+        return {}
+
+    def fit_floor(self, inp: CalibInputs, progress: Progress = lambda s: None, uncertainty: bool = True) -> FloorFit:
+        """The floor against ``inp``'s recordings and its spread between them (``uncertainty=False``: no
+        refits, the standard deviations NaN)."""
+        from imu_learn.calib import fit as ff  # torch: only where the floor is fitted
+
+        return ff.fit_floor(inp.train, inp.val, inp.settings, inp.groups, inp.val_groups, progress, uncertainty,
+                            self.floor_terms())
+
+    def reference(self) -> Dict[str, Any]:
+        """profile.json's ``reference`` entry (empty: the reference as given)."""
+        return {}
+
+    def observed(self) -> Dict[str, Dict[str, Any]]:
+        """profile.json's ``observed``: per floor parameter, whether the reference observed it, and why not."""
+        return {k: {"observed": True} for k in OBSERVABLE}
+
+    def observes(self) -> Tuple[str, ...]:
+        return tuple(k for k, o in self.observed().items() if o.get("observed"))
+
+
+def under_root(path: Any, root: Optional[Path]) -> Any:
+    """A recording's path relative to the data root when it lies under it (a profile names recordings
+    as a user's data root does, not as this machine's folders)."""
+    if isinstance(path, str) and root is not None and Path(path).is_absolute():
+        try:
+            return str(Path(path).resolve().relative_to(Path(root).resolve()))
+        except ValueError:
+            return path
+    return path
+
+
+def device_name(fmt: str, name: str) -> str:
+    """The device a recording's format belongs to (a one-device dataset), else the recording's name."""
+    from imu_learn.infer.rates import recording_device
+
+    return recording_device(fmt) or recording_name(name)
+
+
+def span(s: Any) -> Dict[str, Any]:
+    """profile.json's entry of a segment used."""
+    return {"segment": s.name, "t0_ns": int(s.t_ns[0]), "t1_ns": int(s.t_ns[-1]), "samples": len(s)}
+
+
+def held_back(segments: List[Segment], frac: float) -> Tuple[List[Segment], List[Segment]]:
+    """The fitted and the held-back block (the last ``frac`` of the recording; 0: nothing held back)."""
+    if frac <= 0:
+        return list(segments), []
+    name = recording_name(segments[0].name)
+    return cut(segments, 0.0, 1.0 - frac, name), cut(segments, 1.0 - frac, 1.0, name)
+
+
+def _name(path: Path) -> str:
+    return path.stem if path.is_file() else path.name
+
+
+def _check_exist(paths: Sequence[Optional[Path]]) -> None:
+    for path in paths:
+        if path is not None and not path.exists():
+            raise FileNotFoundError(2, "No such file or directory", str(path))
+
+
+def _format(path: Path, fmt: str, columns: Any) -> str:
+    from imu_learn.data.formats import USER_CSV, detect_format, user_csv
+
+    return USER_CSV if user_csv(fmt, columns) is not None else fmt if fmt != "auto" else detect_format(path)
+
+
+class PosesSource(Source):
+    """6-DoF poses in any frame (module doc): ``inputs`` with their ``groundtruths`` (None: the format's
+    own), the reference's known ``extrinsics`` (a Kalibr/EuRoC yaml; None: estimated), reference gaps
+    longer than ``max_gap_s`` split (None: 0.05 s, or 1.5 periods of a sparse reference), the last
+    ``val_fraction`` of each recording held back."""
+
+    kind = "poses"
+
+    def __init__(self, inputs: Sequence[Path], groundtruths: Sequence[Optional[Path]] = (), fmt: str = "auto",
+                 columns: Any = None, extrinsics: Optional[Path] = None, max_gap_s: Optional[float] = None,
+                 val_fraction: float = 0.15, device: Optional[str] = None) -> None:
+        self.inputs = [Path(p) for p in inputs]
+        gts = [None if g is None else Path(g) for g in groundtruths]
+        if len(gts) > len(self.inputs):
+            raise ConfigError(f"--groundtruth: {len(gts)} given for {len(self.inputs)} --input")
+        self.groundtruths: List[Optional[Path]] = gts + [None] * (len(self.inputs) - len(gts))
+        self.fmt, self.columns, self.extrinsics = fmt, columns, extrinsics
+        self.max_gap_s, self.val_fraction, self.device = max_gap_s, val_fraction, device
+        self.frame: Optional[FrameFit] = None  # how the reference was moved into the IMU's frame
+
+    def read(self, progress: Progress = lambda s: None) -> CalibInputs:
+        """The recordings read, their reference checked against the IMU and moved into its frame, then
+        cut into the fitted and the held-back block."""
+        from imu_learn.calib.reference import FrameOptions, frame_lines, read_extrinsics, resolve_frame, to_imu_frame
+        from imu_learn.data.formats import read_recording
+        from imu_learn.data.loading import AlignOptions, align
+        from imu_learn.eval.groundtruth import default_gap_s
+
+        _check_exist([*self.inputs, *self.groundtruths, self.extrinsics])
+        extrinsics = read_extrinsics(self.extrinsics) if self.extrinsics else None
+        pairs, names, sources, fmts = [], [], [], []
+        for path, gt in zip(self.inputs, self.groundtruths):
+            fmts.append(_format(path, self.fmt, self.columns))
+            pairs.append(read_recording(path, self.fmt, gt, columns=self.columns))
+            names.append(_name(path))
+            sources.append({"recording": str(path), "format": fmts[-1], "groundtruth": str(gt) if gt else "the format's own"})
+        progress("checking the reference against the IMU (frame, lag, gravity, scale)")
+        self.frame = resolve_frame(pairs, FrameOptions(), extrinsics, self.max_gap_s, names)
+        for line in frame_lines(self.frame):
+            progress(line)
+        observes = self.observes()
+        recordings: List[Recording] = []
+        for i, ((imu, ref), name, source) in enumerate(zip(pairs, names, sources)):
+            ref = to_imu_frame(ref, self.frame, i)
+            gap = self.max_gap_s if self.max_gap_s is not None else default_gap_s(ref)
+            segs = align(imu, ref, AlignOptions(max_gap_s=gap), name=name).segments
+            tr, va = held_back(segs, self.val_fraction)
+            recordings += [Recording(source["recording"], role, part, self.kind, observes)
+                           for role, part in ((TRAIN, tr), (VAL, va)) if part]
+            source.update({"max_gap_s": gap, "train": [span(s) for s in tr], "val": [span(s) for s in va]})
+        inp = CalibInputs(recordings=recordings, settings=FitSettings(), sources=sources, source=self)
+        inp.device = self.device or device_name(fmts[0] if fmts else "auto", inp.train[0].name if inp.train else names[0])
+        return inp
+
+    def floor_terms(self) -> Dict[str, Any]:
+        """Everything, or (a reference that cannot resolve accelerations,
+        :func:`imu_learn.calib.reference.resolves_acceleration`) no low-pass and the acc bias only, M_a
+        held at the identity."""
+        from imu_learn.baselines.traditional import ACC_BIAS_ONLY  # torch: only where the floor is fitted
+
+        if self.frame is None or self.frame.resolves_acceleration:
+            return {}
+        return {"cutoffs_hz": (None,), "acc_prior": ACC_BIAS_ONLY}
+
+    def fit_floor(self, inp: CalibInputs, progress: Progress = lambda s: None, uncertainty: bool = True) -> FloorFit:
+        """The affine floor; on a reference whose stamps were moved by its own lag, the time offset kept
+        at its prior (what the fit finds on top is the IMU's offset plus the lag's rounding, not
+        observable apart from the reference's latency): the zero-order hold's half sample
+        (:data:`TIME_OFFSET_PRIOR_SAMPLES`, what an IMU on the reference's clock shows: a sample holds
+        the rate at its start over the interval after it)."""
+        fit = super().fit_floor(inp, progress, uncertainty)
+        if self.frame is not None and self.frame.applied.get("lag"):
+            fit.log["time_offset_fitted_on_the_moved_reference"] = [fit.floor.params.time_offset]
+            fit.floor = fit.floor.with_params(time_offset=TIME_OFFSET_PRIOR_SAMPLES)
+            fit.std = replace(fit.std, time_offset=np.float64(np.nan))
+        return fit
+
+    def reference(self) -> Dict[str, Any]:
+        return self.frame.to_dict() if self.frame is not None else {}
+
+    def observed(self) -> Dict[str, Dict[str, Any]]:
+        out = super().observed()
+        ref = self.frame
+        if ref is not None and not ref.resolves_acceleration:
+            why = (f"the reference at {ref.rate_hz:.3g} Hz: its velocity, smoothed over several of its poses, "
+                   "attenuates the accelerations the fit needs, so it would scale the accelerometer down and choose "
+                   "a low-pass the IMU does not need; kept at the prior (identity, no filter)")
+            for k in ("accelerometer.matrix", "cutoff_gyro", "cutoff_acc"):
+                out[k] = {"observed": False, "why": why}
+        if ref is not None and ref.applied.get("level"):
+            out["accelerometer.bias"] = {
+                "observed": True, "partly": "along gravity only: across it the bias and the tilt of the reference's "
+                f"world (levelled by calibrate, {ref.tilt_deg:.1f}° off) are one and the same unless the attitude "
+                "varies widely; the levelling absorbs part of it (0.1 m/s^2 is 0.6° of tilt)"}
+        if ref is not None and ref.applied.get("lag"):
+            out["time_offset"] = {"observed": False, "why": f"the reference's stamps were {ref.lag_s * 1e3:+.0f} ms "
+                                  "off the IMU's; the IMU's own offset cannot be told apart from the reference's latency: "
+                                  "the prior, the zero-order hold's half sample"}
+        return out
+
+
+class ConfigSource(Source):
+    """A fit or evaluate config's train/val split (its recordings' ground truth), with evaluate's
+    FitSettings for it; ``data_root`` overrides the config's."""
+
+    kind = "poses"
+
+    def __init__(self, config: Path, data_root: Optional[Any] = None, device: Optional[str] = None) -> None:
+        self.config, self.data_root, self.device = Path(config), data_root, device
+
+    def read(self, progress: Progress = lambda s: None) -> CalibInputs:
+        from imu_learn.data.splits import data_root_dir, make_split
+        from imu_learn.eval.run import load_eval_config
+        from imu_learn.settings import read_toml
+        from imu_learn.train.config import load_config
+
+        overrides = ["--data.data_root", self.data_root] if self.data_root else []
+        if "base" in read_toml(self.config):  # an evaluate config: its base holds the data
+            res = load_eval_config(self.config, overrides)
+            data, settings = res.run.data, res.fit_settings()
+        else:
+            run = load_config(self.config, overrides)
+            data = run.data
+            settings = FitSettings(window=data.window, seed=run.seed, gravity=data.gravity)
+        split = make_split(data)
+        root = data_root_dir(data)
+        sources = [{**row, "path": under_root(row.get("path"), root), "role": role}
+                   for role in ("train", "val") for row in split.record[role]]
+        device = self.device or device_name(data.roots[0].format if data.roots else "auto", split.train[0].name)
+        recordings = (blocks(split.train, [recording_name(s.name) for s in split.train], TRAIN)
+                      + blocks(split.val, [recording_name(s.name) for s in split.val], VAL))
+        return CalibInputs(recordings=recordings, settings=settings, device=device, sources=sources, source=self)
+
+
+class StillSource(Source):
+    """Recordings without a reference (``--imu-only``): the IMU alone, the noise of its still stretches."""
+
+    kind = "none"
+
+    def __init__(self, inputs: Sequence[Path], fmt: str = "auto", columns: Any = None,
+                 device: Optional[str] = None) -> None:
+        self.inputs, self.fmt, self.columns, self.device = [Path(p) for p in inputs], fmt, columns, device
+
+    def read(self, progress: Progress = lambda s: None) -> CalibInputs:
+        _check_exist(self.inputs)
+        recordings, sources, fmts = [], [], []
+        for path in self.inputs:
+            fmts.append(_format(path, self.fmt, self.columns))
+            piece = imu_piece(path, self.fmt, self.columns)
+            recordings.append(Recording(piece.name, NOISE, [piece], self.kind, ()))
+            sources.append({"recording": str(path), "format": fmts[-1], "role": "noise (IMU only)"})
+        device = self.device or device_name(fmts[0] if fmts else "auto", recordings[0].name)
+        return CalibInputs(recordings=recordings, device=device, sources=sources, source=self)
+
+    def observed(self) -> Dict[str, Dict[str, Any]]:
+        return {}
+
+
+def imu_piece(path: Path, fmt: str, columns: Any = None) -> StillPiece:
+    """A recording's IMU alone (a layout without stamps of its own, BROAD, reads them with its ground truth)."""
+    from imu_learn.data.formats import read_imu_source, read_recording
+
+    src = read_imu_source(path, fmt, columns=columns)
+    if src.t_ns is not None:
+        return StillPiece(_name(path), src.t_ns, src.gyro, src.acc)
+    imu, _ = read_recording(path, fmt)
+    return StillPiece(path.stem, imu.t_ns, imu.gyro, imu.acc)
