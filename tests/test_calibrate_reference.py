@@ -9,8 +9,8 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from crops import EASY, SHIPPED
 
+from crops import EASY, SHIPPED
 from imu_learn.cli import main
 from imu_learn.core.quat import quat_mul, wxyz_to_xyzw
 from imu_learn.data.formats import read_recording
