@@ -22,8 +22,14 @@ from imu_learn.train.config import build_config, load_config
 
 logger = logging.getLogger(__name__)
 
-DESCRIPTION = """Calibrate an IMU against a reference trajectory (ground truth, motion capture, or a TUM trajectory
-from VIO via --groundtruth; or a config's training split via --config): the time offset and the
+DESCRIPTION = """Calibrate an IMU against a reference trajectory (ground truth, motion capture, a VIO/SLAM trajectory
+in its camera's frame, RTK positions via --groundtruth; or a config's training split via --config).
+The reference is checked against the IMU first: its rotation to the IMU (from rotation rates, or
+--extrinsics), its lag, gravity in its world and its scale; what cannot be resolved is refused (exit 2,
+one line), and only what the reference observes is fitted (a 20-30 Hz VO: no acc scale or low-pass;
+positions: the biases). A profile outside what a MEMS IMU can be (scale 0.8-1.25, misalignment < 5°,
+|gyro bias| < 0.1 rad/s, |acc bias| < 1 m/s^2, gravity within 5 %) or one that makes the held-back block
+worse is not written (--force writes it with a warning). Fitted: the time offset and the
 gyroscope/accelerometer affine calibration (scale, misalignment, bias; evaluate's traditional+timing
 floor, with the same settings), gravity, and the noise: white-noise densities and bias random walks
 from the residuals against the reference and from the Allan deviation of still stretches. A still
