@@ -135,11 +135,14 @@ def test_positions_only_is_refused():
         resolve_frame([(imu, ref)])
 
 
-def test_planar_odometry_is_refused():
+def test_planar_odometry_is_the_odometry_source_s_not_the_6dof_path():
+    from imu_learn.calib.odometry import is_planar_odometry
+
     imu, seg = flight(planar=True)
     ref = reference_of(seg, rot([0, 0, 1], 119), lag_s=0.091)
     ref = GroundTruth(ref.t_ns, ref.p * [1, 1, 0], ref.q_wxyz)  # yaw-only quaternions (planar motion), z = 0
-    with pytest.raises(ReferenceFrameError, match="planar.*wheel odometry"):
+    assert is_planar_odometry(ref)  # calibrate's source selection reads it as odometry (calib.odometry)
+    with pytest.raises(ReferenceFrameError, match="planar.*wheel odometry.*reads it as odometry"):
         resolve_frame([(imu, ref)])
 
 

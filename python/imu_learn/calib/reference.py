@@ -463,16 +463,18 @@ def check_orientation(ref: GroundTruth, name: str) -> None:
 
 
 def check_not_odometry(ref: GroundTruth, name: str) -> None:
-    """Planar wheel odometry (every orientation a yaw about the world's z, the height constant) observes
-    yaw rate and forward speed only: the affine floor would fit the IMU's roll and pitch axes against
-    zero."""
-    up = quat_rotate(ref.q_wxyz, np.broadcast_to([0.0, 0.0, 1.0], (len(ref.q_wxyz), 3)))
-    tilt = np.degrees(np.arccos(np.clip(up[:, 2], -1.0, 1.0)))
-    if float(np.max(tilt)) < 0.01 and float(np.ptp(ref.p[:, 2])) < 1e-6:
+    """Planar wheel odometry (every orientation a yaw about the world's z, the height constant;
+    :func:`imu_learn.calib.odometry.is_planar_odometry`, the rule calibrate's source selection uses)
+    observes yaw rate and forward speed only: the 6-DoF path would fit the IMU's roll and pitch axes
+    against zero, so it is not taken here; :class:`imu_learn.calib.odometry.OdometrySource` fits what it
+    observes (``imu-learn calibrate --groundtruth`` picks it for such a file)."""
+    from imu_learn.calib.odometry import is_planar_odometry
+
+    if is_planar_odometry(ref):
         raise ReferenceFrameError(
             f"{name}: the reference is planar (no roll, no pitch, a constant height: wheel odometry); it observes "
-            "yaw rate and forward speed only, not the affine floor; use it as aiding (imu-learn navigate --aiding "
-            "FILE --aiding-kind relative-pose), or calibrate --imu-only for the noise")
+            "yaw rate and forward speed only, not a 6-DoF frame: calibrate reads it as odometry (OdometrySource: the "
+            "gyro bias and scale about the vertical axis)")
 
 
 def to_imu_frame(ref: GroundTruth, fit: FrameFit, index: int) -> GroundTruth:

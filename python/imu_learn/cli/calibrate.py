@@ -93,13 +93,18 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 def source_of(args: argparse.Namespace) -> Source:
     """The reference source the options name: --config's split, --imu-only's still recordings, a
-    positions-only --groundtruth (GNSS), else poses (any frame)."""
+    positions-only --groundtruth (GNSS), a planar odometry one (the yaw rate), else poses (any frame)."""
     if args.config:
         return ConfigSource(args.config, args.data_root, args.device)
     if args.imu_only:
         return StillSource(args.input, args.format, csv_layout(args), args.device)
     if any(is_positions_reference(g) for g in args.groundtruth or []):
         return source_from_cli(args)  # positions only: attitude from the navigator's smoother
+    from imu_learn.calib.odometry import OdometrySource, is_odometry_reference
+
+    if any(is_odometry_reference(g) for g in args.groundtruth or []):  # planar odometry: the yaw rate only
+        return OdometrySource(args.input, args.groundtruth, args.format, csv_layout(args), args.max_gap_s,
+                              args.val_fraction, args.device)
     return PosesSource(args.input, args.groundtruth or [], args.format, csv_layout(args), args.extrinsics,
                        args.max_gap_s, args.val_fraction, args.device)
 
