@@ -27,8 +27,11 @@ RPY = (180.0, 0.0, 90.0)  # the IMU's mounting: body (x forward, z up) = M imu
 T0_NS = 1_000_000_000_000
 
 
-def synthetic_drive(folder: Path, seconds: float = 90.0, seed: int = 0):
-    """ASL recording ``folder/car`` (IMU with biases and noise) and ``folder/fixes.tum`` (positions)."""
+def synthetic_drive(folder: Path, seconds: float = 90.0, seed: int = 0, imu_late_s: float = 0.0,
+                    tilt: float = 1.0):
+    """ASL recording ``folder/car`` (IMU with biases and noise; its stamps ``imu_late_s`` late, a logging
+    delay) and ``folder/fixes.tum`` (positions). ``tilt`` scales the pitch and roll rates (the roll the
+    track cannot tell wanders to tens of degrees at 1)."""
     rng = np.random.default_rng(seed)
     fs, sub = 100, 10
     dt = 1.0 / (fs * sub)
@@ -36,7 +39,7 @@ def synthetic_drive(folder: Path, seconds: float = 90.0, seed: int = 0):
     moving = np.clip((tt - 3.0) / 5.0, 0.0, 1.0)  # still for 3 s, then speeding up over 5 s
     speed = moving * (8.0 + 2.0 * np.sin(0.3 * tt))
     dspeed = np.gradient(speed, dt)
-    w = np.stack([0.04 * np.sin(2 * np.pi * tt / 5.0), 0.05 * np.sin(2 * np.pi * tt / 9.0),
+    w = np.stack([tilt * 0.04 * np.sin(2 * np.pi * tt / 5.0), tilt * 0.05 * np.sin(2 * np.pi * tt / 9.0),
                   0.3 * np.sin(2 * np.pi * tt / 20.0) + 0.15 * np.sin(2 * np.pi * tt / 7.0)], axis=1) * moving[:, None]
     R = np.empty((len(tt), 3, 3))
     R[0] = Rotation.from_euler("z", 30, degrees=True).as_matrix()
@@ -51,7 +54,7 @@ def synthetic_drive(folder: Path, seconds: float = 90.0, seed: int = 0):
     M = mounting_rotation(RPY)
     gyro = w[i] @ M + B_G + rng.normal(0, 1e-3 * np.sqrt(fs), (len(i), 3))
     acc = f_body[i] @ M + B_A + rng.normal(0, 1e-2 * np.sqrt(fs), (len(i), 3))
-    t_ns = T0_NS + np.round(tt[i] * 1e9).astype(np.int64)
+    t_ns = T0_NS + np.round((tt[i] + imu_late_s) * 1e9).astype(np.int64)
     rec = folder / "car"
     (rec / "mav0" / "imu0").mkdir(parents=True)
     with open(rec / "mav0" / "imu0" / "data.csv", "w") as fh:
@@ -94,7 +97,8 @@ def test_biases_from_positions(tmp_path):
     from imu_learn.calib.run import CalibOptions
 
     rec, fixes = synthetic_drive(tmp_path, seconds=60.0)
-    opts = P.PositionsOptions(imu_noise=(1e-3, 1e-2, 1e-5, 1e-4), max_iterations=2, max_windows=300)
+    opts = P.PositionsOptions(imu_noise=(1e-3, 1e-2, 1e-5, 1e-4), max_iterations=2, max_windows=300,
+                              imu_delay_s=0.0)  # given: this car's roll wanders (synthetic_drive's tilt)
     res = P.calibrate_positions(rec, fixes, tmp_path / "cal", opts, CalibOptions(plot=False))
     prof = Profile.load(tmp_path / "cal" / "profile.json")
     np.testing.assert_allclose(prof.gyro.bias, B_G, atol=5e-4)
@@ -108,8 +112,79 @@ def test_biases_from_positions(tmp_path):
     for k in ("gyroscope.matrix", "accelerometer.matrix", "g_sensitivity", "cutoff_gyro", "cutoff_acc", "time_offset"):
         assert not prof.observed[k]["observed"], k
     assert prof.reference["kind"] == "positions" and 1 <= prof.reference["passes"] <= 2
+    assert prof.reference["navigator"]["imu_delay"] == {"s": 0.0, "std_s": None, "from": "given"}
     assert prof.checks and not prof.checks["failed"]  # calibrate's plausibility checks ran on it
     assert res.profile.floor == prof.floor and (tmp_path / "cal" / "imu.yaml").is_file()
+
+
+def test_imu_delay_from_the_track(tmp_path):
+    """A log written 0.12 s late: the estimate is -0.12 s in the navigator's convention (added to every IMU
+    stamp), within 3 standard errors or 0.03 s; none: near 0."""
+    from imu_learn.data import formats
+
+    for late, name in ((0.12, "late"), (0.0, "on_time")):
+        rec, fixes = synthetic_drive(tmp_path / name, seconds=60.0, imu_late_s=late, tilt=0.0)  # a level car: roll biases it (references.md)
+        src = formats.read_imu_source(rec)
+        t, p, g, _ = P.read_fixes(fixes)
+        est = P.estimate_imu_delay(src.t_ns, src.acc, t, p, g)
+        assert not est["at_edge"] and est["fixes_used"] > 400
+        assert abs(est["imu_delay_s"] + late) < max(0.03, 3 * est["std_s"]), est
+        assert 0 < est["std_s"] < 0.02 and len(est["blocks_s"]) == 4
+        if late:
+            assert est["residual_mps2"] < est["residual_at_zero_mps2"]
+
+
+def calibrate_args(*argv: str):
+    from imu_learn.cli.common import parser
+
+    return parser("calibrate").parse_args(list(argv))
+
+
+def test_navigator_options_reach_the_source(tmp_path):
+    from imu_learn.cli.calibrate import source_of
+
+    rec, fixes = synthetic_drive(tmp_path, seconds=12.0)
+    args = calibrate_args("--input", str(rec), "--groundtruth", str(fixes), "--out", str(tmp_path / "cal"),
+                          "--imu-rotation-rpy-deg", "180,-6.79,185.35", "--imu-delay-s", "-0.125",
+                          "--lever-arm", "0,-0.05,0")
+    src = source_of(args)
+    assert isinstance(src, P.PositionsSource)
+    assert src.opts.imu_rotation_rpy_deg == (180.0, -6.79, 185.35)
+    assert src.opts.imu_delay_s == -0.125 and src.opts.lever_arm == (0.0, -0.05, 0.0)
+    src = source_of(calibrate_args("--input", str(rec), "--groundtruth", str(fixes), "--out", str(tmp_path / "c2")))
+    assert src.opts.imu_rotation_rpy_deg is None and src.opts.imu_delay_s is None and src.opts.lever_arm is None
+    # the delay given reaches the profile's reference as given
+    res = P.positions_floor.__defaults__  # noqa: F841 - the signature stays (imu, ref, opts, work, progress, device)
+    delay, info = P.imu_delay(src.opts.__class__(imu_delay_s=-0.125), None, None, None, 9.81)
+    assert delay == -0.125 and info == {"s": -0.125, "std_s": None, "from": "given"}
+
+
+@pytest.mark.parametrize("extra, kind", [(["--imu-delay-s", "0.1"], "poses"),
+                                         (["--lever-arm", "0,0,0.1", "--imu-rotation-rpy-deg", "0,0,90"], "poses"),
+                                         (["--imu-only", "--imu-delay-s", "0.1"], "none")])
+def test_navigator_options_refused_with_another_reference(tmp_path, capsys, extra, kind):
+    rec, fixes = synthetic_drive(tmp_path, seconds=12.0)
+    six = tmp_path / "pose.tum"  # a 6-DoF reference: the poses kind
+    six.write_text("".join(f"{1000 + i * 0.1:.1f} 0 0 0 {np.sin(i * 0.05):.6f} 0 0 {np.cos(i * 0.05):.6f}\n"
+                           for i in range(50)))
+    gt = [] if "--imu-only" in extra else ["--groundtruth", str(six)]
+    rc = main(["calibrate", "--input", str(rec), *gt, "--out", str(tmp_path / "cal"), *extra])
+    err = [line for line in capsys.readouterr().err.splitlines() if "error" in line]
+    assert rc == 2 and len(err) == 1, err
+    assert f"not used with the {kind} reference kind" in err[0] and extra[-2] in err[0]
+    assert not (tmp_path / "cal" / "profile.json").exists()
+
+
+def test_lever_arm_and_extrinsics_not_both(tmp_path):
+    from imu_learn.errors import ConfigError
+
+    rec, fixes = synthetic_drive(tmp_path, seconds=12.0)
+    yaml = tmp_path / "sensor.yaml"
+    yaml.write_text("T_BS:\n  cols: 4\n  rows: 4\n  data: [1, 0, 0, 0, 0, 1, 0, 0, 0, 0, 1, 0.2, 0, 0, 0, 1]\n")
+    args = calibrate_args("--input", str(rec), "--groundtruth", str(fixes), "--out", str(tmp_path / "cal"),
+                          "--lever-arm", "0,0,0.1", "--extrinsics", str(yaml))
+    with pytest.raises(ConfigError, match="--lever-arm and --extrinsics"):
+        P.source_from_cli(args)
 
 
 # --- the real drive ------------------------------------------------------------------------------
@@ -137,3 +212,5 @@ def test_calibrate_the_drive_from_its_rtk_fixes(tmp_path, capsys):
     assert np.all(np.abs(prof.gyro.bias) < 0.02) and np.all(np.abs(prof.acc.bias) < 0.5)
     d = json.loads((tmp_path / "cal" / "profile.json").read_text())
     assert d["reference"]["passes"] >= 1
+    delay = d["reference"]["navigator"]["imu_delay"]  # estimated: the log is about 0.125-0.19 s late
+    assert delay["from"].startswith("estimated") and -0.25 < delay["s"] < -0.1 and 0 < delay["std_s"] < 0.05

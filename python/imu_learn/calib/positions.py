@@ -24,9 +24,13 @@ A reference of positions alone cannot be compared with the gyroscope directly
 The mounting (which IMU axis is forward) matters to the navigator: it starts with the body x-axis along
 the track. Given (``imu_rotation_rpy_deg``) it is used as is; otherwise :func:`forward_mounting`
 estimates it from the data: the IMU's up from the accelerometer at the start, its forward from the
-horizontal specific force against the track's along- and cross-track accelerations. The logging delay
-(``imu_delay_s``) and the antenna's lever arm are the navigator's options and stay out of the profile
-(its time offset is 0 and not observed).
+horizontal specific force against the track's along- and cross-track accelerations. The IMU's logging
+delay against the positions (``imu_delay_s``, the navigator's convention: added to every IMU stamp) is
+given, or estimated from the data (:func:`estimate_imu_delay`: the same levelled horizontal specific
+force against the track's, over a 1-D search of candidate delays); a lag left in leaks into the forward
+accelerometer bias. The delay and the antenna's lever arm are the navigator's options and stay out of
+the profile (its time offset is 0 and not observed); profile.json's ``reference`` records them, the
+delay with its standard error and whether it was given or estimated.
 
 What the profile says it observed (:func:`observed`): the gyro and accelerometer biases; the matrices,
 g-sensitivity, cutoffs and time offset are held at their priors. :class:`PositionsSource` is calibrate's
@@ -73,7 +77,7 @@ class PositionsOptions:
 
     fmt: str = "auto"  # the recording's layout
     imu_rotation_rpy_deg: Optional[Tuple[float, float, float]] = None  # None: :func:`forward_mounting`
-    imu_delay_s: float = 0.0
+    imu_delay_s: Optional[float] = None  # added to every IMU stamp; None: :func:`estimate_imu_delay`
     lever_arm: Optional[Tuple[float, float, float]] = None
     imu_noise: Optional[Tuple[float, float, float, float]] = None  # None: the navigator's built-in figures
     keyframe_hz: float = 10.0
@@ -214,6 +218,95 @@ def _level_rotation(up: np.ndarray) -> np.ndarray:
 
 
 # ------------------------------------------------------------------------------------------------
+# the IMU's logging delay, from the data
+
+
+def estimate_imu_delay(t_ns: np.ndarray, acc: np.ndarray, fix_t_ns: np.ndarray, fix_p: np.ndarray,
+                       gravity: float = 9.81, search_s: float = 0.5, step_s: float = 0.005, blocks: int = 4,
+                       min_speed: float = 1.0, level_s: float = 2.0, span_s: float = 0.5) -> Dict[str, Any]:
+    """The IMU's logging delay against the positions, in the navigator's convention (``--imu-delay-s``:
+    added to every IMU stamp; a log written 0.125 s late gives -0.125), without a reference attitude.
+
+    The IMU's specific force is levelled with its mean over the first ``level_s`` (as
+    :func:`forward_mounting`) and smoothed with the kernel the track's second difference over +-T applies
+    (a triangle of half-width T: ``span_s``, at least two fix periods; it averages the fixes' noise); the
+    track gives its along-track acceleration plus gravity along the grade and its cross-track one at every
+    fix faster than ``min_speed``. For each candidate
+    delay d in [-search_s, search_s] (steps of ``step_s``) the IMU's horizontal force at the stamps
+    ``fix - d`` is fitted to the track's by one complex factor (the forward axis's heading and a scale,
+    least squares); the delay is the one with the least RMS residual, refined by a parabola through
+    its neighbours. Standard error: the same search on ``blocks`` time blocks alone, spread /
+    sqrt(blocks). Returns {"imu_delay_s", "std_s", "blocks_s", "residual_mps2", "residual_at_zero_mps2",
+    "fixes_used", "search_s", "at_edge"} (at_edge: the minimum at the end of the search, not trusted)."""
+    t = (np.asarray(t_ns, dtype=np.int64) - int(t_ns[0])) * 1e-9
+    tf = (np.asarray(fix_t_ns, dtype=np.int64) - int(t_ns[0])) * 1e-9
+    acc = np.asarray(acc, dtype=np.float64)
+    up = np.mean(acc[t <= t[0] + level_s], axis=0)
+    f = (acc @ _level_rotation(up / np.linalg.norm(up)).T)[:, :2]
+    T = max(span_s, 2 * float(np.median(np.diff(tf))))
+    pt = [np.stack([np.interp(tf + u, tf, fix_p[:, j]) for j in range(3)], axis=1) for u in (-T, T)]
+    v = (pt[1] - pt[0]) / (2 * T)
+    a = (pt[1] - 2 * np.asarray(fix_p, dtype=np.float64) + pt[0]) / T ** 2
+    speed = np.linalg.norm(v[:, :2], axis=1)
+    sp = np.maximum(speed, 1e-9)
+    track = ((a[:, 0] * v[:, 0] + a[:, 1] * v[:, 1] + gravity * v[:, 2]) / sp  # along, with the grade
+             + 1j * (v[:, 0] * a[:, 1] - v[:, 1] * a[:, 0]) / sp)  # cross (to the left)
+    dt = float(np.median(np.diff(t)))
+    h = max(1, int(round(T / dt)))
+    kern = np.concatenate([np.arange(1, h + 1), np.arange(h + 1, 0, -1)]).astype(np.float64)
+    kern /= kern.sum()
+    z = np.convolve(f[:, 0], kern, "same") + 1j * np.convolve(f[:, 1], kern, "same")
+    ok = speed > min_speed
+    ok &= (tf - T >= tf[0]) & (tf + T <= tf[-1])
+    ok &= (tf - search_s > t[0] + 2 * h * dt) & (tf + search_s < t[-1] - 2 * h * dt)
+    if ok.sum() < 40:
+        raise InvalidInputError(f"positions: {int(ok.sum())} fixes faster than {min_speed:g} m/s; the IMU's logging "
+                                "delay cannot be estimated from the track (give --imu-delay-s)")
+    ds = np.arange(-search_s, search_s + step_s / 2, step_s)
+    tk = tf[ok]
+    Z = np.stack([np.interp(tk - d, t, z.real) + 1j * np.interp(tk - d, t, z.imag) for d in ds])
+    S = track[ok]
+
+    def search(sel: np.ndarray) -> Tuple[float, np.ndarray, int]:
+        s_ = S[sel]
+        c = (Z[:, sel] @ s_.conj()) / np.vdot(s_, s_).real
+        r = np.sqrt(np.mean(np.abs(Z[:, sel] - c[:, None] * s_[None, :]) ** 2, axis=1))
+        i = int(np.argmin(r))
+        d = float(ds[i])
+        if 0 < i < len(ds) - 1:
+            den = r[i - 1] - 2 * r[i] + r[i + 1]
+            if den > 0:
+                d += 0.5 * step_s * float(r[i - 1] - r[i + 1]) / float(den)
+        return d, r, i
+
+    d, r, i = search(np.ones(len(S), dtype=bool))
+    edges = np.linspace(tk[0], tk[-1] + 1e-9, blocks + 1)
+    per = []
+    for b in range(blocks):
+        sel = (tk >= edges[b]) & (tk < edges[b + 1])
+        if sel.sum() >= 20:
+            per.append(search(sel)[0])
+    std = float(np.std(per, ddof=1) / math.sqrt(len(per))) if len(per) >= 2 else math.nan
+    return {"imu_delay_s": d, "std_s": std, "blocks_s": per, "residual_mps2": float(r[i]),
+            "residual_at_zero_mps2": float(r[int(np.argmin(np.abs(ds)))]), "fixes_used": int(ok.sum()),
+            "search_s": search_s, "at_edge": i in (0, len(ds) - 1)}
+
+
+def imu_delay(opts: "PositionsOptions", imu: ImuData, fix_t: np.ndarray, fix_p: np.ndarray,
+              gravity: float) -> Tuple[float, Dict[str, Any]]:
+    """(the delay the navigator gets, profile.json's ``reference.imu_delay`` entry): ``opts.imu_delay_s``
+    as given, else :func:`estimate_imu_delay`."""
+    if opts.imu_delay_s is not None:
+        return float(opts.imu_delay_s), {"s": float(opts.imu_delay_s), "std_s": None, "from": "given"}
+    est = estimate_imu_delay(imu.t_ns, imu.acc, fix_t, fix_p, gravity)
+    if est["at_edge"]:
+        raise InvalidInputError(f"positions: the IMU's logging delay is beyond +-{est['search_s']:g} s or not "
+                                "observed by the track (give --imu-delay-s)")
+    return est["imu_delay_s"], {"s": est["imu_delay_s"], "std_s": est["std_s"],
+                                "from": "estimated from the track (estimate_imu_delay)", **est}
+
+
+# ------------------------------------------------------------------------------------------------
 # one pass: the smoother, its trajectory as a reference, the bias-only floor against it
 
 
@@ -310,7 +403,7 @@ def observed() -> Dict[str, Dict[str, Any]]:
         out[k]["why"] = ("a positions-only reference, smoothed through keyframes, cannot tell a low-pass the IMU needs; "
                          "kept at the prior (no filter)")
     out["time_offset"]["why"] = ("positions only: the IMU's offset cannot be told apart from the logging delay the "
-                                 "navigator was given (imu_delay_s in the reference entry); kept at 0")
+                                 "navigator was given or estimated (reference.navigator.imu_delay); kept at 0")
     return out
 
 
@@ -332,6 +425,12 @@ def positions_floor(imu_path: Path, ref_path: Path, opts: PositionsOptions = Pos
                   acc=np.asarray(src.acc, dtype=np.float64))
     rate = float(sample_rate_hz(imu.t_ns))
     fix_t, fix_p, gravity, ref_fmt = read_fixes(ref_path)
+    if opts.imu_delay_s is None:
+        progress("positions: the IMU's logging delay from the track")
+    delay, delay_info = imu_delay(opts, imu, fix_t, fix_p, gravity)
+    if delay_info["from"] != "given":
+        progress(f"positions: IMU delay {delay:+.3f} s (+-{delay_info['std_s']:.3f}), estimated")
+    opts = replace(opts, imu_delay_s=delay)
     if opts.imu_rotation_rpy_deg is not None:
         rpy, mount_info = [float(x) for x in opts.imu_rotation_rpy_deg], {"from": "given"}
     else:
@@ -388,7 +487,7 @@ def positions_floor(imu_path: Path, ref_path: Path, opts: PositionsOptions = Pos
                       "as the reference, the bias-only floor fitted against it, the smoother run again with it; "
                       "repeated until the biases change by less than their standard error",
             "navigator": {"imu_rotation_rpy_deg": rpy, "mounting": mount_info, "imu_delay_s": opts.imu_delay_s,
-                          "lever_arm_m": None if opts.lever_arm is None else list(opts.lever_arm),
+                          "imu_delay": delay_info, "lever_arm_m": None if opts.lever_arm is None else list(opts.lever_arm),
                           "imu_noise": None if opts.imu_noise is None else list(opts.imu_noise),
                           "keyframe_hz": opts.keyframe_hz, "nhc": opts.nhc, "gravity_mps2": gravity},
             "passes": len(passes), "converged": bool(converged),
@@ -496,8 +595,8 @@ def calibrate_positions(imu_path: Path, ref_path: Path, out_dir: Path, opts: Pos
 
 def source_from_cli(args: Any) -> PositionsSource:
     """``imu-learn calibrate --input REC --groundtruth POSITIONS``'s source, with the command's options
-    (one recording; ``--extrinsics``' translation is the antenna's lever arm); the navigator's passes
-    in ``--out``/positions."""
+    (one recording; the navigator's options :func:`navigator_options`); the navigator's passes in
+    ``--out``/positions."""
     from imu_learn.errors import ConfigError
 
     if len(args.input) != 1 or len(args.groundtruth or []) != 1:
@@ -506,10 +605,46 @@ def source_from_cli(args: Any) -> PositionsSource:
         raise ConfigError("--learned needs a 6-DoF reference; a positions reference gives the bias-only floor")
     if args.format == "csv-columns" or any(getattr(args, k, None) is not None for k in ("columns", "time_unit")):
         raise ConfigError("calibrate with a positions reference reads a recording's own layout, not a user's CSV")
-    lever = None
-    if args.extrinsics:
+    opts = PositionsOptions(fmt=args.format, val_fraction=args.val_fraction, **navigator_options(args))
+    return PositionsSource(args.input[0], args.groundtruth[0], opts, Path(args.out) / "positions", args.device)
+
+
+NAVIGATOR_OPTIONS = ("imu_rotation_rpy_deg", "imu_delay_s", "lever_arm")  # calibrate's options of navigate's names
+
+
+def navigator_options(args: Any) -> Dict[str, Any]:
+    """The :class:`PositionsOptions` fields calibrate's navigator options give, with ``imu-learn
+    navigate``'s names and conventions: ``--imu-rotation-rpy-deg R,P,Y`` (the body frame relative to
+    the IMU frame), ``--imu-delay-s S`` (added to every IMU stamp; absent: estimated) and ``--lever-arm
+    X,Y,Z`` (the antenna from the IMU in the body frame; or ``--extrinsics``' translation, not both)."""
+    from imu_learn.errors import ConfigError
+    from imu_learn.fuse.navigate import parse_vector
+
+    out: Dict[str, Any] = {}
+    rpy, delay, lever = (getattr(args, k, None) for k in NAVIGATOR_OPTIONS)
+    if rpy is not None:
+        out["imu_rotation_rpy_deg"] = parse_vector(rpy, 3, "--imu-rotation-rpy-deg")
+    if delay is not None:
+        if not math.isfinite(delay):
+            raise ConfigError(f"--imu-delay-s: must be finite, got {delay!r}")
+        out["imu_delay_s"] = float(delay)
+    if lever is not None:
+        if getattr(args, "extrinsics", None):
+            raise ConfigError("--lever-arm and --extrinsics both give the antenna's lever arm; give one")
+        out["lever_arm"] = parse_vector(lever, 3, "--lever-arm")
+    elif getattr(args, "extrinsics", None):
         from imu_learn.data.formats.extrinsics import read_t_bs
 
-        lever = tuple(float(x) for x in read_t_bs(args.extrinsics)[:3, 3])
-    opts = PositionsOptions(fmt=args.format, lever_arm=lever, val_fraction=args.val_fraction)
-    return PositionsSource(args.input[0], args.groundtruth[0], opts, Path(args.out) / "positions", args.device)
+        out["lever_arm"] = tuple(float(x) for x in read_t_bs(args.extrinsics)[:3, 3])
+    return out
+
+
+def refuse_navigator_options(args: Any, kind: str) -> None:
+    """A :class:`ConfigError` when navigator options (:data:`NAVIGATOR_OPTIONS`) come with a reference
+    kind other than positions, which does not use them."""
+    from imu_learn.errors import ConfigError
+
+    given = [f"--{k.replace('_', '-')}" for k in NAVIGATOR_OPTIONS if getattr(args, k, None) is not None]
+    if given and kind != PositionsSource.kind:
+        raise ConfigError(f"{', '.join(given)}: the navigator's options for a positions-only --groundtruth (GNSS); "
+                          f"not used with the {kind} reference kind")

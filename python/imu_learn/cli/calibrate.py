@@ -10,7 +10,7 @@ import sys
 from pathlib import Path
 from typing import Any, Callable, List, Optional, Sequence
 
-from imu_learn.calib.positions import is_positions_reference, source_from_cli
+from imu_learn.calib.positions import is_positions_reference, refuse_navigator_options, source_from_cli
 from imu_learn.calib.run import CalibInputs, CalibOptions, calibrate
 from imu_learn.calib.sources import ConfigSource, PosesSource, Source, StillSource, under_root
 from imu_learn.cli.common import add_data_root, add_imu_input_options, csv_layout, run_command
@@ -87,6 +87,15 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help="with --learned: epochs of training (default: the config's optim.epochs, 24 by default)")
     p.add_argument("--seed", type=int, metavar="S", help="with --learned: the run's seed (default: the config's, 0)")
     p.add_argument("--out", type=Path, required=True, metavar="DIR", help="output folder")
+    nav = "with a positions-only --groundtruth (GNSS), as imu-learn navigate's option of the same name: "
+    p.add_argument("--imu-rotation-rpy-deg", default=None, metavar="R,P,Y",
+                   help=nav + "the IMU's mounting, roll, pitch, yaw [deg] of the body frame relative to the IMU frame "
+                              "(default: estimated from the track)")
+    p.add_argument("--imu-delay-s", type=float, default=None, metavar="S",
+                   help=nav + "added to every IMU stamp, a logging delay (e.g. -0.125 on rtklibexplorer's drive; "
+                              "default: estimated from the track, recorded in profile.json's reference)")
+    p.add_argument("--lever-arm", default=None, metavar="X,Y,Z",
+                   help=nav + "the antenna from the IMU in the body frame [m] (instead of --extrinsics)")
     add_data_root(p, "the config's recordings")
     add_imu_input_options(p)
 
@@ -118,6 +127,7 @@ def run(args: argparse.Namespace, rest: List[str], keep: Callable[[Any], None]) 
     say = (lambda s: None) if args.quiet else (lambda s: logger.info("%s", s))
     say("reading the recordings")
     source = source_of(args)
+    refuse_navigator_options(args, source.kind)  # the navigator's options: the positions kind only
     writes = source.kind == "positions"  # its reading runs the smoother, which writes into --out
     if writes:
         keep(f"{args.out} keeps only complete files (each written atomically)")
