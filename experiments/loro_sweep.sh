@@ -6,9 +6,12 @@
 #   IMU_LEARN_DATA=<data root> bash experiments/loro_sweep.sh [WORK [SECONDS]]
 #
 # WORK (default reports/loro) gets one folder per device (loro.md, loro.json, the folds' profiles and
-# runs); SECONDS caps each device's sweep (a rerun continues where it stopped). The training budgets
+# runs); SECONDS caps each device's sweep (a rerun continues where it stopped; over a sweep scored
+# before the open-loop AOE was a cell of the verdict, the rerun scores the AOE from the saved runs
+# without retraining). The training budgets
 # are the configs' own with the epochs below (measured on one H100 machine, 16 cores, all devices at
-# once: the figures in docs/experiments/loro.md). Without a GPU each run takes about 2-6 min on one core (Blackbird 6 x 200 steps: 108 s of training).
+# once: the figures in docs/experiments/loro.md). Without a GPU each run takes about 2-6 min on one core (Blackbird 6 x 200 steps: 108 s of training);
+# on a 2-core machine shared with other jobs Blackbird's six runs, 2 at once, took about 8 min each.
 set -u
 WORK=${1:-reports/loro}
 LIMIT=${2:-0}

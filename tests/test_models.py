@@ -344,6 +344,46 @@ def what_ships():
 
 
 RATIO = r"(\d+\.\d+) \((\d+\.\d+)\)"  # the loro table's "mean (worst)" cells
+AOE_ROW = "open-loop AOE"  # the loro table's whole-stretch open-loop attitude cell (n = whole)
+LORO_ROW = re.compile(r"^\| (\S+) \| (\d+|whole) \| (open loop|start-up bias removed|open-loop AOE) \|")
+
+
+def loro_cells_lost(text: str):
+    """The card's leave-one-recording-out table read as the verdict reads it: (held-out recordings,
+    problems). A problem is a held-out recording without four relative-pose rows or without its
+    open-loop AOE row, or a cell whose seed mean is not below 0.99 or whose worst seed is above 1."""
+    rows = [r for r in text.splitlines() if LORO_ROW.match(r)]
+    held_out = list(dict.fromkeys(LORO_ROW.match(r).group(1) for r in rows))
+    problems = []
+    for rec in held_out:
+        mine = [r for r in rows if LORO_ROW.match(r).group(1) == rec]
+        aoe = [r for r in mine if LORO_ROW.match(r).group(3) == AOE_ROW]
+        if len(mine) - len(aoe) < 4:
+            problems.append(f"{rec}: fewer than four relative-pose rows")
+        if len(aoe) != 1:
+            problems.append(f"{rec}: no open-loop AOE row")
+    for r in rows:
+        pairs = re.findall(RATIO, r)
+        want = 1 if LORO_ROW.match(r).group(3) == AOE_ROW else 2
+        if len(pairs) != want:
+            problems.append(f"unreadable row: {r}")
+        problems += [f"loses to its floor: {r}" for mean, worst in pairs if not (float(mean) < 0.99 and float(worst) <= 1.0)]
+    return held_out, problems
+
+
+def test_the_cards_loro_table_check_counts_the_aoe_cell():
+    """A table that wins every relative-pose cell but loses the open-loop AOE, or has no AOE row, is not a shipped table."""
+    head = "| held out | n | protocol | floor rot [deg] | rot: recipe | rot: alone | floor trans [m] | trans: recipe | trans: alone |"
+    pose = [f"| {rec} | {n} | {p} | 0.3 | 0.900 (0.950) | 0.900 | 0.16 | 0.450 (0.480) | 0.450 |"
+            for rec in ("train", "val") for n in (10, 200) for p in ("open loop", "start-up bias removed")]
+    aoe = {rec: f"| {rec} | whole | open-loop AOE | 0.56 | {r} | 0.9 | - | - | - |"
+           for rec, r in (("train", "0.900 (0.950)"), ("val", "0.950 (0.980)"))}
+    assert loro_cells_lost("\n".join([head, *pose, *aoe.values()])) == (["train", "val"], [])
+    held, lost = loro_cells_lost("\n".join([head, *pose]))
+    assert held == ["train", "val"] and lost == ["train: no open-loop AOE row", "val: no open-loop AOE row"]
+    losing = aoe["val"].replace("0.950 (0.980)", "1.140 (1.200)")
+    _held, lost = loro_cells_lost("\n".join([head, *pose, aoe["train"], losing]))
+    assert lost == [f"loses to its floor: {losing}"]
 
 
 def test_every_device_ships_a_profile_with_a_floor():
@@ -365,11 +405,6 @@ def test_a_learned_model_ships_only_with_leave_one_recording_out_beating_its_flo
             assert "**Not shipped" in text, ckpt.name
             continue
         assert "**Ships.**" in text, ckpt.name
-        rows = [r for r in text.splitlines() if re.match(r"^\| \S+ \| \d+ \| (open loop|start-up bias removed) \|", r)]
-        held_out = {r.split("|")[1].strip() for r in rows}
-        assert len(held_out) >= 2 and len(rows) >= 4 * len(held_out), f"{ckpt.name}: no leave-one-recording-out table"
-        for r in rows:
-            pairs = re.findall(RATIO, r)
-            assert len(pairs) == 2, r
-            for mean, worst in pairs:
-                assert float(mean) < 0.99 and float(worst) <= 1.0, f"{ckpt.name}: loses to its floor: {r}"
+        held_out, lost = loro_cells_lost(text)
+        assert len(held_out) >= 2, f"{ckpt.name}: no leave-one-recording-out table"
+        assert not lost, f"{ckpt.name}: {lost}"
