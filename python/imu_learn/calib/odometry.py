@@ -214,9 +214,11 @@ def robust_line(y: np.ndarray, x: np.ndarray, iterations: int = 8) -> Tuple[floa
     return float(sol[0]), float(sol[1]), float(np.sqrt(np.sum(w * r * r) / max(1.0, np.sum(w))))
 
 
-def fit_yaw(groups: Dict[str, Sequence[Segment]], u: np.ndarray, window_s: float, blocks: int = 4) -> YawFit:
+def fit_yaw(groups: Dict[str, Sequence[Segment]], u: np.ndarray, window_s: float, blocks: int = 4,
+            min_turn: float = OdometryOptions.min_yaw_rate) -> YawFit:
     """Step 3 over every group's segments; the standard errors from the groups (one: ``blocks`` time
-    blocks) as the floor's spread."""
+    blocks) as the floor's spread (a group whose yaw rate spreads less than ``min_turn`` gives its bias
+    at the common scale and no scale)."""
     from imu_learn.calib.fit import time_blocks
 
     segs = [s for g in groups.values() for s in g]
@@ -229,16 +231,19 @@ def fit_yaw(groups: Dict[str, Sequence[Segment]], u: np.ndarray, window_s: float
     per: Dict[str, Tuple[float, float]] = {}
     for name, part in parts.items():
         py, px, _ = rate_pairs(part, u, window_s)
-        if len(py) >= 8 and np.std(px) > 1e-6:
+        if len(py) < 8:
+            continue
+        if np.std(px) >= min_turn:
             s_, b_, _ = robust_line(py, px)
             per[name] = (b_, s_)
-    k = len(per)
-    if k >= 2:
-        v = np.array(list(per.values()))
-        b_std, s_std = (np.std(v, axis=0, ddof=1) / math.sqrt(k)).tolist()
-    else:
-        b_std = s_std = math.nan
-    return YawFit(bias, scale, b_std, s_std, res, len(y), per)
+        else:  # a group that barely turns tells the bias (at the common scale), not the scale
+            per[name] = (float(np.median(py - scale * px)), math.nan)
+
+    def spread(i: int) -> float:
+        v = np.array([x[i] for x in per.values() if np.isfinite(x[i])])
+        return float(np.std(v, ddof=1) / math.sqrt(len(v))) if len(v) >= 2 else math.nan
+
+    return YawFit(bias, scale, spread(0), spread(1), res, len(y), per)
 
 
 def refine_lag(imu: ImuData, ref: GroundTruth, u: np.ndarray, lag: float, opts: OdometryOptions,
@@ -482,7 +487,7 @@ class OdometrySource(Source):
 
         assert self.u is not None, "OdometrySource: read() first"
         progress("planar odometry: the gyro bias and scale about the vertical axis")
-        self.yaw = fit_yaw(self._groups(inp), self.u, self.opts.window_s, self.opts.blocks)
+        self.yaw = fit_yaw(self._groups(inp), self.u, self.opts.window_s, self.opts.blocks, self.opts.min_yaw_rate)
         floor, std, self.scale_applied = yaw_floor(self.yaw, self.u, self.opts)
         y = self.yaw
         progress(f"odometry: gyro about the vertical: bias {y.bias:+.5f} ± {y.bias_std:.5f} rad/s, scale "
@@ -505,8 +510,16 @@ class OdometrySource(Source):
                 "mounting_yaw_std_deg": self.fwd.get("psi_std_deg"),
                 "forward_axis_in_imu": self.fwd.get("forward_axis_in_imu"),
                 "applied": {"lag": bool(self.lags), "rotation": True, "level": False, "scale": False, "lever_arm": False},
-                "rotation_deg": math.nan, "rotation_from": "planar odometry: the vertical from gravity, the forward axis "
+                "rotation_deg": self._rotation_deg(), "rotation_from": "planar odometry: the vertical from gravity, the forward axis "
                                                          "from the horizontal specific force"}
+
+    def _rotation_deg(self) -> float:
+        """The angle of R_base_imu (the IMU in the odometry's base frame), NaN before read()."""
+        if self.u is None:
+            return math.nan
+        psi = math.radians(self.fwd["psi_deg"]) if self.fwd.get("psi_deg") is not None else 0.0
+        r = _rot_z(psi) @ level(self.u)
+        return math.degrees(math.acos(float(np.clip((np.trace(r) - 1) / 2, -1.0, 1.0))))
 
     def observes_keys(self) -> Tuple[str, ...]:
         return ("gyroscope.bias",) + (("gyroscope.matrix",) if self.scale_applied else ())
@@ -535,7 +548,8 @@ class OdometrySource(Source):
         fb = "" if b is None else f" (found {b:+.3f} ± {self.fwd.get('acc_forward_bias_std_mps2', math.nan):.3f} m/s^2)"
         out["accelerometer.bias"] = {"observed": False, "why": f"{WHY}: the forward speed gives the bias along the "
                                      f"forward axis{fb}, but the vertical axis comes from the same accelerometer at rest, "
-                                     "so that bias tilts it and cancels itself on a level floor; kept at the prior 0"}
+                                     "so that bias tilts it and cancels itself on a level floor, and in turns the IMU's "
+                                     "offset from the base's centre adds a body-fixed centripetal term; kept at the prior 0"}
         out["g_sensitivity"]["why"] = f"{WHY}: no rotation across the vertical to tell it; kept at the prior 0"
         for k in ("accelerometer.matrix", "cutoff_gyro", "cutoff_acc"):
             out[k]["why"] = f"{WHY}: no specific force across the plane, no fast rotation; kept at the prior"
