@@ -10,7 +10,7 @@ import math
 import numpy as np
 import pytest
 
-from imu_learn.calib.odometry import (OdometrySource, is_odometry_reference, is_planar_odometry, vertical_axis)
+from imu_learn.calib.odometry import OdometrySource, is_odometry_reference, is_planar_odometry, vertical_axis
 from imu_learn.calib.reference import check_not_odometry, level_rotation
 from imu_learn.calib.run import CalibOptions, calibrate
 from imu_learn.data.types import GroundTruth, ImuData

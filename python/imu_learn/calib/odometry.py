@@ -51,8 +51,22 @@ import numpy as np
 
 from imu_learn.baselines.affine import Floor, TraditionalParams
 from imu_learn.baselines.base import FitSettings
-from imu_learn.calib.sources import (OBSERVABLE, TIME_OFFSET_PRIOR_SAMPLES, TRAIN, VAL, CalibInputs, Progress,
-                                     Recording, Source, _check_exist, _format, _name, device_name, held_back, span)
+from imu_learn.calib.sources import (
+    OBSERVABLE,
+    TIME_OFFSET_PRIOR_SAMPLES,
+    TRAIN,
+    VAL,
+    CalibInputs,
+    Progress,
+    Recording,
+    Source,
+    _check_exist,
+    _format,
+    _name,
+    device_name,
+    held_back,
+    span,
+)
 from imu_learn.core.quat import quat_mul
 from imu_learn.data.types import GroundTruth, ImuData, Segment
 from imu_learn.errors import ReferenceFrameError
@@ -529,7 +543,7 @@ class OdometrySource(Source):
         out: Dict[str, Dict[str, Any]] = {k: {"observed": False, "why": f"{WHY}: kept at the prior"} for k in OBSERVABLE}
         out["gyroscope.bias"] = {
             "observed": True, "why": "planar odometry observes the yaw rate: the gyro bias and scale about the vertical "
-            f"axis", "partly": f"about the vertical axis {u} only; the components across it kept at the prior 0"}
+            "axis", "partly": f"about the vertical axis {u} only; the components across it kept at the prior 0"}
         y = self.yaw
         scale = "" if y is None else f" (scale {y.scale:.4f} ± {y.scale_std:.4f})"
         if self.scale_applied:

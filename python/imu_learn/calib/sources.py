@@ -12,6 +12,8 @@ floor they observe.
   stretches only.
 * :class:`imu_learn.calib.positions.PositionsSource`: positions only (GNSS); the navigator's smoother
   makes the reference and fits the bias-only floor (it lives beside that loop).
+* :class:`imu_learn.calib.odometry.OdometrySource`: planar wheel odometry (kind ``odometry``): the yaw
+  rate only, the gyro bias and scale about the IMU's vertical axis (it lives beside its fit).
 
 A new reference kind is a new :class:`Source`: :meth:`Source.read` yields its recordings; where the
 affine fit against them (:func:`imu_learn.calib.fit.fit_floor`, with :meth:`Source.floor_terms`) is
@@ -62,7 +64,7 @@ class Recording:
     ``sources`` name it; the group the floor's spread is taken over), ``role`` (``train``: fitted;
     ``val``: held back, selects the floor's filter and offset and judges it; ``noise``: the IMU alone,
     its still stretches), its ``segments`` (the reference on the IMU stamps; :class:`StillPiece` for
-    ``noise``), the reference ``kind`` (``poses``, ``positions``, ``none``) and what that reference
+    ``noise``), the reference ``kind`` (``poses``, ``positions``, ``odometry``, ``none``) and what that reference
     observes (``observes``: the keys of :data:`OBSERVABLE` it resolves; the noise always)."""
 
     name: str
