@@ -154,7 +154,6 @@ def test_navigator_options_reach_the_source(tmp_path):
     src = source_of(calibrate_args("--input", str(rec), "--groundtruth", str(fixes), "--out", str(tmp_path / "c2")))
     assert src.opts.imu_rotation_rpy_deg is None and src.opts.imu_delay_s is None and src.opts.lever_arm is None
     # the delay given reaches the profile's reference as given
-    res = P.positions_floor.__defaults__  # noqa: F841 - the signature stays (imu, ref, opts, work, progress, device)
     delay, info = P.imu_delay(src.opts.__class__(imu_delay_s=-0.125), None, None, None, 9.81)
     assert delay == -0.125 and info == {"s": -0.125, "std_s": None, "from": "given"}
 

@@ -292,7 +292,7 @@ def estimate_imu_delay(t_ns: np.ndarray, acc: np.ndarray, fix_t_ns: np.ndarray, 
             "search_s": search_s, "at_edge": i in (0, len(ds) - 1)}
 
 
-def imu_delay(opts: "PositionsOptions", imu: ImuData, fix_t: np.ndarray, fix_p: np.ndarray,
+def imu_delay(opts: PositionsOptions, imu: ImuData, fix_t: np.ndarray, fix_p: np.ndarray,
               gravity: float) -> Tuple[float, Dict[str, Any]]:
     """(the delay the navigator gets, profile.json's ``reference.imu_delay`` entry): ``opts.imu_delay_s``
     as given, else :func:`estimate_imu_delay`."""
