@@ -230,7 +230,9 @@ TINY = [
 @pytest.fixture(scope="module")
 def run_dir(tmp_path_factory):
     d = tmp_path_factory.mktemp("models") / "run"
-    assert fit_cli.main(["--out", str(d), *TINY]) == 0
+    with pytest.MonkeyPatch.context() as mp:  # a run with relative folders, whatever the shell's data root
+        mp.delenv("IMU_LEARN_DATA", raising=False)
+        assert fit_cli.main(["--out", str(d), *TINY]) == 0
     return d
 
 
