@@ -44,6 +44,7 @@ from pathlib import Path
 from typing import Any, Callable, Dict, List, Sequence, Tuple
 
 import numpy as np
+
 from imu_learn.baselines.base import FitSettings
 from imu_learn.calib.profile import Profile
 from imu_learn.calib.run import CalibInputs, floor_profile
