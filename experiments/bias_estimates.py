@@ -6,7 +6,7 @@ floor's input (the raw gyro minus the training recordings' mean ground-truth bia
 of what is left: none (the training mean), still stretches (imu_learn.core.still), gravity consistency
 (imu_learn.core.bias_gravity) and, with --model DEVICE=PT, the learned estimator (imu_learn.nn.bias_net).
 Printed and written (JSON): the bias error |estimate - ground-truth fit| [rad/s] and the open-loop AOE
-(imu_learn.eval.peers: RMS and mean over the segment) of the raw gyro minus each estimate, and of the
+(imu_learn.score.peers: RMS and mean over the segment) of the raw gyro minus each estimate, and of the
 ground-truth fit (the oracle).
 
 Writes: the table of "Each recording's own bias" to stdout and every figure to --out (JSON).
@@ -28,7 +28,7 @@ import numpy as np
 
 from imu_learn.core.bias_gravity import gravity_bias
 from imu_learn.core.still import BIAS_SETTINGS, still_bias
-from imu_learn.eval.peers import PeerErrors, add_segment, segment_errors, summarise
+from imu_learn.score.peers import PeerErrors, add_segment, segment_errors, summarise
 from imu_learn.train.bias_data import DEVICES, Recording, load_device, training_mean
 
 Estimator = Callable[[Recording, np.ndarray], Optional[np.ndarray]]

@@ -1,6 +1,6 @@
 """Whole-recording AOE across ground-truth gaps (Brossard's / AirIMU's --mask protocol) for recordings
 whose motion capture drops out (TUM-VI): the gyro integrated open loop from the first sample through
-every gap, the error counted only where motion capture measured (eval.peers.masked_aoe).
+every gap, the error counted only where motion capture measured (score.peers.masked_aoe).
 
     IMU_LEARN_DATA=<root> python experiments/bridged_aoe.py --recordings tum-vi/dataset-room2_512_16 \
         tum-vi/dataset-room4_512_16 --checkpoint models/tumvi_bmi160.pt \
@@ -22,7 +22,7 @@ from pathlib import Path
 import numpy as np
 
 from imu_learn.data.loading import AlignOptions, load_sequence
-from imu_learn.eval.peers import covered, masked_aoe
+from imu_learn.score.peers import covered, masked_aoe
 
 
 def main() -> None:

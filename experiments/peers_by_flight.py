@@ -3,11 +3,11 @@
 For each EuRoC test flight of configs/euroc_paper.toml (MH_04, V1_03, V2_02, V1_01; V1_01 against its
 corrected 20 Hz ASL state, as the config says) and TUM-VI rooms 2 and 4 of configs/tumvi.toml:
 
-* the AOE of eval.peers: the gyro integrated open loop from the ground-truth attitude at the first
+* the AOE of score.peers: the gyro integrated open loop from the ground-truth attitude at the first
   sample, error angle e_j at every sample; **RMSE** (Brossard's and Debias_IMU's AOE) and **mean**
   (AirIMU's ``AOE``). EuRoC: per gap-free segment of the config (max_gap_s), pooled; TUM-VI:
   Brossard's protocol (the whole room integrated through motion-capture gaps of up to 3 s, counted
-  where motion capture measured: eval.peers.masked_aoe, as experiments/bridged_aoe.py);
+  where motion capture measured: score.peers.masked_aoe, as experiments/bridged_aoe.py);
 * inputs: ``raw``; ``floor``: the device profile of ``imu-learn calibrate --config CONFIG`` (its
   training split only: traditional+timing, fitted once and cached under OUT/profiles); ``floor +
   still``: that floor and the recording's own gyro bias from its still stretches, with no ground
@@ -61,9 +61,9 @@ from imu_learn.data.formats import read_imu_source
 from imu_learn.data.loading import AlignOptions, load_sequence
 from imu_learn.data.splits import data_root_dir, find_all, make_split, recording_name
 from imu_learn.data.types import Segment
-from imu_learn.eval.peers import attitude_errors, covered, masked_aoe
 from imu_learn.infer.rewrite import still_along_gravity
 from imu_learn.score.metrics import fit_startup_bias
+from imu_learn.score.peers import attitude_errors, covered, masked_aoe
 from imu_learn.train.config import load_config
 from imu_learn.util.atomic import atomic_write_text
 

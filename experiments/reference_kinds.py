@@ -5,7 +5,7 @@ references (rotated, late), each a profile of the same four flights scored open 
 For each reference kind: ``imu-learn calibrate --input F --groundtruth REF ...`` on MH_01, MH_03, MH_05
 and V2_01 (as a user runs it), then on each test flight ``imu-learn refine --profile P --bias
 still+gravity`` and the peers' open-loop figures of the refined IMU against the flight's ground truth
-(eval.peers: AOE RMSE, RO_RMSE and RP_RMSE over 1 s windows). The estimated extrinsic is compared with
+(score.peers: AOE RMSE, RO_RMSE and RP_RMSE over 1 s windows). The estimated extrinsic is compared with
 cam0's ``T_BS`` (euroc-vo/cam0_sensor.yaml).
 
     IMU_LEARN_DATA=<root> python experiments/reference_kinds.py [--out reports/reference_kinds] [--trial 0]
@@ -32,7 +32,7 @@ from imu_learn.core.quat import quat_mul, wxyz_to_xyzw, xyzw_to_wxyz
 from imu_learn.data.formats import read_imu_source, read_recording
 from imu_learn.data.formats.extrinsics import read_t_bs
 from imu_learn.data.loading import AlignOptions, align
-from imu_learn.eval.peers import PeerErrors, add_segment, segment_errors, summarise
+from imu_learn.score.peers import PeerErrors, add_segment, segment_errors, summarise
 
 TRAIN = {"MH_01_easy": "MH01", "MH_03_medium": "MH03", "MH_05_difficult": "MH05", "V2_01_easy": "V201"}
 TEST = ["MH_04_difficult", "V1_03_difficult", "V2_02_medium"]

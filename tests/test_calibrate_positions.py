@@ -1,4 +1,4 @@
-"""A device profile from positions only (imu_learn.calib.positions): attitude a latent state of the
+"""A device profile from positions only (imu_learn.fuse.calibrate_positions): attitude a latent state of the
 navigator's smoother, the bias-only floor fitted against its smoothed trajectory and iterated.
 
 Fast: a synthetic car (turns, grades, an IMU mounted upside down and yawed, constant gyro and acc
@@ -15,10 +15,10 @@ import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
-from imu_learn.calib import positions as P
 from imu_learn.calib.profile import Profile
 from imu_learn.cli import main
 from imu_learn.data.formats.gnss_imu import mounting_rotation
+from imu_learn.fuse import calibrate_positions as P
 
 G = 9.81
 B_G = np.array([0.004, -0.003, 0.005])  # rad/s, IMU frame

@@ -1,4 +1,4 @@
-"""A user's CSV mistakes never pass silently (imu_learn.data.input_checks, called by the one read of a
+"""A user's CSV mistakes never pass silently (imu_learn.data.formats.input_checks, called by the one read of a
 user's CSV): each mistake a column map and its units let through stops a command with exit 2 and one
 line naming the mistake and the option that fixes it, or a warning where the data cannot decide; a
 correct file passes without a word; --skip-bad-lines skips a logger's truncated lines and counts them.

@@ -1,4 +1,4 @@
-"""The peers' open-loop protocols (imu_learn.eval.peers): closed-form cases, an independent numpy /
+"""The peers' open-loop protocols (imu_learn.score.peers): closed-form cases, an independent numpy /
 scipy implementation on the shipped EuRoC crop, and the wiring into evaluate and its report."""
 import math
 
@@ -9,9 +9,9 @@ from scipy.spatial.transform import Rotation
 from imu_learn.baselines.base import Method, PosePrediction, Raw
 from imu_learn.core.quat import xyzw_to_wxyz
 from imu_learn.data.types import Segment
-from imu_learn.eval import peers
 from imu_learn.eval import run as ev
 from imu_learn.eval.report import _md_peers, peers_table, summary_text
+from imu_learn.score import peers
 
 G = 9.81
 

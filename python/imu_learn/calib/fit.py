@@ -30,7 +30,6 @@ from __future__ import annotations
 
 import math
 import random
-from dataclasses import dataclass, field
 from typing import Any, Callable, Dict, List, Optional, Sequence, Tuple
 
 import numpy as np
@@ -39,29 +38,12 @@ import torch
 from imu_learn.baselines.affine import ESTIMATES, Floor, TraditionalParams
 from imu_learn.baselines.base import FitSettings
 from imu_learn.baselines.traditional import TraditionalTiming
-from imu_learn.calib.profile import apply_floor
+from imu_learn.calib.profile import FloorFit, apply_floor  # noqa: F401  (FloorFit: what fit_floor returns)
 from imu_learn.core.quat import quat_rotate
 from imu_learn.data.splits import cut
 from imu_learn.data.types import Segment, median_period_ns
 
 Progress = Callable[[str], None]
-
-
-@dataclass
-class FloorFit:
-    """The floor (TraditionalTiming's), its fit log, and per parameter the standard deviation over
-    groups (``std``: the parameters' shapes; NaN with fewer than two groups). ``entries``: what
-    profile.json's ``fit_log`` says of the fit (default: the log and the groups; a reference source
-    that fits its floor otherwise says its own)."""
-
-    floor: Floor
-    log: Dict[str, list]
-    std: TraditionalParams
-    groups: List[Dict[str, object]]
-    entries: Optional[Dict[str, Any]] = field(default=None)
-
-    def log_entries(self) -> Dict[str, Any]:
-        return self.entries if self.entries is not None else {"floor": self.log, "groups": self.groups}
 
 
 def seed_all(seed: int) -> None:

@@ -45,12 +45,16 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import TYPE_CHECKING, Any, Dict, List, Optional, Sequence, Tuple
+from typing import Any, Dict, List, Optional, Sequence, Tuple
 
 import numpy as np
 
 from imu_learn.baselines.affine import Floor, TraditionalParams
 from imu_learn.baselines.base import FitSettings
+from imu_learn.calib import noise as nz
+from imu_learn.calib.frames import default_gap_s
+from imu_learn.calib.profile import FloorFit
+from imu_learn.calib.reference import _quat, fit_lag, is_planar_odometry, level_rotation
 from imu_learn.calib.sources import (
     OBSERVABLE,
     TIME_OFFSET_PRIOR_SAMPLES,
@@ -68,33 +72,17 @@ from imu_learn.calib.sources import (
     span,
 )
 from imu_learn.core.quat import quat_mul
+from imu_learn.data.formats import read_recording
+from imu_learn.data.formats.groundtruth import read_groundtruth
+from imu_learn.data.loading import AlignOptions, align
 from imu_learn.data.types import GroundTruth, ImuData, Segment
 from imu_learn.errors import ReferenceFrameError
 
-if TYPE_CHECKING:
-    from imu_learn.calib.fit import FloorFit
-
 G = 9.81
-PLANAR_TILT_DEG = 0.01  # the planar rule: no orientation tilted more than this from the world's z ...
-PLANAR_HEIGHT_M = 1e-6  # ... and a height constant within this
-
-
-def is_planar_odometry(ref: GroundTruth) -> bool:
-    """The planar rule: every orientation a yaw about the world's z and the height constant (wheel
-    odometry in ``base_link``)."""
-    from imu_learn.core.quat import quat_rotate
-
-    if len(ref.t_ns) < 2:
-        return False
-    up = quat_rotate(ref.q_wxyz, np.broadcast_to([0.0, 0.0, 1.0], (len(ref.q_wxyz), 3)))
-    tilt = np.degrees(np.arccos(np.clip(up[:, 2], -1.0, 1.0)))
-    return bool(float(np.max(tilt)) < PLANAR_TILT_DEG and float(np.ptp(ref.p[:, 2])) < PLANAR_HEIGHT_M)
 
 
 def is_odometry_reference(path: Optional[Path]) -> bool:
     """Whether the reference file ``path`` (TUM, ASL) is planar odometry (:func:`is_planar_odometry`)."""
-    from imu_learn.data.formats.groundtruth import read_groundtruth
-
     if path is None or not Path(path).is_file():
         return False
     for floats in (False, True):
@@ -144,8 +132,6 @@ def yaw_of(q_wxyz: np.ndarray) -> np.ndarray:
 
 def vertical_axis(imu: ImuData, opts: OdometryOptions = OdometryOptions()) -> Tuple[np.ndarray, str]:
     """Step 1: the IMU's up in its own coordinates, and where it came from."""
-    from imu_learn.calib import noise as nz
-
     t, a = imu.t_ns, imu.acc
     st = nz.still_stretches(t, imu.gyro, a, nz.StillSettings())
     still_s = sum((t[i1 - 1] - t[i0]) * 1e-9 for i0, i1 in st)
@@ -168,20 +154,12 @@ def vertical_axis(imu: ImuData, opts: OdometryOptions = OdometryOptions()) -> Tu
 
 def level(u: np.ndarray) -> np.ndarray:
     """The smallest rotation taking ``u`` to +z."""
-    from imu_learn.calib.reference import level_rotation
-
     return level_rotation(np.asarray(u, dtype=np.float64))
 
 
 def _rot_z(psi: float) -> np.ndarray:
     c, s = math.cos(psi), math.sin(psi)
     return np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
-
-
-def _quat(r: np.ndarray) -> np.ndarray:
-    from imu_learn.calib.reference import _quat as q
-
-    return q(r)
 
 
 def _windows(t_ns: np.ndarray, n: int) -> Tuple[np.ndarray, np.ndarray]:
@@ -288,8 +266,6 @@ def shifted(ref: GroundTruth, lag_s: float, q_base_imu: Optional[np.ndarray] = N
 
 
 def _segments(imu: ImuData, ref: GroundTruth, max_gap_s: float, name: str) -> List[Segment]:
-    from imu_learn.data.loading import AlignOptions, align
-
     return align(imu, ref, AlignOptions(max_gap_s=max_gap_s), name=name).segments
 
 
@@ -415,8 +391,6 @@ class OdometrySource(Source):
         self.scale_applied = False
 
     def read(self, progress: Progress = lambda s: None) -> CalibInputs:
-        from imu_learn.data.formats import read_recording
-
         _check_exist([*self.inputs, *self.groundtruths])
         pairs, names, sources, fmts = [], [], [], []
         for path, gt in zip(self.inputs, self.groundtruths):
@@ -432,8 +406,6 @@ class OdometrySource(Source):
                    progress: Progress = lambda s: None) -> CalibInputs:
         """Steps 1-4 (module doc) on (IMU, odometry) pairs, the recordings cut into the fitted and the
         held-back block."""
-        from imu_learn.calib.reference import fit_lag
-        from imu_learn.eval.groundtruth import default_gap_s
 
         o = self.opts
         sources = sources if sources is not None else [{"recording": n, "reference_kind": "odometry"} for n in names]
@@ -497,8 +469,6 @@ class OdometrySource(Source):
     def fit_floor(self, inp: CalibInputs, progress: Progress = lambda s: None, uncertainty: bool = True) -> FloorFit:
         """Step 3 on the fitted block: the floor of the module doc, its spread and the held-back block's
         yaw-only score (in the fit log)."""
-        from imu_learn.calib.fit import FloorFit
-
         assert self.u is not None, "OdometrySource: read() first"
         progress("planar odometry: the gyro bias and scale about the vertical axis")
         self.yaw = fit_yaw(self._groups(inp), self.u, self.opts.window_s, self.opts.blocks, self.opts.min_yaw_rate)

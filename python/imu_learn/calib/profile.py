@@ -368,3 +368,20 @@ def noise_only(device: str, sample_rate: float, noise: Dict[str, NoiseTerm], **e
                    acc=Affine(np.eye(3), np.zeros(3), UNITS["accelerometer"], nan33.copy(), nan3.copy()),
                    g_sensitivity=np.zeros((3, 3)), gravity_mps2=math.nan if "gravity" not in extra else extra.pop("gravity"),
                    gravity_mps2_std=math.nan, floor=None, noise=noise, **extra)
+
+
+@dataclass
+class FloorFit:
+    """The floor (TraditionalTiming's), its fit log, and per parameter the standard deviation over
+    groups (``std``: the parameters' shapes; NaN with fewer than two groups). ``entries``: what
+    profile.json's ``fit_log`` says of the fit (default: the log and the groups; a reference source
+    that fits its floor otherwise says its own)."""
+
+    floor: Floor
+    log: Dict[str, list]
+    std: TraditionalParams
+    groups: List[Dict[str, object]]
+    entries: Optional[Dict[str, Any]] = field(default=None)
+
+    def log_entries(self) -> Dict[str, Any]:
+        return self.entries if self.entries is not None else {"floor": self.log, "groups": self.groups}

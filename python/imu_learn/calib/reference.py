@@ -37,11 +37,20 @@ from typing import Any, Dict, List, Optional, Sequence, Tuple
 import numpy as np
 
 from imu_learn.baselines.base import FitSettings
+from imu_learn.calib.frames import (
+    default_gap_s,
+    fit_acc_rotation,
+    fit_offset,
+    kabsch,
+    mean_rates,
+    rotation_matrices,
+    segments,
+)
 from imu_learn.core.quat import quat_conj, quat_mul, quat_rotate
 from imu_learn.data.formats.extrinsics import read_t_bs
+from imu_learn.data.loading import AlignOptions
 from imu_learn.data.types import GroundTruth, ImuData, Segment, sample_rate_hz
 from imu_learn.errors import ReferenceFrameError
-from imu_learn.eval.groundtruth import default_gap_s, fit_offset, kabsch, rotation_matrices, segments
 
 G = 9.81
 
@@ -182,8 +191,6 @@ def rate_window(imu_rate: float, ref_rate: float) -> int:
 
 def rotation_spread(segs: Sequence[Segment], m: int, blocks: int = 20, seed: int = 0) -> float:
     """Standard deviation [deg] of the fitted rotation over blocks of windows resampled (a bootstrap)."""
-    from imu_learn.eval.groundtruth import mean_rates
-
     rates = [mean_rates(s, m) for s in segs if len(s) > 2 * m]
     if not rates:
         return math.nan
@@ -207,8 +214,6 @@ def _angle_deg(r: np.ndarray) -> float:
 
 def planar_ratio(segs: Sequence[Segment], m: int) -> float:
     """Smallest over largest standard deviation of the reference's mean rates along its principal axes."""
-    from imu_learn.eval.groundtruth import mean_rates
-
     b = np.concatenate([mean_rates(s, m)[1] for s in segs if len(s) > 2 * m])
     sv = np.linalg.svd(b - b.mean(0), compute_uv=False)
     return float(sv[-1] / max(sv[0], 1e-12))
@@ -388,8 +393,6 @@ def resolves_acceleration(ref_rate_hz: float, window_s: float, fraction: float =
     the floor's window ``window_s`` (a 20 Hz VO: 0.45 s against 1 s) the smoothed reference
     favours an accelerometer scaled down and low-passed, an artefact of the reference, not the IMU.
     EuRoC's 200 Hz, TUM-VI's 120 Hz and Fetch's 90 Hz motion capture resolve it (0.05-0.1 s)."""
-    from imu_learn.data.loading import AlignOptions
-
     span_s = (2 * AlignOptions().velocity_half_window + 1) / max(ref_rate_hz, 1e-9)
     return span_s <= fraction * window_s
 
@@ -398,8 +401,6 @@ def planar_rotation(segs: Sequence[Segment], m: int, rate_rms: float, ratio: flo
     """Motion about one axis (a ground robot) leaves the rotation about it free in the rates: the
     rotation from specific force instead (gravity and the horizontal accelerations, in a level reference
     world; :func:`imu_learn.eval.groundtruth.fit_acc_rotation`), kept only if the rates agree with it."""
-    from imu_learn.eval.groundtruth import fit_acc_rotation
-
     horizontal = _horizontal_acc_rms(segs)
     if horizontal < MIN_HORIZONTAL_ACC:
         raise ReferenceFrameError(
@@ -434,8 +435,6 @@ def _horizontal_acc_rms(segs: Sequence[Segment]) -> float:
 
 
 def _rate_residual(segs: Sequence[Segment], r: np.ndarray, bias: np.ndarray, m: int) -> float:
-    from imu_learn.eval.groundtruth import mean_rates
-
     rates = [mean_rates(s, m) for s in segs if len(s) > 2 * m]
     a = np.concatenate([x[0] for x in rates])
     b = np.concatenate([x[1] for x in rates])
@@ -443,8 +442,6 @@ def _rate_residual(segs: Sequence[Segment], r: np.ndarray, bias: np.ndarray, m: 
 
 
 def _bias_given(segs: Sequence[Segment], r_imu_ref: np.ndarray, m: int) -> np.ndarray:
-    from imu_learn.eval.groundtruth import mean_rates
-
     rates = [mean_rates(s, m) for s in segs if len(s) > 2 * m]
     a = np.concatenate([r[0] for r in rates])
     b = np.concatenate([r[1] for r in rates])
@@ -462,14 +459,26 @@ def check_orientation(ref: GroundTruth, name: str) -> None:
             "calibrate --imu-only for the noise")
 
 
+PLANAR_TILT_DEG = 0.01  # the planar rule: no orientation tilted more than this from the world's z ...
+PLANAR_HEIGHT_M = 1e-6  # ... and a height constant within this
+
+
+def is_planar_odometry(ref: GroundTruth) -> bool:
+    """The planar rule: every orientation a yaw about the world's z and the height constant (wheel
+    odometry in ``base_link``)."""
+    if len(ref.t_ns) < 2:
+        return False
+    up = quat_rotate(ref.q_wxyz, np.broadcast_to([0.0, 0.0, 1.0], (len(ref.q_wxyz), 3)))
+    tilt = np.degrees(np.arccos(np.clip(up[:, 2], -1.0, 1.0)))
+    return bool(float(np.max(tilt)) < PLANAR_TILT_DEG and float(np.ptp(ref.p[:, 2])) < PLANAR_HEIGHT_M)
+
+
 def check_not_odometry(ref: GroundTruth, name: str) -> None:
     """Planar wheel odometry (every orientation a yaw about the world's z, the height constant;
     :func:`imu_learn.calib.odometry.is_planar_odometry`, the rule calibrate's source selection uses)
     observes yaw rate and forward speed only: the 6-DoF path would fit the IMU's roll and pitch axes
     against zero, so it is not taken here; :class:`imu_learn.calib.odometry.OdometrySource` fits what it
     observes (``imu-learn calibrate --groundtruth`` picks it for such a file)."""
-    from imu_learn.calib.odometry import is_planar_odometry
-
     if is_planar_odometry(ref):
         raise ReferenceFrameError(
             f"{name}: the reference is planar (no roll, no pitch, a constant height: wheel odometry); it observes "

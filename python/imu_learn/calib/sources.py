@@ -10,7 +10,7 @@ floor they observe.
 * :class:`ConfigSource`: a fit or evaluate config's train/val split, with evaluate's settings.
 * :class:`StillSource`: recordings without a reference (``--imu-only``): the noise of their still
   stretches only.
-* :class:`imu_learn.calib.positions.PositionsSource`: positions only (GNSS); the navigator's smoother
+* :class:`imu_learn.fuse.calibrate_positions.PositionsSource`: positions only (GNSS); the navigator's smoother
   makes the reference and fits the bias-only floor (it lives beside that loop).
 * :class:`imu_learn.calib.odometry.OdometrySource`: planar wheel odometry (kind ``odometry``): the yaw
   rate only, the gyro bias and scale about the IMU's vertical axis (it lives beside its fit).
@@ -26,18 +26,20 @@ from __future__ import annotations
 
 from dataclasses import dataclass, replace
 from pathlib import Path
-from typing import TYPE_CHECKING, Any, Callable, Dict, List, Optional, Sequence, Tuple
+from typing import Any, Callable, Dict, List, Optional, Sequence, Tuple
 
 import numpy as np
 
 from imu_learn.baselines.base import FitSettings
+from imu_learn.calib.frames import default_gap_s
+from imu_learn.calib.profile import FloorFit
+from imu_learn.calib.reference import FrameFit, FrameOptions, frame_lines, read_extrinsics, resolve_frame, to_imu_frame
+from imu_learn.data.formats import USER_CSV, detect_format, read_imu_source, read_recording, user_csv
+from imu_learn.data.loading import AlignOptions, align
 from imu_learn.data.splits import cut, recording_name
 from imu_learn.data.types import Segment
 from imu_learn.errors import ConfigError
-
-if TYPE_CHECKING:
-    from imu_learn.calib.fit import FloorFit
-    from imu_learn.calib.reference import FrameFit
+from imu_learn.infer.rates import recording_device
 
 Progress = Callable[[str], None]
 
@@ -185,7 +187,6 @@ def under_root(path: Any, root: Optional[Path]) -> Any:
 
 def device_name(fmt: str, name: str) -> str:
     """The device a recording's format belongs to (a one-device dataset), else the recording's name."""
-    from imu_learn.infer.rates import recording_device
 
     return recording_device(fmt) or recording_name(name)
 
@@ -214,7 +215,6 @@ def _check_exist(paths: Sequence[Optional[Path]]) -> None:
 
 
 def _format(path: Path, fmt: str, columns: Any) -> str:
-    from imu_learn.data.formats import USER_CSV, detect_format, user_csv
 
     return USER_CSV if user_csv(fmt, columns) is not None else fmt if fmt != "auto" else detect_format(path)
 
@@ -242,10 +242,6 @@ class PosesSource(Source):
     def read(self, progress: Progress = lambda s: None) -> CalibInputs:
         """The recordings read, their reference checked against the IMU and moved into its frame, then
         cut into the fitted and the held-back block."""
-        from imu_learn.calib.reference import FrameOptions, frame_lines, read_extrinsics, resolve_frame, to_imu_frame
-        from imu_learn.data.formats import read_recording
-        from imu_learn.data.loading import AlignOptions, align
-        from imu_learn.eval.groundtruth import default_gap_s
 
         _check_exist([*self.inputs, *self.groundtruths, self.extrinsics])
         extrinsics = read_extrinsics(self.extrinsics) if self.extrinsics else None
@@ -320,39 +316,6 @@ class PosesSource(Source):
         return out
 
 
-class ConfigSource(Source):
-    """A fit or evaluate config's train/val split (its recordings' ground truth), with evaluate's
-    FitSettings for it; ``data_root`` overrides the config's."""
-
-    kind = "poses"
-
-    def __init__(self, config: Path, data_root: Optional[Any] = None, device: Optional[str] = None) -> None:
-        self.config, self.data_root, self.device = Path(config), data_root, device
-
-    def read(self, progress: Progress = lambda s: None) -> CalibInputs:
-        from imu_learn.data.splits import data_root_dir, make_split
-        from imu_learn.eval.run import load_eval_config
-        from imu_learn.settings import read_toml
-        from imu_learn.train.config import load_config
-
-        overrides = ["--data.data_root", self.data_root] if self.data_root else []
-        if "base" in read_toml(self.config):  # an evaluate config: its base holds the data
-            res = load_eval_config(self.config, overrides)
-            data, settings = res.run.data, res.fit_settings()
-        else:
-            run = load_config(self.config, overrides)
-            data = run.data
-            settings = FitSettings(window=data.window, seed=run.seed, gravity=data.gravity)
-        split = make_split(data)
-        root = data_root_dir(data)
-        sources = [{**row, "path": under_root(row.get("path"), root), "role": role}
-                   for role in ("train", "val") for row in split.record[role]]
-        device = self.device or device_name(data.roots[0].format if data.roots else "auto", split.train[0].name)
-        recordings = (blocks(split.train, [recording_name(s.name) for s in split.train], TRAIN)
-                      + blocks(split.val, [recording_name(s.name) for s in split.val], VAL))
-        return CalibInputs(recordings=recordings, settings=settings, device=device, sources=sources, source=self)
-
-
 class StillSource(Source):
     """Recordings without a reference (``--imu-only``): the IMU alone, the noise of its still stretches."""
 
@@ -379,7 +342,6 @@ class StillSource(Source):
 
 def imu_piece(path: Path, fmt: str, columns: Any = None) -> StillPiece:
     """A recording's IMU alone (a layout without stamps of its own, BROAD, reads them with its ground truth)."""
-    from imu_learn.data.formats import read_imu_source, read_recording
 
     src = read_imu_source(path, fmt, columns=columns)
     if src.t_ns is not None:

@@ -10,13 +10,26 @@ import sys
 from pathlib import Path
 from typing import Any, Callable, List, Optional, Sequence
 
-from imu_learn.calib.positions import is_positions_reference, refuse_navigator_options, source_from_cli
+from imu_learn.baselines.base import FitSettings
+from imu_learn.calib.odometry import OdometrySource, is_odometry_reference
 from imu_learn.calib.run import CalibInputs, CalibOptions, calibrate
-from imu_learn.calib.sources import ConfigSource, PosesSource, Source, StillSource, under_root
+from imu_learn.calib.sources import (
+    TRAIN,
+    VAL,
+    PosesSource,
+    Progress,
+    Source,
+    StillSource,
+    blocks,
+    device_name,
+    under_root,
+)
 from imu_learn.cli.common import add_data_root, add_imu_input_options, csv_layout, run_command
 from imu_learn.data.formats import FORMATS, USER_CSV, detect_format
+from imu_learn.data.splits import data_root_dir, make_split, recording_name
 from imu_learn.errors import ConfigError
 from imu_learn.eval.run import load_eval_config
+from imu_learn.fuse.calibrate_positions import is_positions_reference, refuse_navigator_options, source_from_cli
 from imu_learn.settings import read_toml
 from imu_learn.train.config import build_config, load_config
 
@@ -100,6 +113,34 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     add_imu_input_options(p)
 
 
+class ConfigSource(Source):
+    """A fit or evaluate config's train/val split (its recordings' ground truth), with evaluate's
+    FitSettings for it; ``data_root`` overrides the config's."""
+
+    kind = "poses"
+
+    def __init__(self, config: Path, data_root: Optional[Any] = None, device: Optional[str] = None) -> None:
+        self.config, self.data_root, self.device = Path(config), data_root, device
+
+    def read(self, progress: Progress = lambda s: None) -> CalibInputs:
+        overrides = ["--data.data_root", self.data_root] if self.data_root else []
+        if "base" in read_toml(self.config):  # an evaluate config: its base holds the data
+            res = load_eval_config(self.config, overrides)
+            data, settings = res.run.data, res.fit_settings()
+        else:
+            run = load_config(self.config, overrides)
+            data = run.data
+            settings = FitSettings(window=data.window, seed=run.seed, gravity=data.gravity)
+        split = make_split(data)
+        root = data_root_dir(data)
+        sources = [{**row, "path": under_root(row.get("path"), root), "role": role}
+                   for role in ("train", "val") for row in split.record[role]]
+        device = self.device or device_name(data.roots[0].format if data.roots else "auto", split.train[0].name)
+        recordings = (blocks(split.train, [recording_name(s.name) for s in split.train], TRAIN)
+                      + blocks(split.val, [recording_name(s.name) for s in split.val], VAL))
+        return CalibInputs(recordings=recordings, settings=settings, device=device, sources=sources, source=self)
+
+
 def source_of(args: argparse.Namespace) -> Source:
     """The reference source the options name: --config's split, --imu-only's still recordings, a
     positions-only --groundtruth (GNSS), a planar odometry one (the yaw rate), else poses (any frame)."""
@@ -109,8 +150,6 @@ def source_of(args: argparse.Namespace) -> Source:
         return StillSource(args.input, args.format, csv_layout(args), args.device)
     if any(is_positions_reference(g) for g in args.groundtruth or []):
         return source_from_cli(args)  # positions only: attitude from the navigator's smoother
-    from imu_learn.calib.odometry import OdometrySource, is_odometry_reference
-
     if any(is_odometry_reference(g) for g in args.groundtruth or []):  # planar odometry: the yaw rate only
         return OdometrySource(args.input, args.groundtruth, args.format, csv_layout(args), args.max_gap_s,
                               args.val_fraction, args.device)

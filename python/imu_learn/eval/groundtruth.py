@@ -30,11 +30,23 @@ from typing import List, Optional, Tuple
 import numpy as np
 from scipy.signal import savgol_filter
 
+from imu_learn.calib.frames import (  # noqa: F401  (re-exported: the check's vocabulary)
+    Offset,
+    default_gap_s,
+    fit_acc_rotation,
+    fit_offset,
+    gt_rate_hz,
+    kabsch,
+    log_q,
+    mean_rates,
+    rotation_matrices,
+    segments,
+    shifted_pairs,
+)
 from imu_learn.core.integration import integrate_windows, window_labels
-from imu_learn.core.quat import quat_conj, quat_mul, quat_rotate
+from imu_learn.core.quat import quat_conj, quat_mul
 from imu_learn.data.formats import read_recording
-from imu_learn.data.loading import AlignOptions, align
-from imu_learn.data.types import GroundTruth, ImuData, Segment, median_period_ns, sample_rate_hz
+from imu_learn.data.types import GroundTruth, ImuData, Segment, median_period_ns
 from imu_learn.errors import TooShortError
 from imu_learn.score.metrics import fit_startup_bias, index_at, relative_pose_errors, remove_bias, rmse, with_imu
 
@@ -63,34 +75,8 @@ def read(root: Path, groundtruth: Optional[Path] = None, fmt: str = "auto", imu_
                           groundtruth_topic=groundtruth_topic)
 
 
-def gt_rate_hz(gt: GroundTruth) -> float:
-    return sample_rate_hz(gt.t_ns)
-
-
-def default_gap_s(gt: GroundTruth) -> float:
-    """0.05 s, or 1.5 ground-truth periods for sparse ground truth (the 20 Hz ASL state)."""
-    return max(0.05, 1.5 / gt_rate_hz(gt))
-
-
-def segments(imu: ImuData, gt: GroundTruth, max_gap_s: float, shift_s: float = 0.0,
-             r_off: Optional[np.ndarray] = None) -> List[Segment]:
-    """Aligned gap-free segments; optionally GT stamps moved by −shift_s and the IMU rotated into
-    the GT body frame (ω_gt = R_offᵀ ω_imu)."""
-    if shift_s:
-        gt = replace(gt, t_ns=gt.t_ns - int(round(shift_s * 1e9)))
-    if r_off is not None:
-        imu = replace(imu, gyro=imu.gyro @ r_off, acc=imu.acc @ r_off)
-    return align(imu, gt, AlignOptions(max_gap_s=max_gap_s)).segments
-
-
 # ---------------------------------------------------------------------------------------------
 # bias and scores
-
-
-def log_q(q: np.ndarray) -> np.ndarray:
-    q = q * np.where(q[..., :1] < 0, -1.0, 1.0)
-    n = np.linalg.norm(q[..., 1:], axis=-1, keepdims=True)
-    return q[..., 1:] * (2 * np.arctan2(n, q[..., :1]) / np.maximum(n, 1e-300))
 
 
 def exp_q(v: np.ndarray) -> np.ndarray:
@@ -140,86 +126,6 @@ def bias_removed_score(segs: List[Segment], n: int) -> Tuple[float, float]:
 # rotation / time offset
 
 
-def mean_rates(seq: Segment, m: int) -> Tuple[np.ndarray, np.ndarray]:
-    """Mean angular rates over m-sample windows (stride 1): IMU (Σ ω dt / Σ dt) and ground truth
-    (Log(q_kᵀ q_k+m) / Δt), both in their own body frames; rows k = 0 .. len − m − 1."""
-    dt = np.diff(seq.t_ns) * 1e-9
-    c = np.concatenate([np.zeros((1, 3)), np.cumsum(seq.gyro[:-1] * dt[:, None], axis=0)])
-    span = (seq.t_ns[m:] - seq.t_ns[:-m])[:, None] * 1e-9
-    w_imu = (c[m:] - c[:-m]) / span
-    w_gt = log_q(quat_mul(quat_conj(seq.q_wxyz[:-m]), seq.q_wxyz[m:])) / span
-    return w_imu, w_gt
-
-
-def kabsch(a: np.ndarray, b: np.ndarray) -> Tuple[np.ndarray, np.ndarray, float]:
-    """R (proper rotation), c minimising Σ|a − R b − c|²; returns (R, c, mean squared residual)."""
-    am, bm = a.mean(0), b.mean(0)
-    u, _, vt = np.linalg.svd((b - bm).T @ (a - am))
-    d = np.diag([1.0, 1.0, np.sign(np.linalg.det(vt.T @ u.T))])
-    r = vt.T @ d @ u.T
-    c = am - r @ bm
-    return r, c, float(np.mean(np.sum((a - b @ r.T - c) ** 2, axis=1)))
-
-
-def shifted_pairs(rates: List[Tuple[np.ndarray, np.ndarray]], shift: float) -> Tuple[np.ndarray, np.ndarray]:
-    """IMU rate k paired with GT rate k + shift (linearly interpolated) inside every segment."""
-    s, f = math.floor(shift), shift - math.floor(shift)
-    a, b = [], []
-    for w_imu, w_gt in rates:
-        k = np.arange(max(0, -s), len(w_imu) - max(0, s + 1))
-        a.append(w_imu[k])
-        b.append((1 - f) * w_gt[k + s] + f * w_gt[k + s + 1])
-    return np.concatenate(a), np.concatenate(b)
-
-
-@dataclass
-class Offset:
-    r_off: np.ndarray  # GT body -> IMU frame: ω_imu ≈ r_off ω_gt + gyro_bias
-    gyro_bias: np.ndarray
-    tau_s: float  # IMU sample at its stamp t ≈ GT(t + tau_s)
-    hold_s: float  # half an IMU period: the shift the zero-order-hold integrator adds (see module doc)
-    rms: float  # residual RMS [rad/s] of the rate fit
-
-    @property
-    def integrator_shift_s(self) -> float:
-        """GT shift that best matches the metric's zero-order-hold integration of the IMU."""
-        return self.tau_s - self.hold_s
-
-
-def fit_offset(segs: List[Segment], m: int = 10, max_shift: int = 20) -> Offset:
-    """Constant rotation + gyro bias (Kabsch) and time offset (shift grid + parabola) between the
-    gyro and the ground truth's angular rate. The rates are compared under the integrator's
-    zero-order hold (sample k held on [t_k, t_k+1]); τ adds back the half period, so it is the
-    offset of IMU samples taken at their stamps. R_off is re-fitted at the sub-sample shift (a
-    misalignment of half a sample alone tilts it by ~0.1°)."""
-    rates = [mean_rates(s, m) for s in segs if len(s) > m + 2 * max_shift + 2]
-    costs = np.array([kabsch(*shifted_pairs(rates, s))[2] for s in range(-max_shift, max_shift + 1)])
-    i = int(np.clip(np.argmin(costs), 1, len(costs) - 2))
-    c_m, c_0, c_p = costs[i - 1: i + 2]
-    shift = i - max_shift + (0.5 * (c_m - c_p) / (c_m - 2 * c_0 + c_p) if c_m - 2 * c_0 + c_p > 0 else 0.0)
-    dt = float(np.median(np.concatenate([np.diff(s.t_ns) for s in segs]))) * 1e-9
-    r, c, cost = kabsch(*shifted_pairs(rates, shift))
-    return Offset(r, c, (shift + 0.5) * dt, 0.5 * dt, math.sqrt(cost))
-
-
-def fit_acc_rotation(segs: List[Segment], half: int = 15) -> np.ndarray:
-    """GT body -> IMU rotation from specific force (Kabsch, bias = centring term): the smoothed
-    accelerometer vs. R_gtᵀ (p̈_gt + g). For a ground robot, which turns about z only, the gyro fixes
-    the tilt but not the yaw of R_off; gravity and the horizontal accelerations fix both."""
-    a, b = [], []
-    for s in segs:
-        if len(s) <= 4 * half:
-            continue
-        dt = median_period_ns(s.t_ns) * 1e-9
-        smooth = lambda x: savgol_filter(x, 2 * half + 1, 2, axis=0)  # noqa: E731
-        f_world = np.gradient(np.gradient(smooth(s.p), dt, axis=0), dt, axis=0) + np.array([0.0, 0.0, G])
-        f_body = np.einsum("nji,nj->ni", rotation_matrices(s.q_wxyz), f_world)
-        keep = slice(2 * half, len(s) - 2 * half)
-        a.append(smooth(s.acc)[keep])
-        b.append(f_body[keep])
-    return kabsch(np.concatenate(a), np.concatenate(b))[0]
-
-
 def angle_axis(r: np.ndarray) -> Tuple[float, np.ndarray]:
     angle = math.acos(np.clip((np.trace(r) - 1) / 2, -1.0, 1.0))
     axis = np.array([r[2, 1] - r[1, 2], r[0, 2] - r[2, 0], r[1, 0] - r[0, 1]])
@@ -234,11 +140,6 @@ def skew(v: np.ndarray) -> np.ndarray:
     z = np.zeros(len(v))
     return np.stack([np.stack([z, -v[:, 2], v[:, 1]], -1), np.stack([v[:, 2], z, -v[:, 0]], -1),
                      np.stack([-v[:, 1], v[:, 0], z], -1)], 1)
-
-
-def rotation_matrices(q: np.ndarray) -> np.ndarray:
-    """(N, 3, 3) rotation matrices of w,x,y,z quaternions."""
-    return np.stack([quat_rotate(q, np.broadcast_to(e, (len(q), 3))) for e in np.eye(3)], axis=2)
 
 
 def lever_rows(seq: Segment, gyro_bias: np.ndarray, half: int) -> Tuple[np.ndarray, np.ndarray]:

@@ -13,7 +13,7 @@ from datetime import datetime
 from pathlib import Path
 from typing import Any, Dict, List, Optional, Tuple
 
-from imu_learn.eval.peers import PEER_KEYS
+from imu_learn.score.peers import PEER_KEYS
 from imu_learn.score.protocol import (
     FLOOR_METHODS,
     PROTOCOL,
@@ -414,7 +414,7 @@ def _md_peers(r: Dict[str, Any], peers: List[Dict[str, Any]]) -> List[str]:
         return []
     L = ["## The peers' protocols, open loop (AOE; AirIMU's 1 s ROE / RTE)", "",
          "Open loop: each method's samples as they are (no bias removed), integrated from the ground-truth "
-         "initial state (`imu_learn.eval.peers`). AOE / yaw AOE: RMSE over every sample of the recording of "
+         "initial state (`imu_learn.score.peers`). AOE / yaw AOE: RMSE over every sample of the recording of "
          "the orientation (yaw) error of the gyro integrated from the ground-truth orientation at the "
          "first sample (Brossard et al. 2020); \"AOE mean\": the mean of that angle instead, which is what "
          "AirIMU's evaluation code reports as AOE; a recording with gaps is scored per gap-free segment, each "

@@ -60,9 +60,10 @@ from imu_learn.errors import (
     MethodError,
     one_line,
 )
-from imu_learn.eval import peers, report
-from imu_learn.eval.peers import PeerErrors, add_segment, summarise
+from imu_learn.eval import report
+from imu_learn.score import peers
 from imu_learn.score.metrics import fit_startup_bias, index_at, remove_bias, rmse, with_imu
+from imu_learn.score.peers import PeerErrors, add_segment, summarise
 from imu_learn.score.protocol import VARIANTS
 from imu_learn.settings import hints_of, merge, nest
 from imu_learn.train.config import (
@@ -306,7 +307,7 @@ def evaluate_sequence(method: Method, seq: Segment, horizons: Seq[int], stride: 
     Refiners: ``refine`` once; the bias is fitted on the refined samples and removed from them; both
     variants are integrated from the ground-truth start state. Regressors: the bias is fitted on the
     raw input and removed from it before ``predict``. ``peers`` (a dict), when given, is filled with the
-    open-loop errors of :mod:`imu_learn.eval.peers` on the whole segment (refiners: AOE from the refined
+    open-loop errors of :mod:`imu_learn.score.peers` on the whole segment (refiners: AOE from the refined
     samples and the 1 s windows; regressors: the 1 s windows from ``predict`` on the raw input, no AOE).
     """
     first = index_at(seq, startup_bias_s)
@@ -590,7 +591,7 @@ def _error_rows(errors: Dict[Tuple[str, str, str, int], List[Dict[str, np.ndarra
 
 
 def _peer_rows(rows: _Rows, peer_out: Dict[Tuple[str, str], Any], recordings: List[str]) -> List[Dict[str, Any]]:
-    """One row per (method, test recording): the peers' open-loop metrics (:mod:`imu_learn.eval.peers`)."""
+    """One row per (method, test recording): the peers' open-loop metrics (:mod:`imu_learn.score.peers`)."""
     return [{"method": name, "sequence": rec, **summarise(peer_out[(name, rec)])}
             for name, _ in rows.methods for rec in recordings if (name, rec) in peer_out]
 

@@ -39,7 +39,7 @@ PROTOCOL = """\
   log-spaced horizons from ``curve_min_s`` to ``curve_max_s``, default 12 from 0.05 s to 5 s):
   RMSE of position, rotation and velocity (the paper's integration-error figure). Seconds are
   turned into samples with the recording's median sample period.
-* The peers' protocols, open loop (:mod:`imu_learn.eval.peers`; every method's samples as they are,
+* The peers' protocols, open loop (:mod:`imu_learn.score.peers`; every method's samples as they are,
   no bias removed, scored from the start of each gap-free test segment, not from ``startup_bias_s``):
   AOE (Brossard et al. 2020) = RMSE over every sample of the angle between the ground-truth
   orientation and the gyro integrated from the ground-truth orientation at the segment's first

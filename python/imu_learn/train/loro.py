@@ -12,7 +12,7 @@ against the floor, epoch 0 kept when no epoch beats it), once per seed; then bot
 which neither saw: relative pose RMSE at ``data.eval_horizons``, rotation and translation, open loop
 and with R's start-up bias removed (:func:`imu_learn.train.on_profile.versus_floor`), and the open-loop
 AOE (:func:`aoe_cell`: the gyro integrated over each whole gap-free stretch of R from its ground-truth
-attitude, RMSE of the angle error over all its samples, :mod:`imu_learn.eval.peers`). What the recipe
+attitude, RMSE of the angle error over all its samples, :mod:`imu_learn.score.peers`). What the recipe
 gives on R is the model where the fold's validation shipped it (at least 1 % better than the floor in
 every validation cell), else the profile alone (ratio 1): :func:`recipe_cells`; the model's own
 held-out cells are kept beside (``model_cells``), shipped or not.
@@ -51,8 +51,8 @@ from imu_learn.calib.run import CalibInputs, floor_profile
 from imu_learn.data.splits import make_split, parse_entry, recording_name
 from imu_learn.data.types import Segment
 from imu_learn.errors import ConfigError
-from imu_learn.eval import peers
 from imu_learn.infer.checkpoint import load_model
+from imu_learn.score import peers
 from imu_learn.train import on_profile, trainer
 from imu_learn.train.config import RunConfig, build_config
 from imu_learn.util.atomic import atomic_write_text
@@ -215,7 +215,7 @@ def aoe_cell(model: Any, profile: Profile, test: Sequence[Segment], cfg: RunConf
     """The open-loop AOE of the model and of the floor on the held-out recording (``test``): the
     gyro integrated over each whole gap-free stretch (:func:`whole_stretches`) from the ground-truth
     attitude at its first sample, the RMSE of the angle error over all samples of all stretches
-    (:func:`imu_learn.eval.peers.attitude_errors`; Brossard's AOE, as ``imu-learn evaluate`` reports it)."""
+    (:func:`imu_learn.score.peers.attitude_errors`; Brossard's AOE, as ``imu-learn evaluate`` reports it)."""
     floor_e, model_e = peers.PeerErrors(rot_rad=None, trans_m=None), peers.PeerErrors(rot_rad=None, trans_m=None)
     stretches = whole_stretches(test)
     for s in stretches:

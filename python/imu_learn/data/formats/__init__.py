@@ -17,7 +17,7 @@ it with ``columns=`` (a :class:`CsvColumns`), the one input resolver every comma
 calls (the CLI's options: :func:`imu_learn.cli.common.add_imu_input_options`). Its
 :class:`ImuSource` carries the layout, so :func:`write_imu` writes the user's columns and units back.
 Both go through :func:`.csv_columns.read_imu_source`, which checks that the numbers fit the map and
-units (:mod:`imu_learn.data.input_checks`) before any work.
+units (:mod:`imu_learn.data.formats.input_checks`) before any work.
 
 The strict parsing of text formats happens in the Rust core; the modules here only find the files
 of a layout and, for binary containers (HDF5, MAT), read arrays with h5py / scipy and hand them to

@@ -20,7 +20,7 @@ not a finite number (a logger's truncated first or last line) is skipped instead
 warning and on the source (``ImuSource.skipped_lines``); the writer keeps such lines as they are.
 
 :func:`read_imu_source`, the one read every command's user CSV goes through, then checks that the
-numbers fit the map and units (:mod:`imu_learn.data.input_checks`: a sample rate no IMU has, gravity
+numbers fit the map and units (:mod:`imu_learn.data.formats.input_checks`: a sample rate no IMU has, gravity
 of 1 m/s^2, a gyro reading gravity, ...) and stops with an ImplausibleInputError naming the option
 that fixes the mistake.
 
@@ -36,6 +36,7 @@ from typing import Optional, Tuple
 import numpy as np
 
 from imu_learn import _imu_core as core
+from imu_learn.data.formats.input_checks import check_user_imu, explain_time_overflow
 from imu_learn.data.types import ImuData
 from imu_learn.errors import InvalidInputError, NotNumericError
 from imu_learn.util.atomic import atomic_write_path
@@ -88,10 +89,8 @@ def write_csv_columns(
 
 
 def read_checked(path: Path, layout: CsvColumns) -> Tuple[ImuData, Tuple[int, ...]]:
-    """The samples of a user's CSV read with ``layout``, checked (:mod:`imu_learn.data.input_checks`)
+    """The samples of a user's CSV read with ``layout``, checked (:mod:`imu_learn.data.formats.input_checks`)
     before anything is done with them, and the 1-based lines skipped (``layout.skip_bad_lines``)."""
-    from imu_learn.data.input_checks import check_user_imu, explain_time_overflow  # imports this package
-
     try:
         r = core.read_csv_columns_checked(str(path), *layout.args(), skip_bad_lines=layout.skip_bad_lines)
     except NotNumericError as e:

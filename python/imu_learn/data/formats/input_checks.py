@@ -41,9 +41,8 @@ import numpy as np
 
 from imu_learn.core.stamps import median_period_ns
 from imu_learn.core.still import still_stretches
+from imu_learn.data.formats.source import DEFAULT_COLUMNS, CsvColumns
 from imu_learn.errors import ImplausibleInputError, NotNumericError
-
-from .formats.source import DEFAULT_COLUMNS, CsvColumns
 
 logger = logging.getLogger(__name__)
 

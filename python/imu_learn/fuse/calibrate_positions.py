@@ -45,21 +45,32 @@ import tempfile
 import time
 from dataclasses import dataclass, field, replace
 from pathlib import Path
-from typing import TYPE_CHECKING, Any, Callable, Dict, List, Optional, Sequence, Tuple
+from typing import Any, Callable, Dict, List, Optional, Sequence, Tuple
 
 import numpy as np
 from scipy.spatial.transform import Rotation
 
 from imu_learn.baselines.affine import Floor, TraditionalParams
 from imu_learn.baselines.base import FitSettings
-from imu_learn.calib.profile import Profile
+from imu_learn.calib import run as cr
+from imu_learn.calib.frames import default_gap_s
+from imu_learn.calib.profile import FloorFit, Profile
 from imu_learn.calib.sources import OBSERVABLE, TRAIN, VAL, CalibInputs, Recording, Source, span
 from imu_learn.calib.sources import held_back as _held_back
+from imu_learn.core.quat import xyzw_to_wxyz
+from imu_learn.core.stamps import sample_rate_hz
+from imu_learn.data import formats
+from imu_learn.data.formats.extrinsics import read_t_bs
+from imu_learn.data.formats.gnss_imu import mounting_rotation
+from imu_learn.data.loading import AlignOptions, align
 from imu_learn.data.types import GroundTruth, ImuData, Segment
-from imu_learn.errors import InvalidInputError
-
-if TYPE_CHECKING:
-    from imu_learn.calib.fit import FloorFit
+from imu_learn.errors import ConfigError, InvalidInputError
+from imu_learn.fuse.aiding.detect import detect
+from imu_learn.fuse.aiding.rtklib import normal_gravity, read_pos
+from imu_learn.fuse.aiding.tum import read_trajectory
+from imu_learn.fuse.navigate import NavigateOptions, Sources, navigate, parse_vector
+from imu_learn.fuse.noise import ImuNoise
+from imu_learn.infer.rates import recording_device
 
 Progress = Callable[[str], None]
 
@@ -110,7 +121,6 @@ class PositionsFloor:
 
 def reference_format(path: Path) -> str:
     """The aiding format of ``path`` (:func:`imu_learn.fuse.aiding.detect.detect`)."""
-    from imu_learn.fuse.aiding.detect import detect
 
     return detect(Path(path))
 
@@ -118,7 +128,6 @@ def reference_format(path: Path) -> str:
 def is_positions_reference(path: Path) -> bool:
     """Whether ``path`` holds positions only: an RTKLIB ``.pos`` file (by its content), or a TUM/CSV
     trajectory with 4 columns or whose orientation never changes (check_orientation's rule)."""
-    from imu_learn.fuse.aiding.tum import read_trajectory
 
     path = Path(path)
     if not path.is_file():
@@ -146,8 +155,6 @@ def read_fixes(path: Path) -> Tuple[np.ndarray, np.ndarray, float, str]:
     """(t_ns, positions (M, 3) in a local z-up frame, gravity [m/s^2], format) of a positions file:
     RTKLIB fixed and float epochs in ENU at the first epoch with the normal gravity there, or a
     TUM/CSV's positions with the navigator's default gravity (9.81)."""
-    from imu_learn.fuse.aiding.rtklib import normal_gravity, read_pos
-    from imu_learn.fuse.aiding.tum import read_trajectory
 
     fmt = reference_format(path)
     if fmt == "rtklib":
@@ -323,8 +330,6 @@ def smoother_pass(imu_path: Path, ref_path: Path, opts: PositionsOptions, rpy: S
                   floor: Optional[Floor], out: Path, device: str, rate: float) -> Dict[str, Any]:
     """The navigator over the whole recording (positions as aiding, no gaps), with ``floor`` applied
     through a profile when given; returns its summary (the trajectories in ``out``)."""
-    from imu_learn.fuse.navigate import NavigateOptions, Sources, navigate
-    from imu_learn.fuse.noise import ImuNoise
 
     out.mkdir(parents=True, exist_ok=True)
     prof = None
@@ -344,8 +349,6 @@ def smoothed_groundtruth(smoothed_tum: Path, mounting: np.ndarray, delay_s: floa
     """The navigator's smoothed trajectory (body frame, the delayed IMU clock) as the IMU's own pose on
     the IMU's recorded clock: ``R_W_imu = R_W_body M``, stamps minus the delay; no velocity (aligning
     derives it)."""
-    from imu_learn.core.quat import xyzw_to_wxyz
-    from imu_learn.fuse.aiding.tum import read_trajectory
 
     tr = read_trajectory(smoothed_tum, "tum")
     R = Rotation.from_quat(tr.q_xyzw).as_matrix() @ mounting
@@ -356,8 +359,6 @@ def smoothed_groundtruth(smoothed_tum: Path, mounting: np.ndarray, delay_s: floa
 
 def reference_segments(imu: ImuData, gt: GroundTruth, name: str) -> List[Segment]:
     """The IMU with the reference on its stamps (gaps of more than 1.5 keyframe periods split)."""
-    from imu_learn.data.loading import AlignOptions, align
-    from imu_learn.eval.groundtruth import default_gap_s
 
     return list(align(imu, gt, AlignOptions(max_gap_s=default_gap_s(gt)), name=name).segments)
 
@@ -413,9 +414,6 @@ def positions_floor(imu_path: Path, ref_path: Path, opts: PositionsOptions = Pos
     """The bias-only floor of the recording ``imu_path`` from the positions in ``ref_path``, with its
     standard errors, observed flags and passes (module docstring). ``work``: where each pass's
     navigator outputs go (default: a temporary folder, removed)."""
-    from imu_learn.core.stamps import sample_rate_hz
-    from imu_learn.data import formats
-    from imu_learn.data.formats.gnss_imu import mounting_rotation
 
     imu_path, ref_path = Path(imu_path), Path(ref_path)
     src = formats.read_imu_source(imu_path, opts.fmt)
@@ -507,8 +505,6 @@ def held_back(segments: List[Segment], frac: float) -> Tuple[List[Segment], List
 
 def _applied(s: Segment, floor: Optional[Floor]) -> Segment:
     """``s`` with the floor so far applied to its IMU (the next pass fits what bias remains)."""
-    from dataclasses import replace
-
     if floor is None:
         return s
     g, a = floor.apply(s.t_ns, s.gyro, s.acc)
@@ -542,11 +538,10 @@ class PositionsSource(Source):
 
     def read(self, progress: Progress = lambda s: None) -> CalibInputs:
         t0 = time.time()
-        progress(f"{self.ref_path}: positions only: the attitude from the navigator's smoother (calib.positions)")
+        progress(f"{self.ref_path}: positions only: the attitude from the navigator's smoother (fuse.calibrate_positions)")
         name = self.imu_path.stem if self.imu_path.is_file() else self.imu_path.name
         device = self.device
         if device is None:
-            from imu_learn.infer.rates import recording_device
 
             device = recording_device(self.opts.fmt) or name
         res = self.result = positions_floor(self.imu_path, self.ref_path, self.opts, self.work, progress, device)
@@ -566,7 +561,6 @@ class PositionsSource(Source):
 
     def fit_floor(self, inp: CalibInputs, progress: Progress = lambda s: None, uncertainty: bool = True) -> FloorFit:
         """The bias-only floor the smoother loop fitted, its standard errors and passes."""
-        from imu_learn.calib.fit import FloorFit
 
         res = self._result()
         return FloorFit(res.floor, {}, res.std, [], entries={"positions": res.passes})
@@ -586,7 +580,6 @@ def calibrate_positions(imu_path: Path, ref_path: Path, out_dir: Path, opts: Pos
     plausibility checks, profile.json, imu.yaml, calibration.png), with its observed flags and
     ``reference`` kind "positions". The navigator's passes are kept in ``out_dir/positions/``.
     Returns a CalibResult."""
-    from imu_learn.calib import run as cr
 
     out_dir = Path(out_dir)
     src = PositionsSource(imu_path, ref_path, opts, out_dir / "positions", device, source)
@@ -597,7 +590,6 @@ def source_from_cli(args: Any) -> PositionsSource:
     """``imu-learn calibrate --input REC --groundtruth POSITIONS``'s source, with the command's options
     (one recording; the navigator's options :func:`navigator_options`); the navigator's passes in
     ``--out``/positions."""
-    from imu_learn.errors import ConfigError
 
     if len(args.input) != 1 or len(args.groundtruth or []) != 1:
         raise ConfigError("calibrate with a positions reference (GNSS): one --input and its --groundtruth")
@@ -617,8 +609,6 @@ def navigator_options(args: Any) -> Dict[str, Any]:
     navigate``'s names and conventions: ``--imu-rotation-rpy-deg R,P,Y`` (the body frame relative to
     the IMU frame), ``--imu-delay-s S`` (added to every IMU stamp; absent: estimated) and ``--lever-arm
     X,Y,Z`` (the antenna from the IMU in the body frame; or ``--extrinsics``' translation, not both)."""
-    from imu_learn.errors import ConfigError
-    from imu_learn.fuse.navigate import parse_vector
 
     out: Dict[str, Any] = {}
     rpy, delay, lever = (getattr(args, k, None) for k in NAVIGATOR_OPTIONS)
@@ -633,7 +623,6 @@ def navigator_options(args: Any) -> Dict[str, Any]:
             raise ConfigError("--lever-arm and --extrinsics both give the antenna's lever arm; give one")
         out["lever_arm"] = parse_vector(lever, 3, "--lever-arm")
     elif getattr(args, "extrinsics", None):
-        from imu_learn.data.formats.extrinsics import read_t_bs
 
         out["lever_arm"] = tuple(float(x) for x in read_t_bs(args.extrinsics)[:3, 3])
     return out
@@ -642,7 +631,6 @@ def navigator_options(args: Any) -> Dict[str, Any]:
 def refuse_navigator_options(args: Any, kind: str) -> None:
     """A :class:`ConfigError` when navigator options (:data:`NAVIGATOR_OPTIONS`) come with a reference
     kind other than positions, which does not use them."""
-    from imu_learn.errors import ConfigError
 
     given = [f"--{k.replace('_', '-')}" for k in NAVIGATOR_OPTIONS if getattr(args, k, None) is not None]
     if given and kind != PositionsSource.kind:
