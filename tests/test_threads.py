@@ -7,9 +7,18 @@ from __future__ import annotations
 import os
 
 import numpy as np
+import pytest
 import torch
 
 from imu_learn.util import threads as th
+
+
+@pytest.fixture(autouse=True)
+def torch_threads_as_they_were():
+    """Each test leaves torch's pool as it found it (later tests compare float32 results that depend on it)."""
+    before = torch.get_num_threads()
+    yield
+    torch.set_num_threads(before)
 
 
 def blas_threads():
