@@ -10,6 +10,7 @@
 //! release) and every property prints how many cases it ran (visible with `--nocapture`).
 //! PROPTEST_RNG_SEED replays a run.
 
+mod common;
 mod io_common;
 
 use std::collections::BTreeSet;
@@ -236,11 +237,11 @@ impl Reader {
                 shipped("datasets/euroc/V1_01_easy/groundtruth_state_20hz.csv"),
             ],
             Reader::Pose => vec![shipped("datasets/tum-vi/dataset-room2_512_16/mav0/mocap0/data.csv")],
-            Reader::Position => vec![io_common::data("euroc/MH_01_easy/mav0/leica0/data.csv")],
+            Reader::Position => vec![common::data("euroc/MH_01_easy/mav0/leica0/data.csv")],
             Reader::Tum => vec![
                 shipped("datasets/euroc/MH_01_easy/groundtruth_pose.tum"),
                 shipped("datasets/euroc/V1_01_easy/groundtruth_pose.tum"),
-                io_common::data("blackbird/clover_yawForward_maxSpeed5p0/val/stamped_groundtruth_imu.txt"),
+                common::data("blackbird/clover_yawForward_maxSpeed5p0/val/stamped_groundtruth_imu.txt"),
             ],
             Reader::Xsens => vec![shipped(
                 "crates/imu_core/tests/fixtures/kaist/sensor_data/xsens_imu.csv",

@@ -4,33 +4,6 @@ use std::path::{Path, PathBuf};
 
 use imu_core::ImuError;
 
-/// Real recordings, outside the repository: the data root `IMU_LEARN_DATA` names (the README's
-/// layout), else `../shared/data` beside the checkout.
-pub const DATA: &str = concat!(env!("CARGO_MANIFEST_DIR"), "/../../../shared/data");
-
-pub fn data_root() -> PathBuf {
-    std::env::var_os("IMU_LEARN_DATA")
-        .map(PathBuf::from)
-        .unwrap_or_else(|| PathBuf::from(DATA))
-}
-
-pub fn data(rel: &str) -> PathBuf {
-    data_root().join(rel)
-}
-
-/// False (and a note on stderr) when the data root lacks `rel`: tests on real recordings then
-/// return early, so `cargo test` passes on a checkout without the datasets.
-pub fn have(rel: &str) -> bool {
-    let ok = data(rel).exists();
-    if !ok {
-        eprintln!(
-            "skipped: {} not in the data root (set IMU_LEARN_DATA)",
-            data(rel).display()
-        );
-    }
-    ok
-}
-
 pub const IMU_HEADER: &str = "#timestamp [ns],w_RS_S_x [rad s^-1],w_RS_S_y [rad s^-1],w_RS_S_z [rad s^-1],a_RS_S_x [m s^-2],a_RS_S_y [m s^-2],a_RS_S_z [m s^-2]";
 
 pub fn write(dir: &tempfile::TempDir, name: &str, text: &str) -> PathBuf {
