@@ -102,8 +102,15 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--out", type=Path, required=True, metavar="DIR", help="output folder")
     nav = "with a positions-only --groundtruth (GNSS), as imu-learn navigate's option of the same name: "
     p.add_argument("--imu-rotation-rpy-deg", default=None, metavar="R,P,Y",
-                   help=nav + "the IMU's mounting, roll, pitch, yaw [deg] of the body frame relative to the IMU frame "
-                              "(default: estimated from the track)")
+                   help=nav + "the IMU's mounting, "
+                              "roll, pitch, yaw [deg] of the body frame relative to the IMU frame (Groves' convention, "
+                              "rtklibexplorer/GNSS_IMU's imu_misalign): starting from the IMU's axes, turn by yaw about z, then"
+                              " by pitch about the new y, then by roll about the new x (intrinsic z-y'-x'') to reach the body's"
+                              " axes; gyro and acc are rotated into the body frame as body = (Rz(yaw) Ry(pitch) Rx(roll))^T "
+                              "imu. Examples: 180,0,0 an IMU upside down (its z down, its y along the body's -y); -90,0,0 a "
+                              "y-up IMU (its y along the body's z, its x forward); 0,0,90 a yaw of 90 deg (the IMU's y forward,"
+                              " its x along the body's -y, i.e. to the right)"
+                              " (default: estimated from the track)")
     p.add_argument("--imu-delay-s", type=float, default=None, metavar="S",
                    help=nav + "added to every IMU stamp, a logging delay (e.g. -0.125 on rtklibexplorer's drive; "
                               "default: estimated from the track, recorded in profile.json's reference)")

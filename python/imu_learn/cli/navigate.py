@@ -53,6 +53,15 @@ EPILOG = """examples:
 """
 
 
+MOUNTING_HELP = ("roll, pitch, yaw [deg] of the body frame relative to the IMU frame (Groves' convention, "
+                 "rtklibexplorer/GNSS_IMU's imu_misalign): starting from the IMU's axes, turn by yaw about z, then"
+                 " by pitch about the new y, then by roll about the new x (intrinsic z-y'-x'') to reach the body's"
+                 " axes; gyro and acc are rotated into the body frame as body = (Rz(yaw) Ry(pitch) Rx(roll))^T "
+                 "imu. Examples: 180,0,0 an IMU upside down (its z down, its y along the body's -y); -90,0,0 a "
+                 "y-up IMU (its y along the body's z, its x forward); 0,0,90 a yaw of 90 deg (the IMU's y forward,"
+                 " its x along the body's -y, i.e. to the right)")
+
+
 def add_arguments(ap: argparse.ArgumentParser) -> None:
     d = NavigateOptions()
     ap.add_argument("--input", type=Path, required=True, metavar="REC",
@@ -119,9 +128,8 @@ def add_arguments(ap: argparse.ArgumentParser) -> None:
     ap.add_argument("--lag-s", type=float, default=None, metavar="S",
                     help="the causal estimate's fixed-lag window (default: the factor graph's)")
     ap.add_argument("--imu-rotation-rpy-deg", default=None, metavar="R,P,Y",
-                    help="the IMU's mounting: roll, pitch, yaw [deg] of the body frame relative to the IMU frame "
-                         "(Groves' convention, rtklibexplorer/GNSS_IMU's imu_misalign); gyro and acc are rotated "
-                         "into the body frame, whose x-axis the track heading and --nhc take as forward")
+                    help="the IMU's mounting: " + MOUNTING_HELP + "; the body's x-axis is what the track heading "
+                         "and --nhc take as forward")
     ap.add_argument("--imu-delay-s", type=float, default=None, metavar="S",
                     help="added to every IMU stamp: a logging delay (e.g. -0.125 on rtklibexplorer's drive)")
     ap.add_argument("--lever-arm", default=None, metavar="X,Y,Z",

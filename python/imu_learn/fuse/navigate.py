@@ -37,7 +37,8 @@ A = C0 is ``T_A_Bk = T_C0_Ck T_BS^-1``, and the body motion between two frames
   faster than 1 m/s (:func:`.start.track.track_start`: the body x-axis along the velocity, as GNSS/INS
   filters for cars do), where fusion starts.
 
-Scoring (``groundtruth``, optional, read only after fusion and only for the report): ground truth
+Scoring (``groundtruth``, optional, only for the report; checked before fusion by :func:`check_inputs`,
+used only after it): ground truth
 interpolated at the estimate's stamps; absolute aiding that shares the ground truth's world
 (``position``): RMSE without alignment; relative and camera-frame aiding: after a rigid SE(3)
 (Umeyama, no scale) alignment, as ``evo_ape -a``. The visual-only trajectory (the aiding's own body
@@ -60,11 +61,12 @@ from imu_learn.calib.profile import Profile
 from imu_learn.core.still import MEMS_PRIOR, MIN_STILL_START_S, BiasPrior
 from imu_learn.data import formats
 from imu_learn.data.formats import CsvColumns, rosbag
+from imu_learn.data.formats import groundtruth as groundtruth_formats
 from imu_learn.data.formats.asl import imu_sensor_yaml
 from imu_learn.data.formats.extrinsics import inverse, read_t_bs
 from imu_learn.data.formats.gnss_imu import mounting_rotation
 from imu_learn.data.types import sample_rate_hz
-from imu_learn.errors import AidingError, ConfigError, InvalidInputError
+from imu_learn.errors import AidingError, ColumnCountError, ConfigError, InvalidInputError
 from imu_learn.infer import rates
 from imu_learn.infer.bias import bias_entry, bias_step
 from imu_learn.infer.bias import choices as bias_choices
@@ -308,7 +310,7 @@ def gnss_rows(src: Sources, imu_t_ns: np.ndarray, lever: np.ndarray, opts: Navig
     without the fixes inside ``opts.gaps``."""
     path = src.aiding
     sol = read_geodetic(src, opts)
-    fixes = fixes_on_imu(sol, imu_t_ns, lever)
+    fixes = fixes_on_imu(sol, imu_t_ns, lever, label=None if opts.aiding_format != "bag" else aiding_label(src, opts))
     rel_s = (imu_t_ns[fixes.idx] - int(imu_t_ns[0])) * 1e-9
     in_gap = in_windows(rel_s, opts.gaps)
     fixes = fixes.select(~in_gap, dropped_outage=int(in_gap.sum()))
@@ -466,6 +468,22 @@ def imu_input(src: Sources, opts: NavigateOptions, imu: Imu) -> Tuple[np.ndarray
     return gyro, acc, var, label
 
 
+AIDING_SOURCES = {"tum": "TUM trajectory", "csv": "CSV trajectory", "asl": "ASL trajectory",
+                  "rtklib": "RTKLIB solution"}
+
+
+def aiding_label(src: Sources, opts: NavigateOptions) -> str:
+    """What the aiding is, for the summary's ``aiding_label`` and the plot's title: a bag's topic by its
+    message type (``run.bag topic /gps/fix (NavSatFix, bag)``: GNSS fixes, not an RTKLIB solution), else the
+    file with its format (``cam0.tum (TUM trajectory)``). The kind and sigmas follow it
+    (:func:`build_aiding`); RTKLIB solutions name their qualities (:func:`fixes_on_imu`)."""
+    name = Path(src.aiding).name
+    if opts.aiding_format == "bag":
+        kind = bag_aiding.topic_type(Path(src.aiding), str(src.aiding_topic)).rsplit("/", 1)[-1]
+        return f"{name} topic {src.aiding_topic} ({kind}, bag)"
+    return f"{name} ({AIDING_SOURCES.get(opts.aiding_format, opts.aiding_format)})"
+
+
 def is_geodetic(src: Sources, opts: NavigateOptions) -> bool:
     """Whether the aiding is geodetic fixes (an RTKLIB file or a bag's NavSatFix topic)."""
     return opts.aiding_format in GEODETIC_FORMATS or (
@@ -493,6 +511,28 @@ def resolve_aiding(src: Sources, opts: NavigateOptions, kind: Optional[str]) -> 
     return replace(opts, aiding_kind=kind)
 
 
+def check_inputs(src: Sources) -> Optional[Tuple[int, int]]:
+    """Read the side files before any fusion, so that a bad one is refused first (not after a long
+    fusion, with tracks and no summary): ``--groundtruth`` (poses: ``t tx ty tz qx qy qz qw`` or
+    ASL; a positions-only file is refused), ``--extrinsics`` and ``--profile``. Returns the ground
+    truth's (first, last) stamp [ns], or None without one."""
+    span = None
+    if src.groundtruth is not None:
+        try:
+            gt = groundtruth_formats.read_groundtruth(Path(src.groundtruth))
+        except ColumnCountError as e:
+            raise ConfigError(f"--groundtruth: {' '.join(str(e).split())}: navigate scores poses (t tx ty tz qx qy qz "
+                              "qw, or an ASL state/pose CSV); a positions-only file cannot be scored") from None
+        if len(gt.t_ns) < 2:
+            raise ConfigError(f"--groundtruth {src.groundtruth}: {len(gt.t_ns)} pose(s); scoring needs at least 2")
+        span = (int(gt.t_ns[0]), int(gt.t_ns[-1]))
+    if src.extrinsics is not None:
+        read_t_bs(src.extrinsics)
+    if src.profile is not None:
+        Profile.load(src.profile)
+    return span
+
+
 def navigate(src: Sources, out: Path, opts: NavigateOptions = NavigateOptions(),
              progress: bool = False) -> Dict[str, object]:
     """Fuse the recording's IMU with its aiding file and write ``out``/{causal.tum, smoothed.tum,
@@ -503,6 +543,7 @@ def navigate(src: Sources, out: Path, opts: NavigateOptions = NavigateOptions(),
     t_start = time.perf_counter()
     opts = resolve_aiding(src, opts, opts.aiding_kind)
     opts.check()
+    gt_span = check_inputs(src)
     if opts.aiding_kind != "position" and src.extrinsics is None:
         log.warning("no --extrinsics: the aiding's poses are taken as body (IMU) poses")
     T_BS = read_t_bs(src.extrinsics) if src.extrinsics is not None else None
@@ -510,6 +551,9 @@ def navigate(src: Sources, out: Path, opts: NavigateOptions = NavigateOptions(),
         raise ConfigError("--lever-arm and --extrinsics both give the antenna's lever arm: pass one")
     imu = read_body_imu(src, opts)
     t_ns = imu.t_ns
+    if gt_span is not None and (gt_span[1] < t_ns[0] or gt_span[0] > t_ns[-1]):
+        raise ConfigError(f"--groundtruth {src.groundtruth}: its stamps [{gt_span[0]}, {gt_span[1]}] ns do not overlap "
+                          f"the IMU's [{int(t_ns[0])}, {int(t_ns[-1])}] ns (same clock?)")
     lever = T_BS[:3, 3] if (T_BS is not None and opts.aiding_kind == "position") else np.zeros(3)
     if opts.lever_arm is not None:
         lever = np.asarray(opts.lever_arm, dtype=np.float64)
@@ -525,7 +569,7 @@ def navigate(src: Sources, out: Path, opts: NavigateOptions = NavigateOptions(),
     else:
         st = pose_start(t_ns, gyro, acc, rows, int(rows.sample[0]), bias0, opts.gravity, opts.level_s)
     s0 = st.start
-    aiding, counts = build_aiding(rows, s0, st.R_WA, lever, opts, Path(src.aiding).name, str(src.aiding),
+    aiding, counts = build_aiding(rows, s0, st.R_WA, lever, opts, aiding_label(src, opts), str(src.aiding),
                                   None if gnss is None else gnss[0])
     if len(aiding) == 0:
         raise AidingError(f"{src.aiding}: no aiding measurement left to fuse", str(src.aiding), opts.aiding_kind)

@@ -280,19 +280,21 @@ def read_pos(path: Path) -> RtkSolution:
 
 def fixes_on_imu(sol: RtkSolution, imu_t_ns: np.ndarray, lever: Sequence[float] = (0.0, 0.0, 0.0),
                  qualities: Sequence[int] = (1, 2), float_gain: float = 2.0, other_gain: float = 5.0,
-                 sigma_floor_m: float = 0.0, move_to_sample: bool = True) -> GnssFixes:
+                 sigma_floor_m: float = 0.0, move_to_sample: bool = True, label: Optional[str] = None) -> GnssFixes:
     """The solution's epochs with a quality in ``qualities`` as :class:`GnssFixes` at the nearest
     IMU sample (the time rules of :func:`imu_learn.fuse.aiding.snap_to_samples`; epochs outside the
     IMU's span or without a sample within half a period are dropped and counted). With
     ``move_to_sample`` and velocity columns, each position is moved by ``v * (t_sample - t_fix)``
     onto its sample's stamp (up to half an IMU period: 5 mm per m/s at 100 Hz). Sigmas: the
     epoch's ENU deviations (at least ``sigma_floor_m``) times 1 (fixed), ``float_gain`` (float) or
-    ``other_gain``. ``lever``: the antenna in the body frame [m]."""
+    ``other_gain``. ``lever``: the antenna in the body frame [m]. ``label``: what the fixes are
+    (default: the RTKLIB solution's file and qualities; a bag's NavSatFix topic names itself)."""
     imu_t_ns = np.asarray(imu_t_ns, dtype=np.int64)
     if not (float_gain > 0 and other_gain > 0 and sigma_floor_m >= 0):
         raise InvalidInputError(f"gains must be > 0 and the floor >= 0: {float_gain}, {other_gain}, {sigma_floor_m}")
     use = np.isin(sol.q, np.asarray(qualities, dtype=np.int8))
-    label = f"RTKLIB {Path(sol.path).name} (real), Q in {list(qualities)}"
+    if label is None:
+        label = f"RTKLIB {Path(sol.path).name} (real), Q in {list(qualities)}"
     if not use.any():
         raise AidingError(f"{sol.path}: no epoch with quality {list(qualities)}", sol.path, label)
     t = sol.t_ns[use]
