@@ -493,15 +493,23 @@ class Traditional(Method):
         with thread_limits(min(self.threads, settings.threads)):
             return self._fit(train, val, settings)
 
-    def _fit(self, train: List[Segment], val: List[Segment], settings: FitSettings) -> Dict[str, list]:
+    def _offset_first(self, train: List[Segment], val: List[Segment], settings: FitSettings,
+                      shift_val: bool = True) -> Tuple[int, float, Dict[str, list], List[Segment], List[Segment]]:
+        """What :meth:`fit` and :meth:`refit` do first: the seed, the window, and (``fit_offset``) the
+        time offset, with the training split (and ``val`` where ``shift_val``) resampled at it.
+        Returns (window, tau, its log, train, val)."""
         torch.manual_seed(settings.seed)
         window = int(self.window or settings.window)
-        tau, tau_log = 0.0, {}
-        if self.fit_offset:
-            if not any(len(s) > window for s in train):
-                raise ValueError(f"no training sequence is longer than the window ({window} samples)")
-            tau, tau_log = self._fit_time_offset(train, val, self.offset_window, settings.gravity)
-            train, val = [shifted(s, tau) for s in train], [shifted(s, tau) for s in val]
+        if not self.fit_offset:
+            return window, 0.0, {}, train, val
+        if not any(len(s) > window for s in train):
+            raise ValueError(f"no training sequence is longer than the window ({window} samples)")
+        tau, tau_log = self._fit_time_offset(train, val, self.offset_window, settings.gravity)
+        return (window, tau, tau_log, [shifted(s, tau) for s in train],
+                [shifted(s, tau) for s in val] if shift_val else val)
+
+    def _fit(self, train: List[Segment], val: List[Segment], settings: FitSettings) -> Dict[str, list]:
+        window, tau, tau_log, train, val = self._offset_first(train, val, settings)
         tr = _Data(train, window, self.max_windows, settings.gravity, self.filter_order)
         if len(tr) == 0:
             raise ValueError(f"no training sequence is longer than the window ({window} samples)")
@@ -567,14 +575,7 @@ class Traditional(Method):
 
     def _refit(self, train: List[Segment], val: List[Segment], start: TraditionalParams,
                settings: FitSettings) -> Dict[str, list]:
-        torch.manual_seed(settings.seed)
-        window = int(self.window or settings.window)
-        tau, tau_log = 0.0, {}
-        if self.fit_offset:
-            if not any(len(s) > window for s in train):
-                raise ValueError(f"no training sequence is longer than the window ({window} samples)")
-            tau, tau_log = self._fit_time_offset(train, val, self.offset_window, settings.gravity)
-            train = [shifted(s, tau) for s in train]
+        window, tau, tau_log, train, _ = self._offset_first(train, val, settings, shift_val=False)
         tr = _Data(train, window, self.max_windows, settings.gravity, self.filter_order)
         if len(tr) == 0:
             raise ValueError(f"no training sequence is longer than the window ({window} samples)")

@@ -189,13 +189,23 @@ def rate_window(imu_rate: float, ref_rate: float) -> int:
     return max(10, int(round(2 * imu_rate / max(ref_rate, 1e-9))))
 
 
-def rotation_spread(segs: Sequence[Segment], m: int, blocks: int = 20, seed: int = 0) -> float:
-    """Standard deviation [deg] of the fitted rotation over blocks of windows resampled (a bootstrap)."""
+Rates = Tuple[np.ndarray, np.ndarray]  # (IMU, reference) mean rates of every window, concatenated
+
+
+def matched_rates(segs: Sequence[Segment], m: int) -> Rates:
+    """The mean angular rates over ``m``-sample windows of every segment long enough (computed once for
+    every step that matches them: the spread, the planar test, the bias, the residual)."""
     rates = [mean_rates(s, m) for s in segs if len(s) > 2 * m]
     if not rates:
+        return np.zeros((0, 3)), np.zeros((0, 3))
+    return np.concatenate([r[0] for r in rates]), np.concatenate([r[1] for r in rates])
+
+
+def rotation_spread(rates: Rates, blocks: int = 20, seed: int = 0) -> float:
+    """Standard deviation [deg] of the fitted rotation over blocks of windows resampled (a bootstrap)."""
+    a, b = rates
+    if not len(a):
         return math.nan
-    a = np.concatenate([r[0] for r in rates])
-    b = np.concatenate([r[1] for r in rates])
     r0 = kabsch(a, b)[0]
     edges = np.linspace(0, len(a), blocks + 1).astype(int)
     rng = np.random.default_rng(seed)
@@ -212,9 +222,9 @@ def _angle_deg(r: np.ndarray) -> float:
     return math.degrees(math.acos(np.clip((np.trace(r) - 1) / 2, -1.0, 1.0)))
 
 
-def planar_ratio(segs: Sequence[Segment], m: int) -> float:
+def planar_ratio(rates: Rates) -> float:
     """Smallest over largest standard deviation of the reference's mean rates along its principal axes."""
-    b = np.concatenate([mean_rates(s, m)[1] for s in segs if len(s) > 2 * m])
+    b = rates[1]
     sv = np.linalg.svd(b - b.mean(0), compute_uv=False)
     return float(sv[-1] / max(sv[0], 1e-12))
 
@@ -344,7 +354,8 @@ def resolve_frame(pairs: Sequence[Tuple[ImuData, GroundTruth]], options: FrameOp
     if not segs:
         raise ReferenceFrameError("no stretch of IMU samples with the reference: check --max-gap-s and the clocks")
     m = rate_window(imu_rate, ref_rate)
-    ratio = planar_ratio(segs, m)
+    rates = matched_rates(segs, m)
+    ratio = planar_ratio(rates)
     off = fit_offset(segs, m=m, max_shift=max(3, int(round(0.02 * imu_rate))))
     w_rms = float(np.sqrt(np.mean(np.concatenate([np.sum(np.square(s.gyro - off.gyro_bias), 1) for s in segs]))))
     method = extrinsics.source if extrinsics is not None else "estimated from rotation rates"
@@ -354,14 +365,14 @@ def resolve_frame(pairs: Sequence[Tuple[ImuData, GroundTruth]], options: FrameOp
                 f"the reference's rotation rates do not match the IMU's in any frame (residual {off.rms:.3f} rad/s "
                 f"against {w_rms:.3f} rad/s of motion): a wrong file, unit or clock")
         r_imu_ref, lever0 = off.r_off, np.zeros(3)
-        rot_std = rotation_spread(segs, m)
+        rot_std = rotation_spread(rates)
         if ratio < options.planar_ratio or rot_std > options.max_rotation_std_deg:
-            r_imu_ref = planar_rotation(segs, m, off.rms, ratio)
+            r_imu_ref = planar_rotation(segs, rates, off.rms, ratio)
             rot_std, method = math.nan, "from specific force: the motion turns about one axis only"
     else:
         r_imu_ref, lever0 = extrinsics.r_imu_ref, extrinsics.lever_m
         rot_std = 0.0
-    gyro_bias = off.gyro_bias if method == "estimated from rotation rates" else _bias_given(segs, r_imu_ref, m)
+    gyro_bias = off.gyro_bias if method == "estimated from rotation rates" else _bias_given(rates, r_imu_ref)
     sol = fit_gravity_scale_lever(per, r_imu_ref, gyro_bias, options.window_s)
     g_up = sol["g_up"]
     tilt = max(math.degrees(math.acos(np.clip(g[2] / max(np.linalg.norm(g), 1e-12), -1, 1))) for g in g_up)
@@ -397,7 +408,7 @@ def resolves_acceleration(ref_rate_hz: float, window_s: float, fraction: float =
     return span_s <= fraction * window_s
 
 
-def planar_rotation(segs: Sequence[Segment], m: int, rate_rms: float, ratio: float) -> np.ndarray:
+def planar_rotation(segs: Sequence[Segment], rates: Rates, rate_rms: float, ratio: float) -> np.ndarray:
     """Motion about one axis (a ground robot) leaves the rotation about it free in the rates: the
     rotation from specific force instead (gravity and the horizontal accelerations, in a level reference
     world; :func:`imu_learn.eval.groundtruth.fit_acc_rotation`), kept only if the rates agree with it."""
@@ -409,8 +420,8 @@ def planar_rotation(segs: Sequence[Segment], m: int, rate_rms: float, ratio: flo
             "not observable from this motion; give --extrinsics FILE (planar wheel odometry observes yaw rate and "
             "speed only)")
     r = fit_acc_rotation(list(segs))
-    bias = _bias_given(segs, r, m)
-    res = _rate_residual(segs, r, bias, m)
+    bias = _bias_given(rates, r)
+    res = _rate_residual(rates, r, bias)
     if res > 2 * rate_rms + 0.01:
         raise ReferenceFrameError(
             f"the reference turns about one axis only (rate spread ratio {ratio:.3f}) and its specific force does not "
@@ -434,17 +445,13 @@ def _horizontal_acc_rms(segs: Sequence[Segment]) -> float:
     return float(np.sqrt(np.mean(np.sum(np.concatenate(out) ** 2, axis=1)))) if out else 0.0
 
 
-def _rate_residual(segs: Sequence[Segment], r: np.ndarray, bias: np.ndarray, m: int) -> float:
-    rates = [mean_rates(s, m) for s in segs if len(s) > 2 * m]
-    a = np.concatenate([x[0] for x in rates])
-    b = np.concatenate([x[1] for x in rates])
+def _rate_residual(rates: Rates, r: np.ndarray, bias: np.ndarray) -> float:
+    a, b = rates
     return float(np.sqrt(np.mean(np.sum((a - bias - b @ r.T) ** 2, axis=1))))
 
 
-def _bias_given(segs: Sequence[Segment], r_imu_ref: np.ndarray, m: int) -> np.ndarray:
-    rates = [mean_rates(s, m) for s in segs if len(s) > 2 * m]
-    a = np.concatenate([r[0] for r in rates])
-    b = np.concatenate([r[1] for r in rates])
+def _bias_given(rates: Rates, r_imu_ref: np.ndarray) -> np.ndarray:
+    a, b = rates
     return np.median(a - b @ r_imu_ref.T, axis=0)
 
 
