@@ -98,7 +98,7 @@ def parameter_findings(floor: Any, gravity_mps2: Optional[float]) -> List[Findin
     ba = np.abs(p.b_a)
     if np.any(ba >= LIMITS["acc_bias_mps2"]):
         out.append(Finding("accelerometer.bias", f"|bias| {ba.max():.3g} m/s^2 (limit {LIMITS['acc_bias_mps2']:g}): a "
-                                                 "reference world not levelled, a lever arm, or an acc unit off"))
+                                                 "reference world not levelled, a lever arm, a reference not in metres, or an acc unit off"))
     if gravity_mps2 is not None and math.isfinite(gravity_mps2) and abs(gravity_mps2 / G - 1) > LIMITS["gravity_rel"]:
         out.append(Finding("gravity_mps2", f"{gravity_mps2:.3f} m/s^2 after the profile (limit +-"
                                            f"{100 * LIMITS['gravity_rel']:g} % of {G}): the acc unit, or a reference "

@@ -229,8 +229,10 @@ class PosesSource(Source):
 
     def __init__(self, inputs: Sequence[Path], groundtruths: Sequence[Optional[Path]] = (), fmt: str = "auto",
                  columns: Any = None, extrinsics: Optional[Path] = None, max_gap_s: Optional[float] = None,
-                 val_fraction: float = 0.15, device: Optional[str] = None) -> None:
+                 val_fraction: float = 0.15, device: Optional[str] = None,
+                 topics: Optional[Dict[str, Optional[str]]] = None) -> None:
         self.inputs = [Path(p) for p in inputs]
+        self.topics = {k: v for k, v in (topics or {}).items() if v}  # a bag's imu_topic / groundtruth_topic
         gts = [None if g is None else Path(g) for g in groundtruths]
         if len(gts) > len(self.inputs):
             raise ConfigError(f"--groundtruth: {len(gts)} given for {len(self.inputs)} --input")
@@ -248,7 +250,7 @@ class PosesSource(Source):
         pairs, names, sources, fmts = [], [], [], []
         for path, gt in zip(self.inputs, self.groundtruths):
             fmts.append(_format(path, self.fmt, self.columns))
-            pairs.append(read_recording(path, self.fmt, gt, columns=self.columns))
+            pairs.append(read_recording(path, self.fmt, gt, columns=self.columns, **self.topics))
             names.append(_name(path))
             sources.append({"recording": str(path), "format": fmts[-1], "groundtruth": str(gt) if gt else "the format's own"})
         progress("checking the reference against the IMU (frame, lag, gravity, scale)")

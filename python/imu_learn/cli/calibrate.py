@@ -79,6 +79,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--extrinsics", type=Path, metavar="YAML",
                    help="the reference sensor's known extrinsic (Kalibr / EuRoC sensor.yaml T_BS: the reference's "
                         "frame in the IMU's); default: estimated from the rotation rates and written to profile.json")
+    p.add_argument("--imu-topic", help="ROS bags: the sensor_msgs/msg/Imu topic (default: the bag's only one)")
+    p.add_argument("--groundtruth-topic", help="ROS bags: the pose topic of the reference (default: the bag's only one)")
     p.add_argument("--force", action="store_true",
                    help="write a profile that fails a plausibility check (scale, misalignment, bias, gravity, the "
                         "held-back block), with a warning, instead of stopping")
@@ -161,7 +163,8 @@ def source_of(args: argparse.Namespace) -> Source:
         return OdometrySource(args.input, args.groundtruth, args.format, csv_layout(args), args.max_gap_s,
                               args.val_fraction, args.device)
     return PosesSource(args.input, args.groundtruth or [], args.format, csv_layout(args), args.extrinsics,
-                       args.max_gap_s, args.val_fraction, args.device)
+                       args.max_gap_s, args.val_fraction, args.device,
+                       {"imu_topic": args.imu_topic, "groundtruth_topic": args.groundtruth_topic})
 
 
 def run(args: argparse.Namespace, rest: List[str], keep: Callable[[Any], None]) -> int:
