@@ -146,7 +146,11 @@ def parser(name: str) -> argparse.ArgumentParser:
 
 def run_command(name: str, argv: Optional[Sequence[str]] = None, **hooks: Any) -> int:
     """Parse ``argv`` for subcommand ``name`` and run it under the one error rule (module doc)."""
-    mod = importlib.import_module(f"imu_learn.cli.{name}")
+    try:
+        mod = importlib.import_module(f"imu_learn.cli.{name}")
+    except KeyboardInterrupt:  # while its modules load (GTSAM, torch: seconds)
+        sys.stderr.write(f"{prog(name)}: interrupted\n")
+        return EXIT_INTERRUPTED
     p = parser(name)
     argv = list(sys.argv[1:] if argv is None else argv)
     if getattr(mod, "OVERRIDES", False):  # --key.sub VALUE config overrides

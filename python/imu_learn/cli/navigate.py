@@ -205,12 +205,13 @@ def run(args: argparse.Namespace, rest: List[str], keep: Callable[[Any], None]) 
     set_torch_threads(args.threads)
     require_gtsam("navigate")
     out = args.out or Path("out") / args.input.name
-    keep(f"nothing is written to {out} before the fusion ends")
+    done: List[bool] = []  # the outputs go in all at once, at the end (imu_learn.util.staging)
+    keep(lambda: f"{out} holds this run's complete outputs" if done else f"nothing of this run is written to {out}")
     src = Sources(args.input, args.aiding, fmt=args.format or "auto", aiding_topic=args.aiding_topic,
                   columns=csv_layout(args), profile=args.profile, extrinsics=args.extrinsics,
                   checkpoint=None if args.checkpoint is None else Path(args.checkpoint), groundtruth=args.groundtruth,
                   displacement=args.displacement, calibration=args.calibration)
-    print(one_line(navigate(src, out, o, progress=not args.quiet)))
+    print(one_line(navigate(src, out, o, progress=not args.quiet, written=lambda: done.append(True))))
     return 0
 
 

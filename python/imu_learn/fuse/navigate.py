@@ -51,7 +51,7 @@ import sys
 import time
 from dataclasses import asdict, dataclass, replace
 from pathlib import Path
-from typing import Dict, Optional, Tuple
+from typing import Callable, Dict, Optional, Tuple
 
 import numpy as np
 from scipy.spatial.transform import Rotation
@@ -70,6 +70,8 @@ from imu_learn.errors import AidingError, ColumnCountError, ConfigError, Invalid
 from imu_learn.infer import rates
 from imu_learn.infer.bias import bias_entry, bias_step
 from imu_learn.infer.bias import choices as bias_choices
+from imu_learn.util import interrupts
+from imu_learn.util.staging import staged_dir
 
 from . import geo
 from .aiding import AbsolutePoses, OutageWindow, PositionFixes, RelativePoses, snap_to_samples
@@ -534,12 +536,14 @@ def check_inputs(src: Sources) -> Optional[Tuple[int, int]]:
 
 
 def navigate(src: Sources, out: Path, opts: NavigateOptions = NavigateOptions(),
-             progress: bool = False) -> Dict[str, object]:
+             progress: bool = False, written: Optional[Callable[[], None]] = None) -> Dict[str, object]:
     """Fuse the recording's IMU with its aiding file and write ``out``/{causal.tum, smoothed.tum,
     plot.png, summary.json} (and the geodetic tracks of GNSS aiding, the bags of bag aiding: see
     :func:`write_outputs`); returns the summary (module docstring). ``progress``: a bar on stderr for
     runs longer than a few seconds. ``opts.aiding_kind`` None: from the aiding
-    (:func:`resolve_aiding`)."""
+    (:func:`resolve_aiding`). The outputs go in all at once (:func:`imu_learn.util.staging.staged_dir`):
+    an error or a Ctrl-C before that leaves ``out`` as it was; ``written()`` is called once ``out``
+    holds them all (a Ctrl-C during the swap is raised after it)."""
     t_start = time.perf_counter()
     opts = resolve_aiding(src, opts, opts.aiding_kind)
     opts.check()
@@ -582,9 +586,6 @@ def navigate(src: Sources, out: Path, opts: NavigateOptions = NavigateOptions(),
     res = fuse_run(src, opts, imu, (gyro, acc, var), st, aiding, label, progress)
     kf_t = t_ns[s0:][res.kf_idx]
     out = Path(out)
-    out.mkdir(parents=True, exist_ok=True)
-    write_trajectory(out / "causal.tum", kf_t, res.causal_p, res.causal_R)
-    write_trajectory(out / "smoothed.tum", kf_t, res.smoothed_p, res.smoothed_R)
     summary: Dict[str, object] = {
         "input": str(src.input), "imu_file": imu.file, "imu_input": label,
         "noise": imu.noise.source if var is None else "learned per-sample variances"
@@ -610,18 +611,23 @@ def navigate(src: Sources, out: Path, opts: NavigateOptions = NavigateOptions(),
         "outputs": {"causal": str(out / "causal.tum"), "smoothed": str(out / "smoothed.tum")},
         **frames(src, opts, None if gnss is None else gnss[1]),
     }
-    summary["outputs"].update(write_outputs(src, out, kf_t, res, None if gnss is None else gnss[1]))
     scores = None
     if src.groundtruth is not None:
         scores = score_against(src.groundtruth, kf_t, res, rows, st.R_WA, int(t_ns[0]), opts.aiding_kind != "position",
                                opts.gaps)
         summary["groundtruth"] = str(src.groundtruth)
         summary["scores"] = scores
-    if plot_navigation(out / "plot.png", f"{Path(src.input).name}: {aiding.label}", kf_t, res, rows, st.R_WA, scores,
-                       opts.gaps, int(t_ns[0])):
-        summary["outputs"]["plot"] = str(out / "plot.png")
-    summary["seconds"] = round(time.perf_counter() - t_start, 2)
-    write_json(out / "summary.json", summary)
+    # every file into a staging folder, swapped in whole at the end: out holds this run's files or the old ones
+    with staged_dir(out, OUTPUT_NAMES, written) as stage:
+        write_trajectory(stage / "causal.tum", kf_t, res.causal_p, res.causal_R)
+        write_trajectory(stage / "smoothed.tum", kf_t, res.smoothed_p, res.smoothed_R)
+        extra = write_outputs(src, stage, kf_t, res, None if gnss is None else gnss[1])
+        summary["outputs"].update({k: str(out / Path(v).relative_to(stage)) for k, v in extra.items()})
+        if plot_navigation(stage / "plot.png", f"{Path(src.input).name}: {aiding.label}", kf_t, res, rows, st.R_WA,
+                           scores, opts.gaps, int(t_ns[0])):
+            summary["outputs"]["plot"] = str(out / "plot.png")
+        summary["seconds"] = round(time.perf_counter() - t_start, 2)
+        write_json(stage / "summary.json", summary)
     return summary
 
 
@@ -687,6 +693,11 @@ def frames(src: Sources, opts: NavigateOptions, sol: Optional[RtkSolution]) -> D
             "time_system": ts}
 
 
+# Every name navigate writes in its output folder: a previous run's are replaced or removed, other files kept.
+OUTPUT_NAMES = ("causal.tum", "smoothed.tum", "plot.png", "summary.json", "causal_llh.csv", "smoothed_llh.csv",
+                "track.kml", "track.geojson", "causal.bag", "smoothed.bag", "causal_bag", "smoothed_bag")
+
+
 def write_outputs(src: Sources, out: Path, kf_t: np.ndarray, res, sol: Optional[RtkSolution]) -> Dict[str, str]:
     """The files beside the TUM ones: with geodetic aiding the causal and smoothed tracks as
     latitude/longitude/height CSVs (``causal_llh.csv``, ``smoothed_llh.csv``), ``track.kml`` and
@@ -730,17 +741,24 @@ def fuse_run(src: Sources, opts: NavigateOptions, imu: Imu, fused: tuple, st: St
     log.info(f"fusing {len(imu.t_ns) - st.start} IMU samples ({label}) with {len(aiding)} {opts.aiding_kind} "
              f"measurements of {src.aiding}")
     t_ns = imu.t_ns[sel]
+
+    def on_state(*_) -> None:  # between two samples, in plain Python: where a held Ctrl-C is raised
+        bar.update(1)
+        interrupts.check()
+
     try:
-        t0 = time.perf_counter()
-        inc = IncrementalFusion(t_ns, st.pose, [aiding], settings, st.bias, predict_between=False,
-                                extra_factors=chain(*hooks))
-        with tqdm(total=len(t_ns), desc="navigate", unit="sample", unit_scale=True, delay=PROGRESS_DELAY_S,
-                  mininterval=1.0, disable=not progress, file=sys.stderr, leave=False) as bar:
-            feed(inc, samples_of(np.ascontiguousarray(gyro[sel]), np.ascontiguousarray(acc[sel]),
-                                 None if var is None else np.ascontiguousarray(var[sel])),
-                 on_state=lambda *_: bar.update(1))
-            bar.set_description("navigate: smoothing")
-            res = inc.smooth()
+        # Ctrl-C held while GTSAM runs (it calls the Python factors back from C++): raised by on_state, or
+        # at the block's end for one during the batch pass
+        with interrupts.held_interrupts():
+            t0 = time.perf_counter()
+            inc = IncrementalFusion(t_ns, st.pose, [aiding], settings, st.bias, predict_between=False,
+                                    extra_factors=chain(*hooks))
+            with tqdm(total=len(t_ns), desc="navigate", unit="sample", unit_scale=True, delay=PROGRESS_DELAY_S,
+                      mininterval=1.0, disable=not progress, file=sys.stderr, leave=False) as bar:
+                feed(inc, samples_of(np.ascontiguousarray(gyro[sel]), np.ascontiguousarray(acc[sel]),
+                                     None if var is None else np.ascontiguousarray(var[sel])), on_state=on_state)
+                bar.set_description("navigate: smoothing")
+                res = inc.smooth()
         res.seconds = time.perf_counter() - t0
         return res
     except RuntimeError as e:  # GTSAM's IndeterminateLinearSystemException and kin
