@@ -128,8 +128,10 @@ def _aiding_by_sample(aiding: Seq) -> tuple:
                 fixes_at.setdefault(int(s), []).append((p, a.lever, m))
         elif isinstance(a, RelativePoses):
             model = gtsam.noiseModel.Diagonal.Sigmas(np.r_[[a.sigma_rot_rad] * 3, [a.sigma_trans_m] * 3])
-            for i, j, R, t in zip(a.i, a.j, a.R_ij, a.t_ij):
-                between_at.setdefault(int(j), []).append((int(i), gtsam.Pose3(gtsam.Rot3(R), t), model))
+            sig = getattr(a, "sigmas", None)  # per pair and axis (M, 6), where the aiding has them
+            for n, (i, j, R, t) in enumerate(zip(a.i, a.j, a.R_ij, a.t_ij)):
+                m = model if sig is None else gtsam.noiseModel.Diagonal.Sigmas(np.asarray(sig[n], dtype=np.float64))
+                between_at.setdefault(int(j), []).append((int(i), gtsam.Pose3(gtsam.Rot3(R), t), m))
         elif isinstance(a, AbsolutePoses):  # a pose prior at its sample: (None, Pose3, model)
             model = gtsam.noiseModel.Diagonal.Sigmas(np.r_[[a.sigma_rot_rad] * 3, [a.sigma_trans_m] * 3])
             for s, R, t in zip(a.idx, a.R, a.p):

@@ -74,12 +74,14 @@ from imu_learn.util import interrupts
 from imu_learn.util.staging import staged_dir
 
 from . import geo
-from .aiding import AbsolutePoses, OutageWindow, PositionFixes, RelativePoses, snap_to_samples
+from .aiding import AbsolutePoses, OutageWindow, PositionFixes, snap_to_samples
 from .aiding import bag as bag_aiding
 from .aiding.detect import FORMATS as DETECTED_FORMATS
 from .aiding.detect import detect as detect_aiding
+from .aiding.estimate import one_line_text, shift_trajectory, summary_entry, with_noise
 from .aiding.outages import in_windows
 from .aiding.rtklib import RtkSolution, fixes_on_imu, normal_gravity, read_pos
+from .aiding.spans import SPANS_S, given_noise, relative_poses
 from .aiding.tum import Trajectory, check_overlap, read_trajectory
 from .aiding.types import AidingRows
 from .factors import chain
@@ -116,6 +118,8 @@ class NavigateOptions:
     rel_sigma_rot_deg: float = 0.05
     rel_sigma_trans_m: float = 0.003
     max_relative_gap_s: float = 0.5
+    # relative poses tie each row to rows these spans [s] before it (0: the row before; :mod:`.aiding.spans`)
+    relative_spans_s: Tuple[float, ...] = SPANS_S
     # absolute poses (in the aiding's world, rotated into W)
     pose_sigma_rot_deg: float = 1.0
     pose_sigma_m: float = 0.02
@@ -330,29 +334,34 @@ def build_aiding(rows: AidingRows, s0: int, R_WA: np.ndarray, lever: np.ndarray,
     """The graph's aiding object for the rows, sample indices counted from ``s0`` (the first fused sample)."""
     idx = rows.sample
     if opts.aiding_kind == "relative-pose":
-        gap = np.diff(rows.t_ns) * 1e-9
-        ok = gap <= opts.max_relative_gap_s
-        i, j = np.flatnonzero(ok), np.flatnonzero(ok) + 1
-        Ri, Rj = rows.R[i], rows.R[j]
-        R_ij = np.einsum("nki,nkj->nij", Ri, Rj)  # Ri^T Rj
-        t_ij = np.einsum("nki,nk->ni", Ri, rows.p[j] - rows.p[i])
-        a = RelativePoses(idx[i], idx[j], R_ij, t_ij, float(np.deg2rad(opts.rel_sigma_rot_deg)),
-                          float(opts.rel_sigma_trans_m),
-                          f"{label}: relative poses, sigma {opts.rel_sigma_rot_deg:g} deg / {opts.rel_sigma_trans_m:g} m"
-                          ).since(s0)
-        return a, {"relative_poses": int(len(i)), "not_chained_over_gaps": int((~ok).sum())}
+        noise, source = relative_noise(rows, opts)
+        a, counts = relative_poses(idx, rows.t_ns, rows.R, rows.p, noise, opts.relative_spans_s,
+                                   opts.max_relative_gap_s, label)
+        return a.since(s0), {**counts, "aiding_estimates": summary_entry(rows, noise, source)}
     if opts.aiding_kind == "pose":
         R = np.einsum("ij,njk->nik", R_WA, rows.R)
         p = rows.p @ R_WA.T
         a = AbsolutePoses(idx, R, p, float(np.deg2rad(opts.pose_sigma_rot_deg)), float(opts.pose_sigma_m),
                           f"{label}: absolute poses, sigma {opts.pose_sigma_rot_deg:g} deg / {opts.pose_sigma_m:g} m",
                           source).since(s0)
-        return a, {"absolute_poses": int(len(idx))}
+        return a, {"absolute_poses": int(len(idx)), "aiding_estimates": summary_entry(rows, None, "")}
     # fixes before the start (the track heading's first fast fix) are left out
     fixes = gnss if gnss is not None else PositionFixes(
         idx, rows.p @ R_WA.T, float(opts.position_sigma_m), np.asarray(lever, dtype=np.float64),
         f"{label}: positions, sigma {opts.position_sigma_m:g} m", source)
     return fixes.since(s0), {"position_fixes": int((idx >= s0).sum()), "fixes_before_start": int((idx < s0).sum())}
+
+
+def relative_noise(rows: AidingRows, opts: NavigateOptions):
+    """(each pose's noise, where it came from): ``--sigma-rot-deg`` / ``--sigma-m`` where given (a
+    relative pose's sigmas, each pose's = over sqrt(2)), else the noise estimated against the IMU
+    (:mod:`.aiding.noise`), else the defaults (a relative pose's 0.003 m / 0.05 deg)."""
+    d = NavigateOptions()
+    given = (opts.rel_sigma_rot_deg != d.rel_sigma_rot_deg) or (opts.rel_sigma_trans_m != d.rel_sigma_trans_m)
+    if rows.noise is not None and not given:
+        return rows.noise, "estimated"
+    return (given_noise(float(np.deg2rad(opts.rel_sigma_rot_deg)), float(opts.rel_sigma_trans_m)),
+            "given" if given else "default")
 
 
 @dataclass(frozen=True)
@@ -442,16 +451,22 @@ def read_body_imu(src: Sources, opts: NavigateOptions) -> Imu:
 
 
 def aiding_rows(src: Sources, opts: NavigateOptions, t_ns: np.ndarray, T_BS: Optional[np.ndarray],
-                lever: np.ndarray) -> Tuple[AidingRows, int, Optional[object], NavigateOptions]:
+                lever: np.ndarray, imu: Optional[Imu] = None) -> Tuple[AidingRows, int, Optional[object], NavigateOptions]:
     """(the rows used, the rows read, (the GNSS fixes, their solution) of geodetic aiding or None, the
-    options with the gravity of geodetic fixes)."""
+    options with the gravity of geodetic fixes). Poses with ``imu``: their time offset estimated and
+    applied, and their noise estimated (:mod:`.aiding.estimate`)."""
     if is_geodetic(src, opts):
         gnss, rows, sol = gnss_rows(src, t_ns, lever, opts)
         # geodetic fixes: the normal gravity at their origin (9.797 m/s^2 on the drive, not 9.81)
         opts = replace(opts, gravity=round(normal_gravity(sol.origin_llh[0], sol.origin_llh[2]), 6))
         return rows, len(rows.sample) + sum(rows.dropped.values()), (gnss, sol), opts
     traj = read_aiding(src, opts)
-    return select_rows(traj, t_ns, T_BS, opts), len(traj), None, opts
+    if imu is None or traj.q_xyzw is None or opts.aiding_kind == "position":
+        return select_rows(traj, t_ns, T_BS, opts), len(traj), None, opts
+    traj, offset = shift_trajectory(traj, imu.t_ns, imu.gyro)
+    rows = select_rows(traj, t_ns, T_BS, opts)
+    rows.offset = offset
+    return with_noise(rows, imu.t_ns, imu.gyro, imu.acc, opts.max_relative_gap_s), len(traj), None, opts
 
 
 def imu_input(src: Sources, opts: NavigateOptions, imu: Imu) -> Tuple[np.ndarray, np.ndarray, Optional[np.ndarray], str]:
@@ -561,7 +576,7 @@ def navigate(src: Sources, out: Path, opts: NavigateOptions = NavigateOptions(),
     lever = T_BS[:3, 3] if (T_BS is not None and opts.aiding_kind == "position") else np.zeros(3)
     if opts.lever_arm is not None:
         lever = np.asarray(opts.lever_arm, dtype=np.float64)
-    rows, rows_read, gnss, opts = aiding_rows(src, opts, t_ns, T_BS, lever)
+    rows, rows_read, gnss, opts = aiding_rows(src, opts, t_ns, T_BS, lever, imu)
     bias0, bias_source = checkpoint_bias(src.checkpoint)
     gyro, acc, var, label = imu_input(src, opts, imu)
     gyro, bias = own_bias(opts, t_ns, gyro, acc, str(src.input), bias_prior(imu))
@@ -781,6 +796,8 @@ def one_line(summary: Dict[str, object]) -> str:
                  f"{sc['smoothed']['pos_rmse_m']:.3f} m")
         if sc.get("aiding_only"):
             text += f", aiding alone {sc['aiding_only']['pos_rmse_m']:.3f} m"
+    if one_line_text(s.get("aiding_estimates")):
+        text += f"; {one_line_text(s.get('aiding_estimates'))}"
     return text + f" -> {Path(str(s['outputs']['smoothed'])).parent} ({s['seconds']:.0f} s)"
 
 

@@ -50,7 +50,9 @@ class PositionFixes:
 @dataclass(frozen=True)
 class RelativePoses:
     """Body pose at sample ``j`` relative to sample ``i``: rotation ``R_ij`` and translation
-    ``t_ij`` (in frame i), with isotropic rotation [rad] and translation [m] sigmas."""
+    ``t_ij`` (in frame i), with isotropic rotation [rad] and translation [m] sigmas, or per pair and
+    axis ``sigmas`` (M, 6): rotation [rad] then translation [m], in frame i (the graph then builds a
+    diagonal noise model per pair; ``sigma_rot_rad`` and ``sigma_trans_m`` are then only a label)."""
 
     i: np.ndarray
     j: np.ndarray
@@ -60,6 +62,7 @@ class RelativePoses:
     sigma_trans_m: float
     label: str
     dropped_outage: int = 0  # relative poses removed by apply_outages
+    sigmas: Optional[np.ndarray] = None
 
     def __len__(self) -> int:
         return len(self.i)
@@ -68,7 +71,8 @@ class RelativePoses:
         """The relative poses where ``keep`` (M,) is True; ``dropped_outage`` is added to the count."""
         keep = np.asarray(keep, dtype=bool)
         return replace(self, i=self.i[keep], j=self.j[keep], R_ij=self.R_ij[keep], t_ij=self.t_ij[keep],
-                       dropped_outage=self.dropped_outage + int(dropped_outage))
+                       dropped_outage=self.dropped_outage + int(dropped_outage),
+                       sigmas=None if self.sigmas is None else self.sigmas[keep])
 
     def since(self, s0: int) -> RelativePoses:
         """The relative poses starting from sample ``s0`` on, their indices counted from it."""
@@ -202,3 +206,7 @@ class AidingRows:
     p: np.ndarray
     R: Optional[np.ndarray]
     dropped: Dict[str, int] = field(default_factory=dict)
+    # estimated from the data (pose aiding): the time offset applied to the stamps
+    # (:class:`.offset.AidingOffset`) and each pose's noise (:class:`.noise.PoseNoise`)
+    offset: Optional[object] = None
+    noise: Optional[object] = None

@@ -1,0 +1,96 @@
+"""Relative poses that keep a SLAM trajectory's global consistency: each row tied not only to the row
+before it but to rows further back, over spans growing by a factor (``SPANS_S``: a tenth of a
+second to about a minute), inside one run of rows (never across a gap longer than ``max_gap_s``:
+a visual system that lost track may restart in a new map). Chaining consecutive rows only turns a
+loop-closed trajectory into an odometry whose drift the graph cannot see; the longer spans carry its
+global shape, the short ones its detail, and between them the IMU.
+
+Each pair's sigmas come from each pose's own noise (:class:`.noise.PoseNoise`, per body axis, as
+white noise per pose): rotation ``sqrt(2) σ_θ``; translation in frame i ``sqrt(2 σ_p² + (σ_θ × t_ij)²)``
+(frame i's rotation error swings the far end). Every pose takes part in up to twice as many pairs as
+there are spans, so its noise would be counted that many times: each sigma is inflated by the
+square root of the number of spans (``inflate``)."""
+from __future__ import annotations
+
+from typing import Sequence, Tuple
+
+import numpy as np
+
+from .noise import PoseNoise
+from .types import RelativePoses
+
+SPANS_S = (0.0, 1.0, 4.0, 16.0, 64.0)  # 0: the next row
+ANCHOR_S = 1.0  # the spans longer than 0 join anchor rows, the first row of each ANCHOR_S
+
+
+def anchors(t_s: np.ndarray, anchor_s: float = ANCHOR_S) -> np.ndarray:
+    """Indices of the anchor rows: the first row of each ``anchor_s`` bin of times ``t_s``."""
+    bins = np.floor((np.asarray(t_s, dtype=np.float64) - float(t_s[0])) / anchor_s).astype(np.int64)
+    return np.unique(bins, return_index=True)[1]
+
+
+def span_pairs(t_s: np.ndarray, spans_s: Sequence[float], max_gap_s: float,
+               anchor_s: float = ANCHOR_S) -> Tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(i, j, which span) of rows at times ``t_s`` (sorted): span 0 ties each row to the row before;
+    a longer span ties each anchor row (:func:`anchors`) to the last anchor at least that span before
+    it. Only inside one run (no two consecutive rows of it further apart than ``max_gap_s``), each
+    pair once (the shortest span's)."""
+    t_s = np.asarray(t_s, dtype=np.float64)
+    run = np.r_[0, np.cumsum(np.diff(t_s) > max_gap_s)]
+    anc = anchors(t_s, anchor_s)
+    pairs = {}
+    for n, span in enumerate(spans_s):
+        if span <= 0:
+            j = np.arange(1, len(t_s))
+            i = j - 1
+        else:
+            j = anc[1:]
+            k = np.searchsorted(t_s[anc], t_s[j] - span, side="right") - 1
+            ok = k >= 0
+            i, j = anc[np.maximum(k, 0)][ok], j[ok]
+        ok = (i < j) & (run[i] == run[j])
+        for a, b in zip(i[ok], j[ok]):
+            pairs.setdefault((int(a), int(b)), n)
+    if not pairs:
+        return np.zeros(0, np.int64), np.zeros(0, np.int64), np.zeros(0, np.int64)
+    ij = np.array(sorted(pairs), dtype=np.int64)
+    return ij[:, 0], ij[:, 1], np.array([pairs[tuple(x)] for x in ij], dtype=np.int64)
+
+
+def pair_sigmas(t_ij: np.ndarray, noise: PoseNoise, inflate=1.0) -> np.ndarray:
+    """(M, 6) sigmas of relative poses with translations ``t_ij`` (M, 3) in frame i (module docstring):
+    rotation [rad] then translation [m], per axis."""
+    th, sp = np.asarray(noise.rot_rad), np.asarray(noise.trans_m)
+    rot = np.broadcast_to(np.sqrt(2) * th, (len(t_ij), 3))
+    x, y, z = t_ij[:, 0], t_ij[:, 1], t_ij[:, 2]
+    swing = np.stack([th[1] ** 2 * z ** 2 + th[2] ** 2 * y ** 2,
+                      th[0] ** 2 * z ** 2 + th[2] ** 2 * x ** 2,
+                      th[0] ** 2 * y ** 2 + th[1] ** 2 * x ** 2], axis=1)
+    trans = np.sqrt(2 * sp ** 2 + swing)
+    return inflate * np.c_[rot, trans]
+
+
+def given_noise(rel_rot_rad: float, rel_trans_m: float) -> PoseNoise:
+    """Each pose's noise from sigmas given for a relative pose between two rows (each over sqrt(2))."""
+    return PoseNoise(np.full(3, rel_rot_rad / np.sqrt(2)), np.full(3, rel_trans_m / np.sqrt(2)), 0, 0, 0.0)
+
+
+def relative_poses(sample: np.ndarray, t_ns: np.ndarray, R: np.ndarray, p: np.ndarray, noise: PoseNoise,
+                   spans_s: Sequence[float], max_gap_s: float, label: str):
+    """(:class:`RelativePoses` over ``spans_s`` (:func:`span_pairs`) with per-pair sigmas
+    (:func:`pair_sigmas`), the counts for the summary) of rows at IMU samples ``sample`` with body
+    poses ``R``, ``p`` in the aiding's world."""
+    i, j, which = span_pairs((np.asarray(t_ns, dtype=np.int64) - int(t_ns[0])) * 1e-9, spans_s, max_gap_s)
+    R_ij = np.einsum("nki,nkj->nij", R[i], R[j])  # Ri^T Rj
+    t_ij = np.einsum("nki,nk->ni", R[i], p[j] - p[i])
+    spans = np.asarray(spans_s, dtype=np.float64)
+    inflate = np.where(spans[which] > 0, np.sqrt(max(1, int(np.sum(spans > 0)))), 1.0)
+    sig = pair_sigmas(t_ij, noise, inflate[:, None])
+    rot, trans = float(np.median(sig[:, :3])), float(np.median(sig[:, 3:]))
+    text = (f"{label}: relative poses over spans {', '.join(f'{s:g}' for s in spans_s)} s, median sigma "
+            f"{np.rad2deg(rot):.3g} deg / {trans:.3g} m")
+    a = RelativePoses(sample[i], sample[j], R_ij, t_ij, rot, trans, text, sigmas=sig)
+    consecutive = int(np.sum(np.diff(np.asarray(t_ns, dtype=np.int64)) * 1e-9 > max_gap_s))
+    counts = {"relative_poses": int(len(i)), "relative_poses_per_span": np.bincount(which, minlength=len(spans_s)).tolist(),
+              "not_chained_over_gaps": consecutive}
+    return a, counts
