@@ -1,5 +1,6 @@
 """Every method ``imu-learn evaluate`` can fit and score, by name, and how to load one. Methods are
-imported only when asked for (most need torch)."""
+imported only when asked for (most need torch). Beside the registered names, ``profile:PATH`` scores a
+device profile's floor as it ships (:mod:`imu_learn.baselines.profile_floor`; nothing fitted)."""
 from __future__ import annotations
 
 import importlib
@@ -9,6 +10,7 @@ from pathlib import Path
 from typing import Callable, Dict, Optional, Tuple, Union
 
 from imu_learn.baselines.base import Method
+from imu_learn.baselines.profile_floor import PREFIX, ProfileFloor
 from imu_learn.errors import ConfigError
 
 log = logging.getLogger(__name__)
@@ -35,6 +37,11 @@ REGISTRY["tlio-style"] = ("imu_learn.baselines.tlio", None)
 REGISTRY["zero-displacement"] = ("imu_learn.baselines.zero_displacement", None)
 
 
+def is_method(name: str) -> bool:
+    """A name evaluate knows: a registered one, or ``profile:PATH``."""
+    return name in REGISTRY or (name.startswith(PREFIX) and len(name) > len(PREFIX))
+
+
 def safe_name(name: str) -> str:
     """``name`` as a file name: letters, digits and ``_.+-`` kept (``traditional+timing``), runs of
     anything else one ``-``."""
@@ -52,6 +59,8 @@ def method_file(folder: Path, name: str, method: Optional[Method] = None) -> Pat
 
 def load_method_class(name: str) -> Optional[Callable[[], Method]]:
     """A factory for method ``name``, or None (after a one-line warning) when its module is absent."""
+    if is_method(name) and name not in REGISTRY:  # profile:PATH
+        return lambda: ProfileFloor(Path(name[len(PREFIX):]))
     if name not in REGISTRY:
         raise ConfigError(f"methods: unknown method {name!r} (known: {', '.join(REGISTRY)})")
     entry = REGISTRY[name]

@@ -165,6 +165,8 @@ class Profile:
     observed: Dict[str, Any] = field(default_factory=dict)
     # the plausibility limits, the held-back block's errors and any check written through with --force
     checks: Dict[str, Any] = field(default_factory=dict)
+    # the floor's terms chosen on held-out recordings (calib.select: the levels, the rule, the figures)
+    selection: Dict[str, Any] = field(default_factory=dict)
     version: int = PROFILE_VERSION
     created: str = field(default_factory=lambda: datetime.now(timezone.utc).isoformat(timespec="seconds"))
 
@@ -223,7 +225,7 @@ class Profile:
             "floor": clean(self.floor_dict), "sources": clean(self.sources), "unobservable": self.unobservable,
             "fit_log": clean(self.fit_log),
             **({"inputs": clean(self.inputs)} if self.inputs else {}),
-            **{k: clean(getattr(self, k)) for k in ("reference", "observed", "checks") if getattr(self, k)},
+            **{k: clean(getattr(self, k)) for k in ("reference", "observed", "checks", "selection") if getattr(self, k)},
         }
 
     def save(self, path: Union[str, Path]) -> None:
@@ -267,7 +269,7 @@ class Profile:
             sources=r.get("sources", list, []), unobservable=r.get("unobservable", list, []),
             fit_log=r.get("fit_log", dict, {}), inputs=r.get("inputs", dict, {}), version=version,
             reference=r.get("reference", dict, {}), observed=r.get("observed", dict, {}), checks=r.get("checks", dict, {}),
-            created=r.get("created", str, ""),
+            selection=r.get("selection", dict, {}), created=r.get("created", str, ""),
         )
 
     def kalibr(self) -> Dict[str, Optional[float]]:

@@ -5,7 +5,8 @@ config's split, still). With a reference (segments with ground truth): the floor
 (:meth:`Source.fit_floor <imu_learn.calib.sources.Source.fit_floor>`: the affine fit of
 :mod:`imu_learn.calib.fit`, torch, unless the source fits its own), its spread between recordings,
 gravity, the noise from the residuals (:func:`noise.residual_noise`) and from still stretches
-(:func:`noise.still_stretches`, :func:`noise.allan_noise`). Without one (a still recording's IMU
+(:func:`noise.still_stretches`, :func:`noise.allan_noise`); with ``select`` (``--select``) the floor's
+terms chosen on the recordings each was not fitted on (:mod:`imu_learn.calib.select`). Without one (a still recording's IMU
 alone): the noise from its still stretches only. Writes, each atomically,
 ``profile.json``, ``imu.yaml`` (Kalibr) and ``calibration.png`` into the output folder.
 """
@@ -40,6 +41,7 @@ class CalibOptions:
     still: nz.StillSettings = nz.StillSettings()
     plot: bool = True
     force: bool = False  # write a profile that fails a plausibility check (with a warning)
+    select: bool = False  # the floor's terms chosen on held-out recordings (calib.select; --select)
 
 
 @dataclass
@@ -120,14 +122,16 @@ def unobservable(has_ref: bool, allan: Optional[nz.AllanNoise], noise: Dict[str,
     return out
 
 
-def floor_profile(inp: CalibInputs, progress: Progress,
-                  uncertainty: bool = True) -> Tuple[Profile, nz.ResidualNoise, nz.ResidualNoise]:
+def floor_profile(inp: CalibInputs, progress: Progress, uncertainty: bool = True,
+                  select: bool = False) -> Tuple[Profile, nz.ResidualNoise, nz.ResidualNoise]:
     """The floor part of the profile (with the reference): the floor its source fits, and the
     residuals before/after it (``uncertainty=False``: no refits per recording, the standard
-    deviations NaN)."""
+    deviations NaN; ``select``: its terms chosen on held-out recordings, :mod:`imu_learn.calib.select`)."""
     from imu_learn.calib import fit as ff  # torch: only where the floor is fitted
+    from imu_learn.calib.select import select_floor
 
     fit = inp.source.fit_floor(inp, progress, uncertainty)
+    fit, selection = select_floor(inp, fit, progress) if select else (fit, {})
     f, std = fit.floor, fit.std
     segs, groups = inp.train + inp.val, inp.groups + inp.val_groups
     progress("gravity and the residual noise")
@@ -141,6 +145,7 @@ def floor_profile(inp: CalibInputs, progress: Progress,
         inp.device, rate, period, f, std, g, g_std,
         fit_log={**fit.log_entries(), "gravity_per_group": g_per, "floor_gravity_mps2": inp.settings.gravity,
                  "floor_settings": asdict(inp.settings), "g_sensitivity_std": std.G},
+        selection=selection,
     )
     return prof, before, after
 
@@ -176,7 +181,7 @@ def calibrate(inp: CalibInputs, out_dir: Path, options: CalibOptions = CalibOpti
         raise InvalidInputError("calibrate: no recording to calibrate from")
     before = after = None
     if has_ref:
-        prof, before, after = floor_profile(inp, progress)
+        prof, before, after = floor_profile(inp, progress, select=options.select)
         prof.reference = inp.source.reference()
         prof.observed = inp.source.observed()
         prof.checks = plausibility(prof, inp, options, progress)

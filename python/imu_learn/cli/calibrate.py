@@ -84,6 +84,10 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--force", action="store_true",
                    help="write a profile that fails a plausibility check (scale, misalignment, bias, gravity, the "
                         "held-back block), with a warning, instead of stopping")
+    p.add_argument("--select", action="store_true",
+                   help="choose each sensor's terms (offset, bias, scale, affine, g-sensitivity, low-pass): the simplest "
+                        "that no simpler one beats on a recording held out in turn (imu_learn.calib.select; "
+                        "profile.json's selection); default: every term")
     p.add_argument("--imu-only", action="store_true",
                    help="read each --input's IMU alone (no reference): the noise from its still stretches only")
     p.add_argument("--device", metavar="NAME", help="the device's name in the profile (default: the dataset a "
@@ -183,7 +187,8 @@ def run(args: argparse.Namespace, rest: List[str], keep: Callable[[Any], None]) 
     inp = source.read(say)
     if not writes:
         keep(f"{args.out} keeps only complete files (each written atomically)")
-    res = calibrate(inp, args.out, CalibOptions(min_still_s=args.min_still_s, plot=not args.no_plot, force=args.force),
+    res = calibrate(inp, args.out, CalibOptions(min_still_s=args.min_still_s, plot=not args.no_plot, force=args.force,
+                                                 select=args.select),
                     say)
     p = res.profile
     for line in summary(p):

@@ -7,7 +7,7 @@ import time
 from pathlib import Path
 from typing import Any, Callable, List, Optional, Sequence
 
-from imu_learn.baselines.registry import REGISTRY
+from imu_learn.baselines.registry import REGISTRY, is_method
 from imu_learn.cli.common import add_data_root, run_command
 from imu_learn.errors import ConfigError
 from imu_learn.eval import report
@@ -28,7 +28,8 @@ overrides: --fit.steps 100 --eval.stride 20 --eval.horizons '[10, 200]' --data.s
 def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--config", type=Path, metavar="TOML",
                    help="eval config (configs/eval_*.toml); default: built-in defaults on the shipped crops")
-    p.add_argument("--methods", metavar="NAME,...", help=f"comma list (default: the config's; known: {', '.join(REGISTRY)})")
+    p.add_argument("--methods", metavar="NAME,...", help=f"comma list (default: the config's; known: {', '.join(REGISTRY)}; and profile:PATH, a "
+                        "device profile's floor as it ships)")
     p.add_argument("--checkpoint", type=Path, metavar="PT",
                    help="also evaluate this `imu-learn fit` checkpoint (best.pt), as the row 'proposed (fit run)'")
     p.add_argument("--out", type=Path, metavar="DIR", help="report folder (default <reports_dir>/<config name>)")
@@ -47,7 +48,7 @@ def run(args: argparse.Namespace, rest: List[str], keep: Callable[[Any], None]) 
     res = load_eval_config(args.config, rest)  # no --config: defaults, data = the fit defaults (crops)
     methods = [m.strip() for m in args.methods.split(",") if m.strip()] if args.methods else list(res.cfg.methods)
     for m in methods:
-        if m not in REGISTRY:
+        if not is_method(m):
             raise ConfigError(f"--methods: unknown method {m!r} (known: {', '.join(REGISTRY)})")
     if args.checkpoint is not None and not args.checkpoint.exists():
         raise FileNotFoundError(2, "No such file or directory", str(args.checkpoint))

@@ -1,0 +1,428 @@
+"""A device profile's terms chosen by the recordings they were not fitted on (``imu-learn calibrate``).
+
+Levels. The floor (:mod:`imu_learn.baselines.traditional`, ``traditional+timing``) is cut into nested
+levels per sensor, each adding terms to the one before:
+
+    gyroscope      offset, bias, scale, affine, g_sensitivity, lowpass
+    accelerometer  offset, bias, scale, affine, lowpass
+
+``offset``: the time offset alone (the ``timing`` floor; the offset is one for both sensors, the IMU's
+clock); ``bias``: + b; ``scale``: + the diagonal of M; ``affine``: + all of M; ``g_sensitivity``: + G
+(gyroscope only); ``lowpass``: + the low-pass cut-off, chosen from the floor's grid on the validation
+blocks as the floor's own fit chooses it. Each level is fitted by the floor's own estimator
+(:func:`imu_learn.baselines.traditional._solve` on its exact residuals and Jacobians, the same windows,
+Huber weights and prior), restricted to the level's parameters, warm-started from the level before.
+
+Held out. Each recording in turn is held out (leave one recording out) where there are several;
+a single recording is cut into four contiguous time blocks (:func:`imu_learn.calib.fit.time_blocks`),
+each held out in turn. On each fold the time offset is fitted on the rest (the floor's search,
+kept only where it lowers the validation cost), then every level; each level is scored on the held-out
+recording (all its blocks, each segment from its own ground-truth start, as ``imu-learn evaluate``
+scores: :mod:`imu_learn.score.metrics`, :mod:`imu_learn.score.peers`). The cells:
+
+* gyroscope (the accelerometer at its full level, fitted once per fold with the full gyroscope: an
+  uncalibrated accelerometer's errors would decide the translation cells): relative rotation and
+  translation RMSE at every horizon
+  (``settings.horizons``, else 10 and 200 samples; windows every 10 samples), start-up bias removed
+  (:func:`~imu_learn.score.metrics.fit_startup_bias` on the first ``startup_bias_s`` = 10 s of each
+  segment, at most 30 % of it), and the open-loop AOE (RMSE over every sample);
+* accelerometer (the gyroscope at its chosen level): relative translation RMSE at every horizon with the
+  start-up bias removed, and open loop (no AOE exists for it; without an open-loop cell no accelerometer
+  bias could ever be chosen: the start-up bias removal absorbs it).
+
+The rule. Levels are visited from the simplest; ``chosen`` starts at ``offset``. A richer level L
+becomes ``chosen`` only if (1) no simpler level beats it: in every held-out cell of every fold its
+error is at most (1 + ``WORSE``) × that of every simpler level (``WORSE`` = 0.5 %, the tolerance of
+"no worse"), and (2) it gains: in at least one held-out cell its error is at most (1 − ``GAIN``) ×
+that of ``chosen`` (``GAIN`` = 1 %). A level that fails is skipped and the next richer one is still
+tried against ``chosen``. So the chosen level is never beaten by a simpler one in any held-out cell.
+
+The profile's floor is then fitted at the chosen levels on all the training recordings (the full fit
+kept as it is where the chosen levels are all it has); profile.json's ``selection`` entry holds the
+levels, the rule, and every held-out figure behind them. torch is imported here (the floor's fit).
+"""
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import dataclass, field, replace
+from typing import Any, Callable, Dict, List, Optional, Sequence, Tuple
+
+import numpy as np
+import torch
+
+from imu_learn.baselines.affine import FLOOR_METHOD, Floor, TraditionalParams
+from imu_learn.baselines.base import FitSettings
+from imu_learn.baselines.timing import RotationWindows, fit_offset, shifted
+from imu_learn.baselines.traditional import (
+    DEFAULT_CUTOFFS,
+    _Data,
+    _gyro_model,
+    _held_rotations,
+    _rms,
+    _RotResiduals,
+    _solve,
+    _VelResiduals,
+)
+from imu_learn.calib.fit import group_segments, seed_all, time_blocks
+from imu_learn.calib.profile import FloorFit
+from imu_learn.data.types import Segment, sample_rate_hz
+from imu_learn.score.metrics import fit_startup_bias, index_at, relative_pose_errors, remove_bias, rmse, with_imu
+from imu_learn.score.peers import attitude_errors
+from imu_learn.util.threads import thread_limits
+
+Progress = Callable[[str], None]
+GYRO_LEVELS = ("offset", "bias", "scale", "affine", "g_sensitivity", "lowpass")
+ACC_LEVELS = ("offset", "bias", "scale", "affine", "lowpass")
+WORSE = 0.005  # "no worse": at most 0.5 % above a simpler level in every held-out cell
+GAIN = 1e-2  # "better": at least 1 % below the level chosen so far in one held-out cell
+PRIOR, HUBER_ROT, HUBER_VEL, MAX_ITER = 1e-3, 0.01, 0.1, 20  # the floor's (Traditional's defaults)
+RULE = (f"levels visited from the simplest; a richer level is chosen only if in every held-out cell its error is at "
+        f"most {1 + WORSE:g} x that of every simpler level, and in at least one cell at most {1 - GAIN:g} x that of "
+        "the level chosen so far")
+
+
+@dataclass(frozen=True)
+class SelectOptions:
+    horizons: Tuple[int, ...] = (10, 200)  # relative pose over n samples (the settings' horizons when given)
+    stride: int = 10  # window starts [samples]
+    startup_bias_s: float = 10.0  # start-up bias fitted on (at most 30 % of a held-out segment)
+    max_windows: int = 1000  # the floor's window budget per fit
+    tau: Optional[float] = None  # a fixed time offset [samples] (not observed); None: fitted per fold
+
+
+@dataclass
+class Fold:
+    """Fitted on ``train`` (``val`` selects the offset and cut-offs), scored on ``held``."""
+
+    name: str
+    train: List[Segment]
+    val: List[Segment]
+    held: List[Segment]
+
+
+def free_indices(sensor: str, level: str) -> np.ndarray:
+    """The floor parameters a level fits: indices into θ_g (21: M_g − I row-major, b_g, G) or θ_a (12)."""
+    nested = {"offset": [], "bias": [9, 10, 11], "scale": [0, 4, 8, 9, 10, 11], "affine": list(range(12))}
+    if level in nested:
+        return np.asarray(nested[level], dtype=np.int64)
+    return np.arange(21 if sensor == "gyro" else 12)
+
+
+class _Subset:
+    """Residuals of a full θ restricted to the ``free`` entries (the rest held at ``full``'s values)."""
+
+    def __init__(self, res: Any, free: np.ndarray, full: np.ndarray) -> None:
+        self.res, self.free, self.full = res, torch.as_tensor(free), torch.as_tensor(full, dtype=torch.float64)
+
+    def theta(self, x: torch.Tensor) -> torch.Tensor:
+        th = self.full.repeat(x.shape[0], 1)
+        th[:, self.free] = x
+        return th
+
+    def __call__(self, x: torch.Tensor) -> torch.Tensor:
+        return self.res(self.theta(x))
+
+    def jacobian(self, x: torch.Tensor, r: torch.Tensor) -> torch.Tensor:
+        return self.res.jacobian(self.theta(x[None])[0], r)[:, self.free]
+
+
+def solve_level(res: Any, theta: np.ndarray, free: np.ndarray, huber: float) -> np.ndarray:
+    """θ with its ``free`` entries solved from their current values (the floor's prior on M − I and G)."""
+    out = np.zeros_like(theta)
+    if free.size == 0:
+        return out
+    prior_idx = np.flatnonzero((free < 9) | (free >= 12))
+    x = _solve(_Subset(res, free, np.zeros_like(theta)), theta[free], prior_idx, PRIOR, huber, MAX_ITER)
+    out[free] = x
+    return out
+
+
+def best_cutoff(residuals: Callable[[Optional[float]], Any], theta: np.ndarray, grid: Sequence[Optional[float]]
+                ) -> Optional[float]:
+    """The grid's cut-off with the lowest validation RMS at ``theta`` (the floor's rule)."""
+    return grid[int(np.argmin([_rms(residuals(c), theta) for c in grid]))]
+
+
+Levels = Dict[str, Tuple[np.ndarray, Optional[float]]]  # level -> (θ, cut-off)
+
+
+def fit_gyro_levels(tr: _Data, va: _Data, grid: Sequence[Optional[float]], upto: str = "lowpass") -> Levels:
+    """θ_g and the gyro cut-off of every level up to ``upto``, each warm-started from the one before."""
+    out: Levels = {"offset": (np.zeros(21), None)}
+    theta, res = np.zeros(21), _RotResiduals(tr.windows(None, None))
+    for level in GYRO_LEVELS[1:GYRO_LEVELS.index(upto) + 1]:
+        if level == "lowpass":
+            c = best_cutoff(lambda c: _RotResiduals(va.windows(c, None)), theta, grid)
+            theta = theta if c is None else solve_level(_RotResiduals(tr.windows(c, None)), theta, np.arange(21), HUBER_ROT)
+            out[level] = (theta, c)
+        else:
+            theta = solve_level(res, theta, free_indices("gyro", level), HUBER_ROT)
+            out[level] = (theta, None)
+    return out
+
+
+def _vel(data: _Data, theta_g: np.ndarray, c_g: Optional[float]) -> Callable[[Optional[float]], _VelResiduals]:
+    """Accelerometer residuals at any acc cut-off with the gyro fixed (its rotations computed once)."""
+    w = data.windows(c_g, None)
+    with torch.no_grad():
+        Rm = _held_rotations(_gyro_model(torch.from_numpy(theta_g), w.gyro, w.acc_g), w.dt)
+    return lambda c: _VelResiduals(None, data.windows(c_g, c), Rm)
+
+
+def fit_acc_levels(tr: _Data, va: _Data, grid: Sequence[Optional[float]], gyro: Tuple[np.ndarray, Optional[float]],
+                   upto: str = "lowpass") -> Levels:
+    """θ_a and the acc cut-off of every level up to ``upto`` with the gyro fixed at ``gyro`` (θ_g, cut-off)."""
+    out: Levels = {"offset": (np.zeros(12), None)}
+    res_tr, res_va = _vel(tr, *gyro), _vel(va, *gyro)
+    theta, res = np.zeros(12), res_tr(None)
+    for level in ACC_LEVELS[1:ACC_LEVELS.index(upto) + 1]:
+        if level == "lowpass":
+            c = best_cutoff(res_va, theta, grid)
+            theta = theta if c is None else solve_level(res_tr(c), theta, np.arange(12), HUBER_VEL)
+            out[level] = (theta, c)
+        else:
+            theta = solve_level(res, theta, free_indices("acc", level), HUBER_VEL)
+            out[level] = (theta, None)
+    return out
+
+
+def floor_of(gyro: Tuple[np.ndarray, Optional[float]], acc: Tuple[np.ndarray, Optional[float]], tau: float) -> Floor:
+    """The floor of (θ_g, gyro cut-off), (θ_a, acc cut-off) and the time offset [samples]."""
+    (tg, cg), (ta, ca) = gyro, acc
+    p = TraditionalParams(M_g=np.eye(3) + tg[:9].reshape(3, 3), b_g=tg[9:12].copy(), G=tg[12:21].reshape(3, 3).copy(),
+                          M_a=np.eye(3) + ta[:9].reshape(3, 3), b_a=ta[9:12].copy(), cutoff_gyro=cg, cutoff_acc=ca,
+                          time_offset=float(tau))
+    return Floor(p, FLOOR_METHOD, 2)
+
+
+def fit_tau(train: List[Segment], val: List[Segment], gravity: float, max_windows: int) -> float:
+    """The floor's time offset [samples]: its 1-D search on 10-sample gyro windows, kept only where it
+    lowers the validation cost (:meth:`imu_learn.baselines.traditional.Traditional._fit_time_offset`)."""
+    tr = RotationWindows(train, 10, 5 * max_windows, gravity)
+    tau, _, _ = fit_offset(tr, 3.0, 0.25, 1e-3, HUBER_ROT)
+    va = RotationWindows(val, 10, 5 * max_windows, gravity) if val else tr
+    va = va if len(va) else tr
+    return float(tau) if va.cost(tau, HUBER_ROT) < va.cost(0.0, HUBER_ROT) else 0.0
+
+
+@dataclass
+class Prepared:
+    """A fold's time offset and its windows (the floor's), shifted by it, with the cut-off grid."""
+
+    fold: Fold
+    tau: float
+    tr: _Data
+    va: _Data
+    grid: List[Optional[float]]
+    gyro: Levels = field(default_factory=dict)
+    acc: Levels = field(default_factory=dict)
+
+
+def prepare(fold: Fold, settings: FitSettings, opts: SelectOptions) -> Prepared:
+    seed_all(settings.seed)
+    tau = opts.tau if opts.tau is not None else fit_tau(fold.train, fold.val, settings.gravity, opts.max_windows)
+    train, val = [shifted(s, tau) for s in fold.train], [shifted(s, tau) for s in fold.val]
+    tr = _Data(train, settings.window, opts.max_windows, settings.gravity, 2)
+    if len(tr) == 0:
+        raise ValueError(f"selection, fold {fold.name}: no training segment longer than the window ({settings.window})")
+    va = _Data(val, settings.window, opts.max_windows, settings.gravity, 2) if val else tr
+    va = va if len(va) else tr
+    fs = min(sample_rate_hz(s.t_ns) for s in train)
+    grid = [c for c in DEFAULT_CUTOFFS if c is None or c < 0.5 * fs] or [None]
+    return Prepared(fold, float(tau), tr, va, grid)
+
+
+def folds(train: List[Segment], val: List[Segment], groups: Sequence[str], val_groups: Sequence[str]) -> List[Fold]:
+    """Leave one recording out (several recordings), else four contiguous time blocks of the one."""
+    per = group_segments(train, val, groups, val_groups)
+    if len(per) >= 2:
+        return [Fold(g, [s for h, (tr, _) in per.items() if h != g for s in tr],
+                     [s for h, (_, va) in per.items() if h != g for s in va], tr_g + va_g)
+                for g, (tr_g, va_g) in per.items()]
+    blocks = time_blocks(train)
+    return [Fold(b, [s for c, (tr, _) in blocks.items() if c != b for s in tr], list(val), tr_b)
+            for b, (tr_b, _) in blocks.items()]
+
+
+def _pool(out: Dict[str, List[np.ndarray]], key: str, x: np.ndarray) -> None:
+    out.setdefault(key, []).append(np.asarray(x, dtype=np.float64))
+
+
+def score(floor: Floor, held: Sequence[Segment], horizons: Sequence[int], opts: SelectOptions,
+          gravity: float) -> Dict[str, float]:
+    """The held-out cells of ``floor`` on ``held`` (module doc): ``rot_deg n=N``, ``trans_m n=N`` (start-up
+    bias removed), ``open_trans_m n=N`` (open loop), ``aoe_deg``; segments pooled, NaN where none scored."""
+    pooled: Dict[str, List[np.ndarray]] = {}
+    for s in held:
+        bias_s = min(opts.startup_bias_s, 0.3 * s.duration_s)
+        first = index_at(s, bias_s)
+        if first + min(horizons) >= len(s) - 1:
+            continue
+        g, a = floor.apply(s.t_ns, s.gyro, s.acc)
+        cal = with_imu(s, g, a)
+        fixed = remove_bias(cal, *fit_startup_bias(cal, bias_s, gravity=gravity))
+        for n in horizons:
+            e = relative_pose_errors(fixed, int(n), opts.stride, gravity, first)
+            _pool(pooled, f"rot_deg n={n}", e["rot_rad"])
+            _pool(pooled, f"trans_m n={n}", e["trans_m"])
+            _pool(pooled, f"open_trans_m n={n}", relative_pose_errors(cal, int(n), opts.stride, gravity, first)["trans_m"])
+        _pool(pooled, "aoe_deg", attitude_errors(s, g)["angle_rad"])
+    out = {k: rmse(np.concatenate(v)) for k, v in pooled.items()}
+    return {k: math.degrees(v) if k.startswith(("rot", "aoe")) else v for k, v in out.items()}
+
+
+CELLS = {"gyro": ("rot_deg", "trans_m", "aoe_deg"), "acc": ("trans_m", "open_trans_m")}
+
+Table = Dict[str, Dict[str, Dict[str, float]]]  # level -> fold -> cell -> error
+
+
+def _ratios(table: Table, a: str, b: str, cells: Tuple[str, ...]) -> List[Tuple[float, str, str]]:
+    """(error of level a / error of level b, fold, cell) over every held-out cell both have."""
+    out = []
+    for f, row in table[a].items():
+        for c, v in row.items():
+            w = table[b].get(f, {}).get(c, math.nan)
+            if c.startswith(cells) and math.isfinite(v) and math.isfinite(w) and w > 0:
+                out.append((v / w, f, c))
+    return out
+
+
+def choose(levels: Sequence[str], table: Table, cells: Tuple[str, ...]) -> Tuple[str, List[Dict[str, Any]]]:
+    """The chosen level by the rule (module doc) and each step's reason."""
+    chosen, steps = levels[0], []
+    for i, level in enumerate(levels[1:], 1):
+        worst = max([(r, f, c, s) for s in levels[:i] for r, f, c in _ratios(table, level, s, cells)], default=None)
+        best = min(_ratios(table, level, chosen, cells), default=None)
+        keep = worst is not None and best is not None and worst[0] <= 1 + WORSE and best[0] <= 1 - GAIN
+        steps.append({"level": level, "against": chosen, "chosen": keep,
+                      "worst_vs_simpler": None if worst is None else {"ratio": worst[0], "fold": worst[1], "cell": worst[2],
+                                                                      "simpler": worst[3]},
+                      "best_vs_chosen": None if best is None else {"ratio": best[0], "fold": best[1], "cell": best[2]}})
+        chosen = level if keep else chosen
+    return chosen, steps
+
+
+@dataclass
+class Selection:
+    """The chosen level per sensor, the folds and every held-out figure behind the choice."""
+
+    gyro: str
+    acc: str
+    kind: str  # "leave one recording out" or "four time blocks of one recording"
+    folds: List[Dict[str, Any]]
+    figures: Dict[str, Table]
+    steps: Dict[str, List[Dict[str, Any]]]
+    horizons: Tuple[int, ...]
+    seconds: float = 0.0
+
+    def to_dict(self) -> Dict[str, Any]:
+        return {"gyro": self.gyro, "acc": self.acc, "levels": {"gyro": list(GYRO_LEVELS), "acc": list(ACC_LEVELS)},
+                "rule": RULE, "held_out": self.kind, "horizons": list(self.horizons),
+                "cells": {k: list(v) for k, v in CELLS.items()}, "folds": self.folds, "steps": self.steps,
+                "held_out_figures": self.figures, "seconds": round(self.seconds, 1)}
+
+
+def _table(preps: List[Prepared], floors: Callable[[Prepared, str], Floor], levels: Sequence[str],
+           horizons: Tuple[int, ...], opts: SelectOptions, gravity: float) -> Table:
+    return {lv: {p.fold.name: score(floors(p, lv), p.fold.held, horizons, opts, gravity) for p in preps}
+            for lv in levels}
+
+
+def select_levels(train: List[Segment], val: List[Segment], groups: Sequence[str], val_groups: Sequence[str],
+                  settings: FitSettings, opts: SelectOptions = SelectOptions(),
+                  progress: Progress = lambda s: None) -> Selection:
+    """Each level fitted on every fold and scored on its held-out part; the gyro's level chosen first
+    (the accelerometer at its full level), then the accelerometer's (the gyro at its chosen level)."""
+    t0 = time.time()
+    horizons = tuple(sorted({int(n) for n in settings.horizons})) or opts.horizons
+    fs = folds(train, val, groups, val_groups)
+    kind = "leave one recording out" if len(set(groups)) >= 2 else "four time blocks of one recording"
+    with thread_limits(1):
+        preps = []
+        for i, f in enumerate(fs):
+            progress(f"selection: {f.name} held out ({i + 1}/{len(fs)}): the gyroscope's levels")
+            p = prepare(f, settings, opts)
+            p.gyro = fit_gyro_levels(p.tr, p.va, p.grid)
+            p.acc = {"full": fit_acc_levels(p.tr, p.va, p.grid, p.gyro["lowpass"])["lowpass"]}
+            preps.append(p)
+        gyro_t = _table(preps, lambda p, lv: floor_of(p.gyro[lv], p.acc["full"], p.tau), GYRO_LEVELS, horizons, opts,
+                        settings.gravity)
+        if not any(math.isfinite(v) for row in gyro_t["offset"].values() for v in row.values()):
+            raise ValueError(f"no held-out segment is longer than the start-up bias span and {min(horizons)} samples")
+        g_level, g_steps = choose(GYRO_LEVELS, gyro_t, CELLS["gyro"])
+        progress(f"selection: gyroscope {g_level}; the accelerometer's levels")
+        for p in preps:
+            p.acc = fit_acc_levels(p.tr, p.va, p.grid, p.gyro[g_level])
+        acc_t = _table(preps, lambda p, lv: floor_of(p.gyro[g_level], p.acc[lv], p.tau), ACC_LEVELS, horizons, opts,
+                       settings.gravity)
+        a_level, a_steps = choose(ACC_LEVELS, acc_t, CELLS["acc"])
+    fold_info = [{"held_out": p.fold.name, "time_offset_samples": p.tau, "cutoff_gyro": p.gyro["lowpass"][1],
+                  "train_segments": len(p.fold.train), "held_out_samples": int(sum(len(s) for s in p.fold.held))}
+                 for p in preps]
+    return Selection(g_level, a_level, kind, fold_info, {"gyro": gyro_t, "acc": acc_t},
+                     {"gyro": g_steps, "acc": a_steps}, horizons, time.time() - t0)
+
+
+def fit_at_levels(train: List[Segment], val: List[Segment], settings: FitSettings, levels: Tuple[str, str],
+                  tau: float, opts: SelectOptions = SelectOptions()) -> Floor:
+    """The floor at (gyro level, acc level) on all of ``train`` (``val`` selects a cut-off), offset ``tau``."""
+    with thread_limits(1):
+        p = prepare(Fold("all", train, val, []), settings, replace(opts, tau=tau))
+        g = fit_gyro_levels(p.tr, p.va, p.grid, levels[0])[levels[0]]
+        a = fit_acc_levels(p.tr, p.va, p.grid, g, levels[1])[levels[1]]
+    return floor_of(g, a, tau)
+
+
+def full_levels(floor: Floor) -> Tuple[str, str]:
+    """The levels the full floor's fit amounts to (its low-pass only where it chose a cut-off)."""
+    p = floor.params
+    return ("lowpass" if p.cutoff_gyro is not None else "g_sensitivity",
+            "lowpass" if p.cutoff_acc is not None else "affine")
+
+
+def masked_std(std: TraditionalParams, levels: Tuple[str, str]) -> TraditionalParams:
+    """``std`` with the parameters the chosen levels do not fit set to NaN (held at their prior)."""
+    g = np.concatenate([std.M_g.ravel(), std.b_g, std.G.ravel()]).astype(np.float64)
+    a = np.concatenate([std.M_a.ravel(), std.b_a]).astype(np.float64)
+    keep_g, keep_a = np.zeros(21, bool), np.zeros(12, bool)
+    keep_g[free_indices("gyro", levels[0])] = True
+    keep_a[free_indices("acc", levels[1])] = True
+    g[~keep_g], a[~keep_a] = np.nan, np.nan
+    return replace(std, M_g=g[:9].reshape(3, 3), b_g=g[9:12], G=g[12:21].reshape(3, 3), M_a=a[:9].reshape(3, 3),
+                   b_a=a[9:12])
+
+
+def skip_reason(inp: Any) -> Optional[str]:
+    """Why calibrate's inputs get no selection (None: they do)."""
+    if inp.source.kind != "poses":
+        return f"a {inp.source.kind} reference: its source fits the floor it observes"
+    if inp.source.floor_terms():
+        return "the reference does not resolve accelerations: the floor's terms are what it observes"
+    return None
+
+
+def select_floor(inp: Any, fit: FloorFit, progress: Progress = lambda s: None,
+                 opts: Optional[SelectOptions] = None) -> Tuple[FloorFit, Dict[str, Any]]:
+    """calibrate's step: the levels chosen on held-out recordings (:func:`select_levels`) and the floor
+    at them (``fit`` as it is where they are all it has); returns the floor fit and the ``selection`` entry."""
+    why = skip_reason(inp)
+    if why is not None:
+        return fit, {"skipped": why}
+    tau = fit.floor.params.time_offset
+    fixed = "time_offset_fitted_on_the_moved_reference" in fit.log
+    opts = opts or SelectOptions(tau=tau if fixed else None)
+    try:
+        sel = select_levels(inp.train, inp.val, inp.groups, inp.val_groups, inp.settings, opts, progress)
+    except ValueError as e:  # too little data to hold any out: the full floor, and why
+        return fit, {"skipped": f"no selection: {e}"}
+    entry = sel.to_dict()
+    levels = (sel.gyro, sel.acc)
+    if levels == full_levels(fit.floor):
+        entry["floor"] = "the full floor's fit: the chosen levels are all it has"
+        return fit, entry
+    progress(f"the floor at gyroscope {sel.gyro}, accelerometer {sel.acc} on all the training recordings")
+    floor = fit_at_levels(inp.train, inp.val, inp.settings, levels, tau, opts)
+    entry["floor"] = ("refitted at the chosen levels on all the training recordings (the time offset the full fit's); "
+                      "standard deviations: the full floor's spread, null for what the levels hold at its prior")
+    return replace(fit, floor=floor, std=masked_std(fit.std, levels)), entry
