@@ -124,6 +124,38 @@ def test_ctrl_c_while_gtsam_calls_python_factors_exits_130_and_writes_nothing(wh
     assert_no_leftovers(out)
 
 
+@pytest.mark.slow  # a whole --nhc fusion (about 40 s on two busy cores) before its batch pass
+def test_ctrl_c_during_the_batch_pass_waits_for_it_then_exits_130(whole, tmp_path):
+    """The batch pass runs in a thread of its own with GTSAM calling the NHC factors (Python) from it:
+    a Ctrl-C there used to end the main thread while it ran, and the process aborted at exit
+    (measured: exit -6, 'terminate called ... scoped_acquire::dec_ref(): thread state must be
+    current!'). Now the Ctrl-C is held until the pass ends."""
+    rec, tum = whole
+    out = tmp_path / "out"
+    before = previous_run(out)
+    proc = subprocess.Popen([sys.executable, "-m", "imu_learn.cli", *args(rec, tum, out, "--nhc")], cwd=REPO, env=ENV,
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE)
+    try:
+        err, deadline = b"", time.time() + 300
+        while b"smoothing" not in err:  # the progress bar's label as the batch pass starts
+            c = proc.stderr.read(1)
+            assert c and time.time() < deadline, (err + proc.communicate()[1]).decode()
+            err += c
+        time.sleep(0.3)
+        proc.send_signal(signal.SIGINT)
+        stdout, rest = proc.communicate(timeout=120)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.communicate()
+    err = (err + rest).decode(errors="replace")
+    assert proc.returncode == 130, err
+    assert err.endswith(f"imu-learn navigate: interrupted; nothing of this run is written to {out}\n"), err[-300:]
+    assert not any(c in err for c in CRASH), err[-300:]
+    assert stdout == b"" and snapshot(out) == before
+    assert_no_leftovers(out)
+
+
 # imu-learn navigate ARGV[2:] whose summary.json, the last file it writes, waits for a signal (ARGV[1]: a
 # file written when it starts waiting)
 PAUSE_IN_SUMMARY = """
