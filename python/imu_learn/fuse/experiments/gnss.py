@@ -11,7 +11,13 @@ still start (``level_s`` seconds, checked still against the fixes' speed), carri
 the gyro; the graph starts at the first fixed (Q = 1) epoch faster than ``yaw_min_speed_mps`` (yaw:
 the body x-axis turned onto that epoch's velocity heading; position and velocity: that epoch);
 bias prior zero (or ``bias_prior = "still"``: the still start's mean gyro, and the accelerometer's
-excess over normal gravity along the specific force). The fixes (RTKLIB
+excess over normal gravity along the specific force; with ``still_se_k`` the gyro part held to that
+many standard errors of the still mean). ``start_at = "still"`` starts the graph at the still start
+instead (levelled there, turned by the heading the track gives, zero velocity; every fix from the
+first on), so the still start and the first metres of motion tell tilt, a horizontal accelerometer
+bias and the gyro bias apart before the first outage; an outage before the heading's epoch is
+refused (its scores would use later fixes). ``prior_yaw_deg`` holds the start's heading apart from
+its tilt (a hand-held device does not point where it walks). The fixes (RTKLIB
 ``.pos``, :mod:`imu_learn.fuse.aiding.rtklib`) enter with their own sigmas and lever arm; the outage
 schedule is the peer's: ``duration_s`` outages every ``period_s`` from ``first_s`` after the first
 GNSS epoch, each ending at least ``end_margin_s`` before its last. Every epoch inside an outage
@@ -57,6 +63,7 @@ log = logging.getLogger(__name__)
 VARIANTS = ("raw", "raw+nhc")
 KIND = "gnss-outages"  # a fuse config's ``kind`` for this experiment
 OMEGA_EARTH = 7.292115e-5  # rad/s
+MIN_BIAS_SIGMA = 1e-6  # rad/s: the least gyro bias prior sigma (a still start of identical rows has none)
 
 
 @dataclass
@@ -124,15 +131,21 @@ class GnssRunConfig:
     level_s: float = 10.0
     still_max_speed_mps: float = 0.1
     yaw_min_speed_mps: float = 1.0
+    start_at: str = "track"  # or "still" (:class:`~imu_learn.fuse.start.track.GnssStartSettings`)
     bias_prior: str = "zero"
     keyframe_hz: float = 10.0
     lag_s: float = 10.0
     resolve_after_s: float = 2.0
     earth_rate: bool = True
     prior_rot_deg: float = 2.0
+    # the start's heading [deg] apart from its tilt; 0: prior_rot_deg about every axis
+    prior_yaw_deg: float = 0.0
     prior_pos_m: float = 0.05
     prior_vel_mps: float = 0.1
     prior_bias_gyro: float = 0.01
+    # bias_prior = "still" and > 0: the gyro bias prior's sigma is this many standard errors of the
+    # still start's mean gyro (its largest axis), not prior_bias_gyro
+    still_se_k: float = 0.0
     prior_bias_acc: float = 0.3
     variants: List[str] = field(default_factory=lambda: ["raw"])
     noise: NoiseCfg = field(default_factory=NoiseCfg)
@@ -164,6 +177,8 @@ def check(cfg: GnssRunConfig, path: object = "config") -> None:
         raise ConfigError(f"{path}: nhc.lever_from: 'config' or 'raw', got {cfg.nhc.lever_from!r}")
     if cfg.nhc.lever_from == "raw" and "raw+nhc" in cfg.variants and cfg.variants[0] != "raw":
         raise ConfigError(f"{path}: nhc.lever_from = 'raw' needs variants to start with 'raw'")
+    if cfg.start_at not in ("track", "still"):
+        raise ConfigError(f"{path}: start_at: 'track' or 'still', got {cfg.start_at!r}")
     if cfg.bias_prior not in ("zero", "still"):
         raise ConfigError(f"{path}: bias_prior: 'zero' or 'still', got {cfg.bias_prior!r}")
     if not cfg.imu or not cfg.pos:
@@ -232,9 +247,13 @@ def run_variant(cfg: GnssRunConfig, variant: str, drive: Drive, eval_idx: np.nda
     t, gyro, acc, fixes, sol = drive.t, drive.gyro, drive.acc, drive.fixes, drive.sol
     start, noise, gravity = drive.start, drive.noise, drive.gravity
 
-    prior = PriorSigmas(math.radians(cfg.prior_rot_deg), cfg.prior_pos_m, cfg.prior_vel_mps, cfg.prior_bias_gyro,
-                        cfg.prior_bias_acc)
-    bias0 = np.r_[start["gyro_still"], start["acc_bias_still"]] if cfg.bias_prior == "still" else None
+    still = cfg.bias_prior == "still"
+    # from a still start the gyro bias is its mean there, known to its standard error
+    bias_gyro = (max(cfg.still_se_k * float(np.max(start["gyro_still_se"])), MIN_BIAS_SIGMA)
+                 if still and cfg.still_se_k > 0 else cfg.prior_bias_gyro)
+    prior = PriorSigmas(math.radians(cfg.prior_rot_deg), cfg.prior_pos_m, cfg.prior_vel_mps, bias_gyro,
+                        cfg.prior_bias_acc, math.radians(cfg.prior_yaw_deg) if cfg.prior_yaw_deg > 0 else None)
+    bias0 = np.r_[start["gyro_still"], start["acc_bias_still"]] if still else None
     callbacks = []
     if cfg.velocity_sigma_mps > 0:
         callbacks.append(velocity_callback(fixes, sol, cfg.velocity_sigma_mps, cfg.float_gain))
@@ -306,10 +325,14 @@ def experiment(cfg: GnssRunConfig) -> Dict[str, object]:
                           omega_earth=(0.0, OMEGA_EARTH * math.cos(lat), OMEGA_EARTH * math.sin(lat))
                           if cfg.earth_rate else (0.0, 0.0, 0.0))
     start = gnss_start(imu_log.imu, sol, gravity, GnssStartSettings(cfg.level_s, cfg.still_max_speed_mps,
-                                                                    cfg.yaw_min_speed_mps, tuple(cfg.lever_gnss_m)))
+                                                                    cfg.yaw_min_speed_mps, tuple(cfg.lever_gnss_m),
+                                                                    cfg.start_at))
     s0 = int(start["s0"])
     t, gyro, acc = imu_log.imu.t_ns[s0:], imu_log.imu.gyro[s0:], imu_log.imu.acc[s0:]
     windows = [w.bounds_ns(int(sol.t_ns[0])) for w in outage_windows(sol, cfg.outages)]  # [start, end) ns
+    if windows and (windows[0][0] - int(sol.t_ns[0])) * 1e-9 < start["heading_s_after_first_epoch"]:
+        raise InvalidInputError(f"{cfg.name}: the first outage starts before the start's heading is known "
+                                f"({start['heading_s_after_first_epoch']:.2f} s): its scores would use later fixes")
     all_fixes = fixes_on_imu(sol, t, cfg.lever_gnss_m, cfg.qualities, cfg.float_gain, sigma_floor_m=cfg.sigma_floor_m)
     truth_all = fixes_on_imu(sol, t, cfg.lever_gnss_m, (1,), sigma_floor_m=cfg.sigma_floor_m)
     ts_fix = t[all_fixes.idx]
@@ -425,7 +448,8 @@ def table(res: Dict[str, object], cfg: GnssRunConfig) -> str:
             lines.append(f"| ours {variant} | {i + 1} | {d['tilt_deg']:.2f} | {d['yaw_deg']:.2f} | {d['dv_mps']:.3f} | "
                          f"{d['da_mps2']:.3f} | {_f(d['drift_acc_m'])} | {_f(d['drift_vel_m'])} | {_f(o['end_m'])} |")
     st = res["start"]
-    lines += ["", f"Start: {st['start_s_after_first_epoch']:.2f} s after the first GNSS epoch (speed "
+    lines += ["", f"Start: {st['start_s_after_first_epoch']:.2f} s after the first GNSS epoch ({st.get('start_at', 'track')}; "
+              f"heading from the epoch at {st.get('heading_s_after_first_epoch', st['start_s_after_first_epoch']):.2f} s, "
               f"{st['speed_mps']:.2f} m/s); IMU {res['imu']['rate_hz']:.1f} Hz; outages (start s, length s) "
               f"{[(round(a, 2), round(b, 2)) for a, b in res['outages_s']]}; "
               + "; ".join(f"{v}: {r['seconds']:.0f} s" for v, r in res["runs"].items()), ""]

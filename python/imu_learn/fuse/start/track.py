@@ -61,13 +61,18 @@ class GnssStartSettings:
     still_max_speed_mps: float = STILL_MAX_SPEED_MPS
     yaw_min_speed_mps: float = 1.0
     lever: Tuple[float, float, float] = (0.0, 0.0, 0.0)
+    # "track": the run starts at the epoch that gives the heading; "still": at the IMU's first sample
+    # (the still start), its heading the track's carried back by the gyro (:func:`gnss_start`)
+    start_at: str = "track"
 
 
 def gnss_start(imu, sol, gravity: float, cfg: GnssStartSettings) -> Dict[str, object]:
     """The start sample, attitude, position, velocity and gyro bias guess of ``imu`` (stamps ``t_ns``,
     ``gyro``, ``acc``) with the RTKLIB solution ``sol``, from the data alone: levelled over the first
     ``level_s`` (checked still against the fixes' speed), carried by the gyro to the first fixed epoch
-    faster than ``yaw_min_speed_mps``, turned onto its velocity heading."""
+    faster than ``yaw_min_speed_mps``, turned onto its velocity heading. With ``start_at = "still"``
+    the start is the IMU's first sample instead, at rest, levelled and turned by the same angle
+    (``heading_s_after_first_epoch``: when the heading became known)."""
     t = imu.t_ns
     n_level = int(np.searchsorted(t, t[0] + int(cfg.level_s * 1e9)))
     if n_level < 10:
@@ -81,6 +86,9 @@ def gnss_start(imu, sol, gravity: float, cfg: GnssStartSettings) -> Dict[str, ob
     f_still = imu.acc[:n_level].mean(axis=0)
     R_lvl = level(f_still)[2]
     gyro_still = imu.gyro[:n_level].mean(axis=0)
+    # the mean's standard error, counting distinct rows only (a logger faster than its sensor repeats rows)
+    distinct = 1 + int(np.any(np.diff(imu.gyro[:n_level], axis=0) != 0, axis=1).sum())
+    gyro_still_se = imu.gyro[:n_level].std(axis=0) / math.sqrt(distinct)
     moving = (sol.q == 1) & (sol.t_ns > t[n_level - 1])
     if speed is None:
         raise InvalidInputError(f"{sol.path}: no velocity columns: the heading at the start needs them")
@@ -102,12 +110,26 @@ def gnss_start(imu, sol, gravity: float, cfg: GnssStartSettings) -> Dict[str, ob
     R0 = Rotation.from_euler("z", heading_vel - heading_body).as_matrix() @ Rm
     lever = np.asarray(cfg.lever, dtype=np.float64)
     p0 = sol.enu[e] + v * (t[s0] - sol.t_ns[e]) * 1e-9 - R0 @ lever
+    heading_s = (int(t[s0]) - int(sol.t_ns[0])) * 1e-9
+    if cfg.start_at == "still":
+        # The same heading at the still start: the levelled attitude turned as the carried one was. The
+        # run then holds the still start and every fix since (position, zero velocity), which tell tilt
+        # and a horizontal accelerometer bias apart as the device turns; outputs from the heading's
+        # epoch on use no later data.
+        R0 = Rotation.from_euler("z", heading_vel - heading_body).as_matrix() @ R_lvl
+        first = int(np.argmin(np.abs(sol.t_ns - t[0])))
+        s0, v = 0, np.zeros(3)
+        p0 = sol.enu[first] - R0 @ lever
+    elif cfg.start_at != "track":
+        raise InvalidInputError(f"start_at: 'track' or 'still', got {cfg.start_at!r}")
     # At rest the specific force's norm is gravity's: the excess along it is an accelerometer bias
     # (the part the still start can tell; horizontal biases look like tilt there).
     acc_bias_still = (np.linalg.norm(f_still) - gravity) * f_still / np.linalg.norm(f_still)
     return {"s0": s0, "epoch": e, "R0": R0, "p0": p0, "v0": v.copy(), "gyro_still": gyro_still,
+            "gyro_still_se": gyro_still_se, "still_distinct_rows": distinct,
             "acc_bias_still": acc_bias_still,
             "start_s_after_first_epoch": (int(t[s0]) - int(sol.t_ns[0])) * 1e-9,
+            "heading_s_after_first_epoch": heading_s, "start_at": cfg.start_at,
             "speed_mps": float(speed[e]), "still_samples": n_level,
             "acc_still_std": imu.acc[:n_level].std(axis=0).tolist(),
             "gyro_still_std": imu.gyro[:n_level].std(axis=0).tolist()}
