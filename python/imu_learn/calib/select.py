@@ -39,7 +39,11 @@ tried against ``chosen``. So the chosen level is never beaten by a simpler one i
 
 The profile's floor is then fitted at the chosen levels on all the training recordings (the full fit
 kept as it is where the chosen levels are all it has); profile.json's ``selection`` entry holds the
-levels, the rule, and every held-out figure behind them. torch is imported here (the floor's fit).
+levels, the rule, and every held-out figure behind them. No selection (the entry says why, the full
+floor kept): a positions or odometry reference, or one that cannot resolve accelerations (their sources
+fix the terms they observe), and recordings too short to hold any out. A reference whose stamps were
+moved by its own lag keeps the time offset's prior in every fold (not observed). torch is imported here
+(the floor's fit).
 """
 from __future__ import annotations
 
