@@ -29,7 +29,8 @@ poses, or position fixes), no ground truth needed: the first state comes from th
 levelled from the accelerometer, heading from the first pose or from the track, position and velocity
 from the first aiding), under a loose prior, and the IMU is fused with the aiding in a GTSAM factor
 graph. Writes causal.tum and smoothed.tum (t tx ty tz qx qy qz qw, body = IMU frame), plot.png and
-summary.json to --out and prints a one-line summary; --groundtruth only scores the result afterwards.
+summary.json to --out, all at once at the end (an error or a Ctrl-C, exit 130, before then leaves --out
+as it was), and prints a one-line summary; --groundtruth only scores the result afterwards.
 GNSS fixes (an RTKLIB .pos, known by its content; a bag's NavSatFix topic) also give the tracks as
 latitude/longitude/height CSVs, KML and GeoJSON; a bag as input or aiding gets the trajectories back as
 nav_msgs/Odometry bags. The IMU noise comes from --imu-noise, a device profile (--profile, which also
