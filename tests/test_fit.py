@@ -29,6 +29,7 @@ TINY = [
     "--data.window", "50", "--data.batch_size", "8", "--data.val_stride", "200", "--data.eval_stride", "50",
     "--model.hidden", "8", "--model.fc", "8", "--model.layers", "1",
     "--optim.steps_per_epoch", "4", "--optim.lr", "1e-3", "--seed", "7", "--threads", "1",
+    "--model.start", "raw",  # the mechanics of a run; the default start (calibrate) is tested on its own
 ]
 
 
@@ -94,6 +95,34 @@ def test_run_writes_run_folder(full_run):
                 assert cell["windows"] > 0 and cell["rot_deg"] > 0 and cell["trans_m"] > 0
     # removing the start-up bias helps the raw EuRoC IMU a lot over 200 samples
     assert res["table"]["raw"]["bias_removed"]["200"]["rot_deg"] < 0.5 * res["table"]["raw"]["open_loop"]["200"]["rot_deg"]
+
+
+def test_default_run_trains_on_top_of_its_training_splits_profile(tmp_path):
+    """The default start (model.start = calibrate): calibrate's profile of the training split alone
+    (RUN/profile/), the untrained model is that floor (epoch 0, scored on validation and kept unless an
+    epoch beats it), and the final table puts raw, the profile and the model side by side and says which
+    ships."""
+    d = tmp_path / "on_profile"
+    no_start = TINY[:TINY.index("--model.start")]
+    assert fit_cli.main(["--out", str(d), *no_start, "--optim.epochs", "2"]) == 0
+    prof = json.loads((d / "profile" / "profile.json").read_text())
+    assert (d / "profile" / "imu.yaml").is_file()
+    fitted_on = prof["sources"][0]
+    assert fitted_on["train"] == ["MH_01_easy[0:0.8]"] and fitted_on["val"] == ["MH_01_easy[0.8:1]"]
+    assert prof["gyroscope"]["matrix"] != [[1, 0, 0], [0, 1, 0], [0, 0, 1]]  # fitted, not the identity
+    assert [int(x["epoch"]) for x in rows(d)] == [0, 1, 2]
+    assert load_checkpoint(d / "best.pt")["model_args"]["start"] == "profile"
+    res = json.loads((d / "results.json").read_text())
+    assert set(res["table"]) == {"raw", "timing", "profile", "model"}
+    best_epoch = load_checkpoint(d / "best.pt")["epoch"]
+    assert res["ships"] == ("model" if best_epoch else "profile")
+    assert f"ships: the {'trained model' if best_epoch else 'device profile'}" in res["text"]
+    if not best_epoch:  # best.pt is the floor: the profile's own figures (its low-pass as a truncated FIR)
+        for col in ("open_loop", "bias_removed"):
+            for n in ("10", "200"):
+                m, p = res["table"]["model"][col][n], res["table"]["profile"][col][n]
+                assert m["rot_deg"] == pytest.approx(p["rot_deg"], rel=0.03)
+                assert m["trans_m"] == pytest.approx(p["trans_m"], rel=0.03)
 
 
 def test_select_on_validation_pose(tmp_path, full_run, capsys):

@@ -43,6 +43,7 @@ from imu_learn.data.types import Segment, sample_rate_hz
 from imu_learn.errors import CheckpointError  # noqa: F401  (defined with every error class)
 from imu_learn.infer import guard
 from imu_learn.infer.windowing import apply, attach, windowing_of_config
+from imu_learn.nn.config import ARGS_BEFORE
 from imu_learn.nn.model import ImuRefiner, ModelConfig
 from imu_learn.util.atomic import atomic_write_bytes
 
@@ -259,7 +260,7 @@ def load_checkpoint(path: Path, map_location: str = "cpu") -> Dict[str, Any]:
 def model_from_checkpoint(state: Dict[str, Any]) -> ImuRefiner:
     """The checkpoint's model in eval mode, with its windowing rule attached (the training window:
     :func:`imu_learn.infer.windowing.windowing_of_config`), so every path applies it alike."""
-    model = ImuRefiner(ModelConfig(**state["model_args"]))
+    model = ImuRefiner(ModelConfig(**{**ARGS_BEFORE, **state["model_args"]}))
     model.load_state_dict(state["model"])
     model.eval()
     attach(model, windowing_of_config(state.get("config")))

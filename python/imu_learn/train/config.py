@@ -50,8 +50,9 @@ class OptimConfig:
     # What picks best.pt: "val_loss" (the training loss on fixed validation windows) or "val_pose"
     # (relative pose RMSE over data.window samples on the validation sequences, each input's
     # start-up bias removed as in the final table, the worse of rotation and translation as a ratio
-    # to raw IMU; see fit.ValidationPose).
-    select: str = "val_loss"
+    # to raw IMU; see fit.ValidationPose). Default: val_pose against the start (below); a run from
+    # another start than a profile keeps val_loss unless it sets these (FROM_SCRATCH_SELECTION).
+    select: str = "val_pose"
     # val_pose only: the horizons [IMU samples] scored on validation (empty: data.window) and the
     # terms: "rot+trans" (the worst ratio over rotation and translation) or "rot" (rotation only,
     # e.g. a gyro-only model). The score is the worst model/raw ratio over horizons and terms.
@@ -74,12 +75,19 @@ class OptimConfig:
     # Score the untrained model on validation as epoch 0 before the first step, so that best.pt can
     # be the starting point itself (with model.fir_init = "timing": the timing floor): the selected
     # model is then never worse than where training started, on validation.
-    validate_start: bool = False
+    validate_start: bool = True
     # val_pose only: what the pose score's ratios are taken against: "raw" (raw IMU) or "start" (the
     # untrained model, i.e. the floor model.start names; needs optim.validate_start): each cell's
     # model/raw ratio divided by the start's, so with select_combine = "max" a score below 1 means better
     # than the floor in EVERY scored cell (rotation and translation, each horizon).
-    select_reference: str = "raw"
+    select_reference: str = "start"
+
+
+# The selection of a run that does not start from a device profile (model.start raw, timing or
+# traditional+timing: the paper's recipe and the floors fitted in the run), where its config does not
+# set these keys: the training loss on validation, as the paper selects.
+FROM_SCRATCH_SELECTION = {"select": "val_loss", "validate_start": False, "select_reference": "raw"}
+FROM_SCRATCH_STARTS = ("raw", "timing", "traditional+timing")
 
 
 @dataclass
@@ -129,6 +137,10 @@ def build_config(base: Dict[str, Any], overrides: Dict[str, Any]) -> RunConfig:
     merged = merge(asdict(RunConfig()), base)
     root = resolve_data_root(overrides.get("data.data_root"), merged["data"]["data_root"])
     merged = merge(merged, nest({**overrides, "data.data_root": root}))
+    if merged["model"]["start"] in FROM_SCRATCH_STARTS:
+        given = set((base.get("optim") or {}) if isinstance(base.get("optim"), dict) else {})
+        given |= {k.split(".", 1)[1] for k in overrides if k.startswith("optim.")}
+        merged["optim"].update({k: v for k, v in FROM_SCRATCH_SELECTION.items() if k not in given})
     cfg = from_dict(RunConfig, merged)
     validate(cfg)
     return cfg

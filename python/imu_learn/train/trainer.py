@@ -93,12 +93,15 @@ from imu_learn.infer.checkpoint import (
     save_checkpoint,
     training_record,
 )
+from imu_learn.infer.rates import recording_device
+from imu_learn.nn.config import ARGS_BEFORE
 from imu_learn.nn.device import pick_device
 from imu_learn.nn.losses import imu_loss
 from imu_learn.nn.model import ImuRefiner, ModelConfig
 from imu_learn.score.metrics import floor_ratios, index_at, relative_pose_rmse_many, variant_table, without_fitted_bias
 from imu_learn.score.protocol import VARIANT_LABELS, VARIANTS
 from imu_learn.train.config import ConfigError, RunConfig, build_config, read_toml, to_toml
+from imu_learn.train.split_profile import calibrate_split
 from imu_learn.util.atomic import atomic_write_text
 
 RESUME_OVERRIDABLE = ("optim.epochs", "device", "threads")
@@ -231,7 +234,7 @@ def init_from(model: ImuRefiner, path: Path) -> None:
     """optim.init: the weights of a trained checkpoint (normalisation included) into ``model``."""
     state = load_checkpoint(path)
     # a checkpoint written before a model arg existed has that arg's default
-    theirs = {k: v for k, v in {**asdict(ModelConfig()), **state["model_args"]}.items() if k not in COVARIANCE_ARGS}
+    theirs = {k: v for k, v in {**asdict(ModelConfig()), **ARGS_BEFORE, **state["model_args"]}.items() if k not in COVARIANCE_ARGS}
     ours = {k: v for k, v in model.model_args().items() if k not in COVARIANCE_ARGS}
     diff = sorted(k for k in set(theirs) | set(ours) if theirs.get(k) != ours.get(k))
     if diff:
@@ -349,15 +352,22 @@ def affine_calibration(p: TraditionalParams) -> Calibration:
     return A, np.concatenate([-p.M_g @ p.b_g, -p.M_a @ p.b_a])
 
 
-def floor_start(cfg: RunConfig, split: Split) -> Tuple[RunConfig, Start]:
-    """``model.start`` = "timing" or "traditional+timing": fit that floor on the split's training
+def floor_start(cfg: RunConfig, split: Split, run_dir: Path) -> Tuple[RunConfig, Start]:
+    """``model.start`` = "calibrate": calibrate's device profile of the split's training segments
+    (:mod:`imu_learn.train.split_profile`, written to ``run_dir/profile/``), then as a profile's path.
+    ``model.start`` = "timing" or "traditional+timing": fit that floor on the split's training
     recordings (validation keeps its offset or not) and return ``cfg`` with ``model.fir_init_tau`` (and
     ``model.calib``) set, plus the calibration (A (6, 6), c (6,)) for :meth:`ImuRefiner.set_calibration`
     (None for "timing"): the untrained model is then that floor (without traditional's low-pass filter).
     ``model.start`` = a device profile's path: :func:`profile_start` (no fit)."""
+    settings = FitSettings(window=cfg.data.window, gravity=cfg.data.gravity, seed=cfg.seed)
+    if cfg.model.start == "calibrate":
+        device = (recording_device(cfg.data.roots[0].format) if cfg.data.roots else None) or "device"
+        logger.info("model.start = calibrate: fitting the device profile of the training split")
+        path = calibrate_split(split, run_dir, settings, device, progress=logger.info)
+        cfg = dataclasses.replace(cfg, model=dataclasses.replace(cfg.model, start=str(path)))
     if cfg.model.start not in ("timing", "traditional+timing"):
         return profile_start(cfg)
-    settings = FitSettings(window=cfg.data.window, gravity=cfg.data.gravity, seed=cfg.seed)
     max_shift = float(cfg.model.fir_taps // 2)
     calib = None
     if cfg.model.start == "timing":
@@ -462,14 +472,17 @@ def timing_floor(split: Split, cfg: RunConfig) -> Tuple[List[Segment], float]:
 
 
 def evaluate_table(raw_seqs: List[Segment], model_seqs: List[Segment], cfg: RunConfig,
-                   timing_seqs: Optional[List[Segment]] = None) -> Dict[str, Any]:
+                   timing_seqs: Optional[List[Segment]] = None,
+                   profile_seqs: Optional[List[Segment]] = None) -> Dict[str, Any]:
     """Relative pose RMSE (rot deg, trans m) at ``data.eval_horizons``, raw (and, given
     ``timing_seqs``, the timing floor) vs model, open loop vs bias removed: pooled over every window
     of the test split (``rows``) and per test recording (``per_recording``, as the paper's Table II
-    lists sequences). ``vs_floor``: the model's ratio to the best of the floor rows (raw, timing)
-    per cell (:func:`imu_learn.score.metrics.floor_ratios`)."""
+    lists sequences). ``profile_seqs``: the test split through the device profile the model starts
+    from (its floor, low-pass included). ``vs_floor``: the model's ratio to the best of the floor rows
+    (raw, timing, profile) per cell (:func:`imu_learn.score.metrics.floor_ratios`)."""
     out: Dict[str, Any] = {"rows": {}, "per_recording": {}, "startup_bias": {}}
-    rows = [("raw", raw_seqs)] + ([("timing", timing_seqs)] if timing_seqs is not None else []) + [("model", model_seqs)]
+    floors = [("timing", timing_seqs), ("profile", profile_seqs)]
+    rows = [("raw", raw_seqs)] + [(k, v) for k, v in floors if v is not None] + [("model", model_seqs)]
     for row, seqs in rows:
         fixed, out["startup_bias"][row] = without_startup_bias(seqs, cfg)
         out["rows"][row] = _cells(seqs, fixed, cfg)
@@ -496,8 +509,9 @@ def format_table(res: Dict[str, Any], names: List[str], cfg: RunConfig) -> str:
              f"{'':24}|" + "|".join(f"{'n=' + str(n):^13}" for _, n in cols[:k]) + "|"
              + "|".join(f"{'n=' + str(n):^13}" for _, n in cols[k:])]
     tau = res.get("timing_offset_samples")
-    labels = {"raw": "raw IMU", "timing": "timing" if tau is None else f"timing {tau:+.2f}", "model": "trained model"}
-    for row in [r for r in ("raw", "timing", "model") if r in res["rows"]]:
+    labels = {"raw": "raw IMU", "timing": "timing" if tau is None else f"timing {tau:+.2f}",
+              "profile": "device profile", "model": "trained model"}
+    for row in [r for r in ("raw", "timing", "profile", "model") if r in res["rows"]]:
         for key, unit, fmt in (("rot_deg", "rot [deg]", "{:.4f}"), ("trans_m", "trans [m]", "{:.5f}")):
             first = labels[row] if key == "rot_deg" else ""
             cells = [fmt.format(res["rows"][row][c][str(n)][key]) for c, n in cols]
@@ -513,6 +527,10 @@ def format_table(res: Dict[str, Any], names: List[str], cfg: RunConfig) -> str:
         lines.append("model/floor: the trained model's error over the lower floor row (named) of each cell; below 1 beats it")
         if "timing" in res["rows"]:
             lines.append("timing: raw IMU resampled at the time offset [samples] fitted on the training split")
+        if "profile" in res["rows"]:
+            lines.append("device profile: the floor the model starts from (calibrate's, fitted on the training split)")
+    if res.get("ships"):
+        lines.append(res["ships"])
     return "\n".join(lines)
 
 
@@ -722,7 +740,7 @@ def train(
     split, sampler, validation = prepare_data(cfg, split)
     start = Start(profile=None if state is None else state.get("profile"))  # a profile the model holds
     if state is None and cfg.model.start != "raw":
-        cfg, start = floor_start(cfg, split)
+        cfg, start = floor_start(cfg, split, run_dir)
     ts = new_state(cfg, split.train, device, start) if state is None else resumed_state(cfg, state, device)
     if validation.pose is not None and state is not None:
         validation.pose.reference = (state.get("extra") or {}).get("select_reference")
@@ -785,16 +803,31 @@ def train(
     return results
 
 
+def ships_line(run_dir: Path, best_epoch: Optional[int]) -> str:
+    """What a run on top of a device profile ships, from the selection on validation (never the test)."""
+    if best_epoch:
+        return (f"ships: the trained model (best.pt, epoch {best_epoch}): it beat the device profile in every "
+                "scored cell on validation")
+    return ("ships: the device profile (no trained epoch beat it on validation; best.pt is the profile's floor, "
+            f"epoch 0): refine with --profile {run_dir / 'profile' / 'profile.json'}")
+
+
 def final_evaluation(cfg: RunConfig, run_dir: Path, split: Split, device: torch.device,
                      best_epoch: Optional[int], best: Optional[float]) -> Dict[str, Any]:
     if not split.test:
         logger.info("no test sequences in data.split.test; no final table")
         return {}
+    state = load_checkpoint(run_dir / "best.pt")
     model = load_model(run_dir / "best.pt", map_location=str(device)).to(device)
     refined = [refine_sequence(model, s, cfg) for s in split.test]
     timing_seqs, tau = timing_floor(split, cfg)
-    res = evaluate_table(list(split.test), refined, cfg, timing_seqs)
+    profile = Profile.from_dict(state["profile"], str(run_dir / "best.pt")) if state.get("profile") else None
+    profile_seqs = None if profile is None else [
+        Segment(s.name, s.t_ns, *profile.apply(s.t_ns, s.gyro, s.acc), s.p, s.v, s.q_wxyz) for s in split.test]
+    res = evaluate_table(list(split.test), refined, cfg, timing_seqs, profile_seqs)
     res["timing_offset_samples"] = tau
+    if profile is not None:
+        res["ships"] = ships_line(run_dir, best_epoch)
     names = [s.name for s in split.test]
     table = format_table(res, names, cfg)  # the command prints it (results["text"])
     out = {
@@ -813,6 +846,7 @@ def final_evaluation(cfg: RunConfig, run_dir: Path, split: Split, device: torch.
         "vs_floor": res["vs_floor"],
         "per_recording": res["per_recording"],
         "startup_bias": res["startup_bias"],
+        "ships": None if profile is None else ("model" if best_epoch else "profile"),
         "text": table,
     }
     atomic_write_text(run_dir / "results.json", json.dumps(out, indent=2))
