@@ -322,6 +322,7 @@ class IncrementalFusion:
         b0 = gtsam.imuBias.ConstantBias(ba0, bg0)  # GTSAM's order: accelerometer, gyroscope
         self._graph = gtsam.NonlinearFactorGraph()
         self._values = gtsam.Values()
+        self._true_at: Dict[int, object] = {}  # pending graph slot -> the Python factor held there
         self._graph.add(gtsam.PriorFactorPose3(X(0), pose0, prior.pose_noise(R0, gtsam)))
         self._graph.add(gtsam.PriorFactorVector(V(0), v0, gtsam.noiseModel.Isotropic.Sigma(3, prior.vel_mps)))
         self._graph.add(gtsam.PriorFactorConstantBias(B(0), b0, gtsam.noiseModel.Diagonal.Sigmas(
@@ -358,11 +359,29 @@ class IncrementalFusion:
                 continue
             graph.add(gtsam.BetweenFactorPose3(X(self._key_of[i]), X(k), rel, model))
             self.counts["relative_pose_factors"] += 1
+        urgent = graph.size() - n
         if self._extra_factors is not None:
-            for f in self._extra_factors(self, k, s):
-                graph.add(f)
-                self.counts["extra_factors"] += 1
-        return graph.size() - n
+            extra = self._extra_factors(self, k, s)
+            for f in extra:
+                self._add_extra(f)
+            # a hook's factors alone call for an update at most every ``update_every_s`` (its attribute)
+            every_ns = int(round(getattr(self._extra_factors, "update_every_s", 0.0) * 1e9))
+            if extra and self.stamps[s] - self._last_update_ns >= every_ns:
+                urgent += len(extra)
+        return urgent
+
+    def _add_extra(self, f) -> None:
+        """An extra factor into the pending graph; a Python one (``gtsam.CustomFactor``) on pending keys
+        only held at the pending values (the IMU prediction) as a native ``LinearContainerFactor`` for
+        the causal solver,
+        whose every call of a Python factor would copy all the window's values, the Python factor
+        itself kept for the smoothing pass (which relinearises it: :mod:`.factors.held`)."""
+        gtsam = self._gtsam
+        if isinstance(f, gtsam.CustomFactor) and all(self._values.exists(key) for key in f.keys()):
+            self._true_at[self._graph.size()] = f
+            f = gtsam.LinearContainerFactor(f.linearize(self._values), self._values)
+        self._graph.add(f)
+        self.counts["extra_factors"] += 1
 
     def add_sample(self, t_ns: int, gyro: np.ndarray, acc: np.ndarray,
                    var: Optional[np.ndarray] = None) -> Optional[CausalState]:
@@ -438,8 +457,8 @@ class IncrementalFusion:
         gtsam = self._gtsam
         coast = t_ns - self._last_update_ns > self.resolve_after_ns
         if self.smoothing == "batch" or not self.windowed:  # the whole-graph path re-solves the whole graph
-            for f in range(self._graph.size()):
-                self._full.add(self._graph.at(f))
+            for f in range(self._graph.size()):  # (the Python factors themselves, not as held)
+                self._full.add(self._true_at.get(f, self._graph.at(f)))
         if self.windowed:
             self._update_window(coast, (t_ns - self.stamps[0]) * 1e-9, (self._last_update_ns - self.stamps[0]) * 1e-9)
         else:
@@ -448,6 +467,7 @@ class IncrementalFusion:
         self.counts["resolves_after_coast"] += int(coast)
         self._graph = gtsam.NonlinearFactorGraph()
         self._values = gtsam.Values()
+        self._true_at = {}
         self._last_update_ns = t_ns
 
     def _update_whole(self, coast: bool) -> None:
@@ -522,19 +542,20 @@ class IncrementalFusion:
         """Variables the causal solver holds now (the fixed-lag smoother's window, or the whole graph)."""
         return len(self._isam.timestamps()) if self.windowed else self._isam.calculateEstimate().size()
 
-    def smooth(self) -> FusionResult:
+    def smooth(self, progress: Optional[Callable] = None) -> FusionResult:
         """After the last sample: the batch Levenberg-Marquardt pass over the whole graph, started
         from iSAM2's final estimate (with the fixed-lag smoother: each keyframe's last estimate in
         its window); the causal estimates beside the smoothed ones. With ``smoothing = "window"``
         no batch pass: the smoothed estimate is that last estimate (a fixed-lag smoother's output;
-        with ``lag_s = inf``, iSAM2's final one)."""
+        with ``lag_s = inf``, iSAM2's final one). ``progress``: called after each of the batch
+        pass's iterations (:func:`.factors.held.optimize`), e.g. a progress bar's update."""
         if not self.done:
             raise InvalidInputError(f"smooth() after the last sample: {self.n} of {len(self.t_ns)} added")
         X, V, B = self._X, self._V, self._B
         initial = self._initial if self.windowed else self._isam.calculateEstimate()
         if self.smoothing == "batch":
             full = self._full
-            est = deep_stack(lambda: held.optimize(full, initial, lm_params()),
+            est = deep_stack(lambda: held.optimize(full, initial, lm_params(), progress),
                              len(self._kf_list))
         else:
             est = initial
