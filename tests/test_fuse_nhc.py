@@ -124,7 +124,7 @@ def test_held_solve_is_levenberg_marquardt_on_the_true_graph():
     assert a.atPose3(X(29)).equals(b.atPose3(X(29)), 0.0)
 
 
-def test_held_solve_falls_back_to_the_true_graph_when_the_linearisation_misleads(monkeypatch):
+def test_held_solve_shortens_a_misleading_step_then_falls_back_to_the_true_graph(monkeypatch):
     rng = np.random.default_rng(8)
     g, _truth, initial = chain_graph(rng, n=10)
     params = graph_mod.lm_params()
@@ -148,10 +148,31 @@ def test_held_solve_falls_back_to_the_true_graph_when_the_linearisation_misleads
         return out
 
     monkeypatch.setattr(held, "held_graph", misleading)
+    # each misleading step shortened until the true error drops, relinearised there: it still descends
     got = held.optimize(g, initial, params)
-    assert calls == [10]  # one held solve, then LM on the true graph
+    assert 1 < len(calls) <= params.getMaxIterations()
+    assert g.error(got) < g.error(initial)
+    # no shortened step lowering the true error: one held iteration, then LM on the true graph
+    calls.clear()
+    tried = []
+    monkeypatch.setattr(held, "MAX_HALVINGS", 0)
+    real_lm = held.levenberg_marquardt
+    monkeypatch.setattr(held, "levenberg_marquardt", lambda gr, *a: tried.append(gr is g) or real_lm(gr, *a))
+    got = held.optimize(g, initial, params)
+    assert calls == [10] and tried == [True]  # (the held step is lm_iteration's)
     assert g.error(got) == pytest.approx(g.error(ref), rel=1e-6, abs=1e-9)
     assert real is not misleading
+
+
+def test_held_solve_reports_progress_and_matches_without_it():
+    rng = np.random.default_rng(9)
+    g, _truth, initial = chain_graph(rng, n=12)
+    params = graph_mod.lm_params()
+    ticks = []
+    a = held.optimize(g, initial, params, progress=ticks.append)
+    b = held.optimize(g, initial, params)
+    assert len(ticks) >= 2 and any(t is not None for t in ticks)  # LM iterations and relinearisations
+    assert g.error(a) == pytest.approx(g.error(b), rel=1e-9, abs=1e-12)
 
 
 # --- a synthetic wheeled drive through the graph ----------------------------------------------------
@@ -206,7 +227,7 @@ def test_nhc_cuts_the_outage_drift_of_a_wheeled_drive(monkeypatch):
     assert smooth_nhc < smooth_raw, (smooth_nhc, smooth_raw)
     # the held solve gives the smoothed estimate LM gives on the true graph
     monkeypatch.setattr(held, "optimize",
-                        lambda g, init, params: gtsam.LevenbergMarquardtOptimizer(g, init, params).optimize())
+                        lambda g, init, params, progress=None: gtsam.LevenbergMarquardtOptimizer(g, init, params).optimize())
     ref, _live, _smooth = run_drive(True)
     np.testing.assert_allclose(res.smoothed_p, ref.smoothed_p, atol=1e-4)
     np.testing.assert_allclose(res.causal_p, ref.causal_p, atol=0.0)

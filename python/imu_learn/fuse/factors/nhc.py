@@ -12,10 +12,10 @@ Jacobians, with GTSAM's retractions ``R <- R Exp(dtheta)``, ``p <- p + R dp`` an
 ``d(R^T v)/dtheta = [R^T v]_x`` (since ``Exp(-dtheta) R^T v ~ R^T v + (R^T v) x dtheta``),
 ``d/dp = 0`` and ``d/dv = R^T``; each restricted to rows y, z (tests/test_gnss_imu.py checks them
 against numerical derivatives). It plugs into :class:`imu_learn.fuse.graph.IncrementalFusion` /
-:func:`imu_learn.fuse.graph.fuse` through ``extra_factors`` (:func:`nhc_callback`). The causal solver
-calls it as it is; the batch smoothing pass holds it at a linearisation point as a native factor and
-relinearises it between Levenberg-Marquardt runs (:mod:`.held`: the Python call inside GTSAM's
-optimiser would copy the whole graph's values each time).
+:func:`imu_learn.fuse.graph.fuse` through ``extra_factors`` (:func:`nhc_callback`). Both passes hold it
+as a native factor linearised at a point (a Python call inside GTSAM's solvers would copy all their
+values each time): the causal solver at its keyframe's IMU prediction, the batch smoothing pass at
+its estimate, relinearised between Levenberg-Marquardt runs (:mod:`.held`).
 """
 from __future__ import annotations
 
@@ -32,19 +32,25 @@ from imu_learn.errors import InvalidInputError
 class NhcSettings:
     """Sigmas [m/s] of the body-frame lateral and vertical velocity; ``lever`` [m]: the constrained
     point from the IMU, body frame; ``every_s``: one factor per keyframe at most this often
-    (0: every keyframe); ``max_yaw_rate_dps``: [deg/s] no factor while turning faster (skids). The
-    one NHC settings type: the navigator's ``--nhc``, an experiment scenario's ``nhc_sigma_mps`` and
-    the GNSS outage config's ``[nhc]`` table all build one."""
+    (0: every keyframe); ``max_yaw_rate_dps``: [deg/s] no factor while turning faster (skids);
+    ``update_every_s``: the NHC factors alone (no aiding at that keyframe) update the causal solver at
+    most this often, else they join the next update (an update at every keyframe, with iSAM2 calling
+    the Python factor, made the causal pass 2.5-6x the run without NHC: docs/experiments/navigate-nhc.md).
+    The one NHC settings type: the navigator's ``--nhc``, an experiment scenario's ``nhc_sigma_mps``
+    and the GNSS outage config's ``[nhc]`` table all build one."""
 
     sigma_lat: float = 0.1
     sigma_vert: float = 0.1
     lever: Sequence[float] = (0.0, 0.0, 0.0)
     every_s: float = 0.0
     max_yaw_rate_dps: float = float("inf")
+    update_every_s: float = 0.5
 
     def __post_init__(self) -> None:
-        if not (self.sigma_lat > 0 and self.sigma_vert > 0 and self.every_s >= 0 and self.max_yaw_rate_dps > 0):
-            raise InvalidInputError(f"NHC: sigmas and max_yaw_rate_dps must be > 0, every_s >= 0: {self}")
+        if not (self.sigma_lat > 0 and self.sigma_vert > 0 and self.every_s >= 0 and self.max_yaw_rate_dps > 0
+                and self.update_every_s >= 0):
+            raise InvalidInputError(f"NHC: sigmas and max_yaw_rate_dps must be > 0, every_s and update_every_s "
+                                    f">= 0: {self}")
 
     @property
     def max_yaw_rate(self) -> float:
@@ -116,6 +122,7 @@ def nhc_callback(settings: NhcSettings, gyro: Optional[np.ndarray] = None,
         state["last_ns"] = t
         return [nhc_factor(X(k), V(k), settings, w)]
 
+    extra.update_every_s = settings.update_every_s  # read by IncrementalFusion (when to update)
     return extra
 
 
