@@ -7,10 +7,11 @@ import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
-from imu_learn.fuse.aiding.estimate import one_line_text, summary_entry
+from imu_learn.fuse.aiding.estimate import one_line_text, shift_trajectory, summary_entry
 from imu_learn.fuse.aiding.noise import gyro_orientation, pose_noise
 from imu_learn.fuse.aiding.offset import estimate_offset
-from imu_learn.fuse.aiding.spans import given_noise, pair_sigmas, relative_poses, span_pairs
+from imu_learn.fuse.aiding.spans import given_noise, pair_sigmas, relative_poses, span_pairs, unbroken
+from imu_learn.fuse.aiding.tum import Trajectory
 from imu_learn.fuse.aiding.types import AidingRows
 
 RATE = 200.0
@@ -161,3 +162,24 @@ def test_relative_poses_and_the_summary_line(synthetic):
     line = one_line_text(summary_entry(rows, est, "estimated"))
     assert line.startswith("aiding noise 0.0") and "mm per pose (estimated)" in line and "offset" in line
     assert one_line_text(None) == ""
+
+
+def test_the_navigator_shifts_the_stamps_only_by_a_lag_of_a_sample_or_more(synthetic):
+    t_ns, gyro, acc, R, p, C = synthetic
+    sample = np.arange(0, len(t_ns), 10)
+    q = Rotation.from_matrix(R[sample]).as_quat()
+    for lag_s, applied in ((0.0, False), (0.015, True)):
+        stamps = t_ns[sample] + int(round(lag_s * 1e9))
+        traj = Trajectory(stamps, p[sample], q, "vo.tum", np.arange(len(sample)) + 1)
+        moved, off = shift_trajectory(traj, t_ns, gyro)
+        assert off.applied is applied and off.to_dict()["applied"] is applied
+        if applied:  # back on the IMU's clock to within a sample
+            assert np.all(np.abs(moved.t_ns - t_ns[sample]) < 5e6)
+        else:
+            assert moved is traj and "within one IMU sample" in off.why
+
+
+def test_only_an_unbroken_aiding_is_tied_over_long_spans():
+    t = (np.arange(0, 30, 0.05) * 1e9).astype(np.int64)
+    assert unbroken(t, 0.5)
+    assert not unbroken(np.r_[t, t[-1] + np.int64(10e9)], 0.5)

@@ -81,13 +81,13 @@ from .aiding.detect import detect as detect_aiding
 from .aiding.estimate import one_line_text, shift_trajectory, summary_entry, with_noise
 from .aiding.outages import in_windows
 from .aiding.rtklib import RtkSolution, fixes_on_imu, normal_gravity, read_pos
-from .aiding.spans import SPANS_S, given_noise, relative_poses
+from .aiding.spans import SPANS_S, given_noise, relative_poses, unbroken
 from .aiding.tum import Trajectory, check_overlap, read_trajectory
 from .aiding.types import AidingRows
 from .factors import chain
 from .factors.nhc import NhcSettings, nhc_callback
 from .graph import IncrementalFusion, feed, samples_of
-from .inputs import checkpoint_bias, checkpoint_input, displacement_hook, displacement_model, method_input
+from .inputs import checkpoint_bias, displacement_hook, displacement_model
 from .noise import ImuNoise, from_profile
 from .output import plot_navigation, write_json, write_trajectory, write_trajectory_bag
 from .score import convergence, score_against
@@ -334,8 +334,9 @@ def build_aiding(rows: AidingRows, s0: int, R_WA: np.ndarray, lever: np.ndarray,
     """The graph's aiding object for the rows, sample indices counted from ``s0`` (the first fused sample)."""
     idx = rows.sample
     if opts.aiding_kind == "relative-pose":
-        noise, source = relative_noise(rows, opts)
-        a, counts = relative_poses(idx, rows.t_ns, rows.R, rows.p, noise, opts.relative_spans_s,
+        whole = unbroken(rows.t_ns, opts.max_relative_gap_s)
+        noise, source = relative_noise(rows, opts, whole)
+        a, counts = relative_poses(idx, rows.t_ns, rows.R, rows.p, noise, opts.relative_spans_s if whole else (0.0,),
                                    opts.max_relative_gap_s, label)
         return a.since(s0), {**counts, "aiding_estimates": summary_entry(rows, noise, source)}
     if opts.aiding_kind == "pose":
@@ -352,13 +353,15 @@ def build_aiding(rows: AidingRows, s0: int, R_WA: np.ndarray, lever: np.ndarray,
     return fixes.since(s0), {"position_fixes": int((idx >= s0).sum()), "fixes_before_start": int((idx < s0).sum())}
 
 
-def relative_noise(rows: AidingRows, opts: NavigateOptions):
+def relative_noise(rows: AidingRows, opts: NavigateOptions, whole: bool = True):
     """(each pose's noise, where it came from): ``--sigma-rot-deg`` / ``--sigma-m`` where given (a
-    relative pose's sigmas, each pose's = over sqrt(2)), else the noise estimated against the IMU
-    (:mod:`.aiding.noise`), else the defaults (a relative pose's 0.003 m / 0.05 deg)."""
+    relative pose's sigmas, each pose's = over sqrt(2)), else for an unbroken aiding (``whole``, tied
+    over long spans) the noise estimated against the IMU (:mod:`.aiding.noise`), else the defaults (a
+    relative pose's 0.003 m / 0.05 deg: consecutive poses alone fused better at them than at the
+    estimate, docs/experiments/navigate-vo.md)."""
     d = NavigateOptions()
     given = (opts.rel_sigma_rot_deg != d.rel_sigma_rot_deg) or (opts.rel_sigma_trans_m != d.rel_sigma_trans_m)
-    if rows.noise is not None and not given:
+    if rows.noise is not None and not given and whole:
         return rows.noise, "estimated"
     return (given_noise(float(np.deg2rad(opts.rel_sigma_rot_deg)), float(opts.rel_sigma_trans_m)),
             "given" if given else "default")

@@ -16,8 +16,9 @@ from .types import AidingRows
 
 def shift_trajectory(traj: Trajectory, imu_t_ns: np.ndarray, gyro: np.ndarray) -> Tuple[Trajectory, AidingOffset]:
     """(the trajectory on the IMU's clock, the offset): its stamps moved by the estimated lag where
-    it was applied (:func:`.offset.estimate_offset`), as read otherwise."""
-    off = estimate_offset(imu_t_ns, gyro, traj.t_ns, traj.q_xyzw)
+    it was applied (:func:`.offset.estimate_offset`: at least one IMU sample), as read otherwise."""
+    period_s = float(np.median(np.diff(np.asarray(imu_t_ns, dtype=np.int64)))) * 1e-9
+    off = estimate_offset(imu_t_ns, gyro, traj.t_ns, traj.q_xyzw, min_shift_s=period_s)
     if not off.applied:
         return traj, off
     return replace(traj, t_ns=traj.t_ns - int(round(off.lag_s * 1e9))), off

@@ -4,8 +4,11 @@ runs on a reference, :func:`imu_learn.calib.reference.fit_lag`; a magnitude does
 frame, so the camera's poses need no extrinsic for it), refined to a fraction of the grid by a
 parabola through the peak. The offset is applied to the aiding's stamps (``t - lag``: the aiding
 stamp ``t`` is the motion the IMU sees at ``t - lag``) only where the peak's correlation says the
-two are the same motion (``min_correlation``) and the peak is not at the search's edge; otherwise
-the stamps are left as read and the summary says why."""
+two are the same motion (``min_correlation``), the peak is not at the search's edge, and the lag is
+at least one IMU sample (``min_shift_s``): a smaller one moves no row to another sample, and the
+estimate has a bias of its own of about half a sample (where a gyro sample stands for the rate over
+the interval before or after its stamp). Otherwise the stamps are left as read and the summary
+says why."""
 from __future__ import annotations
 
 from dataclasses import dataclass
@@ -39,7 +42,8 @@ class AidingOffset:
 
 
 def estimate_offset(imu_t_ns: np.ndarray, gyro: np.ndarray, t_ns: np.ndarray, q_xyzw: np.ndarray,
-                    max_lag_s: float = MAX_LAG_S, min_correlation: float = MIN_CORRELATION) -> AidingOffset:
+                    max_lag_s: float = MAX_LAG_S, min_correlation: float = MIN_CORRELATION,
+                    min_shift_s: float = 0.0) -> AidingOffset:
     """The aiding–IMU time offset from the aiding's rotations ``q_xyzw`` (N, 4) at ``t_ns`` and the gyro
     (module docstring). Never raises for a poor match: the result says it was not applied."""
     ref = GroundTruth(np.asarray(t_ns, dtype=np.int64), np.zeros((len(t_ns), 3)),
@@ -54,6 +58,9 @@ def estimate_offset(imu_t_ns: np.ndarray, gyro: np.ndarray, t_ns: np.ndarray, q_
     if not corr >= min_correlation:
         return AidingOffset(lag, corr, False, f"|w| correlation {corr:.2f} < {min_correlation:g}: not applied")
     lag = lag + _subgrid(imu, ref, lag, max_lag_s)
+    if abs(lag) < min_shift_s:
+        return AidingOffset(lag, corr, False, f"|w| cross-correlation, peak {corr:.2f}; within one IMU sample "
+                                              f"({1e3 * min_shift_s:.3g} ms): not applied")
     return AidingOffset(lag, corr, True, f"|w| cross-correlation, peak {corr:.2f}")
 
 

@@ -70,6 +70,13 @@ def pair_sigmas(t_ij: np.ndarray, noise: PoseNoise, inflate=1.0) -> np.ndarray:
     return inflate * np.c_[rot, trans]
 
 
+def unbroken(t_ns: np.ndarray, max_gap_s: float) -> bool:
+    """Whether the rows at ``t_ns`` are one run: no two consecutive further apart than ``max_gap_s``.
+    Only such aiding is tied over the long spans: with breaks (10 s camera gaps on EuRoC) they made
+    the coasting worse, the causal estimate diverging after a break (docs/experiments/navigate-vo.md)."""
+    return bool(np.all(np.diff(np.asarray(t_ns, dtype=np.int64)) * 1e-9 <= max_gap_s))
+
+
 def given_noise(rel_rot_rad: float, rel_trans_m: float) -> PoseNoise:
     """Each pose's noise from sigmas given for a relative pose between two rows (each over sqrt(2))."""
     return PoseNoise(np.full(3, rel_rot_rad / np.sqrt(2)), np.full(3, rel_trans_m / np.sqrt(2)), 0, 0, 0.0)
