@@ -103,6 +103,12 @@ def add_arguments(ap: argparse.ArgumentParser) -> None:
                     help="multiply the covariance head's per-sample gyro and acc variances by G and A (a --checkpoint "
                          "with a covariance head only; imu_learn.fuse.variance.calibrate_model calibrates them over "
                          "the keyframe interval)")
+    ap.add_argument("--force", action="store_true",
+                    help="apply a --profile or --checkpoint made for a rate more than 5 %% off the recording's "
+                         "(a warning; without it: refused, as imu-learn refine)")
+    ap.add_argument("--imu-name", metavar="NAME",
+                    help="the recording's device, checked against the profile's or model's (default: the dataset "
+                         "its format belongs to, else not checked)")
     ap.add_argument("--calibration", type=Path, default=None, metavar="FILE",
                     help="apply a fit imu-learn evaluate saved (<out>/methods/timing.json, traditional+timing.json) "
                          "to the IMU instead of a checkpoint: the simple floor a learned input is judged against")
@@ -211,7 +217,8 @@ def run(args: argparse.Namespace, rest: List[str], keep: Callable[[Any], None]) 
     src = Sources(args.input, args.aiding, fmt=args.format or "auto", aiding_topic=args.aiding_topic,
                   columns=csv_layout(args), profile=args.profile, extrinsics=args.extrinsics,
                   checkpoint=None if args.checkpoint is None else Path(args.checkpoint), groundtruth=args.groundtruth,
-                  displacement=args.displacement, calibration=args.calibration)
+                  displacement=args.displacement, calibration=args.calibration, force=args.force,
+                  imu_name=args.imu_name)
     print(one_line(navigate(src, out, o, progress=not args.quiet, written=lambda: done.append(True))))
     return 0
 

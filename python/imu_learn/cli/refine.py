@@ -1,28 +1,25 @@
 """``imu-learn refine``: a recording's IMU through a device profile's floor or a trained model, in the
-input's own format (:mod:`imu_learn.infer.rewrite` writes it, :mod:`imu_learn.infer.refiner` runs a
-model, :meth:`imu_learn.calib.profile.Profile.apply` the floor, :mod:`imu_learn.infer.rates` checks
-that they were made for the recording's rate and device, :mod:`imu_learn.infer.guard` whether the
-recording looks like their training data); ``--bias METHOD`` removes the recording's own gyro bias,
+input's own format (:mod:`imu_learn.infer.rewrite` writes it; the correction plan,
+:mod:`imu_learn.calib.correction`, which navigate uses too, applies the floor or the model after the
+same checks: :mod:`imu_learn.infer.rates` that they were made for the recording's rate and device,
+:mod:`imu_learn.infer.guard` whether the recording looks like their training data); ``--bias METHOD`` removes the recording's own gyro bias,
 bounded by the device's bias spread (:mod:`imu_learn.infer.bias`, the registry). Writes a summary beside
 the output (:func:`imu_learn.infer.rewrite.summary_path`)."""
 from __future__ import annotations
 
 import argparse
 import logging
-from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Callable, Dict, List, Optional, Sequence
 
-from imu_learn.calib.profile import Profile
+from imu_learn.calib import correction
 from imu_learn.cli.common import add_imu_input_options, csv_layout, run_command
-from imu_learn.core.still import MEMS_PRIOR, BiasPrior
 from imu_learn.data.formats import FORMATS, USER_CSV, ImuSource, read_imu_source
-from imu_learn.data.types import sample_rate_hz
-from imu_learn.errors import ConfigError, InvalidInputError
-from imu_learn.infer import guard, rates
+from imu_learn.errors import ConfigError
+from imu_learn.infer import rates
 from imu_learn.infer.bias import REGISTRY, bias_step, choices, help_text
 from imu_learn.infer.bias import bias_entry as own_bias_entry
-from imu_learn.infer.rewrite import Step, measured, rewrite_recording, summary_path, write_summary
+from imu_learn.infer.rewrite import rewrite_recording, summary_path, write_summary
 from imu_learn.util.extras import require_extra
 
 logger = logging.getLogger(__name__)
@@ -79,112 +76,18 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     add_imu_input_options(p)
 
 
-@dataclass
-class Plan:
-    """What refine applies: the steps in order, what they were made for (rate and device), the words
-    of the summary line, and whether a step needs the recording's stamps (a profile's time offset)."""
-
-    steps: List[Step] = field(default_factory=list)
-    made_for: List[rates.MadeFor] = field(default_factory=list)
-    words: List[str] = field(default_factory=list)
-    needs_stamps: bool = False
-    stamps_for: str = "a profile's time offset"  # what needs them, for the message
-    training: Optional[Dict[str, Any]] = None  # the statistics of the training data (guard), None: not recorded
-    gravity: float = 9.80665  # [m/s^2] for the still detector's norm check (a profile's own when it has one)
-    prior: BiasPrior = MEMS_PRIOR  # the device's bias spread after the steps (a profile's, else a MEMS gyro's)
-    measured: Dict[str, Any] = field(default_factory=dict)  # what the steps measure as they run
+def request(args: argparse.Namespace) -> correction.Request:
+    """What refine's command line asks the correction plan for (:mod:`imu_learn.calib.correction`)."""
+    return correction.Request(profile=args.profile, checkpoint=args.checkpoint, force=args.force, device=args.device,
+                              window=args.window, overlap=args.overlap, batch=args.batch, progress=not args.quiet,
+                              variance="required" if args.fill_covariance else "never")
 
 
-def profile_step(profile: Profile) -> Step:
-    def step(t_ns, gyro, acc):
-        g, a = profile.apply(t_ns, gyro, acc)
-        return g, a, None
-
-    return step
+def recording(args: argparse.Namespace, src: ImuSource) -> correction.Recording:
+    return correction.Recording(str(args.input), src.t_ns, src.gyro, src.acc, src.fmt, args.format, args.imu_name)
 
 
-def describe_profile(profile: Profile, where: str) -> str:
-    return f"profile {where} (device {profile.device!r}, {rates.hz(profile.sample_rate_hz)})"
-
-
-def from_profile(args: argparse.Namespace) -> Plan:
-    """The floor of ``--profile``."""
-    profile = Profile.load(args.profile)
-    made = rates.MadeFor(f"profile {args.profile}", profile.sample_rate_hz, profile.device)
-    plan = Plan([profile_step(profile)], [made], [f"the floor of {describe_profile(profile, str(args.profile))}"],
-                needs_stamps=True, training=profile.inputs or None)
-    plan.gravity = _gravity(profile, plan.gravity)
-    plan.prior = _prior(profile, str(args.profile))
-    return plan
-
-
-def _prior(profile: Profile, where: str) -> BiasPrior:
-    """The device prior after ``profile``'s floor: zero mean, its gyroscope's bias spread."""
-    return BiasPrior.from_bias_std(profile.gyro.bias_std, f"the bias spread of profile {where}")
-
-
-def _gravity(profile: Profile, default: float) -> float:
-    g = profile.gravity_mps2
-    return float(g) if g is not None and g == g and g > 0 else default
-
-
-def from_checkpoint(args: argparse.Namespace) -> Plan:
-    """The model of ``--checkpoint``, after the profile it carries, if any."""
-    require_extra("train", "imu-learn refine --checkpoint")
-    from imu_learn.infer.checkpoint import imu_record, load_checkpoint, model_from_checkpoint
-    from imu_learn.infer.refiner import model_step, require_covariance_head
-    from imu_learn.nn.device import pick_device
-
-    try:
-        device = pick_device(args.device)
-    except RuntimeError as e:  # torch's own message for a device string it does not know
-        raise ConfigError(f"--device: {e}") from e
-    state = load_checkpoint(args.checkpoint)
-    model = model_from_checkpoint(state).to(device)
-    if args.fill_covariance:
-        require_covariance_head(model, args.checkpoint)
-    record = imu_record(state)
-    made = rates.MadeFor(f"model {args.checkpoint}", record["sample_rate_hz"], record["device"])
-    rule = model.windowing.replace(args.window, args.overlap, args.batch)
-    kind = f"causal, chunks of {rule.window}" if model.cfg.causal else f"window {rule.window}, overlap {rule.overlap}"
-    rate = "rate unknown" if not made.sample_rate_hz else rates.hz(made.sample_rate_hz)
-    plan = Plan(made_for=[made],
-                words=[f"model {args.checkpoint}: {kind}, {device}, made for {made.device or 'an unknown device'} "
-                       f"at {rate}"], training=record.get("inputs"))
-    if record["profile"] and record["profile_in_model"]:  # the model's own start: applied once, inside it
-        profile = Profile.from_dict(record["profile"], f"{args.checkpoint} (its profile)")
-        plan.words.append(f"on top of the floor of its {describe_profile(profile, 'carried')}, held by the model")
-        plan.gravity = _gravity(profile, plan.gravity)
-        plan.prior = _prior(profile, f"{args.checkpoint} (its profile)")
-    elif record["profile"]:
-        profile = Profile.from_dict(record["profile"], f"{args.checkpoint} (its profile)")
-        plan.steps.append(profile_step(profile))
-        plan.words.append(f"after its {describe_profile(profile, 'carried')}")
-        plan.needs_stamps = True
-        plan.gravity = _gravity(profile, plan.gravity)
-        plan.prior = _prior(profile, f"{args.checkpoint} (its profile)")
-    step = model_step(model, args.window, args.overlap, args.batch, not args.quiet, args.fill_covariance)
-    plan.steps.append(measured(step, plan.measured))  # what the model adds: the guard's residual
-    if args.fill_covariance:
-        plan.words.append("covariance fields: learned per-sample variances")
-    return plan
-
-
-def check_recording(args: argparse.Namespace, src: ImuSource, plan: Plan) -> Optional[float]:
-    """The recording's rate (None: no stamps); stops on a rate more than 5 % off (unless --force)
-    and logs a warning line for each mismatch it lets through."""
-    if src.t_ns is None and plan.needs_stamps:
-        raise InvalidInputError(f"{args.input} has no stamps of its own ({src.fmt}); {plan.stamps_for} needs them")
-    rate = sample_rate_hz(src.t_ns) if src.t_ns is not None else None
-    device = rates.recording_device(src.fmt, args.format, args.imu_name)
-    for line in rates.check(str(args.input), rate, device, plan.made_for, args.force):
-        logger.warning(line)
-    for line in rates.unchecked(rate, plan.made_for):
-        logger.info(line)
-    return rate
-
-
-def add_bias_step(args: argparse.Namespace, plan: Plan) -> None:
+def add_bias_step(args: argparse.Namespace, plan: correction.Plan) -> None:
     if args.bias_model is not None and args.bias not in ("learned", "auto"):
         raise ConfigError("--bias-model is the estimator of --bias learned (or one of auto's)")
     if args.bias == "learned" or args.bias_model is not None:
@@ -196,7 +99,7 @@ def add_bias_step(args: argparse.Namespace, plan: Plan) -> None:
         plan.needs_stamps = True
 
 
-def bias_entry(args: argparse.Namespace, plan: Plan) -> Dict[str, Any]:
+def bias_entry(args: argparse.Namespace, plan: correction.Plan) -> Dict[str, Any]:
     """The summary's ``bias`` entry; logs one warning line when nothing was estimated or the bound
     shrank or rejected the estimate."""
     entry, warning = own_bias_entry(args.bias, plan.measured, str(args.input))
@@ -205,35 +108,20 @@ def bias_entry(args: argparse.Namespace, plan: Plan) -> Dict[str, Any]:
     return entry
 
 
-def guard_entry(args: argparse.Namespace, src: ImuSource, plan: Plan, rate: Optional[float]) -> Dict[str, Any]:
-    """The summary's ``guard`` entry; logs its warning (or info) line."""
-    what = f"model {args.checkpoint}" if args.checkpoint is not None else f"profile {args.profile}"
-    stats = guard.input_stats(src.t_ns, src.gyro, src.acc, rate)
-    entry, warning, info = guard.verdict(plan.training, stats, what, plan.measured.get("residual_rms"))
-    if warning:
-        logger.warning(warning)
-    if info and args.checkpoint is not None:  # a profile without them: said in the summary only (an affine floor)
-        logger.info(info)
-    return entry
-
-
 def run(args: argparse.Namespace, rest: List[str], keep: Callable[[Any], None]) -> int:
     if args.fill_covariance and args.checkpoint is None:
         raise ConfigError("--fill-covariance needs a --checkpoint with a covariance head")
-    plan = from_profile(args) if args.profile is not None else from_checkpoint(args)
+    plan = correction.build(request(args))
     add_bias_step(args, plan)
     src = read_imu_source(args.input, args.format, args.imu_topic, csv_layout(args))
-    rate = check_recording(args, src, plan)
-    target = rewrite_recording(src, args.input, args.out, plan.steps, args.copy_folder, args.fill_covariance)
+    rec = recording(args, src)
+    rate = correction.check(plan, rec, args.force)
+    target = rewrite_recording(src, args.input, args.out, [plan.apply], args.copy_folder, args.fill_covariance)
     summary = {
         "input": str(args.input), "output": str(target), "format": src.fmt,
         "checkpoint": None if args.checkpoint is None else str(args.checkpoint),
         "profile": None if args.profile is None else str(args.profile),
-        "applied": plan.words,
-        "made_for": [{"what": m.what, "sample_rate_hz": m.sample_rate_hz, "device": m.device} for m in plan.made_for],
-        "recording": {"sample_rate_hz": rate, "device": rates.recording_device(src.fmt, args.format, args.imu_name),
-                      "samples": int(len(src.gyro))},
-        "guard": guard_entry(args, src, plan, rate),
+        **correction.summary(plan, rec, rate, correction.guard_entry(plan, rec, rate)),
         "bias": bias_entry(args, plan),
     }
     where = summary_path(args.out, target)

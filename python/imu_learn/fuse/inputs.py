@@ -8,8 +8,9 @@ by a config's input names, the navigator by ``--checkpoint`` / ``--calibration``
   inputs, their per-sample noise variances (:data:`Imu`); ``raw`` is the samples as they are;
 * :func:`displacement_hook` is the graph's factor hook of a displacement model (``tlio-style`` or its
   floor ``zero-displacement``), regressed from the raw samples;
-* :func:`checkpoint_input` and :func:`method_input` are the navigator's two ways of refining a
-  recording (a checkpoint, or a saved fit), each with the label its summary carries.
+* :func:`checkpoint_input` and :func:`method_input` refine arrays by a checkpoint or a saved fit,
+  each with its label, through the correction plan's steps (:mod:`imu_learn.calib.correction`, which
+  the navigator applies with its checks).
 
 Checkpoints run through the one windowing rule (:func:`imu_learn.infer.windowing.apply`), as refine,
 evaluate and fit apply them.
@@ -21,7 +22,8 @@ from typing import Dict, Optional, Tuple, Union
 
 import numpy as np
 
-from imu_learn.baselines.registry import REGISTRY, load_method_class
+from imu_learn.baselines.registry import load_method_class
+from imu_learn.calib import correction
 from imu_learn.data.types import Segment
 from imu_learn.errors import ConfigError
 
@@ -104,22 +106,23 @@ def checkpoint_input(checkpoint: Optional[Path], t_ns: np.ndarray, gyro: np.ndar
                      variance_scale: Optional[Tuple[float, float]] = None) -> Tuple[np.ndarray, np.ndarray,
                                                                                     Optional[np.ndarray], str]:
     """(gyro, acc, per-sample variances or None, label): the IMU refined by ``checkpoint`` (raw without
-    one; ``proposed``), weighted by its covariance head's variances when it has one
-    (``proposed+learned-cov``, the ``learned`` input's samples). ``variance_scale`` (k_gyro, k_acc),
-    dimensionless: multiplies the head's gyro and acc variances (:mod:`.variance` calibrates them over
-    the keyframe interval); a :class:`ConfigError` without a covariance head."""
+    one; ``proposed``; after the profile it carries, as the correction plan applies it:
+    :mod:`imu_learn.calib.correction`, unchecked here), weighted by its covariance head's variances when
+    it has one (``proposed+learned-cov``, the ``learned`` input's samples). ``variance_scale`` (k_gyro,
+    k_acc), dimensionless: multiplies the head's gyro and acc variances (:mod:`.variance` calibrates them
+    over the keyframe interval); a :class:`ConfigError` without a covariance head."""
     if checkpoint is None:
         if variance_scale is not None:
             raise ConfigError("--variance-scale scales a covariance head's variances: it needs --checkpoint")
         return gyro, acc, None, "raw"
-    model = load("proposed", str(checkpoint))
-    seq = imu_only(Path(checkpoint).stem, t_ns, gyro, acc)
-    if model.cov_head is None:
+    plan = correction.build(correction.Request(checkpoint=Path(checkpoint), variance="if-head",
+                                               command="imu-learn navigate"))
+    if not plan.covariance:
         if variance_scale is not None:
             raise ConfigError(f"--variance-scale: {Path(checkpoint).name} has no covariance head (model.covariance)")
-        g, a, _ = apply("proposed", model, seq)
+        g, a, _ = plan.apply(t_ns, gyro, acc)
         return g, a, None, f"refined by {Path(checkpoint).name}"
-    g, a, var = apply("proposed+learned-cov", model, seq)
+    g, a, var = plan.apply(t_ns, gyro, acc)
     label = f"refined by {Path(checkpoint).name}, weighted by its learned covariance"
     if variance_scale is not None:
         kg, ka = (float(x) for x in variance_scale)
@@ -130,15 +133,11 @@ def checkpoint_input(checkpoint: Optional[Path], t_ns: np.ndarray, gyro: np.ndar
 
 def method_input(path: Path, t_ns: np.ndarray, gyro: np.ndarray, acc: np.ndarray) -> Tuple[np.ndarray, np.ndarray, str]:
     """(gyro, acc, label): the IMU through a fit ``imu-learn evaluate`` saved (``<out>/methods/timing.json``,
-    ``traditional+timing.json``, ...; the method is the file's name), the floor a learned input is judged by."""
-    name = Path(path).stem
-    if name not in REGISTRY:
-        raise ConfigError(f"--calibration: {path}: the file name must be a method's ({', '.join(REGISTRY)}), as "
-                          "imu-learn evaluate writes it")
-    if not Path(path).is_file():
-        raise FileNotFoundError(f"--calibration: {path} not found (imu-learn evaluate --methods {name} writes it)")
-    g, a, _ = apply(name, load(name, str(path)), imu_only(name, t_ns, gyro, acc))
-    return np.ascontiguousarray(g), np.ascontiguousarray(a), f"{name} ({Path(path).name})"
+    ``traditional+timing.json``, ...; the method is the file's name), the floor a learned input is judged by
+    (:func:`imu_learn.calib.correction.from_calibration`)."""
+    plan = correction.from_calibration(Path(path))
+    g, a, _ = plan.apply(t_ns, gyro, acc)
+    return g, a, plan.words[0]
 
 
 def displacement_model(path: Path, cache: Optional[Cache] = None):

@@ -49,7 +49,7 @@ from __future__ import annotations
 import logging
 import sys
 import time
-from dataclasses import asdict, dataclass, replace
+from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
 from typing import Callable, Dict, Optional, Tuple
 
@@ -57,6 +57,7 @@ import numpy as np
 from scipy.spatial.transform import Rotation
 from tqdm import tqdm
 
+from imu_learn.calib import correction
 from imu_learn.calib.profile import Profile
 from imu_learn.core.still import MEMS_PRIOR, MIN_STILL_START_S, BiasPrior
 from imu_learn.data import formats
@@ -65,9 +66,7 @@ from imu_learn.data.formats import groundtruth as groundtruth_formats
 from imu_learn.data.formats.asl import imu_sensor_yaml
 from imu_learn.data.formats.extrinsics import inverse, read_t_bs
 from imu_learn.data.formats.gnss_imu import mounting_rotation
-from imu_learn.data.types import sample_rate_hz
 from imu_learn.errors import AidingError, ColumnCountError, ConfigError, InvalidInputError
-from imu_learn.infer import rates
 from imu_learn.infer.bias import bias_entry, bias_step
 from imu_learn.infer.bias import choices as bias_choices
 from imu_learn.util import interrupts
@@ -386,6 +385,8 @@ class Sources:
     groundtruth: Optional[Path] = None
     displacement: Optional[Path] = None
     calibration: Optional[Path] = None
+    force: bool = False  # apply a profile or model made for another rate (a warning), as refine --force
+    imu_name: Optional[str] = None  # the recording's device, checked against the profile's or model's
 
 
 @dataclass
@@ -400,6 +401,9 @@ class Imu:
     file: str
     mounting: Optional[np.ndarray] = None
     floor: Optional[str] = None  # the profile whose floor was applied (sensor frame, before the mounting)
+    var: Optional[np.ndarray] = None  # a covariance head's per-sample variances (body frame), None: none
+    label: str = "raw"  # what the samples are (the summary's imu_input)
+    correction: Dict[str, object] = field(default_factory=dict)  # the correction plan's summary
 
 
 def imu_noise(src: Sources, opts: NavigateOptions, own: Optional[ImuNoise], profile: Optional[Profile]) -> ImuNoise:
@@ -419,38 +423,43 @@ def imu_noise(src: Sources, opts: NavigateOptions, own: Optional[ImuNoise], prof
     return noise
 
 
-def load_profile(src: Sources, t_ns: np.ndarray, fmt: str) -> Optional[Profile]:
-    """The device profile, its rate and device checked against the recording's (warnings only)."""
-    if src.profile is None:
-        return None
-    profile = Profile.load(src.profile)
-    made = rates.MadeFor(f"profile {src.profile}", profile.sample_rate_hz, profile.device)
-    for line in rates.check(Path(src.input).name, sample_rate_hz(t_ns), rates.recording_device(fmt, src.fmt),
-                            [made], force=True):
-        log.warning(line)
-    return profile
+def load_profile(src: Sources) -> Optional[Profile]:
+    """The device profile (its rate and device are checked with what is applied: :func:`read_body_imu`)."""
+    return None if src.profile is None else Profile.load(src.profile)
 
 
 def read_body_imu(src: Sources, opts: NavigateOptions) -> Imu:
-    """The recording's IMU (through the profile's floor when there is one and no checkpoint or
-    calibration) in the body frame (``--imu-rotation-rpy-deg``), its stamps moved by
-    ``--imu-delay-s``, with its noise (:func:`imu_noise`)."""
+    """The recording's IMU through the correction plan (:mod:`imu_learn.calib.correction`, as refine
+    applies it: the rate and device check, refused more than 5 % off unless ``src.force``, then the
+    profile's floor when there is no checkpoint or calibration, else the model (after the profile it
+    carries, once) or the fit, then the guard) in the IMU's own frame, then in the body frame
+    (``--imu-rotation-rpy-deg``), its stamps moved by ``--imu-delay-s``, with its noise (:func:`imu_noise`)."""
     t_ns, gyro, acc, own, imu_file, fmt = read_imu(src.input, src.fmt, src.columns)
-    profile = load_profile(src, t_ns, fmt)
+    profile = load_profile(src)
     noise = imu_noise(src, opts, own, profile)
-    floor = None
-    if profile is not None and profile.has_floor and src.checkpoint is None and src.calibration is None:
-        gyro, acc = profile.apply(t_ns, gyro, acc)
-        floor = str(src.profile)
-    elif profile is not None and profile.has_floor:
+    if src.calibration is not None and src.checkpoint is not None:
+        raise ConfigError("--calibration and --checkpoint both refine the IMU: pass one")
+    refined = src.checkpoint is not None or src.calibration is not None
+    floor = profile is not None and profile.has_floor and not refined
+    if profile is not None and profile.has_floor and refined:
         log.info(f"{src.profile}: its noise only (the IMU is refined by --checkpoint / --calibration, not its floor)")
+    plan = correction.build(correction.Request(
+        profile=src.profile if floor else None, checkpoint=src.checkpoint, calibration=src.calibration,
+        noise_profile=None if floor else src.profile, force=src.force, variance="if-head", command="imu-learn navigate"))
+    label = input_label(src, opts, plan, floor)
+    fixed = correction.correct(plan, correction.Recording(str(src.input), t_ns, gyro, acc, fmt, src.fmt, src.imu_name),
+                               src.force)
+    gyro, acc, var = fixed.gyro, fixed.acc, fixed.var
     mounting = None
     if opts.imu_rotation_rpy_deg is not None:
         mounting = mounting_rotation(opts.imu_rotation_rpy_deg)
         gyro, acc = np.ascontiguousarray(gyro @ mounting.T), np.ascontiguousarray(acc @ mounting.T)
+        if var is not None:  # the diagonal of M diag(v) M^T: exact for an axis permutation or flip
+            var = np.ascontiguousarray(np.hstack([var[:, :3] @ (mounting**2).T, var[:, 3:] @ (mounting**2).T]))
     if opts.imu_delay_s:
         t_ns = t_ns + int(round(opts.imu_delay_s * 1e9))
-    return Imu(t_ns, gyro, acc, noise, imu_file, mounting, floor)
+    return Imu(t_ns, gyro, acc, noise, imu_file, mounting, str(src.profile) if floor else None, var, label,
+               fixed.summary)
 
 
 def aiding_rows(src: Sources, opts: NavigateOptions, t_ns: np.ndarray, T_BS: Optional[np.ndarray],
@@ -472,20 +481,33 @@ def aiding_rows(src: Sources, opts: NavigateOptions, t_ns: np.ndarray, T_BS: Opt
     return with_noise(rows, imu.t_ns, imu.gyro, imu.acc, opts.max_relative_gap_s), len(traj), None, opts
 
 
-def imu_input(src: Sources, opts: NavigateOptions, imu: Imu) -> Tuple[np.ndarray, np.ndarray, Optional[np.ndarray], str]:
-    """(gyro, acc, per-sample variances or None, label): the IMU as fused, through ``--calibration`` or
-    ``--checkpoint`` (:mod:`.inputs`)."""
-    if src.calibration is not None:
-        if src.checkpoint is not None:
-            raise ConfigError("--calibration and --checkpoint both refine the IMU: pass one")
-        if opts.variance_scale is not None:
+def input_label(src: Sources, opts: NavigateOptions, plan: correction.Plan, floor: bool) -> str:
+    """What the IMU as fused is, for the summary's ``imu_input``; refuses ``--variance-scale`` without a
+    covariance head's variances to scale (before any model runs)."""
+    if opts.variance_scale is not None:
+        if src.calibration is not None:
             raise ConfigError("--variance-scale scales a covariance head's variances: not with --calibration")
-        gyro, acc, label = method_input(Path(src.calibration), imu.t_ns, imu.gyro, imu.acc)
-        return gyro, acc, None, label
-    gyro, acc, var, label = checkpoint_input(src.checkpoint, imu.t_ns, imu.gyro, imu.acc, opts.variance_scale)
-    if imu.floor is not None:
-        label = f"the floor of profile {Path(imu.floor).parent.name or imu.floor}"
-    return gyro, acc, var, label
+        if src.checkpoint is None:
+            raise ConfigError("--variance-scale scales a covariance head's variances: it needs --checkpoint")
+        if not plan.covariance:
+            raise ConfigError(f"--variance-scale: {Path(src.checkpoint).name} has no covariance head (model.covariance)")
+    if src.calibration is not None:
+        return plan.words[0]
+    if src.checkpoint is not None:
+        label = f"refined by {Path(src.checkpoint).name}"
+        return label + (", weighted by its learned covariance" if plan.covariance else "")
+    return f"the floor of profile {Path(src.profile).parent.name or src.profile}" if floor else "raw"
+
+
+def imu_input(src: Sources, opts: NavigateOptions, imu: Imu) -> Tuple[np.ndarray, np.ndarray, Optional[np.ndarray], str]:
+    """(gyro, acc, per-sample variances or None, label): the IMU as fused (corrected by
+    :func:`read_body_imu`), a covariance head's variances scaled by ``--variance-scale``."""
+    var, label = imu.var, imu.label
+    if var is not None and opts.variance_scale is not None:
+        kg, ka = (float(x) for x in opts.variance_scale)
+        var = var * np.repeat([kg, ka], 3)
+        label += f" scaled by {kg:g} (gyro), {ka:g} (acc)"
+    return imu.gyro, imu.acc, var, label
 
 
 AIDING_SOURCES = {"tum": "TUM trajectory", "csv": "CSV trajectory", "asl": "ASL trajectory",
@@ -625,7 +647,7 @@ def navigate(src: Sources, out: Path, opts: NavigateOptions = NavigateOptions(),
         "imu_mounting": None if imu.mounting is None else np.round(imu.mounting, 6).tolist(),
         "lever_arm_m": [round(float(x), 4) for x in lever],
         "final_bias": [round(float(b), 6) for b in res.smoothed_bias[-1]],
-        "bias": bias,
+        "bias": bias, "correction": imu.correction,
         "outputs": {"causal": str(out / "causal.tum"), "smoothed": str(out / "smoothed.tum")},
         **frames(src, opts, None if gnss is None else gnss[1]),
     }
