@@ -110,7 +110,7 @@ def test_the_untrained_model_holds_the_profiles_low_pass_too(tmp_path):
 @pytest.mark.parametrize("more,expected", [
     (["--model.fir_taps", "3"], "needs model.fir_taps >= 7"),
     (["--model.start", "profile"], "name the device profile's file"),
-    (["--model.start", "traditional"], "model.start: must be one of raw, timing, traditional+timing or a device"),
+    (["--model.start", "traditional"], "model.start: must be one of calibrate, raw, timing, traditional+timing or a device"),
 ])
 def test_a_start_that_cannot_hold_the_floor_is_one_line(tmp_path, capsys, more, expected):
     path = profile_file(tmp_path, time_offset=2.4)

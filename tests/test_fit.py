@@ -109,7 +109,8 @@ def test_default_run_trains_on_top_of_its_training_splits_profile(tmp_path):
     assert (d / "profile" / "imu.yaml").is_file()
     fitted_on = prof["sources"][0]
     assert fitted_on["train"] == ["MH_01_easy[0:0.8]"] and fitted_on["val"] == ["MH_01_easy[0.8:1]"]
-    assert prof["gyroscope"]["matrix"] != [[1, 0, 0], [0, 1, 0], [0, 0, 1]]  # fitted, not the identity
+    assert any(abs(b) > 1e-4 for b in prof["gyroscope"]["bias"])  # EuRoC's gyro bias, fitted
+    assert {prof["selection"]["gyro"], prof["selection"]["acc"]} <= set(prof["selection"]["levels"]["gyro"])
     assert [int(x["epoch"]) for x in rows(d)] == [0, 1, 2]
     assert load_checkpoint(d / "best.pt")["model_args"]["start"] == "profile"
     res = json.loads((d / "results.json").read_text())

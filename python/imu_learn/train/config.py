@@ -204,7 +204,8 @@ def validate(cfg: RunConfig) -> None:
     need(cfg.loss.w_nll >= 0, "loss.w_nll", f"must be >= 0, got {cfg.loss.w_nll}")
     need(cfg.loss.w_nll == 0 or cfg.model.covariance, "loss.w_nll", "needs model.covariance = true")
     need(cfg.model.start in MODEL_STARTS or cfg.model.start.lower().endswith(".json"), "model.start",
-         f"must be one of {', '.join(MODEL_STARTS[:3])} or a device profile's path (profile.json), "
+         f"must be one of {', '.join(s for s in MODEL_STARTS if s != 'profile')} or a device profile's path "
+         "(profile.json), "
          f"got {cfg.model.start!r}")
     need(cfg.model.refine in REFINE_CHANNELS, "model.refine",
          f"must be one of {', '.join(REFINE_CHANNELS)}, got {cfg.model.refine!r}")

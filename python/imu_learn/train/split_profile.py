@@ -4,7 +4,9 @@ split, which the refiner then trains on top of.
 :func:`calibrate_split` runs ``imu-learn calibrate``'s fit (:func:`imu_learn.calib.run.calibrate`:
 the floor, gravity, the noise of the still stretches, the plausibility checks and the held-back
 block) on the split's training segments, the validation segments held back, and writes
-``profile.json`` and ``imu.yaml`` into ``RUN/profile/``. The run then starts from that file exactly
+``profile.json`` and ``imu.yaml`` into ``RUN/profile/``, each sensor's floor terms chosen on held-out
+blocks (``calibrate --select``, :mod:`imu_learn.calib.select`: the simplest level that no simpler one
+beats on a held-out block in any cell). The run then starts from that file exactly
 as from ``--model.start PATH/profile.json`` (:func:`imu_learn.train.trainer.profile_start`), so the
 untrained model is the profile's floor and selection against it (``optim.select_reference =
 "start"``) keeps the profile where no epoch beats it. The test split is never seen.
@@ -46,5 +48,5 @@ def calibrate_split(split: Split, run_dir: Path, settings: FitSettings, device: 
                       [], settings, device,
                       [{"split": "the run's training split; validation held back",
                         "train": [s.name for s in train], "val": [s.name for s in val]}])
-    calibrate(inp, out, CalibOptions(plot=False), progress)
+    calibrate(inp, out, CalibOptions(plot=False, select=True), progress)
     return path
