@@ -134,3 +134,21 @@ def test_refine_and_navigate_correct_a_recording_into_the_same_samples(given, tm
     _t, g, _a = core.read_asl_imu(str(EUROC / IMU_REL))
     assert np.abs(g_r - np.asarray(g)).max() > 1e-5  # something was applied
     assert imu.correction["applied"] == summary["applied"] and imu.correction["guard"]["verdict"] == summary["guard"]["verdict"]
+
+
+def test_navigate_applies_the_model_in_the_imus_own_frame_then_the_mounting(tmp_path):
+    """With --imu-rotation-rpy-deg the model sees the IMU as it was trained on it (its own axes); the
+    samples and a covariance head's variances are then turned into the body frame."""
+    from imu_learn.data.formats.gnss_imu import mounting_rotation
+    from imu_learn.fuse import navigate as nav
+
+    cov = REPO / "models" / "euroc_adis16448_cov.pt"
+    plain = body_imu(EUROC, checkpoint=cov)
+    opts = nav.NavigateOptions(imu_rotation_rpy_deg=(-90.0, 0.0, 0.0))  # y up: an axis permutation with a flip
+    turned = nav.read_body_imu(nav.Sources(EUROC, Path("unused.tum"), checkpoint=cov), opts)
+    M = mounting_rotation((-90.0, 0.0, 0.0))
+    np.testing.assert_array_equal(turned.gyro, np.ascontiguousarray(plain.gyro @ M.T))
+    np.testing.assert_array_equal(turned.acc, np.ascontiguousarray(plain.acc @ M.T))
+    order = np.abs(np.round(M)).argmax(1)  # body axis i is IMU axis order[i]
+    np.testing.assert_allclose(turned.var, np.hstack([plain.var[:, order], plain.var[:, 3 + order]]), rtol=1e-12)
+    assert plain.var is not None and not np.allclose(plain.var[:, order], plain.var[:, :3])
