@@ -798,9 +798,9 @@ def fuse_run(src: Sources, opts: NavigateOptions, imu: Imu, fused: tuple, st: St
                 feed(inc, samples_of(np.ascontiguousarray(gyro[sel]), np.ascontiguousarray(acc[sel]),
                                      None if var is None else np.ascontiguousarray(var[sel])), on_state=on_state)
                 bar.set_description("navigate: smoothing")
-                bar.unit = "step"
-                bar.reset(total=None)  # the batch pass's iterations, counted
-                res = inc.smooth(progress=lambda *_: bar.update(1))
+                bar.total, bar.unit, bar.unit_scale = None, "iteration", False
+                bar.reset()  # the batch pass's iterations, counted (no total known)
+                res = inc.smooth(progress=lambda *_: (bar.update(1), bar.refresh()))
         res.seconds = time.perf_counter() - t0
         return res
     except RuntimeError as e:  # GTSAM's IndeterminateLinearSystemException and kin
