@@ -15,8 +15,9 @@ runs on that native graph (its damping carried from one iteration to the next, a
 and the true (nonlinear) error decides, with LM's own convergence tests, when to stop. At each
 iteration's point the held factors' error and Jacobian are the Python factors' own, so the end point
 is a stationary point of the true problem, the one LM on the true graph converges to. (Holding them
-over a whole LM run instead, then relinearising and running LM again, took 2-3 runs: 3.3x the pass
-without NHC on the 400 s drive, against about 2x now.)
+over a whole LM run instead, then relinearising and running LM again, took 2-3 runs of up to 4
+iterations: 1.6-3.3x the pass without NHC on the 400 s stand-in of docs/experiments/navigate-nhc.md;
+relinearised at every iteration, 1.4-2.3x.)
 
 A step that raises the true error (the held linearisation misled LM: a start far from the optimum)
 is shortened along the same tangent-space step (halved up to :data:`MAX_HALVINGS` times, each tried on
