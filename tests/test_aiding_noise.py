@@ -55,13 +55,13 @@ def test_a_known_noise_level_is_recovered_per_axis(synthetic):
     t_ns, gyro, acc, R, p, C = synthetic
     sig_rot, sig_m = np.deg2rad(0.05), 0.003
     sample, Rn, pn = noisy_rows(R, p, sig_rot, sig_m)
-    est = pose_noise(t_ns, gyro, acc, sample, Rn, pn, C=C)
+    est = pose_noise(t_ns, gyro, acc, (sample, Rn, pn), C=C)
     assert est is not None and est.n_rot > 500 and est.n_trans > 500
     np.testing.assert_allclose(est.trans_m, sig_m, rtol=0.15)
     np.testing.assert_allclose(est.rot_rad, sig_rot, rtol=0.15)
     # three times the noise reads three times as large
     sample, Rn, pn = noisy_rows(R, p, 3 * sig_rot, 3 * sig_m)
-    est3 = pose_noise(t_ns, gyro, acc, sample, Rn, pn, C=C)
+    est3 = pose_noise(t_ns, gyro, acc, (sample, Rn, pn), C=C)
     np.testing.assert_allclose(est3.trans_m / est.trans_m, 3.0, rtol=0.15)
     np.testing.assert_allclose(est3.rot_rad / est.rot_rad, 3.0, rtol=0.15)
 
@@ -69,8 +69,8 @@ def test_a_known_noise_level_is_recovered_per_axis(synthetic):
 def test_a_gyro_bias_and_gravity_do_not_enter_the_estimate(synthetic):
     t_ns, gyro, acc, R, p, C = synthetic
     sample, Rn, pn = noisy_rows(R, p, np.deg2rad(0.05), 0.003)
-    clean = pose_noise(t_ns, gyro, acc, sample, Rn, pn, C=C)
-    biased = pose_noise(t_ns, gyro + [0.01, -0.02, 0.015], acc + [0.1, 0.0, -0.2], sample, Rn, pn)
+    clean = pose_noise(t_ns, gyro, acc, (sample, Rn, pn), C=C)
+    biased = pose_noise(t_ns, gyro + [0.01, -0.02, 0.015], acc + [0.1, 0.0, -0.2], (sample, Rn, pn))
     np.testing.assert_allclose(biased.rot_rad, clean.rot_rad, rtol=0.1)
     np.testing.assert_allclose(biased.trans_m, clean.trans_m, rtol=0.1)
 
@@ -78,14 +78,14 @@ def test_a_gyro_bias_and_gravity_do_not_enter_the_estimate(synthetic):
 def test_jumps_and_a_loop_closure_do_not_inflate_the_estimate(synthetic):
     t_ns, gyro, acc, R, p, C = synthetic
     sample, Rn, pn = noisy_rows(R, p, np.deg2rad(0.05), 0.003)
-    clean = pose_noise(t_ns, gyro, acc, sample, Rn, pn, C=C)
+    clean = pose_noise(t_ns, gyro, acc, (sample, Rn, pn), C=C)
     pj, Rj = pn.copy(), Rn.copy()
     pj[600:] += [0.4, -0.3, 0.1]  # a loop closure: the rest of the trajectory moved at once
     Rj[600:] = Rotation.from_euler("z", 3, degrees=True).as_matrix() @ Rj[600:]
     for k in (100, 250, 900):  # single outliers
         pj[k] += 0.2
         Rj[k] = Rj[k] @ Rotation.from_rotvec([0.05, 0, 0]).as_matrix()
-    jumped = pose_noise(t_ns, gyro, acc, sample, Rj, pj, C=C)
+    jumped = pose_noise(t_ns, gyro, acc, (sample, Rj, pj), C=C)
     np.testing.assert_allclose(jumped.trans_m, clean.trans_m, rtol=0.1)
     np.testing.assert_allclose(jumped.rot_rad, clean.rot_rad, rtol=0.1)
     # a plain standard deviation of the same residuals would not have been robust: the jump is 130 sigmas
@@ -95,7 +95,7 @@ def test_jumps_and_a_loop_closure_do_not_inflate_the_estimate(synthetic):
 def test_the_floor_holds_for_a_noiseless_aiding(synthetic):
     t_ns, gyro, acc, R, p, C = synthetic
     sample, Rn, pn = noisy_rows(R, p, 0.0, 0.0)
-    est = pose_noise(t_ns, gyro, acc, sample, Rn, pn, C=C)
+    est = pose_noise(t_ns, gyro, acc, (sample, Rn, pn), C=C)
     assert np.all(est.trans_m >= 0.0005) and np.all(est.rot_rad >= np.deg2rad(0.005))
     assert np.all(est.trans_m < 0.001)
 
@@ -103,7 +103,7 @@ def test_the_floor_holds_for_a_noiseless_aiding(synthetic):
 def test_too_few_rows_give_no_estimate(synthetic):
     t_ns, gyro, acc, R, p, C = synthetic
     sample, Rn, pn = noisy_rows(R[:100], p[:100], 0.001, 0.003)
-    assert pose_noise(t_ns, gyro, acc, sample, Rn, pn, C=C) is None
+    assert pose_noise(t_ns, gyro, acc, (sample, Rn, pn), C=C) is None
 
 
 @pytest.mark.parametrize("lag_s", [0.012, -0.0237, 0.0])
@@ -149,7 +149,7 @@ def test_pair_sigmas_grow_with_the_lever_of_the_rotation():
 def test_relative_poses_and_the_summary_line(synthetic):
     t_ns, gyro, acc, R, p, C = synthetic
     sample, Rn, pn = noisy_rows(R, p, np.deg2rad(0.05), 0.003)
-    est = pose_noise(t_ns, gyro, acc, sample, Rn, pn, C=C)
+    est = pose_noise(t_ns, gyro, acc, (sample, Rn, pn), C=C)
     a, counts = relative_poses(sample, t_ns[sample], Rn, pn, est, (0.0, 1.0, 16.0), 0.5, "vo")
     assert a.sigmas.shape == (len(a), 6) and counts["relative_poses"] == len(a)
     assert counts["relative_poses_per_span"][0] == len(sample) - 1

@@ -27,7 +27,7 @@ def shift_trajectory(traj: Trajectory, imu_t_ns: np.ndarray, gyro: np.ndarray) -
 def with_noise(rows: AidingRows, imu_t_ns: np.ndarray, gyro: np.ndarray, acc: np.ndarray,
                max_gap_s: float) -> AidingRows:
     """``rows`` with each pose's noise estimated against the IMU (None with too few increments)."""
-    rows.noise = pose_noise(imu_t_ns, gyro, acc, rows.sample, rows.R, rows.p, 1, max_gap_s)
+    rows.noise = pose_noise(imu_t_ns, gyro, acc, (rows.sample, rows.R, rows.p), 1, max_gap_s)
     return rows
 
 

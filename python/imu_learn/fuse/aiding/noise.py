@@ -21,7 +21,7 @@ not enough: the estimate is then None.
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Dict, Optional
+from typing import Dict, Optional, Tuple
 
 import numpy as np
 from scipy.ndimage import median_filter
@@ -79,12 +79,12 @@ def detrend(r: np.ndarray, rows: int) -> np.ndarray:
     return r - median_filter(r, size=(size, 1), mode="nearest")
 
 
-def pose_noise(imu_t_ns: np.ndarray, gyro: np.ndarray, acc: np.ndarray, sample: np.ndarray, R: np.ndarray,
-               p: np.ndarray, stride: int = 1, max_gap_s: float = 0.5, C: Optional[np.ndarray] = None
-               ) -> Optional[PoseNoise]:
-    """Each pose's noise per body axis from rows at IMU samples ``sample`` (M,) with body poses ``R``
-    (M, 3, 3), ``p`` (M, 3) in the aiding's world, compared ``stride`` rows apart (module docstring);
-    ``C``: :func:`gyro_orientation` when already computed. None with too few increments."""
+def pose_noise(imu_t_ns: np.ndarray, gyro: np.ndarray, acc: np.ndarray, rows: Tuple[np.ndarray, np.ndarray, np.ndarray],
+               stride: int = 1, max_gap_s: float = 0.5, C: Optional[np.ndarray] = None) -> Optional[PoseNoise]:
+    """Each pose's noise per body axis from ``rows`` = (IMU samples (M,), body poses R (M, 3, 3), p (M, 3)
+    in the aiding's world), compared ``stride`` rows apart (module docstring); ``C``:
+    :func:`gyro_orientation` when already computed. None with too few increments."""
+    sample, R, p = rows
     t = (np.asarray(imu_t_ns, dtype=np.int64) - int(imu_t_ns[0])) * 1e-9
     C = gyro_orientation(imu_t_ns, gyro) if C is None else C
     ts = t[sample]
