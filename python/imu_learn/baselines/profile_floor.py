@@ -20,8 +20,6 @@ from imu_learn.baselines.base import FitSettings, Method
 from imu_learn.data.types import Segment
 from imu_learn.errors import ProfileError
 
-PREFIX = "profile:"  # the method's name: profile:PATH
-
 
 def read_floor(path: Path) -> Optional[Floor]:
     """The floor of the profile at ``path`` (None: a noise-only profile)."""

@@ -10,7 +10,6 @@ from pathlib import Path
 from typing import Callable, Dict, Optional, Tuple, Union
 
 from imu_learn.baselines.base import Method
-from imu_learn.baselines.profile_floor import PREFIX, ProfileFloor
 from imu_learn.errors import ConfigError
 
 log = logging.getLogger(__name__)
@@ -37,6 +36,9 @@ REGISTRY["tlio-style"] = ("imu_learn.baselines.tlio", None)
 REGISTRY["zero-displacement"] = ("imu_learn.baselines.zero_displacement", None)
 
 
+PREFIX = "profile:"  # profile:PATH, a device profile's floor (imu_learn.baselines.profile_floor)
+
+
 def is_method(name: str) -> bool:
     """A name evaluate knows: a registered one, or ``profile:PATH``."""
     return name in REGISTRY or (name.startswith(PREFIX) and len(name) > len(PREFIX))
@@ -60,7 +62,8 @@ def method_file(folder: Path, name: str, method: Optional[Method] = None) -> Pat
 def load_method_class(name: str) -> Optional[Callable[[], Method]]:
     """A factory for method ``name``, or None (after a one-line warning) when its module is absent."""
     if is_method(name) and name not in REGISTRY:  # profile:PATH
-        return lambda: ProfileFloor(Path(name[len(PREFIX):]))
+        floor = importlib.import_module("imu_learn.baselines.profile_floor").ProfileFloor
+        return lambda: floor(Path(name[len(PREFIX):]))
     if name not in REGISTRY:
         raise ConfigError(f"methods: unknown method {name!r} (known: {', '.join(REGISTRY)})")
     entry = REGISTRY[name]

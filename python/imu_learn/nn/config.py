@@ -5,7 +5,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 REFINE_CHANNELS = {"imu": [1.0] * 6, "gyro": [1.0, 1.0, 1.0, 0.0, 0.0, 0.0]}
-# Where training starts (ModelConfig.start); "calibrate" (the default): the device profile that
+# Where training starts (ModelConfig.start); "calibrate" (a run's default): the device profile that
 # `imu-learn calibrate` fits on the run's own training split; "profile": a device profile's floor as the fixed
 # calibration and FIR shift. A run config may also name the profile's file (PATH.json), which
 # `imu-learn fit` reads and replaces by "profile".
@@ -35,7 +35,7 @@ class ModelConfig:
     # [t_k, t_k+1]) and when a sample was taken, which taps of [0, -1/2, 1/2] undo exactly.
     fir_taps: int = 0
     # Where training starts (`imu-learn fit` fills the fields below from the train split):
-    # "calibrate" (the default): calibrate's device profile of the training split (written to
+    # "calibrate" (a run's default): calibrate's device profile of the training split (written to
     # RUN/profile/), then as "profile" below, so an untrained or unhelpful model is that profile;
     # "raw" (the identity map, the paper); "timing": the FIR starts as a time shift by
     # fir_init_tau samples (linear interpolation between the two nearest taps,
@@ -46,7 +46,7 @@ class ModelConfig:
     # (`imu-learn fit --model.start PATH/profile.json`, `imu-learn calibrate --learned`) instead of a fit,
     # so the model holds that floor itself: the checkpoint carries the profile, and refine does not
     # apply it again before the model.
-    start: str = "calibrate"
+    start: str = "raw"  # a run's default is "calibrate" (train.config.RunConfig)
     fir_init_tau: float = 0.0
     calib: bool = False  # a fixed affine calibration (buffers calib_A (6, 6), calib_c (6,)) before the network
     # Learned uncertainty: a second head predicting each refined sample's noise variances (six

@@ -93,7 +93,8 @@ FROM_SCRATCH_STARTS = ("raw", "timing", "traditional+timing")
 @dataclass
 class RunConfig:
     data: DataConfig = field(default_factory=DataConfig)
-    model: ModelConfig = field(default_factory=ModelConfig)
+    # the default run trains on top of its training split's device profile (model.start = calibrate)
+    model: ModelConfig = field(default_factory=lambda: ModelConfig(start="calibrate"))
     loss: LossConfig = field(default_factory=LossConfig)
     optim: OptimConfig = field(default_factory=OptimConfig)
     seed: int = 0
