@@ -10,7 +10,7 @@ frame, at the graph's keyframes), ``plot.png`` and ``summary.json`` to the outpu
 fixes also the tracks on the globe (:mod:`.geo`), with a bag the trajectories as Odometry bags
 (:func:`write_outputs`). The aiding's format is found from its content (:mod:`.aiding.detect`); the
 IMU noise is ``--imu-noise``, a device profile's (which also applies its floor), the recording's
-sensor.yaml or the built-in device's (:func:`imu_noise`).
+sensor.yaml or the MEMS class default scaled to the aiding (:func:`imu_noise`, :mod:`.noise_fit`).
 
 Frames. A camera trajectory (ORB-SLAM2 and the like) gives ``T_C0_Ck``: camera k in the first
 camera's frame C0. With the camera-to-body extrinsic ``T_BS`` the body pose in that aiding world
@@ -88,6 +88,7 @@ from .factors.nhc import NhcSettings, nhc_callback
 from .graph import IncrementalFusion, feed, samples_of
 from .inputs import checkpoint_bias, displacement_hook, displacement_model
 from .noise import ImuNoise, from_profile
+from .noise_fit import fit_noise, fitted_noise
 from .output import plot_navigation, write_json, write_trajectory, write_trajectory_bag
 from .score import convergence, score_against
 from .settings import FusionSettings, PriorSigmas
@@ -406,9 +407,11 @@ class Imu:
     correction: Dict[str, object] = field(default_factory=dict)  # the correction plan's summary
 
 
-def imu_noise(src: Sources, opts: NavigateOptions, own: Optional[ImuNoise], profile: Optional[Profile]) -> ImuNoise:
+def imu_noise(src: Sources, opts: NavigateOptions, own: Optional[ImuNoise], profile: Optional[Profile],
+              imu: Optional[Tuple[np.ndarray, np.ndarray, np.ndarray]] = None) -> ImuNoise:
     """The noise the graph assumes: ``--imu-noise``, else the profile's, else the recording's
-    sensor.yaml, else the built-in device's (one warning line naming it)."""
+    sensor.yaml, else with ``imu`` (its stamps, gyro, acc as read) the MEMS class default scaled to
+    the aiding's innovations (:mod:`.noise_fit`), else the built-in device's (one warning line each)."""
     if opts.imu_noise is not None:
         return ImuNoise(*opts.imu_noise, source="--imu-noise")
     if profile is not None:
@@ -416,6 +419,21 @@ def imu_noise(src: Sources, opts: NavigateOptions, own: Optional[ImuNoise], prof
                             [k for k in profile.kalibr() if profile.unobserved_noise(k)])
     if own is not None:
         return own
+    if imu is not None:
+        t_ns, gyro, acc = imu[0] + int(round(opts.imu_delay_s * 1e9)), imu[1], imu[2]
+        if opts.imu_rotation_rpy_deg is not None:
+            M = mounting_rotation(opts.imu_rotation_rpy_deg)
+            gyro, acc = gyro @ M.T, acc @ M.T
+        if is_geodetic(src, opts):
+            _, rows, sol = gnss_rows(src, t_ns, np.zeros(3), opts)
+            gravity = normal_gravity(sol.origin_llh[0], sol.origin_llh[2])
+        else:
+            T_BS = read_t_bs(src.extrinsics) if src.extrinsics is not None else None
+            rows, gravity = select_rows(read_aiding(src, opts), t_ns, T_BS, opts), opts.gravity
+        noise = fitted_noise(fit_noise(t_ns, gyro, acc, rows.t_ns, rows.p, rows.R, gravity, opts.max_relative_gap_s))
+        log.warning(f"no --profile, --imu-noise or sensor.yaml: the IMU noise is {noise.source}; "
+                    "imu-learn calibrate writes your device's")
+        return noise
     noise = ImuNoise()
     log.warning(f"no --profile or --imu-noise: the IMU noise is the built-in EuRoC ADIS16448's (gyro "
                 f"{noise.gyro_noise_density:g} rad/s/sqrt(Hz), acc {noise.acc_noise_density:g} m/s^2/sqrt(Hz)); "
@@ -436,7 +454,7 @@ def read_body_imu(src: Sources, opts: NavigateOptions) -> Imu:
     (``--imu-rotation-rpy-deg``), its stamps moved by ``--imu-delay-s``, with its noise (:func:`imu_noise`)."""
     t_ns, gyro, acc, own, imu_file, fmt = read_imu(src.input, src.fmt, src.columns)
     profile = load_profile(src)
-    noise = imu_noise(src, opts, own, profile)
+    noise = imu_noise(src, opts, own, profile, (t_ns, gyro, acc))
     if src.calibration is not None and src.checkpoint is not None:
         raise ConfigError("--calibration and --checkpoint both refine the IMU: pass one")
     refined = src.checkpoint is not None or src.calibration is not None

@@ -1,0 +1,103 @@
+"""The IMU noise fitted from the aiding's innovations (imu_learn.fuse.noise_fit): a synthetic IMU
+with known white noise, position and pose aiding; the class default 10x too quiet or too noisy."""
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+from scipy.spatial.transform import Rotation
+
+from imu_learn.fuse.noise import ImuNoise
+from imu_learn.fuse.noise_fit import FACTOR_BOUNDS, fit_noise, fitted_noise
+
+G = 9.81
+RATE = 200.0
+TRUE_GYRO, TRUE_ACC = 2e-3, 2e-2  # the IMU's white noise [rad/s/sqrt(Hz)], [m/s^2/sqrt(Hz)]
+AID_SIGMA_M = 0.002
+BIAS = np.array([0.05, -0.03, 0.08])
+
+
+def recording(seconds: float = 240.0, aid_hz: float = 10.0, seed: int = 0):
+    """(t_ns, noisy gyro, noisy acc, aiding stamps, noisy positions, rotations): the IMU's exact
+    samples integrated under a zero-order hold give the true trajectory."""
+    rng = np.random.default_rng(seed)
+    n = int(seconds * RATE) + 1
+    dt = 1.0 / RATE
+    t = np.arange(n) * dt
+    w = np.c_[0.3 * np.sin(0.5 * t), 0.2 * np.cos(0.9 * t), 0.4 + 0.2 * np.sin(0.3 * t)]
+    a_w = np.c_[np.sin(0.4 * t), 0.8 * np.cos(0.7 * t), 0.3 * np.sin(1.3 * t)]
+    steps = Rotation.from_rotvec(w[:-1] * dt).as_matrix()
+    R = np.empty((n, 3, 3))
+    R[0] = np.eye(3)
+    for k in range(n - 1):
+        R[k + 1] = R[k] @ steps[k]
+    f = np.einsum("nji,nj->ni", R, a_w - np.array([0.0, 0.0, -G]))
+    v = np.r_[np.zeros((1, 3)), np.cumsum(a_w[:-1] * dt, axis=0)]
+    p = np.r_[np.zeros((1, 3)), np.cumsum(v[:-1] * dt + 0.5 * a_w[:-1] * dt ** 2, axis=0)]
+    t_ns = 10 ** 18 + np.arange(n, dtype=np.int64) * 5_000_000
+    gyro = w + rng.normal(0, TRUE_GYRO / np.sqrt(dt), w.shape)
+    acc = f + rng.normal(0, TRUE_ACC / np.sqrt(dt), f.shape) + BIAS  # with a bias
+    idx = np.arange(0, n, int(RATE / aid_hz))
+    return t_ns, gyro, acc, t_ns[idx], p[idx] + rng.normal(0, AID_SIGMA_M, (len(idx), 3)), R[idx]
+
+
+def scaled_default(k: float) -> ImuNoise:
+    return ImuNoise(k * TRUE_GYRO, k * TRUE_ACC, 1e-5, 1e-3, source="test class")
+
+
+@pytest.mark.parametrize("wrong", [0.1, 10.0])
+@pytest.mark.parametrize("kind", ["position", "pose"])
+def test_the_fitted_densities_are_within_two_of_the_truth(wrong, kind):
+    t_ns, gyro, acc, aid_t, p, R = recording()
+    default = scaled_default(wrong)
+    fit = fit_noise(t_ns, gyro, acc, aid_t, p, R if kind == "pose" else None, G, default=default)
+    assert fit.used, fit.reason
+    noise = fitted_noise(fit, default)
+    assert 0.5 < noise.acc_noise_density / TRUE_ACC < 2.0, fit
+    assert 0.5 < noise.gyro_noise_density / TRUE_GYRO < 2.0, fit
+    assert 0.5 < fit.aiding_sigma_m / AID_SIGMA_M < 2.0, fit
+    assert 0.7 < fit.chi2_ratio < 1.4, fit
+    assert noise.source.startswith("fitted from the aiding's innovations: x")
+
+
+def test_a_factor_outside_the_bounds_falls_back_to_the_class_default_and_says_so():
+    t_ns, gyro, acc, aid_t, p, _ = recording(seconds=120.0)
+    default = scaled_default(1e-3)  # the truth is 1000x the "class default"
+    fit = fit_noise(t_ns, gyro, acc, aid_t, p, None, G, default=default)
+    assert not fit.used and fit.factor > FACTOR_BOUNDS[1]
+    noise = fitted_noise(fit, default)
+    assert noise.acc_noise_density == default.acc_noise_density
+    assert "outside [0.05, 100]" in noise.source
+
+
+def test_too_few_aiding_rows_give_no_fit():
+    t_ns, gyro, acc, aid_t, p, _ = recording(seconds=1.5)
+    fit = fit_noise(t_ns, gyro, acc, aid_t, p, None, G)
+    assert not fit.used and fit.factor is None and "2 needed" in fit.reason
+
+
+def write_asl(root, t_ns, gyro, acc, aid_t, p):
+    """An ASL IMU folder without sensor.yaml and the aiding's positions (TUM, 4 columns)."""
+    imu = root / "rec" / "mav0" / "imu0"
+    imu.mkdir(parents=True)
+    rows = [f"{k},{w[0]:.9f},{w[1]:.9f},{w[2]:.9f},{a[0]:.9f},{a[1]:.9f},{a[2]:.9f}" for k, w, a in zip(t_ns, gyro, acc)]
+    (imu / "data.csv").write_text("#timestamp [ns],w_RS_S_x [rad s^-1],w_RS_S_y [rad s^-1],w_RS_S_z [rad s^-1],"
+                                  "a_RS_S_x [m s^-2],a_RS_S_y [m s^-2],a_RS_S_z [m s^-2]\n" + "\n".join(rows) + "\n")
+    fixes = "\n".join(f"{k // 10 ** 9}.{k % 10 ** 9:09d} {q[0]:.5f} {q[1]:.5f} {q[2]:.5f}" for k, q in zip(aid_t, p))
+    (root / "fixes.tum").write_text(fixes + "\n")
+    return root / "rec", root / "fixes.tum"
+
+
+def test_navigate_without_a_noise_source_fits_it_and_says_so(tmp_path, capsys):
+    from imu_learn.cli import main
+
+    rec, fixes = write_asl(tmp_path, *recording(seconds=60.0)[:5])
+    out = tmp_path / "out"
+    rc = main(["navigate", "--input", str(rec), "--aiding", str(fixes), "--aiding-kind", "position", "--out", str(out)])
+    err = capsys.readouterr().err
+    assert rc == 0, err
+    s = json.loads((out / "summary.json").read_text())
+    assert s["noise"].startswith("fitted from the aiding's innovations: x") and s["noise"] == s["imu_noise"]["source"]
+    assert 0.5 < s["imu_noise"]["accelerometer_noise_density"] / TRUE_ACC < 2.0
+    assert sum("fitted from the aiding's innovations" in line for line in err.splitlines()) == 1
