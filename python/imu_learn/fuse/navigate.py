@@ -22,7 +22,9 @@ A = C0 is ``T_A_Bk = T_C0_Ck T_BS^-1``, and the body motion between two frames
   frame, so its non-gravity-aligned first-camera frame needs no handling at all; roll and pitch
   come from gravity through the IMU, heading and position are the prior's gauge (fixed by the
   first pose). Rows further apart than ``max_relative_gap_s`` are not chained: a visual system
-  that lost track reports no motion across the gap, and the IMU alone carries it.
+  that lost track reports no motion across the gap, and the IMU alone carries it. Aiding without
+  such breaks is also tied over long spans, weighted by its noise estimated against the IMU
+  (:mod:`.aiding.spans`, :mod:`.aiding.estimate`); the aiding's time offset is estimated first.
 * ``pose``: a prior factor on each aided body pose in the navigation frame W. A is rotated into W by
   ``R_WA``, estimated once at the start from the levelled attitude (:func:`.start.level.level_aiding`):
   its tilt error (the accelerometer bias over g, ~0.1-0.5 deg) then stays in every absolute pose

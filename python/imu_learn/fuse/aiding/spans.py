@@ -1,15 +1,16 @@
-"""Relative poses that keep a SLAM trajectory's global consistency: each row tied not only to the row
-before it but to rows further back, over spans growing by a factor (``SPANS_S``: a tenth of a
-second to about a minute), inside one run of rows (never across a gap longer than ``max_gap_s``:
-a visual system that lost track may restart in a new map). Chaining consecutive rows only turns a
+"""Relative poses that keep a SLAM trajectory's global consistency: each row tied to the row before
+it, and each anchor row (one per ``ANCHOR_S``) to the anchors further back, over spans growing by a
+factor (``SPANS_S``: 1 to 64 s), inside one run of rows (never across a gap longer than
+``max_gap_s``: a visual system that lost track may restart in a new map). The navigator uses the
+long spans only on aiding without breaks (:func:`unbroken`). Chaining consecutive rows only turns a
 loop-closed trajectory into an odometry whose drift the graph cannot see; the longer spans carry its
 global shape, the short ones its detail, and between them the IMU.
 
 Each pair's sigmas come from each pose's own noise (:class:`.noise.PoseNoise`, per body axis, as
 white noise per pose): rotation ``sqrt(2) σ_θ``; translation in frame i ``sqrt(2 σ_p² + (σ_θ × t_ij)²)``
 (frame i's rotation error swings the far end). Every pose takes part in up to twice as many pairs as
-there are spans, so its noise would be counted that many times: each sigma is inflated by the
-square root of the number of spans (``inflate``)."""
+there are spans, so its noise would be counted that many times: each long span's sigma is inflated
+by the square root of the number of long spans (``inflate``)."""
 from __future__ import annotations
 
 from typing import Sequence, Tuple
