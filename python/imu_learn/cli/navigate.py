@@ -10,6 +10,7 @@ from typing import Any, Callable, List, Optional, Sequence
 from imu_learn.cli.common import add_imu_input_options, csv_layout, run_command
 from imu_learn.cli.common import parser as common_parser
 from imu_learn.errors import ConfigError
+from imu_learn.fuse.aiding.kinds import GEODETIC_KIND, kind_of
 from imu_learn.fuse.navigate import (
     AIDING_FORMATS,
     KINDS,
@@ -199,11 +200,9 @@ def options(args: argparse.Namespace):
     if args.sigma_rot_deg is not None:
         if o.aiding_kind is None:
             raise ConfigError("--sigma-rot-deg weighs poses: give --aiding-kind pose or relative-pose")
-        o = replace(o, **{"rel_sigma_rot_deg" if o.aiding_kind == "relative-pose" else "pose_sigma_rot_deg":
-                          args.sigma_rot_deg})
+        o = replace(o, **{kind_of(o.aiding_kind).sigma_rot_option: args.sigma_rot_deg})
     if args.sigma_m is not None:
-        key = {"relative-pose": "rel_sigma_trans_m", "pose": "pose_sigma_m", "position": "position_sigma_m"}
-        o = replace(o, **{key[o.aiding_kind or "position"]: args.sigma_m})
+        o = replace(o, **{kind_of(o.aiding_kind or GEODETIC_KIND).sigma_m_option: args.sigma_m})
     return o
 
 

@@ -75,14 +75,16 @@ from imu_learn.util import interrupts
 from imu_learn.util.staging import staged_dir
 
 from . import geo
-from .aiding import AbsolutePoses, OutageWindow, PositionFixes, snap_to_samples
+from .aiding import OutageWindow, snap_to_samples
 from .aiding import bag as bag_aiding
 from .aiding.detect import FORMATS as DETECTED_FORMATS
 from .aiding.detect import detect as detect_aiding
-from .aiding.estimate import one_line_text, shift_trajectory, summary_entry, with_noise
+from .aiding.estimate import one_line_text, shift_trajectory, with_noise
+from .aiding.kinds import GEODETIC_KIND, kind_of
+from .aiding.kinds import KINDS as AIDING_KINDS
 from .aiding.outages import in_windows
 from .aiding.rtklib import RtkSolution, fixes_on_imu, normal_gravity, read_pos
-from .aiding.spans import SPANS_S, given_noise, relative_poses, unbroken
+from .aiding.spans import SPANS_S
 from .aiding.tum import Trajectory, check_overlap, read_trajectory
 from .aiding.types import AidingRows
 from .factors import chain
@@ -95,11 +97,10 @@ from .output import plot_navigation, write_json, write_trajectory, write_traject
 from .score import convergence, score_against
 from .settings import FusionSettings, PriorSigmas
 from .start import Start
-from .start.aiding import pose_start, position_start
 
 log = logging.getLogger(__name__)
 
-KINDS = ("position", "pose", "relative-pose")
+KINDS = tuple(AIDING_KINDS)  # position, pose, relative-pose (:mod:`.aiding.kinds`)
 AIDING_FORMATS = ("auto",) + DETECTED_FORMATS  # auto: by content (:mod:`.aiding.detect`)
 GEODETIC_FORMATS = ("rtklib",)  # and a bag's NavSatFix topic
 PROGRESS_DELAY_S = 3.0  # the progress bar shows on runs longer than this
@@ -184,10 +185,10 @@ class NavigateOptions:
             raise ConfigError(f"--imu-noise: each density must be > 0, got {self.imu_noise!r}")
         if not np.isfinite(self.imu_delay_s):
             raise ConfigError(f"--imu-delay-s: must be finite, got {self.imu_delay_s!r}")
-        if self.lever_arm is not None and self.aiding_kind != "position":
+        if self.lever_arm is not None and not kind_of(self.aiding_kind).lever:
             raise ConfigError("--lever-arm is the antenna's: only with --aiding-kind position")
-        if self.aiding_format == "rtklib" and self.aiding_kind != "position":
-            raise ConfigError("--aiding-format rtklib holds positions: use it with --aiding-kind position")
+        if self.aiding_format == "rtklib" and not kind_of(self.aiding_kind).geodetic:
+            raise ConfigError(f"--aiding-format rtklib holds positions: use it with --aiding-kind {GEODETIC_KIND}")
 
 
 def parse_vector(text: str, n: int, option: str) -> Tuple[float, ...]:
@@ -269,7 +270,7 @@ def select_rows(traj: Trajectory, imu_t_ns: np.ndarray, T_BS: Optional[np.ndarra
         raise AidingError(f"{traj.path}: {len(idx)} aiding row(s) left inside the IMU's span (dropped: "
                           f"{', '.join(f'{v} {k}' for k, v in dropped.items() if v)}); at least 2 needed",
                           traj.path, opts.aiding_kind)
-    if traj.q_xyzw is not None and opts.aiding_kind != "position":
+    if traj.q_xyzw is not None and kind_of(opts.aiding_kind).poses:
         R, p = body_poses(traj, T_BS)
         R = R[idx]
         p = p[idx]
@@ -299,7 +300,7 @@ def read_imu(path: Path, fmt: str = "auto", columns: Optional[CsvColumns] = None
 def read_aiding(src: Sources, opts: NavigateOptions) -> Trajectory:
     """The aiding file (or bag topic) as a :class:`Trajectory` (poses, or positions for ``position``;
     geodetic fixes: see :func:`gnss_rows`)."""
-    need = opts.aiding_kind != "position"
+    need = kind_of(opts.aiding_kind).poses
     if opts.aiding_format == "bag":
         return bag_aiding.read_trajectory(Path(src.aiding), str(src.aiding_topic), need_orientation=need)
     return read_trajectory(src.aiding, opts.aiding_format, need_orientation=need)
@@ -323,50 +324,12 @@ def gnss_rows(src: Sources, imu_t_ns: np.ndarray, lever: np.ndarray, opts: Navig
     in_gap = in_windows(rel_s, opts.gaps)
     fixes = fixes.select(~in_gap, dropped_outage=int(in_gap.sum()))
     if len(fixes) < 2:
-        raise AidingError(f"{path}: {len(fixes)} usable fix(es) inside the IMU's span", str(path), "position")
+        raise AidingError(f"{path}: {len(fixes)} usable fix(es) inside the IMU's span", str(path), GEODETIC_KIND)
     dropped = {"outside_imu": fixes.dropped_outside, "no_imu_sample": fixes.dropped_unmatched,
                "in_gaps": int(in_gap.sum()), "quality_not_used": int(len(sol) - len(fixes) - int(in_gap.sum())
                                                                      - fixes.dropped_outside - fixes.dropped_unmatched)}
     t = np.asarray(imu_t_ns, dtype=np.int64)[fixes.idx]
     return fixes, AidingRows(fixes.idx.astype(np.int64), t, t, fixes.p.copy(), None, dropped), sol
-
-
-def build_aiding(rows: AidingRows, s0: int, R_WA: np.ndarray, lever: np.ndarray, opts: NavigateOptions,
-                 label: str, source: str, gnss=None):
-    """The graph's aiding object for the rows, sample indices counted from ``s0`` (the first fused sample)."""
-    idx = rows.sample
-    if opts.aiding_kind == "relative-pose":
-        whole = unbroken(rows.t_ns, opts.max_relative_gap_s)
-        noise, source = relative_noise(rows, opts, whole)
-        a, counts = relative_poses(idx, rows.t_ns, rows.R, rows.p, noise, opts.relative_spans_s if whole else (0.0,),
-                                   opts.max_relative_gap_s, label)
-        return a.since(s0), {**counts, "aiding_estimates": summary_entry(rows, noise, source)}
-    if opts.aiding_kind == "pose":
-        R = np.einsum("ij,njk->nik", R_WA, rows.R)
-        p = rows.p @ R_WA.T
-        a = AbsolutePoses(idx, R, p, float(np.deg2rad(opts.pose_sigma_rot_deg)), float(opts.pose_sigma_m),
-                          f"{label}: absolute poses, sigma {opts.pose_sigma_rot_deg:g} deg / {opts.pose_sigma_m:g} m",
-                          source).since(s0)
-        return a, {"absolute_poses": int(len(idx)), "aiding_estimates": summary_entry(rows, None, "")}
-    # fixes before the start (the track heading's first fast fix) are left out
-    fixes = gnss if gnss is not None else PositionFixes(
-        idx, rows.p @ R_WA.T, float(opts.position_sigma_m), np.asarray(lever, dtype=np.float64),
-        f"{label}: positions, sigma {opts.position_sigma_m:g} m", source)
-    return fixes.since(s0), {"position_fixes": int((idx >= s0).sum()), "fixes_before_start": int((idx < s0).sum())}
-
-
-def relative_noise(rows: AidingRows, opts: NavigateOptions, whole: bool = True):
-    """(each pose's noise, where it came from): ``--sigma-rot-deg`` / ``--sigma-m`` where given (a
-    relative pose's sigmas, each pose's = over sqrt(2)), else for an unbroken aiding (``whole``, tied
-    over long spans) the noise estimated against the IMU (:mod:`.aiding.noise`), else the defaults (a
-    relative pose's 0.003 m / 0.05 deg: consecutive poses alone fused better at them than at the
-    estimate, docs/experiments/navigate-vo.md)."""
-    d = NavigateOptions()
-    given = (opts.rel_sigma_rot_deg != d.rel_sigma_rot_deg) or (opts.rel_sigma_trans_m != d.rel_sigma_trans_m)
-    if rows.noise is not None and not given and whole:
-        return rows.noise, "estimated"
-    return (given_noise(float(np.deg2rad(opts.rel_sigma_rot_deg)), float(opts.rel_sigma_trans_m)),
-            "given" if given else "default")
 
 
 @dataclass(frozen=True)
@@ -493,7 +456,7 @@ def aiding_rows(src: Sources, opts: NavigateOptions, t_ns: np.ndarray, T_BS: Opt
         opts = replace(opts, gravity=round(normal_gravity(sol.origin_llh[0], sol.origin_llh[2]), 6))
         return rows, len(rows.sample) + sum(rows.dropped.values()), (gnss, sol), opts
     traj = read_aiding(src, opts)
-    if imu is None or traj.q_xyzw is None or opts.aiding_kind == "position":
+    if imu is None or traj.q_xyzw is None or not kind_of(opts.aiding_kind).poses:
         return select_rows(traj, t_ns, T_BS, opts), len(traj), None, opts
     traj, offset = shift_trajectory(traj, imu.t_ns, imu.gyro)
     rows = select_rows(traj, t_ns, T_BS, opts)
@@ -538,7 +501,7 @@ def aiding_label(src: Sources, opts: NavigateOptions) -> str:
     """What the aiding is, for the summary's ``aiding_label`` and the plot's title: a bag's topic by its
     message type (``run.bag topic /gps/fix (NavSatFix, bag)``: GNSS fixes, not an RTKLIB solution), else the
     file with its format (``cam0.tum (TUM trajectory)``). The kind and sigmas follow it
-    (:func:`build_aiding`); RTKLIB solutions name their qualities (:func:`fixes_on_imu`)."""
+    (:meth:`.aiding.kinds.AidingKind.build`); RTKLIB solutions name their qualities (:func:`fixes_on_imu`)."""
     name = Path(src.aiding).name
     if opts.aiding_format == "bag":
         kind = bag_aiding.topic_type(Path(src.aiding), str(src.aiding_topic)).rsplit("/", 1)[-1]
@@ -563,13 +526,15 @@ def resolve_aiding(src: Sources, opts: NavigateOptions, kind: Optional[str]) -> 
                           "(PoseStamped, Odometry, TransformStamped, PointStamped or NavSatFix)")
     if opts.aiding_format != "bag" and src.aiding_topic:
         raise ConfigError(f"--aiding-topic: {src.aiding} is not a ROS bag (format {opts.aiding_format})")
-    if kind is not None and kind != "position" and opts.aiding_format == "bag" and is_geodetic(src, opts):
-        raise ConfigError(f"{src.aiding} topic {src.aiding_topic} holds GNSS fixes: use it with --aiding-kind position")
+    if kind is not None and not getattr(kind_of(kind), "geodetic", False) and opts.aiding_format == "bag" \
+            and is_geodetic(src, opts):
+        raise ConfigError(f"{src.aiding} topic {src.aiding_topic} holds GNSS fixes: use it with --aiding-kind "
+                          f"{GEODETIC_KIND}")
     if kind is None:
         if not is_geodetic(src, opts):
             raise ConfigError(f"--aiding-kind {{{','.join(KINDS)}}}: say what {Path(src.aiding).name} holds "
                               f"(its format, {opts.aiding_format}, does not)")
-        kind = "position"
+        kind = GEODETIC_KIND
     return replace(opts, aiding_kind=kind)
 
 
@@ -608,7 +573,8 @@ def navigate(src: Sources, out: Path, opts: NavigateOptions = NavigateOptions(),
     opts = resolve_aiding(src, opts, opts.aiding_kind)
     opts.check()
     gt_span = check_inputs(src)
-    if opts.aiding_kind != "position" and src.extrinsics is None:
+    kind = kind_of(opts.aiding_kind)
+    if kind.poses and src.extrinsics is None:
         log.warning("no --extrinsics: the aiding's poses are taken as body (IMU) poses")
     T_BS = read_t_bs(src.extrinsics) if src.extrinsics is not None else None
     if opts.lever_arm is not None and T_BS is not None:
@@ -618,7 +584,7 @@ def navigate(src: Sources, out: Path, opts: NavigateOptions = NavigateOptions(),
     if gt_span is not None and (gt_span[1] < t_ns[0] or gt_span[0] > t_ns[-1]):
         raise ConfigError(f"--groundtruth {src.groundtruth}: its stamps [{gt_span[0]}, {gt_span[1]}] ns do not overlap "
                           f"the IMU's [{int(t_ns[0])}, {int(t_ns[-1])}] ns (same clock?)")
-    lever = T_BS[:3, 3] if (T_BS is not None and opts.aiding_kind == "position") else np.zeros(3)
+    lever = T_BS[:3, 3] if (T_BS is not None and kind.lever) else np.zeros(3)
     if opts.lever_arm is not None:
         lever = np.asarray(opts.lever_arm, dtype=np.float64)
     rows, rows_read, gnss, opts = aiding_rows(src, opts, t_ns, T_BS, lever, imu)
@@ -628,17 +594,14 @@ def navigate(src: Sources, out: Path, opts: NavigateOptions = NavigateOptions(),
     if bias.get("applied") and np.any(bias0[:3]):  # the estimate replaces the device bias's gyro part
         bias0 = np.r_[unobserved(bias) @ bias0[:3], bias0[3:]]
         bias_source += f"; gyro part: only where the recording's own bias ({opts.bias}) was not observed"
-    if opts.aiding_kind == "position":
-        st = position_start(t_ns, gyro, acc, rows, lever, bias0, opts.gravity, opts.level_s)
-    else:
-        st = pose_start(t_ns, gyro, acc, rows, int(rows.sample[0]), bias0, opts.gravity, opts.level_s)
+    st = kind.start((t_ns, gyro, acc), rows, lever, bias0, opts)
     s0 = st.start
-    aiding, counts = build_aiding(rows, s0, st.R_WA, lever, opts, aiding_label(src, opts), str(src.aiding),
-                                  None if gnss is None else gnss[0])
+    aiding, counts = kind.build(rows, s0, st.R_WA, lever, opts, aiding_label(src, opts), str(src.aiding),
+                                None if gnss is None else gnss[0])
     if len(aiding) == 0:
         raise AidingError(f"{src.aiding}: no aiding measurement left to fuse", str(src.aiding), opts.aiding_kind)
     # position aiding starts moving
-    at_rest = st.info["still_s"] >= MIN_STILL_START_S and opts.aiding_kind != "position"
+    at_rest = st.info["still_s"] >= MIN_STILL_START_S and not kind.moving_start
     st = replace(st, prior=PriorSigmas(rot_rad=float(np.deg2rad(opts.prior_rot_deg)), pos_m=opts.prior_pos_m,
                                        vel_mps=0.05 if at_rest else opts.prior_vel_mps))
     if src.displacement is not None:
@@ -673,7 +636,7 @@ def navigate(src: Sources, out: Path, opts: NavigateOptions = NavigateOptions(),
     }
     scores = None
     if src.groundtruth is not None:
-        scores = score_against(src.groundtruth, kf_t, res, rows, st.R_WA, int(t_ns[0]), opts.aiding_kind != "position",
+        scores = score_against(src.groundtruth, kf_t, res, rows, st.R_WA, int(t_ns[0]), kind.aligned,
                                opts.gaps)
         summary["groundtruth"] = str(src.groundtruth)
         summary["scores"] = scores
