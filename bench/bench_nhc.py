@@ -134,7 +134,7 @@ def navigate_timed(imu: Path, pos: Path, out: Path, extra: list, prof=None) -> d
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    ap.add_argument("--data-root", default=os.environ.get("IMU_LEARN_DATA", "/work/shared/data"))
+    ap.add_argument("--data-root", default=os.environ.get("IMU_LEARN_DATA", ""))
     ap.add_argument("--seconds", type=float, default=410.0)
     ap.add_argument("--aiding-hz", type=float, default=2.5, help="the fixes thinned to this rate")
     ap.add_argument("--fix-sigma-m", type=float, default=0.0,

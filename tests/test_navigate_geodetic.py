@@ -15,7 +15,6 @@ from imu_learn.calib.profile import NoiseTerm, Profile, noise_only
 from imu_learn.fuse import geo
 from imu_learn.fuse.aiding import rtklib
 from imu_learn.fuse.aiding.detect import detect
-from imu_learn.fuse.noise import BUILT_IN
 from test_navigate_gnss import DELAY_S, H0, LAT0, LEVER, LON0, RPY, run, synthetic_car
 
 NOISE = {"gyroscope_noise_density": 1e-4, "accelerometer_noise_density": 1e-3, "gyroscope_random_walk": 1e-5,
@@ -120,9 +119,9 @@ def test_noise_from_a_profile_else_one_warning_naming_the_built_in(tmp_path, cap
     rc, _out, err = run(car_args(imu, pos, tmp_path / "plain") + ["--quiet"], capsys)
     assert rc == 0, err
     warnings = [ln for ln in err.splitlines() if "warning" in ln]
-    assert len(warnings) == 1 and "built-in EuRoC ADIS16448" in warnings[0] and "--profile" in warnings[0], err
+    assert len(warnings) == 1 and "EuRoC ADIS16448" in warnings[0] and "--profile" in warnings[0], err
     s = json.loads((tmp_path / "plain" / "summary.json").read_text())
-    assert s["imu_noise"]["source"] == BUILT_IN and s["profile"] is None
+    assert "EuRoC ADIS16448 sensor.yaml" in s["imu_noise"]["source"] and s["profile"] is None  # the class default
     prof = write_profile(tmp_path / "calib" / "profile.json")
     rc, _out, err = run(car_args(imu, pos, tmp_path / "prof") + ["--quiet", "--profile", prof], capsys)
     assert rc == 0, err

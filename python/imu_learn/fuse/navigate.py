@@ -375,7 +375,8 @@ class Imu:
 def imu_noise(src: Sources, opts: NavigateOptions, own: Optional[ImuNoise], profile: Optional[Profile],
               imu: Optional[Tuple[np.ndarray, np.ndarray, np.ndarray]] = None) -> ImuNoise:
     """The noise the graph assumes: ``--imu-noise``, else the profile's, else the recording's
-    sensor.yaml, else with ``imu`` (its stamps, gyro, acc as read) the MEMS class default scaled to
+    sensor.yaml, else with ``imu`` (its stamps, gyro, acc as fused: corrected, in the body frame, the
+    stamps delayed) the MEMS class default scaled to
     the aiding's innovations (:mod:`.noise_fit`), else the built-in device's (one warning line each)."""
     if opts.imu_noise is not None:
         return ImuNoise(*opts.imu_noise, source="--imu-noise")
@@ -385,10 +386,7 @@ def imu_noise(src: Sources, opts: NavigateOptions, own: Optional[ImuNoise], prof
     if own is not None:
         return own
     if imu is not None:
-        t_ns, gyro, acc = imu[0] + int(round(opts.imu_delay_s * 1e9)), imu[1], imu[2]
-        if opts.imu_rotation_rpy_deg is not None:
-            M = mounting_rotation(opts.imu_rotation_rpy_deg)
-            gyro, acc = gyro @ M.T, acc @ M.T
+        t_ns, gyro, acc = imu
         if is_geodetic(src, opts):
             _, rows, sol = gnss_rows(src, t_ns, np.zeros(3), opts)
             gravity = normal_gravity(sol.origin_llh[0], sol.origin_llh[2])
@@ -419,7 +417,6 @@ def read_body_imu(src: Sources, opts: NavigateOptions) -> Imu:
     (``--imu-rotation-rpy-deg``), its stamps moved by ``--imu-delay-s``, with its noise (:func:`imu_noise`)."""
     t_ns, gyro, acc, own, imu_file, fmt = read_imu(src.input, src.fmt, src.columns)
     profile = load_profile(src)
-    noise = imu_noise(src, opts, own, profile, (t_ns, gyro, acc))
     if src.calibration is not None and src.checkpoint is not None:
         raise ConfigError("--calibration and --checkpoint both refine the IMU: pass one")
     refined = src.checkpoint is not None or src.calibration is not None
@@ -441,6 +438,7 @@ def read_body_imu(src: Sources, opts: NavigateOptions) -> Imu:
             var = np.ascontiguousarray(np.hstack([var[:, :3] @ (mounting**2).T, var[:, 3:] @ (mounting**2).T]))
     if opts.imu_delay_s:
         t_ns = t_ns + int(round(opts.imu_delay_s * 1e9))
+    noise = imu_noise(src, opts, own, profile, (t_ns, gyro, acc))  # after the checks: on the IMU as fused
     return Imu(t_ns, gyro, acc, noise, imu_file, mounting, str(src.profile) if floor else None, var, label,
                fixed.summary)
 
