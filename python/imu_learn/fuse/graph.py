@@ -36,7 +36,7 @@ import numpy as np
 
 from imu_learn.errors import InvalidInputError
 
-from .aiding import AbsolutePoses, PositionFixes, RelativePoses, epochs
+from .aiding import epochs
 from .factors import held
 from .settings import SETTLE_S, FusionSettings
 
@@ -57,10 +57,7 @@ class FusionResult:
 def keyframes(t_ns: np.ndarray, keyframe_hz: float, aiding: Seq) -> np.ndarray:
     idx = [epochs(t_ns, keyframe_hz), np.array([0, len(t_ns) - 1])]
     for a in aiding:
-        if isinstance(a, PositionFixes):
-            idx.append(a.idx)
-        else:
-            idx += [a.i, a.j]
+        idx += a.tied_samples()
     return np.unique(np.concatenate(idx).astype(np.int64))
 
 
@@ -112,32 +109,12 @@ def _aiding_by_sample(aiding: Seq) -> tuple:
     """The aiding's factors' ingredients by the IMU sample they are tied to: position fixes
     ``{s: [(p, lever, model)]}`` and relative poses ``{j: [(i, Pose3, model)]}`` (absolute poses
     there too, as ``(None, Pose3, model)``)."""
-    import gtsam
-
     fixes_at: Dict[int, List] = {}
     between_at: Dict[int, List] = {}
-    for a in aiding:
-        if isinstance(a, PositionFixes):
-            model = gtsam.noiseModel.Isotropic.Sigma(3, a.sigma_m)
-            # Per-fix sigmas (M, 3) where the aiding has them (aiding.GnssFixes), else sigma_m.
-            sig = getattr(a, "sigmas", None)
-            if sig is not None and np.shape(sig) != (len(a.idx), 3):
-                raise InvalidInputError(f"{a.label}: per-fix sigmas {np.shape(sig)}, expected ({len(a.idx)}, 3)")
-            for n, (s, p) in enumerate(zip(a.idx, a.p)):
-                m = model if sig is None else gtsam.noiseModel.Diagonal.Sigmas(np.asarray(sig[n], dtype=np.float64))
-                fixes_at.setdefault(int(s), []).append((p, a.lever, m))
-        elif isinstance(a, RelativePoses):
-            model = gtsam.noiseModel.Diagonal.Sigmas(np.r_[[a.sigma_rot_rad] * 3, [a.sigma_trans_m] * 3])
-            sig = getattr(a, "sigmas", None)  # per pair and axis (M, 6), where the aiding has them
-            for n, (i, j, R, t) in enumerate(zip(a.i, a.j, a.R_ij, a.t_ij)):
-                m = model if sig is None else gtsam.noiseModel.Diagonal.Sigmas(np.asarray(sig[n], dtype=np.float64))
-                between_at.setdefault(int(j), []).append((int(i), gtsam.Pose3(gtsam.Rot3(R), t), m))
-        elif isinstance(a, AbsolutePoses):  # a pose prior at its sample: (None, Pose3, model)
-            model = gtsam.noiseModel.Diagonal.Sigmas(np.r_[[a.sigma_rot_rad] * 3, [a.sigma_trans_m] * 3])
-            for s, R, t in zip(a.idx, a.R, a.p):
-                between_at.setdefault(int(s), []).append((None, gtsam.Pose3(gtsam.Rot3(R), t), model))
-        else:
+    for a in aiding:  # each aiding type hands its own (:mod:`.aiding.types`)
+        if not hasattr(a, "factors_by_sample"):
             raise InvalidInputError(f"unknown aiding {type(a).__name__}")
+        a.factors_by_sample(fixes_at, between_at)
     return fixes_at, between_at
 
 

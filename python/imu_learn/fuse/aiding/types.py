@@ -2,15 +2,17 @@
 (:class:`PositionFixes`, and :class:`GnssFixes` with per-fix sigmas), relative poses
 (:class:`RelativePoses`) and absolute poses (:class:`AbsolutePoses`). Each subsets with
 :meth:`select` (every per-measurement array together, dropped measurements counted) and is
-re-indexed from a run's first fused sample with :meth:`since`."""
+re-indexed from a run's first fused sample with :meth:`since`; :meth:`tied_samples` names the IMU
+samples its measurements are tied to and :meth:`factors_by_sample` hands the factor graph
+(:mod:`imu_learn.fuse.graph`) their factors' ingredients: a new aiding type is one class here."""
 from __future__ import annotations
 
 from dataclasses import dataclass, field, replace
-from typing import Dict, Optional, Union
+from typing import Dict, List, Optional, Union
 
 import numpy as np
 
-from imu_learn.errors import AidingError
+from imu_learn.errors import AidingError, InvalidInputError
 
 
 @dataclass(frozen=True)
@@ -46,6 +48,23 @@ class PositionFixes:
         kept = self.select(self.idx >= s0)
         return replace(kept, idx=kept.idx - s0)
 
+    def tied_samples(self) -> List[np.ndarray]:
+        """The IMU samples the fixes are tied to (the graph makes each a keyframe)."""
+        return [self.idx]
+
+    def factors_by_sample(self, fixes_at: Dict[int, List], between_at: Dict[int, List]) -> None:
+        """Each fix into ``fixes_at`` as ``{s: [(p, lever, model)]}`` (the graph's position factors)."""
+        import gtsam
+
+        model = gtsam.noiseModel.Isotropic.Sigma(3, self.sigma_m)
+        # Per-fix sigmas (M, 3) where the aiding has them (GnssFixes), else sigma_m.
+        sig = getattr(self, "sigmas", None)
+        if sig is not None and np.shape(sig) != (len(self.idx), 3):
+            raise InvalidInputError(f"{self.label}: per-fix sigmas {np.shape(sig)}, expected ({len(self.idx)}, 3)")
+        for n, (s, p) in enumerate(zip(self.idx, self.p)):
+            m = model if sig is None else gtsam.noiseModel.Diagonal.Sigmas(np.asarray(sig[n], dtype=np.float64))
+            fixes_at.setdefault(int(s), []).append((p, self.lever, m))
+
 
 @dataclass(frozen=True)
 class RelativePoses:
@@ -80,6 +99,20 @@ class RelativePoses:
             return self
         kept = self.select(self.i >= s0)
         return replace(kept, i=kept.i - s0, j=kept.j - s0)
+
+    def tied_samples(self) -> List[np.ndarray]:
+        """The IMU samples the relative poses are tied to: both ends."""
+        return [self.i, self.j]
+
+    def factors_by_sample(self, fixes_at: Dict[int, List], between_at: Dict[int, List]) -> None:
+        """Each relative pose into ``between_at`` at its later end as ``{j: [(i, Pose3, model)]}``."""
+        import gtsam
+
+        model = gtsam.noiseModel.Diagonal.Sigmas(np.r_[[self.sigma_rot_rad] * 3, [self.sigma_trans_m] * 3])
+        sig = self.sigmas  # per pair and axis (M, 6), where the aiding has them
+        for n, (i, j, R, t) in enumerate(zip(self.i, self.j, self.R_ij, self.t_ij)):
+            m = model if sig is None else gtsam.noiseModel.Diagonal.Sigmas(np.asarray(sig[n], dtype=np.float64))
+            between_at.setdefault(int(j), []).append((int(i), gtsam.Pose3(gtsam.Rot3(R), t), m))
 
 
 
@@ -126,6 +159,18 @@ class AbsolutePoses:
         kept = self.select(self.idx >= s0)
         return replace(kept, idx=kept.idx - s0)
 
+    def tied_samples(self) -> List[np.ndarray]:
+        """The IMU samples the poses are tied to (``i`` and ``j``, both ``idx``)."""
+        return [self.i, self.j]
+
+    def factors_by_sample(self, fixes_at: Dict[int, List], between_at: Dict[int, List]) -> None:
+        """Each pose into ``between_at`` as a pose prior at its sample: ``{s: [(None, Pose3, model)]}``."""
+        import gtsam
+
+        model = gtsam.noiseModel.Diagonal.Sigmas(np.r_[[self.sigma_rot_rad] * 3, [self.sigma_trans_m] * 3])
+        for s, R, t in zip(self.idx, self.R, self.p):
+            between_at.setdefault(int(s), []).append((None, gtsam.Pose3(gtsam.Rot3(R), t), model))
+
 
 @dataclass(frozen=True)
 class GnssFixes(PositionFixes):
@@ -151,9 +196,7 @@ Aiding = Union[PositionFixes, RelativePoses, AbsolutePoses]
 
 def aiding_samples(aiding: Aiding) -> np.ndarray:
     """The IMU samples the aiding constrains, sorted, each once (a relative pose: both ends)."""
-    if isinstance(aiding, PositionFixes):
-        return np.unique(np.asarray(aiding.idx, dtype=np.int64))
-    return np.unique(np.concatenate([aiding.i, aiding.j]).astype(np.int64))
+    return np.unique(np.concatenate(aiding.tied_samples()).astype(np.int64))
 
 
 def aiding_gaps(aiding: Aiding, t_ns: np.ndarray) -> Dict[str, Optional[float]]:
