@@ -80,7 +80,7 @@ from .aiding import bag as bag_aiding
 from .aiding.detect import FORMATS as DETECTED_FORMATS
 from .aiding.detect import detect as detect_aiding
 from .aiding.estimate import one_line_text, shift_trajectory, with_noise
-from .aiding.kinds import GEODETIC_KIND, kind_of
+from .aiding.kinds import GEODETIC_KIND, AidingKind, kind_of
 from .aiding.kinds import KINDS as AIDING_KINDS
 from .aiding.outages import in_windows
 from .aiding.rtklib import RtkSolution, fixes_on_imu, normal_gravity, read_pos
@@ -558,16 +558,40 @@ def check_inputs(src: Sources) -> Optional[Tuple[int, int]]:
     return span
 
 
-def navigate(src: Sources, out: Path, opts: NavigateOptions = NavigateOptions(),
-             progress: bool = False, written: Optional[Callable[[], None]] = None) -> Dict[str, object]:
-    """Fuse the recording's IMU with its aiding file and write ``out``/{causal.tum, smoothed.tum,
-    plot.png, summary.json} (and the geodetic tracks of GNSS aiding, the bags of bag aiding: see
-    :func:`write_outputs`); returns the summary (module docstring). ``progress``: a bar on stderr for
-    runs longer than a few seconds. ``opts.aiding_kind`` None: from the aiding
-    (:func:`resolve_aiding`). The outputs go in all at once (:func:`imu_learn.util.staging.staged_dir`):
-    an error or a Ctrl-C before that leaves ``out`` as it was; ``written()`` is called once ``out``
-    holds them all (a Ctrl-C during the swap is raised after it)."""
-    t_start = time.perf_counter()
+@dataclass
+class Inputs:
+    """What :func:`read_inputs` read and checked: the options as resolved (with geodetic fixes' gravity),
+    the aiding's kind, the IMU (:func:`read_body_imu`), the lever arm, the aiding rows used and how
+    many were read, and (the GNSS fixes, their solution) of geodetic aiding or None."""
+
+    opts: NavigateOptions
+    kind: AidingKind
+    imu: Imu
+    lever: np.ndarray
+    rows: AidingRows
+    rows_read: int
+    gnss: Optional[tuple]
+
+
+@dataclass
+class Started:
+    """What :func:`start_run` hands the fusion: the first state, the graph's aiding and the summary's
+    counts of it, the IMU as fused (gyro, acc, variances or None) and its label, the summary's
+    ``bias`` entry and where the first bias came from."""
+
+    st: Start
+    aiding: object
+    counts: Dict[str, object]
+    fused: tuple
+    label: str
+    bias: Dict[str, object]
+    bias_source: str
+
+
+def read_inputs(src: Sources, opts: NavigateOptions) -> Inputs:
+    """The run's inputs, each checked before any fusion: the aiding's format and kind
+    (:func:`resolve_aiding`), the options, the side files (:func:`check_inputs`), the IMU (the ground
+    truth's stamps overlapping it), the lever arm and the aiding rows (:func:`aiding_rows`)."""
     opts = resolve_aiding(src, opts, opts.aiding_kind)
     opts.check()
     gt_span = check_inputs(src)
@@ -586,16 +610,22 @@ def navigate(src: Sources, out: Path, opts: NavigateOptions = NavigateOptions(),
     if opts.lever_arm is not None:
         lever = np.asarray(opts.lever_arm, dtype=np.float64)
     rows, rows_read, gnss, opts = aiding_rows(src, opts, t_ns, T_BS, lever, imu)
+    return Inputs(opts, kind, imu, lever, rows, rows_read, gnss)
+
+
+def start_run(src: Sources, inp: Inputs) -> Started:
+    """The start: the IMU as fused (the checkpoint's bias, ``--variance-scale``, ``--bias``), the first
+    state (:meth:`.aiding.kinds.AidingKind.start`) under its loose prior, and the graph's aiding from it."""
+    opts, kind, rows, lever, t_ns = inp.opts, inp.kind, inp.rows, inp.lever, inp.imu.t_ns
     bias0, bias_source = checkpoint_bias(src.checkpoint)
-    gyro, acc, var, label = imu_input(src, opts, imu)
-    gyro, bias = own_bias(opts, t_ns, gyro, acc, str(src.input), bias_prior(imu))
+    gyro, acc, var, label = imu_input(src, opts, inp.imu)
+    gyro, bias = own_bias(opts, t_ns, gyro, acc, str(src.input), bias_prior(inp.imu))
     if bias.get("applied") and np.any(bias0[:3]):  # the estimate replaces the device bias's gyro part
         bias0 = np.r_[unobserved(bias) @ bias0[:3], bias0[3:]]
         bias_source += f"; gyro part: only where the recording's own bias ({opts.bias}) was not observed"
     st = kind.start((t_ns, gyro, acc), rows, lever, bias0, opts)
-    s0 = st.start
-    aiding, counts = kind.build(rows, s0, st.R_WA, lever, opts, aiding_label(src, opts), str(src.aiding),
-                                None if gnss is None else gnss[0])
+    aiding, counts = kind.build(rows, st.start, st.R_WA, lever, opts, aiding_label(src, opts), str(src.aiding),
+                                None if inp.gnss is None else inp.gnss[0])
     if len(aiding) == 0:
         raise AidingError(f"{src.aiding}: no aiding measurement left to fuse", str(src.aiding), opts.aiding_kind)
     # position aiding starts moving
@@ -604,52 +634,81 @@ def navigate(src: Sources, out: Path, opts: NavigateOptions = NavigateOptions(),
                                        vel_mps=0.05 if at_rest else opts.prior_vel_mps))
     if src.displacement is not None:
         label += f" + displacements of {Path(src.displacement).name}"
-    res = fuse_run(src, opts, imu, (gyro, acc, var), st, aiding, label, progress)
+    return Started(st, aiding, counts, (gyro, acc, var), label, bias, bias_source)
+
+
+def run_summary(src: Sources, out: Path, inp: Inputs, run: Started, res) -> Dict[str, object]:
+    """summary.json's content (without ``seconds``, known once written), with ``--groundtruth`` the scores."""
+    opts, imu, rows, st, t_ns, s0 = inp.opts, inp.imu, inp.rows, run.st, inp.imu.t_ns, run.st.start
     kf_t = t_ns[s0:][res.kf_idx]
-    out = Path(out)
     summary: Dict[str, object] = {
-        "input": str(src.input), "imu_file": imu.file, "imu_input": label,
-        "noise": imu.noise.source if var is None else "learned per-sample variances"
+        "input": str(src.input), "imu_file": imu.file, "imu_input": run.label,
+        "noise": imu.noise.source if run.fused[2] is None else "learned per-sample variances"
         + ("" if opts.variance_scale is None else " x variance_scale"),
         "imu_noise": imu.noise.to_dict(), "profile": _text(src.profile), "profile_floor": imu.floor is not None,
         "aiding_topic": src.aiding_topic,
         "aiding": str(src.aiding), "aiding_kind": opts.aiding_kind, "aiding_format": opts.aiding_format,
-        "aiding_label": aiding.label, "extrinsics": _text(src.extrinsics), "checkpoint": _text(src.checkpoint),
+        "aiding_label": run.aiding.label, "extrinsics": _text(src.extrinsics), "checkpoint": _text(src.checkpoint),
         "displacement": _text(src.displacement), "calibration": _text(src.calibration),
         "variance_scale": None if opts.variance_scale is None else [float(x) for x in opts.variance_scale],
-        "aiding_rows_read": int(rows_read), "aiding_rows_used": int(len(rows.sample)), "aiding_dropped": rows.dropped,
-        **counts, "keyframes": int(len(res.kf_idx)),
+        "aiding_rows_read": int(inp.rows_read), "aiding_rows_used": int(len(rows.sample)),
+        "aiding_dropped": rows.dropped, **run.counts, "keyframes": int(len(res.kf_idx)),
         "imu_samples_before_start": s0, "duration_s": round(float((t_ns[-1] - t_ns[s0]) * 1e-9), 3),
-        "init": {**st.info, "bias0": [round(float(b), 6) for b in st.bias], "bias_source": bias_source,
+        "init": {**st.info, "bias0": [round(float(b), 6) for b in st.bias], "bias_source": run.bias_source,
                  "prior": asdict(st.prior)},
         "convergence": convergence(kf_t * 1e-9, res.causal_p, res.causal_R, res.smoothed_p, res.smoothed_R),
         "counts": res.counts, "seconds_fusion": round(res.seconds, 2),
         "options": {k: (list(map(list, v)) if k == "gaps" else v) for k, v in asdict(opts).items()},
         "imu_mounting": None if imu.mounting is None else np.round(imu.mounting, 6).tolist(),
-        "lever_arm_m": [round(float(x), 4) for x in lever],
+        "lever_arm_m": [round(float(x), 4) for x in inp.lever],
         "final_bias": [round(float(b), 6) for b in res.smoothed_bias[-1]],
-        "bias": bias, "correction": imu.correction,
+        "bias": run.bias, "correction": imu.correction,
         "outputs": {"causal": str(out / "causal.tum"), "smoothed": str(out / "smoothed.tum")},
-        **frames(src, opts, None if gnss is None else gnss[1]),
+        **frames(src, opts, None if inp.gnss is None else inp.gnss[1]),
     }
-    scores = None
     if src.groundtruth is not None:
-        scores = score_against(src.groundtruth, kf_t, res, rows, st.R_WA, int(t_ns[0]), kind.aligned,
-                               opts.gaps)
         summary["groundtruth"] = str(src.groundtruth)
-        summary["scores"] = scores
-    # every file into a staging folder, swapped in whole at the end: out holds this run's files or the old ones
+        summary["scores"] = score_against(src.groundtruth, kf_t, res, rows, st.R_WA, int(t_ns[0]), inp.kind.aligned,
+                                          opts.gaps)
+    return summary
+
+
+def write_run(src: Sources, out: Path, inp: Inputs, run: Started, res, summary: Dict[str, object],
+              written: Optional[Callable[[], None]], t_start: float) -> Dict[str, object]:
+    """Every file into a staging folder, swapped in whole at the end (:func:`imu_learn.util.staging.staged_dir`):
+    ``out`` holds this run's files or the old ones; returns the summary, its ``seconds`` and outputs filled in."""
+    t_ns, gnss = inp.imu.t_ns, inp.gnss
+    kf_t = t_ns[run.st.start:][res.kf_idx]
     with staged_dir(out, OUTPUT_NAMES, written) as stage:
         write_trajectory(stage / "causal.tum", kf_t, res.causal_p, res.causal_R)
         write_trajectory(stage / "smoothed.tum", kf_t, res.smoothed_p, res.smoothed_R)
         extra = write_outputs(src, stage, kf_t, res, None if gnss is None else gnss[1])
         summary["outputs"].update({k: str(out / Path(v).relative_to(stage)) for k, v in extra.items()})
-        if plot_navigation(stage / "plot.png", f"{Path(src.input).name}: {aiding.label}", kf_t, res, rows, st.R_WA,
-                           scores, opts.gaps, int(t_ns[0])):
+        if plot_navigation(stage / "plot.png", f"{Path(src.input).name}: {run.aiding.label}", kf_t, res, inp.rows,
+                           run.st.R_WA, summary.get("scores"), inp.opts.gaps, int(t_ns[0])):
             summary["outputs"]["plot"] = str(out / "plot.png")
         summary["seconds"] = round(time.perf_counter() - t_start, 2)
         write_json(stage / "summary.json", summary)
     return summary
+
+
+def navigate(src: Sources, out: Path, opts: NavigateOptions = NavigateOptions(),
+             progress: bool = False, written: Optional[Callable[[], None]] = None) -> Dict[str, object]:
+    """Fuse the recording's IMU with its aiding file and write ``out``/{causal.tum, smoothed.tum,
+    plot.png, summary.json} (and the geodetic tracks of GNSS aiding, the bags of bag aiding: see
+    :func:`write_outputs`); returns the summary (module docstring). ``progress``: a bar on stderr for
+    runs longer than a few seconds. ``opts.aiding_kind`` None: from the aiding
+    (:func:`resolve_aiding`). The outputs go in all at once (:func:`imu_learn.util.staging.staged_dir`):
+    an error or a Ctrl-C before that leaves ``out`` as it was; ``written()`` is called once ``out``
+    holds them all (a Ctrl-C during the swap is raised after it). The steps: :func:`read_inputs`,
+    :func:`start_run`, :func:`fuse_run`, :func:`run_summary`, :func:`write_run`."""
+    t_start = time.perf_counter()
+    inp = read_inputs(src, opts)
+    run = start_run(src, inp)
+    res = fuse_run(src, inp.opts, inp.imu, run.fused, run.st, run.aiding, run.label, progress)
+    out = Path(out)
+    summary = run_summary(src, out, inp, run, res)
+    return write_run(src, out, inp, run, res, summary, written, t_start)
 
 
 def bias_prior(imu: Imu) -> BiasPrior:
