@@ -86,6 +86,13 @@ def assert_complete(out: Path, kept: tuple = ()) -> None:
     assert len(rows) == s["keyframes"]
 
 
+def reap(proc: subprocess.Popen) -> None:
+    """A test's process that is still running (a failed wait) killed and collected."""
+    if proc.poll() is None:
+        proc.kill()
+        proc.communicate()
+
+
 def interrupted_line(err: str) -> str:
     lines = [ln for ln in err.replace("\r", "\n").splitlines() if ln.strip() and "%|" not in ln]
     assert not any(c in err for c in CRASH), err
@@ -113,9 +120,7 @@ def test_ctrl_c_while_gtsam_calls_python_factors_exits_130_and_writes_nothing(wh
         stdout, rest = proc.communicate(timeout=60)
         waited = time.time() - t
     finally:
-        if proc.poll() is None:
-            proc.kill()
-            proc.communicate()
+        reap(proc)
     err += rest
     assert proc.returncode == 130, err
     assert interrupted_line(err) == f"imu-learn navigate: interrupted; nothing of this run is written to {out}"
@@ -145,9 +150,7 @@ def test_ctrl_c_during_the_batch_pass_waits_for_it_then_exits_130(whole, tmp_pat
         proc.send_signal(signal.SIGINT)
         stdout, rest = proc.communicate(timeout=120)
     finally:
-        if proc.poll() is None:
-            proc.kill()
-            proc.communicate()
+        reap(proc)
     err = (err + rest).decode(errors="replace")
     assert proc.returncode == 130, err
     assert err.endswith(f"imu-learn navigate: interrupted; nothing of this run is written to {out}\n"), err[-300:]
@@ -187,9 +190,7 @@ def test_ctrl_c_while_writing_the_outputs_leaves_the_previous_run(short, tmp_pat
         proc.send_signal(signal.SIGINT)
         _, err = proc.communicate(timeout=60)
     finally:
-        if proc.poll() is None:
-            proc.kill()
-            proc.communicate()
+        reap(proc)
     assert proc.returncode == 130, err
     assert interrupted_line(err) == f"imu-learn navigate: interrupted; nothing of this run is written to {out}"
     assert snapshot(out) == before
