@@ -309,6 +309,15 @@ def test_cli_input_errors_are_one_line(crop_without_groundtruth, tmp_path, capsy
     assert capsys.readouterr().err.startswith(f"imu-learn navigate: error: ExtrinsicsError: {no_tbs}: no T_BS entry")
     assert main(["navigate", "--input", str(rec), "--aiding", str(tum)]) == 2
     assert "--aiding-kind" in capsys.readouterr().err
+    # the camera's poses without their extrinsic (cam0 is ~90 deg from the IMU): refused before any fusion
+    assert main(base + ["--aiding", str(tum)]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "ConfigError" in err and "--extrinsics" in err
+    assert float(err.split("its body frame is ")[1].split("°")[0]) > 80
+    ident = write(tmp_path / "ident.yaml", CAM0_YAML.split("T_BS")[0] + "T_BS:\n  cols: 4\n  rows: 4\n  data: [1.0, 0.0, "
+                  "0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0, 1.0]\n")
+    assert main(base + ["--aiding", str(tum), "--extrinsics", str(ident)]) == 2
+    assert "that extrinsic is not this aiding's" in capsys.readouterr().err
     # imu-learn fuse runs a config's experiments: a recording there is a one-line error naming navigate
     assert main(["fuse", "--input", str(rec), "--aiding", str(tum), "--aiding-kind", "pose"]) == 2
     err = capsys.readouterr().err

@@ -115,7 +115,7 @@ def add_arguments(ap: argparse.ArgumentParser) -> None:
                          "to the IMU instead of a checkpoint: the simple floor a learned input is judged against")
     ap.add_argument("--extrinsics", type=Path, default=None, metavar="YAML",
                     help="the aiding sensor's Kalibr/ASL sensor.yaml: T_BS, sensor to body (IMU); camera poses are "
-                         "moved into the IMU frame with it (without: the aiding is taken as body poses)")
+                         "moved into the IMU frame with it (without: the aiding is taken as body poses, and refused when its rotations are not the gyro's)")
     ap.add_argument("--groundtruth", type=Path, default=None, metavar="FILE",
                     help="score the result afterwards (TUM or ASL): RMSE after SE(3) alignment for camera aiding, "
                          "without alignment for position fixes; the visual-only error beside it")

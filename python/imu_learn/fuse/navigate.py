@@ -80,6 +80,7 @@ from .aiding import bag as bag_aiding
 from .aiding.detect import FORMATS as DETECTED_FORMATS
 from .aiding.detect import detect as detect_aiding
 from .aiding.estimate import one_line_text, shift_trajectory, with_noise
+from .aiding.frame import FrameCheck, check_frame
 from .aiding.kinds import GEODETIC_KIND, AidingKind, kind_of
 from .aiding.kinds import KINDS as AIDING_KINDS
 from .aiding.outages import in_windows
@@ -459,7 +460,29 @@ def aiding_rows(src: Sources, opts: NavigateOptions, t_ns: np.ndarray, T_BS: Opt
     traj, offset = shift_trajectory(traj, imu.t_ns, imu.gyro)
     rows = select_rows(traj, t_ns, T_BS, opts)
     rows.offset = offset
+    rows.frame = checked_frame(src, rows, imu)
     return with_noise(rows, imu.t_ns, imu.gyro, imu.acc, opts.max_relative_gap_s), len(traj), None, opts
+
+
+def checked_frame(src: Sources, rows: AidingRows, imu: Imu) -> FrameCheck:
+    """The aiding poses' body frame against the IMU's (:mod:`.aiding.frame`), before any fusion:
+    refused (exit 2) when it is not the IMU's, naming ``--extrinsics``; one warning line when it is a
+    little off or cannot be told."""
+    check = check_frame(imu.t_ns, imu.gyro, rows)
+    if check.verdict == "refused":
+        if src.extrinsics is None:
+            fix = ("they are another sensor's poses (a camera's?): pass --extrinsics with that sensor's pose in the "
+                   "IMU frame (a Kalibr/EuRoC sensor.yaml T_BS)")
+        else:
+            fix = (f"after --extrinsics {src.extrinsics}: that extrinsic is not this aiding's (T_BS is the sensor's "
+                   "pose in the IMU frame; check its direction and the sensor)")
+        raise ConfigError(f"--aiding {src.aiding}: {check.why}: {fix}")
+    if check.verdict == "warned":
+        log.warning("aiding frame: %s; the poses are fused as the IMU's (pass --extrinsics if you know the "
+                    "sensor's mounting)", check.why)
+    elif check.verdict == "not checked":
+        log.warning("aiding frame not checked: %s", check.why)
+    return check
 
 
 def input_label(src: Sources, opts: NavigateOptions, plan: correction.Plan, floor: bool) -> str:
@@ -596,8 +619,6 @@ def read_inputs(src: Sources, opts: NavigateOptions) -> Inputs:
     opts.check()
     gt_span = check_inputs(src)
     kind = kind_of(opts.aiding_kind)
-    if kind.poses and src.extrinsics is None:
-        log.warning("no --extrinsics: the aiding's poses are taken as body (IMU) poses")
     T_BS = read_t_bs(src.extrinsics) if src.extrinsics is not None else None
     if opts.lever_arm is not None and T_BS is not None:
         raise ConfigError("--lever-arm and --extrinsics both give the antenna's lever arm: pass one")

@@ -35,7 +35,8 @@ def summary_entry(rows: AidingRows, used: Optional[PoseNoise], source: str) -> D
     """The summary's ``aiding_estimates``: the offset, the noise estimated and the noise used (and
     where it came from)."""
     est = rows.noise
-    return {"offset": None if rows.offset is None else rows.offset.to_dict(),
+    return {"frame_check": None if rows.frame is None else rows.frame.to_dict(),
+            "offset": None if rows.offset is None else rows.offset.to_dict(),
             "noise_estimated": None if est is None else est.to_dict(),
             "noise_used": None if used is None else {
                 "rot_deg_per_axis": [round(float(np.rad2deg(x)), 5) for x in used.rot_rad],

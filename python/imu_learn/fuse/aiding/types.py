@@ -253,3 +253,4 @@ class AidingRows:
     # (:class:`.offset.AidingOffset`) and each pose's noise (:class:`.noise.PoseNoise`)
     offset: Optional[object] = None
     noise: Optional[object] = None
+    frame: Optional[object] = None  # the frame check before the fusion (:class:`.frame.FrameCheck`)

@@ -1,0 +1,106 @@
+"""Is the aiding's body frame the IMU's? Pose aiding (VO / SLAM output, a motion-capture track) is
+fused as the poses of the IMU's body, after ``--extrinsics`` (the sensor's pose in the body frame)
+where one is given. Poses of a camera given without it are rotated from the IMU by the camera's
+mounting (EuRoC's cam0: about 90°), and the fusion then pulls the IMU's rotation toward another
+axis's: it diverges while exiting 0 (an ORB-SLAM2 trajectory of V2_02 fused with no extrinsic gave an
+aligned RMSE of 10^13 m against the VO's 6 cm). This check runs before any fusion.
+
+The rotation between the two frames follows from rotation increments alone, as ``imu-learn calibrate``
+resolves a reference's frame (:func:`imu_learn.calib.reference.resolve_frame`): between consecutive
+aiding rows, the aiding's body-frame rate ``log(R_iᵀ R_i+1) / dt`` against the gyro's mean over the
+same IMU samples, both centred (the gyro's bias, a constant rate, drops out), fitted by Kabsch
+(:func:`imu_learn.calib.frames.kabsch`). A motion that turns about one axis only (a ground robot's
+yaw) leaves the rotation about that axis unobservable; then only the axis is compared: the gyro's
+rates that go with the aiding's main axis against that axis.
+
+* rotation (or the axis's angle) above :data:`MAX_ROTATION_DEG`: refused (exit 2), naming
+  ``--extrinsics``; a camera's mounting is tens of degrees, a well-mounted sensor's residual a few;
+* above :data:`WARN_ROTATION_DEG`: one warning line (the fusion takes the poses as they are);
+* too few pairs or too little turning to tell: not checked, and the summary says so.
+
+The result goes into the summary's ``aiding.frame_check``."""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Dict, Optional
+
+import numpy as np
+from scipy.spatial.transform import Rotation
+
+from imu_learn.calib.frames import kabsch
+from imu_learn.fuse.aiding.types import AidingRows
+
+MAX_ROTATION_DEG = 5.0  # refused above: the calibrate plausibility rule's misalignment limit
+WARN_ROTATION_DEG = 1.0  # warned above: calibrate's ``identity_deg`` (below it a frame counts as the IMU's)
+MIN_PAIRS = 20  # pairs of consecutive rows needed to tell
+MIN_RATE_RMS = 0.05  # rad/s: the centred rates' RMS below which the motion cannot tell the frame
+PLANAR_RATIO = 0.1  # smallest over largest principal spread of the rates: one axis only below it
+MAX_PAIR_S = 0.5  # consecutive rows further apart are not paired (a gap)
+
+
+@dataclass(frozen=True)
+class FrameCheck:
+    """``rotation_deg``: the estimated angle between the aiding's body frame and the IMU's (the main
+    axis's angle when ``axis_only``), None when not checked; ``pairs``: the row pairs used;
+    ``verdict``: "same frame", "warned", "refused" or "not checked"; ``why``: one line."""
+
+    rotation_deg: Optional[float]
+    axis_only: bool
+    pairs: int
+    verdict: str
+    why: str
+
+    def to_dict(self) -> Dict[str, object]:
+        return {"rotation_deg": None if self.rotation_deg is None else round(self.rotation_deg, 2),
+                "axis_only": self.axis_only, "pairs": self.pairs, "verdict": self.verdict, "why": self.why}
+
+
+def paired_rates(imu_t_ns: np.ndarray, gyro: np.ndarray, rows: AidingRows,
+                 max_pair_s: float = MAX_PAIR_S) -> tuple:
+    """(IMU mean rates, aiding body-frame rates), (P, 3) each, over the pairs of consecutive rows
+    within ``max_pair_s`` of each other."""
+    s = np.asarray(rows.sample, dtype=np.int64)
+    t = np.asarray(imu_t_ns, dtype=np.int64)
+    dt = np.diff(t[s]) * 1e-9
+    ok = (dt > 0) & (dt <= max_pair_s)
+    if not ok.any():
+        return np.zeros((0, 3)), np.zeros((0, 3))
+    step = np.diff(t) * 1e-9
+    integral = np.concatenate([np.zeros((1, 3)), np.cumsum(gyro[:-1] * step[:, None], axis=0)])
+    w_imu = (integral[s[1:]] - integral[s[:-1]]) / np.maximum(dt, 1e-12)[:, None]
+    R = np.asarray(rows.R)
+    w_aid = Rotation.from_matrix(np.transpose(R[:-1], (0, 2, 1)) @ R[1:]).as_rotvec() / np.maximum(dt, 1e-12)[:, None]
+    return w_imu[ok], w_aid[ok]
+
+
+def check_frame(imu_t_ns: np.ndarray, gyro: np.ndarray, rows: AidingRows) -> FrameCheck:
+    """The aiding's body frame against the IMU's (module docstring). Never raises: the caller refuses
+    on ``verdict == "refused"``."""
+    if rows.R is None:
+        return FrameCheck(None, False, 0, "not checked", "the aiding holds no rotations")
+    a, b = paired_rates(imu_t_ns, gyro, rows)
+    n = len(a)
+    if n < MIN_PAIRS:
+        return FrameCheck(None, False, n, "not checked", f"{n} pairs of consecutive rows; {MIN_PAIRS} needed")
+    bc = b - b.mean(0)
+    _, sv, vt = np.linalg.svd(bc, full_matrices=False)
+    rms = float(np.sqrt(np.sum(sv ** 2) / n))
+    if rms < MIN_RATE_RMS:
+        return FrameCheck(None, False, n, "not checked",
+                          f"the aiding turns too little to tell its frame (rates' RMS {rms:.3f} rad/s)")
+    axis_only = bool(sv[1] < PLANAR_RATIO * sv[0])
+    if axis_only:  # one axis: the gyro's rates that go with the aiding's main axis against that axis
+        u = vt[0]
+        d = (a - a.mean(0)).T @ (bc @ u)
+        angle = math.degrees(math.acos(np.clip(d @ u / max(np.linalg.norm(d), 1e-12), -1.0, 1.0)))
+    else:
+        r = kabsch(a, b)[0]
+        angle = math.degrees(math.acos(np.clip((np.trace(r) - 1) / 2, -1.0, 1.0)))
+    what = "its main rotation axis is" if axis_only else "its body frame is"
+    line = f"{what} {angle:.1f}° from the IMU's (from {n} rotation increments)"
+    if angle > MAX_ROTATION_DEG:
+        return FrameCheck(angle, axis_only, n, "refused", line)
+    if angle > WARN_ROTATION_DEG:
+        return FrameCheck(angle, axis_only, n, "warned", line)
+    return FrameCheck(angle, axis_only, n, "same frame", line)

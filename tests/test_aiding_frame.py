@@ -1,0 +1,77 @@
+"""The aiding frame check (imu_learn.fuse.aiding.frame) against known mountings: a synthetic IMU turning
+about every axis (or about one), its body poses at 20 Hz seen through a known rotation, the gyro with a
+constant bias and white noise. The estimated angle is compared with the rotation put in."""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from scipy.spatial.transform import Rotation
+
+from imu_learn.fuse.aiding.frame import MAX_ROTATION_DEG, check_frame
+from imu_learn.fuse.aiding.types import AidingRows
+
+RATE_HZ, AID_HZ, SECONDS = 200, 20, 60.0
+
+
+def motion(planar: bool, seed: int = 0):
+    """(t_ns, body rates (N, 3), body-to-world rotations (N,)): smooth random rates, yaw only if planar."""
+    rng = np.random.default_rng(seed)
+    n = int(SECONDS * RATE_HZ)
+    t = np.arange(n) / RATE_HZ
+    w = np.zeros((n, 3))
+    for k in range(3):
+        f = rng.uniform(0.1, 0.6, 3)
+        ph = rng.uniform(0, 2 * np.pi, 3)
+        w[:, k] = sum(0.4 * np.sin(2 * np.pi * fi * t + p) for fi, p in zip(f, ph))
+    if planar:
+        w[:, :2] = 0.0
+    R = [Rotation.identity()]
+    for k in range(n - 1):
+        R.append(R[-1] * Rotation.from_rotvec(w[k] / RATE_HZ))
+    return (t * 1e9).astype(np.int64), w, Rotation.concatenate(R)
+
+
+def rows_seen_through(R_WB: Rotation, mount: Rotation) -> AidingRows:
+    """The poses of a sensor whose frame is the body's turned by ``mount`` (R_B_S), every 10th sample."""
+    idx = np.arange(0, len(R_WB), RATE_HZ // AID_HZ)
+    R_WS = (R_WB[idx] * mount).as_matrix()
+    return AidingRows(idx, idx.astype(np.int64), idx.astype(np.int64), np.zeros((len(idx), 3)), R_WS)
+
+
+def gyro_of(w: np.ndarray, seed: int = 1) -> np.ndarray:
+    rng = np.random.default_rng(seed)
+    return w + np.array([0.08, -0.03, 0.05]) + rng.normal(0, 0.01, w.shape)  # EuRoC-sized bias
+
+
+@pytest.mark.parametrize("deg", [0.0, 0.6, 3.0, 10.0, 90.0, 119.0, 180.0])
+def test_the_estimated_angle_is_the_mounting_put_in(deg):
+    t, w, R = motion(planar=False)
+    mount = Rotation.from_rotvec(np.deg2rad(deg) * np.array([1.0, 2.0, -0.5]) / np.linalg.norm([1.0, 2.0, -0.5]))
+    c = check_frame(t, gyro_of(w), rows_seen_through(R, mount))
+    assert not c.axis_only and c.pairs > 1000
+    assert c.rotation_deg == pytest.approx(deg, abs=0.3)
+    want = "refused" if deg > MAX_ROTATION_DEG else ("warned" if deg > 1.0 else "same frame")
+    assert c.verdict == want
+
+
+def test_planar_motion_compares_the_axis_only():
+    t, w, R = motion(planar=True)
+    g = gyro_of(w)
+    # turned about the yaw axis itself: not observable, and harmless for the axis
+    c = check_frame(t, g, rows_seen_through(R, Rotation.from_euler("z", 70, degrees=True)))
+    assert c.axis_only and c.verdict == "same frame" and c.rotation_deg < 1.0
+    # a camera looking forward (its z along the body's x): the yaw axis lands on another axis
+    c = check_frame(t, g, rows_seen_through(R, Rotation.from_euler("y", 90, degrees=True)))
+    assert c.axis_only and c.verdict == "refused" and c.rotation_deg == pytest.approx(90, abs=1)
+    # upside down (180 deg about x): the axis is reversed, not hidden by a sign
+    c = check_frame(t, g, rows_seen_through(R, Rotation.from_euler("x", 180, degrees=True)))
+    assert c.verdict == "refused" and c.rotation_deg == pytest.approx(180, abs=1)
+
+
+def test_too_little_motion_or_too_few_rows_is_not_checked():
+    t, w, R = motion(planar=False)
+    still = check_frame(t, gyro_of(0.001 * w), rows_seen_through(Rotation.identity(len(t)), Rotation.identity()))
+    assert still.verdict == "not checked" and "turns too little" in still.why
+    rows = rows_seen_through(R, Rotation.identity())
+    few = AidingRows(rows.sample[:10], rows.t_ns[:10], rows.imu_t_ns[:10], rows.p[:10], rows.R[:10])
+    assert check_frame(t, gyro_of(w), few).verdict == "not checked"
