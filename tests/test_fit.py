@@ -115,6 +115,11 @@ def test_default_run_trains_on_top_of_its_training_splits_profile(tmp_path):
     assert load_checkpoint(d / "best.pt")["model_args"]["start"] == "profile"
     res = json.loads((d / "results.json").read_text())
     assert set(res["table"]) == {"raw", "timing", "profile", "model"}
+    # the open-loop AOE is a cell of the table and of the selection (the floor's AOE is far below raw's)
+    aoe = res["open_loop_aoe_deg"]
+    assert set(aoe) == {"raw", "timing", "profile", "model"} and aoe["profile"] < 0.5 * aoe["raw"]
+    assert "open-loop AOE [deg]: raw IMU" in res["text"]
+    assert all(float(x["val_pose_aoe_deg"]) > 0 for x in rows(d))
     best_epoch = load_checkpoint(d / "best.pt")["epoch"]
     assert res["ships"] == ("model" if best_epoch else "profile")
     assert f"ships: the {'trained model' if best_epoch else 'device profile'}" in res["text"]
@@ -124,6 +129,7 @@ def test_default_run_trains_on_top_of_its_training_splits_profile(tmp_path):
                 m, p = res["table"]["model"][col][n], res["table"]["profile"][col][n]
                 assert m["rot_deg"] == pytest.approx(p["rot_deg"], rel=0.03)
                 assert m["trans_m"] == pytest.approx(p["trans_m"], rel=0.03)
+        assert aoe["model"] == pytest.approx(aoe["profile"], rel=0.03)
 
 
 def test_select_on_validation_pose(tmp_path, full_run, capsys):

@@ -74,6 +74,13 @@ def attitude_errors(seq: Segment, gyro: Optional[np.ndarray] = None) -> Dict[str
     return {"angle_rad": rotation_angle(seq.q_wxyz, q_hat), "yaw_rad": yaw_error(seq.q_wxyz, q_hat)}
 
 
+def open_loop_aoe_deg(seqs: List[Segment]) -> float:
+    """Open-loop AOE [deg] of ``seqs`` as they are (their gyro): each segment integrated from its first
+    ground-truth attitude, the RMSE of the angle error over every sample of every segment."""
+    e = np.concatenate([attitude_errors(s)["angle_rad"] for s in seqs]) if seqs else np.zeros(0)
+    return math.degrees(float(np.sqrt(np.mean(e * e)))) if len(e) else math.nan
+
+
 def covered(t_ns: np.ndarray, gt_t_ns: np.ndarray, max_gap_s: float) -> np.ndarray:
     """(N,) bool: IMU stamps ``t_ns`` that lie between two ground-truth stamps ``gt_t_ns`` at most
     ``max_gap_s`` apart (or on one): where interpolated ground truth is measured, not bridged."""

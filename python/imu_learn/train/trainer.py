@@ -99,6 +99,7 @@ from imu_learn.nn.device import pick_device
 from imu_learn.nn.losses import imu_loss
 from imu_learn.nn.model import ImuRefiner, ModelConfig
 from imu_learn.score.metrics import floor_ratios, index_at, relative_pose_rmse_many, variant_table, without_fitted_bias
+from imu_learn.score.peers import open_loop_aoe_deg
 from imu_learn.score.protocol import VARIANT_LABELS, VARIANTS
 from imu_learn.train.config import ConfigError, RunConfig, build_config, read_toml, to_toml
 from imu_learn.train.split_profile import calibrate_split
@@ -293,6 +294,10 @@ class ValidationPose:
             groups.setdefault(recording_of(s.name) if cfg.optim.select_average == "recordings" else "all", []).append(i)
         self.groups = list(groups.values())
         self.raw = {n: self._scores(self.seqs, n) for n in self.horizons}
+        # on top of a floor (select_reference "start") the open-loop AOE is one more cell: an epoch that
+        # loses it to the floor is not picked (the verdict covers every cell the final table reports)
+        self.aoe = cfg.optim.select_reference == "start"
+        self.raw_aoe = [open_loop_aoe_deg([self.seqs[i] for i in g]) for g in self.groups] if self.aoe else []
         # optim.select_reference = "start": the untrained model's ratios (set by its first call, epoch
         # 0, and carried in the checkpoint so a resumed run scores the same way)
         self.reference: Optional[List[float]] = None
@@ -314,6 +319,11 @@ class ValidationPose:
             out[f"pose_rot_deg_n{n}"], out[f"pose_trans_m_n{n}"] = pooled["rot_deg"], pooled["trans_m"]
         # the longest horizon's figures also under the short names (metrics.csv columns kept)
         out["pose_rot_deg"], out["pose_trans_m"] = pooled["rot_deg"], pooled["trans_m"]
+        if self.aoe:
+            got_aoe = [open_loop_aoe_deg([refined[i] for i in g]) for g in self.groups]
+            logs = [math.log(max(m, 1e-15) / max(r, 1e-15)) for m, r in zip(got_aoe, self.raw_aoe)]
+            ratios.append(math.exp(sum(logs) / len(logs)))
+            out["pose_aoe_deg"] = open_loop_aoe_deg(refined)
         if self.cfg.optim.select_reference == "start":
             if self.reference is None:
                 self.reference = list(ratios)
@@ -491,6 +501,7 @@ def evaluate_table(raw_seqs: List[Segment], model_seqs: List[Segment], cfg: RunC
             out["per_recording"].setdefault(rec, {})[row] = _cells([seqs[i] for i in idx], [fixed[i] for i in idx], cfg)
     floors = [r for r, _ in rows if r != "model"]
     out["vs_floor"] = floor_ratios(out["rows"], floors, "model")
+    out["aoe_deg"] = {row: open_loop_aoe_deg(list(seqs)) for row, seqs in rows}
     return out
 
 
@@ -517,6 +528,10 @@ def format_table(res: Dict[str, Any], names: List[str], cfg: RunConfig) -> str:
             cells = [fmt.format(res["rows"][row][c][str(n)][key]) for c, n in cols]
             lines.append(f"{first:14}{unit:>10}|" + "|".join(f"{x:^13}" for x in cells[:k]) + "|"
                          + "|".join(f"{x:^13}" for x in cells[k:]))
+    aoe = res.get("aoe_deg")
+    if aoe:
+        lines.append("open-loop AOE [deg]: " + ", ".join(f"{labels[r]} {aoe[r]:.3f}" for r in labels if r in aoe)
+                     + " (each test segment from its first ground-truth attitude)")
     vs = res.get("vs_floor")
     if vs:
         for key, unit in (("rot", "rot"), ("trans", "trans")):
@@ -844,6 +859,7 @@ def final_evaluation(cfg: RunConfig, run_dir: Path, split: Split, device: torch.
         "table": res["rows"],
         "timing_offset_samples": tau,
         "vs_floor": res["vs_floor"],
+        "open_loop_aoe_deg": res["aoe_deg"],
         "per_recording": res["per_recording"],
         "startup_bias": res["startup_bias"],
         "ships": None if profile is None else ("model" if best_epoch else "profile"),
