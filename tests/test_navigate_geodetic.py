@@ -201,3 +201,18 @@ def test_real_drive_cut_from_its_pos_file_alone(tmp_path, capsys):
     gj = json.loads((out / "track.geojson").read_text())
     c = np.asarray(gj["features"][1]["geometry"]["coordinates"])
     assert np.all(np.abs(c[:, 0] - o["longitude_deg"]) < 0.01) and np.all(np.abs(c[:, 1] - o["latitude_deg"]) < 0.01)
+
+
+def test_aiding_hz_thins_the_gnss_fixes(tmp_path, capsys):
+    imu, pos, _ = synthetic_car(tmp_path, seconds=16.0)
+    counts = {}
+    for hz in (None, 1.0):
+        out = tmp_path / f"nav{hz}"
+        extra = [] if hz is None else ["--aiding-hz", hz]
+        rc, _, err = run(car_args(imu, pos, out) + ["--imu-noise", "1e-4,1e-3,1e-5,1e-4", "--quiet"] + extra, capsys)
+        assert rc == 0, err
+        s = json.loads((out / "summary.json").read_text())
+        counts[hz] = (s["aiding_rows_used"], s["aiding_dropped"].get("thinned", 0))
+    used, thinned = counts[1.0]
+    assert counts[None][1] == 0 and thinned > 0 and used + thinned == counts[None][0]
+    assert used == pytest.approx(counts[None][0] / 4, abs=2)  # 4 Hz fixes kept at 1 Hz

@@ -324,11 +324,14 @@ def gnss_rows(src: Sources, imu_t_ns: np.ndarray, lever: np.ndarray, opts: Navig
     rel_s = (imu_t_ns[fixes.idx] - int(imu_t_ns[0])) * 1e-9
     in_gap = in_windows(rel_s, opts.gaps)
     fixes = fixes.select(~in_gap, dropped_outage=int(in_gap.sum()))
+    th = thin(np.asarray(imu_t_ns, dtype=np.int64)[fixes.idx], opts.aiding_hz)  # --aiding-hz thins fixes too
+    fixes = fixes.select(th)
     if len(fixes) < 2:
         raise AidingError(f"{path}: {len(fixes)} usable fix(es) inside the IMU's span", str(path), GEODETIC_KIND)
     dropped = {"outside_imu": fixes.dropped_outside, "no_imu_sample": fixes.dropped_unmatched,
-               "in_gaps": int(in_gap.sum()), "quality_not_used": int(len(sol) - len(fixes) - int(in_gap.sum())
-                                                                     - fixes.dropped_outside - fixes.dropped_unmatched)}
+               "in_gaps": int(in_gap.sum()), "thinned": int((~th).sum()),
+               "quality_not_used": int(len(sol) - len(fixes) - int(in_gap.sum()) - int((~th).sum())
+                                       - fixes.dropped_outside - fixes.dropped_unmatched)}
     t = np.asarray(imu_t_ns, dtype=np.int64)[fixes.idx]
     return fixes, AidingRows(fixes.idx.astype(np.int64), t, t, fixes.p.copy(), None, dropped), sol
 
