@@ -91,17 +91,24 @@ def test_a_late_reference_is_moved_and_the_imus_offset_left_unobserved(tmp_path,
                  oracle["gyroscope"]["bias_std"], floor=5e-4)
 
 
-def test_a_20_hz_reference_fits_the_acc_bias_only(tmp_path, oracle):
+def test_a_20_hz_reference_fits_the_accelerometer_from_its_positions(tmp_path, oracle):
+    """A 20 Hz reference's velocity cannot resolve accelerations (no low-pass chosen); its positions
+    give the accelerometer's matrix and bias (calib.acc_positions), the oracle's within the two stated
+    uncertainties; the reference's origin is the IMU's."""
     ref = write_reference(tmp_path / "vo.tum", world_deg=100.0, every=10)
     p = calibrate(tmp_path / "out", "--groundtruth", str(ref))
     assert not p["reference"]["resolves_acceleration"]
-    assert np.allclose(p["accelerometer"]["matrix"], np.eye(3), atol=1e-6)
     assert p["floor"]["cutoff_gyro"] is None and p["floor"]["cutoff_acc"] is None
-    assert {k for k, v in p["observed"].items() if not v["observed"]} == {
-        "accelerometer.matrix", "cutoff_gyro", "cutoff_acc"}
+    assert {k for k, v in p["observed"].items() if not v["observed"]} == {"cutoff_gyro", "cutoff_acc"}
+    assert "positions" in p["observed"]["accelerometer.matrix"]["how"]
     assert close(p["gyroscope"]["bias"], oracle["gyroscope"]["bias"], p["gyroscope"]["bias_std"],
                  oracle["gyroscope"]["bias_std"], floor=5e-4)
-    assert np.all(np.abs(np.asarray(p["accelerometer"]["bias"])) < 0.3)
+    a, oa = p["accelerometer"], oracle["accelerometer"]
+    fit = p["reference"]["accelerometer_from_positions"]
+    assert close(a["matrix"], oa["matrix"], fit["M_a_std"], oa["matrix_std"]), (a["matrix"], oa["matrix"])
+    assert np.all(np.abs(np.diag(a["matrix"]) - np.diag(oa["matrix"])) < 0.01)  # the scales to 1 %
+    assert np.all(np.abs(np.asarray(fit["lever_arm_m"])) <= 4 * np.asarray(fit["lever_arm_std_m"]) + 0.005)
+    assert np.all(np.abs(np.asarray(a["bias"])) < 0.3)
 
 
 def test_another_recordings_reference_is_refused_before_any_fit(tmp_path, capsys):

@@ -20,7 +20,9 @@ The chain (docs: your-device.md; design: a 6-DoF reference in an unknown frame):
    the scale applied where the reference is not metric (|s − 1| beyond 3 standard errors and 2 %)
    and the lever arm where it is significant.
 4. The reference, rotated, levelled, scaled, moved to the IMU origin and put on the IMU's clock
-   (:func:`to_imu_frame`), is then an ordinary ground truth for the floor.
+   (:func:`to_imu_frame`), is then an ordinary ground truth for the floor; where its velocity cannot
+   resolve accelerations (:func:`resolves_acceleration`: a 20 Hz VO), the accelerometer comes from its
+   positions (:mod:`imu_learn.calib.acc_positions`).
 
 A reference that is already in the IMU frame (rotation below ``identity_deg``, lag within the floor's
 own search, level, metric, no lever arm) is returned untouched, so a motion-capture profile stays
@@ -408,7 +410,10 @@ def resolves_acceleration(ref_rate_hz: float, window_s: float, fraction: float =
     attenuates every acceleration faster than that span; where the span is more than ``fraction`` of
     the floor's window ``window_s`` (a 20 Hz VO: 0.45 s against 1 s) the smoothed reference
     favours an accelerometer scaled down and low-passed, an artefact of the reference, not the IMU.
-    EuRoC's 200 Hz, TUM-VI's 120 Hz and Fetch's 90 Hz motion capture resolve it (0.05-0.1 s)."""
+    EuRoC's 200 Hz, TUM-VI's 120 Hz and Fetch's 90 Hz motion capture resolve it (0.05-0.1 s). Where
+    it does not, the floor fits no low-pass and the acc bias only, and calibrate then fits the
+    accelerometer's matrix and bias from the reference's positions instead, which no smoothing
+    attenuates (:mod:`imu_learn.calib.acc_positions`, :meth:`imu_learn.calib.sources.PosesSource.acc_from_positions`)."""
     span_s = (2 * AlignOptions().velocity_half_window + 1) / max(ref_rate_hz, 1e-9)
     return span_s <= fraction * window_s
 

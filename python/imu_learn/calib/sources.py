@@ -6,7 +6,9 @@ floor they observe.
 * :class:`PosesSource`: a 6-DoF reference in any frame (``--input``, with ``--groundtruth`` or the
   format's own ground truth): checked against the IMU and moved into its frame
   (:func:`imu_learn.calib.reference.resolve_frame`, :func:`~imu_learn.calib.reference.to_imu_frame`),
-  aligned onto the IMU stamps, the last ``val_fraction`` of each recording held back.
+  aligned onto the IMU stamps, the last ``val_fraction`` of each recording held back; a reference whose
+  velocity cannot resolve accelerations (a 20 Hz VO) gives the accelerometer from its positions
+  (:mod:`imu_learn.calib.acc_positions`).
 * :class:`ConfigSource`: a fit or evaluate config's train/val split, with evaluate's settings.
 * :class:`StillSource`: recordings without a reference (``--imu-only``): the noise of their still
   stretches only.
@@ -31,6 +33,7 @@ from typing import Any, Callable, Dict, List, Optional, Sequence, Tuple
 import numpy as np
 
 from imu_learn.baselines.base import FitSettings
+from imu_learn.calib.acc_positions import AccFit, AccOptions, fit_acc_from_positions, recording_spread
 from imu_learn.calib.frames import default_gap_s
 from imu_learn.calib.profile import FloorFit
 from imu_learn.calib.reference import FrameFit, FrameOptions, frame_lines, read_extrinsics, resolve_frame, to_imu_frame
@@ -45,6 +48,7 @@ Progress = Callable[[str], None]
 
 TRAIN, VAL, NOISE = "train", "val", "noise"  # a recording's role
 TIME_OFFSET_PRIOR_SAMPLES = 0.5  # an unobserved time offset: the zero-order hold's half sample
+ACC_MAX_SCALE_STD = 0.02  # the positions' fit of the accelerometer is kept where its scales are this certain
 # profile.json's ``observed``: the floor's parameters a reference may or may not observe
 OBSERVABLE = ("time_offset", "gyroscope.matrix", "gyroscope.bias", "g_sensitivity", "accelerometer.matrix",
               "accelerometer.bias", "cutoff_gyro", "cutoff_acc")
@@ -223,14 +227,17 @@ class PosesSource(Source):
     """6-DoF poses in any frame (module doc): ``inputs`` with their ``groundtruths`` (None: the format's
     own), the reference's known ``extrinsics`` (a Kalibr/EuRoC yaml; None: estimated), reference gaps
     longer than ``max_gap_s`` split (None: 0.05 s, or 1.5 periods of a sparse reference), the last
-    ``val_fraction`` of each recording held back."""
+    ``val_fraction`` of each recording held back; ``acc_options``: how a reference whose velocity cannot
+    resolve accelerations (a 20 Hz VO) fits the accelerometer from its positions
+    (:meth:`acc_from_positions`; None: the acc bias only, M_a = I)."""
 
     kind = "poses"
 
     def __init__(self, inputs: Sequence[Path], groundtruths: Sequence[Optional[Path]] = (), fmt: str = "auto",
                  columns: Any = None, extrinsics: Optional[Path] = None, max_gap_s: Optional[float] = None,
                  val_fraction: float = 0.15, device: Optional[str] = None,
-                 topics: Optional[Dict[str, Optional[str]]] = None) -> None:
+                 topics: Optional[Dict[str, Optional[str]]] = None,
+                 acc_options: Optional[AccOptions] = AccOptions(fit_tilt=True)) -> None:
         self.inputs = [Path(p) for p in inputs]
         self.topics = {k: v for k, v in (topics or {}).items() if v}  # a bag's imu_topic / groundtruth_topic
         gts = [None if g is None else Path(g) for g in groundtruths]
@@ -240,6 +247,10 @@ class PosesSource(Source):
         self.fmt, self.columns, self.extrinsics = fmt, columns, extrinsics
         self.max_gap_s, self.val_fraction, self.device = max_gap_s, val_fraction, device
         self.frame: Optional[FrameFit] = None  # how the reference was moved into the IMU's frame
+        # the accelerometer from the positions where the velocity cannot resolve it (None: bias only)
+        self.acc_options: Optional[AccOptions] = acc_options
+        self.acc_fit: Optional[AccFit] = None
+        self.acc_refused = ""
 
     def read(self, progress: Progress = lambda s: None) -> CalibInputs:
         """The recordings read, their reference checked against the IMU and moved into its frame, then
@@ -286,16 +297,67 @@ class PosesSource(Source):
         at its prior (what the fit finds on top is the IMU's offset plus the lag's rounding, not
         observable apart from the reference's latency): the zero-order hold's half sample
         (:data:`TIME_OFFSET_PRIOR_SAMPLES`, what an IMU on the reference's clock shows: a sample holds
-        the rate at its start over the interval after it)."""
+        the rate at its start over the interval after it). On a reference whose velocity cannot
+        resolve accelerations, the accelerometer's (M_a, b_a) then come from its positions
+        (:meth:`acc_from_positions`)."""
         fit = super().fit_floor(inp, progress, uncertainty)
         if self.frame is not None and self.frame.applied.get("lag"):
             fit.log["time_offset_fitted_on_the_moved_reference"] = [fit.floor.params.time_offset]
             fit.floor = fit.floor.with_params(time_offset=TIME_OFFSET_PRIOR_SAMPLES)
             fit.std = replace(fit.std, time_offset=np.float64(np.nan))
+        if self.frame is not None and not self.frame.resolves_acceleration and self.acc_options is not None:
+            fit = self.acc_from_positions(inp, fit, progress, uncertainty)
+        return fit
+
+    def acc_from_positions(self, inp: CalibInputs, fit: FloorFit, progress: Progress = lambda s: None,
+                           uncertainty: bool = True) -> FloorFit:
+        """The accelerometer's matrix and bias from the reference's positions
+        (:func:`imu_learn.calib.acc_positions.fit_acc_from_positions`: second differences over a long
+        baseline, no velocity; the lever arm to the reference's origin and each world's tilt jointly;
+        the attitude within a baseline the floor's calibrated gyro, held to the reference's over
+        ``attitude_smooth_s``), at the floor's time offset, in place of the floor's bias-only fit (kept in the log). Refused
+        (the bias-only floor kept, and said why) where the motion leaves a scale's standard error above
+        :data:`ACC_MAX_SCALE_STD`. The standard deviations, as the floor's: the spread of the fit on each
+        recording alone over sqrt(recordings); the cluster-robust ones of the joint fit in the reference
+        entry."""
+        per: Dict[str, List[Segment]] = {}
+        rates: Dict[str, List[np.ndarray]] = {}  # the floor's calibrated gyro: the attitude within a baseline
+        for s, g in zip(inp.train, inp.groups):
+            per.setdefault(g, []).append(s)
+            rates.setdefault(g, []).append(fit.floor.apply(s.t_ns, s.gyro, s.acc)[0])
+        recs, gyros = list(per.values()), list(rates.values())
+        tau = float(fit.floor.params.time_offset)
+        opts = self.acc_options
+        assert opts is not None
+        progress(f"accelerometer from the reference's positions (second differences over +-{opts.baseline_s:g} s)")
+        try:
+            acc = fit_acc_from_positions(recs, opts, tau, inp.settings.gravity, gyros)
+        except ValueError as e:
+            self.acc_refused = str(e)
+            return fit
+        worst = float(np.max(np.diag(acc.M_a_std)))
+        if not worst <= ACC_MAX_SCALE_STD:
+            self.acc_refused = (f"the motion leaves the accelerometer's scale uncertain from the positions "
+                                f"(standard error up to {worst:.3f}, limit {ACC_MAX_SCALE_STD:g})")
+            progress(f"accelerometer from positions refused: {self.acc_refused}")
+            return fit
+        self.acc_fit = acc
+        fit.log["accelerometer_bias_only_fit"] = [{"M_a": fit.floor.params.M_a.tolist(), "b_a": fit.floor.params.b_a.tolist()}]
+        fit.floor = fit.floor.with_params(M_a=acc.M_a, b_a=acc.b_a)
+        if uncertainty:
+            sp = recording_spread(recs, opts, tau, inp.settings.gravity, gyros)
+            m_std, b_std = (sp[0], sp[1]) if sp is not None else (acc.M_a_std, acc.b_a_std)
+            fit.std = replace(fit.std, M_a=m_std, b_a=b_std)
+        progress("accelerometer from positions: scales " + ", ".join(f"{x:.4f}" for x in np.diag(acc.M_a))
+                 + " (± " + ", ".join(f"{x:.4f}" for x in np.diag(acc.M_a_std)) + "), reference origin ("
+                 + ", ".join(f"{100 * x:+.1f}" for x in acc.lever_m) + ") cm in the IMU frame")
         return fit
 
     def reference(self) -> Dict[str, Any]:
-        return self.frame.to_dict() if self.frame is not None else {}
+        out = self.frame.to_dict() if self.frame is not None else {}
+        if self.acc_fit is not None:
+            out["accelerometer_from_positions"] = self.acc_fit.to_dict()
+        return out
 
     def observed(self) -> Dict[str, Dict[str, Any]]:
         out = super().observed()
@@ -306,11 +368,20 @@ class PosesSource(Source):
                    "a low-pass the IMU does not need; kept at the prior (identity, no filter)")
             for k in ("accelerometer.matrix", "cutoff_gyro", "cutoff_acc"):
                 out[k] = {"observed": False, "why": why}
+            if self.acc_refused:
+                out["accelerometer.matrix"] = {"observed": False, "why": why + "; from its positions: " + self.acc_refused}
         if ref is not None and ref.applied.get("level"):
             out["accelerometer.bias"] = {
                 "observed": True, "partly": "along gravity only: across it the bias and the tilt of the reference's "
                 f"world (levelled by calibrate, {ref.tilt_deg:.1f}° off) are one and the same unless the attitude "
                 "varies widely; the levelling absorbs part of it (0.1 m/s^2 is 0.6° of tilt)"}
+        if self.acc_fit is not None:
+            how = ("from the reference's positions, not its velocity: second differences over +-"
+                   f"{self.acc_fit.options.baseline_s:g} s (reference.accelerometer_from_positions)")
+            out["accelerometer.matrix"] = {"observed": True, "how": how}
+            if self.acc_fit.options.fit_tilt:
+                out["accelerometer.bias"] = {"observed": True, "how": how + "; each recording's world tilt fitted "
+                                             "with it (told apart from the bias by the attitude's changes of heading)"}
         if ref is not None and ref.applied.get("lag"):
             out["time_offset"] = {"observed": False, "why": f"the reference's stamps were {ref.lag_s * 1e3:+.0f} ms "
                                   "off the IMU's; the IMU's own offset cannot be told apart from the reference's latency: "
