@@ -258,3 +258,23 @@ def test_staged_dir_error_leaves_the_folder_and_symlinks_stay(tmp_path):
     with pytest.raises(NotADirectoryError, match="not a folder"):
         with staged_dir(tmp_path / "file"):
             pass
+
+
+@pytest.mark.parametrize("delay_s", [0.1, 0.25, 0.5])
+def test_ctrl_c_while_the_command_starts_exits_130_without_a_traceback(short, tmp_path, delay_s):
+    """Ctrl-C while the console command imports numpy, the core, torch: exit 130 and at most one line
+    (the first tens of ms, before Python's own handler exists, the signal ends the process as 130 too)."""
+    rec, tum = short
+    out = tmp_path / "out"
+    proc = subprocess.Popen([sys.executable, "-c", "import sys; from imu_learn.cli import main; sys.exit(main())",
+                             *args(rec, tum, out, "--quiet")], cwd=REPO, env=ENV, stdout=subprocess.PIPE,
+                            stderr=subprocess.PIPE, text=True)
+    try:
+        time.sleep(delay_s)
+        proc.send_signal(signal.SIGINT)
+        _, err = proc.communicate(timeout=120)
+    finally:
+        reap(proc)
+    assert proc.returncode in (130, -signal.SIGINT), err
+    assert not any(c in err for c in CRASH) and err.count("\n") <= 1, err[-300:]
+    assert not out.exists()

@@ -18,9 +18,14 @@ error rule, the logging set-up and the flags every subcommand has (``--quiet``, 
 from __future__ import annotations
 
 import sys
-from typing import Any, List, Optional
 
-from imu_learn.cli.common import COMMANDS, EXIT_ERROR, run_command
+try:  # the command's start (typing, numpy, the core): a Ctrl-C here exits 130 in one line too
+    from typing import Any, List, Optional
+
+    from imu_learn.cli.common import COMMANDS, EXIT_ERROR, run_command
+except KeyboardInterrupt:
+    sys.stderr.write("imu-learn: interrupted\n")
+    raise SystemExit(130) from None
 
 
 def usage() -> str:
