@@ -34,7 +34,7 @@ from __future__ import annotations
 import json
 import math
 from pathlib import Path
-from typing import Dict, List, Tuple
+from typing import Callable, Dict, List, Tuple
 from typing import Sequence as Seq
 
 import numpy as np
@@ -99,6 +99,23 @@ class RotationWindows:
         return float(np.mean(np.where(a <= delta, 0.5 * a * a, delta * (a - 0.5 * delta))))
 
 
+def golden_section(f: Callable[[float], float], a: float, b: float, tol: float) -> Tuple[float, float]:
+    """(x, f(x)) of the lower of the two last interior points of a golden-section search for a
+    minimum of ``f`` in [a, b], stopped when the bracket is at most ``tol`` wide."""
+    c, d = b - GOLDEN * (b - a), a + GOLDEN * (b - a)
+    fc, fd = f(c), f(d)
+    while b - a > tol:
+        if fc < fd:
+            b, d, fd = d, c, fc
+            c = b - GOLDEN * (b - a)
+            fc = f(c)
+        else:
+            a, c, fc = c, d, fd
+            d = a + GOLDEN * (b - a)
+            fd = f(d)
+    return (c, fc) if fc <= fd else (d, fd)
+
+
 def fit_offset(windows: RotationWindows, max_shift: float, grid_step: float, tol: float,
                delta: float) -> Tuple[float, List[float], List[float]]:
     """(tau minimising ``windows.cost``, the grid, the cost at each grid point): grid, then golden
@@ -107,19 +124,8 @@ def fit_offset(windows: RotationWindows, max_shift: float, grid_step: float, tol
     grid = [i * grid_step for i in range(-k, k + 1)]
     costs = [windows.cost(t, delta) for t in grid]
     i = int(np.argmin(costs))
-    a, b = grid[max(i - 1, 0)], grid[min(i + 1, len(grid) - 1)]
-    c, d = b - GOLDEN * (b - a), a + GOLDEN * (b - a)
-    fc, fd = windows.cost(c, delta), windows.cost(d, delta)
-    while b - a > tol:
-        if fc < fd:
-            b, d, fd = d, c, fc
-            c = b - GOLDEN * (b - a)
-            fc = windows.cost(c, delta)
-        else:
-            a, c, fc = c, d, fd
-            d = a + GOLDEN * (b - a)
-            fd = windows.cost(d, delta)
-    best = min([(costs[i], grid[i]), (fc, c), (fd, d)])
+    x, fx = golden_section(lambda t: windows.cost(t, delta), grid[max(i - 1, 0)], grid[min(i + 1, len(grid) - 1)], tol)
+    best = min([(costs[i], grid[i]), (fx, x)])
     return float(best[1]), grid, [float(x) for x in costs]
 
 

@@ -12,28 +12,29 @@ per sensor, or none); the specific force that drives the g-sensitivity is the re
 with the gyro's cutoff.
 
 Fit (``fit``): nonlinear least squares *through the same zero-order-hold integration* that the
-evaluation uses (the scheme of :func:`imu_learn.nn.integration.integrate`, in float64; agrees with
-the core's ``integrate_windows`` to ~1e-15), on short windows of the
-training sequences (``window`` samples, labels at the paper's fractions of it):
+evaluation uses (the scheme of :func:`imu_learn.nn.integration.integrate` and of the core's
+``integrate_windows``, in float64, numpy; they agree to ~1e-15), on short windows of the training
+sequences (``window`` samples, labels at the paper's fractions of it):
 
 1. gyro: residuals Log(Δq_gt ⊗ Δq̂⁻¹) at every horizon of every window;
 2. accel, with the fitted gyro model fixed: residuals Δβ_gt − Δβ̂ and Δγ_gt − Δγ̂.
 
 Both are solved by Levenberg–Marquardt with Huber IRLS weights on the norm of each residual
-3-vector (``huber_rot`` rad, ``huber_vel``; ground-truth glitches pull only linearly), in torch
-float64. The model is affine in its 21 (gyro) and 12 (accel) parameters, so the problem is close
-to linear and converges in a few iterations (about five). The Jacobians are exact and analytic, one
-pass over the windows each: for the gyro, perturbing sample k's rate by δ rotates the increment by
-R(Q_k) J_r(ω_k dt) dt δ (Q_k the product up to sample k, J_r SO(3)'s right Jacobian) and the residual
-by −J_r⁻¹(r) of that (:func:`_rot_jacobian`); the velocity/position residuals are bilinear in
-(M_a, b_a) (:meth:`_VelResiduals.jacobian`). They agree with central differences to ~1e-11 relative,
-and replaced forward differences with every parameter perturbed in one batched evaluation (22 and
-13 integrations per iteration, ~6e-8 relative error): the same parameters to ~1e-8, 10× less work.
-The rotation residuals only need the products up to the horizons
-(:func:`rotation_increments`), and with the gyro fixed the accelerometer residuals are cumulative
-sums over fixed rotations (:class:`_VelResiduals`; those rotations are computed once per split and
-gyro cutoff, not per accelerometer cutoff). A weak prior (``prior`` × (M − I), ``prior`` × G,
-as residuals) keeps directions the training motion does not excite at the identity.
+3-vector (``huber_rot`` rad, ``huber_vel``; ground-truth glitches pull only linearly), in numpy
+float64 (no torch: ``imu-learn calibrate`` never loads it). The model is affine in its 21 (gyro) and
+12 (accel) parameters, so the problem is close to linear and converges in a few iterations. The
+Jacobians are exact and analytic, one pass over the windows each: for the gyro, perturbing sample
+k's rate by δ rotates the increment by R(Q_k) J_r(ω_k dt) dt δ (Q_k the product up to sample k, J_r
+SO(3)'s right Jacobian) and the residual by −J_r⁻¹(r) of that (:meth:`_RotResiduals.jacobian`, on the
+products the residuals just computed). With the gyro fixed the accelerometer residuals are *linear*
+in (M_a − I, c = M_a b_a): :class:`_VelResiduals` sums each window's rotations against the samples
+once (``Φ``, per split and cutoff; the rotations once per split and gyro cutoff) and every residual
+and Jacobian after that is a product with ``Φ`` (the solve stays in (M_a, b_a), the same minimum).
+A weak prior (``prior`` × (M − I), ``prior`` × G, as residuals) keeps directions the training motion
+does not excite at the identity. The solve stops when a step lowers the cost by at most ``tol``
+(1e-8) of it or moves θ by at most ``tol`` of its size: on EuRoC's five training flights the same
+iterations as the torch fit this replaced (1e-10) and the same parameters, within 6e-9 of their
+standard deviation (docs/experiments/benchmarks.md, "calibrate's time").
 
 The cutoffs are chosen from a small grid (``cutoffs_hz``, ``None`` = no filter) on the *validation*
 sequences by the same residuals (RMS of |r| over windows and horizons, no prior): the gyro model is
@@ -53,15 +54,16 @@ validation split keeps tau = 0 when the fitted offset does not lower its cost. P
 ``traditional`` keeps tau = 0 (its saved fits, with or without a ``time_offset`` entry, load as
 before).
 
-Threads: the fit runs with ``threads`` torch threads (default 1, at most ``settings.threads``;
-:func:`imu_learn.util.threads.thread_limits`, restored afterwards). It is thousands of operations
-of a few milliseconds each: beside other CPU-bound work on two cores, two OpenMP threads made the
-EuRoC fit and its refits 4-5× slower than one (41-60 s against 9-14 s: every parallel region waits
-for its descheduled second thread); what a second thread gains on an idle machine was not measured.
+Threads: the fit runs with ``threads`` BLAS threads (default 1, at most ``settings.threads``;
+:func:`imu_learn.util.threads.thread_limits`, restored afterwards; torch's pool too where torch is
+loaded). It is many numpy operations of a millisecond or less: beside other CPU-bound work on two
+cores a second thread waits more than it helps (when the fit ran in torch, two OpenMP threads made
+it 4-5× slower than one).
 
 ``refit`` fits the affine parameters again on a part of the data with a fit's cutoffs kept and its
-parameters as the start (the time offset searched again): what calibrate's uncertainty needs per
-recording, at a fraction of a fit's cost.
+parameters as the start, and the time offset searched again from the fit's (a golden-section
+search within ±``OFFSET_BRACKET`` samples of it; the whole grid where the minimum lies at that
+bracket's edge): what calibrate's uncertainty needs per recording, at a fraction of a fit's cost.
 """
 from __future__ import annotations
 
@@ -69,55 +71,56 @@ import json
 import math
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Callable, Dict, List, Optional, Tuple
+from typing import Any, Callable, Dict, List, Optional, Tuple
 from typing import Sequence as Seq
 
 import numpy as np
-import torch
 
 from imu_learn.baselines import affine
 from imu_learn.baselines.affine import TraditionalParams, lowpass  # noqa: F401  (lowpass: re-exported)
 from imu_learn.baselines.base import FitSettings, Method
-from imu_learn.baselines.timing import RotationWindows, fit_offset, shifted
+from imu_learn.baselines.timing import RotationWindows, fit_offset, golden_section, shifted
 from imu_learn.core.integration import PAPER_FRACTIONS, window_labels
+from imu_learn.core.quat import quat_conj, quat_log, quat_mul
 from imu_learn.data.types import Segment, sample_rate_hz
-from imu_learn.nn.so3 import quat_conj, quat_mul, so3_exp, so3_log
 from imu_learn.util.threads import thread_limits
-
-Tensor = torch.Tensor
 
 DEFAULT_CUTOFFS: Tuple[Optional[float], ...] = (None, 40.0, 20.0, 10.0, 5.0)
 ACC_BIAS_ONLY = 1e6  # ``acc_prior`` that holds M_a at the identity (|M_a - I| below 1e-9 on real data)
+TOL = 1e-8  # the solve's stopping rule (relative cost decrease or step; module doc)
+OFFSET_BRACKET = 0.5  # a refit searches its time offset within this many samples of the fit's first
 
 
-def _gyro_model(theta: Tensor, g_m: Tensor, a_m: Tensor) -> Tensor:
-    """θ (..., 21) = (M_g − I, b_g, G) row-major; inputs (B, W, 3) -> (..., B, W, 3)."""
-    lead = theta.shape[:-1]
-    M = torch.eye(3, dtype=theta.dtype) + theta[..., :9].reshape(*lead, 3, 3)
-    b = theta[..., 9:12].reshape(*lead, 1, 1, 3)
-    G = theta[..., 12:21].reshape(*lead, 3, 3)
-    return torch.einsum("...ij,...bwj->...bwi", M, g_m - b) - torch.einsum("...ij,bwj->...bwi", G, a_m)
+def _exp(phi: np.ndarray) -> Tuple[np.ndarray, np.ndarray]:
+    """Rotation vectors, components first (3, ...) -> unit quaternions (4, ...) (w, x, y, z; the
+    branches of :func:`imu_learn.nn.so3.so3_exp`), and θ² (...)."""
+    px, py, pz = phi
+    t2 = px * px + py * py + pz * pz
+    small = t2 < 1e-8
+    t = np.sqrt(np.where(small, 1.0, t2))
+    s = np.where(small, 0.5 - t2 / 48.0, np.sin(0.5 * t) / t)
+    c = np.where(small, 1.0 - t2 / 8.0, np.cos(0.5 * t))
+    return np.stack((c, s * px, s * py, s * pz)), t2
 
 
-def _acc_model(theta: Tensor, a_m: Tensor) -> Tensor:
-    """θ (..., 12) = (M_a − I, b_a); input (B, W, 3) -> (..., B, W, 3)."""
-    lead = theta.shape[:-1]
-    M = torch.eye(3, dtype=theta.dtype) + theta[..., :9].reshape(*lead, 3, 3)
-    b = theta[..., 9:12].reshape(*lead, 1, 1, 3)
-    return torch.einsum("...ij,...bwj->...bwi", M, a_m - b)
+def _gyro_model(theta: np.ndarray, g_m: np.ndarray, a_m: np.ndarray) -> np.ndarray:
+    """θ (21,) = (M_g − I, b_g, G) row-major; inputs (B, W, 3) -> (B, W, 3)."""
+    M = np.eye(3) + theta[:9].reshape(3, 3)
+    G = theta[12:21].reshape(3, 3)
+    return ((g_m - theta[9:12]).reshape(-1, 3) @ M.T - a_m.reshape(-1, 3) @ G.T).reshape(g_m.shape)
 
 
 @dataclass
 class _Windows:
-    """Training/validation windows of one or more sequences, gathered (all float64 tensors)."""
+    """Training/validation windows of one or more sequences, gathered (all float64 arrays)."""
 
-    gyro: Tensor  # (B, W, 3) filtered with the gyro cutoff
-    acc_g: Tensor  # (B, W, 3) specific force filtered with the gyro cutoff (g-sensitivity input)
-    acc: Tensor  # (B, W, 3) filtered with the accel cutoff
-    dt: Tensor  # (B, W)
-    dq: Tensor  # (B, H, 4)
-    dv: Tensor  # (B, H, 3)
-    dp: Tensor  # (B, H, 3)
+    gyro: np.ndarray  # (B, W, 3) filtered with the gyro cutoff
+    acc_g: np.ndarray  # (B, W, 3) specific force filtered with the gyro cutoff (g-sensitivity input)
+    acc: np.ndarray  # (B, W, 3) filtered with the accel cutoff
+    dt: np.ndarray  # (B, W)
+    dq: np.ndarray  # (B, H, 4)
+    dv: np.ndarray  # (B, H, 3)
+    dp: np.ndarray  # (B, H, 3)
     horizons: List[int]
     key: Tuple[int, Optional[float]] = (0, None)  # (id of the _Data, the gyro cutoff): same key, same gyro windows
 
@@ -143,7 +146,7 @@ class _Data:
             self.items.append((s, sample_rate_hz(s.t_ns), dt, lab))
         self.horizons = [int(h) for h in self.items[0][3].horizons] if self.items else []
         self.window = window
-        self._cache: Dict[tuple, object] = {}  # filtered signals and gathered windows
+        self._cache: Dict[tuple, Any] = {}  # filtered signals and gathered windows
 
     def __len__(self) -> int:
         return sum(len(it[3].starts) for it in self.items)
@@ -154,9 +157,9 @@ class _Data:
             self._cache[key] = [lowpass(getattr(s, which), fs, cutoff, self.order) for s, fs, _, _ in self.items]
         return self._cache[key]  # type: ignore[return-value]
 
-    def _gathered(self, which: str, cutoff: Optional[float] = None) -> Tensor:
+    def _gathered(self, which: str, cutoff: Optional[float] = None) -> np.ndarray:
         """The windows of one signal ("gyro"/"acc" at a cutoff, or "dt", "dq", "dv", "dp") gathered
-        into one tensor, once per (signal, cutoff): the grid asks for the same ones many times."""
+        into one array, once per (signal, cutoff): the grid asks for the same ones many times."""
         key = ("gather", which, cutoff)
         if key not in self._cache:
             ar = np.arange(self.window)
@@ -167,7 +170,7 @@ class _Data:
                 parts = [dt[lab.starts.astype(np.int64)[:, None] + ar] for _, _, dt, lab in self.items]
             else:
                 parts = [getattr(lab, "dq_wxyz" if which == "dq" else which) for _, _, _, lab in self.items]
-            self._cache[key] = torch.from_numpy(np.ascontiguousarray(np.concatenate(parts), dtype=np.float64))
+            self._cache[key] = np.ascontiguousarray(np.concatenate(parts), dtype=np.float64)
         return self._cache[key]
 
     def windows(self, cutoff_gyro: Optional[float], cutoff_acc: Optional[float]) -> _Windows:
@@ -176,270 +179,258 @@ class _Data:
                         dq=g("dq"), dv=g("dv"), dp=g("dp"), horizons=self.horizons, key=(id(self), cutoff_gyro))
 
 
-def _tree_product(q: Tensor) -> Tensor:
-    """Ordered product q[..., 0, :] ⊗ q[..., 1, :] ⊗ ... along dim -2 by pairwise reduction."""
-    while q.shape[-2] > 1:
-        if q.shape[-2] % 2:
-            ident = torch.zeros_like(q[..., :1, :])
-            ident[..., 0] = 1.0
-            q = torch.cat((q, ident), dim=-2)
-        q = quat_mul(q[..., 0::2, :], q[..., 1::2, :])
-    return q[..., 0, :]
+def _prefix_rotations(step: np.ndarray) -> np.ndarray:
+    """Inclusive prefix product along axis 1 of quaternions (4, W, B), components first: out[:, k] =
+    step[:, 0] ⊗ ... ⊗ step[:, k], chained sample by sample (the integration's own order) over the B
+    windows at once: W small products cost less than a log-depth scan's W·log2 W on this size."""
+    out = np.empty_like(step)
+    w, x, y, z = out[:, 0] = step[:, 0]
+    for k in range(1, step.shape[1]):
+        bw, bx, by, bz = step[:, k]
+        w, x, y, z = (w * bw - x * bx - y * by - z * bz, w * bx + x * bw + y * bz - z * by,
+                      w * by - x * bz + y * bw + z * bx, w * bz + x * by - y * bx + z * bw)
+        out[0, k], out[1, k], out[2, k], out[3, k] = w, x, y, z
+    return out
 
 
-def rotation_increments(gyro: Tensor, dt: Tensor, horizons: Seq[int]) -> Tensor:
-    """Δq (..., H, 4) after the first h samples, h in ``horizons`` (increasing): the same zero-order
-    hold as :func:`imu_learn.nn.integration.integrate`, but only the products up to the horizons
-    (pairwise within each segment between horizons, then chained), so about W quaternion products
-    instead of W·log2 W. gyro (..., W, 3), dt broadcastable to (..., W)."""
-    step = so3_exp(gyro * dt.unsqueeze(-1))
-    out, acc, prev = [], None, 0
-    for h in horizons:
-        seg = _tree_product(step[..., prev:h, :])
-        acc = seg if acc is None else quat_mul(acc, seg)
-        out.append(acc)
-        prev = h
-    return torch.stack(out, dim=-2)
+def _components(x: np.ndarray) -> np.ndarray:
+    """(B, W, C) -> (C, W, B), contiguous: the layout of the sample-by-sample chain."""
+    return np.ascontiguousarray(x.transpose(2, 1, 0))
 
 
-def _rot_residuals(theta: Tensor, w: _Windows) -> Tensor:
-    """θ (K, 21) -> (K, B·H·3) residuals Log(Δq_gt ⊗ Δq̂⁻¹)."""
-    dq = rotation_increments(_gyro_model(theta, w.gyro, w.acc_g), w.dt, w.horizons)
-    return so3_log(quat_mul(w.dq, quat_conj(dq))).reshape(theta.shape[0], -1)
+def rotation_increments(gyro: np.ndarray, dt: np.ndarray, horizons: Seq[int]) -> np.ndarray:
+    """Δq (B, H, 4) after the first h samples, h in ``horizons``: the zero-order hold of
+    :func:`imu_learn.nn.integration.integrate` (the core's ``integrate_windows``). gyro (B, W, 3), dt (B, W)."""
+    Q = _prefix_rotations(_exp(_components(gyro * dt[..., None]))[0])
+    return np.ascontiguousarray(Q[:, [h - 1 for h in horizons]].transpose(2, 1, 0))
 
 
-class _RotResiduals:
-    """:func:`_rot_residuals` on fixed windows, with its exact Jacobian (:func:`_rot_jacobian`)."""
-
-    def __init__(self, w: _Windows) -> None:
-        self.w = w
-
-    def __call__(self, theta: Tensor) -> Tensor:
-        return _rot_residuals(theta, self.w)
-
-    def jacobian(self, theta: Tensor, r: Tensor) -> Tensor:
-        return _rot_jacobian(theta, r, self.w)
+def _quat_matrix(q: np.ndarray) -> Tuple[Tuple[np.ndarray, ...], ...]:
+    """Rotation matrix of unit quaternions, components first (4, ...) (w, x, y, z): its rows of entries (...)."""
+    w, x, y, z = q
+    xx, yy, zz, xy, xz, yz, wx, wy, wz = x * x, y * y, z * z, x * y, x * z, y * z, w * x, w * y, w * z
+    return ((1 - 2 * (yy + zz), 2 * (xy - wz), 2 * (xz + wy)), (2 * (xy + wz), 1 - 2 * (xx + zz), 2 * (yz - wx)),
+            (2 * (xz - wy), 2 * (yz + wx), 1 - 2 * (xx + yy)))
 
 
-def _so3_jacobian_coefficients(t2: Tensor, inverse: bool) -> Tuple[Tensor, Tensor]:
+def _so3_jacobian_coefficients(t2: np.ndarray, inverse: bool) -> Tuple[np.ndarray, np.ndarray]:
     """(c1, c2) of J_r = I − c1 [φ]× + c2 [φ]×² (or of its inverse) at θ² = ``t2``."""
     small = t2 < 1e-8
-    t2s = torch.where(small, torch.ones_like(t2), t2)
-    t = torch.sqrt(t2s)
+    t2s = np.where(small, 1.0, t2)
+    t = np.sqrt(t2s)
     if inverse:
-        c2 = torch.where(small, torch.full_like(t2, 1.0 / 12.0), 1.0 / t2s - (1.0 + torch.cos(t)) / (2.0 * t * torch.sin(t)))
-        return torch.full_like(t2, -0.5), c2
-    c1 = torch.where(small, 0.5 - t2 / 24.0, (1.0 - torch.cos(t)) / t2s)
-    c2 = torch.where(small, 1.0 / 6.0 - t2 / 120.0, (t - torch.sin(t)) / (t2s * t))
+        c2 = np.where(small, 1.0 / 12.0, 1.0 / t2s - (1.0 + np.cos(t)) / (2.0 * t * np.sin(t)))
+        return np.full_like(t2, -0.5), c2
+    c1 = np.where(small, 0.5 - t2 / 24.0, (1.0 - np.cos(t)) / t2s)
+    c2 = np.where(small, 1.0 / 6.0 - t2 / 120.0, (t - np.sin(t)) / (t2s * t))
     return c1, c2
 
 
-def _so3_jacobian(phi: Tensor, inverse: bool) -> Tensor:
+def _so3_jacobian(phi: np.ndarray, inverse: bool) -> np.ndarray:
     """The right Jacobian J_r(φ) of SO(3) (Exp(φ + δ) ≈ Exp(φ) Exp(J_r δ)), or its inverse, (..., 3, 3):
     J_r = I − c1 [φ]× + c2 [φ]×² with c1 = (1 − cos θ)/θ², c2 = (θ − sin θ)/θ³; J_r⁻¹ = I + ½ [φ]× +
     (1/θ² − (1 + cos θ)/(2θ sin θ)) [φ]×²; [φ]×² = φφᵀ − θ² I. Written out entry by entry."""
-    x, y, z = phi.unbind(-1)
+    x, y, z = np.moveaxis(phi, -1, 0)
     t2 = x * x + y * y + z * z
     c1, c2 = _so3_jacobian_coefficients(t2, inverse)
     a = 1.0 - c2 * t2
     cx, cy, cz = c1 * x, c1 * y, c1 * z
     xy, xz, yz = c2 * x * y, c2 * x * z, c2 * y * z
-    return torch.stack((a + c2 * x * x, xy + cz, xz - cy, xy - cz, a + c2 * y * y, yz + cx, xz + cy, yz - cx,
-                        a + c2 * z * z), dim=-1).reshape(*phi.shape[:-1], 3, 3)
+    return np.stack((a + c2 * x * x, xy + cz, xz - cy, xy - cz, a + c2 * y * y, yz + cx, xz + cy, yz - cx,
+                     a + c2 * z * z), axis=-1).reshape(*phi.shape[:-1], 3, 3)
 
 
-def _quat_matrix(q: Tensor) -> Tensor:
-    """Rotation matrix (..., 3, 3) of unit quaternions (..., 4) (w, x, y, z)."""
-    w, x, y, z = q.unbind(-1)
-    xx, yy, zz, xy, xz, yz, wx, wy, wz = x * x, y * y, z * z, x * y, x * z, y * z, w * x, w * y, w * z
-    return torch.stack((1 - 2 * (yy + zz), 2 * (xy - wz), 2 * (xz + wy), 2 * (xy + wz), 1 - 2 * (xx + zz),
-                        2 * (yz - wx), 2 * (xz - wy), 2 * (yz + wx), 1 - 2 * (xx + yy)), dim=-1).reshape(*q.shape[:-1], 3, 3)
-
-
-def _horizon_sums(A: Tensor, f: Tensor, horizons: Seq[int]) -> Tensor:
-    """Σ_{k<h} A_k ⊗ f_k (B, H, 3, 3, F) for A (B, W, 3, 3), f (B, W, F): one batched matrix product per
-    stretch between horizons, then chained."""
-    B, W = A.shape[:2]
-    At = A.reshape(B, W, 9).transpose(1, 2)
+def _horizon_sums(A: np.ndarray, f: np.ndarray, horizons: Seq[int]) -> np.ndarray:
+    """Σ_{k<h} A_k ⊗ f_k (B, H, 9, F) for A (B, 9, W) (each sample's 3×3 row-major), f (B, W, F): one
+    batched matrix product per stretch between horizons, then chained."""
     out, acc, prev = [], None, 0
     for h in horizons:
-        seg = At[:, :, prev:h] @ f[:, prev:h]  # (B, 9, F)
+        seg = A[:, :, prev:h] @ f[:, prev:h]  # (B, 9, F)
         acc = seg if acc is None else acc + seg
         out.append(acc)
         prev = h
-    return torch.stack(out, dim=1).reshape(B, len(out), 3, 3, f.shape[-1])
+    return np.stack(out, axis=1)
 
 
-def _rot_jacobian(theta: Tensor, r: Tensor, w: _Windows) -> Tensor:
-    """The exact Jacobian (B·H·3, 21) of :func:`_rot_residuals` at θ (21,) with residuals r (B·H·3,).
+class _RotResiduals:
+    """Rotation residuals Log(Δq_gt ⊗ Δq̂⁻¹) (B·H·3,) of θ (21,) on fixed windows, with their exact
+    Jacobian (:meth:`jacobian`). Works on the windows components first ((3, W, B): the chain's
+    layout); the rotations of the last evaluation are kept for the Jacobian at that θ."""
 
-    Perturbing sample k's rate by δ_k turns Δq̂ into Exp(ψ) Δq̂ with ψ = Σ_{k<h} R(Q_k) J_r(ω_k dt_k) dt_k δ_k
-    (Q_k the product up to and including sample k), and the residual Log(E Exp(−ψ)) moves by
-    −J_r⁻¹(r) ψ; the model is affine in θ, so ∂ω_k/∂θ is exact. One pass over the windows instead of
-    one integration per parameter (the forward differences this replaces)."""
-    B, W, _ = w.gyro.shape
-    M = torch.eye(3, dtype=theta.dtype) + theta[:9].reshape(3, 3)
-    b = theta[9:12]
-    phi = _gyro_model(theta[None], w.gyro, w.acc_g)[0] * w.dt.unsqueeze(-1)
-    # A_k = R(Q_k) J_r(φ_k) dt_k column by column: J_r = a I − c1 [φ]× + c2 φφᵀ, a = 1 − c2 θ², so
-    # A[:, j] = (a R_j − c1 (R [φ]×)_j + c2 φ_j R φ) dt with R_j the columns of R(Q_k)
-    R = _quat_matrix(_prefix_rotations(so3_exp(phi)))
-    R0, R1, R2 = R[..., 0], R[..., 1], R[..., 2]
-    x, y, z = (c.unsqueeze(-1) for c in phi.unbind(-1))
-    c1, c2 = _so3_jacobian_coefficients((phi * phi).sum(-1, keepdim=True), False)
-    a, Rphi, dt = 1.0 - c2 * (x * x + y * y + z * z), x * R0 + y * R1 + z * R2, w.dt.unsqueeze(-1)
-    A = torch.stack(((a * R0 - c1 * (z * R1 - y * R2) + c2 * x * Rphi) * dt,
-                     (a * R1 - c1 * (x * R2 - z * R0) + c2 * y * Rphi) * dt,
-                     (a * R2 - c1 * (y * R0 - x * R1) + c2 * z * Rphi) * dt), dim=-1)  # (B, W, 3, 3)
-    H = len(w.horizons)
-    f = torch.cat((w.gyro - b, w.acc_g, torch.ones_like(w.dt).unsqueeze(-1)), dim=-1)  # (B, W, 7)
-    S = _horizon_sums(A, f, w.horizons)  # Σ_{k<h} A_k ⊗ f_k
-    dM, dG, A_h = S[..., :3].reshape(B, H, 3, 9), S[..., 3:6].reshape(B, H, 3, 9), S[..., 6]
-    dpsi = torch.cat((dM, -(A_h @ M), -dG), dim=-1)  # (B, H, 3, 21)
-    return -(_so3_jacobian(r.reshape(B, H, 3), True) @ dpsi).reshape(B * H * 3, 21)
+    def __init__(self, w: _Windows) -> None:
+        self.w = w
+        B, W, _ = w.gyro.shape
+        self.shape = (W, B)
+        self.g = _components(w.gyro).reshape(3, W * B)
+        self.a = _components(w.acc_g).reshape(3, W * B)
+        self.dt = np.ascontiguousarray(w.dt.T)  # (W, B)
+        self.idx = [h - 1 for h in w.horizons]
+        self._f: Optional[np.ndarray] = None  # (B, W, 7): the rates, the specific force, 1
+        self._last: Optional[Tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]] = None  # (θ, φ, θ², products)
+
+    def _products(self, theta: np.ndarray) -> Tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """φ = ω dt (3, W, B), its θ² (W, B) and the inclusive products Q (4, W, B) at θ."""
+        if self._last is None or not np.array_equal(self._last[0], theta):
+            M = np.eye(3) + theta[:9].reshape(3, 3)
+            omega = M @ self.g - theta[12:21].reshape(3, 3) @ self.a - (M @ theta[9:12])[:, None]
+            phi = omega.reshape(3, *self.shape) * self.dt
+            step, t2 = _exp(phi)
+            self._last = (np.array(theta, dtype=np.float64), phi, t2, _prefix_rotations(step))
+        return self._last[1], self._last[2], self._last[3]
+
+    def __call__(self, theta: np.ndarray) -> np.ndarray:
+        Q = self._products(theta)[2][:, self.idx]  # (4, H, B)
+        return quat_log(quat_mul(self.w.dq, quat_conj(Q.transpose(2, 1, 0)))).reshape(-1)
+
+    def jacobian(self, theta: np.ndarray, r: np.ndarray) -> np.ndarray:
+        """The exact Jacobian (B·H·3, 21) at θ with residuals r.
+
+        Perturbing sample k's rate by δ_k turns Δq̂ into Exp(ψ) Δq̂ with ψ = Σ_{k<h} R(Q_k) J_r(φ_k) dt_k δ_k
+        (Q_k the product up to and including sample k, φ_k = ω_k dt_k), and the residual Log(E Exp(−ψ))
+        moves by −J_r⁻¹(r) ψ; the model is affine in θ, so ∂ω_k/∂θ is exact: (g_k − b) ⊗ for M_g, −M_g
+        for b_g, −a_k ⊗ for G, and Σ A_k (g_k − b) = Σ A_k g_k − (Σ A_k) b."""
+        w = self.w
+        W, B = self.shape
+        H = len(w.horizons)
+        M = np.eye(3) + theta[:9].reshape(3, 3)
+        phi, t2, Q = self._products(theta)
+        R = _quat_matrix(Q)
+        # J_r(φ) dt = a I − c1 [φ]× + c2 φφᵀ with a = (1 − c2 θ²) dt (c1, c2 times dt), entry by entry
+        c1, c2 = _so3_jacobian_coefficients(t2, False)
+        a, c1, c2 = (1.0 - c2 * t2) * self.dt, c1 * self.dt, c2 * self.dt
+        x, y, z = phi
+        cx, cy, cz, qx, qy, qz = c1 * x, c1 * y, c1 * z, c2 * x, c2 * y, c2 * z
+        Jr = ((a + qx * x, qx * y + cz, qx * z - cy), (qx * y - cz, a + qy * y, qy * z + cx),
+              (qx * z + cy, qy * z - cx, a + qz * z))
+        A = np.empty((9, W, B))  # A_k = R(Q_k) J_r(φ_k) dt_k, entry (r, i) in row 3r + i
+        for rr in range(3):
+            for i in range(3):
+                np.add(R[rr][0] * Jr[0][i] + R[rr][1] * Jr[1][i], R[rr][2] * Jr[2][i], out=A[3 * rr + i])
+        if self._f is None:
+            self._f = np.concatenate((w.gyro, w.acc_g, np.ones((B, W, 1))), axis=-1)
+        S = _horizon_sums(np.ascontiguousarray(A.transpose(2, 0, 1)), self._f, w.horizons)  # (B, H, 9, 7)
+        S = S.reshape(B, H, 3, 3, 7)
+        A_h = S[..., 6]  # Σ A_k (B, H, 3, 3)
+        dM = (S[..., :3] - A_h[..., None] * theta[9:12]).reshape(B, H, 3, 9)
+        dpsi = np.concatenate((dM, -(A_h @ M), -S[..., 3:6].reshape(B, H, 3, 9)), axis=-1)  # (B, H, 3, 21)
+        return -(_so3_jacobian(r.reshape(B, H, 3), True) @ dpsi).reshape(B * H * 3, 21)
 
 
-def _prefix_rotations(step: Tensor) -> Tensor:
-    """Inclusive prefix product along dim 1 of quaternions (B, W, 4): out[:, k] = step[:, 0] ⊗ ... ⊗ step[:, k],
-    chained sample by sample (the integration's own order) over (B,) columns in numpy: W small products
-    cost less than a log-depth scan's W·log2 W on this size."""
-    s = np.ascontiguousarray(step.detach().numpy().transpose(1, 2, 0))  # (W, 4, B)
-    out = np.empty_like(s)
-    w, x, y, z = out[0] = s[0]
-    for k in range(1, s.shape[0]):
-        bw, bx, by, bz = s[k]
-        w, x, y, z = (w * bw - x * bx - y * by - z * bz, w * bx + x * bw + y * bz - z * by,
-                      w * by - x * bz + y * bw + z * bx, w * bz + x * by - y * bx + z * bw)
-        out[k, 0], out[k, 1], out[k, 2], out[k, 3] = w, x, y, z
-    return torch.from_numpy(np.ascontiguousarray(out.transpose(2, 0, 1)))
-
-
-def _held_rotations(gyro: Tensor, dt: Tensor) -> Tensor:
-    """Rotation matrices (B, W, 3, 3) in force while each sample is held (R_0 = I, R_{i+1} = R_i Exp(ω_i dt_i))."""
-    incl = _prefix_rotations(so3_exp(gyro * dt.unsqueeze(-1)))
-    ident = torch.zeros_like(incl[:, :1])
-    ident[..., 0] = 1.0
-    return _quat_matrix(torch.cat((ident, incl[:, :-1]), dim=1))
+def _held_rotations(gyro: np.ndarray, dt: np.ndarray) -> np.ndarray:
+    """R_k dt_k (B, 9, W) for rates (B, W, 3): the rotation matrix in force while each sample is held
+    (R_0 = I, R_{k+1} = R_k Exp(ω_k dt_k)), row-major, times the sample's dt (what :class:`_VelResiduals` takes)."""
+    step, _ = _exp(_components(gyro * dt[..., None]))
+    step[:, 1:] = step[:, :-1].copy()  # the products up to the sample before
+    step[:, 0] = np.array([1.0, 0.0, 0.0, 0.0])[:, None]
+    dtc = dt.T
+    return np.ascontiguousarray(np.stack([e * dtc for row in _quat_matrix(_prefix_rotations(step)) for e in row]
+                                         ).transpose(2, 0, 1))
 
 
 class _VelResiduals:
-    """Δβ/Δγ residuals for accelerometer parameters θ (K, 12) with the rotations fixed by the
-    (already calibrated) gyro: R_i from the same integration, then Δβ, Δγ are cumulative sums.
-    ``Rm``: those rotations (:func:`_held_rotations` of ``gyro``) when already computed (they do not
-    depend on the accelerometer's cutoff)."""
+    """Δβ/Δγ residuals (2·B·H·3,) of accelerometer parameters θ (12,) = (M_a − I, b_a) with the
+    rotations fixed by the (already calibrated) gyro: R_k from the same integration, then
+    Δβ_h = Σ_{k<h} R_k u_k dt_k and Δγ_h = Σ_{k<h} R_k u_k dt_k (½ dt_k + t_h − t_{k+1}), u_k = M_a (a_k − b_a).
+    Linear in (D = M_a − I, c = M_a b_a): the sums of R_k dt_k against (a_k, 1) and their Δγ weights
+    are taken once here (``Φ``), so a residual is y − Φ (D, c) and the Jacobian in (D, b_a) follows
+    from Φ. ``gyro``: the calibrated rates, or None with ``Rm`` (:func:`_held_rotations` of them: R_k dt_k,
+    which do not depend on the accelerometer's cutoff)."""
 
-    def __init__(self, gyro: Optional[Tensor], w: _Windows, Rm: Optional[Tensor] = None) -> None:
-        self.Rm = _held_rotations(gyro, w.dt) if Rm is None else Rm
-        self.cols = [self.Rm[..., j].contiguous() for j in range(3)]
-        self.w = w
-        self.idx = torch.as_tensor([h - 1 for h in w.horizons], dtype=torch.long)
-
-    def jacobian(self, theta: Tensor, r: Optional[Tensor] = None) -> Tensor:
-        """The exact Jacobian (2·B·H·3, 12) of the residuals at θ (12,) (r unused: the residuals are
-        bilinear in (M_a, b_a)): Δβ_h = Σ_{k<h} R_k u_k dt_k and Δγ_h = Σ_{k<h} R_k u_k dt_k (½ dt_k + t_h − t_{k+1}),
-        u_k = M_a (a_k − b_a)."""
-        w = self.w
+    def __init__(self, gyro: Optional[np.ndarray], w: _Windows, Rm: Optional[np.ndarray] = None) -> None:
+        if Rm is None:
+            assert gyro is not None, "_VelResiduals: give the rates or their rotations"
+            Rm = _held_rotations(gyro, w.dt)
         B, W, _ = w.acc.shape
         H = len(w.horizons)
-        M = torch.eye(3, dtype=theta.dtype) + theta[:9].reshape(3, 3)
-        T = torch.cat((torch.zeros_like(w.dt[:, :1]), torch.cumsum(w.dt, dim=1)), dim=1)  # t_m = Σ_{k<m} dt_k
+        T = np.concatenate((np.zeros((B, 1)), np.cumsum(w.dt, axis=1)), axis=1)  # t_m = Σ_{k<m} dt_k
         # Δγ's weight ½ dt_k + t_h − t_{k+1} = t_h − s_k: Σ_{k<h} s_k (...) rides along as more columns
-        s = (T[:, 1:] - 0.5 * w.dt).unsqueeze(-1)
-        f = torch.cat((w.acc - theta[9:12], torch.ones_like(s)), dim=-1)  # (B, W, 4)
-        S = _horizon_sums(self.Rm * w.dt[..., None, None], torch.cat((f, s * f), dim=-1), w.horizons)
+        s = (T[:, 1:] - 0.5 * w.dt)[..., None]
+        f = np.concatenate((w.acc, np.ones_like(s)), axis=-1)  # (B, W, 4)
+        S = _horizon_sums(Rm, np.concatenate((f, s * f), axis=-1), w.horizons).reshape(B, H, 3, 3, 8)
         t_h = T[:, list(w.horizons)][:, :, None, None, None]
-        out = []
-        for Sx in (S[..., :4], t_h * S[..., :4] - S[..., 4:]):  # Δβ, Δγ
-            out.append(torch.cat((Sx[..., :3].reshape(B, H, 3, 9), -(Sx[..., 3] @ M)), dim=-1).reshape(-1, 12))
-        return -torch.cat(out)
+        Sx = np.stack((S[..., :4], t_h * S[..., :4] - S[..., 4:]))  # (2, B, H, 3, 3, 4): Δβ, Δγ
+        # prediction Σ R dt (M a − c) = Σ_ij Sx[.., i, j] M_ij − Σ_i Sx[.., i, 3] c_i, M = I + D
+        y0 = Sx[..., 0, 0] + Sx[..., 1, 1] + Sx[..., 2, 2]  # (2, B, H, 3)
+        self.y = (np.stack((w.dv, w.dp)) - y0).reshape(-1)
+        self.phi_d = Sx[..., :3].reshape(2 * B * H * 3, 9)
+        self.phi_c = -Sx[..., 3].reshape(2 * B * H * 3, 3)
 
-    def __call__(self, theta: Tensor) -> Tensor:
-        w = self.w
-        dt3 = w.dt.unsqueeze(-1)
-        u = _acc_model(theta, w.acc)  # (K, B, W, 3)
-        R0, R1, R2 = self.cols
-        ra_dt = (R0 * u[..., 0:1] + R1 * u[..., 1:2] + R2 * u[..., 2:3]) * dt3  # R_i u_i dt_i, column by column
-        dv_incl = torch.cumsum(ra_dt, dim=-2)
-        dv_excl = dv_incl - ra_dt
-        dp_incl = torch.cumsum(dv_excl * dt3 + 0.5 * ra_dt * dt3, dim=-2)
-        K = theta.shape[0]
-        r_v = (w.dv - dv_incl[:, :, self.idx]).reshape(K, -1)
-        r_p = (w.dp - dp_incl[:, :, self.idx]).reshape(K, -1)
-        return torch.cat((r_v, r_p), dim=1)
+    def __call__(self, theta: np.ndarray) -> np.ndarray:
+        M = np.eye(3) + theta[:9].reshape(3, 3)
+        return self.y - self.phi_d @ theta[:9] - self.phi_c @ (M @ theta[9:12])
+
+    def jacobian(self, theta: np.ndarray, r: Optional[np.ndarray] = None) -> np.ndarray:
+        """The exact Jacobian (2·B·H·3, 12) at θ (r unused): ∂r/∂D_ij = −Φ_D[:, ij] − Φ_c[:, i] b_j,
+        ∂r/∂b = −Φ_c M_a."""
+        M = np.eye(3) + theta[:9].reshape(3, 3)
+        b = theta[9:12]
+        dD = self.phi_d + (self.phi_c[:, :, None] * b[None, None, :]).reshape(-1, 9)
+        return -np.concatenate((dD, self.phi_c @ M), axis=1)
 
 
-def _rms(res: Callable[[Tensor], Tensor], theta: np.ndarray) -> float:
+def _rms(res: Callable[[np.ndarray], np.ndarray], theta: np.ndarray) -> float:
     """RMS over windows and horizons of the norm of each 3-vector residual."""
-    with torch.no_grad():
-        r = res(torch.as_tensor(np.asarray(theta, dtype=np.float64))[None])[0].reshape(-1, 3)
-    return float(torch.sqrt((r * r).sum(-1).mean()))
+    r = res(np.asarray(theta, dtype=np.float64)).reshape(-1, 3)
+    return float(np.sqrt((r * r).sum(-1).mean()))
 
 
-def _huber_weights(r: Tensor, delta: float) -> Tensor:
+def _norms(r: np.ndarray) -> np.ndarray:
+    r3 = r.reshape(-1, 3)
+    return np.sqrt((r3 * r3).sum(-1))
+
+
+def _huber_weights(r: np.ndarray, delta: float) -> np.ndarray:
     """IRLS weights of the Huber loss on the norm of each 3-vector of r (R,), repeated per component."""
-    n = r.reshape(-1, 3).norm(dim=-1)
-    wt = torch.where(n <= delta, torch.ones_like(n), delta / n.clamp_min(1e-300))
-    return wt.repeat_interleave(3)
+    n = _norms(r)
+    return np.repeat(np.where(n <= delta, 1.0, delta / np.maximum(n, 1e-300)), 3)
 
 
-def _huber_cost(r: Tensor, delta: float) -> float:
-    n = r.reshape(-1, 3).norm(dim=-1)
-    return float(torch.where(n <= delta, 0.5 * n * n, delta * (n - 0.5 * delta)).sum())
+def _huber_cost(r: np.ndarray, delta: float) -> float:
+    n = _norms(r)
+    return float(np.where(n <= delta, 0.5 * n * n, delta * (n - 0.5 * delta)).sum())
 
 
-def _solve(
-    res: Callable[[Tensor], Tensor], x0: np.ndarray, prior_idx: np.ndarray, prior: float, delta: float,
-    max_iter: int, step: float = 1e-6, chunk: int = 8, tol: float = 1e-10,
-) -> np.ndarray:
+def _solve(res: Any, x0: np.ndarray, prior_idx: np.ndarray, prior: float, delta: float, max_iter: int,
+           tol: float = TOL) -> np.ndarray:
     """Levenberg–Marquardt with Huber IRLS weights on Σ ρ_δ(|r_j(θ)|) + ½ prior² |θ[prior_idx]|².
 
-    The Jacobian is ``res.jacobian(θ, r)`` where the residuals have one (both of :meth:`Traditional.fit`'s
-    stages: exact, one pass), else forward differences with all parameters perturbed in one batched
-    evaluation (``chunk`` candidates at a time). Everything stays in torch float64 (the normal
-    equations are P×P)."""
+    ``res(θ)`` gives the residuals (R,) and ``res.jacobian(θ, r)`` their exact Jacobian (R, P) (both
+    of :meth:`Traditional.fit`'s stages have one). Stops when a step lowers the cost by at most
+    ``tol`` of it or moves θ by at most ``tol`` (1 + |θ|), or when no damping finds a lower cost."""
     P = len(x0)
-    pmask = torch.zeros(P, dtype=torch.float64)
-    pmask[torch.as_tensor(prior_idx, dtype=torch.long)] = prior * prior
+    pmask = np.zeros(P)
+    pmask[np.asarray(prior_idx, dtype=np.int64)] = prior * prior
 
-    def batch(X: Tensor) -> Tensor:
-        return torch.cat([res(X[i:i + chunk]) for i in range(0, len(X), chunk)])
-
-    def cost(x: Tensor, r: Tensor) -> float:
+    def cost(x: np.ndarray, r: np.ndarray) -> float:
         return _huber_cost(r, delta) + 0.5 * float((pmask * x * x).sum())
 
-    jac = getattr(res, "jacobian", None)
-    with torch.no_grad():
-        x = torch.as_tensor(np.asarray(x0, dtype=np.float64)).clone()
-        r = batch(x[None])[0]
-        c = cost(x, r)
-        lam = 1e-3
-        for _ in range(max_iter):
-            if jac is not None:
-                J = jac(x, r)  # (R, P)
-            else:
-                J = ((batch(x[None] + step * torch.eye(P, dtype=torch.float64)) - r[None]) / step).T
-            wt = _huber_weights(r, delta)
-            Jw = J * wt[:, None]
-            A = J.T @ Jw + torch.diag(pmask)
-            g = Jw.T @ r + pmask * x
-            improved = False
-            for _ in range(10):
-                d = torch.linalg.solve(A + lam * torch.diag(torch.diagonal(A)), -g)
-                xn = x + d
-                rn = batch(xn[None])[0]
-                cn = cost(xn, rn)
-                if cn < c:
-                    improved = True
-                    break
-                lam *= 10.0
-            if not improved:
+    x = np.array(x0, dtype=np.float64)
+    r = res(x)
+    c = cost(x, r)
+    lam = 1e-3
+    for _ in range(max_iter):
+        J = res.jacobian(x, r)  # (R, P)
+        Jw = J * _huber_weights(r, delta)[:, None]
+        A = J.T @ Jw + np.diag(pmask)
+        g = Jw.T @ r + pmask * x
+        improved = False
+        for _ in range(10):
+            d = np.linalg.solve(A + lam * np.diag(np.diagonal(A)), -g)
+            xn = x + d
+            rn = res(xn)
+            cn = cost(xn, rn)
+            if cn < c:
+                improved = True
                 break
-            small = float(d.norm()) <= tol * (1.0 + float(x.norm())) or (c - cn) <= tol * c
-            x, r, c = xn, rn, cn
-            lam = max(lam / 10.0, 1e-9)
-            if small:
-                break
-    return x.numpy().copy()
+            lam *= 10.0
+        if not improved:
+            break
+        small = float(np.linalg.norm(d)) <= tol * (1.0 + float(np.linalg.norm(x))) or (c - cn) <= tol * c
+        x, r, c = xn, rn, cn
+        lam = max(lam / 10.0, 1e-9)
+        if small:
+            break
+    return x
 
 
 class Traditional(Method):
@@ -494,17 +485,18 @@ class Traditional(Method):
             return self._fit(train, val, settings)
 
     def _offset_first(self, train: List[Segment], val: List[Segment], settings: FitSettings,
-                      shift_val: bool = True) -> Tuple[int, float, Dict[str, list], List[Segment], List[Segment]]:
-        """What :meth:`fit` and :meth:`refit` do first: the seed, the window, and (``fit_offset``) the
-        time offset, with the training split (and ``val`` where ``shift_val``) resampled at it.
+                      shift_val: bool = True, start: Optional[float] = None
+                      ) -> Tuple[int, float, Dict[str, list], List[Segment], List[Segment]]:
+        """What :meth:`fit` and :meth:`refit` do first: the window and (``fit_offset``) the time
+        offset (searched from ``start`` where given), with the training split (and ``val`` where
+        ``shift_val``) resampled at it.
         Returns (window, tau, its log, train, val)."""
-        torch.manual_seed(settings.seed)
         window = int(self.window or settings.window)
         if not self.fit_offset:
             return window, 0.0, {}, train, val
         if not any(len(s) > window for s in train):
             raise ValueError(f"no training sequence is longer than the window ({window} samples)")
-        tau, tau_log = self._fit_time_offset(train, val, self.offset_window, settings.gravity)
+        tau, tau_log = self._fit_time_offset(train, val, self.offset_window, settings.gravity, start)
         return (window, tau, tau_log, [shifted(s, tau) for s in train],
                 [shifted(s, tau) for s in val] if shift_val else val)
 
@@ -521,7 +513,7 @@ class Traditional(Method):
         g_idx, a_idx = np.r_[0:9, 12:21], np.r_[0:9]
 
         # 1. gyro: fit at the first cutoff, score the grid on validation, refit at the chosen one.
-        def rot(w: _Windows) -> Callable[[Tensor], Tensor]:
+        def rot(w: _Windows) -> _RotResiduals:
             return _RotResiduals(w)
 
         theta_g, c_g, val_rot, wg = self._fit_at_best_cutoff(
@@ -530,21 +522,22 @@ class Traditional(Method):
 
         # 2. accel with the gyro model fixed: the same on velocity/position residuals (the rotations
         # depend on the gyro windows only, not on the accelerometer's cutoff: computed once per split).
-        held: Dict[Tuple[int, Optional[float]], Tensor] = {}
+        held: Dict[Tuple[int, Optional[float]], np.ndarray] = {}
+        sums: Dict[Tuple[Tuple[int, Optional[float]], int], _VelResiduals] = {}
 
-        def vel(w: _Windows) -> Callable[[Tensor], Tensor]:
-            with torch.no_grad():
-                if w.key not in held:
-                    held[w.key] = _held_rotations(_gyro_model(torch.from_numpy(theta_g), w.gyro, w.acc_g), w.dt)
-                return _VelResiduals(None, w, held[w.key])
+        def vel(w: _Windows) -> _VelResiduals:
+            if w.key not in held:
+                held[w.key] = _held_rotations(_gyro_model(theta_g, w.gyro, w.acc_g), w.dt)
+            if (w.key, id(w.acc)) not in sums:
+                sums[(w.key, id(w.acc))] = _VelResiduals(None, w, held[w.key])
+            return sums[(w.key, id(w.acc))]
 
         theta_a, c_a, val_vel, wa = self._fit_at_best_cutoff(
             vel, lambda c: tr.windows(c_g, c), lambda c: va.windows(c_g, c), grid, np.zeros(12), a_idx, self.huber_vel,
             self._acc_prior)
         # "before" = raw IMU (identity model, no filter) on the same windows
         raw = tr.windows(None, None)
-        ident = _gyro_model(torch.zeros(21, dtype=torch.float64), raw.gyro, raw.acc_g)
-        a_before = _rms(_VelResiduals(ident, raw), np.zeros(12))
+        a_before = _rms(_VelResiduals(raw.gyro, raw), np.zeros(12))  # the identity gyro model: the raw rates
         a_after = _rms(vel(wa), theta_a)
 
         self.params = TraditionalParams(
@@ -575,7 +568,8 @@ class Traditional(Method):
 
     def _refit(self, train: List[Segment], val: List[Segment], start: TraditionalParams,
                settings: FitSettings) -> Dict[str, list]:
-        window, tau, tau_log, train, _ = self._offset_first(train, val, settings, shift_val=False)
+        window, tau, tau_log, train, _ = self._offset_first(train, val, settings, shift_val=False,
+                                                            start=start.time_offset)
         tr = _Data(train, window, self.max_windows, settings.gravity, self.filter_order)
         if len(tr) == 0:
             raise ValueError(f"no training sequence is longer than the window ({window} samples)")
@@ -583,8 +577,7 @@ class Traditional(Method):
         g0 = np.concatenate([(start.M_g - np.eye(3)).ravel(), start.b_g, start.G.ravel()])
         a0 = np.concatenate([(start.M_a - np.eye(3)).ravel(), start.b_a])
         theta_g = _solve(_RotResiduals(w), g0, np.r_[0:9, 12:21], self.prior, self.huber_rot, self.max_iter)
-        with torch.no_grad():
-            vel = _VelResiduals(_gyro_model(torch.from_numpy(theta_g), w.gyro, w.acc_g), w)
+        vel = _VelResiduals(_gyro_model(theta_g, w.gyro, w.acc_g), w)
         theta_a = _solve(vel, a0, np.r_[0:9], self._acc_prior, self.huber_vel, self.max_iter)
         self.params = TraditionalParams(
             M_g=np.eye(3) + theta_g[:9].reshape(3, 3), b_g=theta_g[9:12].copy(), G=theta_g[12:21].reshape(3, 3).copy(),
@@ -593,13 +586,21 @@ class Traditional(Method):
         )
         return {"train_windows": [len(tr)], "stride": [tr.stride], **tau_log}
 
-    def _fit_time_offset(self, train: List[Segment], val: List[Segment], window: int,
-                         gravity: float) -> Tuple[float, Dict[str, list]]:
+    def _fit_time_offset(self, train: List[Segment], val: List[Segment], window: int, gravity: float,
+                         start: Optional[float] = None) -> Tuple[float, Dict[str, list]]:
         """The temporal calibration: tau [samples] by the timing baseline's 1-D search on the raw
         gyro's rotation residuals over ``offset_window``-sample training windows (short, for the
-        reason :mod:`imu_learn.baselines.timing` gives), kept only if it lowers the validation cost."""
+        reason :mod:`imu_learn.baselines.timing` gives), kept only if it lowers the validation cost.
+        With ``start`` (a refit): a golden-section search within ±``OFFSET_BRACKET`` samples of it,
+        the whole grid where its minimum lies at the bracket's edge."""
         tr = RotationWindows(train, window, 5 * self.max_windows, gravity)
-        tau, _, _ = fit_offset(tr, self.max_shift, 0.25, 1e-3, self.huber_rot)
+        tau = math.nan
+        if start is not None and math.isfinite(start):
+            lo, hi = start - OFFSET_BRACKET, start + OFFSET_BRACKET
+            tau, _ = golden_section(lambda t: tr.cost(t, self.huber_rot), lo, hi, 1e-3)
+            tau = tau if lo + 2e-3 < tau < hi - 2e-3 else math.nan
+        if not math.isfinite(tau):
+            tau, _, _ = fit_offset(tr, self.max_shift, 0.25, 1e-3, self.huber_rot)
         va = RotationWindows(val, window, 5 * self.max_windows, gravity) if val else tr
         va = va if len(va) else tr
         zero, got = va.cost(0.0, self.huber_rot), va.cost(tau, self.huber_rot)

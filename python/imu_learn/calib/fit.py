@@ -23,17 +23,16 @@ over groups as above. The floor itself fixes g (``settings.gravity``) and fits t
 scale against it: the two are nearly degenerate, so this value is a consistency check of the
 floor, not an independent measurement (the profile says so).
 
-torch is imported here (the floor's fit needs it); nothing else in calib imports this module at
-module level.
+The fit is numpy (:mod:`imu_learn.baselines.traditional`): nothing here loads torch.
 """
 from __future__ import annotations
 
 import math
 import random
+import sys
 from typing import Any, Callable, Dict, List, Optional, Sequence, Tuple
 
 import numpy as np
-import torch
 
 from imu_learn.baselines.affine import ESTIMATES, Floor, TraditionalParams
 from imu_learn.baselines.base import FitSettings
@@ -47,10 +46,13 @@ Progress = Callable[[str], None]
 
 
 def seed_all(seed: int) -> None:
-    """What ``imu-learn evaluate`` seeds before each method's fit."""
+    """What ``imu-learn evaluate`` seeds before each method's fit (torch's generator only where torch
+    is already loaded: the floor's fit draws nothing from it)."""
     random.seed(seed)
     np.random.seed(seed % (2**32))
-    torch.manual_seed(seed)
+    torch = sys.modules.get("torch")
+    if torch is not None:
+        torch.manual_seed(seed)
 
 
 def fit_once(train: List[Segment], val: List[Segment], settings: FitSettings,

@@ -52,6 +52,7 @@ import numpy as np
 from imu_learn.baselines.affine import Floor, TraditionalParams
 from imu_learn.baselines.base import FitSettings
 from imu_learn.calib import noise as nz
+from imu_learn.calib.fit import time_blocks
 from imu_learn.calib.frames import default_gap_s
 from imu_learn.calib.profile import FloorFit
 from imu_learn.calib.reference import _quat, fit_lag, is_planar_odometry, level_rotation
@@ -211,8 +212,6 @@ def fit_yaw(groups: Dict[str, Sequence[Segment]], u: np.ndarray, window_s: float
     """Step 3 over every group's segments; the standard errors from the groups (one: ``blocks`` time
     blocks) as the floor's spread (a group whose yaw rate spreads less than ``min_turn`` gives its bias
     at the common scale and no scale)."""
-    from imu_learn.calib.fit import time_blocks
-
     segs = [s for g in groups.values() for s in g]
     y, x, _ = rate_pairs(segs, u, window_s)
     if len(y) < 8:

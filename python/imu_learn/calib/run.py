@@ -3,7 +3,7 @@
 The recordings come from a reference source (:mod:`imu_learn.calib.sources`: poses, positions, a
 config's split, still). With a reference (segments with ground truth): the floor the source fits
 (:meth:`Source.fit_floor <imu_learn.calib.sources.Source.fit_floor>`: the affine fit of
-:mod:`imu_learn.calib.fit`, torch, unless the source fits its own), its spread between recordings,
+:mod:`imu_learn.calib.fit`, unless the source fits its own), its spread between recordings,
 gravity, the noise from the residuals (:func:`noise.residual_noise`) and from still stretches
 (:func:`noise.still_stretches`, :func:`noise.allan_noise`); with ``select`` (``--select``) the floor's
 terms chosen on the recordings each was not fitted on (:mod:`imu_learn.calib.select`). Without one (a still recording's IMU
@@ -22,11 +22,13 @@ from typing import Any, Callable, Dict, List, Optional, Sequence, Tuple
 import numpy as np
 
 from imu_learn.baselines.affine import Floor, TraditionalParams
+from imu_learn.calib import fit as ff
 from imu_learn.calib import noise as nz
 from imu_learn.calib.kalibr import write_kalibr_yaml
 from imu_learn.calib.plausible import LIMITS, held_back_errors, held_back_findings, parameter_findings
 from imu_learn.calib.plot import plot_calibration
 from imu_learn.calib.profile import NOISE_KEYS, NOISE_UNITS, NoiseTerm, Profile, noise_only
+from imu_learn.calib.select import select_floor
 from imu_learn.calib.sources import TIME_OFFSET_PRIOR_SAMPLES, CalibInputs, Recording, StillPiece
 from imu_learn.core.stamps import median_period_ns, sample_rate_hz
 from imu_learn.errors import ImplausibleProfileError, InvalidInputError
@@ -127,9 +129,6 @@ def floor_profile(inp: CalibInputs, progress: Progress, uncertainty: bool = True
     """The floor part of the profile (with the reference): the floor its source fits, and the
     residuals before/after it (``uncertainty=False``: no refits per recording, the standard
     deviations NaN; ``select``: its terms chosen on held-out recordings, :mod:`imu_learn.calib.select`)."""
-    from imu_learn.calib import fit as ff  # torch: only where the floor is fitted
-    from imu_learn.calib.select import select_floor
-
     fit = inp.source.fit_floor(inp, progress, uncertainty)
     fit, selection = select_floor(inp, fit, progress) if select else (fit, {})
     f, std = fit.floor, fit.std
@@ -153,8 +152,6 @@ def floor_profile(inp: CalibInputs, progress: Progress, uncertainty: bool = True
 def plausibility(prof: Profile, inp: CalibInputs, options: CalibOptions, progress: Progress) -> Dict[str, Any]:
     """The checks of :mod:`imu_learn.calib.plausible` on the fitted floor and on the held-back block;
     a failure stops calibrate (:class:`ImplausibleProfileError`) unless ``options.force``."""
-    from imu_learn.calib import fit as ff  # torch: only where the floor is fitted
-
     progress("checking the profile: plausibility and the held-back block")
     assert prof.floor is not None
     found = parameter_findings(prof.floor, prof.gravity_mps2)

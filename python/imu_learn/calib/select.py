@@ -42,8 +42,8 @@ kept as it is where the chosen levels are all it has); profile.json's ``selectio
 levels, the rule, and every held-out figure behind them. No selection (the entry says why, the full
 floor kept): a positions or odometry reference, or one that cannot resolve accelerations (their sources
 fix the terms they observe), and recordings too short to hold any out. A reference whose stamps were
-moved by its own lag keeps the time offset's prior in every fold (not observed). torch is imported here
-(the floor's fit).
+moved by its own lag keeps the time offset's prior in every fold (not observed). The fits are the
+floor's own (numpy, no torch).
 """
 from __future__ import annotations
 
@@ -53,7 +53,6 @@ from dataclasses import dataclass, field, replace
 from typing import Any, Callable, Dict, List, Optional, Sequence, Tuple
 
 import numpy as np
-import torch
 
 from imu_learn.baselines.affine import FLOOR_METHOD, Floor, TraditionalParams
 from imu_learn.baselines.base import FitSettings
@@ -117,18 +116,18 @@ class _Subset:
     """Residuals of a full θ restricted to the ``free`` entries (the rest held at ``full``'s values)."""
 
     def __init__(self, res: Any, free: np.ndarray, full: np.ndarray) -> None:
-        self.res, self.free, self.full = res, torch.as_tensor(free), torch.as_tensor(full, dtype=torch.float64)
+        self.res, self.free, self.full = res, np.asarray(free), np.asarray(full, dtype=np.float64)
 
-    def theta(self, x: torch.Tensor) -> torch.Tensor:
-        th = self.full.repeat(x.shape[0], 1)
-        th[:, self.free] = x
+    def theta(self, x: np.ndarray) -> np.ndarray:
+        th = self.full.copy()
+        th[self.free] = x
         return th
 
-    def __call__(self, x: torch.Tensor) -> torch.Tensor:
+    def __call__(self, x: np.ndarray) -> np.ndarray:
         return self.res(self.theta(x))
 
-    def jacobian(self, x: torch.Tensor, r: torch.Tensor) -> torch.Tensor:
-        return self.res.jacobian(self.theta(x[None])[0], r)[:, self.free]
+    def jacobian(self, x: np.ndarray, r: np.ndarray) -> np.ndarray:
+        return self.res.jacobian(self.theta(x), r)[:, self.free]
 
 
 def solve_level(res: Any, theta: np.ndarray, free: np.ndarray, huber: float) -> np.ndarray:
@@ -169,8 +168,7 @@ def fit_gyro_levels(tr: _Data, va: _Data, grid: Sequence[Optional[float]], upto:
 def _vel(data: _Data, theta_g: np.ndarray, c_g: Optional[float]) -> Callable[[Optional[float]], _VelResiduals]:
     """Accelerometer residuals at any acc cut-off with the gyro fixed (its rotations computed once)."""
     w = data.windows(c_g, None)
-    with torch.no_grad():
-        Rm = _held_rotations(_gyro_model(torch.from_numpy(theta_g), w.gyro, w.acc_g), w.dt)
+    Rm = _held_rotations(_gyro_model(theta_g, w.gyro, w.acc_g), w.dt)
     return lambda c: _VelResiduals(None, data.windows(c_g, c), Rm)
 
 

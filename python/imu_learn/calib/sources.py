@@ -33,6 +33,8 @@ from typing import Any, Callable, Dict, List, Optional, Sequence, Tuple
 import numpy as np
 
 from imu_learn.baselines.base import FitSettings
+from imu_learn.baselines.traditional import ACC_BIAS_ONLY
+from imu_learn.calib import fit as ff
 from imu_learn.calib.acc_positions import AccFit, AccOptions, fit_acc_from_positions, recording_spread
 from imu_learn.calib.frames import default_gap_s
 from imu_learn.calib.profile import FloorFit
@@ -161,8 +163,6 @@ class Source:
     def fit_floor(self, inp: CalibInputs, progress: Progress = lambda s: None, uncertainty: bool = True) -> FloorFit:
         """The floor against ``inp``'s recordings and its spread between them (``uncertainty=False``: no
         refits, the standard deviations NaN)."""
-        from imu_learn.calib import fit as ff  # torch: only where the floor is fitted
-
         return ff.fit_floor(inp.train, inp.val, inp.settings, inp.groups, inp.val_groups, progress, uncertainty,
                             self.floor_terms())
 
@@ -286,8 +286,6 @@ class PosesSource(Source):
         """Everything, or (a reference that cannot resolve accelerations,
         :func:`imu_learn.calib.reference.resolves_acceleration`) no low-pass and the acc bias only, M_a
         held at the identity."""
-        from imu_learn.baselines.traditional import ACC_BIAS_ONLY  # torch: only where the floor is fitted
-
         if self.frame is None or self.frame.resolves_acceleration:
             return {}
         return {"cutoffs_hz": (None,), "acc_prior": ACC_BIAS_ONLY}

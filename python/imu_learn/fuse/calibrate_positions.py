@@ -52,6 +52,7 @@ from scipy.spatial.transform import Rotation
 
 from imu_learn.baselines.affine import Floor, TraditionalParams
 from imu_learn.baselines.base import FitSettings
+from imu_learn.calib import fit as ff
 from imu_learn.calib import run as cr
 from imu_learn.calib.frames import default_gap_s
 from imu_learn.calib.profile import FloorFit, Profile
@@ -368,8 +369,6 @@ def fit_biases(train: List[Segment], val: List[Segment], settings: FitSettings, 
     """(bias-only floor, its standard errors (of b_g and b_a from ``blocks`` time blocks; the rest, held
     at the prior, NaN), the fit log):
     :func:`imu_learn.calib.fit.fit_once` with the matrices held (module docstring)."""
-    from imu_learn.calib import fit as ff
-
     terms = {"cutoffs_hz": (None,), "prior": BIAS_ONLY, "acc_prior": BIAS_ONLY, "fit_offset": False}
     method, log = ff.fit_once(train, val, settings, max_windows, terms)
     p, prior = TraditionalParams.from_dict(method.to_dict()), TraditionalParams.identity()
