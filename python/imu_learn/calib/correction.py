@@ -139,7 +139,8 @@ def describe_profile(profile: Profile, where: str) -> str:
 
 def _prior(profile: Profile, where: str) -> BiasPrior:
     """The device prior after ``profile``'s floor: zero mean, its gyroscope's bias spread."""
-    return BiasPrior.from_bias_std(profile.gyro.bias_std, f"the bias spread of profile {where}")
+    return BiasPrior.from_bias_std(profile.gyro.bias_std, f"the bias spread of profile {where}",
+                                   measured=profile.bias_prior)
 
 
 def _gravity(profile: Profile, default: float) -> float:

@@ -167,6 +167,9 @@ class Profile:
     checks: Dict[str, Any] = field(default_factory=dict)
     # the floor's terms chosen on held-out recordings (calib.select: the levels, the rule, the figures)
     selection: Dict[str, Any] = field(default_factory=dict)
+    # the device's bias prior for --bias measured on its training recordings (experiments/bias_prior.py
+    # fit: the moving bias's spread, the still and gravity estimators' errors); empty: none
+    bias_prior: Dict[str, Any] = field(default_factory=dict)
     version: int = PROFILE_VERSION
     created: str = field(default_factory=lambda: datetime.now(timezone.utc).isoformat(timespec="seconds"))
 
@@ -225,7 +228,8 @@ class Profile:
             "floor": clean(self.floor_dict), "sources": clean(self.sources), "unobservable": self.unobservable,
             "fit_log": clean(self.fit_log),
             **({"inputs": clean(self.inputs)} if self.inputs else {}),
-            **{k: clean(getattr(self, k)) for k in ("reference", "observed", "checks", "selection") if getattr(self, k)},
+            **{k: clean(getattr(self, k)) for k in ("reference", "observed", "checks", "selection", "bias_prior")
+               if getattr(self, k)},
         }
 
     def save(self, path: Union[str, Path]) -> None:
@@ -269,7 +273,8 @@ class Profile:
             sources=r.get("sources", list, []), unobservable=r.get("unobservable", list, []),
             fit_log=r.get("fit_log", dict, {}), inputs=r.get("inputs", dict, {}), version=version,
             reference=r.get("reference", dict, {}), observed=r.get("observed", dict, {}), checks=r.get("checks", dict, {}),
-            selection=r.get("selection", dict, {}), created=r.get("created", str, ""),
+            selection=r.get("selection", dict, {}), bias_prior=r.get("bias_prior", dict, {}),
+            created=r.get("created", str, ""),
         )
 
     def kalibr(self) -> Dict[str, Optional[float]]:

@@ -62,27 +62,78 @@ def prior_spread(bias_std: Optional[Sequence[float]]) -> np.ndarray:
     return np.clip(s, BIAS_SPREAD_FLOOR, MEMS_BIAS_BOUND)
 
 
+MEASURED_STD_FLOOR = 0.0005  # rad/s: the least a measured spread (of few recordings) is taken as
+
+
+def _measured(x: object, isotropic: bool) -> Optional[Tuple[float, float, float]]:
+    """A measured per-axis spread [rad/s] of a profile's ``bias_prior`` (floored at
+    :data:`MEASURED_STD_FLOOR`; ``isotropic``: its largest axis on every axis), None where absent."""
+    if x is None:
+        return None
+    a = np.asarray(x, dtype=np.float64).reshape(-1)
+    if a.size not in (1, 3) or not np.all(np.isfinite(a)):
+        return None
+    a = np.maximum(np.broadcast_to(a, (3,)), MEASURED_STD_FLOOR)
+    a = np.full(3, a.max()) if isotropic else a
+    return (float(a[0]), float(a[1]), float(a[2]))
+
+
 @dataclass(frozen=True)
 class BiasPrior:
     """What the device's gyro bias can be where an estimator runs: ``bias`` [rad/s] (3,) its mean
     (zero after a profile's floor, which removed the device's own) and ``std`` [rad/s] (3,) its spread
-    (:func:`prior_spread`); ``source`` says where they came from."""
+    (:func:`prior_spread`: the still rule's and the bound's); ``source`` says where they came from.
+
+    Measured on the device's training recordings (a profile's ``bias_prior``, written by
+    ``experiments/bias_prior.py fit``; None on a profile without it, and then nothing below applies):
+    ``moving_std`` the recording-to-recording spread of the bias *while moving* after the floor
+    (recorded; the summary shows it), ``still_error_std`` how far a still stretch's (resting) bias
+    lies from the moving one per axis (it raises the still estimate's fixed uncertainty floor),
+    ``gravity_error_std`` gravity consistency's error beyond its own uncertainty along the directions
+    it observed, ``measured_rms`` per estimator (``still``, ``gravity``) its RMS error against the
+    moving bias and the profile alone's (the moving bias itself) over the same recordings and
+    directions (``--bias auto``'s gate)."""
 
     bias: Tuple[float, float, float] = (0.0, 0.0, 0.0)
     std: Tuple[float, float, float] = (MEMS_BIAS_BOUND,) * 3
     source: str = f"no profile: a MEMS gyro's bias spread, {MEMS_BIAS_BOUND:g} rad/s"
+    moving_std: Optional[Tuple[float, float, float]] = None
+    still_error_std: Optional[Tuple[float, float, float]] = None
+    gravity_error_std: Optional[float] = None
+    # estimator -> (its RMS error, the profile alone's) [rad/s] on the training recordings (the gate)
+    measured_rms: Tuple[Tuple[str, float, float], ...] = ()
 
     @classmethod
-    def from_bias_std(cls, bias_std: Optional[Sequence[float]], source: str, isotropic: bool = False) -> BiasPrior:
+    def from_bias_std(cls, bias_std: Optional[Sequence[float]], source: str, isotropic: bool = False,
+                      measured: Optional[Dict[str, object]] = None) -> BiasPrior:
         """Zero mean (after the floor), the spread of ``bias_std`` (``isotropic``: its largest axis on
-        every axis, for an IMU rotated into another frame)."""
+        every axis, for an IMU rotated into another frame); ``measured``: a profile's ``bias_prior``
+        (class doc; empty or None: none)."""
         s = prior_spread(bias_std)
         s = np.full(3, s.max()) if isotropic else s
-        return cls((0.0, 0.0, 0.0), tuple(float(v) for v in s), source)
+        m = measured or {}
+        g = m.get("gravity_error_std_rad_s")
+        g = float(g) if isinstance(g, (int, float)) and math.isfinite(g) else None
+        rms = []
+        for name, r in (m.get("rms_rad_s") or {}).items():
+            if (isinstance(r, dict) and all(isinstance(r.get(k), (int, float)) and math.isfinite(r[k])
+                                            for k in ("error", "profile_alone"))):
+                rms.append((str(name), float(r["error"]), float(r["profile_alone"])))
+        return cls((0.0, 0.0, 0.0), tuple(float(v) for v in s), source,
+                   _measured(m.get("moving_std_rad_s"), isotropic), _measured(m.get("still_error_std_rad_s"), isotropic),
+                   g, tuple(rms))
 
     def to_dict(self) -> Dict[str, object]:
-        return {"bias_rad_s": [float(v) for v in self.bias], "std_rad_s": [float(v) for v in self.std],
-                "source": self.source, "spread_floor_rad_s": BIAS_SPREAD_FLOOR, "mems_bound_rad_s": MEMS_BIAS_BOUND}
+        out: Dict[str, object] = {"bias_rad_s": [float(v) for v in self.bias], "std_rad_s": [float(v) for v in self.std],
+                                  "source": self.source, "spread_floor_rad_s": BIAS_SPREAD_FLOOR,
+                                  "mems_bound_rad_s": MEMS_BIAS_BOUND}
+        if (self.moving_std is not None or self.still_error_std is not None or self.gravity_error_std is not None
+                or self.measured_rms):
+            out["measured"] = {"moving_std_rad_s": None if self.moving_std is None else list(self.moving_std),
+                               "still_error_std_rad_s": None if self.still_error_std is None else list(self.still_error_std),
+                               "gravity_error_std_rad_s": self.gravity_error_std,
+                               "rms_rad_s": {k: {"error": e, "profile_alone": a} for k, e, a in self.measured_rms}}
+        return out
 
 
 MEMS_PRIOR = BiasPrior()

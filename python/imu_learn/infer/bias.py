@@ -21,6 +21,14 @@ stretches, floored at :data:`STILL_STD_FLOOR` (a rest of seconds leaves 1-3 mrad
 flights: the bias moves from rest to motion); gravity consistency's per direction (its eigen-directions,
 the information its data gave; observed where its data, not its prior, set them); the learned estimator's a fixed
 :data:`LEARNED_STD` (its held-out bias error on the Fetch robot).
+
+**The device's training recordings** (a profile's ``bias_prior``, :func:`measure_prior`): a still
+stretch measures the bias at rest, open loop needs the bias while moving. Where the profile measured,
+on the recordings it was fitted on, each estimator's RMS error against their moving bias and the
+profile alone's, ``auto`` admits only the estimators that were the closer (:func:`better_than_prior`);
+the still estimate's uncertainty floor is raised to the rest-minus-moving spread measured there, and
+gravity consistency's error beyond its own uncertainty is added to its variance. A profile without
+``bias_prior``: as before.
 """
 from __future__ import annotations
 
@@ -116,20 +124,29 @@ def _still(ctx: Context, t_ns: np.ndarray, gyro: np.ndarray, acc: np.ndarray) ->
                    f"rule (mean gyro up to {top:.3f} rad/s, beyond {STILL_SIGMAS:g} sigma of the device's bias "
                    "spread: a steady turn, not rest)")
         return BiasEstimate("still", None, np.zeros((3, 3)), detail, why)
-    var = est.gyro_bias_std ** 2 + STILL_STD_FLOOR ** 2
+    # the rest-to-motion change: the fixed floor, raised to what the device's training recordings
+    # measured where the profile says (prior.still_error_std)
+    rest = STILL_STD_FLOOR if ctx.prior.still_error_std is None else np.maximum(STILL_STD_FLOOR,
+                                                                                np.asarray(ctx.prior.still_error_std))
+    var = est.gyro_bias_std ** 2 + rest ** 2
     if est.between_stretches is not None:
         var = var + est.between_stretches ** 2
     detail["std_rad_s"] = _vec(np.sqrt(var))
     return BiasEstimate("still", est.gyro_bias, np.diag(1.0 / var), detail)
 
 
-def _gravity_info(grav: Any) -> np.ndarray:
-    """The information its data gave (its eigen-directions' less its prior's), every direction."""
+def _gravity_info(grav: Any, extra: Optional[float] = None) -> np.ndarray:
+    """The information its data gave (its eigen-directions' less its prior's), every direction;
+    ``extra`` [rad/s]: its error beyond that, measured on the device's training recordings (the
+    prior's ``gravity_error_std``), added to each direction's variance."""
     if grav.gyro_bias is None or grav.directions is None:
         return np.zeros((3, 3))
     info = np.zeros((3, 3))
     for d, s in zip(grav.directions, grav.direction_std):
-        info += np.outer(d, d) * max(1.0 / s ** 2 - 1.0 / grav.settings.prior_sigma ** 2, 0.0)
+        lam = max(1.0 / s ** 2 - 1.0 / grav.settings.prior_sigma ** 2, 0.0)
+        if extra and lam > 0:
+            lam = 1.0 / (1.0 / lam + extra ** 2)
+        info += np.outer(d, d) * lam
     return info
 
 
@@ -147,7 +164,8 @@ def _gravity(ctx: Context, t_ns: np.ndarray, gyro: np.ndarray, acc: np.ndarray) 
         s = est.settings
         return BiasEstimate("gravity", None, np.zeros((3, 3)), est.to_dict(),
                             "{where} is shorter than " + f"{s.min_windows} windows of {s.window_s:g} s")
-    return BiasEstimate("gravity", est.gyro_bias, _gravity_info(est), est.to_dict(), unseen=_gravity_unseen(est))
+    return BiasEstimate("gravity", est.gyro_bias, _gravity_info(est, ctx.prior.gravity_error_std), est.to_dict(),
+                        unseen=_gravity_unseen(est))
 
 
 def still_along_gravity(still: Optional[np.ndarray], grav: Any) -> Optional[np.ndarray]:
@@ -167,7 +185,7 @@ def still_along_gravity(still: Optional[np.ndarray], grav: Any) -> Optional[np.n
 def _still_gravity(ctx: Context, t_ns: np.ndarray, gyro: np.ndarray, acc: np.ndarray) -> BiasEstimate:
     still, grav = _still(ctx, t_ns, gyro, acc), gravity_bias(t_ns, gyro, acc)
     b = still_along_gravity(still.gyro_bias, grav)
-    g_info = _gravity_info(grav)
+    g_info = _gravity_info(grav, ctx.prior.gravity_error_std)
     unseen = np.zeros((3, 3))
     if still.gyro_bias is None:
         info, unseen = g_info, _gravity_unseen(grav)
@@ -269,20 +287,31 @@ def combine(parts: List[BiasEstimate], prior: BiasPrior, with_prior: bool = Fals
     """``auto``: the estimates each bounded (:func:`bound`: shrunk ones enter as shrunk, rejected ones
     are dropped), combined by their information, b = (sum Li)^+ sum Li bi, and the prior's mean
     along the directions none observed. ``with_prior``: the prior averaged in everywhere,
-    b = (L0 + sum Li)^-1 (L0 b0 + sum Li bi) (measured worse: docs/refine.md)."""
+    b = (L0 + sum Li)^-1 (L0 b0 + sum Li bi) (measured worse: docs/refine.md). A prior measured on
+    the device's training recordings (a profile's ``bias_prior``) gates each estimator first
+    (:func:`better_than_prior`)."""
     b0, L0 = np.asarray(prior.bias, dtype=np.float64), prior_information(prior)
     used, info, num, details, seen = [], np.zeros((3, 3)), np.zeros(3), {}, np.zeros((3, 3))
     for p in parts:
         verdict = bound(p, prior)
         details[p.method] = {**p.detail, "bound": verdict.to_dict()}
-        if verdict.decision in ("applied", "shrunk"):
-            used.append(p.method)
-            info += p.information
-            num += p.information @ verdict.gyro_bias
-            seen += np.eye(3) - p.unobserved()
+        if verdict.decision not in ("applied", "shrunk"):
+            continue
+        ok, rms = better_than_prior(p, prior)
+        if rms is not None:
+            details[p.method]["gate"] = {"entered": ok, "training_rms_error_rad_s": rms[0],
+                                         "training_rms_profile_alone_rad_s": rms[1], "rule": GATE_RULE}
+        if not ok:
+            continue
+        used.append(p.method)
+        info += p.information
+        num += p.information @ verdict.gyro_bias
+        seen += np.eye(3) - p.unobserved()
     detail: Dict[str, Any] = {"rule": "every estimate bounded by the device prior, those kept combined by their "
                                       "information (inverse covariances), the prior's mean where none observed"
-                                      + ("; the prior averaged in everywhere" if with_prior else ""),
+                                      + ("; the prior averaged in everywhere" if with_prior else "")
+                                      + ("; each estimator gated by its error on the device's training recordings"
+                                         if prior.measured_rms else ""),
                               "used": used, **details}
     if not used:
         detail.update({"gyro_bias_rad_s": None, "gyro_bias_deg_s": None})
@@ -300,6 +329,18 @@ def combine(parts: List[BiasEstimate], prior: BiasPrior, with_prior: bool = Fals
     lam, vec = np.linalg.eigh(seen)
     unseen = vec[:, lam < 1e-9] @ vec[:, lam < 1e-9].T
     return BiasEstimate("auto", b, info, detail, unseen=unseen)
+
+
+GATE_RULE = ("an estimator enters only where, on the device's training recordings (the profile's bias_prior), "
+             "its estimate lay closer to the bias while moving than the profile alone did (RMS over the recordings "
+             "and the directions it observed); a device without that figure: every estimator enters")
+
+
+def better_than_prior(est: BiasEstimate, prior: BiasPrior) -> Tuple[bool, Optional[Tuple[float, float]]]:
+    """(whether ``est`` enters ``auto``, (its RMS error, the profile alone's) [rad/s] on the device's
+    training recordings, None where the profile has not measured them): :data:`GATE_RULE`."""
+    rms = {k: (e, a) for k, e, a in prior.measured_rms}.get(est.method)
+    return (True, None) if rms is None else (rms[0] < rms[1], rms)
 
 
 @dataclass
@@ -341,6 +382,64 @@ def bound(est: BiasEstimate, prior: BiasPrior) -> Verdict:
         return Verdict("shrunk", z, b, f"{what}: beyond {ACCEPT_SIGMAS:g}, shrunk toward it (precision-weighted)", prior)
     return Verdict("rejected", z, None, f"{what}: beyond {REJECT_SIGMAS:g}, rejected; the profile's bias kept "
                    "(nothing subtracted)", prior)
+
+
+# -- the prior measured on the device's training recordings ---------------------------------------------
+
+
+def measure_prior(recordings: List[Tuple[str, np.ndarray, np.ndarray, np.ndarray, np.ndarray]],
+                  ctx: Context) -> Dict[str, Any]:
+    """A profile's ``bias_prior`` (:class:`imu_learn.core.still.BiasPrior`, read back by its
+    ``from_bias_std(measured=...)``) from the device's training recordings: each (name, t_ns, gyro,
+    acc, moving bias) with the profile's floor applied and its bias *while moving* (fitted on its
+    ground truth, rad/s). Per recording, the ``still`` and ``gravity`` estimates (``ctx``: the
+    recording's gravity and the profile's prior) against the moving bias: ``moving_std_rad_s`` the
+    moving bias's spread about zero per axis (x n/(n-1): the floor was fitted on them; None under two
+    recordings), ``still_error_std_rad_s`` the RMS of still - moving per axis, ``gravity_error_std_rad_s``
+    gravity consistency's error beyond its own uncertainty along the directions its data set (pooled),
+    and ``rms_rad_s`` per estimator its RMS error and the profile alone's (the moving bias) over the
+    same recordings and directions (``auto``'s gate, :func:`better_than_prior`)."""
+    rows, moving, still_err, still_mov, grav_err, grav_mov = [], [], [], [], [], []
+    for name, t, g, a, b in recordings:
+        b = np.asarray(b, dtype=np.float64)
+        st, gr = _still(ctx, t, g, a), gravity_bias(t, g, a)
+        row: Dict[str, Any] = {"recording": name, "moving_bias_rad_s": _vec(b), "still_minus_moving_rad_s": None,
+                               "gravity_error_along_observed_rad_s": None}
+        moving.append(b)
+        if st.gyro_bias is not None:
+            still_err.append(st.gyro_bias - b)
+            still_mov.append(b)
+            row["still_minus_moving_rad_s"] = _vec(st.gyro_bias - b)
+        if gr.gyro_bias is not None and gr.directions is not None:
+            # its data's own std along each direction it observed (its prior's information taken out, as
+            # _gravity_info), the one the error beyond it is added to
+            inv_p = 1.0 / gr.settings.prior_sigma ** 2
+            seen = [(np.asarray(u), float(1.0 / np.sqrt(max(1.0 / s ** 2 - inv_p, 1e-30))))
+                    for u, s in zip(gr.directions, gr.direction_std) if s <= gr.settings.observed_below]
+            e = [(float(u @ (gr.gyro_bias - b)), s) for u, s in seen]
+            grav_err.extend(e)
+            grav_mov.extend(float(u @ b) for u, _ in seen)
+            row["gravity_error_along_observed_rad_s"] = [x for x, _ in e]
+            row["gravity_own_std_rad_s"] = [s for _, s in e]
+        rows.append(row)
+
+    def rms(x: List[Any]) -> Optional[float]:
+        return float(np.sqrt(np.mean(np.square(np.asarray(x, dtype=np.float64))))) if len(x) else None
+
+    n = len(moving)
+    extra = None
+    if grav_err:
+        extra = float(np.sqrt(max(float(np.mean([x * x - s * s for x, s in grav_err])), 0.0)))
+    gate: Dict[str, Any] = {}
+    if still_err:
+        gate["still"] = {"error": rms(still_err), "profile_alone": rms(still_mov)}
+    if grav_err:
+        gate["gravity"] = {"error": rms([x for x, _ in grav_err]), "profile_alone": rms(grav_mov)}
+    return {"recordings": rows,
+            "moving_std_rad_s": _vec(np.sqrt(np.mean(np.square(moving), axis=0) * n / (n - 1))) if n >= 2 else None,
+            "still_error_std_rad_s": _vec(np.sqrt(np.mean(np.square(still_err), axis=0))) if still_err else None,
+            "still_recordings": len(still_err),
+            "gravity_error_std_rad_s": extra, "gravity_directions": len(grav_err), "rms_rad_s": gate}
 
 
 # -- the step and the summary ----------------------------------------------------------------------

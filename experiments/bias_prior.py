@@ -1,0 +1,196 @@
+"""The device's bias prior for ``--bias auto`` (docs/refine.md, "The recording's own bias"), and the
+held-out table of every ``--bias`` option against the profile alone.
+
+``fit``: on the recordings a profile was fitted on (CONFIG's train and val splits, whole recordings,
+the profile's floor applied to the whole IMU file), per recording: the bias *while moving* (one
+constant gyro bias fitted on its ground truth, ``score.metrics.fit_startup_bias`` over each gap-free
+segment, averaged by samples), the still estimate and the gravity-consistency estimate of
+``--bias still`` / ``--bias gravity`` (no ground truth) and their errors against it. Their spreads
+go into the profile's ``bias_prior`` (``moving_std_rad_s``: the recording-to-recording spread of the
+moving bias after the floor; ``still_error_std_rad_s``: how far a still stretch's (resting) bias lies
+from the moving one, per axis; ``gravity_error_std_rad_s``: gravity consistency's error along the
+directions it observed, beyond its own uncertainty). ``imu_learn.infer.bias`` reads them (auto).
+
+``score``: on CONFIG's test recordings, the profile's floor and each ``--bias`` option exactly as
+``imu-learn refine --profile P --bias METHOD`` runs it (``imu_learn.infer.bias.bias_step`` on the
+whole IMU file, the prior from the profile), open-loop AOE (``imu_learn.score.peers.attitude_errors``,
+RMS pooled over the recording's gap-free ground-truth segments, each integrated from its own start).
+
+    IMU_LEARN_DATA=<root> python experiments/bias_prior.py fit --config configs/euroc_paper.toml \\
+        --profile models/profiles/euroc_adis16448/profile.json [--write]
+    IMU_LEARN_DATA=<root> python experiments/bias_prior.py score --config configs/euroc_paper.toml \\
+        --profile models/profiles/euroc_adis16448/profile.json [--json OUT.json]
+
+Writes: with ``fit --write``, the profile's ``bias_prior`` field (the profile file itself); with
+``score --json``, the table's figures. Prints a markdown table.
+Data: the recordings of CONFIG under the data root (EuRoC, TUM-VI, Fetch, Blackbird, BROAD).
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import os
+import sys
+from pathlib import Path
+from typing import Any, Dict, List, Tuple
+
+import numpy as np
+
+from imu_learn.calib.profile import Profile
+from imu_learn.core.still import BiasPrior
+from imu_learn.data.formats import read_imu_source
+from imu_learn.data.splits import data_root_dir, find_all, make_split, recording_name
+from imu_learn.data.types import Segment
+from imu_learn.infer.bias import Context, bias_step, measure_prior
+from imu_learn.score.metrics import fit_startup_bias
+from imu_learn.score.peers import attitude_errors
+from imu_learn.train.config import load_config
+from imu_learn.util.atomic import atomic_write_text
+
+REPO = Path(__file__).resolve().parents[1]
+METHODS = ("none", "still", "gravity", "still+gravity", "auto")
+
+
+def recordings(config: str, data_root: Path, splits: Tuple[str, ...]) -> Tuple[Any, List[Tuple[str, Path, List[Segment]]]]:
+    """(the data config, [(recording, its IMU file's path, its segments of ``splits``)])."""
+    cfg = load_config(REPO / config if not Path(config).is_absolute() else Path(config),
+                      ["--data.data_root", str(data_root)])
+    split = make_split(cfg.data)
+    found = find_all(cfg.data.roots, data_root_dir(cfg.data))
+    segs = [s for name in splits for s in getattr(split, name)]
+    names = list(dict.fromkeys(recording_name(s.name) for s in segs))
+    return cfg.data, [(n, found[n][0], [s for s in segs if recording_name(s.name) == n]) for n in names]
+
+
+def at(t_src: np.ndarray, t_seg: np.ndarray) -> np.ndarray:
+    i = np.searchsorted(t_src, t_seg)
+    if np.any(i >= len(t_src)) or np.any(t_src[np.minimum(i, len(t_src) - 1)] != t_seg):
+        raise ValueError("a segment's stamps are not the IMU file's")
+    return i
+
+
+def with_gyro(s: Segment, g: np.ndarray) -> Segment:
+    return Segment(s.name, s.t_ns, g, s.acc, s.p, s.v, s.q_wxyz)
+
+
+def moving_bias(segs: List[Segment], gyro: List[np.ndarray], gravity: float) -> np.ndarray:
+    """One constant gyro bias over a recording's segments, fitted on ground truth (by samples)."""
+    bs = [fit_startup_bias(with_gyro(s, g), s.duration_s + 1.0, gravity=gravity)[0] for s, g in zip(segs, gyro)]
+    return np.average(np.array(bs), axis=0, weights=np.array([len(s) for s in segs], dtype=float))
+
+
+def floor_file(path: Path, profile: Profile, segs: List[Segment]) -> Tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The floor on the recording's whole IMU file (as refine runs), or, where the file cannot be read
+    alone or its stamps are not the segments' (BROAD's trials, Blackbird's flights), on its
+    ground-truth segments joined (a gap in the stamps between them)."""
+    try:
+        src = read_imu_source(path)
+        t = np.asarray(src.t_ns, dtype=np.int64)
+        for s in segs:
+            at(t, s.t_ns)
+        gyro, acc = src.gyro, src.acc
+    except (TypeError, ValueError, OSError):
+        t = np.concatenate([s.t_ns for s in segs]).astype(np.int64)
+        gyro, acc = np.concatenate([s.gyro for s in segs]), np.concatenate([s.acc for s in segs])
+    g, a = profile.apply(t, gyro, acc)
+    return t, g, a
+
+
+def gravity_of(profile: Profile, data: Any) -> float:
+    g = profile.gravity_mps2
+    return float(g) if g is not None and g == g and g > 0 else float(data.gravity)
+
+
+# -- fit ------------------------------------------------------------------------------------------------
+
+def fit(config: str, profile_path: Path, data_root: Path) -> Dict[str, Any]:
+    """The profile's ``bias_prior`` (module doc) from CONFIG's train and val recordings."""
+    profile = Profile.load(profile_path)
+    data, recs = recordings(config, data_root, ("train", "val"))
+    grav = gravity_of(profile, data)
+    prior = BiasPrior.from_bias_std(profile.gyro.bias_std, "the profile's bias spread")
+    measured = []
+    for name, path, segs in recs:
+        t, g, a = floor_file(path, profile, segs)
+        b = moving_bias(segs, [g[at(t, s.t_ns)] for s in segs], data.gravity)
+        measured.append((name, t, g, a, b))
+        print(f"{name}: moving bias {np.round(b * 1e3, 2)} mrad/s", file=sys.stderr, flush=True)
+    out = measure_prior(measured, Context(grav, prior))
+    for r in out["recordings"]:
+        print(f"{r['recording']}: still - moving {r['still_minus_moving_rad_s']}, gravity's error "
+              f"{r['gravity_error_along_observed_rad_s']}", file=sys.stderr)
+    return {"method": "experiments/bias_prior.py fit (docs/refine.md, \"The recording's own bias\")",
+            "config": config, **out}
+
+
+# -- score ----------------------------------------------------------------------------------------------
+
+def score(config: str, profile_path: Path, data_root: Path, splits: Tuple[str, ...] = ("test",)) -> List[Dict[str, Any]]:
+    """Every ``--bias`` option's open-loop AOE on CONFIG's test recordings (module doc)."""
+    from imu_learn.calib.correction import _prior  # the prior refine gives --bias (the profile's)
+
+    profile = Profile.load(profile_path)
+    data, recs = recordings(config, data_root, splits)
+    grav = gravity_of(profile, data)
+    prior = _prior(profile, str(profile_path))
+    out = []
+    for name, path, segs in recs:
+        t, g, a = floor_file(path, profile, segs)
+        idx = [at(t, s.t_ns) for s in segs]
+        row: Dict[str, Any] = {"recording": name, "aoe_deg": {}, "decision": {}, "subtracted_rad_s": {}}
+        for m in METHODS:
+            gm = g
+            if m != "none":
+                sink: Dict[str, Any] = {}
+                gm, _, _ = bias_step(m, grav, sink, prior=prior)(t, g, a)
+                v = sink["bound"]
+                row["decision"][m] = v.decision
+                row["subtracted_rad_s"][m] = None if v.gyro_bias is None else [float(x) for x in v.gyro_bias]
+                if m == "auto":
+                    row["auto_used"] = sink[m].detail.get("used")
+            e = np.concatenate([attitude_errors(with_gyro(s, gm[i]))["angle_rad"] for s, i in zip(segs, idx)])
+            row["aoe_deg"][m] = math.degrees(float(np.sqrt(np.mean(e * e))))
+        row["moving_bias_rad_s"] = moving_bias(segs, [g[i] for i in idx], data.gravity).tolist()
+        out.append(row)
+        print(f"{name}: " + "  ".join(f"{m} {row['aoe_deg'][m]:.2f}" for m in METHODS) + f"  (auto used {row.get('auto_used')})",
+              file=sys.stderr, flush=True)
+    return out
+
+
+def table(rows: List[Dict[str, Any]]) -> str:
+    head = "| recording | " + " | ".join(f"{m}" for m in METHODS) + " | auto / none | auto used |"
+    lines = [head, "|" + "---|" * (len(METHODS) + 3)]
+    for r in rows:
+        a = r["aoe_deg"]
+        lines.append(f"| {r['recording']} | " + " | ".join(f"{a[m]:.2f}" for m in METHODS)
+                     + f" | {a['auto'] / a['none']:.3f} | {', '.join(r.get('auto_used') or []) or '–'} |")
+    return "\n".join(lines)
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("what", choices=("fit", "score"))
+    ap.add_argument("--config", required=True)
+    ap.add_argument("--profile", type=Path, required=True)
+    ap.add_argument("--data-root", type=Path, default=Path(os.environ.get("IMU_LEARN_DATA", "data")))
+    ap.add_argument("--write", action="store_true", help="fit: write bias_prior into the profile")
+    ap.add_argument("--json", type=Path, help="score: write the figures here")
+    a = ap.parse_args()
+    if a.what == "fit":
+        bp = fit(a.config, a.profile, a.data_root)
+        print(json.dumps({k: v for k, v in bp.items() if k != "recordings"}, indent=1))
+        if a.write:
+            d = json.loads(a.profile.read_text())
+            d["bias_prior"] = bp
+            atomic_write_text(a.profile, json.dumps(d, indent=2, allow_nan=False) + "\n")
+            print(f"written {a.profile}'s bias_prior")
+    else:
+        rows = score(a.config, a.profile, a.data_root)
+        print(table(rows))
+        if a.json:
+            atomic_write_text(a.json, json.dumps(rows, indent=1))
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,118 @@
+"""``--bias auto`` on a device whose bias at rest is not its bias while moving (docs/refine.md, "The
+recording's own bias"): the prior measured on the device's training recordings
+(:func:`imu_learn.infer.bias.measure_prior`, a profile's ``bias_prior``) keeps the still stretches out
+of ``auto`` where, on those recordings, they lay farther from the moving bias than the profile alone
+did, and keeps them in where they did not. The synthetic recordings' moving bias is the one injected
+(the oracle), independent of the estimators."""
+from __future__ import annotations
+
+import json
+import math
+
+import numpy as np
+
+from imu_learn import _imu_core as core
+from imu_learn.calib.profile import Affine, Profile
+from imu_learn.core.still import BiasPrior
+from imu_learn.infer.bias import REGISTRY, Context, better_than_prior, combine, measure_prior
+
+RATE = 100.0
+G = 9.81
+IMU_REL = "mav0/imu0/data.csv"
+REST_S, MOVE_S = 5.0, 40.0
+
+
+def robot(rest_bias, moving_bias, seed=0):
+    """A level robot at rest for REST_S (gyro: ``rest_bias`` plus white noise), then driving for MOVE_S,
+    turning about gravity (the body's z) at a varying rate with its accelerometer shaken (gyro: the
+    rate plus ``moving_bias``)."""
+    n0, n1 = int(REST_S * RATE), int(MOVE_S * RATE)
+    t = (np.arange(n0 + n1) * 1e9 / RATE).astype(np.int64)
+    s = np.arange(n1) / RATE
+    rng = np.random.default_rng(seed)
+    w = np.zeros((n0 + n1, 3))
+    w[n0:, 2] = 0.5 * np.sin(2 * np.pi * 0.2 * s) + 0.3 * np.sin(2 * np.pi * 0.07 * s)
+    bias = np.vstack([np.tile(rest_bias, (n0, 1)), np.tile(moving_bias, (n1, 1))])
+    g = w + bias + rng.normal(0, 0.002, w.shape)
+    a = np.tile([0.0, 0.0, G], (n0 + n1, 1))
+    a[:n0] += rng.normal(0, 0.02, (n0, 3))
+    a[n0:] += rng.normal(0, 0.3, (n1, 3))
+    return t, g, a
+
+
+def device(rest_minus_moving, moving_z):
+    """The device's training recordings: (name, t, gyro, acc, moving bias) with the rest bias
+    ``rest_minus_moving`` [rad/s] on z away from each moving one."""
+    out = []
+    for i, m in enumerate(moving_z):
+        b = np.array([0.0, 0.0, m])
+        out.append((f"train{i}", *robot(b + [0.0, 0.0, rest_minus_moving], b, seed=10 + i), b))
+    return out
+
+
+def prior_of(measured):
+    return BiasPrior.from_bias_std([0.002] * 3, "test", measured=measured)
+
+
+def refine_auto(tmp_path, measured, rest_bias, moving_bias):
+    """``imu-learn refine --profile P --bias auto`` on a recording, P the identity floor whose
+    ``bias_prior`` is ``measured``: (the summary's bias entry, the bias subtracted per sample)."""
+    from imu_learn.cli.refine import main
+
+    t, g, a = robot(rest_bias, moving_bias, seed=99)
+    f = tmp_path / "in" / IMU_REL
+    f.parent.mkdir(parents=True)
+    core.write_asl_imu(str(f), t, g, a, "#timestamp [ns],w_RS_S_x [rad s^-1],w_RS_S_y [rad s^-1],w_RS_S_z [rad s^-1],"
+                       "a_RS_S_x [m s^-2],a_RS_S_y [m s^-2],a_RS_S_z [m s^-2]")
+    prof = Profile(device="synthetic", sample_rate_hz=RATE, time_offset_s=0.0, time_offset_s_std=math.nan,
+                   gyro=Affine(np.eye(3), np.zeros(3), "rad/s", np.zeros((3, 3)), np.full(3, 0.002)),
+                   acc=Affine(np.eye(3), np.zeros(3), "m/s^2"), g_sensitivity=np.zeros((3, 3)), gravity_mps2=G,
+                   gravity_mps2_std=math.nan, floor={}, bias_prior=measured)
+    prof.save(tmp_path / "profile.json")
+    assert Profile.load(tmp_path / "profile.json").bias_prior == json.loads(json.dumps(measured))
+    out = tmp_path / "o.csv"
+    assert main(["--profile", str(tmp_path / "profile.json"), "--input", str(f), "--out", str(out),
+                 "--bias", "auto", "--quiet"]) == 0
+    entry = json.loads((tmp_path / "o.csv.summary.json").read_text())["bias"]
+    _, g_out, _ = core.read_asl_imu(str(out))
+    return entry, (g - g_out).mean(0)
+
+
+def test_the_measured_prior_sees_the_rest_to_motion_change():
+    m = measure_prior(device(0.008, (0.001, -0.001, 0.0005)), Context(G, prior_of(None)))
+    assert m["still_recordings"] == 3
+    # the still stretch reads the resting bias: 8 mrad/s from the moving one on z, noise elsewhere
+    assert abs(m["still_error_std_rad_s"][2] - 0.008) < 0.0005 and max(m["still_error_std_rad_s"][:2]) < 0.0005
+    assert m["rms_rad_s"]["still"]["error"] > m["rms_rad_s"]["still"]["profile_alone"]
+    assert not better_than_prior(REGISTRY["still"].run(Context(G, prior_of(m)), *robot([0, 0, 0.006], [0, 0, 0])),
+                                 prior_of(m))[0]
+
+
+def test_auto_does_not_apply_the_resting_bias(tmp_path):
+    """Rest reads 6 mrad/s on z, the bias while moving is zero: ``still`` subtracts the resting bias,
+    ``auto`` (with the device's measured prior) does not."""
+    measured = measure_prior(device(0.008, (0.001, -0.001, 0.0005)), Context(G, prior_of(None)))
+    entry, sub = refine_auto(tmp_path, measured, [0.0, 0.0, 0.006], [0.0, 0.0, 0.0])
+    assert abs(entry["still"]["gyro_bias_rad_s"][2] - 0.006) < 0.0005  # the rest was found
+    assert "still" not in entry["used"] and entry["still"]["gate"]["entered"] is False
+    assert abs(sub[2]) < 0.001, sub  # the resting bias is not subtracted
+
+
+def test_auto_keeps_a_rest_that_reads_the_moving_bias(tmp_path):
+    """The same robot whose rest reads its moving bias: the still stretches enter ``auto`` and its
+    5 mrad/s on z is subtracted."""
+    measured = measure_prior(device(0.0, (0.004, -0.005, 0.006)), Context(G, prior_of(None)))
+    assert measured["rms_rad_s"]["still"]["error"] < measured["rms_rad_s"]["still"]["profile_alone"]
+    entry, sub = refine_auto(tmp_path, measured, [0.0, 0.0, 0.005], [0.0, 0.0, 0.005])
+    assert "still" in entry["used"] and entry["still"]["gate"]["entered"] is True
+    assert abs(sub[2] - 0.005) < 0.0005, sub
+
+
+def test_a_prior_without_the_measured_figures_changes_nothing():
+    """An old profile (no ``bias_prior``): every estimator enters, as before."""
+    t, g, a = robot([0.0, 0.0, 0.006], [0.0, 0.0, 0.0])
+    old = BiasPrior.from_bias_std([0.002] * 3, "test")
+    assert old == BiasPrior.from_bias_std([0.002] * 3, "test", measured={})
+    ctx = Context(G, old)
+    c = combine([REGISTRY["still"].run(ctx, t, g, a), REGISTRY["gravity"].run(ctx, t, g, a)], old)
+    assert "still" in c.detail["used"] and abs(c.gyro_bias[2] - 0.006) < 0.0005
