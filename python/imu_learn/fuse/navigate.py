@@ -742,7 +742,7 @@ def bias_prior(imu: Imu) -> BiasPrior:
         return MEMS_PRIOR
     profile = Profile.load(imu.floor)
     return BiasPrior.from_bias_std(profile.gyro.bias_std, f"the bias spread of profile {imu.floor}",
-                                   isotropic=imu.mounting is not None)
+                                   isotropic=imu.mounting is not None, measured=profile.bias_prior)
 
 
 def own_bias(opts: NavigateOptions, t_ns: np.ndarray, gyro: np.ndarray, acc: np.ndarray,
