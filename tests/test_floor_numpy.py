@@ -11,6 +11,7 @@ import sys
 from pathlib import Path
 
 import numpy as np
+import pytest
 
 from imu_learn.baselines.base import FitSettings
 from imu_learn.baselines.traditional import (
@@ -160,3 +161,23 @@ def test_calibrates_modules_and_the_fit_run_without_torch():
         "assert np.abs(m.params.M_g - M_G).max() < 1e-7 and 'torch' not in sys.modules\n")
     r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, cwd=str(REPO))
     assert r.returncode == 0, r.stderr[-2000:]
+
+
+@pytest.mark.parametrize("fs,fc", [(200.0, 5.0), (200.0, 20.0), (200.0, 40.0), (200.0, 90.0), (30.0, 5.0), (285.7, 20.0),
+                                   (1000.0, 5.0)])
+def test_the_order_2_lowpass_is_scipys(fs, fc):
+    """affine's numpy Butterworth (the floor's order 2) against scipy.signal's butter and sosfiltfilt
+    (the oracle), on a drifting noisy signal with a large offset, and on one just longer than the padding."""
+    from scipy.signal import butter, sosfiltfilt
+
+    from imu_learn.baselines.affine import butter2, lowpass
+
+    sos = butter(2, fc, btype="low", fs=fs, output="sos")
+    np.testing.assert_allclose(butter2(fc, fs), sos, rtol=1e-14, atol=1e-15)
+    rng = np.random.default_rng(int(fs + fc))
+    x = np.cumsum(rng.normal(size=(20000, 3)), 0) * 0.01 + [0.1, -0.2, 9.81] + rng.normal(size=(20000, 3))
+    y = lowpass(x, fs, fc)
+    assert np.abs(y - sosfiltfilt(sos, x, axis=0)).max() < 1e-12 * np.abs(x).max()
+    short = x[:10]
+    assert np.abs(lowpass(short, fs, fc) - sosfiltfilt(sos, short, axis=0)).max() < 1e-12 * np.abs(short).max()
+    np.testing.assert_array_equal(lowpass(x[:9], fs, fc), x[:9])  # too short for the padding: unchanged

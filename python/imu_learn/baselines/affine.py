@@ -5,7 +5,11 @@ and of what a device profile applies (:meth:`imu_learn.calib.profile.Profile.app
     gyro' = M_g (LP_g(gyro) - b_g) - G LP_g(acc)        acc' = M_a (LP_a(acc) - b_a)
 
 after the time offset (gyro and acc resampled at t + time_offset samples, :func:`.timing.resample`).
-LP is a zero-phase Butterworth low-pass of each axis (``None``: no filter)."""
+LP is a zero-phase Butterworth low-pass of each axis (``None``: no filter): ``scipy.signal``'s
+``butter`` and ``sosfiltfilt`` (odd padding of 3 × (2 · sections + 1) samples, each pass started in
+the steady state of its first sample). The floor's order 2 (every saved floor's) is computed here in
+numpy (:func:`butter2`, :func:`filtfilt2`): importing ``scipy.signal`` costs about 1 s of CPU
+(scipy 1.17), a fifth of ``imu-learn calibrate``; other orders import it."""
 from __future__ import annotations
 
 import math
@@ -14,7 +18,6 @@ from dataclasses import dataclass, replace
 from typing import Any, Callable, Dict, Iterator, Optional, Tuple
 
 import numpy as np
-from scipy.signal import butter, sosfiltfilt
 
 from imu_learn.baselines.timing import resample
 from imu_learn.core.stamps import median_period_ns, sample_rate_hz
@@ -164,17 +167,64 @@ class Floor(Mapping):
     __hash__ = None  # type: ignore[assignment]
 
 
+def butter2(cutoff_hz: float, fs: float) -> np.ndarray:
+    """``scipy.signal.butter(2, cutoff_hz, fs=fs, output="sos")`` in closed form (the bilinear
+    transform with the cutoff prewarped, K = tan(π f_c / f_s)): one section (1, 6)."""
+    k, s2 = math.tan(math.pi * cutoff_hz / fs), math.sqrt(2.0)
+    norm = 1.0 / (1.0 + s2 * k + k * k)
+    b0 = k * k * norm
+    return np.array([[b0, 2.0 * b0, b0, 1.0, 2.0 * (k * k - 1.0) * norm, (1.0 - s2 * k + k * k) * norm]])
+
+
+def _section_response(sos: np.ndarray) -> Tuple[np.ndarray, float]:
+    """The impulse response of one second-order section with complex poles r e^{±iθ} (a Butterworth
+    low-pass below Nyquist), until r^k falls below 1e-18 of its scale, and its gain at DC."""
+    b0, b1, b2, _, a1, a2 = (float(v) for v in sos[0])
+    r, th = math.sqrt(a2), math.atan2(math.sqrt(4.0 * a2 - a1 * a1), -a1)
+    k = np.arange(int(math.ceil(math.log(1e-18 * math.sin(th)) / math.log(r))) + 3)
+    g = r ** k * np.sin((k + 1) * th) / math.sin(th)  # of 1 / (1 + a1 z⁻¹ + a2 z⁻²)
+    h = b0 * g
+    h[1:] += b1 * g[:-1]
+    h[2:] += b2 * g[:-2]
+    return h, (b0 + b1 + b2) / (1.0 + a1 + a2)
+
+
+def _steady_pass(x: np.ndarray, h: np.ndarray, dc: float) -> np.ndarray:
+    """One causal pass of the filter over x (N, C) started in the steady state of x[0] (scipy's
+    ``zi = sosfilt_zi(sos) * x[0]``): dc · x[0] plus the response at rest to x − x[0] (an FFT
+    convolution with h, exact where h has decayed below the rounding)."""
+    n = len(x) + len(h) - 1
+    nfft = 1 << (n - 1).bit_length()
+    d = np.fft.irfft(np.fft.rfft(x - x[0], nfft, axis=0) * np.fft.rfft(h, nfft)[:, None], nfft, axis=0)
+    return d[:len(x)] + dc * x[0]
+
+
+def filtfilt2(sos: np.ndarray, x: np.ndarray) -> np.ndarray:
+    """``scipy.signal.sosfiltfilt(sos, x, axis=0)`` for one Butterworth low-pass section (:func:`butter2`)
+    on x (N, C), N > 9: odd extension by 9 samples, a forward and a backward steady-state pass.
+    Agrees with scipy's to ~1e-14 of max |x| (tests/test_floor_numpy.py)."""
+    pad = 9
+    h, dc = _section_response(sos)
+    ext = np.concatenate((2.0 * x[:1] - x[pad:0:-1], x, 2.0 * x[-1:] - x[-2:-pad - 2:-1]))
+    y = _steady_pass(_steady_pass(ext, h, dc)[::-1], h, dc)[::-1]
+    return np.ascontiguousarray(y[pad:-pad])
+
+
 def lowpass(x: np.ndarray, fs: float, cutoff_hz: Optional[float], order: int = 2) -> np.ndarray:
     """Zero-phase Butterworth low-pass of each column of x (N, C); ``None`` (or a cutoff at or above
-    Nyquist, or a signal too short for the filter's padding) returns x unchanged."""
+    Nyquist, or a signal too short for the filter's padding) returns x unchanged. Order 2 in numpy
+    (:func:`filtfilt2`), other orders by ``scipy.signal``."""
     x = np.asarray(x, dtype=np.float64)
     if cutoff_hz is None or cutoff_hz >= 0.5 * fs:
         return x.copy()
-    sos = butter(order, cutoff_hz, btype="low", fs=fs, output="sos")
-    padlen = 3 * (2 * len(sos) + 1)
-    if len(x) <= padlen:
+    sections = (order + 1) // 2
+    if len(x) <= 3 * (2 * sections + 1):
         return x.copy()
-    return sosfiltfilt(sos, x, axis=0)
+    if order == 2:
+        return filtfilt2(butter2(cutoff_hz, fs), x)
+    from scipy.signal import butter, sosfiltfilt
+
+    return sosfiltfilt(butter(order, cutoff_hz, btype="low", fs=fs, output="sos"), x, axis=0)
 
 
 def apply(p: TraditionalParams, t_ns: np.ndarray, gyro: np.ndarray, acc: np.ndarray,

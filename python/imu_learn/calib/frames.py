@@ -11,7 +11,6 @@ from dataclasses import dataclass, replace
 from typing import List, Optional, Tuple
 
 import numpy as np
-from scipy.signal import savgol_filter
 
 from imu_learn.core.quat import quat_conj, quat_mul, quat_rotate
 from imu_learn.data.loading import AlignOptions, align
@@ -112,6 +111,8 @@ def fit_acc_rotation(segs: List[Segment], half: int = 15) -> np.ndarray:
     """GT body -> IMU rotation from specific force (Kabsch, bias = centring term): the smoothed
     accelerometer vs. R_gtᵀ (p̈_gt + g). For a ground robot, which turns about z only, the gyro fixes
     the tilt but not the yaw of R_off; gravity and the horizontal accelerations fix both."""
+    from scipy.signal import savgol_filter  # here only: importing scipy.signal costs ~1 s of CPU
+
     a, b = [], []
     for s in segs:
         if len(s) <= 4 * half:
