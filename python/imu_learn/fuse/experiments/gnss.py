@@ -17,7 +17,11 @@ instead (levelled there, turned by the heading the track gives, zero velocity; e
 first on), so the still start and the first metres of motion tell tilt, a horizontal accelerometer
 bias and the gyro bias apart before the first outage; an outage before the heading's epoch is
 refused (its scores would use later fixes). ``prior_yaw_deg`` holds the start's heading apart from
-its tilt (a hand-held device does not point where it walks). The fixes (RTKLIB
+its tilt (a hand-held device does not point where it walks). Timing from the data, outside the
+outages, no truth: ``delay_from = "fixes"`` measures the IMU's time offset (:mod:`imu_learn.fuse.start.delay`,
+the specific force's norm against the fixes' second differences) in place of ``delay_s``;
+``velocity_lag_from = "pos"`` measures how far the ``.pos`` velocities lag its positions
+(:func:`imu_learn.fuse.factors.velocity.velocity_lag`) and ties each velocity to that instant. The fixes (RTKLIB
 ``.pos``, :mod:`imu_learn.fuse.aiding.rtklib`) enter with their own sigmas and lever arm; the outage
 schedule is the peer's: ``duration_s`` outages every ``period_s`` from ``first_s`` after the first
 GNSS epoch, each ending at least ``end_margin_s`` before its last. Every epoch inside an outage
@@ -51,12 +55,13 @@ from ..aiding import GnssFixes, OutageWindow
 from ..aiding.rtklib import RtkSolution, fixes_on_imu, normal_gravity, read_pos
 from ..factors import chain
 from ..factors.nhc import NhcSettings, calibrate_lever, nhc_callback
-from ..factors.velocity import velocity_callback
+from ..factors.velocity import velocity_callback, velocity_lag
 from ..graph import IncrementalFusion, feed, samples_of
 from ..noise import ImuNoise
 from ..output import write_json
 from ..score import error_stats
 from ..settings import FusionSettings, PriorSigmas
+from ..start.delay import imu_delay
 from ..start.track import GnssStartSettings, gnss_start
 
 log = logging.getLogger(__name__)
@@ -120,6 +125,9 @@ class GnssRunConfig:
     wheeled: bool = True
     mounting_rpy_deg: List[float] = field(default_factory=lambda: [0.0, 0.0, 0.0])
     delay_s: float = 0.0
+    # "fixes": the IMU's time offset measured from the data (fuse/start/delay.py: the specific force's
+    # norm against the fixes' second differences outside the outages), replacing delay_s
+    delay_from: str = "config"
     lever_gnss_m: List[float] = field(default_factory=lambda: [0.0, 0.0, 0.0])
     qualities: List[int] = field(default_factory=lambda: [1, 2])
     float_gain: float = 2.0
@@ -128,6 +136,10 @@ class GnssRunConfig:
     # for float epochs), as the peer's EKF uses them; the antenna's rotation-induced velocity
     # (omega x lever, ~cm/s with these lever arms) is neglected. 0: positions only.
     velocity_sigma_mps: float = 0.0
+    # when the velocities belong [s]: at t_epoch - velocity_lag_s; velocity_lag_from = "pos": that lag
+    # measured from the .pos alone (fuse/factors/velocity.py: velocity_lag), "config": velocity_lag_s
+    velocity_lag_s: float = 0.0
+    velocity_lag_from: str = "config"
     level_s: float = 10.0
     still_max_speed_mps: float = 0.1
     yaw_min_speed_mps: float = 1.0
@@ -177,6 +189,12 @@ def check(cfg: GnssRunConfig, path: object = "config") -> None:
         raise ConfigError(f"{path}: nhc.lever_from: 'config' or 'raw', got {cfg.nhc.lever_from!r}")
     if cfg.nhc.lever_from == "raw" and "raw+nhc" in cfg.variants and cfg.variants[0] != "raw":
         raise ConfigError(f"{path}: nhc.lever_from = 'raw' needs variants to start with 'raw'")
+    if cfg.delay_from not in ("config", "fixes"):
+        raise ConfigError(f"{path}: delay_from: 'config' or 'fixes', got {cfg.delay_from!r}")
+    if cfg.velocity_lag_from not in ("config", "pos"):
+        raise ConfigError(f"{path}: velocity_lag_from: 'config' or 'pos', got {cfg.velocity_lag_from!r}")
+    if not (math.isfinite(cfg.velocity_lag_s) and cfg.velocity_lag_s >= 0):
+        raise ConfigError(f"{path}: velocity_lag_s: a time >= 0 s, got {cfg.velocity_lag_s!r}")
     if cfg.start_at not in ("track", "still"):
         raise ConfigError(f"{path}: start_at: 'track' or 'still', got {cfg.start_at!r}")
     if cfg.bias_prior not in ("zero", "still"):
@@ -235,6 +253,7 @@ class Drive:
     start: Dict[str, object]
     noise: ImuNoise
     gravity: float
+    velocity_lag_s: float = 0.0  # the velocities belong to t_epoch - this [s] (fuse/factors/velocity.py)
 
 
 def run_variant(cfg: GnssRunConfig, variant: str, drive: Drive, eval_idx: np.ndarray, diag_idx: Sequence[int] = (),
@@ -256,7 +275,7 @@ def run_variant(cfg: GnssRunConfig, variant: str, drive: Drive, eval_idx: np.nda
     bias0 = np.r_[start["gyro_still"], start["acc_bias_still"]] if still else None
     callbacks = []
     if cfg.velocity_sigma_mps > 0:
-        callbacks.append(velocity_callback(fixes, sol, cfg.velocity_sigma_mps, cfg.float_gain))
+        callbacks.append(velocity_callback(fixes, sol, cfg.velocity_sigma_mps, cfg.float_gain, drive.velocity_lag_s))
     if variant == "raw+nhc":
         lever_nhc = tuple(cfg.nhc.lever) if nhc_lever is None else tuple(float(x) for x in nhc_lever)
         callbacks.append(nhc_callback(replace(cfg.nhc, lever=lever_nhc), gyro))
@@ -316,9 +335,23 @@ def experiment(cfg: GnssRunConfig) -> Dict[str, object]:
     root = cfg.root()
     imu_path = root / cfg.imu
     M = mounting_rotation(cfg.mounting_rpy_deg)
-    imu_log = read_imu_log(imu_path, (root / cfg.tag) if cfg.tag else None, M, cfg.delay_s)
     sol = read_pos(root / cfg.pos)
     gravity = normal_gravity(sol.origin_llh[0], sol.origin_llh[2])
+    tag = (root / cfg.tag) if cfg.tag else None
+    delay: Dict[str, object] = {"delay_s": cfg.delay_s, "from": "config"}
+    if cfg.delay_from == "fixes":
+        # from the data (no attitude, no truth), on the fixed epochs outside the outages
+        raw_log = read_imu_log(imu_path, tag, M, 0.0)
+        outside = np.ones(len(sol.t_ns), bool)
+        for w in outage_windows(sol, cfg.outages):
+            a, b = w.bounds_ns(int(sol.t_ns[0]))
+            outside &= ~((sol.t_ns >= a) & (sol.t_ns < b))
+        est = imu_delay(raw_log.imu.t_ns, raw_log.imu.acc, sol, gravity, use=outside)
+        delay = {"from": "fixes", **asdict(est)}
+        log.info("%s: the IMU's time offset from the fixes %+.3f s (specific-force norm residual %.3f m/s^2, %.3f at "
+                 "0 s; %d epochs); the config's delay_s %+.3f s not used", cfg.name, est.delay_s, est.rms_mps2,
+                 est.rms_at_zero_mps2, est.epochs, cfg.delay_s)
+    imu_log = read_imu_log(imu_path, tag, M, float(delay["delay_s"]))
     lat = math.radians(sol.origin_llh[0])
     noise = EarthImuNoise(cfg.noise.gyro_noise_density, cfg.noise.acc_noise_density, cfg.noise.gyro_random_walk,
                           cfg.noise.acc_random_walk, source=cfg.noise.source,
@@ -330,6 +363,18 @@ def experiment(cfg: GnssRunConfig) -> Dict[str, object]:
     s0 = int(start["s0"])
     t, gyro, acc = imu_log.imu.t_ns[s0:], imu_log.imu.gyro[s0:], imu_log.imu.acc[s0:]
     windows = [w.bounds_ns(int(sol.t_ns[0])) for w in outage_windows(sol, cfg.outages)]  # [start, end) ns
+    vel_lag: Dict[str, object] = {"lag_s": cfg.velocity_lag_s, "from": "config"}
+    if cfg.velocity_lag_from == "pos" and cfg.velocity_sigma_mps > 0:
+        # from the .pos alone (its fixed positions' own differences; no IMU, no truth), on the epochs
+        # outside the outages; a velocity ahead of its epoch (< 0) is not used (it would need later keyframes)
+        outside = np.ones(len(sol.t_ns), bool)
+        for a, b in windows:
+            outside &= ~((sol.t_ns >= a) & (sol.t_ns < b))
+        lag = velocity_lag(sol, use=outside)
+        vel_lag = {"from": "pos", **asdict(lag), "lag_s": max(lag.lag_s, 0.0), "measured_s": lag.lag_s}
+        log.info("%s: the velocities lag the positions by %.3f s (horizontal RMS against the positions' central "
+                 "differences %.3f -> %.3f m/s over %d epochs)", cfg.name, lag.lag_s, lag.rms_before_mps,
+                 lag.rms_after_mps, lag.epochs)
     if windows and (windows[0][0] - int(sol.t_ns[0])) * 1e-9 < start["heading_s_after_first_epoch"]:
         raise InvalidInputError(f"{cfg.name}: the first outage starts before the start's heading is known "
                                 f"({start['heading_s_after_first_epoch']:.2f} s): its scores would use later fixes")
@@ -365,7 +410,8 @@ def experiment(cfg: GnssRunConfig) -> Dict[str, object]:
             except InvalidInputError as e:  # e.g. a straight drive: keep the config's lever
                 nhc_lever, nhc_fit = None, {"lever_m": list(cfg.nhc.lever), "fallback": str(e)}
                 log.warning("%s: %s; NHC lever from the config %s", cfg.name, e, cfg.nhc.lever)
-        r = run_variant(cfg, variant, Drive(t, gyro, acc, fixes, sol, start, noise, gravity), eval_idx, diag_idx,
+        r = run_variant(cfg, variant, Drive(t, gyro, acc, fixes, sol, start, noise, gravity, float(vel_lag["lag_s"])),
+                        eval_idx, diag_idx,
                         nhc_lever if variant == "raw+nhc" else None)
         if variant == "raw":
             raw_res = r["result"]
@@ -394,6 +440,7 @@ def experiment(cfg: GnssRunConfig) -> Dict[str, object]:
             "gnss": {"path": cfg.pos, "epochs": len(sol), "q_counts": {int(q): int((sol.q == q).sum())
                                                                       for q in np.unique(sol.q)},
                      "fixes_used": len(fixes), "withheld": int(in_out.sum()), "truth_in_outages": int((which >= 0).sum())},
+            "velocity_lag": vel_lag, "imu_delay": delay,
             "start": {k: (v.tolist() if isinstance(v, np.ndarray) else v) for k, v in start.items()},
             "outages_s": [((a - int(sol.t_ns[0])) * 1e-9, (b - a) * 1e-9) for a, b in windows],
             "runs": runs}
