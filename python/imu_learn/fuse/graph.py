@@ -1,6 +1,8 @@
 """The factor graph: navigation state (pose, velocity) and IMU bias at keyframes, GTSAM's
 ``CombinedImuFactor`` (bias random walk inside) between consecutive keyframes, aiding factors at
-their keyframes, and a prior on the first state.
+their keyframes, and a prior on the first state. Pose aiding in its own world
+(:class:`~imu_learn.fuse.aiding.types.WorldPoses`) adds one state, that world's pose in the
+navigation frame (key ``w0``): free (no prior of its own), never marginalised from the fixed-lag window.
 
 Keyframes are the IMU samples of a fixed-rate grid (``keyframe_hz``) plus every sample an aiding
 measurement is tied to. Each IMU sample k is held over [t_k, t_k+1] (zero-order hold, as
@@ -37,6 +39,7 @@ import numpy as np
 from imu_learn.errors import InvalidInputError
 
 from .aiding import epochs
+from .aiding.types import WORLD
 from .factors import held
 from .settings import SETTLE_S, FusionSettings
 
@@ -264,6 +267,7 @@ class IncrementalFusion:
         # extra_factors(self, k, s) at keyframe k (sample s) before its update, it returns factors to
         # add there; they count as new information (iSAM2 updates at that keyframe).
         self._extra_factors = extra_factors
+        self._world = None  # the key of the aiding's world (WorldPoses), once its first pose arrived
         if extra_factors is not None:
             self.counts["extra_factors"] = 0
         self.n = 0  # samples added so far
@@ -333,6 +337,13 @@ class IncrementalFusion:
             if i is None:  # an absolute pose (AbsolutePoses)
                 graph.add(gtsam.PriorFactorPose3(X(k), rel, model))
                 self.counts["pose_factors"] = self.counts.get("pose_factors", 0) + 1
+                continue
+            if i == WORLD:  # a pose in the aiding's own world, a free state (WorldPoses): X_k = T_WA Z
+                if self._world is None:  # its first value from this keyframe's (IMU-predicted) pose
+                    self._world = gtsam.symbol("w", 0)
+                    self._values.insert(self._world, self._values.atPose3(X(k)).compose(rel.inverse()))
+                graph.add(gtsam.BetweenFactorPose3(self._world, X(k), rel, model))
+                self.counts["world_pose_factors"] = self.counts.get("world_pose_factors", 0) + 1
                 continue
             graph.add(gtsam.BetweenFactorPose3(X(self._key_of[i]), X(k), rel, model))
             self.counts["relative_pose_factors"] += 1
@@ -466,6 +477,8 @@ class IncrementalFusion:
         of them is marginalised."""
         values = self._values
         stamps = {key: self._kf_t[self._gtsam.Symbol(key).index()] for key in values.keys()}
+        if self._world is not None:  # the aiding's world is re-stamped at every update: never marginalised
+            stamps[self._world] = t_s
         self._initial.insert(values)
         graph = self._inside_window(self._graph, set(stamps) | set(self._isam.timestamps()))
         if coast:  # (inside the first SETTLE_S the start stays held too)

@@ -23,8 +23,9 @@ A = C0 is ``T_A_Bk = T_C0_Ck T_BS^-1``, and the body motion between two frames
   come from gravity through the IMU, heading and position are the prior's gauge (fixed by the
   first pose). Rows further apart than ``max_relative_gap_s`` are not chained: a visual system
   that lost track reports no motion across the gap, and the IMU alone carries it. Aiding without
-  such breaks is also tied over long spans, weighted by its noise estimated against the IMU
-  (:mod:`.aiding.spans`, :mod:`.aiding.estimate`); the aiding's time offset is estimated first.
+  such breaks is also tied to its own world, one free state of the graph, weighted by its noise
+  estimated against the IMU (:mod:`.aiding.spans`, :mod:`.aiding.estimate`); the aiding's time
+  offset is estimated first.
 * ``pose``: a prior factor on each aided body pose in the navigation frame W. A is rotated into W by
   ``R_WA``, estimated once at the start from the levelled attitude (:func:`.start.level.level_aiding`):
   its tilt error (the accelerometer bias over g, ~0.1-0.5 deg) then stays in every absolute pose
@@ -124,6 +125,8 @@ class NavigateOptions:
     max_relative_gap_s: float = 0.5
     # relative poses tie each row to rows these spans [s] before it (0: the row before; :mod:`.aiding.spans`)
     relative_spans_s: Tuple[float, ...] = SPANS_S
+    # unbroken relative-pose aiding: each row also tied to the aiding's own world, one free state (:mod:`.aiding.spans`)
+    relative_world: bool = True
     # absolute poses (in the aiding's world, rotated into W)
     pose_sigma_rot_deg: float = 1.0
     pose_sigma_m: float = 0.02

@@ -1,7 +1,7 @@
 """Aiding for the factor graph, each measurement tied to an IMU sample:
 
 * :mod:`.types`: the measurement types (position fixes, GNSS fixes with per-fix sigmas, relative and
-  absolute poses), each with ``select`` and ``since``, the samples it ties (``tied_samples``) and its
+  absolute poses, poses in the aiding's own world), each with ``select`` and ``since``, the samples it ties (``tied_samples``) and its
   factors for the graph (``factors_by_sample``);
 * :mod:`.kinds`: each ``--aiding-kind`` of the navigator as one class (what its rows carry, its start,
   its sigma options, the aiding it builds); not imported here (it uses :mod:`imu_learn.fuse.start`);

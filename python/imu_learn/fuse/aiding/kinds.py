@@ -6,13 +6,14 @@ graph's aiding object it builds from them. A new kind is one class here.
   the start is levelled then headed along the track (:func:`..start.aiding.position_start`),
   moving; an extrinsic's translation is the antenna's lever arm.
 * ``pose`` (:class:`PoseKind`): absolute body poses, rotated into the navigation frame.
-* ``relative-pose`` (:class:`RelativePoseKind`): the motion between poses, over long spans where
-  the aiding has no breaks (:mod:`.spans`).
+* ``relative-pose`` (:class:`RelativePoseKind`): the motion between consecutive poses and, where
+  the aiding has no breaks, each pose in the aiding's own world, one free state (:mod:`.spans`).
 
 Both pose kinds start from the first pose row (:func:`..start.aiding.pose_start`), at rest when the
 IMU was still there."""
 from __future__ import annotations
 
+from dataclasses import replace
 from typing import Dict, Optional, Tuple
 
 import numpy as np
@@ -20,7 +21,7 @@ import numpy as np
 from ..start.aiding import pose_start, position_start
 from ..start.types import Start
 from .estimate import summary_entry
-from .spans import given_noise, relative_poses, unbroken
+from .spans import given_noise, relative_poses, unbroken, world_poses
 from .types import AbsolutePoses, AidingRows, PositionFixes
 
 
@@ -98,13 +99,16 @@ class RelativePoseKind(AidingKind):
         noise, source = relative_noise(rows, opts, whole)
         a, counts = relative_poses(rows.sample, rows.t_ns, rows.R, rows.p, noise,
                                    opts.relative_spans_s if whole else (0.0,), opts.max_relative_gap_s, label)
+        if whole and opts.relative_world:  # each pose also in the aiding's own world, a free state
+            a = replace(a, world=world_poses(rows.sample, rows.R, rows.p, noise, label))
+            counts["world_poses"] = len(rows.sample)
         return a.since(s0), {**counts, "aiding_estimates": summary_entry(rows, noise, source)}
 
 
 def relative_noise(rows: AidingRows, opts, whole: bool = True):
     """(each pose's noise, where it came from): ``--sigma-rot-deg`` / ``--sigma-m`` where given (a
     relative pose's sigmas, each pose's = over sqrt(2)), else for an unbroken aiding (``whole``, tied
-    over long spans) the noise estimated against the IMU (:mod:`.noise`), else the defaults (a
+    to its world) the noise estimated against the IMU (:mod:`.noise`), else the defaults (a
     relative pose's 0.003 m / 0.05 deg: consecutive poses alone fused better at them than at the
     estimate, docs/experiments/navigate-vo.md). ``opts``: the navigator's options (their class's
     defaults tell what was given)."""

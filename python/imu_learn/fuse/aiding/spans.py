@@ -1,16 +1,21 @@
-"""Relative poses that keep a SLAM trajectory's global consistency: each row tied to the row before
-it, and each anchor row (one per ``ANCHOR_S``) to the anchors further back, over spans growing by a
-factor (``SPANS_S``: 1 to 64 s), inside one run of rows (never across a gap longer than
-``max_gap_s``: a visual system that lost track may restart in a new map). The navigator uses the
-long spans only on aiding without breaks (:func:`unbroken`). Chaining consecutive rows only turns a
-loop-closed trajectory into an odometry whose drift the graph cannot see; the longer spans carry its
-global shape, the short ones its detail, and between them the IMU.
+"""Relative poses, and poses in the aiding's own world, that keep a SLAM trajectory's global
+consistency. :func:`relative_poses` ties each row to the row before it (:data:`SPANS_S`, the
+navigator's default) and, over longer spans (:data:`LONG_SPANS_S`), each anchor row (one per
+``ANCHOR_S``) to the anchors further back, inside one run of rows (never across a gap longer than
+``max_gap_s``: a visual system that lost track may restart in a new map). :func:`world_poses` ties
+each row's pose to the aiding's own world, one free state of the graph (its pose in the navigation
+frame, estimated online: :class:`.types.WorldPoses`); the navigator does so on aiding without breaks
+(:func:`unbroken`). Chaining consecutive rows only turns a loop-closed trajectory into an odometry
+whose drift the graph cannot see; the world carries its global shape to the causal estimate as well
+(the long spans reached the smoothing pass only, those longer than the fixed-lag window never the
+causal one: docs/experiments/navigate-vo.md), the chain its detail, and between them the IMU.
 
 Each pair's sigmas come from each pose's own noise (:class:`.noise.PoseNoise`, per body axis, as
 white noise per pose): rotation ``sqrt(2) σ_θ``; translation in frame i ``sqrt(2 σ_p² + (σ_θ × t_ij)²)``
-(frame i's rotation error swings the far end). Every pose takes part in up to twice as many pairs as
-there are spans, so its noise would be counted that many times: each long span's sigma is inflated
-by the square root of the number of long spans (``inflate``)."""
+(frame i's rotation error swings the far end). Over long spans every pose takes part in up to twice
+as many pairs as there are spans, so its noise would be counted that many times: each long span's
+sigma is inflated by the square root of the number of long spans (``inflate``). A world pose takes
+the pose's own sigmas."""
 from __future__ import annotations
 
 from typing import Sequence, Tuple
@@ -18,9 +23,10 @@ from typing import Sequence, Tuple
 import numpy as np
 
 from .noise import PoseNoise
-from .types import RelativePoses
+from .types import RelativePoses, WorldPoses
 
-SPANS_S = (0.0, 1.0, 4.0, 16.0, 64.0)  # 0: the next row
+SPANS_S = (0.0,)  # 0: the next row (the navigator's relative poses, beside the world's)
+LONG_SPANS_S = (0.0, 1.0, 4.0, 16.0, 64.0)  # and the anchors 1-64 s back (the navigator's before the world)
 ANCHOR_S = 1.0  # the spans longer than 0 join anchor rows, the first row of each ANCHOR_S
 
 
@@ -73,8 +79,9 @@ def pair_sigmas(t_ij: np.ndarray, noise: PoseNoise, inflate=1.0) -> np.ndarray:
 
 def unbroken(t_ns: np.ndarray, max_gap_s: float) -> bool:
     """Whether the rows at ``t_ns`` are one run: no two consecutive further apart than ``max_gap_s``.
-    Only such aiding is tied over the long spans: with breaks (10 s camera gaps on EuRoC) they made
-    the coasting worse, the causal estimate diverging after a break (docs/experiments/navigate-vo.md)."""
+    Only such aiding is tied to its world (or over long spans): a visual system that lost track may
+    restart in a new map, and with breaks (10 s camera gaps on EuRoC) the long spans made the coasting
+    worse, the causal estimate diverging after a break (docs/experiments/navigate-vo.md)."""
     return bool(np.all(np.diff(np.asarray(t_ns, dtype=np.int64)) * 1e-9 <= max_gap_s))
 
 
@@ -102,3 +109,11 @@ def relative_poses(sample: np.ndarray, t_ns: np.ndarray, R: np.ndarray, p: np.nd
     counts = {"relative_poses": int(len(i)), "relative_poses_per_span": np.bincount(which, minlength=len(spans_s)).tolist(),
               "not_chained_over_gaps": consecutive}
     return a, counts
+
+
+def world_poses(sample: np.ndarray, R: np.ndarray, p: np.ndarray, noise: PoseNoise, label: str) -> WorldPoses:
+    """The rows' body poses ``R``, ``p`` in the aiding's world, tied to the graph through its free world
+    frame (:class:`WorldPoses`), each with its per-pose noise."""
+    sig = np.r_[np.asarray(noise.rot_rad, dtype=np.float64), np.asarray(noise.trans_m, dtype=np.float64)]
+    return WorldPoses(np.asarray(sample), np.asarray(R), np.asarray(p), np.tile(sig, (len(sample), 1)),
+                      f"{label}: poses in the aiding's world (a free frame)")

@@ -1,6 +1,7 @@
 """The aiding measurements the factor graph takes, each tied to IMU sample indices: position fixes
 (:class:`PositionFixes`, and :class:`GnssFixes` with per-fix sigmas), relative poses
-(:class:`RelativePoses`) and absolute poses (:class:`AbsolutePoses`). Each subsets with
+(:class:`RelativePoses`), absolute poses (:class:`AbsolutePoses`) and poses in the aiding's own
+world, a free state of the graph (:class:`WorldPoses`, held by :class:`RelativePoses`). Each subsets with
 :meth:`select` (every per-measurement array together, dropped measurements counted) and is
 re-indexed from a run's first fused sample with :meth:`since`; :meth:`tied_samples` names the IMU
 samples its measurements are tied to and :meth:`factors_by_sample` hands the factor graph
@@ -82,30 +83,39 @@ class RelativePoses:
     label: str
     dropped_outage: int = 0  # relative poses removed by apply_outages
     sigmas: Optional[np.ndarray] = None
+    # the same rows' poses tied to the aiding's own world, a free state of the graph (:class:`WorldPoses`)
+    world: Optional[WorldPoses] = None
 
     def __len__(self) -> int:
-        return len(self.i)
+        return len(self.i) + (0 if self.world is None else len(self.world))
 
     def select(self, keep: np.ndarray, dropped_outage: int = 0) -> RelativePoses:
-        """The relative poses where ``keep`` (M,) is True; ``dropped_outage`` is added to the count."""
+        """The relative poses where ``keep`` (M,) is True; ``dropped_outage`` is added to the count; of
+        :attr:`world`, the poses at a dropped pair's end and no kept pair's are dropped too."""
         keep = np.asarray(keep, dtype=bool)
-        return replace(self, i=self.i[keep], j=self.j[keep], R_ij=self.R_ij[keep], t_ij=self.t_ij[keep],
+        i, j = self.i[keep], self.j[keep]
+        world = self.world
+        if world is not None:
+            w = world.idx
+            world = world.select(~(np.isin(w, np.r_[self.i[~keep], self.j[~keep]]) & ~np.isin(w, np.r_[i, j])))
+        return replace(self, i=i, j=j, R_ij=self.R_ij[keep], t_ij=self.t_ij[keep],
                        dropped_outage=self.dropped_outage + int(dropped_outage),
-                       sigmas=None if self.sigmas is None else self.sigmas[keep])
+                       sigmas=None if self.sigmas is None else self.sigmas[keep], world=world)
 
     def since(self, s0: int) -> RelativePoses:
         """The relative poses starting from sample ``s0`` on, their indices counted from it."""
         if s0 == 0:
             return self
         kept = self.select(self.i >= s0)
-        return replace(kept, i=kept.i - s0, j=kept.j - s0)
+        return replace(kept, i=kept.i - s0, j=kept.j - s0, world=None if kept.world is None else kept.world.since(s0))
 
     def tied_samples(self) -> List[np.ndarray]:
-        """The IMU samples the relative poses are tied to: both ends."""
-        return [self.i, self.j]
+        """The IMU samples the relative poses are tied to: both ends (and :attr:`world`'s)."""
+        return [self.i, self.j] + ([] if self.world is None else self.world.tied_samples())
 
     def factors_by_sample(self, fixes_at: Dict[int, List], between_at: Dict[int, List]) -> None:
-        """Each relative pose into ``between_at`` at its later end as ``{j: [(i, Pose3, model)]}``."""
+        """Each relative pose into ``between_at`` at its later end as ``{j: [(i, Pose3, model)]}``
+        (and :attr:`world`'s poses)."""
         import gtsam
 
         model = gtsam.noiseModel.Diagonal.Sigmas(np.r_[[self.sigma_rot_rad] * 3, [self.sigma_trans_m] * 3])
@@ -113,6 +123,68 @@ class RelativePoses:
         for n, (i, j, R, t) in enumerate(zip(self.i, self.j, self.R_ij, self.t_ij)):
             m = model if sig is None else gtsam.noiseModel.Diagonal.Sigmas(np.asarray(sig[n], dtype=np.float64))
             between_at.setdefault(int(j), []).append((int(i), gtsam.Pose3(gtsam.Rot3(R), t), m))
+        if self.world is not None:
+            self.world.factors_by_sample(fixes_at, between_at)
+
+
+# between_at's first element for a pose tied to the aiding's own world (:class:`WorldPoses`)
+WORLD = "world"
+
+
+
+@dataclass(frozen=True)
+class WorldPoses:
+    """Body poses ``R`` (M, 3, 3), ``p`` (M, 3) at IMU samples ``idx`` in the aiding's own world A,
+    tied to the navigation frame through one more state of the graph, A's pose in it (``X_k = T_WA
+    Z_k``; no prior on it: a free world frame, estimated online with the rest, the first pose's
+    prior and gravity fixing it). Per pose and body axis ``sigmas`` (M, 6): rotation [rad] then
+    translation [m]. A SLAM trajectory's global consistency thereby reaches the causal estimate,
+    as it is, where relative poses carry it over long spans only (docs/experiments/navigate-vo.md)."""
+
+    idx: np.ndarray
+    R: np.ndarray
+    p: np.ndarray
+    sigmas: np.ndarray
+    label: str
+    dropped_outage: int = 0
+
+    @property
+    def i(self) -> np.ndarray:
+        return self.idx
+
+    @property
+    def j(self) -> np.ndarray:
+        return self.idx
+
+    def __len__(self) -> int:
+        return len(self.idx)
+
+    def select(self, keep: np.ndarray, dropped_outage: int = 0) -> WorldPoses:
+        """The poses where ``keep`` (M,) is True; ``dropped_outage`` is added to the count."""
+        keep = np.asarray(keep, dtype=bool)
+        return replace(self, idx=self.idx[keep], R=self.R[keep], p=self.p[keep], sigmas=self.sigmas[keep],
+                       dropped_outage=self.dropped_outage + int(dropped_outage))
+
+    def since(self, s0: int) -> WorldPoses:
+        """The poses from sample ``s0`` on, their indices counted from it."""
+        if s0 == 0:
+            return self
+        kept = self.select(self.idx >= s0)
+        return replace(kept, idx=kept.idx - s0)
+
+    def tied_samples(self) -> List[np.ndarray]:
+        """The IMU samples the poses are tied to."""
+        return [self.idx]
+
+    def factors_by_sample(self, fixes_at: Dict[int, List], between_at: Dict[int, List]) -> None:
+        """Each pose into ``between_at`` at its sample as ``{s: [(WORLD, Pose3, model)]}``."""
+        import gtsam
+
+        if np.shape(self.sigmas) != (len(self.idx), 6):
+            raise InvalidInputError(f"{self.label}: per-pose sigmas {np.shape(self.sigmas)}, expected ({len(self.idx)}, 6)")
+        for s, R, t, sig in zip(self.idx, self.R, self.p, self.sigmas):
+            model = gtsam.noiseModel.Diagonal.Sigmas(np.asarray(sig, dtype=np.float64))
+            between_at.setdefault(int(s), []).append((WORLD, gtsam.Pose3(gtsam.Rot3(R), t), model))
 
 
 
@@ -191,7 +263,7 @@ class GnssFixes(PositionFixes):
                          *(None if a is None else a[keep] for a in (self.sigmas, self.q, self.epoch)))
 
 
-Aiding = Union[PositionFixes, RelativePoses, AbsolutePoses]
+Aiding = Union[PositionFixes, RelativePoses, AbsolutePoses, WorldPoses]
 
 
 def aiding_samples(aiding: Aiding) -> np.ndarray:
