@@ -38,18 +38,23 @@ from typing import Any, Dict, List, Tuple
 import numpy as np
 
 from imu_learn.calib.profile import Profile
+from imu_learn.core.quat import quat_conj, quat_log, quat_mul
 from imu_learn.core.still import BiasPrior
 from imu_learn.data.formats import read_imu_source
 from imu_learn.data.splits import data_root_dir, find_all, make_split, recording_name
 from imu_learn.data.types import Segment
 from imu_learn.infer.bias import Context, bias_step, measure_prior
 from imu_learn.score.metrics import fit_startup_bias
-from imu_learn.score.peers import attitude_errors
+from imu_learn.score.peers import attitude_errors, open_loop_attitude, segment_errors
 from imu_learn.train.config import load_config
 from imu_learn.util.atomic import atomic_write_text
 
 REPO = Path(__file__).resolve().parents[1]
-METHODS = ("none", "still", "gravity", "still+gravity", "auto")
+METHODS = ("none", "still", "gravity", "still+gravity", "auto", "moving")
+# fitted on the recording's own ground truth: bounds, not estimators. oracle: one constant bias;
+# oracle_20s: one per 20 s; auto+oracle_vertical: auto's estimate with its component along the body's
+# mean gravity direction (what only a still stretch sees) replaced by the constant oracle's
+ORACLES = ("oracle", "oracle_20s", "auto+oracle_vertical")
 
 
 def recordings(config: str, data_root: Path, splits: Tuple[str, ...]) -> Tuple[Any, List[Tuple[str, Path, List[Segment]]]]:
@@ -110,6 +115,10 @@ def fit(config: str, profile_path: Path, data_root: Path) -> Dict[str, Any]:
     data, recs = recordings(config, data_root, ("train", "val"))
     grav = gravity_of(profile, data)
     prior = BiasPrior.from_bias_std(profile.gyro.bias_std, "the profile's bias spread")
+    term = profile.noise.get("gyroscope_random_walk")  # rad/s^2/sqrt(Hz) = rad/s/sqrt(s)
+    rw = None if term is None or not math.isfinite(float(term.value)) else float(term.value)
+    prior = BiasPrior.from_bias_std(profile.gyro.bias_std, "the profile's bias spread",
+                                    measured={"random_walk_rad_s_sqrt_s": rw})
     measured = []
     for name, path, segs in recs:
         t, g, a = floor_file(path, profile, segs)
@@ -121,10 +130,55 @@ def fit(config: str, profile_path: Path, data_root: Path) -> Dict[str, Any]:
         print(f"{r['recording']}: still - moving {r['still_minus_moving_rad_s']}, gravity's error "
               f"{r['gravity_error_along_observed_rad_s']}", file=sys.stderr)
     return {"method": "experiments/bias_prior.py fit (docs/refine.md, \"The recording's own bias\")",
-            "config": config, **out}
+            "config": config, **out, "random_walk_rad_s_sqrt_s": prior.random_walk}
 
 
 # -- score ----------------------------------------------------------------------------------------------
+
+def peer(row: Dict[str, Any], m: str, segs: List[Segment], gyro: List[np.ndarray], gravity: float) -> None:
+    """``row``'s open-loop AOE [deg] and RO_RMSE [deg] / RP_RMSE [m] over 1 s (AirIMU's) for method ``m``."""
+    e, ro, rp = [], [], []
+    for s, g in zip(segs, gyro):
+        e.append(attitude_errors(with_gyro(s, g))["angle_rad"])
+        w = segment_errors(s, g, s.acc, gravity=gravity)
+        ro.append(w["rot_rad"])
+        rp.append(w["trans_m"])
+    r = {k: float(np.sqrt(np.mean(np.square(np.concatenate(v))))) for k, v in (("a", e), ("o", ro), ("p", rp))}
+    row["aoe_deg"][m] = math.degrees(r["a"])
+    row.setdefault("ro_rmse_deg", {})[m] = math.degrees(r["o"])
+    row.setdefault("rp_rmse_m", {})[m] = r["p"]
+
+
+def oracle_gyro(segs: List[Segment], gyro: List[np.ndarray], piece_s: Any = None) -> Tuple[List[np.ndarray], np.ndarray]:
+    """The gyro less the bias that minimises the open-loop attitude error on the recording's own ground
+    truth (least squares on the rotation error every 10th sample, scipy): one constant per recording
+    (``piece_s`` None), or one per ``piece_s`` of each segment (the last piece at least half as long);
+    and the biases (pieces, 3) [rad/s]."""
+    from scipy.optimize import least_squares
+
+    ks = []
+    for s in segs:
+        tt = (s.t_ns - s.t_ns[0]) * 1e-9
+        k = np.zeros(len(s), dtype=int) if piece_s is None else np.floor(tt / piece_s).astype(int)
+        if k.max() > 0 and tt[-1] - k.max() * piece_s < piece_s / 2:
+            k[k == k.max()] -= 1
+        ks.append(k)
+    offs = np.cumsum([0] + [int(k.max()) + 1 for k in ks]) if piece_s is not None else np.zeros(len(ks) + 1, int)
+
+    def biased(x: np.ndarray) -> List[np.ndarray]:
+        b = x.reshape(-1, 3)
+        return [g - b[o + k] for g, o, k in zip(gyro, offs[:-1], ks)]
+
+    def res(x: np.ndarray) -> np.ndarray:
+        return np.concatenate([quat_log(quat_mul(quat_conj(s.q_wxyz[::10]), open_loop_attitude(s, g)[::10])).ravel()
+                               for s, g in zip(segs, biased(x))])
+
+    n = 3 * (int(offs[-1]) if piece_s is not None else 1)
+    x = least_squares(res, np.zeros(n), diff_step=1e-3, x_scale=1e-3).x
+    return biased(x), x.reshape(-1, 3)
+
+
+# -- score (the table) ----------------------------------------------------------------------------------------------
 
 def score(config: str, profile_path: Path, data_root: Path, splits: Tuple[str, ...] = ("test",)) -> List[Dict[str, Any]]:
     """Every ``--bias`` option's open-loop AOE on CONFIG's test recordings (module doc)."""
@@ -149,22 +203,36 @@ def score(config: str, profile_path: Path, data_root: Path, splits: Tuple[str, .
                 row["subtracted_rad_s"][m] = None if v.gyro_bias is None else [float(x) for x in v.gyro_bias]
                 if m == "auto":
                     row["auto_used"] = sink[m].detail.get("used")
-            e = np.concatenate([attitude_errors(with_gyro(s, gm[i]))["angle_rad"] for s, i in zip(segs, idx)])
-            row["aoe_deg"][m] = math.degrees(float(np.sqrt(np.mean(e * e))))
+            peer(row, m, segs, [gm[i] for i in idx], data.gravity)
+        fixed, b_or = oracle_gyro(segs, [g[i] for i in idx])
+        peer(row, "oracle", segs, fixed, data.gravity)
+        peer(row, "oracle_20s", segs, oracle_gyro(segs, [g[i] for i in idx], 20.0)[0], data.gravity)
+        b_auto = np.asarray(row["subtracted_rad_s"]["auto"] or np.zeros(3))
+        u = a.mean(0) / np.linalg.norm(a.mean(0))  # the body's mean gravity direction
+        b_mix = b_auto + u * float(u @ (b_or[0] - b_auto))
+        peer(row, "auto+oracle_vertical", segs, [g[i] - b_mix for i in idx], data.gravity)
+        row["oracle_rad_s"] = b_or[0].tolist()
         row["moving_bias_rad_s"] = moving_bias(segs, [g[i] for i in idx], data.gravity).tolist()
         out.append(row)
-        print(f"{name}: " + "  ".join(f"{m} {row['aoe_deg'][m]:.2f}" for m in METHODS) + f"  (auto used {row.get('auto_used')})",
+        print(f"{name}: " + "  ".join(f"{m} {row['aoe_deg'][m]:.2f}" for m in METHODS + ORACLES) + f"  (auto used {row.get('auto_used')})",
               file=sys.stderr, flush=True)
     return out
 
 
 def table(rows: List[Dict[str, Any]]) -> str:
-    head = "| recording | " + " | ".join(f"{m}" for m in METHODS) + " | auto / none | auto used |"
-    lines = [head, "|" + "---|" * (len(METHODS) + 3)]
+    cols = METHODS + ORACLES
+    head = "| recording | " + " | ".join(f"{m}" for m in cols) + " | auto / none | moving / none | auto used |"
+    lines = [head, "|" + "---|" * (len(cols) + 4)]
     for r in rows:
         a = r["aoe_deg"]
-        lines.append(f"| {r['recording']} | " + " | ".join(f"{a[m]:.2f}" for m in METHODS)
-                     + f" | {a['auto'] / a['none']:.3f} | {', '.join(r.get('auto_used') or []) or '–'} |")
+        lines.append(f"| {r['recording']} | " + " | ".join(f"{a[m]:.2f}" for m in cols)
+                     + f" | {a['auto'] / a['none']:.3f} | {a['moving'] / a['none']:.3f} | "
+                     f"{', '.join(r.get('auto_used') or []) or '–'} |")
+    lines.append("")
+    lines.append("RO_RMSE 1 s [deg] / RP_RMSE 1 s [m]:")
+    for r in rows:
+        lines.append(f"- {r['recording']}: " + ", ".join(f"{m} {r['ro_rmse_deg'][m]:.3f} / {r['rp_rmse_m'][m]:.4f}"
+                                                         for m in cols))
     return "\n".join(lines)
 
 

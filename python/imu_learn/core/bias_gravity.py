@@ -196,3 +196,195 @@ def gravity_bias(t_ns: np.ndarray, gyro: np.ndarray, acc: np.ndarray,
         gyro_bias=b_est, gyro_bias_std=np.sqrt(np.diag(cov)), directions=vec.T, direction_std=1.0 / np.sqrt(lam),
         gravity_body=g_body / max(np.linalg.norm(g_body), 1e-12), residual_rms=misfit, chunks=len(parts),
         windows=int(sum(len(r[0]) for r in rows)), used_s=sum((c - a) * period for a, c in parts), settings=s)
+
+
+# -- a bias that moves ----------------------------------------------------------------------------------
+
+
+@dataclass(frozen=True)
+class MovingSettings:
+    """:func:`moving_gravity_bias`: the bias piecewise linear between knots ``knot_s`` apart, its
+    change between neighbouring knots a random walk of ``random_walk`` [rad/s/sqrt(s)] (a profile's
+    ``gyroscope_random_walk``, floored at ``random_walk_floor``); ``gravity``: the window means as
+    :class:`GravitySettings` (its ``prior_sigma`` on every knot); a still stretch enters as an
+    absolute measurement of every axis at its mid time with its white-noise standard error and
+    ``rest_sigma`` [rad/s] per axis added (the bias at rest is not the bias while moving).
+    ``prior_std`` optionally a prior on the knots' average."""
+
+    knot_s: float = 30.0
+    random_walk: float = 3.4e-4  # rad/s/sqrt(s) (EuRoC's ADIS16448 profile's, an upper bound)
+    random_walk_floor: float = 2e-5
+    rest_sigma: Tuple[float, float, float] = (0.003, 0.003, 0.003)
+    # the window means' spread 0.15 m/s^2 (chosen on EuRoC's training flights by the time average's RMS
+    # error against their moving bias, among 0.5 and 0.15: docs/experiments/bias_prior.md)
+    gravity: GravitySettings = GravitySettings(window_sigma=0.15)
+    # per axis [rad/s], a prior on the knots' average (the device's moving-bias spread measured on its
+    # training recordings, a profile's bias_prior); None: none (``gravity.prior_sigma`` on each knot only)
+    prior_std: Optional[Tuple[float, float, float]] = None
+
+
+@dataclass
+class MovingBias:
+    """A bias that moves (module doc of :func:`moving_gravity_bias`): ``knots_t_ns`` (J,), ``knots``
+    (J, 3) [rad/s] and their covariance ``cov`` (3J, 3J) (knot-major); :meth:`at` the per-sample bias
+    and its standard deviation; ``mean`` / ``mean_cov`` the time average over the recording."""
+
+    knots_t_ns: np.ndarray
+    knots: np.ndarray
+    cov: np.ndarray
+    mean: np.ndarray
+    mean_cov: np.ndarray
+    stills: int
+    chunks: int
+    windows: int
+    settings: MovingSettings
+
+    def weights(self, t_ns: np.ndarray) -> np.ndarray:
+        return hat_weights(np.asarray(t_ns, dtype=np.int64), self.knots_t_ns)
+
+    def at(self, t_ns: np.ndarray) -> Tuple[np.ndarray, np.ndarray]:
+        """((N, 3) bias [rad/s], (N, 3) its standard deviation) at ``t_ns``."""
+        W = self.weights(t_ns)  # (N, J)
+        b = W @ self.knots
+        J = len(self.knots)
+        C = self.cov.reshape(J, 3, J, 3)
+        var = np.stack([np.einsum("nj,jk,nk->n", W, C[:, a, :, a], W) for a in range(3)], -1)
+        return b, np.sqrt(np.maximum(var, 0.0))
+
+    def to_dict(self) -> Dict[str, object]:
+        s = self.settings
+        return {"gyro_bias_rad_s": [float(v) for v in self.mean],
+                "gyro_bias_deg_s": [float(v) for v in np.rad2deg(self.mean)],
+                "mean_std_rad_s": [float(v) for v in np.sqrt(np.diag(self.mean_cov))],
+                "knots_t_s": [round(float(v - self.knots_t_ns[0]) * 1e-9, 3) for v in self.knots_t_ns],
+                "knots_rad_s": [[float(v) for v in k] for k in self.knots],
+                "knots_std_rad_s": [[float(v) for v in np.sqrt(np.diag(self.cov).reshape(-1, 3)[j])]
+                                    for j in range(len(self.knots))],
+                "stills": self.stills, "chunks": self.chunks, "windows": self.windows,
+                "observable": "gravity consistency across gravity over time, every still stretch on every axis at "
+                              "its time; the axis along gravity between stills follows the random walk",
+                "settings": {"knot_s": s.knot_s, "random_walk_rad_s_sqrt_s": s.random_walk,
+                             "rest_sigma_rad_s": list(s.rest_sigma), "window_s": s.gravity.window_s,
+                             "chunk_s": s.gravity.chunk_s, "window_sigma_m_s2": s.gravity.window_sigma,
+                             "prior_sigma_rad_s": s.gravity.prior_sigma}}
+
+
+def hat_weights(t_ns: np.ndarray, knots_t_ns: np.ndarray) -> np.ndarray:
+    """(N, J) piecewise-linear interpolation weights of the knots (constant beyond the ends)."""
+    k = np.asarray(knots_t_ns, dtype=np.float64)
+    t = np.clip(np.asarray(t_ns, dtype=np.float64), k[0], k[-1])
+    W = np.zeros((len(t), len(k)))
+    if len(k) == 1:
+        W[:, 0] = 1.0
+        return W
+    j = np.clip(np.searchsorted(k, t, side="right") - 1, 0, len(k) - 2)
+    f = (t - k[j]) / (k[j + 1] - k[j])
+    W[np.arange(len(t)), j] = 1.0 - f
+    W[np.arange(len(t)), j + 1] = f
+    return W
+
+
+def _rotations(t: np.ndarray, gyro: np.ndarray) -> np.ndarray:
+    """(N, 3, 3) R_m of each sample (the chunk's integrated frame, from its first sample)."""
+    q = preintegrate(t, gyro, np.zeros_like(gyro)).dq_wxyz
+    w, x, y, z = q[:, 0], q[:, 1], q[:, 2], q[:, 3]
+    return np.stack([np.stack([1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)], -1),
+                     np.stack([2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)], -1),
+                     np.stack([2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)], -1)], -2)
+
+
+def _moving_rows(t: np.ndarray, gyro: np.ndarray, acc: np.ndarray, W: np.ndarray,
+                 window_s: float) -> Tuple[np.ndarray, np.ndarray]:
+    """(window means of the specific force (K, 3), d m_k / d knot j's bias before [G]x: (K, J, 3, 3))
+    over one chunk; W (N, J) the knots' weights (only the knots the chunk touches)."""
+    edges = np.searchsorted(t, t[0] + (np.arange(int((t[-1] - t[0]) * 1e-9 / window_s + 1e-9) + 1) * window_s * 1e9)
+                            .astype(np.int64))
+    edges = edges[edges < len(t)]
+    if len(edges) < 2:
+        return np.zeros((0, 3)), np.zeros((0, W.shape[1], 3, 3))
+    inc = preintegrate(t, gyro, acc)
+    T = inc.dt[edges[1:]] - inc.dt[edges[:-1]]
+    m = (inc.dv[edges[1:]] - inc.dv[edges[:-1]]) / T[:, None]
+    R = _rotations(t, gyro)
+    dt = np.r_[np.diff(t) * 1e-9, 0.0]
+    out = np.zeros((len(T), W.shape[1], 3, 3))
+    for j in range(W.shape[1]):
+        wj = W[:, j] * dt
+        if not np.any(wj):
+            continue
+        C = np.concatenate([np.zeros((1, 3, 3)), np.cumsum(R * wj[:, None, None], 0)[:-1]])  # int_0^t R h_j
+        P = np.concatenate([np.zeros((1, 3, 3)), np.cumsum(C * dt[:, None, None], 0)[:-1]])
+        out[:, j] = (P[edges[1:]] - P[edges[:-1]]) / T[:, None, None]
+    return m, out
+
+
+def moving_prior_information(J: int, span_s: float, s: MovingSettings) -> np.ndarray:
+    """(3J, 3J) the information of the priors alone over J knots spread over ``span_s``: each knot's
+    (``prior_std``, else ``gravity.prior_sigma``) and the random walk between neighbours."""
+    q = max(float(s.random_walk), float(s.random_walk_floor))
+    D = np.kron(np.eye(J - 1, J, 1) - np.eye(J - 1, J), np.eye(3))
+    H = np.eye(3 * J) / s.gravity.prior_sigma ** 2 + D.T @ D / (q * q * span_s / (J - 1))
+    if s.prior_std is not None:  # on the knots' average (the recording's level), not on each knot
+        M = np.kron(np.full((1, J), 1.0 / J), np.eye(3))
+        H = H + M.T @ np.diag(1.0 / np.asarray(s.prior_std, dtype=np.float64) ** 2) @ M
+    return H
+
+
+def moving_gravity_bias(t_ns: np.ndarray, gyro: np.ndarray, acc: np.ndarray,
+                        stills: List[Tuple[int, np.ndarray, np.ndarray]] = (),
+                        settings: MovingSettings = MovingSettings()) -> Optional[MovingBias]:
+    """A bias that moves, without ground truth: gravity consistency (:func:`gravity_bias`'s window
+    means, each chunk its own gravity) with the bias piecewise linear in time (knots ``knot_s``
+    apart, an increment on the input's), a random walk between neighbouring knots and ``stills``
+    (each (mid time [ns], mean gyro (3,), its standard error (3,))) as absolute measurements of every
+    axis. Gauss-Newton (the gyro re-integrated with the per-sample estimate). None: neither a chunk of
+    ``min_windows`` windows nor a still stretch."""
+    s, gs = settings, settings.gravity
+    t = np.asarray(t_ns, dtype=np.int64)
+    gyro, acc = np.asarray(gyro, dtype=np.float64), np.asarray(acc, dtype=np.float64)
+    if len(t) < 4:
+        return None
+    parts = [(a, b) for a, b in chunks(t, gs) if (t[b - 1] - t[a]) * 1e-9 >= gs.min_windows * gs.window_s]
+    if not parts and not stills:
+        return None
+    span = (t[-1] - t[0]) * 1e-9
+    J = max(2, int(round(span / s.knot_s)) + 1)
+    kt = np.linspace(float(t[0]), float(t[-1]), J).astype(np.int64)
+    H0, r0 = moving_prior_information(J, span, s), np.zeros(3 * J)
+    for tm, mean, se in stills:
+        w = hat_weights(np.array([tm]), kt)[0]
+        Hm = np.kron(w[:, None], np.eye(3))  # (3J, 3)
+        var = np.asarray(se, dtype=np.float64) ** 2 + np.asarray(s.rest_sigma, dtype=np.float64) ** 2
+        H0 += Hm @ np.diag(1.0 / var) @ Hm.T
+        r0 += Hm @ (np.asarray(mean, dtype=np.float64) / var)
+    Wall = hat_weights(t, kt)
+    x = np.linalg.solve(H0, r0)  # the stills and the priors alone
+    windows = 0
+    for _ in range(max(1, gs.iters) + 1):
+        b_t = Wall @ x.reshape(J, 3)
+        H, r = H0.copy(), r0.copy()
+        windows = 0
+        for a, c in parts:
+            touch = np.flatnonzero(np.any(Wall[a:c] > 0, axis=0))
+            m, A = _moving_rows(t[a:c], gyro[a:c] - b_t[a:c], acc[a:c], Wall[a:c][:, touch], gs.window_s)
+            if len(m) < 2:
+                continue
+            windows += len(m)
+            G = m.mean(0)
+            Jm = -np.einsum("il,kjlc->kijc", _skew(G), A).reshape(len(m), 3, -1)  # (K, 3, 3*len(touch))
+            Jc, mc = Jm - Jm.mean(0), m - m.mean(0)
+            cols = (3 * touch[:, None] + np.arange(3)).ravel()
+            w = 1.0 / gs.window_sigma ** 2
+            xl = x[cols]
+            # the model is linear in the increment about the bias already subtracted: m = G - J (x - x_used)
+            H[np.ix_(cols, cols)] += w * np.einsum("kia,kib->ab", Jc, Jc)
+            r[cols] += w * (np.einsum("kia,ki->a", Jc, mc) + np.einsum("kia,kib,b->a", Jc, Jc, xl))
+        x_new = np.linalg.solve(H, r)
+        done = np.max(np.abs(x_new - x)) < 1e-7
+        x = x_new
+        if done:
+            break
+    cov = np.linalg.inv(H)
+    knots = x.reshape(J, 3)
+    M = np.kron(Wall.mean(0)[None, :], np.eye(3))  # (3, 3J): the time average
+    return MovingBias(kt, knots, cov, M @ x, M @ cov @ M.T, len(stills), len(parts), windows, s)

@@ -102,6 +102,9 @@ class BiasPrior:
     gravity_error_std: Optional[float] = None
     # estimator -> (its RMS error, the profile alone's) [rad/s] on the training recordings (the gate)
     measured_rms: Tuple[Tuple[str, float, float], ...] = ()
+    # the gyro's bias random walk [rad/s/sqrt(s)] (the profile's gyroscope_random_walk, copied into its
+    # bias_prior by experiments/bias_prior.py fit): ``--bias moving``'s prior on how fast the bias moves
+    random_walk: Optional[float] = None
 
     @classmethod
     def from_bias_std(cls, bias_std: Optional[Sequence[float]], source: str, isotropic: bool = False,
@@ -119,9 +122,11 @@ class BiasPrior:
             if (isinstance(r, dict) and all(isinstance(r.get(k), (int, float)) and math.isfinite(r[k])
                                             for k in ("error", "profile_alone"))):
                 rms.append((str(name), float(r["error"]), float(r["profile_alone"])))
+        rw = m.get("random_walk_rad_s_sqrt_s")
+        rw = float(rw) if isinstance(rw, (int, float)) and math.isfinite(rw) and rw > 0 else None
         return cls((0.0, 0.0, 0.0), tuple(float(v) for v in s), source,
                    _measured(m.get("moving_std_rad_s"), isotropic), _measured(m.get("still_error_std_rad_s"), isotropic),
-                   g, tuple(rms))
+                   g, tuple(rms), rw)
 
     def to_dict(self) -> Dict[str, object]:
         out: Dict[str, object] = {"bias_rad_s": [float(v) for v in self.bias], "std_rad_s": [float(v) for v in self.std],
@@ -132,7 +137,8 @@ class BiasPrior:
             out["measured"] = {"moving_std_rad_s": None if self.moving_std is None else list(self.moving_std),
                                "still_error_std_rad_s": None if self.still_error_std is None else list(self.still_error_std),
                                "gravity_error_std_rad_s": self.gravity_error_std,
-                               "rms_rad_s": {k: {"error": e, "profile_alone": a} for k, e, a in self.measured_rms}}
+                               "rms_rad_s": {k: {"error": e, "profile_alone": a} for k, e, a in self.measured_rms},
+                               "random_walk_rad_s_sqrt_s": self.random_walk}
         return out
 
 

@@ -39,8 +39,8 @@ from typing import Any, Callable, Dict, List, Optional, Tuple
 
 import numpy as np
 
-from imu_learn.core.bias_gravity import gravity_bias
-from imu_learn.core.still import BIAS_SETTINGS, MEMS_PRIOR, STILL_SIGMAS, BiasPrior, still_bias
+from imu_learn.core.bias_gravity import MovingSettings, gravity_bias, moving_gravity_bias, moving_prior_information
+from imu_learn.core.still import BIAS_SETTINGS, MEMS_PRIOR, STILL_SIGMAS, BiasPrior, still_bias, still_stretches
 from imu_learn.errors import InvalidInputError
 
 log = logging.getLogger(__name__)
@@ -70,6 +70,10 @@ class BiasEstimate:
     detail: Dict[str, Any]
     missing: Optional[str] = None
     unseen: Optional[np.ndarray] = None  # (3, 3) projection onto what it did not observe; None: from the information
+    # a bias that moves (``moving``): (N, 3) per sample and its standard deviation; ``gyro_bias`` their
+    # time average (what the bound and the gate judge)
+    per_sample: Optional[np.ndarray] = None
+    per_sample_std: Optional[np.ndarray] = None
 
     @property
     def std(self) -> Optional[np.ndarray]:
@@ -222,6 +226,75 @@ def _learned(ctx: Context, t_ns: np.ndarray, gyro: np.ndarray, acc: np.ndarray) 
     return BiasEstimate("learned", np.asarray(b, dtype=np.float64), info_diag(np.full(3, LEARNED_STD)), detail)
 
 
+def _rest_sigma(prior: BiasPrior) -> np.ndarray:
+    return (np.full(3, STILL_STD_FLOOR) if prior.still_error_std is None
+            else np.maximum(STILL_STD_FLOOR, np.asarray(prior.still_error_std)))
+
+
+def moving_raw(ctx: Context, t_ns: np.ndarray, gyro: np.ndarray, acc: np.ndarray) -> BiasEstimate:
+    """``moving`` without its gate: :func:`imu_learn.core.bias_gravity.moving_gravity_bias` with every
+    still stretch (the still rule's, as ``still``) at its time, the random walk the prior's (the
+    profile's), the rest-to-motion spread the still estimate's floor."""
+    t = np.asarray(t_ns, dtype=np.int64)
+    g = np.asarray(gyro, dtype=np.float64)
+    found = still_stretches(t, g, acc, replace(BIAS_SETTINGS, gravity=float(ctx.gravity), prior=ctx.prior))
+    stills = [(int((t[a] + t[b - 1]) // 2), g[a:b].mean(0), g[a:b].std(0, ddof=1) / np.sqrt(b - a)) for a, b in found]
+    # each still's rest-to-motion uncertainty as the still estimate's (its floor, raised to the profile's
+    # measured spread); no prior on the level (the measured moving-bias spread as one: worse on EuRoC's
+    # training flights, docs/experiments/bias_prior.md)
+    s = MovingSettings(rest_sigma=tuple(float(v) for v in _rest_sigma(ctx.prior)))
+    if ctx.prior.random_walk is not None:
+        s = replace(s, random_walk=float(ctx.prior.random_walk))
+    est = moving_gravity_bias(t, g, acc, stills, s)
+    if est is None:
+        return BiasEstimate("moving", None, np.zeros((3, 3)), {"gyro_bias_rad_s": None},
+                            "neither a still stretch nor enough windows in {where}")
+    b, sd = est.at(t)
+    # the time average's information from its data: its posterior's less the priors' alone (knots'
+    # prior and random walk), every direction; unseen where the priors, not the data, set it
+    J = len(est.knots)
+    Wm = np.kron(est.weights(t).mean(0)[None, :], np.eye(3))
+    Hp = moving_prior_information(J, (t[-1] - t[0]) * 1e-9, s)
+    Pm = Wm @ np.linalg.inv(Hp) @ Wm.T
+    lam, vec = np.linalg.eigh(np.linalg.inv(est.mean_cov) - np.linalg.inv(Pm))
+    lam_p = np.array([float(v @ np.linalg.inv(Pm) @ v) for v in vec.T])
+    seen = lam > lam_p
+    info = (vec[:, seen] * np.maximum(lam[seen], 0.0)) @ vec[:, seen].T
+    unseen = vec[:, ~seen] @ vec[:, ~seen].T
+    detail = {**est.to_dict(), "std_rad_s": _vec(np.sqrt(np.diag(est.mean_cov)))}
+    return BiasEstimate("moving", est.mean, info, detail, unseen=unseen, per_sample=b, per_sample_std=sd)
+
+
+MOVING_GATE_RULE = ("moving enters only where, on the device's training recordings (the profile's bias_prior), its "
+                    "time average lay closer to the bias while moving than the profile alone and the still estimate "
+                    "(the other estimate of every axis) did; elsewhere auto's constant estimate is used")
+
+
+def moving_admitted(prior: BiasPrior) -> Tuple[bool, Optional[Dict[str, float]]]:
+    """(whether ``moving``'s own estimate is used, the training figures it was judged on [rad/s], None
+    where the profile has not measured them): :data:`MOVING_GATE_RULE`."""
+    rms = {k: (e, a) for k, e, a in prior.measured_rms}
+    if "moving" not in rms:
+        return True, None
+    figures = {"moving": rms["moving"][0], "profile_alone": rms["moving"][1]}
+    if "still" in rms:
+        figures["still"] = rms["still"][0]
+    return figures["moving"] < min(v for k, v in figures.items() if k != "moving"), figures
+
+
+def _moving(ctx: Context, t_ns: np.ndarray, gyro: np.ndarray, acc: np.ndarray) -> BiasEstimate:
+    ok, figures = moving_admitted(ctx.prior)
+    gate = None if figures is None else {"entered": ok, "training_rms_rad_s": figures, "rule": MOVING_GATE_RULE}
+    if ok:
+        est = moving_raw(ctx, t_ns, gyro, acc)
+        if gate:
+            est.detail["gate"] = gate
+        return est
+    est = _auto(ctx, t_ns, gyro, acc)  # method "auto": its parts bounded each (bound)
+    est.detail = {**est.detail, "moving_gate": gate, "rule": MOVING_GATE_RULE + "; " + est.detail["rule"]}
+    return est
+
+
 def _auto(ctx: Context, t_ns: np.ndarray, gyro: np.ndarray, acc: np.ndarray) -> BiasEstimate:
     parts = [_still(ctx, t_ns, gyro, acc), _gravity(ctx, t_ns, gyro, acc)]
     if ctx.model is not None:
@@ -256,6 +329,12 @@ REGISTRY: Dict[str, Estimator] = {e.name: e for e in (
     Estimator("still+gravity", _still_gravity, "the recording's own gyro bias removed: from its still stretches "
               "along gravity, from gravity consistency across it",
               "the still estimate along gravity, gravity's across it"),
+    Estimator("moving", _moving, "the recording's own gyro bias, moving over time, removed: gravity consistency "
+              "with a random-walk bias and every still stretch at its time (auto's where the profile's bias_prior "
+              "keeps it out)",
+              "a bias that moves: gravity consistency with the bias piecewise linear in time (its random walk the "
+              "profile's) and every still stretch at its time; where the profile's bias_prior measured it no "
+              "closer than the profile alone and the still estimate, auto's", navigate=False),
     Estimator("learned", _learned, "the recording's own gyro bias from the learned estimator removed",
               "the long-context estimator of --bias-model", navigate=False, needs_model=True),
 )}
@@ -397,9 +476,9 @@ def measure_prior(recordings: List[Tuple[str, np.ndarray, np.ndarray, np.ndarray
     moving bias's spread about zero per axis (x n/(n-1): the floor was fitted on them; None under two
     recordings), ``still_error_std_rad_s`` the RMS of still - moving per axis, ``gravity_error_std_rad_s``
     gravity consistency's error beyond its own uncertainty along the directions its data set (pooled),
-    and ``rms_rad_s`` per estimator its RMS error and the profile alone's (the moving bias) over the
+    and ``rms_rad_s`` per estimator (``moving``: its time average, :func:`moving_raw`) its RMS error and the profile alone's (the moving bias) over the
     same recordings and directions (``auto``'s gate, :func:`better_than_prior`)."""
-    rows, moving, still_err, still_mov, grav_err, grav_mov = [], [], [], [], [], []
+    rows, moving, still_err, still_mov, grav_err, grav_mov, mov_err, mov_mov = [], [], [], [], [], [], [], []
     for name, t, g, a, b in recordings:
         b = np.asarray(b, dtype=np.float64)
         st, gr = _still(ctx, t, g, a), gravity_bias(t, g, a)
@@ -421,6 +500,13 @@ def measure_prior(recordings: List[Tuple[str, np.ndarray, np.ndarray, np.ndarray
             grav_mov.extend(float(u @ b) for u, _ in seen)
             row["gravity_error_along_observed_rad_s"] = [x for x, _ in e]
             row["gravity_own_std_rad_s"] = [s for _, s in e]
+        mv = moving_raw(ctx, t, g, a)
+        if mv.gyro_bias is not None:
+            lam, vec = np.linalg.eigh(np.eye(3) - mv.unobserved())
+            dirs = vec.T[lam > 0.5]
+            row["moving_error_along_observed_rad_s"] = [float(u @ (mv.gyro_bias - b)) for u in dirs]
+            mov_err.extend(row["moving_error_along_observed_rad_s"])
+            mov_mov.extend(float(u @ b) for u in dirs)
         rows.append(row)
 
     def rms(x: List[Any]) -> Optional[float]:
@@ -435,6 +521,8 @@ def measure_prior(recordings: List[Tuple[str, np.ndarray, np.ndarray, np.ndarray
         gate["still"] = {"error": rms(still_err), "profile_alone": rms(still_mov)}
     if grav_err:
         gate["gravity"] = {"error": rms([x for x, _ in grav_err]), "profile_alone": rms(grav_mov)}
+    if mov_err:  # its time average against the moving bias (constant per recording), the directions it observed
+        gate["moving"] = {"error": rms(mov_err), "profile_alone": rms(mov_mov)}
     return {"recordings": rows,
             "moving_std_rad_s": _vec(np.sqrt(np.mean(np.square(moving), axis=0) * n / (n - 1))) if n >= 2 else None,
             "still_error_std_rad_s": _vec(np.sqrt(np.mean(np.square(still_err), axis=0))) if still_err else None,
@@ -465,6 +553,8 @@ def bias_step(method: str, gravity: float, sink: Dict[str, Any], model: Optional
         sink[method], sink["bound"] = est, verdict
         if verdict.gyro_bias is None:
             return gyro, acc, None
+        if est.per_sample is not None:  # a bias that moves: shifted as the bound moved its average
+            return gyro - (est.per_sample + (verdict.gyro_bias - est.gyro_bias)), acc, None
         return gyro - verdict.gyro_bias, acc, None
 
     return step
