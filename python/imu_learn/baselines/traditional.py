@@ -91,15 +91,35 @@ TOL = 1e-8  # the solve's stopping rule (relative cost decrease or step; module 
 OFFSET_BRACKET = 0.5  # a refit searches its time offset within this many samples of the fit's first
 
 
+# Below θ² = SERIES_T2 (θ < 0.1 rad: a sample's rotation at 200 Hz below 20 rad/s) the functions of θ that the
+# integration and its Jacobian need are their Taylor series in θ² (the first term left out is below 1e-18 of
+# the sum there; (1 − cos θ)/θ² itself loses ~1e-12 to cancellation at θ = 0.005), above it sin and cos.
+SERIES_T2 = 0.01
+EXP_S = (1 / 2, -1 / 48, 1 / 3840, -1 / 645120, 1 / 185794560)  # sin(θ/2)/θ
+EXP_C = (1.0, -1 / 8, 1 / 384, -1 / 46080, 1 / 10321920, -1 / 3715891200)  # cos(θ/2)
+JR_C1 = (1 / 2, -1 / 24, 1 / 720, -1 / 40320, 1 / 3628800, -1 / 479001600)  # (1 − cos θ)/θ²
+JR_C2 = (1 / 6, -1 / 120, 1 / 5040, -1 / 362880, 1 / 39916800, -1 / 6227020800)  # (θ − sin θ)/θ³
+
+
+def _series(t2: np.ndarray, coeffs: Seq[float]) -> np.ndarray:
+    """Σ_k coeffs[k] t2^k by Horner's rule."""
+    out = np.full_like(t2, coeffs[-1])
+    for c in coeffs[-2::-1]:
+        out *= t2
+        out += c
+    return out
+
+
 def _exp(phi: np.ndarray) -> Tuple[np.ndarray, np.ndarray]:
-    """Rotation vectors, components first (3, ...) -> unit quaternions (4, ...) (w, x, y, z; the
-    branches of :func:`imu_learn.nn.so3.so3_exp`), and θ² (...)."""
+    """Rotation vectors, components first (3, ...) -> unit quaternions (4, ...) (w, x, y, z; what
+    :func:`imu_learn.nn.so3.so3_exp` gives, to rounding), and θ² (...)."""
     px, py, pz = phi
     t2 = px * px + py * py + pz * pz
-    small = t2 < 1e-8
-    t = np.sqrt(np.where(small, 1.0, t2))
-    s = np.where(small, 0.5 - t2 / 48.0, np.sin(0.5 * t) / t)
-    c = np.where(small, 1.0 - t2 / 8.0, np.cos(0.5 * t))
+    s, c = _series(t2, EXP_S), _series(t2, EXP_C)
+    big = t2 >= SERIES_T2
+    if big.any():
+        t = np.sqrt(t2[big])
+        s[big], c[big] = np.sin(0.5 * t) / t, np.cos(0.5 * t)
     return np.stack((c, s * px, s * py, s * pz)), t2
 
 
@@ -215,14 +235,18 @@ def _quat_matrix(q: np.ndarray) -> Tuple[Tuple[np.ndarray, ...], ...]:
 
 def _so3_jacobian_coefficients(t2: np.ndarray, inverse: bool) -> Tuple[np.ndarray, np.ndarray]:
     """(c1, c2) of J_r = I − c1 [φ]× + c2 [φ]×² (or of its inverse) at θ² = ``t2``."""
-    small = t2 < 1e-8
-    t2s = np.where(small, 1.0, t2)
-    t = np.sqrt(t2s)
     if inverse:
+        small = t2 < 1e-8
+        t2s = np.where(small, 1.0, t2)
+        t = np.sqrt(t2s)
         c2 = np.where(small, 1.0 / 12.0, 1.0 / t2s - (1.0 + np.cos(t)) / (2.0 * t * np.sin(t)))
         return np.full_like(t2, -0.5), c2
-    c1 = np.where(small, 0.5 - t2 / 24.0, (1.0 - np.cos(t)) / t2s)
-    c2 = np.where(small, 1.0 / 6.0 - t2 / 120.0, (t - np.sin(t)) / (t2s * t))
+    c1, c2 = _series(t2, JR_C1), _series(t2, JR_C2)
+    big = t2 >= SERIES_T2
+    if big.any():
+        t2b = t2[big]
+        tb = np.sqrt(t2b)
+        c1[big], c2[big] = (1.0 - np.cos(tb)) / t2b, (tb - np.sin(tb)) / (t2b * tb)
     return c1, c2
 
 
