@@ -14,7 +14,10 @@ directions it observed, beyond its own uncertainty). ``imu_learn.infer.bias`` re
 ``score``: on CONFIG's test recordings, the profile's floor and each ``--bias`` option exactly as
 ``imu-learn refine --profile P --bias METHOD`` runs it (``imu_learn.infer.bias.bias_step`` on the
 whole IMU file, the prior from the profile), open-loop AOE (``imu_learn.score.peers.attitude_errors``,
-RMS pooled over the recording's gap-free ground-truth segments, each integrated from its own start).
+RMS pooled over the recording's gap-free ground-truth segments, each integrated from its own start;
+its mean beside, AirIMU's form) and RO_RMSE / RP_RMSE over 1 s windows
+(``imu_learn.score.peers.segment_errors``); beside them oracles fitted on the recording's own ground
+truth (:data:`ORACLES`: bounds, not estimators).
 
     IMU_LEARN_DATA=<root> python experiments/bias_prior.py fit --config configs/euroc_paper.toml \\
         --profile models/profiles/euroc_adis16448/profile.json [--write]
@@ -136,7 +139,8 @@ def fit(config: str, profile_path: Path, data_root: Path) -> Dict[str, Any]:
 # -- score ----------------------------------------------------------------------------------------------
 
 def peer(row: Dict[str, Any], m: str, segs: List[Segment], gyro: List[np.ndarray], gravity: float) -> None:
-    """``row``'s open-loop AOE [deg] and RO_RMSE [deg] / RP_RMSE [m] over 1 s (AirIMU's) for method ``m``."""
+    """``row``'s open-loop AOE [deg] (RMSE, Debias_IMU's form, and mean, AirIMU's) and RO_RMSE [deg] /
+    RP_RMSE [m] over 1 s (AirIMU's) for method ``m``."""
     e, ro, rp = [], [], []
     for s, g in zip(segs, gyro):
         e.append(attitude_errors(with_gyro(s, g))["angle_rad"])
@@ -145,6 +149,7 @@ def peer(row: Dict[str, Any], m: str, segs: List[Segment], gyro: List[np.ndarray
         rp.append(w["trans_m"])
     r = {k: float(np.sqrt(np.mean(np.square(np.concatenate(v))))) for k, v in (("a", e), ("o", ro), ("p", rp))}
     row["aoe_deg"][m] = math.degrees(r["a"])
+    row.setdefault("aoe_mean_deg", {})[m] = math.degrees(float(np.mean(np.concatenate(e))))  # AirIMU's form
     row.setdefault("ro_rmse_deg", {})[m] = math.degrees(r["o"])
     row.setdefault("rp_rmse_m", {})[m] = r["p"]
 
@@ -229,10 +234,10 @@ def table(rows: List[Dict[str, Any]]) -> str:
                      + f" | {a['auto'] / a['none']:.3f} | {a['moving'] / a['none']:.3f} | "
                      f"{', '.join(r.get('auto_used') or []) or '–'} |")
     lines.append("")
-    lines.append("RO_RMSE 1 s [deg] / RP_RMSE 1 s [m]:")
+    lines.append("AOE mean [deg] (AirIMU's form) / RO_RMSE 1 s [deg] / RP_RMSE 1 s [m]:")
     for r in rows:
-        lines.append(f"- {r['recording']}: " + ", ".join(f"{m} {r['ro_rmse_deg'][m]:.3f} / {r['rp_rmse_m'][m]:.4f}"
-                                                         for m in cols))
+        lines.append(f"- {r['recording']}: " + ", ".join(
+            f"{m} {r['aoe_mean_deg'][m]:.2f} / {r['ro_rmse_deg'][m]:.3f} / {r['rp_rmse_m'][m]:.4f}" for m in cols))
     return "\n".join(lines)
 
 

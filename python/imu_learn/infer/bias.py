@@ -7,7 +7,9 @@ its information (the inverse covariance over the directions it observed; zero al
 and its own summary. ``still`` (:func:`imu_learn.core.still.still_bias`, the still rule with the
 recording's prior), ``gravity`` (:func:`imu_learn.core.bias_gravity.gravity_bias`), ``still+gravity``
 (the still estimate along gravity, gravity consistency's across it), ``auto`` (every estimator without a
-model, with the prior, combined by their information) and ``learned`` (refine only; a model, torch).
+model, with the prior, combined by their information), ``moving`` (refine only: a bias that moves,
+:func:`imu_learn.core.bias_gravity.moving_gravity_bias`, per sample; ``auto``'s where the profile's
+``bias_prior`` keeps it out, :data:`MOVING_GATE_RULE`) and ``learned`` (refine only; a model, torch).
 The command-line choices and their help are made from it (:func:`choices`, :func:`help_text`).
 
 **The bound** (:func:`bound`): the device prior (:class:`imu_learn.core.still.BiasPrior`: a profile's
