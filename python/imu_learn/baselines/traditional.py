@@ -88,6 +88,7 @@ from imu_learn.util.threads import thread_limits
 DEFAULT_CUTOFFS: Tuple[Optional[float], ...] = (None, 40.0, 20.0, 10.0, 5.0)
 ACC_BIAS_ONLY = 1e6  # ``acc_prior`` that holds M_a at the identity (|M_a - I| below 1e-9 on real data)
 TOL = 1e-8  # the solve's stopping rule (relative cost decrease or step; module doc)
+ACC_TOL = 1e-12  # the accelerometer stage's: a residual there is a product with Φ (~1 ms), so it runs to the end
 OFFSET_BRACKET = 0.5  # a refit searches its time offset within this many samples of the fit's first
 
 
@@ -360,6 +361,8 @@ class _VelResiduals:
     from Φ. ``gyro``: the calibrated rates, or None with ``Rm`` (:func:`_held_rotations` of them: R_k dt_k,
     which do not depend on the accelerometer's cutoff)."""
 
+    tol = ACC_TOL  # the solve's stopping rule here (cheap evaluations: run to the end)
+
     def __init__(self, gyro: Optional[np.ndarray], w: _Windows, Rm: Optional[np.ndarray] = None) -> None:
         if Rm is None:
             assert gyro is not None, "_VelResiduals: give the rates or their rotations"
@@ -415,12 +418,14 @@ def _huber_cost(r: np.ndarray, delta: float) -> float:
 
 
 def _solve(res: Any, x0: np.ndarray, prior_idx: np.ndarray, prior: float, delta: float, max_iter: int,
-           tol: float = TOL) -> np.ndarray:
+           tol: Optional[float] = None) -> np.ndarray:
     """Levenberg–Marquardt with Huber IRLS weights on Σ ρ_δ(|r_j(θ)|) + ½ prior² |θ[prior_idx]|².
 
     ``res(θ)`` gives the residuals (R,) and ``res.jacobian(θ, r)`` their exact Jacobian (R, P) (both
     of :meth:`Traditional.fit`'s stages have one). Stops when a step lowers the cost by at most
-    ``tol`` of it or moves θ by at most ``tol`` (1 + |θ|), or when no damping finds a lower cost."""
+    ``tol`` of it or moves θ by at most ``tol`` (1 + |θ|) (default: the residuals' own ``tol``, else
+    :data:`TOL`), or when no damping finds a lower cost."""
+    tol = getattr(res, "tol", TOL) if tol is None else tol
     P = len(x0)
     pmask = np.zeros(P)
     pmask[np.asarray(prior_idx, dtype=np.int64)] = prior * prior
