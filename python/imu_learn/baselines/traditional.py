@@ -31,10 +31,11 @@ in (M_a − I, c = M_a b_a): :class:`_VelResiduals` sums each window's rotations
 once (``Φ``, per split and cutoff; the rotations once per split and gyro cutoff) and every residual
 and Jacobian after that is a product with ``Φ`` (the solve stays in (M_a, b_a), the same minimum).
 A weak prior (``prior`` × (M − I), ``prior`` × G, as residuals) keeps directions the training motion
-does not excite at the identity. The solve stops when a step lowers the cost by at most ``tol``
-(1e-8) of it or moves θ by at most ``tol`` of its size: on EuRoC's five training flights the same
-iterations as the torch fit this replaced (1e-10) and the same parameters, within 6e-9 of their
-standard deviation (docs/experiments/benchmarks.md, "calibrate's time").
+does not excite at the identity. The solve stops when a step lowers the cost by at most ``tol`` of
+it or moves θ by at most ``tol`` of its size: 1e-8 for the gyro (on EuRoC's five training flights the
+same iterations as the torch fit this replaced, at 1e-10), 1e-12 for the accelerometer (its evaluations
+are products with Φ); the parameters are the torch fit's within 2e-5 of their standard deviation
+(docs/experiments/benchmarks.md, "calibrate's time").
 
 The cutoffs are chosen from a small grid (``cutoffs_hz``, ``None`` = no filter) on the *validation*
 sequences by the same residuals (RMS of |r| over windows and horizons, no prior): the gyro model is
