@@ -19,6 +19,7 @@ from imu_learn.cli import main
 from imu_learn.data import formats
 from imu_learn.data.formats import gnss_imu
 from imu_learn.fuse.aiding import rtklib
+from imu_learn.fuse.start.delay import imu_delay
 
 G_UNIT = 9.80665
 START_S = 1752003261  # the tag's start [s, GPST since 1970]
@@ -165,6 +166,9 @@ def test_navigator_option_errors(tmp_path, capsys):
     assert rc == 2 and "ConfigError: --imu-rotation-rpy-deg: expected 3 comma-separated" in err
     rc, _out, err = run(["--input", imu, "--aiding", pos, "--aiding-kind", "pose", "--lever-arm", "0,0,1"], capsys)
     assert rc == 2 and "--lever-arm is the antenna's: only with --aiding-kind position" in err
+    rc, _out, err = run(["--input", imu, "--aiding", pos, "--aiding-kind", "position", "--aiding-format", "tum",
+                         "--imu-delay-s", "auto"], capsys)
+    assert rc == 2 and "--imu-delay-s auto measures the delay against GNSS fixes" in err
     for wrong in (["--config", "configs/fuse_euroc.toml"], ["--set", "a=1"]):  # the experiments' options
         with pytest.raises(SystemExit):
             run(base + wrong, capsys)
@@ -211,3 +215,26 @@ def test_real_drive_first_minute(tmp_path, capsys):
     p = np.stack([np.interp(x, (t - t[0]) * 1e-9, d[:, 1 + k]) for k in range(3)], axis=1)
     h = np.linalg.norm(p[:, :2] - sol.enu[m, :2], axis=1)
     assert np.sqrt(np.mean(h ** 2)) < 0.1, np.sqrt(np.mean(h ** 2))  # cm level where fixed (2.6 cm on the whole drive)
+
+
+def test_imu_delay_auto_is_measured_against_the_fixes(tmp_path, capsys):
+    """``--imu-delay-s auto``: the delay the fixes give (:func:`imu_learn.fuse.start.delay.imu_delay`, tested on
+    its own in test_imu_gnss_delay.py) is the one added to the IMU's stamps and named in the summary. The
+    level synthetic car barely shows its delay in the specific force's norm (its accelerations are
+    horizontal: |f| - g = a^2 / 2g, 0.05 m/s^2), so the estimate is only bounded here."""
+    imu, pos, _ = synthetic_car(tmp_path)
+    base = ["--input", imu, "--aiding", pos, "--imu-rotation-rpy-deg", ",".join(map(str, RPY)),
+            "--lever-arm", ",".join(map(str, LEVER)), "--imu-noise", "1e-4,1e-3,1e-5,1e-4", "--keyframe-hz", 4,
+            "--quiet"]
+    rc, _, err = run(base + ["--imu-delay-s", "auto", "--out", tmp_path / "auto"], capsys)
+    assert rc == 0, err
+    d = json.loads((tmp_path / "auto" / "summary.json").read_text())["imu_delay"]
+    src = formats.read_imu_source(imu, "gnss-imu")
+    want = imu_delay(np.asarray(src.t_ns), np.asarray(src.acc), rtklib.read_pos(pos), rtklib.normal_gravity(LAT0, H0))
+    assert d["from"] == "fixes" and d["delay_s"] == pytest.approx(want.delay_s, abs=1e-4) and d["epochs"] == want.epochs
+    assert -0.2 < d["delay_s"] < 0.0 and d["rms_mps2"] < d["rms_at_zero_mps2"]
+    rc, _, err = run(base + ["--imu-delay-s", str(-DELAY_S), "--out", tmp_path / "given"], capsys)
+    given = json.loads((tmp_path / "given" / "summary.json").read_text())["imu_delay"]
+    assert rc == 0 and given == {"delay_s": -DELAY_S, "from": "--imu-delay-s"}
+    rc, _, err = run(base + ["--imu-delay-s", "soon", "--out", tmp_path / "x"], capsys)
+    assert rc == 2 and "--imu-delay-s: seconds (e.g. -0.2) or 'auto'" in err

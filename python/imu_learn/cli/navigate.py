@@ -64,6 +64,13 @@ MOUNTING_HELP = ("roll, pitch, yaw [deg] of the body frame relative to the IMU f
                  " its x along the body's -y, i.e. to the right)")
 
 
+def parse_delay(text: str) -> float:
+    try:
+        return float(text)
+    except ValueError:
+        raise ConfigError(f"--imu-delay-s: seconds (e.g. -0.2) or 'auto', got {text!r}") from None
+
+
 def add_arguments(ap: argparse.ArgumentParser) -> None:
     d = NavigateOptions()
     ap.add_argument("--input", type=Path, required=True, metavar="REC",
@@ -138,8 +145,10 @@ def add_arguments(ap: argparse.ArgumentParser) -> None:
     ap.add_argument("--imu-rotation-rpy-deg", default=None, metavar="R,P,Y",
                     help="the IMU's mounting: " + MOUNTING_HELP + "; the body's x-axis is what the track heading "
                          "and --nhc take as forward")
-    ap.add_argument("--imu-delay-s", type=float, default=None, metavar="S",
-                    help="added to every IMU stamp: a logging delay (e.g. -0.125 on rtklibexplorer's drive)")
+    ap.add_argument("--imu-delay-s", default=None, metavar="S|auto",
+                    help="added to every IMU stamp: a logging delay [s] (e.g. -0.2 on rtklibexplorer's drive); "
+                         "'auto' (GNSS fixes): measured from the data, the accelerometer's specific-force norm "
+                         "against the fixes' accelerations outside --gaps (the summary's imu_delay)")
     ap.add_argument("--lever-arm", default=None, metavar="X,Y,Z",
                     help="position aiding: the antenna from the IMU in the body frame [m] (instead of --extrinsics)")
     ap.add_argument("--nhc", action="store_true", default=None,
@@ -185,8 +194,11 @@ def options(args: argparse.Namespace):
     # the kind None: found from the aiding by imu_learn.fuse.navigate.resolve_aiding (GNSS fixes are positions)
     o = NavigateOptions(aiding_kind=args.aiding_kind, aiding_format=args.aiding_format or "auto")
     plain = {"keyframe_hz": args.keyframe_hz, "aiding_hz": args.aiding_hz, "max_relative_gap_s": args.max_relative_gap_s,
-             "lag_s": args.lag_s, "imu_delay_s": args.imu_delay_s}
+             "lag_s": args.lag_s}
     o = replace(o, **{k: v for k, v in plain.items() if v is not None})
+    if args.imu_delay_s is not None:
+        o = replace(o, **({"imu_delay_from": "fixes"} if args.imu_delay_s.strip().lower() == "auto"
+                          else {"imu_delay_s": parse_delay(args.imu_delay_s)}))
     if args.gaps is not None:
         o = replace(o, gaps=parse_gaps(args.gaps))
     for name, n in (("imu_rotation_rpy_deg", 3), ("lever_arm", 3), ("imu_noise", 4), ("variance_scale", 2)):

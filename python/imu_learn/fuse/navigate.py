@@ -99,6 +99,7 @@ from .output import plot_navigation, write_json, write_trajectory, write_traject
 from .score import convergence, score_against
 from .settings import FusionSettings, PriorSigmas
 from .start import Start
+from .start.delay import imu_delay
 
 log = logging.getLogger(__name__)
 
@@ -144,6 +145,9 @@ class NavigateOptions:
     # [s] added to every IMU stamp (rtklibexplorer's imu_t_off: -0.125 s on its drive)
     imu_rotation_rpy_deg: Optional[Tuple[float, float, float]] = None
     imu_delay_s: float = 0.0
+    # "fixes" (--imu-delay-s auto): the delay measured from the data against GNSS fixes
+    # (:func:`.start.delay.imu_delay`, outside ``gaps``) in place of imu_delay_s
+    imu_delay_from: str = "option"
     # position aiding: the antenna from the IMU, body frame [m] (instead of an extrinsic's translation)
     lever_arm: Optional[Tuple[float, float, float]] = None
     # the non-holonomic constraint of a wheeled vehicle (:mod:`.factors.nhc`): no sideways / vertical body velocity
@@ -189,6 +193,8 @@ class NavigateOptions:
             raise ConfigError(f"--imu-noise: each density must be > 0, got {self.imu_noise!r}")
         if not np.isfinite(self.imu_delay_s):
             raise ConfigError(f"--imu-delay-s: must be finite, got {self.imu_delay_s!r}")
+        if self.imu_delay_from not in ("option", "fixes"):
+            raise ConfigError(f"imu_delay_from: 'option' or 'fixes', got {self.imu_delay_from!r}")
         if self.lever_arm is not None and not kind_of(self.aiding_kind).lever:
             raise ConfigError("--lever-arm is the antenna's: only with --aiding-kind position")
         if self.aiding_format == "rtklib" and not kind_of(self.aiding_kind).geodetic:
@@ -377,6 +383,7 @@ class Imu:
     var: Optional[np.ndarray] = None  # a covariance head's per-sample variances (body frame), None: none
     label: str = "raw"  # what the samples are (the summary's imu_input)
     correction: Dict[str, object] = field(default_factory=dict)  # the correction plan's summary
+    delay: Dict[str, object] = field(default_factory=dict)  # the delay added to the stamps and where it came from
 
 
 def imu_noise(src: Sources, opts: NavigateOptions, own: Optional[ImuNoise], profile: Optional[Profile],
@@ -443,11 +450,29 @@ def read_body_imu(src: Sources, opts: NavigateOptions) -> Imu:
         gyro, acc = np.ascontiguousarray(gyro @ mounting.T), np.ascontiguousarray(acc @ mounting.T)
         if var is not None:  # the diagonal of M diag(v) M^T: exact for an axis permutation or flip
             var = np.ascontiguousarray(np.hstack([var[:, :3] @ (mounting**2).T, var[:, 3:] @ (mounting**2).T]))
-    if opts.imu_delay_s:
-        t_ns = t_ns + int(round(opts.imu_delay_s * 1e9))
+    delay = measured_delay(src, opts, t_ns, acc) if opts.imu_delay_from == "fixes" else {
+        "delay_s": opts.imu_delay_s, "from": "--imu-delay-s"}
+    if delay["delay_s"]:
+        t_ns = t_ns + int(round(float(delay["delay_s"]) * 1e9))
     noise = imu_noise(src, opts, own, profile, (t_ns, gyro, acc))  # after the checks: on the IMU as fused
     return Imu(t_ns, gyro, acc, noise, imu_file, mounting, str(src.profile) if floor else None, var, label,
-               fixed.summary)
+               fixed.summary, delay)
+
+
+def measured_delay(src: Sources, opts: NavigateOptions, t_ns: np.ndarray, acc: np.ndarray) -> Dict[str, object]:
+    """``--imu-delay-s auto``: the delay to add to the IMU's stamps, measured against the GNSS fixes
+    outside ``--gaps`` (:func:`.start.delay.imu_delay`: the specific force's norm, no attitude needed)."""
+    if not is_geodetic(src, opts):
+        raise ConfigError("--imu-delay-s auto measures the delay against GNSS fixes (an RTKLIB .pos or a NavSatFix "
+                          "topic); with this aiding give the delay in seconds")
+    sol = read_geodetic(src, opts)
+    rel_s = (np.asarray(sol.t_ns, dtype=np.int64) - int(t_ns[0])) * 1e-9
+    est = imu_delay(t_ns, acc, sol, normal_gravity(sol.origin_llh[0], sol.origin_llh[2]),
+                    use=~in_windows(rel_s, opts.gaps))
+    log.info("IMU time offset from the fixes: %+.3f s (specific-force norm RMS %.3f m/s^2, %.3f at 0 s; %d epochs)",
+             est.delay_s, est.rms_mps2, est.rms_at_zero_mps2, est.epochs)
+    return {"delay_s": round(est.delay_s, 4), "from": "fixes", "rms_mps2": round(est.rms_mps2, 4),
+            "rms_at_zero_mps2": round(est.rms_at_zero_mps2, 4), "epochs": est.epochs}
 
 
 def aiding_rows(src: Sources, opts: NavigateOptions, t_ns: np.ndarray, T_BS: Optional[np.ndarray],
@@ -689,7 +714,7 @@ def run_summary(src: Sources, out: Path, inp: Inputs, run: Started, res) -> Dict
         "imu_mounting": None if imu.mounting is None else np.round(imu.mounting, 6).tolist(),
         "lever_arm_m": [round(float(x), 4) for x in inp.lever],
         "final_bias": [round(float(b), 6) for b in res.smoothed_bias[-1]],
-        "bias": run.bias, "correction": imu.correction,
+        "bias": run.bias, "correction": imu.correction, "imu_delay": imu.delay,
         "outputs": {"causal": str(out / "causal.tum"), "smoothed": str(out / "smoothed.tum")},
         **frames(src, opts, None if inp.gnss is None else inp.gnss[1]),
     }
