@@ -66,7 +66,7 @@ def rest_reading(p: Profile):
     return g[k0:k1].mean(0), rate, s.gyro[k0:k1].mean(0)
 
 
-@pytest.mark.slow  # the floor's fit, five times (one minute or more)
+@pytest.mark.slow  # the floor's fit, five times (about 10 s)
 def test_writes_a_profile_kalibr_yaml_and_a_plot(calibrated):
     out = calibrated
     assert {p.name for p in out.iterdir()} == {"profile.json", "imu.yaml", "calibration.png"}
