@@ -132,8 +132,33 @@ WORLD = "world"
 
 
 
+class _PosesAtSamples:
+    """What poses tied to one IMU sample each (``idx``) share: ``i`` and ``j`` are both ``idx``,
+    their count, and :meth:`since` (the subclass's :meth:`select`, re-indexed from ``s0``)."""
+
+    idx: np.ndarray
+
+    @property
+    def i(self) -> np.ndarray:
+        return self.idx
+
+    @property
+    def j(self) -> np.ndarray:
+        return self.idx
+
+    def __len__(self) -> int:
+        return len(self.idx)
+
+    def since(self, s0: int):
+        """The poses from sample ``s0`` on, their indices counted from it."""
+        if s0 == 0:
+            return self
+        kept = self.select(self.idx >= s0)
+        return replace(kept, idx=kept.idx - s0)
+
+
 @dataclass(frozen=True)
-class WorldPoses:
+class WorldPoses(_PosesAtSamples):
     """Body poses ``R`` (M, 3, 3), ``p`` (M, 3) at IMU samples ``idx`` in the aiding's own world A,
     tied to the navigation frame through one more state of the graph, A's pose in it (``X_k = T_WA
     Z_k``; no prior on it: a free world frame, estimated online with the rest, the first pose's
@@ -148,29 +173,11 @@ class WorldPoses:
     label: str
     dropped_outage: int = 0
 
-    @property
-    def i(self) -> np.ndarray:
-        return self.idx
-
-    @property
-    def j(self) -> np.ndarray:
-        return self.idx
-
-    def __len__(self) -> int:
-        return len(self.idx)
-
     def select(self, keep: np.ndarray, dropped_outage: int = 0) -> WorldPoses:
         """The poses where ``keep`` (M,) is True; ``dropped_outage`` is added to the count."""
         keep = np.asarray(keep, dtype=bool)
         return replace(self, idx=self.idx[keep], R=self.R[keep], p=self.p[keep], sigmas=self.sigmas[keep],
                        dropped_outage=self.dropped_outage + int(dropped_outage))
-
-    def since(self, s0: int) -> WorldPoses:
-        """The poses from sample ``s0`` on, their indices counted from it."""
-        if s0 == 0:
-            return self
-        kept = self.select(self.idx >= s0)
-        return replace(kept, idx=kept.idx - s0)
 
     def tied_samples(self) -> List[np.ndarray]:
         """The IMU samples the poses are tied to."""
@@ -187,10 +194,8 @@ class WorldPoses:
             between_at.setdefault(int(s), []).append((WORLD, gtsam.Pose3(gtsam.Rot3(R), t), model))
 
 
-
-
 @dataclass(frozen=True)
-class AbsolutePoses:
+class AbsolutePoses(_PosesAtSamples):
     """Body poses in the navigation frame at IMU samples ``idx``: rotations ``R`` (M, 3, 3) and
     positions ``p`` (M, 3), e.g. a camera trajectory moved into the IMU frame and its world rotated
     into the navigation frame (:mod:`imu_learn.fuse.navigate`); isotropic rotation [rad] and
@@ -207,29 +212,11 @@ class AbsolutePoses:
     source: str = ""
     dropped_outage: int = 0
 
-    @property
-    def i(self) -> np.ndarray:
-        return self.idx
-
-    @property
-    def j(self) -> np.ndarray:
-        return self.idx
-
-    def __len__(self) -> int:
-        return len(self.idx)
-
     def select(self, keep: np.ndarray, dropped_outage: int = 0) -> AbsolutePoses:
         """The poses where ``keep`` (M,) is True; ``dropped_outage`` is added to the count."""
         keep = np.asarray(keep, dtype=bool)
         return replace(self, idx=self.idx[keep], R=self.R[keep], p=self.p[keep],
                        dropped_outage=self.dropped_outage + int(dropped_outage))
-
-    def since(self, s0: int) -> AbsolutePoses:
-        """The poses from sample ``s0`` on, their indices counted from it."""
-        if s0 == 0:
-            return self
-        kept = self.select(self.idx >= s0)
-        return replace(kept, idx=kept.idx - s0)
 
     def tied_samples(self) -> List[np.ndarray]:
         """The IMU samples the poses are tied to (``i`` and ``j``, both ``idx``)."""
