@@ -24,6 +24,7 @@ from imu_learn.baselines.traditional import (
 )
 from imu_learn.core.integration import preintegrate
 from imu_learn.data.types import Segment
+from test_layout import BLOCK_TORCH
 
 REPO = Path(__file__).resolve().parents[1]
 G = 9.81
@@ -138,14 +139,6 @@ def test_jacobians_match_central_differences(crop_split):
     assert np.abs(J - Jn).max() < 1e-8 * np.abs(Jn).max()
 
 
-BLOCK_TORCH = """
-import importlib.abc, sys
-class NoTorch(importlib.abc.MetaPathFinder):
-    def find_spec(self, name, path=None, target=None):
-        if name == "torch" or name.startswith("torch."):
-            raise ImportError("torch is blocked in this test")
-sys.meta_path.insert(0, NoTorch())
-"""
 
 
 def test_calibrates_modules_and_the_fit_run_without_torch():
