@@ -45,3 +45,31 @@ def test_the_library_entry_checks_too(tmp_path, monkeypatch):
     with pytest.raises(MissingExtraError, match=r"evaluate needs matplotlib, the eval extra"):
         run_evaluation(res, ["raw"], tmp_path / "report")
     assert not (tmp_path / "report").exists()
+
+
+def test_a_ctrl_c_inside_an_extensions_import_is_a_ctrl_c(monkeypatch):
+    """A C extension interrupted while it initialises (gtsam under pybind11) raises ImportError
+    ("initialization failed") from the KeyboardInterrupt: that is Ctrl-C, not "install the extra"."""
+    import importlib
+
+    from imu_learn.util import extras
+
+    def interrupted_import(name, package=None):
+        try:
+            raise KeyboardInterrupt
+        except KeyboardInterrupt as e:
+            raise ImportError("initialization failed") from e
+
+    monkeypatch.setattr(importlib, "import_module", interrupted_import)
+    with pytest.raises(KeyboardInterrupt):
+        require("gtsam", "fuse", "imu-learn navigate")
+    with pytest.raises(KeyboardInterrupt):
+        extras.optional("matplotlib")
+
+    def missing(name, package=None):
+        raise ModuleNotFoundError(f"No module named {name!r}")
+
+    monkeypatch.setattr(importlib, "import_module", missing)
+    assert extras.optional("matplotlib") is None
+    with pytest.raises(MissingExtraError):
+        require("gtsam", "fuse", "imu-learn navigate")

@@ -12,6 +12,7 @@ import numpy as np
 
 from imu_learn.calib.noise import MIN_RANDOM_WALK_TAU_S, AllanNoise, ResidualNoise
 from imu_learn.util.atomic import atomic_write_path
+from imu_learn.util.extras import optional
 
 AXES = "xyz"
 
@@ -60,9 +61,8 @@ def _still_panel(ax, allan: Optional[AllanNoise], cols: slice, name: str, unit: 
 def plot_calibration(path: Path, device: str, before: Optional[ResidualNoise], after: Optional[ResidualNoise],
                      allan: Optional[AllanNoise]) -> bool:
     """Write the figure to ``path`` atomically; False (nothing written) without matplotlib."""
-    try:
-        import matplotlib
-    except ImportError:
+    matplotlib = optional("matplotlib")
+    if matplotlib is None:
         return False
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt

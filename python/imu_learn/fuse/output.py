@@ -17,6 +17,7 @@ from imu_learn import _imu_core as core
 from imu_learn.core.quat import xyzw_to_wxyz
 from imu_learn.data.formats.rosbag import output_bag_path, write_odometry
 from imu_learn.util.atomic import atomic_write_bytes, atomic_write_path, atomic_write_text
+from imu_learn.util.extras import optional
 
 from .aiding.tum import read_tum
 
@@ -62,9 +63,8 @@ def read_runs(path: Path, log: Callable[[str], None]) -> Dict[str, dict]:
 def plot_setting(out_png: Path, title: str, t_ns: np.ndarray, p_gt: np.ndarray,
                  runs: Sequence[Tuple[str, Path, Path]], outages: Sequence[Tuple[float, float]] = ()) -> bool:
     """``runs``: (input name, causal TUM, smoothed TUM). False (nothing written) without matplotlib."""
-    try:
-        import matplotlib
-    except ImportError:
+    matplotlib = optional("matplotlib")
+    if matplotlib is None:
         return False
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
@@ -107,9 +107,8 @@ def plot_navigation(out_png: Path, title: str, kf_t: np.ndarray, res, rows, R_WA
          scores: Optional[dict], gaps: Sequence[Tuple[float, float]], t0_ns: int) -> bool:
     """Top view of the causal and smoothed trajectories and the aiding, and the causal estimate's
     distance from the smoothed one over time (gaps shaded). False (nothing written) without matplotlib."""
-    try:
-        import matplotlib
-    except ImportError:
+    matplotlib = optional("matplotlib")
+    if matplotlib is None:
         return False
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt

@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import importlib
 from types import ModuleType
-from typing import Dict, Tuple
+from typing import Dict, Optional, Tuple
 
 from imu_learn.errors import MissingExtraError
 
@@ -27,9 +27,33 @@ def require(module: str, extra: str, needed_for: str) -> ModuleType:
     which extra installs it."""
     try:
         return importlib.import_module(module)
-    except ImportError:
+    except ImportError as e:
+        if interrupted(e):  # a Ctrl-C inside a C extension's initialisation (gtsam's) comes as ImportError
+            raise KeyboardInterrupt from None
         raise MissingExtraError(f"{needed_for} needs {module.split('.')[0]}, the {extra} extra: "
                                 f"pip install 'imu-learn[{extra}]'") from None
+
+
+def interrupted(e: BaseException) -> bool:
+    """Whether a KeyboardInterrupt caused ``e`` (its cause or context, at any depth)."""
+    seen = set()
+    while e is not None and id(e) not in seen:
+        if isinstance(e, KeyboardInterrupt):
+            return True
+        seen.add(id(e))
+        e = e.__cause__ or e.__context__
+    return False
+
+
+def optional(module: str) -> Optional[ModuleType]:
+    """``module`` imported, or None where it is not installed (a figure left out); a Ctrl-C during its
+    import is raised as the KeyboardInterrupt it was, never read as "not installed"."""
+    try:
+        return importlib.import_module(module)
+    except ImportError as e:
+        if interrupted(e):
+            raise KeyboardInterrupt from None
+        return None
 
 
 def require_extra(extra: str, needed_for: str) -> None:
