@@ -411,3 +411,16 @@ def test_a_learned_model_ships_only_with_leave_one_recording_out_beating_its_flo
         held_out, lost = loro_cells_lost(text)
         assert len(held_out) >= 2, f"{ckpt.name}: no leave-one-recording-out table"
         assert not lost, f"{ckpt.name}: {lost}"
+
+
+def test_compare_with_raw_refuses_a_model_that_runs_after_its_carried_profile(monkeypatch, tmp_path):
+    """A checkpoint whose device profile is applied before the model (not held by it): the check would
+    score the model on the wrong input, so it refuses, naming refine."""
+    from imu_learn.errors import ConfigError
+    from imu_learn.infer import model_check
+
+    real = model_check.imu_record
+    monkeypatch.setattr(model_check, "imu_record",
+                        lambda state: {**real(state), "profile": {"device": "x"}, "profile_in_model": False})
+    with pytest.raises(ConfigError, match="imu-learn refine --checkpoint"):
+        compare(MODELS / "euroc_adis16448.pt")

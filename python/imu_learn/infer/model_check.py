@@ -9,7 +9,9 @@ as ``fit.evaluate_table`` does): relative pose RMSE over n IMU samples, windows 
 samples from ``startup_bias_s`` seconds into each segment on, open loop and with a start-up bias
 (fitted on each input's first ``startup_bias_s`` seconds against ground truth, raw and refined
 separately) subtracted. Settings left as None come from the checkpoint's run config
-(``data.eval_stride``, ``data.startup_bias_s``, ``data.gravity``).
+(``data.eval_stride``, ``data.startup_bias_s``, ``data.gravity``). A checkpoint whose device profile
+runs before the model (carried, not held by it) is refused: this check applies the model alone
+(``imu-learn refine --checkpoint`` applies both, through :mod:`imu_learn.calib.correction`).
 
 Used by tests/test_models.py to check that a shipped model does not make its test crop worse, and
 handy for a model card::
@@ -30,7 +32,8 @@ from imu_learn.data.formats import CsvColumns, read_recording
 from imu_learn.data.loading import AlignOptions, align
 from imu_learn.data.types import ImuData
 from imu_learn.data.types import Segment as Seq
-from imu_learn.infer.checkpoint import load_checkpoint, model_from_checkpoint
+from imu_learn.errors import ConfigError
+from imu_learn.infer.checkpoint import imu_record, load_checkpoint, model_from_checkpoint
 from imu_learn.infer.refiner import refine_arrays
 from imu_learn.infer.windowing import windowing_of
 from imu_learn.nn.device import pick_device
@@ -72,6 +75,11 @@ def compare_with_raw(
     ``columns``: the recording is a user's CSV of this layout (its ground truth is ``groundtruth``).
     """
     state = load_checkpoint(Path(checkpoint))
+    record = imu_record(state)
+    if record["profile"] and not record["profile_in_model"]:  # its floor runs before the model: not here
+        raise ConfigError(f"{checkpoint}: the model runs after the device profile it carries, which this check does "
+                          "not apply; score it with imu-learn refine --checkpoint (which applies both) and "
+                          "imu-learn evaluate")
     data = (state.get("config") or {}).get("data") or {}
     stride = int(stride if stride is not None else data.get("eval_stride", 10))
     startup_bias_s = float(startup_bias_s if startup_bias_s is not None else data.get("startup_bias_s", 10.0))
