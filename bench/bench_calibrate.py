@@ -21,7 +21,7 @@ uncertainty refits, gravity, the noise, the files). Cases:
 Prints the minimum and the median over ``--repeat`` runs per case of the wall time, of the
 command's own time and of the process's CPU time (user + system, from ``getrusage`` of the child:
 the steadier figure on a shared machine), the load average before the runs (other work on the
-machine shows there) and the thread settings in the environment; then the targets of issue 35
+machine shows there) and the thread settings in the environment; then the project's targets
 beside them (wall ≤ 5 s for EuRoC's five flights and for the 400 s recording, ≤ 2× that beside a
 busy loop). Figures only: no pass/fail.
 
@@ -153,7 +153,7 @@ def case(name: str, argv: List[str], env: Dict[str, str], repeat: int, busy: boo
     return statistics.median(walls)
 
 
-TARGET_S, BUSY_RATIO = 5.0, 2.0  # issue 35: at most 5 s on 2 cores, at most 2x that beside another job
+TARGET_S, BUSY_RATIO = 5.0, 2.0  # the targets: at most 5 s on 2 cores, at most 2x that beside another job
 
 
 def targets(label: str, alone: float, busy: float) -> None:
