@@ -491,15 +491,15 @@ def aiding_rows(src: Sources, opts: NavigateOptions, t_ns: np.ndarray, T_BS: Opt
     traj, offset = shift_trajectory(traj, imu.t_ns, imu.gyro)
     rows = select_rows(traj, t_ns, T_BS, opts)
     rows.offset = offset
-    rows.frame = checked_frame(src, rows, imu)
+    rows.frame = checked_frame(src, rows, imu, opts.max_relative_gap_s)
     return with_noise(rows, imu.t_ns, imu.gyro, imu.acc, opts.max_relative_gap_s), len(traj), None, opts
 
 
-def checked_frame(src: Sources, rows: AidingRows, imu: Imu) -> FrameCheck:
+def checked_frame(src: Sources, rows: AidingRows, imu: Imu, max_gap_s: float) -> FrameCheck:
     """The aiding poses' body frame against the IMU's (:mod:`.aiding.frame`), before any fusion:
     refused (exit 2) when it is not the IMU's, naming ``--extrinsics``; one warning line when it is a
     little off or cannot be told."""
-    check = check_frame(imu.t_ns, imu.gyro, rows)
+    check = check_frame(imu.t_ns, imu.gyro, rows, max_gap_s)
     if check.verdict == "refused":
         if src.extrinsics is None:
             fix = ("they are another sensor's poses (a camera's?): pass --extrinsics with that sensor's pose in the "

@@ -36,7 +36,6 @@ WARN_ROTATION_DEG = 1.0  # warned above: calibrate's ``identity_deg`` (below it 
 MIN_PAIRS = 20  # pairs of consecutive rows needed to tell
 MIN_RATE_RMS = 0.05  # rad/s: the centred rates' RMS below which the motion cannot tell the frame
 PLANAR_RATIO = 0.1  # smallest over largest principal spread of the rates: one axis only below it
-MAX_PAIR_S = 0.5  # consecutive rows further apart are not paired (a gap)
 
 
 @dataclass(frozen=True)
@@ -56,14 +55,13 @@ class FrameCheck:
                 "axis_only": self.axis_only, "pairs": self.pairs, "verdict": self.verdict, "why": self.why}
 
 
-def paired_rates(imu_t_ns: np.ndarray, gyro: np.ndarray, rows: AidingRows,
-                 max_pair_s: float = MAX_PAIR_S) -> tuple:
+def paired_rates(imu_t_ns: np.ndarray, gyro: np.ndarray, rows: AidingRows, max_gap_s: float) -> tuple:
     """(IMU mean rates, aiding body-frame rates), (P, 3) each, over the pairs of consecutive rows
-    within ``max_pair_s`` of each other."""
+    within ``max_gap_s`` of each other (the rule of the relative poses and their noise)."""
     s = np.asarray(rows.sample, dtype=np.int64)
     t = np.asarray(imu_t_ns, dtype=np.int64)
     dt = np.diff(t[s]) * 1e-9
-    ok = (dt > 0) & (dt <= max_pair_s)
+    ok = (dt > 0) & (dt <= max_gap_s)
     if not ok.any():
         return np.zeros((0, 3)), np.zeros((0, 3))
     step = np.diff(t) * 1e-9
@@ -74,12 +72,12 @@ def paired_rates(imu_t_ns: np.ndarray, gyro: np.ndarray, rows: AidingRows,
     return w_imu[ok], w_aid[ok]
 
 
-def check_frame(imu_t_ns: np.ndarray, gyro: np.ndarray, rows: AidingRows) -> FrameCheck:
-    """The aiding's body frame against the IMU's (module docstring). Never raises: the caller refuses
-    on ``verdict == "refused"``."""
+def check_frame(imu_t_ns: np.ndarray, gyro: np.ndarray, rows: AidingRows, max_gap_s: float = 0.5) -> FrameCheck:
+    """The aiding's body frame against the IMU's (module docstring), pairing rows at most ``max_gap_s``
+    apart (``--max-relative-gap-s``). Never raises: the caller refuses on ``verdict == "refused"``."""
     if rows.R is None:
         return FrameCheck(None, False, 0, "not checked", "the aiding holds no rotations")
-    a, b = paired_rates(imu_t_ns, gyro, rows)
+    a, b = paired_rates(imu_t_ns, gyro, rows, max_gap_s)
     n = len(a)
     if n < MIN_PAIRS:
         return FrameCheck(None, False, n, "not checked", f"{n} pairs of consecutive rows; {MIN_PAIRS} needed")
@@ -95,8 +93,7 @@ def check_frame(imu_t_ns: np.ndarray, gyro: np.ndarray, rows: AidingRows) -> Fra
         d = (a - a.mean(0)).T @ (bc @ u)
         angle = math.degrees(math.acos(np.clip(d @ u / max(np.linalg.norm(d), 1e-12), -1.0, 1.0)))
     else:
-        r = kabsch(a, b)[0]
-        angle = math.degrees(math.acos(np.clip((np.trace(r) - 1) / 2, -1.0, 1.0)))
+        angle = math.degrees(Rotation.from_matrix(kabsch(a, b)[0]).magnitude())
     what = "its main rotation axis is" if axis_only else "its body frame is"
     line = f"{what} {angle:.1f}° from the IMU's (from {n} rotation increments)"
     if angle > MAX_ROTATION_DEG:
