@@ -9,7 +9,12 @@ segment, averaged by samples), the still estimate and the gravity-consistency es
 go into the profile's ``bias_prior`` (``moving_std_rad_s``: the recording-to-recording spread of the
 moving bias after the floor; ``still_error_std_rad_s``: how far a still stretch's (resting) bias lies
 from the moving one, per axis; ``gravity_error_std_rad_s``: gravity consistency's error along the
-directions it observed, beyond its own uncertainty). ``imu_learn.infer.bias`` reads them (auto).
+directions it observed, beyond its own uncertainty). ``rms_rad_s``: per estimator its RMS error
+against the moving bias and the profile alone's, ``still`` and ``gravity`` (auto's gate), then, with
+the prior those figures make (as the profile will run), ``moving``'s time average and ``auto`` as it
+runs (still and gravity, its gate), both along the directions ``moving`` observed (moving's gate
+compares it with the profile alone, the still estimate and auto; a profile fitted before ``auto`` was
+measured has no ``auto`` figure, and its moving gate says so). ``imu_learn.infer.bias`` reads them.
 
 ``score``: on CONFIG's test recordings, the profile's floor and each ``--bias`` option exactly as
 ``imu-learn refine --profile P --bias METHOD`` runs it (``imu_learn.infer.bias.bias_step`` on the
@@ -17,12 +22,13 @@ whole IMU file, the prior from the profile), open-loop AOE (``imu_learn.score.pe
 RMS pooled over the recording's gap-free ground-truth segments, each integrated from its own start;
 its mean beside, AirIMU's form) and RO_RMSE / RP_RMSE over 1 s windows
 (``imu_learn.score.peers.segment_errors``); beside them oracles fitted on the recording's own ground
-truth (:data:`ORACLES`: bounds, not estimators).
+truth (:data:`ORACLES`: bounds, not estimators); per recording whether ``moving`` gave its own estimate
+or auto's (its gate), and the training figures the gate judged.
 
     IMU_LEARN_DATA=<root> python experiments/bias_prior.py fit --config configs/euroc_paper.toml \\
         --profile models/profiles/euroc_adis16448/profile.json [--write]
     IMU_LEARN_DATA=<root> python experiments/bias_prior.py score --config configs/euroc_paper.toml \\
-        --profile models/profiles/euroc_adis16448/profile.json [--json OUT.json]
+        --profile models/profiles/euroc_adis16448/profile.json [--json OUT.json] [--splits train,val]
 
 Writes: with ``fit --write``, the profile's ``bias_prior`` field (the profile file itself); with
 ``score --json``, the table's figures. Prints a markdown table.
@@ -208,6 +214,10 @@ def score(config: str, profile_path: Path, data_root: Path, splits: Tuple[str, .
                 row["subtracted_rad_s"][m] = None if v.gyro_bias is None else [float(x) for x in v.gyro_bias]
                 if m == "auto":
                     row["auto_used"] = sink[m].detail.get("used")
+                if m == "moving":  # its gate: its own estimate, or auto's (imu_learn.infer.bias.moving_admitted)
+                    row["moving_own"] = sink[m].method == "moving"
+                    gate = sink[m].detail.get("gate") or sink[m].detail.get("moving_gate")
+                    row["moving_gate_rms_rad_s"] = None if gate is None else gate["training_rms_rad_s"]
             peer(row, m, segs, [gm[i] for i in idx], data.gravity)
         fixed, b_or = oracle_gyro(segs, [g[i] for i in idx])
         peer(row, "oracle", segs, fixed, data.gravity)
@@ -226,13 +236,20 @@ def score(config: str, profile_path: Path, data_root: Path, splits: Tuple[str, .
 
 def table(rows: List[Dict[str, Any]]) -> str:
     cols = METHODS + ORACLES
-    head = "| recording | " + " | ".join(f"{m}" for m in cols) + " | auto / none | moving / none | auto used |"
-    lines = [head, "|" + "---|" * (len(cols) + 4)]
+    head = ("| recording | " + " | ".join(f"{m}" for m in cols)
+            + " | auto / none | moving / none | auto used | moving gives |")
+    lines = [head, "|" + "---|" * (len(cols) + 5)]
     for r in rows:
         a = r["aoe_deg"]
+        gives = "its own" if r.get("moving_own") else "auto's"
         lines.append(f"| {r['recording']} | " + " | ".join(f"{a[m]:.2f}" for m in cols)
                      + f" | {a['auto'] / a['none']:.3f} | {a['moving'] / a['none']:.3f} | "
-                     f"{', '.join(r.get('auto_used') or []) or '–'} |")
+                     f"{', '.join(r.get('auto_used') or []) or '–'} | {gives} |")
+    gates = {json.dumps(r.get("moving_gate_rms_rad_s"), sort_keys=True) for r in rows}
+    for g in gates:  # the same profile for every row: one line
+        lines.append("")
+        lines.append("moving's gate, training RMS [mrad/s]: " + ("none measured (it enters)" if g == "null" else
+                     ", ".join(f"{k} {v * 1e3:.3f}" for k, v in json.loads(g).items())))
     lines.append("")
     lines.append("AOE mean [deg] (AirIMU's form) / RO_RMSE 1 s [deg] / RP_RMSE 1 s [m]:")
     for r in rows:
@@ -249,6 +266,8 @@ def main() -> None:
     ap.add_argument("--data-root", type=Path, default=Path(os.environ.get("IMU_LEARN_DATA", "data")))
     ap.add_argument("--write", action="store_true", help="fit: write bias_prior into the profile")
     ap.add_argument("--json", type=Path, help="score: write the figures here")
+    ap.add_argument("--splits", default="test", help="score: CONFIG's splits to score, comma-separated (default "
+                    "test; train,val: the recordings fit measures, a check of the gate's figures, not held out)")
     a = ap.parse_args()
     if a.what == "fit":
         bp = fit(a.config, a.profile, a.data_root)
@@ -259,7 +278,7 @@ def main() -> None:
             atomic_write_text(a.profile, json.dumps(d, indent=2, allow_nan=False) + "\n")
             print(f"written {a.profile}'s bias_prior")
     else:
-        rows = score(a.config, a.profile, a.data_root)
+        rows = score(a.config, a.profile, a.data_root, tuple(x for x in a.splits.split(",") if x))
         print(table(rows))
         if a.json:
             atomic_write_text(a.json, json.dumps(rows, indent=1))

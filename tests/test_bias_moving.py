@@ -95,3 +95,48 @@ def test_the_registry_subtracts_per_sample_and_the_gate_keeps_it_out():
     sink = {}
     out, _, _ = bias_step("moving", 9.81, sink, prior=BiasPrior.from_bias_std([0.01] * 3, "test", measured=measured))(t, g, a)
     assert sink["moving"].detail["gate"]["entered"] is True and np.std((g - out)[:, 0]) > 1e-3
+
+
+def _gate(measured):
+    """``--bias moving`` on the ramping device under a profile whose ``bias_prior`` holds ``measured``:
+    (its sink, the gyro it gives, ``--bias auto``'s gyro under the same profile)."""
+    t, g, a, _ = ramping()
+    prior = BiasPrior.from_bias_std([0.01] * 3, "test", measured=measured)
+    sink = {}
+    out, _, _ = bias_step("moving", 9.81, sink, prior=prior)(t, g, a)
+    auto, _, _ = bias_step("auto", 9.81, {}, prior=prior)(t, g, a)
+    return sink, g, out, auto
+
+
+def test_the_gate_keeps_moving_out_where_auto_was_closer_on_the_training_recordings():
+    """Training figures where moving beats the profile alone and the still estimate but not auto: the old
+    gate (profile alone and still only) admitted it; now auto's estimate, the figures in the summary."""
+    measured = {"rms_rad_s": {"moving": {"error": 0.0008, "profile_alone": 0.004},
+                              "still": {"error": 0.001, "profile_alone": 0.004},
+                              "auto": {"error": 0.0005, "profile_alone": 0.004}}}
+    sink, g, out, auto = _gate(measured)
+    gate = sink["moving"].detail["moving_gate"]
+    assert gate["entered"] is False and gate["compared_with_auto"] is True
+    assert gate["training_rms_rad_s"] == {"moving": 0.0008, "profile_alone": 0.004, "still": 0.001, "auto": 0.0005}
+    assert sink["moving"].method == "auto" and np.array_equal(out, auto) and np.ptp((g - out)[:, 0]) < 1e-12
+    # auto measured farther than moving: moving's own, per sample
+    measured["rms_rad_s"]["auto"]["error"] = 0.0009
+    sink, g, out, auto = _gate(measured)
+    assert sink["moving"].detail["gate"]["entered"] is True and sink["moving"].method == "moving"
+    assert np.std((g - out)[:, 0]) > 1e-3 and not np.array_equal(out, auto)
+
+
+def test_an_old_prior_without_the_auto_figure_keeps_the_old_gate_and_says_so():
+    """A profile fitted before auto was measured: moving judged against the profile alone and the still
+    estimate only (it enters where it beat both), the summary saying the auto figure is missing."""
+    measured = {"rms_rad_s": {"moving": {"error": 0.0008, "profile_alone": 0.004},
+                              "still": {"error": 0.001, "profile_alone": 0.004}}}
+    sink, g, out, _ = _gate(measured)
+    gate = sink["moving"].detail["gate"]
+    assert gate["entered"] is True and gate["compared_with_auto"] is False
+    assert "no auto figure" in gate["rule"] and "auto" not in gate["training_rms_rad_s"]
+    assert sink["moving"].method == "moving" and np.std((g - out)[:, 0]) > 1e-3
+    measured["rms_rad_s"]["still"]["error"] = 0.0006  # and kept out where the still estimate was closer, as before
+    sink, _, out, auto = _gate(measured)
+    assert sink["moving"].detail["moving_gate"]["entered"] is False and np.array_equal(out, auto)
+    assert "no auto figure" in sink["moving"].detail["rule"]

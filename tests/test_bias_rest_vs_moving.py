@@ -10,11 +10,12 @@ import json
 import math
 
 import numpy as np
+import pytest
 
 from imu_learn import _imu_core as core
 from imu_learn.calib.profile import Affine, Profile
 from imu_learn.core.still import BiasPrior
-from imu_learn.infer.bias import REGISTRY, Context, better_than_prior, combine, measure_prior
+from imu_learn.infer.bias import REGISTRY, Context, better_than_prior, combine, measure_prior, moving_admitted
 
 RATE = 100.0
 G = 9.81
@@ -116,3 +117,24 @@ def test_a_prior_without_the_measured_figures_changes_nothing():
     ctx = Context(G, old)
     c = combine([REGISTRY["still"].run(ctx, t, g, a), REGISTRY["gravity"].run(ctx, t, g, a)], old)
     assert "still" in c.detail["used"] and abs(c.gyro_bias[2] - 0.006) < 0.0005
+
+
+def test_the_measured_prior_measures_auto_as_it_runs():
+    """``auto``'s training figure (``--bias moving``'s gate) is auto run with the prior the other figures
+    make, its gate included: where the rest reads 8 mrad/s off the moving bias, the still stretches and
+    gravity consistency both measured farther than the profile alone, so auto subtracts nothing and its
+    error is the profile alone's (auto without its gate would subtract the resting bias); where the rest
+    reads the moving bias, the still stretches enter and auto lands within their noise of the injected
+    bias."""
+    m = measure_prior(device(0.008, (0.001, -0.001, 0.0005)), Context(G, prior_of(None)))
+    r = m["rms_rad_s"]
+    assert r["still"]["error"] > r["still"]["profile_alone"] and r["gravity"]["error"] > r["gravity"]["profile_alone"]
+    assert all(row["auto_used"] == [] for row in m["recordings"])
+    assert r["auto"]["error"] == pytest.approx(r["auto"]["profile_alone"], rel=1e-9, abs=0.0)
+    assert r["auto"]["profile_alone"] == r["moving"]["profile_alone"]  # the same recordings and directions
+    m = measure_prior(device(0.0, (0.004, -0.005, 0.006)), Context(G, prior_of(None)))
+    r = m["rms_rad_s"]
+    assert all("still" in row["auto_used"] for row in m["recordings"])
+    assert r["auto"]["error"] < 0.0003 and r["auto"]["profile_alone"] > 0.002
+    ok, figures = moving_admitted(prior_of(m))
+    assert figures["auto"] == r["auto"]["error"] and not ok  # moving (its rests only at the start) farther

@@ -268,32 +268,44 @@ def moving_raw(ctx: Context, t_ns: np.ndarray, gyro: np.ndarray, acc: np.ndarray
 
 
 MOVING_GATE_RULE = ("moving enters only where, on the device's training recordings (the profile's bias_prior), its "
-                    "time average lay closer to the bias while moving than the profile alone and the still estimate "
-                    "(the other estimate of every axis) did; elsewhere auto's constant estimate is used")
+                    "time average lay closer to the bias while moving than the profile alone, the still estimate "
+                    "(the other estimate of every axis) and auto (as it runs there, along the directions moving "
+                    "observed) did; elsewhere auto's constant estimate is used")
+MOVING_GATE_NO_AUTO = ("this profile's bias_prior has no auto figure (fitted before auto was measured): judged against "
+                       "the profile alone and the still estimate only; refit it with experiments/bias_prior.py fit "
+                       "--write to judge it against auto")
 
 
 def moving_admitted(prior: BiasPrior) -> Tuple[bool, Optional[Dict[str, float]]]:
     """(whether ``moving``'s own estimate is used, the training figures it was judged on [rad/s], None
-    where the profile has not measured them): :data:`MOVING_GATE_RULE`."""
+    where the profile has not measured them): :data:`MOVING_GATE_RULE`; a ``bias_prior`` without the
+    ``auto`` figure (an older profile): against the profile alone and the still estimate only
+    (:data:`MOVING_GATE_NO_AUTO`)."""
     rms = {k: (e, a) for k, e, a in prior.measured_rms}
     if "moving" not in rms:
         return True, None
     figures = {"moving": rms["moving"][0], "profile_alone": rms["moving"][1]}
-    if "still" in rms:
-        figures["still"] = rms["still"][0]
+    for other in ("still", "auto"):
+        if other in rms:
+            figures[other] = rms[other][0]
     return figures["moving"] < min(v for k, v in figures.items() if k != "moving"), figures
 
 
 def _moving(ctx: Context, t_ns: np.ndarray, gyro: np.ndarray, acc: np.ndarray) -> BiasEstimate:
     ok, figures = moving_admitted(ctx.prior)
-    gate = None if figures is None else {"entered": ok, "training_rms_rad_s": figures, "rule": MOVING_GATE_RULE}
+    gate = None
+    if figures is not None:
+        gate = {"entered": ok, "training_rms_rad_s": figures, "compared_with_auto": "auto" in figures,
+                "rule": MOVING_GATE_RULE if "auto" in figures else MOVING_GATE_RULE + "; " + MOVING_GATE_NO_AUTO}
+        if "auto" not in figures:
+            log.info("--bias moving: %s", MOVING_GATE_NO_AUTO)
     if ok:
         est = moving_raw(ctx, t_ns, gyro, acc)
         if gate:
             est.detail["gate"] = gate
         return est
     est = _auto(ctx, t_ns, gyro, acc)  # method "auto": its parts bounded each (bound)
-    est.detail = {**est.detail, "moving_gate": gate, "rule": MOVING_GATE_RULE + "; " + est.detail["rule"]}
+    est.detail = {**est.detail, "moving_gate": gate, "rule": gate["rule"] + "; " + est.detail["rule"]}
     return est
 
 
@@ -336,7 +348,7 @@ REGISTRY: Dict[str, Estimator] = {e.name: e for e in (
               "keeps it out)",
               "a bias that moves: gravity consistency with the bias piecewise linear in time (its random walk the "
               "profile's) and every still stretch at its time; where the profile's bias_prior measured it no "
-              "closer than the profile alone and the still estimate, auto's", navigate=False),
+              "closer than the profile alone, the still estimate and auto, auto's", navigate=False),
     Estimator("learned", _learned, "the recording's own gyro bias from the learned estimator removed",
               "the long-context estimator of --bias-model", navigate=False, needs_model=True),
 )}
@@ -478,9 +490,14 @@ def measure_prior(recordings: List[Tuple[str, np.ndarray, np.ndarray, np.ndarray
     moving bias's spread about zero per axis (x n/(n-1): the floor was fitted on them; None under two
     recordings), ``still_error_std_rad_s`` the RMS of still - moving per axis, ``gravity_error_std_rad_s``
     gravity consistency's error beyond its own uncertainty along the directions its data set (pooled),
-    and ``rms_rad_s`` per estimator (``moving``: its time average, :func:`moving_raw`) its RMS error and the profile alone's (the moving bias) over the
-    same recordings and directions (``auto``'s gate, :func:`better_than_prior`)."""
-    rows, moving, still_err, still_mov, grav_err, grav_mov, mov_err, mov_mov = [], [], [], [], [], [], [], []
+    and ``rms_rad_s`` per estimator its RMS error and the profile alone's (the moving bias) over the
+    same recordings and directions: ``still`` and ``gravity`` (``auto``'s gate, :func:`better_than_prior`);
+    then, with the prior these figures make (``ctx``'s with them: as a profile carrying them runs),
+    ``moving`` (its time average, :func:`moving_raw`, bounded as :func:`bias_step` bounds it) and
+    ``auto`` (:func:`combine` of still and gravity with that prior and its gate, bounded; nothing
+    subtracted where it gives none), both along the directions ``moving`` observed on each recording
+    (``moving``'s gate, :func:`moving_admitted`, compares them like for like)."""
+    rows, moving, still_err, still_mov, grav_err, grav_mov, mov_err, mov_mov, auto_err = ([] for _ in range(9))
     for name, t, g, a, b in recordings:
         b = np.asarray(b, dtype=np.float64)
         st, gr = _still(ctx, t, g, a), gravity_bias(t, g, a)
@@ -502,13 +519,6 @@ def measure_prior(recordings: List[Tuple[str, np.ndarray, np.ndarray, np.ndarray
             grav_mov.extend(float(u @ b) for u, _ in seen)
             row["gravity_error_along_observed_rad_s"] = [x for x, _ in e]
             row["gravity_own_std_rad_s"] = [s for _, s in e]
-        mv = moving_raw(ctx, t, g, a)
-        if mv.gyro_bias is not None:
-            lam, vec = np.linalg.eigh(np.eye(3) - mv.unobserved())
-            dirs = vec.T[lam > 0.5]
-            row["moving_error_along_observed_rad_s"] = [float(u @ (mv.gyro_bias - b)) for u in dirs]
-            mov_err.extend(row["moving_error_along_observed_rad_s"])
-            mov_mov.extend(float(u @ b) for u in dirs)
         rows.append(row)
 
     def rms(x: List[Any]) -> Optional[float]:
@@ -523,13 +533,38 @@ def measure_prior(recordings: List[Tuple[str, np.ndarray, np.ndarray, np.ndarray
         gate["still"] = {"error": rms(still_err), "profile_alone": rms(still_mov)}
     if grav_err:
         gate["gravity"] = {"error": rms([x for x, _ in grav_err]), "profile_alone": rms(grav_mov)}
-    if mov_err:  # its time average against the moving bias (constant per recording), the directions it observed
+    out: Dict[str, Any] = {
+        "moving_std_rad_s": _vec(np.sqrt(np.mean(np.square(moving), axis=0) * n / (n - 1))) if n >= 2 else None,
+        "still_error_std_rad_s": _vec(np.sqrt(np.mean(np.square(still_err), axis=0))) if still_err else None,
+        "still_recordings": len(still_err), "gravity_error_std_rad_s": extra, "gravity_directions": len(grav_err)}
+    # the prior as a profile carrying these figures runs: the still estimate's floor, gravity
+    # consistency's extra variance and auto's gate from them, the rest (random walk, spread) ctx's
+    made = BiasPrior.from_bias_std(ctx.prior.std, ctx.prior.source, measured={**out, "rms_rad_s": gate})
+    run = replace(ctx, prior=replace(ctx.prior, moving_std=made.moving_std, still_error_std=made.still_error_std,
+                                     gravity_error_std=made.gravity_error_std, measured_rms=made.measured_rms))
+    for row, (_, t, g, a, b) in zip(rows, recordings):
+        b = np.asarray(b, dtype=np.float64)
+        mv = moving_raw(run, t, g, a)
+        if mv.gyro_bias is None:
+            continue
+        lam, vec = np.linalg.eigh(np.eye(3) - mv.unobserved())
+        dirs = vec.T[lam > 0.5]
+        # what each subtracts on average as it runs (bias_step: bounded; nothing where rejected)
+        sub_mv = bound(mv, run.prior).gyro_bias
+        au = _auto(run, t, g, a)
+        sub_au = bound(au, run.prior).gyro_bias
+        sub_mv = np.zeros(3) if sub_mv is None else sub_mv
+        sub_au = np.zeros(3) if sub_au is None else sub_au
+        row["moving_error_along_observed_rad_s"] = [float(u @ (sub_mv - b)) for u in dirs]
+        row["auto_error_along_moving_observed_rad_s"] = [float(u @ (sub_au - b)) for u in dirs]
+        row["auto_used"] = au.detail.get("used")
+        mov_err.extend(row["moving_error_along_observed_rad_s"])
+        auto_err.extend(row["auto_error_along_moving_observed_rad_s"])
+        mov_mov.extend(float(u @ b) for u in dirs)
+    if mov_err:  # time averages against the moving bias (constant per recording), the directions moving observed
         gate["moving"] = {"error": rms(mov_err), "profile_alone": rms(mov_mov)}
-    return {"recordings": rows,
-            "moving_std_rad_s": _vec(np.sqrt(np.mean(np.square(moving), axis=0) * n / (n - 1))) if n >= 2 else None,
-            "still_error_std_rad_s": _vec(np.sqrt(np.mean(np.square(still_err), axis=0))) if still_err else None,
-            "still_recordings": len(still_err),
-            "gravity_error_std_rad_s": extra, "gravity_directions": len(grav_err), "rms_rad_s": gate}
+        gate["auto"] = {"error": rms(auto_err), "profile_alone": rms(mov_mov)}
+    return {"recordings": rows, **out, "rms_rad_s": gate}
 
 
 # -- the step and the summary ----------------------------------------------------------------------
