@@ -60,6 +60,13 @@ def tum_of_groundtruth(flight: Path, dst: Path) -> Path:
     return dst
 
 
+def thinned_tum(src: Path, dst: Path, every: int) -> Path:
+    """Every ``every``-th pose of a TUM trajectory (the 200 Hz ground truth as a 20 Hz reference)."""
+    rows = np.loadtxt(src, comments="#")
+    np.savetxt(dst, rows[::every], fmt="%.9f")
+    return dst
+
+
 def score(flight: Path, refined: Path) -> Dict[str, float]:
     imu, gt = read_recording(flight)
     src = read_imu_source(refined)
@@ -91,6 +98,8 @@ def main() -> int:
             f = root / "euroc" / flight
             if kind == "mocap":
                 ref = tum_of_groundtruth(f, out / f"{flight}_gt.tum")
+            elif kind == "mocap20hz":
+                ref = thinned_tum(tum_of_groundtruth(f, out / f"{flight}_gt.tum"), out / f"{flight}_gt20.tum", 10)
             elif kind.startswith("orbslam2"):
                 ref = vo / f"{code}.txt"
             elif kind.startswith("rot"):
