@@ -96,11 +96,12 @@ def main() -> int:
         cmd = exe + ["calibrate", "--out", str(calib), "--no-plot", "--device", "euroc-adis16448"]
         for flight, code in TRAIN.items():
             f = root / "euroc" / flight
-            if kind == "mocap":
+            base = kind.split("+")[0]
+            if base == "mocap":
                 ref = tum_of_groundtruth(f, out / f"{flight}_gt.tum")
-            elif kind == "mocap20hz":
+            elif base == "mocap20hz":
                 ref = thinned_tum(tum_of_groundtruth(f, out / f"{flight}_gt.tum"), out / f"{flight}_gt20.tum", 10)
-            elif kind.startswith("orbslam2"):
+            elif base == "orbslam2":
                 ref = vo / f"{code}.txt"
             elif kind.startswith("rot"):
                 ref = rotated_tum(tum_of_groundtruth(f, out / f"{flight}_gt.tum"), out / f"{flight}_{kind}.tum",
@@ -109,8 +110,10 @@ def main() -> int:
                 ref = rotated_tum(tum_of_groundtruth(f, out / f"{flight}_gt.tum"), out / f"{flight}_{kind}.tum",
                                   0.0, np.array([0, 0, 1.0]), late_s=0.1)
             cmd += ["--input", str(f), "--groundtruth", str(ref)]
-        if kind.endswith("+extrinsics"):
+        if "+extrinsics" in kind:
             cmd += ["--extrinsics", str(cam0)]
+        if "+select" in kind:  # the floor's terms chosen on held-out recordings (calib.select)
+            cmd += ["--select"]
         t0 = time.time()
         res = run(cmd)
         row: dict = {"exit": res.returncode, "seconds": round(time.time() - t0, 1),
@@ -127,7 +130,8 @@ def main() -> int:
             row["gyro_bias"] = prof["gyroscope"]["bias"]
             row["acc_bias"] = prof["accelerometer"]["bias"]
             row["acc_matrix"] = prof["accelerometer"]["matrix"]
-            row["floor"] = {k: prof["floor"].get(k) for k in ("time_offset", "cutoff_gyro", "cutoff_acc")}
+            row["floor"] = {k: prof["floor"].get(k) for k in ("time_offset", "cutoff_gyro", "cutoff_acc", "M_g", "G")}
+            row["selection"] = {k: prof.get("selection", {}).get(k) for k in ("gyro", "acc", "skipped")}
             for flight in TEST:
                 f = root / "euroc" / flight
                 dst = out / f"{kind}_{flight}"

@@ -183,3 +183,55 @@ def test_calibrate_with_select_writes_the_floor_at_the_chosen_levels_and_the_sel
     prof.save(path)
     back = Profile.load(path)
     assert back.selection["gyro"] == "bias" and set(back.selection["held_out_figures"]["gyro"]) == set(sel.GYRO_LEVELS)
+
+
+GYRO_ONLY = sel.SelectOptions(max_windows=200, startup_bias_s=5.0, gyro_only=True)
+
+
+@pytest.mark.parametrize("scale", [False, True])
+def test_a_reference_without_accelerations_selects_the_gyroscope_on_rotation_alone(scale):
+    """A reference that cannot resolve accelerations (a 20 Hz VO): the gyroscope's levels up to
+    g-sensitivity on the rotation cells, the accelerometer not selected; the scaled device's scale
+    is found, the bias-only device's bias kept, and no simpler level beats the chosen one in a cell."""
+    s = sel.select_levels(*device(scale), SETTINGS, GYRO_ONLY)
+    assert s.gyro in (("scale", "affine") if scale else ("bias",)), s.steps["gyro"]
+    assert s.acc == "not selected" and s.figures["acc"] == {} and set(s.figures["gyro"]) == set(sel.GYRO_ONLY_LEVELS)
+    t = s.figures["gyro"]
+    levels = list(sel.GYRO_ONLY_LEVELS)
+    for simpler in levels[:levels.index(s.gyro)]:
+        for fold, cells in t[s.gyro].items():
+            for cell, v in cells.items():
+                if cell.startswith(sel.GYRO_ONLY_CELLS):
+                    assert v <= (1 + sel.WORSE) * t[simpler][fold][cell], (simpler, fold, cell)
+    d = s.to_dict()
+    assert d["levels"]["acc"] == [] and d["cells"]["gyro"] == ["rot_deg", "aoe_deg"]
+
+
+def test_select_floor_keeps_the_sources_accelerometer_for_a_reference_without_accelerations():
+    """calibrate's step for such a reference: the gyroscope refitted at its chosen level, the
+    accelerometer (matrix, bias, standard deviations) exactly the source's fit's (from the positions)."""
+    from imu_learn.baselines.traditional import ACC_BIAS_ONLY
+    from imu_learn.calib.profile import FloorFit
+    from imu_learn.calib.sources import CalibInputs, Source
+
+    class VoLike(Source):
+        def floor_terms(self):
+            return {"cutoffs_hz": (None,), "acc_prior": ACC_BIAS_ONLY}
+
+        def match_kernel(self, inp):
+            return np.full(3, 1 / 3)  # a reference 3 IMU samples apart: its triangle
+
+    train, val, groups, val_groups = device(False)
+    inp = CalibInputs(train, val, groups, val_groups, settings=SETTINGS, source=VoLike())
+    assert sel.skip_reason(inp) is None and sel.gyro_only(inp)
+    M_a, b_a = np.diag([1.01, 0.99, 1.0]), np.array([0.3, -0.2, 0.1])
+    full = sel.floor_of((np.r_[np.full(9, 1e-3), BIAS_G, np.full(9, 1e-4)], None), (np.zeros(12), None), 0.0)
+    full = full.with_params(M_a=M_a, b_a=b_a)
+    ones = TraditionalParams(np.ones((3, 3)), np.ones(3), np.ones((3, 3)), np.full((3, 3), 2.0), np.full(3, 2.0))
+    fit, entry = sel.select_floor(inp, FloorFit(full, {}, ones, []), opts=GYRO_ONLY)
+    p = fit.floor.params
+    assert entry["gyro"] == "bias" and entry["acc"] == "not selected" and "source's" in entry["floor"]
+    assert np.array_equal(p.M_a, M_a) and np.array_equal(p.b_a, b_a) and p.cutoff_acc is None and p.cutoff_gyro is None
+    assert np.array_equal(p.M_g, np.eye(3)) and np.array_equal(p.G, np.zeros((3, 3)))
+    assert np.abs(p.b_g - BIAS_G).max() < 1e-3
+    assert np.all(np.isnan(fit.std.M_g)) and np.all(np.isfinite(fit.std.b_g)) and np.all(fit.std.M_a == 2.0)

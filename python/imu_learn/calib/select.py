@@ -39,9 +39,19 @@ tried against ``chosen``. So the chosen level is never beaten by a simpler one i
 
 The profile's floor is then fitted at the chosen levels on all the training recordings (the full fit
 kept as it is where the chosen levels are all it has); profile.json's ``selection`` entry holds the
-levels, the rule, and every held-out figure behind them. No selection (the entry says why, the full
-floor kept): a positions or odometry reference, or one that cannot resolve accelerations (their sources
-fix the terms they observe), and recordings too short to hold any out. A reference whose stamps were
+levels, the rule, and every held-out figure behind them.
+
+A poses reference that cannot resolve accelerations (a 20 Hz VO; its source restricts the floor's
+terms): its rotations are accurate, so the gyroscope's levels are chosen against them
+(``SelectOptions.gyro_only``): up to ``g_sensitivity`` (no low-pass: a 20 Hz reference does not see
+one), on the rotation cells only (rotation at every horizon and the open-loop AOE against the
+reference's attitude: its positions over 10-200 IMU samples are its interpolation's), fitted and scored
+on the IMU seen through the reference's interpolation as its floor is
+(:meth:`~imu_learn.calib.sources.PosesSource.match_kernel`), the accelerometer at ``bias`` in every
+fold. The accelerometer is not selected: the profile keeps the source's (from the positions).
+
+No selection (the entry says why, the full floor kept): a positions or odometry reference (their
+sources fix the terms they observe), and recordings too short to hold any out. A reference whose stamps were
 moved by its own lag keeps the time offset's prior in every fold (not observed). The fits are the
 floor's own (numpy, no torch).
 """
@@ -69,6 +79,7 @@ from imu_learn.baselines.traditional import (
 )
 from imu_learn.calib.fit import group_segments, seed_all, time_blocks
 from imu_learn.calib.profile import FloorFit
+from imu_learn.calib.sources import matched
 from imu_learn.data.types import Segment, sample_rate_hz
 from imu_learn.score.metrics import fit_startup_bias, index_at, relative_pose_errors, remove_bias, rmse, with_imu
 from imu_learn.score.peers import attitude_errors
@@ -92,6 +103,10 @@ class SelectOptions:
     startup_bias_s: float = 10.0  # start-up bias fitted on (at most 30 % of a held-out segment)
     max_windows: int = 1000  # the floor's window budget per fit
     tau: Optional[float] = None  # a fixed time offset [samples] (not observed); None: fitted per fold
+    # a reference that cannot resolve accelerations (a 20 Hz VO): the gyroscope's levels only, up to
+    # ``g_sensitivity`` (no low-pass: not observed), on the rotation cells (GYRO_ONLY_CELLS); the
+    # accelerometer at ``bias`` (M_a = I) in every fold, and not selected
+    gyro_only: bool = False
 
 
 @dataclass
@@ -275,6 +290,8 @@ def score(floor: Floor, held: Sequence[Segment], horizons: Sequence[int], opts: 
 
 
 CELLS = {"gyro": ("rot_deg", "trans_m", "aoe_deg"), "acc": ("trans_m", "open_trans_m")}
+GYRO_ONLY_LEVELS = GYRO_LEVELS[:-1]  # a reference that cannot resolve accelerations: no low-pass level
+GYRO_ONLY_CELLS = ("rot_deg", "aoe_deg")  # its positions over 10-200 IMU samples are its interpolation's
 
 Table = Dict[str, Dict[str, Dict[str, float]]]  # level -> fold -> cell -> error
 
@@ -317,12 +334,17 @@ class Selection:
     steps: Dict[str, List[Dict[str, Any]]]
     horizons: Tuple[int, ...]
     seconds: float = 0.0
+    gyro_levels: Tuple[str, ...] = GYRO_LEVELS
+    gyro_cells: Tuple[str, ...] = CELLS["gyro"]
 
     def to_dict(self) -> Dict[str, Any]:
-        return {"gyro": self.gyro, "acc": self.acc, "levels": {"gyro": list(GYRO_LEVELS), "acc": list(ACC_LEVELS)},
+        gyro_only = self.gyro_levels != GYRO_LEVELS
+        return {"gyro": self.gyro, "acc": self.acc,
+                "levels": {"gyro": list(self.gyro_levels), "acc": [] if gyro_only else list(ACC_LEVELS)},
                 "rule": RULE, "held_out": self.kind, "horizons": list(self.horizons),
-                "cells": {k: list(v) for k, v in CELLS.items()}, "folds": self.folds, "steps": self.steps,
-                "held_out_figures": self.figures, "seconds": round(self.seconds, 1)}
+                "cells": {"gyro": list(self.gyro_cells), "acc": [] if gyro_only else list(CELLS["acc"])},
+                "folds": self.folds, "steps": self.steps, "held_out_figures": self.figures,
+                "seconds": round(self.seconds, 1)}
 
 
 def _table(preps: List[Prepared], floors: Callable[[Prepared, str], Floor], levels: Sequence[str],
@@ -340,6 +362,8 @@ def select_levels(train: List[Segment], val: List[Segment], groups: Sequence[str
     horizons = tuple(sorted({int(n) for n in settings.horizons})) or opts.horizons
     fs = folds(train, val, groups, val_groups)
     kind = "leave one recording out" if len(set(groups)) >= 2 else "four time blocks of one recording"
+    if opts.gyro_only:
+        return _select_gyro_only(fs, kind, horizons, settings, opts, progress, t0)
     with thread_limits(1):
         preps = []
         for i, f in enumerate(fs):
@@ -364,6 +388,32 @@ def select_levels(train: List[Segment], val: List[Segment], groups: Sequence[str
                  for p in preps]
     return Selection(g_level, a_level, kind, fold_info, {"gyro": gyro_t, "acc": acc_t},
                      {"gyro": g_steps, "acc": a_steps}, horizons, time.time() - t0)
+
+
+def _select_gyro_only(fs: List[Fold], kind: str, horizons: Tuple[int, ...], settings: FitSettings,
+                      opts: SelectOptions, progress: Progress, t0: float) -> Selection:
+    """:func:`select_levels` for a reference that cannot resolve accelerations (``opts.gyro_only``)."""
+    levels, top = GYRO_ONLY_LEVELS, GYRO_ONLY_LEVELS[-1]
+    with thread_limits(1):
+        preps = []
+        for i, f in enumerate(fs):
+            progress(f"selection: {f.name} held out ({i + 1}/{len(fs)}): the gyroscope's levels (rotation only)")
+            p = prepare(f, settings, opts)
+            p.grid = [None]
+            p.gyro = fit_gyro_levels(p.tr, p.va, p.grid, top)
+            p.acc = {"bias": fit_acc_levels(p.tr, p.va, p.grid, p.gyro[top], "bias")["bias"]}
+            preps.append(p)
+        gyro_t = _table(preps, lambda p, lv: floor_of(p.gyro[lv], p.acc["bias"], p.tau), levels, horizons, opts,
+                        settings.gravity)
+    if not any(math.isfinite(v) for row in gyro_t["offset"].values() for v in row.values()):
+        raise ValueError(f"no held-out segment is longer than the start-up bias span and {min(horizons)} samples")
+    g_level, g_steps = choose(levels, gyro_t, GYRO_ONLY_CELLS)
+    progress(f"selection: gyroscope {g_level} (the accelerometer not selected: the reference cannot resolve it)")
+    fold_info = [{"held_out": p.fold.name, "time_offset_samples": p.tau, "cutoff_gyro": None,
+                  "train_segments": len(p.fold.train), "held_out_samples": int(sum(len(s) for s in p.fold.held))}
+                 for p in preps]
+    return Selection(g_level, "not selected", kind, fold_info, {"gyro": gyro_t, "acc": {}}, {"gyro": g_steps, "acc": []},
+                     horizons, time.time() - t0, levels, GYRO_ONLY_CELLS)
 
 
 def fit_at_levels(train: List[Segment], val: List[Segment], settings: FitSettings, levels: Tuple[str, str],
@@ -396,29 +446,43 @@ def masked_std(std: TraditionalParams, levels: Tuple[str, str]) -> TraditionalPa
 
 
 def skip_reason(inp: Any) -> Optional[str]:
-    """Why calibrate's inputs get no selection (None: they do)."""
+    """Why calibrate's inputs get no selection (None: they do; a poses reference that cannot resolve
+    accelerations gets the gyroscope's, :func:`gyro_only`)."""
     if inp.source.kind != "poses":
         return f"a {inp.source.kind} reference: its source fits the floor it observes"
-    if inp.source.floor_terms():
-        return "the reference does not resolve accelerations: the floor's terms are what it observes"
     return None
+
+
+def gyro_only(inp: Any) -> bool:
+    """A poses reference that cannot resolve accelerations (its source restricts the floor's terms: a
+    20 Hz VO): its rotations are accurate, so the gyroscope's levels are chosen against them; the
+    accelerometer keeps what its source fitted (from the positions)."""
+    return bool(inp.source.floor_terms())
 
 
 def select_floor(inp: Any, fit: FloorFit, progress: Progress = lambda s: None,
                  opts: Optional[SelectOptions] = None) -> Tuple[FloorFit, Dict[str, Any]]:
     """calibrate's step: the levels chosen on held-out recordings (:func:`select_levels`) and the floor
-    at them (``fit`` as it is where they are all it has); returns the floor fit and the ``selection`` entry."""
+    at them (``fit`` as it is where they are all it has); returns the floor fit and the ``selection`` entry.
+    A reference that cannot resolve accelerations (:func:`gyro_only`): the gyroscope's levels, fitted
+    and scored on the IMU seen through the reference's interpolation as its floor was
+    (:meth:`~imu_learn.calib.sources.PosesSource.match_kernel`), the accelerometer the source's."""
     why = skip_reason(inp)
     if why is not None:
         return fit, {"skipped": why}
     tau = fit.floor.params.time_offset
     fixed = "time_offset_fitted_on_the_moved_reference" in fit.log
-    opts = opts or SelectOptions(tau=tau if fixed else None)
+    only = gyro_only(inp)
+    opts = opts or SelectOptions(tau=tau if fixed else None, gyro_only=only)
+    kernel = inp.source.match_kernel(inp) if only and hasattr(inp.source, "match_kernel") else np.ones(1)
+    data = matched(inp, kernel) if len(kernel) > 1 else inp
     try:
-        sel = select_levels(inp.train, inp.val, inp.groups, inp.val_groups, inp.settings, opts, progress)
+        sel = select_levels(data.train, data.val, data.groups, data.val_groups, data.settings, opts, progress)
     except ValueError as e:  # too little data to hold any out: the full floor, and why
         return fit, {"skipped": f"no selection: {e}"}
     entry = sel.to_dict()
+    if only:
+        return _gyro_only_floor(data, fit, sel, entry, tau, opts, progress)
     levels = (sel.gyro, sel.acc)
     if levels == full_levels(fit.floor):
         entry["floor"] = "the full floor's fit: the chosen levels are all it has"
@@ -428,3 +492,21 @@ def select_floor(inp: Any, fit: FloorFit, progress: Progress = lambda s: None,
     entry["floor"] = ("refitted at the chosen levels on all the training recordings (the time offset the full fit's); "
                       "standard deviations: the full floor's spread, null for what the levels hold at its prior")
     return replace(fit, floor=floor, std=masked_std(fit.std, levels)), entry
+
+
+def _gyro_only_floor(data: Any, fit: FloorFit, sel: Selection, entry: Dict[str, Any], tau: float,
+                     opts: SelectOptions, progress: Progress) -> Tuple[FloorFit, Dict[str, Any]]:
+    """The floor at the chosen gyroscope level on all the training recordings, the accelerometer (matrix,
+    bias, no low-pass) the source's fit's."""
+    if sel.gyro == GYRO_ONLY_LEVELS[-1]:
+        entry["floor"] = "the full floor's fit: the chosen gyroscope level is all it has"
+        return fit, entry
+    progress(f"the floor at gyroscope {sel.gyro} on all the training recordings")
+    floor = fit_at_levels(data.train, data.val, data.settings, (sel.gyro, "bias"), tau, opts)
+    p = fit.floor.params
+    floor = floor.with_params(M_a=p.M_a.copy(), b_a=p.b_a.copy(), cutoff_acc=p.cutoff_acc, cutoff_gyro=None)
+    entry["floor"] = ("gyroscope refitted at the chosen level on all the training recordings (the time offset the "
+                      "full fit's); the accelerometer the source's fit's; standard deviations: the full floor's "
+                      "spread, null for the gyroscope's terms the level holds at its prior")
+    g = masked_std(fit.std, (sel.gyro, "affine"))
+    return replace(fit, floor=floor, std=replace(fit.std, M_g=g.M_g, b_g=g.b_g, G=g.G)), entry
