@@ -10,6 +10,7 @@ from scipy.spatial.transform import Rotation
 from imu_learn.errors import InvalidInputError
 from imu_learn.fuse.aiding import rtklib
 from imu_learn.fuse.start.delay import _double_integral, imu_delay
+from test_navigate_gnss import LEVER, RPY, synthetic_car
 
 G = 9.7968
 T0 = 1_752_003_258_499_000_000
@@ -81,6 +82,31 @@ def test_double_integral_is_exact_for_piecewise_linear():
     t = np.r_[0.0, t]
     y = 2.0 + 3.0 * t  # linear: F = t^2 + t^3 / 2
     assert np.allclose(_double_integral(t, y), t ** 2 + t ** 3 / 2, rtol=1e-12, atol=1e-12)
+
+
+def test_navigate_reads_the_fixes_once_for_the_delay_the_noise_fit_and_the_rows(tmp_path, monkeypatch):
+    """``--imu-delay-s auto`` with no noise given (the noise fitted from the fixes too): navigate reads
+    the .pos once, and the delay it adds is :func:`imu_delay`'s on the same file read apart."""
+    from pathlib import Path
+
+    from imu_learn.data import formats
+    from imu_learn.fuse import navigate as nav
+
+    imu, pos, _ = synthetic_car(tmp_path)
+    reads = []
+    real = nav.read_pos
+    monkeypatch.setattr(nav, "read_pos", lambda path: reads.append(Path(path)) or real(path))
+    opts = nav.NavigateOptions(aiding_kind=None, aiding_format="auto", imu_rotation_rpy_deg=RPY, lever_arm=tuple(LEVER),
+                               imu_delay_from="fixes")
+    inp = nav.read_inputs(nav.Sources(imu, pos), opts)
+    assert reads == [pos]
+    assert "the aiding's innovations" in inp.imu.noise.source  # the noise fit ran, on the same solution
+    src = formats.read_imu_source(imu, "gnss-imu")
+    sol = rtklib.read_pos(pos)
+    want = imu_delay(np.asarray(src.t_ns), np.asarray(src.acc), sol, rtklib.normal_gravity(*sol.origin_llh[::2]))
+    assert inp.imu.delay["from"] == "fixes" and inp.imu.delay["delay_s"] == round(want.delay_s, 4)
+    assert inp.imu.delay["epochs"] == want.epochs
+    assert inp.imu.t_ns[0] - int(src.t_ns[0]) == int(round(inp.imu.delay["delay_s"] * 1e9))
 
 
 # --- the real drive (skipped without the data root) ------------------------------------------------

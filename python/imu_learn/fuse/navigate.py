@@ -317,18 +317,18 @@ def read_aiding(src: Sources, opts: NavigateOptions) -> Trajectory:
 
 
 def read_geodetic(src: Sources, opts: NavigateOptions) -> RtkSolution:
-    """Geodetic fixes in local ENU at their first epoch: an RTKLIB ``.pos`` file or a bag's NavSatFix topic."""
+    """Geodetic fixes in local ENU at their first epoch: an RTKLIB ``.pos`` file or a bag's NavSatFix topic
+    (read once, by :func:`read_inputs`: the delay, the noise fit and the rows all take that solution)."""
     if opts.aiding_format == "bag":
         return bag_aiding.read_navsat(Path(src.aiding), str(src.aiding_topic), opts.position_sigma_m)
     return read_pos(Path(src.aiding))
 
 
-def gnss_rows(src: Sources, imu_t_ns: np.ndarray, lever: np.ndarray, opts: NavigateOptions):
-    """(GnssFixes on the IMU's samples with their own per-fix sigmas, AidingRows, the RtkSolution) of
-    geodetic fixes (:func:`read_geodetic`; RTKLIB: fixed and float solutions, float down-weighted),
-    without the fixes inside ``opts.gaps``."""
+def gnss_rows(src: Sources, sol: RtkSolution, imu_t_ns: np.ndarray, lever: np.ndarray, opts: NavigateOptions):
+    """(GnssFixes on the IMU's samples with their own per-fix sigmas, AidingRows) of the geodetic fixes
+    ``sol`` (:func:`read_geodetic`; RTKLIB: fixed and float solutions, float down-weighted), without the
+    fixes inside ``opts.gaps``."""
     path = src.aiding
-    sol = read_geodetic(src, opts)
     fixes = fixes_on_imu(sol, imu_t_ns, lever, label=None if opts.aiding_format != "bag" else aiding_label(src, opts))
     rel_s = (imu_t_ns[fixes.idx] - int(imu_t_ns[0])) * 1e-9
     in_gap = in_windows(rel_s, opts.gaps)
@@ -342,7 +342,7 @@ def gnss_rows(src: Sources, imu_t_ns: np.ndarray, lever: np.ndarray, opts: Navig
                "quality_not_used": int(len(sol) - len(fixes) - int(in_gap.sum()) - int((~th).sum())
                                        - fixes.dropped_outside - fixes.dropped_unmatched)}
     t = np.asarray(imu_t_ns, dtype=np.int64)[fixes.idx]
-    return fixes, AidingRows(fixes.idx.astype(np.int64), t, t, fixes.p.copy(), None, dropped), sol
+    return fixes, AidingRows(fixes.idx.astype(np.int64), t, t, fixes.p.copy(), None, dropped)
 
 
 @dataclass(frozen=True)
@@ -387,11 +387,13 @@ class Imu:
 
 
 def imu_noise(src: Sources, opts: NavigateOptions, own: Optional[ImuNoise], profile: Optional[Profile],
-              imu: Optional[Tuple[np.ndarray, np.ndarray, np.ndarray]] = None) -> ImuNoise:
+              imu: Optional[Tuple[np.ndarray, np.ndarray, np.ndarray]] = None,
+              sol: Optional[RtkSolution] = None) -> ImuNoise:
     """The noise the graph assumes: ``--imu-noise``, else the profile's, else the recording's
     sensor.yaml, else with ``imu`` (its stamps, gyro, acc as fused: corrected, in the body frame, the
     stamps delayed) the MEMS class default scaled to
-    the aiding's innovations (:mod:`.noise_fit`), else the built-in device's (one warning line each)."""
+    the aiding's innovations (:mod:`.noise_fit`; the geodetic fixes ``sol`` when the aiding is GNSS),
+    else the built-in device's (one warning line each)."""
     if opts.imu_noise is not None:
         return ImuNoise(*opts.imu_noise, source="--imu-noise")
     if profile is not None:
@@ -401,8 +403,8 @@ def imu_noise(src: Sources, opts: NavigateOptions, own: Optional[ImuNoise], prof
         return own
     if imu is not None:
         t_ns, gyro, acc = imu
-        if is_geodetic(src, opts):
-            _, rows, sol = gnss_rows(src, t_ns, np.zeros(3), opts)
+        if sol is not None:
+            _, rows = gnss_rows(src, sol, t_ns, np.zeros(3), opts)
             gravity = normal_gravity(sol.origin_llh[0], sol.origin_llh[2])
         else:
             T_BS = read_t_bs(src.extrinsics) if src.extrinsics is not None else None
@@ -423,12 +425,13 @@ def load_profile(src: Sources) -> Optional[Profile]:
     return None if src.profile is None else Profile.load(src.profile)
 
 
-def read_body_imu(src: Sources, opts: NavigateOptions) -> Imu:
+def read_body_imu(src: Sources, opts: NavigateOptions, sol: Optional[RtkSolution] = None) -> Imu:
     """The recording's IMU through the correction plan (:mod:`imu_learn.calib.correction`, as refine
     applies it: the rate and device check, refused more than 5 % off unless ``src.force``, then the
     profile's floor when there is no checkpoint or calibration, else the model (after the profile it
     carries, once) or the fit, then the guard) in the IMU's own frame, then in the body frame
-    (``--imu-rotation-rpy-deg``), its stamps moved by ``--imu-delay-s``, with its noise (:func:`imu_noise`)."""
+    (``--imu-rotation-rpy-deg``), its stamps moved by ``--imu-delay-s`` (``auto``: measured against the
+    geodetic fixes ``sol``), with its noise (:func:`imu_noise`)."""
     t_ns, gyro, acc, own, imu_file, fmt = read_imu(src.input, src.fmt, src.columns)
     profile = load_profile(src)
     if src.calibration is not None and src.checkpoint is not None:
@@ -450,22 +453,23 @@ def read_body_imu(src: Sources, opts: NavigateOptions) -> Imu:
         gyro, acc = np.ascontiguousarray(gyro @ mounting.T), np.ascontiguousarray(acc @ mounting.T)
         if var is not None:  # the diagonal of M diag(v) M^T: exact for an axis permutation or flip
             var = np.ascontiguousarray(np.hstack([var[:, :3] @ (mounting**2).T, var[:, 3:] @ (mounting**2).T]))
-    delay = measured_delay(src, opts, t_ns, acc) if opts.imu_delay_from == "fixes" else {
+    delay = measured_delay(sol, opts, t_ns, acc) if opts.imu_delay_from == "fixes" else {
         "delay_s": opts.imu_delay_s, "from": "--imu-delay-s"}
     if delay["delay_s"]:
         t_ns = t_ns + int(round(float(delay["delay_s"]) * 1e9))
-    noise = imu_noise(src, opts, own, profile, (t_ns, gyro, acc))  # after the checks: on the IMU as fused
+    noise = imu_noise(src, opts, own, profile, (t_ns, gyro, acc), sol)  # after the checks: on the IMU as fused
     return Imu(t_ns, gyro, acc, noise, imu_file, mounting, str(src.profile) if floor else None, var, label,
                fixed.summary, delay)
 
 
-def measured_delay(src: Sources, opts: NavigateOptions, t_ns: np.ndarray, acc: np.ndarray) -> Dict[str, object]:
+def measured_delay(sol: Optional[RtkSolution], opts: NavigateOptions, t_ns: np.ndarray,
+                   acc: np.ndarray) -> Dict[str, object]:
     """``--imu-delay-s auto``: the delay to add to the IMU's stamps, measured against the GNSS fixes
-    outside ``--gaps`` (:func:`.start.delay.imu_delay`: the specific force's norm, no attitude needed)."""
-    if not is_geodetic(src, opts):
+    ``sol`` (None: the aiding is not GNSS fixes, refused) outside ``--gaps`` (:func:`.start.delay.imu_delay`:
+    the specific force's norm, no attitude needed)."""
+    if sol is None:
         raise ConfigError("--imu-delay-s auto measures the delay against GNSS fixes (an RTKLIB .pos or a NavSatFix "
                           "topic); with this aiding give the delay in seconds")
-    sol = read_geodetic(src, opts)
     rel_s = (np.asarray(sol.t_ns, dtype=np.int64) - int(t_ns[0])) * 1e-9
     est = imu_delay(t_ns, acc, sol, normal_gravity(sol.origin_llh[0], sol.origin_llh[2]),
                     use=~in_windows(rel_s, opts.gaps))
@@ -476,12 +480,14 @@ def measured_delay(src: Sources, opts: NavigateOptions, t_ns: np.ndarray, acc: n
 
 
 def aiding_rows(src: Sources, opts: NavigateOptions, t_ns: np.ndarray, T_BS: Optional[np.ndarray],
-                lever: np.ndarray, imu: Optional[Imu] = None) -> Tuple[AidingRows, int, Optional[object], NavigateOptions]:
+                lever: np.ndarray, imu: Optional[Imu] = None,
+                sol: Optional[RtkSolution] = None) -> Tuple[AidingRows, int, Optional[object], NavigateOptions]:
     """(the rows used, the rows read, (the GNSS fixes, their solution) of geodetic aiding or None, the
-    options with the gravity of geodetic fixes). Poses with ``imu``: their time offset estimated and
-    applied, and their noise estimated (:mod:`.aiding.estimate`)."""
-    if is_geodetic(src, opts):
-        gnss, rows, sol = gnss_rows(src, t_ns, lever, opts)
+    options with the gravity of geodetic fixes). ``sol``: the geodetic fixes (:func:`read_geodetic`),
+    None for other aiding. Poses with ``imu``: their time offset estimated and applied, and their noise
+    estimated (:mod:`.aiding.estimate`)."""
+    if sol is not None:
+        gnss, rows = gnss_rows(src, sol, t_ns, lever, opts)
         # geodetic fixes: the normal gravity at their origin (9.797 m/s^2 on the drive, not 9.81)
         opts = replace(opts, gravity=round(normal_gravity(sol.origin_llh[0], sol.origin_llh[2]), 6))
         return rows, len(rows.sample) + sum(rows.dropped.values()), (gnss, sol), opts
@@ -645,7 +651,8 @@ class Started:
 def read_inputs(src: Sources, opts: NavigateOptions) -> Inputs:
     """The run's inputs, each checked before any fusion: the aiding's format and kind
     (:func:`resolve_aiding`), the options, the side files (:func:`check_inputs`), the IMU (the ground
-    truth's stamps overlapping it), the lever arm and the aiding rows (:func:`aiding_rows`)."""
+    truth's stamps overlapping it), the lever arm and the aiding rows (:func:`aiding_rows`). Geodetic
+    fixes are read once (:func:`read_geodetic`), for the delay, the noise fit and the rows alike."""
     opts = resolve_aiding(src, opts, opts.aiding_kind)
     opts.check()
     gt_span = check_inputs(src)
@@ -653,7 +660,8 @@ def read_inputs(src: Sources, opts: NavigateOptions) -> Inputs:
     T_BS = read_t_bs(src.extrinsics) if src.extrinsics is not None else None
     if opts.lever_arm is not None and T_BS is not None:
         raise ConfigError("--lever-arm and --extrinsics both give the antenna's lever arm: pass one")
-    imu = read_body_imu(src, opts)
+    sol = read_geodetic(src, opts) if is_geodetic(src, opts) else None
+    imu = read_body_imu(src, opts, sol)
     t_ns = imu.t_ns
     if gt_span is not None and (gt_span[1] < t_ns[0] or gt_span[0] > t_ns[-1]):
         raise ConfigError(f"--groundtruth {src.groundtruth}: its stamps [{gt_span[0]}, {gt_span[1]}] ns do not overlap "
@@ -661,7 +669,7 @@ def read_inputs(src: Sources, opts: NavigateOptions) -> Inputs:
     lever = T_BS[:3, 3] if (T_BS is not None and kind.lever) else np.zeros(3)
     if opts.lever_arm is not None:
         lever = np.asarray(opts.lever_arm, dtype=np.float64)
-    rows, rows_read, gnss, opts = aiding_rows(src, opts, t_ns, T_BS, lever, imu)
+    rows, rows_read, gnss, opts = aiding_rows(src, opts, t_ns, T_BS, lever, imu, sol)
     return Inputs(opts, kind, imu, lever, rows, rows_read, gnss)
 
 
