@@ -8,6 +8,8 @@ import pytest
 from scipy.spatial.transform import Rotation
 
 from imu_learn.fuse.aiding.frame import MAX_ROTATION_DEG, check_frame
+from imu_learn.fuse.aiding.noise import pose_noise
+from imu_learn.fuse.aiding.pairs import rotation_pairs
 from imu_learn.fuse.aiding.types import AidingRows
 
 RATE_HZ, AID_HZ, SECONDS = 200, 20, 60.0
@@ -75,3 +77,30 @@ def test_too_little_motion_or_too_few_rows_is_not_checked():
     rows = rows_seen_through(R, Rotation.identity())
     few = AidingRows(rows.sample[:10], rows.t_ns[:10], rows.imu_t_ns[:10], rows.p[:10], rows.R[:10])
     assert check_frame(t, gyro_of(w), few).verdict == "not checked"
+
+
+def test_the_frame_check_and_the_noise_estimate_pair_the_same_rows():
+    """One pairing (imu_learn.fuse.aiding.pairs), used by the frame check and the pose noise estimate:
+    consecutive rows pair when their IMU samples are more than zero and at most --max-relative-gap-s
+    apart; the gyro's rotation over a pair is its samples' SO(3) chain (here the motion's own rotation,
+    composed apart by scipy from the same rates)."""
+    t, w, R = motion(planar=False)
+    rows = rows_seen_through(R, Rotation.identity())
+    keep = np.ones(len(rows.sample), dtype=bool)
+    keep[50:58] = False  # a 0.45 s gap (rows every 0.05 s)
+    keep[200:209] = False  # a 0.50 s gap
+    keep[400:420] = False  # a 1.05 s gap
+    idx = np.sort(np.r_[np.flatnonzero(keep), 600])  # row 600 twice: one IMU sample, no span
+    s = rows.sample[idx]
+    cut = AidingRows(s, s.astype(np.int64), s.astype(np.int64), np.zeros((len(s), 3)), rows.R[idx])
+    dt = np.diff(t[s]) * 1e-9
+    for gap in (0.5, 0.46, 0.3):
+        want = int(np.sum((dt > 0) & (dt <= gap + 1e-9)))
+        pairs = rotation_pairs(t, s, cut.R, gap, gyro=w)
+        assert len(pairs) == want == check_frame(t, gyro_of(w), cut, gap).pairs
+        est = pose_noise(t, gyro_of(w), np.zeros((len(t), 3)), (s, cut.R, cut.p), 1, gap)
+        assert est is not None and est.n_rot == want
+        truth = (R[s[pairs.a]].inv() * R[s[pairs.b]]).as_matrix()
+        np.testing.assert_allclose(pairs.gyro, truth, atol=1e-9)  # 12000 steps composed two ways
+        np.testing.assert_allclose(pairs.aiding, truth, atol=1e-12)
+    assert len(set(np.diff(s)[dt > 0.3])) == 3  # the gaps the rule is tested on

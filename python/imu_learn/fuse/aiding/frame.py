@@ -7,8 +7,9 @@ aligned RMSE of 10^13 m against the VO's 6 cm). This check runs before any fusio
 
 The rotation between the two frames follows from rotation increments alone, as ``imu-learn calibrate``
 resolves a reference's frame (:func:`imu_learn.calib.reference.resolve_frame`): between consecutive
-aiding rows, the aiding's body-frame rate ``log(R_iᵀ R_i+1) / dt`` against the gyro's mean over the
-same IMU samples, both centred (the gyro's bias, a constant rate, drops out), fitted by Kabsch
+aiding rows (paired as the noise estimate pairs them, :mod:`.pairs`), the aiding's body-frame rate
+``log(R_iᵀ R_i+1) / dt`` against the gyro's ``log(C_iᵀ C_i+1) / dt`` over the same IMU samples (its
+SO(3) chain), both centred (the gyro's bias, a constant rate, drops out), fitted by Kabsch
 (:func:`imu_learn.calib.frames.kabsch`). A motion that turns about one axis only (a ground robot's
 yaw) leaves the rotation about that axis unobservable; then only the axis is compared: the gyro's
 rates that go with the aiding's main axis against that axis.
@@ -29,6 +30,7 @@ import numpy as np
 from scipy.spatial.transform import Rotation
 
 from imu_learn.calib.frames import kabsch
+from imu_learn.fuse.aiding.pairs import rotation_pairs
 from imu_learn.fuse.aiding.types import AidingRows
 
 MAX_ROTATION_DEG = 5.0  # refused above: the calibrate plausibility rule's misalignment limit
@@ -55,29 +57,25 @@ class FrameCheck:
                 "axis_only": self.axis_only, "pairs": self.pairs, "verdict": self.verdict, "why": self.why}
 
 
-def paired_rates(imu_t_ns: np.ndarray, gyro: np.ndarray, rows: AidingRows, max_gap_s: float) -> tuple:
+def paired_rates(imu_t_ns: np.ndarray, gyro: np.ndarray, rows: AidingRows, max_gap_s: float,
+                 C: Optional[np.ndarray] = None) -> tuple:
     """(IMU mean rates, aiding body-frame rates), (P, 3) each, over the pairs of consecutive rows
-    within ``max_gap_s`` of each other (the rule of the relative poses and their noise)."""
-    s = np.asarray(rows.sample, dtype=np.int64)
-    t = np.asarray(imu_t_ns, dtype=np.int64)
-    dt = np.diff(t[s]) * 1e-9
-    ok = (dt > 0) & (dt <= max_gap_s)
-    if not ok.any():
+    (:func:`.pairs.rotation_pairs`: at most ``max_gap_s`` apart); ``C``: the gyro's orientation
+    (:func:`.pairs.gyro_orientation`) when already computed."""
+    pairs = rotation_pairs(imu_t_ns, rows.sample, rows.R, max_gap_s, C=C, gyro=gyro)
+    if not len(pairs):
         return np.zeros((0, 3)), np.zeros((0, 3))
-    step = np.diff(t) * 1e-9
-    integral = np.concatenate([np.zeros((1, 3)), np.cumsum(gyro[:-1] * step[:, None], axis=0)])
-    w_imu = (integral[s[1:]] - integral[s[:-1]]) / np.maximum(dt, 1e-12)[:, None]
-    R = np.asarray(rows.R)
-    w_aid = Rotation.from_matrix(np.transpose(R[:-1], (0, 2, 1)) @ R[1:]).as_rotvec() / np.maximum(dt, 1e-12)[:, None]
-    return w_imu[ok], w_aid[ok]
+    return tuple(Rotation.from_matrix(m).as_rotvec() / pairs.dt_s[:, None] for m in (pairs.gyro, pairs.aiding))
 
 
-def check_frame(imu_t_ns: np.ndarray, gyro: np.ndarray, rows: AidingRows, max_gap_s: float = 0.5) -> FrameCheck:
+def check_frame(imu_t_ns: np.ndarray, gyro: np.ndarray, rows: AidingRows, max_gap_s: float = 0.5,
+                C: Optional[np.ndarray] = None) -> FrameCheck:
     """The aiding's body frame against the IMU's (module docstring), pairing rows at most ``max_gap_s``
-    apart (``--max-relative-gap-s``). Never raises: the caller refuses on ``verdict == "refused"``."""
+    apart (``--max-relative-gap-s``); ``C``: the gyro's orientation when already computed. Never
+    raises: the caller refuses on ``verdict == "refused"``."""
     if rows.R is None:
         return FrameCheck(None, False, 0, "not checked", "the aiding holds no rotations")
-    a, b = paired_rates(imu_t_ns, gyro, rows, max_gap_s)
+    a, b = paired_rates(imu_t_ns, gyro, rows, max_gap_s, C)
     n = len(a)
     if n < MIN_PAIRS:
         return FrameCheck(None, False, n, "not checked", f"{n} pairs of consecutive rows; {MIN_PAIRS} needed")

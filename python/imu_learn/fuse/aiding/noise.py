@@ -3,10 +3,11 @@ short spans, per body axis, robust to jumps and loop closures (a median absolute
 floor. No ground truth is read.
 
 * **Rotation.** For rows ``a, b`` (``stride`` rows apart, no gap longer than ``max_gap_s`` between
-  them) the aiding's relative rotation ``R_a^T R_b`` against the gyro's over the same samples: the
-  residual's rotation vector, less its running median (the gyro bias over the span), per axis.
+  them: paired as the frame check pairs them, :mod:`.pairs`) the aiding's relative rotation
+  ``R_a^T R_b`` against the gyro's over the same samples (its SO(3) chain): the residual's rotation
+  vector, less its running median (the gyro bias over the span), per axis.
   Its robust spread is the relative rotation's sigma; each pose's own is that over sqrt(2).
-* **Translation.** For rows ``a, b, c`` the change of mean velocity, ``(p_c - p_b)/Δ2 - (p_b -
+* **Translation.** For rows ``a, b, c`` (one run, :func:`.pairs.runs`) the change of mean velocity, ``(p_c - p_b)/Δ2 - (p_b -
   p_a)/Δ1``, needs no velocity: the IMU predicts it from the specific force rotated into the aiding's
   world (the aiding's rotation at ``b``, carried by the gyro inside the span) as
   ``1/Δ2 ∫_b^c (t_c - s) a ds + 1/Δ1 ∫_a^b (s - a) a ds``; gravity and the accelerometer bias add a
@@ -26,6 +27,8 @@ from typing import Dict, Optional, Tuple
 import numpy as np
 from scipy.ndimage import median_filter
 from scipy.spatial.transform import Rotation
+
+from .pairs import RotationPairs, gyro_orientation, rotation_pairs, runs, within
 
 MAD_TO_SIGMA = 1.4826
 MIN_INCREMENTS = 20
@@ -56,18 +59,6 @@ class PoseNoise:
                           "per body axis"}
 
 
-def gyro_orientation(t_ns: np.ndarray, gyro: np.ndarray) -> np.ndarray:
-    """(N, 3, 3): the IMU's orientation at each sample in the frame of the first, from the gyro
-    alone (each sample's rate held until the next)."""
-    dt = np.diff(np.asarray(t_ns, dtype=np.int64)) * 1e-9
-    steps = Rotation.from_rotvec(gyro[:-1] * dt[:, None]).as_matrix()
-    C = np.empty((len(t_ns), 3, 3))
-    C[0] = np.eye(3)
-    for k in range(len(steps)):
-        C[k + 1] = C[k] @ steps[k]
-    return C
-
-
 def robust_sigma(r: np.ndarray) -> np.ndarray:
     """(3,) 1.4826 × the median absolute deviation of ``r`` (M, 3), per column."""
     return MAD_TO_SIGMA * np.median(np.abs(r - np.median(r, axis=0)), axis=0)
@@ -88,27 +79,20 @@ def pose_noise(imu_t_ns: np.ndarray, gyro: np.ndarray, acc: np.ndarray, rows: Tu
     t = (np.asarray(imu_t_ns, dtype=np.int64) - int(imu_t_ns[0])) * 1e-9
     C = gyro_orientation(imu_t_ns, gyro) if C is None else C
     ts = t[sample]
-    ok = np.diff(ts) <= max_gap_s
-    run = np.r_[0, np.cumsum(~ok)]  # rows of one run share a number
-    a = np.arange(len(sample) - stride)
-    pair = run[a] == run[a + stride]
-    rot = _rotation_residuals(C, sample, R, a[pair], stride, ts)
-    a3 = np.arange(len(sample) - 2 * stride)
-    triple = run[a3] == run[a3 + 2 * stride]
-    trans = _translation_sigma(t, C, acc, sample, R, p, a3[triple], stride)
+    pairs = rotation_pairs(imu_t_ns, sample, R, max_gap_s, stride, C=C)
+    rot = _rotation_residuals(pairs, ts, stride)
+    trans = _translation_sigma(t, C, acc, sample, R, p, within(runs(imu_t_ns, sample, max_gap_s), 2 * stride), stride)
     if len(rot) < MIN_INCREMENTS or trans is None:
         return None
     rot_rad = np.maximum(robust_sigma(rot) / np.sqrt(2), FLOOR_ROT_RAD)
-    span = float(np.median(ts[a[pair] + stride] - ts[a[pair]]))
+    span = float(np.median(pairs.dt_s))
     return PoseNoise(rot_rad, np.maximum(trans[0], FLOOR_TRANS_M), int(len(rot)), trans[1], span)
 
 
-def _rotation_residuals(C, sample, R, a, stride, ts) -> np.ndarray:
-    """(M, 3) the aiding's relative rotations against the gyro's, less their running median."""
-    b = a + stride
-    R_vo = np.einsum("nki,nkj->nij", R[a], R[b])
-    R_imu = np.einsum("nki,nkj->nij", C[sample[a]], C[sample[b]])
-    r = Rotation.from_matrix(np.einsum("nki,nkj->nij", R_imu, R_vo)).as_rotvec()
+def _rotation_residuals(pairs: RotationPairs, ts: np.ndarray, stride: int) -> np.ndarray:
+    """(M, 3) the aiding's relative rotations against the gyro's (:func:`.pairs.rotation_pairs`), less
+    their running median."""
+    r = Rotation.from_matrix(np.einsum("nki,nkj->nij", pairs.gyro, pairs.aiding)).as_rotvec()
     per_s = max(1, int(round(TREND_S / max(float(np.median(np.diff(ts))), 1e-3) / stride)))
     return detrend(r, per_s) if len(r) else r
 
