@@ -100,6 +100,7 @@ from .score import convergence, score_against
 from .settings import FusionSettings, PriorSigmas
 from .start import Start
 from .start.delay import imu_delay
+from .start.prior import profile_bias_sigmas
 
 log = logging.getLogger(__name__)
 
@@ -690,8 +691,12 @@ def start_run(src: Sources, inp: Inputs) -> Started:
         raise AidingError(f"{src.aiding}: no aiding measurement left to fuse", str(src.aiding), opts.aiding_kind)
     # position aiding starts moving
     at_rest = st.info["still_s"] >= MIN_STILL_START_S and not kind.moving_start
+    # the bias prior: a floor-applied profile's per-recording bias spread (.start.prior), else the defaults
+    bias_sigmas, st.info["bias_prior"] = (None, {"source": "defaults: no profile floor applied"}) if inp.imu.floor is None \
+        else profile_bias_sigmas(Profile.load(inp.imu.floor))
+    bias_kw = {} if bias_sigmas is None else {"bias_gyro": bias_sigmas[0], "bias_acc": bias_sigmas[1]}
     st = replace(st, prior=PriorSigmas(rot_rad=float(np.deg2rad(opts.prior_rot_deg)), pos_m=opts.prior_pos_m,
-                                       vel_mps=0.05 if at_rest else opts.prior_vel_mps))
+                                       vel_mps=0.05 if at_rest else opts.prior_vel_mps, **bias_kw))
     if src.displacement is not None:
         label += f" + displacements of {Path(src.displacement).name}"
     return Started(st, aiding, counts, (gyro, acc, var), label, bias, bias_source)

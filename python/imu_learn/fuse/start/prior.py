@@ -1,0 +1,78 @@
+"""The first state's bias prior from a device profile (:func:`profile_bias_sigmas`).
+
+Once a profile's floor has been applied, what is left of the IMU's bias on a new recording is that
+recording's own departure from the device's mean: the spread of the bias *between recordings*. The
+profile's ``bias_std`` is not that spread but the standard error of the floor's mean over its groups
+(:mod:`imu_learn.calib.fit`: the spread of the per-group values over sqrt(groups)), so the
+per-recording spread is ``bias_std × sqrt(groups)``, ``groups`` the profile's
+``fit_log["groups"]`` (one entry per recording refitted alone). A profile fitted on one recording
+has time blocks of it as groups (``block1`` ..): their spread is not between recordings, and the
+defaults (:class:`~imu_learn.fuse.settings.PriorSigmas`) are kept.
+
+The graph takes one sigma per sensor (every axis the same): the largest axis' spread (an IMU rotated
+into another body frame mixes the axes anyway), floored at :data:`GYRO_SPREAD_FLOOR` /
+:data:`ACC_SPREAD_FLOOR` (a spread from a handful of recordings may come out small by chance) and
+never looser than the defaults.
+"""
+from __future__ import annotations
+
+import math
+from typing import Dict, Optional, Tuple
+
+import numpy as np
+
+from imu_learn.core.still import BIAS_SPREAD_FLOOR
+
+from ..settings import PriorSigmas
+
+# rad/s: the least gyro bias spread a profile's prior is given (the still rule's floor for a profile
+# fitted on few recordings, imu_learn.core.still.BIAS_SPREAD_FLOOR)
+GYRO_SPREAD_FLOOR = BIAS_SPREAD_FLOOR
+# m/s^2: the least accelerometer bias spread (about 1 mg, the order of an ADIS16448-class MEMS
+# accelerometer's bias repeatability; EuRoC's profile spreads 0.05-0.11 m/s^2 by axis, above it)
+ACC_SPREAD_FLOOR = 0.01
+
+
+def per_recording_spread(bias_std, groups: int) -> np.ndarray:
+    """(3,) the spread of the bias between recordings from a standard error of the mean over
+    ``groups`` independent groups: ``bias_std × sqrt(groups)`` (NaN where unknown)."""
+    return np.asarray(bias_std, dtype=np.float64).reshape(3) * math.sqrt(groups)
+
+
+def _groups(fit_log: Dict[str, object]) -> Tuple[int, bool]:
+    """(the number of groups in a profile's fit log, whether they are recordings, not time blocks)."""
+    groups = fit_log.get("groups") if isinstance(fit_log, dict) else None
+    if not isinstance(groups, list):
+        return 0, False
+    names = [str(g.get("group", "")) if isinstance(g, dict) else "" for g in groups]
+    blocks = any(n.startswith("block") and n[5:].isdigit() for n in names)
+    return len(groups), not blocks
+
+
+def profile_bias_sigmas(profile, defaults: PriorSigmas = PriorSigmas()
+                        ) -> Tuple[Optional[Tuple[float, float]], Dict[str, object]]:
+    """((gyro sigma [rad/s], acc sigma [m/s^2]) or None, the summary's entry): the first state's bias
+    prior from ``profile`` (an :class:`imu_learn.calib.profile.Profile`; module docstring). None,
+    with the reason in the entry, where the profile does not give a per-recording spread (fewer than
+    two recordings, time blocks of one, or no ``bias_std``): the defaults then."""
+    n, recordings = _groups(profile.fit_log)
+    entry: Dict[str, object] = {"groups": n}
+    gyro = per_recording_spread(profile.gyro.bias_std, max(n, 1))
+    acc = per_recording_spread(profile.acc.bias_std, max(n, 1))
+    if n < 2 or not recordings:
+        entry["source"] = (f"defaults (gyro {defaults.bias_gyro:g} rad/s, acc {defaults.bias_acc:g} m/s^2): the profile's "
+                           + ("groups are time blocks of one recording, not recordings" if n >= 2 and not recordings
+                              else f"fit has {n} group(s), no spread between recordings"))
+        return None, entry
+    if not (np.all(np.isfinite(gyro)) and np.all(np.isfinite(acc))):
+        entry["source"] = "defaults: the profile's bias_std is not known on every axis"
+        return None, entry
+    sg = float(min(max(gyro.max(), GYRO_SPREAD_FLOOR), defaults.bias_gyro))
+    sa = float(min(max(acc.max(), ACC_SPREAD_FLOOR), defaults.bias_acc))
+    entry.update({
+        "source": (f"the profile's per-recording bias spread: bias_std x sqrt({n} groups), its largest axis, floored at "
+                   f"{GYRO_SPREAD_FLOOR:g} rad/s / {ACC_SPREAD_FLOOR:g} m/s^2"),
+        "gyro_per_recording_rad_s": [round(float(v), 6) for v in gyro],
+        "acc_per_recording_mps2": [round(float(v), 6) for v in acc],
+        "bias_gyro_rad_s": round(sg, 6), "bias_acc_mps2": round(sa, 6)})
+    return (sg, sa), entry
