@@ -8,7 +8,13 @@ still+gravity`` and the peers' open-loop figures of the refined IMU against the 
 (score.peers: AOE RMSE, RO_RMSE and RP_RMSE over 1 s windows). The estimated extrinsic is compared with
 cam0's ``T_BS`` (euroc-vo/cam0_sensor.yaml).
 
-    IMU_LEARN_DATA=<root> python experiments/reference_kinds.py [--out reports/reference_kinds] [--trial 0]
+Kinds: ``mocap`` (the ground truth as given), ``mocap20hz`` (its every 10th pose: a 20 Hz reference
+already in the IMU's frame), ``orbslam2``, ``orbslam2+extrinsics`` (cam0's ``T_BS`` given), ``rot90``,
+``rot119``, ``rot180`` (the ground truth's body rotated about (1, 2, 3)), ``late100ms``; a ``+select``
+suffix adds ``calibrate --select`` (the floor's terms chosen on held-out recordings).
+
+    IMU_LEARN_DATA=<root> python experiments/reference_kinds.py [--out reports/reference_kinds] [--trial 0] \
+        [--kinds mocap,orbslam2,orbslam2+select]
 
 Data: under the data root, euroc/<flight>, euroc-vo/orbslam2_stereo/trial<k>/<code>.txt,
 euroc-vo/cam0_sensor.yaml. Prints one markdown table; writes OUT/results.json. Writes:
@@ -103,12 +109,14 @@ def main() -> int:
                 ref = thinned_tum(tum_of_groundtruth(f, out / f"{flight}_gt.tum"), out / f"{flight}_gt20.tum", 10)
             elif base == "orbslam2":
                 ref = vo / f"{code}.txt"
-            elif kind.startswith("rot"):
-                ref = rotated_tum(tum_of_groundtruth(f, out / f"{flight}_gt.tum"), out / f"{flight}_{kind}.tum",
-                                  float(kind[3:]), np.array([1.0, 2.0, 3.0]))
-            else:
-                ref = rotated_tum(tum_of_groundtruth(f, out / f"{flight}_gt.tum"), out / f"{flight}_{kind}.tum",
+            elif base.startswith("rot"):
+                ref = rotated_tum(tum_of_groundtruth(f, out / f"{flight}_gt.tum"), out / f"{flight}_{base}.tum",
+                                  float(base[3:]), np.array([1.0, 2.0, 3.0]))
+            elif base == "late100ms":
+                ref = rotated_tum(tum_of_groundtruth(f, out / f"{flight}_gt.tum"), out / f"{flight}_{base}.tum",
                                   0.0, np.array([0, 0, 1.0]), late_s=0.1)
+            else:
+                raise SystemExit(f"unknown reference kind {kind!r}")
             cmd += ["--input", str(f), "--groundtruth", str(ref)]
         if "+extrinsics" in kind:
             cmd += ["--extrinsics", str(cam0)]
