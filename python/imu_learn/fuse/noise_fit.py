@@ -34,7 +34,8 @@ from scipy.optimize import nnls
 
 from imu_learn.calib.profile import CLASS_DEFAULT_SOURCE, CLASS_DEFAULTS
 
-from .aiding.noise import detrend, gyro_orientation, robust_sigma
+from .aiding.noise import detrend, robust_sigma
+from .aiding.pairs import gyro_orientation, runs, within
 from .noise import ImuNoise
 
 FACTOR_BOUNDS = (0.05, 100.0)  # 0.1 (a class default 10x too noisy) sits inside with room for the fit's scatter
@@ -121,15 +122,14 @@ def fit_noise(imu_t_ns: np.ndarray, gyro: np.ndarray, acc: np.ndarray, aid_t_ns:
     dt = np.r_[np.diff(t), 0.0]
     S = _cumulative(t, np.einsum("nij,nj->ni", C, acc) * dt[:, None])
     g_vec = None if R is not None else np.array([0.0, 0.0, -float(gravity)])
-    run = np.r_[0, np.cumsum(np.diff(tau) > max_gap_s)]
+    run = runs(imu_t_ns, sample, max_gap_s)  # the aiding's one pairing rule (.aiding.pairs)
     period = float(np.median(np.diff(tau)))
     rows: List[Tuple[float, float, float]] = []  # (variance, aiding coefficient, IMU coefficient)
     parts: List[Tuple[np.ndarray, np.ndarray, np.ndarray]] = []
     spans: List[float] = []
     stride = 1
     while 2 * stride < len(tau) and stride * period <= MAX_SPAN_S:
-        a = np.arange(len(tau) - 2 * stride)
-        a = a[run[a] == run[a + 2 * stride]]
+        a = within(run, 2 * stride)
         if len(a) >= MIN_TRIPLES:
             e, d1, d2, X = residuals(t, S, C, tau, sample, p, R, g_vec, (a, a + stride, a + 2 * stride))
             e = e - X @ np.linalg.lstsq(X, e, rcond=None)[0]  # less the constant bias's part
