@@ -18,8 +18,7 @@ measured has no ``auto`` figure, and its moving gate says so). ``imu_learn.infer
 
 ``score``: on CONFIG's test recordings, the profile's floor and each ``--bias`` option exactly as
 ``imu-learn refine --profile P --bias METHOD`` runs it (``imu_learn.infer.bias.bias_step`` on the
-whole IMU file, the prior from the profile, the still detector on the floor's samples before its
-low-pass), open-loop AOE (``imu_learn.score.peers.attitude_errors``,
+whole IMU file, the prior from the profile), open-loop AOE (``imu_learn.score.peers.attitude_errors``,
 RMS pooled over the recording's gap-free ground-truth segments, each integrated from its own start;
 its mean beside, AirIMU's form) and RO_RMSE / RP_RMSE over 1 s windows
 (``imu_learn.score.peers.segment_errors``); beside them oracles fitted on the recording's own ground
@@ -47,7 +46,6 @@ from typing import Any, Dict, List, Tuple
 
 import numpy as np
 
-from imu_learn.calib.correction import before_lowpass
 from imu_learn.calib.profile import Profile
 from imu_learn.core.quat import quat_conj, quat_log, quat_mul
 from imu_learn.core.still import BiasPrior
@@ -96,11 +94,10 @@ def moving_bias(segs: List[Segment], gyro: List[np.ndarray], gravity: float) -> 
     return np.average(np.array(bs), axis=0, weights=np.array([len(s) for s in segs], dtype=float))
 
 
-def floor_file(path: Path, profile: Profile, segs: List[Segment]) -> Tuple[np.ndarray, np.ndarray, np.ndarray, Any]:
+def floor_file(path: Path, profile: Profile, segs: List[Segment]) -> Tuple[np.ndarray, np.ndarray, np.ndarray]:
     """The floor on the recording's whole IMU file (as refine runs), or, where the file cannot be read
     alone or its stamps are not the segments' (BROAD's trials, Blackbird's flights), on its
-    ground-truth segments joined (a gap in the stamps between them): (t, gyro, acc, the (gyro, acc)
-    before the floor's low-pass that refine's still detector looks at, None without a low-pass)."""
+    ground-truth segments joined (a gap in the stamps between them)."""
     try:
         src = read_imu_source(path)
         t = np.asarray(src.t_ns, dtype=np.int64)
@@ -111,7 +108,7 @@ def floor_file(path: Path, profile: Profile, segs: List[Segment]) -> Tuple[np.nd
         t = np.concatenate([s.t_ns for s in segs]).astype(np.int64)
         gyro, acc = np.concatenate([s.gyro for s in segs]), np.concatenate([s.acc for s in segs])
     g, a = profile.apply(t, gyro, acc)
-    return t, g, a, before_lowpass(profile, t, gyro, acc)
+    return t, g, a
 
 
 def gravity_of(profile: Profile, data: Any) -> float:
@@ -133,9 +130,9 @@ def fit(config: str, profile_path: Path, data_root: Path) -> Dict[str, Any]:
                                     measured={"random_walk_rad_s_sqrt_s": rw})
     measured = []
     for name, path, segs in recs:
-        t, g, a, seen = floor_file(path, profile, segs)
+        t, g, a = floor_file(path, profile, segs)
         b = moving_bias(segs, [g[at(t, s.t_ns)] for s in segs], data.gravity)
-        measured.append((name, t, g, a, b, seen))
+        measured.append((name, t, g, a, b))
         print(f"{name}: moving bias {np.round(b * 1e3, 2)} mrad/s", file=sys.stderr, flush=True)
     out = measure_prior(measured, Context(grav, prior))
     for r in out["recordings"]:
@@ -204,14 +201,14 @@ def score(config: str, profile_path: Path, data_root: Path, splits: Tuple[str, .
     prior = _prior(profile, str(profile_path))
     out = []
     for name, path, segs in recs:
-        t, g, a, seen = floor_file(path, profile, segs)
+        t, g, a = floor_file(path, profile, segs)
         idx = [at(t, s.t_ns) for s in segs]
         row: Dict[str, Any] = {"recording": name, "aoe_deg": {}, "decision": {}, "subtracted_rad_s": {}}
         for m in METHODS:
             gm = g
             if m != "none":
                 sink: Dict[str, Any] = {}
-                gm, _, _ = bias_step(m, grav, sink, prior=prior, detect=seen)(t, g, a)
+                gm, _, _ = bias_step(m, grav, sink, prior=prior)(t, g, a)
                 v = sink["bound"]
                 row["decision"][m] = v.decision
                 row["subtracted_rad_s"][m] = None if v.gyro_bias is None else [float(x) for x in v.gyro_bias]

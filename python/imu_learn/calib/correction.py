@@ -34,7 +34,6 @@ from imu_learn.core.still import MEMS_PRIOR, BiasPrior
 from imu_learn.data.types import Segment, sample_rate_hz
 from imu_learn.errors import ConfigError, InvalidInputError
 from imu_learn.infer import guard, rates
-from imu_learn.infer.bias import STILL_INPUT
 from imu_learn.infer.rewrite import Step, measured
 from imu_learn.util.extras import require_extra
 
@@ -126,28 +125,9 @@ class Corrected:
 # -- building the plan -----------------------------------------------------------------------------
 
 
-def before_lowpass(profile: Profile, t_ns: np.ndarray, gyro: np.ndarray,
-                   acc: np.ndarray) -> Optional[Tuple[np.ndarray, np.ndarray]]:
-    """(gyro, acc) with ``profile``'s floor applied without its low-pass (the time offset and the affine
-    terms), None where the floor has no low-pass (its output is that already) or no floor."""
-    f = profile.floor
-    if f is None or (f.params.cutoff_gyro is None and f.params.cutoff_acc is None):
-        return None
-    return f.without_lowpass().apply(np.asarray(t_ns, dtype=np.int64), np.asarray(gyro, dtype=np.float64),
-                                     np.asarray(acc, dtype=np.float64))
-
-
-def profile_step(profile: Profile, sink: Optional[Dict[str, Any]] = None) -> Step:
-    """The profile's floor; with ``sink``, where the floor has a low-pass, its samples before it beside
-    its output under ``sink[STILL_INPUT]``: what ``--bias``'s still detector looks at
-    (:func:`imu_learn.infer.bias.still_input`; a rest must not depend on the cut-off)."""
+def profile_step(profile: Profile) -> Step:
     def step(t_ns, gyro, acc):
         g, a = profile.apply(t_ns, gyro, acc)
-        if sink is not None:
-            sink.pop(STILL_INPUT, None)
-            raw = before_lowpass(profile, t_ns, gyro, acc)
-            if raw is not None:
-                sink[STILL_INPUT] = (g, a, raw[0], raw[1])
         return g, a, None
 
     return step
@@ -195,9 +175,8 @@ def from_profile(path: Path) -> Plan:
     """The floor of a device profile."""
     profile = Profile.load(path)
     made = rates.MadeFor(f"profile {path}", profile.sample_rate_hz, profile.device)
-    plan = Plan([], [made], [f"the floor of {describe_profile(profile, str(path))}"],
+    plan = Plan([profile_step(profile)], [made], [f"the floor of {describe_profile(profile, str(path))}"],
                 needs_stamps=True, training=profile.inputs or None, what=f"profile {path}", kind="profile")
-    plan.steps.append(profile_step(profile, plan.measured))  # its samples before the low-pass: --bias's detector
     plan.gravity = _gravity(profile, plan.gravity)
     plan.prior = _prior(profile, str(path))
     return plan

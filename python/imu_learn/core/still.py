@@ -30,9 +30,7 @@ gyro - prior bias| <= k sigma`` on every axis (:data:`STILL_SIGMAS`, 3), sigma t
 the MEMS bound itself), and the mean accelerometer norm within :data:`ACC_NORM_TOL` (0.3 m/s^2, 3 %) of
 gravity. Refine's and navigate's ``--bias`` detector applies it to each stretch it finds (the norm
 per window, the gyro on the stretch's mean; the recording's prior: :data:`BIAS_SETTINGS` plus
-``prior``; it looks at the samples with the profile's time offset and affine terms applied but not
-its low-pass, :func:`still_bias`'s ``detect``: a rest is the device's, not a filter's, and the
-quietness threshold moved with the cut-off), navigate's still start to every 0.25 s block
+``prior``), navigate's still start to every 0.25 s block
 (:func:`imu_learn.fuse.start.level.block_is_still`, the MEMS prior); a recording has a still start
 when it rests at least :data:`MIN_STILL_START_S` from its first sample. ``imu-learn calibrate``'s
 Allan stretches keep the spread check only (the raw device's bias is what it fits).
@@ -296,21 +294,12 @@ class StillBias:
 
 
 def still_bias(t_ns: np.ndarray, gyro: np.ndarray, acc: np.ndarray,
-               settings: StillSettings = BIAS_SETTINGS,
-               detect: Optional[Tuple[np.ndarray, np.ndarray]] = None) -> StillBias:
-    """The gyro bias of a recording from its still stretches (module doc). ``detect``: the (gyro, acc)
-    the stretches are found on (the same samples before a profile's low-pass: refine's and navigate's
-    ``--bias``, module doc), None: ``gyro`` and ``acc`` themselves; the bias is ``gyro``'s mean over
-    them, the norm ``acc``'s."""
+               settings: StillSettings = BIAS_SETTINGS) -> StillBias:
+    """The gyro bias of a recording from its still stretches (module doc)."""
     t = np.asarray(t_ns, dtype=np.int64)
     gyro, acc = np.asarray(gyro, dtype=np.float64), np.asarray(acc, dtype=np.float64)
-    dg, da = (gyro, acc) if detect is None else (np.asarray(detect[0], dtype=np.float64),
-                                                  np.asarray(detect[1], dtype=np.float64))
-    if dg.shape != gyro.shape or da.shape != acc.shape:
-        raise ValueError(f"still_bias: the detector's samples {dg.shape}, {da.shape} are not the estimate's "
-                         f"{gyro.shape}, {acc.shape}")
-    found = still_stretches(t, dg, da, settings)
-    refused = _refused(t, dg, da, settings, found)
+    found = still_stretches(t, gyro, acc, settings)
+    refused = _refused(t, gyro, acc, settings, found)
     if not found:
         return StillBias(None, None, None, None, 0.0, 0, [], settings, refused)
     g = np.concatenate([gyro[a:b] for a, b in found])

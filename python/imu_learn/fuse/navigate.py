@@ -70,7 +70,7 @@ from imu_learn.data.formats.asl import imu_sensor_yaml
 from imu_learn.data.formats.extrinsics import inverse, read_t_bs
 from imu_learn.data.formats.gnss_imu import mounting_rotation
 from imu_learn.errors import AidingError, ColumnCountError, ConfigError, InvalidInputError
-from imu_learn.infer.bias import bias_entry, bias_step, still_input
+from imu_learn.infer.bias import bias_entry, bias_step
 from imu_learn.infer.bias import choices as bias_choices
 from imu_learn.util import interrupts
 from imu_learn.util.staging import staged_dir
@@ -385,8 +385,6 @@ class Imu:
     label: str = "raw"  # what the samples are (the summary's imu_input)
     correction: Dict[str, object] = field(default_factory=dict)  # the correction plan's summary
     delay: Dict[str, object] = field(default_factory=dict)  # the delay added to the stamps and where it came from
-    # (gyro, acc) before the profile's low-pass, body frame: what --bias's still detector looks at; None: gyro, acc
-    still_input: Optional[Tuple[np.ndarray, np.ndarray]] = None
 
 
 def imu_noise(src: Sources, opts: NavigateOptions, own: Optional[ImuNoise], profile: Optional[Profile],
@@ -450,12 +448,10 @@ def read_body_imu(src: Sources, opts: NavigateOptions, sol: Optional[RtkSolution
     fixed = correction.correct(plan, correction.Recording(str(src.input), t_ns, gyro, acc, fmt, src.fmt, src.imu_name),
                                src.force)
     gyro, acc, var = fixed.gyro, fixed.acc, fixed.var
-    still = still_input(plan.measured, gyro, acc)  # the floor's samples before its low-pass (--bias's detector)
     mounting = None
     if opts.imu_rotation_rpy_deg is not None:
         mounting = mounting_rotation(opts.imu_rotation_rpy_deg)
         gyro, acc = np.ascontiguousarray(gyro @ mounting.T), np.ascontiguousarray(acc @ mounting.T)
-        still = None if still is None else (still[0] @ mounting.T, still[1] @ mounting.T)
         if var is not None:  # the diagonal of M diag(v) M^T: exact for an axis permutation or flip
             var = np.ascontiguousarray(np.hstack([var[:, :3] @ (mounting**2).T, var[:, 3:] @ (mounting**2).T]))
     delay = measured_delay(sol, opts, t_ns, acc) if opts.imu_delay_from == "fixes" else {
@@ -464,7 +460,7 @@ def read_body_imu(src: Sources, opts: NavigateOptions, sol: Optional[RtkSolution
         t_ns = t_ns + int(round(float(delay["delay_s"]) * 1e9))
     noise = imu_noise(src, opts, own, profile, (t_ns, gyro, acc), sol)  # after the checks: on the IMU as fused
     return Imu(t_ns, gyro, acc, noise, imu_file, mounting, str(src.profile) if floor else None, var, label,
-               fixed.summary, delay, still)
+               fixed.summary, delay)
 
 
 def measured_delay(sol: Optional[RtkSolution], opts: NavigateOptions, t_ns: np.ndarray,
@@ -684,7 +680,7 @@ def start_run(src: Sources, inp: Inputs) -> Started:
     opts, kind, rows, lever, t_ns = inp.opts, inp.kind, inp.rows, inp.lever, inp.imu.t_ns
     bias0, bias_source = checkpoint_bias(src.checkpoint)
     gyro, acc, var, label = imu_input(src, opts, inp.imu)
-    gyro, bias = own_bias(opts, t_ns, gyro, acc, str(src.input), bias_prior(inp.imu), inp.imu.still_input)
+    gyro, bias = own_bias(opts, t_ns, gyro, acc, str(src.input), bias_prior(inp.imu))
     if bias.get("applied") and np.any(bias0[:3]):  # the estimate replaces the device bias's gyro part
         bias0 = np.r_[unobserved(bias) @ bias0[:3], bias0[3:]]
         bias_source += f"; gyro part: only where the recording's own bias ({opts.bias}) was not observed"
@@ -791,17 +787,14 @@ def bias_prior(imu: Imu) -> BiasPrior:
 
 
 def own_bias(opts: NavigateOptions, t_ns: np.ndarray, gyro: np.ndarray, acc: np.ndarray,
-             where: str, prior: BiasPrior = MEMS_PRIOR,
-             detect: Optional[Tuple[np.ndarray, np.ndarray]] = None) -> Tuple[np.ndarray, Dict[str, object]]:
+             where: str, prior: BiasPrior = MEMS_PRIOR) -> Tuple[np.ndarray, Dict[str, object]]:
     """(the gyro with the recording's own bias removed, the summary's ``bias`` entry): ``opts.bias``
     estimated on the IMU as fused (after the profile's floor or the model, in the body frame) and
-    bounded by ``prior``, the estimator refine's ``--bias`` runs (:func:`imu_learn.infer.bias.bias_step`);
-    its still detector looks at ``detect`` (the floor's samples before its low-pass, as refine's), None:
-    at ``gyro``, ``acc``."""
+    bounded by ``prior``, the estimator refine's ``--bias`` runs (:func:`imu_learn.infer.bias.bias_step`)."""
     if opts.bias == "none":
         return gyro, {"method": "none"}
     sink: Dict[str, object] = {}
-    g, _, _ = bias_step(opts.bias, opts.gravity, sink, prior=prior, detect=detect)(t_ns, gyro, acc)
+    g, _, _ = bias_step(opts.bias, opts.gravity, sink, prior=prior)(t_ns, gyro, acc)
     entry, warning = bias_entry(opts.bias, sink, where)
     if warning:
         log.warning(warning)

@@ -112,36 +112,15 @@ def info_diag(std: np.ndarray) -> np.ndarray:
 @dataclass
 class Context:
     """What an estimator gets besides the samples: gravity's magnitude [m/s^2] (the still rule's
-    norm check), the device prior, the learned estimator's model, and ``detect``: the (gyro, acc) the
-    still detector looks at (the samples before the profile's low-pass, :func:`still_input`; None:
-    the samples given). The estimates themselves are made on the samples given."""
+    norm check), the device prior, the learned estimator's model."""
 
     gravity: float = 9.80665
     prior: BiasPrior = MEMS_PRIOR
     model: Optional[Path] = None
-    detect: Optional[Tuple[np.ndarray, np.ndarray]] = None
-
-
-# The sink key under which a profile's floor step leaves its samples before its low-pass, with the
-# output they belong to (imu_learn.calib.correction.profile_step): (gyro out, acc out, gyro, acc).
-STILL_INPUT = "still_input"
-
-
-def still_input(sink: Dict[str, Any], gyro: np.ndarray, acc: np.ndarray) -> Optional[Tuple[np.ndarray, np.ndarray]]:
-    """What the still detector of ``--bias`` looks at: the profile floor's samples before its low-pass
-    (its time offset and affine terms applied) where ``gyro`` and ``acc`` are that floor's own output
-    (the very arrays ``sink[STILL_INPUT]`` holds: no model or other step between), else None (the
-    samples as given). Whether a rest counts must not depend on a filter the reference may not have
-    observed (docs/refine.md)."""
-    rec = sink.get(STILL_INPUT)
-    if rec is None or rec[0] is not gyro or rec[1] is not acc:
-        return None
-    return rec[2], rec[3]
 
 
 def _still(ctx: Context, t_ns: np.ndarray, gyro: np.ndarray, acc: np.ndarray) -> BiasEstimate:
-    est = still_bias(t_ns, gyro, acc, replace(BIAS_SETTINGS, gravity=float(ctx.gravity), prior=ctx.prior),
-                     ctx.detect)
+    est = still_bias(t_ns, gyro, acc, replace(BIAS_SETTINGS, gravity=float(ctx.gravity), prior=ctx.prior))
     detail = est.to_dict()
     if est.gyro_bias is None:
         why = "no still stretch in {where} (docs/refine.md: the detector's thresholds and the still rule)"
@@ -260,8 +239,7 @@ def moving_raw(ctx: Context, t_ns: np.ndarray, gyro: np.ndarray, acc: np.ndarray
     profile's), the rest-to-motion spread the still estimate's floor."""
     t = np.asarray(t_ns, dtype=np.int64)
     g = np.asarray(gyro, dtype=np.float64)
-    dg, da = (g, acc) if ctx.detect is None else ctx.detect  # found where _still finds them
-    found = still_stretches(t, dg, da, replace(BIAS_SETTINGS, gravity=float(ctx.gravity), prior=ctx.prior))
+    found = still_stretches(t, g, acc, replace(BIAS_SETTINGS, gravity=float(ctx.gravity), prior=ctx.prior))
     stills = [(int((t[a] + t[b - 1]) // 2), g[a:b].mean(0), g[a:b].std(0, ddof=1) / np.sqrt(b - a)) for a, b in found]
     # each still's rest-to-motion uncertainty as the still estimate's (its floor, raised to the profile's
     # measured spread); no prior on the level (the measured moving-bias spread as one: worse on EuRoC's
@@ -502,12 +480,12 @@ def bound(est: BiasEstimate, prior: BiasPrior) -> Verdict:
 # -- the prior measured on the device's training recordings ---------------------------------------------
 
 
-def measure_prior(recordings: List[Tuple[Any, ...]], ctx: Context) -> Dict[str, Any]:
+def measure_prior(recordings: List[Tuple[str, np.ndarray, np.ndarray, np.ndarray, np.ndarray]],
+                  ctx: Context) -> Dict[str, Any]:
     """A profile's ``bias_prior`` (:class:`imu_learn.core.still.BiasPrior`, read back by its
     ``from_bias_std(measured=...)``) from the device's training recordings: each (name, t_ns, gyro,
-    acc, moving bias[, (gyro, acc) before the low-pass]) with the profile's floor applied and its bias
-    *while moving* (fitted on its ground truth, rad/s); the sixth, where given, is what the still
-    detector looks at (``Context.detect``, as :func:`bias_step` runs with a profile). Per recording, the ``still`` and ``gravity`` estimates (``ctx``: the
+    acc, moving bias) with the profile's floor applied and its bias *while moving* (fitted on its
+    ground truth, rad/s). Per recording, the ``still`` and ``gravity`` estimates (``ctx``: the
     recording's gravity and the profile's prior) against the moving bias: ``moving_std_rad_s`` the
     moving bias's spread about zero per axis (x n/(n-1): the floor was fitted on them; None under two
     recordings), ``still_error_std_rad_s`` the RMS of still - moving per axis, ``gravity_error_std_rad_s``
@@ -520,9 +498,9 @@ def measure_prior(recordings: List[Tuple[Any, ...]], ctx: Context) -> Dict[str, 
     subtracted where it gives none), both along the directions ``moving`` observed on each recording
     (``moving``'s gate, :func:`moving_admitted`, compares them like for like)."""
     rows, moving, still_err, still_mov, grav_err, grav_mov, mov_err, mov_mov, auto_err = ([] for _ in range(9))
-    for name, t, g, a, b, *seen in recordings:
+    for name, t, g, a, b in recordings:
         b = np.asarray(b, dtype=np.float64)
-        st, gr = _still(replace(ctx, detect=seen[0] if seen else None), t, g, a), gravity_bias(t, g, a)
+        st, gr = _still(ctx, t, g, a), gravity_bias(t, g, a)
         row: Dict[str, Any] = {"recording": name, "moving_bias_rad_s": _vec(b), "still_minus_moving_rad_s": None,
                                "gravity_error_along_observed_rad_s": None}
         moving.append(b)
@@ -564,9 +542,8 @@ def measure_prior(recordings: List[Tuple[Any, ...]], ctx: Context) -> Dict[str, 
     made = BiasPrior.from_bias_std(ctx.prior.std, ctx.prior.source, measured={**out, "rms_rad_s": gate})
     run = replace(ctx, prior=replace(ctx.prior, moving_std=made.moving_std, still_error_std=made.still_error_std,
                                      gravity_error_std=made.gravity_error_std, measured_rms=made.measured_rms))
-    for row, (_, t, g, a, b, *seen) in zip(rows, recordings):
+    for row, (_, t, g, a, b) in zip(rows, recordings):
         b = np.asarray(b, dtype=np.float64)
-        run = replace(run, detect=seen[0] if seen else None)
         mv = moving_raw(run, t, g, a)
         if mv.gyro_bias is None:
             continue
@@ -594,12 +571,10 @@ def measure_prior(recordings: List[Tuple[Any, ...]], ctx: Context) -> Dict[str, 
 
 
 def bias_step(method: str, gravity: float, sink: Dict[str, Any], model: Optional[Path] = None,
-              prior: BiasPrior = MEMS_PRIOR, detect: Optional[Tuple[np.ndarray, np.ndarray]] = None) -> Step:
+              prior: BiasPrior = MEMS_PRIOR) -> Step:
     """The step of ``--bias METHOD``: the estimator of :data:`REGISTRY` on what the steps before give,
     bounded (:func:`bound`) and subtracted. ``sink[method]`` gets the estimate, ``sink["bound"]`` the
-    verdict. The still detector looks at ``detect`` (the (gyro, acc) before the profile's low-pass,
-    as the samples the step gets), else at what a profile step before it left in ``sink``
-    (:func:`still_input`), else at the samples it gets."""
+    verdict."""
     if method not in REGISTRY:
         raise InvalidInputError(f"--bias: one of {', '.join(choices())}, got {method!r}")
     if REGISTRY[method].needs_model and model is None:
@@ -610,8 +585,7 @@ def bias_step(method: str, gravity: float, sink: Dict[str, Any], model: Optional
     def step(t_ns: Optional[np.ndarray], gyro: np.ndarray, acc: np.ndarray):
         if t_ns is None:
             raise InvalidInputError(f"--bias {method} needs the recording's stamps")
-        seen = detect if detect is not None else still_input(sink, gyro, acc)
-        est = REGISTRY[method].run(replace(ctx, detect=seen), t_ns, gyro, acc)
+        est = REGISTRY[method].run(ctx, t_ns, gyro, acc)
         verdict = bound(est, prior)
         sink[method], sink["bound"] = est, verdict
         if verdict.gyro_bias is None:
