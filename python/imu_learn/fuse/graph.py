@@ -306,8 +306,7 @@ class IncrementalFusion:
         self._true_at: Dict[int, object] = {}  # pending graph slot -> the Python factor held there
         self._graph.add(gtsam.PriorFactorPose3(X(0), pose0, prior.pose_noise(R0, gtsam)))
         self._graph.add(gtsam.PriorFactorVector(V(0), v0, gtsam.noiseModel.Isotropic.Sigma(3, prior.vel_mps)))
-        self._graph.add(gtsam.PriorFactorConstantBias(B(0), b0, gtsam.noiseModel.Diagonal.Sigmas(
-            np.r_[[prior.bias_acc] * 3, [prior.bias_gyro] * 3])))
+        self._graph.add(gtsam.PriorFactorConstantBias(B(0), b0, gtsam.noiseModel.Diagonal.Sigmas(prior.bias_sigmas())))
         self._values.insert(X(0), pose0)
         self._values.insert(V(0), v0)
         self._values.insert(B(0), b0)

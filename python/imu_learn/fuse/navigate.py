@@ -693,7 +693,7 @@ def start_run(src: Sources, inp: Inputs) -> Started:
     at_rest = st.info["still_s"] >= MIN_STILL_START_S and not kind.moving_start
     # the bias prior: a floor-applied profile's per-recording bias spread (.start.prior), else the defaults
     bias_sigmas, st.info["bias_prior"] = (None, {"source": "defaults: no profile floor applied"}) if inp.imu.floor is None \
-        else profile_bias_sigmas(Profile.load(inp.imu.floor))
+        else profile_bias_sigmas(Profile.load(inp.imu.floor), isotropic=inp.imu.mounting is not None)
     bias_kw = {} if bias_sigmas is None else {"bias_gyro": bias_sigmas[0], "bias_acc": bias_sigmas[1]}
     st = replace(st, prior=PriorSigmas(rot_rad=float(np.deg2rad(opts.prior_rot_deg)), pos_m=opts.prior_pos_m,
                                        vel_mps=0.05 if at_rest else opts.prior_vel_mps, **bias_kw))

@@ -4,7 +4,7 @@ first state's prior and the estimator (:class:`FusionSettings`, taken by
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from typing import Optional
+from typing import Optional, Tuple, Union
 
 import numpy as np
 
@@ -29,16 +29,23 @@ SMOOTHING = ("batch", "window")
 
 @dataclass(frozen=True)
 class PriorSigmas:
-    """The first state's prior: pose and velocity from ground truth (tight), bias zero (loose)."""
+    """The first state's prior: pose and velocity from ground truth (tight), bias zero (loose). The
+    bias sigmas are one value for every axis or three, per body axis (a device profile's per-recording
+    spread: :func:`imu_learn.fuse.start.prior.profile_bias_sigmas`)."""
 
     rot_rad: float = 1e-3
     pos_m: float = 1e-3
     vel_mps: float = 1e-2
-    bias_gyro: float = 0.1  # rad/s: EuRoC's ADIS16448 starts with up to ~0.08 rad/s
-    bias_acc: float = 0.5  # m/s^2
+    bias_gyro: Union[float, Tuple[float, float, float]] = 0.1  # rad/s: EuRoC's ADIS16448 starts with up to ~0.08 rad/s
+    bias_acc: Union[float, Tuple[float, float, float]] = 0.5  # m/s^2
     # When set: heading [rad] apart from roll/pitch (rot_rad), both in the navigation frame (a levelled
     # start whose heading is less known than its tilt); None: rot_rad about every body axis.
     yaw_rad: Optional[float] = None
+
+    def bias_sigmas(self) -> np.ndarray:
+        """(6,) the first bias's sigmas in GTSAM's order: accelerometer (m/s^2), then gyro (rad/s), per axis."""
+        return np.r_[np.broadcast_to(np.asarray(self.bias_acc, dtype=np.float64), (3,)),
+                     np.broadcast_to(np.asarray(self.bias_gyro, dtype=np.float64), (3,))]
 
     def pose_noise(self, R0: np.ndarray, gtsam):
         """The first pose's prior noise model (GTSAM's Pose3 tangent: body rotation, then position)."""

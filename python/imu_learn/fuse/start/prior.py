@@ -9,10 +9,10 @@ per-recording spread is ``bias_std × sqrt(groups)``, ``groups`` the profile's
 has time blocks of it as groups (``block1`` ..): their spread is not between recordings, and the
 defaults (:class:`~imu_learn.fuse.settings.PriorSigmas`) are kept.
 
-The graph takes one sigma per sensor (every axis the same): the largest axis' spread (an IMU rotated
-into another body frame mixes the axes anyway), floored at :data:`GYRO_SPREAD_FLOOR` /
-:data:`ACC_SPREAD_FLOOR` (a spread from a handful of recordings may come out small by chance) and
-never looser than the defaults.
+Per axis (the profile's axes are the body's when the IMU is not rotated into another body frame;
+with a mounting, ``isotropic``: the largest axis' spread on every axis, as the gyro's ``--bias``
+prior does), each floored at :data:`GYRO_SPREAD_FLOOR` / :data:`ACC_SPREAD_FLOOR` (a spread from a
+handful of recordings may come out small by chance) and never looser than the defaults.
 """
 from __future__ import annotations
 
@@ -49,30 +49,38 @@ def _groups(fit_log: Dict[str, object]) -> Tuple[int, bool]:
     return len(groups), not blocks
 
 
-def profile_bias_sigmas(profile, defaults: PriorSigmas = PriorSigmas()
-                        ) -> Tuple[Optional[Tuple[float, float]], Dict[str, object]]:
-    """((gyro sigma [rad/s], acc sigma [m/s^2]) or None, the summary's entry): the first state's bias
-    prior from ``profile`` (an :class:`imu_learn.calib.profile.Profile`; module docstring). None,
-    with the reason in the entry, where the profile does not give a per-recording spread (fewer than
-    two recordings, time blocks of one, or no ``bias_std``): the defaults then."""
+def profile_bias_sigmas(profile, defaults: PriorSigmas = PriorSigmas(), isotropic: bool = False
+                        ) -> Tuple[Optional[Tuple[Tuple[float, ...], Tuple[float, ...]]], Dict[str, object]]:
+    """((gyro sigmas [rad/s], acc sigmas [m/s^2]), each per axis) or None, the summary's entry): the
+    first state's bias prior from ``profile`` (an :class:`imu_learn.calib.profile.Profile`; module
+    docstring; ``isotropic``: the largest axis on every axis). None, with the reason in the entry, where
+    the profile does not give a per-recording spread (fewer than two recordings, time blocks of one,
+    or no ``bias_std``): the defaults then."""
     n, recordings = _groups(profile.fit_log)
     entry: Dict[str, object] = {"groups": n}
     gyro = per_recording_spread(profile.gyro.bias_std, max(n, 1))
     acc = per_recording_spread(profile.acc.bias_std, max(n, 1))
     if n < 2 or not recordings:
-        entry["source"] = (f"defaults (gyro {defaults.bias_gyro:g} rad/s, acc {defaults.bias_acc:g} m/s^2): the profile's "
+        entry["source"] = (f"defaults (gyro {defaults.bias_gyro} rad/s, acc {defaults.bias_acc} m/s^2): the profile's "
                            + ("groups are time blocks of one recording, not recordings" if n >= 2 and not recordings
                               else f"fit has {n} group(s), no spread between recordings"))
         return None, entry
     if not (np.all(np.isfinite(gyro)) and np.all(np.isfinite(acc))):
         entry["source"] = "defaults: the profile's bias_std is not known on every axis"
         return None, entry
-    sg = float(min(max(gyro.max(), GYRO_SPREAD_FLOOR), defaults.bias_gyro))
-    sa = float(min(max(acc.max(), ACC_SPREAD_FLOOR), defaults.bias_acc))
+
+    def sigmas(spread: np.ndarray, floor: float, default) -> Tuple[float, ...]:
+        s = np.full(3, spread.max()) if isotropic else spread
+        return tuple(float(v) for v in np.minimum(np.maximum(s, floor), np.broadcast_to(default, (3,))))
+
+    sg = sigmas(gyro, GYRO_SPREAD_FLOOR, defaults.bias_gyro)
+    sa = sigmas(acc, ACC_SPREAD_FLOOR, defaults.bias_acc)
     entry.update({
-        "source": (f"the profile's per-recording bias spread: bias_std x sqrt({n} groups), its largest axis, floored at "
-                   f"{GYRO_SPREAD_FLOOR:g} rad/s / {ACC_SPREAD_FLOOR:g} m/s^2"),
+        "source": (f"the profile's per-recording bias spread: bias_std x sqrt({n} groups), "
+                   + ("its largest axis on every axis (the IMU rotated into the body frame), " if isotropic
+                      else "per axis, ")
+                   + f"floored at {GYRO_SPREAD_FLOOR:g} rad/s / {ACC_SPREAD_FLOOR:g} m/s^2"),
         "gyro_per_recording_rad_s": [round(float(v), 6) for v in gyro],
         "acc_per_recording_mps2": [round(float(v), 6) for v in acc],
-        "bias_gyro_rad_s": round(sg, 6), "bias_acc_mps2": round(sa, 6)})
+        "bias_gyro_rad_s": [round(v, 6) for v in sg], "bias_acc_mps2": [round(v, 6) for v in sa]})
     return (sg, sa), entry
