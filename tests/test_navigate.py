@@ -28,7 +28,7 @@ from imu_learn.errors import (
 )
 from imu_learn.fuse.aiding.tum import check_overlap, read_trajectory, read_tum, seconds_to_ns
 from imu_learn.fuse.inputs import checkpoint_bias
-from imu_learn.fuse.score import convergence, interpolate_groundtruth, umeyama
+from imu_learn.fuse.score import convergence, interpolate_groundtruth, umeyama, window_errors
 from imu_learn.fuse.start import level as init
 
 # EuRoC cam0's T_BS (camera to body = IMU), as in every EuRoC sensor.yaml of cam0 (Burri et al. 2016).
@@ -562,3 +562,12 @@ def test_without_gtsam_both_commands_say_the_extra_in_one_line(tmp_path):
         r = subprocess.run([sys.executable, "-c", block, *argv], capture_output=True, text=True, timeout=120)
         assert r.returncode == 2 and r.stderr.count("\n") == 1, r.stderr
         assert "MissingExtraError" in r.stderr and "imu-learn[fuse]" in r.stderr
+
+
+def test_window_errors_end_is_the_last_keyframe_inside_the_window():
+    rel_s = np.array([0.0, 1.0, 2.0, 3.0, 4.0, 5.0])
+    e = np.array([9.0, 1.0, 3.0, 2.0, 7.0, 8.0])
+    w = window_errors(e, rel_s, 0.5, 3.0)  # keyframes at 1, 2, 3 s inside
+    assert w["end_m"] == 2.0 and w["max_m"] == 3.0
+    assert w["rmse_m"] == pytest.approx(np.sqrt((1 + 9 + 4) / 3))
+    assert window_errors(e, rel_s, 5.5, 1.0, missing=None)["end_m"] is None

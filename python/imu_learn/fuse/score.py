@@ -7,7 +7,7 @@ from __future__ import annotations
 
 from dataclasses import replace
 from pathlib import Path
-from typing import Dict, List, Optional, Sequence, Tuple
+from typing import Dict, Optional, Sequence, Tuple
 from typing import Sequence as Seq
 
 import numpy as np
@@ -38,9 +38,21 @@ def umeyama(src: np.ndarray, dst: np.ndarray) -> Tuple[np.ndarray, np.ndarray]:
     return R, mu_d - R @ mu_s
 
 
+def window_errors(e: np.ndarray, rel_s: np.ndarray, start: float, dur: float, missing: Optional[float] = float("nan")
+                  ) -> Dict[str, Optional[float]]:
+    """The errors ``e`` [m] at the keyframes (``rel_s``: seconds from the first IMU sample) inside one
+    outage or gap: its RMS, maximum and the last one inside it (``end_m``: the error when the aiding
+    returns, the GNSS/INS peers' figure); ``missing`` where no keyframe lies inside."""
+    m = in_windows(rel_s, [(start, dur)])
+    if not m.any():
+        return {"start_s": float(start), "duration_s": float(dur), "rmse_m": missing, "max_m": missing, "end_m": missing}
+    return {"start_s": float(start), "duration_s": float(dur), "rmse_m": rmse(e[m]), "max_m": float(e[m].max()),
+            "end_m": float(e[m][-1])}
+
+
 def score(res: FusionResult, t_ns: np.ndarray, p_gt: np.ndarray, q_wxyz_gt: np.ndarray,
           outages: Seq[Tuple[float, float]] = (), align: bool = False) -> Dict[str, object]:
-    """``{causal|smoothed: {pos_rmse_m, rot_rmse_deg, outages: [{start_s, duration_s, rmse_m, max_m}]}}``;
+    """``{causal|smoothed: {pos_rmse_m, rot_rmse_deg, outages: [{start_s, duration_s, rmse_m, max_m, end_m}]}}``;
     ``align``: each trajectory rigidly aligned to ground truth first (its own alignment)."""
     idx = res.kf_idx
     inside = outage_mask(t_ns, outages)[idx] if outages else np.zeros(len(idx), bool)
@@ -51,11 +63,7 @@ def score(res: FusionResult, t_ns: np.ndarray, p_gt: np.ndarray, q_wxyz_gt: np.n
             R_al, t_al = umeyama(p, p_gt[idx])
             p, R = p @ R_al.T + t_al, np.einsum("ij,njk->nik", R_al, R)
         e = np.linalg.norm(p - p_gt[idx], axis=1)
-        per: List[Dict[str, float]] = []
-        for start, dur in outages:
-            m = in_windows(rel_s, [(start, dur)])
-            per.append({"start_s": float(start), "duration_s": float(dur), "rmse_m": rmse(e[m]),
-                        "max_m": float(e[m].max()) if m.any() else float("nan")})
+        per = [window_errors(e, rel_s, start, dur) for start, dur in outages]
         out[name] = {
             "pos_rmse_m": rmse(e),
             "pos_rmse_aided_m": rmse(e[~inside]),
@@ -159,9 +167,7 @@ def score_against(groundtruth: Path, kf_t: np.ndarray, res, rows, R_WA: np.ndarr
     for kind, p, R in (("causal", res.causal_p, res.causal_R), ("smoothed", res.smoothed_p, res.smoothed_R)):
         s, e, _, _ = _errors(p[inside], R[inside], p_gt, R_gt, align)
         if gaps:
-            s["gaps"] = [{"start_s": a, "duration_s": d,
-                          "rmse_m": float(np.sqrt(np.mean(e[m] ** 2))) if (m := in_windows(rel_s, [(a, d)])).any()
-                          else None, "max_m": float(e[m].max()) if m.any() else None} for a, d in gaps]
+            s["gaps"] = [window_errors(e, rel_s, a, d, missing=None) for a, d in gaps]
             s["outside_gaps_rmse_m"] = float(np.sqrt(np.mean(e[~in_gap] ** 2))) if (~in_gap).any() else None
         out[kind] = s
     # the aiding alone (its body positions, in W) at its own stamps, aligned the same way
