@@ -27,7 +27,11 @@ the information its data gave; observed where its data, not its prior, set them)
 **The device's training recordings** (a profile's ``bias_prior``, :func:`measure_prior`): a still
 stretch measures the bias at rest, open loop needs the bias while moving. Where the profile measured,
 on the recordings it was fitted on, each estimator's RMS error against their moving bias and the
-profile alone's, ``auto`` admits only the estimators that were the closer (:func:`better_than_prior`);
+profile alone's, ``auto`` admits only the estimators that were the closer (:func:`better_than_prior`),
+and so do the named options (:func:`admit`: ``still``, ``gravity``, ``learned``; ``still+gravity`` each
+part; ``moving`` its own gate): one kept out subtracts nothing beyond the profile's floor (decision
+``gated``, one log line, the figures in the entry's ``gate``), one the profile has no figure for is
+applied as bounded ("not measured");
 the still estimate's uncertainty floor is raised to the rest-minus-moving spread measured there, and
 gravity consistency's error beyond its own uncertainty is added to its variance. A profile without
 ``bias_prior``: as before.
@@ -190,6 +194,19 @@ def still_along_gravity(still: Optional[np.ndarray], grav: Any) -> Optional[np.n
 
 def _still_gravity(ctx: Context, t_ns: np.ndarray, gyro: np.ndarray, acc: np.ndarray) -> BiasEstimate:
     still, grav = _still(ctx, t_ns, gyro, acc), gravity_bias(t_ns, gyro, acc)
+    still_detail, grav_detail = still.detail, grav.to_dict()
+    # each part admitted as auto admits it (better_than_prior): one kept out counts as absent
+    gates: Dict[str, Any] = {}
+    for part, b_part in (("still", still.gyro_bias), ("gravity", grav.gyro_bias)):
+        if b_part is None:
+            continue
+        ok, rms = better_than_prior(BiasEstimate(part, b_part, np.zeros((3, 3)), {}), ctx.prior)
+        gates[part] = gate_entry(ok, rms)
+        if not ok and part == "still":
+            still = replace(still, gyro_bias=None, information=np.zeros((3, 3)),
+                            missing="the still estimate kept out by the gate")
+        elif not ok:
+            grav = replace(grav, gyro_bias=None)
     b = still_along_gravity(still.gyro_bias, grav)
     g_info = _gravity_info(grav, ctx.prior.gravity_error_std)
     unseen = np.zeros((3, 3))
@@ -204,9 +221,14 @@ def _still_gravity(ctx: Context, t_ns: np.ndarray, gyro: np.ndarray, acc: np.nda
         info = A @ still.information @ A + Q @ g_info @ Q
     detail = {"gyro_bias_rad_s": _vec(b), "gyro_bias_deg_s": None if b is None else _vec(np.rad2deg(b)),
               "rule": "the still stretches' estimate along gravity, gravity consistency's across it (either alone "
-                      "where the other has none)",
-              "still": still.detail, "gravity": grav.to_dict()}
-    missing = None if b is not None else "neither a still stretch nor enough windows in {where}"
+                      "where the other has none); each part admitted as auto admits it (its gate)",
+              "still": still_detail, "gravity": grav_detail, "gate": gates}
+    missing = None
+    if b is None:
+        out = [f"{k} ({gate_words(v)})" for k, v in gates.items() if not v["entered"]]
+        missing = ("neither a still stretch nor enough windows in {where}" if not out else
+                   "nothing left in {where} after the gate: " + "; ".join(out)
+                   + ("" if len(out) == 2 else "; the other part gave no estimate"))
     return BiasEstimate("still+gravity", b, info if b is not None else np.zeros((3, 3)), detail, missing, unseen)
 
 
@@ -392,8 +414,7 @@ def combine(parts: List[BiasEstimate], prior: BiasPrior, with_prior: bool = Fals
             continue
         ok, rms = better_than_prior(p, prior)
         if rms is not None:
-            details[p.method]["gate"] = {"entered": ok, "training_rms_error_rad_s": rms[0],
-                                         "training_rms_profile_alone_rad_s": rms[1], "rule": GATE_RULE}
+            details[p.method]["gate"] = gate_entry(ok, rms)
         if not ok:
             continue
         used.append(p.method)
@@ -436,11 +457,52 @@ def better_than_prior(est: BiasEstimate, prior: BiasPrior) -> Tuple[bool, Option
     return (True, None) if rms is None else (rms[0] < rms[1], rms)
 
 
+NOT_MEASURED = ("not measured: the profile's bias_prior has no training figure for this estimator (or the profile "
+                "has no bias_prior), so it is applied ungated")
+
+
+def gate_entry(ok: bool, rms: Optional[Tuple[float, float]]) -> Dict[str, Any]:
+    """The summary's ``gate`` of one estimator (auto's parts, the named options): whether it entered,
+    the training figures it was judged on [rad/s] and :data:`GATE_RULE`; "not measured" without them."""
+    if rms is None:
+        return {"entered": True, "measured": False, "rule": NOT_MEASURED}
+    return {"entered": ok, "measured": True, "training_rms_error_rad_s": rms[0],
+            "training_rms_profile_alone_rad_s": rms[1], "rule": GATE_RULE}
+
+
+def gate_words(gate: Dict[str, Any]) -> str:
+    """One line of a ``gate`` entry: the figures and the verdict."""
+    if not gate.get("measured"):
+        return NOT_MEASURED
+    e, a = gate["training_rms_error_rad_s"], gate["training_rms_profile_alone_rad_s"]
+    return (f"training RMS error {e * 1e3:.2f} mrad/s " + ("below" if gate["entered"] else "not below")
+            + f" the profile alone's {a * 1e3:.2f} mrad/s (the profile's bias_prior.rms_rad_s)")
+
+
+GATED = ("still", "gravity", "learned")  # the named options gated in bias_step (still+gravity per part, moving its own)
+
+
+def admit(est: BiasEstimate, verdict: Verdict, prior: BiasPrior) -> Verdict:
+    """A named option (``--bias still|gravity|learned``) admitted as ``auto`` admits its parts
+    (:func:`better_than_prior`, :data:`GATE_RULE`): kept out, nothing subtracted beyond the profile's
+    floor (decision ``gated``); the figures go into ``est.detail["gate"]`` ("not measured" where the
+    profile has none: applied as bounded)."""
+    if est.method not in GATED or est.gyro_bias is None:
+        return verdict
+    ok, rms = better_than_prior(est, prior)
+    est.detail["gate"] = gate_entry(ok, rms)
+    if ok or verdict.gyro_bias is None:
+        return verdict
+    return Verdict("gated", verdict.z, None, "kept out by the device's training recordings: "
+                   + gate_words(est.detail["gate"]) + "; the profile alone used (nothing subtracted beyond its "
+                   "floor); rule: " + GATE_RULE + f" (the bound alone: {verdict.decision})", prior)
+
+
 @dataclass
 class Verdict:
-    """What :func:`bound` made of an estimate: ``decision`` (applied / shrunk / rejected / none),
-    ``z`` the largest distance from the prior in combined sigmas over its observed directions,
-    ``gyro_bias`` what is subtracted (None: nothing), ``why`` one line."""
+    """What :func:`bound` made of an estimate: ``decision`` (applied / shrunk / rejected / none; gated:
+    kept out by :func:`admit`), ``z`` the largest distance from the prior in combined sigmas over its
+    observed directions, ``gyro_bias`` what is subtracted (None: nothing), ``why`` one line."""
 
     decision: str
     z: Optional[float]
@@ -586,7 +648,7 @@ def bias_step(method: str, gravity: float, sink: Dict[str, Any], model: Optional
         if t_ns is None:
             raise InvalidInputError(f"--bias {method} needs the recording's stamps")
         est = REGISTRY[method].run(ctx, t_ns, gyro, acc)
-        verdict = bound(est, prior)
+        verdict = admit(est, bound(est, prior), prior)
         sink[method], sink["bound"] = est, verdict
         if verdict.gyro_bias is None:
             return gyro, acc, None
@@ -613,6 +675,6 @@ def bias_entry(method: str, sink: Dict[str, Any], where: str) -> Tuple[Dict[str,
              "bound": verdict.to_dict(), "unobserved_directions_body": unseen}
     if verdict.decision == "none":
         return entry, f"--bias {method}: " + str(est.missing).replace("{where}", where) + "; no bias subtracted"
-    if verdict.decision == "rejected":
+    if verdict.decision in ("rejected", "gated"):
         return entry, f"--bias {method}: the estimate in {where} is {verdict.why}"
     return entry, None if verdict.decision == "applied" else f"--bias {method}: the estimate in {where} is {verdict.why}"
