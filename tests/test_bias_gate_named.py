@@ -13,6 +13,7 @@ import math
 import numpy as np
 import pytest
 
+from floors import turning_robot
 from imu_learn import _imu_core as core
 from imu_learn.calib.profile import Affine, Profile
 from imu_learn.core.still import BiasPrior
@@ -26,20 +27,9 @@ MOVING_BIAS = np.array([0.003, -0.002, 0.0])  # the bias while turning: across g
 
 
 def robot(seed=0):
-    """A level robot at rest for REST_S (gyro: REST_BIAS plus white noise), then turning about gravity
-    (the body's z) at a varying rate with its accelerometer shaken (gyro: the rate plus MOVING_BIAS)."""
-    n0, n1 = int(REST_S * RATE), int(MOVE_S * RATE)
-    t = (np.arange(n0 + n1) * 1e9 / RATE).astype(np.int64)
-    s = np.arange(n1) / RATE
-    rng = np.random.default_rng(seed)
-    w = np.zeros((n0 + n1, 3))
-    w[n0:, 2] = 0.5 * np.sin(2 * np.pi * 0.2 * s) + 0.3 * np.sin(2 * np.pi * 0.07 * s)
-    bias = np.vstack([np.tile(REST_BIAS, (n0, 1)), np.tile(MOVING_BIAS, (n1, 1))])
-    g = w + bias + rng.normal(0, 0.002, w.shape)
-    a = np.tile([0.0, 0.0, G], (n0 + n1, 1))
-    a[:n0] += rng.normal(0, 0.02, (n0, 3))
-    a[n0:] += rng.normal(0, 0.3, (n1, 3))
-    return t, g, a
+    """A level robot at rest (gyro: REST_BIAS), then turning about gravity (gyro: MOVING_BIAS;
+    :func:`floors.turning_robot`)."""
+    return turning_robot(REST_BIAS, MOVING_BIAS, seed, RATE, REST_S, MOVE_S, G)
 
 
 def measured(**figures):

@@ -12,6 +12,7 @@ import math
 import numpy as np
 import pytest
 
+from floors import turning_robot
 from imu_learn import _imu_core as core
 from imu_learn.calib.profile import Affine, Profile
 from imu_learn.core.still import BiasPrior
@@ -24,21 +25,8 @@ REST_S, MOVE_S = 5.0, 40.0
 
 
 def robot(rest_bias, moving_bias, seed=0):
-    """A level robot at rest for REST_S (gyro: ``rest_bias`` plus white noise), then driving for MOVE_S,
-    turning about gravity (the body's z) at a varying rate with its accelerometer shaken (gyro: the
-    rate plus ``moving_bias``)."""
-    n0, n1 = int(REST_S * RATE), int(MOVE_S * RATE)
-    t = (np.arange(n0 + n1) * 1e9 / RATE).astype(np.int64)
-    s = np.arange(n1) / RATE
-    rng = np.random.default_rng(seed)
-    w = np.zeros((n0 + n1, 3))
-    w[n0:, 2] = 0.5 * np.sin(2 * np.pi * 0.2 * s) + 0.3 * np.sin(2 * np.pi * 0.07 * s)
-    bias = np.vstack([np.tile(rest_bias, (n0, 1)), np.tile(moving_bias, (n1, 1))])
-    g = w + bias + rng.normal(0, 0.002, w.shape)
-    a = np.tile([0.0, 0.0, G], (n0 + n1, 1))
-    a[:n0] += rng.normal(0, 0.02, (n0, 3))
-    a[n0:] += rng.normal(0, 0.3, (n1, 3))
-    return t, g, a
+    """A level robot at rest, then turning about gravity (:func:`floors.turning_robot`)."""
+    return turning_robot(rest_bias, moving_bias, seed, RATE, REST_S, MOVE_S, G)
 
 
 def device(rest_minus_moving, moving_z):
