@@ -9,10 +9,22 @@ experiments/reference_kinds.py scores (score.peers: AOE, RO_RMSE and RP_RMSE ove
 Terms: ``M_g`` (the gyro matrix), ``b_g``, ``G`` (g-sensitivity), ``tau`` (time offset), ``cut_g``,
 ``cut_a`` (the low-pass cut-offs), ``acc_aff`` (M_a and b_a), ``acc`` (M_a, b_a and cut_a), and
 ``M_g_I`` / ``G_0`` (the gyro matrix at the identity, no g-sensitivity: the donor not used);
+parts of the gyro matrix: ``M_g_diag`` (its scales), ``M_g_skew`` (its antisymmetric part: a rotation),
+``M_g_sym`` (its symmetric off-diagonal part: the axes' non-orthogonality), ``M_g_c0``, ``M_g_c1``,
+``M_g_c2`` (its columns: what a rate about the IMU's x, y, z puts on each axis); columns of the
+g-sensitivity: ``G_c0``, ``G_c1``, ``G_c2`` (the rate per m/s^2 of specific force along x, y, z);
 ``none``: the base as it is.
 
+With ``--split A B`` (two earlier outputs' folder prefixes, e.g. OUT1/none and OUT2/none) nothing is
+refined: for each flight the refined gyro of ``B_<flight>`` minus ``A_<flight>``'s is split into its mean
+over the flight (the constant level the two leave; along and across the gravity direction refine's
+gravity consistency found in A) and the rest, each added alone to A's refined gyro and scored:
+
+    IMU_LEARN_DATA=<root> python experiments/profile_swap.py --split OUT1/none OUT2/none --out OUT3
+
 Data: under the data root, euroc/<flight>. Writes: OUT/<terms>.json (each hybrid profile), OUT/<terms>_<flight>/
-(refine's output), OUT/results.json; prints one line per hybrid.
+(refine's output), OUT/results.json; prints one line per hybrid (``--split``: OUT/split_<part>_<flight>/,
+OUT/split.json).
 """
 from __future__ import annotations
 
@@ -25,7 +37,23 @@ import sys
 from pathlib import Path
 from typing import Any, Dict
 
+import numpy as np
 from reference_kinds import TEST, score
+
+
+def _part(m: np.ndarray, term: str) -> np.ndarray:
+    """The part of a 3x3 matrix a term names (the rest zero): the parts of each add up to ``m``."""
+    off = m - np.diag(np.diag(m))
+    if term == "M_g_diag":
+        return np.diag(np.diag(m))
+    if term == "M_g_skew":
+        return (off - off.T) / 2
+    if term == "M_g_sym":
+        return (off + off.T) / 2
+    out = np.zeros((3, 3))
+    j = int(term[-1])
+    out[:, j] = m[:, j]
+    return out
 
 
 def swap(p: Dict[str, Any], d: Dict[str, Any], term: str) -> Dict[str, Any]:
@@ -42,6 +70,16 @@ def swap(p: Dict[str, Any], d: Dict[str, Any], term: str) -> Dict[str, Any]:
         f["b_g"], p["gyroscope"]["bias"] = g["b_g"], d["gyroscope"]["bias"]
     elif term == "G":
         f["G"], p["g_sensitivity_rad_s_per_mps2"] = g["G"], d["g_sensitivity_rad_s_per_mps2"]
+    elif term in ("M_g_diag", "M_g_skew", "M_g_sym", "M_g_c0", "M_g_c1", "M_g_c2", "G_c0", "G_c1", "G_c2"):
+        key, field = ("M_g", ("gyroscope", "matrix")) if term.startswith("M_g") else \
+            ("G", ("g_sensitivity_rad_s_per_mps2",))
+        m = np.asarray(f[key], dtype=np.float64)
+        m = (m - _part(m, term) + _part(np.asarray(g[key], dtype=np.float64), term)).tolist()
+        f[key] = m
+        if len(field) == 2:
+            p[field[0]][field[1]] = m
+        else:
+            p[field[0]] = m
     elif term == "G_0":
         f["G"] = p["g_sensitivity_rad_s_per_mps2"] = [[0.0] * 3 for _ in range(3)]
     elif term == "tau":
@@ -59,15 +97,56 @@ def swap(p: Dict[str, Any], d: Dict[str, Any], term: str) -> Dict[str, Any]:
     return p
 
 
+def level_parts(d: np.ndarray, up: np.ndarray) -> Dict[str, np.ndarray]:
+    """A gyro difference (N x 3) split into its constant level (all, along ``up``, across it) and the rest."""
+    m = d.mean(axis=0)
+    u = up / np.linalg.norm(up)
+    along = u * float(u @ m)
+    return {"mean": np.broadcast_to(m, d.shape), "mean_along_g": np.broadcast_to(along, d.shape),
+            "mean_across_g": np.broadcast_to(m - along, d.shape), "varying": d - m}
+
+
+def split(a_prefix: Path, b_prefix: Path, flights: str, root: Path, out: Path) -> int:
+    from imu_learn.data.formats import read_imu_source
+
+    out.mkdir(parents=True, exist_ok=True)
+    results: Dict[str, Dict[str, Any]] = {}
+    for flight in flights.split(","):
+        a_dir, b_dir = Path(f"{a_prefix}_{flight}"), Path(f"{b_prefix}_{flight}")
+        a, b = read_imu_source(a_dir), read_imu_source(b_dir)
+        if not np.array_equal(a.t_ns, b.t_ns):
+            raise SystemExit(f"{a_dir} and {b_dir}: different stamps")
+        up = np.asarray(json.loads((a_dir / "summary.json").read_text())["bias"]["gravity"]["gravity_direction_body"])
+        header = (a_dir / "mav0" / "imu0" / "data.csv").read_text().split("\n", 1)[0].lstrip("#")
+        d = b.gyro - a.gyro
+        row: Dict[str, Any] = {"mean_difference_rad_s": d.mean(axis=0).tolist()}
+        for part, add in [("A", np.zeros_like(d)), ("B", d)] + list(level_parts(d, up).items()):
+            dst = out / f"split_{part}_{flight}"
+            (dst / "mav0" / "imu0").mkdir(parents=True, exist_ok=True)
+            np.savetxt(dst / "mav0" / "imu0" / "data.csv", np.column_stack([a.t_ns, a.gyro + add, a.acc]),
+                       delimiter=",", fmt=["%d"] + ["%.12g"] * 6, header=header, comments="#")
+            row[part] = score(root / "euroc" / flight, dst)
+        results[flight] = row
+        print(f"{flight:16s} " + " | ".join(f"{k} {v['aoe_deg']:.3f}° / {v['ro_rmse_deg']:.4f}°"
+                                              for k, v in row.items() if isinstance(v, dict)), flush=True)
+    (out / "split.json").write_text(json.dumps(results, indent=1, default=float))
+    return 0
+
+
 def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    ap.add_argument("--base", type=Path, required=True)
-    ap.add_argument("--donor", type=Path, required=True)
+    ap.add_argument("--base", type=Path)
+    ap.add_argument("--donor", type=Path)
+    ap.add_argument("--split", type=Path, nargs=2, metavar=("A", "B"))
     ap.add_argument("--terms", default="none,M_g,b_g,G,tau,cut_a,acc_aff")
     ap.add_argument("--flights", default=",".join(TEST))
     ap.add_argument("--out", type=Path, default=Path("reports/profile_swap"))
     args = ap.parse_args()
     root = Path(os.environ.get("IMU_LEARN_DATA", "datasets"))
+    if args.split:
+        return split(args.split[0], args.split[1], args.flights, root, args.out)
+    if args.base is None or args.donor is None:
+        ap.error("--base and --donor (or --split A B)")
     base, donor = json.loads(args.base.read_text()), json.loads(args.donor.read_text())
     args.out.mkdir(parents=True, exist_ok=True)
     results: Dict[str, Dict[str, Any]] = {}
