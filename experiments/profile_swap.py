@@ -18,7 +18,8 @@ g-sensitivity: ``G_c0``, ``G_c1``, ``G_c2`` (the rate per m/s^2 of specific forc
 With ``--split A B`` (two earlier outputs' folder prefixes, e.g. OUT1/none and OUT2/none) nothing is
 refined: for each flight the refined gyro of ``B_<flight>`` minus ``A_<flight>``'s is split into its mean
 over the flight (the constant level the two leave; along and across the gravity direction refine's
-gravity consistency found in A) and the rest, each added alone to A's refined gyro and scored:
+gravity consistency found in A) and the rest, each added alone to A's refined gyro and scored; A's
+mean rate over the flight (its net turn per second) printed with them:
 
     IMU_LEARN_DATA=<root> python experiments/profile_swap.py --split OUT1/none OUT2/none --out OUT3
 
@@ -119,7 +120,9 @@ def split(a_prefix: Path, b_prefix: Path, flights: str, root: Path, out: Path) -
         up = np.asarray(json.loads((a_dir / "summary.json").read_text())["bias"]["gravity"]["gravity_direction_body"])
         header = (a_dir / "mav0" / "imu0" / "data.csv").read_text().split("\n", 1)[0].lstrip("#")
         d = b.gyro - a.gyro
-        row: Dict[str, Any] = {"mean_difference_rad_s": d.mean(axis=0).tolist()}
+        span_s = (a.t_ns[-1] - a.t_ns[0]) / 1e9  # A's mean rate over the flight: its net turn per second
+        row: Dict[str, Any] = {"mean_difference_rad_s": d.mean(axis=0).tolist(),
+                               "mean_rate_rad_s": a.gyro.mean(axis=0).tolist(), "span_s": span_s}
         for part, add in [("A", np.zeros_like(d)), ("B", d)] + list(level_parts(d, up).items()):
             dst = out / f"split_{part}_{flight}"
             (dst / "mav0" / "imu0").mkdir(parents=True, exist_ok=True)
@@ -127,6 +130,8 @@ def split(a_prefix: Path, b_prefix: Path, flights: str, root: Path, out: Path) -
                        delimiter=",", fmt=["%d"] + ["%.12g"] * 6, header=header, comments="#")
             row[part] = score(root / "euroc" / flight, dst)
         results[flight] = row
+        print(f"{flight:16s} mean rate {np.round(1e3 * a.gyro.mean(axis=0), 1)} mrad/s over {span_s:.0f} s, "
+              f"difference's mean {np.round(1e3 * d.mean(axis=0), 3)} mrad/s")
         print(f"{flight:16s} " + " | ".join(f"{k} {v['aoe_deg']:.3f}° / {v['ro_rmse_deg']:.4f}°"
                                               for k, v in row.items() if isinstance(v, dict)), flush=True)
     (out / "split.json").write_text(json.dumps(results, indent=1, default=float))
