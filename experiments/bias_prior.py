@@ -123,10 +123,10 @@ def fit(config: str, profile_path: Path, data_root: Path) -> Dict[str, Any]:
     profile = Profile.load(profile_path)
     data, recs = recordings(config, data_root, ("train", "val"))
     grav = gravity_of(profile, data)
-    prior = BiasPrior.from_bias_std(profile.gyro.bias_std, "the profile's bias spread")
     term = profile.noise.get("gyroscope_random_walk")  # rad/s^2/sqrt(Hz) = rad/s/sqrt(s)
     rw = None if term is None or not math.isfinite(float(term.value)) else float(term.value)
-    prior = BiasPrior.from_bias_std(profile.gyro.bias_std, "the profile's bias spread",
+    std, how = profile.gyro_bias_prior_std()  # the spread refine's --bias prior is given (calib.correction)
+    prior = BiasPrior.from_bias_std(std, f"the profile's bias spread ({how})",
                                     measured={"random_walk_rad_s_sqrt_s": rw})
     measured = []
     for name, path, segs in recs:

@@ -138,9 +138,10 @@ def describe_profile(profile: Profile, where: str) -> str:
 
 
 def _prior(profile: Profile, where: str) -> BiasPrior:
-    """The device prior after ``profile``'s floor: zero mean, its gyroscope's bias spread."""
-    return BiasPrior.from_bias_std(profile.gyro.bias_std, f"the bias spread of profile {where}",
-                                   measured=profile.bias_prior)
+    """The device prior after ``profile``'s floor: zero mean, its gyroscope's bias spread between
+    recordings (:meth:`Profile.gyro_bias_prior_std`)."""
+    std, how = profile.gyro_bias_prior_std()
+    return BiasPrior.from_bias_std(std, f"the bias spread of profile {where} ({how})", measured=profile.bias_prior)
 
 
 def _gravity(profile: Profile, default: float) -> float:

@@ -288,6 +288,49 @@ class Profile:
         t = self.noise.get(key)
         return key in CLASS_DEFAULTS and t is not None and t.detail.get("kind") == "upper bound"
 
+    def recording_groups(self) -> Tuple[int, bool]:
+        """(the number of groups in the fit log, whether they are recordings): one entry of
+        ``fit_log["groups"]`` per recording refitted alone; a profile fitted on one recording has time
+        blocks of it (``block1`` ..) as groups, whose spread is not between recordings."""
+        groups = self.fit_log.get("groups") if isinstance(self.fit_log, dict) else None
+        if not isinstance(groups, list):
+            return 0, False
+        names = [str(g.get("group", "")) if isinstance(g, dict) else "" for g in groups]
+        blocks = any(n.startswith("block") and n[5:].isdigit() for n in names)
+        return len(groups), not blocks
+
+    def bias_spread(self, sensor: str = "gyro") -> Tuple[Optional[np.ndarray], str]:
+        """((3,) the spread of ``sensor``'s (``gyro``/``acc``) bias *between recordings*, or None; why).
+
+        ``bias_std`` is the standard error of the floor's mean over the fit's groups
+        (:mod:`imu_learn.calib.fit`: the spread of the per-group values over sqrt(groups)), so the
+        per-recording spread is ``bias_std × sqrt(groups)`` (:func:`per_recording_spread`). None where
+        the profile does not give one: fewer than two groups, time blocks of one recording, or a
+        ``bias_std`` not known on every axis."""
+        n, recordings = self.recording_groups()
+        if n < 2:
+            return None, f"the fit has {n} group(s), no spread between recordings"
+        if not recordings:
+            return None, "the profile's groups are time blocks of one recording, not recordings"
+        s = per_recording_spread((self.gyro if sensor == "gyro" else self.acc).bias_std, n)
+        if not np.all(np.isfinite(s)):
+            return None, "the profile's bias_std is not known on every axis"
+        return s, f"bias_std x sqrt({n} groups)"
+
+    def gyro_bias_prior_std(self) -> Tuple[np.ndarray, str]:
+        """((3,) the gyro bias spread a ``--bias`` prior is given, how): the per-recording spread
+        (:meth:`bias_spread`), else (one recording, no groups) ``bias_std`` itself."""
+        s, why = self.bias_spread("gyro")
+        if s is None:
+            return np.asarray(self.gyro.bias_std, dtype=np.float64).reshape(3), f"bias_std ({why})"
+        return s, f"per recording, {why}"
+
+
+def per_recording_spread(bias_std: Any, groups: int) -> np.ndarray:
+    """(3,) the spread of a bias between recordings from a standard error of the mean over ``groups``
+    independent groups: ``bias_std × sqrt(groups)`` (NaN where unknown)."""
+    return np.asarray(bias_std, dtype=np.float64).reshape(3) * math.sqrt(groups)
+
 
 class _Reader:
     """Typed access to a profile dict; every failure is a ProfileError naming the file and field."""

@@ -25,7 +25,8 @@ components need the device at rest in several attitudes, and the scale error ent
 at a steady rate is as quiet as rest and keeps its accelerometer on gravity, so a window is at rest
 only where the gyro itself, not only its spread, lies near what the device's bias can be: ``|mean
 gyro - prior bias| <= k sigma`` on every axis (:data:`STILL_SIGMAS`, 3), sigma the prior's spread
-(:class:`BiasPrior`: a device profile's ``gyroscope.bias_std``, the device's bias spread, floored at
+(:class:`BiasPrior`: the device's bias spread between recordings, a profile's ``gyroscope.bias_std`` ×
+sqrt(its recording groups), ``Profile.gyro_bias_prior_std`` (one recording: ``bias_std``), floored at
 :data:`BIAS_SPREAD_FLOOR` 5 mrad/s and capped at :data:`MEMS_BIAS_BOUND` 0.05 rad/s; without a profile
 the MEMS bound itself), and the mean accelerometer norm within :data:`ACC_NORM_TOL` (0.3 m/s^2, 3 %) of
 gravity. Refine's and navigate's ``--bias`` detector applies it to each stretch it finds (the norm

@@ -777,12 +777,14 @@ def navigate(src: Sources, out: Path, opts: NavigateOptions = NavigateOptions(),
 
 
 def bias_prior(imu: Imu) -> BiasPrior:
-    """The device prior of ``--bias``: the bias spread of the profile whose floor was applied (its
-    largest axis on every axis when the IMU is rotated into the body frame), else a MEMS gyro's."""
+    """The device prior of ``--bias``: the bias spread between recordings of the profile whose floor was
+    applied (:meth:`Profile.gyro_bias_prior_std`; its largest axis on every axis when the IMU is rotated
+    into the body frame), else a MEMS gyro's."""
     if imu.floor is None:
         return MEMS_PRIOR
     profile = Profile.load(imu.floor)
-    return BiasPrior.from_bias_std(profile.gyro.bias_std, f"the bias spread of profile {imu.floor}",
+    std, how = profile.gyro_bias_prior_std()
+    return BiasPrior.from_bias_std(std, f"the bias spread of profile {imu.floor} ({how})",
                                    isotropic=imu.mounting is not None, measured=profile.bias_prior)
 
 

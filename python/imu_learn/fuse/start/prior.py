@@ -5,8 +5,9 @@ recording's own departure from the device's mean: the spread of the bias *betwee
 profile's ``bias_std`` is not that spread but the standard error of the floor's mean over its groups
 (:mod:`imu_learn.calib.fit`: the spread of the per-group values over sqrt(groups)), so the
 per-recording spread is ``bias_std × sqrt(groups)``, ``groups`` the profile's
-``fit_log["groups"]`` (one entry per recording refitted alone). A profile fitted on one recording
-has time blocks of it as groups (``block1`` ..): their spread is not between recordings, and the
+``fit_log["groups"]`` (one entry per recording refitted alone;
+:meth:`imu_learn.calib.profile.Profile.recording_groups`, the ``--bias`` prior's rule too). A
+profile fitted on one recording has time blocks of it as groups (``block1`` ..): their spread is not between recordings, and the
 defaults (:class:`~imu_learn.fuse.settings.PriorSigmas`) are kept.
 
 Per axis (the profile's axes are the body's when the IMU is not rotated into another body frame;
@@ -16,11 +17,11 @@ handful of recordings may come out small by chance) and never looser than the de
 """
 from __future__ import annotations
 
-import math
 from typing import Dict, Optional, Tuple
 
 import numpy as np
 
+from imu_learn.calib.profile import per_recording_spread
 from imu_learn.core.still import BIAS_SPREAD_FLOOR
 
 from ..settings import PriorSigmas
@@ -33,22 +34,6 @@ GYRO_SPREAD_FLOOR = BIAS_SPREAD_FLOOR
 ACC_SPREAD_FLOOR = 0.01
 
 
-def per_recording_spread(bias_std, groups: int) -> np.ndarray:
-    """(3,) the spread of the bias between recordings from a standard error of the mean over
-    ``groups`` independent groups: ``bias_std × sqrt(groups)`` (NaN where unknown)."""
-    return np.asarray(bias_std, dtype=np.float64).reshape(3) * math.sqrt(groups)
-
-
-def _groups(fit_log: Dict[str, object]) -> Tuple[int, bool]:
-    """(the number of groups in a profile's fit log, whether they are recordings, not time blocks)."""
-    groups = fit_log.get("groups") if isinstance(fit_log, dict) else None
-    if not isinstance(groups, list):
-        return 0, False
-    names = [str(g.get("group", "")) if isinstance(g, dict) else "" for g in groups]
-    blocks = any(n.startswith("block") and n[5:].isdigit() for n in names)
-    return len(groups), not blocks
-
-
 def profile_bias_sigmas(profile, defaults: PriorSigmas = PriorSigmas(), isotropic: bool = False
                         ) -> Tuple[Optional[Tuple[Tuple[float, ...], Tuple[float, ...]]], Dict[str, object]]:
     """((gyro sigmas [rad/s], acc sigmas [m/s^2]), each per axis) or None, the summary's entry): the
@@ -56,7 +41,7 @@ def profile_bias_sigmas(profile, defaults: PriorSigmas = PriorSigmas(), isotropi
     docstring; ``isotropic``: the largest axis on every axis). None, with the reason in the entry, where
     the profile does not give a per-recording spread (fewer than two recordings, time blocks of one,
     or no ``bias_std``): the defaults then."""
-    n, recordings = _groups(profile.fit_log)
+    n, recordings = profile.recording_groups()
     entry: Dict[str, object] = {"groups": n}
     gyro = per_recording_spread(profile.gyro.bias_std, max(n, 1))
     acc = per_recording_spread(profile.acc.bias_std, max(n, 1))
