@@ -57,6 +57,13 @@ def _part(m: np.ndarray, term: str) -> np.ndarray:
     return out
 
 
+def _check_parts(m: np.ndarray) -> None:
+    """The parts a swap names add up to the matrix (each family), so swapping all of them swaps it."""
+    for family in (("M_g_diag", "M_g_skew", "M_g_sym"), ("M_g_c0", "M_g_c1", "M_g_c2")):
+        if not np.allclose(sum(_part(m, t) for t in family), m, rtol=0.0, atol=1e-15):
+            raise AssertionError(f"the parts {family} do not add up to the matrix")
+
+
 def swap(p: Dict[str, Any], d: Dict[str, Any], term: str) -> Dict[str, Any]:
     """``p`` with ``term`` taken from ``d`` (the floor and the profile's own fields alike)."""
     p = copy.deepcopy(p)
@@ -75,6 +82,7 @@ def swap(p: Dict[str, Any], d: Dict[str, Any], term: str) -> Dict[str, Any]:
         key, field = ("M_g", ("gyroscope", "matrix")) if term.startswith("M_g") else \
             ("G", ("g_sensitivity_rad_s_per_mps2",))
         m = np.asarray(f[key], dtype=np.float64)
+        _check_parts(m)
         m = (m - _part(m, term) + _part(np.asarray(g[key], dtype=np.float64), term)).tolist()
         f[key] = m
         if len(field) == 2:
