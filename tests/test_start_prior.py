@@ -12,9 +12,9 @@ import math
 import numpy as np
 import pytest
 
-from imu_learn.calib.profile import Profile
+from imu_learn.calib.profile import Profile, per_recording_spread
 from imu_learn.fuse.settings import PriorSigmas
-from imu_learn.fuse.start.prior import ACC_SPREAD_FLOOR, GYRO_SPREAD_FLOOR, per_recording_spread, profile_bias_sigmas
+from imu_learn.fuse.start.prior import ACC_SPREAD_FLOOR, GYRO_SPREAD_FLOOR, profile_bias_sigmas
 
 pytest.importorskip("gtsam")
 

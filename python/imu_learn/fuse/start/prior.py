@@ -21,7 +21,6 @@ from typing import Dict, Optional, Tuple
 
 import numpy as np
 
-from imu_learn.calib.profile import per_recording_spread
 from imu_learn.core.still import BIAS_SPREAD_FLOOR
 
 from ..settings import PriorSigmas
@@ -41,17 +40,12 @@ def profile_bias_sigmas(profile, defaults: PriorSigmas = PriorSigmas(), isotropi
     docstring; ``isotropic``: the largest axis on every axis). None, with the reason in the entry, where
     the profile does not give a per-recording spread (fewer than two recordings, time blocks of one,
     or no ``bias_std``): the defaults then."""
-    n, recordings = profile.recording_groups()
+    n, _ = profile.recording_groups()
     entry: Dict[str, object] = {"groups": n}
-    gyro = per_recording_spread(profile.gyro.bias_std, max(n, 1))
-    acc = per_recording_spread(profile.acc.bias_std, max(n, 1))
-    if n < 2 or not recordings:
-        entry["source"] = (f"defaults (gyro {defaults.bias_gyro} rad/s, acc {defaults.bias_acc} m/s^2): the profile's "
-                           + ("groups are time blocks of one recording, not recordings" if n >= 2 and not recordings
-                              else f"fit has {n} group(s), no spread between recordings"))
-        return None, entry
-    if not (np.all(np.isfinite(gyro)) and np.all(np.isfinite(acc))):
-        entry["source"] = "defaults: the profile's bias_std is not known on every axis"
+    (gyro, why_g), (acc, why_a) = profile.bias_spread("gyro"), profile.bias_spread("acc")
+    if gyro is None or acc is None:
+        entry["source"] = (f"defaults (gyro {defaults.bias_gyro} rad/s, acc {defaults.bias_acc} m/s^2): "
+                           + (why_g if gyro is None else why_a))
         return None, entry
 
     def sigmas(spread: np.ndarray, floor: float, default) -> Tuple[float, ...]:
