@@ -2,11 +2,16 @@
 BROAD-style .mat trial without stamps."""
 from __future__ import annotations
 
+import json
+import math
 from pathlib import Path
 
 import numpy as np
 
+from imu_learn import _imu_core as core
 from imu_learn.baselines.traditional import TraditionalTiming
+from imu_learn.calib.profile import Affine, Profile
+from imu_learn.cli.refine import main as refine_main
 
 
 def set_floor(cutoffs=(None, None), time_offset: float = 0.54, seed: int = 5) -> TraditionalTiming:
@@ -48,3 +53,27 @@ def turning_robot(rest_bias, moving_bias, seed: int = 0, rate: float = 100.0, re
     a[:n0] += rng.normal(0, 0.02, (n0, 3))
     a[n0:] += rng.normal(0, 0.3, (n1, 3))
     return t, g, a
+
+
+ASL_HEADER = ("#timestamp [ns],w_RS_S_x [rad s^-1],w_RS_S_y [rad s^-1],w_RS_S_z [rad s^-1],"
+              "a_RS_S_x [m s^-2],a_RS_S_y [m s^-2],a_RS_S_z [m s^-2]")
+
+
+def refine_identity_floor(tmp_path: Path, t, g, a, bias: str, bias_prior, gyro_bias_std: float,
+                          rate: float = 100.0, gravity: float = 9.81):
+    """``imu-learn refine --profile P --bias BIAS`` on an ASL recording of (t, g, a), P the identity
+    floor with ``gyroscope.bias_std`` = ``gyro_bias_std`` and ``bias_prior``: (the summary's bias entry,
+    the refined gyro). The recording is TMP/in/mav0/imu0/data.csv, the profile TMP/profile.json."""
+    f = tmp_path / "in" / "mav0/imu0/data.csv"
+    f.parent.mkdir(parents=True)
+    core.write_asl_imu(str(f), t, g, a, ASL_HEADER)
+    prof = Profile(device="synthetic", sample_rate_hz=rate, time_offset_s=0.0, time_offset_s_std=math.nan,
+                   gyro=Affine(np.eye(3), np.zeros(3), "rad/s", np.zeros((3, 3)), np.full(3, gyro_bias_std)),
+                   acc=Affine(np.eye(3), np.zeros(3), "m/s^2"), g_sensitivity=np.zeros((3, 3)), gravity_mps2=gravity,
+                   gravity_mps2_std=math.nan, floor={}, bias_prior=bias_prior)
+    prof.save(tmp_path / "profile.json")
+    out = tmp_path / "o.csv"
+    assert refine_main(["--profile", str(tmp_path / "profile.json"), "--input", str(f), "--out", str(out),
+                        "--bias", bias, "--quiet"]) == 0
+    _, g_out, _ = core.read_asl_imu(str(out))
+    return json.loads((tmp_path / "o.csv.summary.json").read_text())["bias"], g_out

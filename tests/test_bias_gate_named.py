@@ -6,16 +6,12 @@ profile has no figure, it is applied as before. The synthetic recording's biases
 (the oracle), independent of the estimators."""
 from __future__ import annotations
 
-import json
 import logging
-import math
 
 import numpy as np
 import pytest
 
-from floors import turning_robot
-from imu_learn import _imu_core as core
-from imu_learn.calib.profile import Affine, Profile
+from floors import refine_identity_floor, turning_robot
 from imu_learn.core.still import BiasPrior
 from imu_learn.infer.bias import GATE_RULE, bias_entry, bias_step
 
@@ -111,24 +107,10 @@ def test_still_gravity_gates_each_part():
 def test_refine_says_so(tmp_path, caplog):
     """``imu-learn refine --profile P --bias still`` with P's ``bias_prior`` keeping it out: the output
     is the floor's (identity) input, one warning line, the summary's bias entry with the figures."""
-    from imu_learn.cli.refine import main
-
     t, g, a = robot(seed=3)
-    f = tmp_path / "in" / "mav0/imu0/data.csv"
-    f.parent.mkdir(parents=True)
-    core.write_asl_imu(str(f), t, g, a, "#timestamp [ns],w_RS_S_x [rad s^-1],w_RS_S_y [rad s^-1],w_RS_S_z [rad s^-1],"
-                       "a_RS_S_x [m s^-2],a_RS_S_y [m s^-2],a_RS_S_z [m s^-2]")
-    prof = Profile(device="synthetic", sample_rate_hz=RATE, time_offset_s=0.0, time_offset_s_std=math.nan,
-                   gyro=Affine(np.eye(3), np.zeros(3), "rad/s", np.zeros((3, 3)), np.full(3, 0.005)),
-                   acc=Affine(np.eye(3), np.zeros(3), "m/s^2"), g_sensitivity=np.zeros((3, 3)), gravity_mps2=G,
-                   gravity_mps2_std=math.nan, floor={}, bias_prior=measured(still=(0.0046, 0.0020)))
-    prof.save(tmp_path / "profile.json")
-    out = tmp_path / "o.csv"
     with caplog.at_level(logging.WARNING):
-        assert main(["--profile", str(tmp_path / "profile.json"), "--input", str(f), "--out", str(out),
-                     "--bias", "still", "--quiet"]) == 0
-    entry = json.loads((tmp_path / "o.csv.summary.json").read_text())["bias"]
-    _, g_out, _ = core.read_asl_imu(str(out))
+        entry, g_out = refine_identity_floor(tmp_path, t, g, a, "still", measured(still=(0.0046, 0.0020)), 0.005,
+                                             RATE, G)
     assert np.abs(g - g_out).max() < 1e-6
     assert entry["method"] == "still" and not entry["applied"] and entry["gate"]["entered"] is False
     lines = [r.getMessage() for r in caplog.records if r.getMessage().startswith("--bias still:")]

@@ -7,14 +7,12 @@ did, and keeps them in where they did not. The synthetic recordings' moving bias
 from __future__ import annotations
 
 import json
-import math
 
 import numpy as np
 import pytest
 
-from floors import turning_robot
-from imu_learn import _imu_core as core
-from imu_learn.calib.profile import Affine, Profile
+from floors import refine_identity_floor, turning_robot
+from imu_learn.calib.profile import Profile
 from imu_learn.core.still import BiasPrior
 from imu_learn.infer.bias import REGISTRY, Context, better_than_prior, combine, measure_prior, moving_admitted
 
@@ -46,24 +44,9 @@ def prior_of(measured):
 def refine_auto(tmp_path, measured, rest_bias, moving_bias):
     """``imu-learn refine --profile P --bias auto`` on a recording, P the identity floor whose
     ``bias_prior`` is ``measured``: (the summary's bias entry, the bias subtracted per sample)."""
-    from imu_learn.cli.refine import main
-
     t, g, a = robot(rest_bias, moving_bias, seed=99)
-    f = tmp_path / "in" / IMU_REL
-    f.parent.mkdir(parents=True)
-    core.write_asl_imu(str(f), t, g, a, "#timestamp [ns],w_RS_S_x [rad s^-1],w_RS_S_y [rad s^-1],w_RS_S_z [rad s^-1],"
-                       "a_RS_S_x [m s^-2],a_RS_S_y [m s^-2],a_RS_S_z [m s^-2]")
-    prof = Profile(device="synthetic", sample_rate_hz=RATE, time_offset_s=0.0, time_offset_s_std=math.nan,
-                   gyro=Affine(np.eye(3), np.zeros(3), "rad/s", np.zeros((3, 3)), np.full(3, 0.002)),
-                   acc=Affine(np.eye(3), np.zeros(3), "m/s^2"), g_sensitivity=np.zeros((3, 3)), gravity_mps2=G,
-                   gravity_mps2_std=math.nan, floor={}, bias_prior=measured)
-    prof.save(tmp_path / "profile.json")
+    entry, g_out = refine_identity_floor(tmp_path, t, g, a, "auto", measured, 0.002, RATE, G)
     assert Profile.load(tmp_path / "profile.json").bias_prior == json.loads(json.dumps(measured))
-    out = tmp_path / "o.csv"
-    assert main(["--profile", str(tmp_path / "profile.json"), "--input", str(f), "--out", str(out),
-                 "--bias", "auto", "--quiet"]) == 0
-    entry = json.loads((tmp_path / "o.csv.summary.json").read_text())["bias"]
-    _, g_out, _ = core.read_asl_imu(str(out))
     return entry, (g - g_out).mean(0)
 
 
