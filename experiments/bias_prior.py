@@ -29,6 +29,12 @@ or auto's (its gate), and the training figures the gate judged.
         --profile models/profiles/euroc_adis16448/profile.json [--write]
     IMU_LEARN_DATA=<root> python experiments/bias_prior.py score --config configs/euroc_paper.toml \\
         --profile models/profiles/euroc_adis16448/profile.json [--json OUT.json] [--splits train,val]
+    IMU_LEARN_DATA=<root> python experiments/bias_prior.py still-check --config configs/broad.toml \\
+        --profile models/profiles/broad_handheld/profile.json [--splits train,val,test]
+
+``still-check``: per recording (the profile's floor applied), how far gravity consistency's estimate
+lies from the still stretches' (``imu_learn.infer.bias.disagreement``, in combined sigmas; ``-``
+where either has none), and the largest.
 
 Writes: with ``fit --write``, the profile's ``bias_prior`` field (the profile file itself); with
 ``score --json``, the table's figures. Prints a markdown table.
@@ -52,7 +58,7 @@ from imu_learn.core.still import BiasPrior
 from imu_learn.data.formats import read_imu_source
 from imu_learn.data.splits import data_root_dir, find_all, make_split, recording_name
 from imu_learn.data.types import Segment
-from imu_learn.infer.bias import Context, bias_step, measure_prior
+from imu_learn.infer.bias import REGISTRY, Context, bias_step, disagreement, gravity_alone, measure_prior
 from imu_learn.score.metrics import fit_startup_bias
 from imu_learn.score.peers import attitude_errors, open_loop_attitude, segment_errors
 from imu_learn.train.config import load_config
@@ -234,6 +240,20 @@ def score(config: str, profile_path: Path, data_root: Path, splits: Tuple[str, .
     return out
 
 
+def still_check(config: str, profile_path: Path, data_root: Path, splits: Tuple[str, ...]) -> List[Tuple[str, Any]]:
+    """(recording, gravity consistency's distance from the still stretches in combined sigmas or None)."""
+    from imu_learn.calib.correction import _prior  # the prior refine gives --bias (the profile's)
+
+    profile = Profile.load(profile_path)
+    data, recs = recordings(config, data_root, splits)
+    ctx = Context(gravity_of(profile, data), _prior(profile, str(profile_path)))
+    out = []
+    for name, path, segs in recs:
+        t, g, a = floor_file(path, profile, segs)
+        out.append((name, disagreement(gravity_alone(ctx, t, g, a), REGISTRY["still"].run(ctx, t, g, a))))
+    return out
+
+
 def table(rows: List[Dict[str, Any]]) -> str:
     cols = METHODS + ORACLES
     head = ("| recording | " + " | ".join(f"{m}" for m in cols)
@@ -260,7 +280,7 @@ def table(rows: List[Dict[str, Any]]) -> str:
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    ap.add_argument("what", choices=("fit", "score"))
+    ap.add_argument("what", choices=("fit", "score", "still-check"))
     ap.add_argument("--config", required=True)
     ap.add_argument("--profile", type=Path, required=True)
     ap.add_argument("--data-root", type=Path, default=Path(os.environ.get("IMU_LEARN_DATA", "data")))
@@ -277,6 +297,12 @@ def main() -> None:
             d["bias_prior"] = bp
             atomic_write_text(a.profile, json.dumps(d, indent=2, allow_nan=False) + "\n")
             print(f"written {a.profile}'s bias_prior")
+    elif a.what == "still-check":
+        rows = still_check(a.config, a.profile, a.data_root, tuple(x for x in a.splits.split(",") if x))
+        for name, z in rows:
+            print(f"{name}: {'-' if z is None else f'{z:.2f}'}")
+        zs = [z for _, z in rows if z is not None]
+        print(f"{len(zs)} of {len(rows)} recordings with both; largest {max(zs):.2f}" if zs else "none with both")
     else:
         rows = score(a.config, a.profile, a.data_root, tuple(x for x in a.splits.split(",") if x))
         print(table(rows))

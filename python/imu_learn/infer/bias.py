@@ -168,7 +168,37 @@ def _gravity_unseen(grav: Any) -> np.ndarray:
                 if s > grav.settings.observed_below), np.zeros((3, 3)))
 
 
-def _gravity(ctx: Context, t_ns: np.ndarray, gyro: np.ndarray, acc: np.ndarray) -> BiasEstimate:
+def disagreement(grav: BiasEstimate, still: BiasEstimate) -> Optional[float]:
+    """How far gravity consistency's estimate lies from the still stretches' of the same recording: the
+    largest distance over the directions gravity consistency observed, in their combined sigmas (None
+    where either has no estimate)."""
+    if grav.gyro_bias is None or still.gyro_bias is None:
+        return None
+    cov = np.linalg.pinv(still.information, hermitian=True)
+    d = np.asarray(grav.gyro_bias) - np.asarray(still.gyro_bias)
+    dirs, std = grav.observed()
+    return max((abs(float(u @ d)) / np.sqrt(s ** 2 + float(u @ cov @ u)) for u, s in zip(dirs, std)), default=0.0)
+
+
+def still_checked(grav: BiasEstimate, still: BiasEstimate) -> BiasEstimate:
+    """``grav`` where the recording's own still stretches support it (within :data:`ACCEPT_SIGMAS`
+    combined sigmas, :func:`disagreement`), else kept out: two estimates of one bias that disagree
+    beyond their uncertainties cannot both hold, and the still stretches measure it directly where
+    gravity consistency infers it from the motion. The check goes into ``detail["still_check"]``."""
+    z = disagreement(grav, still)
+    if z is None:
+        return grav
+    grav.detail["still_check"] = {"z_sigmas": round(float(z), 3), "limit_sigmas": ACCEPT_SIGMAS,
+                                  "kept": bool(z <= ACCEPT_SIGMAS)}
+    if z <= ACCEPT_SIGMAS:
+        return grav
+    return replace(grav, gyro_bias=None, information=np.zeros((3, 3)), unseen=None,
+                   missing=f"gravity consistency's estimate is {z:.1f} sigma from the still stretches' in "
+                   "{where}: kept out (the still stretches measure the bias directly)")
+
+
+def gravity_alone(ctx: Context, t_ns: np.ndarray, gyro: np.ndarray, acc: np.ndarray) -> BiasEstimate:
+    """Gravity consistency's estimate as it is (before :func:`still_checked`)."""
     est = gravity_bias(t_ns, gyro, acc)
     if est.gyro_bias is None:
         s = est.settings
@@ -176,6 +206,11 @@ def _gravity(ctx: Context, t_ns: np.ndarray, gyro: np.ndarray, acc: np.ndarray) 
                             "{where} is shorter than " + f"{s.min_windows} windows of {s.window_s:g} s")
     return BiasEstimate("gravity", est.gyro_bias, _gravity_info(est, ctx.prior.gravity_error_std), est.to_dict(),
                         unseen=_gravity_unseen(est))
+
+
+def _gravity(ctx: Context, t_ns: np.ndarray, gyro: np.ndarray, acc: np.ndarray) -> BiasEstimate:
+    """Gravity consistency, checked against the recording's still stretches (:func:`still_checked`)."""
+    return still_checked(gravity_alone(ctx, t_ns, gyro, acc), _still(ctx, t_ns, gyro, acc))
 
 
 def still_along_gravity(still: Optional[np.ndarray], grav: Any) -> Optional[np.ndarray]:
@@ -207,6 +242,13 @@ def _still_gravity(ctx: Context, t_ns: np.ndarray, gyro: np.ndarray, acc: np.nda
                             missing="the still estimate kept out by the gate")
         elif not ok:
             grav = replace(grav, gyro_bias=None)
+    check = None
+    if still.gyro_bias is not None and grav.gyro_bias is not None:  # the two parts must agree (still_checked)
+        part = still_checked(BiasEstimate("gravity", grav.gyro_bias, _gravity_info(grav, ctx.prior.gravity_error_std),
+                                          {}), still)
+        check = part.detail.get("still_check")
+        if part.gyro_bias is None:
+            grav = replace(grav, gyro_bias=None)
     b = still_along_gravity(still.gyro_bias, grav)
     g_info = _gravity_info(grav, ctx.prior.gravity_error_std)
     unseen = np.zeros((3, 3))
@@ -222,7 +264,7 @@ def _still_gravity(ctx: Context, t_ns: np.ndarray, gyro: np.ndarray, acc: np.nda
     detail = {"gyro_bias_rad_s": _vec(b), "gyro_bias_deg_s": None if b is None else _vec(np.rad2deg(b)),
               "rule": "the still stretches' estimate along gravity, gravity consistency's across it (either alone "
                       "where the other has none); each part admitted as auto admits it (its gate)",
-              "still": still_detail, "gravity": grav_detail, "gate": gates}
+              "still": still_detail, "gravity": grav_detail, "gate": gates, "still_check": check}
     missing = None
     if b is None:
         out = [f"{k} ({gate_words(v)})" for k, v in gates.items() if not v["entered"]]
@@ -332,7 +374,8 @@ def _moving(ctx: Context, t_ns: np.ndarray, gyro: np.ndarray, acc: np.ndarray) -
 
 
 def _auto(ctx: Context, t_ns: np.ndarray, gyro: np.ndarray, acc: np.ndarray) -> BiasEstimate:
-    parts = [_still(ctx, t_ns, gyro, acc), _gravity(ctx, t_ns, gyro, acc)]
+    still = _still(ctx, t_ns, gyro, acc)
+    parts = [still, still_checked(gravity_alone(ctx, t_ns, gyro, acc), still)]
     if ctx.model is not None:
         parts.append(_learned(ctx, t_ns, gyro, acc))
     return combine(parts, ctx.prior)
