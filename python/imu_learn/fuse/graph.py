@@ -416,12 +416,13 @@ class IncrementalFusion:
             self._values.insert(X(k), pred.pose())
             self._values.insert(V(k), pred.velocity())
             self._values.insert(B(k), self._bias)
-            if not self._add_aiding(k, n) and k < len(self._kf_list) - 1:
+            aided = bool(self._add_aiding(k, n))
+            if not aided and k < len(self._kf_list) - 1:
                 # No new information: the estimate as of t_k is the IMU prediction (what a navigation
                 # system outputs between aiding epochs); iSAM2 takes these factors with the next update.
                 self._state, self._vel = pred.pose(), pred.velocity()
-            else:
-                self._update(t)
+            else:  # (the last keyframe always: its factors join the graph; after a coast without aiding
+                self._update(t, resolve=aided)  # at its end nothing is re-solved: there is nothing new)
                 self._state = self._isam.calculateEstimatePose3(X(k))
                 self._vel = self._isam.calculateEstimateVector(V(k))
                 self._bias = self._isam.calculateEstimateConstantBias(B(k))
@@ -437,12 +438,12 @@ class IncrementalFusion:
             self._pim = None
         return CausalState(n, t, True, updated, self._nav)
 
-    def _update(self, t_ns: int) -> None:
+    def _update(self, t_ns: int, resolve: bool = True) -> None:
         """Hand the pending factors and values to the causal solver; after a coast longer than
-        ``resolve_after_ns`` re-solve in batch (the whole graph, or with the fixed-lag smoother its
-        window plus the coast: bounded, so fusion stays linear)."""
+        ``resolve_after_ns`` ended by new information (``resolve``) re-solve in batch (the whole graph,
+        or with the fixed-lag smoother its window plus the coast: bounded, so fusion stays linear)."""
         gtsam = self._gtsam
-        coast = t_ns - self._last_update_ns > self.resolve_after_ns
+        coast = resolve and t_ns - self._last_update_ns > self.resolve_after_ns
         if self.smoothing == "batch" or not self.windowed:  # the whole-graph path re-solves the whole graph
             for f in range(self._graph.size()):  # (the Python factors themselves, not as held)
                 self._full.add(self._true_at.get(f, self._graph.at(f)))
