@@ -404,7 +404,8 @@ REGISTRY: Dict[str, Estimator] = {e.name: e for e in (
               "3 sigma of the device's bias spread)"),
     Estimator("gravity", _gravity, "the recording's own gyro bias from gravity consistency removed (rates "
               "perpendicular to gravity only)",
-              "gravity consistency over 10 s windows (rates perpendicular to gravity only)"),
+              "gravity consistency over 10 s windows (rates perpendicular to gravity only; kept out where the "
+              "recording's still stretches read a bias more than 3 sigma from it)"),
     Estimator("still+gravity", _still_gravity, "the recording's own gyro bias removed: from its still stretches "
               "along gravity, from gravity consistency across it",
               "the still estimate along gravity, gravity's across it"),
