@@ -52,6 +52,7 @@ from typing import Any, Dict, List, Tuple
 
 import numpy as np
 
+from imu_learn.calib.correction import _prior  # the prior refine gives --bias (the profile's)
 from imu_learn.calib.profile import Profile
 from imu_learn.core.quat import quat_conj, quat_log, quat_mul
 from imu_learn.core.still import BiasPrior
@@ -199,8 +200,6 @@ def oracle_gyro(segs: List[Segment], gyro: List[np.ndarray], piece_s: Any = None
 
 def score(config: str, profile_path: Path, data_root: Path, splits: Tuple[str, ...] = ("test",)) -> List[Dict[str, Any]]:
     """Every ``--bias`` option's open-loop AOE on CONFIG's test recordings (module doc)."""
-    from imu_learn.calib.correction import _prior  # the prior refine gives --bias (the profile's)
-
     profile = Profile.load(profile_path)
     data, recs = recordings(config, data_root, splits)
     grav = gravity_of(profile, data)
@@ -242,8 +241,6 @@ def score(config: str, profile_path: Path, data_root: Path, splits: Tuple[str, .
 
 def still_check(config: str, profile_path: Path, data_root: Path, splits: Tuple[str, ...]) -> List[Tuple[str, Any]]:
     """(recording, gravity consistency's distance from the still stretches in combined sigmas or None)."""
-    from imu_learn.calib.correction import _prior  # the prior refine gives --bias (the profile's)
-
     profile = Profile.load(profile_path)
     data, recs = recordings(config, data_root, splits)
     ctx = Context(gravity_of(profile, data), _prior(profile, str(profile_path)))

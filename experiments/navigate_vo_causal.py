@@ -133,9 +133,7 @@ def frame(src: nav.Sources, out: Path) -> None:
 
 def errors(src: nav.Sources, out: Path) -> None:
     traj = read_tum(src.aiding)
-    T = read_t_bs(src.extrinsics)
-    R = Rotation.from_quat(traj.q_xyzw).as_matrix()
-    p = traj.p + np.einsum("nij,j->ni", R, -(T[:3, :3].T @ T[:3, 3]))  # the IMU's position (camera pose x T_SB)
+    _, p = nav.body_poses(traj, read_t_bs(src.extrinsics))  # the IMU's positions in the VO's world
     inside, pg, _ = sc.interpolate_groundtruth(sc.read_groundtruth(src.groundtruth), np.asarray(traj.t_ns))
     Ra, ta = sc.umeyama(p[inside], pg)
     e = p[inside] @ Ra.T + ta - pg

@@ -41,6 +41,8 @@ from typing import Any, Dict
 import numpy as np
 from reference_kinds import TEST, score
 
+from imu_learn.data.formats import read_imu_source
+
 
 def _part(m: np.ndarray, term: str) -> np.ndarray:
     """The part of a 3x3 matrix a term names (the rest zero): the parts of each add up to ``m``."""
@@ -116,8 +118,6 @@ def level_parts(d: np.ndarray, up: np.ndarray) -> Dict[str, np.ndarray]:
 
 
 def split(a_prefix: Path, b_prefix: Path, flights: str, root: Path, out: Path) -> int:
-    from imu_learn.data.formats import read_imu_source
-
     out.mkdir(parents=True, exist_ok=True)
     results: Dict[str, Dict[str, Any]] = {}
     for flight in flights.split(","):

@@ -54,7 +54,7 @@ def references(rec: Path, files, horizons=(10, 200), gravity: float = 9.81) -> N
         imu, gt = gt_check.read(rec, f)[:2]
         gap = default_gap_s(gt)
         off = fit_offset(segments(imu, gt, gap))
-        deg = float(np.degrees(np.arccos(np.clip((np.trace(off.r_off) - 1) / 2, -1, 1))))
+        deg = gt_check.angle_axis(off.r_off)[0]
         for label, r in (("as is", None), (f"applied ({deg:.2f} deg)", off.r_off)):
             print(f"| {Path(f).name} | {label} | {cells(segments(imu, gt, gap, r_off=r), horizons, gravity)} |", flush=True)
 

@@ -197,15 +197,19 @@ def still_checked(grav: BiasEstimate, still: BiasEstimate) -> BiasEstimate:
                    "{where}: kept out (the still stretches measure the bias directly)")
 
 
-def gravity_alone(ctx: Context, t_ns: np.ndarray, gyro: np.ndarray, acc: np.ndarray) -> BiasEstimate:
-    """Gravity consistency's estimate as it is (before :func:`still_checked`)."""
-    est = gravity_bias(t_ns, gyro, acc)
+def _gravity_estimate(ctx: Context, est: Any) -> BiasEstimate:
+    """Gravity consistency's result (:func:`gravity_bias`) as a :class:`BiasEstimate`."""
     if est.gyro_bias is None:
         s = est.settings
         return BiasEstimate("gravity", None, np.zeros((3, 3)), est.to_dict(),
                             "{where} is shorter than " + f"{s.min_windows} windows of {s.window_s:g} s")
     return BiasEstimate("gravity", est.gyro_bias, _gravity_info(est, ctx.prior.gravity_error_std), est.to_dict(),
                         unseen=_gravity_unseen(est))
+
+
+def gravity_alone(ctx: Context, t_ns: np.ndarray, gyro: np.ndarray, acc: np.ndarray) -> BiasEstimate:
+    """Gravity consistency's estimate as it is (before :func:`still_checked`)."""
+    return _gravity_estimate(ctx, gravity_bias(t_ns, gyro, acc))
 
 
 def _gravity(ctx: Context, t_ns: np.ndarray, gyro: np.ndarray, acc: np.ndarray) -> BiasEstimate:
@@ -242,15 +246,12 @@ def _still_gravity(ctx: Context, t_ns: np.ndarray, gyro: np.ndarray, acc: np.nda
                             missing="the still estimate kept out by the gate")
         elif not ok:
             grav = replace(grav, gyro_bias=None)
-    check = None
-    if still.gyro_bias is not None and grav.gyro_bias is not None:  # the two parts must agree (still_checked)
-        part = still_checked(BiasEstimate("gravity", grav.gyro_bias, _gravity_info(grav, ctx.prior.gravity_error_std),
-                                          {}), still)
-        check = part.detail.get("still_check")
-        if part.gyro_bias is None:
-            grav = replace(grav, gyro_bias=None)
+    part = still_checked(_gravity_estimate(ctx, grav), still)  # the two parts must agree
+    check = part.detail.get("still_check")
+    if part.gyro_bias is None:
+        grav = replace(grav, gyro_bias=None)
     b = still_along_gravity(still.gyro_bias, grav)
-    g_info = _gravity_info(grav, ctx.prior.gravity_error_std)
+    g_info = part.information
     unseen = np.zeros((3, 3))
     if still.gyro_bias is None:
         info, unseen = g_info, _gravity_unseen(grav)
