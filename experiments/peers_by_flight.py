@@ -8,8 +8,9 @@ corrected 20 Hz ASL state, as the config says) and TUM-VI rooms 2 and 4 of confi
   (AirIMU's ``AOE``). EuRoC: per gap-free segment of the config (max_gap_s), pooled; TUM-VI:
   Brossard's protocol (the whole room integrated through motion-capture gaps of up to 3 s, counted
   where motion capture measured: score.peers.masked_aoe, as experiments/bridged_aoe.py);
-* inputs: ``raw``; ``floor``: the device profile of ``imu-learn calibrate --config CONFIG`` (its
-  training split only: traditional+timing, fitted once and cached under OUT/profiles); ``floor +
+* inputs: ``raw``; ``floor``: the shipped device profile (models/profiles/<device>: ``imu-learn calibrate
+  --config CONFIG --select``, its training split only, the terms chosen on its recordings held out in
+  turn; ``--refit`` fits it again under OUT/profiles); ``floor +
   still``: that floor and the recording's own gyro bias from its still stretches, with no ground
   truth (what ``imu-learn refine --profile P --bias still`` writes: the same library steps, run on
   the whole IMU file); ``floor + still + offset``: the still estimate plus the mean, over the
@@ -34,8 +35,8 @@ corrected 20 Hz ASL state, as the config says) and TUM-VI rooms 2 and 4 of confi
 
 Prints one markdown table per dataset and writes OUT/results.json. Writes: docs/experiments/learning.md,
 "Flight by flight against the peers". Data: the EuRoC and TUM-VI recordings of the two configs under
-the data root. About 6 min on one shared core with the profiles cached (EuRoC 3, TUM-VI 3); fitting them
-the first time adds about 20 s (EuRoC) and 3-12 min (TUM-VI, by the machine's load).
+the data root. About 6 min on one shared core (EuRoC 3, TUM-VI 3); ``--refit`` adds about 30 s (EuRoC)
+and 80 s (TUM-VI).
 """
 from __future__ import annotations
 
@@ -85,8 +86,10 @@ PEERS = {
               "Brossard (RMSE)": {"dataset-room2_512_16": 1.31, "dataset-room4_512_16": 1.48}},
 }
 DATASETS = {
-    "euroc": {"config": "configs/euroc_paper.toml", "model": "models/euroc_adis16448_openloop.pt"},
-    "tumvi": {"config": "configs/tumvi.toml", "model": "models/tumvi_bmi160.pt"},
+    "euroc": {"config": "configs/euroc_paper.toml", "model": "models/euroc_adis16448_openloop.pt",
+              "profile": "models/profiles/euroc_adis16448/profile.json"},
+    "tumvi": {"config": "configs/tumvi.toml", "model": "models/tumvi_bmi160.pt",
+              "profile": "models/profiles/tumvi_bmi160/profile.json"},
 }
 INPUTS = ("raw", "floor", "floor + still", "floor + still + offset", "floor + gravity", "floor + still∥g + gravity⊥g",
           "model", "oracle bias", "oracle 10 s", "oracle affine")
@@ -96,14 +99,15 @@ OURS = ("raw", "floor", "floor + still", "floor + still + offset", "floor + grav
 
 # -- the floor ---------------------------------------------------------------------------------------
 
-def ensure_profile(config: str, out: Path, data_root: Path, refit: bool) -> Path:
-    """``imu-learn calibrate --config CONFIG`` (its training split only), cached in ``out``."""
+def ensure_profile(spec: dict, out: Path, data_root: Path, refit: bool) -> Path:
+    """The shipped profile (``imu-learn calibrate --config CONFIG --select``, its training split only, and
+    its bias prior); with ``refit``, that command run again into ``out`` (no bias prior)."""
+    if not refit:
+        return REPO / spec["profile"]
     path = out / "profile.json"
-    if path.exists() and not refit:
-        return path
     exe = Path(sys.executable).with_name("imu-learn")
-    cmd = [str(exe), "calibrate", "--config", str(REPO / config), "--data-root", str(data_root), "--out", str(out),
-           "--no-plot"]
+    cmd = [str(exe), "calibrate", "--config", str(REPO / spec["config"]), "--data-root", str(data_root),
+           "--out", str(out), "--select", "--no-plot"]
     print(f"fitting the floor: {' '.join(cmd)}", file=sys.stderr)
     subprocess.run(cmd, check=True, stdout=subprocess.DEVNULL)
     return path
@@ -405,14 +409,14 @@ def main() -> None:
     ap.add_argument("--data-root", type=Path, default=Path(os.environ.get("IMU_LEARN_DATA", REPO.parent / "shared" / "data")))
     ap.add_argument("--out", type=Path, default=REPO / "reports" / "peers_by_flight")
     ap.add_argument("--datasets", default="euroc,tumvi", help="comma-separated: euroc, tumvi")
-    ap.add_argument("--refit", action="store_true", help="refit the cached profiles")
+    ap.add_argument("--refit", action="store_true", help="refit the profiles (calibrate --select) instead of using the shipped ones")
     a = ap.parse_args()
     t0 = time.time()
     result: Dict[str, Any] = {"date_utc": time.strftime("%Y-%m-%d %H:%M", time.gmtime()), "data_root": str(a.data_root),
                               "peers": PEERS, "datasets": {}}
     for ds in [d for d in a.datasets.split(",") if d]:
         spec = DATASETS[ds]
-        prof_path = ensure_profile(spec["config"], a.out / "profiles" / ds, a.data_root, a.refit)
+        prof_path = ensure_profile(spec, a.out / "profiles" / ds, a.data_root, a.refit)
         profile = Profile.load(prof_path)
         data, train, recs = euroc_recordings(a.data_root) if ds == "euroc" else tumvi_recordings(a.data_root)
         off = still_offset(train, profile, data.gravity)

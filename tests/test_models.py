@@ -20,6 +20,7 @@ import torch
 from imu_learn import _imu_core as core
 from imu_learn import load_recording
 from imu_learn.calib.profile import Profile
+from imu_learn.calib.select import choose, free_indices
 from imu_learn.cli import fit as fit_cli
 from imu_learn.cli.checkpoint import main as checkpoint_main
 from imu_learn.cli.refine import main as refine_main
@@ -396,6 +397,49 @@ def test_every_device_ships_a_profile_with_a_floor():
         prof = Profile.load(MODELS / folder / "profile.json")
         assert prof.has_floor, folder
         assert (MODELS / folder / "imu.yaml").is_file(), folder
+
+
+def chosen_level(sensor: str, selection: dict) -> str:
+    """The level the selection rule picks from the held-out figures the profile records (re-derived)."""
+    levels = tuple(selection["levels"][sensor])
+    cells = tuple(selection["cells"][sensor])
+    return choose(levels, selection["held_out_figures"][sensor], cells)[0]
+
+
+def test_every_shipped_profile_holds_the_levels_chosen_on_recordings_it_was_not_fitted_on():
+    """Each shipped profile was fitted by `calibrate --select`: its recorded held-out figures give the
+    levels it records by the rule, and its floor frees no parameter beyond them (the rest at their
+    prior: identity, zero, no low-pass). A full floor, or a level edited by hand, fails."""
+    profiles, _ = what_ships()
+    for folder in profiles:
+        raw = json.loads((MODELS / folder / "profile.json").read_text())
+        assert "selection" in raw, f"{folder}: not fitted with --select"
+        sel, floor = raw["selection"], raw["floor"]
+        for sensor, key_m, key_b in (("gyro", "M_g", "b_g"), ("acc", "M_a", "b_a")):
+            level = sel[sensor]
+            assert chosen_level(sensor, sel) == level, f"{folder}: {sensor} level {level} is not the rule's"
+            theta = np.concatenate([(np.asarray(floor[key_m]) - np.eye(3)).ravel(), np.asarray(floor[key_b])])
+            if sensor == "gyro":
+                theta = np.concatenate([theta, np.asarray(floor["G"]).ravel()])
+            fixed = np.setdiff1d(np.arange(theta.size), free_indices(sensor, level))
+            assert np.all(theta[fixed] == 0.0), f"{folder}: {sensor} fits beyond its level {level}"
+            cutoff = floor["cutoff_gyro" if sensor == "gyro" else "cutoff_acc"]
+            assert level == "lowpass" or cutoff is None, f"{folder}: {sensor} low-pass {cutoff} at level {level}"
+
+
+def test_the_selection_check_fails_a_full_floor_and_an_edited_level():
+    """The check above on what it exists to catch: the previous full-floor EuRoC profile's parameters
+    under the shipped selection, and a level changed by hand."""
+    raw = json.loads((MODELS / "profiles" / "euroc_adis16448" / "profile.json").read_text())
+    sel = raw["selection"]
+    assert chosen_level("gyro", sel) == sel["gyro"] == "bias"
+    edited = {**sel, "held_out_figures": {**sel["held_out_figures"], "gyro": {
+        lvl: ({f: {c: v * 0.9 for c, v in row.items()} for f, row in figs.items()} if lvl == "scale" else figs)
+        for lvl, figs in sel["held_out_figures"]["gyro"].items()}}}
+    assert chosen_level("gyro", edited) == "scale"  # a scale 10 % better everywhere would have been chosen
+    theta_scaled = np.zeros(21)
+    theta_scaled[0] = 1e-3  # M_g[0, 0] - 1: a scale, beyond "bias"
+    assert np.any(theta_scaled[np.setdiff1d(np.arange(21), free_indices("gyro", "bias"))] != 0.0)
 
 
 def test_a_learned_model_ships_only_with_leave_one_recording_out_beating_its_floor():

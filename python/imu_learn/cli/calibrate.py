@@ -146,7 +146,8 @@ class ConfigSource(Source):
             settings = FitSettings(window=data.window, seed=run.seed, gravity=data.gravity)
         split = make_split(data)
         root = data_root_dir(data)
-        sources = [{**row, "path": under_root(row.get("path"), root), "role": role}
+        sources = [{**row, **{k: under_root(row.get(k), root) for k in ("path", "groundtruth", "groundtruth_path")},
+                    "role": role}
                    for role in ("train", "val") for row in split.record[role]]
         device = self.device or device_name(data.roots[0].format if data.roots else "auto", split.train[0].name)
         recordings = (blocks(split.train, [recording_name(s.name) for s in split.train], TRAIN)
