@@ -10,7 +10,8 @@ import math
 import numpy as np
 import pytest
 
-from imu_learn.calib.acc_positions import AccOptions, fit_acc_from_positions, recording_spread
+from imu_learn.calib.acc_positions import AccOptions, fit_acc_from_positions, heldout_rms, recording_spread
+from imu_learn.calib.select import free_indices, select_acc_from_positions
 from imu_learn.core.quat import quat_log, quat_mul, quat_rotate
 from imu_learn.data.loading import AlignOptions, align
 from imu_learn.data.types import GroundTruth, ImuData
@@ -36,7 +37,8 @@ def euler_quat(e: np.ndarray) -> np.ndarray:
     return quat_mul(qz, quat_mul(qy, qx))
 
 
-def device(seed: int, seconds: float = 240.0, pos_noise: float = 0.003, att_noise_deg: float = 0.1, tilt=(0.0, 0.0)):
+def device(seed: int, seconds: float = 240.0, pos_noise: float = 0.003, att_noise_deg: float = 0.1, tilt=(0.0, 0.0),
+           m_true: np.ndarray = M_TRUE):
     """(IMU, 20 Hz reference) of a drone-like flight: sums of sines in position (analytic acceleration),
     roll and pitch within ±17°, heading sweeping ±120°; the reference world tilted by ``tilt``
     (horizontal gravity [m/s²], as a levelling error leaves it)."""
@@ -53,7 +55,7 @@ def device(seed: int, seconds: float = 240.0, pos_noise: float = 0.003, att_nois
     q = euler_quat(e)
     g = np.array([tilt[0], tilt[1], -G])
     f_true = quat_rotate(np.c_[q[:, :1], -q[:, 1:]], a - g)  # R^T (a - g)
-    acc = np.linalg.solve(M_TRUE, f_true.T).T + B_TRUE + 0.01 * rng.standard_normal(f_true.shape)
+    acc = np.linalg.solve(m_true, f_true.T).T + B_TRUE + 0.01 * rng.standard_normal(f_true.shape)
     t_ns = (1e9 + t * 1e9).astype(np.int64)
     gyro = np.zeros_like(acc)  # the rates whose zero-order hold reproduces the attitude at every sample
     gyro[:-1] = quat_log(quat_mul(np.c_[q[:-1, :1], -q[:-1, 1:]], q[1:])) / 0.005
@@ -129,3 +131,31 @@ def test_too_short_a_reference_is_refused():
     segs, _ = device(8, seconds=1.5)
     with pytest.raises(ValueError, match="baseline"):
         fit_acc_from_positions([segs], AccOptions(baseline_s=1.0))
+
+
+@pytest.mark.parametrize("matrix, level", [(np.eye(3), "bias"), (M_TRUE, "affine")])
+def test_the_level_chosen_on_held_out_recordings_is_the_devices(matrix, level):
+    """Three recordings of one device, each held out in turn (calib.select.select_acc_from_positions):
+    a device with a bias alone gets `bias` (no matrix fitted to the reference's noise), one with a
+    scale and a misalignment gets `affine`; the chosen level's held-out residual is never above a
+    simpler level's by more than the rule's 0.5 %."""
+    recs = [device(s, seconds=90.0, m_true=matrix)[0] for s in (11, 12, 13)]
+    gyros = [[s.gyro for s in segs] for segs in recs]
+    chosen, table, steps = select_acc_from_positions(["a", "b", "c"], recs, gyros, AccOptions(), 0.5, G)
+    assert chosen == level, steps
+    levels = list(table)
+    for simpler in levels[: levels.index(chosen)]:
+        for rec, cells in table[chosen].items():
+            for cell, v in cells.items():
+                assert v <= 1.005 * table[simpler][rec][cell], (simpler, rec, cell)
+
+
+def test_a_level_holds_the_terms_it_does_not_fit_at_their_prior():
+    """`free`: at `bias` the matrix is the identity exactly and the bias is the device's; scored on a
+    recording it was not fitted on, the full fit of a scaled device beats the bias alone."""
+    segs = device(3, seconds=120.0)[0]
+    fit_b = fit_acc_from_positions([segs], AccOptions(), 0.5, free=free_indices("acc", "bias"))
+    assert np.array_equal(fit_b.M_a, np.eye(3))
+    fit_a = fit_acc_from_positions([segs], AccOptions(), 0.5)
+    other = device(4, seconds=120.0)[0]
+    assert np.all(heldout_rms(fit_a, other, 0.5) < heldout_rms(fit_b, other, 0.5))

@@ -111,6 +111,35 @@ def test_a_20_hz_reference_fits_the_accelerometer_from_its_positions(tmp_path, o
     assert np.all(np.abs(np.asarray(a["bias"])) < 0.3)
 
 
+def test_select_chooses_the_accelerometers_level_on_the_positions_of_each_recording_held_out(tmp_path):
+    """`--select` with a 20 Hz reference on two crops: the accelerometer's level is chosen on the
+    positions (each crop held out in turn, its residual per world axis recorded), the floor's matrix and
+    bias are the positions' fit at that level (nothing outside it fitted), and the profile's reference
+    entry is that fit."""
+    from crops import CROP
+    from imu_learn.calib.select import POSITION_ACC_LEVELS, free_indices
+
+    args = []
+    for name in (EASY, CROP):
+        _, gt = read_recording(SHIPPED / name)
+        rows = np.column_stack([gt.t_ns * 1e-9, gt.p, wxyz_to_xyzw(gt.q_wxyz)])[::10]
+        ref = tmp_path / f"{Path(name).name}.tum"
+        np.savetxt(ref, rows, fmt="%.9f")
+        args += ["--input", str(SHIPPED / name), "--groundtruth", str(ref)]
+    out = tmp_path / "out"
+    assert main(["calibrate", *args, "--out", str(out), "--no-plot", "--quiet", "--select"]) == 0
+    p = json.loads((out / "profile.json").read_text())
+    sel = p["selection"]
+    assert sel["acc"] in POSITION_ACC_LEVELS and sel["levels"]["acc"] == list(POSITION_ACC_LEVELS)
+    figs = sel["held_out_figures"]["acc"]
+    assert set(figs) == set(POSITION_ACC_LEVELS) and all(len(figs[lv]) == 2 for lv in figs)
+    m_a, fit = np.asarray(p["floor"]["M_a"]), p["reference"]["accelerometer_from_positions"]
+    theta = np.r_[(m_a - np.eye(3)).ravel(), p["floor"]["b_a"]]
+    fixed = np.setdiff1d(np.arange(12), free_indices("acc", sel["acc"]))
+    assert np.all(theta[fixed] == 0.0)
+    assert np.allclose(fit["M_a"], m_a) and np.allclose(fit["b_a"], p["floor"]["b_a"])
+
+
 def test_another_recordings_reference_is_refused_before_any_fit(tmp_path, capsys):
     other = SHIPPED / "euroc/MH_04_difficult/mav0/state_groundtruth_estimate0/data.csv"
     _, gt = read_recording(SHIPPED / "euroc/MH_04_difficult", groundtruth=other)

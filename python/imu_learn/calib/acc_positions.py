@@ -220,11 +220,14 @@ def _sandwich(a: np.ndarray, res: np.ndarray, w: np.ndarray, clusters: np.ndarra
 
 def fit_acc_from_positions(recordings: Sequence[Sequence[Segment]], options: AccOptions = AccOptions(),
                            tau_samples: float = 0.0, gravity: float = 9.81,
-                           gyros: Optional[Sequence[Sequence[np.ndarray]]] = None) -> AccFit:
+                           gyros: Optional[Sequence[Sequence[np.ndarray]]] = None,
+                           free: Optional[Sequence[int]] = None) -> AccFit:
     """The accelerometer's (M_a, b_a) and the reference origin from ``recordings`` (each a list of
     segments: the reference in the IMU frame on the IMU stamps, the world levelled; module doc);
     ``gyros``: each segment's calibrated rates (the attitude then the gyro's, :func:`gyro_attitude`),
-    or None (the reference's attitude)."""
+    or None (the reference's attitude); ``free``: the affine parameters fitted, as indices into
+    (M_a − I row-major, b_a) (:func:`imu_learn.calib.select.free_indices`), the others held at their
+    prior (identity, zero); None: all twelve."""
     blocks: List[Tuple[np.ndarray, np.ndarray, np.ndarray]] = []
     cluster_id: List[np.ndarray] = []
     next_cluster = 0
@@ -253,7 +256,11 @@ def fit_acc_from_positions(recordings: Sequence[Sequence[Segment]], options: Acc
             a[sel, :, 15 + 2 * r:17 + 2 * r] = ab[rec == r][:, :, 15:17]
         y[j:j + m] = yb
         j += m
-    keep = list(range(N_AFFINE))
+    free_set = set(range(N_AFFINE)) if free is None else {int(i) for i in free}
+    x_prior = np.r_[np.eye(3).ravel(), np.zeros(3)]  # (vec M_a, c) at the prior
+    fixed = [i for i in range(N_AFFINE) if i not in free_set]
+    y = y - np.einsum("rij,j->ri", a[:, :, fixed], x_prior[fixed])
+    keep = sorted(free_set)
     if options.fit_lever:
         keep += list(range(N_AFFINE, N_AFFINE + N_LEVER))
     if options.fit_tilt:
@@ -263,7 +270,9 @@ def fit_acc_from_positions(recordings: Sequence[Sequence[Segment]], options: Acc
     res = y - np.einsum("rij,j->ri", sub, x_sub)
     cov_sub = _sandwich(sub, res, w, np.concatenate(cluster_id))
     x = np.zeros(n_x)
+    x[fixed] = x_prior[fixed]
     x[keep] = x_sub
+    y = y + np.einsum("rij,j->ri", a[:, :, fixed], x_prior[fixed])  # the rows as given, for M_a = I below
     cov = np.zeros((n_x, n_x))
     cov[np.ix_(keep, keep)] = cov_sub
     m_a = x[:9].reshape(3, 3)
@@ -291,6 +300,26 @@ def fit_acc_from_positions(recordings: Sequence[Sequence[Segment]], options: Acc
                   attitude="the reference's" if gyros is None else "the calibrated gyro's, held to the reference's",
                   extra={"tilt_std_mps2": sd[15:].reshape(k, 2).tolist(),
                          "down_weighted_rows": int(np.sum(w < 1.0))})
+
+
+def heldout_rms(fit: AccFit, segments: Sequence[Segment], tau_samples: float = 0.0, gravity: float = 9.81,
+                gyros: Optional[Sequence[np.ndarray]] = None) -> np.ndarray:
+    """Per world axis, the RMS residual [m/s] of ``fit`` (its M_a, c and reference origin, as fitted
+    elsewhere) on a recording it was not fitted on: that recording's world tilt, a property of its
+    reference and not of the IMU, fitted alone (least squares); NaN per axis without a row."""
+    blocks = [segment_rows(s, fit.options, tau_samples, gravity, None if gyros is None else gyros[j])
+              for j, s in enumerate(segments)]
+    blocks = [(a, y) for a, y, _t in blocks if len(y)]
+    if not blocks:
+        return np.full(3, math.nan)
+    a = np.concatenate([b[0] for b in blocks])
+    y = np.concatenate([b[1] for b in blocks])
+    x = np.r_[fit.M_a.ravel(), fit.M_a @ fit.b_a, fit.lever_m]
+    res = y - np.einsum("rij,j->ri", a[:, :, :15], x)
+    if fit.options.fit_tilt:
+        tilt, *_ = np.linalg.lstsq(a[:, :, 15:17].reshape(-1, 2), res.reshape(-1), rcond=None)
+        res = res - np.einsum("rij,j->ri", a[:, :, 15:17], tilt)
+    return np.sqrt(np.mean(res**2, axis=0))
 
 
 def _rms(res: np.ndarray) -> float:

@@ -48,7 +48,10 @@ one), on the rotation cells only (rotation at every horizon and the open-loop AO
 reference's attitude: its positions over 10-200 IMU samples are its interpolation's), fitted and scored
 on the IMU seen through the reference's interpolation as its floor is
 (:meth:`~imu_learn.calib.sources.PosesSource.match_kernel`), the accelerometer at ``bias`` in every
-fold. The accelerometer is not selected: the profile keeps the source's (from the positions).
+fold. The accelerometer's level (:data:`POSITION_ACC_LEVELS`: no low-pass) is then chosen on the
+source's fit from the positions (:func:`select_acc_from_positions`: each recording held out in turn,
+its second-difference residual per world axis the cells) and refitted on all recordings at it; with
+one recording the source's twelve terms stay.
 
 No selection (the entry says why, the full floor kept): a positions or odometry reference (their
 sources fix the terms they observe), and recordings too short to hold any out. A reference whose stamps were
@@ -77,6 +80,7 @@ from imu_learn.baselines.traditional import (
     _solve,
     _VelResiduals,
 )
+from imu_learn.calib.acc_positions import AccOptions, fit_acc_from_positions, heldout_rms
 from imu_learn.calib.fit import group_segments, seed_all, time_blocks
 from imu_learn.calib.profile import FloorFit
 from imu_learn.calib.sources import matched
@@ -292,6 +296,10 @@ def score(floor: Floor, held: Sequence[Segment], horizons: Sequence[int], opts: 
 CELLS = {"gyro": ("rot_deg", "trans_m", "aoe_deg"), "acc": ("trans_m", "open_trans_m")}
 GYRO_ONLY_LEVELS = GYRO_LEVELS[:-1]  # a reference that cannot resolve accelerations: no low-pass level
 GYRO_ONLY_CELLS = ("rot_deg", "aoe_deg")  # its positions over 10-200 IMU samples are its interpolation's
+# its accelerometer from the positions (calib.acc_positions): no low-pass level (not observed), one cell
+# per world axis, the held-out recording's second-difference residual (its world tilt fitted alone)
+POSITION_ACC_LEVELS = ACC_LEVELS[:-1]
+POSITION_ACC_CELLS = ("positions_rms_mps",)
 
 Table = Dict[str, Dict[str, Dict[str, float]]]  # level -> fold -> cell -> error
 
@@ -408,7 +416,7 @@ def _select_gyro_only(fs: List[Fold], kind: str, horizons: Tuple[int, ...], sett
     if not any(math.isfinite(v) for row in gyro_t["offset"].values() for v in row.values()):
         raise ValueError(f"no held-out segment is longer than the start-up bias span and {min(horizons)} samples")
     g_level, g_steps = choose(levels, gyro_t, GYRO_ONLY_CELLS)
-    progress(f"selection: gyroscope {g_level} (the accelerometer not selected: the reference cannot resolve it)")
+    progress(f"selection: gyroscope {g_level}; the accelerometer from the reference's positions next")
     fold_info = [{"held_out": p.fold.name, "time_offset_samples": p.tau, "cutoff_gyro": None,
                   "train_segments": len(p.fold.train), "held_out_samples": int(sum(len(s) for s in p.fold.held))}
                  for p in preps]
@@ -482,7 +490,7 @@ def select_floor(inp: Any, fit: FloorFit, progress: Progress = lambda s: None,
         return fit, {"skipped": f"no selection: {e}"}
     entry = sel.to_dict()
     if only:
-        return _gyro_only_floor(data, fit, sel, entry, tau, opts, progress)
+        return _gyro_only_floor(inp, data, fit, sel, entry, tau, opts, progress)
     levels = (sel.gyro, sel.acc)
     if levels == full_levels(fit.floor):
         entry["floor"] = "the full floor's fit: the chosen levels are all it has"
@@ -494,19 +502,70 @@ def select_floor(inp: Any, fit: FloorFit, progress: Progress = lambda s: None,
     return replace(fit, floor=floor, std=masked_std(fit.std, levels)), entry
 
 
-def _gyro_only_floor(data: Any, fit: FloorFit, sel: Selection, entry: Dict[str, Any], tau: float,
+def _gyro_only_floor(inp: Any, data: Any, fit: FloorFit, sel: Selection, entry: Dict[str, Any], tau: float,
                      opts: SelectOptions, progress: Progress) -> Tuple[FloorFit, Dict[str, Any]]:
-    """The floor at the chosen gyroscope level on all the training recordings, the accelerometer (matrix,
-    bias, no low-pass) the source's fit's."""
+    """The floor at the chosen gyroscope level on all the training recordings; the accelerometer (matrix,
+    bias, no low-pass) the source's fit's, at the level its positions choose (:func:`select_acc_from_positions`)."""
     if sel.gyro == GYRO_ONLY_LEVELS[-1]:
         entry["floor"] = "the full floor's fit: the chosen gyroscope level is all it has"
-        return fit, entry
-    progress(f"the floor at gyroscope {sel.gyro} on all the training recordings")
-    floor = fit_at_levels(data.train, data.val, data.settings, (sel.gyro, "bias"), tau, opts)
-    p = fit.floor.params
-    floor = floor.with_params(M_a=p.M_a.copy(), b_a=p.b_a.copy(), cutoff_acc=p.cutoff_acc, cutoff_gyro=None)
-    entry["floor"] = ("gyroscope refitted at the chosen level on all the training recordings (the time offset the "
-                      "full fit's); the accelerometer the source's fit's; standard deviations: the full floor's "
-                      "spread, null for the gyroscope's terms the level holds at its prior")
-    g = masked_std(fit.std, (sel.gyro, "affine"))
-    return replace(fit, floor=floor, std=replace(fit.std, M_g=g.M_g, b_g=g.b_g, G=g.G)), entry
+    else:
+        progress(f"the floor at gyroscope {sel.gyro} on all the training recordings")
+        floor = fit_at_levels(data.train, data.val, data.settings, (sel.gyro, "bias"), tau, opts)
+        p = fit.floor.params
+        floor = floor.with_params(M_a=p.M_a.copy(), b_a=p.b_a.copy(), cutoff_acc=p.cutoff_acc, cutoff_gyro=None)
+        entry["floor"] = ("gyroscope refitted at the chosen level on all the training recordings (the time offset the "
+                          "full fit's); the accelerometer the source's fit's; standard deviations: the full floor's "
+                          "spread, null for the gyroscope's terms the level holds at its prior")
+        g = masked_std(fit.std, (sel.gyro, "affine"))
+        fit = replace(fit, floor=floor, std=replace(fit.std, M_g=g.M_g, b_g=g.b_g, G=g.G))
+    return _positions_acc_level(inp, fit, entry, progress), entry
+
+
+def select_acc_from_positions(names: Sequence[str], recs: Sequence[Sequence[Segment]],
+                              gyros: Sequence[Sequence[np.ndarray]], options: AccOptions, tau: float, gravity: float
+                              ) -> Tuple[str, Table, List[Dict[str, Any]]]:
+    """The accelerometer's level from a reference's positions: each recording held out in turn, every
+    level of :data:`POSITION_ACC_LEVELS` fitted on the others (:func:`fit_acc_from_positions`) and scored by
+    its second-difference residual on the held-out one, per world axis (:func:`heldout_rms`); the
+    rule of :func:`choose`."""
+    table: Table = {lv: {} for lv in POSITION_ACC_LEVELS}
+    for r, name in enumerate(names):
+        rest = [x for i, x in enumerate(recs) if i != r]
+        rest_g = [x for i, x in enumerate(gyros) if i != r]
+        for lv in POSITION_ACC_LEVELS:
+            acc = fit_acc_from_positions(rest, options, tau, gravity, rest_g, free_indices("acc", lv))
+            rms = heldout_rms(acc, recs[r], tau, gravity, gyros[r])
+            table[lv][name] = {f"{POSITION_ACC_CELLS[0]} {ax}": float(v) for ax, v in zip("xyz", rms)}
+    level, steps = choose(POSITION_ACC_LEVELS, table, POSITION_ACC_CELLS)
+    return level, table, steps
+
+
+def _positions_acc_level(inp: Any, fit: FloorFit, entry: Dict[str, Any], progress: Progress) -> FloorFit:
+    """``fit`` with the accelerometer the source fitted from the positions (all twelve terms) refitted at
+    the level :func:`select_acc_from_positions` chooses; as it is with fewer than two recordings or no
+    positions' fit (the entry's ``acc`` says why)."""
+    source = inp.source
+    acc_full = getattr(source, "acc_fit", None)
+    names, recs, gyros = source.positions_data(inp, fit.floor) if acc_full is not None else ([], [], [])
+    if acc_full is None or len(recs) < 2:
+        entry["acc"] = "not selected: " + ("the accelerometer is not fitted from the reference's positions"
+                                           if acc_full is None else "one recording (none to hold out)")
+        return fit
+    progress("selection: the accelerometer's levels from the reference's positions (each recording held out)")
+    tau, gravity = float(fit.floor.params.time_offset), inp.settings.gravity
+    try:
+        level, table, steps = select_acc_from_positions(names, recs, gyros, acc_full.options, tau, gravity)
+        acc = fit_acc_from_positions(recs, acc_full.options, tau, gravity, gyros, free_indices("acc", level))
+    except ValueError as e:
+        entry["acc"] = f"not selected: {e}"
+        return fit
+    progress(f"selection: accelerometer {level} (from the positions)")
+    entry["acc"] = level
+    entry["levels"] = {**entry.get("levels", {}), "acc": list(POSITION_ACC_LEVELS)}
+    entry["cells"] = {**entry.get("cells", {}), "acc": list(POSITION_ACC_CELLS)}
+    entry["held_out_figures"] = {**entry.get("held_out_figures", {}), "acc": table}
+    entry["steps"] = {**entry.get("steps", {}), "acc": steps}
+    source.acc_fit = acc
+    a = masked_std(fit.std, ("affine", level))
+    return replace(fit, floor=fit.floor.with_params(M_a=acc.M_a.copy(), b_a=acc.b_a.copy()),
+                   std=replace(fit.std, M_a=a.M_a, b_a=a.b_a))

@@ -381,12 +381,7 @@ class PosesSource(Source):
         :data:`ACC_MAX_SCALE_STD`. The standard deviations, as the floor's: the spread of the fit on each
         recording alone over sqrt(recordings); the cluster-robust ones of the joint fit in the reference
         entry."""
-        per: Dict[str, List[Segment]] = {}
-        rates: Dict[str, List[np.ndarray]] = {}  # the floor's calibrated gyro: the attitude within a baseline
-        for s, g in zip(inp.train, inp.groups):
-            per.setdefault(g, []).append(s)
-            rates.setdefault(g, []).append(fit.floor.apply(s.t_ns, s.gyro, s.acc)[0])
-        recs, gyros = list(per.values()), list(rates.values())
+        _names, recs, gyros = self.positions_data(inp, fit.floor)
         tau = float(fit.floor.params.time_offset)
         opts = self.acc_options
         assert opts is not None
@@ -413,6 +408,17 @@ class PosesSource(Source):
                  + " (± " + ", ".join(f"{x:.4f}" for x in np.diag(acc.M_a_std)) + "), reference origin ("
                  + ", ".join(f"{100 * x:+.1f}" for x in acc.lever_m) + ") cm in the IMU frame")
         return fit
+
+    @staticmethod
+    def positions_data(inp: CalibInputs, floor: Any) -> Tuple[List[str], List[List[Segment]], List[List[np.ndarray]]]:
+        """The training segments per recording (their names, segments, and the gyro ``floor`` calibrates:
+        the attitude within a baseline), as :func:`fit_acc_from_positions` takes them."""
+        per: Dict[str, List[Segment]] = {}
+        rates: Dict[str, List[np.ndarray]] = {}
+        for s, g in zip(inp.train, inp.groups):
+            per.setdefault(g, []).append(s)
+            rates.setdefault(g, []).append(floor.apply(s.t_ns, s.gyro, s.acc)[0])
+        return list(per), list(per.values()), list(rates.values())
 
     def reference(self) -> Dict[str, Any]:
         out = self.frame.to_dict() if self.frame is not None else {}
