@@ -97,6 +97,40 @@ def test_the_window_stays_bounded_as_the_recording_grows():
     assert whole_sizes[-1] == 3 * len(whole.kf_idx) and whole_sizes[0] < whole_sizes[1] < whole_sizes[2]
 
 
+def relative_chain(p, R, at_s, gap, rate=200):
+    """Consecutive relative poses at ``at_s`` [s] (exact), none over ``gap`` = (start_s, length_s) and
+    none chained across it (as a relative aiding's break leaves them)."""
+    idx = np.round(np.asarray(at_s) * rate).astype(np.int64)
+    pairs = [(a, b) for a, b in zip(idx[:-1], idx[1:])
+             if not (a <= gap[0] * rate < b or gap[0] * rate <= a < (gap[0] + gap[1]) * rate)]
+    i, j = np.array([a for a, _ in pairs]), np.array([b for _, b in pairs])
+    R_ij = np.einsum("nji,njk->nik", R[i], R[j])
+    t_ij = np.einsum("nji,nj->ni", R[i], p[j] - p[i])
+    return RelativePoses(i, j, R_ij, t_ij, 1e-3, 1e-3, "relative")
+
+
+@pytest.mark.parametrize("lag_s", [np.inf, DEFAULT_LAG_S])
+def test_a_coast_that_relative_aiding_ends_is_not_re_solved(lag_s):
+    """Relative poses after a break tie nothing to the states before it: the coast's end is moved by no
+    measurement, so the batch re-solve (for a fix far from the prediction) does not run (on EuRoC MH_04
+    with its ORB-SLAM2 poses and two 10 s gaps, that re-solve of the fixed-lag window moved the causal track
+    4 m and 10 degrees; without it the causal RMSE is 0.235 m against 4.5). A fix after the coast, or a
+    relative pose from before it, is still re-solved."""
+    t, gyro, acc, p, R, fixes = noisy_climb(20.0)
+    at = np.arange(0.0, 20.0 + 1e-9, 0.1)
+    rel = relative_chain(p, R, at, (8.0, 6.0))
+    res = run(t, gyro, acc, R, fixes, lag_s, aiding=[rel])
+    assert res.counts["relative_pose_factors"] == len(rel.i) and res.counts["resolves_after_coast"] == 0
+    assert np.all(np.isfinite(res.causal_p))
+    fix_after = PositionFixes(np.array([int(14.0 * 200)]), p[[int(14.0 * 200)]], 0.02, np.zeros(3), "one fix")
+    anchored = run(t, gyro, acc, R, fixes, lag_s, aiding=[rel, fix_after])
+    assert anchored.counts["resolves_after_coast"] == 1
+    k0, k1 = int(7.0 * 200), int(14.0 * 200)  # a relative pose from before the coast to its end (a loop)
+    loop = RelativePoses(np.array([k0]), np.array([k1]), (R[k0].T @ R[k1])[None], (R[k0].T @ (p[k1] - p[k0]))[None],
+                         1e-3, 1e-3, "loop")
+    assert run(t, gyro, acc, R, fixes, lag_s, aiding=[rel, loop]).counts["resolves_after_coast"] == 1
+
+
 def test_a_factor_reaching_before_the_window_is_left_to_the_smoothing_pass(monkeypatch):
     monkeypatch.setattr(graph, "SETTLE_S", 0.0)  # no start held: the window is the lag from the start
     t, gyro, acc, p, R, fixes = noisy_climb(10.0)
