@@ -50,7 +50,7 @@ on the IMU seen through the reference's interpolation as its floor is
 (:meth:`~imu_learn.calib.sources.PosesSource.match_kernel`), the accelerometer at ``bias`` in every
 fold. The accelerometer's level (:data:`POSITION_ACC_LEVELS`: no low-pass) is then chosen on the
 source's fit from the positions (:func:`select_acc_from_positions`: each recording held out in turn,
-its second-difference residual per world axis the cells) and refitted on all recordings at it; with
+its second-difference residual the cell) and refitted on all recordings at it; with
 one recording the source's twelve terms stay.
 
 No selection (the entry says why, the full floor kept): a positions or odometry reference (their
@@ -296,8 +296,9 @@ def score(floor: Floor, held: Sequence[Segment], horizons: Sequence[int], opts: 
 CELLS = {"gyro": ("rot_deg", "trans_m", "aoe_deg"), "acc": ("trans_m", "open_trans_m")}
 GYRO_ONLY_LEVELS = GYRO_LEVELS[:-1]  # a reference that cannot resolve accelerations: no low-pass level
 GYRO_ONLY_CELLS = ("rot_deg", "aoe_deg")  # its positions over 10-200 IMU samples are its interpolation's
-# its accelerometer from the positions (calib.acc_positions): no low-pass level (not observed), one cell
-# per world axis, the held-out recording's second-difference residual (its world tilt fitted alone)
+# its accelerometer from the positions (calib.acc_positions): no low-pass level (not observed), one cell,
+# the held-out recording's second-difference residual (RMS of its 3-vector's norm, as the translation
+# cells score a position error; its world tilt fitted alone)
 POSITION_ACC_LEVELS = ACC_LEVELS[:-1]
 POSITION_ACC_CELLS = ("positions_rms_mps",)
 
@@ -526,8 +527,8 @@ def select_acc_from_positions(names: Sequence[str], recs: Sequence[Sequence[Segm
                               ) -> Tuple[str, Table, List[Dict[str, Any]]]:
     """The accelerometer's level from a reference's positions: each recording held out in turn, every
     level of :data:`POSITION_ACC_LEVELS` fitted on the others (:func:`fit_acc_from_positions`) and scored by
-    its second-difference residual on the held-out one, per world axis (:func:`heldout_rms`); the
-    rule of :func:`choose`."""
+    its second-difference residual on the held-out one (:func:`heldout_rms`, the RMS of the residual
+    3-vector's norm); the rule of :func:`choose`."""
     table: Table = {lv: {} for lv in POSITION_ACC_LEVELS}
     for r, name in enumerate(names):
         rest = [x for i, x in enumerate(recs) if i != r]
@@ -535,7 +536,7 @@ def select_acc_from_positions(names: Sequence[str], recs: Sequence[Sequence[Segm
         for lv in POSITION_ACC_LEVELS:
             acc = fit_acc_from_positions(rest, options, tau, gravity, rest_g, free_indices("acc", lv))
             rms = heldout_rms(acc, recs[r], tau, gravity, gyros[r])
-            table[lv][name] = {f"{POSITION_ACC_CELLS[0]} {ax}": float(v) for ax, v in zip("xyz", rms)}
+            table[lv][name] = {POSITION_ACC_CELLS[0]: float(np.sqrt(np.sum(rms**2)))}
     level, steps = choose(POSITION_ACC_LEVELS, table, POSITION_ACC_CELLS)
     return level, table, steps
 
