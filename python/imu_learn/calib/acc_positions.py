@@ -259,20 +259,19 @@ def fit_acc_from_positions(recordings: Sequence[Sequence[Segment]], options: Acc
     free_set = set(range(N_AFFINE)) if free is None else {int(i) for i in free}
     x_prior = np.r_[np.eye(3).ravel(), np.zeros(3)]  # (vec M_a, c) at the prior
     fixed = [i for i in range(N_AFFINE) if i not in free_set]
-    y = y - np.einsum("rij,j->ri", a[:, :, fixed], x_prior[fixed])
+    y_free = y - np.einsum("rij,j->ri", a[:, :, fixed], x_prior[fixed])  # the held terms moved into the rows
     keep = sorted(free_set)
     if options.fit_lever:
         keep += list(range(N_AFFINE, N_AFFINE + N_LEVER))
     if options.fit_tilt:
         keep += list(range(N_AFFINE + N_LEVER, n_x))
     sub = a[:, :, keep]
-    x_sub, w = _huber_lstsq(sub, y, options.huber, options.iterations)
-    res = y - np.einsum("rij,j->ri", sub, x_sub)
+    x_sub, w = _huber_lstsq(sub, y_free, options.huber, options.iterations)
+    res = y_free - np.einsum("rij,j->ri", sub, x_sub)
     cov_sub = _sandwich(sub, res, w, np.concatenate(cluster_id))
     x = np.zeros(n_x)
     x[fixed] = x_prior[fixed]
     x[keep] = x_sub
-    y = y + np.einsum("rij,j->ri", a[:, :, fixed], x_prior[fixed])  # the rows as given, for M_a = I below
     cov = np.zeros((n_x, n_x))
     cov[np.ix_(keep, keep)] = cov_sub
     m_a = x[:9].reshape(3, 3)
@@ -303,15 +302,15 @@ def fit_acc_from_positions(recordings: Sequence[Sequence[Segment]], options: Acc
 
 
 def heldout_rms(fit: AccFit, segments: Sequence[Segment], tau_samples: float = 0.0, gravity: float = 9.81,
-                gyros: Optional[Sequence[np.ndarray]] = None) -> np.ndarray:
-    """Per world axis, the RMS residual [m/s] of ``fit`` (its M_a, c and reference origin, as fitted
-    elsewhere) on a recording it was not fitted on: that recording's world tilt, a property of its
-    reference and not of the IMU, fitted alone (least squares); NaN per axis without a row."""
+                gyros: Optional[Sequence[np.ndarray]] = None) -> float:
+    """The RMS of the residual 3-vector's norm [m/s] of ``fit`` (its M_a, c and reference origin, as
+    fitted elsewhere) on a recording it was not fitted on: that recording's world tilt, a property of its
+    reference and not of the IMU, fitted alone (least squares); NaN without a row."""
     blocks = [segment_rows(s, fit.options, tau_samples, gravity, None if gyros is None else gyros[j])
               for j, s in enumerate(segments)]
     blocks = [(a, y) for a, y, _t in blocks if len(y)]
     if not blocks:
-        return np.full(3, math.nan)
+        return math.nan
     a = np.concatenate([b[0] for b in blocks])
     y = np.concatenate([b[1] for b in blocks])
     x = np.r_[fit.M_a.ravel(), fit.M_a @ fit.b_a, fit.lever_m]
@@ -319,7 +318,7 @@ def heldout_rms(fit: AccFit, segments: Sequence[Segment], tau_samples: float = 0
     if fit.options.fit_tilt:
         tilt, *_ = np.linalg.lstsq(a[:, :, 15:17].reshape(-1, 2), res.reshape(-1), rcond=None)
         res = res - np.einsum("rij,j->ri", a[:, :, 15:17], tilt)
-    return np.sqrt(np.mean(res**2, axis=0))
+    return _rms(res)
 
 
 def _rms(res: np.ndarray) -> float:

@@ -535,8 +535,7 @@ def select_acc_from_positions(names: Sequence[str], recs: Sequence[Sequence[Segm
         rest_g = [x for i, x in enumerate(gyros) if i != r]
         for lv in POSITION_ACC_LEVELS:
             acc = fit_acc_from_positions(rest, options, tau, gravity, rest_g, free_indices("acc", lv))
-            rms = heldout_rms(acc, recs[r], tau, gravity, gyros[r])
-            table[lv][name] = {POSITION_ACC_CELLS[0]: float(np.sqrt(np.sum(rms**2)))}
+            table[lv][name] = {POSITION_ACC_CELLS[0]: heldout_rms(acc, recs[r], tau, gravity, gyros[r])}
     level, steps = choose(POSITION_ACC_LEVELS, table, POSITION_ACC_CELLS)
     return level, table, steps
 
