@@ -16,6 +16,15 @@ The limits (MEMS IMUs; :data:`LIMITS`, each documented in docs/your-device.md):
   rotation error over ``window`` samples against the raw IMU, and does not raise the translation
   error by more than ``HELD_BACK_SLACK`` (the translation of a sparse reference is noisier than the
   accelerometer, so a tie counts as no harm).
+
+**Within the block's noise.** Each held-back finding carries ``z``: the paired difference of the
+windows' squared errors (profile minus raw; their mean is the difference of the two mean squares)
+over its standard error (windows half-overlap: half their count taken as independent). A raise
+above :data:`HELD_BACK_Z` standard errors is harm (the frame, unit, clock or the fit is wrong):
+calibrate stops. One within it (or on fewer than :data:`HELD_BACK_MIN_WINDOWS` windows: it cannot
+tell, and stops too) says the block cannot tell the fitted terms from none: calibrate keeps that
+sensor's terms at their prior (:func:`imu_learn.calib.run.plausibility`), so the profile never
+claims a correction the reference does not support.
 """
 from __future__ import annotations
 
@@ -37,6 +46,8 @@ LIMITS: Dict[str, Any] = {
     "gravity_rel": 0.05,
 }
 HELD_BACK_SLACK = 1.02
+HELD_BACK_Z = 2.0  # a held-back raise beyond this many standard errors of the paired difference: harm
+HELD_BACK_MIN_WINDOWS = 8  # fewer held-back windows: the noise of the difference is not known
 G = 9.81
 
 
@@ -46,6 +57,7 @@ class Finding:
 
     field: str
     message: str
+    within_noise: bool = False  # a held-back raise the block's own noise explains (HELD_BACK_Z)
 
     def line(self) -> str:
         return f"{self.field}: {self.message}"
@@ -106,10 +118,21 @@ def parameter_findings(floor: Any, gravity_mps2: Optional[float]) -> List[Findin
     return out
 
 
+def _paired_z(raw: List[np.ndarray], cal: List[np.ndarray]) -> float:
+    """The mean of the windows' squared-error differences (cal minus raw) over its standard error,
+    half the windows counted as independent (they half-overlap); NaN with too few windows."""
+    d = np.concatenate(cal) ** 2 - np.concatenate(raw) ** 2
+    if len(d) < HELD_BACK_MIN_WINDOWS:
+        return math.nan
+    se = float(np.std(d, ddof=1)) / math.sqrt(len(d) / 2)
+    return float(np.mean(d)) / se if se > 0 else (0.0 if np.mean(d) == 0 else math.copysign(math.inf, np.mean(d)))
+
+
 def held_back_errors(segs: Sequence[Any], calibrated: Sequence[Tuple[np.ndarray, np.ndarray]], n: int,
                      gravity: float = G) -> Dict[str, float]:
     """Relative rotation [deg] and translation [m] RMSE over ``n`` samples on ``segs`` (the held-back
-    block), raw and with each segment's ``calibrated`` (gyro, acc), stride n/2."""
+    block), raw and with each segment's ``calibrated`` (gyro, acc), stride n/2, and the paired
+    differences' ``z`` (module doc; NaN: too few windows)."""
     raw_r, raw_t, cal_r, cal_t = [], [], [], []
     stride = max(1, n // 2)
     for s, (g, a) in zip(segs, calibrated):
@@ -123,22 +146,39 @@ def held_back_errors(segs: Sequence[Any], calibrated: Sequence[Tuple[np.ndarray,
         cal_t.append(e1["trans_m"])
     if not raw_r:
         return {}
-    return {"window_samples": n, "raw_rot_deg": math.degrees(rmse(np.concatenate(raw_r))),
+    return {"window_samples": n, "windows": int(sum(len(r) for r in raw_r)),
+            "raw_rot_deg": math.degrees(rmse(np.concatenate(raw_r))),
             "raw_trans_m": rmse(np.concatenate(raw_t)), "profile_rot_deg": math.degrees(rmse(np.concatenate(cal_r))),
-            "profile_trans_m": rmse(np.concatenate(cal_t))}
+            "profile_trans_m": rmse(np.concatenate(cal_t)), "z_rot": _paired_z(raw_r, cal_r),
+            "z_trans": _paired_z(raw_t, cal_t)}
+
+
+def _noise_words(z: Optional[float]) -> Tuple[bool, str]:
+    """(whether the raise is within the block's noise, the words that say so)."""
+    if z is None:
+        return False, ""
+    if not math.isfinite(z):
+        return False, "; too few held-back windows to tell a raise from noise"
+    within = z <= HELD_BACK_Z
+    return within, (f"; {z:.1f} standard errors, " + ("within" if within else "beyond")
+                    + f" the block's noise ({HELD_BACK_Z:g})")
 
 
 def held_back_findings(errs: Dict[str, float]) -> List[Finding]:
-    """The held-back check of the module doc (nothing to say without a held-back block)."""
+    """The held-back check of the module doc (nothing to say without a held-back block); each finding
+    says whether the block's noise explains it (``within_noise``)."""
     if not errs:
         return []
     out = []
     if errs["profile_rot_deg"] > errs["raw_rot_deg"]:
+        within, words = _noise_words(errs.get("z_rot"))
         out.append(Finding("held_back.rotation", f"the profile raises the rotation error on the held-back block "
                                                  f"({errs['profile_rot_deg']:.3f}° against raw {errs['raw_rot_deg']:.3f}° "
-                                                 f"over {errs['window_samples']} samples)"))
+                                                 f"over {errs['window_samples']} samples{words})", within))
     if errs["profile_trans_m"] > HELD_BACK_SLACK * errs["raw_trans_m"]:
+        within, words = _noise_words(errs.get("z_trans"))
         out.append(Finding("held_back.translation", f"the profile raises the translation error on the held-back "
                                                     f"block ({errs['profile_trans_m']:.4f} m against raw "
-                                                    f"{errs['raw_trans_m']:.4f} m over {errs['window_samples']} samples)"))
+                                                    f"{errs['raw_trans_m']:.4f} m over {errs['window_samples']} "
+                                                    f"samples{words})", within))
     return out

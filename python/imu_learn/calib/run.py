@@ -27,7 +27,7 @@ from imu_learn.calib import noise as nz
 from imu_learn.calib.kalibr import write_kalibr_yaml
 from imu_learn.calib.plausible import LIMITS, held_back_errors, held_back_findings, parameter_findings
 from imu_learn.calib.plot import plot_calibration
-from imu_learn.calib.profile import NOISE_KEYS, NOISE_UNITS, NoiseTerm, Profile, noise_only
+from imu_learn.calib.profile import NOISE_KEYS, NOISE_UNITS, Affine, NoiseTerm, Profile, noise_only
 from imu_learn.calib.select import select_floor
 from imu_learn.calib.sources import TIME_OFFSET_PRIOR_SAMPLES, CalibInputs, Recording, StillPiece
 from imu_learn.core.stamps import median_period_ns, sample_rate_hz
@@ -149,21 +149,81 @@ def floor_profile(inp: CalibInputs, progress: Progress, uncertainty: bool = True
     return prof, before, after
 
 
+# what a held-back finding's sensor keeps at its prior, and the profile's parameters that are
+HELD_BACK_SENSORS = {"held_back.rotation": "gyroscope", "held_back.translation": "accelerometer"}
+PRIOR_TERMS = {"gyroscope": ("gyroscope.matrix", "gyroscope.bias", "g_sensitivity", "cutoff_gyro"),
+               "accelerometer": ("accelerometer.matrix", "accelerometer.bias", "cutoff_acc")}
+
+
+def at_prior(prof: Profile, sensor: str) -> None:
+    """``prof`` with ``sensor``'s terms at their prior (identity matrix, zero bias, no g-sensitivity,
+    no low-pass), their standard deviations unknown; the time offset and the other sensor as fitted."""
+    assert prof.floor is not None
+    nan3, nan33 = np.full(3, np.nan), np.full((3, 3), np.nan)
+    if sensor == "gyroscope":
+        prof.floor = prof.floor.with_params(M_g=np.eye(3), b_g=np.zeros(3), G=np.zeros((3, 3)), cutoff_gyro=None)
+        prof.gyro = Affine(np.eye(3), np.zeros(3), prof.gyro.unit, nan33, nan3)
+        prof.g_sensitivity = np.zeros((3, 3))
+    else:
+        prof.floor = prof.floor.with_params(M_a=np.eye(3), b_a=np.zeros(3), cutoff_acc=None)
+        prof.acc = Affine(np.eye(3), np.zeros(3), prof.acc.unit, nan33, nan3)
+
+
+def _held_back(prof: Profile, inp: CalibInputs) -> Dict[str, Any]:
+    held = inp.val if inp.val else []
+    assert prof.floor is not None
+    return held_back_errors(held, ff.calibrated(held, prof.floor, True), inp.settings.window, inp.settings.gravity)
+
+
+def keep_unsupported_at_prior(prof: Profile, inp: CalibInputs, errs: Dict[str, Any]
+                              ) -> Tuple[Dict[str, Any], List[Dict[str, str]]]:
+    """Held-back raises the block's noise explains (:mod:`imu_learn.calib.plausible`), the rotation's
+    first (the gyroscope moves the translation too): the concerned sensor's terms kept at their prior
+    (:func:`at_prior`), the block scored again, until none is left or one is beyond the noise; each
+    said in one log line, ``observed`` and the returned entries. Returns (the block's errors now, what
+    was kept at the prior)."""
+    kept: List[Dict[str, str]] = []
+    found = held_back_findings(errs)
+    while found and all(f.within_noise for f in found):
+        f = found[0]
+        sensor = HELD_BACK_SENSORS[f.field]
+        if any(k["sensor"] == sensor for k in kept):
+            break
+        why = f"the held-back block cannot tell the fitted terms from none: {f.message}"
+        at_prior(prof, sensor)
+        kept.append({"sensor": sensor, "why": why})
+        for k in PRIOR_TERMS[sensor]:
+            prof.observed[k] = {"observed": False, "why": why}
+        logger.warning("%s: the fitted terms kept at their prior (identity, zero bias, no filter): %s", sensor, why)
+        errs = _held_back(prof, inp)
+        found = held_back_findings(errs)
+    return errs, kept
+
+
 def plausibility(prof: Profile, inp: CalibInputs, options: CalibOptions, progress: Progress) -> Dict[str, Any]:
     """The checks of :mod:`imu_learn.calib.plausible` on the fitted floor and on the held-back block;
-    a failure stops calibrate (:class:`ImplausibleProfileError`) unless ``options.force``."""
+    a failure stops calibrate (:class:`ImplausibleProfileError`) unless ``options.force``. Held-back
+    raises within the block's noise (every parameter plausible, no ``--force``): the sensor's terms
+    kept at their prior (:func:`keep_unsupported_at_prior`) and checked again."""
     progress("checking the profile: plausibility and the held-back block")
     assert prof.floor is not None
     found = parameter_findings(prof.floor, prof.gravity_mps2)
-    held = inp.val if inp.val else []
-    errs = held_back_errors(held, ff.calibrated(held, prof.floor, True), inp.settings.window, inp.settings.gravity)
-    found += held_back_findings(errs)
-    checks = {"limits": LIMITS, "held_back": errs, "failed": [f.line() for f in found], "forced": bool(found)}
+    errs = _held_back(prof, inp)
+    held = held_back_findings(errs)
+    kept: List[Dict[str, str]] = []
+    if held and not found and not options.force and all(f.within_noise for f in held):
+        errs, kept = keep_unsupported_at_prior(prof, inp, errs)
+        held = held_back_findings(errs)
+    found += held
+    checks = {"limits": LIMITS, "held_back": errs, "failed": [f.line() for f in found], "forced": bool(found),
+              **({"kept_at_prior": kept} if kept else {})}
     if found and not options.force:
+        hint = "" if inp.source.kind != "poses" or prof.selection else (
+            "; --select fits only the terms held-out recordings support")
         raise ImplausibleProfileError(f"calibrate: the profile is not written: {found[0].line()}"
                                       + (f" (and {len(found) - 1} more)" if len(found) > 1 else "")
-                                      + "; check the reference's frame, units and clock (imu-learn groundtruth), or "
-                                      "write it anyway with --force", found[0].field)
+                                      + "; check the reference's frame, units and clock (imu-learn groundtruth)"
+                                      + hint + ", or write it anyway with --force", found[0].field)
     for f in found:
         logger.warning("written with --force although %s", f.line())
     return checks

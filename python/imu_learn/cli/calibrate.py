@@ -8,7 +8,7 @@ import argparse
 import logging
 import sys
 from pathlib import Path
-from typing import Any, Callable, List, Optional, Sequence
+from typing import Any, Callable, Dict, List, Optional, Sequence
 
 from imu_learn.baselines.base import FitSettings
 from imu_learn.calib.odometry import OdometrySource, is_odometry_reference
@@ -259,6 +259,7 @@ def summary(p: Any) -> List[str]:
         lines.append(f"time offset {p.time_offset_s * 1e3:+.3f} ms (+-{p.time_offset_s_std * 1e3:.3f}); "
                      f"gyro bias {_vec(p.gyro.bias)} rad/s; acc bias {_vec(p.acc.bias)} m/s^2; "
                      f"gravity {p.gravity_mps2:.4f} m/s^2")
+        lines.append(_terms_line(p.selection, p.reference.get("kind", "poses")))
     for k, t in p.noise.items():
         lines.append(f"{k}: {t.value:.3e} {t.unit} ({t.source}, {t.detail.get('kind', 'fit')})")
     if p.reference and not all(v is False for v in p.reference.get("applied", {}).values()):
@@ -271,6 +272,19 @@ def summary(p: Any) -> List[str]:
     for u in p.unobservable:
         lines.append(f"not observed: {u['what']}: {u['why']}")
     return lines
+
+
+def _terms_line(selection: Dict[str, Any], kind: str) -> str:
+    """Which of the floor's terms the profile holds and how they were chosen."""
+    if kind != "poses":
+        return f"terms: those a {kind} reference observes (the others at their prior)"
+    if "gyro" in selection:
+        return (f"terms chosen on held-out recordings ({selection['held_out']}): gyroscope {selection['gyro']}, "
+                f"accelerometer {selection['acc']}")
+    if "skipped" in selection:
+        return f"terms: the reference's own ({selection['skipped']})"
+    return ("terms: every term of the floor, none chosen on held-out recordings (on recordings it did not see a "
+            "richer floor can lose to a simpler one); --select keeps only the terms held-out recordings support")
 
 
 def _vec(v: Any) -> str:
