@@ -1,7 +1,7 @@
 """Calibrate a device this project did not tune the VO path on (TUM-VI's BMI160) from the references a
 user has: its motion capture thinned to 20 Hz in the IMU's frame, and the same poses made into a VO's
 (another sensor's body frame, a world turned and shifted off gravity, 20 Hz, white noise on every pose);
-each with calibrate's default and with ``--select``, scored on the unseen rooms 2 and 4 beside the raw
+each with every term (``--no-select``) and with ``--select``, scored on the unseen rooms 2 and 4 beside the raw
 IMU and the shipped (motion-capture) profile.
 
 For each reference kind: ``imu-learn calibrate --input DATA/tum-vi/dataset-roomR_512_16 --groundtruth
@@ -75,7 +75,7 @@ def main() -> None:
             name = kind + ("+select" if select else "")
             out = args.out / name
             p = run(exe + ["calibrate", *inputs, "--device", "tumvi_" + kind, "--out", str(out), "--no-plot"]
-                    + (["--select"] if select else []))
+                    + (["--select"] if select else ["--no-select"]))
             if p.returncode != 0:
                 results[name] = {"exit": p.returncode, "line": (p.stderr.strip().splitlines() or [""])[-1]}
                 continue

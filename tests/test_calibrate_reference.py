@@ -98,6 +98,8 @@ def test_a_20_hz_reference_fits_the_accelerometer_from_its_positions(tmp_path, o
     ref = write_reference(tmp_path / "vo.tum", world_deg=100.0, every=10)
     p = calibrate(tmp_path / "out", "--groundtruth", str(ref))
     assert not p["reference"]["resolves_acceleration"]
+    assert "cannot resolve accelerations" in p["selection"]["by_default"]  # its terms chosen by default
+    assert p["selection"]["held_out"] == "four time blocks of one recording"
     assert p["floor"]["cutoff_gyro"] is None and p["floor"]["cutoff_acc"] is None
     assert {k for k, v in p["observed"].items() if not v["observed"]} == {"cutoff_gyro", "cutoff_acc"}
     assert "positions" in p["observed"]["accelerometer.matrix"]["how"]

@@ -82,3 +82,19 @@ def test_the_paired_z_of_windows():
     assert f.within_noise and "within the block's noise" in f.message
     [f] = pl.held_back_findings({**base, "profile_rot_deg": 1.01, "z_rot": math.nan})
     assert not f.within_noise and "too few" in f.message
+
+
+def test_the_terms_are_chosen_by_default_for_a_reference_that_cannot_resolve_accelerations():
+    from imu_learn.calib.run import selects
+    from imu_learn.calib.sources import Source
+
+    class Sparse(Source):  # a 20 Hz VO: its source restricts the floor's terms
+        def floor_terms(self):
+            return {"cutoffs_hz": (None,)}
+
+    class Positions(Sparse):
+        kind = "positions"
+
+    sparse, dense, positions = (CalibInputs([], [], [], [], source=s()) for s in (Sparse, Source, Positions))
+    assert selects(None, sparse) and not selects(None, dense) and not selects(None, positions)
+    assert not selects(False, sparse) and selects(True, dense)

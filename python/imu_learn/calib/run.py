@@ -28,7 +28,7 @@ from imu_learn.calib.kalibr import write_kalibr_yaml
 from imu_learn.calib.plausible import LIMITS, held_back_errors, held_back_findings, parameter_findings
 from imu_learn.calib.plot import plot_calibration
 from imu_learn.calib.profile import NOISE_KEYS, NOISE_UNITS, Affine, NoiseTerm, Profile, noise_only
-from imu_learn.calib.select import select_floor
+from imu_learn.calib.select import gyro_only, select_floor
 from imu_learn.calib.sources import TIME_OFFSET_PRIOR_SAMPLES, CalibInputs, Recording, StillPiece
 from imu_learn.core.stamps import median_period_ns, sample_rate_hz
 from imu_learn.errors import ImplausibleProfileError, InvalidInputError
@@ -43,7 +43,9 @@ class CalibOptions:
     still: nz.StillSettings = nz.StillSettings()
     plot: bool = True
     force: bool = False  # write a profile that fails a plausibility check (with a warning)
-    select: bool = False  # the floor's terms chosen on held-out recordings (calib.select; --select)
+    # the floor's terms chosen on held-out recordings (calib.select; --select / --no-select); None: chosen
+    # for a poses reference that cannot resolve accelerations (SELECT_BY_DEFAULT), every term otherwise
+    select: Optional[bool] = None
 
 
 @dataclass
@@ -122,6 +124,19 @@ def unobservable(has_ref: bool, allan: Optional[nz.AllanNoise], noise: Dict[str,
                             "; motion-correlated errors (vibration, reference noise, calibration errors that vary "
                             "with the motion) dominate the residuals" if t.source == "residuals" else "")})
     return out
+
+
+SELECT_BY_DEFAULT = ("a reference that cannot resolve accelerations (a VO of 20-30 Hz): every term of the floor "
+                     "fitted against it lost to simpler floors on recordings it did not see (TUM-VI's unseen rooms "
+                     "1.24x raw in rotation over 20 s; docs/experiments/references.md)")
+
+
+def selects(option: Optional[bool], inp: CalibInputs) -> bool:
+    """Whether the floor's terms are chosen on held-out recordings: as asked, else (None) for a poses
+    reference that cannot resolve accelerations (:data:`SELECT_BY_DEFAULT`)."""
+    if option is not None:
+        return option
+    return inp.source.kind == "poses" and gyro_only(inp)
 
 
 def floor_profile(inp: CalibInputs, progress: Progress, uncertainty: bool = True,
@@ -238,7 +253,10 @@ def calibrate(inp: CalibInputs, out_dir: Path, options: CalibOptions = CalibOpti
         raise InvalidInputError("calibrate: no recording to calibrate from")
     before = after = None
     if has_ref:
-        prof, before, after = floor_profile(inp, progress, select=options.select)
+        select = selects(options.select, inp)
+        prof, before, after = floor_profile(inp, progress, select=select)
+        if select and options.select is None:
+            prof.selection["by_default"] = SELECT_BY_DEFAULT
         prof.reference = inp.source.reference()
         prof.observed = inp.source.observed()
         prof.checks = plausibility(prof, inp, options, progress)

@@ -84,10 +84,11 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--force", action="store_true",
                    help="write a profile that fails a plausibility check (scale, misalignment, bias, gravity, the "
                         "held-back block), with a warning, instead of stopping")
-    p.add_argument("--select", action="store_true",
+    p.add_argument("--select", action=argparse.BooleanOptionalAction, default=None,
                    help="choose each sensor's terms (offset, bias, scale, affine, g-sensitivity, low-pass): the simplest "
                         "that no simpler one beats on a recording held out in turn (imu_learn.calib.select; "
-                        "profile.json's selection); default: every term")
+                        "profile.json's selection); --no-select: every term. Default: chosen for poses that cannot "
+                        "resolve accelerations (a VO of 20-30 Hz: every term overfits it), every term otherwise")
     p.add_argument("--imu-only", action="store_true",
                    help="read each --input's IMU alone (no reference): the noise from its still stretches only")
     p.add_argument("--device", metavar="NAME", help="the device's name in the profile (default: the dataset a "
@@ -280,7 +281,8 @@ def _terms_line(selection: Dict[str, Any], kind: str) -> str:
         return f"terms: those a {kind} reference observes (the others at their prior)"
     if "gyro" in selection:
         return (f"terms chosen on held-out recordings ({selection['held_out']}): gyroscope {selection['gyro']}, "
-                f"accelerometer {selection['acc']}")
+                f"accelerometer {selection['acc']}" + ("; by default for " + selection["by_default"].split(":")[0]
+                                                        + " (--no-select: every term)" if "by_default" in selection else ""))
     if "skipped" in selection:
         return f"terms: the reference's own ({selection['skipped']})"
     return ("terms: every term of the floor, none chosen on held-out recordings (on recordings it did not see a "
