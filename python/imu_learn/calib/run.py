@@ -164,7 +164,7 @@ def floor_profile(inp: CalibInputs, progress: Progress, uncertainty: bool = True
     return prof, before, after
 
 
-# what a held-back finding's sensor keeps at its prior, and the profile's parameters that are
+# the sensor a held-back finding concerns, and that sensor's parameters in profile.json's ``observed``
 HELD_BACK_SENSORS = {"held_back.rotation": "gyroscope", "held_back.translation": "accelerometer"}
 PRIOR_TERMS = {"gyroscope": ("gyroscope.matrix", "gyroscope.bias", "g_sensitivity", "cutoff_gyro"),
                "accelerometer": ("accelerometer.matrix", "accelerometer.bias", "cutoff_acc")}
