@@ -159,3 +159,21 @@ def test_another_recordings_reference_is_refused_before_any_fit(tmp_path, capsys
 def quat_from_matrix(r: np.ndarray) -> np.ndarray:
     from imu_learn.calib.reference import _quat
     return _quat(r)
+
+
+def test_references_on_different_clocks_are_refused_naming_each_lag(tmp_path, capsys):
+    """One lag is applied to every recording of a run: two crops whose references disagree by 0.1 s
+    (one on another clock) are refused before any fit, each recording's lag named, nothing written."""
+    from crops import CROP
+
+    args = []
+    for name, late in ((EASY, 0.0), (CROP, 0.1)):
+        _, gt = read_recording(SHIPPED / name)
+        ref = tmp_path / f"{Path(name).name}.tum"
+        np.savetxt(ref, np.column_stack([gt.t_ns * 1e-9 + late, gt.p, wxyz_to_xyzw(gt.q_wxyz)]), fmt="%.9f")
+        args += ["--input", str(SHIPPED / name), "--groundtruth", str(ref)]
+    out = tmp_path / "out"
+    assert main(["calibrate", *args, "--out", str(out), "--no-plot", "--quiet"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()[-1]
+    assert "lags behind their IMUs disagree" in err and "+100 ms" in err and "+0 ms" in err, err
+    assert not (out / "profile.json").exists()

@@ -145,13 +145,15 @@ pub enum ImuError {
         found: usize,
     },
 
-    #[error("{}:{line}:{column}: field {field:?} = {value:?} is not a number", path.display())]
+    #[error("{}:{line}:{column}: field {field:?} = {value:?} is not a number{hint}", path.display())]
     NotNumeric {
         path: PathBuf,
         line: usize,
         column: usize,
         field: String,
         value: String,
+        /// What the value likely is instead ("" where nothing more can be said).
+        hint: &'static str,
     },
 
     #[error("{}:{line}:{column}: field {field:?} = {value:?} is not finite (NaN or inf)", path.display())]

@@ -72,6 +72,7 @@ fn non_numeric_field() {
             column,
             field,
             value,
+            ..
         } => {
             assert_eq!((path, *line, *column), (&p, 3, 4));
             assert_eq!(field, "w_RS_S_z [rad s^-1]");

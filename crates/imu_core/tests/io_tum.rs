@@ -164,6 +164,32 @@ fn bad_fields_use_fixed_names() {
         e => panic!("{e:?}"),
     }
     assert_message(&err, &p, 2, Some("timestamp"));
+    assert!(!err.to_string().contains("2262"), "{err}");
+}
+
+#[test]
+fn stamps_in_milliseconds_name_the_unit() {
+    // A VO's stamps written in ms where TUM means seconds: past i64 ns, a number all the same.
+    let dir = tempfile::tempdir().unwrap();
+    let p = write(
+        &dir,
+        "ms.tum",
+        "1403637130538.319092 0 0 0 0 0 0 1
+",
+    );
+    let err = read_tum(&p, &strict()).unwrap_err();
+    match &err {
+        ImuError::NotNumeric { line, field, hint, .. } => {
+            assert_eq!((*line, field.as_str()), (1, "timestamp"));
+            assert!(hint.contains("milliseconds or microseconds read as seconds"), "{hint}");
+        }
+        e => panic!("{e:?}"),
+    }
+    assert!(
+        err.to_string()
+            .contains("not a number of the file's time unit before the year 2262"),
+        "{err}"
+    );
 }
 
 #[test]

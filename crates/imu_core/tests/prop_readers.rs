@@ -473,6 +473,7 @@ fn check_error(path: &Path, lines: &[&[u8]], format: &Format, e: &ImuError) -> R
             column,
             field,
             value,
+            ..
         }
         | ImuError::NonFinite {
             path: p,

@@ -73,6 +73,9 @@ class FrameOptions:
     ``floor_window_s``."""
 
     max_lag_s: float = 1.0
+    # one rig, one clock: the recordings' lags may spread by this much (real references, one run each:
+    # EuRoC's motion capture and ORB-SLAM2 within 10 ms, Fetch 15 ms, BROAD, Blackbird, TUM-VI 0)
+    max_lag_spread_s: float = 0.03
     min_correlation: float = 0.6
     identity_deg: float = 1.0
     planar_ratio: float = 0.1
@@ -329,6 +332,17 @@ def level_rotation(g_up: np.ndarray) -> np.ndarray:
 # the whole chain
 
 
+def check_one_clock(lags: Sequence[float], names: Sequence[str], spread_s: float) -> None:
+    """One lag is applied to every recording (one rig): refused where the recordings' own lags spread
+    by more than ``spread_s`` (a reference on another clock), each recording's lag named."""
+    if len(lags) < 2 or max(lags) - min(lags) <= spread_s:
+        return
+    each = ", ".join(f"{n} {x * 1e3:+.0f} ms" for n, x in zip(names, lags))
+    raise ReferenceFrameError(
+        f"the references' lags behind their IMUs disagree ({each}; spread above {spread_s * 1e3:.0f} ms): a "
+        "reference on another clock; put every reference on its IMU's clock, or calibrate them in separate runs")
+
+
 def resolve_frame(pairs: Sequence[Tuple[ImuData, GroundTruth]], options: FrameOptions = FrameOptions(),
                   extrinsics: Optional[Extrinsics] = None, max_gap_s: Optional[float] = None,
                   names: Optional[Sequence[str]] = None) -> FrameFit:
@@ -350,6 +364,7 @@ def resolve_frame(pairs: Sequence[Tuple[ImuData, GroundTruth]], options: FrameOp
         lags.append((lag, corr))
     lag = float(np.median([x[0] for x in lags]))
     corr = float(min(x[1] for x in lags))
+    check_one_clock([x[0] for x in lags], names, options.max_lag_spread_s)
     imu_rate = sample_rate_hz(pairs[0][0].t_ns)
     ref_rate = float(np.median([sample_rate_hz(ref.t_ns) for _, ref in pairs]))
     coarse = lag if abs(lag) > options.floor_lag_s else 0.0

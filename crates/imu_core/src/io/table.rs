@@ -274,6 +274,7 @@ pub(crate) enum BadKind {
     NotNumeric {
         col: usize,
         value: String,
+        hint: &'static str,
     },
     NonFinite {
         col: usize,
@@ -366,12 +367,13 @@ impl RowRules {
                     }
                 }
             },
-            BadKind::NotNumeric { col, value } => ImuError::NotNumeric {
+            BadKind::NotNumeric { col, value, hint } => ImuError::NotNumeric {
                 path,
                 line,
                 column: col + 1,
                 field: name(col),
                 value,
+                hint,
             },
             BadKind::NonFinite { col, value } => ImuError::NonFinite {
                 path,
@@ -430,13 +432,24 @@ impl RowRules {
             // 19 digits always fit in u64, and cover every ns stamp up to year 2262.
             if !f.is_empty() && f.len() <= 19 && f.iter().all(u8::is_ascii_digit) {
                 let n = f.iter().fold(0u64, |acc, &d| acc * 10 + u64::from(d - b'0'));
-                return i64::try_from(n).map_err(|_| BadKind::NotNumeric { col, value: lossy(f) });
+                return i64::try_from(n).map_err(|_| BadKind::NotNumeric {
+                    col,
+                    value: lossy(f),
+                    hint: TIME_RANGE_HINT,
+                });
             }
         }
         match parse_decimal(f, self.time_digits) {
             Decimal::Int(n) => Ok(n),
             Decimal::Frac(n) if self.time_digits > 0 || self.float_ns => Ok(n),
             Decimal::Frac(_) => Err(BadKind::FloatTimestamp { col, value: lossy(f) }),
+            Decimal::OutOfRange if fast_float2::parse::<f64, _>(f).is_ok_and(f64::is_finite) => {
+                Err(BadKind::NotNumeric {
+                    col,
+                    value: lossy(f),
+                    hint: TIME_RANGE_HINT,
+                })
+            }
             Decimal::Invalid | Decimal::OutOfRange => Err(bad_number(col, f)),
         }
     }
@@ -619,10 +632,18 @@ fn lossy(f: &[u8]) -> String {
     String::from_utf8_lossy(f).into_owned()
 }
 
+/// A time that parses as a number but lies past i64 nanoseconds (the year 2262) in the file's unit.
+const TIME_RANGE_HINT: &str = " of the file's time unit before the year 2262 \
+                               (milliseconds or microseconds read as seconds?)";
+
 fn bad_number(col: usize, f: &[u8]) -> BadKind {
     match fast_float2::parse::<f64, _>(f) {
         Ok(x) if !x.is_finite() => BadKind::NonFinite { col, value: lossy(f) },
-        _ => BadKind::NotNumeric { col, value: lossy(f) },
+        _ => BadKind::NotNumeric {
+            col,
+            value: lossy(f),
+            hint: "",
+        },
     }
 }
 
