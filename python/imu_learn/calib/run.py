@@ -126,9 +126,10 @@ def unobservable(has_ref: bool, allan: Optional[nz.AllanNoise], noise: Dict[str,
     return out
 
 
-SELECT_BY_DEFAULT = ("a reference that cannot resolve accelerations (a VO of 20-30 Hz): every term of the floor "
-                     "fitted against it lost to simpler floors on recordings it did not see (TUM-VI's unseen rooms "
-                     "1.24x raw in rotation over 20 s; docs/experiments/references.md)")
+SELECT_BY_DEFAULT_FOR = "a reference that cannot resolve accelerations (a VO of 20-30 Hz)"
+SELECT_BY_DEFAULT = (SELECT_BY_DEFAULT_FOR + ": every term of the floor fitted against it lost to simpler floors on "
+                     "recordings it did not see (TUM-VI's unseen rooms 1.24x raw in rotation over 20 s; "
+                     "docs/experiments/references.md)")
 
 
 def selects(option: Optional[bool], inp: CalibInputs) -> bool:
@@ -174,14 +175,14 @@ def at_prior(prof: Profile, sensor: str) -> None:
     """``prof`` with ``sensor``'s terms at their prior (identity matrix, zero bias, no g-sensitivity,
     no low-pass), their standard deviations unknown; the time offset and the other sensor as fitted."""
     assert prof.floor is not None
-    nan3, nan33 = np.full(3, np.nan), np.full((3, 3), np.nan)
+    i, unknown = TraditionalParams.identity(), TraditionalParams.unknown()
     if sensor == "gyroscope":
-        prof.floor = prof.floor.with_params(M_g=np.eye(3), b_g=np.zeros(3), G=np.zeros((3, 3)), cutoff_gyro=None)
-        prof.gyro = Affine(np.eye(3), np.zeros(3), prof.gyro.unit, nan33, nan3)
-        prof.g_sensitivity = np.zeros((3, 3))
+        prof.floor = prof.floor.with_params(M_g=i.M_g, b_g=i.b_g, G=i.G, cutoff_gyro=None)
+        prof.gyro = Affine(i.M_g.copy(), i.b_g.copy(), prof.gyro.unit, unknown.M_g, unknown.b_g)
+        prof.g_sensitivity = i.G.copy()
     else:
-        prof.floor = prof.floor.with_params(M_a=np.eye(3), b_a=np.zeros(3), cutoff_acc=None)
-        prof.acc = Affine(np.eye(3), np.zeros(3), prof.acc.unit, nan33, nan3)
+        prof.floor = prof.floor.with_params(M_a=i.M_a, b_a=i.b_a, cutoff_acc=None)
+        prof.acc = Affine(i.M_a.copy(), i.b_a.copy(), prof.acc.unit, unknown.M_a, unknown.b_a)
 
 
 def _held_back(prof: Profile, inp: CalibInputs) -> Dict[str, Any]:
@@ -224,12 +225,10 @@ def plausibility(prof: Profile, inp: CalibInputs, options: CalibOptions, progres
     assert prof.floor is not None
     found = parameter_findings(prof.floor, prof.gravity_mps2)
     errs = _held_back(prof, inp)
-    held = held_back_findings(errs)
     kept: List[Dict[str, str]] = []
-    if held and not found and not options.force and all(f.within_noise for f in held):
+    if not found and not options.force:
         errs, kept = keep_unsupported_at_prior(prof, inp, errs)
-        held = held_back_findings(errs)
-    found += held
+    found += held_back_findings(errs)
     checks = {"limits": LIMITS, "held_back": errs, "failed": [f.line() for f in found], "forced": bool(found),
               **({"kept_at_prior": kept} if kept else {})}
     if found and not options.force:

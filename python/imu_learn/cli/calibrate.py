@@ -12,7 +12,7 @@ from typing import Any, Callable, Dict, List, Optional, Sequence
 
 from imu_learn.baselines.base import FitSettings
 from imu_learn.calib.odometry import OdometrySource, is_odometry_reference
-from imu_learn.calib.run import CalibInputs, CalibOptions, calibrate
+from imu_learn.calib.run import SELECT_BY_DEFAULT_FOR, CalibInputs, CalibOptions, calibrate
 from imu_learn.calib.sources import (
     TRAIN,
     VAL,
@@ -281,7 +281,7 @@ def _terms_line(selection: Dict[str, Any], kind: str) -> str:
         return f"terms: those a {kind} reference observes (the others at their prior)"
     if "gyro" in selection:
         return (f"terms chosen on held-out recordings ({selection['held_out']}): gyroscope {selection['gyro']}, "
-                f"accelerometer {selection['acc']}" + ("; by default for " + selection["by_default"].split(":")[0]
+                f"accelerometer {selection['acc']}" + ("; by default for " + SELECT_BY_DEFAULT_FOR
                                                         + " (--no-select: every term)" if "by_default" in selection else ""))
     if "skipped" in selection:
         return f"terms: the reference's own ({selection['skipped']})"
