@@ -218,6 +218,19 @@ def _sandwich(a: np.ndarray, res: np.ndarray, w: np.ndarray, clusters: np.ndarra
     return bread @ meat @ bread.T * (m / max(m - 1, 1))
 
 
+Rows = Tuple[np.ndarray, np.ndarray, np.ndarray]  # one segment's (A, y, centre times): segment_rows
+ATTITUDE = {False: "the reference's", True: "the calibrated gyro's, held to the reference's"}
+
+
+def recording_rows(recordings: Sequence[Sequence[Segment]], options: AccOptions = AccOptions(),
+                   tau_samples: float = 0.0, gravity: float = 9.81,
+                   gyros: Optional[Sequence[Sequence[np.ndarray]]] = None) -> List[List[Rows]]:
+    """:func:`segment_rows` of every segment of every recording (what a fit on any subset of the
+    recordings, at any level, reads)."""
+    return [[segment_rows(s, options, tau_samples, gravity, None if gyros is None else gyros[i][j])
+             for j, s in enumerate(segs)] for i, segs in enumerate(recordings)]
+
+
 def fit_acc_from_positions(recordings: Sequence[Sequence[Segment]], options: AccOptions = AccOptions(),
                            tau_samples: float = 0.0, gravity: float = 9.81,
                            gyros: Optional[Sequence[Sequence[np.ndarray]]] = None,
@@ -228,12 +241,19 @@ def fit_acc_from_positions(recordings: Sequence[Sequence[Segment]], options: Acc
     or None (the reference's attitude); ``free``: the affine parameters fitted, as indices into
     (M_a − I row-major, b_a) (:func:`imu_learn.calib.select.free_indices`), the others held at their
     prior (identity, zero); None: all twelve."""
+    return fit_acc_from_rows(recording_rows(recordings, options, tau_samples, gravity, gyros), options, free,
+                             ATTITUDE[gyros is not None])
+
+
+def fit_acc_from_rows(recordings: Sequence[Sequence[Rows]], options: AccOptions = AccOptions(),
+                      free: Optional[Sequence[int]] = None, attitude: str = ATTITUDE[False]) -> AccFit:
+    """:func:`fit_acc_from_positions` on each recording's segments' rows (:func:`recording_rows`);
+    ``attitude`` says whose attitude the rows were built on."""
     blocks: List[Tuple[np.ndarray, np.ndarray, np.ndarray]] = []
     cluster_id: List[np.ndarray] = []
     next_cluster = 0
     for i, segs in enumerate(recordings):
-        for j, s in enumerate(segs):
-            a, y, t = segment_rows(s, options, tau_samples, gravity, None if gyros is None else gyros[i][j])
+        for a, y, t in segs:
             if not len(y):
                 continue
             blocks.append((a, y, np.full(len(y), i)))
@@ -296,7 +316,7 @@ def fit_acc_from_positions(recordings: Sequence[Sequence[Segment]], options: Acc
     return AccFit(M_a=m_a, b_a=b_a, lever_m=x[12:15], M_a_std=sd[:9].reshape(3, 3),
                   b_a_std=np.sqrt(np.maximum(np.diag(cov_b), 0.0)), lever_std_m=sd[12:15],
                   tilt=x[15:].reshape(k, 2), rows=rows, rms=_rms(res), rms_identity=_rms(res_i), options=options,
-                  attitude="the reference's" if gyros is None else "the calibrated gyro's, held to the reference's",
+                  attitude=attitude,
                   extra={"tilt_std_mps2": sd[15:].reshape(k, 2).tolist(),
                          "down_weighted_rows": int(np.sum(w < 1.0))})
 
@@ -306,9 +326,13 @@ def heldout_rms(fit: AccFit, segments: Sequence[Segment], tau_samples: float = 0
     """The RMS of the residual 3-vector's norm [m/s] of ``fit`` (its M_a, c and reference origin, as
     fitted elsewhere) on a recording it was not fitted on: that recording's world tilt, a property of its
     reference and not of the IMU, fitted alone (least squares); NaN without a row."""
-    blocks = [segment_rows(s, fit.options, tau_samples, gravity, None if gyros is None else gyros[j])
-              for j, s in enumerate(segments)]
-    blocks = [(a, y) for a, y, _t in blocks if len(y)]
+    return heldout_rms_rows(fit, recording_rows([segments], fit.options, tau_samples, gravity,
+                                                None if gyros is None else [gyros])[0])
+
+
+def heldout_rms_rows(fit: AccFit, rows: Sequence[Rows]) -> float:
+    """:func:`heldout_rms` on one recording's segments' rows (:func:`recording_rows`)."""
+    blocks = [(a, y) for a, y, _t in rows if len(y)]
     if not blocks:
         return math.nan
     a = np.concatenate([b[0] for b in blocks])

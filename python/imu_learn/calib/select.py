@@ -80,7 +80,14 @@ from imu_learn.baselines.traditional import (
     _solve,
     _VelResiduals,
 )
-from imu_learn.calib.acc_positions import AccOptions, fit_acc_from_positions, heldout_rms
+from imu_learn.calib.acc_positions import (
+    ATTITUDE,
+    AccOptions,
+    fit_acc_from_positions,
+    fit_acc_from_rows,
+    heldout_rms_rows,
+    recording_rows,
+)
 from imu_learn.calib.fit import group_segments, seed_all, time_blocks
 from imu_learn.calib.profile import FloorFit
 from imu_learn.calib.sources import matched
@@ -528,14 +535,16 @@ def select_acc_from_positions(names: Sequence[str], recs: Sequence[Sequence[Segm
     """The accelerometer's level from a reference's positions: each recording held out in turn, every
     level of :data:`POSITION_ACC_LEVELS` fitted on the others (:func:`fit_acc_from_positions`) and scored by
     its second-difference residual on the held-out one (:func:`heldout_rms`, the RMS of the residual
-    3-vector's norm); the rule of :func:`choose`."""
+    3-vector's norm); the rule of :func:`choose`. Each segment's rows are built once
+    (:func:`recording_rows`: they depend on neither the level nor the fold)."""
+    rows = recording_rows(recs, options, tau, gravity, gyros)
+    attitude = ATTITUDE[True]
     table: Table = {lv: {} for lv in POSITION_ACC_LEVELS}
     for r, name in enumerate(names):
-        rest = [x for i, x in enumerate(recs) if i != r]
-        rest_g = [x for i, x in enumerate(gyros) if i != r]
+        rest = [x for i, x in enumerate(rows) if i != r]
         for lv in POSITION_ACC_LEVELS:
-            acc = fit_acc_from_positions(rest, options, tau, gravity, rest_g, free_indices("acc", lv))
-            table[lv][name] = {POSITION_ACC_CELLS[0]: heldout_rms(acc, recs[r], tau, gravity, gyros[r])}
+            acc = fit_acc_from_rows(rest, options, free_indices("acc", lv), attitude)
+            table[lv][name] = {POSITION_ACC_CELLS[0]: heldout_rms_rows(acc, rows[r])}
     level, steps = choose(POSITION_ACC_LEVELS, table, POSITION_ACC_CELLS)
     return level, table, steps
 
