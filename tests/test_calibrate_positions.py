@@ -174,6 +174,20 @@ def test_navigator_options_refused_with_another_reference(tmp_path, capsys, extr
     assert not (tmp_path / "cal" / "profile.json").exists()
 
 
+def test_another_recordings_fixes_are_refused_before_any_estimate(tmp_path, capsys):
+    """Fixes a day off the IMU (another recording's): one line naming both spans, before the delay and
+    mounting estimates (which would blame the track's speed), nothing written."""
+    rec, fixes = synthetic_drive(tmp_path, seconds=12.0)
+    late = tmp_path / "late.tum"
+    late.write_text("".join(f"{float(r.split()[0]) + 86400:.6f} {' '.join(r.split()[1:])}\n"
+                            for r in fixes.read_text().splitlines()))
+    rc = main(["calibrate", "--input", str(rec), "--groundtruth", str(late), "--out", str(tmp_path / "cal")])
+    err = [line for line in capsys.readouterr().err.splitlines() if "error" in line]
+    assert rc == 2 and len(err) == 1, err
+    assert "AidingOverlapError" in err[0] and "do not overlap in time" in err[0] and "late.tum" in err[0]
+    assert not (tmp_path / "cal" / "profile.json").exists()
+
+
 def test_lever_arm_and_extrinsics_not_both(tmp_path):
     from imu_learn.errors import ConfigError
 

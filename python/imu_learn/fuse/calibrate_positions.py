@@ -68,7 +68,7 @@ from imu_learn.data.types import GroundTruth, ImuData, Segment
 from imu_learn.errors import ConfigError, InvalidInputError
 from imu_learn.fuse.aiding.detect import detect
 from imu_learn.fuse.aiding.rtklib import normal_gravity, read_pos
-from imu_learn.fuse.aiding.tum import read_trajectory
+from imu_learn.fuse.aiding.tum import Trajectory, check_overlap, read_trajectory
 from imu_learn.fuse.navigate import NavigateOptions, Sources, navigate, parse_vector
 from imu_learn.fuse.noise import ImuNoise
 from imu_learn.infer.rates import recording_device
@@ -152,18 +152,24 @@ def is_positions_reference(path: Path) -> bool:
     return bool(np.max(2 * np.arccos(np.clip(dots, -1, 1))) < math.radians(0.5))
 
 
-def read_fixes(path: Path) -> Tuple[np.ndarray, np.ndarray, float, str]:
-    """(t_ns, positions (M, 3) in a local z-up frame, gravity [m/s^2], format) of a positions file:
-    RTKLIB fixed and float epochs in ENU at the first epoch with the normal gravity there, or a
-    TUM/CSV's positions with the navigator's default gravity (9.81)."""
+def read_fix_track(path: Path) -> Tuple[Trajectory, float, str]:
+    """(the fixes as a positions-only trajectory, with their lines in the file; gravity [m/s^2]; format)
+    of a positions file: RTKLIB fixed and float epochs in ENU at the first epoch with the normal gravity
+    there, or a TUM/CSV's positions with the navigator's default gravity (9.81)."""
 
     fmt = reference_format(path)
     if fmt == "rtklib":
         sol = read_pos(Path(path))
         keep = np.isin(sol.q, (1, 2))
-        return sol.t_ns[keep], sol.enu[keep], normal_gravity(sol.origin_llh[0], sol.origin_llh[2]), fmt
-    traj = read_trajectory(path, fmt, need_orientation=False)
-    return traj.t_ns, traj.p, 9.81, fmt
+        return (Trajectory(sol.t_ns[keep], sol.enu[keep], None, str(path), sol.lines[keep]),
+                normal_gravity(sol.origin_llh[0], sol.origin_llh[2]), fmt)
+    return read_trajectory(path, fmt, need_orientation=False), 9.81, fmt
+
+
+def read_fixes(path: Path) -> Tuple[np.ndarray, np.ndarray, float, str]:
+    """(t_ns, positions (M, 3) in a local z-up frame, gravity [m/s^2], format): :func:`read_fix_track`."""
+    traj, gravity, fmt = read_fix_track(path)
+    return traj.t_ns, traj.p, gravity, fmt
 
 
 # ------------------------------------------------------------------------------------------------
@@ -421,7 +427,9 @@ def positions_floor(imu_path: Path, ref_path: Path, opts: PositionsOptions = Pos
     imu = ImuData(t_ns=np.asarray(src.t_ns, dtype=np.int64), gyro=np.asarray(src.gyro, dtype=np.float64),
                   acc=np.asarray(src.acc, dtype=np.float64))
     rate = float(sample_rate_hz(imu.t_ns))
-    fix_t, fix_p, gravity, ref_fmt = read_fixes(ref_path)
+    track, gravity, ref_fmt = read_fix_track(ref_path)
+    check_overlap(track, imu.t_ns, "positions")  # another recording's fixes: named before any estimate
+    fix_t, fix_p = track.t_ns, track.p
     if opts.imu_delay_s is None:
         progress("positions: the IMU's logging delay from the track")
     delay, delay_info = imu_delay(opts, imu, fix_t, fix_p, gravity)
