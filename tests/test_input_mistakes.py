@@ -102,6 +102,19 @@ def test_microsecond_stamps_read_as_ms(tmp_path, capsys):
     assert err.rstrip().endswith("add --time-unit us")
 
 
+def test_decimal_seconds_read_as_ns(tmp_path, capsys):
+    """Seconds with decimals under the default ns round to the same ns and repeat: the reader's
+    duplicate is explained by the unit the stamps as written fit."""
+    t, g, a = samples()
+    err = refused(capsys, write(tmp_path / "s.csv", t, g, a, time_text=lambda ti: f"{ti * 1e-9:.6f}"))
+    assert "s.csv:3: the stamps repeat as read with --time-unit ns" in err and "they look like seconds" in err
+    assert err.rstrip().endswith("add --time-unit s")
+    # stamps that really repeat stay the reader's own error
+    t[5] = t[4]
+    rc, err = calibrate(capsys, write(tmp_path / "dup.csv", t, g, a))
+    assert rc == 2 and "TimestampError" in err and "duplicates the previous row's timestamp" in err, err
+
+
 # 2. acc unit -------------------------------------------------------------------------------------
 def test_acc_in_g_read_as_mps2(tmp_path, capsys):
     t, g, a = samples()

@@ -36,9 +36,9 @@ from typing import Optional, Tuple
 import numpy as np
 
 from imu_learn import _imu_core as core
-from imu_learn.data.formats.input_checks import check_user_imu, explain_time_overflow
+from imu_learn.data.formats.input_checks import check_user_imu, explain_repeated_stamps, explain_time_overflow
 from imu_learn.data.types import ImuData
-from imu_learn.errors import InvalidInputError, NotNumericError
+from imu_learn.errors import InvalidInputError, NotNumericError, TimestampError
 from imu_learn.util.atomic import atomic_write_path
 
 from .source import DEFAULT_COLUMNS, CsvColumns, ImuSource  # noqa: F401  (the layout type lives with ImuSource)
@@ -95,6 +95,11 @@ def read_checked(path: Path, layout: CsvColumns) -> Tuple[ImuData, Tuple[int, ..
         r = core.read_csv_columns_checked(str(path), *layout.args(), skip_bad_lines=layout.skip_bad_lines)
     except NotNumericError as e:
         better = explain_time_overflow(Path(path), e, layout)
+        if better is None:
+            raise
+        raise better from e
+    except TimestampError as e:
+        better = explain_repeated_stamps(Path(path), e, layout)
         if better is None:
             raise
         raise better from e

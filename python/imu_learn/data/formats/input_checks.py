@@ -17,7 +17,8 @@ The checks, in order (each assumes the ones before it passed):
 3. the sample rate the stamps give in the stated ``--time-unit`` lies outside :data:`RATE_RANGE_HZ`;
    the unit that gives a rate inside it is named. A stamp too large for int64 ns in the stated unit
    (which the reader refuses as not a number) is explained the same way
-   (:func:`explain_time_overflow`).
+   (:func:`explain_time_overflow`), as are decimal stamps that round to repeated ones in the stated
+   unit (seconds read as ns; the reader refuses them as repeated: :func:`explain_repeated_stamps`).
 4. gyro and acc swapped: the gyro reads a gravity-like magnitude at rest and the acc does not.
 5. ``|acc|`` at rest near 1 (g read as m/s^2) or near 96 (m/s^2 read as g); elsewhere far from
    gravity: a warning.
@@ -42,7 +43,7 @@ import numpy as np
 from imu_learn.core.stamps import median_period_ns
 from imu_learn.core.still import still_stretches
 from imu_learn.data.formats.source import DEFAULT_COLUMNS, CsvColumns
-from imu_learn.errors import ImplausibleInputError, NotNumericError
+from imu_learn.errors import ImplausibleInputError, NotNumericError, TimestampError
 
 logger = logging.getLogger(__name__)
 
@@ -212,16 +213,56 @@ def _check_rate(c: _Context) -> None:
     if _in(rate, RATE_RANGE_HZ):
         return
     unit = c.layout.time_unit
-    step = period / _UNIT_NS[unit]
-    said = f"the stamps step by {step:.6g} {unit} ({_rate_text(rate)}) with --time-unit {unit}"
-    fits = [u for u in _UNIT_NS if u != unit and _in(rate * _UNIT_NS[unit] / _UNIT_NS[u], RATE_RANGE_HZ)]
-    if fits:
-        best = min(fits, key=lambda u: abs(math.log(rate * _UNIT_NS[unit] / _UNIT_NS[u] / TYPICAL_RATE_HZ)))
+    said = f"the stamps step by {period / _UNIT_NS[unit]:.6g} {unit} ({_rate_text(rate)}) with --time-unit {unit}"
+    best = _fitting_unit(rate, unit)
+    if best is not None:
         fixed = rate * _UNIT_NS[unit] / _UNIT_NS[best]
         c.fail(f"{said}: they look like {_UNIT_WORDS[best]} ({_rate_text(fixed)}); add --time-unit {best}",
                "--time-unit")
     c.fail(f"{said}, and no time unit gives an IMU's rate ({_rate_text(RATE_RANGE_HZ[0])} to "
            f"{_rate_text(RATE_RANGE_HZ[1])}): is {c.column('t')} the time? fix --columns", "--columns")
+
+
+def _fitting_unit(rate: float, unit: str) -> Optional[str]:
+    """The time unit, other than ``unit``, in which stamps that give ``rate`` [Hz] read in ``unit`` give
+    an IMU's rate (:data:`RATE_RANGE_HZ`; the one nearest :data:`TYPICAL_RATE_HZ`), None if none does."""
+    fits = [u for u in _UNIT_NS if u != unit and _in(rate * _UNIT_NS[unit] / _UNIT_NS[u], RATE_RANGE_HZ)]
+    return min(fits, key=lambda u: abs(math.log(rate * _UNIT_NS[unit] / _UNIT_NS[u] / TYPICAL_RATE_HZ)),
+               default=None)
+
+
+def explain_repeated_stamps(path: Path, err: TimestampError, layout: CsvColumns,
+                            lines: int = 1000) -> Optional[ImplausibleInputError]:
+    """For stamps the reader refused as repeated or going back: where the time column's first ``lines``
+    values, read as decimals in the stated ``--time-unit``, step at a rate outside an IMU's and another
+    unit fits (seconds with decimals read as ns round to the same ns), the error naming that unit; else
+    None (the stamps do repeat)."""
+    entries = [e.strip().lower() for e in layout.columns.split(",")]
+    if "t" not in entries or err.column != entries.index("t") + 1:
+        return None
+    col, stamps = entries.index("t"), []
+    with open(path, encoding="utf-8", errors="replace") as fh:
+        for _, line in zip(range(lines), fh):
+            fields = re.split(r"[,;\t ]+", line.strip())
+            try:
+                stamps.append(float(fields[col]))
+            except (IndexError, ValueError):
+                continue  # a header, a comment
+    steps = np.diff(np.asarray(stamps, dtype=np.float64))
+    steps = steps[steps > 0]
+    if not len(steps):
+        return None
+    unit = layout.time_unit
+    rate = 1e9 / (float(np.median(steps)) * _UNIT_NS[unit])
+    best = None if _in(rate, RATE_RANGE_HZ) else _fitting_unit(rate, unit)
+    if best is None:
+        return None
+    where = f"{err.path}:{err.line}" if err.path else str(path)
+    return ImplausibleInputError(
+        f"{where}: the stamps repeat as read with --time-unit {unit}; as written they step by "
+        f"{float(np.median(steps)):.6g} {unit} ({_rate_text(rate)}): they look like {_UNIT_WORDS[best]} "
+        f"({_rate_text(rate * _UNIT_NS[unit] / _UNIT_NS[best])}); add --time-unit {best}",
+        path=str(path), option="--time-unit")
 
 
 _INT64_MAX = 2**63 - 1
