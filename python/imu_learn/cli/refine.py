@@ -69,7 +69,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--bias", choices=choices(), default="none", help=help_text())
     p.add_argument("--bias-model", type=Path, metavar="PT",
                    help="--bias learned (and auto): the bias estimator (python -m imu_learn.train.bias_train writes one; "
-                        "models/bias/fetch_bias_net.pt for the Fetch robot's IMU)")
+                        "none ships: models/bias/README.md)")
     p.add_argument("--fill-covariance", action="store_true",
                    help="ROS bags, a checkpoint with a covariance head: write each IMU message's angular_velocity / "
                         "linear_acceleration covariance as the diagonal of its predicted per-sample variances")
