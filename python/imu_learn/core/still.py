@@ -66,6 +66,14 @@ def prior_spread(bias_std: Optional[Sequence[float]]) -> np.ndarray:
 MEASURED_STD_FLOOR = 0.0005  # rad/s: the least a measured spread (of few recordings) is taken as
 
 
+def _vector(x: object) -> Optional[Tuple[float, float, float]]:
+    """A finite 3-vector of a profile's ``bias_prior``, None where absent or malformed."""
+    if x is None:
+        return None
+    a = np.asarray(x, dtype=np.float64).reshape(-1)
+    return (float(a[0]), float(a[1]), float(a[2])) if a.size == 3 and np.all(np.isfinite(a)) else None
+
+
 def _measured(x: object, isotropic: bool) -> Optional[Tuple[float, float, float]]:
     """A measured per-axis spread [rad/s] of a profile's ``bias_prior`` (floored at
     :data:`MEASURED_STD_FLOOR`; ``isotropic``: its largest axis on every axis), None where absent."""
@@ -93,7 +101,12 @@ class BiasPrior:
     ``gravity_error_std`` gravity consistency's error beyond its own uncertainty along the directions
     it observed, ``measured_rms`` per estimator (``still``, ``gravity``) its RMS error against the
     moving bias and the profile alone's (the moving bias itself) over the same recordings and
-    directions (``--bias auto``'s gate)."""
+    directions (``--bias auto``'s gate). ``rest_to_motion`` [rad/s] (3,): the device's systematic
+    change of the bias from rest to motion (moving minus still, the mean over the training recordings,
+    per axis where holding each recording out in turn showed it lowered the still estimate's error;
+    zero elsewhere), which the still estimate adds; then ``still_error_std`` is the spread left after it.
+    None where not measured, and for an IMU rotated into another frame (``isotropic``: its axes are not
+    the profile's; the spread before it is used)."""
 
     bias: Tuple[float, float, float] = (0.0, 0.0, 0.0)
     std: Tuple[float, float, float] = (MEMS_BIAS_BOUND,) * 3
@@ -106,6 +119,7 @@ class BiasPrior:
     # the gyro's bias random walk [rad/s/sqrt(s)] (the profile's gyroscope_random_walk, copied into its
     # bias_prior by experiments/bias_prior.py fit): ``--bias moving``'s prior on how fast the bias moves
     random_walk: Optional[float] = None
+    rest_to_motion: Optional[Tuple[float, float, float]] = None
 
     @classmethod
     def from_bias_std(cls, bias_std: Optional[Sequence[float]], source: str, isotropic: bool = False,
@@ -125,9 +139,13 @@ class BiasPrior:
                 rms.append((str(name), float(r["error"]), float(r["profile_alone"])))
         rw = m.get("random_walk_rad_s_sqrt_s")
         rw = float(rw) if isinstance(rw, (int, float)) and math.isfinite(rw) and rw > 0 else None
+        shift = None if isotropic else _vector(m.get("rest_to_motion_rad_s"))
+        # the still estimate's spread after the shift where it applies, else the one before it
+        still_std = m.get("still_error_std_rad_s") if shift is not None or "rest_to_motion_rad_s" not in m else \
+            m.get("still_error_unshifted_std_rad_s")
         return cls((0.0, 0.0, 0.0), tuple(float(v) for v in s), source,
-                   _measured(m.get("moving_std_rad_s"), isotropic), _measured(m.get("still_error_std_rad_s"), isotropic),
-                   g, tuple(rms), rw)
+                   _measured(m.get("moving_std_rad_s"), isotropic), _measured(still_std, isotropic),
+                   g, tuple(rms), rw, shift)
 
     def to_dict(self) -> Dict[str, object]:
         out: Dict[str, object] = {"bias_rad_s": [float(v) for v in self.bias], "std_rad_s": [float(v) for v in self.std],
@@ -139,8 +157,13 @@ class BiasPrior:
                                "still_error_std_rad_s": None if self.still_error_std is None else list(self.still_error_std),
                                "gravity_error_std_rad_s": self.gravity_error_std,
                                "rms_rad_s": {k: {"error": e, "profile_alone": a} for k, e, a in self.measured_rms},
-                               "random_walk_rad_s_sqrt_s": self.random_walk}
+                               "random_walk_rad_s_sqrt_s": self.random_walk,
+                               "rest_to_motion_rad_s": None if self.rest_to_motion is None else list(self.rest_to_motion)}
         return out
+
+    def shift(self) -> np.ndarray:
+        """The rest-to-motion change the still estimate adds [rad/s] (3,): zero where not measured."""
+        return np.zeros(3) if self.rest_to_motion is None else np.asarray(self.rest_to_motion, dtype=np.float64)
 
 
 MEMS_PRIOR = BiasPrior()

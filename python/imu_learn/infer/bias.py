@@ -32,9 +32,11 @@ and so do the named options (:func:`admit`: ``still``, ``gravity``, ``learned``;
 part; ``moving`` its own gate): one kept out subtracts nothing beyond the profile's floor (decision
 ``gated``, one log line, the figures in the entry's ``gate``), one the profile has no figure for is
 applied as bounded ("not measured");
-the still estimate's uncertainty floor is raised to the rest-minus-moving spread measured there, and
-gravity consistency's error beyond its own uncertainty is added to its variance. A profile without
-``bias_prior``: as before.
+the still estimate adds the device's systematic rest-to-motion change measured there (:func:`rest_to_motion`:
+moving minus still, per axis where it is significant and holds on recordings held out in turn; the bias
+of a vibrating drone's gyro in flight is not the one on the ground), its uncertainty floor is raised to the
+spread left after that, and gravity consistency's error beyond its own uncertainty is added to its
+variance. A profile without ``bias_prior``: as before.
 """
 from __future__ import annotations
 
@@ -142,7 +144,12 @@ def _still(ctx: Context, t_ns: np.ndarray, gyro: np.ndarray, acc: np.ndarray) ->
     if est.between_stretches is not None:
         var = var + est.between_stretches ** 2
     detail["std_rad_s"] = _vec(np.sqrt(var))
-    return BiasEstimate("still", est.gyro_bias, np.diag(1.0 / var), detail)
+    b = est.gyro_bias
+    if ctx.prior.rest_to_motion is not None:  # the bias while moving: the device's measured change added
+        b = b + ctx.prior.shift()
+        detail.update(at_rest_rad_s=_vec(est.gyro_bias), rest_to_motion_rad_s=_vec(ctx.prior.shift()),
+                      gyro_bias_rad_s=_vec(b), gyro_bias_deg_s=_vec(np.rad2deg(b)))
+    return BiasEstimate("still", b, np.diag(1.0 / var), detail)
 
 
 def _gravity_info(grav: Any, extra: Optional[float] = None) -> np.ndarray:
@@ -305,7 +312,9 @@ def moving_raw(ctx: Context, t_ns: np.ndarray, gyro: np.ndarray, acc: np.ndarray
     t = np.asarray(t_ns, dtype=np.int64)
     g = np.asarray(gyro, dtype=np.float64)
     found = still_stretches(t, g, acc, replace(BIAS_SETTINGS, gravity=float(ctx.gravity), prior=ctx.prior))
-    stills = [(int((t[a] + t[b - 1]) // 2), g[a:b].mean(0), g[a:b].std(0, ddof=1) / np.sqrt(b - a)) for a, b in found]
+    shift = ctx.prior.shift()  # each still's bias while moving (the device's rest-to-motion change)
+    stills = [(int((t[a] + t[b - 1]) // 2), g[a:b].mean(0) + shift, g[a:b].std(0, ddof=1) / np.sqrt(b - a))
+              for a, b in found]
     # each still's rest-to-motion uncertainty as the still estimate's (its floor, raised to the profile's
     # measured spread); no prior on the level (the measured moving-bias spread as one: worse on EuRoC's
     # training flights, docs/experiments/bias_prior.md)
@@ -586,6 +595,29 @@ def bound(est: BiasEstimate, prior: BiasPrior) -> Verdict:
 
 # -- the prior measured on the device's training recordings ---------------------------------------------
 
+REST_TO_MOTION_MIN = 3  # recordings with a still stretch needed to measure the rest-to-motion change
+REST_TO_MOTION_SIGMAS = ACCEPT_SIGMAS  # the mean kept only this many standard errors from zero
+REST_TO_MOTION_RULE = ("moving minus still, the mean over the training recordings with a still stretch, per body axis "
+                       f"where it lies at least {REST_TO_MOTION_SIGMAS:g} standard errors from zero and holding each "
+                       f"recording out in turn (at least {REST_TO_MOTION_MIN}) lowered the RMS of the still estimate's "
+                       "error against the moving bias on that axis; zero elsewhere")
+
+
+def rest_to_motion(still_err: List[np.ndarray]) -> Tuple[Optional[np.ndarray], List[np.ndarray]]:
+    """The device's rest-to-motion change of the bias (:data:`REST_TO_MOTION_RULE`) from each training
+    recording's still minus moving bias, and the still estimate's errors with it (each recording's with
+    the change measured on the others: held out; as they are on the axes where it is zero). None (and
+    the errors as they are) under :data:`REST_TO_MOTION_MIN` recordings."""
+    n = len(still_err)
+    if n < REST_TO_MOTION_MIN:
+        return None, list(still_err)
+    D = np.asarray(still_err, dtype=np.float64)  # still - moving, (n, 3)
+    held = np.stack([D[r] - np.delete(D, r, axis=0).mean(0) for r in range(n)])  # still + (moving - still) of the others
+    sig = np.abs(D.mean(0)) >= REST_TO_MOTION_SIGMAS * D.std(0, ddof=1) / np.sqrt(n)
+    keep = sig & (np.sqrt(np.mean(held ** 2, axis=0)) < np.sqrt(np.mean(D ** 2, axis=0)))
+    shift = np.where(keep, -D.mean(0), 0.0)
+    return shift, list(np.where(keep, held, D))
+
 
 def measure_prior(recordings: List[Tuple[str, np.ndarray, np.ndarray, np.ndarray, np.ndarray]],
                   ctx: Context) -> Dict[str, Any]:
@@ -595,7 +627,9 @@ def measure_prior(recordings: List[Tuple[str, np.ndarray, np.ndarray, np.ndarray
     ground truth, rad/s). Per recording, the ``still`` and ``gravity`` estimates (``ctx``: the
     recording's gravity and the profile's prior) against the moving bias: ``moving_std_rad_s`` the
     moving bias's spread about zero per axis (x n/(n-1): the floor was fitted on them; None under two
-    recordings), ``still_error_std_rad_s`` the RMS of still - moving per axis, ``gravity_error_std_rad_s``
+    recordings), ``rest_to_motion_rad_s`` the device's rest-to-motion change (:func:`rest_to_motion`),
+    ``still_error_std_rad_s`` the RMS of still - moving per axis after it (held out; before it:
+    ``still_error_unshifted_std_rad_s``), ``gravity_error_std_rad_s``
     gravity consistency's error beyond its own uncertainty along the directions its data set (pooled),
     and ``rms_rad_s`` per estimator its RMS error and the profile alone's (the moving bias) over the
     same recordings and directions: ``still`` and ``gravity`` (``auto``'s gate, :func:`better_than_prior`);
@@ -636,19 +670,23 @@ def measure_prior(recordings: List[Tuple[str, np.ndarray, np.ndarray, np.ndarray
     if grav_err:
         extra = float(np.sqrt(max(float(np.mean([x * x - s * s for x, s in grav_err])), 0.0)))
     gate: Dict[str, Any] = {}
+    shift, still_left = rest_to_motion(still_err)
     if still_err:
-        gate["still"] = {"error": rms(still_err), "profile_alone": rms(still_mov)}
+        gate["still"] = {"error": rms(still_left), "profile_alone": rms(still_mov)}
     if grav_err:
         gate["gravity"] = {"error": rms([x for x, _ in grav_err]), "profile_alone": rms(grav_mov)}
     out: Dict[str, Any] = {
         "moving_std_rad_s": _vec(np.sqrt(np.mean(np.square(moving), axis=0) * n / (n - 1))) if n >= 2 else None,
-        "still_error_std_rad_s": _vec(np.sqrt(np.mean(np.square(still_err), axis=0))) if still_err else None,
+        "still_error_std_rad_s": _vec(np.sqrt(np.mean(np.square(still_left), axis=0))) if still_err else None,
+        "still_error_unshifted_std_rad_s": _vec(np.sqrt(np.mean(np.square(still_err), axis=0))) if still_err else None,
+        "rest_to_motion_rad_s": _vec(shift), "rest_to_motion_rule": REST_TO_MOTION_RULE,
         "still_recordings": len(still_err), "gravity_error_std_rad_s": extra, "gravity_directions": len(grav_err)}
     # the prior as a profile carrying these figures runs: the still estimate's floor, gravity
     # consistency's extra variance and auto's gate from them, the rest (random walk, spread) ctx's
     made = BiasPrior.from_bias_std(ctx.prior.std, ctx.prior.source, measured={**out, "rms_rad_s": gate})
     run = replace(ctx, prior=replace(ctx.prior, moving_std=made.moving_std, still_error_std=made.still_error_std,
-                                     gravity_error_std=made.gravity_error_std, measured_rms=made.measured_rms))
+                                     gravity_error_std=made.gravity_error_std, measured_rms=made.measured_rms,
+                                     rest_to_motion=made.rest_to_motion))
     for row, (_, t, g, a, b) in zip(rows, recordings):
         b = np.asarray(b, dtype=np.float64)
         mv = moving_raw(run, t, g, a)
