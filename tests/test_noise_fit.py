@@ -101,3 +101,31 @@ def test_navigate_without_a_noise_source_fits_it_and_says_so(tmp_path, capsys):
     assert s["noise"].startswith("fitted from the aiding's innovations: x") and s["noise"] == s["imu_noise"]["source"]
     assert 0.5 < s["imu_noise"]["accelerometer_noise_density"] / TRUE_ACC < 2.0
     assert sum("fitted from the aiding's innovations" in line for line in err.splitlines()) == 1
+
+
+def test_a_profiles_white_noise_is_raised_to_the_moving_imus_with_pose_aiding():
+    """navigate's :func:`in_motion`: a profile measures the white noise at rest; the pose aiding's
+    innovations see the moving IMU's. A profile 10x too quiet gets the fitted densities (within 2x of
+    the truth), its random walks kept; a sensor noisier than the fit keeps its own; no fit leaves the
+    profile's as they are, and each source says which."""
+    from imu_learn.fuse.navigate import in_motion
+    from imu_learn.fuse.noise_fit import CLASS_WHITE
+
+    t_ns, gyro, acc, aid_t, p, R = recording()
+    fit = fit_noise(t_ns, gyro, acc, aid_t, p, R, G)
+    assert fit.used, fit.reason
+    quiet = ImuNoise(TRUE_GYRO / 10, TRUE_ACC / 10, 2e-5, 4e-3, source="profile P")
+    raised = in_motion(quiet, fit)
+    assert 0.5 < raised.acc_noise_density / TRUE_ACC < 2.0 and 0.5 < raised.gyro_noise_density / TRUE_GYRO < 2.0
+    assert raised.acc_noise_density == pytest.approx(fit.factor * CLASS_WHITE[1])
+    assert (raised.gyro_random_walk, raised.acc_random_walk) == (2e-5, 4e-3)
+    assert raised.source.startswith("profile P; white noise") and "raised" in raised.source
+    noisy_gyro = in_motion(ImuNoise(TRUE_GYRO * 5, TRUE_ACC / 10, 2e-5, 4e-3, source="profile P"), fit)
+    assert noisy_gyro.gyro_noise_density == TRUE_GYRO * 5 and noisy_gyro.acc_noise_density == raised.acc_noise_density
+    kept = in_motion(ImuNoise(TRUE_GYRO * 5, TRUE_ACC * 5, 2e-5, 4e-3, source="profile P"), fit)
+    assert (kept.gyro_noise_density, kept.acc_noise_density) == (TRUE_GYRO * 5, TRUE_ACC * 5)
+    assert "not above it: kept" in kept.source
+    short = fit_noise(t_ns[:300], gyro[:300], acc[:300], aid_t[:1], p[:1], R[:1], G)
+    assert not short.used
+    same = in_motion(quiet, short)
+    assert same.acc_noise_density == quiet.acc_noise_density and "no in-motion fit" in same.source

@@ -94,7 +94,7 @@ from .factors.nhc import NhcSettings, nhc_callback
 from .graph import IncrementalFusion, feed, samples_of
 from .inputs import checkpoint_bias, displacement_hook, displacement_model
 from .noise import ImuNoise, from_profile
-from .noise_fit import fit_noise, fitted_noise
+from .noise_fit import CLASS_WHITE, NoiseFit, fit_noise, fitted_noise
 from .output import plot_navigation, write_json, write_trajectory, write_trajectory_bag
 from .score import convergence, score_against
 from .settings import FusionSettings, PriorSigmas
@@ -390,7 +390,8 @@ class Imu:
 def imu_noise(src: Sources, opts: NavigateOptions, own: Optional[ImuNoise], profile: Optional[Profile],
               imu: Optional[Tuple[np.ndarray, np.ndarray, np.ndarray]] = None,
               sol: Optional[RtkSolution] = None) -> ImuNoise:
-    """The noise the graph assumes: ``--imu-noise``, else the profile's, else the recording's
+    """The noise the graph assumes: ``--imu-noise``, else the profile's (with pose aiding its white
+    noise raised to the moving IMU's, :func:`in_motion`), else the recording's
     sensor.yaml, else with ``imu`` (its stamps, gyro, acc as fused: corrected, in the body frame, the
     stamps delayed) the MEMS class default scaled to
     the aiding's innovations (:mod:`.noise_fit`; the geodetic fixes ``sol`` when the aiding is GNSS),
@@ -398,19 +399,15 @@ def imu_noise(src: Sources, opts: NavigateOptions, own: Optional[ImuNoise], prof
     if opts.imu_noise is not None:
         return ImuNoise(*opts.imu_noise, source="--imu-noise")
     if profile is not None:
-        return from_profile(profile.kalibr(), str(src.profile),
-                            [k for k in profile.kalibr() if profile.unobserved_noise(k)])
+        noise = from_profile(profile.kalibr(), str(src.profile),
+                             [k for k in profile.kalibr() if profile.unobserved_noise(k)])
+        if imu is not None and sol is None and opts.aiding_kind is not None and kind_of(opts.aiding_kind).poses:
+            noise = in_motion(noise, innovation_fit(src, opts, imu, sol))
+        return noise
     if own is not None:
         return own
     if imu is not None:
-        t_ns, gyro, acc = imu
-        if sol is not None:
-            _, rows = gnss_rows(src, sol, t_ns, np.zeros(3), opts)
-            gravity = normal_gravity(sol.origin_llh[0], sol.origin_llh[2])
-        else:
-            T_BS = read_t_bs(src.extrinsics) if src.extrinsics is not None else None
-            rows, gravity = select_rows(read_aiding(src, opts), t_ns, T_BS, opts), opts.gravity
-        noise = fitted_noise(fit_noise(t_ns, gyro, acc, rows.t_ns, rows.p, rows.R, gravity, opts.max_relative_gap_s))
+        noise = fitted_noise(innovation_fit(src, opts, imu, sol))
         log.warning(f"no --profile, --imu-noise or sensor.yaml: the IMU noise is {noise.source}; "
                     "imu-learn calibrate writes your device's")
         return noise
@@ -419,6 +416,42 @@ def imu_noise(src: Sources, opts: NavigateOptions, own: Optional[ImuNoise], prof
                 f"{noise.gyro_noise_density:g} rad/s/sqrt(Hz), acc {noise.acc_noise_density:g} m/s^2/sqrt(Hz)); "
                 "imu-learn calibrate writes your device's")
     return noise
+
+
+def innovation_fit(src: Sources, opts: NavigateOptions, imu: Tuple[np.ndarray, np.ndarray, np.ndarray],
+                   sol: Optional[RtkSolution] = None) -> NoiseFit:
+    """The IMU's white noise fitted from the aiding's innovations (:mod:`.noise_fit`) on ``imu`` (stamps,
+    gyro, acc as fused); the geodetic fixes ``sol`` when the aiding is GNSS."""
+    t_ns, gyro, acc = imu
+    if sol is not None:
+        _, rows = gnss_rows(src, sol, t_ns, np.zeros(3), opts)
+        gravity = normal_gravity(sol.origin_llh[0], sol.origin_llh[2])
+    else:
+        T_BS = read_t_bs(src.extrinsics) if src.extrinsics is not None else None
+        rows, gravity = select_rows(read_aiding(src, opts), t_ns, T_BS, opts), opts.gravity
+    return fit_noise(t_ns, gyro, acc, rows.t_ns, rows.p, rows.R, gravity, opts.max_relative_gap_s)
+
+
+def in_motion(noise: ImuNoise, fit: NoiseFit) -> ImuNoise:
+    """A profile's noise with its white noise raised to what the pose aiding's innovations say the moving
+    IMU has (:func:`innovation_fit`: one factor on the MEMS class default's gyro and accelerometer white
+    noise, as without a profile; a profile measures them at rest, where motors and roads are quiet: on
+    EuRoC's flights the fit is 6-11x the ADIS16448 profile's), each sensor's where the fit is usable and
+    higher; the random walks stay the profile's. The source says which (docs/experiments/navigate-vo.md,
+    "The IMU's noise in motion")."""
+    if not fit.used:
+        return replace(noise, source=f"{noise.source}; no in-motion fit from the aiding's innovations ({fit.reason})")
+    gyro, acc = (float(fit.factor) * w for w in CLASS_WHITE)
+    if gyro <= noise.gyro_noise_density and acc <= noise.acc_noise_density:
+        return replace(noise, source=f"{noise.source}; the aiding's innovations fit x{float(fit.factor):.3g} the class "
+                                     "white noise, not above it: kept")
+    raised = replace(noise, gyro_noise_density=max(gyro, noise.gyro_noise_density),
+                     acc_noise_density=max(acc, noise.acc_noise_density))
+    return replace(raised, source=f"{noise.source}; white noise (gyro {noise.gyro_noise_density:.3g}, acc "
+                                  f"{noise.acc_noise_density:.3g}: at rest) raised to gyro {raised.gyro_noise_density:.3g} "
+                                  f"rad/s/sqrt(Hz), acc {raised.acc_noise_density:.3g} m/s^2/sqrt(Hz), fitted from the "
+                                  f"aiding's innovations in motion (x{float(fit.factor):.3g} the class default, chi2/dof "
+                                  f"{fit.chi2_ratio}, {fit.residuals} residuals)")
 
 
 def load_profile(src: Sources) -> Optional[Profile]:
