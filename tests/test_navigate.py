@@ -276,6 +276,23 @@ def test_cli_navigates_the_crop_without_ground_truth(crop_without_groundtruth, t
     assert len(causal) == s["keyframes"] and causal.t_ns[0] >= read_tum(tum).t_ns[0]
 
 
+@pytest.mark.parametrize("kind", ["relative-pose", "pose"])
+def test_pose_aiding_in_millimetres_is_refused_before_the_fusion(crop_without_groundtruth, tmp_path, capsys, kind):
+    """The camera trajectory with its positions in mm: the aiding's changes of velocity do not follow the
+    accelerometer, so navigate exits 2 with one line naming the unit, before fusing and writing anything."""
+    rec, tum, yaml = crop_without_groundtruth
+    rows = [line.split() for line in tum.read_text().splitlines() if line and not line.startswith("#")]
+    mm = tmp_path / "cam0_mm.tum"
+    mm.write_text("".join(" ".join([r[0], *(f"{1000 * float(x):.6f}" for x in r[1:4]), *r[4:]]) + "\n" for r in rows))
+    out = tmp_path / "out"
+    rc = main(["navigate", "--input", str(rec), "--aiding", str(mm), "--aiding-kind", kind, "--extrinsics", str(yaml),
+               "--out", str(out)])
+    err = capsys.readouterr().err
+    assert rc == 2 and err.count("error:") == 1, err
+    assert "do not follow the accelerometer" in err and "mm" in err and "fusing" not in err
+    assert not out.exists()
+
+
 def test_cli_scores_with_groundtruth_and_gaps(crop_without_groundtruth, tmp_path, capsys):
     rec, tum, yaml = crop_without_groundtruth
     out = tmp_path / "out"

@@ -94,7 +94,7 @@ from .factors.nhc import NhcSettings, nhc_callback
 from .graph import IncrementalFusion, feed, samples_of
 from .inputs import checkpoint_bias, displacement_hook, displacement_model
 from .noise import ImuNoise, from_profile
-from .noise_fit import CLASS_WHITE, NoiseFit, fit_noise, fitted_noise
+from .noise_fit import CLASS_WHITE, FACTOR_BOUNDS, NoiseFit, fit_noise, fitted_noise
 from .output import plot_navigation, write_json, write_trajectory, write_trajectory_bag
 from .score import convergence, score_against
 from .settings import FusionSettings, PriorSigmas
@@ -391,7 +391,7 @@ def imu_noise(src: Sources, opts: NavigateOptions, own: Optional[ImuNoise], prof
               imu: Optional[Tuple[np.ndarray, np.ndarray, np.ndarray]] = None,
               sol: Optional[RtkSolution] = None) -> ImuNoise:
     """The noise the graph assumes: ``--imu-noise``, else the profile's (with pose aiding its white
-    noise raised to the moving IMU's, :func:`in_motion`), else the recording's
+    noise raised to the moving IMU's once the rows are read, :func:`moving_imu`), else the recording's
     sensor.yaml, else with ``imu`` (its stamps, gyro, acc as fused: corrected, in the body frame, the
     stamps delayed) the MEMS class default scaled to
     the aiding's innovations (:mod:`.noise_fit`; the geodetic fixes ``sol`` when the aiding is GNSS),
@@ -399,11 +399,8 @@ def imu_noise(src: Sources, opts: NavigateOptions, own: Optional[ImuNoise], prof
     if opts.imu_noise is not None:
         return ImuNoise(*opts.imu_noise, source="--imu-noise")
     if profile is not None:
-        noise = from_profile(profile.kalibr(), str(src.profile),
-                             [k for k in profile.kalibr() if profile.unobserved_noise(k)])
-        if imu is not None and sol is None and opts.aiding_kind is not None and kind_of(opts.aiding_kind).poses:
-            noise = in_motion(noise, innovation_fit(src, opts, imu, sol))
-        return noise
+        return from_profile(profile.kalibr(), str(src.profile),
+                            [k for k in profile.kalibr() if profile.unobserved_noise(k)])
     if own is not None:
         return own
     if imu is not None:
@@ -430,6 +427,23 @@ def innovation_fit(src: Sources, opts: NavigateOptions, imu: Tuple[np.ndarray, n
         T_BS = read_t_bs(src.extrinsics) if src.extrinsics is not None else None
         rows, gravity = select_rows(read_aiding(src, opts), t_ns, T_BS, opts), opts.gravity
     return fit_noise(t_ns, gyro, acc, rows.t_ns, rows.p, rows.R, gravity, opts.max_relative_gap_s)
+
+
+def moving_imu(src: Sources, opts: NavigateOptions, imu: Imu, rows: AidingRows) -> Imu:
+    """Pose aiding, once its rows are read and their frame checked: the aiding's innovations against the
+    IMU (:mod:`.noise_fit`, on those rows) refuse positions that do not follow the accelerometer (a fit
+    beyond :data:`.noise_fit.FACTOR_BOUNDS`' upper end: no IMU is that noisy, the positions' unit or scale is
+    off), and raise a profile's white noise to the moving IMU's (:func:`in_motion`). Other aiding: ``imu``."""
+    if not kind_of(opts.aiding_kind).poses:
+        return imu
+    fit = fit_noise(imu.t_ns, imu.gyro, imu.acc, rows.t_ns, rows.p, rows.R, opts.gravity, opts.max_relative_gap_s)
+    if fit.factor is not None and fit.factor > FACTOR_BOUNDS[1]:
+        raise ConfigError(f"--aiding {src.aiding}: its positions do not follow the accelerometer (their changes of "
+                          f"velocity need x{fit.factor:.3g} the MEMS class noise, at most x{FACTOR_BOUNDS[1]:g} fits "
+                          "any IMU): positions in mm or cm, or a monocular VO without metric scale? give them in metres")
+    if src.profile is None or opts.imu_noise is not None:  # the noise is not the profile's
+        return imu
+    return replace(imu, noise=in_motion(imu.noise, fit))
 
 
 def in_motion(noise: ImuNoise, fit: NoiseFit) -> ImuNoise:
@@ -704,7 +718,7 @@ def read_inputs(src: Sources, opts: NavigateOptions) -> Inputs:
     if opts.lever_arm is not None:
         lever = np.asarray(opts.lever_arm, dtype=np.float64)
     rows, rows_read, gnss, opts = aiding_rows(src, opts, t_ns, T_BS, lever, imu, sol)
-    return Inputs(opts, kind, imu, lever, rows, rows_read, gnss)
+    return Inputs(opts, kind, moving_imu(src, opts, imu, rows), lever, rows, rows_read, gnss)
 
 
 def start_run(src: Sources, inp: Inputs) -> Started:
