@@ -276,21 +276,56 @@ def test_cli_navigates_the_crop_without_ground_truth(crop_without_groundtruth, t
     assert len(causal) == s["keyframes"] and causal.t_ns[0] >= read_tum(tum).t_ns[0]
 
 
+def _scaled_aiding(tum: Path, factor: float, path: Path) -> Path:
+    rows = [line.split() for line in tum.read_text().splitlines() if line and not line.startswith("#")]
+    path.write_text("".join(" ".join([r[0], *(f"{factor * float(x):.6f}" for x in r[1:4]), *r[4:]]) + "\n"
+                            for r in rows))
+    return path
+
+
 @pytest.mark.parametrize("kind", ["relative-pose", "pose"])
 def test_pose_aiding_in_millimetres_is_refused_before_the_fusion(crop_without_groundtruth, tmp_path, capsys, kind):
-    """The camera trajectory with its positions in mm: the aiding's changes of velocity do not follow the
-    accelerometer, so navigate exits 2 with one line naming the unit, before fusing and writing anything."""
+    """The camera trajectory with its positions in mm: they are x1000 the distances the accelerometer
+    measures, so navigate exits 2 with one line naming the unit and the factor, before fusing and writing
+    anything."""
     rec, tum, yaml = crop_without_groundtruth
-    rows = [line.split() for line in tum.read_text().splitlines() if line and not line.startswith("#")]
-    mm = tmp_path / "cam0_mm.tum"
-    mm.write_text("".join(" ".join([r[0], *(f"{1000 * float(x):.6f}" for x in r[1:4]), *r[4:]]) + "\n" for r in rows))
+    mm = _scaled_aiding(tum, 1000.0, tmp_path / "cam0_mm.tum")
     out = tmp_path / "out"
     rc = main(["navigate", "--input", str(rec), "--aiding", str(mm), "--aiding-kind", kind, "--extrinsics", str(yaml),
                "--out", str(out)])
     err = capsys.readouterr().err
     assert rc == 2 and err.count("error:") == 1, err
-    assert "do not follow the accelerometer" in err and "mm" in err and "fusing" not in err
+    assert "mm" in err and "fusing" not in err
+    factor = float(err.split("--aiding-scale ")[1].split()[0])
+    assert factor == pytest.approx(1e-3, rel=0.05), err
     assert not out.exists()
+
+
+def test_monocular_scale_is_refused_and_the_factor_it_names_fuses(crop_without_groundtruth, tmp_path, capsys):
+    """The camera trajectory (the crop's motion capture in the camera frame: metric) scaled by 0.4, as a
+    monocular VO writes it: refused (exit 2) with the factor to pass, which is 2.5 within its 5 %; with
+    that factor the run fuses, the summary's scale within 5 % of metric, and its track a fifth or less of
+    the error the 0.4 scale itself makes (0.6 x the trajectory's spread about its centroid, after the
+    rigid alignment the score does; the factor is the raw IMU's estimate, +-1.5 % on this 60 s crop)."""
+    rec, tum, yaml = crop_without_groundtruth
+    mono = _scaled_aiding(tum, 0.4, tmp_path / "cam0_mono.tum")
+    base = ["navigate", "--input", str(rec), "--aiding", str(mono), "--aiding-kind", "relative-pose", "--extrinsics",
+            str(yaml)]
+    assert main(base + ["--out", str(tmp_path / "refused")]) == 2
+    err = capsys.readouterr().err
+    assert "monocular" in err and "fusing" not in err, err
+    factor = float(err.split("--aiding-scale ")[1].split()[0])
+    assert factor == pytest.approx(2.5, rel=0.05), err
+    assert not (tmp_path / "refused").exists()
+    out = tmp_path / "out"
+    assert main(base + ["--aiding-scale", f"{factor:g}", "--out", str(out),
+                        "--groundtruth", str(SHIPPED / CROP / GT_REL)]) == 0, capsys.readouterr().err
+    s = json.loads((out / "summary.json").read_text())
+    scale = s["aiding_estimates"]["scale"]
+    assert scale["observed"] and not scale["off_metric"] and scale["scale"] == pytest.approx(1.0, abs=0.05)
+    p = read_tum(tum).p
+    unfixed = 0.6 * float(np.sqrt(np.mean(np.sum((p - p.mean(0)) ** 2, axis=1))))
+    assert s["scores"]["smoothed"]["pos_rmse_m"] < 0.2 * unfixed, (s["scores"]["smoothed"]["pos_rmse_m"], unfixed)
 
 
 def test_cli_scores_with_groundtruth_and_gaps(crop_without_groundtruth, tmp_path, capsys):

@@ -130,6 +130,9 @@ def add_arguments(ap: argparse.ArgumentParser) -> None:
                     help=f"keyframe grid besides the aiding's own samples (default {d.keyframe_hz:g})")
     ap.add_argument("--gaps", default=None, metavar="START:DUR,...",
                     help="drop the aiding inside these windows (seconds from the first IMU sample), e.g. 30:10,70:10")
+    ap.add_argument("--aiding-scale", type=float, default=None, metavar="S",
+                    help="multiply the pose aiding's positions by S (a monocular VO's scale); without it they are "
+                         "checked metric against the accelerometer, and refused with the S to pass when they are not")
     ap.add_argument("--aiding-hz", type=float, default=None, metavar="HZ",
                     help="thin the aiding to this rate (default: every row)")
     ap.add_argument("--sigma-rot-deg", type=float, default=None, metavar="DEG",
@@ -193,7 +196,7 @@ def options(args: argparse.Namespace):
                           "GNSS fixes)")
     # the kind None: found from the aiding by imu_learn.fuse.navigate.resolve_aiding (GNSS fixes are positions)
     o = NavigateOptions(aiding_kind=args.aiding_kind, aiding_format=args.aiding_format or "auto")
-    plain = {"keyframe_hz": args.keyframe_hz, "aiding_hz": args.aiding_hz, "max_relative_gap_s": args.max_relative_gap_s,
+    plain = {"keyframe_hz": args.keyframe_hz, "aiding_hz": args.aiding_hz, "aiding_scale": args.aiding_scale, "max_relative_gap_s": args.max_relative_gap_s,
              "lag_s": args.lag_s}
     o = replace(o, **{k: v for k, v in plain.items() if v is not None})
     if args.imu_delay_s is not None:

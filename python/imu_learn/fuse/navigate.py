@@ -94,7 +94,7 @@ from .factors.nhc import NhcSettings, nhc_callback
 from .graph import IncrementalFusion, feed, samples_of
 from .inputs import checkpoint_bias, displacement_hook, displacement_model
 from .noise import ImuNoise, from_profile
-from .noise_fit import CLASS_WHITE, FACTOR_BOUNDS, NoiseFit, fit_noise, fitted_noise
+from .noise_fit import CLASS_WHITE, FACTOR_BOUNDS, NoiseFit, ScaleFit, fit_noise, fit_scale, fitted_noise, prepare
 from .output import plot_navigation, write_json, write_trajectory, write_trajectory_bag
 from .score import convergence, score_against
 from .settings import FusionSettings, PriorSigmas
@@ -133,6 +133,8 @@ class NavigateOptions:
     pose_sigma_rot_deg: float = 1.0
     pose_sigma_m: float = 0.02
     position_sigma_m: float = 0.05
+    # pose aiding: multiply its positions by this (a monocular VO's scale; None: as read, checked metric)
+    aiding_scale: Optional[float] = None
     # the first state's prior (loose: it comes from the data, not ground truth)
     prior_rot_deg: float = 3.0
     prior_pos_m: float = 0.1
@@ -177,6 +179,10 @@ class NavigateOptions:
             v = getattr(self, name)
             if not (np.isfinite(v) and v > 0):
                 raise ConfigError(f"{name}: must be a positive number, got {v!r}")
+        if self.aiding_scale is not None and not (np.isfinite(self.aiding_scale) and self.aiding_scale > 0):
+            raise ConfigError(f"--aiding-scale: must be a positive number, got {self.aiding_scale!r}")
+        if self.aiding_scale is not None and not kind_of(self.aiding_kind).poses:
+            raise ConfigError("--aiding-scale scales poses: only with --aiding-kind pose or relative-pose")
         if self.aiding_hz is not None and not self.aiding_hz > 0:
             raise ConfigError(f"--aiding-hz: must be > 0, got {self.aiding_hz!r}")
         for start, dur in self.gaps:
@@ -310,11 +316,13 @@ def read_imu(path: Path, fmt: str = "auto", columns: Optional[CsvColumns] = None
 
 def read_aiding(src: Sources, opts: NavigateOptions) -> Trajectory:
     """The aiding file (or bag topic) as a :class:`Trajectory` (poses, or positions for ``position``;
-    geodetic fixes: see :func:`gnss_rows`)."""
+    geodetic fixes: see :func:`gnss_rows`), its positions times ``--aiding-scale`` where given."""
     need = kind_of(opts.aiding_kind).poses
     if opts.aiding_format == "bag":
-        return bag_aiding.read_trajectory(Path(src.aiding), str(src.aiding_topic), need_orientation=need)
-    return read_trajectory(src.aiding, opts.aiding_format, need_orientation=need)
+        traj = bag_aiding.read_trajectory(Path(src.aiding), str(src.aiding_topic), need_orientation=need)
+    else:
+        traj = read_trajectory(src.aiding, opts.aiding_format, need_orientation=need)
+    return traj if opts.aiding_scale is None else replace(traj, p=traj.p * float(opts.aiding_scale))
 
 
 def read_geodetic(src: Sources, opts: NavigateOptions) -> RtkSolution:
@@ -431,12 +439,17 @@ def innovation_fit(src: Sources, opts: NavigateOptions, imu: Tuple[np.ndarray, n
 
 def moving_imu(src: Sources, opts: NavigateOptions, imu: Imu, rows: AidingRows) -> Imu:
     """Pose aiding, once its rows are read and their frame checked: the aiding's innovations against the
-    IMU (:mod:`.noise_fit`, on those rows) refuse positions that do not follow the accelerometer (a fit
-    beyond :data:`.noise_fit.FACTOR_BOUNDS`' upper end: no IMU is that noisy, the positions' unit or scale is
-    off), and raise a profile's white noise to the moving IMU's (:func:`in_motion`). Other aiding: ``imu``."""
+    IMU (:mod:`.noise_fit`, on those rows) refuse positions that are not metric (:func:`.noise_fit.fit_scale`
+    off 1: a monocular VO, mm or cm; the fix names ``--aiding-scale``) or do not follow the accelerometer
+    (a noise fit beyond :data:`.noise_fit.FACTOR_BOUNDS`' upper end: no IMU is that noisy), and raise a
+    profile's white noise to the moving IMU's (:func:`in_motion`). Other aiding: ``imu``."""
     if not kind_of(opts.aiding_kind).poses:
         return imu
-    fit = fit_noise(imu.t_ns, imu.gyro, imu.acc, rows.t_ns, rows.p, rows.R, opts.gravity, opts.max_relative_gap_s)
+    prep = prepare(imu.t_ns, imu.gyro, imu.acc, rows.t_ns, opts.max_relative_gap_s)
+    rows.scale = fit_scale(rows.p, rows.R, prep)
+    check_scale(src, opts, rows.scale)
+    fit = fit_noise(imu.t_ns, imu.gyro, imu.acc, rows.t_ns, rows.p, rows.R, opts.gravity, opts.max_relative_gap_s,
+                    prep=prep)
     if fit.factor is not None and fit.factor > FACTOR_BOUNDS[1]:
         raise ConfigError(f"--aiding {src.aiding}: its positions do not follow the accelerometer (their changes of "
                           f"velocity need x{fit.factor:.3g} the MEMS class noise, at most x{FACTOR_BOUNDS[1]:g} fits "
@@ -444,6 +457,19 @@ def moving_imu(src: Sources, opts: NavigateOptions, imu: Imu, rows: AidingRows) 
     if src.profile is None or opts.imu_noise is not None:  # the noise is not the profile's
         return imu
     return replace(imu, noise=in_motion(imu.noise, fit))
+
+
+def check_scale(src: Sources, opts: NavigateOptions, fit: ScaleFit) -> None:
+    """Refused (exit 2, before the fusion) where the poses' positions are observed off metric; the fix is
+    the factor that makes them metric (``--aiding-scale``, times the one given)."""
+    if not fit.off:
+        return
+    k, given = float(fit.scale), opts.aiding_scale or 1.0
+    fix = given / k
+    after = "" if opts.aiding_scale is None else f" after --aiding-scale {given:g}"
+    raise ConfigError(f"--aiding {src.aiding}: its positions are x{k:.3g} (+-{float(fit.std):.2g}) the distances "
+                      f"the accelerometer measures{after}: a monocular VO without metric scale, or positions in mm or "
+                      f"cm? give them in metres, or pass --aiding-scale {fix:.4g}")
 
 
 def in_motion(noise: ImuNoise, fit: NoiseFit) -> ImuNoise:

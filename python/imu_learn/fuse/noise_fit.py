@@ -23,6 +23,11 @@ ratios), giving σ_p and ``factor² = σ_a² / σ_a,class²``; the gyro density 
 (:data:`imu_learn.calib.profile.CLASS_DEFAULTS`). ``chi2_ratio`` checks the result: the median of the
 squared normalised residuals over the median of χ²(1) (1: consistent). A factor outside
 :data:`FACTOR_BOUNDS` is not used: the class default is, and the warning says so.
+
+The same triples tell pose aiding's metric scale (:func:`fit_scale`, the estimator and rule of
+:mod:`imu_learn.calib.metric_scale`): a monocular VO's positions are in a unit of its own, and a filter
+fusing them as metres follows them anyway (on an EuRoC flight with its stereo poses scaled by 0.4: exit
+0, the noise fit x45, the track 4.1 m off).
 """
 from __future__ import annotations
 
@@ -32,6 +37,8 @@ from typing import List, Optional, Tuple
 import numpy as np
 from scipy.optimize import nnls
 
+from imu_learn.calib import metric_scale
+from imu_learn.calib.metric_scale import ScaleFit
 from imu_learn.calib.profile import CLASS_DEFAULT_SOURCE, CLASS_DEFAULTS
 
 from .aiding.noise import detrend, robust_sigma
@@ -71,30 +78,14 @@ class NoiseFit:
         return self.factor is not None and not self.reason
 
 
-def _cumulative(t: np.ndarray, F: np.ndarray) -> Tuple[np.ndarray, np.ndarray]:
-    """(∫_0^t f ds, ∫_0^t s f ds) at each sample time of ``F`` = f dt (held until the next sample)."""
-    dt = np.r_[np.diff(t), 0.0]
-    S0 = np.r_[np.zeros((1, 3)), np.cumsum(F, axis=0)[:-1]]
-    S1 = np.r_[np.zeros((1, 3)), np.cumsum(F * (t + 0.5 * dt)[:, None], axis=0)[:-1]]
-    return S0, S1
-
-
-def _at(t: np.ndarray, S: np.ndarray, tau: np.ndarray) -> np.ndarray:
-    return np.stack([np.interp(tau, t, S[:, i]) for i in range(3)], axis=1)
-
-
-def residuals(t: np.ndarray, S: Tuple[np.ndarray, np.ndarray], C: np.ndarray, tau: np.ndarray, sample: np.ndarray,
-              p: np.ndarray, R: Optional[np.ndarray], g_vec: Optional[np.ndarray], idx: Tuple[np.ndarray, ...]):
-    """(residual norms (M,), Δ1, Δ2, their regressors on a constant accelerometer bias (M, 3)) of the triples ``idx`` = (a, b, c) (module docstring); ``R``
-    (pose aiding): gravity in the aiding's world estimated as the median of the per-triple ones."""
-    a, b, c = idx
-    d1, d2 = tau[b] - tau[a], tau[c] - tau[b]
-    d_vo = (p[c] - p[b]) / d2[:, None] - (p[b] - p[a]) / d1[:, None]
-    S0 = [_at(t, S[0], tau[i]) for i in idx]
-    S1 = [_at(t, S[1], tau[i]) for i in idx]
-    late = (tau[c][:, None] * (S0[2] - S0[1]) - (S1[2] - S1[1])) / d2[:, None]
-    early = ((S1[1] - S1[0]) - tau[a][:, None] * (S0[1] - S0[0])) / d1[:, None]
-    imu = late + early
+def residuals(t: np.ndarray, F: np.ndarray, C: np.ndarray, tau: np.ndarray, sample: np.ndarray, p: np.ndarray,
+              R: Optional[np.ndarray], g_vec: Optional[np.ndarray], a: np.ndarray, stride: int):
+    """(residual norms (M,), Δ1, Δ2, their regressors on a constant accelerometer bias (M, 3)) of the triples from
+    rows ``a``, ``stride`` rows apart (module docstring); ``F``: the specific force in the gyro's frame times dt;
+    ``R`` (pose aiding): gravity in the aiding's world estimated as the median of the per-triple ones."""
+    b = a + stride
+    d_vo, d1, d2 = metric_scale.triples(tau, p, a, stride)
+    imu = metric_scale.kernel_integral(t, F, tau, a, stride)
     w = 0.5 * (d1 + d2)
     if g_vec is None:
         to_A = np.einsum("nij,nkj->nik", R[b], C[sample[b]])
@@ -106,24 +97,48 @@ def residuals(t: np.ndarray, S: Tuple[np.ndarray, np.ndarray], C: np.ndarray, ta
     return e, d1, d2, w[:, None] * u
 
 
-def fit_noise(imu_t_ns: np.ndarray, gyro: np.ndarray, acc: np.ndarray, aid_t_ns: np.ndarray, p: np.ndarray,
-              R: Optional[np.ndarray] = None, gravity: Optional[float] = 9.81, max_gap_s: float = 0.5,
-              default: Optional[ImuNoise] = None) -> NoiseFit:
-    """The fit (module docstring) from the IMU (stamps [ns], gyro [rad/s], acc [m/s^2], any frame)
-    and aiding rows inside its span (stamps [ns] on the IMU's clock, positions ``p`` (M, 3) [m]; with
-    ``R`` (M, 3, 3) body-to-aiding-world rotations, gravity is found in that world, else the world is
-    z up with ``gravity`` [m/s^2]). ``default``: the noise the factor scales (the class default)."""
-    default = class_default() if default is None else default
+@dataclass(frozen=True)
+class Prepared:
+    """The IMU and aiding stamps [s from the first IMU sample], each row's IMU sample, the gyro's
+    orientation ``C``, the specific force in its frame times dt ``F``, each row's run
+    (:func:`.aiding.pairs.runs`) and the aiding's median period [s]: what :func:`fit_noise` and
+    :func:`fit_scale` both compare."""
+
+    t: np.ndarray
+    tau: np.ndarray
+    sample: np.ndarray
+    C: np.ndarray
+    F: np.ndarray
+    run: np.ndarray
+    period: float
+
+
+def prepare(imu_t_ns: np.ndarray, gyro: np.ndarray, acc: np.ndarray, aid_t_ns: np.ndarray,
+            max_gap_s: float = 0.5) -> Prepared:
     t0 = int(imu_t_ns[0])
     t = (np.asarray(imu_t_ns, dtype=np.int64) - t0) * 1e-9
     tau = (np.asarray(aid_t_ns, dtype=np.int64) - t0) * 1e-9
     sample = np.clip(np.searchsorted(t, tau), 0, len(t) - 1)
     C = gyro_orientation(imu_t_ns, gyro)
     dt = np.r_[np.diff(t), 0.0]
-    S = _cumulative(t, np.einsum("nij,nj->ni", C, acc) * dt[:, None])
-    g_vec = None if R is not None else np.array([0.0, 0.0, -float(gravity)])
+    F = np.einsum("nij,nj->ni", C, acc) * dt[:, None]
     run = runs(imu_t_ns, sample, max_gap_s)  # the aiding's one pairing rule (.aiding.pairs)
-    period = float(np.median(np.diff(tau)))
+    period = float(np.median(np.diff(tau))) if len(tau) > 1 else float("nan")
+    return Prepared(t, tau, sample, C, F, run, period)
+
+
+def fit_noise(imu_t_ns: np.ndarray, gyro: np.ndarray, acc: np.ndarray, aid_t_ns: np.ndarray, p: np.ndarray,
+              R: Optional[np.ndarray] = None, gravity: Optional[float] = 9.81, max_gap_s: float = 0.5,
+              default: Optional[ImuNoise] = None, prep: Optional[Prepared] = None) -> NoiseFit:
+    """The fit (module docstring) from the IMU (stamps [ns], gyro [rad/s], acc [m/s^2], any frame)
+    and aiding rows inside its span (stamps [ns] on the IMU's clock, positions ``p`` (M, 3) [m]; with
+    ``R`` (M, 3, 3) body-to-aiding-world rotations, gravity is found in that world, else the world is
+    z up with ``gravity`` [m/s^2]). ``default``: the noise the factor scales (the class default);
+    ``prep``: :func:`prepare` of the same inputs, when already computed."""
+    default = class_default() if default is None else default
+    pr = prep if prep is not None else prepare(imu_t_ns, gyro, acc, aid_t_ns, max_gap_s)
+    t, tau, sample, C, F, run, period = pr.t, pr.tau, pr.sample, pr.C, pr.F, pr.run, pr.period
+    g_vec = None if R is not None else np.array([0.0, 0.0, -float(gravity)])
     rows: List[Tuple[float, float, float]] = []  # (variance, aiding coefficient, IMU coefficient)
     parts: List[Tuple[np.ndarray, np.ndarray, np.ndarray]] = []
     spans: List[float] = []
@@ -131,7 +146,7 @@ def fit_noise(imu_t_ns: np.ndarray, gyro: np.ndarray, acc: np.ndarray, aid_t_ns:
     while 2 * stride < len(tau) and stride * period <= MAX_SPAN_S:
         a = within(run, 2 * stride)
         if len(a) >= MIN_TRIPLES:
-            e, d1, d2, X = residuals(t, S, C, tau, sample, p, R, g_vec, (a, a + stride, a + 2 * stride))
+            e, d1, d2, X = residuals(t, F, C, tau, sample, p, R, g_vec, a, stride)
             e = e - X @ np.linalg.lstsq(X, e, rcond=None)[0]  # less the constant bias's part
             span = float(np.median(0.5 * (d1 + d2)))
             e = detrend(e[:, None], int(round(max(TREND_S, TREND_SPANS * span) / period)))[:, 0]
@@ -176,3 +191,19 @@ def fitted_noise(fit: NoiseFit, default: Optional[ImuNoise] = None) -> ImuNoise:
                     source=f"fitted from the aiding's innovations: x{k:.3g} the MEMS class default's white noise "
                            f"(chi2/dof {fit.chi2_ratio}, {fit.residuals} residuals over spans {list(fit.spans_s)} s; "
                            f"aiding {1e3 * float(fit.aiding_sigma_m):.3g} mm per axis)")
+
+
+
+def fit_scale(p: np.ndarray, R: np.ndarray, prep: Prepared) -> ScaleFit:
+    """Pose aiding's metric scale (:mod:`imu_learn.calib.metric_scale`): the IMU's specific force over each
+    triple turned into the aiding's world by the aiding's attitude at its middle row (``R_b C_bᵀ``)."""
+    stride = metric_scale.stride_of(prep.period)
+    a = within(prep.run, 2 * stride)
+    span = float(stride * prep.period) if np.isfinite(prep.period) else float("nan")
+    if not len(a):
+        return metric_scale.fit([], stride, span)
+    d_vo, d1, d2 = metric_scale.triples(prep.tau, p, a, stride)
+    imu = metric_scale.kernel_integral(prep.t, prep.F, prep.tau, a, stride)
+    b = a + stride
+    to_A = np.einsum("nij,nkj->nik", R[b], prep.C[prep.sample[b]])
+    return metric_scale.fit([(d_vo, np.einsum("nij,nj->ni", to_A, imu), 0.5 * (d1 + d2))], stride, span)

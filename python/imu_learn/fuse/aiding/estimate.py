@@ -37,6 +37,7 @@ def summary_entry(rows: AidingRows, used: Optional[PoseNoise], source: str) -> D
     est = rows.noise
     return {"frame_check": None if rows.frame is None else rows.frame.to_dict(),
             "offset": None if rows.offset is None else rows.offset.to_dict(),
+            "scale": None if rows.scale is None else rows.scale.to_dict(),
             "noise_estimated": None if est is None else est.to_dict(),
             "noise_used": None if used is None else {
                 "rot_deg_per_axis": [round(float(np.rad2deg(x)), 5) for x in used.rot_rad],
@@ -53,6 +54,9 @@ def one_line_text(entry: Optional[Dict[str, object]]) -> str:
         rot = float(np.sqrt(np.mean(np.square(used["rot_deg_per_axis"]))))
         trans = 1e3 * float(np.sqrt(np.mean(np.square(used["trans_m_per_axis"]))))
         parts.append(f"aiding noise {rot:.3f} deg / {trans:.1f} mm per pose ({used['source']})")
+    sc = entry.get("scale")
+    if sc and sc.get("observed"):
+        parts.append(f"scale x{sc['scale']:.3f} (+-{sc['std']:.3f}) of metric")
     off = entry.get("offset")
     if off and off.get("lag_s") is not None:
         parts.append(f"offset {1e3 * off['lag_s']:+.1f} ms{'' if off['applied'] else ' (not applied)'}")

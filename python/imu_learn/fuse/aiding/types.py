@@ -313,3 +313,4 @@ class AidingRows:
     offset: Optional[object] = None
     noise: Optional[object] = None
     frame: Optional[object] = None  # the frame check before the fusion (:class:`.frame.FrameCheck`)
+    scale: Optional[object] = None  # the positions' metric scale (:class:`imu_learn.fuse.noise_fit.ScaleFit`)
