@@ -71,20 +71,29 @@ def stride_of(period_s: float) -> int:
     return max(1, int(round(SPAN_S / period_s))) if np.isfinite(period_s) and period_s > 0 else 1
 
 
-def fit(parts: Sequence[Tuple[np.ndarray, np.ndarray, np.ndarray]], stride: int, span_s: float) -> ScaleFit:
+def fit(parts: Sequence[Tuple[np.ndarray, ...]], stride: int, span_s: float) -> ScaleFit:
     """The scale from ``parts``, each (Δv̄ (M, 3) in the reference's units, ``∫ k R f ds`` (M, 3) in its
-    world [m/s], w (M,) [s]) of triples ``stride`` rows apart (module docstring)."""
+    world [m/s], w (M,) [s]) of triples ``stride`` rows apart (module docstring) in a world of its own (its
+    own gravity: one part per recording's segment), with a fourth entry ``∫ k R ds`` (M, 3, 3) [s] where a
+    constant accelerometer bias (one IMU) is fitted too (every part or none)."""
     parts = [x for x in parts if len(x[2])]
     m = int(sum(len(x[2]) for x in parts))
     if m < MIN_TRIPLES:
         return ScaleFit(None, None, m, span_s, f"{m} reference triples over {span_s:.2g} s; {MIN_TRIPLES} needed")
     d = np.concatenate([x[0] for x in parts])
     y = np.concatenate([x[1] for x in parts]).reshape(-1)
-    w = np.concatenate([x[2] for x in parts])
-    A = np.zeros((m, 3, 4))
+    bias = bool(parts) and all(len(x) > 3 for x in parts)
+    k = len(parts)  # each part its own world: its own gravity
+    n = 1 + 3 * k + (3 if bias else 0)
+    A = np.zeros((m, 3, n))
     A[:, :, 0] = d
-    A[:, :, 1:] = -np.eye(3) * w[:, None, None]
-    A = A.reshape(-1, 4)
+    row = 0
+    for i, x in enumerate(parts):
+        A[row:row + len(x[2]), :, 1 + 3 * i:4 + 3 * i] = -np.eye(3) * x[2][:, None, None]
+        row += len(x[2])
+    if bias:
+        A[:, :, n - 3:] = -np.concatenate([x[3] for x in parts])
+    A = A.reshape(-1, n)
     wt = np.ones(m)
     for _ in range(6):
         sw = np.repeat(np.sqrt(wt), 3)
@@ -93,7 +102,7 @@ def fit(parts: Sequence[Tuple[np.ndarray, np.ndarray, np.ndarray]], stride: int,
         wt = np.minimum(1.0, (1.5 * np.median(r) + 1e-12) / np.maximum(r, 1e-12))
     ww = np.repeat(wt, 3)
     res = y - A @ x
-    s2 = float(np.sum(ww * res ** 2) / max(1, len(y) - 4))
+    s2 = float(np.sum(ww * res ** 2) / max(1, len(y) - n))
     cov = s2 * np.linalg.pinv((A * ww[:, None]).T @ A)
     inv, inv_std = float(x[0]), float(np.sqrt(max(cov[0, 0], 0.0)) * np.sqrt(2 * stride))
     if not inv > SIGMAS * inv_std:

@@ -17,8 +17,11 @@ The chain (docs: your-device.md; design: a 6-DoF reference in an unknown frame):
    ``window_s``:  Σ R_WI f dt = s Δv_ref + Δ(R_WB (ω × r)) + g_up T,  unknowns the reference's
    scale s (metres per reference unit), the lever arm r (IMU origin in the reference body frame) and g_up (the specific force
    of rest, in the reference world). The world is then levelled (g_up to +z),
-   the scale applied where the reference is not metric (|s − 1| beyond 3 standard errors and 2 %)
-   and the lever arm where it is significant.
+   the lever arm kept where it is significant. The scale that is applied (and reported) is
+   :mod:`.metric_scale`'s, on the positions' changes of mean velocity over half-second spans less the
+   lever arm's part (the joint fit's, on velocities, reads low on a noisy reference: 0.85 on a 200 Hz
+   pose-only crop), applied where more than 5 % and 4 standard errors off 1 (the joint fit's scale
+   where that one is not observed).
 4. The reference, rotated, levelled, scaled, moved to the IMU origin and put on the IMU's clock
    (:func:`to_imu_frame`), is then an ordinary ground truth for the floor; where its velocity cannot
    resolve accelerations (:func:`resolves_acceleration`: a 20 Hz VO), the accelerometer comes from its
@@ -39,6 +42,7 @@ from typing import Any, Dict, List, Optional, Sequence, Tuple
 import numpy as np
 
 from imu_learn.baselines.base import FitSettings
+from imu_learn.calib import metric_scale
 from imu_learn.calib.frames import (
     default_gap_s,
     fit_acc_rotation,
@@ -84,11 +88,6 @@ class FrameOptions:
     window_s: float = 1.0
     floor_lag_s: float = 0.015
     level_deg: float = 2.0
-    # a reference is taken as metric unless its scale is this far off 1: stereo, VIO, motion capture and
-    # GNSS are metric, a monocular trajectory's scale is arbitrary; in between the estimate is not trusted
-    # (a pose-only 200 Hz EuRoC crop reads 0.85 ± 0.03 from velocities its positions imply): the floor
-    # then fits against the reference as it is and the plausibility limits judge the result
-    min_scale_error: float = 0.25
     lever_sigmas: float = 5.0
     min_lever_m: float = 0.02
     floor_window_s: Optional[float] = None
@@ -317,6 +316,37 @@ def fit_gravity_scale_lever(recordings: Sequence[Sequence[Segment]], r_imu_ref: 
             "g_up": x[4:].reshape(k, 3)}
 
 
+def reference_scale(recordings: Sequence[Sequence[Segment]], r_imu_ref: np.ndarray, ref_rate_hz: float,
+                    lever_m: np.ndarray) -> metric_scale.ScaleFit:
+    """The reference's metric scale (:mod:`.metric_scale`): its positions, interpolated on the IMU's stamps,
+    at rows of its own rate (at most 40 Hz), against the IMU's specific force turned into its world by
+    its own attitude (``R_ref r_imu_refᵀ``) at every IMU sample, less what the lever arm ``lever_m`` (the
+    IMU origin in the reference's body frame [m]) adds to the IMU origin's change of mean velocity; a
+    constant accelerometer bias fitted with it (one IMU), each segment's gravity its own."""
+    parts, stride, span = [], 1, float("nan")
+    for segs in recordings:
+        for s in segs:
+            t = (s.t_ns - s.t_ns[0]) * 1e-9
+            imu_rate = sample_rate_hz(s.t_ns)
+            step = max(1, int(round(imu_rate / min(ref_rate_hz, 40.0))))
+            rows = np.arange(0, len(s), step)
+            tau = t[rows]
+            stride = metric_scale.stride_of(step / imu_rate)
+            span = stride * step / imu_rate
+            a = np.arange(max(len(rows) - 2 * stride, 0))
+            if not len(a):
+                continue
+            dt = np.r_[np.diff(t), 0.0]
+            F = quat_rotate(s.q_wxyz, s.acc @ r_imu_ref) * dt[:, None]  # R_ref r_imu_refᵀ f dt
+            d_vo, d1, d2 = metric_scale.triples(tau, s.p[rows], a, stride)
+            arm, _, _ = metric_scale.triples(tau, quat_rotate(s.q_wxyz[rows], np.broadcast_to(lever_m, (len(rows), 3))),
+                                             a, stride)
+            cols = [quat_rotate(s.q_wxyz, np.broadcast_to(r_imu_ref[j], s.acc.shape)) * dt[:, None] for j in range(3)]
+            KR = np.stack([metric_scale.kernel_integral(t, c, tau, a, stride) for c in cols], axis=2)
+            parts.append((d_vo, metric_scale.kernel_integral(t, F, tau, a, stride) - arm, 0.5 * (d1 + d2), KR))
+    return metric_scale.fit(parts, stride, span)
+
+
 def level_rotation(g_up: np.ndarray) -> np.ndarray:
     """The smallest rotation taking ``g_up``'s direction to +z."""
     u = g_up / np.linalg.norm(g_up)
@@ -404,15 +434,17 @@ def resolve_frame(pairs: Sequence[Tuple[ImuData, GroundTruth]], options: FrameOp
             f"the reference's translation does not follow the accelerometer (scale {sol['scale']:.3f} ± "
             f"{sol['scale_std']:.3f}): a mirrored axis, positions of another recording, or a reference that barely "
             "moves; check the file (imu-learn groundtruth)")
-    scale_off = abs(sol["scale"] - 1) > max(options.min_scale_error, 3 * sol["scale_std"]) and sol["scale_std"] < 0.1
     lever_sig = (np.linalg.norm(sol["lever"]) > options.lever_sigmas * np.linalg.norm(sol["lever_std"])
                  and np.linalg.norm(sol["lever"]) > options.min_lever_m)
     lever = lever0 if extrinsics is not None else (sol["lever"] if lever_sig else np.zeros(3))
+    metric = reference_scale(per, r_imu_ref, ref_rate, lever)
+    scale_off = metric.off  # the scale applied is metric_scale's (the joint fit's reads low on a noisy velocity)
     applied = {"rotation": rot_deg >= options.identity_deg or extrinsics is not None, "lag": coarse != 0.0,
                "level": tilt >= options.level_deg, "scale": bool(scale_off),
                "lever_arm": bool(np.linalg.norm(lever) > 0)}
     return FrameFit(r_imu_ref, rot_deg, rot_std, off.rms, w_rms, coarse if coarse else lag, corr, gyro_bias,
-                    float(sol["scale"]), float(sol["scale_std"]), lever,
+                    *((1.0 / metric.scale, metric.std / metric.scale ** 2) if metric.observed
+                      else (float(sol["scale"]), float(sol["scale_std"]))), lever,
                     np.zeros(3) if extrinsics is not None else sol["lever_std"], tilt, g_up, ref_rate, method,
                     resolves_acceleration(ref_rate, options.floor_window_s or FitSettings().window / imu_rate,
                                           options.acc_span_fraction), applied)
