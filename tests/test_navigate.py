@@ -323,6 +323,7 @@ def test_monocular_scale_is_refused_and_the_factor_it_names_fuses(crop_without_g
     s = json.loads((out / "summary.json").read_text())
     scale = s["aiding_estimates"]["scale"]
     assert scale["observed"] and not scale["off_metric"] and scale["scale"] == pytest.approx(1.0, abs=0.05)
+    assert s["causal_frame"].startswith("the aiding's world as estimated at each update")  # unbroken: its world
     p = read_tum(tum).p
     unfixed = 0.6 * float(np.sqrt(np.mean(np.sum((p - p.mean(0)) ** 2, axis=1))))
     assert s["scores"]["smoothed"]["pos_rmse_m"] < 0.2 * unfixed, (s["scores"]["smoothed"]["pos_rmse_m"], unfixed)
@@ -339,6 +340,7 @@ def test_cli_scores_with_groundtruth_and_gaps(crop_without_groundtruth, tmp_path
     sc = s["scores"]
     assert sc["aligned"] and s["aiding_dropped"]["in_gaps"] == 300  # 15 s of 20 Hz poses
     assert s["not_chained_over_gaps"] == 2
+    assert s["causal_frame"] == "navigation frame"  # aiding with breaks: no world of its own
     assert sc["aiding_only"]["pos_rmse_m"] < 1e-6  # the aiding is ground truth here
     assert [g["duration_s"] for g in sc["smoothed"]["gaps"]] == [10.0, 5.0]
     assert sc["smoothed"]["gaps"][0]["max_m"] > sc["smoothed"]["outside_gaps_rmse_m"]

@@ -47,7 +47,7 @@ from .settings import SETTLE_S, FusionSettings
 @dataclass
 class FusionResult:
     kf_idx: np.ndarray  # (K,) IMU sample index of each keyframe
-    causal_p: np.ndarray  # (K, 3) each keyframe's position right after its own update
+    causal_p: np.ndarray  # (K, 3) each keyframe's position right after its own update (see causal_frame)
     causal_R: np.ndarray  # (K, 3, 3)
     smoothed_p: np.ndarray
     smoothed_R: np.ndarray
@@ -55,6 +55,10 @@ class FusionResult:
     smoothed_bias: np.ndarray  # (K, 6) gyro, acc
     seconds: float = 0.0
     counts: Dict[str, int] = field(default_factory=dict)
+    # how causal_p / causal_R are expressed: "navigation frame" (each as its update estimated it), or with
+    # the aiding's own world (WorldPoses) "the aiding's world as estimated at each update, mapped into the
+    # navigation frame by the final world" (:meth:`IncrementalFusion.smooth`)
+    causal_frame: str = "navigation frame"
 
 
 def keyframes(t_ns: np.ndarray, keyframe_hz: float, aiding: Seq) -> np.ndarray:
@@ -269,6 +273,8 @@ class IncrementalFusion:
         # add there; they count as new information (iSAM2 updates at that keyframe).
         self._extra_factors = extra_factors
         self._world = None  # the key of the aiding's world (WorldPoses), once its first pose arrived
+        self._world_now: Optional[np.ndarray] = None  # its causal estimate (4, 4) after the last update
+        self.causal_world = np.full((K, 4, 4), np.nan)  # that estimate as of each keyframe
         if extra_factors is not None:
             self.counts["extra_factors"] = 0
         self.n = 0  # samples added so far
@@ -435,8 +441,12 @@ class IncrementalFusion:
                 self._state = self._isam.calculateEstimatePose3(X(k))
                 self._vel = self._isam.calculateEstimateVector(V(k))
                 self._bias = self._isam.calculateEstimateConstantBias(B(k))
+                if self._world is not None:
+                    self._world_now = self._isam.calculateEstimatePose3(self._world).matrix()
                 updated = True
         self.causal_p[k], self.causal_R[k] = self._state.translation(), self._state.rotation().matrix()
+        if self._world_now is not None:
+            self.causal_world[k] = self._world_now
         self._nav = gtsam.NavState(self._state, self._vel)
         self._k = k + 1
         if self._k < len(self._kf_list):
@@ -569,8 +579,31 @@ class IncrementalFusion:
             b = est.atConstantBias(B(k))
             smoothed_b[k] = np.r_[b.gyroscope(), b.accelerometer()]
         counts = {k: v for k, v in self.counts.items() if k != "isam2_updates"}
-        return FusionResult(self.kf_idx, self.causal_p, self.causal_R, smoothed_p, smoothed_R, smoothed_v, smoothed_b,
-                            time.perf_counter() - self._t_start, counts)
+        causal_p, causal_R, frame = self.causal_p, self.causal_R, "navigation frame"
+        if self._world is not None and est.exists(self._world):
+            causal_p, causal_R = in_final_world(self.causal_p, self.causal_R, self.causal_world,
+                                                est.atPose3(self._world).matrix())
+            frame = ("the aiding's world as estimated at each update, mapped into the navigation frame by the "
+                     "final world")
+        return FusionResult(self.kf_idx, causal_p, causal_R, smoothed_p, smoothed_R, smoothed_v, smoothed_b,
+                            time.perf_counter() - self._t_start, counts, frame)
+
+
+def in_final_world(p: np.ndarray, R: np.ndarray, worlds: np.ndarray, final: np.ndarray
+                   ) -> Tuple[np.ndarray, np.ndarray]:
+    """Causal poses ``(p, R)`` (K, 3), (K, 3, 3) in the navigation frame, each taken into the aiding's world
+    through the world's causal estimate as of its keyframe (``worlds`` (K, 4, 4), NaN before the first:
+    those take the first estimate), then into the navigation frame through ``final`` (4, 4): one rigid
+    map of the aiding's world, so the world's causal re-estimates (its tilt as the accelerometer tells it
+    over the run) no longer move the poses already output. The relative geometry of each pose to the
+    aiding is the causal solver's, as it was at that pose's update."""
+    have = ~np.isnan(worlds[:, 0, 0])
+    if not have.any():
+        return p, R
+    idx = np.maximum.accumulate(np.where(have, np.arange(len(have)), -1))
+    idx[idx < 0] = int(np.argmax(have))
+    M = np.einsum("ij,kjl->kil", final, np.linalg.inv(worlds[idx]))  # final · W_k⁻¹
+    return np.einsum("kij,kj->ki", M[:, :3, :3], p) + M[:, :3, 3], np.einsum("kij,kjl->kil", M[:, :3, :3], R)
 
 
 # One sample as the graph takes it: (sample index, gyro [rad/s] (3,), acc [m/s^2] (3,), its noise variances

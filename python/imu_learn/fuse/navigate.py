@@ -802,6 +802,7 @@ def run_summary(src: Sources, out: Path, inp: Inputs, run: Started, res) -> Dict
         "final_bias": [round(float(b), 6) for b in res.smoothed_bias[-1]],
         "bias": run.bias, "correction": imu.correction, "imu_delay": imu.delay,
         "outputs": {"causal": str(out / "causal.tum"), "smoothed": str(out / "smoothed.tum")},
+        "causal_frame": res.causal_frame,
         **frames(src, opts, None if inp.gnss is None else inp.gnss[1]),
     }
     if src.groundtruth is not None:
