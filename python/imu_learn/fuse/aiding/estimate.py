@@ -3,15 +3,19 @@ offset (:mod:`.offset`, applied to the aiding's stamps) and each pose's noise (:
 relative poses' sigmas where none are given), and the summary's entry for both."""
 from __future__ import annotations
 
+import logging
 from dataclasses import replace
 from typing import Dict, Optional, Tuple
 
 import numpy as np
 
+from .maps import one_map
 from .noise import PoseNoise, pose_noise
 from .offset import AidingOffset, estimate_offset
 from .tum import Trajectory
 from .types import AidingRows
+
+log = logging.getLogger(__name__)
 
 
 def shift_trajectory(traj: Trajectory, imu_t_ns: np.ndarray, gyro: np.ndarray) -> Tuple[Trajectory, AidingOffset]:
@@ -26,8 +30,12 @@ def shift_trajectory(traj: Trajectory, imu_t_ns: np.ndarray, gyro: np.ndarray) -
 
 def with_noise(rows: AidingRows, imu_t_ns: np.ndarray, gyro: np.ndarray, acc: np.ndarray,
                max_gap_s: float) -> AidingRows:
-    """``rows`` with each pose's noise estimated against the IMU (None with too few increments)."""
+    """``rows`` with each pose's noise estimated against the IMU (None with too few increments) and,
+    where they have breaks, whether they stay in one map (:mod:`.maps`)."""
     rows.noise = pose_noise(imu_t_ns, gyro, acc, (rows.sample, rows.R, rows.p), 1, max_gap_s)
+    rows.maps = one_map(imu_t_ns, gyro, acc, rows.sample, rows.t_ns, rows.p, rows.R, max_gap_s)
+    if rows.maps is not None and not rows.maps.verdict:
+        log.info("aiding with breaks, not tied to one world: %s", rows.maps.why)
     return rows
 
 
@@ -38,6 +46,7 @@ def summary_entry(rows: AidingRows, used: Optional[PoseNoise], source: str) -> D
     return {"frame_check": None if rows.frame is None else rows.frame.to_dict(),
             "offset": None if rows.offset is None else rows.offset.to_dict(),
             "scale": None if rows.scale is None else rows.scale.to_dict(),
+            "breaks": None if rows.maps is None else rows.maps.to_dict(),
             "noise_estimated": None if est is None else est.to_dict(),
             "noise_used": None if used is None else {
                 "rot_deg_per_axis": [round(float(np.rad2deg(x)), 5) for x in used.rot_rad],
@@ -54,6 +63,10 @@ def one_line_text(entry: Optional[Dict[str, object]]) -> str:
         rot = float(np.sqrt(np.mean(np.square(used["rot_deg_per_axis"]))))
         trans = 1e3 * float(np.sqrt(np.mean(np.square(used["trans_m_per_axis"]))))
         parts.append(f"aiding noise {rot:.3f} deg / {trans:.1f} mm per pose ({used['source']})")
+    br = entry.get("breaks")
+    if br:
+        parts.append(f"{len(br['breaks'])} break(s), " + ("one map: its world tied in the smoothing pass" if br["one_map"] else
+                                                          "not one map: each run chained alone"))
     sc = entry.get("scale")
     if sc and sc.get("observed"):
         parts.append(f"scale x{sc['scale']:.3f} (+-{sc['std']:.3f}) of metric")

@@ -99,8 +99,12 @@ class RelativePoseKind(AidingKind):
         noise, source = relative_noise(rows, opts, whole)
         a, counts = relative_poses(rows.sample, rows.t_ns, rows.R, rows.p, noise,
                                    opts.relative_spans_s if whole else (0.0,), opts.max_relative_gap_s, label)
-        if whole and opts.relative_world:  # each pose also in the aiding's own world, a free state
-            a = replace(a, world=world_poses(rows.sample, rows.R, rows.p, noise, label))
+        # breaks in one map (.maps: each checked against the IMU's dead reckoning): the smoothing pass
+        # ties every run to the one world, with the noise estimated; the causal estimate chains as before
+        one_map = not whole and bool(getattr(rows.maps, "verdict", False))
+        if (whole or one_map) and opts.relative_world:  # each pose also in the aiding's own world, a free state
+            wn = noise if whole else relative_noise(rows, opts, True)[0]
+            a = replace(a, world=world_poses(rows.sample, rows.R, rows.p, wn, label, smoothing_only=one_map))
             counts["world_poses"] = len(rows.sample)
         return a.since(s0), {**counts, "aiding_estimates": summary_entry(rows, noise, source)}
 

@@ -111,9 +111,12 @@ def relative_poses(sample: np.ndarray, t_ns: np.ndarray, R: np.ndarray, p: np.nd
     return a, counts
 
 
-def world_poses(sample: np.ndarray, R: np.ndarray, p: np.ndarray, noise: PoseNoise, label: str) -> WorldPoses:
+def world_poses(sample: np.ndarray, R: np.ndarray, p: np.ndarray, noise: PoseNoise, label: str,
+                smoothing_only: bool = False) -> WorldPoses:
     """The rows' body poses ``R``, ``p`` in the aiding's world, tied to the graph through its free world
-    frame (:class:`WorldPoses`), each with its per-pose noise."""
+    frame (:class:`WorldPoses`), each with its per-pose noise; ``smoothing_only``: in the batch
+    smoothing pass alone."""
     sig = np.r_[np.asarray(noise.rot_rad, dtype=np.float64), np.asarray(noise.trans_m, dtype=np.float64)]
+    where = " (smoothing pass only)" if smoothing_only else ""
     return WorldPoses(np.asarray(sample), np.asarray(R), np.asarray(p), np.tile(sig, (len(sample), 1)),
-                      f"{label}: poses in the aiding's world (a free frame)")
+                      f"{label}: poses in the aiding's world (a free frame){where}", smoothing_only=smoothing_only)

@@ -129,6 +129,7 @@ class RelativePoses:
 
 # between_at's first element for a pose tied to the aiding's own world (:class:`WorldPoses`)
 WORLD = "world"
+WORLD_SMOOTHED = "world, smoothing pass only"  # the same tie, for the batch smoothing pass alone
 
 
 
@@ -172,6 +173,9 @@ class WorldPoses(_PosesAtSamples):
     sigmas: np.ndarray
     label: str
     dropped_outage: int = 0
+    # tied for the batch smoothing pass only (aiding with breaks in one map, :mod:`.maps`): the causal
+    # estimate chains each run as before (tied there, its coasting through the breaks was worse)
+    smoothing_only: bool = False
 
     def select(self, keep: np.ndarray, dropped_outage: int = 0) -> WorldPoses:
         """The poses where ``keep`` (M,) is True; ``dropped_outage`` is added to the count."""
@@ -191,7 +195,8 @@ class WorldPoses(_PosesAtSamples):
             raise InvalidInputError(f"{self.label}: per-pose sigmas {np.shape(self.sigmas)}, expected ({len(self.idx)}, 6)")
         for s, R, t, sig in zip(self.idx, self.R, self.p, self.sigmas):
             model = gtsam.noiseModel.Diagonal.Sigmas(np.asarray(sig, dtype=np.float64))
-            between_at.setdefault(int(s), []).append((WORLD, gtsam.Pose3(gtsam.Rot3(R), t), model))
+            between_at.setdefault(int(s), []).append((WORLD_SMOOTHED if self.smoothing_only else WORLD,
+                                                      gtsam.Pose3(gtsam.Rot3(R), t), model))
 
 
 @dataclass(frozen=True)
@@ -313,4 +318,5 @@ class AidingRows:
     offset: Optional[object] = None
     noise: Optional[object] = None
     frame: Optional[object] = None  # the frame check before the fusion (:class:`.frame.FrameCheck`)
-    scale: Optional[object] = None  # the positions' metric scale (:class:`imu_learn.fuse.noise_fit.ScaleFit`)
+    scale: Optional[object] = None  # the positions' metric scale (:class:`imu_learn.calib.metric_scale.ScaleFit`)
+    maps: Optional[object] = None  # with breaks: whether they stay in one map (:class:`.maps.OneMap`)

@@ -1,0 +1,74 @@
+"""Relative-pose aiding with breaks in one map (fuse/aiding/maps.py): on the synthetic flight of
+test_aiding_world.py, a 3 s break in the same world passes the check against the IMU's dead reckoning
+and a map restarted after it (its first pose the identity at the origin, as a visual odometry that
+reinitialises writes) fails it; one map ties every run to the world in the smoothing pass alone, so
+the causal track is the chained one's exactly and the smoothed one lies closer to the truth."""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+pytest.importorskip("gtsam")
+
+from imu_learn.fuse.aiding.kinds import KINDS  # noqa: E402
+from imu_learn.fuse.aiding.maps import one_map  # noqa: E402
+from imu_learn.fuse.graph import IncrementalFusion, feed, samples_of  # noqa: E402
+from imu_learn.fuse.navigate import NavigateOptions  # noqa: E402
+from imu_learn.fuse.settings import FusionSettings  # noqa: E402
+from test_aiding_world import rows_of, vo_flight  # noqa: E402
+
+
+@pytest.fixture(scope="module")
+def broken():
+    t_ns, gyro, acc, R, p, v0, (sample, R_A, p_A, _) = vo_flight()
+    t = (t_ns[sample] - t_ns[0]) * 1e-9
+    gap = (t >= 10.0) & (t < 13.0)
+    return t_ns, gyro, acc, R, p, v0, sample, R_A, p_A, gap
+
+
+def check(t_ns, gyro, acc, rows):
+    return one_map(t_ns, gyro, acc, rows.sample, rows.t_ns, rows.p, rows.R, 0.5)
+
+
+def test_a_break_in_one_map_passes_and_a_restarted_map_fails(broken):
+    t_ns, gyro, acc, R, p, v0, sample, R_A, p_A, gap = broken
+    rows = rows_of(t_ns, gyro, acc, sample, R_A, p_A, gap)
+    same = check(t_ns, gyro, acc, rows)
+    assert same is not None and same.verdict and len(same.breaks) == 1, same
+    b = same.breaks[0]
+    assert b["rotation_deg"] < 0.3 * b["rotation_bound_deg"] and b["translation_miss_m"] < 0.5 * b["translation_bound_m"], b
+    # after the break, a new map: the first pose after it is the identity at the origin
+    first = int(np.argmax(gap)) + int(gap.sum())
+    R_new, p_new = R_A.copy(), p_A.copy()
+    R_new[first:] = np.einsum("ji,njk->nik", R_A[first], R_A[first:])
+    p_new[first:] = (p_A[first:] - p_A[first]) @ R_A[first]
+    new = check(t_ns, gyro, acc, rows_of(t_ns, gyro, acc, sample, R_new, p_new, gap))
+    assert new is not None and not new.verdict and "new map" in new.why, new
+    assert check(t_ns, gyro, acc, rows_of(t_ns, gyro, acc, sample, R_A, p_A)) is None  # no break
+
+
+def test_one_map_ties_its_world_in_the_smoothing_pass_alone(broken):
+    t_ns, gyro, acc, R, p, v0, sample, R_A, p_A, gap = broken
+    kind, opts = KINDS["relative-pose"], NavigateOptions()
+
+    def fused(maps: bool):
+        rows = rows_of(t_ns, gyro, acc, sample, R_A, p_A, gap)
+        rows.maps = check(t_ns, gyro, acc, rows) if maps else None
+        a, counts = kind.build(rows, 0, np.eye(3), np.zeros(3), opts, "vo", "")
+        inc = IncrementalFusion(t_ns, (R[0], p[0], v0), [a], FusionSettings(lag_s=3.0), predict_between=False)
+        feed(inc, samples_of(gyro, acc))
+        return inc.smooth(), counts, a
+
+    chained, _, a0 = fused(False)
+    tied, counts, a1 = fused(True)
+    assert a0.world is None and a1.world is not None and a1.world.smoothing_only
+    assert counts["world_poses"] == int((~gap).sum())
+    assert np.array_equal(tied.causal_p, chained.causal_p)  # the causal estimate is the chained one's
+    assert tied.counts["world_pose_factors_smoothing"] == int((~gap).sum())
+    at = np.isin(tied.kf_idx, sample)
+
+    def rmse(x):
+        return float(np.sqrt(np.mean(np.sum((x[at] - p[tied.kf_idx[at]]) ** 2, axis=1))))
+
+    # the smoothed track: one world across the break (the chained one is tied across it by the IMU alone)
+    assert rmse(tied.smoothed_p) < 0.8 * rmse(chained.smoothed_p), (rmse(tied.smoothed_p), rmse(chained.smoothed_p))
