@@ -60,6 +60,14 @@ def test_the_pos_file_is_found_by_its_content(tmp_path):
     (tmp_path / "a.csv").write_text("t,x,y,z,qx,qy,qz,qw\n1.0,0,0,0,0,0,0,1\n")
     (tmp_path / "a_asl.csv").write_text("#timestamp,px,py,pz,qw,qx,qy,qz\n1403636579758555392,0,0,0,1,0,0,0\n")
     assert [detect(tmp_path / n) for n in ("a.tum", "a.csv", "a_asl.csv")] == ["tum", "csv", "asl"]
+    # ns in float notation (Fetch's motion capture: float64 printed in full) is ASL too, read as ns
+    (tmp_path / "f_asl.csv").write_text("# timestamp, x, y, z, qw, qx, qy, qz\n"
+                                        "1.691116804683040768e+18,-1.3765,1.2738,0.3642,1,0,0,0\n"
+                                        "1.691116804694800128e+18,-1.3766,1.2738,0.3642,1,0,0,0\n")
+    (tmp_path / "s.csv").write_text("t,x,y,z,qx,qy,qz,qw\n1.691116804e+09,0,0,0,0,0,0,1\n")
+    assert detect(tmp_path / "f_asl.csv") == "asl" and detect(tmp_path / "s.csv") == "csv"
+    from imu_learn.fuse.aiding.tum import read_trajectory
+    assert read_trajectory(tmp_path / "f_asl.csv", "asl").t_ns.tolist() == [1691116804683040768, 1691116804694800128]
     (tmp_path / "run.bag").write_bytes(b"")
     assert detect(tmp_path / "run.bag") == "bag"
     utc = tmp_path / "utc.pos"

@@ -4,9 +4,9 @@
 * a ROS bag (a ``.bag`` file or a ROS 2 folder): ``bag`` (:mod:`.bag`; a topic names the stream);
 * ``%`` comment lines whose last names RTKLIB's time system and position columns: ``rtklib``
   (:mod:`.rtklib`);
-* otherwise the first line that is not a comment or a header of names: commas and an integer first
-  cell of 13 digits or more (nanoseconds) -> ``asl``; commas -> ``csv``; white space -> ``tum``
-  (:mod:`.tum`).
+* otherwise the first line that is not a comment or a header of names: commas and a first cell in
+  nanoseconds (an integer of 13 digits or more, or a number of 1e12 or more in float notation) ->
+  ``asl``; commas -> ``csv``; white space -> ``tum`` (:mod:`.tum`).
 """
 from __future__ import annotations
 
@@ -25,6 +25,17 @@ def _head(path: Path) -> List[str]:
     with open(path, "rb") as fh:
         raw = fh.read(HEAD_BYTES)
     return raw.decode("utf-8", errors="replace").splitlines()[:200]
+
+
+def _ns(cell: str) -> bool:
+    """A stamp in nanoseconds: 13 digits or more, or a number of 1e12 or more in float notation
+    (``1.691116804683040768e+18``: Fetch's motion capture, float64 printed in full)."""
+    if cell.isdigit():
+        return len(cell) >= 13
+    try:
+        return float(cell) >= 1e12
+    except ValueError:
+        return False
 
 
 def detect(path: Path) -> str:
@@ -46,5 +57,5 @@ def detect(path: Path) -> str:
         first = text.split(",", 1)[0].strip()
         if not any(c.isdigit() for c in first):
             continue  # a header line of names
-        return "asl" if first.isdigit() and len(first) >= 13 else "csv"
+        return "asl" if _ns(first) else "csv"
     return "tum"

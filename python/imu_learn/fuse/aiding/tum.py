@@ -9,6 +9,8 @@ Three layouts, one reader: the core's (``imu_core::io::tum::read_trajectory``, t
 * ``asl``: an ASL CSV (EuRoC/Kalibr): ``timestamp [ns], px, py, pz, qw, qx, qy, qz`` (quaternion
   scalar first), positions only: ``timestamp, px, py, pz``.
 
+ASL stamps in float notation of 1e12 or more (ns since an epoch printed as float64, as Fetch's motion
+capture writes them) are read as ns to float64's resolution; a smaller float there is an error.
 Lines starting with ``#`` and blank lines are skipped anywhere (a trailing ``# ...`` comment after a
 row's fields too); a CSV header line of names (not numbers) is skipped when it is the first line
 that is not a comment. Every row must have the column count of the first row. Seconds are
@@ -117,6 +119,15 @@ def _reworded(e: ParseError, src: str, layout: str) -> ParseError:
     return type(e)(msg, e.path, e.line, col, name if col is not None else e.field)
 
 
+def epoch_ns_in_float_notation(e: FloatTimestampError) -> bool:
+    """Whether the stamp ``e`` names is a number of 1e12 or more: ns since an epoch printed as a float
+    (a small float there is more likely seconds or a mistake, and stays an error)."""
+    try:
+        return float(str(e.value)) >= 1e12
+    except (TypeError, ValueError):
+        return False
+
+
 def read_trajectory(path: Union[str, Path], layout: str = "tum", need_orientation: bool = True) -> Trajectory:
     """The trajectory in ``path`` (module docstring: layouts, comments, errors). With
     ``need_orientation`` rows must carry a quaternion (8 columns); otherwise 4 columns
@@ -126,6 +137,16 @@ def read_trajectory(path: Union[str, Path], layout: str = "tum", need_orientatio
     src = str(path)
     try:
         d = core.read_trajectory(src, layout, positions_only=not need_orientation)
+    except FloatTimestampError as e:
+        if not epoch_ns_in_float_notation(e):
+            raise _reworded(e, src, layout) from None
+        # ns of an epoch in float notation (float64 printed in full, as Fetch's motion capture): read as
+        # ns to float64's resolution (256 ns at this epoch), as the Fetch reader reads its IMU
+        log.info(f"{src}: stamps in float notation, read as ns (float64 resolution)")
+        try:
+            d = core.read_trajectory(src, layout, positions_only=not need_orientation, allow_float_timestamps=True)
+        except ParseError as e2:
+            raise _reworded(e2, src, layout) from None
     except ParseError as e:
         raise _reworded(e, src, layout) from None
     lines = d["lines"]
