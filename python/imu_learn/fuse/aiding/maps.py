@@ -29,7 +29,7 @@ translation bound is 30-40 m; the rotation check then decides).
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from typing import Dict, List, Optional
+from typing import Dict, List, Optional, Tuple
 
 import numpy as np
 
@@ -82,6 +82,18 @@ def gravity_in_world(t: np.ndarray, F: np.ndarray, C: np.ndarray, tau: np.ndarra
     return np.median((d_vo - np.einsum("nij,nj->ni", to_A, imu)) / (0.5 * (d1 + d2))[:, None], axis=0)
 
 
+@dataclass(frozen=True)
+class _Imu:
+    """The IMU as the check uses it: stamps [s from the first sample], dt, the gyro's chain ``C`` and the
+    accelerometer [m/s²], and gravity in the aiding's world ``g``."""
+
+    t: np.ndarray
+    dt: np.ndarray
+    C: np.ndarray
+    acc: np.ndarray
+    g: np.ndarray
+
+
 def one_map(imu_t_ns: np.ndarray, gyro: np.ndarray, acc: np.ndarray, sample: np.ndarray, aid_t_ns: np.ndarray,
             p: np.ndarray, R: np.ndarray, max_gap_s: float) -> Optional[OneMap]:
     """The check (module docstring) of rows at IMU samples ``sample``, stamps ``aid_t_ns``, body poses ``R``,
@@ -94,46 +106,50 @@ def one_map(imu_t_ns: np.ndarray, gyro: np.ndarray, acc: np.ndarray, sample: np.
     tau = (np.asarray(aid_t_ns, dtype=np.int64) - t0) * 1e-9
     C = gyro_orientation(imu_t_ns, gyro)
     dt = np.r_[np.diff(t), 0.0]
-    F = np.einsum("nij,nj->ni", C, acc) * dt[:, None]
-    g = gravity_in_world(t, F, C, tau, sample, p, R, run)
+    g = gravity_in_world(t, np.einsum("nij,nj->ni", C, acc) * dt[:, None], C, tau, sample, p, R, run)
     if g is None:
         return OneMap(False, [], "too few rows inside the runs to find gravity in the aiding's world")
+    imu = _Imu(t, dt, C, np.asarray(acc, dtype=np.float64), g)
     out: List[Dict[str, float]] = []
     why = ""
     for b in np.flatnonzero(np.diff(run)) + 1:
-        a = b - 1
-        T = float(tau[b] - tau[a])
-        turned = C[sample[a]].T @ C[sample[b]]
-        # the median over the last EDGE_ROWS rows before the break and the first after it: one pose at a
-        # break's edge is often off (a tracker losing or regaining its view)
-        before = [i for i in range(a, a - EDGE_ROWS, -1) if i >= 0 and run[i] == run[a]]
-        after = [j for j in range(b, b + EDGE_ROWS) if j < len(run) and run[j] == run[b]]
-        rot = float(np.median([_angle_deg((R[i].T @ R[j]).T @ (C[sample[i]].T @ C[sample[j]]))
-                               for i in before for j in after]))
-        rot_bound = ROT_DEG + GYRO_DRIFT_DEG_S * T + ROT_FRACTION * _angle_deg(turned)
-        first = int(np.searchsorted(tau, tau[a] - VELOCITY_S))
-        first = first if run[first] == run[a] and first < a else None
-        entry = {"t_s": round(float(tau[a]), 3), "duration_s": round(T, 3), "rotation_deg": round(rot, 3),
-                 "rotation_bound_deg": round(rot_bound, 3)}
-        if first is None:
-            why = why or f"the break at {tau[a]:.1f} s follows a run shorter than {VELOCITY_S:g} s"
-            out.append({**entry, "ok": False})
-            continue
-        v = (p[a] - p[first]) / (tau[a] - tau[first])
-        sa, sb = int(sample[a]), int(sample[b])
-        to_A = R[a] @ C[sa].T
-        acc_A = np.einsum("ij,nj->ni", to_A, np.einsum("nij,nj->ni", C[sa:sb], acc[sa:sb])) + g
-        h = dt[sa:sb, None]
-        dv = np.cumsum(acc_A * h, axis=0) - acc_A * h  # velocity change at each sample's start
-        predicted = v * T + np.sum(dv * h + 0.5 * acc_A * h ** 2, axis=0)
-        miss = float(np.linalg.norm((p[b] - p[a]) - predicted))
-        acc_err = ACC_ERR + 0.5 * G * np.radians(rot_bound)  # the attitude error the rotation bound allows tilts gravity
-        pos_bound = 0.5 * acc_err * T ** 2 + VEL_ERR * T + POS_FLOOR_M
-        ok = rot <= rot_bound and miss <= pos_bound
-        out.append({**entry, "translation_miss_m": round(miss, 3), "translation_bound_m": round(pos_bound, 3),
-                    "ok": bool(ok)})
-        if not ok and not why:
-            why = (f"the break at {tau[a]:.1f} s ({T:.1f} s): the aiding turned {rot:.1f} deg against the gyro "
+        entry, fail = _check_break(imu, tau, sample, p, R, run, int(b))
+        out.append(entry)
+        why = why or fail
+    return OneMap(not why, out, why)
+
+
+def _check_break(imu: _Imu, tau: np.ndarray, sample: np.ndarray, p: np.ndarray, R: np.ndarray, run: np.ndarray,
+                 b: int) -> Tuple[Dict[str, float], str]:
+    """(the break's figures, why it is not in one map or "") of the break before row ``b``."""
+    a, C = b - 1, imu.C
+    T = float(tau[b] - tau[a])
+    turned = C[sample[a]].T @ C[sample[b]]
+    # the median over the last EDGE_ROWS rows before the break and the first after it: one pose at a
+    # break's edge is often off (a tracker losing or regaining its view)
+    before = [i for i in range(a, a - EDGE_ROWS, -1) if i >= 0 and run[i] == run[a]]
+    after = [j for j in range(b, b + EDGE_ROWS) if j < len(run) and run[j] == run[b]]
+    rot = float(np.median([_angle_deg((R[i].T @ R[j]).T @ (C[sample[i]].T @ C[sample[j]]))
+                           for i in before for j in after]))
+    rot_bound = ROT_DEG + GYRO_DRIFT_DEG_S * T + ROT_FRACTION * _angle_deg(turned)
+    entry = {"t_s": round(float(tau[a]), 3), "duration_s": round(T, 3), "rotation_deg": round(rot, 3),
+             "rotation_bound_deg": round(rot_bound, 3)}
+    first = int(np.searchsorted(tau, tau[a] - VELOCITY_S))
+    if not (run[first] == run[a] and first < a):
+        return {**entry, "ok": False}, f"the break at {tau[a]:.1f} s follows a run shorter than {VELOCITY_S:g} s"
+    v = (p[a] - p[first]) / (tau[a] - tau[first])
+    sa, sb = int(sample[a]), int(sample[b])
+    acc_A = np.einsum("ij,nj->ni", R[a] @ C[sa].T, np.einsum("nij,nj->ni", C[sa:sb], imu.acc[sa:sb])) + imu.g
+    h = imu.dt[sa:sb, None]
+    dv = np.cumsum(acc_A * h, axis=0) - acc_A * h  # velocity change at each sample's start
+    predicted = v * T + np.sum(dv * h + 0.5 * acc_A * h ** 2, axis=0)
+    miss = float(np.linalg.norm((p[b] - p[a]) - predicted))
+    acc_err = ACC_ERR + 0.5 * G * np.radians(rot_bound)  # the attitude error the rotation bound allows tilts gravity
+    pos_bound = 0.5 * acc_err * T ** 2 + VEL_ERR * T + POS_FLOOR_M
+    ok = rot <= rot_bound and miss <= pos_bound
+    entry = {**entry, "translation_miss_m": round(miss, 3), "translation_bound_m": round(pos_bound, 3), "ok": bool(ok)}
+    if ok:
+        return entry, ""
+    return entry, (f"the break at {tau[a]:.1f} s ({T:.1f} s): the aiding turned {rot:.1f} deg against the gyro "
                    f"(bound {rot_bound:.1f}) and moved {miss:.2f} m off the IMU's dead reckoning (bound "
                    f"{pos_bound:.2f} m): a new map")
-    return OneMap(not why, out, why)
