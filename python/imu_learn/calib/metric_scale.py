@@ -120,18 +120,50 @@ def triples(tau: np.ndarray, p: np.ndarray, a: np.ndarray, stride: int) -> Tuple
     return (p[c] - p[b]) / d2[:, None] - (p[b] - p[a]) / d1[:, None], d1, d2
 
 
-def kernel_integral(t: np.ndarray, F: np.ndarray, tau: np.ndarray, a: np.ndarray, stride: int) -> np.ndarray:
-    """``∫ k(s) f ds`` (M, 3) over each triple from rows ``a`` (stamps ``tau``), ``F`` = f dt at IMU stamps
-    ``t`` [s] (each sample held until the next; the running integrals interpolated at the rows)."""
+Integrals = Tuple[np.ndarray, np.ndarray, np.ndarray]  # (t, ∫_0^t f ds, ∫_0^t s f ds) at each IMU stamp
+
+
+def running_integrals(t: np.ndarray, F: np.ndarray) -> Integrals:
+    """(``t``, ∫_0^t f ds, ∫_0^t s f ds) at each IMU stamp ``t`` [s] of ``F`` = f dt (each sample held until
+    the next): computed once, then read at any triples by :func:`kernel_integral`."""
     dt = np.r_[np.diff(t), 0.0]
     S0 = np.r_[np.zeros((1, 3)), np.cumsum(F, axis=0)[:-1]]
     S1 = np.r_[np.zeros((1, 3)), np.cumsum(F * (t + 0.5 * dt)[:, None], axis=0)[:-1]]
+    return t, S0, S1
 
-    def at(S: np.ndarray, i: np.ndarray) -> np.ndarray:
-        return np.stack([np.interp(tau[i], t, S[:, k]) for k in range(3)], axis=1)
+
+def kernel_integral(S: Integrals, tau: np.ndarray, a: np.ndarray, stride: int) -> np.ndarray:
+    """``∫ k(s) f ds`` (M, 3) over each triple from rows ``a`` (stamps ``tau``), from the running integrals
+    ``S`` (:func:`running_integrals`, interpolated at the rows)."""
+    t, S0, S1 = S
+
+    def at(X: np.ndarray, i: np.ndarray) -> np.ndarray:
+        return np.stack([np.interp(tau[i], t, X[:, k]) for k in range(3)], axis=1)
 
     b, c = a + stride, a + 2 * stride
     d1, d2 = tau[b] - tau[a], tau[c] - tau[b]
     late = (tau[c][:, None] * (at(S0, c) - at(S0, b)) - (at(S1, c) - at(S1, b))) / d2[:, None]
     early = ((at(S1, b) - at(S1, a)) - tau[a][:, None] * (at(S0, b) - at(S0, a))) / d1[:, None]
     return late + early
+
+
+def to_world(R: np.ndarray, C: np.ndarray, sample: np.ndarray, b: np.ndarray, v: np.ndarray) -> np.ndarray:
+    """``v`` (M, 3) in the gyro's frame (``C``: its chain) turned into the aiding's world by the aiding's
+    attitude ``R`` at rows ``b`` (IMU samples ``sample``): ``R_b C_bᵀ v``."""
+    return np.einsum("nij,nkj,nk->ni", R[b], C[sample[b]], v)
+
+
+def pose_terms(S: Integrals, C: np.ndarray, tau: np.ndarray, sample: np.ndarray, p: np.ndarray, R: np.ndarray,
+               a: np.ndarray, stride: int) -> Tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """One part for :func:`fit` from pose rows (stamps ``tau``, IMU samples ``sample``, body poses ``R``, ``p``
+    in the aiding's world) and the IMU's running integrals ``S`` of its specific force in the gyro's frame
+    (chain ``C``): (Δv̄, ``∫ k C f ds`` turned into the aiding's world at each triple's middle row, w)."""
+    d_vo, d1, d2 = triples(tau, p, a, stride)
+    return d_vo, to_world(R, C, sample, a + stride, kernel_integral(S, tau, a, stride)), 0.5 * (d1 + d2)
+
+
+def gravity(terms: Tuple[np.ndarray, np.ndarray, np.ndarray]) -> np.ndarray:
+    """Gravity in the aiding's world [m/s²] from :func:`pose_terms`: the median over the triples of
+    ``(Δv̄ − ∫ k R f ds) / w`` (a metric aiding's)."""
+    d_vo, imu_A, w = terms
+    return np.median((d_vo - imu_A) / w[:, None], axis=0)

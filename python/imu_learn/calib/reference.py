@@ -342,8 +342,10 @@ def reference_scale(recordings: Sequence[Sequence[Segment]], r_imu_ref: np.ndarr
             arm, _, _ = metric_scale.triples(tau, quat_rotate(s.q_wxyz[rows], np.broadcast_to(lever_m, (len(rows), 3))),
                                              a, stride)
             cols = [quat_rotate(s.q_wxyz, np.broadcast_to(r_imu_ref[j], s.acc.shape)) * dt[:, None] for j in range(3)]
-            KR = np.stack([metric_scale.kernel_integral(t, c, tau, a, stride) for c in cols], axis=2)
-            parts.append((d_vo, metric_scale.kernel_integral(t, F, tau, a, stride) - arm, 0.5 * (d1 + d2), KR))
+            KR = np.stack([metric_scale.kernel_integral(metric_scale.running_integrals(t, c), tau, a, stride)
+                           for c in cols], axis=2)
+            imu = metric_scale.kernel_integral(metric_scale.running_integrals(t, F), tau, a, stride)
+            parts.append((d_vo, imu - arm, 0.5 * (d1 + d2), KR))
     return metric_scale.fit(parts, stride, span)
 
 

@@ -61,6 +61,7 @@ from scipy.spatial.transform import Rotation
 from tqdm import tqdm
 
 from imu_learn.calib import correction
+from imu_learn.calib.metric_scale import ScaleFit
 from imu_learn.calib.profile import Profile
 from imu_learn.core.still import MEMS_PRIOR, MIN_STILL_START_S, BiasPrior
 from imu_learn.data import formats
@@ -94,7 +95,7 @@ from .factors.nhc import NhcSettings, nhc_callback
 from .graph import IncrementalFusion, feed, samples_of
 from .inputs import checkpoint_bias, displacement_hook, displacement_model
 from .noise import ImuNoise, from_profile
-from .noise_fit import CLASS_WHITE, FACTOR_BOUNDS, NoiseFit, ScaleFit, fit_noise, fit_scale, fitted_noise, prepare
+from .noise_fit import CLASS_WHITE, FACTOR_BOUNDS, NoiseFit, fit_noise, fit_scale, fitted_noise, prepare
 from .output import plot_navigation, write_json, write_trajectory, write_trajectory_bag
 from .score import convergence, score_against
 from .settings import FusionSettings, PriorSigmas

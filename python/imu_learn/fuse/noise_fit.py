@@ -78,37 +78,35 @@ class NoiseFit:
         return self.factor is not None and not self.reason
 
 
-def residuals(t: np.ndarray, F: np.ndarray, C: np.ndarray, tau: np.ndarray, sample: np.ndarray, p: np.ndarray,
-              R: Optional[np.ndarray], g_vec: Optional[np.ndarray], a: np.ndarray, stride: int):
+def residuals(pr: Prepared, p: np.ndarray, R: Optional[np.ndarray], g_vec: Optional[np.ndarray], a: np.ndarray,
+              stride: int):
     """(residual norms (M,), Δ1, Δ2, their regressors on a constant accelerometer bias (M, 3)) of the triples from
-    rows ``a``, ``stride`` rows apart (module docstring); ``F``: the specific force in the gyro's frame times dt;
-    ``R`` (pose aiding): gravity in the aiding's world estimated as the median of the per-triple ones."""
+    rows ``a``, ``stride`` rows apart (module docstring); ``R`` (pose aiding): gravity in the aiding's world
+    estimated as the median of the per-triple ones (:func:`imu_learn.calib.metric_scale.gravity`)."""
     b = a + stride
-    d_vo, d1, d2 = metric_scale.triples(tau, p, a, stride)
-    imu = metric_scale.kernel_integral(t, F, tau, a, stride)
+    d_vo, d1, d2 = metric_scale.triples(pr.tau, p, a, stride)
+    imu = metric_scale.kernel_integral(pr.S, pr.tau, a, stride)
     w = 0.5 * (d1 + d2)
     if g_vec is None:
-        to_A = np.einsum("nij,nkj->nik", R[b], C[sample[b]])
-        g_vec = np.median((d_vo - np.einsum("nij,nj->ni", to_A, imu)) / w[:, None], axis=0)
+        g_vec = metric_scale.gravity((d_vo, metric_scale.to_world(R, pr.C, pr.sample, b, imu), w))
     norm = np.linalg.norm(imu, axis=1)
     e = np.linalg.norm(d_vo - g_vec * w[:, None], axis=1) - norm
     # a constant accelerometer bias b moves e by about -w (u . b), u the specific force's direction in the body
-    u = np.einsum("nji,nj->ni", C[sample[b]], imu / np.maximum(norm, 1e-9)[:, None])
+    u = np.einsum("nji,nj->ni", pr.C[pr.sample[b]], imu / np.maximum(norm, 1e-9)[:, None])
     return e, d1, d2, w[:, None] * u
 
 
 @dataclass(frozen=True)
 class Prepared:
-    """The IMU and aiding stamps [s from the first IMU sample], each row's IMU sample, the gyro's
-    orientation ``C``, the specific force in its frame times dt ``F``, each row's run
-    (:func:`.aiding.pairs.runs`) and the aiding's median period [s]: what :func:`fit_noise` and
-    :func:`fit_scale` both compare."""
+    """The aiding's stamps [s from the first IMU sample], each row's IMU sample, the gyro's orientation
+    ``C``, the running integrals of the specific force in its frame (:func:`imu_learn.calib.metric_scale.running_integrals`),
+    each row's run (:func:`.aiding.pairs.runs`) and the aiding's median period [s]: what :func:`fit_noise`
+    and :func:`fit_scale` both compare."""
 
-    t: np.ndarray
     tau: np.ndarray
     sample: np.ndarray
     C: np.ndarray
-    F: np.ndarray
+    S: metric_scale.Integrals
     run: np.ndarray
     period: float
 
@@ -121,10 +119,10 @@ def prepare(imu_t_ns: np.ndarray, gyro: np.ndarray, acc: np.ndarray, aid_t_ns: n
     sample = np.clip(np.searchsorted(t, tau), 0, len(t) - 1)
     C = gyro_orientation(imu_t_ns, gyro)
     dt = np.r_[np.diff(t), 0.0]
-    F = np.einsum("nij,nj->ni", C, acc) * dt[:, None]
+    S = metric_scale.running_integrals(t, np.einsum("nij,nj->ni", C, acc) * dt[:, None])
     run = runs(imu_t_ns, sample, max_gap_s)  # the aiding's one pairing rule (.aiding.pairs)
     period = float(np.median(np.diff(tau))) if len(tau) > 1 else float("nan")
-    return Prepared(t, tau, sample, C, F, run, period)
+    return Prepared(tau, sample, C, S, run, period)
 
 
 def fit_noise(imu_t_ns: np.ndarray, gyro: np.ndarray, acc: np.ndarray, aid_t_ns: np.ndarray, p: np.ndarray,
@@ -137,7 +135,7 @@ def fit_noise(imu_t_ns: np.ndarray, gyro: np.ndarray, acc: np.ndarray, aid_t_ns:
     ``prep``: :func:`prepare` of the same inputs, when already computed."""
     default = class_default() if default is None else default
     pr = prep if prep is not None else prepare(imu_t_ns, gyro, acc, aid_t_ns, max_gap_s)
-    t, tau, sample, C, F, run, period = pr.t, pr.tau, pr.sample, pr.C, pr.F, pr.run, pr.period
+    tau, run, period = pr.tau, pr.run, pr.period
     g_vec = None if R is not None else np.array([0.0, 0.0, -float(gravity)])
     rows: List[Tuple[float, float, float]] = []  # (variance, aiding coefficient, IMU coefficient)
     parts: List[Tuple[np.ndarray, np.ndarray, np.ndarray]] = []
@@ -146,7 +144,7 @@ def fit_noise(imu_t_ns: np.ndarray, gyro: np.ndarray, acc: np.ndarray, aid_t_ns:
     while 2 * stride < len(tau) and stride * period <= MAX_SPAN_S:
         a = within(run, 2 * stride)
         if len(a) >= MIN_TRIPLES:
-            e, d1, d2, X = residuals(t, F, C, tau, sample, p, R, g_vec, a, stride)
+            e, d1, d2, X = residuals(pr, p, R, g_vec, a, stride)
             e = e - X @ np.linalg.lstsq(X, e, rcond=None)[0]  # less the constant bias's part
             span = float(np.median(0.5 * (d1 + d2)))
             e = detrend(e[:, None], int(round(max(TREND_S, TREND_SPANS * span) / period)))[:, 0]
@@ -193,7 +191,6 @@ def fitted_noise(fit: NoiseFit, default: Optional[ImuNoise] = None) -> ImuNoise:
                            f"aiding {1e3 * float(fit.aiding_sigma_m):.3g} mm per axis)")
 
 
-
 def fit_scale(p: np.ndarray, R: np.ndarray, prep: Prepared) -> ScaleFit:
     """Pose aiding's metric scale (:mod:`imu_learn.calib.metric_scale`): the IMU's specific force over each
     triple turned into the aiding's world by the aiding's attitude at its middle row (``R_b C_bᵀ``)."""
@@ -202,8 +199,5 @@ def fit_scale(p: np.ndarray, R: np.ndarray, prep: Prepared) -> ScaleFit:
     span = float(stride * prep.period) if np.isfinite(prep.period) else float("nan")
     if not len(a):
         return metric_scale.fit([], stride, span)
-    d_vo, d1, d2 = metric_scale.triples(prep.tau, p, a, stride)
-    imu = metric_scale.kernel_integral(prep.t, prep.F, prep.tau, a, stride)
-    b = a + stride
-    to_A = np.einsum("nij,nkj->nik", R[b], prep.C[prep.sample[b]])
-    return metric_scale.fit([(d_vo, np.einsum("nij,nj->ni", to_A, imu), 0.5 * (d1 + d2))], stride, span)
+    return metric_scale.fit([metric_scale.pose_terms(prep.S, prep.C, prep.tau, prep.sample, p, R, a, stride)],
+                            stride, span)

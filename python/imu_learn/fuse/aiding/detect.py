@@ -16,6 +16,7 @@ from typing import List
 from imu_learn.data.formats import rosbag
 
 from .rtklib import looks_like_pos
+from .tum import is_epoch_ns
 
 FORMATS = ("tum", "csv", "asl", "rtklib", "bag")
 HEAD_BYTES = 65536
@@ -25,17 +26,6 @@ def _head(path: Path) -> List[str]:
     with open(path, "rb") as fh:
         raw = fh.read(HEAD_BYTES)
     return raw.decode("utf-8", errors="replace").splitlines()[:200]
-
-
-def _ns(cell: str) -> bool:
-    """A stamp in nanoseconds: 13 digits or more, or a number of 1e12 or more in float notation
-    (``1.691116804683040768e+18``: Fetch's motion capture, float64 printed in full)."""
-    if cell.isdigit():
-        return len(cell) >= 13
-    try:
-        return float(cell) >= 1e12
-    except ValueError:
-        return False
 
 
 def detect(path: Path) -> str:
@@ -57,5 +47,5 @@ def detect(path: Path) -> str:
         first = text.split(",", 1)[0].strip()
         if not any(c.isdigit() for c in first):
             continue  # a header line of names
-        return "asl" if _ns(first) else "csv"
+        return "asl" if is_epoch_ns(first) else "csv"
     return "tum"

@@ -12,6 +12,7 @@ import numpy as np
 from .maps import one_map
 from .noise import PoseNoise, pose_noise
 from .offset import AidingOffset, estimate_offset
+from .pairs import gyro_orientation
 from .tum import Trajectory
 from .types import AidingRows
 
@@ -32,8 +33,9 @@ def with_noise(rows: AidingRows, imu_t_ns: np.ndarray, gyro: np.ndarray, acc: np
                max_gap_s: float) -> AidingRows:
     """``rows`` with each pose's noise estimated against the IMU (None with too few increments) and,
     where they have breaks, whether they stay in one map (:mod:`.maps`)."""
-    rows.noise = pose_noise(imu_t_ns, gyro, acc, (rows.sample, rows.R, rows.p), 1, max_gap_s)
-    rows.maps = one_map(imu_t_ns, gyro, acc, rows.sample, rows.t_ns, rows.p, rows.R, max_gap_s)
+    C = gyro_orientation(imu_t_ns, gyro)  # the gyro's chain, once for both
+    rows.noise = pose_noise(imu_t_ns, gyro, acc, (rows.sample, rows.R, rows.p), 1, max_gap_s, C=C)
+    rows.maps = one_map(imu_t_ns, gyro, acc, rows.sample, rows.t_ns, rows.p, rows.R, max_gap_s, C=C)
     if rows.maps is not None and not rows.maps.verdict:
         log.info("aiding with breaks, not tied to one world: %s", rows.maps.why)
     return rows

@@ -66,20 +66,15 @@ def _angle_deg(R: np.ndarray) -> float:
     return float(np.degrees(np.arccos(np.clip((np.trace(R) - 1.0) / 2.0, -1.0, 1.0))))
 
 
-def gravity_in_world(t: np.ndarray, F: np.ndarray, C: np.ndarray, tau: np.ndarray, sample: np.ndarray,
+def gravity_in_world(S: metric_scale.Integrals, C: np.ndarray, tau: np.ndarray, sample: np.ndarray,
                      p: np.ndarray, R: np.ndarray, run: np.ndarray) -> Optional[np.ndarray]:
-    """Gravity in the aiding's world [m/s²]: the median over half-second triples inside runs of the
-    aiding's change of mean velocity less the IMU's specific force turned into that world, per span."""
-    period = float(np.median(np.diff(tau)))
-    stride = metric_scale.stride_of(period)
+    """Gravity in the aiding's world [m/s²] (:func:`imu_learn.calib.metric_scale.gravity`) over the
+    half-second triples inside runs; None with too few."""
+    stride = metric_scale.stride_of(float(np.median(np.diff(tau))))
     a = within(run, 2 * stride)
     if len(a) < metric_scale.MIN_TRIPLES:
         return None
-    d_vo, d1, d2 = metric_scale.triples(tau, p, a, stride)
-    imu = metric_scale.kernel_integral(t, F, tau, a, stride)
-    b = a + stride
-    to_A = np.einsum("nij,nkj->nik", R[b], C[sample[b]])
-    return np.median((d_vo - np.einsum("nij,nj->ni", to_A, imu)) / (0.5 * (d1 + d2))[:, None], axis=0)
+    return metric_scale.gravity(metric_scale.pose_terms(S, C, tau, sample, p, R, a, stride))
 
 
 @dataclass(frozen=True)
@@ -95,18 +90,20 @@ class _Imu:
 
 
 def one_map(imu_t_ns: np.ndarray, gyro: np.ndarray, acc: np.ndarray, sample: np.ndarray, aid_t_ns: np.ndarray,
-            p: np.ndarray, R: np.ndarray, max_gap_s: float) -> Optional[OneMap]:
+            p: np.ndarray, R: np.ndarray, max_gap_s: float, C: Optional[np.ndarray] = None) -> Optional[OneMap]:
     """The check (module docstring) of rows at IMU samples ``sample``, stamps ``aid_t_ns``, body poses ``R``,
-    ``p`` in the aiding's world; None where the rows have no break."""
+    ``p`` in the aiding's world; None where the rows have no break. ``C``: :func:`.pairs.gyro_orientation`
+    when already computed."""
     run = runs(imu_t_ns, sample, max_gap_s)
     if run[-1] == 0:
         return None
     t0 = int(imu_t_ns[0])
     t = (np.asarray(imu_t_ns, dtype=np.int64) - t0) * 1e-9
     tau = (np.asarray(aid_t_ns, dtype=np.int64) - t0) * 1e-9
-    C = gyro_orientation(imu_t_ns, gyro)
+    C = gyro_orientation(imu_t_ns, gyro) if C is None else C
     dt = np.r_[np.diff(t), 0.0]
-    g = gravity_in_world(t, np.einsum("nij,nj->ni", C, acc) * dt[:, None], C, tau, sample, p, R, run)
+    S = metric_scale.running_integrals(t, np.einsum("nij,nj->ni", C, acc) * dt[:, None])
+    g = gravity_in_world(S, C, tau, sample, p, R, run)
     if g is None:
         return OneMap(False, [], "too few rows inside the runs to find gravity in the aiding's world")
     imu = _Imu(t, dt, C, np.asarray(acc, dtype=np.float64), g)

@@ -119,13 +119,26 @@ def _reworded(e: ParseError, src: str, layout: str) -> ParseError:
     return type(e)(msg, e.path, e.line, col, name if col is not None else e.field)
 
 
-def epoch_ns_in_float_notation(e: FloatTimestampError) -> bool:
-    """Whether the stamp ``e`` names is a number of 1e12 or more: ns since an epoch printed as a float
-    (a small float there is more likely seconds or a mistake, and stays an error)."""
+EPOCH_NS_MIN = 1e12  # a stamp this large is ns since an epoch (seconds since 1970 are ~1.7e9)
+
+
+def is_epoch_ns(text: str) -> bool:
+    """Whether a stamp's text is ns since an epoch: an integer of 13 digits or more, or a number of
+    :data:`EPOCH_NS_MIN` or more in float notation (float64 printed in full, as Fetch's motion capture)."""
+    text = str(text).strip()
+    if text.isdigit():
+        return len(text) >= 13
     try:
-        return float(str(e.value)) >= 1e12
-    except (TypeError, ValueError):
+        return float(text) >= EPOCH_NS_MIN
+    except ValueError:
         return False
+
+
+def epoch_ns_in_float_notation(e: FloatTimestampError) -> bool:
+    """Whether the stamp ``e`` names is ns since an epoch (:func:`is_epoch_ns`; a small float there is more
+    likely seconds or a mistake, and stays an error)."""
+    value = getattr(e, "value", None)
+    return value is not None and is_epoch_ns(str(value))
 
 
 def read_trajectory(path: Union[str, Path], layout: str = "tum", need_orientation: bool = True) -> Trajectory:
