@@ -15,6 +15,7 @@ import numpy as np
 from imu_learn.core.quat import quat_conj, quat_mul, quat_rotate
 from imu_learn.data.loading import AlignOptions, align
 from imu_learn.data.types import GroundTruth, ImuData, Segment, median_period_ns, sample_rate_hz
+from imu_learn.errors import AlignmentError
 
 G = 9.81
 
@@ -29,14 +30,38 @@ def default_gap_s(gt: GroundTruth) -> float:
 
 
 def segments(imu: ImuData, gt: GroundTruth, max_gap_s: float, shift_s: float = 0.0,
-             r_off: Optional[np.ndarray] = None) -> List[Segment]:
+             r_off: Optional[np.ndarray] = None, name: str = "") -> List[Segment]:
     """Aligned gap-free segments; optionally GT stamps moved by −shift_s and the IMU rotated into
-    the GT body frame (ω_gt = R_offᵀ ω_imu)."""
+    the GT body frame (ω_gt = R_offᵀ ω_imu). A reference whose dropouts leave no segment long enough
+    is refused naming the recording and the ``--max-gap-s`` that bridges them (:func:`gap_hint`)."""
     if shift_s:
         gt = replace(gt, t_ns=gt.t_ns - int(round(shift_s * 1e9)))
     if r_off is not None:
         imu = replace(imu, gyro=imu.gyro @ r_off, acc=imu.acc @ r_off)
-    return align(imu, gt, AlignOptions(max_gap_s=max_gap_s)).segments
+    try:
+        return align(imu, gt, AlignOptions(max_gap_s=max_gap_s)).segments
+    except AlignmentError as e:
+        hint = gap_hint(gt, max_gap_s)
+        if hint is None:
+            raise
+        raise AlignmentError(f"{name + ': ' if name else ''}{hint}", getattr(e, "path", None),
+                             getattr(e, "imu_path", None)) from e
+
+
+def gap_hint(gt: GroundTruth, max_gap_s: float) -> Optional[str]:
+    """Why a reference with frequent dropouts leaves no stretch long enough at ``max_gap_s``, and the
+    ``--max-gap-s`` that keeps it (1.1 × its 99th-percentile spacing, to 10 ms: a motion-capture system
+    dropping a frame or five, Fetch's up to 66 ms); None where its spacing is not the cause."""
+    d = np.diff(np.asarray(gt.t_ns, dtype=np.int64)) * 1e-9
+    n_gaps = int(np.sum(d > max_gap_s))
+    if len(d) == 0 or n_gaps == 0:
+        return None
+    s = math.ceil(110 * float(np.percentile(d, 99))) / 100
+    if s <= max_gap_s or s > 0.5:
+        return None
+    return (f"the reference has {n_gaps} gaps longer than {max_gap_s:g} s (the longest {1e3 * float(d.max()):.0f} ms), "
+            f"which leave no stretch long enough; --max-gap-s {s:g} bridges 99 % of its spacing by interpolation "
+            "(fine for a slow platform; a fast one wants a reference without dropouts)")
 
 
 def log_q(q: np.ndarray) -> np.ndarray:

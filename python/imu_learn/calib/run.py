@@ -126,18 +126,21 @@ def unobservable(has_ref: bool, allan: Optional[nz.AllanNoise], noise: Dict[str,
     return out
 
 
-SELECT_BY_DEFAULT_FOR = "a reference that cannot resolve accelerations (a VO of 20-30 Hz)"
+SELECT_BY_DEFAULT_FOR = ("a reference that cannot resolve accelerations (a VO of 20-30 Hz) or that turns about one "
+                         "axis only (a ground robot)")
 SELECT_BY_DEFAULT = (SELECT_BY_DEFAULT_FOR + ": every term of the floor fitted against it lost to simpler floors on "
                      "recordings it did not see (TUM-VI's unseen rooms 1.24x raw in rotation over 20 s; "
-                     "docs/experiments/references.md)")
+                     "docs/experiments/references.md), or fitted the noise of axes the motion does not turn about "
+                     "(Fetch's gyro x scale 0.80)")
 
 
 def selects(option: Optional[bool], inp: CalibInputs) -> bool:
     """Whether the floor's terms are chosen on held-out recordings: as asked, else (None) for a poses
-    reference that cannot resolve accelerations (:data:`SELECT_BY_DEFAULT`)."""
+    reference that cannot resolve accelerations or turns about one axis only (:data:`SELECT_BY_DEFAULT`)."""
     if option is not None:
         return option
-    return inp.source.kind == "poses" and gyro_only(inp)
+    frame = getattr(inp.source, "frame", None)
+    return inp.source.kind == "poses" and (gyro_only(inp) or bool(frame is not None and frame.turns_about_one_axis))
 
 
 def floor_profile(inp: CalibInputs, progress: Progress, uncertainty: bool = True,

@@ -118,6 +118,11 @@ class SelectOptions:
     # ``g_sensitivity`` (no low-pass: not observed), on the rotation cells (GYRO_ONLY_CELLS); the
     # accelerometer at ``bias`` (M_a = I) in every fold, and not selected
     gyro_only: bool = False
+    # the richest gyroscope level tried (None: every one); a reference that turns about one axis only (a
+    # ground robot) stops at ``bias``: held-out blocks of the same motion cannot tell a scale of the axes it
+    # does not turn about from their noise (Fetch's one recording: x and y scales 0.55, "better" held out
+    # because they shrink noise), nor a misalignment or g-sensitivity from the turn's
+    gyro_upto: Optional[str] = None
 
 
 @dataclass
@@ -354,7 +359,7 @@ class Selection:
     gyro_cells: Tuple[str, ...] = CELLS["gyro"]
 
     def to_dict(self) -> Dict[str, Any]:
-        gyro_only = self.gyro_levels != GYRO_LEVELS
+        gyro_only = self.gyro_cells != CELLS["gyro"]
         return {"gyro": self.gyro, "acc": self.acc,
                 "levels": {"gyro": list(self.gyro_levels), "acc": [] if gyro_only else list(ACC_LEVELS)},
                 "rule": RULE, "held_out": self.kind, "horizons": list(self.horizons),
@@ -380,36 +385,39 @@ def select_levels(train: List[Segment], val: List[Segment], groups: Sequence[str
     kind = "leave one recording out" if len(set(groups)) >= 2 else "four time blocks of one recording"
     if opts.gyro_only:
         return _select_gyro_only(fs, kind, horizons, settings, opts, progress, t0)
+    top = opts.gyro_upto or GYRO_LEVELS[-1]
+    levels = GYRO_LEVELS[:GYRO_LEVELS.index(top) + 1]
     with thread_limits(1):
         preps = []
         for i, f in enumerate(fs):
             progress(f"selection: {f.name} held out ({i + 1}/{len(fs)}): the gyroscope's levels")
             p = prepare(f, settings, opts)
-            p.gyro = fit_gyro_levels(p.tr, p.va, p.grid)
-            p.acc = {"full": fit_acc_levels(p.tr, p.va, p.grid, p.gyro["lowpass"])["lowpass"]}
+            p.gyro = fit_gyro_levels(p.tr, p.va, p.grid, top)
+            p.acc = {"full": fit_acc_levels(p.tr, p.va, p.grid, p.gyro[top])["lowpass"]}
             preps.append(p)
-        gyro_t = _table(preps, lambda p, lv: floor_of(p.gyro[lv], p.acc["full"], p.tau), GYRO_LEVELS, horizons, opts,
+        gyro_t = _table(preps, lambda p, lv: floor_of(p.gyro[lv], p.acc["full"], p.tau), levels, horizons, opts,
                         settings.gravity)
         if not any(math.isfinite(v) for row in gyro_t["offset"].values() for v in row.values()):
             raise ValueError(f"no held-out segment is longer than the start-up bias span and {min(horizons)} samples")
-        g_level, g_steps = choose(GYRO_LEVELS, gyro_t, CELLS["gyro"])
+        g_level, g_steps = choose(levels, gyro_t, CELLS["gyro"])
         progress(f"selection: gyroscope {g_level}; the accelerometer's levels")
         for p in preps:
             p.acc = fit_acc_levels(p.tr, p.va, p.grid, p.gyro[g_level])
         acc_t = _table(preps, lambda p, lv: floor_of(p.gyro[g_level], p.acc[lv], p.tau), ACC_LEVELS, horizons, opts,
                        settings.gravity)
         a_level, a_steps = choose(ACC_LEVELS, acc_t, CELLS["acc"])
-    fold_info = [{"held_out": p.fold.name, "time_offset_samples": p.tau, "cutoff_gyro": p.gyro["lowpass"][1],
+    fold_info = [{"held_out": p.fold.name, "time_offset_samples": p.tau, "cutoff_gyro": p.gyro[top][1],
                   "train_segments": len(p.fold.train), "held_out_samples": int(sum(len(s) for s in p.fold.held))}
                  for p in preps]
     return Selection(g_level, a_level, kind, fold_info, {"gyro": gyro_t, "acc": acc_t},
-                     {"gyro": g_steps, "acc": a_steps}, horizons, time.time() - t0)
+                     {"gyro": g_steps, "acc": a_steps}, horizons, time.time() - t0, levels)
 
 
 def _select_gyro_only(fs: List[Fold], kind: str, horizons: Tuple[int, ...], settings: FitSettings,
                       opts: SelectOptions, progress: Progress, t0: float) -> Selection:
     """:func:`select_levels` for a reference that cannot resolve accelerations (``opts.gyro_only``)."""
-    levels, top = GYRO_ONLY_LEVELS, GYRO_ONLY_LEVELS[-1]
+    top = opts.gyro_upto if opts.gyro_upto in GYRO_ONLY_LEVELS else GYRO_ONLY_LEVELS[-1]
+    levels = GYRO_ONLY_LEVELS[:GYRO_ONLY_LEVELS.index(top) + 1]
     with thread_limits(1):
         preps = []
         for i, f in enumerate(fs):
@@ -489,7 +497,9 @@ def select_floor(inp: Any, fit: FloorFit, progress: Progress = lambda s: None,
     tau = fit.floor.params.time_offset
     fixed = "time_offset_fitted_on_the_moved_reference" in fit.log
     only = gyro_only(inp)
-    opts = opts or SelectOptions(tau=tau if fixed else None, gyro_only=only)
+    frame = getattr(inp.source, "frame", None)
+    upto = "bias" if frame is not None and frame.turns_about_one_axis else None
+    opts = opts or SelectOptions(tau=tau if fixed else None, gyro_only=only, gyro_upto=upto)
     kernel = inp.source.match_kernel(inp) if only and hasattr(inp.source, "match_kernel") else np.ones(1)
     data = matched(inp, kernel) if len(kernel) > 1 else inp
     try:

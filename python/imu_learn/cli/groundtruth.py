@@ -21,7 +21,7 @@ EPILOG = """examples:
   imu-learn groundtruth --input datasets/euroc/MH_04_difficult
   imu-learn groundtruth --input datasets/euroc/V1_01_easy --groundtruth datasets/euroc/V1_01_easy/groundtruth_pose.tum \\
       --groundtruth datasets/euroc/V1_01_easy/groundtruth_state_20hz.csv
-  imu-learn groundtruth --input robot/run1 --format fetch --max-gap-s 0.1 --yaw-from-acc
+  imu-learn groundtruth --input robot/run1 --format fetch --max-gap-s 0.1
   imu-learn groundtruth --input my_imu.csv --columns t,_,gx,gy,gz,ax,ay,az --time-unit s --groundtruth mocap.tum"""
 
 
@@ -33,7 +33,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--max-gap-s", type=float, default=None, metavar="S",
                    help="split at ground-truth gaps longer than S (default 0.05, or 1.5 periods of sparse ground truth)")
     p.add_argument("--yaw-from-acc", action="store_true",
-                   help="fit R_off on specific force (a ground robot turning about z only: the gyro leaves its yaw free)")
+                   help="fit R_off on specific force (a ground robot turning about z only: the gyro leaves its yaw free; "
+                        "chosen by itself where the rates turn about one axis only)")
     p.add_argument("--imu-topic", help="rosbag: the sensor_msgs/msg/Imu topic (default: the bag's only one)")
     p.add_argument("--groundtruth-topic", help="rosbag: the pose topic (default: the bag's only one)")
     add_imu_input_options(p)
@@ -56,7 +57,7 @@ def describe(row: Any) -> List[str]:
             f"  bias-removed RMSE over 10 samples: rot {row.n10[0]:.4f}°, trans {row.n10[1]:.5f} m; "
             f"over 200 samples: {score(row.n200)}",
             f"  R_off (GT body -> IMU): {row.off_deg:.2f}° about {fmt_vec(row.off_axis)}; "
-            f"tau {row.tau_ms:+.1f} ms (> 0: GT stamps late)",
+            f"tau {row.tau_ms:+.1f} ms (> 0: GT stamps late); R_off {row.rotation_from}",
             f"  over 200 samples after R_off: {score(row.after_rot)}; after R_off and the GT shifted by tau - dt/2: "
             f"{score(row.after_hold)}",
             f"  lever arm (IMU origin in the GT body frame): {fmt_vec(row.lever_cm, 1)} cm ± {max(row.lever_se_cm):.1f}",

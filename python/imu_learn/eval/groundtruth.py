@@ -12,7 +12,10 @@ every EuRoC / TUM-VI / Fetch recording is experiments/groundtruth_report.py):
   for every whole-sample shift within ±100 ms, the best one refined by a parabola. The metric's
   integrator holds sample k over [t_k, t_k+1], i.e. it sees the IMU half a period late; the check
   also scores with the GT shifted by τ − dt/2, which undoes that. A ground robot turns about z
-  only, so the gyro leaves R_off's yaw free: ``yaw_from_acc`` fits R_off on specific force instead;
+  only, so the gyro leaves R_off's yaw free: where the rates turn about one axis only (calibrate's rule,
+  :func:`imu_learn.calib.reference.planar_ratio`) or with ``yaw_from_acc``, R_off comes from specific
+  force instead (:func:`imu_learn.calib.reference.planar_rotation`: refused where the horizontal
+  accelerations cannot fix it);
 * the lever arm r of the IMU origin in the GT body frame, by least squares on
   S(R a_imu) − S(p̈_gt) − g = S(R (ω̇× + ω×ω×)) r + S(R) b_a  (world frame; S: one Savitzky-Golay
   smoother on every term, so the equation stays exact), with R_off and τ applied;
@@ -35,6 +38,7 @@ from imu_learn.calib.frames import (  # noqa: F401  (re-exported: the check's vo
     default_gap_s,
     fit_acc_rotation,
     fit_offset,
+    gap_hint,
     gt_rate_hz,
     kabsch,
     log_q,
@@ -43,6 +47,7 @@ from imu_learn.calib.frames import (  # noqa: F401  (re-exported: the check's vo
     segments,
     shifted_pairs,
 )
+from imu_learn.calib.reference import FrameOptions, matched_rates, planar_ratio, planar_rotation
 from imu_learn.core.integration import integrate_windows, window_labels
 from imu_learn.core.quat import quat_conj, quat_mul
 from imu_learn.data.formats import read_recording
@@ -248,6 +253,7 @@ class GroundTruthCheck:
     after_hold: Tuple[float, float]  # n=200 with R_off applied and GT shifted by τ − dt/2
     lever_cm: np.ndarray
     lever_se_cm: np.ndarray
+    rotation_from: str = "from the gyro"  # how R_off was found (a ground robot's: specific force)
 
     @property
     def verdict(self) -> str:
@@ -269,16 +275,22 @@ def check(imu: ImuData, gt: GroundTruth, recording: str, label: str,
     """Everything the check says about one ground truth of a recording (the module doc), and the
     fitted offset (the mocap noise needs it)."""
     gap = options.max_gap_s if options.max_gap_s is not None else default_gap_s(gt)
-    segs = segments(imu, gt, gap)
+    segs = segments(imu, gt, gap, name=recording)
     longest = max((len(s) for s in segs), default=0)
     if longest <= MIN_SAMPLES:
         raise TooShortError(f"{recording}: the longest stretch of IMU samples with ground truth ({label}) holds "
-                            f"{longest} samples; the check needs more than {MIN_SAMPLES} (1 s windows), "
-                            f"raise max_gap_s (now {gap:g} s) if the ground truth has gaps",
+                            f"{longest} samples; the check needs more than {MIN_SAMPLES} (1 s windows): "
+                            + (gap_hint(gt, gap) or f"raise --max-gap-s (now {gap:g} s) if the ground truth has gaps"),
                             samples=longest, needed=MIN_SAMPLES + 1)
     off = fit_offset(segs)
+    rates = matched_rates(segs, 10)
+    ratio = planar_ratio(rates)
+    yaw = "from the gyro"
     if options.yaw_from_acc:  # the gyro leaves the yaw of R_off free (rotation about z only): take the accelerometer's
-        off = replace(off, r_off=fit_acc_rotation(segs))
+        off, yaw = replace(off, r_off=fit_acc_rotation(segs)), "from specific force (--yaw-from-acc)"
+    elif ratio < FrameOptions().planar_ratio:  # calibrate's rule (calib.reference): refused where acc cannot fix it
+        off = replace(off, r_off=planar_rotation(segs, rates, off.rms, ratio))
+        yaw = f"from specific force: the motion turns about one axis only (rate spread ratio {ratio:.3f})"
     rotated = segments(imu, gt, gap, r_off=off.r_off)
     held = segments(imu, gt, gap, shift_s=off.integrator_shift_s, r_off=off.r_off)
     lever, lever_se = fit_lever_arm(segments(imu, gt, gap, shift_s=off.tau_s, r_off=off.r_off),
@@ -286,7 +298,7 @@ def check(imu: ImuData, gt: GroundTruth, recording: str, label: str,
     angle, axis = angle_axis(off.r_off)
     row = GroundTruthCheck(recording, label, gt_rate_hz(gt), sum(len(s) for s in segs), len(segs),
               bias_removed_score(segs, 10), bias_removed_score(segs, 200), angle, axis, 1e3 * off.tau_s,
-              bias_removed_score(rotated, 200), bias_removed_score(held, 200), 100 * lever, 100 * lever_se)
+              bias_removed_score(rotated, 200), bias_removed_score(held, 200), 100 * lever, 100 * lever_se, yaw)
     return row, off
 
 

@@ -207,7 +207,7 @@ def forward_mounting(t_ns: np.ndarray, acc: np.ndarray, fix_t_ns: np.ndarray, fi
     ok[:2] = ok[-2:] = False
     if ok.sum() < 20:
         raise InvalidInputError(f"positions: {int(ok.sum())} fixes faster than {min_speed:g} m/s; the IMU's forward "
-                                "axis cannot be found from the track (give the mounting)")
+                                "axis cannot be found from the track: give the mounting with --imu-rotation-rpy-deg R,P,Y")
     fh = (c[i1[ok]] - c[i0[ok]])[:, :2] / (i1[ok] - i0[ok])[:, None]
     A = np.block([[along[ok][:, None], -cross[ok][:, None]], [cross[ok][:, None], along[ok][:, None]]])
     y = np.concatenate([fh[:, 0], fh[:, 1]])

@@ -30,6 +30,7 @@ import numpy as np
 from scipy.spatial.transform import Rotation
 
 from imu_learn.calib.frames import kabsch
+from imu_learn.calib.reference import FrameOptions, glitch_cap, planar_ratio
 from imu_learn.fuse.aiding.pairs import rotation_pairs
 from imu_learn.fuse.aiding.types import AidingRows
 
@@ -37,7 +38,9 @@ MAX_ROTATION_DEG = 5.0  # refused above: the calibrate plausibility rule's misal
 WARN_ROTATION_DEG = 1.0  # warned above: calibrate's ``identity_deg`` (below it a frame counts as the IMU's)
 MIN_PAIRS = 20  # pairs of consecutive rows needed to tell
 MIN_RATE_RMS = 0.05  # rad/s: the centred rates' RMS below which the motion cannot tell the frame
-PLANAR_RATIO = 0.1  # smallest over largest principal spread of the rates: one axis only below it
+# rates over at least this span [s] (a 20 Hz VO: its pairs as they are): a 90-120 Hz motion capture's rates between consecutive rows carry its
+# orientation noise / 10 ms (0.1-0.2 rad/s on Fetch), which spreads a ground robot's yaw over every axis
+MIN_SPAN_S = 0.05
 
 
 @dataclass(frozen=True)
@@ -60,12 +63,23 @@ class FrameCheck:
 def paired_rates(imu_t_ns: np.ndarray, gyro: np.ndarray, rows: AidingRows, max_gap_s: float,
                  C: Optional[np.ndarray] = None) -> tuple:
     """(IMU mean rates, aiding body-frame rates), (P, 3) each, over the pairs of consecutive rows
-    (:func:`.pairs.rotation_pairs`: at most ``max_gap_s`` apart); ``C``: the gyro's orientation
-    (:func:`.pairs.gyro_orientation`) when already computed."""
+    (:func:`.pairs.rotation_pairs`: at most ``max_gap_s`` apart), less the pairs whose aiding rate no
+    gyro reading comes near (:func:`imu_learn.calib.reference.glitch_cap`: a motion-capture quaternion
+    that jumps for a frame), averaged over :data:`MIN_SPAN_S` where the rows are denser (the noise of
+    consecutive rows made Fetch's yaw turns look like motion about every axis: 154°);
+    ``C``: the gyro's orientation (:func:`.pairs.gyro_orientation`) when already computed."""
     pairs = rotation_pairs(imu_t_ns, rows.sample, rows.R, max_gap_s, C=C, gyro=gyro)
     if not len(pairs):
         return np.zeros((0, 3)), np.zeros((0, 3))
-    return tuple(Rotation.from_matrix(m).as_rotvec() / pairs.dt_s[:, None] for m in (pairs.gyro, pairs.aiding))
+    a, b = (Rotation.from_matrix(m).as_rotvec() / pairs.dt_s[:, None] for m in (pairs.gyro, pairs.aiding))
+    keep = np.linalg.norm(b, axis=1) <= glitch_cap(np.linalg.norm(a, axis=1))  # the aiding's own jumps out
+    a, b, dt = a[keep], b[keep], pairs.dt_s[keep]
+    k = int(math.ceil(MIN_SPAN_S / max(float(np.median(dt)), 1e-9))) if len(dt) else 1
+    if k <= 1:
+        return a, b
+    n = len(dt) // k * k  # mean rates over k consecutive pairs (weighted by their spans)
+    w = dt[:n].reshape(-1, k, 1)
+    return tuple((x[:n].reshape(-1, k, 3) * w).sum(1) / w.sum(1) for x in (a, b))
 
 
 def check_frame(imu_t_ns: np.ndarray, gyro: np.ndarray, rows: AidingRows, max_gap_s: float = 0.5,
@@ -85,7 +99,7 @@ def check_frame(imu_t_ns: np.ndarray, gyro: np.ndarray, rows: AidingRows, max_ga
     if rms < MIN_RATE_RMS:
         return FrameCheck(None, False, n, "not checked",
                           f"the aiding turns too little to tell its frame (rates' RMS {rms:.3f} rad/s)")
-    axis_only = bool(sv[1] < PLANAR_RATIO * sv[0])
+    axis_only = planar_ratio((a, b)) < FrameOptions.planar_ratio  # calibrate's rule
     if axis_only:  # one axis: the gyro's rates that go with the aiding's main axis against that axis
         u = vt[0]
         d = (a - a.mean(0)).T @ (bc @ u)
