@@ -177,3 +177,16 @@ def test_references_on_different_clocks_are_refused_naming_each_lag(tmp_path, ca
     err = capsys.readouterr().err.strip().splitlines()[-1]
     assert "lags behind their IMUs disagree" in err and "+100 ms" in err and "+0 ms" in err, err
     assert not (out / "profile.json").exists()
+
+
+@pytest.mark.parametrize("factor, unit", [(100.0, "centimetres"), (1000.0, "millimetres")])
+def test_positions_in_cm_or_mm_are_refused_naming_the_unit(tmp_path, capsys, factor, unit):
+    ref = write_reference(tmp_path / "ref.tum", rotate=False)
+    rows = np.loadtxt(ref)
+    rows[:, 1:4] *= factor
+    np.savetxt(ref, rows, fmt="%.9f")
+    code = main(["calibrate", "--input", str(REC), "--groundtruth", str(ref), "--out", str(tmp_path / "out")])
+    err = capsys.readouterr().err
+    assert code == 2 and f"positions in {unit}? give them in metres" in err
+    assert f"x{factor:.4g}"[:3] in err  # the factor it read, e.g. x101.6 or x1016
+    assert not (tmp_path / "out" / "profile.json").exists()

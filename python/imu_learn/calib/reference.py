@@ -463,6 +463,11 @@ def resolve_frame(pairs: Sequence[Tuple[ImuData, GroundTruth]], options: FrameOp
     tilt = max(math.degrees(math.acos(np.clip(g[2] / max(np.linalg.norm(g), 1e-12), -1, 1))) for g in g_up)
     rot_deg = _angle_deg(r_imu_ref)
     if sol["scale"] < 3 * sol["scale_std"] or sol["scale"] <= 0.05:
+        unit = _unit_off(float(sol["scale"]), float(sol["scale_std"]))
+        if unit:
+            raise ReferenceFrameError(
+                f"the reference's positions are x{1 / sol['scale']:.4g} the distances the accelerometer measures "
+                f"(scale {sol['scale']:.4g} +- {sol['scale_std']:.2g} m per unit): {unit}? give them in metres")
         raise ReferenceFrameError(
             f"the reference's translation does not follow the accelerometer (scale {sol['scale']:.3f} ± "
             f"{sol['scale_std']:.3f}): a mirrored axis, positions of another recording, or a reference that barely "
@@ -481,6 +486,19 @@ def resolve_frame(pairs: Sequence[Tuple[ImuData, GroundTruth]], options: FrameOp
                     np.zeros(3) if extrinsics is not None else sol["lever_std"], tilt, g_up, ref_rate, method,
                     resolves_acceleration(ref_rate, options.floor_window_s or FitSettings().window / imu_rate,
                                           options.acc_span_fraction), applied, ratio)
+
+
+UNITS = {"millimetres": 1e-3, "centimetres": 1e-2}  # what a scale below 0.05 (refused) points at
+
+
+def _unit_off(scale: float, std: float) -> str:
+    """The length unit a well-determined scale [m per reference unit] points at ("" where none: within
+    10 % and 5 standard errors of one of :data:`UNITS`). Larger scales are a monocular VO's or feet,
+    which :mod:`.metric_scale` reads and applies."""
+    if not (scale > 10 * std > 0):
+        return ""
+    near = [u for u, k in UNITS.items() if abs(scale - k) < max(0.1 * k, 5 * std)]
+    return f"positions in {near[0]}" if near else ""
 
 
 def resolves_acceleration(ref_rate_hz: float, window_s: float, fraction: float = FrameOptions.acc_span_fraction) -> bool:
