@@ -1,7 +1,8 @@
 """The off-metric rule (imu_learn.calib.metric_scale.ScaleFit.off): a scale is applied (calibrate) or
 refused (navigate) only where the fit with a constant accelerometer bias and the fit without it both read
 it off metric, the same way. EuRoC's Vicon-room flights read 1.056 with the bias (V2_01) and 1.021
-without: a motion-capture reference, metric, whose scale was applied before the rule."""
+without: a motion-capture reference, metric, whose scale was applied before the rule. And the cause an
+implausible scale is given (imu_learn.calib.plausible): a unit only where the scale reads like one."""
 from __future__ import annotations
 
 import pytest
@@ -31,3 +32,24 @@ def test_the_second_reading_needs_its_own_standard_errors():
     assert TOLERANCE < 0.07 and noisy.off
     noisier = ScaleFit(1.08, 0.005, 1000, 0.5, "", ScaleFit(1.07, (0.07 + 1e-3) / SIGMAS, 1000, 0.5))
     assert not noisier.off
+
+
+@pytest.mark.parametrize("sensor, diag, cause", [
+    ("accelerometer", 9.81, "an acc unit off (g read as m/s^2: 9.8x)"),
+    ("accelerometer", 12.0, "an acc unit off"),  # g read as m/s^2 with a scale error on top
+    ("accelerometer", 0.78, "not a unit mistake (that reads x9.81 or x0.102)"),  # one flight's V2_01
+    ("gyroscope", 57.0, "a gyro unit off (deg/s read as rad/s: 57x)"),
+    ("gyroscope", 0.55, "not a unit mistake (that reads x57.3 or x0.0175)"),  # Fetch's x scale, one recording
+])
+def test_an_implausible_scale_names_a_unit_only_where_it_reads_like_one(sensor, diag, cause):
+    import numpy as np
+
+    from imu_learn.baselines.affine import TraditionalParams
+    from imu_learn.calib.plausible import parameter_findings
+
+    p = TraditionalParams.identity()
+    m = np.eye(3)
+    m[1, 1] = diag
+    p = TraditionalParams.from_dict({**p.to_dict(), ("M_a" if sensor == "accelerometer" else "M_g"): m.tolist()})
+    found = [f for f in parameter_findings(p, None) if f.field == f"{sensor}.matrix[1][1]"]
+    assert len(found) == 1 and cause in found[0].message

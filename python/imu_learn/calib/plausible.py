@@ -63,7 +63,17 @@ class Finding:
         return f"{self.field}: {self.message}"
 
 
-def _matrix_findings(name: str, m: np.ndarray, unit_hint: str) -> List[Finding]:
+def _scale_cause(d: float, unit: Tuple[float, str], other: str) -> str:
+    """The likely cause of a scale ``d`` outside the limits: the unit mistake ``unit`` = (factor, words)
+    where ``d`` is within a factor 1.5 of it or of its inverse, else a term the motion did not fix."""
+    k, words = unit
+    if d > 0 and min(abs(math.log(d / k)), abs(math.log(d * k))) < math.log(1.5):
+        return words
+    return (f"not a unit mistake (that reads x{k:.3g} or x{1 / k:.3g}): a term the recordings' motion does not fix "
+            f"(its noise fitted), or {other}")
+
+
+def _matrix_findings(name: str, m: np.ndarray, unit: Tuple[float, str], other: str) -> List[Finding]:
     out = []
     lo, hi = LIMITS["scale"]
     for i in range(3):
@@ -75,7 +85,8 @@ def _matrix_findings(name: str, m: np.ndarray, unit_hint: str) -> List[Finding]:
             continue
         d = row[i]
         if not lo <= d <= hi:
-            out.append(Finding(f"{name}.matrix[{i}][{i}]", f"scale {d:.4g} outside {lo}-{hi}: {unit_hint}"))
+            out.append(Finding(f"{name}.matrix[{i}][{i}]", f"scale {d:.4g} outside {lo}-{hi}: "
+                                                           + _scale_cause(float(d), unit, other)))
         for j in range(3):
             if j != i:
                 ang = math.degrees(math.atan2(abs(row[j]), abs(d)))
@@ -99,10 +110,11 @@ def parameter_findings(floor: Any, gravity_mps2: Optional[float]) -> List[Findin
     """Every limit of the module doc that ``floor`` (the profile's Floor, its parameters or saved
     dict) breaks."""
     p = _params(floor)
-    out = _matrix_findings("gyroscope", p.M_g, "a gyro unit off (deg/s read as rad/s: 57x) or a "
-                                               "reference rotation in another unit")
-    out += _matrix_findings("accelerometer", p.M_a, "an acc unit off (g read as m/s^2: 9.8x) or a "
-                                                    "reference position scale off (monocular VO)")
+    out = _matrix_findings("gyroscope", p.M_g, (math.degrees(1.0), "a gyro unit off (deg/s read as rad/s: 57x) or a "
+                                                                   "reference rotation in another unit"),
+                           "a reference rotation that does not follow the IMU's")
+    out += _matrix_findings("accelerometer", p.M_a, (G, "an acc unit off (g read as m/s^2: 9.8x)"),
+                            "a reference position scale off (monocular VO)")
     bg = np.abs(p.b_g)
     if np.any(bg >= LIMITS["gyro_bias_rad_s"]):
         out.append(Finding("gyroscope.bias", f"|bias| {bg.max():.3g} rad/s (limit {LIMITS['gyro_bias_rad_s']:g}): a "
