@@ -23,13 +23,14 @@ ACC_BIAS = np.array([0.15, -0.12, 0.05])
 ACC_CROSS = np.array([[1.0, 0, 0], [0, 1.0, 0], [0.03, 0.02, 1.0]])  # z picks up x and y: the plane of the turns tilts 2°
 
 
-def robot(seed: int = 0):
+def robot(seed: int = 0, moving: bool = True):
     """(t_ns, IMU gyro, IMU acc, world positions, body-to-world rotations) of a robot driving on the
     floor: yaw rate and forward speed smooth random, the IMU turned by MOUNT from the body."""
     rng = np.random.default_rng(seed)
     t = np.arange(int(SECONDS * RATE)) / RATE
     yaw_rate = sum(0.5 * np.sin(2 * np.pi * f * t + p) for f, p in zip(rng.uniform(0.05, 0.3, 3), rng.uniform(0, 6, 3)))
     speed = 0.6 + sum(0.3 * np.sin(2 * np.pi * f * t + p) for f, p in zip(rng.uniform(0.05, 0.3, 2), rng.uniform(0, 6, 2)))
+    speed = speed if moving else 0 * t  # turning on the spot: no horizontal acceleration
     yaw = np.concatenate([[0.0], np.cumsum(yaw_rate[:-1]) / RATE])
     v = np.stack([speed * np.cos(yaw), speed * np.sin(yaw), 0 * t], 1)
     p = np.concatenate([np.zeros((1, 3)), np.cumsum(v[:-1], 0) / RATE])
@@ -131,3 +132,9 @@ def test_the_selection_stops_a_ground_robots_gyroscope_at_its_bias(data):
     sel = select_levels(segs, [], ["robot"] * len(segs), [], settings, SelectOptions(gyro_upto="bias", max_windows=300))
     assert sel.gyro_levels == ("offset", "bias") and sel.gyro in ("offset", "bias")
     assert sel.to_dict()["levels"]["gyro"] == ["offset", "bias"] and sel.to_dict()["levels"]["acc"]
+
+
+def test_groundtruth_says_when_the_rotation_about_the_turning_axis_is_not_observable():
+    t, gyro, acc, p, R = robot(moving=False)
+    row, _ = gr.check(ImuData(t, gyro, acc), mocap(t, p, R, glitches=0), "spot", "mocap", gr.CheckOptions(max_gap_s=0.1))
+    assert "NOT observable" in row.rotation_from and "not observable" in row.verdict

@@ -52,7 +52,7 @@ from imu_learn.core.integration import integrate_windows, window_labels
 from imu_learn.core.quat import quat_conj, quat_mul
 from imu_learn.data.formats import read_recording
 from imu_learn.data.types import GroundTruth, ImuData, Segment, median_period_ns
-from imu_learn.errors import TooShortError
+from imu_learn.errors import ReferenceFrameError, TooShortError
 from imu_learn.score.metrics import fit_startup_bias, index_at, relative_pose_errors, remove_bias, rmse, with_imu
 
 MIN_SAMPLES = 200  # the longest scored window (n=200): a shorter recording cannot be checked
@@ -258,6 +258,8 @@ class GroundTruthCheck:
     @property
     def verdict(self) -> str:
         frame = "IMU frame" if self.off_deg < 0.5 else f"rotated {self.off_deg:.1f}° off the IMU"
+        if "NOT observable" in self.rotation_from:
+            frame += " (its part about the turning axis not observable)"
         lag = "" if abs(self.tau_ms) < 2.5 else f", GT {self.tau_ms:+.0f} ms late"
         arm = np.linalg.norm(self.lever_cm)
         lever = f", lever arm {arm:.1f} cm" if arm > max(2.0, 3 * np.max(self.lever_se_cm)) else ""
@@ -288,9 +290,13 @@ def check(imu: ImuData, gt: GroundTruth, recording: str, label: str,
     yaw = "from the gyro"
     if options.yaw_from_acc:  # the gyro leaves the yaw of R_off free (rotation about z only): take the accelerometer's
         off, yaw = replace(off, r_off=fit_acc_rotation(segs)), "from specific force (--yaw-from-acc)"
-    elif ratio < FrameOptions().planar_ratio:  # calibrate's rule (calib.reference): refused where acc cannot fix it
-        off = replace(off, r_off=planar_rotation(segs, rates, off.rms, ratio))
-        yaw = f"from specific force: the motion turns about one axis only (rate spread ratio {ratio:.3f})"
+    elif ratio < FrameOptions().planar_ratio:  # calibrate's rule (calib.reference)
+        try:
+            off = replace(off, r_off=planar_rotation(segs, rates, off.rms, ratio))
+            yaw = f"from specific force: the motion turns about one axis only (rate spread ratio {ratio:.3f})"
+        except ReferenceFrameError:  # a check reports, where calibrate refuses
+            yaw = (f"from the gyro, its part about the turning axis NOT observable: the motion turns about one axis "
+                   f"only (rate spread ratio {ratio:.3f}) and specific force does not fix it")
     rotated = segments(imu, gt, gap, r_off=off.r_off)
     held = segments(imu, gt, gap, shift_s=off.integrator_shift_s, r_off=off.r_off)
     lever, lever_se = fit_lever_arm(segments(imu, gt, gap, shift_s=off.tau_s, r_off=off.r_off),
