@@ -146,6 +146,13 @@ def running_integrals(t: np.ndarray, F: np.ndarray) -> Integrals:
     return t, S0, S1
 
 
+def gyro_frame_integrals(t: np.ndarray, C: np.ndarray, acc: np.ndarray) -> Integrals:
+    """:func:`running_integrals` of the specific force ``acc`` turned into the gyro's frame by its chain ``C``
+    (what navigate's noise and scale fits and its breaks' check compare with pose aiding)."""
+    dt = np.r_[np.diff(t), 0.0]
+    return running_integrals(t, np.einsum("nij,nj->ni", C, acc) * dt[:, None])
+
+
 def kernel_integral(S: Integrals, tau: np.ndarray, a: np.ndarray, stride: int) -> np.ndarray:
     """``∫ k(s) f ds`` (M, 3) over each triple from rows ``a`` (stamps ``tau``), from the running integrals
     ``S`` (:func:`running_integrals`, interpolated at the rows)."""

@@ -254,11 +254,12 @@ class GroundTruthCheck:
     lever_cm: np.ndarray
     lever_se_cm: np.ndarray
     rotation_from: str = "from the gyro"  # how R_off was found (a ground robot's: specific force)
+    about_turning_axis_observed: bool = True  # False: a ground robot whose specific force cannot fix it
 
     @property
     def verdict(self) -> str:
         frame = "IMU frame" if self.off_deg < 0.5 else f"rotated {self.off_deg:.1f}° off the IMU"
-        if "NOT observable" in self.rotation_from:
+        if not self.about_turning_axis_observed:
             frame += " (its part about the turning axis not observable)"
         lag = "" if abs(self.tau_ms) < 2.5 else f", GT {self.tau_ms:+.0f} ms late"
         arm = np.linalg.norm(self.lever_cm)
@@ -287,7 +288,7 @@ def check(imu: ImuData, gt: GroundTruth, recording: str, label: str,
     off = fit_offset(segs)
     rates = matched_rates(segs, 10)
     ratio = planar_ratio(rates)
-    yaw = "from the gyro"
+    yaw, observed = "from the gyro", True
     if options.yaw_from_acc:  # the gyro leaves the yaw of R_off free (rotation about z only): take the accelerometer's
         off, yaw = replace(off, r_off=fit_acc_rotation(segs)), "from specific force (--yaw-from-acc)"
     elif ratio < FrameOptions().planar_ratio:  # calibrate's rule (calib.reference)
@@ -295,6 +296,7 @@ def check(imu: ImuData, gt: GroundTruth, recording: str, label: str,
             off = replace(off, r_off=planar_rotation(segs, rates, off.rms, ratio))
             yaw = f"from specific force: the motion turns about one axis only (rate spread ratio {ratio:.3f})"
         except ReferenceFrameError:  # a check reports, where calibrate refuses
+            observed = False
             yaw = (f"from the gyro, its part about the turning axis NOT observable: the motion turns about one axis "
                    f"only (rate spread ratio {ratio:.3f}) and specific force does not fix it")
     rotated = segments(imu, gt, gap, r_off=off.r_off)
@@ -304,7 +306,7 @@ def check(imu: ImuData, gt: GroundTruth, recording: str, label: str,
     angle, axis = angle_axis(off.r_off)
     row = GroundTruthCheck(recording, label, gt_rate_hz(gt), sum(len(s) for s in segs), len(segs),
               bias_removed_score(segs, 10), bias_removed_score(segs, 200), angle, axis, 1e3 * off.tau_s,
-              bias_removed_score(rotated, 200), bias_removed_score(held, 200), 100 * lever, 100 * lever_se, yaw)
+              bias_removed_score(rotated, 200), bias_removed_score(held, 200), 100 * lever, 100 * lever_se, yaw, observed)
     return row, off
 
 

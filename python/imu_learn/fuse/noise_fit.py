@@ -118,8 +118,7 @@ def prepare(imu_t_ns: np.ndarray, gyro: np.ndarray, acc: np.ndarray, aid_t_ns: n
     tau = (np.asarray(aid_t_ns, dtype=np.int64) - t0) * 1e-9
     sample = np.clip(np.searchsorted(t, tau), 0, len(t) - 1)
     C = gyro_orientation(imu_t_ns, gyro)
-    dt = np.r_[np.diff(t), 0.0]
-    S = metric_scale.running_integrals(t, np.einsum("nij,nj->ni", C, acc) * dt[:, None])
+    S = metric_scale.gyro_frame_integrals(t, C, acc)
     run = runs(imu_t_ns, sample, max_gap_s)  # the aiding's one pairing rule (.aiding.pairs)
     period = float(np.median(np.diff(tau))) if len(tau) > 1 else float("nan")
     return Prepared(tau, sample, C, S, run, period)

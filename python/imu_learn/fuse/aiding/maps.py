@@ -102,7 +102,7 @@ def one_map(imu_t_ns: np.ndarray, gyro: np.ndarray, acc: np.ndarray, sample: np.
     tau = (np.asarray(aid_t_ns, dtype=np.int64) - t0) * 1e-9
     C = gyro_orientation(imu_t_ns, gyro) if C is None else C
     dt = np.r_[np.diff(t), 0.0]
-    S = metric_scale.running_integrals(t, np.einsum("nij,nj->ni", C, acc) * dt[:, None])
+    S = metric_scale.gyro_frame_integrals(t, C, acc)
     g = gravity_in_world(S, C, tau, sample, p, R, run)
     if g is None:
         return OneMap(False, [], "too few rows inside the runs to find gravity in the aiding's world")
