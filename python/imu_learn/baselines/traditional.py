@@ -308,8 +308,9 @@ class _RotResiduals:
         Q = self._products(theta)[2][:, self.idx]  # (4, H, B)
         return quat_log(quat_mul(self.w.dq, quat_conj(Q.transpose(2, 1, 0)))).reshape(-1)
 
-    def jacobian(self, theta: np.ndarray, r: np.ndarray) -> np.ndarray:
-        """The exact Jacobian (B·H·3, 21) at θ with residuals r.
+    def jacobian(self, theta: np.ndarray, r: np.ndarray, cols: Optional[np.ndarray] = None) -> np.ndarray:
+        """The exact Jacobian (B·H·3, 21) at θ with residuals r; with ``cols``, its columns ``cols`` only
+        (B·H·3, len(cols)), the sums the others need left out (a fit of a few terms: the bias alone).
 
         Perturbing sample k's rate by δ_k turns Δq̂ into Exp(ψ) Δq̂ with ψ = Σ_{k<h} R(Q_k) J_r(φ_k) dt_k δ_k
         (Q_k the product up to and including sample k, φ_k = ω_k dt_k), and the residual Log(E Exp(−ψ))
@@ -332,14 +333,20 @@ class _RotResiduals:
         for rr in range(3):
             for i in range(3):
                 np.add(R[rr][0] * Jr[0][i] + R[rr][1] * Jr[1][i], R[rr][2] * Jr[2][i], out=A[3 * rr + i])
+        cols = np.arange(21) if cols is None else np.asarray(cols, dtype=np.int64)
+        use_g, use_a = bool(np.any(cols < 9)), bool(np.any(cols >= 12))
+        fcols = [0, 1, 2] * use_g + [3, 4, 5] * use_a + [6]  # of (rates, specific force, 1)
         if self._f is None:
             self._f = np.concatenate((w.gyro, w.acc_g, np.ones((B, W, 1))), axis=-1)
-        S = _horizon_sums(np.ascontiguousarray(A.transpose(2, 0, 1)), self._f, w.horizons)  # (B, H, 9, 7)
-        S = S.reshape(B, H, 3, 3, 7)
-        A_h = S[..., 6]  # Σ A_k (B, H, 3, 3)
-        dM = (S[..., :3] - A_h[..., None] * theta[9:12]).reshape(B, H, 3, 9)
-        dpsi = np.concatenate((dM, -(A_h @ M), -S[..., 3:6].reshape(B, H, 3, 9)), axis=-1)  # (B, H, 3, 21)
-        return -(_so3_jacobian(r.reshape(B, H, 3), True) @ dpsi).reshape(B * H * 3, 21)
+        f = self._f if len(fcols) == 7 else np.ascontiguousarray(self._f[..., fcols])
+        S = _horizon_sums(np.ascontiguousarray(A.transpose(2, 0, 1)), f, w.horizons)  # (B, H, 9, F)
+        S = S.reshape(B, H, 3, 3, len(fcols))
+        A_h = S[..., -1]  # Σ A_k (B, H, 3, 3)
+        zero = np.zeros((B, H, 3, 9))
+        dM = (S[..., :3] - A_h[..., None] * theta[9:12]).reshape(B, H, 3, 9) if use_g else zero
+        dG = -S[..., 3 * use_g:3 * use_g + 3].reshape(B, H, 3, 9) if use_a else zero
+        dpsi = np.concatenate((dM, -(A_h @ M), dG), axis=-1)[..., cols]  # (B, H, 3, len(cols))
+        return -(_so3_jacobian(r.reshape(B, H, 3), True) @ dpsi).reshape(B * H * 3, len(cols))
 
 
 def _held_rotations(gyro: np.ndarray, dt: np.ndarray) -> np.ndarray:

@@ -30,6 +30,10 @@ scores: :mod:`imu_learn.score.metrics`, :mod:`imu_learn.score.peers`). The cells
   start-up bias removed, and open loop (no AOE exists for it; without an open-loop cell no accelerometer
   bias could ever be chosen: the start-up bias removal absorbs it).
 
+Each table scores only the cells its rule reads (profile.json's held-out figures hold those). The folds'
+fits and the held-out scores run on the process's cores, one thread each (numpy's loops and the core's
+integration release the GIL; BLAS and rayon at one thread): the same figures as one after another.
+
 The rule. Levels are visited from the simplest; ``chosen`` starts at ``offset``. A richer level L
 becomes ``chosen`` only if (1) no simpler level beats it: in every held-out cell of every fold its
 error is at most (1 + ``WORSE``) × that of every simpler level (``WORSE`` = 0.5 %, the tolerance of
@@ -62,6 +66,7 @@ from __future__ import annotations
 
 import math
 import time
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field, replace
 from typing import Any, Callable, Dict, List, Optional, Sequence, Tuple
 
@@ -94,7 +99,7 @@ from imu_learn.calib.sources import matched
 from imu_learn.data.types import Segment, sample_rate_hz
 from imu_learn.score.metrics import fit_startup_bias, index_at, relative_pose_errors, remove_bias, rmse, with_imu
 from imu_learn.score.peers import attitude_errors
-from imu_learn.util.threads import thread_limits
+from imu_learn.util.threads import cores, thread_limits
 
 Progress = Callable[[str], None]
 GYRO_LEVELS = ("offset", "bias", "scale", "affine", "g_sensitivity", "lowpass")
@@ -158,6 +163,8 @@ class _Subset:
         return self.res(self.theta(x))
 
     def jacobian(self, x: np.ndarray, r: np.ndarray) -> np.ndarray:
+        if isinstance(self.res, _RotResiduals):
+            return self.res.jacobian(self.theta(x), r, self.free)
         return self.res.jacobian(self.theta(x), r)[:, self.free]
 
 
@@ -283,10 +290,12 @@ def _pool(out: Dict[str, List[np.ndarray]], key: str, x: np.ndarray) -> None:
 
 
 def score(floor: Floor, held: Sequence[Segment], horizons: Sequence[int], opts: SelectOptions,
-          gravity: float) -> Dict[str, float]:
+          gravity: float, cells: Tuple[str, ...] = ("rot_deg", "trans_m", "open_trans_m", "aoe_deg")) -> Dict[str, float]:
     """The held-out cells of ``floor`` on ``held`` (module doc): ``rot_deg n=N``, ``trans_m n=N`` (start-up
-    bias removed), ``open_trans_m n=N`` (open loop), ``aoe_deg``; segments pooled, NaN where none scored."""
+    bias removed), ``open_trans_m n=N`` (open loop), ``aoe_deg``, those named in ``cells`` (a table's
+    rule reads no other); segments pooled, NaN where none scored."""
     pooled: Dict[str, List[np.ndarray]] = {}
+    fixed_cells = {"rot_deg", "trans_m"}.intersection(cells)
     for s in held:
         bias_s = min(opts.startup_bias_s, 0.3 * s.duration_s)
         first = index_at(s, bias_s)
@@ -294,13 +303,18 @@ def score(floor: Floor, held: Sequence[Segment], horizons: Sequence[int], opts: 
             continue
         g, a = floor.apply(s.t_ns, s.gyro, s.acc)
         cal = with_imu(s, g, a)
-        fixed = remove_bias(cal, *fit_startup_bias(cal, bias_s, gravity=gravity))
+        fixed = remove_bias(cal, *fit_startup_bias(cal, bias_s, gravity=gravity)) if fixed_cells else cal
         for n in horizons:
-            e = relative_pose_errors(fixed, int(n), opts.stride, gravity, first)
-            _pool(pooled, f"rot_deg n={n}", e["rot_rad"])
-            _pool(pooled, f"trans_m n={n}", e["trans_m"])
-            _pool(pooled, f"open_trans_m n={n}", relative_pose_errors(cal, int(n), opts.stride, gravity, first)["trans_m"])
-        _pool(pooled, "aoe_deg", attitude_errors(s, g)["angle_rad"])
+            if fixed_cells:
+                e = relative_pose_errors(fixed, int(n), opts.stride, gravity, first)
+                for c, key in (("rot_deg", "rot_rad"), ("trans_m", "trans_m")):
+                    if c in cells:
+                        _pool(pooled, f"{c} n={n}", e[key])
+            if "open_trans_m" in cells:
+                e = relative_pose_errors(cal, int(n), opts.stride, gravity, first)
+                _pool(pooled, f"open_trans_m n={n}", e["trans_m"])
+        if "aoe_deg" in cells:
+            _pool(pooled, "aoe_deg", attitude_errors(s, g)["angle_rad"])
     out = {k: rmse(np.concatenate(v)) for k, v in pooled.items()}
     return {k: math.degrees(v) if k.startswith(("rot", "aoe")) else v for k, v in out.items()}
 
@@ -368,10 +382,24 @@ class Selection:
                 "seconds": round(self.seconds, 1)}
 
 
+def _each(fn: Callable[[Any], Any], items: Sequence[Any]) -> List[Any]:
+    """``[fn(x) for x in items]`` on the process's cores, one thread each (the fits and scores release
+    the GIL in numpy's and the core's loops; BLAS and rayon held at one thread by the caller)."""
+    n = min(cores(), len(items))
+    if n <= 1:
+        return [fn(x) for x in items]
+    with ThreadPoolExecutor(n) as pool:
+        return list(pool.map(fn, items))
+
+
 def _table(preps: List[Prepared], floors: Callable[[Prepared, str], Floor], levels: Sequence[str],
-           horizons: Tuple[int, ...], opts: SelectOptions, gravity: float) -> Table:
-    return {lv: {p.fold.name: score(floors(p, lv), p.fold.held, horizons, opts, gravity) for p in preps}
-            for lv in levels}
+           horizons: Tuple[int, ...], opts: SelectOptions, gravity: float, cells: Tuple[str, ...]) -> Table:
+    jobs = [(lv, p) for lv in levels for p in preps]
+    scores = _each(lambda j: score(floors(j[1], j[0]), j[1].fold.held, horizons, opts, gravity, cells), jobs)
+    out: Table = {lv: {} for lv in levels}
+    for (lv, p), sc in zip(jobs, scores):
+        out[lv][p.fold.name] = sc
+    return out
 
 
 def select_levels(train: List[Segment], val: List[Segment], groups: Sequence[str], val_groups: Sequence[str],
@@ -388,23 +416,25 @@ def select_levels(train: List[Segment], val: List[Segment], groups: Sequence[str
     top = opts.gyro_upto or GYRO_LEVELS[-1]
     levels = GYRO_LEVELS[:GYRO_LEVELS.index(top) + 1]
     with thread_limits(1):
-        preps = []
-        for i, f in enumerate(fs):
+        def fold_fit(item: Tuple[int, Fold]) -> Prepared:
+            i, f = item
             progress(f"selection: {f.name} held out ({i + 1}/{len(fs)}): the gyroscope's levels")
             p = prepare(f, settings, opts)
             p.gyro = fit_gyro_levels(p.tr, p.va, p.grid, top)
             p.acc = {"full": fit_acc_levels(p.tr, p.va, p.grid, p.gyro[top])["lowpass"]}
-            preps.append(p)
+            return p
+
+        preps = _each(fold_fit, list(enumerate(fs)))
         gyro_t = _table(preps, lambda p, lv: floor_of(p.gyro[lv], p.acc["full"], p.tau), levels, horizons, opts,
-                        settings.gravity)
+                        settings.gravity, CELLS["gyro"])
         if not any(math.isfinite(v) for row in gyro_t["offset"].values() for v in row.values()):
             raise ValueError(f"no held-out segment is longer than the start-up bias span and {min(horizons)} samples")
         g_level, g_steps = choose(levels, gyro_t, CELLS["gyro"])
         progress(f"selection: gyroscope {g_level}; the accelerometer's levels")
-        for p in preps:
-            p.acc = fit_acc_levels(p.tr, p.va, p.grid, p.gyro[g_level])
+        for p, acc in zip(preps, _each(lambda p: fit_acc_levels(p.tr, p.va, p.grid, p.gyro[g_level]), preps)):
+            p.acc = acc
         acc_t = _table(preps, lambda p, lv: floor_of(p.gyro[g_level], p.acc[lv], p.tau), ACC_LEVELS, horizons, opts,
-                       settings.gravity)
+                       settings.gravity, CELLS["acc"])
         a_level, a_steps = choose(ACC_LEVELS, acc_t, CELLS["acc"])
     fold_info = [{"held_out": p.fold.name, "time_offset_samples": p.tau, "cutoff_gyro": p.gyro[top][1],
                   "train_segments": len(p.fold.train), "held_out_samples": int(sum(len(s) for s in p.fold.held))}
@@ -428,7 +458,7 @@ def _select_gyro_only(fs: List[Fold], kind: str, horizons: Tuple[int, ...], sett
             p.acc = {"bias": fit_acc_levels(p.tr, p.va, p.grid, p.gyro[top], "bias")["bias"]}
             preps.append(p)
         gyro_t = _table(preps, lambda p, lv: floor_of(p.gyro[lv], p.acc["bias"], p.tau), levels, horizons, opts,
-                        settings.gravity)
+                        settings.gravity, GYRO_ONLY_CELLS)
     if not any(math.isfinite(v) for row in gyro_t["offset"].values() for v in row.values()):
         raise ValueError(f"no held-out segment is longer than the start-up bias span and {min(horizons)} samples")
     g_level, g_steps = choose(levels, gyro_t, GYRO_ONLY_CELLS)
