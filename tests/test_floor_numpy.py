@@ -192,3 +192,16 @@ def test_the_series_below_a_tenth_of_a_radian_are_the_functions():
     np.testing.assert_allclose(c1[wide], ((1 - np.cos(t)) / t**2)[wide], rtol=1e-13)
     np.testing.assert_allclose(c2[wide], ((t - np.sin(t)) / t**3)[wide], rtol=1e-12)
     assert np.abs(c1[~wide] - 0.5).max() < 2.1e-4 and np.abs(c2[~wide] - 1 / 6).max() < 2.1e-5
+
+
+def test_a_jacobians_columns_alone_are_its_full_columns(crop_split):
+    """A level's fit asks for its columns only (the bias: 3 of 21): they equal the full Jacobian's."""
+    d = _Data([crop_split[0]], 100, 40, G)
+    w = d.windows(None, None)
+    rng = np.random.default_rng(4)
+    theta = np.concatenate([0.01 * rng.standard_normal(9), 0.02 * rng.standard_normal(3), 1e-3 * rng.standard_normal(9)])
+    rot = _RotResiduals(w)
+    r = rot(theta)
+    full = rot.jacobian(theta, r)
+    for cols in ([9, 10, 11], [0, 4, 8, 9, 10, 11], list(range(12)), [12, 15, 20], [3, 13]):
+        np.testing.assert_allclose(rot.jacobian(theta, r, np.asarray(cols)), full[:, cols], rtol=1e-12, atol=1e-15)
