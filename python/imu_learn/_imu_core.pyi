@@ -140,6 +140,25 @@ def integrate_windows(t_ns: _I64, gyro: _F64, acc: _F64, starts: _Idx, horizons:
     longest horizon below N (InvalidInputError otherwise, even with no starts); no starts give
     empty (0, H, ...) arrays."""
 
+def rotation_window_sums(
+    gyro: _F64, acc_g: _F64, dt: _F64, theta: _F64, horizons: _Idx, jacobian: bool,
+) -> Dict[str, Optional[_F64]]:
+    """The traditional fit's gyro rotations over B windows of W samples (gyro, acc_g (B, W, 3), dt
+    (B, W) [s]) at theta (21,) = (M_g - I, b_g, G) row-major: per sample omega = M g - G a - M b,
+    Q_k = Q_{k-1} Exp(omega dt). Returns {"q_wxyz": (B, H, 4) Q_{h-1} per horizon h, "sums": with
+    jacobian (B, H, 9, 7) sum_{k<h} A_k[r, i] f_k[F] at [b, h, 3r + i, F], A_k = R(Q_k) J_r(omega dt) dt,
+    f_k = (g_k, a_k, 1); else None}. Horizons in 1..W, any order; a non-finite theta, mismatched
+    shapes or a horizon out of range raise InvalidInputError. See imu_learn.baselines.traditional."""
+
+def velocity_window_sums(rates: _F64, acc: _F64, dt: _F64, horizons: _Idx) -> _F64:
+    """The traditional fit's accelerometer sums over B windows of W samples (rates, the calibrated
+    gyro rates [rad/s], and acc, (B, W, 3); dt (B, W) [s]): with the held rotations R_0 = I,
+    R_{k+1} = R_k Exp(omega_k dt_k), T_m = sum_{j<m} dt_j, s_k = T_{k+1} - dt_k / 2 and the columns
+    c_k = (a_k, 1, s_k a_k, s_k), returns (B, H, 9, 8) float64, sum_{k<h} R_k[r, i] dt_k c_k[F] at
+    [b, h, 3r + i, F] for each horizon h. Horizons in 1..W, any order; mismatched shapes, arrays not
+    C-contiguous or a horizon out of range raise InvalidInputError. See
+    imu_learn.baselines.traditional (_held_rotations, _VelResiduals)."""
+
 def increment_covariance(t_ns: _I64, gyro: _F64, acc: _F64, var: _F64, horizons: _Idx) -> _F64:
     """(H, 9, 9) covariance of (dtheta, dbeta, dgamma) after each horizon's number of intervals from
     sample 0 (the rows of preintegrate; horizon 0 is zero). var (N, 6): per-sample discrete-time

@@ -4,8 +4,9 @@
 //! `labels` (Δq/Δβ/Δγ from ground truth) and `batch` (augmented training windows), with
 //! `integrate` (Δq/Δβ/Δγ from IMU samples), `covariance` (their covariance under per-sample
 //! noise) and `so3` as the shared maths; `allan` characterises a sensor's noise (overlapping Allan
-//! deviation and its slope fits). Nothing here knows Python; the bindings live in `python`
-//! behind the `python` feature.
+//! deviation and its slope fits); `rotsums` is the per-sample work of the traditional baseline's
+//! gyro fit (rotations and Jacobian sums over windows). Nothing here knows Python; the bindings
+//! live in `python` behind the `python` feature.
 
 pub mod align;
 pub mod allan;
@@ -15,6 +16,7 @@ pub mod error;
 pub mod integrate;
 pub mod io;
 pub mod labels;
+pub mod rotsums;
 pub mod so3;
 pub mod types;
 

@@ -81,7 +81,7 @@ from imu_learn.baselines import affine
 from imu_learn.baselines.affine import TraditionalParams, lowpass  # noqa: F401  (lowpass: re-exported)
 from imu_learn.baselines.base import FitSettings, Method
 from imu_learn.baselines.timing import RotationWindows, fit_offset, golden_section, shifted
-from imu_learn.core.integration import PAPER_FRACTIONS, window_labels
+from imu_learn.core.integration import PAPER_FRACTIONS, rotation_window_sums, window_labels
 from imu_learn.core.quat import quat_conj, quat_log, quat_mul
 from imu_learn.data.types import Segment, sample_rate_hz
 from imu_learn.util.threads import thread_limits
@@ -280,71 +280,43 @@ def _horizon_sums(A: np.ndarray, f: np.ndarray, horizons: Seq[int]) -> np.ndarra
 
 class _RotResiduals:
     """Rotation residuals Log(Δq_gt ⊗ Δq̂⁻¹) (B·H·3,) of θ (21,) on fixed windows, with their exact
-    Jacobian (:meth:`jacobian`). Works on the windows components first ((3, W, B): the chain's
-    layout); the rotations of the last evaluation are kept for the Jacobian at that θ."""
+    Jacobian (:meth:`jacobian`). The per-sample work (the model's rates, their products and the
+    Jacobian's sums) is the core's :func:`~imu_learn.core.integration.rotation_window_sums`; the last
+    evaluation is kept for the Jacobian at that θ."""
 
     def __init__(self, w: _Windows) -> None:
         self.w = w
-        B, W, _ = w.gyro.shape
-        self.shape = (W, B)
-        self.g = _components(w.gyro).reshape(3, W * B)
-        self.a = _components(w.acc_g).reshape(3, W * B)
-        self.dt = np.ascontiguousarray(w.dt.T)  # (W, B)
-        self.idx = [h - 1 for h in w.horizons]
-        self._f: Optional[np.ndarray] = None  # (B, W, 7): the rates, the specific force, 1
-        self._last: Optional[Tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]] = None  # (θ, φ, θ², products)
+        self._last: Optional[Tuple[np.ndarray, np.ndarray, Optional[np.ndarray]]] = None  # (θ, Q (B, H, 4), sums)
 
-    def _products(self, theta: np.ndarray) -> Tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """φ = ω dt (3, W, B), its θ² (W, B) and the inclusive products Q (4, W, B) at θ."""
-        if self._last is None or not np.array_equal(self._last[0], theta):
-            M = np.eye(3) + theta[:9].reshape(3, 3)
-            omega = M @ self.g - theta[12:21].reshape(3, 3) @ self.a - (M @ theta[9:12])[:, None]
-            phi = omega.reshape(3, *self.shape) * self.dt
-            step, t2 = _exp(phi)
-            self._last = (np.array(theta, dtype=np.float64), phi, t2, _prefix_rotations(step))
-        return self._last[1], self._last[2], self._last[3]
+    def _sums(self, theta: np.ndarray, jacobian: bool) -> Tuple[np.ndarray, Optional[np.ndarray]]:
+        """Q at the horizons (B, H, 4) and, with ``jacobian``, the sums (B, H, 9, 7) at θ."""
+        last = self._last
+        if last is None or not np.array_equal(last[0], theta) or (jacobian and last[2] is None):
+            w = self.w
+            d = rotation_window_sums(w.gyro, w.acc_g, w.dt, theta, w.horizons, jacobian)
+            self._last = last = (np.array(theta, dtype=np.float64), d["q_wxyz"], d["sums"])
+        return last[1], last[2]
 
     def __call__(self, theta: np.ndarray) -> np.ndarray:
-        Q = self._products(theta)[2][:, self.idx]  # (4, H, B)
-        return quat_log(quat_mul(self.w.dq, quat_conj(Q.transpose(2, 1, 0)))).reshape(-1)
+        Q = self._sums(theta, False)[0]
+        return quat_log(quat_mul(self.w.dq, quat_conj(Q))).reshape(-1)
 
     def jacobian(self, theta: np.ndarray, r: np.ndarray, cols: Optional[np.ndarray] = None) -> np.ndarray:
         """The exact Jacobian (B·H·3, 21) at θ with residuals r; with ``cols``, its columns ``cols`` only
-        (B·H·3, len(cols)), the sums the others need left out (a fit of a few terms: the bias alone).
+        (B·H·3, len(cols)).
 
         Perturbing sample k's rate by δ_k turns Δq̂ into Exp(ψ) Δq̂ with ψ = Σ_{k<h} R(Q_k) J_r(φ_k) dt_k δ_k
         (Q_k the product up to and including sample k, φ_k = ω_k dt_k), and the residual Log(E Exp(−ψ))
         moves by −J_r⁻¹(r) ψ; the model is affine in θ, so ∂ω_k/∂θ is exact: (g_k − b) ⊗ for M_g, −M_g
         for b_g, −a_k ⊗ for G, and Σ A_k (g_k − b) = Σ A_k g_k − (Σ A_k) b."""
-        w = self.w
-        W, B = self.shape
-        H = len(w.horizons)
+        B, H = len(self.w.gyro), len(self.w.horizons)
         M = np.eye(3) + theta[:9].reshape(3, 3)
-        phi, t2, Q = self._products(theta)
-        R = _quat_matrix(Q)
-        # J_r(φ) dt = a I − c1 [φ]× + c2 φφᵀ with a = (1 − c2 θ²) dt (c1, c2 times dt), entry by entry
-        c1, c2 = _so3_jacobian_coefficients(t2, False)
-        a, c1, c2 = (1.0 - c2 * t2) * self.dt, c1 * self.dt, c2 * self.dt
-        x, y, z = phi
-        cx, cy, cz, qx, qy, qz = c1 * x, c1 * y, c1 * z, c2 * x, c2 * y, c2 * z
-        Jr = ((a + qx * x, qx * y + cz, qx * z - cy), (qx * y - cz, a + qy * y, qy * z + cx),
-              (qx * z + cy, qy * z - cx, a + qz * z))
-        A = np.empty((9, W, B))  # A_k = R(Q_k) J_r(φ_k) dt_k, entry (r, i) in row 3r + i
-        for rr in range(3):
-            for i in range(3):
-                np.add(R[rr][0] * Jr[0][i] + R[rr][1] * Jr[1][i], R[rr][2] * Jr[2][i], out=A[3 * rr + i])
+        S = self._sums(theta, True)[1].reshape(B, H, 3, 3, 7)  # type: ignore[union-attr]
         cols = np.arange(21) if cols is None else np.asarray(cols, dtype=np.int64)
-        use_g, use_a = bool(np.any(cols < 9)), bool(np.any(cols >= 12))
-        fcols = [0, 1, 2] * use_g + [3, 4, 5] * use_a + [6]  # of (rates, specific force, 1)
-        if self._f is None:
-            self._f = np.concatenate((w.gyro, w.acc_g, np.ones((B, W, 1))), axis=-1)
-        f = self._f if len(fcols) == 7 else np.ascontiguousarray(self._f[..., fcols])
-        S = _horizon_sums(np.ascontiguousarray(A.transpose(2, 0, 1)), f, w.horizons)  # (B, H, 9, F)
-        S = S.reshape(B, H, 3, 3, len(fcols))
-        A_h = S[..., -1]  # Σ A_k (B, H, 3, 3)
+        A_h = S[..., 6]  # Σ A_k (B, H, 3, 3)
         zero = np.zeros((B, H, 3, 9))
-        dM = (S[..., :3] - A_h[..., None] * theta[9:12]).reshape(B, H, 3, 9) if use_g else zero
-        dG = -S[..., 3 * use_g:3 * use_g + 3].reshape(B, H, 3, 9) if use_a else zero
+        dM = (S[..., :3] - A_h[..., None] * theta[9:12]).reshape(B, H, 3, 9) if np.any(cols < 9) else zero
+        dG = -S[..., 3:6].reshape(B, H, 3, 9) if np.any(cols >= 12) else zero
         dpsi = np.concatenate((dM, -(A_h @ M), dG), axis=-1)[..., cols]  # (B, H, 3, len(cols))
         return -(_so3_jacobian(r.reshape(B, H, 3), True) @ dpsi).reshape(B * H * 3, len(cols))
 

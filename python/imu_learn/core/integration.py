@@ -2,7 +2,7 @@
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Protocol
+from typing import Dict, Optional, Protocol
 from typing import Sequence as Seq
 
 import numpy as np
@@ -83,6 +83,18 @@ def _indices(x: np.ndarray, name: str) -> np.ndarray:
     if a.ndim != 1 or not np.issubdtype(a.dtype, np.integer):
         raise InvalidInputError(f"{name} must be a 1-d sequence of integers, got {a.dtype} {a.shape}")
     return np.ascontiguousarray(a, dtype=np.uint64 if np.issubdtype(a.dtype, np.unsignedinteger) else np.int64)
+
+
+def rotation_window_sums(gyro: np.ndarray, acc_g: np.ndarray, dt: np.ndarray, theta: np.ndarray,
+                         horizons: Seq[int], jacobian: bool) -> Dict[str, Optional[np.ndarray]]:
+    """The floor's gyro model on B windows of W samples (the core's ``rotation_window_sums``): rates
+    ω = M_g g − G a − M_g b_g at θ (21,) = (M_g − I, b_g, G) row-major, their products Q_k = Q_{k−1} ⊗
+    Exp(ω_k dt_k); returns ``q_wxyz`` (B, H, 4), Q after the first h samples for h in ``horizons``,
+    and with ``jacobian`` ``sums`` (B, H, 9, 7): Σ_{k<h} A_k ⊗ (g_k, a_k, 1) with A_k = R(Q_k) J_r(ω_k
+    dt_k) dt_k (row-major 3×3), what the rotation residuals' exact Jacobian is built from (else None).
+    gyro, acc_g (B, W, 3), dt (B, W) [s]."""
+    return core.rotation_window_sums(_f64(gyro), _f64(acc_g), _f64(dt), _f64(theta),
+                                     _indices(horizons, "horizons"), bool(jacobian))
 
 
 def integrate_windows(seq: SegmentArrays, starts: np.ndarray, horizons: np.ndarray) -> WindowLabels:

@@ -1,6 +1,11 @@
-//! Alignment, integration, covariance, labels and batches.
+//! Alignment, integration, covariance, labels, batches and the traditional fit's rotation and
+//! velocity sums.
 
-use numpy::{PyArray2, PyArray3, PyArrayDyn, PyArrayMethods, PyReadonlyArray1, PyReadonlyArray2};
+use numpy::ndarray::Array4;
+use numpy::{
+    IntoPyArray, PyArray2, PyArray3, PyArray4, PyArrayDyn, PyArrayMethods, PyReadonlyArray1, PyReadonlyArray2,
+    PyReadonlyArray3, PyUntypedArrayMethods,
+};
 use std::path::PathBuf;
 use std::sync::LazyLock;
 
@@ -18,6 +23,7 @@ use crate::python::arrays::{
     BufferPool,
 };
 use crate::python::errors::{alignment_to_py, to_py};
+use crate::rotsums::{self, SUM_COLS, SUM_ROWS, THETA_LEN, VEL_COLS};
 use crate::types::Vec3;
 use crate::types::{GroundTruth, ImuSamples, Sequence};
 
@@ -287,6 +293,104 @@ fn integrate_windows<'py>(
     labels_dict(py, l)
 }
 
+/// A C-contiguous (B, W, 3) float64 array as its B·W rows, with B and W.
+fn windows3<'a>(a: &'a PyReadonlyArray3<'_, f64>, name: &str) -> PyResult<(usize, usize, &'a [Vec3])> {
+    let shape = a.shape();
+    let bad = |why: &str| to_py(ImuError::invalid(format!("{name} must be {why}, got shape {shape:?}")));
+    if shape[2] != 3 {
+        return Err(bad("a (B, W, 3) array"));
+    }
+    // `as_slice` also takes Fortran order, whose buffer is not rows of 3.
+    let flat = a
+        .as_slice()
+        .ok()
+        .filter(|_| a.is_c_contiguous())
+        .ok_or_else(|| bad("C-contiguous (use numpy.ascontiguousarray)"))?;
+    Ok((shape[0], shape[1], flat.as_chunks::<3>().0))
+}
+
+#[pyfunction]
+fn rotation_window_sums<'py>(
+    py: Python<'py>,
+    gyro: PyReadonlyArray3<'py, f64>,
+    acc_g: PyReadonlyArray3<'py, f64>,
+    dt: PyReadonlyArray2<'py, f64>,
+    theta: PyReadonlyArray1<'py, f64>,
+    horizons: Indices<'py>,
+    jacobian: bool,
+) -> PyResult<Bound<'py, PyDict>> {
+    let (b, w, g) = windows3(&gyro, "gyro")?;
+    let (_, _, a) = windows3(&acc_g, "acc_g")?;
+    let invalid = |msg: String| to_py(ImuError::invalid(msg));
+    if acc_g.shape() != gyro.shape() {
+        return Err(invalid(format!(
+            "acc_g has shape {:?}, gyro {:?}: they must match",
+            acc_g.shape(),
+            gyro.shape()
+        )));
+    }
+    if dt.shape() != [b, w] {
+        return Err(invalid(format!("dt has shape {:?}, expected ({b}, {w})", dt.shape())));
+    }
+    let d = dt
+        .as_slice()
+        .ok()
+        .filter(|_| dt.is_c_contiguous())
+        .ok_or_else(|| invalid("dt must be C-contiguous (use numpy.ascontiguousarray)".into()))?;
+    let th: &[f64; THETA_LEN] = slice1(&theta, "theta")?
+        .try_into()
+        .map_err(|_| invalid(format!("theta has {} entries, expected {THETA_LEN}", theta.len())))?;
+    let hs = horizons.to_usize("horizons")?;
+    let r = py
+        .allow_threads(|| rotsums::rotation_window_sums(g, a, d, b, w, th, &hs, jacobian))
+        .map_err(to_py)?;
+    let nh = hs.len();
+    let out = PyDict::new(py);
+    out.set_item("q_wxyz", out3_flat(py, r.q_wxyz, b, nh, 4)?)?;
+    let sums = r
+        .sums
+        .map(|s| Array4::from_shape_vec((b, nh, SUM_ROWS, SUM_COLS), s).map(|x| x.into_pyarray(py)))
+        .transpose()
+        .map_err(|e| invalid(e.to_string()))?;
+    out.set_item("sums", sums)?;
+    Ok(out)
+}
+
+#[pyfunction]
+fn velocity_window_sums<'py>(
+    py: Python<'py>,
+    rates: PyReadonlyArray3<'py, f64>,
+    acc: PyReadonlyArray3<'py, f64>,
+    dt: PyReadonlyArray2<'py, f64>,
+    horizons: Indices<'py>,
+) -> PyResult<Bound<'py, PyArray4<f64>>> {
+    let (b, w, r) = windows3(&rates, "rates")?;
+    let (_, _, a) = windows3(&acc, "acc")?;
+    let invalid = |msg: String| to_py(ImuError::invalid(msg));
+    if acc.shape() != rates.shape() {
+        return Err(invalid(format!(
+            "acc has shape {:?}, rates {:?}: they must match",
+            acc.shape(),
+            rates.shape()
+        )));
+    }
+    if dt.shape() != [b, w] {
+        return Err(invalid(format!("dt has shape {:?}, expected ({b}, {w})", dt.shape())));
+    }
+    let d = dt
+        .as_slice()
+        .ok()
+        .filter(|_| dt.is_c_contiguous())
+        .ok_or_else(|| invalid("dt must be C-contiguous (use numpy.ascontiguousarray)".into()))?;
+    let hs = horizons.to_usize("horizons")?;
+    let s = py
+        .allow_threads(|| rotsums::velocity_window_sums(r, a, d, b, w, &hs))
+        .map_err(to_py)?;
+    Array4::from_shape_vec((b, hs.len(), SUM_ROWS, VEL_COLS), s)
+        .map(|x| x.into_pyarray(py))
+        .map_err(|e| invalid(e.to_string()))
+}
+
 /// Covariances → (M, 9, 9), moving the buffer (each `Cov9` is row-major).
 fn covariances_out(py: Python<'_>, covs: Vec<Cov9>) -> PyResult<Bound<'_, PyArray3<f64>>> {
     let m = covs.len();
@@ -530,6 +634,8 @@ pub fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(preintegrate, m)?)?;
     m.add_function(wrap_pyfunction!(window_labels, m)?)?;
     m.add_function(wrap_pyfunction!(integrate_windows, m)?)?;
+    m.add_function(wrap_pyfunction!(rotation_window_sums, m)?)?;
+    m.add_function(wrap_pyfunction!(velocity_window_sums, m)?)?;
     m.add_function(wrap_pyfunction!(increment_covariance, m)?)?;
     m.add_function(wrap_pyfunction!(interval_covariances, m)?)?;
     m.add_class::<SequenceSet>()?;

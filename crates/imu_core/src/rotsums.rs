@@ -1,0 +1,392 @@
+//! The per-sample work of the traditional baseline's gyro fit (`_RotResiduals` in
+//! python/imu_learn/baselines/traditional.py): for B windows of W samples and the affine gyro
+//! model θ, the zero-order-hold rotation at each horizon and, for the exact Jacobian, the sums
+//! of each sample's sensitivity against its inputs.
+//!
+//! Per sample k of a window, with M = I + θ[0..9], b = θ[9..12], G = θ[12..21] (row-major):
+//!
+//!   ω_k = M g_k − G a_k − M b,   φ_k = ω_k dt_k,   Q_k = Q_{k−1} ⊗ Exp(φ_k)   (Q_{−1} = I)
+//!   A_k = R(Q_k) J_r(φ_k) dt_k,  f_k = (g_k, a_k, 1),  S_h = Σ_{k<h} A_k ⊗ f_k
+//!
+//! (J_r SO(3)'s right Jacobian). The output is Q_{h−1} and S_h for every horizon h. The
+//! arithmetic follows the numpy code step for step (the same Taylor series below θ² = 0.01, the
+//! same product order), so the two agree to round-off.
+//!
+//! The accelerometer stage (`_VelResiduals`) holds the calibrated rates ω_k fixed and needs, per
+//! window and horizon, the sums of the rotation in force while each sample is held against the
+//! sample's specific force (`velocity_window_sums`):
+//!
+//!   R_0 = I, R_{k+1} = R_k Exp(ω_k dt_k),   Rm_k = R_k dt_k,   T_m = Σ_{j<m} dt_j,
+//!   s_k = T_{k+1} − ½ dt_k,   c_k = (a_k, 1, s_k a_k, s_k),   V_h = Σ_{k<h} Rm_k ⊗ c_k
+//!
+//! (`_horizon_sums(_held_rotations(ω, dt), concat((f, s f)), horizons)` in numpy).
+
+use rayon::prelude::*;
+
+use crate::batch::try_zeroed_vec;
+use crate::error::{ImuError, Result};
+use crate::types::{QuatWxyz, Vec3};
+
+/// θ: M_g − I (9), b_g (3), G (9), row-major.
+pub const THETA_LEN: usize = 21;
+/// Rows of a sum: entry (r, i) of A_k in row 3r + i.
+pub const SUM_ROWS: usize = 9;
+/// Columns of a sum: f_k = (g_k, a_k, 1).
+pub const SUM_COLS: usize = 7;
+const SUM_LEN: usize = SUM_ROWS * SUM_COLS;
+
+/// Below θ² = SERIES_T2 the functions of θ are their Taylor series in θ² (no division by θ, and
+/// no cancellation in 1 − cos θ); the coefficients are traditional.py's.
+const SERIES_T2: f64 = 0.01;
+/// sin(θ/2)/θ
+const EXP_S: [f64; 5] = [1.0 / 2.0, -1.0 / 48.0, 1.0 / 3840.0, -1.0 / 645120.0, 1.0 / 185794560.0];
+/// cos(θ/2)
+const EXP_C: [f64; 6] = [
+    1.0,
+    -1.0 / 8.0,
+    1.0 / 384.0,
+    -1.0 / 46080.0,
+    1.0 / 10321920.0,
+    -1.0 / 3715891200.0,
+];
+/// (1 − cos θ)/θ²
+const JR_C1: [f64; 6] = [
+    1.0 / 2.0,
+    -1.0 / 24.0,
+    1.0 / 720.0,
+    -1.0 / 40320.0,
+    1.0 / 3628800.0,
+    -1.0 / 479001600.0,
+];
+/// (θ − sin θ)/θ³
+const JR_C2: [f64; 6] = [
+    1.0 / 6.0,
+    -1.0 / 120.0,
+    1.0 / 5040.0,
+    -1.0 / 362880.0,
+    1.0 / 39916800.0,
+    -1.0 / 6227020800.0,
+];
+
+/// The rotations and sums of every window at every horizon.
+#[derive(Clone, Debug, PartialEq)]
+pub struct RotSums {
+    /// Q_{h−1} (w, x, y, z), (B, H, 4) row-major.
+    pub q_wxyz: Vec<f64>,
+    /// S_h, entry [b, h, 3r + i, F] = Σ_{k<h} A_k[r, i] f_k[F], (B, H, 9, 7) row-major; only when
+    /// asked for.
+    pub sums: Option<Vec<f64>>,
+}
+
+/// Σ_j coeffs[j] t2^j by Horner's rule.
+#[inline(always)]
+fn series<const N: usize>(t2: f64, coeffs: &[f64; N]) -> f64 {
+    coeffs[..N - 1].iter().rev().fold(coeffs[N - 1], |acc, &c| acc * t2 + c)
+}
+
+/// Exp(φ) as a unit quaternion, given θ² = |φ|².
+#[inline(always)]
+fn exp(phi: Vec3, t2: f64) -> QuatWxyz {
+    let (s, c) = if t2 < SERIES_T2 {
+        (series(t2, &EXP_S), series(t2, &EXP_C))
+    } else {
+        let t = t2.sqrt();
+        ((0.5 * t).sin() / t, (0.5 * t).cos())
+    };
+    [c, s * phi[0], s * phi[1], s * phi[2]]
+}
+
+/// (c1, c2) of J_r = I − c1 [φ]× + c2 [φ]×² at θ² = t2.
+#[inline(always)]
+fn jr_coefficients(t2: f64) -> (f64, f64) {
+    if t2 < SERIES_T2 {
+        (series(t2, &JR_C1), series(t2, &JR_C2))
+    } else {
+        let t = t2.sqrt();
+        ((1.0 - t.cos()) / t2, (t - t.sin()) / (t2 * t))
+    }
+}
+
+/// Hamilton product a ⊗ b (w, x, y, z), summed left to right as `_prefix_rotations` does.
+#[inline(always)]
+fn qmul(a: QuatWxyz, b: QuatWxyz) -> QuatWxyz {
+    let [w, x, y, z] = a;
+    [
+        w * b[0] - x * b[1] - y * b[2] - z * b[3],
+        w * b[1] + x * b[0] + y * b[3] - z * b[2],
+        w * b[2] - x * b[3] + y * b[0] + z * b[1],
+        w * b[3] + x * b[2] - y * b[1] + z * b[0],
+    ]
+}
+
+/// Rotation matrix of a unit quaternion, as `_quat_matrix`.
+#[inline(always)]
+fn quat_matrix(q: QuatWxyz) -> [[f64; 3]; 3] {
+    let [w, x, y, z] = q;
+    let (xx, yy, zz, xy, xz, yz) = (x * x, y * y, z * z, x * y, x * z, y * z);
+    let (wx, wy, wz) = (w * x, w * y, w * z);
+    [
+        [1.0 - 2.0 * (yy + zz), 2.0 * (xy - wz), 2.0 * (xz + wy)],
+        [2.0 * (xy + wz), 1.0 - 2.0 * (xx + zz), 2.0 * (yz - wx)],
+        [2.0 * (xz - wy), 2.0 * (yz + wx), 1.0 - 2.0 * (xx + yy)],
+    ]
+}
+
+/// A = R(q) J_r(φ) dt, row-major (entry (r, i) at 3r + i). J_r dt = a I − c1 [φ]× + c2 φφᵀ with
+/// a = (1 − c2 θ²) dt and c1, c2 times dt, entry by entry as `_RotResiduals.jacobian`.
+#[inline(always)]
+fn sensitivity(q: QuatWxyz, phi: Vec3, t2: f64, dt: f64) -> [f64; SUM_ROWS] {
+    let (c1, c2) = jr_coefficients(t2);
+    let (a, c1, c2) = ((1.0 - c2 * t2) * dt, c1 * dt, c2 * dt);
+    let [x, y, z] = phi;
+    let (cx, cy, cz, qx, qy, qz) = (c1 * x, c1 * y, c1 * z, c2 * x, c2 * y, c2 * z);
+    let jr = [
+        [a + qx * x, qx * y + cz, qx * z - cy],
+        [qx * y - cz, a + qy * y, qy * z + cx],
+        [qx * z + cy, qy * z - cx, a + qz * z],
+    ];
+    let r = quat_matrix(q);
+    std::array::from_fn(|e| {
+        let (row, i) = (e / 3, e % 3);
+        r[row][0] * jr[0][i] + r[row][1] * jr[1][i] + r[row][2] * jr[2][i]
+    })
+}
+
+/// The gyro model at θ, set up once per call.
+struct Model {
+    m: [[f64; 3]; 3],
+    g: [[f64; 3]; 3],
+    mb: Vec3,
+}
+
+impl Model {
+    fn new(theta: &[f64; THETA_LEN]) -> Self {
+        let mut m = [[0.0; 3]; 3];
+        let mut g = [[0.0; 3]; 3];
+        for r in 0..3 {
+            for c in 0..3 {
+                m[r][c] = theta[3 * r + c] + if r == c { 1.0 } else { 0.0 };
+                g[r][c] = theta[12 + 3 * r + c];
+            }
+        }
+        let b = [theta[9], theta[10], theta[11]];
+        let mb = m.map(|row| dot(row, b));
+        Model { m, g, mb }
+    }
+
+    /// ω = M g − G a − M b.
+    #[inline(always)]
+    fn rate(&self, gyro: Vec3, acc: Vec3) -> Vec3 {
+        std::array::from_fn(|r| dot(self.m[r], gyro) - dot(self.g[r], acc) - self.mb[r])
+    }
+}
+
+#[inline(always)]
+fn dot(a: Vec3, b: Vec3) -> f64 {
+    a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
+}
+
+/// One window, sample by sample (its samples up to the longest horizon). `order` lists the
+/// horizons' indices by increasing horizon; each horizon's rotation (and sum) goes to its own slot.
+#[allow(clippy::too_many_arguments)]
+fn window(
+    model: &Model,
+    gyro: &[Vec3],
+    acc: &[Vec3],
+    dt: &[f64],
+    horizons: &[usize],
+    order: &[usize],
+    q_out: &mut [f64],
+    mut sums_out: Option<&mut [f64]>,
+) {
+    let mut q: QuatWxyz = [1.0, 0.0, 0.0, 0.0];
+    let mut s = [0.0; SUM_LEN];
+    let mut next = order.iter().peekable();
+    for k in 0..gyro.len() {
+        let w = model.rate(gyro[k], acc[k]);
+        let phi = [w[0] * dt[k], w[1] * dt[k], w[2] * dt[k]];
+        let t2 = dot(phi, phi);
+        q = qmul(q, exp(phi, t2));
+        if sums_out.is_some() {
+            let sens = sensitivity(q, phi, t2, dt[k]);
+            let (g, a) = (gyro[k], acc[k]);
+            let f = [g[0], g[1], g[2], a[0], a[1], a[2], 1.0];
+            for (row, &ae) in s.chunks_exact_mut(SUM_COLS).zip(&sens) {
+                for (se, &fe) in row.iter_mut().zip(&f) {
+                    *se += ae * fe;
+                }
+            }
+        }
+        while let Some(&&j) = next.peek() {
+            if horizons[j] != k + 1 {
+                break;
+            }
+            q_out[4 * j..4 * j + 4].copy_from_slice(&q);
+            if let Some(out) = sums_out.as_deref_mut() {
+                out[SUM_LEN * j..SUM_LEN * (j + 1)].copy_from_slice(&s);
+            }
+            next.next();
+        }
+    }
+}
+
+/// `n` zeros, or an error naming `what` where they cannot be allocated.
+fn zeroed(n: usize, what: &str) -> Result<Vec<f64>> {
+    try_zeroed_vec(n).map_err(|e| ImuError::invalid(format!("{what}: {n} floats cannot be allocated ({e})")))
+}
+
+/// Rotations Q_{h−1} and (with `jacobian`) sums S_h of `b` windows of `w` samples each, for the
+/// gyro model `theta` (see the module doc). `gyro`, `acc` (the specific force driving G) and `dt`
+/// [s] hold the windows one after another (B·W rows each); `horizons` (H, in 1..=W, any order,
+/// repeats allowed) are sample counts. Everything is checked before anything is allocated; the
+/// samples' values are not checked (a NaN sample gives NaN outputs of its window). Windows run in
+/// parallel, each one sequentially.
+#[allow(clippy::too_many_arguments)]
+pub fn rotation_window_sums(
+    gyro: &[Vec3],
+    acc: &[Vec3],
+    dt: &[f64],
+    b: usize,
+    w: usize,
+    theta: &[f64; THETA_LEN],
+    horizons: &[usize],
+    jacobian: bool,
+) -> Result<RotSums> {
+    check_windows(
+        [("gyro", gyro.len()), ("acc", acc.len()), ("dt", dt.len())],
+        b,
+        w,
+        horizons,
+    )?;
+    if let Some((i, v)) = theta.iter().enumerate().find(|(_, v)| !v.is_finite()) {
+        return Err(ImuError::invalid(format!("theta[{i}] = {v} is not finite")));
+    }
+    let nh = horizons.len();
+    let q_len = b.checked_mul(nh).and_then(|x| x.checked_mul(4));
+    let s_len = b.checked_mul(nh).and_then(|x| x.checked_mul(SUM_LEN));
+    let (Some(q_len), Some(s_len)) = (q_len, s_len) else {
+        return Err(ImuError::invalid(format!("{b} windows x {nh} horizons overflow")));
+    };
+
+    let mut order: Vec<usize> = (0..nh).collect();
+    order.sort_by_key(|&j| horizons[j]);
+    let last = horizons[order[nh - 1]];
+    let model = Model::new(theta);
+    let mut q_wxyz = zeroed(q_len, "q_wxyz")?;
+    let mut sums = if jacobian { Some(zeroed(s_len, "sums")?) } else { None };
+    // Window i's samples, up to its longest horizon.
+    let run = |i: usize, q: &mut [f64], s: Option<&mut [f64]>| {
+        let k = i * w..i * w + last;
+        let (g, a, d) = (&gyro[k.clone()], &acc[k.clone()], &dt[k]);
+        window(&model, g, a, d, horizons, &order, q, s);
+    };
+    let q_chunks = q_wxyz.par_chunks_mut(4 * nh).enumerate();
+    match sums.as_deref_mut() {
+        Some(s) => q_chunks
+            .zip(s.par_chunks_mut(SUM_LEN * nh))
+            .for_each(|((i, q), s)| run(i, q, Some(s))),
+        None => q_chunks.for_each(|(i, q)| run(i, q, None)),
+    }
+    Ok(RotSums { q_wxyz, sums })
+}
+
+/// Columns of a velocity sum: c_k = (a_k, 1, s_k a_k, s_k).
+pub const VEL_COLS: usize = 8;
+const VEL_LEN: usize = SUM_ROWS * VEL_COLS;
+
+/// The checks both entry points share: B·W samples in every input, horizons non-empty and in
+/// 1..=W. Returns B·W.
+fn check_windows(inputs: [(&str, usize); 3], b: usize, w: usize, horizons: &[usize]) -> Result<usize> {
+    let n = b
+        .checked_mul(w)
+        .ok_or_else(|| ImuError::invalid(format!("{b} windows of {w} samples overflow")))?;
+    for (name, len) in inputs {
+        if len != n {
+            return Err(ImuError::invalid(format!(
+                "{name} has {len} samples, expected {b} windows x {w} samples = {n}"
+            )));
+        }
+    }
+    if horizons.is_empty() {
+        return Err(ImuError::invalid("horizons is empty: at least one horizon is needed"));
+    }
+    if let Some((i, h)) = horizons.iter().enumerate().find(|(_, &h)| h == 0 || h > w) {
+        return Err(ImuError::invalid(format!(
+            "horizons[{i}] = {h}: a horizon must be in 1..={w} (the window's samples)"
+        )));
+    }
+    Ok(n)
+}
+
+/// One window of `velocity_window_sums`, sample by sample (its samples up to the longest
+/// horizon), with plain running sums; `order` as in `window`.
+fn velocity_window(rates: &[Vec3], acc: &[Vec3], dt: &[f64], horizons: &[usize], order: &[usize], out: &mut [f64]) {
+    let mut q: QuatWxyz = [1.0, 0.0, 0.0, 0.0];
+    let mut t = 0.0; // T_k, summed in sample order as numpy's cumsum
+    let mut s = [0.0; VEL_LEN];
+    let mut next = order.iter().peekable();
+    for k in 0..rates.len() {
+        let d = dt[k];
+        // R_k dt_k with R_k the product of the steps before sample k (R_0 = I).
+        let r = quat_matrix(q);
+        let rm: [f64; SUM_ROWS] = std::array::from_fn(|e| r[e / 3][e % 3] * d);
+        t += d;
+        let sk = t - 0.5 * d;
+        let a = acc[k];
+        let c = [a[0], a[1], a[2], 1.0, sk * a[0], sk * a[1], sk * a[2], sk];
+        for (row, &re) in s.chunks_exact_mut(VEL_COLS).zip(&rm) {
+            for (se, &ce) in row.iter_mut().zip(&c) {
+                *se += re * ce;
+            }
+        }
+        while let Some(&&j) = next.peek() {
+            if horizons[j] != k + 1 {
+                break;
+            }
+            out[VEL_LEN * j..VEL_LEN * (j + 1)].copy_from_slice(&s);
+            next.next();
+        }
+        // The step of the last sample is never held by a later one.
+        if k + 1 < rates.len() {
+            let wk = rates[k];
+            let phi = [wk[0] * d, wk[1] * d, wk[2] * d];
+            q = qmul(q, exp(phi, dot(phi, phi)));
+        }
+    }
+}
+
+/// The accelerometer stage's sums V_h of `b` windows of `w` samples each (see the module doc):
+/// entry [b, h, 3r + i, F] = Σ_{k<h} R_k[r, i] dt_k c_k[F], (B, H, 9, 8) row-major. `rates` (the
+/// calibrated rates [rad/s]), `acc` (specific force) and `dt` [s] hold the windows one after
+/// another (B·W rows each); `horizons` (H, in 1..=W, any order, repeats allowed) are sample
+/// counts. Everything is checked before anything is allocated; the samples' values are not
+/// checked (a NaN sample gives NaN outputs in its window from where it enters). Windows run in
+/// parallel, each one sequentially, so the result does not depend on the number of threads.
+pub fn velocity_window_sums(
+    rates: &[Vec3],
+    acc: &[Vec3],
+    dt: &[f64],
+    b: usize,
+    w: usize,
+    horizons: &[usize],
+) -> Result<Vec<f64>> {
+    check_windows(
+        [("rates", rates.len()), ("acc", acc.len()), ("dt", dt.len())],
+        b,
+        w,
+        horizons,
+    )?;
+    let nh = horizons.len();
+    let Some(len) = b.checked_mul(nh).and_then(|x| x.checked_mul(VEL_LEN)) else {
+        return Err(ImuError::invalid(format!("{b} windows x {nh} horizons overflow")));
+    };
+    let mut order: Vec<usize> = (0..nh).collect();
+    order.sort_by_key(|&j| horizons[j]);
+    let last = horizons[order[nh - 1]];
+    let mut sums = zeroed(len, "sums")?;
+    sums.par_chunks_mut(VEL_LEN * nh).enumerate().for_each(|(i, out)| {
+        let k = i * w..i * w + last;
+        velocity_window(&rates[k.clone()], &acc[k.clone()], &dt[k], horizons, &order, out);
+    });
+    Ok(sums)
+}
