@@ -13,6 +13,8 @@ uncertainty refits, gravity, the noise, the files). Cases:
   V2_03, their last 15 % selecting), skipped with a message when the data root is absent;
 * ``euroc + busy loop``: the same with one ``python -c "while True: pass"`` process started beside
   each run (one core of CPU-bound load; the busy process is ended after the run);
+* ``euroc --select`` (alone and beside the busy loop): the same with each sensor's terms chosen on the
+  flights held out in turn (five folds, their fits and scores on the cores);
 * ``synthetic``: one ``--seconds`` s recording at ``--rate`` Hz with a 6-DoF reference (EuRoC ASL
   layout, written once into a temporary folder), with a known scale/misalignment, bias and noise
   on both sensors, calibrated by ``--input``; the fitted gyro bias and accelerometer scale are
@@ -192,6 +194,9 @@ def main(argv: Optional[List[str]] = None) -> int:
             alone = case("euroc (5 training flights)", common, env, repeat, busy=False)
             busy = case("euroc + busy loop", common, env, repeat, busy=True)
             targets("euroc", alone, busy)
+            alone = case("euroc --select", [*common, "--select"], env, repeat, busy=False)
+            busy = case("euroc --select + busy loop", [*common, "--select"], env, repeat, busy=True)
+            targets("euroc --select", alone, busy)
     with tempfile.TemporaryDirectory() as tmp:
         rec = Path(tmp) / "synthetic"
         n = write_synthetic(rec, args.seconds, args.rate)

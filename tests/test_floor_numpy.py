@@ -176,24 +176,6 @@ def test_the_order_2_lowpass_is_scipys(fs, fc):
     np.testing.assert_array_equal(lowpass(x[:9], fs, fc), x[:9])  # too short for the padding: unchanged
 
 
-def test_the_series_below_a_tenth_of_a_radian_are_the_functions():
-    """_exp and J_r's coefficients switch from Taylor series to sin/cos at θ = 0.1 rad: both sides agree
-    with the closed forms (sin/cos of θ/2 to rounding; (1 − cos θ)/θ² and (θ − sin θ)/θ³ to their own
-    cancellation, ~1e-16/θ², where θ is large enough for that to be small)."""
-    from imu_learn.baselines.traditional import _exp, _so3_jacobian_coefficients
-
-    t = np.concatenate([np.geomspace(1e-6, 0.0999, 200), [0.1, 0.10001], np.linspace(0.1001, 2.0, 50)])
-    phi = np.stack([t * 0.6, -t * 0.8, 0.0 * t])
-    q, t2 = _exp(phi)
-    np.testing.assert_allclose(q[0], np.cos(t / 2), rtol=3e-16, atol=0)
-    np.testing.assert_allclose(q[1], np.sin(t / 2) * 0.6, rtol=5e-16, atol=0)
-    c1, c2 = _so3_jacobian_coefficients(t2, False)
-    wide = t > 0.05
-    np.testing.assert_allclose(c1[wide], ((1 - np.cos(t)) / t**2)[wide], rtol=1e-13)
-    np.testing.assert_allclose(c2[wide], ((t - np.sin(t)) / t**3)[wide], rtol=1e-12)
-    assert np.abs(c1[~wide] - 0.5).max() < 2.1e-4 and np.abs(c2[~wide] - 1 / 6).max() < 2.1e-5
-
-
 def test_a_jacobians_columns_alone_are_its_full_columns(crop_split):
     """A level's fit asks for its columns only (the bias: 3 of 21): they equal the full Jacobian's."""
     d = _Data([crop_split[0]], 100, 40, G)

@@ -1,24 +1,15 @@
 """The core's ``rotation_window_sums`` (what the floor's gyro fit, baselines/traditional.py
-``_RotResiduals``, runs on) against numpy: the rotation products at each horizon, and the sums
-Σ_{k<h} A_k ⊗ f_k its exact Jacobian is built from, computed here from the module's numpy helpers
-(the sample-by-sample chain of ``_prefix_rotations``, ``_quat_matrix``, the SO(3) Jacobian's
-coefficients)."""
+``_RotResiduals``, runs on) against the numpy reference (``core/numpy_reference.py``: exact
+exponentials, a doubling scan of the products, J_r in closed form): the rotation products at each
+horizon, and the sums Σ_{k<h} A_k ⊗ f_k its exact Jacobian is built from."""
 from __future__ import annotations
 
 import numpy as np
 import pytest
 
 from imu_learn import _imu_core as core
-from imu_learn.baselines.traditional import (
-    _components,
-    _exp,
-    _gyro_model,
-    _horizon_sums,
-    _prefix_rotations,
-    _quat_matrix,
-    _so3_jacobian_coefficients,
-    _Windows,
-)
+from imu_learn.baselines.traditional import _Windows
+from imu_learn.core import numpy_reference as ref
 from imu_learn.errors import InvalidInputError
 
 B, W = 50, 40
@@ -47,33 +38,6 @@ def some_theta(seed: int) -> np.ndarray:
                            1e-3 * rng.standard_normal(9)))
 
 
-def numpy_products(w: _Windows, theta: np.ndarray):
-    """φ = ω dt (3, W, B), its θ² (W, B) and the inclusive products Q (4, W, B) at θ, in numpy."""
-    phi = _components(_gyro_model(theta, w.gyro, w.acc_g) * w.dt[..., None])
-    step, t2 = _exp(phi)
-    return phi, t2, _prefix_rotations(step)
-
-
-def numpy_sums(w: _Windows, theta: np.ndarray) -> np.ndarray:
-    """S (B, H, 9, 7): Σ_{k<h} A_k ⊗ (g_k, a_k, 1), A_k = R(Q_k) J_r(φ_k) dt_k, in numpy."""
-    Bn, Wn, _ = w.gyro.shape
-    dt = np.ascontiguousarray(w.dt.T)
-    phi, t2, Q = numpy_products(w, theta)
-    R = _quat_matrix(Q)
-    c1, c2 = _so3_jacobian_coefficients(t2, False)
-    a, c1, c2 = (1.0 - c2 * t2) * dt, c1 * dt, c2 * dt
-    x, y, z = phi
-    cx, cy, cz, qx, qy, qz = c1 * x, c1 * y, c1 * z, c2 * x, c2 * y, c2 * z
-    Jr = ((a + qx * x, qx * y + cz, qx * z - cy), (qx * y - cz, a + qy * y, qy * z + cx),
-          (qx * z + cy, qy * z - cx, a + qz * z))
-    A = np.empty((9, Wn, Bn))
-    for r in range(3):
-        for i in range(3):
-            np.add(R[r][0] * Jr[0][i] + R[r][1] * Jr[1][i], R[r][2] * Jr[2][i], out=A[3 * r + i])
-    f = np.concatenate((w.gyro, w.acc_g, np.ones((Bn, Wn, 1))), axis=-1)
-    return _horizon_sums(np.ascontiguousarray(A.transpose(2, 0, 1)), f, w.horizons)
-
-
 def call(w: _Windows, theta: np.ndarray, jacobian: bool, horizons=None) -> dict:
     hs = np.asarray(w.horizons if horizons is None else horizons, dtype=np.uint64)
     return core.rotation_window_sums(w.gyro, w.acc_g, w.dt, theta, hs, jacobian)
@@ -83,12 +47,12 @@ def call(w: _Windows, theta: np.ndarray, jacobian: bool, horizons=None) -> dict:
 def test_rotations_and_sums_match_numpy(seed):
     w = windows(seed)
     theta = np.zeros(21) if seed == 0 else some_theta(seed)
-    q_np = numpy_products(w, theta)[2][:, [h - 1 for h in HORIZONS]].transpose(2, 1, 0)  # (B, H, 4)
+    q_np, s_np = ref.rotation_window_sums(w.gyro, w.acc_g, w.dt, theta, HORIZONS)
     out = call(w, theta, True)
     assert out["q_wxyz"].shape == (B, len(HORIZONS), 4)
     assert out["sums"].shape == (B, len(HORIZONS), 9, 7)
     np.testing.assert_allclose(out["q_wxyz"], q_np, rtol=0, atol=1e-12)
-    np.testing.assert_allclose(out["sums"], numpy_sums(w, theta), rtol=0, atol=1e-12)
+    np.testing.assert_allclose(out["sums"], s_np, rtol=0, atol=1e-12)
     plain = call(w, theta, False)
     assert plain["sums"] is None
     np.testing.assert_array_equal(plain["q_wxyz"], out["q_wxyz"])

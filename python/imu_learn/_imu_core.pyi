@@ -157,7 +157,7 @@ def velocity_window_sums(rates: _F64, acc: _F64, dt: _F64, horizons: _Idx) -> _F
     c_k = (a_k, 1, s_k a_k, s_k), returns (B, H, 9, 8) float64, sum_{k<h} R_k[r, i] dt_k c_k[F] at
     [b, h, 3r + i, F] for each horizon h. Horizons in 1..W, any order; mismatched shapes, arrays not
     C-contiguous or a horizon out of range raise InvalidInputError. See
-    imu_learn.baselines.traditional (_held_rotations, _VelResiduals)."""
+    imu_learn.baselines.traditional (_VelResiduals); its numpy oracle imu_learn.core.numpy_reference."""
 
 def increment_covariance(t_ns: _I64, gyro: _F64, acc: _F64, var: _F64, horizons: _Idx) -> _F64:
     """(H, 9, 9) covariance of (dtheta, dbeta, dgamma) after each horizon's number of intervals from

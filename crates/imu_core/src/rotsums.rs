@@ -8,9 +8,10 @@
 //!   ω_k = M g_k − G a_k − M b,   φ_k = ω_k dt_k,   Q_k = Q_{k−1} ⊗ Exp(φ_k)   (Q_{−1} = I)
 //!   A_k = R(Q_k) J_r(φ_k) dt_k,  f_k = (g_k, a_k, 1),  S_h = Σ_{k<h} A_k ⊗ f_k
 //!
-//! (J_r SO(3)'s right Jacobian). The output is Q_{h−1} and S_h for every horizon h. The
-//! arithmetic follows the numpy code step for step (the same Taylor series below θ² = 0.01, the
-//! same product order), so the two agree to round-off.
+//! (J_r SO(3)'s right Jacobian). The output is Q_{h−1} and S_h for every horizon h. Below θ² =
+//! 0.01 the functions of θ are their Taylor series in θ² (no division by θ, no cancellation in
+//! 1 − cos θ); the numpy oracle (python/imu_learn/core/numpy_reference.py, closed forms and a
+//! doubling scan) agrees to round-off.
 //!
 //! The accelerometer stage (`_VelResiduals`) holds the calibrated rates ω_k fixed and needs, per
 //! window and horizon, the sums of the rotation in force while each sample is held against the
@@ -19,7 +20,7 @@
 //!   R_0 = I, R_{k+1} = R_k Exp(ω_k dt_k),   Rm_k = R_k dt_k,   T_m = Σ_{j<m} dt_j,
 //!   s_k = T_{k+1} − ½ dt_k,   c_k = (a_k, 1, s_k a_k, s_k),   V_h = Σ_{k<h} Rm_k ⊗ c_k
 //!
-//! (`_horizon_sums(_held_rotations(ω, dt), concat((f, s f)), horizons)` in numpy).
+//! (`velocity_window_sums` in python/imu_learn/core/numpy_reference.py, the oracle).
 
 use rayon::prelude::*;
 
@@ -36,7 +37,7 @@ pub const SUM_COLS: usize = 7;
 const SUM_LEN: usize = SUM_ROWS * SUM_COLS;
 
 /// Below θ² = SERIES_T2 the functions of θ are their Taylor series in θ² (no division by θ, and
-/// no cancellation in 1 − cos θ); the coefficients are traditional.py's.
+/// no cancellation in 1 − cos θ); the switch keeps the first term left out below 1e-18 of the sum.
 const SERIES_T2: f64 = 0.01;
 /// sin(θ/2)/θ
 const EXP_S: [f64; 5] = [1.0 / 2.0, -1.0 / 48.0, 1.0 / 3840.0, -1.0 / 645120.0, 1.0 / 185794560.0];
@@ -107,7 +108,7 @@ fn jr_coefficients(t2: f64) -> (f64, f64) {
     }
 }
 
-/// Hamilton product a ⊗ b (w, x, y, z), summed left to right as `_prefix_rotations` does.
+/// Hamilton product a ⊗ b (w, x, y, z).
 #[inline(always)]
 fn qmul(a: QuatWxyz, b: QuatWxyz) -> QuatWxyz {
     let [w, x, y, z] = a;
@@ -119,7 +120,7 @@ fn qmul(a: QuatWxyz, b: QuatWxyz) -> QuatWxyz {
     ]
 }
 
-/// Rotation matrix of a unit quaternion, as `_quat_matrix`.
+/// Rotation matrix of a unit quaternion (row-major).
 #[inline(always)]
 fn quat_matrix(q: QuatWxyz) -> [[f64; 3]; 3] {
     let [w, x, y, z] = q;
@@ -319,8 +320,24 @@ fn check_windows(inputs: [(&str, usize); 3], b: usize, w: usize, horizons: &[usi
 }
 
 /// One window of `velocity_window_sums`, sample by sample (its samples up to the longest
-/// horizon), with plain running sums; `order` as in `window`.
-fn velocity_window(rates: &[Vec3], acc: &[Vec3], dt: &[f64], horizons: &[usize], order: &[usize], out: &mut [f64]) {
+/// horizon), with plain running sums; `order` as in `window`. `steps` (scratch, one per sample)
+/// takes every sample's Exp(ω_k dt_k) first: they do not depend on each other, so computing
+/// them apart from the product chain lets the processor overlap them.
+#[allow(clippy::too_many_arguments)]
+fn velocity_window(
+    rates: &[Vec3],
+    acc: &[Vec3],
+    dt: &[f64],
+    horizons: &[usize],
+    order: &[usize],
+    steps: &mut Vec<QuatWxyz>,
+    out: &mut [f64],
+) {
+    steps.clear();
+    steps.extend(rates.iter().zip(dt).map(|(wk, &d)| {
+        let phi = [wk[0] * d, wk[1] * d, wk[2] * d];
+        exp(phi, dot(phi, phi))
+    }));
     let mut q: QuatWxyz = [1.0, 0.0, 0.0, 0.0];
     let mut t = 0.0; // T_k, summed in sample order as numpy's cumsum
     let mut s = [0.0; VEL_LEN];
@@ -346,12 +363,7 @@ fn velocity_window(rates: &[Vec3], acc: &[Vec3], dt: &[f64], horizons: &[usize],
             out[VEL_LEN * j..VEL_LEN * (j + 1)].copy_from_slice(&s);
             next.next();
         }
-        // The step of the last sample is never held by a later one.
-        if k + 1 < rates.len() {
-            let wk = rates[k];
-            let phi = [wk[0] * d, wk[1] * d, wk[2] * d];
-            q = qmul(q, exp(phi, dot(phi, phi)));
-        }
+        q = qmul(q, steps[k]);
     }
 }
 
@@ -384,9 +396,11 @@ pub fn velocity_window_sums(
     order.sort_by_key(|&j| horizons[j]);
     let last = horizons[order[nh - 1]];
     let mut sums = zeroed(len, "sums")?;
-    sums.par_chunks_mut(VEL_LEN * nh).enumerate().for_each(|(i, out)| {
-        let k = i * w..i * w + last;
-        velocity_window(&rates[k.clone()], &acc[k.clone()], &dt[k], horizons, &order, out);
-    });
+    sums.par_chunks_mut(VEL_LEN * nh)
+        .enumerate()
+        .for_each_init(Vec::new, |steps, (i, out)| {
+            let k = i * w..i * w + last;
+            velocity_window(&rates[k.clone()], &acc[k.clone()], &dt[k], horizons, &order, steps, out);
+        });
     Ok(sums)
 }

@@ -13,7 +13,7 @@ with the gyro's cutoff.
 
 Fit (``fit``): nonlinear least squares *through the same zero-order-hold integration* that the
 evaluation uses (the scheme of :func:`imu_learn.nn.integration.integrate` and of the core's
-``integrate_windows``, in float64, numpy; they agree to ~1e-15), on short windows of the training
+``integrate_windows``, in float64; they agree to ~1e-15), on short windows of the training
 sequences (``window`` samples, labels at the paper's fractions of it):
 
 1. gyro: residuals Log(Δq_gt ⊗ Δq̂⁻¹) at every horizon of every window;
@@ -21,7 +21,9 @@ sequences (``window`` samples, labels at the paper's fractions of it):
 
 Both are solved by Levenberg–Marquardt with Huber IRLS weights on the norm of each residual
 3-vector (``huber_rot`` rad, ``huber_vel``; ground-truth glitches pull only linearly), in numpy
-float64 (no torch: ``imu-learn calibrate`` never loads it). The model is affine in its 21 (gyro) and
+float64 (no torch: ``imu-learn calibrate`` never loads it), the per-sample chains in the core
+(``rotation_window_sums``, ``velocity_window_sums``: Rust, the GIL released; their numpy oracle is
+:mod:`imu_learn.core.numpy_reference`). The model is affine in its 21 (gyro) and
 12 (accel) parameters, so the problem is close to linear and converges in a few iterations. The
 Jacobians are exact and analytic, one pass over the windows each: for the gyro, perturbing sample
 k's rate by δ rotates the increment by R(Q_k) J_r(ω_k dt) dt δ (Q_k the product up to sample k, J_r
@@ -81,7 +83,7 @@ from imu_learn.baselines import affine
 from imu_learn.baselines.affine import TraditionalParams, lowpass  # noqa: F401  (lowpass: re-exported)
 from imu_learn.baselines.base import FitSettings, Method
 from imu_learn.baselines.timing import RotationWindows, fit_offset, golden_section, shifted
-from imu_learn.core.integration import PAPER_FRACTIONS, rotation_window_sums, window_labels
+from imu_learn.core.integration import PAPER_FRACTIONS, rotation_window_sums, velocity_window_sums, window_labels
 from imu_learn.core.quat import quat_conj, quat_log, quat_mul
 from imu_learn.data.types import Segment, sample_rate_hz
 from imu_learn.util.threads import thread_limits
@@ -91,38 +93,6 @@ ACC_BIAS_ONLY = 1e6  # ``acc_prior`` that holds M_a at the identity (|M_a - I| b
 TOL = 1e-8  # the solve's stopping rule (relative cost decrease or step; module doc)
 ACC_TOL = 1e-12  # the accelerometer stage's: a residual there is a product with Φ (~1 ms), so it runs to the end
 OFFSET_BRACKET = 0.5  # a refit searches its time offset within this many samples of the fit's first
-
-
-# Below θ² = SERIES_T2 (θ < 0.1 rad: a sample's rotation at 200 Hz below 20 rad/s) the functions of θ that the
-# integration and its Jacobian need are their Taylor series in θ² (the first term left out is below 1e-18 of
-# the sum there; (1 − cos θ)/θ² itself loses ~1e-12 to cancellation at θ = 0.005), above it sin and cos.
-SERIES_T2 = 0.01
-EXP_S = (1 / 2, -1 / 48, 1 / 3840, -1 / 645120, 1 / 185794560)  # sin(θ/2)/θ
-EXP_C = (1.0, -1 / 8, 1 / 384, -1 / 46080, 1 / 10321920, -1 / 3715891200)  # cos(θ/2)
-JR_C1 = (1 / 2, -1 / 24, 1 / 720, -1 / 40320, 1 / 3628800, -1 / 479001600)  # (1 − cos θ)/θ²
-JR_C2 = (1 / 6, -1 / 120, 1 / 5040, -1 / 362880, 1 / 39916800, -1 / 6227020800)  # (θ − sin θ)/θ³
-
-
-def _series(t2: np.ndarray, coeffs: Seq[float]) -> np.ndarray:
-    """Σ_k coeffs[k] t2^k by Horner's rule."""
-    out = np.full_like(t2, coeffs[-1])
-    for c in coeffs[-2::-1]:
-        out *= t2
-        out += c
-    return out
-
-
-def _exp(phi: np.ndarray) -> Tuple[np.ndarray, np.ndarray]:
-    """Rotation vectors, components first (3, ...) -> unit quaternions (4, ...) (w, x, y, z; what
-    :func:`imu_learn.nn.so3.so3_exp` gives, to rounding), and θ² (...)."""
-    px, py, pz = phi
-    t2 = px * px + py * py + pz * pz
-    s, c = _series(t2, EXP_S), _series(t2, EXP_C)
-    big = t2 >= SERIES_T2
-    if big.any():
-        t = np.sqrt(t2[big])
-        s[big], c[big] = np.sin(0.5 * t) / t, np.cos(0.5 * t)
-    return np.stack((c, s * px, s * py, s * pz)), t2
 
 
 def _gyro_model(theta: np.ndarray, g_m: np.ndarray, a_m: np.ndarray) -> np.ndarray:
@@ -201,81 +171,21 @@ class _Data:
                         dq=g("dq"), dv=g("dv"), dp=g("dp"), horizons=self.horizons, key=(id(self), cutoff_gyro))
 
 
-def _prefix_rotations(step: np.ndarray) -> np.ndarray:
-    """Inclusive prefix product along axis 1 of quaternions (4, W, B), components first: out[:, k] =
-    step[:, 0] ⊗ ... ⊗ step[:, k], chained sample by sample (the integration's own order) over the B
-    windows at once: W small products cost less than a log-depth scan's W·log2 W on this size."""
-    out = np.empty_like(step)
-    w, x, y, z = out[:, 0] = step[:, 0]
-    for k in range(1, step.shape[1]):
-        bw, bx, by, bz = step[:, k]
-        w, x, y, z = (w * bw - x * bx - y * by - z * bz, w * bx + x * bw + y * bz - z * by,
-                      w * by - x * bz + y * bw + z * bx, w * bz + x * by - y * bx + z * bw)
-        out[0, k], out[1, k], out[2, k], out[3, k] = w, x, y, z
-    return out
-
-
-def _components(x: np.ndarray) -> np.ndarray:
-    """(B, W, C) -> (C, W, B), contiguous: the layout of the sample-by-sample chain."""
-    return np.ascontiguousarray(x.transpose(2, 1, 0))
-
-
-def rotation_increments(gyro: np.ndarray, dt: np.ndarray, horizons: Seq[int]) -> np.ndarray:
-    """Δq (B, H, 4) after the first h samples, h in ``horizons``: the zero-order hold of
-    :func:`imu_learn.nn.integration.integrate` (the core's ``integrate_windows``). gyro (B, W, 3), dt (B, W)."""
-    Q = _prefix_rotations(_exp(_components(gyro * dt[..., None]))[0])
-    return np.ascontiguousarray(Q[:, [h - 1 for h in horizons]].transpose(2, 1, 0))
-
-
-def _quat_matrix(q: np.ndarray) -> Tuple[Tuple[np.ndarray, ...], ...]:
-    """Rotation matrix of unit quaternions, components first (4, ...) (w, x, y, z): its rows of entries (...)."""
-    w, x, y, z = q
-    xx, yy, zz, xy, xz, yz, wx, wy, wz = x * x, y * y, z * z, x * y, x * z, y * z, w * x, w * y, w * z
-    return ((1 - 2 * (yy + zz), 2 * (xy - wz), 2 * (xz + wy)), (2 * (xy + wz), 1 - 2 * (xx + zz), 2 * (yz - wx)),
-            (2 * (xz - wy), 2 * (yz + wx), 1 - 2 * (xx + yy)))
-
-
-def _so3_jacobian_coefficients(t2: np.ndarray, inverse: bool) -> Tuple[np.ndarray, np.ndarray]:
-    """(c1, c2) of J_r = I − c1 [φ]× + c2 [φ]×² (or of its inverse) at θ² = ``t2``."""
-    if inverse:
-        small = t2 < 1e-8
-        t2s = np.where(small, 1.0, t2)
-        t = np.sqrt(t2s)
-        c2 = np.where(small, 1.0 / 12.0, 1.0 / t2s - (1.0 + np.cos(t)) / (2.0 * t * np.sin(t)))
-        return np.full_like(t2, -0.5), c2
-    c1, c2 = _series(t2, JR_C1), _series(t2, JR_C2)
-    big = t2 >= SERIES_T2
-    if big.any():
-        t2b = t2[big]
-        tb = np.sqrt(t2b)
-        c1[big], c2[big] = (1.0 - np.cos(tb)) / t2b, (tb - np.sin(tb)) / (t2b * tb)
-    return c1, c2
-
-
-def _so3_jacobian(phi: np.ndarray, inverse: bool) -> np.ndarray:
-    """The right Jacobian J_r(φ) of SO(3) (Exp(φ + δ) ≈ Exp(φ) Exp(J_r δ)), or its inverse, (..., 3, 3):
-    J_r = I − c1 [φ]× + c2 [φ]×² with c1 = (1 − cos θ)/θ², c2 = (θ − sin θ)/θ³; J_r⁻¹ = I + ½ [φ]× +
-    (1/θ² − (1 + cos θ)/(2θ sin θ)) [φ]×²; [φ]×² = φφᵀ − θ² I. Written out entry by entry."""
+def _so3_jacobian_inverse(phi: np.ndarray) -> np.ndarray:
+    """The inverse right Jacobian of SO(3) (Exp(φ + δ) ≈ Exp(φ) Exp(J_r δ)), (..., 3, 3): J_r⁻¹ = I + ½ [φ]× +
+    c2 [φ]×², c2 = 1/θ² − (1 + cos θ)/(2θ sin θ) (1/12 at θ → 0); [φ]×² = φφᵀ − θ² I. Written out entry by entry."""
     x, y, z = np.moveaxis(phi, -1, 0)
     t2 = x * x + y * y + z * z
-    c1, c2 = _so3_jacobian_coefficients(t2, inverse)
+    small = t2 < 1e-8
+    t2s = np.where(small, 1.0, t2)
+    t = np.sqrt(t2s)
+    c1 = np.full_like(t2, -0.5)
+    c2 = np.where(small, 1.0 / 12.0, 1.0 / t2s - (1.0 + np.cos(t)) / (2.0 * t * np.sin(t)))
     a = 1.0 - c2 * t2
     cx, cy, cz = c1 * x, c1 * y, c1 * z
     xy, xz, yz = c2 * x * y, c2 * x * z, c2 * y * z
     return np.stack((a + c2 * x * x, xy + cz, xz - cy, xy - cz, a + c2 * y * y, yz + cx, xz + cy, yz - cx,
                      a + c2 * z * z), axis=-1).reshape(*phi.shape[:-1], 3, 3)
-
-
-def _horizon_sums(A: np.ndarray, f: np.ndarray, horizons: Seq[int]) -> np.ndarray:
-    """Σ_{k<h} A_k ⊗ f_k (B, H, 9, F) for A (B, 9, W) (each sample's 3×3 row-major), f (B, W, F): one
-    batched matrix product per stretch between horizons, then chained."""
-    out, acc, prev = [], None, 0
-    for h in horizons:
-        seg = A[:, :, prev:h] @ f[:, prev:h]  # (B, 9, F)
-        acc = seg if acc is None else acc + seg
-        out.append(acc)
-        prev = h
-    return np.stack(out, axis=1)
 
 
 class _RotResiduals:
@@ -318,18 +228,7 @@ class _RotResiduals:
         dM = (S[..., :3] - A_h[..., None] * theta[9:12]).reshape(B, H, 3, 9) if np.any(cols < 9) else zero
         dG = -S[..., 3:6].reshape(B, H, 3, 9) if np.any(cols >= 12) else zero
         dpsi = np.concatenate((dM, -(A_h @ M), dG), axis=-1)[..., cols]  # (B, H, 3, len(cols))
-        return -(_so3_jacobian(r.reshape(B, H, 3), True) @ dpsi).reshape(B * H * 3, len(cols))
-
-
-def _held_rotations(gyro: np.ndarray, dt: np.ndarray) -> np.ndarray:
-    """R_k dt_k (B, 9, W) for rates (B, W, 3): the rotation matrix in force while each sample is held
-    (R_0 = I, R_{k+1} = R_k Exp(ω_k dt_k)), row-major, times the sample's dt (what :class:`_VelResiduals` takes)."""
-    step, _ = _exp(_components(gyro * dt[..., None]))
-    step[:, 1:] = step[:, :-1].copy()  # the products up to the sample before
-    step[:, 0] = np.array([1.0, 0.0, 0.0, 0.0])[:, None]
-    dtc = dt.T
-    return np.ascontiguousarray(np.stack([e * dtc for row in _quat_matrix(_prefix_rotations(step)) for e in row]
-                                         ).transpose(2, 0, 1))
+        return -(_so3_jacobian_inverse(r.reshape(B, H, 3)) @ dpsi).reshape(B * H * 3, len(cols))
 
 
 class _VelResiduals:
@@ -337,23 +236,18 @@ class _VelResiduals:
     rotations fixed by the (already calibrated) gyro: R_k from the same integration, then
     Δβ_h = Σ_{k<h} R_k u_k dt_k and Δγ_h = Σ_{k<h} R_k u_k dt_k (½ dt_k + t_h − t_{k+1}), u_k = M_a (a_k − b_a).
     Linear in (D = M_a − I, c = M_a b_a): the sums of R_k dt_k against (a_k, 1) and their Δγ weights
-    are taken once here (``Φ``), so a residual is y − Φ (D, c) and the Jacobian in (D, b_a) follows
-    from Φ. ``gyro``: the calibrated rates, or None with ``Rm`` (:func:`_held_rotations` of them: R_k dt_k,
-    which do not depend on the accelerometer's cutoff)."""
+    are taken once here (``Φ``; the core's :func:`~imu_learn.core.integration.velocity_window_sums`, the
+    rotations held over each sample chained from ``rates``, the calibrated gyro), so a residual is
+    y − Φ (D, c) and the Jacobian in (D, b_a) follows from Φ."""
 
     tol = ACC_TOL  # the solve's stopping rule here (cheap evaluations: run to the end)
 
-    def __init__(self, gyro: Optional[np.ndarray], w: _Windows, Rm: Optional[np.ndarray] = None) -> None:
-        if Rm is None:
-            assert gyro is not None, "_VelResiduals: give the rates or their rotations"
-            Rm = _held_rotations(gyro, w.dt)
+    def __init__(self, rates: np.ndarray, w: _Windows) -> None:
         B, W, _ = w.acc.shape
         H = len(w.horizons)
         T = np.concatenate((np.zeros((B, 1)), np.cumsum(w.dt, axis=1)), axis=1)  # t_m = Σ_{k<m} dt_k
         # Δγ's weight ½ dt_k + t_h − t_{k+1} = t_h − s_k: Σ_{k<h} s_k (...) rides along as more columns
-        s = (T[:, 1:] - 0.5 * w.dt)[..., None]
-        f = np.concatenate((w.acc, np.ones_like(s)), axis=-1)  # (B, W, 4)
-        S = _horizon_sums(Rm, np.concatenate((f, s * f), axis=-1), w.horizons).reshape(B, H, 3, 3, 8)
+        S = velocity_window_sums(rates, w.acc, w.dt, w.horizons).reshape(B, H, 3, 3, 8)
         t_h = T[:, list(w.horizons)][:, :, None, None, None]
         Sx = np.stack((S[..., :4], t_h * S[..., :4] - S[..., 4:]))  # (2, B, H, 3, 3, 4): Δβ, Δγ
         # prediction Σ R dt (M a − c) = Σ_ij Sx[.., i, j] M_ij − Σ_i Sx[.., i, 3] c_i, M = I + D
@@ -531,14 +425,14 @@ class Traditional(Method):
 
         # 2. accel with the gyro model fixed: the same on velocity/position residuals (the rotations
         # depend on the gyro windows only, not on the accelerometer's cutoff: computed once per split).
-        held: Dict[Tuple[int, Optional[float]], np.ndarray] = {}
+        rates: Dict[Tuple[int, Optional[float]], np.ndarray] = {}
         sums: Dict[Tuple[Tuple[int, Optional[float]], int], _VelResiduals] = {}
 
         def vel(w: _Windows) -> _VelResiduals:
-            if w.key not in held:
-                held[w.key] = _held_rotations(_gyro_model(theta_g, w.gyro, w.acc_g), w.dt)
+            if w.key not in rates:
+                rates[w.key] = _gyro_model(theta_g, w.gyro, w.acc_g)
             if (w.key, id(w.acc)) not in sums:
-                sums[(w.key, id(w.acc))] = _VelResiduals(None, w, held[w.key])
+                sums[(w.key, id(w.acc))] = _VelResiduals(rates[w.key], w)
             return sums[(w.key, id(w.acc))]
 
         theta_a, c_a, val_vel, wa = self._fit_at_best_cutoff(

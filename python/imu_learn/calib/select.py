@@ -79,7 +79,6 @@ from imu_learn.baselines.traditional import (
     DEFAULT_CUTOFFS,
     _Data,
     _gyro_model,
-    _held_rotations,
     _rms,
     _RotResiduals,
     _solve,
@@ -206,8 +205,8 @@ def fit_gyro_levels(tr: _Data, va: _Data, grid: Sequence[Optional[float]], upto:
 def _vel(data: _Data, theta_g: np.ndarray, c_g: Optional[float]) -> Callable[[Optional[float]], _VelResiduals]:
     """Accelerometer residuals at any acc cut-off with the gyro fixed (its rotations computed once)."""
     w = data.windows(c_g, None)
-    Rm = _held_rotations(_gyro_model(theta_g, w.gyro, w.acc_g), w.dt)
-    return lambda c: _VelResiduals(None, data.windows(c_g, c), Rm)
+    rates = _gyro_model(theta_g, w.gyro, w.acc_g)
+    return lambda c: _VelResiduals(rates, data.windows(c_g, c))
 
 
 def fit_acc_levels(tr: _Data, va: _Data, grid: Sequence[Optional[float]], gyro: Tuple[np.ndarray, Optional[float]],

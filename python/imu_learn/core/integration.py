@@ -97,6 +97,14 @@ def rotation_window_sums(gyro: np.ndarray, acc_g: np.ndarray, dt: np.ndarray, th
                                      _indices(horizons, "horizons"), bool(jacobian))
 
 
+def velocity_window_sums(rates: np.ndarray, acc: np.ndarray, dt: np.ndarray, horizons: Seq[int]) -> np.ndarray:
+    """The sums the floor's accelerometer residuals are linear in (the core's ``velocity_window_sums``):
+    (B, H, 9, 8), entry [b, h, 3r + i, F] = Σ_{k<h} R_k[r, i] dt_k c_k[F] with R_k the rotation held over
+    sample k (R_0 = I, R_{k+1} = R_k Exp(ω_k dt_k) from ``rates``) and c_k = (a_k, 1, s_k a_k, s_k),
+    s_k = t_{k+1} − ½ dt_k from the window's start. rates, acc (B, W, 3), dt (B, W) [s]."""
+    return core.velocity_window_sums(_f64(rates), _f64(acc), _f64(dt), _indices(horizons, "horizons"))
+
+
 def integrate_windows(seq: SegmentArrays, starts: np.ndarray, horizons: np.ndarray) -> WindowLabels:
     """IMU-side Δq/Δβ/Δγ for the given windows and horizons (same layout as :func:`window_labels`).
 

@@ -334,6 +334,58 @@ def make_batch(
 
 
 # --------------------------------------------------------------------------------------------
+# The calibration floor's window sums (the oracle of the core's rotsums.rs)
+# --------------------------------------------------------------------------------------------
+
+
+def _skew(v: np.ndarray) -> np.ndarray:
+    """(..., 3) -> (..., 3, 3) with [v]x u = v x u."""
+    x, y, z = v[..., 0], v[..., 1], v[..., 2]
+    o = np.zeros_like(x)
+    return np.stack([np.stack([o, -z, y], -1), np.stack([z, o, -x], -1), np.stack([-y, x, o], -1)], -2)
+
+
+def _horizon_rows(x: np.ndarray, horizons: Sequence[int]) -> np.ndarray:
+    """Σ_{k<h} x[:, k] for every h: the inclusive cumulative sum along axis 1 at rows h − 1."""
+    return np.cumsum(x, axis=1)[:, [int(h) - 1 for h in horizons]]
+
+
+def rotation_window_sums(gyro: np.ndarray, acc_g: np.ndarray, dt: np.ndarray, theta: np.ndarray,
+                         horizons: Sequence[int]) -> Tuple[np.ndarray, np.ndarray]:
+    """(Q at the horizons (B, H, 4), S (B, H, 9, 7)) of the floor's gyro model θ = (M − I, b, G) on
+    windows gyro, acc_g (B, W, 3), dt (B, W): ω = M (g − b) − G a, Q_k = Q_{k−1} Exp(ω_k dt_k), and
+    S_h = Σ_{k<h} A_k ⊗ (g_k, a_k, 1) with A_k = R(Q_k) J_r(ω_k dt_k) dt_k (row-major), J_r = I − c1 [φ]x
+    + c2 [φ]x², c1 = (1 − cos θ)/θ², c2 = (θ − sin θ)/θ³ in closed form (a series only below 1e-2 rad)."""
+    M = np.eye(3) + theta[:9].reshape(3, 3)
+    phi = ((gyro - theta[9:12]) @ M.T - acc_g @ theta[12:21].reshape(3, 3).T) * dt[..., None]
+    Q = quat_prefix_scan(so3_exp(phi))
+    th2 = np.einsum("...i,...i->...", phi, phi)
+    th = np.sqrt(th2)
+    c1 = 0.5 * np.sinc(th / (2.0 * np.pi)) ** 2  # 2 sin²(θ/2)/θ²
+    safe = np.where(th < 1e-2, 1.0, th)
+    c2 = np.where(th < 1e-2, 1 / 6 - th2 / 120 + th2 * th2 / 5040, (safe - np.sin(safe)) / safe**3)
+    K = _skew(phi)
+    Jr = np.eye(3) - c1[..., None, None] * K + c2[..., None, None] * (K @ K)
+    A = (quat_to_matrix(Q) @ Jr) * dt[..., None, None]
+    f = np.concatenate((gyro, acc_g, np.ones(dt.shape + (1,))), axis=-1)
+    B, W = dt.shape
+    S = _horizon_rows(A.reshape(B, W, 9, 1) * f[:, :, None, :], horizons)
+    return Q[:, [int(h) - 1 for h in horizons]], S
+
+
+def velocity_window_sums(rates: np.ndarray, acc: np.ndarray, dt: np.ndarray, horizons: Sequence[int]) -> np.ndarray:
+    """S (B, H, 9, 8) = Σ_{k<h} R_k dt_k ⊗ (a_k, 1, s_k a_k, s_k) with R_k the rotation held over sample k
+    (R_0 = I, R_{k+1} = R_k Exp(ω_k dt_k)), s_k = t_{k+1} − ½ dt_k from the window's start."""
+    B, W = dt.shape
+    Q = quat_prefix_scan(so3_exp(rates * dt[..., None]))
+    held = np.concatenate((np.broadcast_to([1.0, 0.0, 0.0, 0.0], (B, 1, 4)), Q[:, :-1]), axis=1)
+    Rm = quat_to_matrix(held) * dt[..., None, None]
+    s = (np.cumsum(dt, axis=1) - 0.5 * dt)[..., None]
+    c = np.concatenate((acc, np.ones_like(s), s * acc, s), axis=-1)
+    return _horizon_rows(Rm.reshape(B, W, 9, 1) * c[:, :, None, :], horizons)
+
+
+# --------------------------------------------------------------------------------------------
 # Loading without the compiled module (bench --only-reference)
 # --------------------------------------------------------------------------------------------
 
