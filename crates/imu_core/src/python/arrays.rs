@@ -24,9 +24,12 @@ pub fn rows<'a, const K: usize>(a: &'a PyReadonlyArray2<'_, f64>, name: &str) ->
     if shape[1] != K {
         return Err(shape_err(format!("{name} must have shape (N, {K}), got {shape:?}")));
     }
-    let flat = a
-        .as_slice()
-        .map_err(|_| shape_err(format!("{name} must be C-contiguous (use numpy.ascontiguousarray)")))?;
+    // as_slice also takes a Fortran-ordered array, whose memory is not rows of K
+    let not_c = || shape_err(format!("{name} must be C-contiguous (use numpy.ascontiguousarray)"));
+    if !a.is_c_contiguous() {
+        return Err(not_c());
+    }
+    let flat = a.as_slice().map_err(|_| not_c())?;
     let (chunks, rest) = flat.as_chunks::<K>();
     debug_assert!(rest.is_empty());
     Ok(chunks)
