@@ -34,7 +34,7 @@ from __future__ import annotations
 import json
 import math
 from pathlib import Path
-from typing import Callable, Dict, List, Tuple
+from typing import Callable, Dict, List, Optional, Tuple
 from typing import Sequence as Seq
 
 import numpy as np
@@ -45,6 +45,7 @@ from imu_learn.core.quat import rotation_angle
 from imu_learn.data.types import Segment, median_period_ns
 
 GOLDEN = (math.sqrt(5.0) - 1.0) / 2.0
+OFFSET_BRACKET = 0.5  # a search from an earlier fit's offset stays within this many samples of it
 
 
 def resample(t_ns: np.ndarray, x: np.ndarray, tau: float, period_ns: float) -> np.ndarray:
@@ -127,6 +128,20 @@ def fit_offset(windows: RotationWindows, max_shift: float, grid_step: float, tol
     x, fx = golden_section(lambda t: windows.cost(t, delta), grid[max(i - 1, 0)], grid[min(i + 1, len(grid) - 1)], tol)
     best = min([(costs[i], grid[i]), (fx, x)])
     return float(best[1]), grid, [float(x) for x in costs]
+
+
+def fit_offset_near(windows: RotationWindows, start: Optional[float], max_shift: float, grid_step: float, tol: float,
+                    delta: float) -> float:
+    """tau minimising ``windows.cost`` by a golden-section search within ±``OFFSET_BRACKET`` samples of
+    ``start`` (an earlier fit's offset on overlapping data: a refit on part of it, a fold of held-out
+    selection), or by :func:`fit_offset`'s whole search where ``start`` is None or not finite, or the
+    minimum lies at that bracket's edge."""
+    if start is not None and math.isfinite(start):
+        lo, hi = start - OFFSET_BRACKET, start + OFFSET_BRACKET
+        tau, _ = golden_section(lambda t: windows.cost(t, delta), lo, hi, tol)
+        if lo + 2 * tol < tau < hi - 2 * tol:
+            return float(tau)
+    return fit_offset(windows, max_shift, grid_step, tol, delta)[0]
 
 
 class Timing(Method):

@@ -65,7 +65,7 @@ it 4-5× slower than one).
 
 ``refit`` fits the affine parameters again on a part of the data with a fit's cutoffs kept and its
 parameters as the start, and the time offset searched again from the fit's (a golden-section
-search within ±``OFFSET_BRACKET`` samples of it; the whole grid where the minimum lies at that
+search within ±``timing.OFFSET_BRACKET`` samples of it; the whole grid where the minimum lies at that
 bracket's edge): what calibrate's uncertainty needs per recording, at a fraction of a fit's cost.
 """
 from __future__ import annotations
@@ -82,7 +82,7 @@ import numpy as np
 from imu_learn.baselines import affine
 from imu_learn.baselines.affine import TraditionalParams, lowpass  # noqa: F401  (lowpass: re-exported)
 from imu_learn.baselines.base import FitSettings, Method
-from imu_learn.baselines.timing import RotationWindows, fit_offset, golden_section, shifted
+from imu_learn.baselines.timing import RotationWindows, fit_offset_near, shifted
 from imu_learn.core.integration import PAPER_FRACTIONS, rotation_window_sums, velocity_window_sums, window_labels
 from imu_learn.core.quat import quat_conj, quat_log, quat_mul
 from imu_learn.data.types import Segment, sample_rate_hz
@@ -92,7 +92,6 @@ DEFAULT_CUTOFFS: Tuple[Optional[float], ...] = (None, 40.0, 20.0, 10.0, 5.0)
 ACC_BIAS_ONLY = 1e6  # ``acc_prior`` that holds M_a at the identity (|M_a - I| below 1e-9 on real data)
 TOL = 1e-8  # the solve's stopping rule (relative cost decrease or step; module doc)
 ACC_TOL = 1e-12  # the accelerometer stage's: a residual there is a product with Φ (~1 ms), so it runs to the end
-OFFSET_BRACKET = 0.5  # a refit searches its time offset within this many samples of the fit's first
 
 
 def _gyro_model(theta: np.ndarray, g_m: np.ndarray, a_m: np.ndarray) -> np.ndarray:
@@ -494,16 +493,10 @@ class Traditional(Method):
         """The temporal calibration: tau [samples] by the timing baseline's 1-D search on the raw
         gyro's rotation residuals over ``offset_window``-sample training windows (short, for the
         reason :mod:`imu_learn.baselines.timing` gives), kept only if it lowers the validation cost.
-        With ``start`` (a refit): a golden-section search within ±``OFFSET_BRACKET`` samples of it,
+        With ``start`` (a refit): a golden-section search within ±``timing.OFFSET_BRACKET`` samples of it,
         the whole grid where its minimum lies at the bracket's edge."""
         tr = RotationWindows(train, window, 5 * self.max_windows, gravity)
-        tau = math.nan
-        if start is not None and math.isfinite(start):
-            lo, hi = start - OFFSET_BRACKET, start + OFFSET_BRACKET
-            tau, _ = golden_section(lambda t: tr.cost(t, self.huber_rot), lo, hi, 1e-3)
-            tau = tau if lo + 2e-3 < tau < hi - 2e-3 else math.nan
-        if not math.isfinite(tau):
-            tau, _, _ = fit_offset(tr, self.max_shift, 0.25, 1e-3, self.huber_rot)
+        tau = fit_offset_near(tr, start, self.max_shift, 0.25, 1e-3, self.huber_rot)
         va = RotationWindows(val, window, 5 * self.max_windows, gravity) if val else tr
         va = va if len(va) else tr
         zero, got = va.cost(0.0, self.huber_rot), va.cost(tau, self.huber_rot)

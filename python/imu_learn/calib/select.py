@@ -15,8 +15,9 @@ Huber weights and prior), restricted to the level's parameters, warm-started fro
 
 Held out. Each recording in turn is held out (leave one recording out) where there are several;
 a single recording is cut into four contiguous time blocks (:func:`imu_learn.calib.fit.time_blocks`),
-each held out in turn. On each fold the time offset is fitted on the rest (the floor's search,
-kept only where it lowers the validation cost), then every level; each level is scored on the held-out
+each held out in turn. On each fold the time offset is fitted on the rest (the floor's search, within
+±0.5 samples of the full fit's offset as the floor's own refits search, the whole grid where the minimum
+lies at that edge; kept only where it lowers the validation cost), then every level; each level is scored on the held-out
 recording (all its blocks, each segment from its own ground-truth start, as ``imu-learn evaluate``
 scores: :mod:`imu_learn.score.metrics`, :mod:`imu_learn.score.peers`). The cells:
 
@@ -74,7 +75,7 @@ import numpy as np
 
 from imu_learn.baselines.affine import FLOOR_METHOD, Floor, TraditionalParams
 from imu_learn.baselines.base import FitSettings
-from imu_learn.baselines.timing import RotationWindows, fit_offset, shifted
+from imu_learn.baselines.timing import RotationWindows, fit_offset_near, shifted
 from imu_learn.baselines.traditional import (
     DEFAULT_CUTOFFS,
     _Data,
@@ -118,6 +119,9 @@ class SelectOptions:
     startup_bias_s: float = 10.0  # start-up bias fitted on (at most 30 % of a held-out segment)
     max_windows: int = 1000  # the floor's window budget per fit
     tau: Optional[float] = None  # a fixed time offset [samples] (not observed); None: fitted per fold
+    # the full fit's time offset [samples]: each fold searches within ±OFFSET_BRACKET of it (the refits' rule,
+    # :func:`imu_learn.baselines.timing.fit_offset_near`; the whole grid where its minimum lies at the edge)
+    tau_near: Optional[float] = None
     # a reference that cannot resolve accelerations (a 20 Hz VO): the gyroscope's levels only, up to
     # ``g_sensitivity`` (no low-pass: not observed), on the rotation cells (GYRO_ONLY_CELLS); the
     # accelerometer at ``bias`` (M_a = I) in every fold, and not selected
@@ -235,11 +239,13 @@ def floor_of(gyro: Tuple[np.ndarray, Optional[float]], acc: Tuple[np.ndarray, Op
     return Floor(p, FLOOR_METHOD, 2)
 
 
-def fit_tau(train: List[Segment], val: List[Segment], gravity: float, max_windows: int) -> float:
-    """The floor's time offset [samples]: its 1-D search on 10-sample gyro windows, kept only where it
-    lowers the validation cost (:meth:`imu_learn.baselines.traditional.Traditional._fit_time_offset`)."""
+def fit_tau(train: List[Segment], val: List[Segment], gravity: float, max_windows: int,
+            near: Optional[float] = None) -> float:
+    """The floor's time offset [samples]: its 1-D search on 10-sample gyro windows (near ``near``, where
+    given), kept only where it lowers the validation cost
+    (:meth:`imu_learn.baselines.traditional.Traditional._fit_time_offset`)."""
     tr = RotationWindows(train, 10, 5 * max_windows, gravity)
-    tau, _, _ = fit_offset(tr, 3.0, 0.25, 1e-3, HUBER_ROT)
+    tau = fit_offset_near(tr, near, 3.0, 0.25, 1e-3, HUBER_ROT)
     va = RotationWindows(val, 10, 5 * max_windows, gravity) if val else tr
     va = va if len(va) else tr
     return float(tau) if va.cost(tau, HUBER_ROT) < va.cost(0.0, HUBER_ROT) else 0.0
@@ -260,7 +266,8 @@ class Prepared:
 
 def prepare(fold: Fold, settings: FitSettings, opts: SelectOptions) -> Prepared:
     seed_all(settings.seed)
-    tau = opts.tau if opts.tau is not None else fit_tau(fold.train, fold.val, settings.gravity, opts.max_windows)
+    tau = (opts.tau if opts.tau is not None
+           else fit_tau(fold.train, fold.val, settings.gravity, opts.max_windows, opts.tau_near))
     train, val = [shifted(s, tau) for s in fold.train], [shifted(s, tau) for s in fold.val]
     tr = _Data(train, settings.window, opts.max_windows, settings.gravity, 2)
     if len(tr) == 0:
@@ -528,7 +535,7 @@ def select_floor(inp: Any, fit: FloorFit, progress: Progress = lambda s: None,
     only = gyro_only(inp)
     frame = getattr(inp.source, "frame", None)
     upto = "bias" if frame is not None and frame.turns_about_one_axis else None
-    opts = opts or SelectOptions(tau=tau if fixed else None, gyro_only=only, gyro_upto=upto)
+    opts = opts or SelectOptions(tau=tau if fixed else None, tau_near=tau, gyro_only=only, gyro_upto=upto)
     kernel = inp.source.match_kernel(inp) if only and hasattr(inp.source, "match_kernel") else np.ones(1)
     data = matched(inp, kernel) if len(kernel) > 1 else inp
     try:
