@@ -665,26 +665,28 @@ pub fn integrate_windows(
         wanted[n].push(h);
     }
     let nh = horizons.len();
-    let per_window: Vec<Vec<Increment>> = starts
-        .par_iter()
-        .map(|&k| {
-            let mut incs = vec![
-                Increment {
-                    dq_wxyz: [1.0, 0.0, 0.0, 0.0],
-                    dv: [0.0; 3],
-                    dp: [0.0; 3],
-                    dt: 0.0
-                };
-                nh
-            ];
-            integrate_from(t_ns, gyro, acc, k, max_h, |j, inc| {
-                for &h in &wanted[j] {
-                    incs[h] = inc;
-                }
-            });
-            incs
-        })
-        .collect();
+    let one = |&k: &usize| {
+        let mut incs = vec![
+            Increment {
+                dq_wxyz: [1.0, 0.0, 0.0, 0.0],
+                dv: [0.0; 3],
+                dp: [0.0; 3],
+                dt: 0.0
+            };
+            nh
+        ];
+        integrate_from(t_ns, gyro, acc, k, max_h, |j, inc| {
+            for &h in &wanted[j] {
+                incs[h] = inc;
+            }
+        });
+        incs
+    };
+    let per_window: Vec<Vec<Increment>> = if crate::par::parallel() {
+        starts.par_iter().map(one).collect()
+    } else {
+        starts.iter().map(one).collect()
+    };
     let total = starts.len() * nh;
     let mut out = Labels {
         starts: starts.to_vec(),

@@ -16,6 +16,7 @@ pub mod error;
 pub mod integrate;
 pub mod io;
 pub mod labels;
+pub mod par;
 pub mod rotsums;
 pub mod so3;
 pub mod types;

@@ -281,12 +281,20 @@ pub fn rotation_window_sums(
         let (g, a, d) = (&gyro[k.clone()], &acc[k.clone()], &dt[k]);
         window(&model, g, a, d, horizons, &order, q, s);
     };
-    let q_chunks = q_wxyz.par_chunks_mut(4 * nh).enumerate();
-    match sums.as_deref_mut() {
-        Some(s) => q_chunks
-            .zip(s.par_chunks_mut(SUM_LEN * nh))
-            .for_each(|((i, q), s)| run(i, q, Some(s))),
-        None => q_chunks.for_each(|(i, q)| run(i, q, None)),
+    let (qn, sn) = (4 * nh, SUM_LEN * nh);
+    match (sums.as_deref_mut(), crate::par::parallel()) {
+        (Some(s), true) => q_wxyz
+            .par_chunks_mut(qn)
+            .zip(s.par_chunks_mut(sn))
+            .enumerate()
+            .for_each(|(i, (q, s))| run(i, q, Some(s))),
+        (Some(s), false) => q_wxyz
+            .chunks_mut(qn)
+            .zip(s.chunks_mut(sn))
+            .enumerate()
+            .for_each(|(i, (q, s))| run(i, q, Some(s))),
+        (None, true) => q_wxyz.par_chunks_mut(qn).enumerate().for_each(|(i, q)| run(i, q, None)),
+        (None, false) => q_wxyz.chunks_mut(qn).enumerate().for_each(|(i, q)| run(i, q, None)),
     }
     Ok(RotSums { q_wxyz, sums })
 }
@@ -396,11 +404,19 @@ pub fn velocity_window_sums(
     order.sort_by_key(|&j| horizons[j]);
     let last = horizons[order[nh - 1]];
     let mut sums = zeroed(len, "sums")?;
-    sums.par_chunks_mut(VEL_LEN * nh)
-        .enumerate()
-        .for_each_init(Vec::new, |steps, (i, out)| {
-            let k = i * w..i * w + last;
-            velocity_window(&rates[k.clone()], &acc[k.clone()], &dt[k], horizons, &order, steps, out);
-        });
+    let one = |steps: &mut Vec<_>, (i, out): (usize, &mut [f64])| {
+        let k = i * w..i * w + last;
+        velocity_window(&rates[k.clone()], &acc[k.clone()], &dt[k], horizons, &order, steps, out);
+    };
+    if crate::par::parallel() {
+        sums.par_chunks_mut(VEL_LEN * nh)
+            .enumerate()
+            .for_each_init(Vec::new, one);
+    } else {
+        let mut steps = Vec::new();
+        sums.chunks_mut(VEL_LEN * nh)
+            .enumerate()
+            .for_each(|x| one(&mut steps, x));
+    }
     Ok(sums)
 }
