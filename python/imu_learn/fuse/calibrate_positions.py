@@ -48,7 +48,6 @@ from pathlib import Path
 from typing import Any, Callable, Dict, List, Optional, Sequence, Tuple
 
 import numpy as np
-from scipy.spatial.transform import Rotation
 
 from imu_learn.baselines.affine import Floor, TraditionalParams
 from imu_learn.baselines.base import FitSettings
@@ -69,7 +68,6 @@ from imu_learn.errors import ConfigError, InvalidInputError
 from imu_learn.fuse.aiding.detect import detect
 from imu_learn.fuse.aiding.rtklib import normal_gravity, read_pos
 from imu_learn.fuse.aiding.tum import Trajectory, check_overlap, read_trajectory
-from imu_learn.fuse.navigate import NavigateOptions, Sources, navigate, parse_vector
 from imu_learn.fuse.noise import ImuNoise
 from imu_learn.infer.rates import recording_device
 
@@ -216,6 +214,8 @@ def forward_mounting(t_ns: np.ndarray, acc: np.ndarray, fix_t_ns: np.ndarray, fi
     fwd_l = np.array([cs[0], cs[1], 0.0]) / max(np.hypot(cs[0], cs[1]), 1e-12)
     fwd = R_lev.T @ fwd_l
     M = np.stack([fwd, np.cross(up, fwd), up])  # body = M imu: x forward, y left, z up
+    from scipy.spatial.transform import Rotation  # here: calibrate's other references never need scipy.spatial
+
     yaw, pitch, roll = Rotation.from_matrix(M.T).as_euler("ZYX", degrees=True)
     return {"rpy_deg": [float(roll), float(pitch), float(yaw)], "forward_imu": fwd.tolist(), "up_imu": up.tolist(),
             "fit_residual_mps2": res, "fixes_used": int(ok.sum())}
@@ -338,6 +338,8 @@ def smoother_pass(imu_path: Path, ref_path: Path, opts: PositionsOptions, rpy: S
     """The navigator over the whole recording (positions as aiding, no gaps), with ``floor`` applied
     through a profile when given; returns its summary (the trajectories in ``out``)."""
 
+    from imu_learn.fuse.navigate import NavigateOptions, Sources, navigate  # the navigator: positions only
+
     out.mkdir(parents=True, exist_ok=True)
     prof = None
     if floor is not None:
@@ -356,6 +358,8 @@ def smoothed_groundtruth(smoothed_tum: Path, mounting: np.ndarray, delay_s: floa
     """The navigator's smoothed trajectory (body frame, the delayed IMU clock) as the IMU's own pose on
     the IMU's recorded clock: ``R_W_imu = R_W_body M``, stamps minus the delay; no velocity (aligning
     derives it)."""
+
+    from scipy.spatial.transform import Rotation
 
     tr = read_trajectory(smoothed_tum, "tum")
     R = Rotation.from_quat(tr.q_xyzw).as_matrix() @ mounting
@@ -616,6 +620,8 @@ def navigator_options(args: Any) -> Dict[str, Any]:
     navigate``'s names and conventions: ``--imu-rotation-rpy-deg R,P,Y`` (the body frame relative to
     the IMU frame), ``--imu-delay-s S`` (added to every IMU stamp; absent: estimated) and ``--lever-arm
     X,Y,Z`` (the antenna from the IMU in the body frame; or ``--extrinsics``' translation, not both)."""
+
+    from imu_learn.fuse.navigate import parse_vector
 
     out: Dict[str, Any] = {}
     rpy, delay, lever = (getattr(args, k, None) for k in NAVIGATOR_OPTIONS)
