@@ -259,13 +259,15 @@ class _VelResiduals:
         M = np.eye(3) + theta[:9].reshape(3, 3)
         return self.y - self.phi_d @ theta[:9] - self.phi_c @ (M @ theta[9:12])
 
-    def jacobian(self, theta: np.ndarray, r: Optional[np.ndarray] = None) -> np.ndarray:
-        """The exact Jacobian (2·B·H·3, 12) at θ (r unused): ∂r/∂D_ij = −Φ_D[:, ij] − Φ_c[:, i] b_j,
-        ∂r/∂b = −Φ_c M_a."""
+    def jacobian(self, theta: np.ndarray, r: Optional[np.ndarray] = None, cols: Optional[np.ndarray] = None
+                 ) -> np.ndarray:
+        """The exact Jacobian (2·B·H·3, 12) at θ (r unused), or its columns ``cols``: ∂r/∂D_ij = −Φ_D[:, ij] −
+        Φ_c[:, i] b_j, ∂r/∂b = −Φ_c M_a."""
         M = np.eye(3) + theta[:9].reshape(3, 3)
         b = theta[9:12]
         dD = self.phi_d + (self.phi_c[:, :, None] * b[None, None, :]).reshape(-1, 9)
-        return -np.concatenate((dD, self.phi_c @ M), axis=1)
+        J = -np.concatenate((dD, self.phi_c @ M), axis=1)
+        return J if cols is None else J[:, cols]
 
 
 def _rms(res: Callable[[np.ndarray], np.ndarray], theta: np.ndarray) -> float:

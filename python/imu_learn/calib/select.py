@@ -166,9 +166,7 @@ class _Subset:
         return self.res(self.theta(x))
 
     def jacobian(self, x: np.ndarray, r: np.ndarray) -> np.ndarray:
-        if isinstance(self.res, _RotResiduals):
-            return self.res.jacobian(self.theta(x), r, self.free)
-        return self.res.jacobian(self.theta(x), r)[:, self.free]
+        return self.res.jacobian(self.theta(x), r, self.free)
 
 
 def solve_level(res: Any, theta: np.ndarray, free: np.ndarray, huber: float) -> np.ndarray:
