@@ -183,6 +183,8 @@ def forward_mounting(t_ns: np.ndarray, acc: np.ndarray, fix_t_ns: np.ndarray, fi
     over the fixes faster than ``min_speed``. Returns {"rpy_deg": roll, pitch, yaw of the body frame
     (x forward, z up) relative to the IMU frame (the navigator's ``--imu-rotation-rpy-deg``),
     "forward_imu", "up_imu", "fit_residual_mps2", "fixes_used"}."""
+    from scipy.spatial.transform import Rotation  # here: calibrate's other references never need scipy.spatial
+
     t = (np.asarray(t_ns, dtype=np.int64) - int(t_ns[0])) * 1e-9
     tf = (np.asarray(fix_t_ns, dtype=np.int64) - int(t_ns[0])) * 1e-9
     up = np.mean(acc[t <= t[0] + level_s], axis=0)
@@ -214,8 +216,6 @@ def forward_mounting(t_ns: np.ndarray, acc: np.ndarray, fix_t_ns: np.ndarray, fi
     fwd_l = np.array([cs[0], cs[1], 0.0]) / max(np.hypot(cs[0], cs[1]), 1e-12)
     fwd = R_lev.T @ fwd_l
     M = np.stack([fwd, np.cross(up, fwd), up])  # body = M imu: x forward, y left, z up
-    from scipy.spatial.transform import Rotation  # here: calibrate's other references never need scipy.spatial
-
     yaw, pitch, roll = Rotation.from_matrix(M.T).as_euler("ZYX", degrees=True)
     return {"rpy_deg": [float(roll), float(pitch), float(yaw)], "forward_imu": fwd.tolist(), "up_imu": up.tolist(),
             "fit_residual_mps2": res, "fixes_used": int(ok.sum())}
