@@ -309,24 +309,23 @@ fn windows3<'a>(a: &'a PyReadonlyArray3<'_, f64>, name: &str) -> PyResult<(usize
     Ok((shape[0], shape[1], flat.as_chunks::<3>().0))
 }
 
-#[pyfunction]
-fn rotation_window_sums<'py>(
-    py: Python<'py>,
-    gyro: PyReadonlyArray3<'py, f64>,
-    acc_g: PyReadonlyArray3<'py, f64>,
-    dt: PyReadonlyArray2<'py, f64>,
-    theta: PyReadonlyArray1<'py, f64>,
-    horizons: Indices<'py>,
-    jacobian: bool,
-) -> PyResult<Bound<'py, PyDict>> {
-    let (b, w, g) = windows3(&gyro, "gyro")?;
-    let (_, _, a) = windows3(&acc_g, "acc_g")?;
+/// Two (B, W, 3) window arrays of one shape and their (B, W) dt, as flat rows: (B, W, x, y, dt).
+#[allow(clippy::type_complexity)]
+fn window_inputs<'a>(
+    x: &'a PyReadonlyArray3<'_, f64>,
+    x_name: &str,
+    y: &'a PyReadonlyArray3<'_, f64>,
+    y_name: &str,
+    dt: &'a PyReadonlyArray2<'_, f64>,
+) -> PyResult<(usize, usize, &'a [[f64; 3]], &'a [[f64; 3]], &'a [f64])> {
+    let (b, w, xs) = windows3(x, x_name)?;
+    let (_, _, ys) = windows3(y, y_name)?;
     let invalid = |msg: String| to_py(ImuError::invalid(msg));
-    if acc_g.shape() != gyro.shape() {
+    if y.shape() != x.shape() {
         return Err(invalid(format!(
-            "acc_g has shape {:?}, gyro {:?}: they must match",
-            acc_g.shape(),
-            gyro.shape()
+            "{y_name} has shape {:?}, {x_name} {:?}: they must match",
+            y.shape(),
+            x.shape()
         )));
     }
     if dt.shape() != [b, w] {
@@ -337,6 +336,21 @@ fn rotation_window_sums<'py>(
         .ok()
         .filter(|_| dt.is_c_contiguous())
         .ok_or_else(|| invalid("dt must be C-contiguous (use numpy.ascontiguousarray)".into()))?;
+    Ok((b, w, xs, ys, d))
+}
+
+#[pyfunction]
+fn rotation_window_sums<'py>(
+    py: Python<'py>,
+    gyro: PyReadonlyArray3<'py, f64>,
+    acc_g: PyReadonlyArray3<'py, f64>,
+    dt: PyReadonlyArray2<'py, f64>,
+    theta: PyReadonlyArray1<'py, f64>,
+    horizons: Indices<'py>,
+    jacobian: bool,
+) -> PyResult<Bound<'py, PyDict>> {
+    let (b, w, g, a, d) = window_inputs(&gyro, "gyro", &acc_g, "acc_g", &dt)?;
+    let invalid = |msg: String| to_py(ImuError::invalid(msg));
     let th: &[f64; THETA_LEN] = slice1(&theta, "theta")?
         .try_into()
         .map_err(|_| invalid(format!("theta has {} entries, expected {THETA_LEN}", theta.len())))?;
@@ -364,24 +378,8 @@ fn velocity_window_sums<'py>(
     dt: PyReadonlyArray2<'py, f64>,
     horizons: Indices<'py>,
 ) -> PyResult<Bound<'py, PyArray4<f64>>> {
-    let (b, w, r) = windows3(&rates, "rates")?;
-    let (_, _, a) = windows3(&acc, "acc")?;
+    let (b, w, r, a, d) = window_inputs(&rates, "rates", &acc, "acc", &dt)?;
     let invalid = |msg: String| to_py(ImuError::invalid(msg));
-    if acc.shape() != rates.shape() {
-        return Err(invalid(format!(
-            "acc has shape {:?}, rates {:?}: they must match",
-            acc.shape(),
-            rates.shape()
-        )));
-    }
-    if dt.shape() != [b, w] {
-        return Err(invalid(format!("dt has shape {:?}, expected ({b}, {w})", dt.shape())));
-    }
-    let d = dt
-        .as_slice()
-        .ok()
-        .filter(|_| dt.is_c_contiguous())
-        .ok_or_else(|| invalid("dt must be C-contiguous (use numpy.ascontiguousarray)".into()))?;
     let hs = horizons.to_usize("horizons")?;
     let s = py
         .allow_threads(|| rotsums::velocity_window_sums(r, a, d, b, w, &hs))
