@@ -20,22 +20,10 @@ GTSAM factor graph, and score the trajectory. One home per concern:
 
 GTSAM (the ``fuse`` extra) is imported where the graph is built.
 """
-from importlib import import_module
-from typing import Any
-
-# the names below, each imported from its module when first used (the package itself imports nothing:
-# calibrate's positions source and the readers under it need neither scipy.spatial nor the graph)
-_HOME = {"PositionFixes": ".aiding", "RelativePoses": ".aiding", "apply_outages": ".aiding", "leica_fixes": ".aiding",
-         "simulate_position": ".aiding", "simulate_relative_pose": ".aiding", "FusionResult": ".graph",
-         "IncrementalFusion": ".graph", "fuse": ".graph", "ImuNoise": ".noise", "FusionSettings": ".settings",
-         "PriorSigmas": ".settings"}
-
-
-def __getattr__(name: str) -> Any:
-    if name in _HOME:
-        return getattr(import_module(_HOME[name], __name__), name)
-    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
-
+from .aiding import PositionFixes, RelativePoses, apply_outages, leica_fixes, simulate_position, simulate_relative_pose
+from .graph import FusionResult, IncrementalFusion, fuse
+from .noise import ImuNoise
+from .settings import FusionSettings, PriorSigmas
 
 __all__ = [
     "FusionResult", "FusionSettings", "ImuNoise", "IncrementalFusion", "PositionFixes", "PriorSigmas", "RelativePoses", "apply_outages", "fuse", "leica_fixes",

@@ -48,6 +48,7 @@ from pathlib import Path
 from typing import Any, Callable, Dict, List, Optional, Sequence, Tuple
 
 import numpy as np
+from scipy.spatial.transform import Rotation
 
 from imu_learn.baselines.affine import Floor, TraditionalParams
 from imu_learn.baselines.base import FitSettings
@@ -68,6 +69,7 @@ from imu_learn.errors import ConfigError, InvalidInputError
 from imu_learn.fuse.aiding.detect import detect
 from imu_learn.fuse.aiding.rtklib import normal_gravity, read_pos
 from imu_learn.fuse.aiding.tum import Trajectory, check_overlap, read_trajectory
+from imu_learn.fuse.navigate import NavigateOptions, Sources, navigate, parse_vector
 from imu_learn.fuse.noise import ImuNoise
 from imu_learn.infer.rates import recording_device
 
@@ -183,8 +185,6 @@ def forward_mounting(t_ns: np.ndarray, acc: np.ndarray, fix_t_ns: np.ndarray, fi
     over the fixes faster than ``min_speed``. Returns {"rpy_deg": roll, pitch, yaw of the body frame
     (x forward, z up) relative to the IMU frame (the navigator's ``--imu-rotation-rpy-deg``),
     "forward_imu", "up_imu", "fit_residual_mps2", "fixes_used"}."""
-    from scipy.spatial.transform import Rotation  # here: calibrate's other references never need scipy.spatial
-
     t = (np.asarray(t_ns, dtype=np.int64) - int(t_ns[0])) * 1e-9
     tf = (np.asarray(fix_t_ns, dtype=np.int64) - int(t_ns[0])) * 1e-9
     up = np.mean(acc[t <= t[0] + level_s], axis=0)
@@ -338,8 +338,6 @@ def smoother_pass(imu_path: Path, ref_path: Path, opts: PositionsOptions, rpy: S
     """The navigator over the whole recording (positions as aiding, no gaps), with ``floor`` applied
     through a profile when given; returns its summary (the trajectories in ``out``)."""
 
-    from imu_learn.fuse.navigate import NavigateOptions, Sources, navigate  # the navigator: positions only
-
     out.mkdir(parents=True, exist_ok=True)
     prof = None
     if floor is not None:
@@ -358,8 +356,6 @@ def smoothed_groundtruth(smoothed_tum: Path, mounting: np.ndarray, delay_s: floa
     """The navigator's smoothed trajectory (body frame, the delayed IMU clock) as the IMU's own pose on
     the IMU's recorded clock: ``R_W_imu = R_W_body M``, stamps minus the delay; no velocity (aligning
     derives it)."""
-
-    from scipy.spatial.transform import Rotation
 
     tr = read_trajectory(smoothed_tum, "tum")
     R = Rotation.from_quat(tr.q_xyzw).as_matrix() @ mounting
@@ -620,8 +616,6 @@ def navigator_options(args: Any) -> Dict[str, Any]:
     navigate``'s names and conventions: ``--imu-rotation-rpy-deg R,P,Y`` (the body frame relative to
     the IMU frame), ``--imu-delay-s S`` (added to every IMU stamp; absent: estimated) and ``--lever-arm
     X,Y,Z`` (the antenna from the IMU in the body frame; or ``--extrinsics``' translation, not both)."""
-
-    from imu_learn.fuse.navigate import parse_vector
 
     out: Dict[str, Any] = {}
     rpy, delay, lever = (getattr(args, k, None) for k in NAVIGATOR_OPTIONS)

@@ -12,23 +12,20 @@
   topics: poses, positions, NavSatFix fixes), :mod:`.detect`
   tells from a file's content which reader it takes.
 """
-from importlib import import_module
-from typing import Any
-
-# the names below, each imported from its module when first used (a reader under this package, as
-# calibrate's positions source uses, does not import the simulation's scipy.spatial)
-_HOME = {"OutageWindow": ".outages", "apply_outages": ".outages", "clip_outages": ".outages", "outage_mask": ".outages",
-         "bag_position_source": ".real", "leica_fixes": ".real", "epochs": ".sampling", "snap_to_samples": ".sampling",
-         "simulate_position": ".simulate", "simulate_relative_pose": ".simulate", "AbsolutePoses": ".types",
-         "Aiding": ".types", "GnssFixes": ".types", "PositionFixes": ".types", "RelativePoses": ".types",
-         "aiding_gaps": ".types", "aiding_samples": ".types", "check_aiding": ".types"}
-
-
-def __getattr__(name: str) -> Any:
-    if name in _HOME:
-        return getattr(import_module(_HOME[name], __name__), name)
-    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
-
+from .outages import OutageWindow, apply_outages, clip_outages, outage_mask
+from .real import bag_position_source, leica_fixes
+from .sampling import epochs, snap_to_samples
+from .simulate import simulate_position, simulate_relative_pose
+from .types import (
+    AbsolutePoses,
+    Aiding,
+    GnssFixes,
+    PositionFixes,
+    RelativePoses,
+    aiding_gaps,
+    aiding_samples,
+    check_aiding,
+)
 
 __all__ = [
     "AbsolutePoses", "Aiding", "GnssFixes", "OutageWindow", "PositionFixes", "RelativePoses", "aiding_gaps",
