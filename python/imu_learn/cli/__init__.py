@@ -20,9 +20,12 @@ from __future__ import annotations
 import sys
 
 try:  # the command's start (typing, numpy, the core): a Ctrl-C here exits 130 in one line too
-    from typing import Any, List, Optional
+    from imu_learn.cli.interrupt import held_sigint
 
-    from imu_learn.cli.common import COMMANDS, EXIT_ERROR, run_command
+    with held_sigint():
+        from typing import Any, List, Optional
+
+        from imu_learn.cli.common import COMMANDS, EXIT_ERROR, run_command
 except KeyboardInterrupt:
     sys.stderr.write("imu-learn: interrupted\n")
     raise SystemExit(130) from None

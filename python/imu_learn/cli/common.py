@@ -18,6 +18,7 @@ import logging
 import sys
 from typing import Any, Callable, Dict, Iterator, List, Optional, Sequence, Union
 
+from imu_learn.cli.interrupt import held_sigint
 from imu_learn.data.formats import USER_CSV
 from imu_learn.data.formats.csv_columns import ACC_UNITS, DEFAULT_COLUMNS, GYRO_UNITS, TIME_UNITS, CsvColumns
 from imu_learn.errors import ImuError, one_line
@@ -147,7 +148,8 @@ def parser(name: str) -> argparse.ArgumentParser:
 def run_command(name: str, argv: Optional[Sequence[str]] = None, **hooks: Any) -> int:
     """Parse ``argv`` for subcommand ``name`` and run it under the one error rule (module doc)."""
     try:
-        mod = importlib.import_module(f"imu_learn.cli.{name}")
+        with held_sigint():
+            mod = importlib.import_module(f"imu_learn.cli.{name}")
     except KeyboardInterrupt:  # while its modules load (GTSAM, torch: seconds)
         sys.stderr.write(f"{prog(name)}: interrupted\n")
         return EXIT_INTERRUPTED
