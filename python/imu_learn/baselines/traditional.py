@@ -84,7 +84,7 @@ from imu_learn.baselines.affine import TraditionalParams, lowpass  # noqa: F401 
 from imu_learn.baselines.base import FitSettings, Method
 from imu_learn.baselines.timing import RotationWindows, fit_offset_near, shifted
 from imu_learn.core.integration import PAPER_FRACTIONS, rotation_window_sums, velocity_window_sums, window_labels
-from imu_learn.core.quat import quat_conj, quat_log, quat_mul
+from imu_learn.core.quat import quat_conj, quat_log, quat_mul, so3_right_jacobian_inverse
 from imu_learn.data.types import Segment, sample_rate_hz
 from imu_learn.util.threads import thread_limits
 
@@ -170,23 +170,6 @@ class _Data:
                         dq=g("dq"), dv=g("dv"), dp=g("dp"), horizons=self.horizons, key=(id(self), cutoff_gyro))
 
 
-def _so3_jacobian_inverse(phi: np.ndarray) -> np.ndarray:
-    """The inverse right Jacobian of SO(3) (Exp(φ + δ) ≈ Exp(φ) Exp(J_r δ)), (..., 3, 3): J_r⁻¹ = I + ½ [φ]× +
-    c2 [φ]×², c2 = 1/θ² − (1 + cos θ)/(2θ sin θ) (1/12 at θ → 0); [φ]×² = φφᵀ − θ² I. Written out entry by entry."""
-    x, y, z = np.moveaxis(phi, -1, 0)
-    t2 = x * x + y * y + z * z
-    small = t2 < 1e-8
-    t2s = np.where(small, 1.0, t2)
-    t = np.sqrt(t2s)
-    c1 = np.full_like(t2, -0.5)
-    c2 = np.where(small, 1.0 / 12.0, 1.0 / t2s - (1.0 + np.cos(t)) / (2.0 * t * np.sin(t)))
-    a = 1.0 - c2 * t2
-    cx, cy, cz = c1 * x, c1 * y, c1 * z
-    xy, xz, yz = c2 * x * y, c2 * x * z, c2 * y * z
-    return np.stack((a + c2 * x * x, xy + cz, xz - cy, xy - cz, a + c2 * y * y, yz + cx, xz + cy, yz - cx,
-                     a + c2 * z * z), axis=-1).reshape(*phi.shape[:-1], 3, 3)
-
-
 class _RotResiduals:
     """Rotation residuals Log(Δq_gt ⊗ Δq̂⁻¹) (B·H·3,) of θ (21,) on fixed windows, with their exact
     Jacobian (:meth:`jacobian`). The per-sample work (the model's rates, their products and the
@@ -227,7 +210,7 @@ class _RotResiduals:
         dM = (S[..., :3] - A_h[..., None] * theta[9:12]).reshape(B, H, 3, 9) if np.any(cols < 9) else zero
         dG = -S[..., 3:6].reshape(B, H, 3, 9) if np.any(cols >= 12) else zero
         dpsi = np.concatenate((dM, -(A_h @ M), dG), axis=-1)[..., cols]  # (B, H, 3, len(cols))
-        return -(_so3_jacobian_inverse(r.reshape(B, H, 3)) @ dpsi).reshape(B * H * 3, len(cols))
+        return -(so3_right_jacobian_inverse(r.reshape(B, H, 3)) @ dpsi).reshape(B * H * 3, len(cols))
 
 
 class _VelResiduals:

@@ -54,3 +54,20 @@ def quat_log(q_wxyz: np.ndarray) -> np.ndarray:
     with np.errstate(divide="ignore", invalid="ignore"):
         scale = np.where(small, (2.0 / w) * (1.0 - n2 / (3.0 * w * w)), 2.0 * np.arctan2(n, w) / n)
     return scale * u
+
+
+def so3_right_jacobian_inverse(phi: np.ndarray) -> np.ndarray:
+    """The inverse right Jacobian of SO(3) (Exp(φ + δ) ≈ Exp(φ) Exp(J_r δ)), (..., 3, 3): J_r⁻¹ = I + ½ [φ]× +
+    c2 [φ]×², c2 = 1/θ² − (1 + cos θ)/(2θ sin θ) (1/12 at θ → 0); [φ]×² = φφᵀ − θ² I. Written out entry by entry."""
+    x, y, z = np.moveaxis(phi, -1, 0)
+    t2 = x * x + y * y + z * z
+    small = t2 < 1e-8
+    t2s = np.where(small, 1.0, t2)
+    t = np.sqrt(t2s)
+    c1 = np.full_like(t2, -0.5)
+    c2 = np.where(small, 1.0 / 12.0, 1.0 / t2s - (1.0 + np.cos(t)) / (2.0 * t * np.sin(t)))
+    a = 1.0 - c2 * t2
+    cx, cy, cz = c1 * x, c1 * y, c1 * z
+    xy, xz, yz = c2 * x * y, c2 * x * z, c2 * y * z
+    return np.stack((a + c2 * x * x, xy + cz, xz - cy, xy - cz, a + c2 * y * y, yz + cx, xz + cy, yz - cx,
+                     a + c2 * z * z), axis=-1).reshape(*phi.shape[:-1], 3, 3)

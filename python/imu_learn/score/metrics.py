@@ -17,8 +17,9 @@ Gauss–Newton over short windows (``window_s`` long, overlapping by ¾), first 
 rotation residuals Log(Δq̂(b_g)⁻¹ Δq_gt), then the accelerometer bias from the velocity residuals
 Δβ_gt − Δβ̂(b_g, b_a). The rotations do not depend on b_a, so the gyro bias is fitted once; Δβ̂ is
 linear in b_a (Δβ̂ = Σ R_k (a_k − b_a) dt_k with R_k fixed by b_g), so its least squares is solved in
-one step. The Jacobians are taken by finite differences *through the same integration* that the
-metric uses, so the fit is consistent with it. Apply with :func:`remove_bias` (subtraction).
+one step. The gyro's Jacobian is exact (the core's rotation window sums: the same zero-order hold and
+exponential as the metric's integration), the accelerometer's the differences of that integration at
+unit biases (exact: linear), so the fit is consistent with the metric. Apply with :func:`remove_bias` (subtraction).
 """
 from __future__ import annotations
 
@@ -28,8 +29,8 @@ from typing import Sequence as Seq
 
 import numpy as np
 
-from imu_learn.core.integration import integrate_windows, preintegrate, window_labels
-from imu_learn.core.quat import quat_conj, quat_log, quat_mul, quat_rotate
+from imu_learn.core.integration import integrate_windows, preintegrate, rotation_window_sums, window_labels
+from imu_learn.core.quat import quat_conj, quat_log, quat_mul, quat_rotate, so3_right_jacobian_inverse
 from imu_learn.data.types import Segment
 from imu_learn.errors import InvalidInputError
 from imu_learn.score.protocol import VARIANTS
@@ -127,19 +128,28 @@ def _residuals(seq: Segment, starts: np.ndarray, n: int, labels, bg: np.ndarray,
     return r_rot.reshape(-1), r_vel.reshape(-1)
 
 
-def _gauss_newton(f, x: np.ndarray, eps: float, iters: int, tol: float) -> np.ndarray:
+def _startup_gyro_bias(seq: Segment, starts: np.ndarray, n: int, labels, iters: int = 10, tol: float = 1e-9
+                       ) -> np.ndarray:
+    """The gyro bias minimising the rotation residuals of :func:`_residuals`, Gauss-Newton on their exact
+    Jacobian: the core's :func:`rotation_window_sums` (rates g - b) gives Q = Δq̂ and A = Σ_k R(Q_k) J_r(φ_k) dt_k;
+    a bias step δ turns Q into Exp(-A δ) Q, so r = Log(Q⁻¹ Δq) moves by J_l⁻¹(r) R(Q)ᵀ A δ (J_l⁻¹(r) = J_r⁻¹(-r))."""
+    k = starts.astype(np.int64)[:, None] + np.arange(n)
+    gyro, acc = seq.gyro[k], seq.acc[k]
+    dt = (np.diff(np.asarray(seq.t_ns, dtype=np.int64)) * 1e-9)[k]
+    dq = labels.dq_wxyz[:, 0]
+    theta = np.zeros(21)  # (M_g - I, b_g, G): the bias alone
     for _ in range(iters):
-        r0 = f(x)
-        J = np.empty((r0.size, x.size))
-        for i in range(x.size):
-            dx = np.zeros_like(x)
-            dx[i] = eps
-            J[:, i] = (f(x + dx) - f(x - dx)) / (2 * eps)
-        step, *_ = np.linalg.lstsq(J, -r0, rcond=None)
-        x = x + step
+        d = rotation_window_sums(gyro, acc, dt, theta, (n,), True)
+        Q = d["q_wxyz"][:, 0]
+        A = d["sums"][:, 0, :, 6].reshape(-1, 3, 3)  # type: ignore[index]
+        r = quat_log(quat_mul(quat_conj(Q), dq))
+        RtA = np.swapaxes(quat_rotate(quat_conj(Q)[:, None, :], np.swapaxes(A, 1, 2)), 1, 2)
+        J = so3_right_jacobian_inverse(-r) @ RtA
+        step, *_ = np.linalg.lstsq(J.reshape(-1, 3), -r.reshape(-1), rcond=None)
+        theta[9:12] += step
         if np.max(np.abs(step)) < tol:
             break
-    return x
+    return theta[9:12].copy()
 
 
 def fit_startup_bias(
@@ -159,7 +169,7 @@ def fit_startup_bias(
     stride = max(1, n // 4)
     labels = window_labels(sub, n, stride, fractions=(1.0,), gravity=gravity)
     starts = np.asarray(labels.starts, dtype=np.uint64)
-    bg = _gauss_newton(lambda x: _residuals(sub, starts, n, labels, x, np.zeros(3))[0], np.zeros(3), 1e-4, 10, 1e-9)
+    bg = _startup_gyro_bias(sub, starts, n, labels)
     # Δβ̂ is linear in b_a: residuals at 0 and at each unit bias give the exact Jacobian, one solve
     r0 = _residuals(sub, starts, n, labels, bg, np.zeros(3))[1]
     J = np.column_stack([_residuals(sub, starts, n, labels, bg, e)[1] - r0 for e in np.eye(3)])
