@@ -293,8 +293,12 @@ def _pool(out: Dict[str, List[np.ndarray]], key: str, x: np.ndarray) -> None:
     out.setdefault(key, []).append(np.asarray(x, dtype=np.float64))
 
 
+CELLS = {"gyro": ("rot_deg", "trans_m", "aoe_deg"), "acc": ("trans_m", "open_trans_m")}
+SCORED = tuple(dict.fromkeys(c for cs in CELLS.values() for c in cs))  # every cell a table reads
+
+
 def score(floor: Floor, held: Sequence[Segment], horizons: Sequence[int], opts: SelectOptions,
-          gravity: float, cells: Tuple[str, ...] = ("rot_deg", "trans_m", "open_trans_m", "aoe_deg")) -> Dict[str, float]:
+          gravity: float, cells: Tuple[str, ...] = SCORED) -> Dict[str, float]:
     """The held-out cells of ``floor`` on ``held`` (module doc): ``rot_deg n=N``, ``trans_m n=N`` (start-up
     bias removed), ``open_trans_m n=N`` (open loop), ``aoe_deg``, those named in ``cells`` (a table's
     rule reads no other); segments pooled, NaN where none scored."""
@@ -323,7 +327,6 @@ def score(floor: Floor, held: Sequence[Segment], horizons: Sequence[int], opts: 
     return {k: math.degrees(v) if k.startswith(("rot", "aoe")) else v for k, v in out.items()}
 
 
-CELLS = {"gyro": ("rot_deg", "trans_m", "aoe_deg"), "acc": ("trans_m", "open_trans_m")}
 GYRO_ONLY_LEVELS = GYRO_LEVELS[:-1]  # a reference that cannot resolve accelerations: no low-pass level
 GYRO_ONLY_CELLS = ("rot_deg", "aoe_deg")  # its positions over 10-200 IMU samples are its interpolation's
 # its accelerometer from the positions (calib.acc_positions): no low-pass level (not observed), one cell,
