@@ -21,7 +21,7 @@ use nalgebra::{Matrix3, SMatrix, Vector3};
 
 use crate::error::{ImuError, Result};
 use crate::integrate::{check_imu, integrate_from};
-use crate::so3::v3;
+use crate::so3::{right_jacobian_coefficients, rotation_matrix_wxyz, v3};
 use crate::types::{seconds_between, Increment, QuatWxyz, Vec3};
 
 /// Per-sample discrete-time variances: gyro x, y, z [(rad/s)²], then acc x, y, z [(m/s²)²].
@@ -212,34 +212,13 @@ fn propagate(
 
 /// Rotation matrix of a unit quaternion w,x,y,z (not renormalised, as the integration's own).
 fn rotation_matrix(q: QuatWxyz) -> Matrix3<f64> {
-    let [w, x, y, z] = q;
-    Matrix3::new(
-        1.0 - 2.0 * (y * y + z * z),
-        2.0 * (x * y - w * z),
-        2.0 * (x * z + w * y),
-        2.0 * (x * y + w * z),
-        1.0 - 2.0 * (x * x + z * z),
-        2.0 * (y * z - w * x),
-        2.0 * (x * z - w * y),
-        2.0 * (y * z + w * x),
-        1.0 - 2.0 * (x * x + y * y),
-    )
+    let r = rotation_matrix_wxyz(q);
+    Matrix3::from_fn(|i, j| r[i][j])
 }
 
-/// Right Jacobian of SO(3): J_r(φ) = I − (1 − cos θ)/θ² [φ]× + (θ − sin θ)/θ³ [φ]×², with the
-/// coefficients' Taylor series below θ = 0.1 rad (exact to double precision there; the closed
-/// forms lose digits to cancellation as θ → 0).
+/// Right Jacobian of SO(3): J_r(φ) = I − c1 [φ]× + c2 [φ]×² with `so3::right_jacobian_coefficients`.
 pub(crate) fn right_jacobian(phi: Vector3<f64>) -> Matrix3<f64> {
-    let t2 = phi.norm_squared();
-    let (a, b) = if t2 < 1e-2 {
-        (
-            0.5 + t2 * (-1.0 / 24.0 + t2 * (1.0 / 720.0 + t2 * (-1.0 / 40320.0 + t2 / 3628800.0))),
-            1.0 / 6.0 + t2 * (-1.0 / 120.0 + t2 * (1.0 / 5040.0 + t2 * (-1.0 / 362880.0 + t2 / 39916800.0))),
-        )
-    } else {
-        let t = t2.sqrt();
-        ((1.0 - t.cos()) / t2, (t - t.sin()) / (t2 * t))
-    };
+    let (a, b) = right_jacobian_coefficients(phi.norm_squared());
     let k = phi.cross_matrix();
     Matrix3::identity() - k * a + k * k * b
 }

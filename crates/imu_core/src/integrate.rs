@@ -20,7 +20,7 @@ use rayon::prelude::*;
 
 use crate::error::{ImuError, Result};
 use crate::labels::check_windows;
-use crate::so3;
+use crate::so3::{self, qmul};
 use crate::types::{seconds_between, Increment, Labels, QuatWxyz, Vec3};
 
 /// Cumulative increments, one row per stamp: row j covers [t_0, t_j]; row 0 is the identity.
@@ -66,21 +66,6 @@ impl Preintegrated {
             dt: *self.dt.get(j)?,
         })
     }
-}
-
-/// Hamilton product a ⊗ b of quaternions stored w,x,y,z. Written out (not nalgebra's) so that the
-/// hot loop is plain arithmetic on arrays, and so that every path (stamps, hold times, windows)
-/// shares the exact same operations and gives bit-identical results. Each component's four
-/// products are summed as a pair of pairs: the running rotation is a chain of these products,
-/// and two additions deep instead of three shortens every link (any grouping rounds alike).
-#[inline(always)]
-fn qmul(a: QuatWxyz, b: QuatWxyz) -> QuatWxyz {
-    [
-        (a[0] * b[0] - a[1] * b[1]) - (a[2] * b[2] + a[3] * b[3]),
-        (a[0] * b[1] + a[1] * b[0]) + (a[2] * b[3] - a[3] * b[2]),
-        (a[0] * b[2] - a[1] * b[3]) + (a[2] * b[0] + a[3] * b[1]),
-        (a[0] * b[3] + a[1] * b[2]) - (a[2] * b[1] - a[3] * b[0]),
-    ]
 }
 
 /// v rotated by the unit quaternion q (w,x,y,z): v + w·t + u × t with t = 2·(u × v), u = (x, y, z)

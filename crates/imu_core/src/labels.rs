@@ -15,6 +15,7 @@
 use rayon::prelude::*;
 
 use crate::error::{ImuError, Result};
+use crate::so3::rotation_matrix_wxyz;
 use crate::types::{gravity_vector, QuatWxyz, Sequence, Vec3};
 // Defined with the other plain data in `types`; re-exported where they were first declared.
 pub(crate) use crate::types::seconds_between;
@@ -124,16 +125,11 @@ pub(crate) struct Frame {
 impl Frame {
     #[inline]
     pub(crate) fn at(gt: &GroundTruthView<'_>, k: usize, gravity: f64) -> Frame {
-        let [w, x, y, z] = normalized(gt.q_wxyz[k]);
+        let q = normalized(gt.q_wxyz[k]);
+        let [w, x, y, z] = q;
         // R of the unit quaternion (body → world); its transpose maps world into body k.
-        let (xx, yy, zz) = (x * x, y * y, z * z);
-        let (xy, xz, yz) = (x * y, x * z, y * z);
-        let (wx, wy, wz) = (w * x, w * y, w * z);
-        let rt = [
-            [1.0 - 2.0 * (yy + zz), 2.0 * (xy + wz), 2.0 * (xz - wy)],
-            [2.0 * (xy - wz), 1.0 - 2.0 * (xx + zz), 2.0 * (yz + wx)],
-            [2.0 * (xz + wy), 2.0 * (yz - wx), 1.0 - 2.0 * (xx + yy)],
-        ];
+        let r = rotation_matrix_wxyz(q);
+        let rt = std::array::from_fn(|i| std::array::from_fn(|j| r[j][i]));
         Frame {
             qi: [w, -x, -y, -z],
             rt,

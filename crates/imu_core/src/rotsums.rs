@@ -8,10 +8,11 @@
 //!   ω_k = M g_k − G a_k − M b,   φ_k = ω_k dt_k,   Q_k = Q_{k−1} ⊗ Exp(φ_k)   (Q_{−1} = I)
 //!   A_k = R(Q_k) J_r(φ_k) dt_k,  f_k = (g_k, a_k, 1),  S_h = Σ_{k<h} A_k ⊗ f_k
 //!
-//! (J_r SO(3)'s right Jacobian). The output is Q_{h−1} and S_h for every horizon h. Below θ² =
-//! 0.01 the functions of θ are their Taylor series in θ² (no division by θ, no cancellation in
-//! 1 − cos θ); the numpy oracle (python/imu_learn/core/numpy_reference.py, closed forms and a
-//! doubling scan) agrees to round-off.
+//! (J_r SO(3)'s right Jacobian). The output is Q_{h−1} and S_h for every horizon h. Exp, the
+//! coefficients of J_r and the quaternion product are `so3`'s (Taylor series below θ² = 0.01: no
+//! division by θ, no cancellation in 1 − cos θ); the numpy oracle
+//! (python/imu_learn/core/numpy_reference.py, closed forms and a doubling scan) agrees to
+//! round-off.
 //!
 //! The accelerometer stage (`_VelResiduals`) holds the calibrated rates ω_k fixed and needs, per
 //! window and horizon, the sums of the rotation in force while each sample is held against the
@@ -26,6 +27,7 @@ use rayon::prelude::*;
 
 use crate::batch::try_zeroed_vec;
 use crate::error::{ImuError, Result};
+use crate::so3::{exp_wxyz, qmul, right_jacobian_coefficients, rotation_matrix_wxyz};
 use crate::types::{QuatWxyz, Vec3};
 
 /// θ: M_g − I (9), b_g (3), G (9), row-major.
@@ -35,39 +37,6 @@ pub const SUM_ROWS: usize = 9;
 /// Columns of a sum: f_k = (g_k, a_k, 1).
 pub const SUM_COLS: usize = 7;
 const SUM_LEN: usize = SUM_ROWS * SUM_COLS;
-
-/// Below θ² = SERIES_T2 the functions of θ are their Taylor series in θ² (no division by θ, and
-/// no cancellation in 1 − cos θ); the switch keeps the first term left out below 1e-18 of the sum.
-const SERIES_T2: f64 = 0.01;
-/// sin(θ/2)/θ
-const EXP_S: [f64; 5] = [1.0 / 2.0, -1.0 / 48.0, 1.0 / 3840.0, -1.0 / 645120.0, 1.0 / 185794560.0];
-/// cos(θ/2)
-const EXP_C: [f64; 6] = [
-    1.0,
-    -1.0 / 8.0,
-    1.0 / 384.0,
-    -1.0 / 46080.0,
-    1.0 / 10321920.0,
-    -1.0 / 3715891200.0,
-];
-/// (1 − cos θ)/θ²
-const JR_C1: [f64; 6] = [
-    1.0 / 2.0,
-    -1.0 / 24.0,
-    1.0 / 720.0,
-    -1.0 / 40320.0,
-    1.0 / 3628800.0,
-    -1.0 / 479001600.0,
-];
-/// (θ − sin θ)/θ³
-const JR_C2: [f64; 6] = [
-    1.0 / 6.0,
-    -1.0 / 120.0,
-    1.0 / 5040.0,
-    -1.0 / 362880.0,
-    1.0 / 39916800.0,
-    -1.0 / 6227020800.0,
-];
 
 /// The rotations and sums of every window at every horizon.
 #[derive(Clone, Debug, PartialEq)]
@@ -79,65 +48,11 @@ pub struct RotSums {
     pub sums: Option<Vec<f64>>,
 }
 
-/// Σ_j coeffs[j] t2^j by Horner's rule.
-#[inline(always)]
-fn series<const N: usize>(t2: f64, coeffs: &[f64; N]) -> f64 {
-    coeffs[..N - 1].iter().rev().fold(coeffs[N - 1], |acc, &c| acc * t2 + c)
-}
-
-/// Exp(φ) as a unit quaternion, given θ² = |φ|².
-#[inline(always)]
-fn exp(phi: Vec3, t2: f64) -> QuatWxyz {
-    let (s, c) = if t2 < SERIES_T2 {
-        (series(t2, &EXP_S), series(t2, &EXP_C))
-    } else {
-        let t = t2.sqrt();
-        ((0.5 * t).sin() / t, (0.5 * t).cos())
-    };
-    [c, s * phi[0], s * phi[1], s * phi[2]]
-}
-
-/// (c1, c2) of J_r = I − c1 [φ]× + c2 [φ]×² at θ² = t2.
-#[inline(always)]
-fn jr_coefficients(t2: f64) -> (f64, f64) {
-    if t2 < SERIES_T2 {
-        (series(t2, &JR_C1), series(t2, &JR_C2))
-    } else {
-        let t = t2.sqrt();
-        ((1.0 - t.cos()) / t2, (t - t.sin()) / (t2 * t))
-    }
-}
-
-/// Hamilton product a ⊗ b (w, x, y, z).
-#[inline(always)]
-fn qmul(a: QuatWxyz, b: QuatWxyz) -> QuatWxyz {
-    let [w, x, y, z] = a;
-    [
-        w * b[0] - x * b[1] - y * b[2] - z * b[3],
-        w * b[1] + x * b[0] + y * b[3] - z * b[2],
-        w * b[2] - x * b[3] + y * b[0] + z * b[1],
-        w * b[3] + x * b[2] - y * b[1] + z * b[0],
-    ]
-}
-
-/// Rotation matrix of a unit quaternion (row-major).
-#[inline(always)]
-fn quat_matrix(q: QuatWxyz) -> [[f64; 3]; 3] {
-    let [w, x, y, z] = q;
-    let (xx, yy, zz, xy, xz, yz) = (x * x, y * y, z * z, x * y, x * z, y * z);
-    let (wx, wy, wz) = (w * x, w * y, w * z);
-    [
-        [1.0 - 2.0 * (yy + zz), 2.0 * (xy - wz), 2.0 * (xz + wy)],
-        [2.0 * (xy + wz), 1.0 - 2.0 * (xx + zz), 2.0 * (yz - wx)],
-        [2.0 * (xz - wy), 2.0 * (yz + wx), 1.0 - 2.0 * (xx + yy)],
-    ]
-}
-
 /// A = R(q) J_r(φ) dt, row-major (entry (r, i) at 3r + i). J_r dt = a I − c1 [φ]× + c2 φφᵀ with
 /// a = (1 − c2 θ²) dt and c1, c2 times dt, entry by entry as `_RotResiduals.jacobian`.
 #[inline(always)]
 fn sensitivity(q: QuatWxyz, phi: Vec3, t2: f64, dt: f64) -> [f64; SUM_ROWS] {
-    let (c1, c2) = jr_coefficients(t2);
+    let (c1, c2) = right_jacobian_coefficients(t2);
     let (a, c1, c2) = ((1.0 - c2 * t2) * dt, c1 * dt, c2 * dt);
     let [x, y, z] = phi;
     let (cx, cy, cz, qx, qy, qz) = (c1 * x, c1 * y, c1 * z, c2 * x, c2 * y, c2 * z);
@@ -146,7 +61,7 @@ fn sensitivity(q: QuatWxyz, phi: Vec3, t2: f64, dt: f64) -> [f64; SUM_ROWS] {
         [qx * y - cz, a + qy * y, qy * z + cx],
         [qx * z + cy, qy * z - cx, a + qz * z],
     ];
-    let r = quat_matrix(q);
+    let r = rotation_matrix_wxyz(q);
     std::array::from_fn(|e| {
         let (row, i) = (e / 3, e % 3);
         r[row][0] * jr[0][i] + r[row][1] * jr[1][i] + r[row][2] * jr[2][i]
@@ -207,7 +122,7 @@ fn window(
         let w = model.rate(gyro[k], acc[k]);
         let phi = [w[0] * dt[k], w[1] * dt[k], w[2] * dt[k]];
         let t2 = dot(phi, phi);
-        q = qmul(q, exp(phi, t2));
+        q = qmul(q, exp_wxyz(phi));
         if sums_out.is_some() {
             let sens = sensitivity(q, phi, t2, dt[k]);
             let (g, a) = (gyro[k], acc[k]);
@@ -344,7 +259,7 @@ fn velocity_window(
     steps.clear();
     steps.extend(rates.iter().zip(dt).map(|(wk, &d)| {
         let phi = [wk[0] * d, wk[1] * d, wk[2] * d];
-        exp(phi, dot(phi, phi))
+        exp_wxyz(phi)
     }));
     let mut q: QuatWxyz = [1.0, 0.0, 0.0, 0.0];
     let mut t = 0.0; // T_k, summed in sample order as numpy's cumsum
@@ -353,7 +268,7 @@ fn velocity_window(
     for k in 0..rates.len() {
         let d = dt[k];
         // R_k dt_k with R_k the product of the steps before sample k (R_0 = I).
-        let r = quat_matrix(q);
+        let r = rotation_matrix_wxyz(q);
         let rm: [f64; SUM_ROWS] = std::array::from_fn(|e| r[e / 3][e % 3] * d);
         t += d;
         let sk = t - 0.5 * d;

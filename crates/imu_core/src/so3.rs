@@ -109,6 +109,68 @@ pub fn exp_series(theta2: f64) -> (f64, f64) {
     (0.5 * sinc, cos)
 }
 
+/// Coefficients (c1, c2) of SO(3)'s right Jacobian J_r(φ) = I − c1 [φ]× + c2 [φ]×² at θ² = |φ|²:
+/// c1 = (1 − cos θ)/θ², c2 = (θ − sin θ)/θ³. Where `exp_series_holds` they are their Taylor
+/// series in θ² (k ≤ 5, exact to double precision there; the closed forms lose digits to
+/// cancellation as θ → 0).
+#[inline(always)]
+pub(crate) fn right_jacobian_coefficients(theta2: f64) -> (f64, f64) {
+    const C1: [f64; 6] = [
+        1.0 / 2.0,
+        -1.0 / 24.0,
+        1.0 / 720.0,
+        -1.0 / 40320.0,
+        1.0 / 3628800.0,
+        -1.0 / 479001600.0,
+    ];
+    const C2: [f64; 6] = [
+        1.0 / 6.0,
+        -1.0 / 120.0,
+        1.0 / 5040.0,
+        -1.0 / 362880.0,
+        1.0 / 39916800.0,
+        -1.0 / 6227020800.0,
+    ];
+    if exp_series_holds(theta2) {
+        let y = theta2;
+        (
+            C1[0] + y * (C1[1] + y * (C1[2] + y * (C1[3] + y * (C1[4] + y * C1[5])))),
+            C2[0] + y * (C2[1] + y * (C2[2] + y * (C2[3] + y * (C2[4] + y * C2[5])))),
+        )
+    } else {
+        let t = theta2.sqrt();
+        ((1.0 - t.cos()) / theta2, (t - t.sin()) / (theta2 * t))
+    }
+}
+
+/// Hamilton product a ⊗ b of quaternions stored w,x,y,z. Written out (not nalgebra's) so that the
+/// hot loops are plain arithmetic on arrays, and so that every path (stamps, hold times, windows)
+/// shares the exact same operations and gives bit-identical results. Each component's four
+/// products are summed as a pair of pairs: the running rotation is a chain of these products,
+/// and two additions deep instead of three shortens every link (any grouping rounds alike).
+#[inline(always)]
+pub(crate) fn qmul(a: QuatWxyz, b: QuatWxyz) -> QuatWxyz {
+    [
+        (a[0] * b[0] - a[1] * b[1]) - (a[2] * b[2] + a[3] * b[3]),
+        (a[0] * b[1] + a[1] * b[0]) + (a[2] * b[3] - a[3] * b[2]),
+        (a[0] * b[2] - a[1] * b[3]) + (a[2] * b[0] + a[3] * b[1]),
+        (a[0] * b[3] + a[1] * b[2]) - (a[2] * b[1] - a[3] * b[0]),
+    ]
+}
+
+/// Rotation matrix (row-major) of a unit quaternion w,x,y,z, not renormalised.
+#[inline(always)]
+pub(crate) fn rotation_matrix_wxyz(q: QuatWxyz) -> [[f64; 3]; 3] {
+    let [w, x, y, z] = q;
+    let (xx, yy, zz, xy, xz, yz) = (x * x, y * y, z * z, x * y, x * z, y * z);
+    let (wx, wy, wz) = (w * x, w * y, w * z);
+    [
+        [1.0 - 2.0 * (yy + zz), 2.0 * (xy - wz), 2.0 * (xz + wy)],
+        [2.0 * (xy + wz), 1.0 - 2.0 * (xx + zz), 2.0 * (yz - wx)],
+        [2.0 * (xz - wy), 2.0 * (yz + wx), 1.0 - 2.0 * (xx + yy)],
+    ]
+}
+
 /// Logarithm SO(3) → so(3), the rotation vector with angle in [0, π].
 #[inline]
 pub fn log(q: &Quat) -> Vector3<f64> {
