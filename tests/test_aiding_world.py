@@ -17,7 +17,7 @@ from imu_learn.fuse import graph  # noqa: E402
 from imu_learn.fuse.aiding import apply_outages  # noqa: E402
 from imu_learn.fuse.aiding.kinds import KINDS  # noqa: E402
 from imu_learn.fuse.aiding.noise import pose_noise  # noqa: E402
-from imu_learn.fuse.aiding.spans import given_noise, relative_poses, world_poses  # noqa: E402
+from imu_learn.fuse.aiding.spans import WORLD_CORRELATION_S, given_noise, relative_poses, world_inflation, world_poses  # noqa: E402,E501
 from imu_learn.fuse.aiding.types import AidingRows  # noqa: E402
 from imu_learn.fuse.graph import IncrementalFusion, feed, samples_of  # noqa: E402
 from imu_learn.fuse.navigate import NavigateOptions  # noqa: E402
@@ -139,3 +139,23 @@ def test_causal_poses_are_mapped_through_the_world_as_it_was_then():
     assert np.allclose(p[3:], (final @ Z)[3:, :3, 3], atol=1e-12)
     # the raw poses moved with the world's tilt (0.57 deg over the run at up to ~5 m): not so after the map
     assert np.abs(X[:, :3, 3] - (final @ Z)[:, :3, 3]).max() > 0.03
+
+
+def test_world_poses_weigh_as_the_maps_slow_error_in_the_causal_solver_alone(synthetic):
+    """Each world pose: its own noise in the smoothing pass, ``causal_inflate`` times it in the causal
+    solver, sqrt(rate x WORLD_CORRELATION_S) where the navigator ties breaks in one map (x100 at 20 Hz, x316
+    at 200 Hz: tests/test_aiding_maps.py) and 1 on aiding without breaks."""
+    t_ns, gyro, acc, R, p, v0, (sample, R_A, p_A, pn) = synthetic
+    at = 10**18 + np.arange(1201, dtype=np.int64) * 50_000_000  # 20 Hz, 60 s
+    assert world_inflation(at) == pytest.approx(np.sqrt(20 * WORLD_CORRELATION_S)) == pytest.approx(100.0)
+    assert world_inflation(10**18 + np.arange(2001, dtype=np.int64) * 5_000_000) == pytest.approx(np.sqrt(1e5))
+    assert world_inflation(at[:1]) == 1.0
+    noise = given_noise(np.sqrt(2) * SIG_ROT, np.sqrt(2) * SIG_M)
+    between: dict = {}
+    world_poses(sample, R_A, p_A, noise, "vo", causal_inflate=100.0).factors_by_sample({}, between)
+    _, _, (causal, smoothed) = between[int(sample[0])][0]
+    np.testing.assert_allclose(causal.sigmas(), 100.0 * smoothed.sigmas())
+    np.testing.assert_allclose(smoothed.sigmas(), np.r_[noise.rot_rad, noise.trans_m])
+    a, _ = KINDS["relative-pose"].build(rows_of(t_ns, gyro, acc, sample, R_A, p_A), 0, np.eye(3), np.zeros(3),
+                                        NavigateOptions(), "vo", "")
+    assert a.world.causal_inflate == 1.0  # no breaks: nothing coasts, the per-pose noise in both passes

@@ -84,7 +84,7 @@ def add_arguments(ap: argparse.ArgumentParser) -> None:
                          "with their covariance; --aiding-kind position implied)")
     ap.add_argument("--aiding-kind", choices=KINDS, default=None,
                     help="relative-pose: between consecutive poses (any visual odometry; the aiding's world, where "
-                         "it has no breaks, is one more state estimated online, never given); pose: absolute poses in the aiding's own world, levelled at the start (a SLAM's "
+                         "it has no breaks or its breaks keep one map, is one more state estimated online, never given); pose: absolute poses in the aiding's own world, levelled at the start (a SLAM's "
                          "globally consistent trajectory: re-anchors after gaps); position: position fixes (heading "
                          "from the track). Required unless the aiding is GNSS fixes (an RTKLIB .pos, a NavSatFix "
                          "topic): those are positions")

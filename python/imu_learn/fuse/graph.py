@@ -39,7 +39,7 @@ import numpy as np
 from imu_learn.errors import InvalidInputError
 
 from .aiding import epochs
-from .aiding.types import WORLD, WORLD_SMOOTHED
+from .aiding.types import WORLD
 from .factors import held
 from .settings import SETTLE_S, FusionSettings
 
@@ -274,7 +274,6 @@ class IncrementalFusion:
         self._extra_factors = extra_factors
         self._world = None  # the key of the aiding's world (WorldPoses), once its first pose arrived
         self._world_now: Optional[np.ndarray] = None  # its causal estimate (4, 4) after the last update
-        self._world_smoothed = None  # (key, keyframe, pose) of a world tied in the smoothing pass alone
         self.causal_world = np.full((K, 4, 4), np.nan)  # that estimate as of each keyframe
         if extra_factors is not None:
             self.counts["extra_factors"] = 0
@@ -344,13 +343,6 @@ class IncrementalFusion:
         for i, rel, model in self._between_at.get(s, ()):
             # what ties this keyframe to the states before the last update (a coast's start): an absolute
             # pose, the aiding's world, a relative pose from a keyframe up to that update
-            if i == WORLD_SMOOTHED:  # the same, for the batch smoothing pass alone (one map with breaks)
-                if self.smoothing == "batch":
-                    if self._world_smoothed is None:
-                        self._world_smoothed = (gtsam.symbol("w", 1), k, rel)
-                    self._full.add(gtsam.BetweenFactorPose3(self._world_smoothed[0], X(k), rel, model))
-                self.counts["world_pose_factors_smoothing"] = self.counts.get("world_pose_factors_smoothing", 0) + 1
-                continue
             self._anchored |= i is None or i == WORLD or self.stamps[i] <= self._last_update_ns
             if i is None:  # an absolute pose (AbsolutePoses)
                 graph.add(gtsam.PriorFactorPose3(X(k), rel, model))
@@ -360,7 +352,10 @@ class IncrementalFusion:
                 if self._world is None:  # its first value from this keyframe's (IMU-predicted) pose
                     self._world = gtsam.symbol("w", 0)
                     self._values.insert(self._world, self._values.atPose3(X(k)).compose(rel.inverse()))
-                graph.add(gtsam.BetweenFactorPose3(self._world, X(k), rel, model))
+                causal, smoothed = model  # the smoothing pass takes the pose's own noise (WorldPoses)
+                if smoothed is not causal:
+                    self._true_at[graph.size()] = gtsam.BetweenFactorPose3(self._world, X(k), rel, smoothed)
+                graph.add(gtsam.BetweenFactorPose3(self._world, X(k), rel, causal))
                 self.counts["world_pose_factors"] = self.counts.get("world_pose_factors", 0) + 1
                 continue
             graph.add(gtsam.BetweenFactorPose3(X(self._key_of[i]), X(k), rel, model))
@@ -573,10 +568,6 @@ class IncrementalFusion:
         initial = self._initial if self.windowed else self._isam.calculateEstimate()
         if self.smoothing == "batch":
             full = self._full
-            if self._world_smoothed is not None:  # its first value from its first keyframe's last estimate
-                key, k0, rel = self._world_smoothed
-                initial = self._gtsam.Values(initial)
-                initial.insert(key, initial.atPose3(X(k0)).compose(rel.inverse()))
             est = deep_stack(lambda: held.optimize(full, initial, lm_params(), progress),
                              len(self._kf_list))
         else:

@@ -67,7 +67,7 @@ def one_line_text(entry: Optional[Dict[str, object]]) -> str:
         parts.append(f"aiding noise {rot:.3f} deg / {trans:.1f} mm per pose ({used['source']})")
     br = entry.get("breaks")
     if br:
-        parts.append(f"{len(br['breaks'])} break(s), " + ("one map: its world tied in the smoothing pass" if br["one_map"] else
+        parts.append(f"{len(br['breaks'])} break(s), " + ("one map: its world tied across them" if br["one_map"] else
                                                           "not one map: each run chained alone"))
     sc = entry.get("scale")
     if sc and sc.get("observed"):

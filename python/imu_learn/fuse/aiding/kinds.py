@@ -7,7 +7,8 @@ graph's aiding object it builds from them. A new kind is one class here.
   moving; an extrinsic's translation is the antenna's lever arm.
 * ``pose`` (:class:`PoseKind`): absolute body poses, rotated into the navigation frame.
 * ``relative-pose`` (:class:`RelativePoseKind`): the motion between consecutive poses and, where
-  the aiding has no breaks, each pose in the aiding's own world, one free state (:mod:`.spans`).
+  the aiding has no breaks or its breaks keep one map (:mod:`.maps`), each pose in the aiding's own
+  world, one free state (:mod:`.spans`).
 
 Both pose kinds start from the first pose row (:func:`..start.aiding.pose_start`), at rest when the
 IMU was still there."""
@@ -21,7 +22,7 @@ import numpy as np
 from ..start.aiding import pose_start, position_start
 from ..start.types import Start
 from .estimate import summary_entry
-from .spans import given_noise, relative_poses, unbroken, world_poses
+from .spans import given_noise, relative_poses, unbroken, world_inflation, world_poses
 from .types import AbsolutePoses, AidingRows, PositionFixes
 
 
@@ -99,12 +100,13 @@ class RelativePoseKind(AidingKind):
         noise, source = relative_noise(rows, opts, whole)
         a, counts = relative_poses(rows.sample, rows.t_ns, rows.R, rows.p, noise,
                                    opts.relative_spans_s if whole else (0.0,), opts.max_relative_gap_s, label)
-        # breaks in one map (.maps: each checked against the IMU's dead reckoning): the smoothing pass
-        # ties every run to the one world, with the noise estimated; the causal estimate chains as before
+        # breaks in one map (.maps: each checked against the IMU's dead reckoning): every run tied to the one
+        # world, with the noise estimated, in the causal solver weighed as the map's slow error (.spans)
         one_map = not whole and bool(getattr(rows.maps, "verdict", False))
         if (whole or one_map) and opts.relative_world:  # each pose also in the aiding's own world, a free state
             wn = noise if whole else relative_noise(rows, opts, True)[0]
-            a = replace(a, world=world_poses(rows.sample, rows.R, rows.p, wn, label, smoothing_only=one_map))
+            inflate = world_inflation(rows.t_ns) if one_map else 1.0
+            a = replace(a, world=world_poses(rows.sample, rows.R, rows.p, wn, label, inflate))
             counts["world_poses"] = len(rows.sample)
         return a.since(s0), {**counts, "aiding_estimates": summary_entry(rows, noise, source)}
 

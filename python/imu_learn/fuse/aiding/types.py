@@ -129,8 +129,6 @@ class RelativePoses:
 
 # between_at's first element for a pose tied to the aiding's own world (:class:`WorldPoses`)
 WORLD = "world"
-WORLD_SMOOTHED = "world, smoothing pass only"  # the same tie, for the batch smoothing pass alone
-
 
 
 class _PosesAtSamples:
@@ -173,9 +171,9 @@ class WorldPoses(_PosesAtSamples):
     sigmas: np.ndarray
     label: str
     dropped_outage: int = 0
-    # tied for the batch smoothing pass only (aiding with breaks in one map, :mod:`.maps`): the causal
-    # estimate chains each run as before (tied there, its coasting through the breaks was worse)
-    smoothing_only: bool = False
+    # the causal solver's sigmas are ``sigmas`` times this (the map's slow error, :mod:`.spans`); the
+    # batch smoothing pass takes ``sigmas`` as they are
+    causal_inflate: float = 1.0
 
     def select(self, keep: np.ndarray, dropped_outage: int = 0) -> WorldPoses:
         """The poses where ``keep`` (M,) is True; ``dropped_outage`` is added to the count."""
@@ -188,15 +186,17 @@ class WorldPoses(_PosesAtSamples):
         return [self.idx]
 
     def factors_by_sample(self, fixes_at: Dict[int, List], between_at: Dict[int, List]) -> None:
-        """Each pose into ``between_at`` at its sample as ``{s: [(WORLD, Pose3, model)]}``."""
+        """Each pose into ``between_at`` at its sample as ``{s: [(WORLD, Pose3, (causal model, smoothing
+        model))]}``."""
         import gtsam
 
         if np.shape(self.sigmas) != (len(self.idx), 6):
             raise InvalidInputError(f"{self.label}: per-pose sigmas {np.shape(self.sigmas)}, expected ({len(self.idx)}, 6)")
         for s, R, t, sig in zip(self.idx, self.R, self.p, self.sigmas):
-            model = gtsam.noiseModel.Diagonal.Sigmas(np.asarray(sig, dtype=np.float64))
-            between_at.setdefault(int(s), []).append((WORLD_SMOOTHED if self.smoothing_only else WORLD,
-                                                      gtsam.Pose3(gtsam.Rot3(R), t), model))
+            sig = np.asarray(sig, dtype=np.float64)
+            smoothed = gtsam.noiseModel.Diagonal.Sigmas(sig)
+            causal = smoothed if self.causal_inflate == 1.0 else gtsam.noiseModel.Diagonal.Sigmas(self.causal_inflate * sig)
+            between_at.setdefault(int(s), []).append((WORLD, gtsam.Pose3(gtsam.Rot3(R), t), (causal, smoothed)))
 
 
 @dataclass(frozen=True)
