@@ -36,6 +36,8 @@ from typing import Dict, List, Optional
 
 import numpy as np
 
+from imu_learn.fuse.score import umeyama
+
 FLIGHTS = {"MH_01_easy": "MH01", "MH_03_medium": "MH03", "MH_04_difficult": "MH04", "MH_05_difficult": "MH05",
            "V1_01_easy": "V101", "V1_03_difficult": "V103", "V2_01_easy": "V201", "V2_02_medium": "V202"}
 GAPS = ("none", "30:10,70:10")
@@ -59,13 +61,6 @@ def navigate(data: Path, trial: str, gaps: str, rec: str, out: Path) -> Optional
     return None if done.returncode == 0 else f"{rec}: exit {done.returncode}: {done.stderr.strip()[-300:]}"
 
 
-def _rotation(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """The rotation R minimising |R (a - mean a) - (b - mean b)| (Kabsch)."""
-    u, _, vt = np.linalg.svd((a - a.mean(0)).T @ (b - b.mean(0)))
-    d = np.sign(np.linalg.det(vt.T @ u.T))
-    return vt.T @ np.diag([1.0, 1.0, d]) @ u.T
-
-
 def coast_drift(run: Path, gt_csv: Path) -> List[Dict[str, float]]:
     """Per gap of ``run``'s summary: the causal track's drift over it (module doc): ``rms_m``, ``end_m``."""
     gt = np.loadtxt(gt_csv, delimiter=",", comments="#")
@@ -82,7 +77,7 @@ def coast_drift(run: Path, gt_csv: Path) -> List[Dict[str, float]]:
         during = np.flatnonzero(inside & (rel >= s) & (rel < e - 0.1))  # the camera's return re-anchors at e
         if before.sum() < 10 or len(during) < 2:
             continue
-        R = _rotation(p[before], g[before])
+        R = umeyama(p[before], g[before])[0]
         k0 = during[0]
         err = np.linalg.norm((p[during] - p[k0]) @ R.T - (g[during] - g[k0]), axis=1)
         out.append({"rms_m": float(np.sqrt(np.mean(err ** 2))), "end_m": float(err[-1])})

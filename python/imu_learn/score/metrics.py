@@ -120,17 +120,15 @@ def relative_pose_rmse_many(seqs: Seq[Segment], n: int, stride: int = 1, gravity
 # start-up bias
 
 
-def _residuals(seq: Segment, starts: np.ndarray, n: int, labels, bg: np.ndarray, ba: np.ndarray) -> Tuple[np.ndarray, np.ndarray]:
-    s = remove_bias(seq, bg, ba)
-    inc = integrate_windows(s, starts, np.array([n], dtype=np.uint64))
-    r_rot = quat_log(quat_mul(quat_conj(inc.dq_wxyz[:, 0]), labels.dq_wxyz[:, 0]))
-    r_vel = labels.dv[:, 0] - inc.dv[:, 0]
-    return r_rot.reshape(-1), r_vel.reshape(-1)
+def _velocity_residuals(seq: Segment, starts: np.ndarray, n: int, labels, bg: np.ndarray, ba: np.ndarray) -> np.ndarray:
+    """Δβ_gt − Δβ̂(b_g, b_a) over the windows, flattened."""
+    inc = integrate_windows(remove_bias(seq, bg, ba), starts, np.array([n], dtype=np.uint64))
+    return (labels.dv[:, 0] - inc.dv[:, 0]).reshape(-1)
 
 
 def _startup_gyro_bias(seq: Segment, starts: np.ndarray, n: int, labels, iters: int = 10, tol: float = 1e-9
                        ) -> np.ndarray:
-    """The gyro bias minimising the rotation residuals of :func:`_residuals`, Gauss-Newton on their exact
+    """The gyro bias minimising the rotation residuals Log(Δq̂(b)⁻¹ Δq_gt), Gauss-Newton on their exact
     Jacobian: the core's :func:`rotation_window_sums` (rates g - b) gives Q = Δq̂ and A = Σ_k R(Q_k) J_r(φ_k) dt_k;
     a bias step δ turns Q into Exp(-A δ) Q, so r = Log(Q⁻¹ Δq) moves by J_l⁻¹(r) R(Q)ᵀ A δ (J_l⁻¹(r) = J_r⁻¹(-r))."""
     k = starts.astype(np.int64)[:, None] + np.arange(n)
@@ -171,8 +169,8 @@ def fit_startup_bias(
     starts = np.asarray(labels.starts, dtype=np.uint64)
     bg = _startup_gyro_bias(sub, starts, n, labels)
     # Δβ̂ is linear in b_a: residuals at 0 and at each unit bias give the exact Jacobian, one solve
-    r0 = _residuals(sub, starts, n, labels, bg, np.zeros(3))[1]
-    J = np.column_stack([_residuals(sub, starts, n, labels, bg, e)[1] - r0 for e in np.eye(3)])
+    r0 = _velocity_residuals(sub, starts, n, labels, bg, np.zeros(3))
+    J = np.column_stack([_velocity_residuals(sub, starts, n, labels, bg, e) - r0 for e in np.eye(3)])
     ba, *_ = np.linalg.lstsq(J, -r0, rcond=None)
     return bg, ba
 
