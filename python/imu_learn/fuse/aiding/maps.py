@@ -6,9 +6,13 @@ its breaks (:class:`.types.WorldPoses`); the second chains each run on its own, 
 Each break (consecutive rows further apart than ``--max-relative-gap-s``, rows ``a`` then ``b``) is
 compared with the IMU's dead reckoning over it, before any fusion:
 
-* **rotation**: the aiding's ``R_aᵀ R_b`` against the gyro's chain ``C_aᵀ C_b`` (:func:`.pairs.gyro_orientation`),
-  within :data:`ROT_DEG` plus :data:`GYRO_DRIFT_DEG_S` per second of the break (a MEMS gyro's bias
-  after the floor) plus :data:`ROT_FRACTION` of the turn over it (an aiding body frame a degree or two
+* **the gyro's bias across it**: the median rate of the aiding's rotation increments against the gyro's
+  over :data:`BIAS_PAIR_S` inside the runs on either side, within :data:`BIAS_S` of the break (raw
+  MEMS gyros read tens of mrad/s off: EuRoC's ADIS16448 80 mrad/s on z, 46° over a 10 s break), taken
+  off the gyro over the break before it is compared;
+* **rotation**: the aiding's ``R_aᵀ R_b`` against the gyro's chain ``C_aᵀ C_b`` (:func:`.pairs.gyro_orientation`,
+  its bias taken off), within :data:`ROT_DEG` plus :data:`GYRO_DRIFT_DEG_S` per second of the break (what
+  is left of the bias: its change and its estimate's error) plus :data:`ROT_FRACTION` of the turn over it (an aiding body frame a degree or two
   off the IMU's: on TUM-VI's motion capture 1.7-2.8° over turns of 60-140°), the median over the
   pairs of the :data:`EDGE_ROWS` rows on each side (a pose at a break's edge is often off: TUM-VI's
   motion capture 2.8° at one dropout); a new map's first frame is the camera's pose at its restart,
@@ -32,6 +36,7 @@ from dataclasses import dataclass, field
 from typing import Dict, List, Optional, Tuple
 
 import numpy as np
+from scipy.spatial.transform import Rotation
 
 from imu_learn.calib import metric_scale
 
@@ -48,6 +53,8 @@ ACC_ERR = 0.3  # m/s^2: a MEMS accelerometer's bias plus the tilt error it leave
 VEL_ERR = 0.1  # m/s: the aiding's velocity from its last VELOCITY_S
 POS_FLOOR_M = 0.1
 VELOCITY_S = 0.5
+BIAS_S = 10.0  # s of the runs on either side of a break whose rotation increments give the gyro's bias
+BIAS_PAIR_S = 0.5  # s: the span of each increment (rows this far apart)
 
 
 @dataclass(frozen=True)
@@ -79,14 +86,21 @@ def gravity_in_world(S: metric_scale.Integrals, C: np.ndarray, tau: np.ndarray, 
 
 @dataclass(frozen=True)
 class _Imu:
-    """The IMU as the check uses it: stamps [s from the first sample], dt, the gyro's chain ``C`` and the
-    accelerometer [m/s²], and gravity in the aiding's world ``g``."""
+    """The IMU as the check uses it: stamps [ns as read; s from the first sample], dt, the gyro [rad/s] and
+    its chain ``C``, the accelerometer [m/s²], and gravity in the aiding's world ``g``."""
 
+    t_ns: np.ndarray
     t: np.ndarray
     dt: np.ndarray
+    gyro: np.ndarray
     C: np.ndarray
     acc: np.ndarray
     g: np.ndarray
+
+    def chain(self, s0: int, s1: int, bias: np.ndarray) -> np.ndarray:
+        """(s1 - s0 + 1, 3, 3) the gyro's orientation at samples ``s0..s1`` in the frame of ``s0``, ``bias``
+        taken off."""
+        return gyro_orientation(self.t_ns[s0:s1 + 1], self.gyro[s0:s1 + 1] - bias)
 
 
 def one_map(imu_t_ns: np.ndarray, gyro: np.ndarray, acc: np.ndarray, sample: np.ndarray, aid_t_ns: np.ndarray,
@@ -106,7 +120,8 @@ def one_map(imu_t_ns: np.ndarray, gyro: np.ndarray, acc: np.ndarray, sample: np.
     g = gravity_in_world(S, C, tau, sample, p, R, run)
     if g is None:
         return OneMap(False, [], "too few rows inside the runs to find gravity in the aiding's world")
-    imu = _Imu(t, dt, C, np.asarray(acc, dtype=np.float64), g)
+    imu = _Imu(np.asarray(imu_t_ns, dtype=np.int64), t, dt, np.asarray(gyro, dtype=np.float64), C,
+               np.asarray(acc, dtype=np.float64), g)
     out: List[Dict[str, float]] = []
     why = ""
     for b in np.flatnonzero(np.diff(run)) + 1:
@@ -116,27 +131,52 @@ def one_map(imu_t_ns: np.ndarray, gyro: np.ndarray, acc: np.ndarray, sample: np.
     return OneMap(not why, out, why)
 
 
+def gyro_bias_across(imu: _Imu, tau: np.ndarray, sample: np.ndarray, R: np.ndarray, run: np.ndarray,
+                     b: int) -> np.ndarray:
+    """(3,) the gyro's bias [rad/s] across the break before row ``b`` (module docstring): the per-axis median
+    of the rate ``log((R_iᵀ R_j)ᵀ C_iᵀ C_j) / Δt`` over rows ``BIAS_PAIR_S`` apart inside the runs on either
+    side, within ``BIAS_S`` of the break; zero with fewer than three such pairs."""
+    a = b - 1
+    k = max(1, int(round(BIAS_PAIR_S / max(float(np.median(np.diff(tau))), 1e-3))))
+    i = within(run, k)
+    j = i + k
+    near = (((run[i] == run[a]) & (tau[i] >= tau[a] - BIAS_S)) | ((run[i] == run[b]) & (tau[j] <= tau[b] + BIAS_S)))
+    i, j = i[near], j[near]
+    if len(i) < 3:
+        return np.zeros(3)
+    C = imu.C
+    d_aid = np.einsum("nki,nkj->nij", R[i], R[j])
+    d_gyro = np.einsum("nki,nkj->nij", C[sample[i]], C[sample[j]])
+    rate = Rotation.from_matrix(np.einsum("nki,nkj->nij", d_aid, d_gyro)).as_rotvec()
+    return np.median(rate / (imu.t[sample[j]] - imu.t[sample[i]])[:, None], axis=0)
+
+
 def _check_break(imu: _Imu, tau: np.ndarray, sample: np.ndarray, p: np.ndarray, R: np.ndarray, run: np.ndarray,
                  b: int) -> Tuple[Dict[str, float], str]:
     """(the break's figures, why it is not in one map or "") of the break before row ``b``."""
-    a, C = b - 1, imu.C
+    a = b - 1
     T = float(tau[b] - tau[a])
-    turned = C[sample[a]].T @ C[sample[b]]
     # the median over the last EDGE_ROWS rows before the break and the first after it: one pose at a
     # break's edge is often off (a tracker losing or regaining its view)
     before = [i for i in range(a, a - EDGE_ROWS, -1) if i >= 0 and run[i] == run[a]]
     after = [j for j in range(b, b + EDGE_ROWS) if j < len(run) and run[j] == run[b]]
-    rot = float(np.median([_angle_deg((R[i].T @ R[j]).T @ (C[sample[i]].T @ C[sample[j]]))
+    bias = gyro_bias_across(imu, tau, sample, R, run, b)
+    s0 = int(sample[before[-1]])
+    C = imu.chain(s0, int(sample[after[-1]]), bias)  # C[n - s0]: sample n in the frame of s0, bias off
+    sa, sb = int(sample[a]), int(sample[b])
+    turned = C[sa - s0].T @ C[sb - s0]
+    rot = float(np.median([_angle_deg((R[i].T @ R[j]).T @ (C[sample[i] - s0].T @ C[sample[j] - s0]))
                            for i in before for j in after]))
     rot_bound = ROT_DEG + GYRO_DRIFT_DEG_S * T + ROT_FRACTION * _angle_deg(turned)
     entry = {"t_s": round(float(tau[a]), 3), "duration_s": round(T, 3), "rotation_deg": round(rot, 3),
-             "rotation_bound_deg": round(rot_bound, 3)}
+             "rotation_bound_deg": round(rot_bound, 3),
+             "gyro_bias_rad_s": [round(float(x), 5) for x in bias]}
     first = int(np.searchsorted(tau, tau[a] - VELOCITY_S))
     if not (run[first] == run[a] and first < a):
         return {**entry, "ok": False}, f"the break at {tau[a]:.1f} s follows a run shorter than {VELOCITY_S:g} s"
     v = (p[a] - p[first]) / (tau[a] - tau[first])
-    sa, sb = int(sample[a]), int(sample[b])
-    acc_A = np.einsum("ij,nj->ni", R[a] @ C[sa].T, np.einsum("nij,nj->ni", C[sa:sb], imu.acc[sa:sb])) + imu.g
+    Cs = C[sa - s0:sb - s0]
+    acc_A = np.einsum("ij,nj->ni", R[a] @ C[sa - s0].T, np.einsum("nij,nj->ni", Cs, imu.acc[sa:sb])) + imu.g
     h = imu.dt[sa:sb, None]
     dv = np.cumsum(acc_A * h, axis=0) - acc_A * h  # velocity change at each sample's start
     predicted = v * T + np.sum(dv * h + 0.5 * acc_A * h ** 2, axis=0)
