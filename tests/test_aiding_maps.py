@@ -2,7 +2,8 @@
 test_aiding_world.py, a 3 s break in the same world passes the check against the IMU's dead reckoning
 and a map restarted after it (its first pose the identity at the origin, as a visual odometry that
 reinitialises writes) fails it; one map ties every run to the world in both passes, so the causal
-and the smoothed tracks after the break lie closer to the truth than the chained ones."""
+and the smoothed tracks after the break lie closer to the truth than the chained ones, and the rows just
+after the break put the causal track back on the map at once."""
 from __future__ import annotations
 
 import numpy as np
@@ -10,6 +11,7 @@ import pytest
 
 pytest.importorskip("gtsam")
 
+from imu_learn.fuse.aiding import kinds as kinds_module  # noqa: E402
 from imu_learn.fuse.aiding.kinds import KINDS  # noqa: E402
 from imu_learn.fuse.aiding.maps import one_map  # noqa: E402
 from imu_learn.fuse.aiding.spans import world_inflation  # noqa: E402
@@ -71,7 +73,7 @@ def test_a_raw_gyros_bias_is_taken_off_before_a_long_break_is_judged(broken):
     assert new is not None and not new.verdict, new
 
 
-def test_one_map_ties_its_world_in_both_passes(broken):
+def test_one_map_ties_its_world_in_both_passes(broken, monkeypatch):
     t_ns, gyro, acc, R, p, v0, sample, R_A, p_A, gap = broken
     kind, opts = KINDS["relative-pose"], NavigateOptions()
 
@@ -99,3 +101,13 @@ def test_one_map_ties_its_world_in_both_passes(broken):
     assert rmse(tied.smoothed_p) < 0.8 * rmse(chained.smoothed_p), (rmse(tied.smoothed_p), rmse(chained.smoothed_p))
     assert rmse(tied.causal_p, after) < 0.8 * rmse(chained.causal_p, after), (rmse(tied.causal_p, after),
                                                                              rmse(chained.causal_p, after))
+    # the rows of the first half second after the break rejoin the map at 10x their translation noise (not
+    # 100x): the causal track is back on it within the first second, where the inflated world takes longer
+    rejoin = a1.world.rejoin
+    assert rejoin is not None and rejoin.sum() == 10 and a1.world.idx[rejoin][0] == sample[np.argmax(gap) + gap.sum()]
+    monkeypatch.setattr(kinds_module, "rejoining", lambda t_ns, max_gap_s: np.zeros(len(t_ns), bool))
+    slow, _, _ = fused(True)
+    t_kf = (t_ns[tied.kf_idx] - t_ns[sample[np.argmax(gap) + gap.sum()]]) * 1e-9
+    first = at & (t_kf >= 0) & (t_kf < 1.0)  # measured 0.013 m against 0.050
+    assert rmse(tied.causal_p, first) < 0.5 * rmse(slow.causal_p, first), (rmse(tied.causal_p, first),
+                                                                           rmse(slow.causal_p, first))

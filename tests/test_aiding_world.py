@@ -17,7 +17,15 @@ from imu_learn.fuse import graph  # noqa: E402
 from imu_learn.fuse.aiding import apply_outages  # noqa: E402
 from imu_learn.fuse.aiding.kinds import KINDS  # noqa: E402
 from imu_learn.fuse.aiding.noise import pose_noise  # noqa: E402
-from imu_learn.fuse.aiding.spans import WORLD_CORRELATION_S, given_noise, relative_poses, world_inflation, world_poses  # noqa: E402,E501
+from imu_learn.fuse.aiding.spans import (  # noqa: E402
+    REJOIN_INFLATE,
+    WORLD_CORRELATION_S,
+    given_noise,
+    rejoining,
+    relative_poses,
+    world_inflation,
+    world_poses,
+)
 from imu_learn.fuse.aiding.types import AidingRows  # noqa: E402
 from imu_learn.fuse.graph import IncrementalFusion, feed, samples_of  # noqa: E402
 from imu_learn.fuse.navigate import NavigateOptions  # noqa: E402
@@ -156,6 +164,24 @@ def test_world_poses_weigh_as_the_maps_slow_error_in_the_causal_solver_alone(syn
     _, _, (causal, smoothed) = between[int(sample[0])][0]
     np.testing.assert_allclose(causal.sigmas(), 100.0 * smoothed.sigmas())
     np.testing.assert_allclose(smoothed.sigmas(), np.r_[noise.rot_rad, noise.trans_m])
+    # a pose rejoining after a break: its translation noise x REJOIN_INFLATE in the causal solver, its rotation's x100
+    rejoin = np.zeros(len(sample), bool)
+    rejoin[1] = True
+    between = {}
+    world_poses(sample, R_A, p_A, noise, "vo", 100.0, rejoin).factors_by_sample({}, between)
+    _, _, (causal, smoothed) = between[int(sample[1])][0]
+    np.testing.assert_allclose(causal.sigmas(), np.r_[100.0 * noise.rot_rad, REJOIN_INFLATE * noise.trans_m])
+    assert REJOIN_INFLATE < 100.0
+    np.testing.assert_allclose(between[int(sample[2])][0][2][0].sigmas(), 100.0 * smoothed.sigmas())
     a, _ = KINDS["relative-pose"].build(rows_of(t_ns, gyro, acc, sample, R_A, p_A), 0, np.eye(3), np.zeros(3),
                                         NavigateOptions(), "vo", "")
-    assert a.world.causal_inflate == 1.0  # no breaks: nothing coasts, the per-pose noise in both passes
+    assert a.world.causal_inflate == 1.0 and a.world.rejoin is None  # no breaks: the per-pose noise in both passes
+
+
+def test_the_rows_rejoining_after_a_break_are_those_of_its_first_half_second():
+    """Rows at 20 Hz over 0-2 s, a 3 s break, 5-6 s, a 0.7 s break, then 10 Hz over 6.7-7 s: with breaks
+    longer than 0.5 s, the rows within 0.5 s of each break's end."""
+    rel = np.r_[np.arange(40) * 0.05, 5.0 + np.arange(20) * 0.05, 6.7 + np.arange(3) * 0.1]
+    got = rejoining(np.int64(10**18) + np.round(rel * 1e9).astype(np.int64), 0.5)
+    want = ((rel >= 5.0) & (rel < 5.49)) | (rel >= 6.7)
+    assert np.array_equal(got, want), np.flatnonzero(got != want)

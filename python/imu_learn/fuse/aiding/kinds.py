@@ -22,7 +22,7 @@ import numpy as np
 from ..start.aiding import pose_start, position_start
 from ..start.types import Start
 from .estimate import summary_entry
-from .spans import given_noise, relative_poses, unbroken, world_inflation, world_poses
+from .spans import given_noise, rejoining, relative_poses, unbroken, world_inflation, world_poses
 from .types import AbsolutePoses, AidingRows, PositionFixes
 
 
@@ -106,7 +106,8 @@ class RelativePoseKind(AidingKind):
         if (whole or one_map) and opts.relative_world:  # each pose also in the aiding's own world, a free state
             wn = noise if whole else relative_noise(rows, opts, True)[0]
             inflate = world_inflation(rows.t_ns) if one_map else 1.0
-            a = replace(a, world=world_poses(rows.sample, rows.R, rows.p, wn, label, inflate))
+            rejoin = rejoining(rows.t_ns, opts.max_relative_gap_s) if one_map else None
+            a = replace(a, world=world_poses(rows.sample, rows.R, rows.p, wn, label, inflate, rejoin))
             counts["world_poses"] = len(rows.sample)
         return a.since(s0), {**counts, "aiding_estimates": summary_entry(rows, noise, source)}
 

@@ -25,12 +25,20 @@ it in, and with each world pose weighed as an independent measurement at the per
 world's pull on that state (its velocity, its biases) doubled the coasting error (EuRoC V1_03, two
 10 s gaps). So across breaks the causal solver gives each world pose the per-pose noise times
 sqrt(rate x :data:`WORLD_CORRELATION_S`) (:func:`world_inflation`): the world's poses together weigh as
-one pose per 500 s (x100 at 20 Hz). Without breaks nothing coasts and the per-pose noise keeps the
+one pose per 500 s (x100 at 20 Hz). Weighed so, the world pulls a coast's end back onto the map over
+seconds (each pose at 20 cm where the coast ended a metre or two off: EuRoC V1_03 with the raw IMU 22-28 cm
+RMS over the first half second, against the VO's 2 cm). So the rows of the first :data:`REJOIN_S` after each
+break (:func:`rejoining`) take their translation noise times :data:`REJOIN_INFLATE` only (x10, 2 cm) in the
+causal solver: the map's error across a break changes little, the state's after a coast a lot. At their own
+noise (x1) they pinned the state to the map's local error and pulled the biases after it (ORB-SLAM2 trial 0
+with the profile: the causal track above the VO by up to 5.4 %, against 2.0 % without and 1.1 % at x10).
+Their rotation stays inflated (at their own rotation noise ten of them outweigh the world's attitude and
+turned it toward the coast's). Without breaks nothing coasts and the per-pose noise keeps the
 causal track on the VO (at or below it on 19 of 24 ORB-SLAM2 runs; inflated, 14); the batch smoothing
 pass always takes the per-pose noise (docs/experiments/navigate-vo.md)."""
 from __future__ import annotations
 
-from typing import Sequence, Tuple
+from typing import Optional, Sequence, Tuple
 
 import numpy as np
 
@@ -42,6 +50,10 @@ LONG_SPANS_S = (0.0, 1.0, 4.0, 16.0, 64.0)  # and the anchors 1-64 s back (the n
 # across breaks, a world pose's error is the map's, correlated over the recording: in the causal solver the
 # world's poses weigh together as one pose per WORLD_CORRELATION_S (each sigma x sqrt(rate x it))
 WORLD_CORRELATION_S = 500.0
+# the world's poses in the first REJOIN_S after each break: in the causal solver their translation sigmas
+# x REJOIN_INFLATE only (chosen on ORB-SLAM2 trial 0 among 1, 10 and the full inflation)
+REJOIN_S = 0.5
+REJOIN_INFLATE = 10.0
 ANCHOR_S = 1.0  # the spans longer than 0 join anchor rows, the first row of each ANCHOR_S
 
 
@@ -127,14 +139,29 @@ def relative_poses(sample: np.ndarray, t_ns: np.ndarray, R: np.ndarray, p: np.nd
 
 
 def world_poses(sample: np.ndarray, R: np.ndarray, p: np.ndarray, noise: PoseNoise, label: str,
-                causal_inflate: float = 1.0) -> WorldPoses:
+                causal_inflate: float = 1.0, rejoin: Optional[np.ndarray] = None) -> WorldPoses:
     """The rows' body poses ``R``, ``p`` in the aiding's world, tied to the graph through its free world
     frame (:class:`WorldPoses`), each with its per-pose noise, times ``causal_inflate`` in the causal
-    solver (:func:`world_inflation`)."""
+    solver (:func:`world_inflation`); on the rows where ``rejoin`` (:func:`rejoining`) their translation's
+    times :data:`REJOIN_INFLATE` (at most ``causal_inflate``)."""
     sig = np.r_[np.asarray(noise.rot_rad, dtype=np.float64), np.asarray(noise.trans_m, dtype=np.float64)]
     more = f", causal sigmas x{causal_inflate:.3g}" if causal_inflate != 1.0 else ""
     return WorldPoses(np.asarray(sample), np.asarray(R), np.asarray(p), np.tile(sig, (len(sample), 1)),
-                      f"{label}: poses in the aiding's world (a free frame{more})", causal_inflate=float(causal_inflate))
+                      f"{label}: poses in the aiding's world (a free frame{more})", causal_inflate=float(causal_inflate),
+                      rejoin=None if rejoin is None else np.asarray(rejoin, dtype=bool),
+                      rejoin_inflate=min(REJOIN_INFLATE, float(causal_inflate)))
+
+
+def rejoining(t_ns: np.ndarray, max_gap_s: float, within_s: float = REJOIN_S) -> np.ndarray:
+    """(M,) the rows at stamps ``t_ns`` less than ``within_s`` after the end of a break (consecutive rows
+    more than ``max_gap_s`` apart): the causal solver weighs their world positions at :data:`REJOIN_INFLATE`
+    times their own noise, so that the state a coast through the break left comes back onto the map
+    (module docstring)."""
+    t = np.asarray(t_ns, dtype=np.int64)
+    out = np.zeros(len(t), bool)
+    for b in np.flatnonzero(np.diff(t) * 1e-9 > max_gap_s) + 1:
+        out[b:] |= (t[b:] - t[b]) * 1e-9 < within_s
+    return out
 
 
 def world_inflation(t_ns: np.ndarray, correlation_s: float = WORLD_CORRELATION_S) -> float:

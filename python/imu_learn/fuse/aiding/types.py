@@ -174,12 +174,17 @@ class WorldPoses(_PosesAtSamples):
     # the causal solver's sigmas are ``sigmas`` times this (the map's slow error, :mod:`.spans`); the
     # batch smoothing pass takes ``sigmas`` as they are
     causal_inflate: float = 1.0
+    # (M,) or None: the poses just after a break (:mod:`.spans`), whose translation sigmas the causal solver
+    # inflates by ``rejoin_inflate`` only: they put the state a coast left back onto the map
+    rejoin: Optional[np.ndarray] = None
+    rejoin_inflate: float = 1.0
 
     def select(self, keep: np.ndarray, dropped_outage: int = 0) -> WorldPoses:
         """The poses where ``keep`` (M,) is True; ``dropped_outage`` is added to the count."""
         keep = np.asarray(keep, dtype=bool)
         return replace(self, idx=self.idx[keep], R=self.R[keep], p=self.p[keep], sigmas=self.sigmas[keep],
-                       dropped_outage=self.dropped_outage + int(dropped_outage))
+                       dropped_outage=self.dropped_outage + int(dropped_outage),
+                       rejoin=None if self.rejoin is None else self.rejoin[keep])
 
     def tied_samples(self) -> List[np.ndarray]:
         """The IMU samples the poses are tied to."""
@@ -192,10 +197,14 @@ class WorldPoses(_PosesAtSamples):
 
         if np.shape(self.sigmas) != (len(self.idx), 6):
             raise InvalidInputError(f"{self.label}: per-pose sigmas {np.shape(self.sigmas)}, expected ({len(self.idx)}, 6)")
-        for s, R, t, sig in zip(self.idx, self.R, self.p, self.sigmas):
+        rejoin = np.zeros(len(self.idx), bool) if self.rejoin is None else np.asarray(self.rejoin, dtype=bool)
+        for s, R, t, sig, plain in zip(self.idx, self.R, self.p, self.sigmas, rejoin):
             sig = np.asarray(sig, dtype=np.float64)
             smoothed = gtsam.noiseModel.Diagonal.Sigmas(sig)
-            causal = smoothed if self.causal_inflate == 1.0 else gtsam.noiseModel.Diagonal.Sigmas(self.causal_inflate * sig)
+            # a rejoining pose's rotation stays inflated: ten at their own rotation noise outweigh the world's
+            # attitude (its 1700 inflated poses hold it to ~0.1 deg) and turned the world toward the coast's
+            inflate = np.r_[np.full(3, self.causal_inflate), np.full(3, self.rejoin_inflate if plain else self.causal_inflate)]
+            causal = smoothed if np.all(inflate == 1.0) else gtsam.noiseModel.Diagonal.Sigmas(inflate * sig)
             between_at.setdefault(int(s), []).append((WORLD, gtsam.Pose3(gtsam.Rot3(R), t), (causal, smoothed)))
 
 
