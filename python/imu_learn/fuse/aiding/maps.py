@@ -10,9 +10,10 @@ compared with the IMU's dead reckoning over it, before any fusion:
   over :data:`BIAS_PAIR_S` inside the runs on either side, within :data:`BIAS_S` of the break (raw
   MEMS gyros read tens of mrad/s off: EuRoC's ADIS16448 80 mrad/s on z, 46° over a 10 s break), taken
   off the gyro over the break before it is compared;
-* **rotation**: the aiding's ``R_aᵀ R_b`` against the gyro's chain ``C_aᵀ C_b`` (:func:`.pairs.gyro_orientation`,
-  its bias taken off), within :data:`ROT_DEG` plus :data:`GYRO_DRIFT_DEG_S` per second of the break (what
-  is left of the bias: its change and its estimate's error) plus :data:`ROT_FRACTION` of the turn over it (an aiding body frame a degree or two
+* **rotation**: the aiding's ``R_aᵀ R_b`` against the gyro's chain ``C_aᵀ C_b``
+  (:func:`.pairs.gyro_orientation`, its bias taken off), within :data:`ROT_DEG` plus
+  :data:`GYRO_DRIFT_DEG_S` per second of the break (what is left of the bias: its change and its
+  estimate's error) plus :data:`ROT_FRACTION` of the turn over it (an aiding body frame a degree or two
   off the IMU's: on TUM-VI's motion capture 1.7-2.8° over turns of 60-140°), the median over the
   pairs of the :data:`EDGE_ROWS` rows on each side (a pose at a break's edge is often off: TUM-VI's
   motion capture 2.8° at one dropout); a new map's first frame is the camera's pose at its restart,
