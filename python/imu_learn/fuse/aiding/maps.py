@@ -41,7 +41,7 @@ from scipy.spatial.transform import Rotation
 
 from imu_learn.calib import metric_scale
 
-from .pairs import gyro_orientation, runs, within
+from .pairs import gyro_orientation, rotation_pairs, runs, within
 
 ROT_DEG = 5.0
 GYRO_DRIFT_DEG_S = 0.1
@@ -123,37 +123,46 @@ def one_map(imu_t_ns: np.ndarray, gyro: np.ndarray, acc: np.ndarray, sample: np.
         return OneMap(False, [], "too few rows inside the runs to find gravity in the aiding's world")
     imu = _Imu(np.asarray(imu_t_ns, dtype=np.int64), t, dt, np.asarray(gyro, dtype=np.float64), C,
                np.asarray(acc, dtype=np.float64), g)
+    rates = _Rates.of(imu_t_ns, sample, R, max_gap_s, C, tau)
     out: List[Dict[str, float]] = []
     why = ""
     for b in np.flatnonzero(np.diff(run)) + 1:
-        entry, fail = _check_break(imu, tau, sample, p, R, run, int(b))
+        entry, fail = _check_break(imu, tau, sample, p, R, run, int(b), rates)
         out.append(entry)
         why = why or fail
     return OneMap(not why, out, why)
 
 
-def gyro_bias_across(imu: _Imu, tau: np.ndarray, sample: np.ndarray, R: np.ndarray, run: np.ndarray,
-                     b: int) -> np.ndarray:
+@dataclass(frozen=True)
+class _Rates:
+    """Inside the runs, rows ``i`` and ``j`` :data:`BIAS_PAIR_S` apart (:func:`.pairs.rotation_pairs`) and
+    the rate [rad/s] of the gyro's rotation over each against the aiding's, ``log((R_iᵀ R_j)ᵀ C_iᵀ C_j) / Δt``."""
+
+    i: np.ndarray
+    j: np.ndarray
+    rate: np.ndarray
+
+    @staticmethod
+    def of(imu_t_ns: np.ndarray, sample: np.ndarray, R: np.ndarray, max_gap_s: float, C: np.ndarray,
+           tau: np.ndarray) -> _Rates:
+        k = max(1, int(round(BIAS_PAIR_S / max(float(np.median(np.diff(tau))), 1e-3))))
+        pr = rotation_pairs(imu_t_ns, sample, R, max_gap_s, k, C=C)
+        if not len(pr):
+            return _Rates(pr.a, pr.b, np.zeros((0, 3)))
+        rate = Rotation.from_matrix(np.einsum("nki,nkj->nij", pr.aiding, pr.gyro)).as_rotvec() / pr.dt_s[:, None]
+        return _Rates(pr.a, pr.b, rate)
+
+
+def gyro_bias_across(rates: _Rates, tau: np.ndarray, run: np.ndarray, b: int) -> np.ndarray:
     """(3,) the gyro's bias [rad/s] across the break before row ``b`` (module docstring): the per-axis median
-    of the rate ``log((R_iᵀ R_j)ᵀ C_iᵀ C_j) / Δt`` over rows ``BIAS_PAIR_S`` apart inside the runs on either
-    side, within ``BIAS_S`` of the break; zero with fewer than three such pairs."""
-    a = b - 1
-    k = max(1, int(round(BIAS_PAIR_S / max(float(np.median(np.diff(tau))), 1e-3))))
-    i = within(run, k)
-    j = i + k
+    of ``rates`` inside the runs on either side, within ``BIAS_S`` of the break; zero with fewer than three."""
+    a, i, j = b - 1, rates.i, rates.j
     near = (((run[i] == run[a]) & (tau[i] >= tau[a] - BIAS_S)) | ((run[i] == run[b]) & (tau[j] <= tau[b] + BIAS_S)))
-    i, j = i[near], j[near]
-    if len(i) < 3:
-        return np.zeros(3)
-    C = imu.C
-    d_aid = np.einsum("nki,nkj->nij", R[i], R[j])
-    d_gyro = np.einsum("nki,nkj->nij", C[sample[i]], C[sample[j]])
-    rate = Rotation.from_matrix(np.einsum("nki,nkj->nij", d_aid, d_gyro)).as_rotvec()
-    return np.median(rate / (imu.t[sample[j]] - imu.t[sample[i]])[:, None], axis=0)
+    return np.median(rates.rate[near], axis=0) if near.sum() >= 3 else np.zeros(3)
 
 
 def _check_break(imu: _Imu, tau: np.ndarray, sample: np.ndarray, p: np.ndarray, R: np.ndarray, run: np.ndarray,
-                 b: int) -> Tuple[Dict[str, float], str]:
+                 b: int, rates: _Rates) -> Tuple[Dict[str, float], str]:
     """(the break's figures, why it is not in one map or "") of the break before row ``b``."""
     a = b - 1
     T = float(tau[b] - tau[a])
@@ -161,7 +170,7 @@ def _check_break(imu: _Imu, tau: np.ndarray, sample: np.ndarray, p: np.ndarray, 
     # break's edge is often off (a tracker losing or regaining its view)
     before = [i for i in range(a, a - EDGE_ROWS, -1) if i >= 0 and run[i] == run[a]]
     after = [j for j in range(b, b + EDGE_ROWS) if j < len(run) and run[j] == run[b]]
-    bias = gyro_bias_across(imu, tau, sample, R, run, b)
+    bias = gyro_bias_across(rates, tau, run, b)
     s0 = int(sample[before[-1]])
     C = imu.chain(s0, int(sample[after[-1]]), bias)  # C[n - s0]: sample n in the frame of s0, bias off
     sa, sb = int(sample[a]), int(sample[b])

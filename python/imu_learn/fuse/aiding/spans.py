@@ -109,7 +109,13 @@ def unbroken(t_ns: np.ndarray, max_gap_s: float) -> bool:
     Only such aiding is tied to its world (or over long spans): a visual system that lost track may
     restart in a new map, and with breaks (10 s camera gaps on EuRoC) the long spans made the coasting
     worse, the causal estimate diverging after a break (docs/experiments/navigate-vo.md)."""
-    return bool(np.all(np.diff(np.asarray(t_ns, dtype=np.int64)) * 1e-9 <= max_gap_s))
+    return len(run_starts(t_ns, max_gap_s)) == 0
+
+
+def run_starts(t_ns: np.ndarray, max_gap_s: float) -> np.ndarray:
+    """The rows (at stamps ``t_ns``) that start a run after a break: further than ``max_gap_s`` after the
+    row before (the break rule of :func:`unbroken`, :func:`relative_poses`' count and :func:`rejoining`)."""
+    return np.flatnonzero(np.diff(np.asarray(t_ns, dtype=np.int64)) * 1e-9 > max_gap_s) + 1
 
 
 def given_noise(rel_rot_rad: float, rel_trans_m: float) -> PoseNoise:
@@ -132,7 +138,7 @@ def relative_poses(sample: np.ndarray, t_ns: np.ndarray, R: np.ndarray, p: np.nd
     text = (f"{label}: relative poses over spans {', '.join(f'{s:g}' for s in spans_s)} s, median sigma "
             f"{np.rad2deg(rot):.3g} deg / {trans:.3g} m")
     a = RelativePoses(sample[i], sample[j], R_ij, t_ij, rot, trans, text, sigmas=sig)
-    consecutive = int(np.sum(np.diff(np.asarray(t_ns, dtype=np.int64)) * 1e-9 > max_gap_s))
+    consecutive = len(run_starts(t_ns, max_gap_s))
     counts = {"relative_poses": int(len(i)), "relative_poses_per_span": np.bincount(which, minlength=len(spans_s)).tolist(),
               "not_chained_over_gaps": consecutive}
     return a, counts
@@ -158,10 +164,11 @@ def rejoining(t_ns: np.ndarray, max_gap_s: float, within_s: float = REJOIN_S) ->
     times their own noise, so that the state a coast through the break left comes back onto the map
     (module docstring)."""
     t = np.asarray(t_ns, dtype=np.int64)
-    out = np.zeros(len(t), bool)
-    for b in np.flatnonzero(np.diff(t) * 1e-9 > max_gap_s) + 1:
-        out[b:] |= (t[b:] - t[b]) * 1e-9 < within_s
-    return out
+    starts = run_starts(t, max_gap_s)
+    run = np.searchsorted(starts, np.arange(len(t)), side="right")  # 0 before the first break
+    if not len(starts):
+        return np.zeros(len(t), bool)
+    return (run > 0) & ((t - t[starts[np.maximum(run - 1, 0)]]) * 1e-9 < within_s)
 
 
 def world_inflation(t_ns: np.ndarray, correlation_s: float = WORLD_CORRELATION_S) -> float:
