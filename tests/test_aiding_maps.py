@@ -14,7 +14,7 @@ pytest.importorskip("gtsam")
 from imu_learn.fuse.aiding import kinds as kinds_module  # noqa: E402
 from imu_learn.fuse.aiding.kinds import KINDS  # noqa: E402
 from imu_learn.fuse.aiding.maps import one_map  # noqa: E402
-from imu_learn.fuse.aiding.spans import world_inflation  # noqa: E402
+from imu_learn.fuse.aiding.spans import REJOIN_INFLATE, world_inflation  # noqa: E402
 from imu_learn.fuse.graph import IncrementalFusion, feed, samples_of  # noqa: E402
 from imu_learn.fuse.navigate import NavigateOptions  # noqa: E402
 from imu_learn.fuse.settings import FusionSettings  # noqa: E402
@@ -88,7 +88,9 @@ def test_one_map_ties_its_world_in_both_passes(broken, monkeypatch):
     chained, _, a0 = fused(False)
     tied, counts, a1 = fused(True)
     assert a0.world is None and a1.world is not None
-    assert a1.world.causal_inflate == pytest.approx(world_inflation(t_ns[sample][~gap]))  # x100 at 20 Hz
+    ratio = a1.world.causal_sigmas / a1.world.sigmas  # x100 at 20 Hz; the rejoining rows' translation x10
+    rejoin = ratio[:, 3] != ratio[:, 0]
+    np.testing.assert_allclose(ratio[~rejoin], world_inflation(t_ns[sample][~gap]))
     assert counts["world_poses"] == tied.counts["world_pose_factors"] == int((~gap).sum())
     at = np.isin(tied.kf_idx, sample)
     after = at & (tied.kf_idx > sample[np.argmax(gap)])
@@ -103,8 +105,9 @@ def test_one_map_ties_its_world_in_both_passes(broken, monkeypatch):
                                                                              rmse(chained.causal_p, after))
     # the rows of the first half second after the break rejoin the map at 10x their translation noise (not
     # 100x): the causal track is back on it within the first second, where the inflated world takes longer
-    rejoin = a1.world.rejoin
-    assert rejoin is not None and rejoin.sum() == 10 and a1.world.idx[rejoin][0] == sample[np.argmax(gap) + gap.sum()]
+    np.testing.assert_allclose(ratio[rejoin], np.r_[np.full(3, world_inflation(t_ns[sample][~gap])),
+                                                    np.full(3, REJOIN_INFLATE)][None, :].repeat(rejoin.sum(), 0))
+    assert rejoin.sum() == 10 and a1.world.idx[rejoin][0] == sample[np.argmax(gap) + gap.sum()]
     monkeypatch.setattr(kinds_module, "rejoining", lambda t_ns, max_gap_s: np.zeros(len(t_ns), bool))
     slow, _, _ = fused(True)
     t_kf = (t_ns[tied.kf_idx] - t_ns[sample[np.argmax(gap) + gap.sum()]]) * 1e-9

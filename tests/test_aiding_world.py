@@ -175,7 +175,7 @@ def test_world_poses_weigh_as_the_maps_slow_error_in_the_causal_solver_alone(syn
     np.testing.assert_allclose(between[int(sample[2])][0][2][0].sigmas(), 100.0 * smoothed.sigmas())
     a, _ = KINDS["relative-pose"].build(rows_of(t_ns, gyro, acc, sample, R_A, p_A), 0, np.eye(3), np.zeros(3),
                                         NavigateOptions(), "vo", "")
-    assert a.world.causal_inflate == 1.0 and a.world.rejoin is None  # no breaks: the per-pose noise in both passes
+    assert a.world.causal_sigmas is None  # no breaks: the per-pose noise in both passes
 
 
 def test_the_rows_rejoining_after_a_break_are_those_of_its_first_half_second():

@@ -171,20 +171,17 @@ class WorldPoses(_PosesAtSamples):
     sigmas: np.ndarray
     label: str
     dropped_outage: int = 0
-    # the causal solver's sigmas are ``sigmas`` times this (the map's slow error, :mod:`.spans`); the
-    # batch smoothing pass takes ``sigmas`` as they are
-    causal_inflate: float = 1.0
-    # (M,) or None: the poses just after a break (:mod:`.spans`), whose translation sigmas the causal solver
-    # inflates by ``rejoin_inflate`` only: they put the state a coast left back onto the map
-    rejoin: Optional[np.ndarray] = None
-    rejoin_inflate: float = 1.0
+    # (M, 6) or None: the causal solver's sigmas (None: ``sigmas``); the batch smoothing pass takes ``sigmas``.
+    # :func:`.spans.world_poses` sets them to ``sigmas`` times the map's slow error, less on the rows that rejoin
+    # the map after a break (:mod:`.spans`)
+    causal_sigmas: Optional[np.ndarray] = None
 
     def select(self, keep: np.ndarray, dropped_outage: int = 0) -> WorldPoses:
         """The poses where ``keep`` (M,) is True; ``dropped_outage`` is added to the count."""
         keep = np.asarray(keep, dtype=bool)
         return replace(self, idx=self.idx[keep], R=self.R[keep], p=self.p[keep], sigmas=self.sigmas[keep],
                        dropped_outage=self.dropped_outage + int(dropped_outage),
-                       rejoin=None if self.rejoin is None else self.rejoin[keep])
+                       causal_sigmas=None if self.causal_sigmas is None else self.causal_sigmas[keep])
 
     def tied_samples(self) -> List[np.ndarray]:
         """The IMU samples the poses are tied to."""
@@ -195,16 +192,14 @@ class WorldPoses(_PosesAtSamples):
         model))]}``."""
         import gtsam
 
-        if np.shape(self.sigmas) != (len(self.idx), 6):
-            raise InvalidInputError(f"{self.label}: per-pose sigmas {np.shape(self.sigmas)}, expected ({len(self.idx)}, 6)")
-        rejoin = np.zeros(len(self.idx), bool) if self.rejoin is None else np.asarray(self.rejoin, dtype=bool)
-        for s, R, t, sig, plain in zip(self.idx, self.R, self.p, self.sigmas, rejoin):
-            sig = np.asarray(sig, dtype=np.float64)
-            smoothed = gtsam.noiseModel.Diagonal.Sigmas(sig)
-            # a rejoining pose's rotation stays inflated: ten at their own rotation noise outweigh the world's
-            # attitude (its 1700 inflated poses hold it to ~0.1 deg) and turned the world toward the coast's
-            inflate = np.r_[np.full(3, self.causal_inflate), np.full(3, self.rejoin_inflate if plain else self.causal_inflate)]
-            causal = smoothed if np.all(inflate == 1.0) else gtsam.noiseModel.Diagonal.Sigmas(inflate * sig)
+        causal_sigmas = self.sigmas if self.causal_sigmas is None else self.causal_sigmas
+        for name, sig in (("sigmas", self.sigmas), ("causal sigmas", causal_sigmas)):
+            if np.shape(sig) != (len(self.idx), 6):
+                raise InvalidInputError(f"{self.label}: per-pose {name} {np.shape(sig)}, expected ({len(self.idx)}, 6)")
+        for s, R, t, sig, causal_sig in zip(self.idx, self.R, self.p, self.sigmas, causal_sigmas):
+            smoothed = gtsam.noiseModel.Diagonal.Sigmas(np.asarray(sig, dtype=np.float64))
+            causal = (smoothed if np.array_equal(causal_sig, sig)
+                      else gtsam.noiseModel.Diagonal.Sigmas(np.asarray(causal_sig, dtype=np.float64)))
             between_at.setdefault(int(s), []).append((WORLD, gtsam.Pose3(gtsam.Rot3(R), t), (causal, smoothed)))
 
 
