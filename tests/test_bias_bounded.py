@@ -8,6 +8,7 @@ from __future__ import annotations
 import argparse
 import json
 import math
+from dataclasses import replace
 
 import numpy as np
 
@@ -100,6 +101,25 @@ def test_a_steady_turn_is_refused_and_a_real_rest_accepted():
     est = still_bias(t, g, a, BIAS_SETTINGS)
     assert est.gyro_bias is not None and np.all(np.abs(est.gyro_bias - BIAS) < 5e-4) and est.still_s > 15.0
     assert len(est.refused) == 1 and est.refused[0]["t0_s"] > 20.0  # the turn after it
+
+
+def test_a_slow_turn_is_refused_where_the_device_measured_its_rest_spread():
+    """A profile's ``bias_std`` from full-floor refits can be far wider than the device's bias (Fetch's
+    34-138 mrad/s x sqrt(6 recordings), the prior then capped at 50 mrad/s: a 0.1 rad/s turn passed as rest and ``--bias moving``
+    subtracted it); where its ``bias_prior`` measured the spread of the bias at rest (moving, still error,
+    rest-to-motion: a few mrad/s), that spread, floored at 5 mrad/s, is the still rule's sigma."""
+    wide = BiasPrior.from_bias_std([0.082, 0.199, 0.338], "fetch-like")
+    measured = BiasPrior.from_bias_std([0.082, 0.199, 0.338], "fetch-like", measured={
+        "moving_std_rad_s": [0.0013, 0.0037, 0.0049], "still_error_std_rad_s": [0.0019, 0.0034, 0.0048],
+        "rest_to_motion_rad_s": [0.0, 0.0, -0.0086]})
+    assert np.allclose(wide.rest_std(), wide.std) and np.allclose(wide.std, MEMS_BIAS_BOUND)
+    assert np.allclose(measured.rest_std(), [BIAS_SPREAD_FLOOR, math.hypot(0.0037, 0.0034),
+                                             math.sqrt(0.0049 ** 2 + 0.0048 ** 2 + 0.0086 ** 2)])
+    t, g, a = steady(20.0, 40.0, rate=0.1)
+    for prior, turn_refused in ((wide, False), (measured, True)):
+        est = still_bias(t, g, a, replace(BIAS_SETTINGS, gravity=G, prior=prior))
+        assert est.gyro_bias is not None and np.all(np.abs(est.gyro_bias - BIAS) < 5e-4) == turn_refused
+        assert bool(est.refused) == turn_refused
 
 
 def test_refine_keeps_the_profiles_bias_on_a_steady_turn(tmp_path, capsys):

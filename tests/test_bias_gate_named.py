@@ -6,6 +6,7 @@ profile has no figure, it is applied as before. The synthetic recording's biases
 (the oracle), independent of the estimators."""
 from __future__ import annotations
 
+import json
 import logging
 
 import numpy as np
@@ -115,3 +116,15 @@ def test_refine_says_so(tmp_path, caplog):
     assert entry["method"] == "still" and not entry["applied"] and entry["gate"]["entered"] is False
     lines = [r.getMessage() for r in caplog.records if r.getMessage().startswith("--bias still:")]
     assert len(lines) == 1 and "kept out" in lines[0]
+
+
+def test_refine_says_no_bias_was_subtracted_when_the_gate_keeps_it_out(tmp_path, capsys):
+    """The command's closing line and the summary's ``applied`` say what was done, not what was asked: a
+    gated ``--bias still`` subtracts nothing, so neither names the still stretches' bias as removed."""
+    t, g, a = robot()
+    entry, g_out = refine_identity_floor(tmp_path, t, g, a, "still", measured(still=(0.0046, 0.0020)), 0.005)
+    assert not entry["applied"] and np.allclose(g_out, g, atol=1e-6)
+    printed = capsys.readouterr().out
+    summary = json.loads((tmp_path / "o.csv.summary.json").read_text())
+    for said in (printed, "; ".join(summary["applied"])):
+        assert "--bias still: no bias subtracted" in said and "still stretches removed" not in said

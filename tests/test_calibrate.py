@@ -201,3 +201,22 @@ def test_a_profile_names_recordings_relative_to_the_data_root(tmp_path):
     assert under_root(str(tmp_path / "elsewhere"), tmp_path / "root") == str(tmp_path / "elsewhere")
     assert under_root("euroc/MH_01_easy", tmp_path / "root") == "euroc/MH_01_easy"
     assert under_root(None, tmp_path) is None and under_root(str(tmp_path), None) == str(tmp_path)
+
+
+@pytest.mark.parametrize("made", [False, True])
+def test_ctrl_c_says_what_the_output_folder_holds(tmp_path, capsys, monkeypatch, made):
+    """Ctrl-C in the fit: exit 130, and the line names the output folder as holding complete files only where
+    it exists (an earlier run's), else says nothing was written."""
+    import imu_learn.cli.calibrate as cli_calibrate
+
+    def interrupted(*a, **k):
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(cli_calibrate, "calibrate", interrupted)
+    out = tmp_path / "out"
+    if made:
+        out.mkdir()
+    assert main(["calibrate", "--input", str(CROP), "--out", str(out), "--quiet", "--no-plot"]) == 130
+    err = capsys.readouterr().err
+    assert (f"{out} keeps only complete files" in err) == made and ("nothing written" in err) != made
+    assert out.exists() == made

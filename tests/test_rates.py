@@ -5,6 +5,7 @@ one line naming both rates (exit 2; ``--force`` proceeds with a warning) and war
 device."""
 from __future__ import annotations
 
+import json
 from pathlib import Path
 
 import numpy as np
@@ -97,6 +98,19 @@ def test_another_device_is_one_warning_line():
     assert rates.recording_device("asl", "tum-vi") == "tum-vi"
     assert rates.recording_device("fetch") == "fetch"
     assert rates.recording_device("csv-columns", "auto", "my-imu") == "my-imu"
+
+
+@pytest.mark.parametrize("profile", sorted((MODELS / "profiles").glob("*/profile.json")))
+def test_a_shipped_profile_is_for_its_datasets_recordings_and_not_the_others(profile):
+    """A profile named DATASET_SENSOR is for that dataset's recordings: no warning there (the shipped Fetch
+    profile on a Fetch recording warned before), one line on every other dataset's."""
+    device = json.loads(profile.read_text())["device"]
+    made = [rates.MadeFor(f"profile {profile.parent.name}", None, device)]
+    own = [d for d in rates.DEVICE_FORMATS if device.startswith(d.replace("-", ""))]
+    assert len(own) == 1, (device, own)
+    assert rates.check("rec", None, own[0], made) == []
+    for other in set(rates.DEVICE_FORMATS) - set(own):
+        assert len(rates.check("rec", None, other, made)) == 1, other
 
 
 # ---- what checkpoints record ---------------------------------------------------------------------

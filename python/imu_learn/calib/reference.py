@@ -673,7 +673,8 @@ def frame_lines(fit: FrameFit) -> List[str]:
     if fit.in_imu_frame:
         return [f"reference: in the IMU frame (rotation {fit.rotation_deg:.2f}°, lag {fit.lag_s * 1e3:+.1f} ms, "
                 f"tilt {fit.tilt_deg:.2f}°, scale {fit.scale:.4f} ± {fit.scale_std:.4f})"]
-    out = [f"reference: rotation to the IMU {fit.rotation_deg:.2f}° ± {fit.rotation_std_deg:.2f}° "
+    spread = f" ± {fit.rotation_std_deg:.2f}°" if math.isfinite(fit.rotation_std_deg) else " (no spread measured)"
+    out = [f"reference: rotation to the IMU {fit.rotation_deg:.2f}°{spread} "
            f"({fit.method}; rate residual {fit.rate_residual:.3f} rad/s)"]
     out.append(f"reference: lag {fit.lag_s * 1e3:+.1f} ms (|w| correlation {fit.lag_correlation:.2f})"
                + ("; moved onto the IMU's clock" if ap.get("lag") else "; left to the floor's time offset"))

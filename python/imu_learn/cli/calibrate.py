@@ -184,11 +184,16 @@ def run(args: argparse.Namespace, rest: List[str], keep: Callable[[Any], None]) 
     source = source_of(args)
     refuse_navigator_options(args, source.kind)  # the navigator's options: the positions kind only
     writes = source.kind == "positions"  # its reading runs the smoother, which writes into --out
+
+    def kept() -> str:
+        return (f"{args.out} keeps only complete files (each written atomically)" if Path(args.out).exists()
+                else f"nothing written ({args.out} not created)")
+
     if writes:
-        keep(f"{args.out} keeps only complete files (each written atomically)")
+        keep(kept)
     inp = source.read(say)
     if not writes:
-        keep(f"{args.out} keeps only complete files (each written atomically)")
+        keep(kept)
     res = calibrate(inp, args.out, CalibOptions(min_still_s=args.min_still_s, plot=not args.no_plot, force=args.force,
                                                  select=args.select),
                     say)

@@ -117,12 +117,15 @@ def run(args: argparse.Namespace, rest: List[str], keep: Callable[[Any], None]) 
     rec = recording(args, src)
     rate = correction.check(plan, rec, args.force)
     target = rewrite_recording(src, args.input, args.out, [plan.apply], args.copy_folder, args.fill_covariance)
+    bias = bias_entry(args, plan)
+    if args.bias != "none" and not bias.get("applied"):  # the words said what was asked: say what was done
+        plan.words[plan.words.index(REGISTRY[args.bias].words)] = f"--bias {args.bias}: no bias subtracted"
     summary = {
         "input": str(args.input), "output": str(target), "format": src.fmt,
         "checkpoint": None if args.checkpoint is None else str(args.checkpoint),
         "profile": None if args.profile is None else str(args.profile),
         **correction.summary(plan, rec, rate, correction.guard_entry(plan, rec, rate)),
-        "bias": bias_entry(args, plan),
+        "bias": bias,
     }
     where = summary_path(args.out, target)
     write_summary(where, summary)

@@ -24,10 +24,12 @@ components need the device at rest in several attitudes, and the scale error ent
 **The still rule** (:func:`at_rest`, the package's one): quiet is not enough. A wheeled robot turning
 at a steady rate is as quiet as rest and keeps its accelerometer on gravity, so a window is at rest
 only where the gyro itself, not only its spread, lies near what the device's bias can be: ``|mean
-gyro - prior bias| <= k sigma`` on every axis (:data:`STILL_SIGMAS`, 3), sigma the prior's spread
-(:class:`BiasPrior`: the device's bias spread between recordings, a profile's ``gyroscope.bias_std`` ×
+gyro - prior bias| <= k sigma`` on every axis (:data:`STILL_SIGMAS`, 3), sigma what the gyro reads at
+rest (:meth:`BiasPrior.rest_std`: measured on the device's training recordings where its profile's
+``bias_prior`` holds the figures, floored at :data:`BIAS_SPREAD_FLOOR` 5 mrad/s; else the prior's spread,
+the device's bias spread between recordings, a profile's ``gyroscope.bias_std`` ×
 sqrt(its recording groups), ``Profile.gyro_bias_prior_std`` (one recording: ``bias_std``), floored at
-:data:`BIAS_SPREAD_FLOOR` 5 mrad/s and capped at :data:`MEMS_BIAS_BOUND` 0.05 rad/s; without a profile
+:data:`BIAS_SPREAD_FLOOR` and capped at :data:`MEMS_BIAS_BOUND` 0.05 rad/s; without a profile
 the MEMS bound itself), and the mean accelerometer norm within :data:`ACC_NORM_TOL` (0.3 m/s^2, 3 %) of
 gravity. Refine's and navigate's ``--bias`` detector applies it to each stretch it finds (the norm
 per window, the gyro on the stretch's mean; the recording's prior: :data:`BIAS_SETTINGS` plus
@@ -165,6 +167,22 @@ class BiasPrior:
         """The rest-to-motion change the still estimate adds [rad/s] (3,): zero where not measured."""
         return np.zeros(3) if self.rest_to_motion is None else np.asarray(self.rest_to_motion, dtype=np.float64)
 
+    def rest_std(self) -> np.ndarray:
+        """(3,) rad/s: the spread of what the gyro reads at rest, the still rule's sigma. Where the device's
+        training recordings measured it (``moving_std``): sqrt(moving_std² + still_error_std² + shift²) per
+        axis (the bias while moving, how far rest reads from it, the systematic change between them),
+        floored at :data:`BIAS_SPREAD_FLOOR` and at most ``std``; else ``std``. A profile's ``bias_std``
+        is the spread of its full floor's refits per recording, where a bias trades with terms the motion
+        barely excites (a level robot's g-sensitivity: Fetch's 34-138 mrad/s against 1-5 measured), so
+        that spread lets a slow steady turn pass for rest."""
+        std = np.asarray(self.std, dtype=np.float64)
+        if self.moving_std is None:
+            return std
+        parts = [np.asarray(self.moving_std), np.zeros(3) if self.still_error_std is None
+                 else np.asarray(self.still_error_std), self.shift()]
+        spread = np.sqrt(sum(np.square(x) for x in parts))
+        return np.minimum(np.maximum(spread, BIAS_SPREAD_FLOOR), std)
+
 
 MEMS_PRIOR = BiasPrior()
 
@@ -176,7 +194,7 @@ def at_rest(gyro_mean: np.ndarray, acc_norm: Optional[np.ndarray], gravity: Opti
     prior's spread of its bias on every axis, and (``gravity`` set) the mean accelerometer norm (...)
     within ``acc_tol`` of ``gravity``. Returns a bool array (...)."""
     g = np.asarray(gyro_mean, dtype=np.float64)
-    ok = np.all(np.abs(g - np.asarray(prior.bias)) <= sigmas * np.asarray(prior.std), axis=-1)
+    ok = np.all(np.abs(g - np.asarray(prior.bias)) <= sigmas * prior.rest_std(), axis=-1)
     if gravity is not None and acc_norm is not None:
         ok &= np.abs(np.asarray(acc_norm, dtype=np.float64) - gravity) <= acc_tol
     return ok

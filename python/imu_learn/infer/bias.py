@@ -133,8 +133,8 @@ def _still(ctx: Context, t_ns: np.ndarray, gyro: np.ndarray, acc: np.ndarray) ->
         if est.refused:
             top = max(max(abs(v) for v in r["gyro_mean_rad_s"]) for r in est.refused)
             why = ("no still stretch in {where}: " + f"{len(est.refused)} quiet stretch(es) refused by the still "
-                   f"rule (mean gyro up to {top:.3f} rad/s, beyond {STILL_SIGMAS:g} sigma of the device's bias "
-                   "spread: a steady turn, not rest)")
+                   f"rule (mean gyro up to {top:.3f} rad/s, beyond {STILL_SIGMAS:g} sigma of what the device's "
+                   "gyro reads at rest: a steady turn, not rest)")
         return BiasEstimate("still", None, np.zeros((3, 3)), detail, why)
     # the rest-to-motion change: the fixed floor, raised to what the device's training recordings
     # measured where the profile says (prior.still_error_std)
@@ -411,7 +411,7 @@ REGISTRY: Dict[str, Estimator] = {e.name: e for e in (
               "combined by their uncertainties (recommended)"),
     Estimator("still", _still, "the recording's own gyro bias from its still stretches removed",
               "the mean gyro over its still stretches (the still rule: quiet, at gravity's norm, the gyro within "
-              "3 sigma of the device's bias spread)"),
+              "3 sigma of what the device's gyro reads at rest)"),
     Estimator("gravity", _gravity, "the recording's own gyro bias from gravity consistency removed (rates "
               "perpendicular to gravity only)",
               "gravity consistency over 10 s windows (rates perpendicular to gravity only; kept out where the "
@@ -461,15 +461,18 @@ def combine(parts: List[BiasEstimate], prior: BiasPrior, with_prior: bool = Fals
     (:func:`better_than_prior`)."""
     b0, L0 = np.asarray(prior.bias, dtype=np.float64), prior_information(prior)
     used, info, num, details, seen = [], np.zeros((3, 3)), np.zeros(3), {}, np.zeros((3, 3))
+    out: List[str] = []  # why each part that did not enter stayed out
     for p in parts:
         verdict = bound(p, prior)
         details[p.method] = {**p.detail, "bound": verdict.to_dict()}
         if verdict.decision not in ("applied", "shrunk"):
+            out.append(f"{p.method} " + ("found none" if verdict.decision == "none" else "rejected by the bound"))
             continue
         ok, rms = better_than_prior(p, prior)
         if rms is not None:
             details[p.method]["gate"] = gate_entry(ok, rms)
         if not ok:
+            out.append(f"{p.method} kept out by the device's training recordings")
             continue
         used.append(p.method)
         info += p.information
@@ -484,7 +487,7 @@ def combine(parts: List[BiasEstimate], prior: BiasPrior, with_prior: bool = Fals
     if not used:
         detail.update({"gyro_bias_rad_s": None, "gyro_bias_deg_s": None})
         return BiasEstimate("auto", None, np.zeros((3, 3)), detail,
-                            "no estimator gave an estimate within the bound in {where}")
+                            "no estimator entered in {where} (" + ", ".join(out) + ")")
     if with_prior:
         b = np.linalg.solve(L0 + info, L0 @ b0 + num)
     else:

@@ -48,8 +48,16 @@ def recording_device(fmt: str, given_format: str = "auto", name: Optional[str] =
     return None
 
 
+def _key(name: str) -> str:
+    return "".join(c for c in name.lower() if c.isalnum())
+
+
 def _same_device(recording: str, made_for: str) -> bool:
-    return recording.lower() in {d.strip().lower() for d in made_for.split("+")}
+    """Whether a recording of device ``recording`` is one ``made_for`` (devices joined by "+") was made for:
+    the same name, or a profile named ``DATASET_SENSOR`` (the shipped ones: ``fetch_debias``,
+    ``tumvi_bmi160``) for a recording of that dataset's format; case and punctuation aside."""
+    names = [d.strip() for d in made_for.split("+")]
+    return _key(recording) in {_key(n) for n in names} | {_key(n.split("_")[0]) for n in names}
 
 
 def check(recording: str, rate_hz: Optional[float], device: Optional[str], made_for: Sequence[MadeFor],
