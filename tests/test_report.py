@@ -235,7 +235,7 @@ def test_floor_table_divides_each_learned_cell_by_the_best_floor_method():
     assert all(x["ratio"] == pytest.approx(5.0) for x in floor if x["method"] == "proposed (fit run)")
     assert not any(x["method"] == "gyro-denoise" and x["term"] == "trans_m" for x in floor)  # no translation
     text = report.summary_text(result)
-    assert "learned / best floor (raw)" in text and "5.00 (raw)" in text
+    assert "learned (and profile:) / best floor (raw)" in text and "5.00 (raw)" in text
     # a better floor method in the run takes over where it is lower
     result["methods"] = ["raw", "timing"] + [m for m in result["methods"] if m != "raw"]
     result["rows"] += [{**x, "method": "timing", "rot_rad": x["rot_rad"] / 2} for x in result["rows"] if x["method"] == "raw"]
@@ -243,4 +243,4 @@ def test_floor_table_divides_each_learned_cell_by_the_best_floor_method():
     assert {x["floor"] for x in floor if x["term"] == "rot_rad"} == {"timing"}
     assert {x["floor"] for x in floor if x["term"] == "trans_m"} == {"raw"}
     assert all(x["ratio"] == pytest.approx(10.0) for x in floor if x["method"] == "proposed (fit run)" and x["term"] == "rot_rad")
-    assert "## Learned methods against the floor" in report.markdown(result, report.relative_pose_table(result), [], [], [])
+    assert "## Learned methods (and shipped profiles) against the floor" in report.markdown(result, report.relative_pose_table(result), [], [], [])

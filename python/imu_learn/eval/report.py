@@ -436,8 +436,8 @@ def _md_floor(r: Dict[str, Any]) -> List[str]:
     floor = floor_table(r)
     if not floor:
         return []
-    L = ["## Learned methods against the floor", "",
-         "Each learned method's error over the best of the simple methods in this run (" +
+    L = ["## Learned methods (and shipped profiles) against the floor", "",
+         "Each learned method's (and each `profile:` method's) error over the best of the simple methods in this run (" +
          ", ".join(f"`{m}`" for m in r["methods"] if m in FLOOR_METHODS) + ": raw IMU, a fitted time offset, "
          "an affine calibration, both; `zero-displacement`: the device stays put), per cell, mean over the test recordings; below 1 the learning pays.", ""]
     rows = [[_esc(x["method"]), VARIANT_SHORT[x["variant"]], str(x["n"]), "rot" if x["term"] == "rot_rad" else "trans",
@@ -489,6 +489,7 @@ def floor_table(result: Dict[str, Any]) -> List[Dict[str, Any]]:
     (below 1: learning pays), ``floor`` names the best floor method. Empty without a floor method."""
     rel = {(x["method"], x["variant"], x["n"]): x for x in relative_pose_table(result) if x["sequence"] == "average"}
     floors = [m for m in result["methods"] if m in FLOOR_METHODS]
+    # a profile:PATH method is a floor that ships, judged against the run's floors as a learned method is
     learned = [m for m in result["methods"] if m not in FLOOR_METHODS and m not in REFERENCE_METHODS]
     out: List[Dict[str, Any]] = []
     for m in learned:
@@ -538,8 +539,8 @@ def summary_text(result: Dict[str, Any]) -> str:
                              f"{_f(x['rp_rmse_m'], '{:.3f}'):>6}")
     floor = floor_table(result)
     if floor:
-        lines.append("learned / best floor (" + ", ".join(m for m in result["methods"] if m in FLOOR_METHODS)
-                     + "), mean over test recordings; below 1 the learning pays:")
+        lines.append("learned (and profile:) / best floor (" + ", ".join(m for m in result["methods"] if m in FLOOR_METHODS)
+                     + "), mean over test recordings; below 1 the learning (the profile) pays:")
         for m in dict.fromkeys(x["method"] for x in floor):
             for v in VARIANTS:
                 cells = [f"{'rot' if x['term'] == 'rot_rad' else 'trans'} n={x['n']} {x['ratio']:.2f} ({x['floor']})"
