@@ -240,6 +240,20 @@ def test_pos_week_seconds_and_ecef_agree_with_llh(tmp_path):
     np.testing.assert_allclose(ecef.sigma_enu, 0.01, atol=1e-9)  # isotropic stays isotropic when rotated
 
 
+def test_pos_cut_last_line_is_left_out_and_one_inside_named(tmp_path, caplog):
+    """A logger stopped mid-line: the last line, cut, is left out (said at info), as the IMU logs' reader
+    does; the same cut inside the file stops with file, line and how to mend it."""
+    import logging
+
+    lines = [pos_line(f"2025/07/08 19:34:{18.499 + 0.25 * k:06.3f}", 40.0966268, -105.1474483, 1601.4) for k in range(3)]
+    cut = lines[:2] + [" ".join(lines[2].split()[:5])]
+    with caplog.at_level(logging.INFO):
+        sol = rtklib.read_pos(write_pos(tmp_path / "cut.pos", cut))
+    assert len(sol.t_ns) == 2 and "left out its last line 5, cut (5 of" in caplog.text
+    with pytest.raises(ColumnCountError, match=r"inside\.pos:4: .*found 5 \(a cut last line is left out"):
+        rtklib.read_pos(write_pos(tmp_path / "inside.pos", [lines[0], cut[2], lines[2]]))
+
+
 @pytest.mark.parametrize("mutate, err, field", [
     (lambda ls: ls.__setitem__(1, ls[1].replace("40.096626800", "nan", 1)), NonFiniteError, "latitude(deg)"),
     (lambda ls: ls.__setitem__(1, ls[1].replace(" 20 ", " x ", 1)), NotNumericError, "ns"),

@@ -35,3 +35,57 @@ def test_positions_only_groundtruth_is_refused_before_fusion(tmp_path, capsys, m
     lines = err.strip().splitlines()
     assert len(lines) == 1 and "--groundtruth" in lines[0] and "positions-only" in lines[0], err
     assert not out.exists() or not any(out.iterdir())
+
+
+def test_a_positions_profile_gives_its_mounting_delay_and_lever_arm_unless_the_options_do(tmp_path, caplog):
+    """A profile that calibrate fitted against positions carries the mounting, delay and lever arm it used
+    or estimated (reference.navigator); navigate takes them where the options are absent (one line says so)
+    and the options win where given. Without them a car's profile ran unmounted: gap ends up to 131 m."""
+    import logging
+
+    import numpy as np
+
+    from imu_learn.calib.profile import Profile
+    from imu_learn.cli.navigate import options, parser
+
+    prof = Profile.load(SHIPPED.parent / "models" / "profiles" / "euroc_adis16448" / "profile.json")
+    prof.reference = {"kind": "positions", "navigator": {"imu_rotation_rpy_deg": [1.0, -6.8, -174.3],
+                                                          "imu_delay_s": -0.179, "lever_arm_m": [0.1, 0.0, 0.9]}}
+    path = tmp_path / "profile.json"
+    prof.save(path)
+    base = ["--input", "imu.csv", "--aiding", "fix.pos", "--profile", str(path)]
+    with caplog.at_level(logging.INFO):
+        o = options(parser().parse_args(base))
+    assert np.allclose(o.imu_rotation_rpy_deg, (1.0, -6.8, -174.3)) and o.imu_delay_s == -0.179 and o.imu_delay_from == "profile"
+    assert np.allclose(o.lever_arm, (0.1, 0.0, 0.9))
+    assert "taken from" in caplog.text and "--imu-rotation-rpy-deg 1,-6.8,-174.3" in caplog.text
+    given = options(parser().parse_args(base + ["--imu-rotation-rpy-deg", "180,0,0", "--imu-delay-s", "0",
+                                                "--lever-arm", "0,0,0"]))
+    assert given.imu_rotation_rpy_deg == (180.0, 0.0, 0.0) and given.imu_delay_s == 0.0 and given.lever_arm == (0, 0, 0)
+    poses = options(parser().parse_args(base + ["--aiding-kind", "relative-pose"]))
+    assert poses.lever_arm is None and poses.imu_delay_s == -0.179  # a lever arm is the antenna's
+
+
+def test_implausible_fused_biases_are_named():
+    """The smoother's last biases beyond a MEMS IMU's (calibrate's limits): one warning naming the usual
+    causes, in the summary too; within them nothing."""
+    from imu_learn.fuse.navigate import final_bias_check
+
+    assert final_bias_check([0.001, -0.02, 0.08, 0.1, -0.2, 0.15]) == {
+        "plausible": True, "limits": {"gyro_rad_s": 0.1, "acc_mps2": 1.0}}
+    bad = final_bias_check([0.0, 0.0, 0.0, -0.33, 3.39, -0.7])
+    assert not bad["plausible"] and "acc bias +3.39 m/s^2 on y" in bad["why"] and "--lever-arm" in bad["why"]
+
+
+def test_gaps_outside_the_recording_are_refused():
+    """A --gaps window wholly outside the recording would drop nothing: refused in one line; one that
+    overlaps it is kept."""
+    import pytest
+
+    from imu_learn.errors import ConfigError
+    from imu_learn.fuse.navigate import OutageWindow, check_gaps
+
+    check_gaps((OutageWindow(120.0, 30.0), OutageWindow(-5.0, 10.0)), 134.0)
+    for bad in (OutageWindow(500.0, 10.0), OutageWindow(-5.0, 3.0)):
+        with pytest.raises(ConfigError, match="lies outside the recording"):
+            check_gaps((bad,), 134.0)

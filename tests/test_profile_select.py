@@ -130,6 +130,22 @@ def test_the_floor_at_the_bias_level_fits_the_biases_alone():
     assert np.abs(p.b_g - BIAS_G).max() < 1e-3 and np.abs(p.b_a - BIAS_A).max() < 2e-2, (p.b_g, p.b_a)
 
 
+def test_the_spread_at_the_chosen_levels_is_that_of_each_recordings_bias():
+    """A profile's standard deviations at the chosen levels: each recording refitted alone at them, the
+    standard error of their mean (the oracle: the biases each recording was given, here 4-8 mrad/s apart
+    on the gyro, 0.1 m/s^2 on the accelerometer); the terms the levels hold at their prior get none."""
+    train, val, groups, val_groups = device(False)
+    d_g = np.array([[0.004, -0.006, 0.0], [-0.004, 0.0, 0.008], [0.0, 0.006, -0.008]])
+    d_a = np.array([[0.1, 0.0, -0.1], [0.0, -0.1, 0.0], [-0.1, 0.1, 0.1]])
+    moved = lambda segs: [Segment(x.name, x.t_ns, x.gyro + d_g[i], x.acc + d_a[i], x.p, x.v, x.q_wxyz)  # noqa: E731
+                          for i, x in enumerate(segs)]
+    std = sel.level_spread(moved(train), moved(val), groups, val_groups, SETTINGS, ("bias", "bias"), 0.0,
+                           TraditionalParams.unknown(), OPTS)
+    np.testing.assert_allclose(std.b_g, d_g.std(0, ddof=1) / math.sqrt(3), atol=5e-4)
+    np.testing.assert_allclose(std.b_a, d_a.std(0, ddof=1) / math.sqrt(3), atol=1e-2)
+    assert np.all(np.isnan(std.M_g)) and np.all(np.isnan(std.G)) and np.all(np.isnan(std.M_a))
+
+
 def test_evaluate_scores_a_profile_as_it_ships(tmp_path):
     """``profile:PATH`` applies the profile's floor exactly as Profile.apply; a malformed one is refused."""
     from floors import set_floor

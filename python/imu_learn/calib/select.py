@@ -93,7 +93,7 @@ from imu_learn.calib.acc_positions import (
     heldout_rms_rows,
     recording_rows,
 )
-from imu_learn.calib.fit import group_segments, seed_all, time_blocks
+from imu_learn.calib.fit import group_segments, seed_all, spread, time_blocks
 from imu_learn.calib.profile import FloorFit
 from imu_learn.calib.sources import matched
 from imu_learn.data.types import Segment, sample_rate_hz
@@ -487,6 +487,29 @@ def fit_at_levels(train: List[Segment], val: List[Segment], settings: FitSetting
     return floor_of(g, a, tau)
 
 
+def level_spread(train: List[Segment], val: List[Segment], groups: Sequence[str], val_groups: Sequence[str],
+                 settings: FitSettings, levels: Tuple[str, str], tau: float, std: TraditionalParams,
+                 opts: SelectOptions = SelectOptions(), progress: Progress = lambda s: None) -> TraditionalParams:
+    """``std`` with the parameters the chosen ``levels`` fit replaced by their spread over the groups
+    (:func:`imu_learn.calib.fit.fit_floor`'s rule: each recording, or four time blocks of one, refitted
+    alone, at the levels and the time offset ``tau``; the standard error of their mean), the rest NaN
+    (:func:`masked_std`); the time offset's and the cut-offs' kept. The full floor's spread misstates a
+    level's: a bias refitted with every term trades with terms the motion barely excites (a level
+    robot's g-sensitivity: Fetch's gyro bias spread 34-138 mrad/s with every term, a few at ``bias``)."""
+    per = group_segments(train, val, groups, val_groups)
+    per = per if len(per) >= 2 else time_blocks(train)
+    usable = {g: tv for g, tv in per.items() if any(len(x) > settings.window + 1 for x in tv[0])}
+    fits = []
+    for i, (g, (tr, va)) in enumerate(usable.items()):
+        progress(f"uncertainty at the chosen levels: refitting on {g} alone ({i + 1}/{len(usable)})")
+        fits.append(fit_at_levels(tr, va, settings, levels, tau, opts).params)
+    out = masked_std(std, levels)
+    if len(fits) < 2:
+        return out
+    return replace(masked_std(spread(fits), levels), time_offset=std.time_offset, cutoff_gyro=std.cutoff_gyro,
+                   cutoff_acc=std.cutoff_acc)
+
+
 def full_levels(floor: Floor) -> Tuple[str, str]:
     """The levels the full floor's fit amounts to (its low-pass only where it chose a cut-off)."""
     p = floor.params
@@ -552,9 +575,11 @@ def select_floor(inp: Any, fit: FloorFit, progress: Progress = lambda s: None,
         return fit, entry
     progress(f"the floor at gyroscope {sel.gyro}, accelerometer {sel.acc} on all the training recordings")
     floor = fit_at_levels(inp.train, inp.val, inp.settings, levels, tau, opts)
+    std = level_spread(inp.train, inp.val, inp.groups, inp.val_groups, inp.settings, levels, tau, fit.std, opts, progress)
     entry["floor"] = ("refitted at the chosen levels on all the training recordings (the time offset the full fit's); "
-                      "standard deviations: the full floor's spread, null for what the levels hold at its prior")
-    return replace(fit, floor=floor, std=masked_std(fit.std, levels)), entry
+                      "standard deviations: the spread of refits at the chosen levels on each recording alone "
+                      "(the time offset's the full floor's), null for what the levels hold at its prior")
+    return replace(fit, floor=floor, std=std), entry
 
 
 def _gyro_only_floor(inp: Any, data: Any, fit: FloorFit, sel: Selection, entry: Dict[str, Any], tau: float,
@@ -569,9 +594,10 @@ def _gyro_only_floor(inp: Any, data: Any, fit: FloorFit, sel: Selection, entry: 
         p = fit.floor.params
         floor = floor.with_params(M_a=p.M_a.copy(), b_a=p.b_a.copy(), cutoff_acc=p.cutoff_acc, cutoff_gyro=None)
         entry["floor"] = ("gyroscope refitted at the chosen level on all the training recordings (the time offset the "
-                          "full fit's); the accelerometer the source's fit's; standard deviations: the full floor's "
-                          "spread, null for the gyroscope's terms the level holds at its prior")
-        g = masked_std(fit.std, (sel.gyro, "affine"))
+                          "full fit's); the accelerometer the source's fit's; the gyroscope's standard deviations: the "
+                          "spread of refits at its level on each recording alone, null for the terms it holds at its prior")
+        g = level_spread(data.train, data.val, data.groups, data.val_groups, data.settings, (sel.gyro, "bias"), tau,
+                         fit.std, opts, progress)
         fit = replace(fit, floor=floor, std=replace(fit.std, M_g=g.M_g, b_g=g.b_g, G=g.G))
     return _positions_acc_level(inp, fit, entry, progress), entry
 

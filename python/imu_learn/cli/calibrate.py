@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import argparse
 import logging
+import math
 import sys
 from pathlib import Path
 from typing import Any, Callable, Dict, List, Optional, Sequence
@@ -262,7 +263,9 @@ def learned_base(args: argparse.Namespace, inp: CalibInputs) -> Any:
 def summary(p: Any) -> List[str]:
     lines = [f"device {p.device}: {p.sample_rate_hz:.4g} Hz"]
     if p.has_floor:
-        lines.append(f"time offset {p.time_offset_s * 1e3:+.3f} ms (+-{p.time_offset_s_std * 1e3:.3f}); "
+        spread = (f"+-{p.time_offset_s_std * 1e3:.3f}" if math.isfinite(p.time_offset_s_std)
+                  else "not observed: held at its prior")
+        lines.append(f"time offset {p.time_offset_s * 1e3:+.3f} ms ({spread}); "
                      f"gyro bias {_vec(p.gyro.bias)} rad/s; acc bias {_vec(p.acc.bias)} m/s^2; "
                      f"gravity {p.gravity_mps2:.4f} m/s^2")
         lines.append(_terms_line(p.selection, p.reference.get("kind", "poses")))

@@ -3,10 +3,12 @@ run time (:mod:`imu_learn.fuse.navigate`)."""
 from __future__ import annotations
 
 import argparse
+import logging
 from dataclasses import replace
 from pathlib import Path
 from typing import Any, Callable, List, Optional, Sequence
 
+from imu_learn.calib.profile import Profile
 from imu_learn.cli.common import add_imu_input_options, csv_layout, run_command
 from imu_learn.cli.common import parser as common_parser
 from imu_learn.errors import ConfigError
@@ -25,6 +27,8 @@ from imu_learn.infer.bias import choices as bias_choices
 from imu_learn.infer.bias import help_text as bias_help
 from imu_learn.util.extras import require
 
+logger = logging.getLogger(__name__)
+
 DESCRIPTION = """Navigate one recording with its real aiding file (a camera trajectory as relative or absolute
 poses, or position fixes), no ground truth needed: the first state comes from the data (attitude
 levelled from the accelerometer, heading from the first pose or from the track, position and velocity
@@ -35,9 +39,11 @@ as it was), and prints a one-line summary; --groundtruth only scores the result 
 GNSS fixes (an RTKLIB .pos, known by its content; a bag's NavSatFix topic) also give the tracks as
 latitude/longitude/height CSVs, KML and GeoJSON; a bag as input or aiding gets the trajectories back as
 nav_msgs/Odometry bags. The IMU noise comes from --imu-noise, a device profile (--profile, which also
-applies its floor), the recording's sensor.yaml, or the built-in ADIS16448's (with a warning).
+applies its floor), the recording's sensor.yaml, or the MEMS class default scaled to the aiding's
+innovations (with a warning).
 GNSS/IMU logs (the gnss-imu format) take --imu-rotation-rpy-deg, --imu-delay-s, --lever-arm and, on
-wheels, --nhc."""
+wheels, --nhc; a --profile that calibrate fitted against positions carries the mounting, delay and lever
+arm it used or estimated, taken where those options are not given (one line says so)."""
 
 EPILOG = """examples:
   imu-learn navigate --input <data>/euroc/MH_04_difficult --aiding <ORB-SLAM2 trajectory>.txt \\
@@ -160,7 +166,7 @@ def add_arguments(ap: argparse.ArgumentParser) -> None:
     ap.add_argument("--imu-noise", default=None, metavar="GND,AND,GRW,ARW",
                     help="the IMU's gyro and acc noise densities and random walks (rad/s/sqrt(Hz), m/s^2/sqrt(Hz), "
                          "rad/s^2/sqrt(Hz), m/s^3/sqrt(Hz)); default: --profile's, else the recording's sensor.yaml, "
-                         "else built in (EuRoC's ADIS16448, with a warning)")
+                         "else the MEMS class default scaled to the aiding's innovations (with a warning)")
     ap.add_argument("--bias", choices=bias_choices(navigate=True), default="none", help=bias_help(navigate=True))
     ap.add_argument("--threads", type=int, default=None, metavar="N",
                     help="torch threads for the --checkpoint's model (default: torch's own)")
@@ -208,6 +214,7 @@ def options(args: argparse.Namespace):
         text = getattr(args, name)
         if text is not None:
             o = replace(o, **{name: parse_vector(text, n, f"--{name.replace('_', '-')}")})
+    o = profile_navigator(args, o)
     if args.nhc:
         o = replace(o, nhc=True)
     if args.bias != "none":
@@ -218,6 +225,39 @@ def options(args: argparse.Namespace):
         o = replace(o, **{kind_of(o.aiding_kind).sigma_rot_option: args.sigma_rot_deg})
     if args.sigma_m is not None:
         o = replace(o, **{kind_of(o.aiding_kind or GEODETIC_KIND).sigma_m_option: args.sigma_m})
+    return o
+
+
+# profile.json's reference.navigator key, NavigateOptions' field, the option, its numbers (0: one, a delay)
+PROFILE_NAVIGATOR = (("imu_rotation_rpy_deg", "imu_rotation_rpy_deg", "--imu-rotation-rpy-deg", 3),
+                     ("imu_delay_s", "imu_delay_s", "--imu-delay-s", 0), ("lever_arm_m", "lever_arm", "--lever-arm", 3))
+
+
+def profile_navigator(args: argparse.Namespace, o):
+    """``o`` with the mounting, IMU delay and lever arm of ``--profile``'s ``reference.navigator`` (what
+    calibrate used or estimated against positions) where the command line gives none; one line says which.
+    A profile of another reference kind, or without them, leaves ``o`` as it is (the lever arm: position
+    aiding only)."""
+    if args.profile is None or not Path(args.profile).is_file():
+        return o  # a missing profile is refused where it is read, with the others
+    nav = (Profile.load(args.profile).reference or {}).get("navigator") or {}
+    taken = []
+    for key, field, option, n in PROFILE_NAVIGATOR:
+        value = nav.get(key)
+        if value is None or getattr(args, field) is not None:
+            continue
+        if field == "lever_arm" and (args.extrinsics is not None
+                                     or not (o.aiding_kind is None or kind_of(o.aiding_kind).lever)):
+            continue
+        if n:
+            o = replace(o, **{field: parse_vector(",".join(repr(float(x)) for x in value), n, option)})
+            taken.append(f"{option} {','.join(f'{float(x):.4g}' for x in value)}")
+        else:
+            o = replace(o, imu_delay_s=float(value), imu_delay_from="profile")
+            taken.append(f"{option} {float(value):+.4g}")
+    if taken:
+        logger.info("taken from %s (calibrate's reference.navigator; the options override): %s", args.profile,
+                    "; ".join(taken))
     return o
 
 

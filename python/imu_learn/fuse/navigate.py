@@ -62,6 +62,7 @@ from tqdm import tqdm
 
 from imu_learn.calib import correction
 from imu_learn.calib.metric_scale import ScaleFit
+from imu_learn.calib.plausible import LIMITS
 from imu_learn.calib.profile import Profile
 from imu_learn.core.still import MEMS_PRIOR, MIN_STILL_START_S, BiasPrior
 from imu_learn.data import formats
@@ -150,7 +151,8 @@ class NavigateOptions:
     imu_rotation_rpy_deg: Optional[Tuple[float, float, float]] = None
     imu_delay_s: float = 0.0
     # "fixes" (--imu-delay-s auto): the delay measured from the data against GNSS fixes
-    # (:func:`.start.delay.imu_delay`, outside ``gaps``) in place of imu_delay_s
+    # (:func:`.start.delay.imu_delay`, outside ``gaps``) in place of imu_delay_s; "profile": imu_delay_s is
+    # a profile's (calibrate's reference.navigator), "option": the option's (0: none given)
     imu_delay_from: str = "option"
     # position aiding: the antenna from the IMU, body frame [m] (instead of an extrinsic's translation)
     lever_arm: Optional[Tuple[float, float, float]] = None
@@ -201,8 +203,8 @@ class NavigateOptions:
             raise ConfigError(f"--imu-noise: each density must be > 0, got {self.imu_noise!r}")
         if not np.isfinite(self.imu_delay_s):
             raise ConfigError(f"--imu-delay-s: must be finite, got {self.imu_delay_s!r}")
-        if self.imu_delay_from not in ("option", "fixes"):
-            raise ConfigError(f"imu_delay_from: 'option' or 'fixes', got {self.imu_delay_from!r}")
+        if self.imu_delay_from not in ("option", "fixes", "profile"):
+            raise ConfigError(f"imu_delay_from: 'option', 'fixes' or 'profile', got {self.imu_delay_from!r}")
         if self.lever_arm is not None and not kind_of(self.aiding_kind).lever:
             raise ConfigError("--lever-arm is the antenna's: only with --aiding-kind position")
         if self.aiding_format == "rtklib" and not kind_of(self.aiding_kind).geodetic:
@@ -415,12 +417,12 @@ def imu_noise(src: Sources, opts: NavigateOptions, own: Optional[ImuNoise], prof
     if imu is not None:
         noise = fitted_noise(innovation_fit(src, opts, imu, sol))
         log.warning(f"no --profile, --imu-noise or sensor.yaml: the IMU noise is {noise.source}; "
-                    "imu-learn calibrate writes your device's")
+                    "imu-learn calibrate writes your device's noise (docs/your-device.md)")
         return noise
     noise = ImuNoise()
     log.warning(f"no --profile or --imu-noise: the IMU noise is the built-in EuRoC ADIS16448's (gyro "
                 f"{noise.gyro_noise_density:g} rad/s/sqrt(Hz), acc {noise.acc_noise_density:g} m/s^2/sqrt(Hz)); "
-                "imu-learn calibrate writes your device's")
+                "imu-learn calibrate writes your device's noise (docs/your-device.md)")
     return noise
 
 
@@ -529,7 +531,8 @@ def read_body_imu(src: Sources, opts: NavigateOptions, sol: Optional[RtkSolution
         if var is not None:  # the diagonal of M diag(v) M^T: exact for an axis permutation or flip
             var = np.ascontiguousarray(np.hstack([var[:, :3] @ (mounting**2).T, var[:, 3:] @ (mounting**2).T]))
     delay = measured_delay(sol, opts, t_ns, acc) if opts.imu_delay_from == "fixes" else {
-        "delay_s": opts.imu_delay_s, "from": "--imu-delay-s"}
+        "delay_s": opts.imu_delay_s, "from": ("the profile's reference.navigator" if opts.imu_delay_from == "profile"
+                                              else "--imu-delay-s" if opts.imu_delay_s else "none (no --imu-delay-s)")}
     if delay["delay_s"]:
         t_ns = t_ns + int(round(float(delay["delay_s"]) * 1e9))
     noise = imu_noise(src, opts, own, profile, (t_ns, gyro, acc), sol)  # after the checks: on the IMU as fused
@@ -723,6 +726,15 @@ class Started:
     bias_source: str
 
 
+def check_gaps(gaps: Tuple[OutageWindow, ...], duration_s: float) -> None:
+    """Refuses a ``--gaps`` window that lies wholly outside the recording (0 to ``duration_s`` from its first
+    IMU sample): it would drop nothing, and the run would look like one with an outage."""
+    for start, dur in gaps:
+        if start >= duration_s or start + dur <= 0.0:
+            raise ConfigError(f"--gaps {start:g}:{dur:g} lies outside the recording (0 to {duration_s:.1f} s from its "
+                              "first IMU sample): give START in seconds from the first sample")
+
+
 def read_inputs(src: Sources, opts: NavigateOptions) -> Inputs:
     """The run's inputs, each checked before any fusion: the aiding's format and kind
     (:func:`resolve_aiding`), the options, the side files (:func:`check_inputs`), the IMU (the ground
@@ -741,6 +753,7 @@ def read_inputs(src: Sources, opts: NavigateOptions) -> Inputs:
     if gt_span is not None and (gt_span[1] < t_ns[0] or gt_span[0] > t_ns[-1]):
         raise ConfigError(f"--groundtruth {src.groundtruth}: its stamps [{gt_span[0]}, {gt_span[1]}] ns do not overlap "
                           f"the IMU's [{int(t_ns[0])}, {int(t_ns[-1])}] ns (same clock?)")
+    check_gaps(opts.gaps, float((t_ns[-1] - t_ns[0]) * 1e-9))
     lever = T_BS[:3, 3] if (T_BS is not None and kind.lever) else np.zeros(3)
     if opts.lever_arm is not None:
         lever = np.asarray(opts.lever_arm, dtype=np.float64)
@@ -776,6 +789,25 @@ def start_run(src: Sources, inp: Inputs) -> Started:
     return Started(st, aiding, counts, (gyro, acc, var), label, bias, bias_source)
 
 
+def final_bias_check(bias: np.ndarray) -> Dict[str, object]:
+    """summary.json's ``final_bias_check``: the smoother's last gyro and acc biases (6,) against a MEMS IMU's
+    limits (:data:`imu_learn.calib.plausible.LIMITS`, calibrate's); beyond them one warning line names the
+    usual causes (the fused tracks are still written). A wrong mounting or a lever arm in centimetres ends
+    in biases no MEMS IMU has (a lever arm of 5 m on the walk: acc bias 3.4 m/s^2)."""
+    b = np.asarray(bias, dtype=np.float64)
+    limits = (LIMITS["gyro_bias_rad_s"], LIMITS["acc_bias_mps2"])
+    over = [f"{name} bias {v:+.3g} {unit} on {'xyz'[i]} (limit {lim:g})"
+            for (name, unit, part, lim) in (("gyro", "rad/s", b[:3], limits[0]), ("acc", "m/s^2", b[3:], limits[1]))
+            for i, v in enumerate(part) if abs(v) > lim]
+    entry: Dict[str, object] = {"plausible": not over, "limits": {"gyro_rad_s": limits[0], "acc_mps2": limits[1]}}
+    if over:
+        entry["why"] = ("the fused IMU's biases are beyond a MEMS IMU's (" + "; ".join(over) + "): a wrong mounting "
+                        "(--imu-rotation-rpy-deg), a lever arm not in metres (--lever-arm), the IMU's units or a "
+                        "profile of another device; the tracks are written, check them")
+        log.warning(entry["why"])
+    return entry
+
+
 def run_summary(src: Sources, out: Path, inp: Inputs, run: Started, res) -> Dict[str, object]:
     """summary.json's content (without ``seconds``, known once written), with ``--groundtruth`` the scores."""
     opts, imu, rows, st, t_ns, s0 = inp.opts, inp.imu, inp.rows, run.st, inp.imu.t_ns, run.st.start
@@ -801,6 +833,7 @@ def run_summary(src: Sources, out: Path, inp: Inputs, run: Started, res) -> Dict
         "imu_mounting": None if imu.mounting is None else np.round(imu.mounting, 6).tolist(),
         "lever_arm_m": [round(float(x), 4) for x in inp.lever],
         "final_bias": [round(float(b), 6) for b in res.smoothed_bias[-1]],
+        "final_bias_check": final_bias_check(res.smoothed_bias[-1]),
         "bias": run.bias, "correction": imu.correction, "imu_delay": imu.delay,
         "outputs": {"causal": str(out / "causal.tum"), "smoothed": str(out / "smoothed.tum")},
         "causal_frame": res.causal_frame,

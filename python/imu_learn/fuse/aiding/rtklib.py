@@ -222,14 +222,18 @@ def read_pos(path: Path) -> RtkSolution:
     has_vel = all(c in col for c in vel_cols)
     t_l, pos_l, cov_l, vel_l, q_l, line_l = [], [], [], [], [], []
     prev = None
-    for i in range(hdr + 1, len(lines)):
+    data = [i for i in range(hdr + 1, len(lines)) if lines[i].strip() and not lines[i].startswith("%")]
+    last = data[-1] if data else -1
+    for i in data:
         line, lineno = lines[i], i + 1
-        if not line.strip() or line.startswith("%"):
-            continue
         tok = line.split()
+        if len(tok) < width and i == last and i > data[0]:  # a logger stopped mid-line: as the IMU logs' reader
+            log.info("%s: left out its last line %d, cut (%d of %d columns)", p, lineno, len(tok), width)
+            break
         if len(tok) != width:
             raise ColumnCountError(f"{p}:{lineno}: expected {width} columns (GPST date/week and time, "
-                                   f"{' '.join(names)}), found {len(tok)}", p, lineno)
+                                   f"{' '.join(names)}), found {len(tok)} (a cut last line is left out; repair "
+                                   "or remove a cut line inside the file)", p, lineno)
         t = _time_ns(tok[:2], p, lineno)
         vals: Dict[str, float] = {}
         for name, c in col.items():
