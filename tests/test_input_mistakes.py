@@ -237,3 +237,23 @@ def test_the_low_level_reader_stays_as_it_was(tmp_path):
     with pytest.raises(ImplausibleInputError) as e:
         read_imu_source(f, columns=CsvColumns())
     assert e.value.option == "--acc-unit"
+
+
+def test_a_cut_last_line_and_a_csv_without_its_map_name_the_option(tmp_path, capsys):
+    """A line cut short stops in one line that, where it is the file's last, names --skip-bad-lines; a CSV of
+    one's own given without --columns (read as EuRoC's layout) names --columns and the unit options."""
+    t, g, a = samples()
+    f = write(tmp_path / "cut.csv", t, g, a)
+    f.write_text(f.read_text() + f"{t[-1] + 5_000_000},0.1,0.2\n")
+    rc, err = calibrate(capsys, f, "--columns", MAP, "--time-unit", "ns")
+    assert rc == 2 and "ColumnCountError" in err and "--skip-bad-lines" in err and err.count("\n") == 1, err
+    inner = write(tmp_path / "inner.csv", t, g, a)
+    lines = inner.read_text().splitlines()
+    lines[100] = ",".join(lines[100].split(",")[:3])
+    inner.write_text("\n".join(lines) + "\n")
+    rc, err = calibrate(capsys, inner, "--columns", MAP, "--time-unit", "ns")
+    assert rc == 2 and "ColumnCountError" in err and "--skip-bad-lines" not in err, err
+    rc = main(["calibrate", "--imu-only", "--input", str(write(tmp_path / "own.csv", t, g, a)), "--out",
+               str(tmp_path / "o"), "--no-plot", "--quiet"])
+    err = capsys.readouterr().err
+    assert rc == 2 and "HeaderError" in err and "--columns" in err and "--time-unit" in err, err

@@ -207,7 +207,8 @@ __all__ = [
 def one_line(e: BaseException) -> str:
     """An error as the one line an entry point prints: always ``<Class>: <message>``, the message of
     an OSError with a file being ``path: reason`` (``FileNotFoundError: runs/x: No such file or
-    directory``), whitespace collapsed."""
+    directory``), whitespace collapsed; the notes a reader added to it (``add_note``: a hint at the likely
+    mistake) follow after "; "."""
     if isinstance(e, OSError) and e.filename and e.strerror:
         msg = f"{e.filename}: {e.strerror}"
         if e.filename2:
@@ -216,6 +217,8 @@ def one_line(e: BaseException) -> str:
         msg = f"{e.filename}: not found"
     else:
         msg = str(e)
+    notes = [str(n) for n in getattr(e, "__notes__", ())]  # hints a reader added (BaseException.add_note)
+    msg = "; ".join([msg] + notes) if msg and notes else msg
     return " ".join(f"{type(e).__name__}: {msg}".split()) if msg else type(e).__name__
 
 

@@ -27,6 +27,7 @@ the same for every kind.
 """
 from __future__ import annotations
 
+import logging
 import math
 from dataclasses import dataclass, replace
 from pathlib import Path
@@ -41,6 +42,7 @@ from imu_learn.calib.acc_positions import AccFit, AccOptions, fit_acc_from_posit
 from imu_learn.calib.frames import default_gap_s
 from imu_learn.calib.profile import FloorFit
 from imu_learn.calib.reference import FrameFit, FrameOptions, frame_lines, read_extrinsics, resolve_frame, to_imu_frame
+from imu_learn.core.still import StillSettings, moving_mean
 from imu_learn.data.formats import USER_CSV, detect_format, read_imu_source, read_recording, user_csv
 from imu_learn.data.loading import AlignOptions, align
 from imu_learn.data.splits import cut, recording_name
@@ -57,6 +59,8 @@ MATCH_MIN_PERIODS = 2.0  # a reference this many IMU periods apart or more: the 
 # profile.json's ``observed``: the floor's parameters a reference may or may not observe
 OBSERVABLE = ("time_offset", "gyroscope.matrix", "gyroscope.bias", "g_sensitivity", "accelerometer.matrix",
               "accelerometer.bias", "cutoff_gyro", "cutoff_acc")
+
+log = logging.getLogger(__name__)
 
 
 @dataclass
@@ -241,11 +245,48 @@ def span(s: Any) -> Dict[str, Any]:
     return {"segment": s.name, "t0_ns": int(s.t_ns[0]), "t1_ns": int(s.t_ns[-1]), "samples": len(s)}
 
 
+MOVING_SHARE = 0.5  # a block moves where at least this share of its samples does (:func:`moves`)
+
+
+def moves(segments: Sequence[Segment]) -> bool:
+    """Whether a block moves enough to select a floor's filter and offset and to judge it: at least
+    :data:`MOVING_SHARE` of its samples move, a sample moving where over the 1 s around it the gyro's or the
+    accelerometer's standard deviation on some axis, or the gyro's mean, is at least the still detector's
+    caps (:class:`imu_learn.core.still.StillSettings`: 0.05 rad/s, 0.5 m/s²)."""
+    caps = StillSettings()
+    n_moving, n_all = 0, 0
+    for x in segments:
+        if len(x) < 3:
+            continue
+        w = max(2, int(round(caps.window_s / (float(np.median(np.diff(x.t_ns))) * 1e-9))))
+        sd = [np.sqrt(np.maximum(moving_mean(v * v, w) - moving_mean(v, w) ** 2, 0.0)).max(1) for v in (x.gyro, x.acc)]
+        mean = np.abs(moving_mean(x.gyro, w)).max(1)
+        n_moving += int(((sd[0] >= caps.gyro_cap) | (sd[1] >= caps.acc_cap) | (mean >= caps.gyro_cap)).sum())
+        n_all += len(x)
+    return n_all > 0 and n_moving >= MOVING_SHARE * n_all
+
+
 def held_back(segments: List[Segment], frac: float) -> Tuple[List[Segment], List[Segment]]:
-    """The fitted and the held-back block (the last ``frac`` of the recording; 0: nothing held back)."""
+    """The fitted and the held-back block: the last ``frac`` of the recording (0: nothing held back), or,
+    where that block does not move (:func:`moves`: a recording that ends at rest, BROAD's trial 18, whose
+    still last 15 % chose a 5 Hz filter and judged the profile on bias drift alone), the latest block of
+    ``frac`` that does, stepping back by half a block (the fitted part then the time before and after it);
+    none moving: the last, with a warning."""
     if frac <= 0:
         return list(segments), []
     name = recording_name(segments[0].name)
+    step = frac / 2
+    for k in range(int(math.floor((1.0 - frac) / step + 1e-9)) + 1):
+        a = 1.0 - frac - k * step
+        held = cut(segments, a, a + frac, name)
+        if moves(held):
+            if k:
+                log.info("%s: its last %g %% does not move; held back %.3g-%.3g of it instead", name, 100 * frac, a,
+                         a + frac)
+            return cut(segments, 0.0, a, name) + (cut(segments, a + frac, 1.0, name) if k else []), held
+    log.warning("%s: no block of %g %% of it moves: the last is held back, but it can neither select the filter "
+                "and offset nor judge the profile; give --val-fraction 0 to select on the training windows",
+                name, 100 * frac)
     return cut(segments, 0.0, 1.0 - frac, name), cut(segments, 1.0 - frac, 1.0, name)
 
 

@@ -96,7 +96,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                                                     "one-device format belongs to, else the first recording's name)")
     p.add_argument("--val-fraction", type=float, default=0.15, metavar="F",
                    help="with --input: the last F of each recording selects the floor's filter and offset, as the "
-                        "configs' splits do (default 0.15; 0: the training windows select)")
+                        "configs' splits do, and judges the profile (default 0.15; a last block that does not move: "
+                        "the latest one that does; 0: the training windows select)")
     p.add_argument("--min-still-s", type=float, default=10.0, metavar="S",
                    help="total still time the Allan noise needs (default 10)")
     p.add_argument("--no-plot", action="store_true", help="no calibration.png")

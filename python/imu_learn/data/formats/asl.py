@@ -9,7 +9,7 @@ import numpy as np
 
 from imu_learn import _imu_core as core
 from imu_learn.data.types import GroundTruth, ImuData
-from imu_learn.errors import InvalidInputError, ParseError
+from imu_learn.errors import HeaderError, InvalidInputError, ParseError
 from imu_learn.util.atomic import atomic_write_path
 
 from .groundtruth import read_groundtruth
@@ -69,8 +69,20 @@ def find_groundtruth(root: Path) -> Path:
     )
 
 
+def _read_imu_csv(path: Path, f: Path, allow_float_timestamps: bool = False):
+    """The core's reading of IMU CSV ``f`` (of ``path``); a header that is not EuRoC's on a file given as
+    such gets a note naming the options of a CSV of the user's own."""
+    try:
+        return core.read_asl_imu(str(f), allow_float_timestamps)
+    except HeaderError as e:
+        if Path(path).is_file():  # a CSV of the user's own, read as EuRoC's layout for want of a column map
+            e.add_note("a CSV of your own: name its columns with --columns (e.g. t,gx,gy,gz,ax,ay,az) and its units "
+                       "with --time-unit, --gyro-unit, --acc-unit (docs/your-device.md)")
+        raise
+
+
 def read_imu(path: Path, allow_float_timestamps: bool = False) -> ImuData:
-    t_ns, gyro, acc = core.read_asl_imu(str(imu_file(Path(path))), allow_float_timestamps)
+    t_ns, gyro, acc = _read_imu_csv(path, imu_file(Path(path)), allow_float_timestamps)
     return ImuData(t_ns=t_ns, gyro=gyro, acc=acc)
 
 
@@ -86,7 +98,7 @@ def read_imu_source(path: Path) -> ImuSource:
     """The IMU of a sequence folder, its ``mav0`` or the IMU CSV itself, strictly parsed (integer
     ns stamps only: the refined copy keeps them as they are)."""
     f = imu_file(path)
-    t_ns, gyro, acc = core.read_asl_imu(str(f))
+    t_ns, gyro, acc = _read_imu_csv(path, f)
     root = sequence_root(f) if path.is_file() else (path.parent if path.name == "mav0" else path)
     try:
         rel = f.resolve().relative_to(root.resolve())

@@ -38,7 +38,7 @@ import numpy as np
 from imu_learn import _imu_core as core
 from imu_learn.data.formats.input_checks import check_user_imu, explain_repeated_stamps, explain_time_overflow
 from imu_learn.data.types import ImuData
-from imu_learn.errors import InvalidInputError, NotNumericError, TimestampError
+from imu_learn.errors import ColumnCountError, InvalidInputError, NotNumericError, TimestampError
 from imu_learn.util.atomic import atomic_write_path
 
 from .source import DEFAULT_COLUMNS, CsvColumns, ImuSource  # noqa: F401  (the layout type lives with ImuSource)
@@ -88,6 +88,16 @@ def write_csv_columns(
     )
 
 
+def last_line(path: Path) -> int:
+    """The 1-based number of a text file's last non-blank line (0: none)."""
+    n = 0
+    with open(path, "rb") as fh:
+        for i, line in enumerate(fh, 1):
+            if line.strip():
+                n = i
+    return n
+
+
 def read_checked(path: Path, layout: CsvColumns) -> Tuple[ImuData, Tuple[int, ...]]:
     """The samples of a user's CSV read with ``layout``, checked (:mod:`imu_learn.data.formats.input_checks`)
     before anything is done with them, and the 1-based lines skipped (``layout.skip_bad_lines``)."""
@@ -103,6 +113,10 @@ def read_checked(path: Path, layout: CsvColumns) -> Tuple[ImuData, Tuple[int, ..
         if better is None:
             raise
         raise better from e
+    except ColumnCountError as e:
+        if e.line is not None and e.line == last_line(Path(path)):
+            e.add_note("the last line, cut by the logger? --skip-bad-lines leaves such lines out (counted)")
+        raise
     skipped = tuple(int(line) for line, _ in r["skipped"])
     if skipped:
         quoted = "; ".join(problem for _, problem in r["skipped"][:SKIPPED_QUOTED])
