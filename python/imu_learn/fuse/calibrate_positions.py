@@ -69,6 +69,7 @@ from imu_learn.errors import ConfigError, InvalidInputError
 from imu_learn.fuse.aiding.detect import detect
 from imu_learn.fuse.aiding.rtklib import normal_gravity, read_pos
 from imu_learn.fuse.aiding.tum import Trajectory, check_overlap, read_trajectory
+from imu_learn.fuse.mounting import _level_rotation, forward_mounting
 from imu_learn.fuse.navigate import NavigateOptions, Sources, navigate, parse_vector
 from imu_learn.fuse.noise import ImuNoise
 from imu_learn.infer.rates import recording_device
@@ -170,65 +171,6 @@ def read_fixes(path: Path) -> Tuple[np.ndarray, np.ndarray, float, str]:
     """(t_ns, positions (M, 3) in a local z-up frame, gravity [m/s^2], format): :func:`read_fix_track`."""
     traj, gravity, fmt = read_fix_track(path)
     return traj.t_ns, traj.p, gravity, fmt
-
-
-# ------------------------------------------------------------------------------------------------
-# the mounting, from the data
-
-
-def forward_mounting(t_ns: np.ndarray, acc: np.ndarray, fix_t_ns: np.ndarray, fix_p: np.ndarray,
-                     gravity: float = 9.81, level_s: float = 2.0, min_speed: float = 3.0) -> Dict[str, Any]:
-    """The IMU's mounting estimated without a reference attitude: up = the mean specific force over the
-    first ``level_s`` (the vehicle at rest or cruising), forward = the horizontal direction in which the
-    levelled specific force follows the track's along-track acceleration (plus gravity along the
-    grade) while its left follows the cross-track one (speed times the turn rate), by least squares
-    over the fixes faster than ``min_speed``. Returns {"rpy_deg": roll, pitch, yaw of the body frame
-    (x forward, z up) relative to the IMU frame (the navigator's ``--imu-rotation-rpy-deg``),
-    "forward_imu", "up_imu", "fit_residual_mps2", "fixes_used"}."""
-    t = (np.asarray(t_ns, dtype=np.int64) - int(t_ns[0])) * 1e-9
-    tf = (np.asarray(fix_t_ns, dtype=np.int64) - int(t_ns[0])) * 1e-9
-    up = np.mean(acc[t <= t[0] + level_s], axis=0)
-    up = up / np.linalg.norm(up)
-    R_lev = _level_rotation(up)  # IMU -> a gravity-aligned frame (z up)
-    # the track: velocity and acceleration by central differences
-    v = np.gradient(fix_p, tf, axis=0)
-    a = np.gradient(v, tf, axis=0)
-    speed = np.linalg.norm(v[:, :2], axis=1)
-    heading = np.unwrap(np.arctan2(v[:, 1], v[:, 0]))
-    rate = np.gradient(heading, tf)
-    along = np.einsum("ij,ij->i", a[:, :2], v[:, :2]) / np.maximum(speed, 1e-9) + gravity * v[:, 2] / np.maximum(speed, 1e-9)
-    cross = speed * rate
-    # the IMU's levelled horizontal specific force, averaged over +-0.25 s around each fix
-    f = acc @ R_lev.T
-    c = np.concatenate([np.zeros((1, 3)), np.cumsum(f, axis=0)])
-    i0 = np.searchsorted(t, tf - 0.25)
-    i1 = np.searchsorted(t, tf + 0.25)
-    ok = (speed > min_speed) & (i1 - i0 > 2) & (tf > t[0]) & (tf < t[-1])
-    ok[:2] = ok[-2:] = False
-    if ok.sum() < 20:
-        raise InvalidInputError(f"positions: {int(ok.sum())} fixes faster than {min_speed:g} m/s; the IMU's forward "
-                                "axis cannot be found from the track: give the mounting with --imu-rotation-rpy-deg R,P,Y")
-    fh = (c[i1[ok]] - c[i0[ok]])[:, :2] / (i1[ok] - i0[ok])[:, None]
-    A = np.block([[along[ok][:, None], -cross[ok][:, None]], [cross[ok][:, None], along[ok][:, None]]])
-    y = np.concatenate([fh[:, 0], fh[:, 1]])
-    cs, *_ = np.linalg.lstsq(A, y, rcond=None)
-    res = float(np.sqrt(np.mean((A @ cs - y) ** 2)))
-    fwd_l = np.array([cs[0], cs[1], 0.0]) / max(np.hypot(cs[0], cs[1]), 1e-12)
-    fwd = R_lev.T @ fwd_l
-    M = np.stack([fwd, np.cross(up, fwd), up])  # body = M imu: x forward, y left, z up
-    yaw, pitch, roll = Rotation.from_matrix(M.T).as_euler("ZYX", degrees=True)
-    return {"rpy_deg": [float(roll), float(pitch), float(yaw)], "forward_imu": fwd.tolist(), "up_imu": up.tolist(),
-            "fit_residual_mps2": res, "fixes_used": int(ok.sum())}
-
-
-def _level_rotation(up: np.ndarray) -> np.ndarray:
-    """A rotation taking ``up`` (unit) onto +z."""
-    z = np.array([0.0, 0.0, 1.0])
-    v, c = np.cross(up, z), float(up @ z)
-    if np.linalg.norm(v) < 1e-12:
-        return np.eye(3) if c > 0 else np.diag([1.0, -1.0, -1.0])
-    k = np.array([[0, -v[2], v[1]], [v[2], 0, -v[0]], [-v[1], v[0], 0]])
-    return np.eye(3) + k + k @ k / (1 + c)
 
 
 # ------------------------------------------------------------------------------------------------

@@ -95,6 +95,7 @@ from .factors import chain
 from .factors.nhc import NhcSettings, nhc_callback
 from .graph import IncrementalFusion, feed, samples_of
 from .inputs import checkpoint_bias, displacement_hook, displacement_model
+from .mounting import mounting_check
 from .noise import ImuNoise, from_profile
 from .noise_fit import CLASS_WHITE, FACTOR_BOUNDS, NoiseFit, fit_noise, fit_scale, fitted_noise, prepare
 from .output import plot_navigation, write_json, write_trajectory, write_trajectory_bag
@@ -396,6 +397,7 @@ class Imu:
     label: str = "raw"  # what the samples are (the summary's imu_input)
     correction: Dict[str, object] = field(default_factory=dict)  # the correction plan's summary
     delay: Dict[str, object] = field(default_factory=dict)  # the delay added to the stamps and where it came from
+    mounting_check: Dict[str, object] = field(default_factory=dict)  # :func:`check_mounting`'s verdict
 
 
 def imu_noise(src: Sources, opts: NavigateOptions, own: Optional[ImuNoise], profile: Optional[Profile],
@@ -524,6 +526,7 @@ def read_body_imu(src: Sources, opts: NavigateOptions, sol: Optional[RtkSolution
     fixed = correction.correct(plan, correction.Recording(str(src.input), t_ns, gyro, acc, fmt, src.fmt, src.imu_name),
                                src.force)
     gyro, acc, var = fixed.gyro, fixed.acc, fixed.var
+    acc_imu = acc
     mounting = None
     if opts.imu_rotation_rpy_deg is not None:
         mounting = mounting_rotation(opts.imu_rotation_rpy_deg)
@@ -535,9 +538,27 @@ def read_body_imu(src: Sources, opts: NavigateOptions, sol: Optional[RtkSolution
                                               else "--imu-delay-s" if opts.imu_delay_s else "none (no --imu-delay-s)")}
     if delay["delay_s"]:
         t_ns = t_ns + int(round(float(delay["delay_s"]) * 1e9))
+    check = check_mounting(t_ns, acc_imu, sol, mounting, opts)
     noise = imu_noise(src, opts, own, profile, (t_ns, gyro, acc), sol)  # after the checks: on the IMU as fused
     return Imu(t_ns, gyro, acc, noise, imu_file, mounting, str(src.profile) if floor else None, var, label,
-               fixed.summary, delay)
+               fixed.summary, delay, check)
+
+
+def check_mounting(t_ns: np.ndarray, acc_imu: np.ndarray, sol: Optional[RtkSolution], mounting: Optional[np.ndarray],
+                   opts: NavigateOptions) -> Dict[str, object]:
+    """With ``--nhc`` and GNSS fixes: the body's forward axis (``--imu-rotation-rpy-deg``, else the IMU's x)
+    against the track's (:func:`.mounting.mounting_check`), one warning beyond its tolerance; else not checked."""
+    if not opts.nhc or sol is None:
+        return {"checked": False, "why": "checked with --nhc and GNSS fixes only (the forward axis of a wheeled vehicle)"}
+    keep = ~in_windows((sol.t_ns - t_ns[0]) * 1e-9, opts.gaps)  # the fixes the run fuses, none withheld
+    check = mounting_check(t_ns, acc_imu, sol.t_ns[keep], sol.enu[keep], mounting,
+                           normal_gravity(sol.origin_llh[0], sol.origin_llh[2]))
+    if check.get("checked") and not check["ok"]:
+        given = "--imu-rotation-rpy-deg" if mounting is not None else "no --imu-rotation-rpy-deg (the IMU's own x)"
+        log.warning(f"the body's forward axis ({given}) is {check['angle_deg']:.0f} deg from the one the track shows "
+                    f"(roll, pitch, yaw {', '.join(f'{x:g}' for x in check['estimated_rpy_deg'])} estimated): with "
+                    "--nhc a wrong mounting wrecks the track; check it")
+    return check
 
 
 def measured_delay(sol: Optional[RtkSolution], opts: NavigateOptions, t_ns: np.ndarray,
@@ -831,6 +852,7 @@ def run_summary(src: Sources, out: Path, inp: Inputs, run: Started, res) -> Dict
         "counts": res.counts, "seconds_fusion": round(res.seconds, 2),
         "options": {k: (list(map(list, v)) if k == "gaps" else v) for k, v in asdict(opts).items()},
         "imu_mounting": None if imu.mounting is None else np.round(imu.mounting, 6).tolist(),
+        "imu_mounting_check": imu.mounting_check,
         "lever_arm_m": [round(float(x), 4) for x in inp.lever],
         "final_bias": [round(float(b), 6) for b in res.smoothed_bias[-1]],
         "final_bias_check": final_bias_check(res.smoothed_bias[-1]),
