@@ -9,6 +9,7 @@ import logging
 import numpy as np
 
 from imu_learn.calib.sources import held_back, moves
+from imu_learn.data.splits import cut
 from imu_learn.data.types import Segment
 
 
@@ -50,3 +51,14 @@ def test_nothing_moving_keeps_the_last_and_says_it_cannot_judge(caplog):
     with caplog.at_level(logging.WARNING):
         tr, va = held_back(recording(0.0), 0.15)
     assert span(va) == [(85, 100)] and "--val-fraction 0" in caplog.text
+
+
+def test_a_raw_gyro_bias_is_not_a_turn():
+    """A raw gyro 0.08 rad/s off (EuRoC's ADIS16448 on z) at rest does not move: the recording's median
+    gyro is taken off before the turn test, so its still end is stepped over as a calibrated one is."""
+    segs = recording(0.8)
+    biased = [s.__class__(s.name, s.t_ns, s.gyro + [0.0, 0.0, 0.08], s.acc, s.p, s.v, s.q_wxyz) for s in segs]
+    tr, va = held_back(biased, 0.15)
+    assert span(va) == [(70, 85)]
+    tail = cut(biased, 0.85, 1.0, "rec")  # at rest: its gyro mean is the bias alone, above the cap
+    assert moves(tail) and not moves(tail, np.median(biased[0].gyro, axis=0))

@@ -248,19 +248,21 @@ def span(s: Any) -> Dict[str, Any]:
 MOVING_SHARE = 0.5  # a block moves where at least this share of its samples does (:func:`moves`)
 
 
-def moves(segments: Sequence[Segment]) -> bool:
+def moves(segments: Sequence[Segment], center: Optional[np.ndarray] = None) -> bool:
     """Whether a block moves enough to select a floor's filter and offset and to judge it: at least
     :data:`MOVING_SHARE` of its samples move, a sample moving where over the 1 s around it the gyro's or the
-    accelerometer's standard deviation on some axis, or the gyro's mean, is at least the still detector's
-    caps (:class:`imu_learn.core.still.StillSettings`: 0.05 rad/s, 0.5 m/s²)."""
+    accelerometer's standard deviation on some axis, or the gyro's mean less ``center`` (the recording's
+    median gyro: a raw gyro's bias, EuRoC's 0.08 rad/s on z, is not a turn; None: zero), is at least the
+    still detector's caps (:class:`imu_learn.core.still.StillSettings`: 0.05 rad/s, 0.5 m/s²)."""
     caps = StillSettings()
+    c = np.zeros(3) if center is None else np.asarray(center, dtype=np.float64)
     n_moving, n_all = 0, 0
     for x in segments:
         if len(x) < 3:
             continue
         w = max(2, int(round(caps.window_s / (float(np.median(np.diff(x.t_ns))) * 1e-9))))
         sd = [np.sqrt(np.maximum(moving_mean(v * v, w) - moving_mean(v, w) ** 2, 0.0)).max(1) for v in (x.gyro, x.acc)]
-        mean = np.abs(moving_mean(x.gyro, w)).max(1)
+        mean = np.abs(moving_mean(x.gyro, w) - c).max(1)
         n_moving += int(((sd[0] >= caps.gyro_cap) | (sd[1] >= caps.acc_cap) | (mean >= caps.gyro_cap)).sum())
         n_all += len(x)
     return n_all > 0 and n_moving >= MOVING_SHARE * n_all
@@ -275,11 +277,12 @@ def held_back(segments: List[Segment], frac: float) -> Tuple[List[Segment], List
     if frac <= 0:
         return list(segments), []
     name = recording_name(segments[0].name)
+    center = np.median(np.concatenate([x.gyro for x in segments]), axis=0)
     step = frac / 2
     for k in range(int(math.floor((1.0 - frac) / step + 1e-9)) + 1):
         a = 1.0 - frac - k * step
         held = cut(segments, a, a + frac, name)
-        if moves(held):
+        if moves(held, center):
             if k:
                 log.info("%s: its last %g %% does not move; held back %.3g-%.3g of it instead", name, 100 * frac, a,
                          a + frac)
