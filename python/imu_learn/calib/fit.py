@@ -98,6 +98,17 @@ def time_blocks(segments: Sequence[Segment], k: int = 4) -> Dict[str, Tuple[List
     return {f"block{i + 1}": (cut(list(segments), i / k, (i + 1) / k, name), []) for i in range(k)}
 
 
+def refit_groups(train: Sequence[Segment], val: Sequence[Segment], groups: Sequence[str], val_groups: Sequence[str],
+                 window: int) -> Dict[str, Tuple[List[Segment], List[Segment]]]:
+    """The groups the uncertainty refits run on (module doc): each recording (its training and validation
+    segments), or four time blocks of a single one; only those with a training segment longer than
+    ``window`` samples."""
+    per = group_segments(train, val, groups, val_groups)
+    if len(per) < 2:  # one recording: four time blocks of it
+        per = time_blocks(train)
+    return {g: tv for g, tv in per.items() if any(len(s) > window + 1 for s in tv[0])}
+
+
 def fit_floor(train: List[Segment], val: List[Segment], settings: FitSettings, groups: Sequence[str],
               val_groups: Sequence[str], progress: Progress = lambda s: None, uncertainty: bool = True,
               terms: Optional[Dict[str, Any]] = None) -> FloorFit:
@@ -108,12 +119,9 @@ def fit_floor(train: List[Segment], val: List[Segment], settings: FitSettings, g
     floor = Floor.from_dict(method.to_dict())
     if not uncertainty:
         return FloorFit(floor, log, TraditionalParams.unknown(), [])
-    per = group_segments(train, val, groups, val_groups)
-    if len(per) < 2:  # one recording: four time blocks of it
-        per = time_blocks(train)
     fits: List[TraditionalParams] = []
     info = []
-    usable = {g: tv for g, tv in per.items() if any(len(s) > settings.window + 1 for s in tv[0])}
+    usable = refit_groups(train, val, groups, val_groups, settings.window)
     for i, (g, (tr, va)) in enumerate(usable.items()):
         progress(f"uncertainty: refitting on {g} alone ({i + 1}/{len(usable)})")
         m = refit_once(method, tr, va, settings, max(GROUP_MIN_WINDOWS, method.max_windows // len(usable)))

@@ -93,7 +93,7 @@ from imu_learn.calib.acc_positions import (
     heldout_rms_rows,
     recording_rows,
 )
-from imu_learn.calib.fit import group_segments, seed_all, spread, time_blocks
+from imu_learn.calib.fit import group_segments, refit_groups, seed_all, spread, time_blocks
 from imu_learn.calib.profile import FloorFit
 from imu_learn.calib.sources import matched
 from imu_learn.data.types import Segment, sample_rate_hz
@@ -496,9 +496,7 @@ def level_spread(train: List[Segment], val: List[Segment], groups: Sequence[str]
     (:func:`masked_std`); the time offset's and the cut-offs' kept. The full floor's spread misstates a
     level's: a bias refitted with every term trades with terms the motion barely excites (a level
     robot's g-sensitivity: Fetch's gyro bias spread 34-138 mrad/s with every term, a few at ``bias``)."""
-    per = group_segments(train, val, groups, val_groups)
-    per = per if len(per) >= 2 else time_blocks(train)
-    usable = {g: tv for g, tv in per.items() if any(len(x) > settings.window + 1 for x in tv[0])}
+    usable = refit_groups(train, val, groups, val_groups, settings.window)
     fits = []
     for i, (g, (tr, va)) in enumerate(usable.items()):
         progress(f"uncertainty at the chosen levels: refitting on {g} alone ({i + 1}/{len(usable)})")

@@ -42,11 +42,11 @@ from imu_learn.calib.acc_positions import AccFit, AccOptions, fit_acc_from_posit
 from imu_learn.calib.frames import default_gap_s
 from imu_learn.calib.profile import FloorFit
 from imu_learn.calib.reference import FrameFit, FrameOptions, frame_lines, read_extrinsics, resolve_frame, to_imu_frame
-from imu_learn.core.still import StillSettings, moving_mean
+from imu_learn.core.still import StillSettings, moving_mean, moving_std
 from imu_learn.data.formats import USER_CSV, detect_format, read_imu_source, read_recording, user_csv
 from imu_learn.data.loading import AlignOptions, align
 from imu_learn.data.splits import cut, recording_name
-from imu_learn.data.types import Segment
+from imu_learn.data.types import Segment, median_period_ns
 from imu_learn.errors import ConfigError
 from imu_learn.infer.rates import recording_device
 
@@ -260,8 +260,9 @@ def moves(segments: Sequence[Segment], center: Optional[np.ndarray] = None) -> b
     for x in segments:
         if len(x) < 3:
             continue
-        w = max(2, int(round(caps.window_s / (float(np.median(np.diff(x.t_ns))) * 1e-9))))
-        sd = [np.sqrt(np.maximum(moving_mean(v * v, w) - moving_mean(v, w) ** 2, 0.0)).max(1) for v in (x.gyro, x.acc)]
+        w = max(2, int(round(caps.window_s / (median_period_ns(x.t_ns) * 1e-9))))
+        # the still detector's own spreads; a segment shorter than the window has none (inf there): not moving
+        sd = [np.where(np.isfinite(v), v, 0.0) for v in (moving_std(x.gyro, w).max(1), moving_std(x.acc, w).max(1))]
         mean = np.abs(moving_mean(x.gyro, w) - c).max(1)
         n_moving += int(((sd[0] >= caps.gyro_cap) | (sd[1] >= caps.acc_cap) | (mean >= caps.gyro_cap)).sum())
         n_all += len(x)
