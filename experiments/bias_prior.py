@@ -131,7 +131,10 @@ def fit(config: str, profile_path: Path, data_root: Path) -> Dict[str, Any]:
     data, recs = recordings(config, data_root, ("train", "val"))
     grav = gravity_of(profile, data)
     term = profile.noise.get("gyroscope_random_walk")  # rad/s^2/sqrt(Hz) = rad/s/sqrt(s)
-    rw = None if term is None or not math.isfinite(float(term.value)) else float(term.value)
+    # how far the bias may move between `moving`'s knots: the data's upper bound where no fit observed the
+    # random walk (the loosest the recordings allow; the class default would hold the bias nearly constant)
+    rw = None if term is None else float(term.bound if term.bounded_only else term.value)
+    rw = rw if rw is not None and math.isfinite(rw) else None
     std, how = profile.gyro_bias_prior_std()  # the spread refine's --bias prior is given (calib.correction)
     prior = BiasPrior.from_bias_std(std, f"the profile's bias spread ({how})",
                                     measured={"random_walk_rad_s_sqrt_s": rw})

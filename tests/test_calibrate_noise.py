@@ -12,7 +12,8 @@ import yaml
 
 from imu_learn.calib import noise as nz
 from imu_learn.calib.kalibr import kalibr_yaml
-from imu_learn.calib.profile import NOISE_KEYS, NoiseTerm, noise_only
+from imu_learn.calib.profile import CLASS_DEFAULTS, NOISE_KEYS, NoiseTerm, Profile, noise_only
+from imu_learn.calib.run import noise_terms
 from imu_learn.data import synthetic as syn
 from imu_learn.data.types import Segment
 
@@ -135,6 +136,33 @@ def test_upper_bounds_hold_and_are_used_when_nothing_is_observed():
     est, value, std = chosen["gyroscope_random_walk"]
     assert est.kind == "upper bound" and value > 0 and math.isnan(std)
     assert chosen["gyroscope_noise_density"][1] == pytest.approx(1e-3, rel=0.15)
+
+
+def test_an_unobserved_random_walk_is_written_as_the_class_default_with_its_bound_beside(tmp_path):
+    """profile.json never holds a bound as a value: the unobserved random walks' value is the device-class
+    default, the bound the data gave sits in detail.upper_bound; read back (and from a profile written
+    before, whose value was the bound), imu.yaml and navigate get the class default."""
+    rng = np.random.default_rng(5)
+    n = 20_000
+    t = 10**18 + np.arange(n, dtype=np.int64) * 5_000_000
+    gyro = rng.standard_normal((n, 3)) * 1e-3 * math.sqrt(200.0)
+    acc = rng.standard_normal((n, 3)) * 1e-2 * math.sqrt(200.0) + [0, 0, G]
+    chosen = nz.choose(nz.candidates(None, nz.allan_noise([("still", t, gyro, acc)]), 10.0), NOISE_KEYS)
+    bound = chosen["gyroscope_random_walk"][1]
+    terms = noise_terms(chosen)
+    rw = terms["gyroscope_random_walk"]
+    assert rw.value == CLASS_DEFAULTS["gyroscope_random_walk"] != bound and rw.source == "class_default"
+    assert rw.bound == pytest.approx(bound) and rw.bounded_only and np.isnan(rw.per_axis).all()
+    assert not terms["gyroscope_noise_density"].bounded_only  # observed: its own value
+    prof = noise_only("my-imu", 200.0, terms)
+    prof.save(tmp_path / "profile.json")
+    back = Profile.load(tmp_path / "profile.json")
+    assert back.noise["gyroscope_random_walk"].bound == pytest.approx(bound)
+    assert back.kalibr()["gyroscope_random_walk"] == CLASS_DEFAULTS["gyroscope_random_walk"]
+    assert f"upper bound {bound:.4e}" in kalibr_yaml(back)
+    old = dict(terms, gyroscope_random_walk=NoiseTerm(np.full(3, bound), bound, math.nan, rw.unit, "allan",
+                                                      {"kind": "upper bound"}))
+    assert noise_only("my-imu", 200.0, old).kalibr()["gyroscope_random_walk"] == CLASS_DEFAULTS["gyroscope_random_walk"]
 
 
 # -- Kalibr's imu.yaml -------------------------------------------------------------------------------

@@ -30,7 +30,8 @@ def kalibr_yaml(profile: Profile, rostopic: str = ROSTOPIC_PLACEHOLDER) -> str:
     for key in NOISE_KEYS:
         term = profile.noise.get(key)
         if profile.unobserved_noise(key):
-            why = f"not observed ({term.source} upper bound {_value(term.value)}): {CLASS_DEFAULT_SOURCE}"
+            src = term.detail.get("upper_bound_from", term.source)
+            why = f"not observed ({src} upper bound {_value(term.bound)}): {CLASS_DEFAULT_SOURCE}"
         elif term is None:
             why = "not measured: fill in a value (e.g. the datasheet's)"
         else:

@@ -19,7 +19,11 @@ Conventions (also written into the file's ``conventions`` entry, so the file exp
 
 Every estimate carries its uncertainty (one standard deviation; null where none could be given)
 and, for the noise, its source: ``residuals`` (calibrated IMU against the reference trajectory),
-``allan`` (Allan deviation of still stretches) or ``datasheet``.
+``allan`` (Allan deviation of still stretches), ``datasheet``, or ``class_default``: a bias random walk
+that no fit observed holds the device-class default (:data:`CLASS_DEFAULTS`) as its ``value``, its
+``detail`` kind ``not observed`` with the bound the data gave (``upper_bound``, ``upper_bound_per_axis``,
+``upper_bound_from``): a bound is never written as a value. (Profiles written before this kept the
+bound as the value, kind ``upper bound``; :meth:`Profile.kalibr` reads both as the class default.)
 
 Errors: :meth:`Profile.load` raises :class:`imu_learn.errors.ProfileError` naming the file and the
 field. No torch here: applying a profile needs numpy and scipy only.
@@ -48,7 +52,8 @@ NOISE_UNITS = {
     "accelerometer_noise_density": "m/s^2/sqrt(Hz)", "accelerometer_random_walk": "m/s^3/sqrt(Hz)",
     "gyroscope_bias_instability": "rad/s", "accelerometer_bias_instability": "m/s^2",
 }
-SOURCES = ("residuals", "allan", "datasheet")
+SOURCES = ("residuals", "allan", "datasheet", "class_default")
+NOT_OBSERVED = "not observed"  # a noise term's detail kind: the value is the class default (module doc)
 # What a consumer of the profile (imu.yaml, navigate) uses for a bias random walk that no fit observed
 # (an Allan upper bound is a bound, not a value): Kalibr's published figures of a MEMS IMU (EuRoC's
 # ADIS16448 sensor.yaml), the same as the fusion's built-in noise.
@@ -132,6 +137,27 @@ class NoiseTerm:
     def to_dict(self) -> Dict[str, Any]:
         return {"value": _num(self.value), "std": _num(self.std), "unit": self.unit, "source": self.source,
                 "per_axis": _arr(self.per_axis), "detail": clean(self.detail)}
+
+    @property
+    def bounded_only(self) -> bool:
+        """No fit observed it: the data gave an upper bound alone (its value the class default where one
+        exists, else that bound; profiles written before the class default kept the bound)."""
+        return self.detail.get("kind") in (NOT_OBSERVED, "upper bound")
+
+    @property
+    def bound(self) -> float:
+        """The upper bound the data gave (NaN where the term was observed)."""
+        if self.detail.get("kind") == NOT_OBSERVED:
+            return float(_nulls_to_nan(self.detail.get("upper_bound")))
+        return float(self.value) if self.bounded_only else math.nan
+
+
+def unobserved_term(key: str, per_axis: np.ndarray, bound: float, source: str, detail: Dict[str, Any]) -> NoiseTerm:
+    """A bias random walk that no fit observed: the class default as its value, the bound the data gave
+    (``per_axis``, ``bound``, from ``source``) in its detail."""
+    return NoiseTerm(np.full(3, math.nan), CLASS_DEFAULTS[key], math.nan, NOISE_UNITS[key], "class_default",
+                     {**detail, "kind": NOT_OBSERVED, "value_from": CLASS_DEFAULT_SOURCE, "upper_bound": _num(bound),
+                      "upper_bound_per_axis": _arr(per_axis), "upper_bound_from": source})
 
 
 @dataclass
@@ -286,7 +312,7 @@ class Profile:
     def unobserved_noise(self, key: str) -> bool:
         """A random walk the profile only bounds (an Allan or residual upper bound)."""
         t = self.noise.get(key)
-        return key in CLASS_DEFAULTS and t is not None and t.detail.get("kind") == "upper bound"
+        return key in CLASS_DEFAULTS and t is not None and t.bounded_only
 
     def recording_groups(self) -> Tuple[int, bool]:
         """(the number of groups in the fit log, whether they are recordings): one entry of

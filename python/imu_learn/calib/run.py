@@ -27,7 +27,17 @@ from imu_learn.calib import noise as nz
 from imu_learn.calib.kalibr import write_kalibr_yaml
 from imu_learn.calib.plausible import LIMITS, held_back_errors, held_back_findings, parameter_findings
 from imu_learn.calib.plot import plot_calibration
-from imu_learn.calib.profile import NOISE_KEYS, NOISE_UNITS, Affine, NoiseTerm, Profile, noise_only
+from imu_learn.calib.profile import (
+    CLASS_DEFAULT_SOURCE,
+    CLASS_DEFAULTS,
+    NOISE_KEYS,
+    NOISE_UNITS,
+    Affine,
+    NoiseTerm,
+    Profile,
+    noise_only,
+    unobserved_term,
+)
 from imu_learn.calib.select import gyro_only, select_floor
 from imu_learn.calib.sources import TIME_OFFSET_PRIOR_SAMPLES, CalibInputs, Recording, StillPiece
 from imu_learn.core.stamps import median_period_ns, sample_rate_hz
@@ -79,6 +89,9 @@ def still_pieces(inp: CalibInputs, settings: nz.StillSettings) -> List[Tuple[str
 def noise_terms(chosen: Dict[str, Tuple[nz.Estimate, float, float]]) -> Dict[str, NoiseTerm]:
     out = {}
     for name, (c, value, std) in chosen.items():
+        if c.kind == "upper bound" and name in CLASS_DEFAULTS:  # a bound is never written as a value
+            out[name] = unobserved_term(name, c.per_axis, value, c.source, dict(c.detail))
+            continue
         out[name] = NoiseTerm(c.per_axis, value, std, NOISE_UNITS[name], c.source,
                               {"kind": c.kind, **{k: v for k, v in c.detail.items()}})
     return out
@@ -117,12 +130,16 @@ def unobservable(has_ref: bool, allan: Optional[nz.AllanNoise], noise: Dict[str,
         t = noise.get(key)
         if t is None:
             out.append({"what": key, "why": "no estimate: neither a reference nor a still stretch"})
-        elif t.detail.get("kind") == "upper bound":
-            out.append({"what": key, "why": f"no fit found it ({t.source}: no region of its slope, or its "
-                        "uncertainty above half its value); the value written is an upper bound, min over τ of "
-                        "the Allan deviation on the term's line" + (
+        elif t.bounded_only:
+            src = t.detail.get("upper_bound_from", t.source)
+            written = (f"the value written is the {CLASS_DEFAULT_SOURCE}; the data bound it above by "
+                       f"{t.bound:.3g} (detail.upper_bound" if t.source == "class_default" else
+                       "the value written is an upper bound (")
+            out.append({"what": key, "why": f"no fit found it ({src}: no region of its slope, or its "
+                        f"uncertainty above half its value); {written}, min over τ of "
+                        "the Allan deviation on the term's line)" + (
                             "; motion-correlated errors (vibration, reference noise, calibration errors that vary "
-                            "with the motion) dominate the residuals" if t.source == "residuals" else "")})
+                            "with the motion) dominate the residuals" if src == "residuals" else "")})
     return out
 
 

@@ -271,6 +271,10 @@ def summary(p: Any) -> List[str]:
                      f"gravity {p.gravity_mps2:.4f} m/s^2")
         lines.append(_terms_line(p.selection, p.reference.get("kind", "poses")))
     for k, t in p.noise.items():
+        if p.unobserved_noise(k):
+            lines.append(f"{k}: {p.kalibr()[k]:.3e} {t.unit} (not observed: the MEMS class default; the data bound "
+                         f"it above by {t.bound:.3e})")
+            continue
         lines.append(f"{k}: {t.value:.3e} {t.unit} ({t.source}, {t.detail.get('kind', 'fit')})")
     if p.reference and not all(v is False for v in p.reference.get("applied", {}).values()):
         r = p.reference
