@@ -98,14 +98,20 @@ def time_blocks(segments: Sequence[Segment], k: int = 4) -> Dict[str, Tuple[List
     return {f"block{i + 1}": (cut(list(segments), i / k, (i + 1) / k, name), []) for i in range(k)}
 
 
+def recordings_or_blocks(train: Sequence[Segment], val: Sequence[Segment], groups: Sequence[str],
+                         val_groups: Sequence[str]) -> Tuple[Dict[str, Tuple[List[Segment], List[Segment]]], bool]:
+    """The one rule of what a refit takes alone and a fold holds out: each recording (its training and
+    validation segments) where there are several, else four time blocks of the single one (no validation
+    segments); the second value says which (True: blocks)."""
+    per = group_segments(train, val, groups, val_groups)
+    return (per, False) if len(per) >= 2 else (time_blocks(train), True)
+
+
 def refit_groups(train: Sequence[Segment], val: Sequence[Segment], groups: Sequence[str], val_groups: Sequence[str],
                  window: int) -> Dict[str, Tuple[List[Segment], List[Segment]]]:
-    """The groups the uncertainty refits run on (module doc): each recording (its training and validation
-    segments), or four time blocks of a single one; only those with a training segment longer than
-    ``window`` samples."""
-    per = group_segments(train, val, groups, val_groups)
-    if len(per) < 2:  # one recording: four time blocks of it
-        per = time_blocks(train)
+    """The groups the uncertainty refits run on (module doc, :func:`recordings_or_blocks`); only those with a
+    training segment longer than ``window`` samples."""
+    per, _ = recordings_or_blocks(train, val, groups, val_groups)
     return {g: tv for g, tv in per.items() if any(len(s) > window + 1 for s in tv[0])}
 
 

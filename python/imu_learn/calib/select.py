@@ -93,7 +93,7 @@ from imu_learn.calib.acc_positions import (
     heldout_rms_rows,
     recording_rows,
 )
-from imu_learn.calib.fit import group_segments, refit_groups, seed_all, spread, time_blocks
+from imu_learn.calib.fit import recordings_or_blocks, refit_groups, seed_all, spread
 from imu_learn.calib.profile import FloorFit
 from imu_learn.calib.sources import matched
 from imu_learn.data.types import Segment, sample_rate_hz
@@ -278,15 +278,12 @@ def prepare(fold: Fold, settings: FitSettings, opts: SelectOptions) -> Prepared:
 
 
 def folds(train: List[Segment], val: List[Segment], groups: Sequence[str], val_groups: Sequence[str]) -> List[Fold]:
-    """Leave one recording out (several recordings), else four contiguous time blocks of the one."""
-    per = group_segments(train, val, groups, val_groups)
-    if len(per) >= 2:
-        return [Fold(g, [s for h, (tr, _) in per.items() if h != g for s in tr],
-                     [s for h, (_, va) in per.items() if h != g for s in va], tr_g + va_g)
-                for g, (tr_g, va_g) in per.items()]
-    blocks = time_blocks(train)
-    return [Fold(b, [s for c, (tr, _) in blocks.items() if c != b for s in tr], list(val), tr_b)
-            for b, (tr_b, _) in blocks.items()]
+    """Leave one recording out (several recordings), else four contiguous time blocks of the one
+    (:func:`~imu_learn.calib.fit.recordings_or_blocks`; blocks validate on the recording's ``val``)."""
+    per, blocks = recordings_or_blocks(train, val, groups, val_groups)
+    return [Fold(g, [s for h, (tr, _) in per.items() if h != g for s in tr],
+                 list(val) if blocks else [s for h, (_, va) in per.items() if h != g for s in va], tr_g + va_g)
+            for g, (tr_g, va_g) in per.items()]
 
 
 def _pool(out: Dict[str, List[np.ndarray]], key: str, x: np.ndarray) -> None:

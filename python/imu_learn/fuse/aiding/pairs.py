@@ -29,11 +29,17 @@ def gyro_orientation(t_ns: np.ndarray, gyro: np.ndarray) -> np.ndarray:
     return C
 
 
-def runs(imu_t_ns: np.ndarray, sample: np.ndarray, max_gap_s: float) -> np.ndarray:
-    """(M,) each row's run number: consecutive rows (at IMU samples ``sample``) share one when their
-    samples are more than zero and at most ``max_gap_s`` apart."""
-    dt = np.diff(np.asarray(imu_t_ns, dtype=np.int64)[np.asarray(sample, dtype=np.int64)]) * 1e-9
+def run_numbers(dt_s: np.ndarray, max_gap_s: float) -> np.ndarray:
+    """The aiding's one break rule: (M,) each row's run number from the M − 1 times between consecutive
+    rows ``dt_s``; two rows share a run when they are more than zero and at most ``max_gap_s`` apart."""
+    dt = np.asarray(dt_s, dtype=np.float64)
     return np.r_[0, np.cumsum(~((dt > 0) & (dt <= max_gap_s)))]
+
+
+def runs(imu_t_ns: np.ndarray, sample: np.ndarray, max_gap_s: float) -> np.ndarray:
+    """(M,) each row's run number (:func:`run_numbers`), the rows at IMU samples ``sample``."""
+    return run_numbers(np.diff(np.asarray(imu_t_ns, dtype=np.int64)[np.asarray(sample, dtype=np.int64)]) * 1e-9,
+                       max_gap_s)
 
 
 def within(run: np.ndarray, span: int) -> np.ndarray:

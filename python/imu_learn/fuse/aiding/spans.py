@@ -43,6 +43,7 @@ from typing import Optional, Sequence, Tuple
 import numpy as np
 
 from .noise import PoseNoise
+from .pairs import run_numbers
 from .types import RelativePoses, WorldPoses
 
 SPANS_S = (0.0,)  # 0: the next row (the navigator's relative poses, beside the world's)
@@ -67,10 +68,10 @@ def span_pairs(t_s: np.ndarray, spans_s: Sequence[float], max_gap_s: float,
                anchor_s: float = ANCHOR_S) -> Tuple[np.ndarray, np.ndarray, np.ndarray]:
     """(i, j, which span) of rows at times ``t_s`` (sorted): span 0 ties each row to the row before;
     a longer span ties each anchor row (:func:`anchors`) to the last anchor at least that span before
-    it. Only inside one run (no two consecutive rows of it further apart than ``max_gap_s``), each
-    pair once (the shortest span's)."""
+    it. Only inside one run (:func:`.pairs.run_numbers`: consecutive rows more than zero and at most
+    ``max_gap_s`` apart), each pair once (the shortest span's)."""
     t_s = np.asarray(t_s, dtype=np.float64)
-    run = np.r_[0, np.cumsum(np.diff(t_s) > max_gap_s)]
+    run = run_numbers(np.diff(t_s), max_gap_s)
     anc = anchors(t_s, anchor_s)
     pairs = {}
     for n, span in enumerate(spans_s):
