@@ -9,7 +9,7 @@ from scipy.spatial.transform import Rotation
 
 from imu_learn.errors import InvalidInputError
 from imu_learn.fuse.aiding import rtklib
-from imu_learn.fuse.start.delay import _double_integral, imu_delay
+from imu_learn.fuse.start.delay import double_integral, imu_delay
 from test_navigate_gnss import LEVER, RPY, synthetic_car
 
 G = 9.7968
@@ -77,11 +77,11 @@ def test_imu_delay_refuses_a_best_match_at_the_grid_edge():
         imu_delay(imu_t, acc, sol, G, grid_s=(-0.2, 0.2, 0.01))
 
 
-def test_double_integral_is_exact_for_piecewise_linear():
+def testdouble_integral_is_exact_for_piecewise_linear():
     t = np.sort(np.random.default_rng(2).uniform(0.0, 3.0, 40))
     t = np.r_[0.0, t]
     y = 2.0 + 3.0 * t  # linear: F = t^2 + t^3 / 2
-    assert np.allclose(_double_integral(t, y), t ** 2 + t ** 3 / 2, rtol=1e-12, atol=1e-12)
+    assert np.allclose(double_integral(t, y), t ** 2 + t ** 3 / 2, rtol=1e-12, atol=1e-12)
 
 
 def test_navigate_reads_the_fixes_once_for_the_delay_the_noise_fit_and_the_rows(tmp_path, monkeypatch):

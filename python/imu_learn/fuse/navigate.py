@@ -103,6 +103,7 @@ from .score import convergence, score_against
 from .settings import FusionSettings, PriorSigmas
 from .start import Start
 from .start.delay import imu_delay
+from .start.gravity import GravityCheck, check_gravity
 from .start.prior import profile_bias_sigmas
 
 log = logging.getLogger(__name__)
@@ -556,8 +557,8 @@ def check_mounting(t_ns: np.ndarray, acc_imu: np.ndarray, sol: Optional[RtkSolut
     if check.get("checked") and not check["ok"]:
         given = "--imu-rotation-rpy-deg" if mounting is not None else "no --imu-rotation-rpy-deg (the IMU's own x)"
         log.warning(f"the body's forward axis ({given}) is {check['angle_deg']:.0f} deg from the one the track shows "
-                    f"(roll, pitch, yaw {', '.join(f'{x:g}' for x in check['estimated_rpy_deg'])} estimated): with "
-                    "--nhc a wrong mounting wrecks the track; check it")
+                    f"(roll, pitch, yaw {', '.join(f'{x:g}' for x in check['estimated_rpy_deg'])} estimated, a z-up "
+                    "body; roll + 180 for a z-down one): with --nhc a wrong mounting wrecks the track; check it")
     return check
 
 
@@ -591,6 +592,10 @@ def aiding_rows(src: Sources, opts: NavigateOptions, t_ns: np.ndarray, T_BS: Opt
         opts = replace(opts, gravity=round(normal_gravity(sol.origin_llh[0], sol.origin_llh[2]), 6))
         return rows, len(rows.sample) + sum(rows.dropped.values()), (gnss, sol), opts
     traj = read_aiding(src, opts)
+    if imu is not None and not kind_of(opts.aiding_kind).poses:
+        rows = select_rows(traj, t_ns, T_BS, opts)
+        rows.gravity = checked_up(src, opts, rows, imu)
+        return rows, len(traj), None, opts
     if imu is None or traj.q_xyzw is None or not kind_of(opts.aiding_kind).poses:
         return select_rows(traj, t_ns, T_BS, opts), len(traj), None, opts
     traj, offset = shift_trajectory(traj, imu.t_ns, imu.gyro)
@@ -598,6 +603,19 @@ def aiding_rows(src: Sources, opts: NavigateOptions, t_ns: np.ndarray, T_BS: Opt
     rows.offset = offset
     rows.frame = checked_frame(src, rows, imu, opts.max_relative_gap_s)
     return with_noise(rows, imu.t_ns, imu.gyro, imu.acc, opts.max_relative_gap_s), len(traj), None, opts
+
+
+def checked_up(src: Sources, opts: NavigateOptions, rows: AidingRows, imu: Imu) -> GravityCheck:
+    """Positions of a trajectory file against the accelerometer (:mod:`.start.gravity`), before any fusion:
+    refused (exit 2) where their world is not z up; a warning line where it cannot be told."""
+    check = check_gravity(imu.t_ns, imu.acc, rows.t_ns, rows.p, opts.gravity)
+    if check.verdict == "refused":
+        fix = ("poses of a VO or SLAM (a camera's first frame as their world)? fuse them as --aiding-kind pose or "
+               "relative-pose with --extrinsics; else turn the positions into a z-up world (ENU)")
+        raise ConfigError(f"--aiding {src.aiding}: its positions' world is not z up: {check.why}: {fix}")
+    if check.verdict == "not checked":
+        log.warning("aiding positions' world not checked against gravity: %s; it must be z up", check.why)
+    return check
 
 
 def checked_frame(src: Sources, rows: AidingRows, imu: Imu, max_gap_s: float) -> FrameCheck:
@@ -856,6 +874,7 @@ def run_summary(src: Sources, out: Path, inp: Inputs, run: Started, res) -> Dict
         "lever_arm_m": [round(float(x), 4) for x in inp.lever],
         "final_bias": [round(float(b), 6) for b in res.smoothed_bias[-1]],
         "final_bias_check": final_bias_check(res.smoothed_bias[-1]),
+        "aiding_up_check": None if rows.gravity is None else rows.gravity.to_dict(),
         "bias": run.bias, "correction": imu.correction, "imu_delay": imu.delay,
         "outputs": {"causal": str(out / "causal.tum"), "smoothed": str(out / "smoothed.tum")},
         "causal_frame": res.causal_frame,

@@ -324,3 +324,4 @@ class AidingRows:
     frame: Optional[object] = None  # the frame check before the fusion (:class:`.frame.FrameCheck`)
     scale: Optional[object] = None  # the positions' metric scale (:class:`imu_learn.calib.metric_scale.ScaleFit`)
     maps: Optional[object] = None  # with breaks: whether they stay in one map (:class:`.maps.OneMap`)
+    gravity: Optional[object] = None  # positions: their world's up (:class:`imu_learn.fuse.start.gravity.GravityCheck`)

@@ -39,7 +39,7 @@ class DelayEstimate:
     grid_s: tuple
 
 
-def _double_integral(t: np.ndarray, y: np.ndarray) -> np.ndarray:
+def double_integral(t: np.ndarray, y: np.ndarray) -> np.ndarray:
     """``F(t_i) = int_0^t_i int_0^s y``, ``y`` piecewise linear between the samples (exact)."""
     dt = np.diff(t)
     f1 = np.r_[0.0, np.cumsum(0.5 * (y[1:] + y[:-1]) * dt)]
@@ -56,7 +56,7 @@ def imu_delay(imu_t_ns: np.ndarray, acc: np.ndarray, sol, gravity: float, use: O
     t0 = int(sol.t_ns[0])
     ti = (np.asarray(imu_t_ns, dtype=np.int64) - t0) * 1e-9
     fn = np.linalg.norm(np.asarray(acc, dtype=np.float64), axis=1) - gravity
-    F = _double_integral(ti, fn)
+    F = double_integral(ti, fn)
     t = (np.asarray(sol.t_ns, dtype=np.int64) - t0) * 1e-9
     ok = sol.q == 1
     if use is not None:
