@@ -219,14 +219,14 @@ def run_experiment(cfg: FuseConfig, out: Path, log: Callable[[str], None] = prin
         raise ConfigError(f"--inputs: {sorted(set(only_inputs) - set(cfg.inputs))} not among the config's inputs {cfg.inputs}")
     if int(jobs) < 1:
         raise ConfigError(f"--jobs: must be >= 1, got {jobs}")
-    out.mkdir(parents=True, exist_ok=True)
-    res_path = out / "results.json"
-    results = read_runs(res_path, log)
     processors: Dict[Tuple[str, str], object] = {}
-    for spec in cfg.recordings:  # a missing model fails here, before any run
+    for spec in cfg.recordings:  # a missing model or fit fails here, before any run and before OUT exists
         for name in run_inputs:
             if name != "raw":
                 load(name, artefact_of(cfg, spec, name), processors)
+    out.mkdir(parents=True, exist_ok=True)
+    res_path = out / "results.json"
+    results = read_runs(res_path, log)
     wanted = {run_key(spec, scn, name, seed): run_hash(cfg, spec, scn, name, seed)
               for spec in cfg.recordings for scn in cfg.scenarios for seed in seeds_of(cfg, scn) for name in cfg.inputs}
     total = len(wanted)
