@@ -42,6 +42,7 @@ from imu_learn.calib.select import gyro_only, select_floor
 from imu_learn.calib.sources import TIME_OFFSET_PRIOR_SAMPLES, CalibInputs, Recording, StillPiece
 from imu_learn.core.stamps import median_period_ns, sample_rate_hz
 from imu_learn.errors import ImplausibleProfileError, InvalidInputError
+from imu_learn.infer.guard import training_inputs
 
 Progress = Callable[[str], None]
 logger = logging.getLogger(__name__)
@@ -84,6 +85,13 @@ def still_pieces(inp: CalibInputs, settings: nz.StillSettings) -> List[Tuple[str
         for i0, i1 in nz.still_stretches(t, g, a, settings):
             out.append((name, t[i0:i1], g[i0:i1], a[i0:i1]))
     return out
+
+
+def raw_imu(inp: CalibInputs) -> List[Tuple[str, np.ndarray, np.ndarray, np.ndarray]]:
+    """The raw IMU the profile was made from (name, t_ns, gyro, acc): every segment with a reference and
+    every IMU-only piece, for the profile's ``inputs`` (:func:`imu_learn.infer.guard.training_inputs`)."""
+    return ([(s.name, s.t_ns, s.gyro, s.acc) for s in inp.train + inp.val]
+            + [(p.name, p.t_ns, p.gyro, p.acc) for p in inp.imu_only])
 
 
 def noise_terms(chosen: Dict[str, Tuple[nz.Estimate, float, float]]) -> Dict[str, NoiseTerm]:
@@ -290,6 +298,7 @@ def calibrate(inp: CalibInputs, out_dir: Path, options: CalibOptions = CalibOpti
     prof.noise_estimates = estimate_dicts(cands)
     prof.sources = inp.sources + ([{"still_stretches": allan.stretches, "still_s": round(allan.seconds, 3)}] if allan else [])
     prof.unobservable = unobservable(has_ref, allan, noise, options)
+    prof.inputs = training_inputs(raw_imu(inp))  # refine's and navigate's guard: is a recording this device's?
     out_dir.mkdir(parents=True, exist_ok=True)
     files = {"profile": out_dir / "profile.json", "kalibr": out_dir / "imu.yaml"}
     prof.save(files["profile"])
