@@ -125,3 +125,40 @@ def test_a_covariance_head_is_exported_as_a_second_output(tmp_path):
     card = json.loads((out / "model.json").read_text())
     assert [o["name"] for o in card["outputs"]] == ["refined", "variance"]
     assert card["outputs"][1]["units"][0] == "(rad/s)^2"
+
+
+def _small_checkpoint(tmp_path):
+    torch.manual_seed(0)
+    m = ImuRefiner(ModelConfig(), mean=torch.zeros(6), std=torch.ones(6))
+    ckpt = tmp_path / "ckpt.pt"
+    save_checkpoint(ckpt, m, {}, epoch=0, step=0, best_metric=None)
+    return ckpt
+
+
+def test_an_opset_the_exporter_cannot_write_is_refused_before_any_file(tmp_path, capsys):
+    ckpt = _small_checkpoint(tmp_path)
+    for opset in ("5", "30"):
+        out = tmp_path / f"o{opset}"
+        assert main(["--checkpoint", str(ckpt), "--out", str(out), "--opset", opset]) == 2
+        err = capsys.readouterr().err
+        assert err.count("\n") == 1 and f"--opset {opset}" in err and not out.exists()
+
+
+def test_an_export_stopped_half_way_leaves_the_folder_as_it_was(tmp_path, monkeypatch):
+    """Ctrl-C (or any failure) after model.ts is written: the previous export stays whole, no new file."""
+    import imu_learn.infer.exporters as ex
+
+    ckpt = _small_checkpoint(tmp_path)
+    out = tmp_path / "out"
+    assert main(["--checkpoint", str(ckpt), "--out", str(out), "--window", "20"]) == 0
+    before = {p.name: p.read_bytes() for p in out.iterdir()}
+    assert set(before) == {"model.ts", "model.onnx", "model.json"}
+
+    def interrupted(*a, **k):
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(ex, "onnx_checked", interrupted)
+    with pytest.raises(KeyboardInterrupt):
+        ex.export(ckpt, out, window=30)
+    assert {p.name: p.read_bytes() for p in out.iterdir()} == before
+    assert not [p for p in tmp_path.iterdir() if p.name.endswith(".staging")]

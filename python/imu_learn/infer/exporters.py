@@ -28,11 +28,12 @@ from typing import Any, Dict, List, Optional, Tuple
 import numpy as np
 import torch
 
-from imu_learn.errors import InvalidInputError
+from imu_learn.errors import ConfigError, InvalidInputError
 from imu_learn.infer.checkpoint import load_checkpoint, model_from_checkpoint
 from imu_learn.nn.model import ImuRefiner
 from imu_learn.util.atomic import atomic_write_path, atomic_write_text
 from imu_learn.util.digest import file_sha256
+from imu_learn.util.staging import staged_dir
 
 CHANNELS = ["gyro_x", "gyro_y", "gyro_z", "acc_x", "acc_y", "acc_z"]
 UNITS = ["rad/s"] * 3 + ["m/s^2"] * 3
@@ -216,20 +217,30 @@ def model_card(model: ImuRefiner, state: Dict[str, Any], checkpoint: Path, files
     }
 
 
+OPSETS = (9, 20)  # the ONNX opsets torch's TorchScript-based exporter writes and this model's ops need
+OUTPUTS = ("model.ts", "model.onnx", "model.json")
+
+
 def export(checkpoint: Path, out: Path, window: int = 200, opset: int = 17, seed: int = 0) -> Dict[str, Any]:
-    """Write model.ts, model.onnx and model.json into ``out``; returns the JSON card."""
+    """Write model.ts, model.onnx and model.json into ``out``, all three or none (a staging folder swapped
+    in at the end: a Ctrl-C or a failed export leaves ``out`` as it was); returns the JSON card."""
     if window < 2:
         raise InvalidInputError(f"--window must be >= 2, got {window}")
+    if not OPSETS[0] <= int(opset) <= OPSETS[1]:
+        raise ConfigError(f"--opset {opset}: the exporter writes ONNX opsets {OPSETS[0]}-{OPSETS[1]} (default 17)")
     state = load_checkpoint(Path(checkpoint))
     model = model_from_checkpoint(state).cpu().float().eval()
-    out = Path(out)
-    out.mkdir(parents=True, exist_ok=True)
     example, other = example_inputs(model, window, seed)
-    files = {"torchscript": out / "model.ts", "onnx": out / "model.onnx"}
-    checks = {"torchscript": torchscript_checked(model, example, other, files["torchscript"]),
-              "onnx": onnx_checked(model, example, other, files["onnx"], opset)}
-    card = model_card(model, state, Path(checkpoint), files, window, opset, checks)
-    atomic_write_text(out / "model.json", json.dumps(card, indent=2) + "\n")
+    with staged_dir(Path(out), OUTPUTS) as stage:
+        files = {"torchscript": stage / "model.ts", "onnx": stage / "model.onnx"}
+        checks = {"torchscript": torchscript_checked(model, example, other, files["torchscript"])}
+        try:
+            checks["onnx"] = onnx_checked(model, example, other, files["onnx"], opset)
+        except (RuntimeError, ValueError) as e:  # torch's exporter or onnxruntime refusing the graph
+            raise ConfigError(f"--opset {opset}: the ONNX export failed ({str(e).splitlines()[0][:200]}); "
+                              "the default 17 is tested") from e
+        card = model_card(model, state, Path(checkpoint), files, window, opset, checks)
+        atomic_write_text(stage / "model.json", json.dumps(card, indent=2) + "\n")
     return card
 
 
