@@ -428,6 +428,22 @@ def test_checkpoint_whose_split_contains_a_test_recording_is_refused():
         ev.check_checkpoint_split(_FakeCheckpoint(["MH_01_easy"], ["V2_01_easy[0:0.2]"]), ["V2_01_easy"])
 
 
+def test_a_checkpoint_made_for_another_rate_is_refused_before_any_fit():
+    """A 100 Hz model on 200 Hz test recordings (refine's rule); 5 % off passes, a model of unknown rate
+    is not checked."""
+    t200 = np.arange(2000, dtype=np.int64) * 5_000_000
+    z = np.zeros((2000, 3))
+    seg = Segment("V1_01_easy", t200, z, z, z, z, np.tile([1.0, 0, 0, 0], (2000, 1)))
+    ck = _FakeCheckpoint([], [])
+    ck.sample_rate_hz = 100.0
+    with pytest.raises(ConfigError, match=r"made for 100 Hz, but test recording V1_01_easy is sampled at 200 Hz"):
+        ev.check_checkpoint_rate(ck, [seg])
+    ck.sample_rate_hz = 196.0
+    ev.check_checkpoint_rate(ck, [seg])
+    ck.sample_rate_hz = None
+    ev.check_checkpoint_rate(ck, [seg])
+
+
 def test_cli_refuses_a_checkpoint_trained_on_the_test_recording(capsys, tmp_path):
     model = ImuRefiner(ModelConfig(hidden=8, layers=1, fc=8))
     ck = tmp_path / "best.pt"

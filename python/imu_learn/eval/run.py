@@ -61,6 +61,7 @@ from imu_learn.errors import (
     one_line,
 )
 from imu_learn.eval import report
+from imu_learn.infer import rates
 from imu_learn.score import peers
 from imu_learn.score.metrics import fit_startup_bias, index_at, remove_bias, rmse, with_imu
 from imu_learn.score.peers import PeerErrors, add_segment, summarise
@@ -226,11 +227,12 @@ class CheckpointRefiner(Method):
     def __init__(self, path: Path, device: str = "cpu") -> None:
         import torch
 
-        from imu_learn.infer.checkpoint import load_checkpoint, model_from_checkpoint
+        from imu_learn.infer.checkpoint import imu_record, load_checkpoint, model_from_checkpoint
 
         self.path = Path(path)
         state = load_checkpoint(self.path, map_location=device)
         self.config = state.get("config") or {}
+        self.sample_rate_hz: Optional[float] = imu_record(state)["sample_rate_hz"]  # None: not recorded
         self.device = torch.device(device)
         self.model = model_from_checkpoint(state).to(self.device)
         self.window = self.model.windowing.window  # the checkpoint's rule (imu_learn.infer.windowing)
@@ -248,6 +250,18 @@ class CheckpointRefiner(Method):
 
 def _recording(label: str) -> str:
     return parse_entry(label).name
+
+
+def check_checkpoint_rate(m: CheckpointRefiner, test: Seq[Segment]) -> None:
+    """Refused (before any fit) where a test recording's rate is more than the rates rule's tolerance off
+    the one the model was made for (refine's and navigate's rule, :mod:`imu_learn.infer.rates`)."""
+    made = m.sample_rate_hz
+    for seg in test if made else ():
+        rate = sample_rate_hz(seg.t_ns)
+        if rate and abs(rate - made) > rates.TOLERANCE * made:
+            raise ConfigError(f"--checkpoint {m.path}: made for {rates.hz(made)}, but test recording "
+                              f"{_recording(seg.name)} is sampled at {rates.hz(rate)} (more than "
+                              f"{rates.TOLERANCE * 100:.0f} % off): evaluate a model trained on this device and rate")
 
 
 def check_checkpoint_split(m: CheckpointRefiner, test_entries: List[str]) -> None:
@@ -499,11 +513,17 @@ def _fit_methods(res: Resolved, methods: List[str], split: Any, methods_dir: Pat
     return rows
 
 
-def _add_checkpoint(rows: _Rows, checkpoint: Path, settings: FitSettings, test_entries: List[str]) -> None:
-    """A full ``imu_learn.fit`` run, beside (not instead of) the same-budget "proposed" row."""
+def _checkpoint(checkpoint: Path, settings: FitSettings, test_entries: List[str], test: Seq[Segment]) -> CheckpointRefiner:
+    """A full ``imu_learn.fit`` run (the row beside, not instead of, the same-budget "proposed"), checked
+    before any fit: its splits against the test recordings, its rate against theirs."""
     ck = CheckpointRefiner(checkpoint, "cpu" if settings.device == "auto" else settings.device)
     check_checkpoint_split(ck, test_entries)
-    rows.add(CHECKPOINT_NAME, ck, {"status": "checkpoint", "file": str(checkpoint), "checkpoint_split": ck.splits()})
+    check_checkpoint_rate(ck, test)
+    return ck
+
+
+def _add_checkpoint(rows: _Rows, ck: CheckpointRefiner) -> None:
+    rows.add(CHECKPOINT_NAME, ck, {"status": "checkpoint", "file": str(ck.path), "checkpoint_split": ck.splits()})
     rows.checkpoint = ck
 
 
@@ -648,13 +668,14 @@ def run_evaluation(res: Resolved, methods: List[str], out_dir: Path, reuse: bool
     if not split.test:
         raise ConfigError("data.split.test: no test sequence (of at least one window)")
     test_entries = list(data.split.test)
+    ck = None if checkpoint is None else _checkpoint(checkpoint, settings, test_entries, split.test)
     out_dir.mkdir(parents=True, exist_ok=True)
     methods_dir = out_dir / "methods"
     methods_dir.mkdir(exist_ok=True)
 
     rows = _fit_methods(res, methods, split, methods_dir, settings, reuse)
-    if checkpoint is not None:
-        _add_checkpoint(rows, checkpoint, settings, test_entries)
+    if ck is not None:
+        _add_checkpoint(rows, ck)
     gt_kinds = _ground_truth_kinds(res.run, test_entries)
     _add_noise_floor(rows, cfg.eval.noise_floor, gt_kinds, data.gravity)
 
