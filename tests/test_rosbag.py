@@ -237,6 +237,16 @@ def test_existing_ros2_output_folder_is_refused(bags, tmp_path):
     assert not [p for p in tmp_path.iterdir() if p.name.startswith(".")]  # no temporary folder left
 
 
+
+def test_refining_into_a_previous_ros2_output_bag_is_refused_not_nested(bags, tmp_path):
+    """A second refine into the same OUT: the first run's bag folder is refused, no bag written into it."""
+    out = tmp_path / "refined"
+    refine_recording(random_model(), bags["sqlite3"], out)
+    before = sorted(p.name for p in out.iterdir())
+    with pytest.raises(ImuError, match="exists already and is a ROS 2 bag"):
+        refine_recording(random_model(), bags["sqlite3"], out)
+    assert sorted(p.name for p in out.iterdir()) == before
+
 # --------------------------------------------------------------------------------------------
 # --fill-covariance: the learned per-sample variances in the IMU covariance fields
 # --------------------------------------------------------------------------------------------

@@ -73,6 +73,9 @@ def check_output(src: ImuSource, input: Path, output: Path, copy_folder: bool = 
             raise InvalidInputError(f"--copy-folder: OUT {output} and the input folder {src.root} overlap")
         if output.exists() and (not output.is_dir() or any(output.iterdir())):
             raise InvalidInputError(f"--copy-folder: {output} exists and is not an empty folder")
+    if src.fmt == formats.rosbag.NAME and (output / formats.rosbag.ROS2_METADATA).is_file():
+        raise InvalidInputError(f"{output} exists already and is a ROS 2 bag (a bag folder is never replaced, nor "
+                                "written into): remove it or give OUT a new name")
     target = output_file(src, output)
     if _same(target, src.imu_file) or _same(output, input):
         raise InvalidInputError(f"refusing to overwrite the input: OUT {output} is the input {input}")
