@@ -66,6 +66,24 @@ def test_a_recording_compared_with_itself_passes_and_an_offset_does_not():
     assert not [d for d in calmer if "p01" in d["statistic"] or "p99" in d["statistic"] or "std" in d["statistic"]]
 
 
+def test_a_profile_is_checked_for_its_device_not_for_how_hard_the_recording_moves(tmp_path):
+    """A profile's guard reads the locations alone: twice the motion (every tail and spread beyond the
+    training's) passes for a profile and warns for a model; another mounting (the accelerometer's axes
+    swapped) warns for both, naming it. End to end: calibrate writes the statistics, refine checks them."""
+    t, g, a = core.read_asl_imu(str(CROPS / "MH_01_easy" / IMU_REL))
+    training = guard.training_inputs([("mh01", t, g, a)])
+    harder = guard.input_stats(t, 2.0 * (g - np.median(g, 0)) + np.median(g, 0), a)
+    assert guard.compare(training, harder) and not guard.compare(training, harder, device_only=True)
+    mounted = guard.input_stats(t, g, a[:, [2, 1, 0]])
+    entry, warning, _ = guard.verdict(training, mounted, "profile P", device_only=True)
+    assert entry["verdict"] == "unlike the training data" and "another device or mounting" in warning
+    from imu_learn.cli.calibrate import main as calibrate
+
+    assert calibrate(["--input", str(CROPS / "MH_01_easy"), "--out", str(tmp_path / "cal"), "--no-plot"]) == 0
+    prof = json.loads((tmp_path / "cal" / "profile.json").read_text())
+    assert [r["name"] for r in prof["inputs"]["recordings"]] and prof["inputs"]["recordings"][0]["samples"] > 1000
+
+
 def test_a_model_adding_far_more_than_on_its_training_data_warns():
     t, g, a = core.read_asl_imu(str(CROPS / "MH_01_easy" / IMU_REL))
     training = {**guard.training_inputs([("mh01", t, g, a)]),

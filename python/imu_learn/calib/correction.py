@@ -273,7 +273,8 @@ def check(plan: Plan, rec: Recording, force: bool = False) -> Optional[float]:
 def guard_entry(plan: Plan, rec: Recording, rate: Optional[float]) -> Dict[str, Any]:
     """The summary's ``guard`` entry; logs its warning (or, for a model, info) line."""
     stats = guard.input_stats(rec.t_ns, rec.gyro, rec.acc, rate)
-    entry, warning, info = guard.verdict(plan.training, stats, plan.what, plan.measured.get("residual_rms"))
+    entry, warning, info = guard.verdict(plan.training, stats, plan.what, plan.measured.get("residual_rms"),
+                                         device_only=plan.kind == "profile")
     if warning:
         logger.warning(warning)
     if info and plan.kind == "checkpoint":  # a profile without them: said in the summary only (an affine floor)

@@ -126,11 +126,13 @@ def _check(name: str, value: Any, lo: np.ndarray, hi: np.ndarray, allowed_lo: np
 
 
 def compare(training: Dict[str, Any], recording: Dict[str, Any],
-            residual: Optional[Dict[str, Any]] = None, training_residual: Optional[Sequence[Dict[str, Any]]] = None
-            ) -> List[Dict[str, Any]]:
+            residual: Optional[Dict[str, Any]] = None, training_residual: Optional[Sequence[Dict[str, Any]]] = None,
+            device_only: bool = False) -> List[Dict[str, Any]]:
     """The statistics of ``recording`` (:func:`input_stats`) outside the rule's bounds around
     ``training`` (:func:`training_inputs`), worst first; with ``residual`` (:func:`residual_rms` on
-    the recording) and ``training_residual`` (one per training recording), the model's residual too."""
+    the recording) and ``training_residual`` (one per training recording), the model's residual too.
+    ``device_only`` (a profile: an affine floor does not depend on how hard the recording moves): the
+    locations alone (per-axis medians, median |acc|), which another device or mounting moves."""
     recs = training["recordings"]
     out: List[Dict[str, Any]] = []
     inf = np.full(3, np.inf)
@@ -140,6 +142,8 @@ def compare(training: Dict[str, Any], recording: Dict[str, Any],
         lo, hi = _training_range(recs, key)
         m = np.maximum(0.5 * (hi - lo), SHIFT_FLOOR[key])
         out += _check(key, recording[key], lo, hi, lo - m, hi + m, "within max(half the training range, the floor)")
+        if device_only:
+            continue
         lo, hi = _training_range(recs, f"{sensor}_p01")
         m = np.maximum(0.5 * (hi - lo), PERCENTILE_FLOOR * mean_std)
         out += _check(f"{sensor}_p01", recording[f"{sensor}_p01"], lo, hi, lo - m, inf,
@@ -166,20 +170,26 @@ def compare(training: Dict[str, Any], recording: Dict[str, Any],
 
 
 def verdict(training: Optional[Dict[str, Any]], recording: Dict[str, Any], what: str,
-            residual: Optional[Dict[str, Any]] = None) -> Tuple[Dict[str, Any], Optional[str], Optional[str]]:
+            residual: Optional[Dict[str, Any]] = None, device_only: bool = False
+            ) -> Tuple[Dict[str, Any], Optional[str], Optional[str]]:
     """(the summary's ``guard`` entry, a warning line or None, an info line or None) for applying
-    ``what`` (a model or profile with training ``inputs``, None: not recorded) to a recording."""
+    ``what`` (a model or profile with training ``inputs``, None: not recorded) to a recording;
+    ``device_only``: :func:`compare`'s (a profile)."""
     if not training or not training.get("recordings"):
         info = f"{what} records no statistics of its training data: the guard cannot check the recording against them"
         return {"verdict": "unchecked", "recording": recording, "residual_rms": residual}, None, info
-    outside = compare(training, recording, residual, training.get("residual_rms"))
+    outside = compare(training, recording, residual, training.get("residual_rms"), device_only)
     entry = {"verdict": "unlike the training data" if outside else "like the training data",
-             "rule": "docs/refine.md (Guard)", "outside": outside, "recording": recording, "residual_rms": residual,
+             "rule": "docs/refine.md (Guard)" + (": the locations alone (a profile)" if device_only else ""),
+             "outside": outside, "recording": recording, "residual_rms": residual,
              "training_recordings": [r.get("name") for r in training["recordings"]]}
     if not outside:
         return entry, None, None
     shown = "; ".join(f"{d['statistic']} {d['value']:.4g} (training {d['training'][0]:.4g}..{d['training'][1]:.4g})"
                       for d in outside[:SHOWN])
     more = f" and {len(outside) - SHOWN} more" if len(outside) > SHOWN else ""
+    if device_only:
+        return entry, (f"the recording looks unlike the IMU {what} was fitted on: {shown}{more}; another device or "
+                       "mounting? its floor may make the data worse (the summary lists every statistic)"), None
     return entry, (f"the recording looks unlike {what}'s training data: {shown}{more}; its output may be worse than "
                    "the input (the summary lists every statistic)"), None

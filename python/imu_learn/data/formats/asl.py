@@ -9,9 +9,10 @@ import numpy as np
 
 from imu_learn import _imu_core as core
 from imu_learn.data.types import GroundTruth, ImuData
-from imu_learn.errors import HeaderError, InvalidInputError, ParseError
+from imu_learn.errors import ColumnCountError, FloatTimestampError, HeaderError, InvalidInputError, ParseError
 from imu_learn.util.atomic import atomic_write_path
 
+from .csv_columns import last_line
 from .groundtruth import read_groundtruth
 from .source import ImuSource
 
@@ -78,6 +79,14 @@ def _read_imu_csv(path: Path, f: Path, allow_float_timestamps: bool = False):
         if Path(path).is_file():  # a CSV of the user's own, read as EuRoC's layout for want of a column map
             e.add_note("a CSV of your own: name its columns with --columns (e.g. t,gx,gy,gz,ax,ay,az) and its units "
                        "with --time-unit, --gyro-unit, --acc-unit (docs/your-device.md)")
+        raise
+    except ColumnCountError as e:
+        if e.line is not None and e.line == last_line(f):
+            e.add_note(f"the last line, cut by the logger? delete it, or read {f} as a CSV of your own with "
+                       "--columns t,gx,gy,gz,ax,ay,az --time-unit ns --skip-bad-lines")
+        raise
+    except FloatTimestampError as e:
+        e.add_note(f"from the command line: read {f} as a CSV of your own, --columns t,gx,gy,gz,ax,ay,az --time-unit ns")
         raise
 
 
