@@ -96,10 +96,18 @@ def test_a_model_adding_far_more_than_on_its_training_data_warns():
 
 
 def test_a_checkpoint_without_statistics_cannot_be_checked(tmp_path, capsys):
-    rc, err, summary = refine(MODEL, CROPS / "MH_04_difficult", tmp_path / "o", capsys)
+    old = tmp_path / "written_before.pt"  # a checkpoint of before the trainer recorded them
+    write_checkpoint(old, {k: v for k, v in load_checkpoint(MODEL).items() if k != "inputs"})
+    rc, err, summary = refine(old, CROPS / "MH_04_difficult", tmp_path / "o", capsys)
     assert rc == 0 and summary["guard"]["verdict"] == "unchecked"
     assert len(err) == 1 and "records no statistics of its training data" in err[0]
-    assert summary["checkpoint"] == str(MODEL) and summary["recording"]["sample_rate_hz"] == pytest.approx(200.0, rel=1e-3)
+    assert summary["checkpoint"] == str(old) and summary["recording"]["sample_rate_hz"] == pytest.approx(200.0, rel=1e-3)
+
+
+def test_the_shipped_euroc_model_carries_its_statistics_and_passes_on_a_crop(tmp_path, capsys):
+    assert load_checkpoint(MODEL).get("inputs", {}).get("recordings")
+    rc, err, summary = refine(MODEL, CROPS / "MH_04_difficult", tmp_path / "o", capsys)
+    assert rc == 0 and summary["guard"]["verdict"] == "like the training data" and not err
 
 
 @pytest.mark.parametrize("crop", ["MH_04_difficult", "V1_01_easy"])
