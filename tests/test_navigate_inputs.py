@@ -89,3 +89,30 @@ def test_gaps_outside_the_recording_are_refused():
     for bad in (OutageWindow(500.0, 10.0), OutageWindow(-5.0, 3.0)):
         with pytest.raises(ConfigError, match="lies outside the recording"):
             check_gaps((bad,), 134.0)
+
+
+def test_a_lever_arm_of_metres_is_named_before_the_fusion(tmp_path, capsys, monkeypatch):
+    """--lever-arm 0,-5,0 (cm typed as m): one warning before the first sample is fused."""
+    rec = tmp_path / "MH_04_difficult"
+    shutil.copytree(SHIPPED / CROP / "mav0" / "imu0", rec / "mav0" / "imu0")
+    rows = (SHIPPED / CROP / GT_REL).read_text().splitlines()[1::20]
+    aiding = tmp_path / "fixes.tum"
+    aiding.write_text("\n".join(f"{int(r.split(',')[0]) * 1e-9:.9f} {' '.join(r.split(',')[1:4])}" for r in rows) + "\n")
+    from imu_learn.fuse import navigate as nav
+
+    class Fused(Exception):
+        pass
+
+    def stop(*a, **k):
+        raise Fused
+
+    monkeypatch.setattr(nav, "fuse_run", stop)
+    args = ["navigate", "--input", str(rec), "--aiding", str(aiding), "--aiding-kind", "position", "--out",
+            str(tmp_path / "out"), "--imu-noise", "1.7e-4,2e-3,1.9e-5,3e-3"]
+    for lever, warned in (("0,-5,0", True), ("0,-0.05,0", False)):
+        try:
+            main(args + ["--lever-arm", lever])
+        except Fused:
+            pass
+        err = capsys.readouterr().err
+        assert ("lever arm is 5 m long" in err) == warned, err

@@ -774,6 +774,9 @@ def check_gaps(gaps: Tuple[OutageWindow, ...], duration_s: float) -> None:
                               "first IMU sample): give START in seconds from the first sample")
 
 
+LEVER_ARM_WARN_M = 3.0  # a lever arm longer than this gets a warning before the fusion (a car's antenna: 0.5-2 m)
+
+
 def read_inputs(src: Sources, opts: NavigateOptions) -> Inputs:
     """The run's inputs, each checked before any fusion: the aiding's format and kind
     (:func:`resolve_aiding`), the options, the side files (:func:`check_inputs`), the IMU (the ground
@@ -796,6 +799,10 @@ def read_inputs(src: Sources, opts: NavigateOptions) -> Inputs:
     lever = T_BS[:3, 3] if (T_BS is not None and kind.lever) else np.zeros(3)
     if opts.lever_arm is not None:
         lever = np.asarray(opts.lever_arm, dtype=np.float64)
+    if float(np.linalg.norm(lever)) > LEVER_ARM_WARN_M:
+        log.warning("the lever arm is %.3g m long (%s): in metres? (a lever arm in cm or mm typed as m moves every "
+                    "fix by that much; the smoother's biases would show it only after the fusion)",
+                    float(np.linalg.norm(lever)), ", ".join(f"{x:g}" for x in lever))
     rows, rows_read, gnss, opts = aiding_rows(src, opts, t_ns, T_BS, lever, imu, sol)
     return Inputs(opts, kind, moving_imu(src, opts, imu, rows), lever, rows, rows_read, gnss)
 
