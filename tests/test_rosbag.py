@@ -476,3 +476,17 @@ def test_a_bag_without_the_bags_extra_is_one_line_naming_the_extra(bags):
     lines = r.stderr.strip().splitlines()
     assert r.returncode == 2 and len(lines) == 1, r.stderr[-2000:]
     assert lines[0].startswith("imu-learn refine: error: MissingExtraError: ") and "imu-learn[bags]" in lines[0]
+
+
+def test_a_linked_bag_folder_is_found_and_a_link_loop_ends(bags, tmp_path):
+    """labels rosbag's search: a ROS 2 bag folder linked into the dataset folder is a recording (it was
+    skipped), a ROS 1 bag linked in too; a link back up the tree is walked once."""
+    from imu_learn.data.formats.rosbag import find_recordings
+
+    d = tmp_path / "bags"
+    d.mkdir()
+    (d / "one.bag").symlink_to(Path(bags["ros1"]).resolve())
+    (d / "two").symlink_to(Path(bags["sqlite3"]).resolve(), target_is_directory=True)
+    (d / "loop").symlink_to(d, target_is_directory=True)
+    found = find_recordings(d)
+    assert d / "one.bag" in found and d / "two" in found and len(found) == 2, found

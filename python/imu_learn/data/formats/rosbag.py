@@ -19,6 +19,7 @@ the other binary containers (Blackbird's HDF5, BROAD's MAT).
 from __future__ import annotations
 
 import logging
+import os
 import sqlite3
 import struct
 from contextlib import contextmanager
@@ -85,8 +86,18 @@ def find_recordings(root: Path) -> List[Path]:
     root = Path(root)
     if detect(root):
         return [bag_path(root)]
-    ros1 = [p for p in root.rglob("*.bag") if p.is_file()]
-    ros2 = [p.parent for p in root.rglob(ROS2_METADATA)]
+    ros1: List[Path] = []
+    ros2: List[Path] = []
+    seen = set()
+    for d, dirs, files in os.walk(root, followlinks=True):  # a linked bag folder is a bag too
+        real = os.path.realpath(d)
+        if real in seen:  # a link back up the tree: once
+            dirs[:] = []
+            continue
+        seen.add(real)
+        here = Path(d)
+        ros1 += [here / f for f in files if f.lower().endswith(".bag") and (here / f).is_file()]
+        ros2 += [here] if ROS2_METADATA in files else []
     return sorted(ros1 + ros2)
 
 
