@@ -66,8 +66,7 @@ from imu_learn.calib.plausible import LIMITS
 from imu_learn.calib.profile import Profile
 from imu_learn.core.still import MEMS_PRIOR, MIN_STILL_START_S, BiasPrior
 from imu_learn.data import formats
-from imu_learn.data.formats import CsvColumns, rosbag
-from imu_learn.data.formats import groundtruth as groundtruth_formats
+from imu_learn.data.formats import CsvColumns, fetch, rosbag
 from imu_learn.data.formats.asl import imu_sensor_yaml
 from imu_learn.data.formats.extrinsics import inverse, read_t_bs
 from imu_learn.data.formats.gnss_imu import mounting_rotation
@@ -99,7 +98,7 @@ from .mounting import mounting_check
 from .noise import ImuNoise, from_profile
 from .noise_fit import CLASS_WHITE, FACTOR_BOUNDS, NoiseFit, fit_noise, fit_scale, fitted_noise, prepare
 from .output import plot_navigation, write_json, write_trajectory, write_trajectory_bag
-from .score import convergence, score_against
+from .score import convergence, read_truth, score_against
 from .settings import FusionSettings, PriorSigmas
 from .start import Start
 from .start.delay import imu_delay
@@ -325,6 +324,9 @@ def read_aiding(src: Sources, opts: NavigateOptions) -> Trajectory:
     need = kind_of(opts.aiding_kind).poses
     if opts.aiding_format == "bag":
         traj = bag_aiding.read_trajectory(Path(src.aiding), str(src.aiding_topic), need_orientation=need)
+    elif opts.aiding_format == "fetch":  # Fetch's motion capture: its dataset's one reader
+        gt = fetch.read_mocap(Path(src.aiding))
+        traj = Trajectory(gt.t_ns, gt.p, gt.q_wxyz[:, [1, 2, 3, 0]], str(src.aiding), np.arange(2, len(gt.t_ns) + 2))
     else:
         traj = read_trajectory(src.aiding, opts.aiding_format, need_orientation=need)
     return traj if opts.aiding_scale is None else replace(traj, p=traj.p * float(opts.aiding_scale))
@@ -669,7 +671,7 @@ def imu_input(src: Sources, opts: NavigateOptions, imu: Imu) -> Tuple[np.ndarray
 
 
 AIDING_SOURCES = {"tum": "TUM trajectory", "csv": "CSV trajectory", "asl": "ASL trajectory",
-                  "rtklib": "RTKLIB solution"}
+                  "rtklib": "RTKLIB solution", "fetch": "Fetch motion capture"}
 
 
 def aiding_label(src: Sources, opts: NavigateOptions) -> str:
@@ -721,7 +723,7 @@ def check_inputs(src: Sources) -> Optional[Tuple[int, int]]:
     span = None
     if src.groundtruth is not None:
         try:
-            gt = groundtruth_formats.read_groundtruth(Path(src.groundtruth))
+            gt = read_truth(Path(src.groundtruth))
         except ColumnCountError as e:
             raise ConfigError(f"--groundtruth: {' '.join(str(e).split())}: navigate scores poses (t tx ty tz qx qy qz "
                               "qw, or an ASL state/pose CSV); a positions-only file cannot be scored") from None

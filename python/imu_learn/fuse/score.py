@@ -14,10 +14,12 @@ import numpy as np
 from scipy.spatial.transform import Rotation, Slerp
 
 from imu_learn.core.quat import rotation_angle, xyzw_to_wxyz
+from imu_learn.data.formats import fetch
 from imu_learn.data.formats.groundtruth import read_groundtruth
 from imu_learn.errors import AidingError
 from imu_learn.score.metrics import rmse
 
+from .aiding.detect import detect as detect_format
 from .aiding.outages import in_windows, outage_mask
 from .graph import FusionResult
 
@@ -150,6 +152,12 @@ def _errors(p_est, R_est, p_gt, R_gt, align: bool, R_al=None, t_al=None):
     return out, e, R_al, t_al
 
 
+def read_truth(path: Path):
+    """``--groundtruth`` as navigate reads it: a Fetch recording's motion capture by its header
+    (:func:`imu_learn.data.formats.fetch.read_mocap`), else a TUM file or an ASL CSV."""
+    return fetch.read_mocap(Path(path)) if detect_format(Path(path)) == "fetch" else read_groundtruth(Path(path))
+
+
 def score_against(groundtruth: Path, kf_t: np.ndarray, res, rows, R_WA: np.ndarray, t0_ns: int, align: bool,
                   gaps: Seq[Tuple[float, float]] = ()) -> Dict[str, object]:
     """Position (and rotation) RMSE of the causal and smoothed trajectories of a navigated recording
@@ -157,7 +165,7 @@ def score_against(groundtruth: Path, kf_t: np.ndarray, res, rows, R_WA: np.ndarr
     the navigation frame by ``R_WA``), against the ``groundtruth`` file interpolated at their stamps;
     after a rigid SE(3) alignment (Umeyama, no scale: ``evo_ape -a``) with ``align``, else as they are;
     plus the error inside each gap (``gaps``: seconds from ``t0_ns``, the first IMU sample)."""
-    gt = read_groundtruth(Path(groundtruth))
+    gt = read_truth(Path(groundtruth))
     inside, p_gt, R_gt = interpolate_groundtruth(gt, kf_t)
     if inside.sum() < 3:
         raise AidingError(f"{groundtruth}: fewer than 3 keyframes inside the ground truth's time span", str(groundtruth))
