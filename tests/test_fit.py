@@ -326,6 +326,34 @@ def test_resume_refuses_changing_the_model(tmp_path, full_run, capsys):
     assert snapshot(d) == before
 
 
+def test_resume_refuses_an_edited_config_toml(tmp_path, full_run, capsys):
+    """The run's config.toml edited by hand (its model smaller): the resume would train the checkpoint's
+    config and leave the file lying; refused in one line naming the key, nothing written."""
+    d = tmp_path / "r"
+    shutil.copytree(full_run, d)
+    text = (d / "config.toml").read_text()
+    assert "hidden = 8\n" in text
+    (d / "config.toml").write_text(text.replace("hidden = 8\n", "hidden = 4\n"))
+    before = snapshot(d)
+    assert fit_cli.main(["--resume", str(d), "--optim.epochs", "4"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "model.hidden" in err[0] and "config.toml" in err[0], err
+    assert snapshot(d) == before
+
+
+def test_a_run_stopped_before_its_first_save_starts_again_on_resume(tmp_path, full_run, capsys):
+    """Ctrl-C while the run's profile was fitted leaves config.toml and split.json, no last.pt: --resume
+    starts the run again from its config (it was a FileNotFoundError)."""
+    d = tmp_path / "early"
+    d.mkdir()
+    for name in ("config.toml", "split.json"):
+        shutil.copy(full_run / name, d / name)
+    text = (d / "config.toml").read_text().replace("epochs = 3", "epochs = 1")
+    (d / "config.toml").write_text(text)
+    assert fit_cli.main(["--resume", str(d), "--quiet"]) == 0, capsys.readouterr().err
+    assert (d / "last.pt").is_file() and [int(x["epoch"]) for x in rows(d)] == [1]
+
+
 def test_existing_run_is_not_overwritten(full_run, capsys):
     before = snapshot(full_run)
     assert fit_cli.main(tiny(full_run, 3)) == 2

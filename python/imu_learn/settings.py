@@ -167,6 +167,13 @@ def nest(flat: Dict[str, Any]) -> Dict[str, Any]:
     return out
 
 
+def toml_of_text(text: str) -> Dict[str, Any]:
+    """A TOML text as read by :func:`read_toml` (a config written by this package)."""
+    if tomllib is None:  # pragma: no cover
+        raise ConfigError("reading TOML needs Python 3.11 or the tomli package")
+    return tomllib.loads(text)
+
+
 def read_toml(path: Path) -> Dict[str, Any]:
     if tomllib is None:  # pragma: no cover
         raise ConfigError(f"{path}: reading TOML needs Python 3.11 or the tomli package")

@@ -61,11 +61,11 @@ def run(args: argparse.Namespace, rest: List[str], keep: Callable[[Any], None],
         return 0
     if args.loro is not None:
         return run_loro(cfg, args)
-    run_dir, split = trainer.open_run(cfg, state, args.resume if state is not None else args.out)
+    run_dir, split = trainer.open_run(cfg, state, args.resume if args.resume is not None else args.out)
 
     def kept() -> str:
         if not (run_dir / "last.pt").exists():
-            return ""
+            return f"nothing trained yet; start it again with: imu-learn fit --resume {run_dir}"
         return f"saved {run_dir / 'last.pt'}, continue with: imu-learn fit --resume {run_dir}"
 
     keep(kept)

@@ -101,6 +101,7 @@ from imu_learn.nn.model import ImuRefiner, ModelConfig
 from imu_learn.score.metrics import floor_ratios, index_at, relative_pose_rmse_many, variant_table, without_fitted_bias
 from imu_learn.score.peers import open_loop_aoe_deg
 from imu_learn.score.protocol import VARIANT_LABELS, VARIANTS
+from imu_learn.settings import toml_of_text
 from imu_learn.train.config import ConfigError, RunConfig, build_config, read_toml, to_toml
 from imu_learn.train.split_profile import calibrate_split
 from imu_learn.util.atomic import atomic_write_text
@@ -887,11 +888,37 @@ def resolve_config(config: Optional[Path], resume: Optional[Path],
         raise ConfigError(f"--{bad[0]}: cannot be changed when resuming (only {', '.join(RESUME_OVERRIDABLE)})")
     if not resume.is_dir():
         raise FileNotFoundError(2, "No such run folder", str(resume))
+    if not (resume / "last.pt").exists() and (resume / "config.toml").is_file():
+        # stopped before its first save (while its profile was fitted): the run starts again from its config
+        logger.info("%s: no last.pt (the run stopped before its first epoch): started again from its config.toml", resume)
+        return build_config(read_toml(resume / "config.toml"), overrides), None
     state = load_checkpoint(resume / "last.pt")  # before anything is written
     cfg = build_config(state["config"], overrides)
+    edited = config_edits(resume / "config.toml", cfg)
+    if edited:
+        raise ConfigError(f"{resume / 'config.toml'}: {', '.join(edited[:5])} differ from the run's last.pt (a resumed run "
+                          "continues with its checkpoint's config): restore the file, or start a new run with the new "
+                          "config (--config FILE --name NEW)")
     if cfg.optim.epochs * cfg.optim.steps_per_epoch < int(state["step"]):
         raise ConfigError(f"--optim.epochs: {cfg.optim.epochs} is fewer than the {state['epoch']} epochs already run")
     return cfg, state
+
+
+def config_edits(path: Path, cfg: RunConfig) -> List[str]:
+    """The keys whose values in a run's ``config.toml`` (``path``; absent: none) differ from ``cfg`` (the
+    config its checkpoint holds), dotted; only the options a resume may change aside."""
+    if not path.is_file():
+        return []
+
+    def flat(d: Any, prefix: str = "") -> Dict[str, Any]:
+        if not isinstance(d, dict):
+            return {prefix[:-1]: d}
+        return {k: v for key, val in d.items() for k, v in flat(val, f"{prefix}{key}.").items()}
+
+    on_disk, held = flat(read_toml(path)), flat(toml_of_text(to_toml(cfg)))
+    free = {k.split(".")[-1] for k in RESUME_OVERRIDABLE} | {"data_root"}
+    return [k for k in sorted(set(on_disk) & set(held))  # keys of both: a newer version's defaults are no edit
+            if on_disk[k] != held[k] and k.split(".")[-1] not in free]
 
 
 def open_run(cfg: RunConfig, state: Optional[Dict[str, Any]], run_dir: Optional[Path]) -> Tuple[Path, Split]:
