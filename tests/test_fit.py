@@ -498,3 +498,19 @@ def test_init_from_a_checkpoint_older_than_a_model_arg(tmp_path, full_run):
     write_checkpoint(old, state)
     assert fit_cli.main(tiny(tmp_path / "cov", 1, "--model.covariance", "true", "--optim.init", str(old),
                              "--optim.trainable", "covariance", "--loss.w_nll", "1.0")) == 0
+
+
+def test_another_devices_profile_as_the_start_is_named_and_the_ships_line_points_at_a_file(tmp_path, caplog):
+    """model.start = TUM-VI's shipped profile on EuRoC's crops: one warning before training (its IMU is unlike
+    the training segments: another mounting), and the profile the final line ships is written in the run."""
+    import logging
+
+    d = tmp_path / "wrongprof"
+    args = [a for a in tiny(d, 1) if a not in ("raw",)]
+    args[args.index("--model.start") + 1:args.index("--model.start") + 1] = [
+        str(REPO / "models/profiles/tumvi_bmi160/profile.json")]
+    with caplog.at_level(logging.WARNING):
+        assert fit_cli.main(args) == 0
+    assert "another device or mounting" in caplog.text and "tumvi_bmi160" in caplog.text
+    res = json.loads((d / "results.json").read_text())
+    assert res["ships"] in ("profile", "model") and (d / "profile" / "profile.json").is_file()

@@ -84,7 +84,7 @@ from imu_learn.calib.profile import Profile
 from imu_learn.core.batches import Batch, BatchSampler, batch_seed
 from imu_learn.data.splits import Split, make_split, split_signature, write_split
 from imu_learn.data.types import Segment
-from imu_learn.infer import windowing
+from imu_learn.infer import guard, windowing
 from imu_learn.infer.checkpoint import (
     load_checkpoint,
     load_model,
@@ -103,7 +103,7 @@ from imu_learn.score.peers import open_loop_aoe_deg
 from imu_learn.score.protocol import VARIANT_LABELS, VARIANTS
 from imu_learn.settings import toml_of_text
 from imu_learn.train.config import ConfigError, RunConfig, build_config, read_toml, to_toml
-from imu_learn.train.split_profile import calibrate_split
+from imu_learn.train.split_profile import PROFILE_DIR, calibrate_split
 from imu_learn.util.atomic import atomic_write_text
 
 RESUME_OVERRIDABLE = ("optim.epochs", "device", "threads")
@@ -378,7 +378,10 @@ def floor_start(cfg: RunConfig, split: Split, run_dir: Path) -> Tuple[RunConfig,
         path = calibrate_split(split, run_dir, settings, device, progress=logger.info)
         cfg = dataclasses.replace(cfg, model=dataclasses.replace(cfg.model, start=str(path)))
     if cfg.model.start not in ("timing", "traditional+timing"):
-        return profile_start(cfg)
+        given = cfg.model.start
+        cfg, start = profile_start(cfg)
+        check_start_profile(given, start.profile, split)
+        return cfg, start
     max_shift = float(cfg.model.fir_taps // 2)
     calib = None
     if cfg.model.start == "timing":
@@ -432,6 +435,26 @@ def floor_filters(p: TraditionalParams, rate_hz: float, most: int) -> Tuple[np.n
     # out[j] = sum_m g_m x[j + m] with g_m = y[c - m]; the taps run m = -k .. k
     taps = [y[c - k:c + k + 1][::-1] / y[c - k:c + k + 1].sum() for y in resp]
     return np.stack([taps[0]] * 3 + [taps[1]] * 3), tail
+
+
+def check_start_profile(where: str, profile: Dict[str, Any], split: Split) -> None:
+    """One warning where a start profile's raw IMU (its ``inputs``) looks unlike the run's training
+    segments (refine's guard, the locations alone: another device or mounting), so a profile of another
+    device is named before the run trains on top of it."""
+    inputs = profile.get("inputs") if isinstance(profile, dict) else None
+    if not inputs or not inputs.get("recordings"):
+        return
+    unlike = {}
+    for s in split.train:
+        out = guard.compare(inputs, guard.input_stats(s.t_ns, s.gyro, s.acc), device_only=True)
+        if out:
+            unlike[s.name] = out[0]
+    if unlike:
+        name, d = next(iter(unlike.items()))
+        logger.warning("model.start: %s was fitted on an IMU unlike %d of the %d training segments (%s: %s %.4g, the "
+                       "profile's %.4g..%.4g): another device or mounting? its floor may make this device's data worse; "
+                       "calibrate this device's (model.start = calibrate)", where, len(unlike), len(split.train), name,
+                       d["statistic"], d["value"], d["training"][0], d["training"][1])
 
 
 def profile_start(cfg: RunConfig) -> Tuple[RunConfig, Start]:
@@ -825,7 +848,7 @@ def ships_line(run_dir: Path, best_epoch: Optional[int]) -> str:
         return (f"ships: the trained model (best.pt, epoch {best_epoch}): it beat the device profile in every "
                 "scored cell on validation")
     return ("ships: the device profile (no trained epoch beat it on validation; best.pt is the profile's floor, "
-            f"epoch 0): refine with --profile {run_dir / 'profile' / 'profile.json'}")
+            f"epoch 0): refine with --profile {run_dir / PROFILE_DIR / 'profile.json'}")
 
 
 def final_evaluation(cfg: RunConfig, run_dir: Path, split: Split, device: torch.device,
@@ -843,6 +866,10 @@ def final_evaluation(cfg: RunConfig, run_dir: Path, split: Split, device: torch.
     res = evaluate_table(list(split.test), refined, cfg, timing_seqs, profile_seqs)
     res["timing_offset_samples"] = tau
     if profile is not None:
+        shipped = run_dir / PROFILE_DIR / "profile.json"
+        if not shipped.exists():  # a model.start = PATH run: the profile it trained on, beside it (the ships line)
+            shipped.parent.mkdir(parents=True, exist_ok=True)
+            profile.save(shipped)
         res["ships"] = ships_line(run_dir, best_epoch)
     names = [s.name for s in split.test]
     table = format_table(res, names, cfg)  # the command prints it (results["text"])
