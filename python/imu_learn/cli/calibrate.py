@@ -233,7 +233,8 @@ def learned(args: argparse.Namespace, inp: CalibInputs, profile: Path, say: Call
     base = learned_base(args, inp)
     cfg = config_on_profile(base, profile, args.learned_epochs or base.optim.epochs,
                             base.seed if args.seed is None else args.seed)
-    keep(f"{profile} is the result so far; the refiner's run is in {args.out / 'fit'}")
+    keep(f"{profile} is the result so far; the refiner's unfinished run is in {args.out / 'fit'}: remove that "
+         "folder and run the same calibrate --learned command again to train it (it starts over)")
     res = train_on_profile(cfg, inp.train, inp.val, args.out, say, bar=not args.quiet)
     print(res.line())
     print(f"learned refiner took {res.seconds:.1f} s")
