@@ -44,6 +44,13 @@ def test_a_z_up_world_passes_and_a_tilted_one_is_found():
     assert small.verdict == "ok"  # within the rule's tolerance: not refused
 
 
+def test_positions_in_millimetres_are_named():
+    ti, f, ta, p = _track()
+    check = check_gravity(ti, f, ta, p * 1000.0, G)
+    assert check.verdict == "refused" and check.scale == 1e-3 and "x1000" in check.why and "millimetres" in check.why
+    assert check_gravity(ti, f, ta, p, G).scale == 1.0
+
+
 def test_too_few_rows_are_not_checked():
     ti, f, ta, p = _track(seconds=2.0)
     assert check_gravity(ti, f, ta, p, G).verdict == "not checked"

@@ -470,8 +470,10 @@ def resolve_frame(pairs: Sequence[Tuple[ImuData, GroundTruth]], options: FrameOp
                 f"(scale {sol['scale']:.4g} +- {sol['scale_std']:.2g} m per unit): {unit}? give them in metres")
         raise ReferenceFrameError(
             f"the reference's translation does not follow the accelerometer (scale {sol['scale']:.3f} ± "
-            f"{sol['scale_std']:.3f}): a mirrored axis, positions of another recording, or a reference that barely "
-            "moves; check the file (imu-learn groundtruth)")
+            f"{sol['scale_std']:.3f}): " + (f"--extrinsics {extrinsics.source} in the wrong direction (T_BS is the "
+                                              "sensor's pose in the IMU frame), " if extrinsics is not None else "")
+            + "a mirrored axis, positions of another recording, or a reference that barely moves; check the file "
+            "(imu-learn groundtruth)")
     lever_sig = (np.linalg.norm(sol["lever"]) > options.lever_sigmas * np.linalg.norm(sol["lever_std"])
                  and np.linalg.norm(sol["lever"]) > options.min_lever_m)
     lever = lever0 if extrinsics is not None else (sol["lever"] if lever_sig else np.zeros(3))

@@ -140,12 +140,12 @@ def unobservable(has_ref: bool, allan: Optional[nz.AllanNoise], noise: Dict[str,
             out.append({"what": key, "why": "no estimate: neither a reference nor a still stretch"})
         elif t.bounded_only:
             src = t.detail.get("upper_bound_from", t.source)
+            bound = "min over τ of the Allan deviation on the term's line"
             written = (f"the value written is the {CLASS_DEFAULT_SOURCE}; the data bound it above by "
-                       f"{t.bound:.3g} (detail.upper_bound" if t.source == "class_default" else
-                       "the value written is an upper bound (")
+                       f"{t.bound:.3g} (detail.upper_bound, {bound})" if t.source == "class_default" else
+                       f"the value written is an upper bound ({bound})")
             out.append({"what": key, "why": f"no fit found it ({src}: no region of its slope, or its "
-                        f"uncertainty above half its value); {written}, min over τ of "
-                        "the Allan deviation on the term's line)" + (
+                        f"uncertainty above half its value); {written}" + (
                             "; motion-correlated errors (vibration, reference noise, calibration errors that vary "
                             "with the motion) dominate the residuals" if src == "residuals" else "")})
     return out
@@ -244,6 +244,35 @@ def keep_unsupported_at_prior(prof: Profile, inp: CalibInputs, errs: Dict[str, A
     return errs, kept
 
 
+# per sensor and chosen level, the floor parameters --select left at their prior
+NOT_SELECTED = {
+    "gyro": {"offset": ("gyroscope.bias", "gyroscope.matrix", "g_sensitivity", "cutoff_gyro"),
+             "bias": ("gyroscope.matrix", "g_sensitivity", "cutoff_gyro"), "scale": ("g_sensitivity", "cutoff_gyro"),
+             "affine": ("g_sensitivity", "cutoff_gyro"), "g_sensitivity": ("cutoff_gyro",)},
+    "acc": {"offset": ("accelerometer.bias", "accelerometer.matrix", "cutoff_acc"),
+            "bias": ("accelerometer.matrix", "cutoff_acc"), "scale": ("cutoff_acc",), "affine": ("cutoff_acc",)},
+}
+
+
+def at_prior_observed(prof: Profile, observed: Dict[str, Dict[str, Any]]) -> Dict[str, Dict[str, Any]]:
+    """The source's ``observed`` with what the fit held at its prior said so: a time offset its validation
+    refused (fitted, then 0 kept: its spread is then unknown, not 0), and the terms ``--select`` did not
+    choose (written at identity / zero with no spread)."""
+    out = dict(observed)
+    fl = prof.fit_log.get("floor", {}) if isinstance(prof.fit_log, dict) else {}
+    fitted, kept = (fl.get("tau_fitted") or [None])[0], (fl.get("tau_samples") or [None])[0]
+    if out.get("time_offset", {}).get("observed") and kept == 0.0 and fitted:
+        out["time_offset"] = {"observed": False, "why": f"fitted at {fitted:+.3f} samples on the training windows, "
+                              "but it did not lower the validation cost: held at its prior (0)"}
+        prof.time_offset_s_std = math.nan
+    for sensor, levels in NOT_SELECTED.items():
+        for key in levels.get(str(prof.selection.get(sensor)), ()):
+            if out.get(key, {}).get("observed", True):
+                out[key] = {"observed": False, "why": f"not selected: the {sensor} level chosen on held-out recordings "
+                            f"is {prof.selection[sensor]}; held at its prior"}
+    return out
+
+
 def plausibility(prof: Profile, inp: CalibInputs, options: CalibOptions, progress: Progress) -> Dict[str, Any]:
     """The checks of :mod:`imu_learn.calib.plausible` on the fitted floor and on the held-back block;
     a failure stops calibrate (:class:`ImplausibleProfileError`) unless ``options.force``. Held-back
@@ -298,7 +327,7 @@ def calibrate(inp: CalibInputs, out_dir: Path, options: CalibOptions = CalibOpti
                            "rotation over 10 samples 0.48 -> 1.01 deg); --select keeps only the terms its held-out "
                            "blocks support (0.16 deg there; about 5x the time)")
         prof.reference = inp.source.reference()
-        prof.observed = inp.source.observed()
+        prof.observed = at_prior_observed(prof, inp.source.observed())
         prof.checks = plausibility(prof, inp, options, progress)
     else:
         prof = noise_only(inp.device, _rate([p.t_ns for p in inp.imu_only]), {})

@@ -248,6 +248,9 @@ def estimate_imu_delay(t_ns: np.ndarray, acc: np.ndarray, fix_t_ns: np.ndarray, 
             "search_s": search_s, "at_edge": i in (0, len(ds) - 1)}
 
 
+DELAY_SIGMAS = 2.0  # an estimated IMU delay within this many standard deviations of 0 is held at 0
+
+
 def imu_delay(opts: PositionsOptions, imu: ImuData, fix_t: np.ndarray, fix_p: np.ndarray,
               gravity: float) -> Tuple[float, Dict[str, Any]]:
     """(the delay the navigator gets, profile.json's ``reference.imu_delay`` entry): ``opts.imu_delay_s``
@@ -258,8 +261,13 @@ def imu_delay(opts: PositionsOptions, imu: ImuData, fix_t: np.ndarray, fix_p: np
     if est["at_edge"]:
         raise InvalidInputError(f"positions: the IMU's logging delay is beyond +-{est['search_s']:g} s or not "
                                 "observed by the track (give --imu-delay-s)")
-    return est["imu_delay_s"], {"s": est["imu_delay_s"], "std_s": est["std_s"],
-                                "from": "estimated from the track (estimate_imu_delay)", **est}
+    d, sd = float(est["imu_delay_s"]), est["std_s"]
+    if sd is not None and math.isfinite(float(sd)) and abs(d) < DELAY_SIGMAS * float(sd):
+        # not told apart from none: held at 0, the estimate kept beside (the walk: 66 +- 48 ms)
+        return 0.0, {**est, "s": 0.0, "std_s": sd, "estimate_s": d,
+                     "from": f"held at 0: the track's estimate {d * 1e3:+.0f} +- {float(sd) * 1e3:.0f} ms is within "
+                             f"{DELAY_SIGMAS:g} standard deviations of it"}
+    return d, {**est, "s": d, "std_s": sd, "from": "estimated from the track (estimate_imu_delay)"}
 
 
 # ------------------------------------------------------------------------------------------------

@@ -612,8 +612,9 @@ def checked_up(src: Sources, opts: NavigateOptions, rows: AidingRows, imu: Imu) 
     refused (exit 2) where their world is not z up; a warning line where it cannot be told."""
     check = check_gravity(imu.t_ns, imu.acc, rows.t_ns, rows.p, opts.gravity)
     if check.verdict == "refused":
-        fix = ("poses of a VO or SLAM (a camera's first frame as their world)? fuse them as --aiding-kind pose or "
-               "relative-pose with --extrinsics; else turn the positions into a z-up world (ENU)")
+        fix = ("poses of a VO or SLAM (a camera's first frame as their world)? give them as poses (navigate: "
+               "--aiding-kind pose or relative-pose with --extrinsics; calibrate: the file with its quaternions), "
+               "else turn the positions into a z-up world (ENU)")
         raise ConfigError(f"--aiding {src.aiding}: its positions' world is not z up: {check.why}: {fix}")
     if check.verdict == "not checked":
         log.warning("aiding positions' world not checked against gravity: %s; it must be z up", check.why)

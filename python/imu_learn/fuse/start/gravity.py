@@ -12,6 +12,8 @@ the best one's. To first order ``|a + g u| − g = a·u``: motion along z identi
 its level (a level robot's world tilted 10° shows), but a world upside down only where the track moves
 vertically.
 
+Units: at the best direction, the positions scaled by each of :data:`SCALES` (mm, cm, ... given as m)
+against the accelerometer; a factor other than 1 that fits :data:`RATIO` times better is refused, naming it.
 The rule: refused where the best direction lies more than :data:`MAX_TILT_DEG` from z up, its RMS
 at most 1 / :data:`RATIO` of z up's and at least :data:`MIN_GAIN` m/s² below it; not checked with fewer
 than :data:`MIN_EPOCHS` rows with both neighbours. Measured: ORB-SLAM2 stereo positions of EuRoC MH_01,
@@ -36,6 +38,7 @@ MIN_GAIN = 0.05  # ... and at least this much above it [m/s^2]
 MIN_EPOCHS = 50  # rows with both neighbours the check needs
 MIN_HALF_S = 0.2  # the second difference's half-width: at least this [s], and 4 rows' spacing
 MAX_EPOCHS = 3000
+SCALES = (1e-3, 1e-2, 0.1, 1.0, 10.0)  # factors tried on the positions (mm, cm, dm, m, 10 m): units, not a scale fit
 
 
 @dataclass(frozen=True)
@@ -52,12 +55,14 @@ class GravityCheck:
     epochs: int
     half_width_s: float
     why: str
+    scale: float = 1.0  # the factor on the positions that fits the accelerometer best, z up (:data:`SCALES`)
 
     def to_dict(self) -> Dict[str, object]:
         return {"verdict": self.verdict, "up_in_aiding_world": [round(float(x), 4) for x in self.up],
                 "tilt_deg": round(self.tilt_deg, 1), "rms_best_mps2": round(self.rms_best, 4),
                 "rms_z_up_mps2": round(self.rms_z_up, 4), "epochs": self.epochs,
-                "half_width_s": round(self.half_width_s, 3), "why": self.why, "method": "imu_learn.fuse.start.gravity"}
+                "half_width_s": round(self.half_width_s, 3), "why": self.why, "scale": self.scale,
+                "method": "imu_learn.fuse.start.gravity"}
 
 
 def sphere(n: int = DIRECTIONS) -> np.ndarray:
@@ -74,6 +79,16 @@ def _epochs(t: np.ndarray, h: float, dt: float, lo: float, hi: float) -> np.ndar
     c = c[np.interp(c - h, t, gap) == np.interp(c + h, t, gap)]
     c = c[::max(1, int(round(0.5 * h / dt)))]
     return c[:: max(1, int(np.ceil(len(c) / MAX_EPOCHS)))]
+
+
+def _rms_over(U: np.ndarray, a: np.ndarray, f: np.ndarray, gravity: float, chunk: int = 500) -> np.ndarray:
+    """(len(U),) the RMS (median removed) of ``f`` − (|a + g u| − g) for each up direction u of ``U``."""
+    out = np.empty(len(U))
+    for i in range(0, len(U), chunk):
+        r = f[None, :] - (np.linalg.norm(a[None, :, :] + gravity * U[i:i + chunk, None, :], axis=2) - gravity)
+        r -= np.median(r, axis=1, keepdims=True)
+        out[i:i + chunk] = np.sqrt(np.mean(r * r, axis=1))
+    return out
 
 
 def check_gravity(imu_t_ns: np.ndarray, acc: np.ndarray, t_ns: np.ndarray, p: np.ndarray, gravity: float,
@@ -102,10 +117,17 @@ def check_gravity(imu_t_ns: np.ndarray, acc: np.ndarray, t_ns: np.ndarray, p: np
     F = double_integral(ti, np.linalg.norm(np.asarray(acc, dtype=np.float64), axis=1) - gravity)
     f = (np.interp(c + h, ti, F) - 2.0 * np.interp(c, ti, F) + np.interp(c - h, ti, F)) / (h * h)
     U = np.vstack([[0.0, 0.0, 1.0], sphere()])
-    r = f[None, :] - (np.linalg.norm(a[None, :, :] + gravity * U[:, None, :], axis=2) - gravity)
-    r -= np.median(r, axis=1, keepdims=True)
-    rms = np.sqrt(np.mean(r * r, axis=1))
+    fits = {x: _rms_over(U, x * a, f, gravity) for x in SCALES}  # every up direction, each factor on the positions
+    rms = fits[1.0]
     k = int(np.argmin(rms))
+    best_of = {x: float(r.min()) for x, r in fits.items()}
+    k_best = min(best_of, key=best_of.get)
+    if k_best != 1.0 and best_of[1.0] >= RATIO * best_of[k_best]:
+        why = (f"the positions are x{1 / k_best:g} the distances the accelerometer measures (its specific-force norm "
+               f"fits them best scaled by {k_best:g}: RMS {best_of[k_best]:.3f} against {best_of[1.0]:.3f} m/s^2 as "
+               "given): millimetres or centimetres? give them in metres")
+        return GravityCheck("refused", tuple(float(x) for x in U[int(np.argmin(fits[k_best]))]), float("nan"),
+                            best_of[k_best], float(rms[0]), int(len(c)), h, why, k_best)
     tilt = float(np.degrees(np.arccos(np.clip(U[k, 2], -1.0, 1.0))))
     up, best, z_up = tuple(float(x) for x in U[k]), float(rms[k]), float(rms[0])
     refused = tilt > MAX_TILT_DEG and z_up >= RATIO * best and z_up - best >= MIN_GAIN
