@@ -11,6 +11,7 @@ import numpy as np
 import pytest
 
 from crops import EASY, SHIPPED
+from imu_learn.calib.run import NOT_SELECTED
 from imu_learn.cli import main
 from imu_learn.core.quat import quat_mul, wxyz_to_xyzw
 from imu_learn.data.formats import read_recording
@@ -101,7 +102,10 @@ def test_a_20_hz_reference_fits_the_accelerometer_from_its_positions(tmp_path, o
     assert "cannot resolve accelerations" in p["selection"]["by_default"]  # its terms chosen by default
     assert p["selection"]["held_out"] == "four time blocks of one recording"
     assert p["floor"]["cutoff_gyro"] is None and p["floor"]["cutoff_acc"] is None
-    assert {k for k, v in p["observed"].items() if not v["observed"]} == {"cutoff_gyro", "cutoff_acc"}
+    # the low-pass is not observed, and neither are the gyro terms the selection left at their prior
+    unselected = set(NOT_SELECTED["gyro"].get(p["selection"]["gyro"], ()))
+    assert {k for k, v in p["observed"].items() if not v["observed"]} == {"cutoff_gyro", "cutoff_acc"} | unselected
+    assert all("not selected" in p["observed"][k]["why"] for k in unselected - {"cutoff_gyro"})
     assert "positions" in p["observed"]["accelerometer.matrix"]["how"]
     assert close(p["gyroscope"]["bias"], oracle["gyroscope"]["bias"], p["gyroscope"]["bias_std"],
                  oracle["gyroscope"]["bias_std"], floor=5e-4)
