@@ -107,6 +107,8 @@ from imu_learn.train.split_profile import PROFILE_DIR, calibrate_split
 from imu_learn.util.atomic import atomic_write_text
 
 RESUME_OVERRIDABLE = ("optim.epochs", "device", "threads")
+# what a run's start (floor_start, profile_start) writes into its config after config.toml: no edit of the user's
+SET_BY_THE_START = ("model.start", "model.fir_taps", "model.fir_init_tau", "model.calib")
 logger = logging.getLogger(__name__)
 
 StepHook = Callable[[int, float], None]
@@ -945,7 +947,7 @@ def config_edits(path: Path, cfg: RunConfig) -> List[str]:
     on_disk, held = flat(read_toml(path)), flat(toml_of_text(to_toml(cfg)))
     free = {k.split(".")[-1] for k in RESUME_OVERRIDABLE} | {"data_root"}
     return [k for k in sorted(set(on_disk) & set(held))  # keys of both: a newer version's defaults are no edit
-            if on_disk[k] != held[k] and k.split(".")[-1] not in free]
+            if on_disk[k] != held[k] and k.split(".")[-1] not in free and k not in SET_BY_THE_START]
 
 
 def open_run(cfg: RunConfig, state: Optional[Dict[str, Any]], run_dir: Optional[Path]) -> Tuple[Path, Split]:
