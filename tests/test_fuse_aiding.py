@@ -439,8 +439,8 @@ def test_aiding_errors_from_the_core_reader_keep_their_wording(tmp_path, text, l
 
 
 def test_a_fetch_motion_capture_file_is_aiding_and_ground_truth(tmp_path):
-    """Fetch's mocap0/data.csv (``# timestamp, x, y, z, qw, qx, qy, qz``, ns in float notation) is found by
-    its header and read by the Fetch reader, as aiding and as navigate's --groundtruth (was a HeaderError)."""
+    """Fetch's mocap0/data.csv (``# timestamp, x, y, z, qw, qx, qy, qz``, ns in float notation) is ASL aiding,
+    and navigate's --groundtruth reads it by its header with the Fetch reader (was a HeaderError)."""
     from imu_learn.fuse.aiding.detect import detect
     from imu_learn.fuse.navigate import NavigateOptions, Sources, read_aiding
     from imu_learn.fuse.score import read_truth
@@ -449,8 +449,8 @@ def test_a_fetch_motion_capture_file_is_aiding_and_ground_truth(tmp_path):
     t0 = 1691117483314093312
     rows = [f"{float(t0 + k * 10_000_000):.18e},{0.01 * k:.6f},0.5,0.36,1.0,0.0,0.0,0.0" for k in range(50)]
     f.write_text("# timestamp, x, y, z, qw, qx, qy, qz\n" + "\n".join(rows) + "\n")
-    assert detect(f) == "fetch"
+    assert detect(f) == "asl"
     gt = read_truth(f)
     assert len(gt.t_ns) == 50 and gt.p[10, 0] == pytest.approx(0.1)
-    traj = read_aiding(Sources(input=tmp_path, aiding=f), NavigateOptions(aiding_format="fetch", aiding_kind="pose"))
+    traj = read_aiding(Sources(input=tmp_path, aiding=f), NavigateOptions(aiding_format="asl", aiding_kind="pose"))
     assert traj.q_xyzw[0].tolist() == [0.0, 0.0, 0.0, 1.0] and traj.t_ns[1] - traj.t_ns[0] == pytest.approx(1e7, abs=512)

@@ -66,7 +66,7 @@ from imu_learn.calib.plausible import LIMITS
 from imu_learn.calib.profile import Profile
 from imu_learn.core.still import MEMS_PRIOR, MIN_STILL_START_S, BiasPrior
 from imu_learn.data import formats
-from imu_learn.data.formats import CsvColumns, fetch, rosbag
+from imu_learn.data.formats import CsvColumns, rosbag
 from imu_learn.data.formats.asl import imu_sensor_yaml
 from imu_learn.data.formats.extrinsics import inverse, read_t_bs
 from imu_learn.data.formats.gnss_imu import mounting_rotation
@@ -324,9 +324,6 @@ def read_aiding(src: Sources, opts: NavigateOptions) -> Trajectory:
     need = kind_of(opts.aiding_kind).poses
     if opts.aiding_format == "bag":
         traj = bag_aiding.read_trajectory(Path(src.aiding), str(src.aiding_topic), need_orientation=need)
-    elif opts.aiding_format == "fetch":  # Fetch's motion capture: its dataset's one reader
-        gt = fetch.read_mocap(Path(src.aiding))
-        traj = Trajectory(gt.t_ns, gt.p, gt.q_wxyz[:, [1, 2, 3, 0]], str(src.aiding), np.arange(2, len(gt.t_ns) + 2))
     else:
         traj = read_trajectory(src.aiding, opts.aiding_format, need_orientation=need)
     return traj if opts.aiding_scale is None else replace(traj, p=traj.p * float(opts.aiding_scale))
@@ -611,6 +608,8 @@ def checked_up(src: Sources, opts: NavigateOptions, rows: AidingRows, imu: Imu) 
     """Positions of a trajectory file against the accelerometer (:mod:`.start.gravity`), before any fusion:
     refused (exit 2) where their world is not z up; a warning line where it cannot be told."""
     check = check_gravity(imu.t_ns, imu.acc, rows.t_ns, rows.p, opts.gravity)
+    if check.verdict == "refused" and check.scale != 1.0:
+        raise ConfigError(f"--aiding {src.aiding}: {check.why}")
     if check.verdict == "refused":
         fix = ("poses of a VO or SLAM (a camera's first frame as their world)? give them as poses (navigate: "
                "--aiding-kind pose or relative-pose with --extrinsics; calibrate: the file with its quaternions), "
@@ -672,7 +671,7 @@ def imu_input(src: Sources, opts: NavigateOptions, imu: Imu) -> Tuple[np.ndarray
 
 
 AIDING_SOURCES = {"tum": "TUM trajectory", "csv": "CSV trajectory", "asl": "ASL trajectory",
-                  "rtklib": "RTKLIB solution", "fetch": "Fetch motion capture"}
+                  "rtklib": "RTKLIB solution"}
 
 
 def aiding_label(src: Sources, opts: NavigateOptions) -> str:

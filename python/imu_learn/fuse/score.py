@@ -19,7 +19,6 @@ from imu_learn.data.formats.groundtruth import read_groundtruth
 from imu_learn.errors import AidingError
 from imu_learn.score.metrics import rmse
 
-from .aiding.detect import detect as detect_format
 from .aiding.outages import in_windows, outage_mask
 from .graph import FusionResult
 
@@ -155,7 +154,7 @@ def _errors(p_est, R_est, p_gt, R_gt, align: bool, R_al=None, t_al=None):
 def read_truth(path: Path):
     """``--groundtruth`` as navigate reads it: a Fetch recording's motion capture by its header
     (:func:`imu_learn.data.formats.fetch.read_mocap`), else a TUM file or an ASL CSV."""
-    return fetch.read_mocap(Path(path)) if detect_format(Path(path)) == "fetch" else read_groundtruth(Path(path))
+    return fetch.read_mocap(Path(path)) if fetch.is_mocap_file(Path(path)) else read_groundtruth(Path(path))
 
 
 def score_against(groundtruth: Path, kf_t: np.ndarray, res, rows, R_WA: np.ndarray, t0_ns: int, align: bool,

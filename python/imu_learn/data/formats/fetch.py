@@ -151,6 +151,11 @@ def read_imu(path: Path) -> ImuData:
     return ImuData(t_ns=t, gyro=np.ascontiguousarray(v[:, :3]), acc=np.ascontiguousarray(v[:, 3:]))
 
 
+def is_mocap_file(path: Path) -> bool:
+    """Whether ``path`` is a file headed as a Fetch recording's motion capture (:data:`MOCAP_NAMES`)."""
+    return Path(path).is_file() and _header_names(_first_line(Path(path))) == MOCAP_NAMES
+
+
 def read_mocap(path: Path) -> GroundTruth:
     """The mocap pose (``mav0/mocap0/data.csv`` of a recording, or the file itself)."""
     path = Path(path)

@@ -4,8 +4,6 @@
 * a ROS bag (a ``.bag`` file or a ROS 2 folder): ``bag`` (:mod:`.bag`; a topic names the stream);
 * ``%`` comment lines whose last names RTKLIB's time system and position columns: ``rtklib``
   (:mod:`.rtklib`);
-* a first line ``# timestamp, x, y, z, qw, qx, qy, qz``: ``fetch`` (a Fetch recording's motion capture,
-  :func:`imu_learn.data.formats.fetch.read_mocap`);
 * otherwise the first line that is not a comment or a header of names: commas and a first cell in
   nanoseconds (an integer of 13 digits or more, or a number of 1e12 or more in float notation) ->
   ``asl``; commas -> ``csv``; white space -> ``tum`` (:mod:`.tum`).
@@ -15,12 +13,12 @@ from __future__ import annotations
 from pathlib import Path
 from typing import List
 
-from imu_learn.data.formats import fetch, rosbag
+from imu_learn.data.formats import rosbag
 
 from .rtklib import looks_like_pos
 from .tum import is_epoch_ns
 
-FORMATS = ("tum", "csv", "asl", "rtklib", "bag", "fetch")
+FORMATS = ("tum", "csv", "asl", "rtklib", "bag")
 HEAD_BYTES = 65536
 
 
@@ -40,8 +38,6 @@ def detect(path: Path) -> str:
     lines = _head(path)
     if looks_like_pos(lines):
         return "rtklib"
-    if lines and tuple(f.strip() for f in lines[0].strip().lstrip("#").split(",")) == fetch.MOCAP_NAMES:
-        return "fetch"
     for line in lines:
         text = line.split("#", 1)[0].strip()
         if not text:

@@ -12,8 +12,9 @@ the best one's. To first order ``|a + g u| − g = a·u``: motion along z identi
 its level (a level robot's world tilted 10° shows), but a world upside down only where the track moves
 vertically.
 
-Units: at the best direction, the positions scaled by each of :data:`SCALES` (mm, cm, ... given as m)
-against the accelerometer; a factor other than 1 that fits :data:`RATIO` times better is refused, naming it.
+Units: with z up, the positions scaled by each of :data:`SCALES` (mm, cm, ... given as m) against the
+accelerometer; a factor other than 1 that fits :data:`RATIO` times better, and explains the norm
+:data:`RATIO` times better than no positions at all, is refused, naming it.
 The rule: refused where the best direction lies more than :data:`MAX_TILT_DEG` from z up, its RMS
 at most 1 / :data:`RATIO` of z up's and at least :data:`MIN_GAIN` m/s² below it; not checked with fewer
 than :data:`MIN_EPOCHS` rows with both neighbours. Measured: ORB-SLAM2 stereo positions of EuRoC MH_01,
@@ -117,17 +118,20 @@ def check_gravity(imu_t_ns: np.ndarray, acc: np.ndarray, t_ns: np.ndarray, p: np
     F = double_integral(ti, np.linalg.norm(np.asarray(acc, dtype=np.float64), axis=1) - gravity)
     f = (np.interp(c + h, ti, F) - 2.0 * np.interp(c, ti, F) + np.interp(c - h, ti, F)) / (h * h)
     U = np.vstack([[0.0, 0.0, 1.0], sphere()])
-    fits = {x: _rms_over(U, x * a, f, gravity) for x in SCALES}  # every up direction, each factor on the positions
-    rms = fits[1.0]
+    rms = _rms_over(U, a, f, gravity)  # every up direction, the positions as given
     k = int(np.argmin(rms))
-    best_of = {x: float(r.min()) for x, r in fits.items()}
+    # units, z up: a factor on the positions that explains the accelerometer's norm better than 1 does and far
+    # better than no positions at all (not by shrinking the positions' noise where they barely accelerate; a
+    # tilted up would let a small factor fit a level change: a car's 1 m/s^2 step under 1 cm fixes)
+    best_of = {x: float(_rms_over(U[:1], x * a, f, gravity)[0]) for x in SCALES}
     k_best = min(best_of, key=best_of.get)
-    if k_best != 1.0 and best_of[1.0] >= RATIO * best_of[k_best]:
+    no_positions = float(np.sqrt(np.mean((f - np.median(f)) ** 2)))
+    if k_best != 1.0 and best_of[1.0] >= RATIO * best_of[k_best] and no_positions >= RATIO * best_of[k_best]:
         why = (f"the positions are x{1 / k_best:g} the distances the accelerometer measures (its specific-force norm "
                f"fits them best scaled by {k_best:g}: RMS {best_of[k_best]:.3f} against {best_of[1.0]:.3f} m/s^2 as "
-               "given): millimetres or centimetres? give them in metres")
-        return GravityCheck("refused", tuple(float(x) for x in U[int(np.argmin(fits[k_best]))]), float("nan"),
-                            best_of[k_best], float(rms[0]), int(len(c)), h, why, k_best)
+               "given, z up): millimetres or centimetres? give them in metres")
+        return GravityCheck("refused", (0.0, 0.0, 1.0), float("nan"), best_of[k_best], best_of[1.0], int(len(c)), h,
+                            why, k_best)
     tilt = float(np.degrees(np.arccos(np.clip(U[k, 2], -1.0, 1.0))))
     up, best, z_up = tuple(float(x) for x in U[k]), float(rms[k]), float(rms[0])
     refused = tilt > MAX_TILT_DEG and z_up >= RATIO * best and z_up - best >= MIN_GAIN
