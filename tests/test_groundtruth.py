@@ -103,6 +103,27 @@ def test_check_of_a_synthetic_recording_names_its_frame_and_clock():
     assert row.after_rot[0] < row.n200[0]  # R_off applied: the rotation agrees better
 
 
+def test_a_reference_world_not_along_gravity_is_levelled_before_translation_and_lever_arm():
+    # a VO/SLAM world: the same recording with its world turned 100° (gravity no longer along its z)
+    lever = np.array([0.05, -0.03, 0.02])
+    seq = recording(0.0, lever=lever)
+    imu = ImuData(seq.t_ns, seq.gyro, seq.acc)
+    level, _ = gr.check(imu, GroundTruth(seq.t_ns, seq.p, seq.q_wxyz), "synthetic", "gt")
+    q_w = axis_angle([1.0, 0.4, 0.0], np.radians(100.0))
+    turned = GroundTruth(seq.t_ns, rotate(np.broadcast_to(q_w, seq.q_wxyz.shape), seq.p),
+                         qmul(np.broadcast_to(q_w, seq.q_wxyz.shape), seq.q_wxyz))
+    row, _ = gr.check(imu, turned, "synthetic", "gt")
+    assert level.world_tilt_deg < 0.5 and not level.levelled
+    assert row.world_tilt_deg == pytest.approx(100.0, abs=0.5) and row.levelled
+    assert row.verdict.endswith("its world tilted 100° from gravity")
+    for a, b in ((row.n200, level.n200), (row.after_rot, level.after_rot), (row.after_hold, level.after_hold)):
+        assert a[0] == pytest.approx(b[0], rel=1e-6)  # rotation: any world
+        assert a[1] == pytest.approx(b[1], rel=0.02)  # translation: the levelled world's
+    np.testing.assert_allclose(row.lever_cm, 100 * lever, atol=0.3)
+    # without the levelling the translation over 1 s is gravity's (metres), as before
+    assert gr.bias_removed_score(gr.segments(imu, turned, 0.05), 200)[1] > 10 * level.n200[1]
+
+
 def test_check_of_a_recording_shorter_than_one_window_is_a_typed_error():
     seq = recording(0.0, seconds=0.5)  # shorter than alignment's shortest segment
     with pytest.raises(ImuError):

@@ -55,7 +55,7 @@ from imu_learn.calib import noise as nz
 from imu_learn.calib.fit import time_blocks
 from imu_learn.calib.frames import default_gap_s
 from imu_learn.calib.profile import FloorFit
-from imu_learn.calib.reference import _quat, fit_lag, is_planar_odometry, level_rotation
+from imu_learn.calib.reference import fit_lag, is_planar_odometry, level_rotation
 from imu_learn.calib.sources import (
     OBSERVABLE,
     TIME_OFFSET_PRIOR_SAMPLES,
@@ -72,7 +72,7 @@ from imu_learn.calib.sources import (
     held_back,
     span,
 )
-from imu_learn.core.quat import quat_mul
+from imu_learn.core.quat import quat_from_matrix, quat_mul
 from imu_learn.data.formats import read_recording
 from imu_learn.data.formats.groundtruth import read_groundtruth
 from imu_learn.data.loading import AlignOptions, align
@@ -442,7 +442,7 @@ class OdometrySource(Source):
             base.append(held_back(segs, self.val_fraction)[0] if segs else [])
         self.fwd = forward_axis([s for b in base for s in b], u, o.acc_window_s, o.min_horizontal_acc, o.blocks)
         psi = math.radians(self.fwd["psi_deg"]) if self.fwd.get("psi_deg") is not None else 0.0
-        q_base_imu = _quat(_rot_z(psi) @ level(u))  # the IMU in the base frame: R_base_imu = Rz(ψ) level(u)
+        q_base_imu = quat_from_matrix(_rot_z(psi) @ level(u))  # the IMU in the base frame: R_base_imu = Rz(ψ) level(u)
         recordings: List[Recording] = []
         observes = self.observes_keys()
         for (imu, ref), name, source, lg in zip(pairs, names, sources, self.lags):

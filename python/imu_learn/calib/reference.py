@@ -52,7 +52,7 @@ from imu_learn.calib.frames import (
     rotation_matrices,
     segments,
 )
-from imu_learn.core.quat import quat_conj, quat_mul, quat_rotate
+from imu_learn.core.quat import quat_conj, quat_from_matrix, quat_mul, quat_rotate
 from imu_learn.data.formats.extrinsics import read_t_bs
 from imu_learn.data.loading import AlignOptions
 from imu_learn.data.types import GroundTruth, ImuData, Segment, sample_rate_hz
@@ -626,8 +626,8 @@ def to_imu_frame(ref: GroundTruth, fit: FrameFit, index: int) -> GroundTruth:
         return ref
     ap = fit.applied
     r_level = level_rotation(fit.g_up[index]) if ap.get("level") else np.eye(3)
-    q_level = _quat(r_level)
-    q_ref_imu = _quat(fit.r_imu_ref.T) if ap.get("rotation") else np.array([1.0, 0, 0, 0])
+    q_level = quat_from_matrix(r_level)
+    q_ref_imu = quat_from_matrix(fit.r_imu_ref.T) if ap.get("rotation") else np.array([1.0, 0, 0, 0])
     s = fit.scale if ap.get("scale") else 1.0
     p_w = s * ref.p + (quat_rotate(ref.q_wxyz, np.broadcast_to(fit.lever_m, ref.p.shape)) if ap.get("lever_arm") else 0.0)
     p = p_w @ r_level.T
@@ -637,23 +637,6 @@ def to_imu_frame(ref: GroundTruth, fit: FrameFit, index: int) -> GroundTruth:
     return GroundTruth(t_ns=np.asarray(t_ns, dtype=np.int64), p=np.ascontiguousarray(p),
                        q_wxyz=np.ascontiguousarray(q / np.linalg.norm(q, axis=1, keepdims=True)),
                        v=None if ap.get("lever_arm") else v)
-
-
-def _quat(r: np.ndarray) -> np.ndarray:
-    """w,x,y,z of a rotation matrix (Shepperd)."""
-    t = np.trace(r)
-    if t > 0:
-        w = math.sqrt(1 + t) / 2
-        return np.array([w, (r[2, 1] - r[1, 2]) / (4 * w), (r[0, 2] - r[2, 0]) / (4 * w), (r[1, 0] - r[0, 1]) / (4 * w)])
-    i = int(np.argmax(np.diag(r)))
-    j, k = (i + 1) % 3, (i + 2) % 3
-    x = math.sqrt(max(1 + r[i, i] - r[j, j] - r[k, k], 0.0)) / 2
-    q = np.zeros(4)
-    q[1 + i] = x
-    q[0] = (r[k, j] - r[j, k]) / (4 * x)
-    q[1 + j] = (r[j, i] + r[i, j]) / (4 * x)
-    q[1 + k] = (r[k, i] + r[i, k]) / (4 * x)
-    return q if q[0] >= 0 else -q
 
 
 # ---------------------------------------------------------------------------------------------

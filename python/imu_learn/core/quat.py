@@ -2,6 +2,8 @@
 components) and the Hamilton algebra on w,x,y,z arrays of shape (..., 4)."""
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
 
@@ -71,3 +73,20 @@ def so3_right_jacobian_inverse(phi: np.ndarray) -> np.ndarray:
     xy, xz, yz = c2 * x * y, c2 * x * z, c2 * y * z
     return np.stack((a + c2 * x * x, xy + cz, xz - cy, xy - cz, a + c2 * y * y, yz + cx, xz + cy, yz - cx,
                      a + c2 * z * z), axis=-1).reshape(*phi.shape[:-1], 3, 3)
+
+
+def quat_from_matrix(r: np.ndarray) -> np.ndarray:
+    """w,x,y,z (w >= 0) of one rotation matrix (3, 3) (Shepperd's method)."""
+    t = np.trace(r)
+    if t > 0:
+        w = math.sqrt(1 + t) / 2
+        return np.array([w, (r[2, 1] - r[1, 2]) / (4 * w), (r[0, 2] - r[2, 0]) / (4 * w), (r[1, 0] - r[0, 1]) / (4 * w)])
+    i = int(np.argmax(np.diag(r)))
+    j, k = (i + 1) % 3, (i + 2) % 3
+    x = math.sqrt(max(1 + r[i, i] - r[j, j] - r[k, k], 0.0)) / 2
+    q = np.zeros(4)
+    q[1 + i] = x
+    q[0] = (r[k, j] - r[j, k]) / (4 * x)
+    q[1 + j] = (r[j, i] + r[i, j]) / (4 * x)
+    q[1 + k] = (r[k, i] + r[i, k]) / (4 * x)
+    return q if q[0] >= 0 else -q

@@ -16,6 +16,10 @@ every EuRoC / TUM-VI / Fetch recording is experiments/groundtruth_report.py):
   :func:`imu_learn.calib.reference.planar_ratio`) or with ``yaw_from_acc``, R_off comes from specific
   force instead (:func:`imu_learn.calib.reference.planar_rotation`: refused where the horizontal
   accelerations cannot fix it);
+* the reference world's tilt from gravity (:func:`world_up`: the specific force turned into the world,
+  less the change of velocity): a world tilted ``FrameOptions.level_deg`` or more (a VO/SLAM world, the
+  first camera frame; a z-down one) is levelled before every translation score and the lever arm,
+  which assume gravity along the world's z (rotation scores do not depend on the world);
 * the lever arm r of the IMU origin in the GT body frame, by least squares on
   S(R a_imu) − S(p̈_gt) − g = S(R (ω̇× + ω×ω×)) r + S(R) b_a  (world frame; S: one Savitzky-Golay
   smoother on every term, so the equation stays exact), with R_off and τ applied;
@@ -47,9 +51,9 @@ from imu_learn.calib.frames import (  # noqa: F401  (re-exported: the check's vo
     segments,
     shifted_pairs,
 )
-from imu_learn.calib.reference import FrameOptions, matched_rates, planar_ratio, planar_rotation
+from imu_learn.calib.reference import FrameOptions, level_rotation, matched_rates, planar_ratio, planar_rotation
 from imu_learn.core.integration import integrate_windows, window_labels
-from imu_learn.core.quat import quat_conj, quat_mul
+from imu_learn.core.quat import quat_conj, quat_from_matrix, quat_mul
 from imu_learn.data.formats import read_recording
 from imu_learn.data.types import GroundTruth, ImuData, Segment, median_period_ns
 from imu_learn.errors import ReferenceFrameError, TooShortError
@@ -173,6 +177,39 @@ def fit_lever_arm(segs: List[Segment], gyro_bias: np.ndarray, half: int = 20) ->
 
 
 # ---------------------------------------------------------------------------------------------
+# the reference world's gravity
+
+
+def world_up(segs: List[Segment]) -> np.ndarray:
+    """Gravity's up direction in the reference world (``segs`` with the IMU in the reference's body
+    frame): the specific force turned into the world, R a = p̈ + g up to noise and bias, summed over each
+    segment, less its change of velocity (the reference's positions over half a second at each end)."""
+    total, seconds = np.zeros(3), 0.0
+    for s in segs:
+        dt = np.diff(s.t_ns) * 1e-9
+        f = np.einsum("nij,nj->ni", rotation_matrices(s.q_wxyz[:-1]), s.acc[:-1])
+        k = max(1, min(len(s) // 4, int(round(0.5 / float(np.median(dt))))))
+        v0, v1 = ((s.p[i + k] - s.p[i]) / ((s.t_ns[i + k] - s.t_ns[i]) * 1e-9) for i in (0, len(s) - 1 - k))
+        total += (f * dt[:, None]).sum(axis=0) - (v1 - v0)
+        seconds += float(dt.sum())
+    g = total / max(seconds, 1e-12)
+    return g / max(float(np.linalg.norm(g)), 1e-12)
+
+
+def tilt_deg(up: np.ndarray) -> float:
+    """The angle of ``up`` from the world's +z [deg]."""
+    return math.degrees(math.acos(float(np.clip(up[2], -1.0, 1.0))))
+
+
+def levelled(gt: GroundTruth, up: np.ndarray) -> GroundTruth:
+    """``gt`` in its world turned by the smallest rotation taking ``up`` to +z (poses and velocities)."""
+    r = level_rotation(up)
+    q = quat_mul(np.broadcast_to(quat_from_matrix(r), gt.q_wxyz.shape), gt.q_wxyz)
+    return replace(gt, p=np.ascontiguousarray(gt.p @ r.T), q_wxyz=np.ascontiguousarray(q),
+                   v=None if gt.v is None else np.ascontiguousarray(gt.v @ r.T))
+
+
+# ---------------------------------------------------------------------------------------------
 # motion-capture noise floor and gaps
 
 
@@ -255,6 +292,13 @@ class GroundTruthCheck:
     lever_se_cm: np.ndarray
     rotation_from: str = "from the gyro"  # how R_off was found (a ground robot's: specific force)
     about_turning_axis_observed: bool = True  # False: a ground robot whose specific force cannot fix it
+    # the reference world's z from up (gravity from the specific force); from FrameOptions.level_deg on, the world
+    # was levelled before every translation score and the lever arm (a VO/SLAM world, a z-down one)
+    world_tilt_deg: float = 0.0
+
+    @property
+    def levelled(self) -> bool:
+        return self.world_tilt_deg >= FrameOptions().level_deg
 
     @property
     def verdict(self) -> str:
@@ -264,7 +308,8 @@ class GroundTruthCheck:
         lag = "" if abs(self.tau_ms) < 2.5 else f", GT {self.tau_ms:+.0f} ms late"
         arm = np.linalg.norm(self.lever_cm)
         lever = f", lever arm {arm:.1f} cm" if arm > max(2.0, 3 * np.max(self.lever_se_cm)) else ""
-        return frame + lag + lever
+        world = f", its world tilted {self.world_tilt_deg:.0f}° from gravity" if self.levelled else ""
+        return frame + lag + lever + world
 
 
 def gt_label(gt_rel: str) -> str:
@@ -286,6 +331,11 @@ def check(imu: ImuData, gt: GroundTruth, recording: str, label: str,
                             + (gap_hint(gt, gap) or f"raise --max-gap-s (now {gap:g} s) if the ground truth has gaps"),
                             samples=longest, needed=MIN_SAMPLES + 1)
     off = fit_offset(segs)
+    up = world_up(segments(imu, gt, gap, r_off=off.r_off))  # the rates fix R_off in any world; gravity the world's up
+    tilt = tilt_deg(up)
+    if tilt >= FrameOptions().level_deg:  # a VO/SLAM world: translation and lever arm need gravity along its z
+        gt = levelled(gt, up)
+        segs = segments(imu, gt, gap, name=recording)
     rates = matched_rates(segs, 10)
     ratio = planar_ratio(rates)
     yaw, observed = "from the gyro", True
@@ -306,7 +356,8 @@ def check(imu: ImuData, gt: GroundTruth, recording: str, label: str,
     angle, axis = angle_axis(off.r_off)
     row = GroundTruthCheck(recording, label, gt_rate_hz(gt), sum(len(s) for s in segs), len(segs),
               bias_removed_score(segs, 10), bias_removed_score(segs, 200), angle, axis, 1e3 * off.tau_s,
-              bias_removed_score(rotated, 200), bias_removed_score(held, 200), 100 * lever, 100 * lever_se, yaw, observed)
+              bias_removed_score(rotated, 200), bias_removed_score(held, 200), 100 * lever, 100 * lever_se, yaw, observed,
+              tilt)
     return row, off
 
 
