@@ -137,6 +137,35 @@ def test_biases_from_positions(tmp_path):
     assert res.profile.floor == prof.floor and (tmp_path / "cal" / "imu.yaml").is_file()
 
 
+def test_biases_from_positions_with_a_users_csv(tmp_path):
+    """The same car's IMU as a CSV of one's own (seconds, deg/s, g; calibrate's --columns and units): the
+    same biases from the same fixes (a positions reference read a recording's own layout only)."""
+    rec, fixes = synthetic_drive(tmp_path, seconds=60.0)
+    rows = np.loadtxt(rec / "mav0" / "imu0" / "data.csv", delimiter=",", comments="#")
+    csv = tmp_path / "my_imu.csv"
+    with open(csv, "w") as fh:
+        fh.write("time_s,ax_g,ay_g,az_g,wx_dps,wy_dps,wz_dps\n")
+        for r in rows:
+            a, w = r[4:7] / 9.80665, np.degrees(r[1:4])
+            fh.write(f"{int(r[0]) / 1e9:.9f},{a[0]:.9f},{a[1]:.9f},{a[2]:.9f},{w[0]:.9f},{w[1]:.9f},{w[2]:.9f}\n")
+    argv = ["calibrate", "--input", str(csv), "--columns", "t,ax,ay,az,gx,gy,gz", "--time-unit", "s", "--gyro-unit",
+            "deg/s", "--acc-unit", "g", "--groundtruth", str(fixes), "--imu-delay-s", "0", "--out", str(tmp_path / "cal"),
+            "--no-plot", "--quiet"]
+    from imu_learn.cli.calibrate import source_of
+
+    src = source_of(calibrate_args(*argv[1:]))
+    assert isinstance(src, P.PositionsSource) and src.opts.columns is not None and src.opts.columns.acc_unit == "g"
+    src = P.PositionsSource(csv, fixes, P.PositionsOptions(columns=src.opts.columns, imu_noise=(1e-3, 1e-2, 1e-5, 1e-4),
+                                                          max_iterations=2, max_windows=300, imu_delay_s=0.0))
+    from imu_learn.calib.run import CalibOptions, calibrate
+
+    calibrate(src.read(), tmp_path / "cal", CalibOptions(plot=False))
+    prof = Profile.load(tmp_path / "cal" / "profile.json")
+    np.testing.assert_allclose(prof.gyro.bias, B_G, atol=5e-4)
+    np.testing.assert_allclose(prof.acc.bias, B_A, atol=0.03)
+    assert prof.sources[0]["format"] == "csv-columns"
+
+
 def test_imu_delay_from_the_track(tmp_path):
     """A log written 0.12 s late: the estimate is -0.12 s in the navigator's convention (added to every IMU
     stamp), within 3 standard errors or 0.03 s; none: near 0."""

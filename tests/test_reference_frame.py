@@ -9,8 +9,8 @@ import numpy as np
 import pytest
 
 from imu_learn.calib.plausible import held_back_findings, parameter_findings
-from imu_learn.calib.reference import FrameOptions, level_rotation, resolve_frame, to_imu_frame
-from imu_learn.core.quat import quat_conj, quat_mul, quat_rotate
+from imu_learn.calib.reference import Extrinsics, FrameOptions, level_rotation, resolve_frame, to_imu_frame
+from imu_learn.core.quat import quat_conj, quat_from_matrix, quat_mul, quat_rotate
 from imu_learn.data.types import GroundTruth, ImuData
 from imu_learn.errors import ReferenceFrameError
 from imu_learn.score.metrics import simulate_sequence
@@ -24,8 +24,7 @@ def rot(axis, deg) -> np.ndarray:
 
 
 def quat(r: np.ndarray) -> np.ndarray:
-    from imu_learn.calib.reference import _quat
-    return _quat(r)
+    return quat_from_matrix(r)
 
 
 def flight(seconds=60.0, rate=200.0, seed=0, planar=False):
@@ -63,6 +62,23 @@ def reference_of(seg, r_imu_ref=np.eye(3), world=np.eye(3), lever=np.zeros(3), l
 
 def angle_deg(r: np.ndarray) -> float:
     return math.degrees(math.acos(np.clip((np.trace(r) - 1) / 2, -1, 1)))
+
+
+def test_a_given_extrinsic_the_rates_contradict_is_refused_and_one_they_confirm_is_used():
+    # a reference in a frame 0.6° off the file's (ORB-SLAM2's rectified left camera against EuRoC's cam0):
+    # the floor's gyroscope matrix would take the 0.6° up and harm every other recording
+    imu, seg = flight()
+    r_true = rot([1, 2, 3], 90.0)
+    ref = reference_of(seg, r_true)
+    lever = np.zeros(3)
+    fit = resolve_frame([(imu, ref)], extrinsics=Extrinsics(r_true, lever, "true.yaml"))
+    assert angle_deg(fit.r_imu_ref @ r_true.T) < 1e-9 and fit.method == "true.yaml"
+    near = rot([1, 0, 0], 0.2) @ r_true  # within the tolerance (a calibration's own error): used as given
+    assert angle_deg(resolve_frame([(imu, ref)], extrinsics=Extrinsics(near, lever, "near.yaml")).r_imu_ref
+                     @ near.T) < 1e-9
+    off = rot([1, 0.5, -0.2], 0.6) @ r_true
+    with pytest.raises(ReferenceFrameError, match=r"off\.yaml.*0\.6.° off the one the rotation rates give"):
+        resolve_frame([(imu, ref)], extrinsics=Extrinsics(off, lever, "off.yaml"))
 
 
 def test_a_reference_in_the_imu_frame_is_left_untouched():

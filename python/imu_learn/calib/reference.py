@@ -88,6 +88,10 @@ class FrameOptions:
     window_s: float = 1.0
     floor_lag_s: float = 0.015
     level_deg: float = 2.0
+    # a given extrinsic's rotation may differ from the rates' by at most the larger of these
+    # (:func:`check_extrinsic_rotation`)
+    extrinsic_tolerance_deg: float = 0.3
+    extrinsic_sigmas: float = 4.0
     lever_sigmas: float = 5.0
     min_lever_m: float = 0.02
     floor_window_s: Optional[float] = None
@@ -455,6 +459,7 @@ def resolve_frame(pairs: Sequence[Tuple[ImuData, GroundTruth]], options: FrameOp
             r_imu_ref = planar_rotation(segs, rates, off.rms, ratio)
             rot_std, method = math.nan, "from specific force: the motion turns about one axis only"
     else:
+        check_extrinsic_rotation(extrinsics, off.r_off, rates, ratio, options)
         r_imu_ref, lever0 = extrinsics.r_imu_ref, extrinsics.lever_m
         rot_std = 0.0
     gyro_bias = off.gyro_bias if method == "estimated from rotation rates" else _bias_given(rates, r_imu_ref)
@@ -488,6 +493,27 @@ def resolve_frame(pairs: Sequence[Tuple[ImuData, GroundTruth]], options: FrameOp
                     np.zeros(3) if extrinsics is not None else sol["lever_std"], tilt, g_up, ref_rate, method,
                     resolves_acceleration(ref_rate, options.floor_window_s or FitSettings().window / imu_rate,
                                           options.acc_span_fraction), applied, ratio)
+
+
+def check_extrinsic_rotation(extrinsics: Extrinsics, r_rates: np.ndarray, rates: Rates, ratio: float,
+                             options: FrameOptions) -> None:
+    """A given extrinsic whose rotation the rates contradict is refused: more than
+    ``options.extrinsic_tolerance_deg`` and ``options.extrinsic_sigmas`` bootstrap spreads
+    (:func:`rotation_spread`) from the rotation the rates give (step 2). The reference is then in
+    another frame than the file's (ORB-SLAM2's stereo poses are the rectified left camera's, 0.6° off
+    EuRoC's cam0), and the floor's gyroscope matrix would take up the difference: a misalignment
+    that holds for that reference and harms every other recording. Not checked where the rates
+    cannot fix the rotation (motion about one axis)."""
+    if ratio < options.planar_ratio:
+        return
+    spread = rotation_spread(rates)
+    off = _angle_deg(r_rates @ extrinsics.r_imu_ref.T)
+    if spread <= options.max_rotation_std_deg and off > max(options.extrinsic_tolerance_deg,
+                                                            options.extrinsic_sigmas * spread):
+        raise ReferenceFrameError(
+            f"--extrinsics {extrinsics.source}: its rotation is {off:.2f}° off the one the rotation rates give "
+            f"(± {spread:.2f}°): the reference is in another frame than the file's (a rectified camera's?); leave "
+            "--extrinsics out to have the rotation estimated, or give the frame the poses are in")
 
 
 UNITS = {"millimetres": 1e-3, "centimetres": 1e-2}  # what a scale below 0.05 (refused) points at

@@ -166,7 +166,7 @@ def source_of(args: argparse.Namespace) -> Source:
     if args.imu_only:
         return StillSource(args.input, args.format, csv_layout(args), args.device)
     if any(is_positions_reference(g) for g in args.groundtruth or []):
-        return source_from_cli(args)  # positions only: attitude from the navigator's smoother
+        return source_from_cli(args, csv_layout(args))  # positions only: attitude from the navigator's smoother
     if any(is_odometry_reference(g) for g in args.groundtruth or []):  # planar odometry: the yaw rate only
         return OdometrySource(args.input, args.groundtruth, args.format, csv_layout(args), args.max_gap_s,
                               args.val_fraction, args.device)

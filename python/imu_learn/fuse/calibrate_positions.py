@@ -63,6 +63,7 @@ from imu_learn.core.stamps import sample_rate_hz
 from imu_learn.data import formats
 from imu_learn.data.formats.extrinsics import read_t_bs
 from imu_learn.data.formats.gnss_imu import mounting_rotation
+from imu_learn.data.formats.source import CsvColumns
 from imu_learn.data.loading import AlignOptions, align
 from imu_learn.data.types import GroundTruth, ImuData, Segment
 from imu_learn.errors import ConfigError, InvalidInputError
@@ -89,6 +90,7 @@ class PositionsOptions:
     iterated."""
 
     fmt: str = "auto"  # the recording's layout
+    columns: Optional[CsvColumns] = None  # a user's CSV: its column map and units (``--columns`` ...)
     imu_rotation_rpy_deg: Optional[Tuple[float, float, float]] = None  # None: :func:`forward_mounting`
     imu_delay_s: Optional[float] = None  # added to every IMU stamp; None: :func:`estimate_imu_delay`
     lever_arm: Optional[Tuple[float, float, float]] = None
@@ -299,7 +301,8 @@ def smoother_pass(imu_path: Path, ref_path: Path, opts: PositionsOptions, rpy: S
                           imu_rotation_rpy_deg=tuple(float(x) for x in rpy), imu_delay_s=opts.imu_delay_s,
                           lever_arm=None if opts.lever_arm is None else tuple(opts.lever_arm), nhc=opts.nhc,
                           imu_noise=tuple(float(x) for x in noise))
-    return navigate(Sources(input=Path(imu_path), aiding=Path(ref_path), fmt=opts.fmt, profile=prof), out, nav)
+    return navigate(Sources(input=Path(imu_path), aiding=Path(ref_path), fmt=opts.fmt, columns=opts.columns,
+                            profile=prof), out, nav)
 
 
 def smoothed_groundtruth(smoothed_tum: Path, mounting: np.ndarray, delay_s: float) -> GroundTruth:
@@ -371,7 +374,7 @@ def positions_floor(imu_path: Path, ref_path: Path, opts: PositionsOptions = Pos
     navigator outputs go (default: a temporary folder, removed)."""
 
     imu_path, ref_path = Path(imu_path), Path(ref_path)
-    src = formats.read_imu_source(imu_path, opts.fmt)
+    src = formats.read_imu_source(imu_path, opts.fmt, columns=opts.columns)
     if src.t_ns is None:
         raise InvalidInputError(f"{imu_path}: the recording has no IMU stamps of its own; navigation needs them")
     imu = ImuData(t_ns=np.asarray(src.t_ns, dtype=np.int64), gyro=np.asarray(src.gyro, dtype=np.float64),
@@ -502,8 +505,8 @@ class PositionsSource(Source):
 
             device = recording_device(self.opts.fmt) or name
         res = self.result = positions_floor(self.imu_path, self.ref_path, self.opts, self.work, progress, device)
-        src = dict(self.entry or {"recording": str(self.imu_path), "format": self.opts.fmt,
-                                  "groundtruth": str(self.ref_path)})
+        fmt = formats.USER_CSV if formats.user_csv(self.opts.fmt, self.opts.columns) is not None else self.opts.fmt
+        src = dict(self.entry or {"recording": str(self.imu_path), "format": fmt, "groundtruth": str(self.ref_path)})
         src.update({"train": [span(s) for s in res.train], "val": [span(s) for s in res.val]})
         observes = self.observes()
         recordings = [Recording(str(self.imu_path), role, part, self.kind, observes)
@@ -543,18 +546,16 @@ def calibrate_positions(imu_path: Path, ref_path: Path, out_dir: Path, opts: Pos
     return cr.calibrate(src.read(progress), out_dir, options if options is not None else cr.CalibOptions(), progress)
 
 
-def source_from_cli(args: Any) -> PositionsSource:
+def source_from_cli(args: Any, columns: Optional[CsvColumns] = None) -> PositionsSource:
     """``imu-learn calibrate --input REC --groundtruth POSITIONS``'s source, with the command's options
-    (one recording; the navigator's options :func:`navigator_options`); the navigator's passes in
-    ``--out``/positions."""
+    (one recording, a user's CSV where ``columns`` is given; the navigator's options
+    :func:`navigator_options`); the navigator's passes in ``--out``/positions."""
 
     if len(args.input) != 1 or len(args.groundtruth or []) != 1:
         raise ConfigError("calibrate with a positions reference (GNSS): one --input and its --groundtruth")
     if args.learned:
         raise ConfigError("--learned needs a 6-DoF reference; a positions reference gives the bias-only floor")
-    if args.format == "csv-columns" or any(getattr(args, k, None) is not None for k in ("columns", "time_unit")):
-        raise ConfigError("calibrate with a positions reference reads a recording's own layout, not a user's CSV")
-    opts = PositionsOptions(fmt=args.format, val_fraction=args.val_fraction, **navigator_options(args))
+    opts = PositionsOptions(fmt=args.format, columns=columns, val_fraction=args.val_fraction, **navigator_options(args))
     return PositionsSource(args.input[0], args.groundtruth[0], opts, Path(args.out) / "positions", args.device)
 
 
