@@ -5,9 +5,16 @@ without: a motion-capture reference, metric, whose scale was applied before the 
 implausible scale is given (imu_learn.calib.plausible): a unit only where the scale reads like one."""
 from __future__ import annotations
 
+import logging
+from dataclasses import replace
+from pathlib import Path
+
+import numpy as np
 import pytest
 
 from imu_learn.calib.metric_scale import SIGMAS, TOLERANCE, ScaleFit
+from imu_learn.calib.reference import FrameFit, frame_lines
+from imu_learn.fuse.navigate import NavigateOptions, Sources, check_scale
 
 
 def fit(scale: float, std: float = 0.005, without: float = None) -> ScaleFit:
@@ -53,3 +60,23 @@ def test_an_implausible_scale_names_a_unit_only_where_it_reads_like_one(sensor, 
     p = TraditionalParams.from_dict({**p.to_dict(), ("M_a" if sensor == "accelerometer" else "M_g"): m.tolist()})
     found = [f for f in parameter_findings(p, None) if f.field == f"{sensor}.matrix[1][1]"]
     assert len(found) == 1 and cause in found[0].message
+
+
+def test_a_scale_the_data_cannot_tell_is_said_not_passed_over(caplog):
+    """navigate (the poses' scale) and calibrate (the reference's) say where the metric-scale check saw too
+    little (Fetch's motion capture with its dropouts: no triple of rows): a unit mistake would pass there."""
+    blind = ScaleFit(None, None, 0, 0.5, "0 reference triples over 0.5 s; 50 needed")
+    with caplog.at_level(logging.WARNING, logger="imu_learn.fuse.navigate"):
+        check_scale(Sources(Path("rec"), Path("mocap.csv")), NavigateOptions(aiding_kind="pose"), blind)
+    assert any("metric scale is not checked (0 reference triples" in r.getMessage() for r in caplog.records)
+    caplog.clear()
+    with caplog.at_level(logging.WARNING, logger="imu_learn.fuse.navigate"):
+        check_scale(Sources(Path("rec"), Path("mocap.csv")), NavigateOptions(aiding_kind="pose"), fit(1.0))
+    assert not caplog.records
+    frame = FrameFit(np.eye(3), 0.1, 0.01, 0.01, 1.0, 0.0, 0.9, np.zeros(3), 1.01, 0.02, np.zeros(3), np.zeros(3), 0.5,
+                     np.array([[0, 0, 9.81]]), 100.0, scale_not_observed=blind.reason)
+    lines = frame_lines(frame)
+    assert any("from the joint fit alone, not applied (the metric-scale check did not observe it: 0 reference" in x
+               for x in lines), lines
+    assert "did not observe it" in frame.to_dict()["scale_from"]
+    assert not any("joint fit alone" in x for x in frame_lines(replace(frame, scale_not_observed="")))

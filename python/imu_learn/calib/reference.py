@@ -131,6 +131,9 @@ class FrameFit:
     resolves_acceleration: bool = True  # the acc scale/misalignment and the low-pass are observable
     applied: Dict[str, bool] = field(default_factory=dict)
     planar_ratio: float = math.nan  # the rates' second over largest spread, the lower sensor's (:func:`planar_ratio`)
+    # why the metric-scale check (:mod:`.metric_scale`) did not observe the scale ("" where it did); then
+    # ``scale`` is the joint fit's (gravity, scale, lever arm), which reads low on a noisy reference, never applied
+    scale_not_observed: str = ""
 
     @property
     def in_imu_frame(self) -> bool:
@@ -154,6 +157,9 @@ class FrameFit:
             "reference_rate_hz": self.rate_hz, "rotation_from": self.method,
             "resolves_acceleration": self.resolves_acceleration, "planar_ratio": self.planar_ratio,
             "applied": dict(self.applied),
+            "scale_from": ("the joint fit of gravity, scale and lever arm (the metric-scale check did not observe it: "
+                           f"{self.scale_not_observed}; not applied)" if self.scale_not_observed
+                           else "the metric-scale check (calib/metric_scale.py)"),
         }
 
 
@@ -492,7 +498,8 @@ def resolve_frame(pairs: Sequence[Tuple[ImuData, GroundTruth]], options: FrameOp
                       else (float(sol["scale"]), float(sol["scale_std"]))), lever,
                     np.zeros(3) if extrinsics is not None else sol["lever_std"], tilt, g_up, ref_rate, method,
                     resolves_acceleration(ref_rate, options.floor_window_s or FitSettings().window / imu_rate,
-                                          options.acc_span_fraction), applied, ratio)
+                                          options.acc_span_fraction), applied, ratio,
+                    "" if metric.observed else (metric.reason or "no estimate"))
 
 
 def check_extrinsic_rotation(extrinsics: Extrinsics, r_rates: np.ndarray, rates: Rates, ratio: float,
@@ -681,16 +688,19 @@ def read_extrinsics(path: Path) -> Extrinsics:
 def frame_lines(fit: FrameFit) -> List[str]:
     """What the check found, for the user (one line each)."""
     ap = fit.applied
+    unchecked = (f"reference: scale {fit.scale:.4f} ± {fit.scale_std:.4f} from the joint fit alone, not applied (the "
+                 f"metric-scale check did not observe it: {fit.scale_not_observed})" if fit.scale_not_observed else "")
     if fit.in_imu_frame:
         return [f"reference: in the IMU frame (rotation {fit.rotation_deg:.2f}°, lag {fit.lag_s * 1e3:+.1f} ms, "
-                f"tilt {fit.tilt_deg:.2f}°, scale {fit.scale:.4f} ± {fit.scale_std:.4f})"]
+                f"tilt {fit.tilt_deg:.2f}°, scale {fit.scale:.4f} ± {fit.scale_std:.4f})"] + ([unchecked] if unchecked else [])
     spread = f" ± {fit.rotation_std_deg:.2f}°" if math.isfinite(fit.rotation_std_deg) else " (no spread measured)"
     out = [f"reference: rotation to the IMU {fit.rotation_deg:.2f}°{spread} "
            f"({fit.method}; rate residual {fit.rate_residual:.3f} rad/s)"]
     out.append(f"reference: lag {fit.lag_s * 1e3:+.1f} ms (|w| correlation {fit.lag_correlation:.2f})"
                + ("; moved onto the IMU's clock" if ap.get("lag") else "; left to the floor's time offset"))
     out.append(f"reference: world tilted {fit.tilt_deg:.2f}° from gravity" + ("; levelled" if ap.get("level") else ""))
-    out.append(f"reference: scale {fit.scale:.4f} ± {fit.scale_std:.4f}" + ("; applied" if ap.get("scale") else "; metric"))
+    out.append(unchecked or f"reference: scale {fit.scale:.4f} ± {fit.scale_std:.4f}"
+               + ("; applied" if ap.get("scale") else "; metric"))
     if ap.get("lever_arm"):
         out.append(f"reference: IMU origin at ({', '.join(f'{x * 100:+.1f}' for x in fit.lever_m)}) cm in its body frame")
     return out

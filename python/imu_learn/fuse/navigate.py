@@ -466,7 +466,11 @@ def moving_imu(src: Sources, opts: NavigateOptions, imu: Imu, rows: AidingRows) 
 
 def check_scale(src: Sources, opts: NavigateOptions, fit: ScaleFit) -> None:
     """Refused (exit 2, before the fusion) where the poses' positions are observed off metric; the fix is
-    the factor that makes them metric (``--aiding-scale``, times the one given)."""
+    the factor that makes them metric (``--aiding-scale``, times the one given); a warning where the data
+    could not tell the scale (positions in other units would then pass unnamed)."""
+    if not fit.observed:
+        log.warning(f"--aiding {src.aiding}: its metric scale is not checked ({fit.reason}); make sure its positions "
+                    "are in metres (summary.json: aiding_estimates.scale)")
     if not fit.off:
         return
     k, given = float(fit.scale), opts.aiding_scale or 1.0
