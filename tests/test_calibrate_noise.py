@@ -5,6 +5,7 @@ its upper bounds, and Kalibr's imu.yaml."""
 from __future__ import annotations
 
 import math
+from dataclasses import replace
 
 import numpy as np
 import pytest
@@ -176,3 +177,25 @@ def test_imu_yaml_parses_and_has_kalibrs_keys():
     assert d["gyroscope_noise_density"] == pytest.approx(2.2e-4) and d["update_rate"] == 200.0
     assert math.isnan(d["accelerometer_random_walk"])  # not measured: .nan, said in its comment
     assert "fill in" in text and d["rostopic"] == "/imu0"
+
+
+def test_a_residual_white_noise_the_imus_own_samples_do_not_allow_is_the_references(moving_reference):
+    """The density the IMU's own samples allow (second differences) recovers a moving IMU's white noise; a
+    residual fit far above it (TUM-VI: the motion capture's noise, 8e-3 rad/s/sqrt(Hz) where the BMI160's
+    samples allow 1e-4) is a bound, and the profile holds the class default with the reason."""
+    rng = np.random.default_rng(3)
+    s = moving_reference
+    gyro = s.gyro + sensor_noise(len(s), 200.0, 2e-3, 0.0, rng)
+    own = nz.own_density([s.t_ns], [gyro])
+    np.testing.assert_allclose(own, 2e-3, rtol=0.15)
+    r = nz.residual_noise([s], [(gyro, s.acc + sensor_noise(len(s), 200.0, 2e-2, 0.0, rng))], G)
+    kept = nz.choose(nz.candidates(r, None, 10.0), NOISE_KEYS)["gyroscope_noise_density"][0]
+    assert kept.kind == "fit"  # the residuals' density is the IMU's own: kept
+    quiet = replace(r, gyro_own=r.gyro.white / (2 * nz.OWN_MARGIN))  # an IMU whose samples are far quieter
+    chosen = nz.choose(nz.candidates(quiet, None, 10.0), NOISE_KEYS)
+    est, value, _ = chosen["gyroscope_noise_density"]
+    assert est.kind == "upper bound" and "reference's noise" in est.detail["why"]
+    term = noise_terms(chosen)["gyroscope_noise_density"]
+    assert term.value == CLASS_DEFAULTS["gyroscope_noise_density"] and term.source == "class_default"
+    assert term.bound == pytest.approx(value) and term.bounded_only
+    assert chosen["accelerometer_noise_density"][0].kind == "fit"  # each sensor judged on its own samples

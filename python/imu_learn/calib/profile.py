@@ -19,8 +19,8 @@ Conventions (also written into the file's ``conventions`` entry, so the file exp
 
 Every estimate carries its uncertainty (one standard deviation; null where none could be given)
 and, for the noise, its source: ``residuals`` (calibrated IMU against the reference trajectory),
-``allan`` (Allan deviation of still stretches), ``datasheet``, or ``class_default``: a bias random walk
-that no fit observed holds the device-class default (:data:`CLASS_DEFAULTS`) as its ``value``, its
+``allan`` (Allan deviation of still stretches), ``datasheet``, or ``class_default``: a figure (a bias
+random walk; a white noise whose only estimate is the reference's noise) that no fit observed holds the device-class default (:data:`CLASS_DEFAULTS`) as its ``value``, its
 ``detail`` kind ``not observed`` with the bound the data gave (``upper_bound``, ``upper_bound_per_axis``,
 ``upper_bound_from``): a bound is never written as a value. (Profiles written before this kept the
 bound as the value, kind ``upper bound``; :meth:`Profile.kalibr` reads both as the class default.)
@@ -57,7 +57,8 @@ NOT_OBSERVED = "not observed"  # a noise term's detail kind: the value is the cl
 # What a consumer of the profile (imu.yaml, navigate) uses for a bias random walk that no fit observed
 # (an Allan upper bound is a bound, not a value): Kalibr's published figures of a MEMS IMU (EuRoC's
 # ADIS16448 sensor.yaml), the same as the fusion's built-in noise.
-CLASS_DEFAULTS = {"gyroscope_random_walk": 1.9393e-5, "accelerometer_random_walk": 3.0e-3}
+CLASS_DEFAULTS = {"gyroscope_noise_density": 1.6968e-4, "accelerometer_noise_density": 2.0e-3,
+                  "gyroscope_random_walk": 1.9393e-5, "accelerometer_random_walk": 3.0e-3}
 CLASS_DEFAULT_SOURCE = "MEMS class default (EuRoC ADIS16448 sensor.yaml)"
 CONVENTIONS = {
     "body_frame": "the IMU's own axes",
@@ -153,7 +154,7 @@ class NoiseTerm:
 
 
 def unobserved_term(key: str, per_axis: np.ndarray, bound: float, source: str, detail: Dict[str, Any]) -> NoiseTerm:
-    """A bias random walk that no fit observed: the class default as its value, the bound the data gave
+    """A figure that no fit observed: the class default as its value, the bound the data gave
     (``per_axis``, ``bound``, from ``source``) in its detail."""
     return NoiseTerm(np.full(3, math.nan), CLASS_DEFAULTS[key], math.nan, NOISE_UNITS[key], "class_default",
                      {**detail, "kind": NOT_OBSERVED, "value_from": CLASS_DEFAULT_SOURCE, "upper_bound": _num(bound),

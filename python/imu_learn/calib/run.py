@@ -144,10 +144,12 @@ def unobservable(has_ref: bool, allan: Optional[nz.AllanNoise], noise: Dict[str,
             written = (f"the value written is the {CLASS_DEFAULT_SOURCE}; the data bound it above by "
                        f"{t.bound:.3g} (detail.upper_bound, {bound})" if t.source == "class_default" else
                        f"the value written is an upper bound ({bound})")
-            out.append({"what": key, "why": f"no fit found it ({src}: no region of its slope, or its "
-                        f"uncertainty above half its value); {written}" + (
+            found = t.detail.get("why") or (f"no fit found it ({src}: no region of its slope, or its uncertainty "
+                                              "above half its value)")
+            out.append({"what": key, "why": f"{found}; {written}" + (
                             "; motion-correlated errors (vibration, reference noise, calibration errors that vary "
-                            "with the motion) dominate the residuals" if src == "residuals" else "")})
+                            "with the motion) dominate the residuals" if src == "residuals" and "why" not in t.detail
+                            else "")})
     return out
 
 
