@@ -13,7 +13,7 @@ import pytest
 from crops import EASY, SHIPPED
 from imu_learn.calib.run import NOT_SELECTED
 from imu_learn.cli import main
-from imu_learn.core.quat import quat_mul, wxyz_to_xyzw
+from imu_learn.core.quat import quat_from_matrix, quat_mul, wxyz_to_xyzw
 from imu_learn.data.formats import read_recording
 
 pytestmark = pytest.mark.slow
@@ -158,11 +158,6 @@ def test_another_recordings_reference_is_refused_before_any_fit(tmp_path, capsys
     assert code == 2 and "ReferenceFrameError" in err and "does not follow the IMU" in err
     assert len(err.strip().splitlines()) == 1 or "fitting the floor" not in err
     assert not (tmp_path / "out" / "profile.json").exists()
-
-
-def quat_from_matrix(r: np.ndarray) -> np.ndarray:
-    from imu_learn.calib.reference import _quat
-    return _quat(r)
 
 
 def test_references_on_different_clocks_are_refused_naming_each_lag(tmp_path, capsys):
