@@ -124,6 +124,21 @@ def test_a_reference_world_not_along_gravity_is_levelled_before_translation_and_
     assert gr.bias_removed_score(gr.segments(imu, turned, 0.05), 200)[1] > 10 * level.n200[1]
 
 
+@pytest.mark.parametrize("gyro, says", [
+    (lambda g: np.radians(g), "the reference's rates: deg/s read as rad/s"),  # rad/s data given --gyro-unit deg/s
+    (lambda g: g * [1.0, 1.0, -1.0], "a gyro unit, a mirrored or swapped axis"),  # one axis's sign flipped
+])
+def test_rates_that_match_in_no_frame_are_the_verdict_not_a_frame(gyro, says):
+    # calibrate refuses these; the check said "IMU frame" (a unit) or a rotation and a lever arm (a mirror)
+    seq = recording(0.0)
+    gt = GroundTruth(seq.t_ns, seq.p, seq.q_wxyz)
+    good, _ = gr.check(ImuData(seq.t_ns, seq.gyro, seq.acc), gt, "synthetic", "gt")
+    assert good.rates_match and not good.verdict.startswith("its rotation rates")
+    row, _ = gr.check(ImuData(seq.t_ns, gyro(seq.gyro), seq.acc), gt, "synthetic", "gt")
+    assert not row.rates_match
+    assert row.verdict.startswith("its rotation rates do not match the IMU's in any frame") and says in row.verdict
+
+
 def test_check_of_a_recording_shorter_than_one_window_is_a_typed_error():
     seq = recording(0.0, seconds=0.5)  # shorter than alignment's shortest segment
     with pytest.raises(ImuError):
@@ -138,7 +153,7 @@ def test_check_of_a_recording_shorter_than_one_window_is_a_typed_error():
 def test_command_on_a_crop_says_its_ground_truth_is_in_the_imu_frame(capsys):
     assert groundtruth_main(["--input", str(EUROC / "MH_04_difficult")]) == 0
     out = capsys.readouterr().out.splitlines()
-    assert out[0].startswith("MH_04_difficult / its own ground truth: 200 Hz, 12001 IMU samples in 1 segment(s)")
+    assert out[0].startswith("MH_04_difficult / its own ground truth: reference at 200 Hz, 12001 IMU samples in 1 segment(s)")
     assert out[-2] == "  verdict: IMU frame"
     assert out[-1].startswith("MH_04_difficult: use its own ground truth (IMU frame; 1 s rot")
 

@@ -342,6 +342,26 @@ fn skip_bad_lines_passes_over_a_truncated_line_above_the_header() {
     ));
 }
 
+#[test]
+fn skip_bad_lines_that_skips_every_line_names_the_first_lines_error() {
+    // nanosecond stamps read as seconds: every stamp overflows; skipping them all must not turn the
+    // precise error (the unit) into "no samples"
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("ns.csv");
+    let mut text = String::from("t,gx,gy,gz,ax,ay,az\n");
+    for i in 0..50u64 {
+        writeln!(text, "{},0,0,0,0,0,9.8", 1_403_636_579_758_555_392u64 + i * 5_000_000).unwrap();
+    }
+    std::fs::write(&path, &text).unwrap();
+    let fmt = CsvFormat::parse("t,gx,gy,gz,ax,ay,az", "s", "rad/s", "m/s2").unwrap();
+    let strict = columns::read_imu(&path, &fmt).unwrap_err().to_string();
+    let skipping = columns::read_imu_checked(&path, &fmt.with_skip_bad_lines(true))
+        .unwrap_err()
+        .to_string();
+    assert!(strict.contains("ns.csv:2:1"), "{strict}");
+    assert_eq!(skipping, strict);
+}
+
 proptest! {
     #[test]
     fn arbitrary_bytes_skipping_bad_lines_give_data_or_a_typed_error(

@@ -56,7 +56,7 @@ def describe(row: Any) -> List[str]:
     world = (f"  world: tilted {row.world_tilt_deg:.1f}° from gravity (the specific force's mean); levelled before every "
              "translation score and the lever arm" if row.levelled else
              f"  world: z up within {row.world_tilt_deg:.1f}° (the specific force's mean)")
-    return [f"{row.recording} / {row.gt}: {row.rate_hz:.0f} Hz, {row.samples} IMU samples in {row.n_segments} segment(s)",
+    return [f"{row.recording} / {row.gt}: reference at {row.rate_hz:.0f} Hz, {row.samples} IMU samples in {row.n_segments} segment(s)",
             world,
             f"  bias-removed RMSE over 10 samples: rot {row.n10[0]:.4f}°, trans {row.n10[1]:.5f} m; "
             f"over 200 samples: {score(row.n200)}",

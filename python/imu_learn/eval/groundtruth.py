@@ -295,13 +295,30 @@ class GroundTruthCheck:
     # the reference world's z from up (gravity from the specific force); from FrameOptions.level_deg on, the world
     # was levelled before every translation score and the lever arm (a VO/SLAM world, a z-down one)
     world_tilt_deg: float = 0.0
+    # the rate fit's residual against the motion's rates [rad/s] (calibrate's rule, FrameOptions.max_rate_residual)
+    # and the IMU's rates over the reference's (least squares on |ω|: 1 for one unit)
+    rate_residual: float = 0.0
+    rate_rms: float = math.inf
+    rate_ratio: float = 1.0
 
     @property
     def levelled(self) -> bool:
         return self.world_tilt_deg >= FrameOptions().level_deg
 
     @property
+    def rates_match(self) -> bool:
+        return self.rate_residual <= FrameOptions().max_rate_residual * self.rate_rms
+
+    @property
     def verdict(self) -> str:
+        if not self.rates_match:
+            unit = next((f"; the IMU reads x{self.rate_ratio:.3g} the reference's rates: {what}?" for k, what in
+                         ((math.pi / 180, "deg/s read as rad/s (--gyro-unit)"),
+                          (180 / math.pi, "rad/s read as deg/s (--gyro-unit)"))
+                         if abs(self.rate_ratio / k - 1) < 0.1), "")
+            return (f"its rotation rates do not match the IMU's in any frame (residual {self.rate_residual:.3f} rad/s "
+                    f"against {self.rate_rms:.3f} of motion): a gyro unit, a mirrored or swapped axis, another "
+                    f"recording{unit}")
         frame = "IMU frame" if self.off_deg < 0.5 else f"rotated {self.off_deg:.1f}° off the IMU"
         if not self.about_turning_axis_observed:
             frame += " (its part about the turning axis not observable)"
@@ -354,10 +371,13 @@ def check(imu: ImuData, gt: GroundTruth, recording: str, label: str,
     lever, lever_se = fit_lever_arm(segments(imu, gt, gap, shift_s=off.tau_s, r_off=off.r_off),
                                     off.r_off.T @ off.gyro_bias)
     angle, axis = angle_axis(off.r_off)
+    imu_w, ref_w = (np.linalg.norm(x, axis=1) for x in rates)
+    ratio = float(imu_w @ ref_w / max(float(ref_w @ ref_w), 1e-300))
+    w_rms = float(np.sqrt(np.mean(np.concatenate([np.sum(np.square(s.gyro - off.gyro_bias), 1) for s in segs]))))
     row = GroundTruthCheck(recording, label, gt_rate_hz(gt), sum(len(s) for s in segs), len(segs),
               bias_removed_score(segs, 10), bias_removed_score(segs, 200), angle, axis, 1e3 * off.tau_s,
               bias_removed_score(rotated, 200), bias_removed_score(held, 200), 100 * lever, 100 * lever_se, yaw, observed,
-              tilt)
+              tilt, off.rms, w_rms, ratio)
     return row, off
 
 

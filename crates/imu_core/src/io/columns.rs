@@ -438,6 +438,11 @@ fn parse(path: &Path, bytes: &[u8], fmt: &CsvFormat) -> Result<Parsed> {
         .collect();
     let rows = table::parse_rows(path, &bytes[layout.body_start..], layout.body_line, &rules, &names)?;
     if rows.t_ns.len() < IMU_ROWS.needed {
+        // skip_bad_lines passed over (nearly) every line: the first one's own error names the cause (a
+        // time unit, a delimiter), where "too few rows" would not
+        if let Some(first) = skipped.first().or(rows.skipped.first()) {
+            return Err(rules.error(path, &names, first.clone()));
+        }
         let t = table::Table {
             path: path.to_path_buf(),
             t_ns: rows.t_ns.clone(),

@@ -86,7 +86,9 @@ def _read_imu_csv(path: Path, f: Path, allow_float_timestamps: bool = False):
                        "--columns t,gx,gy,gz,ax,ay,az --time-unit ns --skip-bad-lines")
         raise
     except FloatTimestampError as e:
-        e.add_note(f"from the command line: read {f} as a CSV of your own, --columns t,gx,gy,gz,ax,ay,az --time-unit ns")
+        e.add_note(f"from the command line: read {f} as a CSV of your own, --columns t,gx,gy,gz,ax,ay,az --time-unit ns "
+                   "(the stamps rounded as the file holds them), with --skip-bad-lines where lines that are not samples "
+                   "(a spreadsheet's notes, empty rows) follow")
         raise
 
 
