@@ -403,8 +403,9 @@ class Imu:
 def imu_noise(src: Sources, opts: NavigateOptions, own: Optional[ImuNoise], profile: Optional[Profile],
               imu: Optional[Tuple[np.ndarray, np.ndarray, np.ndarray]] = None,
               sol: Optional[RtkSolution] = None) -> ImuNoise:
-    """The noise the graph assumes: ``--imu-noise``, else the profile's (with pose aiding its white
-    noise raised to the moving IMU's once the rows are read, :func:`moving_imu`), else the recording's
+    """The noise the graph assumes: ``--imu-noise``, else the profile's (its white noise raised to the moving
+    IMU's, :func:`in_motion`: with GNSS fixes ``sol`` here, with pose aiding once the rows are read,
+    :func:`moving_imu`), else the recording's
     sensor.yaml, else with ``imu`` (its stamps, gyro, acc as fused: corrected, in the body frame, the
     stamps delayed) the MEMS class default scaled to
     the aiding's innovations (:mod:`.noise_fit`; the geodetic fixes ``sol`` when the aiding is GNSS),
@@ -412,8 +413,10 @@ def imu_noise(src: Sources, opts: NavigateOptions, own: Optional[ImuNoise], prof
     if opts.imu_noise is not None:
         return ImuNoise(*opts.imu_noise, source="--imu-noise")
     if profile is not None:
-        return from_profile(profile.kalibr(), str(src.profile),
-                            [k for k in profile.kalibr() if profile.unobserved_noise(k)])
+        noise = from_profile(profile.kalibr(), str(src.profile), [k for k in profile.kalibr() if profile.unobserved_noise(k)])
+        # GNSS: the profile's white noise (at rest) raised to the moving IMU's as pose aiding's is (:func:`moving_imu`);
+        # pose aiding's rows are read (and their frame checked) later
+        return in_motion(noise, innovation_fit(src, opts, imu, sol)) if sol is not None and imu is not None else noise
     if own is not None:
         return own
     if imu is not None:
@@ -482,8 +485,8 @@ def check_scale(src: Sources, opts: NavigateOptions, fit: ScaleFit) -> None:
 
 
 def in_motion(noise: ImuNoise, fit: NoiseFit) -> ImuNoise:
-    """A profile's noise with its white noise raised to what the pose aiding's innovations say the moving
-    IMU has (:func:`innovation_fit`: one factor on the MEMS class default's gyro and accelerometer white
+    """A profile's noise with its white noise raised to what the aiding's innovations (poses, GNSS fixes) say
+    the moving IMU has (:func:`innovation_fit`: one factor on the MEMS class default's gyro and accelerometer white
     noise, as without a profile; a profile measures them at rest, where motors and roads are quiet: on
     EuRoC's flights the fit is 6-11x the ADIS16448 profile's), each sensor's where the fit is usable and
     higher; the random walks stay the profile's. The source says which (docs/experiments/navigate-vo.md,
