@@ -6,7 +6,9 @@ built-in noise, and the progress bar. On the synthetic car of tests/test_navigat
 from __future__ import annotations
 
 import json
+import logging
 import xml.etree.ElementTree as ET
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -15,6 +17,8 @@ from imu_learn.calib.profile import NoiseTerm, Profile, noise_only
 from imu_learn.fuse import geo
 from imu_learn.fuse.aiding import rtklib
 from imu_learn.fuse.aiding.detect import detect
+from imu_learn.fuse.aiding.types import AidingRows
+from imu_learn.fuse.navigate import Sources, warn_unaided_end
 from test_navigate_gnss import DELAY_S, H0, LAT0, LEVER, LON0, RPY, run, synthetic_car
 
 NOISE = {"gyroscope_noise_density": 1e-4, "accelerometer_noise_density": 1e-3, "gyroscope_random_walk": 1e-5,
@@ -228,3 +232,19 @@ def test_aiding_hz_thins_the_gnss_fixes(tmp_path, capsys):
     used, thinned = counts[1.0]
     assert counts[None][1] == 0 and thinned > 0 and used + thinned == counts[None][0]
     assert used == pytest.approx(counts[None][0] / 4, abs=2)  # 4 Hz fixes kept at 1 Hz
+
+
+def test_an_aiding_that_stops_long_before_the_imu_is_named(caplog):
+    """A .pos cut short (the walk's at 65 of 134 s) left the tracks' last minute dead reckoning, exit 0, with no
+    word; a --gaps window that runs to the end says so on purpose, and a short tail is a receiver's usual end."""
+    t_ns = np.arange(0, 134_000, 5, dtype=np.int64) * 1_000_000  # 134 s of IMU
+    rows = lambda last_s: AidingRows(np.zeros(2, int), np.array([0, int(last_s * 1e9)]), np.zeros(2, np.int64),  # noqa: E731
+                                     np.zeros((2, 3)), None)
+    src = Sources(Path("imu.csv"), Path("rover.pos"))
+    with caplog.at_level(logging.WARNING, logger="imu_learn.fuse.navigate"):
+        warn_unaided_end(src, rows(65.0), t_ns, ())
+        assert len(caplog.records) == 1 and "the tracks' last 69.0 s are the IMU's alone" in caplog.text
+        caplog.clear()
+        warn_unaided_end(src, rows(131.0), t_ns, ())  # 3 s: a receiver's usual end
+        warn_unaided_end(src, rows(65.0), t_ns, ((60.0, 80.0),))  # the user's own outage to the end
+        assert not caplog.records

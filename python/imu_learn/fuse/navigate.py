@@ -813,7 +813,25 @@ def read_inputs(src: Sources, opts: NavigateOptions) -> Inputs:
                     "fix by that much; the smoother's biases would show it only after the fusion)",
                     float(np.linalg.norm(lever)), ", ".join(f"{x:g}" for x in lever))
     rows, rows_read, gnss, opts = aiding_rows(src, opts, t_ns, T_BS, lever, imu, sol)
+    warn_unaided_end(src, rows, t_ns, opts.gaps)
     return Inputs(opts, kind, moving_imu(src, opts, imu, rows), lever, rows, rows_read, gnss)
+
+
+UNAIDED_END_S = 5.0  # an aiding that stops this long before the IMU gets a warning (the tracks' end is unaided)
+
+
+def warn_unaided_end(src: Sources, rows: AidingRows, t_ns: np.ndarray, gaps: Tuple[OutageWindow, ...]) -> None:
+    """One warning where the aiding's last row comes more than :data:`UNAIDED_END_S` before the IMU's last
+    sample outside a ``--gaps`` window that runs to the end (a file cut short, a receiver that stopped):
+    the tracks' end is then the IMU's alone, which nothing else in the output says."""
+    if not len(rows.t_ns):
+        return
+    last_s, end_s = (float((x - t_ns[0]) * 1e-9) for x in (rows.t_ns[-1], t_ns[-1]))
+    if end_s - last_s <= UNAIDED_END_S or any(g0 <= last_s + UNAIDED_END_S and g0 + dur >= end_s for g0, dur in gaps):
+        return
+    log.warning(f"--aiding {src.aiding}: its last row is at {last_s:.1f} s of the IMU's {end_s:.1f} s: the tracks' last "
+                f"{end_s - last_s:.1f} s are the IMU's alone (dead reckoning): a file cut short, or a receiver that "
+                "stopped?")
 
 
 def start_run(src: Sources, inp: Inputs) -> Started:
