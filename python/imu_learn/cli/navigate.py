@@ -119,7 +119,8 @@ def add_arguments(ap: argparse.ArgumentParser) -> None:
                          "the keyframe interval)")
     ap.add_argument("--force", action="store_true",
                     help="apply a --profile or --checkpoint made for a rate more than 5 %% off the recording's "
-                         "(a warning; without it: refused, as imu-learn refine)")
+                         "(a warning; without it: refused, as imu-learn refine); with --nhc, fuse a mounting whose "
+                         "forward axis is more than 20 deg from the one the GNSS track shows (a warning)")
     ap.add_argument("--imu-name", metavar="NAME",
                     help="the recording's device, checked against the profile's or model's (default: the dataset "
                          "its format belongs to, else not checked)")
