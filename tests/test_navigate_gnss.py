@@ -148,6 +148,26 @@ def test_with_nhc_a_mounting_the_track_contradicts_is_refused_unless_forced(tmp_
     assert rc == 0 and "fused as given (--force)" in err, err
 
 
+def test_simulated_outages_are_scored_against_the_fixes_the_run_withheld(tmp_path, capsys):
+    """--groundtruth rover.pos: the RTK-fixed rows score a GNSS-aided run's antenna in its ENU world, with
+    each --gaps window's error at the fixes withheld there (a GNSS user has no other truth; it was refused)."""
+    imu, pos, _ = synthetic_car(tmp_path)
+    base = ["--input", imu, "--format", "gnss-imu", "--aiding", pos, "--aiding-kind", "position",
+            "--aiding-format", "rtklib", "--imu-rotation-rpy-deg", ",".join(map(str, RPY)),
+            "--imu-delay-s", -DELAY_S, "--lever-arm", ",".join(map(str, LEVER)),
+            "--imu-noise", "1e-4,1e-3,1e-5,1e-4", "--keyframe-hz", 4, "--quiet"]
+    rc, out, err = run(base + ["--gaps", "20:5", "--groundtruth", pos, "--out", tmp_path / "nav"], capsys)
+    assert rc == 0, err
+    sc = json.loads((tmp_path / "nav" / "summary.json").read_text())["scores"]
+    assert sc["aligned"] is False and "RTK-fixed rows (Q = 1)" in sc["truth"]
+    for kind in ("causal", "smoothed"):
+        assert sc[kind]["outside_gaps_rmse_m"] < 0.05, sc[kind]  # the fixes the run fused: the antenna on them
+        gap = sc[kind]["gaps"][0]
+        assert gap["start_s"] == 20.0 and gap["rmse_m"] is not None and gap["max_m"] >= gap["rmse_m"]
+    assert sc["causal"]["gaps"][0]["max_m"] > sc["causal"]["outside_gaps_rmse_m"]  # it coasts there
+    assert "causal at the gaps' ends" in out
+
+
 def test_synthetic_car_navigated_with_mounting_delay_lever_and_nhc(tmp_path, capsys):
     imu, pos, (t_true, p_true) = synthetic_car(tmp_path)
     base = ["--input", imu, "--format", "gnss-imu", "--aiding", pos, "--aiding-kind", "position",

@@ -132,7 +132,9 @@ def add_arguments(ap: argparse.ArgumentParser) -> None:
                          "moved into the IMU frame with it (without: the aiding is taken as body poses, and refused when its rotations are not the gyro's)")
     ap.add_argument("--groundtruth", type=Path, default=None, metavar="FILE",
                     help="score the result afterwards (TUM or ASL): RMSE after SE(3) alignment for camera aiding, "
-                         "without alignment for position fixes; the visual-only error beside it")
+                         "without alignment for position fixes; the visual-only error beside it; with GNSS an "
+                         "RTKLIB .pos (its RTK-fixed rows against the antenna, each --gaps window at the fixes "
+                         "withheld there)")
     ap.add_argument("--keyframe-hz", type=float, default=None, metavar="HZ",
                     help=f"keyframe grid besides the aiding's own samples (default {d.keyframe_hz:g})")
     ap.add_argument("--gaps", default=None, metavar="START:DUR,...",

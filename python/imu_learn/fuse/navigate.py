@@ -98,7 +98,7 @@ from .mounting import mounting_check
 from .noise import ImuNoise, from_profile
 from .noise_fit import CLASS_WHITE, FACTOR_BOUNDS, NoiseFit, fit_noise, fit_scale, fitted_noise, prepare
 from .output import plot_navigation, write_json, write_trajectory, write_trajectory_bag
-from .score import convergence, read_truth, score_against
+from .score import convergence, read_truth, score_against, score_against_fixes
 from .settings import FusionSettings, PriorSigmas
 from .start import Start
 from .start.delay import imu_delay
@@ -726,18 +726,30 @@ def resolve_aiding(src: Sources, opts: NavigateOptions, kind: Optional[str]) -> 
     return replace(opts, aiding_kind=kind)
 
 
+def truth_is_fixes(src: Sources) -> bool:
+    """``--groundtruth`` is an RTKLIB ``.pos`` (scored by :func:`.score.score_against_fixes`)."""
+    return src.groundtruth is not None and detect_aiding(Path(src.groundtruth)) == "rtklib"
+
+
 def check_inputs(src: Sources) -> Optional[Tuple[int, int]]:
     """Read the side files before any fusion, so that a bad one is refused first (not after a long
     fusion, with tracks and no summary): ``--groundtruth`` (poses: ``t tx ty tz qx qy qz qw`` or
-    ASL; a positions-only file is refused), ``--extrinsics`` and ``--profile``. Returns the ground
+    ASL, or an RTKLIB ``.pos`` whose RTK-fixed rows score a GNSS-aided run's antenna; another
+    positions-only file is refused), ``--extrinsics`` and ``--profile``. Returns the ground
     truth's (first, last) stamp [ns], or None without one."""
     span = None
-    if src.groundtruth is not None:
+    if truth_is_fixes(src):
+        fixes = read_pos(Path(src.groundtruth))
+        if int(np.sum(np.asarray(fixes.q) == 1)) < 3:
+            raise ConfigError(f"--groundtruth {src.groundtruth}: fewer than 3 RTK-fixed rows (Q = 1) to score with")
+        span = (int(fixes.t_ns[0]), int(fixes.t_ns[-1]))
+    elif src.groundtruth is not None:
         try:
             gt = read_truth(Path(src.groundtruth))
         except ColumnCountError as e:
             raise ConfigError(f"--groundtruth: {' '.join(str(e).split())}: navigate scores poses (t tx ty tz qx qy qz "
-                              "qw, or an ASL state/pose CSV); a positions-only file cannot be scored") from None
+                              "qw, or an ASL state/pose CSV) or a GNSS-aided run's antenna against an RTKLIB .pos; "
+                              "another positions-only file cannot be scored") from None
         if len(gt.t_ns) < 2:
             raise ConfigError(f"--groundtruth {src.groundtruth}: {len(gt.t_ns)} pose(s); scoring needs at least 2")
         span = (int(gt.t_ns[0]), int(gt.t_ns[-1]))
@@ -803,6 +815,9 @@ def read_inputs(src: Sources, opts: NavigateOptions) -> Inputs:
     if opts.lever_arm is not None and T_BS is not None:
         raise ConfigError("--lever-arm and --extrinsics both give the antenna's lever arm: pass one")
     sol = read_geodetic(src, opts) if is_geodetic(src, opts) else None
+    if truth_is_fixes(src) and sol is None:
+        raise ConfigError(f"--groundtruth {src.groundtruth}: an RTKLIB .pos scores a run aided by GNSS fixes (in their "
+                          "ENU world); give this run's reference as poses (t tx ty tz qx qy qz qw, or ASL)")
     imu = read_body_imu(src, opts, sol)
     t_ns = imu.t_ns
     if gt_span is not None and (gt_span[1] < t_ns[0] or gt_span[0] > t_ns[-1]):
@@ -918,7 +933,11 @@ def run_summary(src: Sources, out: Path, inp: Inputs, run: Started, res) -> Dict
         "causal_frame": res.causal_frame,
         **frames(src, opts, None if inp.gnss is None else inp.gnss[1]),
     }
-    if src.groundtruth is not None:
+    if src.groundtruth is not None and truth_is_fixes(src):
+        summary["groundtruth"] = str(src.groundtruth)
+        summary["scores"] = score_against_fixes(read_pos(Path(src.groundtruth)), kf_t, res, inp.lever,
+                                                inp.gnss[1].origin_llh, int(t_ns[0]), opts.gaps)
+    elif src.groundtruth is not None:
         summary["groundtruth"] = str(src.groundtruth)
         summary["scores"] = score_against(src.groundtruth, kf_t, res, rows, st.R_WA, int(t_ns[0]), inp.kind.aligned,
                                           opts.gaps)
@@ -1117,6 +1136,9 @@ def one_line(summary: Dict[str, object]) -> str:
                  f"{sc['smoothed']['pos_rmse_m']:.3f} m")
         if sc.get("aiding_only"):
             text += f", aiding alone {sc['aiding_only']['pos_rmse_m']:.3f} m"
+        ends = [g["end_m"] for g in sc["causal"].get("gaps") or [] if g.get("end_m") is not None]
+        if ends:
+            text += f"; causal at the gaps' ends {', '.join(f'{e:.2f}' for e in ends)} m"
     if one_line_text(s.get("aiding_estimates")):
         text += f"; {one_line_text(s.get('aiding_estimates'))}"
     return text + f" -> {Path(str(s['outputs']['smoothed'])).parent} ({s['seconds']:.0f} s)"

@@ -20,6 +20,7 @@ from imu_learn.errors import AidingError
 from imu_learn.score.metrics import rmse
 
 from .aiding.outages import in_windows, outage_mask
+from .geo import enu_to_llh, llh_to_enu
 from .graph import FusionResult
 
 
@@ -190,4 +191,39 @@ def score_against(groundtruth: Path, kf_t: np.ndarray, res, rows, R_WA: np.ndarr
             for kind, p, R in (("causal", res.causal_p, res.causal_R), ("smoothed", res.smoothed_p, res.smoothed_R)):
                 gi, gp, gR = interpolate_groundtruth(gt, kf_t[ks])
                 out[f"{kind}_at_aiding_stamps"], _, _, _ = _errors(p[ks][gi], R[ks][gi], gp, gR, align)
+    return out
+
+
+def score_against_fixes(fixes, kf_t: np.ndarray, res, lever: np.ndarray, origin_llh: Seq[float], t0_ns: int,
+                        gaps: Sequence[Tuple[float, float]] = ()) -> Dict[str, object]:
+    """Position errors of the causal and smoothed tracks of a GNSS-aided run against RTK-fixed positions
+    (``fixes``: an :class:`~.aiding.rtklib.RtkSolution`, Q = 1 rows only): each track's antenna (the body
+    position plus its attitude times ``lever``) linearly interpolated at the fixes' stamps, in the run's ENU
+    frame at ``origin_llh`` (no alignment: one world); 3-D and horizontal RMSE, and inside each ``--gaps``
+    window (``gaps``: seconds from ``t0_ns``, the first IMU sample) its RMSE, maximum and the error when the
+    aiding returns, at the fixes the run withheld there."""
+    fixed = np.asarray(fixes.q) == 1
+    t = np.asarray(fixes.t_ns, dtype=np.int64)[fixed]
+    p_gt = llh_to_enu(enu_to_llh(np.asarray(fixes.enu)[fixed], fixes.origin_llh), origin_llh)
+    inside = (t >= kf_t[0]) & (t <= kf_t[-1])
+    if inside.sum() < 3:
+        raise AidingError(f"{fixes.path}: fewer than 3 RTK-fixed rows (Q = 1) inside the run's time span",
+                          str(fixes.path))
+    t, p_gt = t[inside], p_gt[inside]
+    x, xq = (kf_t - kf_t[0]) * 1e-9, (t - kf_t[0]) * 1e-9
+    nearest = np.clip(np.searchsorted(kf_t, t), 0, len(kf_t) - 1)
+    rel_s = (t - t0_ns) * 1e-9
+    out: Dict[str, object] = {"aligned": False, "alignment": "none (the run's ENU frame)",
+                              "truth": f"RTK-fixed rows (Q = 1) of {fixes.path}: {int(inside.sum())} inside the run",
+                              "at": "the antenna (the track's body position + its attitude x the lever arm)"}
+    for kind, p, R in (("causal", res.causal_p, res.causal_R), ("smoothed", res.smoothed_p, res.smoothed_R)):
+        ant = np.stack([np.interp(xq, x, p[:, k]) for k in range(3)], axis=1) + R[nearest] @ np.asarray(lever, float)
+        d = ant - p_gt
+        e = np.linalg.norm(d, axis=1)
+        s: Dict[str, object] = {"pos_rmse_m": rmse(e), "horizontal_rmse_m": rmse(np.linalg.norm(d[:, :2], axis=1))}
+        if gaps:
+            s["gaps"] = [window_errors(e, rel_s, a, g, missing=None) for a, g in gaps]
+            m = in_windows(rel_s, gaps)
+            s["outside_gaps_rmse_m"] = rmse(e[~m]) if (~m).any() else None
+        out[kind] = s
     return out
