@@ -5,7 +5,9 @@ rule itself on a table made by hand, and evaluate's ``profile:PATH`` method."""
 from __future__ import annotations
 
 import json
+import logging
 import math
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -17,6 +19,8 @@ from imu_learn.core.quat import quat_conj, quat_rotate
 from imu_learn.data import synthetic as syn
 from imu_learn.data.splits import cut
 from imu_learn.data.types import Segment
+from imu_learn.errors import ConfigError
+from imu_learn.eval.run import check_profiles
 from imu_learn.score.metrics import simulate_sequence
 
 pytest.importorskip("torch")
@@ -254,3 +258,23 @@ def test_select_floor_keeps_the_sources_accelerometer_for_a_reference_without_ac
     assert np.array_equal(p.M_g, np.eye(3)) and np.array_equal(p.G, np.zeros((3, 3)))
     assert np.abs(p.b_g - BIAS_G).max() < 1e-3
     assert np.all(np.isnan(fit.std.M_g)) and np.all(np.isfinite(fit.std.b_g)) and np.all(fit.std.M_a == 2.0)
+
+
+def test_evaluate_refuses_a_profile_fitted_on_a_test_recording_and_warns_on_another_device(tmp_path, caplog):
+    """As --checkpoint is: a profile whose sources hold a test recording is refused before any fit; a test
+    recording unlike the IMU the profile was fitted on (refine's guard: the EuRoC profile on a TUM-VI room, or
+    here on a level synthetic IMU whose gravity is along z, not EuRoC's -x) gets one warning."""
+    shipped = json.loads((Path(__file__).resolve().parent.parent / "models/profiles/euroc_adis16448/profile.json")
+                         .read_text())
+    path = tmp_path / "profile.json"
+    path.write_text(json.dumps({**shipped, "sources": [{"recording": "/data/euroc/V1_01_easy"}]}))
+    s = recording(7, np.eye(3), np.eye(3), seconds=5.0)
+    with pytest.raises(ConfigError, match="fitted on V1_01_easy, a test recording here"):
+        check_profiles(["raw", f"profile:{path}"], ["V1_01_easy"], [s])
+    with caplog.at_level(logging.WARNING, logger="imu_learn.eval.run"):
+        check_profiles([f"profile:{path}"], ["MH_04_difficult"], [s])
+    assert caplog.text.count("looks unlike the IMU profile") == 1
+    caplog.clear()
+    with caplog.at_level(logging.WARNING, logger="imu_learn.eval.run"):
+        check_profiles(["raw", "timing"], ["V1_01_easy"], [s])  # no profile: nothing to check
+    assert not caplog.records

@@ -42,6 +42,7 @@ from imu_learn._imu_core import __version__
 from imu_learn.baselines.base import FitSettings, Method, PosePrediction, poses_from_imu
 from imu_learn.baselines.noise_floor import NOISE_FLOOR_NAME, GroundTruthImu
 from imu_learn.baselines.registry import DEFAULT_METHODS, REGISTRY, load_method_class, method_file, safe_name  # noqa: F401
+from imu_learn.baselines.registry import PREFIX as PROFILE_PREFIX
 from imu_learn.core.quat import rotation_angle
 from imu_learn.data.formats import read_recording
 from imu_learn.data.splits import (
@@ -50,6 +51,7 @@ from imu_learn.data.splits import (
     groundtruth_paths,
     make_split,
     parse_entry,
+    recording_name,
     resolve_path,
     split_signature,
 )
@@ -61,7 +63,7 @@ from imu_learn.errors import (
     one_line,
 )
 from imu_learn.eval import report
-from imu_learn.infer import rates
+from imu_learn.infer import guard, rates
 from imu_learn.score import peers
 from imu_learn.score.metrics import fit_startup_bias, index_at, remove_bias, rmse, with_imu
 from imu_learn.score.peers import PeerErrors, add_segment, summarise
@@ -271,6 +273,37 @@ def check_checkpoint_split(m: CheckpointRefiner, test_entries: List[str]) -> Non
         if r in seen:
             raise ConfigError(f"--checkpoint {m.path}: its {seen[r]} split uses {r}, a test recording here "
                               "(test sequences must never be seen in training or selection)")
+
+
+def check_profiles(methods: List[str], test_entries: List[str], test: Seq[Segment]) -> None:
+    """Each ``profile:PATH`` method, before any fit: refused where it was fitted on a test recording (the
+    checkpoint's rule, :func:`check_checkpoint_split`: its ``sources``), and one warning per test recording
+    that looks unlike the IMU it was fitted on (refine's guard, :func:`imu_learn.infer.guard.verdict`: the
+    locations of the raw IMU's statistics, the profile's ``inputs``)."""
+    tests = {_recording(t) for t in test_entries}
+    for name in methods:
+        if not name.startswith(PROFILE_PREFIX):
+            continue
+        path = name[len(PROFILE_PREFIX):]
+        try:
+            d = json.loads(Path(path).read_text())
+        except (OSError, ValueError):  # missing or malformed: the method's own reader names it
+            continue
+        d = d if isinstance(d, dict) else {}
+        fitted = {Path(str(s.get("recording", ""))).name for s in d.get("sources") or [] if isinstance(s, dict)}
+        for r in sorted(tests & fitted):
+            raise ConfigError(f"{name}: the profile was fitted on {r}, a test recording here (test sequences must "
+                              "never be seen in training or selection): score it on recordings it did not see")
+        seen = set()
+        for seg in sorted(test, key=len, reverse=True):  # each test recording once, its longest segment
+            rec = recording_name(seg.name)
+            if rec in seen:
+                continue
+            seen.add(rec)
+            _entry, warning, _info = guard.verdict(d.get("inputs"), guard.input_stats(seg.t_ns, seg.gyro, seg.acc),
+                                                   f"profile {path}", device_only=True)
+            if warning:
+                logger.warning("%s: %s", rec, warning)
 
 
 # ---------------------------------------------------------------------------------------------
@@ -669,6 +702,7 @@ def run_evaluation(res: Resolved, methods: List[str], out_dir: Path, reuse: bool
         raise ConfigError("data.split.test: no test sequence (of at least one window)")
     test_entries = list(data.split.test)
     ck = None if checkpoint is None else _checkpoint(checkpoint, settings, test_entries, split.test)
+    check_profiles(methods, test_entries, split.test)
     out_dir.mkdir(parents=True, exist_ok=True)
     methods_dir = out_dir / "methods"
     methods_dir.mkdir(exist_ok=True)
