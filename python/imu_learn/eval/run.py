@@ -541,7 +541,10 @@ def _fit_methods(res: Resolved, methods: List[str], split: Any, methods_dir: Pat
         if factory is None:
             rows.skipped.append(name)
             continue
-        logger.info("%s: %sfitting on the train split", name, "loading or " if reuse else "")
+        if name == "raw" or name.startswith(PROFILE_PREFIX):
+            logger.info("%s: nothing to fit", name)
+        else:
+            logger.info("%s: %sfitting on the train split", name, "loading or " if reuse else "")
         rows.add(name, *prepare_method(name, factory, res, split, methods_dir, settings, reuse))
     return rows
 
