@@ -349,7 +349,9 @@ def gnss_rows(src: Sources, sol: RtkSolution, imu_t_ns: np.ndarray, lever: np.nd
     th = thin(np.asarray(imu_t_ns, dtype=np.int64)[fixes.idx], opts.aiding_hz)  # --aiding-hz thins fixes too
     fixes = fixes.select(th)
     if len(fixes) < 2:
-        raise AidingError(f"{path}: {len(fixes)} usable fix(es) inside the IMU's span", str(path), GEODETIC_KIND)
+        why = (f" ({int(in_gap.sum())} withheld by --gaps {','.join(f'{a:g}:{d:g}' for a, d in opts.gaps)}: leave some "
+               "fixes outside the gaps)" if in_gap.any() else "")
+        raise AidingError(f"{path}: {len(fixes)} usable fix(es) inside the IMU's span{why}", str(path), GEODETIC_KIND)
     dropped = {"outside_imu": fixes.dropped_outside, "no_imu_sample": fixes.dropped_unmatched,
                "in_gaps": int(in_gap.sum()), "thinned": int((~th).sum()),
                "quality_not_used": int(len(sol) - len(fixes) - int(in_gap.sum()) - int((~th).sum())
