@@ -318,8 +318,9 @@ def candidates(residual: Optional[ResidualNoise], allan: Optional[AllanNoise], m
                 out.append(Estimate(f"{sensor}_noise_density", bound, np.full(3, np.nan), "residuals", "upper bound",
                                     {**info, "fit_per_axis": [float(x) for x in pl.white],
                                      "own_density_per_axis": [float(x) for x in own],
-                                     "why": f"the residuals' white noise lies above {OWN_MARGIN:g}x the density the "
-                                            "IMU's own samples allow: it is the reference's noise"}))
+                                     "why": f"the residuals' white noise ({_rms(pl.white):.3g}) lies above "
+                                            f"{OWN_MARGIN:g}x the density the IMU's own samples allow ({_rms(own):.3g}, "
+                                            "their second differences in motion): it is the reference's noise"}))
             else:
                 out.append(Estimate(f"{sensor}_noise_density", pl.white, pl.white_std, "residuals", "fit", info))
             out.append(Estimate(f"{sensor}_random_walk", pl.random_walk, pl.random_walk_std, "residuals", "fit", info))
