@@ -67,13 +67,29 @@ def test_refine_with_a_profile_is_evaluates_fitted_floor_bit_for_bit(crop_split,
     refined_as_evaluate(m, tmp_path, capsys)
 
 
-def test_a_recording_without_stamps_cannot_take_a_profiles_time_offset(tmp_path, capsys):
+def test_a_broad_trial_takes_a_profile_on_its_nominal_stamps_and_one_without_a_rate_is_refused(tmp_path, capsys):
+    """A BROAD trial stores its rate, not stamps: refine applies a profile's time offset on the stamps of that
+    rate, as evaluate reads the trial (the shipped BROAD profile was refused on every trial); a .mat with no
+    rate has no stamps and is refused (one line, nothing written)."""
     scipy_io = pytest.importorskip("scipy.io")
     src = write_broad_trial(tmp_path / "01_trial.mat", scipy_io)
-    m = TraditionalTiming()
-    as_profile(m, 285.7, "broad").save(tmp_path / "profile.json")
+    m = set_floor((30.0, 15.0), 0.54)
+    prof = as_profile(m, 286.0, "broad")
+    prof.save(tmp_path / "profile.json")
     assert refine_main(["--profile", str(tmp_path / "profile.json"), "--input", str(src), "--out",
-                        str(tmp_path / "out")]) == 2
+                        str(tmp_path / "out.mat"), "--quiet"]) == 0
+    capsys.readouterr()
+    back = scipy_io.loadmat(str(tmp_path / "out.mat"))
+    mat = scipy_io.loadmat(str(src))
+    g, a = mat["imu_gyr"], mat["imu_acc"]
+    t = np.round(np.arange(len(g)) * (1e9 / 286.0)).astype(np.int64)
+    want_g, want_a = m.refine(Segment("t", t, g, a, np.zeros_like(g), np.zeros_like(g), np.tile([1.0, 0, 0, 0], (len(g), 1))))
+    assert np.array_equal(back["imu_gyr"], want_g) and np.array_equal(back["imu_acc"], want_a)
+    assert not np.allclose(back["imu_gyr"], g)
+    bare = tmp_path / "02_bare.mat"
+    scipy_io.savemat(bare, {"imu_gyr": g, "imu_acc": a})
+    assert refine_main(["--profile", str(tmp_path / "profile.json"), "--input", str(bare), "--out",
+                        str(tmp_path / "out2.mat"), "--format", "broad"]) == 2
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and "no stamps" in err, err
-    assert not (tmp_path / "out").exists()
+    assert not (tmp_path / "out2.mat").exists()

@@ -52,9 +52,7 @@ def read_recording(
     if groundtruth is not None:
         raise InvalidInputError("BROAD trials carry their own ground truth; groundtruth= is not used")
     m = _load_mat(path, TRIAL_VARIABLES)
-    fs = float(np.asarray(m["sampling_rate"]).ravel()[0])
-    if not (np.isfinite(fs) and fs > 0):
-        raise InvalidInputError(f"{path}: sampling_rate {fs} is not a positive number")
+    fs = _rate(path, m)
     gyro = np.ascontiguousarray(m["imu_gyr"], dtype=np.float64)
     acc = np.ascontiguousarray(m["imu_acc"], dtype=np.float64)
     q = np.asarray(m["opt_quat"], dtype=np.float64)
@@ -64,9 +62,7 @@ def read_recording(
         raise InvalidInputError(
             f"{path}: array shapes disagree: gyr {gyro.shape} acc {acc.shape} quat {q.shape} pos {p.shape}"
         )
-    # Integer-ns stamps from the nominal rate; rounding each stamp (not accumulating dt) keeps
-    # them within 0.5 ns of i / fs.
-    t_ns = np.round(np.arange(n, dtype=np.float64) * (1e9 / fs)).astype(np.int64)
+    t_ns = nominal_stamps(n, fs)
     imu_ok = np.isfinite(gyro).all(1) & np.isfinite(acc).all(1)
     if not imu_ok.all():
         raise InvalidInputError(f"{path}: IMU row {int(np.flatnonzero(~imu_ok)[0])} is not finite")
@@ -80,8 +76,23 @@ def read_recording(
     return ImuData(t_ns=t_ns, gyro=gyro, acc=acc), gt
 
 
+def _rate(path: Path, m: dict) -> float:
+    fs = float(np.asarray(m["sampling_rate"]).ravel()[0])
+    if not (np.isfinite(fs) and fs > 0):
+        raise InvalidInputError(f"{path}: sampling_rate {fs} is not a positive number")
+    return fs
+
+
+def nominal_stamps(n: int, fs: float) -> np.ndarray:
+    """Integer-ns stamps of ``n`` samples at the trial's nominal rate ``fs``: rounding each stamp (not
+    accumulating dt) keeps them within 0.5 ns of i / fs (the trial stores no stamps, only its rate)."""
+    return np.round(np.arange(n, dtype=np.float64) * (1e9 / fs)).astype(np.int64)
+
+
 def read_imu_source(path: Path) -> ImuSource:
-    """The IMU of a trial (only ``imu_gyr`` / ``imu_acc`` are needed; a trial has no stamps)."""
+    """The IMU of a trial (only ``imu_gyr`` / ``imu_acc`` are needed) with the stamps of its nominal
+    ``sampling_rate`` (:func:`nominal_stamps`, as :func:`read_recording` reads them), or none where the
+    file holds no rate."""
     if not path.exists():
         raise FileNotFoundError(2, "No such file or directory", str(path))
     m = _load_mat(path, IMU_VARIABLES)
@@ -89,7 +100,8 @@ def read_imu_source(path: Path) -> ImuSource:
     acc = np.ascontiguousarray(m["imu_acc"], dtype=np.float64)
     if gyro.ndim != 2 or gyro.shape[1] != 3 or acc.shape != gyro.shape:
         raise InvalidInputError(f"{path}: imu_gyr {gyro.shape} and imu_acc {acc.shape} must both be (N, 3)")
-    return ImuSource(NAME, path, path.parent, Path(path.name), None, gyro, acc)
+    t_ns = nominal_stamps(len(gyro), _rate(path, m)) if "sampling_rate" in m else None
+    return ImuSource(NAME, path, path.parent, Path(path.name), t_ns, gyro, acc)
 
 
 def write_imu(src: ImuSource, out: Path, gyro: np.ndarray, acc: np.ndarray) -> None:
