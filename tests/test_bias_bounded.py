@@ -145,6 +145,22 @@ def test_refine_keeps_the_profiles_bias_on_a_steady_turn(tmp_path, capsys):
     assert "refused by the still rule" in capsys.readouterr().err
 
 
+def test_refine_says_when_it_refused_a_turn_and_used_the_rest_beside_it(tmp_path, capsys):
+    """A rest, then a steady turn as quiet as rest: the bias comes from the rest, and one warning names the
+    refused turn (it passed in silence, only the summary's refused_as_turning said so)."""
+    from imu_learn.cli.refine import main
+
+    t, g, a = steady(20.0, 40.0)
+    src = write_asl(tmp_path / "in", t, g, a)
+    prof = profile(tmp_path / "profile.json")
+    out = tmp_path / "still.csv"
+    assert main(["--profile", str(prof), "--input", str(src / IMU_REL), "--out", str(out), "--bias", "still"]) == 0
+    entry = json.loads((tmp_path / "still.csv.summary.json").read_text())["bias"]
+    assert entry["applied"] and entry["refused_as_turning"]
+    err = [ln for ln in capsys.readouterr().err.splitlines() if "warning" in ln]
+    assert len(err) == 1 and "1 quiet stretch(es)" in err[0] and "refused as a steady turn" in err[0], err
+
+
 def test_refine_applies_a_real_rest(tmp_path):
     from imu_learn.cli.refine import main
 

@@ -763,4 +763,20 @@ def bias_entry(method: str, sink: Dict[str, Any], where: str) -> Tuple[Dict[str,
         return entry, f"--bias {method}: " + str(est.missing).replace("{where}", where) + "; no bias subtracted"
     if verdict.decision in ("rejected", "gated"):
         return entry, f"--bias {method}: the estimate in {where} is {verdict.why}"
-    return entry, None if verdict.decision == "applied" else f"--bias {method}: the estimate in {where} is {verdict.why}"
+    turns = _turns_refused(entry)
+    if verdict.decision == "applied":
+        return entry, None if not turns else (
+            f"--bias {method}: {len(turns)} quiet stretch(es) in {where} refused as a steady turn, not rest (mean gyro "
+            f"up to {max(max(abs(v) for v in r['gyro_mean_rad_s']) for r in turns):.3f} rad/s); the estimate from the "
+            "rest")
+    return entry, f"--bias {method}: the estimate in {where} is {verdict.why}"
+
+
+def _turns_refused(entry: Any) -> List[Dict[str, Any]]:
+    """The still rule's refused stretches (``refused_as_turning``) anywhere in an estimate's summary."""
+    if isinstance(entry, dict):
+        found = list(entry.get("refused_as_turning") or [])
+        return found + [r for k, v in entry.items() if k != "refused_as_turning" for r in _turns_refused(v)]
+    if isinstance(entry, list):
+        return [r for v in entry for r in _turns_refused(v)]
+    return []
