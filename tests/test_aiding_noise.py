@@ -106,7 +106,7 @@ def test_too_few_rows_give_no_estimate(synthetic):
     assert pose_noise(t_ns, gyro, acc, (sample, Rn, pn), C=C) is None
 
 
-@pytest.mark.parametrize("lag_s", [0.012, -0.0237, 0.0])
+@pytest.mark.parametrize("lag_s", [0.012, -0.0237, 0.0, 0.2])  # 0.2 s: a late clock (the edge of the search it had)
 def test_a_known_time_offset_is_recovered(synthetic, lag_s):
     t_ns, gyro, acc, R, p, C = synthetic
     sample = np.arange(0, len(t_ns), 10)

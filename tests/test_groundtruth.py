@@ -139,6 +139,16 @@ def test_rates_that_match_in_no_frame_are_the_verdict_not_a_frame(gyro, says):
     assert row.verdict.startswith("its rotation rates do not match the IMU's in any frame") and says in row.verdict
 
 
+def test_a_reference_late_beyond_the_fine_search_is_found_by_the_coarse_lag():
+    # a VO 0.2 s late (a clock set by hand): the +-20-sample search read 403 ms and "rates match in no frame"
+    seq = recording(0.0)
+    imu = ImuData(seq.t_ns, seq.gyro, seq.acc)
+    late = GroundTruth(seq.t_ns + 200_000_000, seq.p, seq.q_wxyz)
+    row, off = gr.check(imu, late, "synthetic", "gt")
+    assert row.rates_match and row.tau_ms == pytest.approx(200.0, abs=1.0) and off.tau_s == pytest.approx(0.2, abs=1e-3)
+    assert "GT +200 ms late" in row.verdict
+
+
 def test_check_of_a_recording_shorter_than_one_window_is_a_typed_error():
     seq = recording(0.0, seconds=0.5)  # shorter than alignment's shortest segment
     with pytest.raises(ImuError):

@@ -51,7 +51,14 @@ from imu_learn.calib.frames import (  # noqa: F401  (re-exported: the check's vo
     segments,
     shifted_pairs,
 )
-from imu_learn.calib.reference import FrameOptions, level_rotation, matched_rates, planar_ratio, planar_rotation
+from imu_learn.calib.reference import (
+    FrameOptions,
+    fit_lag,
+    level_rotation,
+    matched_rates,
+    planar_ratio,
+    planar_rotation,
+)
 from imu_learn.core.integration import integrate_windows, window_labels
 from imu_learn.core.quat import quat_conj, quat_from_matrix, quat_mul
 from imu_learn.data.formats import read_recording
@@ -340,6 +347,8 @@ def check(imu: ImuData, gt: GroundTruth, recording: str, label: str,
     """Everything the check says about one ground truth of a recording (the module doc), and the
     fitted offset (the mocap noise needs it)."""
     gap = options.max_gap_s if options.max_gap_s is not None else default_gap_s(gt)
+    coarse = coarse_lag(imu, gt)  # beyond the fine search's +-20 samples (a clock set by hand): calibrate's step 1
+    gt = replace(gt, t_ns=gt.t_ns - int(round(coarse * 1e9))) if coarse else gt
     segs = segments(imu, gt, gap, name=recording)
     longest = max((len(s) for s in segs), default=0)
     if longest <= MIN_SAMPLES:
@@ -378,7 +387,24 @@ def check(imu: ImuData, gt: GroundTruth, recording: str, label: str,
               bias_removed_score(segs, 10), bias_removed_score(segs, 200), angle, axis, 1e3 * off.tau_s,
               bias_removed_score(rotated, 200), bias_removed_score(held, 200), 100 * lever, 100 * lever_se, yaw, observed,
               tilt, off.rms, w_rms, ratio)
+    if coarse:  # the stamps moved by the coarse lag first: the offset is against the file as read
+        off = replace(off, tau_s=off.tau_s + coarse)
+        row = replace(row, tau_ms=1e3 * off.tau_s)
     return row, off
+
+
+def coarse_lag(imu: ImuData, gt: GroundTruth) -> float:
+    """The reference's lag [s] from the cross-correlation of |ω| over +-1 s (calibrate's step 1,
+    :func:`imu_learn.calib.reference.fit_lag`) where it is beyond calibrate's ``floor_lag_s`` and the peak
+    is clear (inside the search, correlation at least ``min_correlation``); else 0: the fine search of
+    :func:`fit_offset` (+-20 samples) covers it, or nothing does."""
+    opts = FrameOptions()
+    try:
+        with np.errstate(invalid="ignore", divide="ignore"):  # a flat |ω| correlates with nothing: NaN, no lag
+            lag, corr, edge = fit_lag(imu, gt, opts.max_lag_s)
+    except ReferenceFrameError:
+        return 0.0
+    return float(lag) if abs(lag) > opts.floor_lag_s and not edge and corr >= opts.min_correlation else 0.0
 
 
 def pick_best(rows: List[GroundTruthCheck]) -> dict:

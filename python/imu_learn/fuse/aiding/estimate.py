@@ -9,6 +9,8 @@ from typing import Dict, Optional, Tuple
 
 import numpy as np
 
+from imu_learn.errors import AidingError
+
 from .maps import one_map
 from .noise import PoseNoise, pose_noise
 from .offset import AidingOffset, estimate_offset
@@ -17,6 +19,7 @@ from .tum import Trajectory
 from .types import AidingRows
 
 log = logging.getLogger(__name__)
+LARGE_LAG_S = 0.05  # an aiding this far off the IMU's clock is moved onto it with a warning (a camera's: a few ms)
 
 
 def shift_trajectory(traj: Trajectory, imu_t_ns: np.ndarray, gyro: np.ndarray) -> Tuple[Trajectory, AidingOffset]:
@@ -24,8 +27,15 @@ def shift_trajectory(traj: Trajectory, imu_t_ns: np.ndarray, gyro: np.ndarray) -
     it was applied (:func:`.offset.estimate_offset`: at least one IMU sample), as read otherwise."""
     period_s = float(np.median(np.diff(np.asarray(imu_t_ns, dtype=np.int64)))) * 1e-9
     off = estimate_offset(imu_t_ns, gyro, traj.t_ns, traj.q_xyzw, min_shift_s=period_s)
+    if off.why.startswith("at the search's edge"):  # a lag the search cannot place: refused, not fused unmoved
+        raise AidingError(f"the aiding's rotations match the IMU's best at a lag of {1e3 * off.lag_s:+.0f} ms or more "
+                          f"(|w| correlation {off.correlation:.2f}, {off.why}): a clock far off the IMU's, or "
+                          "another recording's aiding; put both on one clock", None)
     if not off.applied:
         return traj, off
+    if abs(off.lag_s) > LARGE_LAG_S:
+        log.warning(f"the aiding's stamps are {1e3 * off.lag_s:+.0f} ms off the IMU's (|w| correlation "
+                    f"{off.correlation:.2f}): moved onto the IMU's clock; check the clocks")
     return replace(traj, t_ns=traj.t_ns - int(round(off.lag_s * 1e9))), off
 
 

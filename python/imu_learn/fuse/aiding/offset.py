@@ -20,7 +20,9 @@ from imu_learn.calib.reference import _rates_on_grid, fit_lag
 from imu_learn.data.types import GroundTruth, ImuData
 from imu_learn.errors import ReferenceFrameError
 
-MAX_LAG_S = 0.2  # the search: +-0.2 s (a camera on the IMU's clock is within a few ms)
+# the search: +-1 s, calibrate's (FrameOptions.max_lag_s; a camera on the IMU's clock is within a few ms, a
+# clock set by hand or a logging delay far more: a VO 0.2 s late was at the +-0.2 s edge, fused unmoved, exit 0)
+MAX_LAG_S = 1.0
 GRID_S = 0.001  # the correlation grid [s]
 MIN_CORRELATION = 0.6
 
