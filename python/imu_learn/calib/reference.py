@@ -91,7 +91,7 @@ class FrameOptions:
     # a given extrinsic's rotation may differ from the rates' by at most the larger of these
     # (:func:`check_extrinsic_rotation`)
     extrinsic_tolerance_deg: float = 0.3
-    extrinsic_sigmas: float = 4.0
+    extrinsic_sigmas: float = 3.0
     lever_sigmas: float = 5.0
     min_lever_m: float = 0.02
     floor_window_s: Optional[float] = None
