@@ -1136,7 +1136,11 @@ def one_line(summary: Dict[str, object]) -> str:
         kind = "aligned" if sc["aligned"] else "unaligned"
         text += (f"; {kind} position RMSE causal {sc['causal']['pos_rmse_m']:.3f} m, smoothed "
                  f"{sc['smoothed']['pos_rmse_m']:.3f} m")
-        if sc.get("aiding_only"):
+        if sc.get("aiding_only") and sc.get("causal_at_aiding_stamps"):  # like with like: the aiding's stamps
+            text += (f"; at the aiding's stamps causal {sc['causal_at_aiding_stamps']['pos_rmse_m']:.3f} m, smoothed "
+                     f"{sc['smoothed_at_aiding_stamps']['pos_rmse_m']:.3f} m, aiding alone "
+                     f"{sc['aiding_only']['pos_rmse_m']:.3f} m")
+        elif sc.get("aiding_only"):
             text += f", aiding alone {sc['aiding_only']['pos_rmse_m']:.3f} m"
         ends = [g["end_m"] for g in sc["causal"].get("gaps") or [] if g.get("end_m") is not None]
         if ends:
