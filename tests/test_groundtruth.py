@@ -149,6 +149,17 @@ def test_a_reference_late_beyond_the_fine_search_is_found_by_the_coarse_lag():
     assert "GT +200 ms late" in row.verdict
 
 
+def test_positions_in_another_unit_are_the_verdict():
+    # positions in mm: the check said "IMU frame" and a lever arm of 127 m; calibrate and navigate refuse them
+    seq = recording(0.0)
+    imu = ImuData(seq.t_ns, seq.gyro, seq.acc)
+    metric, _ = gr.check(imu, GroundTruth(seq.t_ns, seq.p, seq.q_wxyz), "synthetic", "gt")
+    assert metric.scale == pytest.approx(1.0, abs=0.03) and not metric.scale_off
+    mm, _ = gr.check(imu, GroundTruth(seq.t_ns, 1000.0 * seq.p, seq.q_wxyz), "synthetic", "gt")
+    assert mm.scale_off and mm.scale == pytest.approx(1000.0, rel=0.03)
+    assert mm.verdict.startswith("its positions are x") and "millimetres" in mm.verdict
+
+
 def test_check_of_a_recording_shorter_than_one_window_is_a_typed_error():
     seq = recording(0.0, seconds=0.5)  # shorter than alignment's shortest segment
     with pytest.raises(ImuError):

@@ -3,6 +3,7 @@ and in which body frame it is (:mod:`imu_learn.eval.groundtruth`)."""
 from __future__ import annotations
 
 import argparse
+import math
 from pathlib import Path
 from typing import Any, Callable, List, Optional, Sequence
 
@@ -65,6 +66,9 @@ def describe(row: Any) -> List[str]:
             f"  over 200 samples after R_off: {score(row.after_rot)}; after R_off and the GT shifted by tau - dt/2: "
             f"{score(row.after_hold)}",
             f"  lever arm (IMU origin in the GT body frame): {fmt_vec(row.lever_cm, 1)} cm ± {max(row.lever_se_cm):.1f}",
+            (f"  scale: the positions are x{row.scale:.4f} (± {row.scale_std:.4f}) the distances the accelerometer "
+             f"measures{'' if row.scale_off else ' (metric)'}" if math.isfinite(row.scale) else
+             "  scale: not observed (too little acceleration)"),
             f"  verdict: {row.verdict}"]
 
 

@@ -58,6 +58,7 @@ from imu_learn.calib.reference import (
     matched_rates,
     planar_ratio,
     planar_rotation,
+    reference_scale,
 )
 from imu_learn.core.integration import integrate_windows, window_labels
 from imu_learn.core.quat import quat_conj, quat_from_matrix, quat_mul
@@ -307,6 +308,11 @@ class GroundTruthCheck:
     rate_residual: float = 0.0
     rate_rms: float = math.inf
     rate_ratio: float = 1.0
+    # the positions' units per metre the accelerometer measures (calib.metric_scale; NaN: not observed) and
+    # whether it is off metric (more than 5 % and 4 standard errors: mm, cm, a monocular VO)
+    scale: float = math.nan
+    scale_std: float = math.nan
+    scale_off: bool = False
 
     @property
     def levelled(self) -> bool:
@@ -326,6 +332,10 @@ class GroundTruthCheck:
             return (f"its rotation rates do not match the IMU's in any frame (residual {self.rate_residual:.3f} rad/s "
                     f"against {self.rate_rms:.3f} of motion): a gyro unit, a mirrored or swapped axis, another "
                     f"recording{unit}")
+        if self.scale_off:
+            return (f"its positions are x{self.scale:.4g} (± {self.scale_std:.2g}) the distances the accelerometer "
+                    "measures: millimetres or centimetres, or a monocular VO without metric scale? (translation and "
+                    "lever arm below are in its units)")
         frame = "IMU frame" if self.off_deg < 0.5 else f"rotated {self.off_deg:.1f}° off the IMU"
         if not self.about_turning_axis_observed:
             frame += " (its part about the turning axis not observable)"
@@ -387,6 +397,9 @@ def check(imu: ImuData, gt: GroundTruth, recording: str, label: str,
               bias_removed_score(segs, 10), bias_removed_score(segs, 200), angle, axis, 1e3 * off.tau_s,
               bias_removed_score(rotated, 200), bias_removed_score(held, 200), 100 * lever, 100 * lever_se, yaw, observed,
               tilt, off.rms, w_rms, ratio)
+    metric = reference_scale([segs], off.r_off, gt_rate_hz(gt), np.zeros(3))
+    if metric.observed:
+        row = replace(row, scale=float(metric.scale), scale_std=float(metric.std), scale_off=bool(metric.off))
     if coarse:  # the stamps moved by the coarse lag first: the offset is against the file as read
         off = replace(off, tau_s=off.tau_s + coarse)
         row = replace(row, tau_ms=1e3 * off.tau_s)
