@@ -12,6 +12,7 @@ import pytest
 
 from crops import EASY, SHIPPED
 from imu_learn.calib.run import NOT_SELECTED
+from imu_learn.calib.select import POSITION_ACC_LEVELS
 from imu_learn.cli import main
 from imu_learn.core.quat import quat_from_matrix, quat_mul, wxyz_to_xyzw
 from imu_learn.data.formats import read_recording
@@ -102,17 +103,26 @@ def test_a_20_hz_reference_fits_the_accelerometer_from_its_positions(tmp_path, o
     assert "cannot resolve accelerations" in p["selection"]["by_default"]  # its terms chosen by default
     assert p["selection"]["held_out"] == "four time blocks of one recording"
     assert p["floor"]["cutoff_gyro"] is None and p["floor"]["cutoff_acc"] is None
-    # the low-pass is not observed, and neither are the gyro terms the selection left at their prior
+    # the low-pass is not observed, and neither are the terms the selection left at their prior: the one
+    # recording's four time blocks held out in turn choose the accelerometer's level from the positions too
     unselected = set(NOT_SELECTED["gyro"].get(p["selection"]["gyro"], ()))
-    assert {k for k, v in p["observed"].items() if not v["observed"]} == {"cutoff_gyro", "cutoff_acc"} | unselected
-    assert all("not selected" in p["observed"][k]["why"] for k in unselected - {"cutoff_gyro"})
-    assert "positions" in p["observed"]["accelerometer.matrix"]["how"]
+    acc_level = p["selection"]["acc"]
+    assert acc_level in POSITION_ACC_LEVELS and set(p["selection"]["held_out_figures"]["acc"][acc_level]) == \
+        {"block1", "block2", "block3", "block4"}
+    acc_unselected = {"accelerometer.matrix"} if acc_level in ("offset", "bias") else set()
+    assert {k for k, v in p["observed"].items() if not v["observed"]} == \
+        {"cutoff_gyro", "cutoff_acc"} | unselected | acc_unselected
+    assert all("not selected" in p["observed"][k]["why"] for k in (unselected | acc_unselected) - {"cutoff_gyro"})
     assert close(p["gyroscope"]["bias"], oracle["gyroscope"]["bias"], p["gyroscope"]["bias_std"],
                  oracle["gyroscope"]["bias_std"], floor=5e-4)
     a, oa = p["accelerometer"], oracle["accelerometer"]
     fit = p["reference"]["accelerometer_from_positions"]
-    assert close(a["matrix"], oa["matrix"], fit["M_a_std"], oa["matrix_std"]), (a["matrix"], oa["matrix"])
-    assert np.all(np.abs(np.diag(a["matrix"]) - np.diag(oa["matrix"])) < 0.01)  # the scales to 1 %
+    if acc_unselected:
+        assert np.array_equal(a["matrix"], np.eye(3))
+    else:
+        assert "positions" in p["observed"]["accelerometer.matrix"]["how"]
+        assert close(a["matrix"], oa["matrix"], fit["M_a_std"], oa["matrix_std"]), (a["matrix"], oa["matrix"])
+        assert np.all(np.abs(np.diag(a["matrix"]) - np.diag(oa["matrix"])) < 0.01)  # the scales to 1 %
     assert np.all(np.abs(np.asarray(fit["lever_arm_m"])) <= 4 * np.asarray(fit["lever_arm_std_m"]) + 0.005)
     assert np.all(np.abs(np.asarray(a["bias"])) < 0.3)
 
@@ -123,7 +133,7 @@ def test_select_chooses_the_accelerometers_level_on_the_positions_of_each_record
     bias are the positions' fit at that level (nothing outside it fitted), and the profile's reference
     entry is that fit."""
     from crops import CROP
-    from imu_learn.calib.select import POSITION_ACC_LEVELS, free_indices
+    from imu_learn.calib.select import free_indices
 
     args = []
     for name in (EASY, CROP):

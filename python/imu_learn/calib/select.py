@@ -93,7 +93,7 @@ from imu_learn.calib.acc_positions import (
     heldout_rms_rows,
     recording_rows,
 )
-from imu_learn.calib.fit import recordings_or_blocks, refit_groups, seed_all, spread
+from imu_learn.calib.fit import recordings_or_blocks, refit_groups, seed_all, spread, time_blocks
 from imu_learn.calib.profile import FloorFit
 from imu_learn.calib.sources import matched
 from imu_learn.data.types import Segment, sample_rate_hz
@@ -624,14 +624,19 @@ def _positions_acc_level(inp: Any, fit: FloorFit, entry: Dict[str, Any], progres
     source = inp.source
     acc_full = getattr(source, "acc_fit", None)
     names, recs, gyros = source.positions_data(inp, fit.floor) if acc_full is not None else ([], [], [])
-    if acc_full is None or len(recs) < 2:
-        entry["acc"] = "not selected: " + ("the accelerometer is not fitted from the reference's positions"
-                                           if acc_full is None else "one recording (none to hold out)")
+    if acc_full is None:
+        entry["acc"] = "not selected: the accelerometer is not fitted from the reference's positions"
         return fit
-    progress("selection: the accelerometer's levels from the reference's positions (each recording held out)")
+    held = (names, recs, gyros)
+    if len(recs) < 2:  # one recording: four time blocks of it held out in turn (the gyroscope's rule)
+        blocks = {k: v[0] for k, v in time_blocks(recs[0]).items() if v[0]}
+        held = (list(blocks), list(blocks.values()),
+                [[fit.floor.apply(x.t_ns, x.gyro, x.acc)[0] for x in segs] for segs in blocks.values()])
+    progress("selection: the accelerometer's levels from the reference's positions (each "
+             + ("recording" if len(recs) >= 2 else "time block of the one recording") + " held out)")
     tau, gravity = float(fit.floor.params.time_offset), inp.settings.gravity
     try:
-        level, table, steps = select_acc_from_positions(names, recs, gyros, acc_full.options, tau, gravity)
+        level, table, steps = select_acc_from_positions(*held, acc_full.options, tau, gravity)
         acc = fit_acc_from_positions(recs, acc_full.options, tau, gravity, gyros, free_indices("acc", level))
     except ValueError as e:
         entry["acc"] = f"not selected: {e}"
