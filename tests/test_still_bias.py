@@ -147,9 +147,12 @@ def test_bias_still_on_a_recording_without_stamps_is_one_line(tmp_path, capsys):
     scipy_io = pytest.importorskip("scipy.io")
     from imu_learn.cli.refine import main
 
-    src = write_broad_trial(tmp_path / "01_trial.mat", scipy_io)
+    # a BROAD-layout .mat without its sampling_rate: no stamps at all (a trial with its rate has the nominal ones)
+    trial = scipy_io.loadmat(str(write_broad_trial(tmp_path / "01_trial.mat", scipy_io)))
+    src = tmp_path / "02_bare.mat"
+    scipy_io.savemat(src, {"imu_gyr": trial["imu_gyr"], "imu_acc": trial["imu_acc"]})
     model = REPO / "models" / "broad_handheld.pt"
     assert main(["--checkpoint", str(model), "--input", str(src), "--out", str(tmp_path / "out"), "--bias", "still",
-                 "--device", "cpu"]) == 2
+                 "--device", "cpu", "--format", "broad"]) == 2
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and "no stamps" in err and "--bias still" in err, err
