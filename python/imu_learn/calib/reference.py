@@ -416,6 +416,12 @@ def check_one_clock(lags: Sequence[float], names: Sequence[str], spread_s: float
         "reference on another clock; put every reference on its IMU's clock, or calibrate them in separate runs")
 
 
+def motion_rms(segs: Sequence[Segment], gyro_bias: np.ndarray) -> float:
+    """The RMS [rad/s] of the bias-removed gyro over ``segs``: the motion a rate fit's residual is judged
+    against (``FrameOptions.max_rate_residual``: above that share, the rates match in no frame)."""
+    return float(np.sqrt(np.mean(np.concatenate([np.sum(np.square(s.gyro - gyro_bias), 1) for s in segs]))))
+
+
 def resolve_frame(pairs: Sequence[Tuple[ImuData, GroundTruth]], options: FrameOptions = FrameOptions(),
                   extrinsics: Optional[Extrinsics] = None, max_gap_s: Optional[float] = None,
                   names: Optional[Sequence[str]] = None) -> FrameFit:
@@ -452,7 +458,7 @@ def resolve_frame(pairs: Sequence[Tuple[ImuData, GroundTruth]], options: FrameOp
     rates = matched_rates(segs, m)
     ratio = planar_ratio(rates)
     off = fit_offset(segs, m=m, max_shift=max(3, int(round(0.02 * imu_rate))))
-    w_rms = float(np.sqrt(np.mean(np.concatenate([np.sum(np.square(s.gyro - off.gyro_bias), 1) for s in segs]))))
+    w_rms = motion_rms(segs, off.gyro_bias)
     method = extrinsics.source if extrinsics is not None else "estimated from rotation rates"
     if extrinsics is None:
         if off.rms > options.max_rate_residual * w_rms:

@@ -56,6 +56,7 @@ from imu_learn.calib.reference import (
     fit_lag,
     level_rotation,
     matched_rates,
+    motion_rms,
     planar_ratio,
     planar_rotation,
     reference_scale,
@@ -401,7 +402,7 @@ def check(imu: ImuData, gt: GroundTruth, recording: str, label: str,
     angle, axis = angle_axis(off.r_off)
     imu_w, ref_w = (np.linalg.norm(x, axis=1) for x in rates)
     ratio = float(imu_w @ ref_w / max(float(ref_w @ ref_w), 1e-300))
-    w_rms = float(np.sqrt(np.mean(np.concatenate([np.sum(np.square(s.gyro - off.gyro_bias), 1) for s in segs]))))
+    w_rms = motion_rms(segs, off.gyro_bias)
     row = GroundTruthCheck(recording, label, gt_rate_hz(gt), sum(len(s) for s in segs), len(segs),
               bias_removed_score(segs, 10), bias_removed_score(segs, 200), angle, axis, 1e3 * off.tau_s,
               bias_removed_score(rotated, 200), bias_removed_score(held, 200), 100 * lever, 100 * lever_se, yaw, observed,
