@@ -4,7 +4,6 @@ Runs are tiny (1-layer model of width 8, window 50, 4 steps per epoch) so the fi
 """
 import csv
 import json
-import os
 import shutil
 import signal
 import subprocess
@@ -12,6 +11,7 @@ import sys
 import time
 from pathlib import Path
 
+import numpy as np
 import pytest
 import torch
 
@@ -271,12 +271,15 @@ def test_sigint_to_a_real_process(tmp_path):
     assert load_checkpoint(d / "last.pt")["step"] >= 4
 
 
-@pytest.mark.parametrize("damage", ["truncated", "garbage", "empty"])
+@pytest.mark.parametrize("damage", ["truncated", "garbage", "pickle_27", "empty"])
 def test_corrupt_checkpoint_is_one_line_exit_2_and_nothing_changes(tmp_path, full_run, damage):
     d = tmp_path / "corrupt"
     shutil.copytree(full_run, d)
     data = (d / "last.pt").read_bytes()
-    bad = {"truncated": data[: len(data) // 2], "garbage": os.urandom(4096), "empty": b""}[damage]
+    garbage = np.random.default_rng(7).bytes(4096)
+    # bytes that read as pickle protocol 27: torch warns before it raises
+    bad = {"truncated": data[: len(data) // 2], "garbage": garbage, "pickle_27": b"\x80\x1b" + garbage,
+           "empty": b""}[damage]
     (d / "last.pt").write_bytes(bad)
     before = snapshot(d)
     p = subprocess.run([PY, "-m", "imu_learn.fit", "--resume", str(d), "--optim.epochs", "5"],

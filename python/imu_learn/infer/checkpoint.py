@@ -33,6 +33,7 @@ from __future__ import annotations
 import hashlib
 import json
 import os
+import warnings
 from pathlib import Path
 from typing import Any, Dict, List, Optional, Sequence
 
@@ -244,7 +245,11 @@ def load_checkpoint(path: Path, map_location: str = "cpu") -> Dict[str, Any]:
     if not path.exists():
         raise FileNotFoundError(2, "No such file or directory", str(path))
     try:
-        state = torch.load(path, map_location=map_location, weights_only=True)
+        # A damaged file can make torch warn (e.g. bytes that read as an unknown pickle protocol)
+        # before it raises: the one error line below says it all, so its warnings are not shown.
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            state = torch.load(path, map_location=map_location, weights_only=True)
     except Exception as e:  # torch raises many kinds for a damaged file; all mean "corrupt"
         raise CheckpointError(f"{path}: not a readable checkpoint ({type(e).__name__}: {e})") from e
     if not isinstance(state, dict) or state.get("format") != FORMAT:
