@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import replace
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -199,3 +200,35 @@ def test_a_residual_white_noise_the_imus_own_samples_do_not_allow_is_the_referen
     assert term.value == CLASS_DEFAULTS["gyroscope_noise_density"] and term.source == "class_default"
     assert term.bound == pytest.approx(value) and term.bounded_only
     assert chosen["accelerometer_noise_density"][0].kind == "fit"  # each sensor judged on its own samples
+
+
+def test_a_reference_below_the_imus_band_bounds_the_residual_white_noise(moving_reference):
+    """A reference smoothed below the IMU's rate (a positions reference's keyframes, a 20 Hz VO, wheel
+    odometry: :meth:`Source.band_limit`) leaves the motion above its band in the residuals: their white noise
+    is a bound whatever the IMU's own samples allow, and the profile holds the class default with the
+    source's reason (the car drive's positions profile wrote acc 0.037 m/s^2/sqrt(Hz), 2.4x what the
+    navigator's innovations fit in motion). The same residuals against a reference that resolves the band: a fit."""
+    rng = np.random.default_rng(4)
+    s = moving_reference
+    gyro = s.gyro + sensor_noise(len(s), 200.0, 2e-3, 0.0, rng)
+    r = nz.residual_noise([s], [(gyro, s.acc + sensor_noise(len(s), 200.0, 2e-2, 0.0, rng))], G)
+    assert all(nz.choose(nz.candidates(r, None, 10.0), NOISE_KEYS)[k][0].kind == "fit"
+               for k in ("gyroscope_noise_density", "accelerometer_noise_density"))
+    why = "a positions reference: its motion is the navigator's smoothed keyframes (10 Hz)"
+    chosen = nz.choose(nz.candidates(r, None, 10.0, band_limit=why), NOISE_KEYS)
+    terms = noise_terms(chosen)
+    for key in ("gyroscope_noise_density", "accelerometer_noise_density"):
+        est = chosen[key][0]
+        assert est.kind == "upper bound" and est.detail["why"] == why
+        assert terms[key].value == CLASS_DEFAULTS[key] and terms[key].bounded_only
+    assert chosen["gyroscope_random_walk"][0].source == "residuals"  # the long-τ terms are not the band's
+
+
+def test_each_reference_source_says_whether_its_residuals_resolve_the_imus_band():
+    from imu_learn.calib.odometry import OdometrySource
+    from imu_learn.calib.sources import Source
+    from imu_learn.fuse.calibrate_positions import PositionsSource
+
+    assert Source().band_limit() is None  # a reference as given (motion capture)
+    assert "keyframes (10 Hz)" in PositionsSource(Path("imu.csv"), Path("rover.pos")).band_limit()
+    assert "wheel odometry" in OdometrySource([Path("a")], [Path("b")]).band_limit()

@@ -162,3 +162,44 @@ def test_an_export_stopped_half_way_leaves_the_folder_as_it_was(tmp_path, monkey
         ex.export(ckpt, out, window=30)
     assert {p.name: p.read_bytes() for p in out.iterdir()} == before
     assert not [p for p in tmp_path.iterdir() if p.name.endswith(".staging")]
+
+
+def test_the_card_says_how_to_window_the_export_to_get_refines_samples(tmp_path):
+    """A model trained on 100-sample windows, exported (traced at 200): the card names the window and overlap
+    refine applies it with (not the trace window), and the ONNX graph run by the card's rule, written here
+    from its text, gives refine's samples on a 3000-sample real recording; other windows do not."""
+    ort = pytest.importorskip("onnxruntime")
+    from imu_learn.infer.windowing import apply
+
+    _t, g, a = core.read_asl_imu(str(IMU))
+    raw = np.c_[g, a][:3000]
+    torch.manual_seed(5)
+    m = ImuRefiner(ModelConfig(), mean=torch.tensor(raw.mean(0)), std=torch.tensor(raw.std(0)))
+    with torch.no_grad():
+        torch.nn.init.normal_(m.head.weight, std=0.5)
+    ckpt = tmp_path / "ckpt.pt"
+    save_checkpoint(ckpt, m, {"data": {"window": 100}}, epoch=0, step=0, best_metric=None)
+    out = tmp_path / "out"
+    assert main(["--checkpoint", str(ckpt), "--out", str(out), "--window", str(TRACE_W)]) == 0
+    card = json.loads((out / "model.json").read_text())
+    assert (card["windowing"]["window"], card["windowing"]["overlap"]) == (100, 50) and card["trace_window"] == TRACE_W
+    gr, ar, _ = apply(load_model(ckpt), raw[:, :3], raw[:, 3:])
+    refined = np.c_[gr, ar]
+    sess = ort.InferenceSession(str(out / "model.onnx"), providers=["CPUExecutionProvider"])
+
+    def by_rule(w, o):
+        n, stride = len(raw), w - o
+        starts = list(range(0, n - w + 1, stride))
+        starts += [n - w] if starts[-1] + w < n else []
+        y = np.empty_like(raw)
+        for k, s in enumerate(starts):
+            lo = 0 if k == 0 else (s + starts[k - 1] + w) // 2
+            hi = n if k == len(starts) - 1 else (starts[k + 1] + s + w) // 2
+            x = raw[None, s:s + w].astype(np.float32)
+            y[lo:hi] = raw[lo:hi] + (sess.run(["refined"], {"imu": x})[0][0] - x[0])[lo - s:hi - s]
+        return y
+
+    ours = by_rule(card["windowing"]["window"], card["windowing"]["overlap"])
+    assert np.abs(ours - refined).max() < 1e-4
+    # the window matters (a random model forgets within tens of samples, so a much shorter one): the check can fail
+    assert np.abs(by_rule(10, 5) - refined).max() > 1e-3

@@ -286,8 +286,13 @@ class Estimate:
         return np.isfinite(v) & (v > 0) & ~(np.isfinite(s) & (s > 0.5 * v))
 
 
-def candidates(residual: Optional[ResidualNoise], allan: Optional[AllanNoise], min_still_s: float) -> List[Estimate]:
-    """Every estimate of the four Kalibr figures and the bias instability, best first per figure."""
+def candidates(residual: Optional[ResidualNoise], allan: Optional[AllanNoise], min_still_s: float,
+               band_limit: Optional[str] = None) -> List[Estimate]:
+    """Every estimate of the four Kalibr figures and the bias instability, best first per figure.
+    ``band_limit``: why the reference cannot measure the IMU's white noise (a reference smoothed below the
+    IMU's rate, :meth:`imu_learn.calib.sources.Source.band_limit`): the residuals' white noise is then a
+    bound, never the IMU's value (the car drive's positions reference: acc 0.037 m/s^2/sqrt(Hz), 2.4x what
+    the navigator's innovations fit in motion; docs/experiments/references.md, "Positions only")."""
     out: List[Estimate] = []
     if allan is not None and allan.seconds >= min_still_s:
         f, pl = allan.fit, power_law_fit(allan.dev)
@@ -313,7 +318,11 @@ def candidates(residual: Optional[ResidualNoise], allan: Optional[AllanNoise], m
                 continue
             info = {"reference_s": round(residual.seconds, 3), "tau_s": list(pl.tau_range), "points": pl.points}
             own = getattr(residual, f"{key}_own")
-            if np.any(pl.white > OWN_MARGIN * own):  # the reference's noise (OWN_MARGIN): a bound, never the IMU's value
+            if band_limit is not None:
+                out.append(Estimate(f"{sensor}_noise_density", np.fmin(pl.white, upper_bound(dev, 1.0, slice(0, 3))),
+                                    np.full(3, np.nan), "residuals", "upper bound",
+                                    {**info, "fit_per_axis": [float(x) for x in pl.white], "why": band_limit}))
+            elif np.any(pl.white > OWN_MARGIN * own):  # the reference's noise (OWN_MARGIN): a bound, never the IMU's value
                 bound = np.fmin(pl.white, upper_bound(dev, 1.0, slice(0, 3)))
                 out.append(Estimate(f"{sensor}_noise_density", bound, np.full(3, np.nan), "residuals", "upper bound",
                                     {**info, "fit_per_axis": [float(x) for x in pl.white],

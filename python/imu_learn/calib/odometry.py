@@ -484,6 +484,9 @@ class OdometrySource(Source):
             "held_back_yaw": held, "forward_axis": self.fwd, "lags": self.lags}}
         return FloorFit(floor, {}, std, [], entries=entries)
 
+    def band_limit(self) -> Optional[str]:
+        return "planar wheel odometry: its rates and speed are the wheels', not the IMU's motion above their band"
+
     def reference(self) -> Dict[str, Any]:
         lag = float(np.median([x["lag_s"] for x in self.lags])) if self.lags else math.nan
         return {"kind": "odometry", "vertical_axis_in_imu": None if self.u is None else self.u.tolist(),

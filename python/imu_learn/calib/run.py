@@ -336,7 +336,7 @@ def calibrate(inp: CalibInputs, out_dir: Path, options: CalibOptions = CalibOpti
     progress("still stretches and their Allan deviation")
     pieces = still_pieces(inp, options.still)
     allan = nz.allan_noise(pieces)
-    cands = nz.candidates(after, allan, options.min_still_s)
+    cands = nz.candidates(after, allan, options.min_still_s, inp.source.band_limit() if has_ref else None)
     noise = noise_terms(nz.choose(cands, NOISE_KEYS))
     prof.noise = {**noise, **bias_instability(cands)}
     prof.noise_estimates = estimate_dicts(cands)

@@ -177,6 +177,12 @@ class Source:
         """profile.json's ``reference`` entry (empty: the reference as given)."""
         return {}
 
+    def band_limit(self) -> Optional[str]:
+        """Why the residuals against this reference cannot measure the IMU's white noise (None: they can).
+        A reference smoothed below the IMU's rate leaves the motion above its band in the residuals, sample
+        by sample: their white noise is a bound, not the IMU's (:func:`imu_learn.calib.noise.candidates`)."""
+        return None
+
     def observed(self) -> Dict[str, Dict[str, Any]]:
         """profile.json's ``observed``: per floor parameter, whether the reference observed it, and why not."""
         return {k: {"observed": True} for k in OBSERVABLE}
@@ -370,6 +376,11 @@ class PosesSource(Source):
         inp = CalibInputs(recordings=recordings, settings=FitSettings(), sources=sources, source=self)
         inp.device = self.device or device_name(fmts[0] if fmts else "auto", inp.train[0].name if inp.train else names[0])
         return inp
+
+    def band_limit(self) -> Optional[str]:
+        if self.frame is None or self.frame.resolves_acceleration:
+            return None
+        return "a reference that cannot resolve accelerations (a 20-30 Hz VO): its residuals hold the motion above its band"
 
     def floor_terms(self) -> Dict[str, Any]:
         """Everything, or (a reference that cannot resolve accelerations,

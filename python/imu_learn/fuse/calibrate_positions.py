@@ -528,6 +528,10 @@ class PositionsSource(Source):
     def reference(self) -> Dict[str, Any]:
         return self._result().reference
 
+    def band_limit(self) -> Optional[str]:
+        return (f"a positions reference: its motion is the navigator's smoothed keyframes "
+                f"({self.opts.keyframe_hz:g} Hz), the IMU's motion above their band is in the residuals")
+
     def observed(self) -> Dict[str, Dict[str, Any]]:
         return observed()
 

@@ -489,8 +489,10 @@ def check_scale(src: Sources, opts: NavigateOptions, fit: ScaleFit) -> None:
 def in_motion(noise: ImuNoise, fit: NoiseFit) -> ImuNoise:
     """A profile's noise with its white noise raised to what the aiding's innovations (poses, GNSS fixes) say
     the moving IMU has (:func:`innovation_fit`: one factor on the MEMS class default's gyro and accelerometer white
-    noise, as without a profile; a profile measures them at rest, where motors and roads are quiet: on
-    EuRoC's flights the fit is 6-11x the ADIS16448 profile's), each sensor's where the fit is usable and
+    noise, as without a profile; a profile measures them at rest, where motors and roads are quiet, or against a
+    motion capture that resolves the IMU's band (a reference that cannot, the profile's class default,
+    :func:`imu_learn.calib.noise.candidates`): on EuRoC's flights the fit is 6-11x the ADIS16448 profile's), each
+    sensor's where the fit is usable and
     higher; the random walks stay the profile's. The source says which (docs/experiments/navigate-vo.md,
     "The IMU's noise in motion")."""
     if not fit.used:
@@ -502,7 +504,7 @@ def in_motion(noise: ImuNoise, fit: NoiseFit) -> ImuNoise:
     raised = replace(noise, gyro_noise_density=max(gyro, noise.gyro_noise_density),
                      acc_noise_density=max(acc, noise.acc_noise_density))
     return replace(raised, source=f"{noise.source}; white noise (gyro {noise.gyro_noise_density:.3g}, acc "
-                                  f"{noise.acc_noise_density:.3g}: at rest) raised to gyro {raised.gyro_noise_density:.3g} "
+                                  f"{noise.acc_noise_density:.3g}: the profile's) raised to gyro {raised.gyro_noise_density:.3g} "
                                   f"rad/s/sqrt(Hz), acc {raised.acc_noise_density:.3g} m/s^2/sqrt(Hz), fitted from the "
                                   f"aiding's innovations in motion (x{float(fit.factor):.3g} the class default, chi2/dof "
                                   f"{fit.chi2_ratio}, {fit.residuals} residuals)")

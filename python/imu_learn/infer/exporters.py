@@ -30,6 +30,7 @@ import torch
 
 from imu_learn.errors import ConfigError, InvalidInputError
 from imu_learn.infer.checkpoint import load_checkpoint, model_from_checkpoint
+from imu_learn.infer.windowing import windowing_of
 from imu_learn.nn.model import ImuRefiner
 from imu_learn.util.atomic import atomic_write_path, atomic_write_text
 from imu_learn.util.digest import file_sha256
@@ -180,6 +181,31 @@ def _io_spec(model: ImuRefiner) -> Dict[str, Any]:
     return {"inputs": inputs, "outputs": outputs}
 
 
+def windowing_card(model: ImuRefiner) -> Dict[str, Any]:
+    """How ``imu-learn refine`` applies the model (:mod:`imu_learn.infer.windowing`), for a runtime that is to
+    give the same samples: the exported graph is one window's forward pass."""
+    w = windowing_of(model)
+    if model.cfg.causal:
+        return {"window": w.window, "overlap": 0, "rule": "causal: chunks of `window` samples (the remainder joined "
+                "to the last) run in order with the LSTM state carried from one to the next; the exported graph "
+                "starts each call from zero state, so run the whole sequence in one call to match refine"}
+    return {"window": w.window, "overlap": w.overlap,
+            "rule": "windows of `window` samples starting every window - overlap samples, the last moved back to end "
+                    "at the sequence's end (a sequence of at most `window` samples: one call); in the overlap of "
+                    "windows k and k+1, sample i comes from window k if i < (start of k+1 + end of k) // 2, else from "
+                    "window k+1; the first and last windows keep their outer edges. Any other window gives other "
+                    "samples (the model was trained on windows of this length)"}
+
+
+def trained_on(state: Dict[str, Any]) -> Dict[str, Any]:
+    """The training recordings' names and sample rates (the checkpoint's guard record): apply the model to
+    this device at this rate (``imu-learn refine`` refuses one more than 5 % off)."""
+    recs = (state.get("inputs") or {}).get("recordings") or []
+    rates = [r.get("rate_hz") for r in recs if isinstance(r, dict) and r.get("rate_hz")]
+    return {"recordings": [str(r.get("name")) for r in recs if isinstance(r, dict)],
+            "sample_rate_hz": float(np.median(rates)) if rates else None}
+
+
 def model_card(model: ImuRefiner, state: Dict[str, Any], checkpoint: Path, files: Dict[str, Path], window: int,
                opset: int, checks: Dict[str, Any]) -> Dict[str, Any]:
     """The JSON card of an export: I/O, normalisation, model args, checks, source checkpoint, digests.
@@ -202,8 +228,12 @@ def model_card(model: ImuRefiner, state: Dict[str, Any], checkpoint: Path, files
         "model_args": model.model_args(),
         "causal": bool(model.cfg.causal),
         "state": "each call starts from zero LSTM state; the bidirectional model needs context on both sides"
-        " (see imu_learn.infer.refiner for windowing)",
+        " (windowing)",
+        "windowing": windowing_card(model),
+        "trained_on": trained_on(state),
         "trace_window": int(window),
+        "trace_window_is": "the window the export was traced and checked at (--window), not the one to apply it "
+                           "with: that is windowing.window",
         "dynamic_axes": {"batch": dynamic, "time": dynamic},
         "onnx_opset": int(opset),
         "checks": checks,
