@@ -159,6 +159,17 @@ def test_gyro_and_acc_swapped(tmp_path, capsys):
     f = write(tmp_path / "swap2.csv", t, a / G, np.degrees(g))
     err = refused(capsys, f, "--gyro-unit", "deg/s", "--acc-unit", "g")
     assert "gyro and acc look swapped" in err
+    # moving throughout, turning at ~11 deg/s: the swapped acc columns read ~11 g, as m/s2 read as g would; their
+    # magnitude spreads as a rate's and the gyro columns' holds as gravity's, so it is the swap that is named
+    t, g, a = samples(seconds_still=0.0)
+    slow = g * 0.15
+    assert 8 < np.median(np.linalg.norm(np.degrees(slow), axis=1)) < 14
+    err = refused(capsys, write(tmp_path / "swap3.csv", t, a / G, np.degrees(slow)), "--gyro-unit", "deg/s",
+                  "--acc-unit", "g")
+    assert "gyro and acc look swapped" in err and "--acc-unit m/s2" not in err
+    rc, err = calibrate(capsys, write(tmp_path / "right.csv", t, np.degrees(slow), a / G), "--gyro-unit", "deg/s",
+                        "--acc-unit", "g")
+    assert rc == 0 and "swapped" not in err  # the same motion in the right columns passes
 
 
 # 5. a constant or integer column -----------------------------------------------------------------

@@ -93,3 +93,20 @@ def test_a_broad_trial_takes_a_profile_on_its_nominal_stamps_and_one_without_a_r
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and "no stamps" in err, err
     assert not (tmp_path / "out2.mat").exists()
+
+
+@pytest.mark.parametrize("option, given, names", [
+    ("--profile", "models/euroc_adis16448.pt", "give it with --checkpoint"),
+    ("--profile", "models/profiles/euroc_adis16448", "it holds profile.json: give that"),
+    ("--profile", "models/profiles/euroc_adis16448/imu.yaml", "give the profile.json beside it"),
+    ("--checkpoint", "models/profiles/euroc_adis16448/profile.json", "apply it with --profile"),
+])
+def test_a_file_given_for_the_other_option_is_one_line_naming_the_right_one(tmp_path, capsys, option, given, names):
+    """A checkpoint given as --profile ended in a UnicodeDecodeError traceback (exit 1); a profile given as
+    --checkpoint pasted torch's advice to load with weights_only=False. Each is one line, exit 2, nothing
+    written, naming the option or file that takes it."""
+    out = tmp_path / "out"
+    assert refine_main([option, str(REPO / given), "--input", str(MH04), "--out", str(out)]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and names in err[0] and "weights_only" not in err[0], err
+    assert not out.exists()

@@ -122,6 +122,18 @@ class Affine:
                 "bias": _arr(self.bias), "bias_std": _arr(self.bias_std)}
 
 
+def _not_a_profile(path: Path) -> str:
+    """What a file given as a profile more likely is, and what takes it."""
+    suffix = path.suffix.lower()
+    if suffix in (".pt", ".pth", ".ckpt"):
+        return ": a checkpoint? give it with --checkpoint"
+    if suffix in (".onnx", ".ts"):
+        return ": an exported model (imu-learn export)? imu-learn applies checkpoints (--checkpoint)"
+    if suffix in (".yaml", ".yml"):
+        return ": imu.yaml is the noise in Kalibr's form; give the profile.json beside it"
+    return ""
+
+
 @dataclass
 class NoiseTerm:
     """One noise figure: per axis (NaN where an axis gave none), the one scalar Kalibr takes
@@ -268,11 +280,19 @@ class Profile:
         """Read a profile; a missing file is FileNotFoundError, anything malformed a
         :class:`ProfileError` naming the file and the field."""
         path = Path(path)
-        text = path.read_text()
+        if path.is_dir():
+            inside = " (it holds profile.json: give that)" if (path / "profile.json").is_file() else ""
+            raise ProfileError(f"{path}: a folder, not a device profile{inside}", str(path))
+        try:
+            text = path.read_text(encoding="utf-8")
+        except UnicodeDecodeError:
+            raise ProfileError(f"{path}: a binary file, not a device profile (profile.json){_not_a_profile(path)}",
+                               str(path)) from None
         try:
             d = json.loads(text)
         except json.JSONDecodeError as e:
-            raise ProfileError(f"{path}:{e.lineno}: not JSON ({e.msg})", str(path), e.lineno, e.colno) from None
+            raise ProfileError(f"{path}:{e.lineno}: not JSON ({e.msg}){_not_a_profile(path)}", str(path), e.lineno,
+                               e.colno) from None
         return cls.from_dict(d, str(path))
 
     @classmethod

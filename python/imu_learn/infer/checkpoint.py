@@ -240,6 +240,19 @@ def write_checkpoint(path: Path, state: Dict[str, Any]) -> None:
     atomic_write_bytes(path, lambda f: torch.save(signed, f))
 
 
+def _what_it_is(path: Path) -> str:
+    """What a file given as a checkpoint more likely is, and what takes it (empty: nothing known)."""
+    if path.is_dir():
+        return ": a folder; give its best.pt or last.pt"
+    with open(path, "rb") as f:
+        head = f.read(64).lstrip()
+    if head.startswith(b"{"):
+        return ": a JSON file (a device profile? apply it with --profile)"
+    if path.suffix.lower() in (".onnx", ".ts"):
+        return ": an exported model (imu-learn export); imu-learn applies the checkpoint it came from"
+    return ""
+
+
 def load_checkpoint(path: Path, map_location: str = "cpu") -> Dict[str, Any]:
     path = Path(path)
     if not path.exists():
@@ -251,7 +264,12 @@ def load_checkpoint(path: Path, map_location: str = "cpu") -> Dict[str, Any]:
             warnings.simplefilter("ignore")
             state = torch.load(path, map_location=map_location, weights_only=True)
     except Exception as e:  # torch raises many kinds for a damaged file; all mean "corrupt"
-        raise CheckpointError(f"{path}: not a readable checkpoint ({type(e).__name__}: {e})") from e
+        what = _what_it_is(path)
+        first = str(e).strip().splitlines()[0] if str(e).strip() else ""
+        # torch's advice to load with weights_only=False (arbitrary code) is no fix for a file that is not a checkpoint
+        why = "" if what else (" (torch cannot read it as a checkpoint)" if first.startswith("Weights only load failed")
+                               else f" ({type(e).__name__}: {first[:200]})")
+        raise CheckpointError(f"{path}: not a readable checkpoint{what}{why}") from e
     if not isinstance(state, dict) or state.get("format") != FORMAT:
         raise CheckpointError(f"{path}: not an imu_learn checkpoint of format {FORMAT}")
     # Checkpoints written before digests (the shipped models/*.pt among them) have none and are

@@ -63,6 +63,10 @@ TYPICAL_RATE_HZ = 200.0
 # 4, 5. |acc| [m/s^2] at rest that reads as gravity; outside it the acc is far from gravity (a
 # warning). A raw magnitude (the file's own numbers) reads as gravity in m/s^2 or in g within
 # GRAVITY_RATIO of 9.81 or of 1.
+# 4. swapped, where a unit would explain the acc columns' level: their |.|'s relative spread (MAD / median) above
+# this, and the gyro columns' at most 1/ratio of it. Real recordings: acc 0.01-0.09, gyro 0.26-0.64 (EuRoC MH_04,
+# TUM-VI room 2, Blackbird, Fetch): swapped, each reads as the other
+SWAP_ACC_SPREAD, SWAP_SPREAD_RATIO = 0.15, 2.0
 GRAVITY_RANGE_MPS2 = (7.0, 13.0)
 GRAVITY_WARN_RANGE_MPS2 = (6.0, 14.0)
 GRAVITY_RATIO = (0.7, 1.4)
@@ -326,10 +330,25 @@ def swapped_map(columns: str) -> str:
     return ",".join(swap.get(e.strip().lower(), e.strip()) for e in columns.split(","))
 
 
+def _spread(x: np.ndarray) -> float:
+    """The relative spread of ``|x|`` over the file (median absolute deviation over the median)."""
+    m = np.linalg.norm(x, axis=1)
+    med = float(np.median(m))
+    return float(np.median(np.abs(m - med))) / med if med > 0 else math.inf
+
+
+def _turns_like_a_rate(c: _Context) -> bool:
+    """The acc columns' magnitude spreads as a turning rate's does and the gyro columns' holds as gravity's
+    (a recording that moves: EuRoC's columns swapped, 0.50 against 0.07); a unit that would explain the acc
+    columns' level (deg/s read as g gives ~10 g) does not explain that."""
+    a, g = _spread(c.acc), _spread(c.gyro)
+    return a > SWAP_ACC_SPREAD and g < a / SWAP_SPREAD_RATIO
+
+
 def _check_swap(c: _Context, rest: Optional[np.ndarray]) -> None:
     g_raw = _median_norm(c.gyro_raw(), rest)
     a_si = _median_norm(c.acc, rest)
-    if _gravity_like_raw(g_raw) and not _acc_explained(c, a_si):
+    if _gravity_like_raw(g_raw) and (not _acc_explained(c, a_si) or _turns_like_a_rate(c)):
         a_raw = _median_norm(c.acc_raw(), rest)
         c.fail(f"the gyro columns read |gyro| = {g_raw:.3g} {_where(rest)}, as gravity does, and the acc columns "
                f"|acc| = {a_raw:.3g}: gyro and acc look swapped; fix --columns (e.g. --columns "
