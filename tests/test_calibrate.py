@@ -218,5 +218,28 @@ def test_ctrl_c_says_what_the_output_folder_holds(tmp_path, capsys, monkeypatch,
         out.mkdir()
     assert main(["calibrate", "--input", str(CROP), "--out", str(out), "--quiet", "--no-plot"]) == 130
     err = capsys.readouterr().err
-    assert (f"{out} keeps only complete files" in err) == made and ("nothing written" in err) != made
+    assert (f"{out}'s profile files are as they were" in err) == made and ("nothing written" in err) != made
     assert out.exists() == made
+
+
+def test_ctrl_c_while_the_files_are_written_leaves_the_previous_runs_set(tmp_path, capsys, monkeypatch):
+    """A rerun into a folder holding a complete run, interrupted once its profile.json is written (in the
+    plot): the folder holds the previous run's three files byte for byte, not this run's profile beside that
+    run's plot (a new user's SIGINT to a real process found that mix). Uninterrupted, the rerun's set."""
+    import imu_learn.calib.run as calib_run
+
+    out = tmp_path / "out"
+    assert main(["calibrate", "--input", str(CROP), "--out", str(out), "--quiet"]) == 0
+    before = {p.name: p.read_bytes() for p in out.iterdir()}
+    assert set(before) == {"profile.json", "imu.yaml", "calibration.png"}
+
+    def plot_then_ctrl_c(path, *a, **k):
+        assert (Path(path).parent / "profile.json").is_file()  # this run's profile is written by now
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(calib_run, "plot_calibration", plot_then_ctrl_c)
+    assert main(["calibrate", "--input", str(CROP), "--out", str(out), "--quiet"]) == 130
+    assert {p.name: p.read_bytes() for p in out.iterdir()} == before
+    monkeypatch.undo()
+    assert main(["calibrate", "--input", str(CROP), "--out", str(out), "--quiet", "--no-plot"]) == 0
+    assert sorted(p.name for p in out.iterdir()) == ["imu.yaml", "profile.json"]  # the old plot went with its run

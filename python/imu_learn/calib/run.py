@@ -43,6 +43,7 @@ from imu_learn.calib.sources import TIME_OFFSET_PRIOR_SAMPLES, CalibInputs, Reco
 from imu_learn.core.stamps import median_period_ns, sample_rate_hz
 from imu_learn.errors import ImplausibleProfileError, InvalidInputError
 from imu_learn.infer.guard import training_inputs
+from imu_learn.util.staging import staged_dir
 
 Progress = Callable[[str], None]
 logger = logging.getLogger(__name__)
@@ -310,6 +311,9 @@ def plausibility(prof: Profile, inp: CalibInputs, options: CalibOptions, progres
     return checks
 
 
+OUTPUT_NAMES = ("profile.json", "imu.yaml", "calibration.png")  # what calibrate writes into its folder
+
+
 def calibrate(inp: CalibInputs, out_dir: Path, options: CalibOptions = CalibOptions(),
               progress: Progress = lambda s: None) -> CalibResult:
     """Fit the profile of ``inp`` and write its files into ``out_dir``."""
@@ -343,14 +347,17 @@ def calibrate(inp: CalibInputs, out_dir: Path, options: CalibOptions = CalibOpti
     prof.sources = inp.sources + ([{"still_stretches": allan.stretches, "still_s": round(allan.seconds, 3)}] if allan else [])
     prof.unobservable = unobservable(has_ref, allan, noise, options)
     prof.inputs = training_inputs(raw_imu(inp))  # refine's and navigate's guard: is a recording this device's?
-    out_dir.mkdir(parents=True, exist_ok=True)
-    files = {"profile": out_dir / "profile.json", "kalibr": out_dir / "imu.yaml"}
-    prof.save(files["profile"])
-    write_kalibr_yaml(prof, files["kalibr"])
-    if options.plot:
-        progress("plot")
-        if plot_calibration(out_dir / "calibration.png", inp.device, before, after, allan):
-            files["plot"] = out_dir / "calibration.png"
+    names = {"profile": "profile.json", "kalibr": "imu.yaml"}
+    # the three files go in together (a Ctrl-C or an error leaves a previous run's set as it was: never this
+    # run's profile beside that run's plot); other entries of out_dir (a positions reference's work) are kept
+    with staged_dir(Path(out_dir), OUTPUT_NAMES) as stage:
+        prof.save(stage / names["profile"])
+        write_kalibr_yaml(prof, stage / names["kalibr"])
+        if options.plot:
+            progress("plot")
+            if plot_calibration(stage / "calibration.png", inp.device, before, after, allan):
+                names["plot"] = "calibration.png"
+    files = {k: Path(out_dir) / v for k, v in names.items()}
     return CalibResult(prof, files, before, after, allan, time.time() - t0)
 
 

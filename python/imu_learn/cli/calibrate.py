@@ -188,7 +188,9 @@ def run(args: argparse.Namespace, rest: List[str], keep: Callable[[Any], None]) 
     writes = source.kind == "positions"  # its reading runs the smoother, which writes into --out
 
     def kept() -> str:
-        return (f"{args.out} keeps only complete files (each written atomically)" if Path(args.out).exists()
+        work = "; the smoother's work in it may be new" if writes else ""
+        return (f"{args.out}'s profile files are as they were (replaced together, at the end{work})"
+                if Path(args.out).exists()
                 else f"nothing written ({args.out} not created)")
 
     if writes:
