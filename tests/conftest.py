@@ -72,7 +72,8 @@ SLOW = {
     "test_outputs_under_failure.py": {
         "test_two_labels_runs_on_one_cache_take_turns",
         "test_fit_signal_midway_through_a_checkpoint_then_resume",
-        "test_refine_signal_midway_then_rerun",
+        "test_refine_ctrl_c_midway_through_its_imu_writes_both_files_then_stops",
+        "test_refine_killed_midway_keeps_the_previous_output_then_reruns",
         "test_evaluate_sigint_midway_then_rerun",
         "test_labels_sigterm_midway_then_resume",
         "test_fuse_sigterm_midway_then_rerun",

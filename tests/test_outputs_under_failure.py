@@ -238,17 +238,45 @@ def test_refine_failing_writer_keeps_the_previous_output(models, out_dir, capsys
     assert_intact(before, out_dir, untouched=str(IMU_REL))
 
 
-@pytest.mark.parametrize("sig", [signal.SIGINT, signal.SIGKILL])
-def test_refine_signal_midway_then_rerun(models, tmp_path, sig):
+def test_refine_ctrl_c_midway_through_its_imu_writes_both_files_then_stops(models, tmp_path):
+    """Ctrl-C while the refined IMU is written: the write and the summary beside it finish (Ctrl-C held for
+    them), then exit 130 saying both are this run's. Before, the Ctrl-C between the two left this run's
+    data.csv beside the previous run's summary.json (a new user's SIGINT to a real process found it)."""
+    out = tmp_path / "out"
+    assert refine(models[0], out) == 0
+    before = files(out)
+    marker = tmp_path / "fired"
+    proc = faulty_cli("*data.csv*", 1, "hold", marker, "imu_learn.refine", *refine_args(models[1], out))
+    try:
+        deadline = time.time() + 120
+        while not marker.exists():
+            assert proc.poll() is None, proc.communicate()[1]
+            assert time.time() < deadline, "the fault never fired"
+            time.sleep(0.05)
+        proc.send_signal(signal.SIGINT)
+        time.sleep(0.5)
+        Path(str(marker) + ".go").write_text("")
+        err = proc.communicate(timeout=60)[1]
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.communicate()
+    assert proc.returncode == 130, err
+    assert "are this run's, complete" in err.strip().splitlines()[-1], err
+    now = files(out)
+    assert now[str(IMU_REL)] != before[str(IMU_REL)]
+    assert json.loads(now["summary.json"])["checkpoint"] == str(models[1])  # the summary of this run's data
+    assert temporaries(out) == []
+
+
+def test_refine_killed_midway_keeps_the_previous_output_then_reruns(models, tmp_path):
     out = tmp_path / "out"
     assert refine(models[0], out) == 0
     before = files(out)
     proc = faulty_cli("*data.csv*", 1, "pause", tmp_path / "fired", "imu_learn.refine", *refine_args(models[1], out))
-    signal_midway(proc, tmp_path / "fired", sig)
+    signal_midway(proc, tmp_path / "fired", signal.SIGKILL)
     assert proc.returncode != 0
-    assert files(out)[str(IMU_REL)] == before[str(IMU_REL)]
-    if sig == signal.SIGINT:  # Python ran its clean-up
-        assert temporaries(out) == []
+    assert files(out) == before | {k: v for k, v in files(out).items() if k.endswith(".tmp")}
     assert_only_hidden_temporaries(out)
     assert refine(models[1], out) == 0
     assert_complete(out / IMU_REL)

@@ -116,19 +116,29 @@ def run(args: argparse.Namespace, rest: List[str], keep: Callable[[Any], None]) 
     src = read_imu_source(args.input, args.format, args.imu_topic, csv_layout(args))
     rec = recording(args, src)
     rate = correction.check(plan, rec, args.force)
-    target = rewrite_recording(src, args.input, args.out, [plan.apply], args.copy_folder, args.fill_covariance)
-    bias = bias_entry(args, plan)
-    if args.bias != "none" and not bias.get("applied"):  # the words said what was asked: say what was done
-        plan.words[plan.words.index(REGISTRY[args.bias].words)] = f"--bias {args.bias}: no bias subtracted"
-    summary = {
-        "input": str(args.input), "output": str(target), "format": src.fmt,
-        "checkpoint": None if args.checkpoint is None else str(args.checkpoint),
-        "profile": None if args.profile is None else str(args.profile),
-        **correction.summary(plan, rec, rate, correction.guard_entry(plan, rec, rate)),
-        "bias": bias,
-    }
+    written: List[Path] = []
+
+    def with_summary(target: Path) -> None:
+        """The summary, beside the refined IMU (written with it, Ctrl-C held: :func:`rewrite_recording`)."""
+        bias = bias_entry(args, plan)
+        if args.bias != "none" and not bias.get("applied"):  # the words said what was asked: say what was done
+            plan.words[plan.words.index(REGISTRY[args.bias].words)] = f"--bias {args.bias}: no bias subtracted"
+        summary = {
+            "input": str(args.input), "output": str(target), "format": src.fmt,
+            "checkpoint": None if args.checkpoint is None else str(args.checkpoint),
+            "profile": None if args.profile is None else str(args.profile),
+            **correction.summary(plan, rec, rate, correction.guard_entry(plan, rec, rate)),
+            "bias": bias,
+        }
+        write_summary(summary_path(args.out, target), summary)
+        written[:] = [target, summary_path(args.out, target)]
+
+    untouched = " (the input folder's copy in OUT is not refined)" if args.copy_folder else f" ({args.out} is as it was)"
+    keep(lambda: f"{written[0]} and {written[1]} are this run's, complete" if written else
+         f"nothing of this run's refined IMU is written{untouched}")
+    target = rewrite_recording(src, args.input, args.out, [plan.apply], args.copy_folder, args.fill_covariance,
+                               with_summary)
     where = summary_path(args.out, target)
-    write_summary(where, summary)
     at = f"recording at {rates.hz(rate)}" if rate else "recording without stamps"
     print(f"refined IMU ({'; '.join(plan.words)}; {at}) written to {target}; summary {where}")
     return 0

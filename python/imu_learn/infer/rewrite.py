@@ -19,7 +19,7 @@ import json
 import os
 import shutil
 from pathlib import Path
-from typing import Any, Dict, Optional, Sequence
+from typing import Any, Callable, Dict, Optional, Sequence
 
 import numpy as np
 
@@ -29,6 +29,7 @@ from imu_learn.errors import InvalidInputError
 from imu_learn.infer.bias import Step, still_along_gravity  # noqa: F401  (their home is infer.bias)
 from imu_learn.infer.guard import residual_rms
 from imu_learn.util.atomic import atomic_write_text
+from imu_learn.util.interrupts import held_interrupts
 
 
 def output_file(src: ImuSource, out: Path) -> Path:
@@ -83,24 +84,28 @@ def check_output(src: ImuSource, input: Path, output: Path, copy_folder: bool = 
 
 
 def rewrite_recording(src: ImuSource, input: Path, output: Path, steps: Sequence[Step], copy_folder: bool = False,
-                      fill_covariance: bool = False) -> Path:
+                      fill_covariance: bool = False, then: Callable[[Path], None] = lambda target: None) -> Path:
     """``src`` with its IMU passed through ``steps`` in order, written to ``output`` in the input's
     own format (``copy_folder``: the whole input folder copied first; ``fill_covariance``: a bag's
-    IMU covariance fields get the last step's variances). Returns the file (or ROS 2 bag folder)
-    written."""
+    IMU covariance fields get the last step's variances). ``then(target)`` writes what goes beside it
+    (refine's summary): the IMU and it are written with Ctrl-C held, so an interrupted rerun leaves both
+    files of the previous run or both of this one, never this run's IMU beside that run's summary.
+    Returns the file (or ROS 2 bag folder) written."""
     target = check_output(src, input, output, copy_folder, fill_covariance)
     gyro, acc, var = src.gyro, src.acc, None
     for step in steps:
         gyro, acc, v = step(src.t_ns, gyro, acc)
         var = v if v is not None else var
-    if fill_covariance:
-        if var is None:
-            raise InvalidInputError("--fill-covariance needs a model with a covariance head")
-        formats.rosbag.write_imu(src, target, gyro, acc, variances=var)
-        return target
-    if copy_folder:
+    if fill_covariance and var is None:
+        raise InvalidInputError("--fill-covariance needs a model with a covariance head")
+    if copy_folder:  # into a new or empty folder (check_output): nothing of a previous run to mix with
         shutil.copytree(src.root, Path(output), dirs_exist_ok=True)
-    formats.write_imu(src, target, gyro, acc)
+    with held_interrupts():
+        if fill_covariance:
+            formats.rosbag.write_imu(src, target, gyro, acc, variances=var)
+        else:
+            formats.write_imu(src, target, gyro, acc)
+        then(target)
     return target
 
 
