@@ -75,6 +75,7 @@ SLOW = {
         "test_refine_ctrl_c_midway_through_its_imu_writes_both_files_then_stops",
         "test_refine_killed_midway_keeps_the_previous_output_then_reruns",
         "test_evaluate_sigint_midway_then_rerun",
+        "test_evaluate_rerun_interrupted_while_writing_its_report_leaves_the_previous_report_whole",
         "test_labels_sigterm_midway_then_resume",
         "test_fuse_sigterm_midway_then_rerun",
     },

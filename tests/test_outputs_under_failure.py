@@ -616,6 +616,26 @@ def test_evaluate_sigint_midway_then_rerun(tmp_path):
     assert_complete(out / "report.md")
 
 
+def test_evaluate_rerun_interrupted_while_writing_its_report_leaves_the_previous_report_whole(tmp_path):
+    """A report of raw and timing, then a rerun of raw alone stopped by Ctrl-C once its CSVs are written (in result.json): every
+    file of the previous report byte for byte (a new user's SIGINT found the rerun's CSVs beside the previous
+    report.md, which named a method they lack), and the line says so. Rerun to the end: the new report alone."""
+    out = tmp_path / "out"
+    assert evaluate(out, "raw,timing") == 0
+    report = lambda: {k: v for k, v in files(out).items() if not k.startswith("methods")}  # noqa: E731
+    before = report()
+    marker = tmp_path / "fired"
+    proc = faulty_cli("*result.json*", 1, "pause", marker, "imu_learn.evaluate", *EVAL_ARGS, "--methods", "raw",
+                      "--out", out)
+    err = signal_midway(proc, marker, signal.SIGINT)
+    assert proc.returncode == 130, err
+    assert "the report is the previous run's, whole" in err.strip().splitlines()[-1], err
+    assert report() == before
+    assert [p for p in out.iterdir() if p.name.endswith(".staging")] == []
+    assert evaluate(out, "raw") == 0
+    assert b"timing" not in report()["relative_pose.csv"] and set(report()) == set(before)
+
+
 def test_evaluate_read_only_report_folder(out_dir, saver, capsys, monkeypatch):
     assert evaluate(out_dir) == 0
     before = files(out_dir)

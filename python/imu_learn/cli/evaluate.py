@@ -38,6 +38,15 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help="load fitted methods from the report folder when settings and split match")
 
 
+def _stamp(path: Path) -> Optional[int]:
+    """``path``'s inode and modification time (None: absent): a report swapped in is another file."""
+    try:
+        st = path.stat()
+    except FileNotFoundError:
+        return None
+    return st.st_ino * 10 ** 20 + st.st_mtime_ns
+
+
 def run(args: argparse.Namespace, rest: List[str], keep: Callable[[Any], None]) -> int:
     t0 = time.time()
     require_extra("eval", "imu-learn evaluate")  # before any fitting: its report needs polars and matplotlib
@@ -53,7 +62,15 @@ def run(args: argparse.Namespace, rest: List[str], keep: Callable[[Any], None]) 
     if args.checkpoint is not None and not args.checkpoint.exists():
         raise FileNotFoundError(2, "No such file or directory", str(args.checkpoint))
     out = args.out or Path(res.cfg.reports_dir) / res.cfg.name
-    keep(f"methods fitted so far are in {out / 'methods'} (rerun with --reuse)")
+    before = _stamp(out / "report.md")
+
+    def kept() -> str:
+        now = _stamp(out / "report.md")
+        report = ("no report is written" if now is None else "the report is the previous run's, whole" if now == before
+                  else "the report is this run's, complete")
+        return f"methods fitted so far are in {out / 'methods'} (rerun with --reuse); {report}"
+
+    keep(kept)
     result = run_evaluation(res, methods, out, reuse=args.reuse, checkpoint=args.checkpoint,
                             progress=not args.quiet, t_start=t0)
     print(report.summary_text(result))

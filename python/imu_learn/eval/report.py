@@ -2,8 +2,7 @@
 and the quoted (published, NOT measured here) figures the results are compared against.
 
 Everything here formats the result dict that :func:`imu_learn.evaluate.run_evaluation` builds;
-nothing is computed from data. Every file is written through :mod:`imu_learn.util.atomic` (complete or
-not at all), ``report.md`` last.
+nothing is computed from data. The report's files go into the output folder together (:func:`write_report`).
 """
 from __future__ import annotations
 
@@ -24,6 +23,7 @@ from imu_learn.score.protocol import (
 )
 from imu_learn.util.atomic import atomic_write_bytes, atomic_write_text
 from imu_learn.util.extras import require
+from imu_learn.util.staging import staged_dir
 
 # ---------------------------------------------------------------------------------------------
 # quoted figures (copied from publications; never our measurements)
@@ -465,22 +465,27 @@ def markdown(result: Dict[str, Any], rel: List[Dict[str, Any]], air: List[Dict[s
     return "\n".join(L)
 
 
+CSV_NAMES = ("relative_pose.csv", "airimu_figures.csv", "integration_error.csv", "errors_all_horizons.csv",
+             "startup_bias.csv", "peers.csv", "quoted_paper_table2.csv")
+# every file a report holds (methods/, the fitted methods' cache that --reuse reads, is not the report's)
+REPORT_NAMES = CSV_NAMES + ("result.json", "report.md") + tuple(f"integration_error_{v}.png" for v in VARIANTS)
+
+
 def write_report(out_dir: Path, result: Dict[str, Any]) -> None:
-    out_dir = Path(out_dir)
-    out_dir.mkdir(parents=True, exist_ok=True)
+    """Every file of the report into a staging folder, put in ``out_dir`` together at the end
+    (:func:`imu_learn.util.staging.staged_dir`): an interrupted or failed rerun leaves the previous
+    report whole (its CSVs never beside another run's report.md); methods/ is kept."""
     rel = relative_pose_table(result)
     air = airimu_table(result)
     curves = curve_table(result)
-    csvs = {"relative_pose.csv": rel, "airimu_figures.csv": air, "integration_error.csv": curves,
-            "errors_all_horizons.csv": result["rows"], "startup_bias.csv": result["biases"],
-            "peers.csv": peers_table(result),
-            "quoted_paper_table2.csv": quoted_rows()}
-    for name, rows in csvs.items():
-        _write_csv(out_dir / name, rows)
-    pngs = plot_curves(result, curves, out_dir)
-    atomic_write_text(out_dir / "result.json",
-                      json.dumps({k: v for k, v in result.items() if k != "rows"}, indent=2, default=str))
-    atomic_write_text(out_dir / "report.md", markdown(result, rel, air, pngs, list(csvs) + ["result.json"]))
+    csvs = dict(zip(CSV_NAMES, (rel, air, curves, result["rows"], result["biases"], peers_table(result), quoted_rows())))
+    with staged_dir(Path(out_dir), REPORT_NAMES) as stage:
+        for name, rows in csvs.items():
+            _write_csv(stage / name, rows)
+        pngs = plot_curves(result, curves, stage)
+        atomic_write_text(stage / "result.json",
+                          json.dumps({k: v for k, v in result.items() if k != "rows"}, indent=2, default=str))
+        atomic_write_text(stage / "report.md", markdown(result, rel, air, pngs, list(csvs) + ["result.json"]))
 
 
 def floor_table(result: Dict[str, Any]) -> List[Dict[str, Any]]:

@@ -37,9 +37,21 @@ def _target(out: Path) -> Path:
     return out.resolve() if out.is_symlink() else Path(os.path.abspath(out))
 
 
+def _own_file_system(target: Path) -> bool:
+    """``target`` is a folder on another file system than its parent (a mount point): files cannot be
+    renamed into it from beside it."""
+    try:
+        return target.is_dir() and (os.path.ismount(target) or target.stat().st_dev != target.parent.stat().st_dev)
+    except OSError:
+        return False
+
+
 def _stage_beside(target: Path) -> Path:
-    """A new, empty staging folder beside ``target`` (inside it when its parent is not writable)."""
+    """A new, empty staging folder beside ``target`` (inside it when its parent is not writable or is on
+    another file system)."""
     target.parent.mkdir(parents=True, exist_ok=True)
+    if _own_file_system(target):
+        return Path(tempfile.mkdtemp(prefix=".", suffix=".staging", dir=target))
     try:
         return Path(tempfile.mkdtemp(prefix=f".{target.name}.", suffix=".staging", dir=target.parent))
     except PermissionError:
@@ -131,6 +143,24 @@ def staged_dir(out: PathLike, owned: Collection[str] = (),
             commit(stage, out, owned)
             if on_commit is not None:
                 on_commit()
+    except OSError as e:
+        shutil.rmtree(stage, ignore_errors=True)
+        raise _final_name(e, stage, target) from None
     except BaseException:
         shutil.rmtree(stage, ignore_errors=True)
         raise
+
+
+def _final_name(e: OSError, stage: Path, target: Path) -> OSError:
+    """``e`` naming the output's final path where it names the staging folder's (a one-line report
+    names the file the user asked for, not a folder that is gone)."""
+    def final(name: object) -> object:
+        text = str(name) if name is not None else ""
+        return str(target) + text[len(str(stage)):] if text.startswith(str(stage)) else name
+
+    message = str(e).replace(str(stage), str(target))
+    if e.errno is None:
+        return type(e)(message) if message != str(e) else e
+    out = type(e)(e.errno, e.strerror, final(e.filename), None, final(e.filename2)) if e.filename2 is not None \
+        else type(e)(e.errno, e.strerror, final(e.filename))
+    return out
