@@ -101,6 +101,11 @@ def test_check_of_a_synthetic_recording_names_its_frame_and_clock():
     assert row.tau_ms == pytest.approx(7.5, abs=0.5)
     assert row.verdict.startswith("rotated 3.0° off the IMU, GT +") and row.verdict.endswith(" ms late")
     assert row.after_rot[0] < row.n200[0]  # R_off applied: the rotation agrees better
+    # the recommendation quotes (and ranks by) the figures after the rotation and lag, not before: a camera-frame VO
+    # read 11.3 deg over 1 s beside "use", 0.22 deg once its 89 deg rotation was applied
+    line = gr.summary_line("synthetic", [row], gr.pick_best([row])["synthetic"])
+    assert f"1 s rot {row.after_hold[0]:.3f}°" in line and "after its rotation and lag" in line
+    assert f"{row.n200[0]:.3f}°" not in line and row.after_hold[0] < 0.5 * row.n200[0]
 
 
 def test_a_reference_world_not_along_gravity_is_levelled_before_translation_and_lever_arm():
@@ -187,7 +192,7 @@ def test_command_picks_the_ground_truth_that_agrees_best(capsys):
     out = capsys.readouterr().out.splitlines()
     assert "  verdict: rotated 1.1° off the IMU" in out
     assert out[-1].startswith("V1_01_easy: use groundtruth_state_20hz.csv (IMU frame;")
-    assert out[-1].endswith("others groundtruth_pose.tum: 0.486°")
+    assert out[-1].endswith("others groundtruth_pose.tum: 0.310°")  # after its 1.1° rotation (0.486° before)
 
 
 def test_command_errors_are_one_line(tmp_path, capsys):
