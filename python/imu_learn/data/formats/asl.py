@@ -66,7 +66,7 @@ def find_groundtruth(root: Path) -> Path:
             return root / rel
     raise InvalidInputError(
         f"{root}: no ground truth found (looked for {', '.join(GROUNDTRUTH_CANDIDATES)}); "
-        "pass groundtruth= a TUM or ASL ground-truth file"
+        "give a TUM or ASL ground-truth file (--groundtruth FILE; groundtruth = \"FILE\" in a config)"
     )
 
 

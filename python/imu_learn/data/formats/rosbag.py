@@ -383,7 +383,8 @@ def read_recording(
     """IMU and ground truth of a bag; ground truth from ``groundtruth`` (a TUM / ASL file beside
     the bag, as EuRoC ships its state estimate) or else from a pose topic of the bag."""
     if groundtruth is not None and groundtruth_topic is not None:
-        raise InvalidInputError("give either groundtruth= (a file) or groundtruth_topic= (a bag topic), not both")
+        raise InvalidInputError("give either a ground-truth file (--groundtruth) or a bag topic (--groundtruth-topic), "
+                                "not both")
     imu = read_imu(path, imu_topic)
     if groundtruth is not None:
         return imu, read_groundtruth(Path(groundtruth), allow_float_timestamps)
