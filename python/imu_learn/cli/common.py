@@ -4,7 +4,9 @@ wrapper (:func:`run_command`).
 * A known error (:class:`imu_learn.errors.ImuError` and its subclasses, :class:`OSError` incl.
   FileNotFoundError / PermissionError) prints ``imu-learn <cmd>: error: <Class>: <message>`` on one
   line on stderr and exits 2; with ``--traceback`` it is re-raised instead.
-* Ctrl-C prints ``imu-learn <cmd>: interrupted`` (and what was kept) and exits 130.
+* Ctrl-C prints ``imu-learn <cmd>: interrupted`` (and what was kept) and exits 130. SIGTERM (``timeout``,
+  ``docker stop``, a batch scheduler) stops the same way, through the same clean-up, and exits 143
+  (:func:`sigterm_as_interrupt`).
 * Any other exception is a bug: it is never caught, Python prints its traceback.
 * Logging of the library goes to stderr as ``imu-learn <cmd>: message`` (INFO; WARNING with
   ``--quiet``, which also turns the progress bars off). Results go to stdout.
@@ -15,7 +17,9 @@ import argparse
 import contextlib
 import importlib
 import logging
+import signal
 import sys
+import threading
 from typing import Any, Callable, Dict, Iterator, List, Optional, Sequence, Union
 
 from imu_learn.cli.interrupt import held_sigint
@@ -27,6 +31,7 @@ from imu_learn.settings import DATA_ROOT_ENV
 EXIT_OK = 0
 EXIT_ERROR = 2
 EXIT_INTERRUPTED = 130
+EXIT_TERMINATED = 143  # 128 + SIGTERM
 KNOWN_ERRORS = (ImuError, OSError)
 
 # subcommand -> one-line help; each lives in imu_learn.cli.<name> (module imported only when run)
@@ -145,13 +150,40 @@ def parser(name: str) -> argparse.ArgumentParser:
     return p
 
 
+@contextlib.contextmanager
+def sigterm_as_interrupt() -> Iterator[List[int]]:
+    """Within the block SIGTERM is raised as a Ctrl-C (SIGINT to this process), so the outputs' clean-up runs
+    as for one, and Ctrl-C held while outputs go in holds it too; yields a list that gets SIGTERM's number
+    once one came. Where SIGTERM is not at its default (a caller's handler) or off the main thread: as is."""
+    came: List[int] = []
+    if threading.current_thread() is not threading.main_thread() or signal.getsignal(signal.SIGTERM) != signal.SIG_DFL:
+        yield came
+        return
+
+    def as_sigint(signum: int, frame: Any) -> None:
+        came.append(signum)
+        signal.raise_signal(signal.SIGINT)
+
+    signal.signal(signal.SIGTERM, as_sigint)
+    try:
+        yield came
+    finally:
+        signal.signal(signal.SIGTERM, signal.SIG_DFL)
+
+
 def run_command(name: str, argv: Optional[Sequence[str]] = None, **hooks: Any) -> int:
     """Parse ``argv`` for subcommand ``name`` and run it under the one error rule (module doc)."""
+    with sigterm_as_interrupt() as terminated:
+        code = _run_command(name, argv, terminated, **hooks)
+    return EXIT_TERMINATED if terminated and code == EXIT_INTERRUPTED else code
+
+
+def _run_command(name: str, argv: Optional[Sequence[str]], terminated: List[int], **hooks: Any) -> int:
     try:
         with held_sigint():
             mod = importlib.import_module(f"imu_learn.cli.{name}")
     except KeyboardInterrupt:  # while its modules load (GTSAM, torch: seconds)
-        sys.stderr.write(f"{prog(name)}: interrupted\n")
+        sys.stderr.write(f"{prog(name)}: {'terminated (SIGTERM)' if terminated else 'interrupted'}\n")
         return EXIT_INTERRUPTED
     p = parser(name)
     argv = list(sys.argv[1:] if argv is None else argv)
@@ -171,5 +203,6 @@ def run_command(name: str, argv: Optional[Sequence[str]] = None, **hooks: Any) -
     except KeyboardInterrupt:
         said = [k() if callable(k) else k for k in kept]
         said = [s for s in said if s]
-        sys.stderr.write(f"{prog(name)}: interrupted{'; ' + '; '.join(said) if said else ''}\n")
+        word = "terminated (SIGTERM)" if terminated else "interrupted"
+        sys.stderr.write(f"{prog(name)}: {word}{'; ' + '; '.join(said) if said else ''}\n")
         return EXIT_INTERRUPTED
