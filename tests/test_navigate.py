@@ -351,6 +351,23 @@ def test_cli_scores_with_groundtruth_and_gaps(crop_without_groundtruth, tmp_path
     assert sc["smoothed"]["gaps"][0]["max_m"] > sc["smoothed"]["outside_gaps_rmse_m"]
     assert sc["smoothed"]["pos_rmse_m"] == pytest.approx(aligned_rmse(out / "smoothed.tum", SHIPPED / CROP / GT_REL))
     assert "aligned position RMSE causal" in cap.out and "aiding alone" in cap.out
+    # the aiding is the truth, so any fused track is worse than it at its stamps: the verdict and the line say so
+    assert sc["against_aiding"]["worse"] == ["causal", "smoothed"]
+    assert sc["against_aiding"]["ratio"]["causal"] == pytest.approx(
+        sc["causal_at_aiding_stamps"]["pos_rmse_m"] / sc["aiding_only"]["pos_rmse_m"])
+    assert "the aiding alone: fusion made its positions worse there" in cap.out
+
+
+def test_a_fused_track_above_the_aiding_alone_is_named_and_one_at_or_below_is_not():
+    from imu_learn.fuse.score import against_aiding
+
+    def scores(causal, smoothed, alone):
+        return {"causal_at_aiding_stamps": {"pos_rmse_m": causal}, "smoothed_at_aiding_stamps": {"pos_rmse_m": smoothed},
+                "aiding_only": {"pos_rmse_m": alone}}
+
+    v = against_aiding(scores(0.0320, 0.0292, 0.0310))  # V2_02 with the raw IMU: causal 3 % above
+    assert v["worse"] == ["causal"] and v["ratio"]["causal"] == pytest.approx(0.0320 / 0.0310)
+    assert against_aiding(scores(0.0312, 0.0300, 0.0310))["worse"] == []  # within 1 %: not said
 
 
 def test_cli_input_errors_are_one_line(crop_without_groundtruth, tmp_path, capsys):

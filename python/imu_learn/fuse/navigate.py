@@ -1142,6 +1142,11 @@ def one_line(summary: Dict[str, object]) -> str:
             text += (f"; at the aiding's stamps causal {sc['causal_at_aiding_stamps']['pos_rmse_m']:.3f} m, smoothed "
                      f"{sc['smoothed_at_aiding_stamps']['pos_rmse_m']:.3f} m, aiding alone "
                      f"{sc['aiding_only']['pos_rmse_m']:.3f} m")
+            worse = (sc.get("against_aiding") or {}).get("worse") or []
+            if worse:
+                ratio = sc["against_aiding"]["ratio"]
+                text += (" (" + " and ".join(f"{k} x{ratio[k]:.3f}" for k in worse)
+                         + " the aiding alone: fusion made its positions worse there)")
         elif sc.get("aiding_only"):
             text += f", aiding alone {sc['aiding_only']['pos_rmse_m']:.3f} m"
         ends = [g["end_m"] for g in sc["causal"].get("gaps") or [] if g.get("end_m") is not None]

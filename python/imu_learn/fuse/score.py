@@ -5,6 +5,7 @@ ground truth's frame, or a ground-truth first state); after a rigid SE(3) alignm
 ``evo_ape -a``) where it does not (relative aiding started from the data)."""
 from __future__ import annotations
 
+import math
 from dataclasses import replace
 from pathlib import Path
 from typing import Dict, Optional, Sequence, Tuple
@@ -191,7 +192,20 @@ def score_against(groundtruth: Path, kf_t: np.ndarray, res, rows, R_WA: np.ndarr
             for kind, p, R in (("causal", res.causal_p, res.causal_R), ("smoothed", res.smoothed_p, res.smoothed_R)):
                 gi, gp, gR = interpolate_groundtruth(gt, kf_t[ks])
                 out[f"{kind}_at_aiding_stamps"], _, _, _ = _errors(p[ks][gi], R[ks][gi], gp, gR, align)
+            out["against_aiding"] = against_aiding(out)
     return out
+
+
+WORSE_THAN_AIDING = 0.01  # a fused track more than 1 % above the aiding alone at its stamps is said
+
+
+def against_aiding(scores: Dict[str, object]) -> Dict[str, object]:
+    """Each fused track's position RMSE at the aiding's stamps over the aiding's alone, and the tracks
+    above it by more than :data:`WORSE_THAN_AIDING` (fusion made the aiding's positions worse there)."""
+    alone = float(scores["aiding_only"]["pos_rmse_m"])
+    ratios = {k: float(scores[f"{k}_at_aiding_stamps"]["pos_rmse_m"]) / alone if alone > 0 else math.nan
+              for k in ("causal", "smoothed")}
+    return {"ratio": ratios, "worse": [k for k, r in ratios.items() if r > 1 + WORSE_THAN_AIDING]}
 
 
 def score_against_fixes(fixes, kf_t: np.ndarray, res, lever: np.ndarray, origin_llh: Seq[float], t0_ns: int,
