@@ -152,8 +152,10 @@ def test_tlio_style_is_a_fusion_input_that_adds_factors(shipped, tiny_tlio, tmp_
     cfg = validate(FuseConfig(init="groundtruth", name="t", data_root=str(shipped), inputs=["raw", "tlio-style"], recordings=[rec],
                               methods_dir=str(methods), scenarios=[scn]))
     out = tmp_path / "o"
-    res = run_experiment(cfg, out, lambda msg: None, only_inputs=["raw"])
+    said = []
+    res = run_experiment(cfg, out, said.append, only_inputs=["raw"])
     assert list(res) == ["MH_04_difficult|g|raw|s0"]
+    assert [x for x in said if x.startswith("[")][0].startswith("[1/1] ")  # the runs asked for, not every input's
     res = run_experiment(cfg, out, lambda msg: None, only_inputs=["tlio-style"])
     assert set(res) == {"MH_04_difficult|g|raw|s0", "MH_04_difficult|g|tlio-style|s0"}  # raw kept
     r = res["MH_04_difficult|g|tlio-style|s0"]

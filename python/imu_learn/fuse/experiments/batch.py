@@ -229,12 +229,13 @@ def run_experiment(cfg: FuseConfig, out: Path, log: Callable[[str], None] = prin
     results = read_runs(res_path, log)
     wanted = {run_key(spec, scn, name, seed): run_hash(cfg, spec, scn, name, seed)
               for spec in cfg.recordings for scn in cfg.scenarios for seed in seeds_of(cfg, scn) for name in cfg.inputs}
-    total = len(wanted)
     kept = {k: r for k, r in results.items()
             if wanted.get(k) == r.get("hash") or (only_inputs and r.get("input") not in run_inputs)}
-    if kept:
-        log(f"imu_learn.fuse: {len(kept)} of {total} runs already in {res_path} with these settings")
-    runs = RunQueue(int(jobs), res_path, cfg, kept, wanted, log)
+    todo = [k for k in wanted if k.split("|")[2] in run_inputs]  # the runs of the inputs asked for (--inputs)
+    done = sum(k in kept for k in todo)
+    if done:
+        log(f"imu_learn.fuse: {done} of {len(todo)} runs already in {res_path} with these settings")
+    runs = RunQueue(int(jobs), res_path, cfg, kept, wanted, log, total=len(todo))
     plots: List[Callable[[], None]] = []
     with runs:
         for spec in cfg.recordings:
@@ -267,9 +268,11 @@ def _submit_recording(cfg: FuseConfig, out: Path, spec: RecordingSpec, run_input
                 runs.log(f"{rname}|{scn.name}: {aiding.label}: {aiding.dropped_outside} fixes outside the IMU segment "
                          f"and {aiding.dropped_unmatched} without an IMU sample of their own left out")
             for name in cfg.inputs:
+                if name not in run_inputs:
+                    continue
                 key = run_key(spec, scn, name, seed)
                 runs.count += 1
-                if aiding is None or key in runs.results or name not in run_inputs:
+                if aiding is None or key in runs.results:
                     continue
                 gyro, acc, var = inputs[name]
                 displacement = displacement_of(cfg, spec, name, processors)
@@ -307,10 +310,11 @@ class RunQueue:
     interrupted experiment resumes from the runs that ended."""
 
     def __init__(self, jobs: int, res_path: Path, cfg: FuseConfig, results: Dict[str, dict], wanted: Dict[str, str],
-                 log: Callable[[str], None]) -> None:
+                 log: Callable[[str], None], total: Optional[int] = None) -> None:
         self.jobs, self.res_path, self.cfg, self.log = jobs, res_path, cfg, log
         self.results, self.wanted = dict(results), wanted
         self.count = 0  # runs looked at so far, for the progress lines
+        self.total = len(wanted) if total is None else int(total)  # the runs asked for (--inputs), of the lines
         self._pool = None
         self._futures: Dict[object, Tuple[str, Optional[int], int]] = {}
         self._env: Dict[str, Optional[str]] = {}
@@ -357,7 +361,7 @@ class RunQueue:
         order = {k: i for i, k in enumerate(self.wanted)}
         self.results = dict(sorted(self.results.items(), key=lambda kv: order.get(kv[0], len(order))))
         save_results(self.res_path, self.cfg, self.results)
-        self.log(f"[{n}/{len(self.wanted)}] {key}: " + (f"failed: {r['failed'][:120]}" if "failed" in r else
+        self.log(f"[{n}/{self.total}] {key}: " + (f"failed: {r['failed'][:120]}" if "failed" in r else
                  f"position RMSE causal {r['causal']['pos_rmse_m']:.3f} m, smoothed "
                  f"{r['smoothed']['pos_rmse_m']:.3f} m ({r['seconds']:.0f} s)"))
 
