@@ -268,3 +268,15 @@ def test_a_cut_last_line_and_a_csv_without_its_map_name_the_option(tmp_path, cap
                str(tmp_path / "o"), "--no-plot", "--quiet"])
     err = capsys.readouterr().err
     assert rc == 2 and "HeaderError" in err and "--columns" in err and "--time-unit" in err, err
+
+
+def test_a_decimal_comma_is_named(tmp_path, capsys):
+    """A spreadsheet in a locale with decimal commas (fields split by ';'): the one line names the likely cause."""
+    t, g, a = samples()
+    f = write(tmp_path / "comma.csv", t, g, a, header="t;gx;gy;gz;ax;ay;az")
+    text = f.read_text().splitlines()
+    rows = [text[0]] + [";".join(x.replace(".", ",") for x in line.split(",")) for line in text[1:]]
+    f.write_text("\n".join(rows) + "\n")
+    rc, err = calibrate(capsys, f, "--columns", MAP)
+    assert rc == 2 and err.count("\n") == 1 and err.startswith("imu-learn calibrate: error: NotNumericError: "), err
+    assert ":2:2: " in err and "is not a number; a decimal comma?" in err and "'.' as the decimal separator" in err

@@ -30,6 +30,7 @@ the file's units; header, comments, time and every other column keep their text.
 from __future__ import annotations
 
 import logging
+import re
 from pathlib import Path
 from typing import Optional, Tuple
 
@@ -98,6 +99,9 @@ def last_line(path: Path) -> int:
     return n
 
 
+DECIMAL_COMMA = re.compile(r'= "[-+]?\d+,\d+" is not a number')  # 0,123: a locale's decimal comma
+
+
 def read_checked(path: Path, layout: CsvColumns) -> Tuple[ImuData, Tuple[int, ...]]:
     """The samples of a user's CSV read with ``layout``, checked (:mod:`imu_learn.data.formats.input_checks`)
     before anything is done with them, and the 1-based lines skipped (``layout.skip_bad_lines``)."""
@@ -106,6 +110,9 @@ def read_checked(path: Path, layout: CsvColumns) -> Tuple[ImuData, Tuple[int, ..
     except NotNumericError as e:
         better = explain_time_overflow(Path(path), e, layout)
         if better is None:
+            if DECIMAL_COMMA.search(str(e)):
+                e.add_note("a decimal comma? the reader takes decimal points: export the file with '.' as the "
+                           "decimal separator (and ',' or ';' between fields)")
             raise
         raise better from e
     except TimestampError as e:
