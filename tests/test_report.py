@@ -78,6 +78,16 @@ def test_quoted_rows_are_marked_and_match_the_paper():
     assert {(r["sequence"], r["method"]) for r in rows} == {(s, m) for s in order for m in methods}
 
 
+def test_a_run_on_another_dataset_quotes_no_euroc_table():
+    """The paper's Table II is EuRoC's: a TUM-VI run's report says so instead of quoting it (it quoted it)."""
+    tumvi = {"roots": [{"path": "tum-vi/dataset-room1_512_16", "format": "tum-vi"}]}
+    euroc = {"roots": [{"path": "euroc/MH_01_easy", "format": "euroc"}]}
+    assert report.quoted_rows(tumvi) == [] and len(report.quoted_rows(euroc)) == len(report.quoted_rows())
+    text = report.quoted_section(tumvi)
+    assert "(quoted)" not in text and "quotes EuRoC flights; this run's recordings are tum-vi" in text
+    assert report.quoted_section(euroc) == report.quoted_section()
+
+
 def test_quoted_section_prints_the_paper_numbers():
     methods, table, order = paper_table2()
     text = report.quoted_section()

@@ -61,8 +61,17 @@ AIRIMU_NOTE = (
 )
 
 
-def quoted_rows() -> List[Dict[str, Any]]:
-    """The paper's Table II as rows, each marked as quoted."""
+def quotes_euroc(result: Optional[Dict[str, Any]]) -> bool:
+    """Whether the run's recordings are EuRoC's (the paper's Table II quotes EuRoC flights only); a result
+    without its roots (older ones) is taken as EuRoC's, as before."""
+    formats = {str(r.get("format", "")).lower() for r in (result or {}).get("roots") or []}
+    return not formats or formats <= {"euroc", "asl"}
+
+
+def quoted_rows(result: Optional[Dict[str, Any]] = None) -> List[Dict[str, Any]]:
+    """The paper's Table II as rows, each marked as quoted (none for a run on another dataset)."""
+    if not quotes_euroc(result):
+        return []
     out = []
     for seq in PAPER_TABLE2_SEQUENCES:
         for m in PAPER_TABLE2_METHODS:
@@ -72,7 +81,12 @@ def quoted_rows() -> List[Dict[str, Any]]:
     return out
 
 
-def quoted_section() -> str:
+def quoted_section(result: Optional[Dict[str, Any]] = None) -> str:
+    if not quotes_euroc(result):
+        formats = sorted({str(r.get("format", "")) for r in result["roots"]})
+        return "\n".join(["## Quoted figures (published; NOT measured here)", "",
+                          f"The paper's Table II quotes EuRoC flights; this run's recordings are {', '.join(formats)}: "
+                          "nothing to quote beside them.", "", f"**AirIMU:** {AIRIMU_NOTE}", ""])
     head = "| Sequence (paper's test set) | " + " | ".join(PAPER_TABLE2_METHODS) + " |"
     lines = [
         "## Quoted figures (published; NOT measured here)",
@@ -460,7 +474,7 @@ def markdown(result: Dict[str, Any], rel: List[Dict[str, Any]], air: List[Dict[s
     """``report.md``: one section after another, each built from ``result`` by its own function."""
     r = result
     L = (_md_head(r) + _md_data(r) + _md_versions(r) + _md_methods(r) + _md_relative_pose(r, rel)
-         + _md_floor(r) + _md_airimu(r, air) + _md_peers(r, peers_table(r)) + _md_curves(r, pngs) + _md_calibration(r) + _md_biases(r) + [quoted_section()])
+         + _md_floor(r) + _md_airimu(r, air) + _md_peers(r, peers_table(r)) + _md_curves(r, pngs) + _md_calibration(r) + _md_biases(r) + [quoted_section(r)])
     L += ["## Files", ""] + [f"- `{c}`" for c in csvs + pngs] + ["- `methods/`: fitted methods and their fit records", ""]
     return "\n".join(L)
 
@@ -478,7 +492,7 @@ def write_report(out_dir: Path, result: Dict[str, Any]) -> None:
     rel = relative_pose_table(result)
     air = airimu_table(result)
     curves = curve_table(result)
-    csvs = dict(zip(CSV_NAMES, (rel, air, curves, result["rows"], result["biases"], peers_table(result), quoted_rows())))
+    csvs = dict(zip(CSV_NAMES, (rel, air, curves, result["rows"], result["biases"], peers_table(result), quoted_rows(result))))
     with staged_dir(Path(out_dir), REPORT_NAMES) as stage:
         for name, rows in csvs.items():
             _write_csv(stage / name, rows)
