@@ -180,6 +180,17 @@ def test_another_recordings_reference_is_refused():
         resolve_frame([(imu, reference_of(other))])
 
 
+def test_a_pair_that_does_not_overlap_is_named():
+    """Two recordings, the second's reference on another clock (no overlap): the one line names that pair
+    (it said "the reference overlaps the IMU for 0.0 s" with no name)."""
+    imu, seg = flight(seed=0)
+    imu2, seg2 = flight(seed=1)
+    late = reference_of(seg2)
+    late = GroundTruth(late.t_ns + int(1e12), late.p, late.q_wxyz)
+    with pytest.raises(ReferenceFrameError, match=r"^room3: the reference overlaps the IMU for 0\.0 s"):
+        resolve_frame([(imu, reference_of(seg)), (imu2, late)], names=["room1", "room3"])
+
+
 def test_a_lag_beyond_the_search_is_refused():
     imu, seg = flight(seconds=80)
     ref = reference_of(seg, lag_s=3.0)

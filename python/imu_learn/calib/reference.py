@@ -431,7 +431,10 @@ def resolve_frame(pairs: Sequence[Tuple[ImuData, GroundTruth]], options: FrameOp
     for (imu, ref), name in zip(pairs, names):
         check_orientation(ref, name)
         check_not_odometry(ref, name)
-        lag, corr, edge = fit_lag(imu, ref, options.max_lag_s)
+        try:
+            lag, corr, edge = fit_lag(imu, ref, options.max_lag_s)
+        except ReferenceFrameError as e:  # which pair, with several
+            raise ReferenceFrameError(f"{name}: {e}") from None
         if corr < options.min_correlation:
             raise ReferenceFrameError(
                 f"{name}: the reference's rotation does not follow the IMU's (|w| correlation {corr:.2f} at its best "

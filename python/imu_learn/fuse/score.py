@@ -5,7 +5,6 @@ ground truth's frame, or a ground-truth first state); after a rigid SE(3) alignm
 ``evo_ape -a``) where it does not (relative aiding started from the data)."""
 from __future__ import annotations
 
-import math
 from dataclasses import replace
 from pathlib import Path
 from typing import Dict, Optional, Sequence, Tuple
@@ -197,14 +196,17 @@ def score_against(groundtruth: Path, kf_t: np.ndarray, res, rows, R_WA: np.ndarr
 
 
 WORSE_THAN_AIDING = 0.01  # a fused track more than 1 % above the aiding alone at its stamps is said
+AIDING_IS_TRUTH_M = 1e-4  # an aiding this close to the ground truth is the ground truth: no ratio to it
 
 
 def against_aiding(scores: Dict[str, object]) -> Dict[str, object]:
     """Each fused track's position RMSE at the aiding's stamps over the aiding's alone, and the tracks
-    above it by more than :data:`WORSE_THAN_AIDING` (fusion made the aiding's positions worse there)."""
+    above it by more than :data:`WORSE_THAN_AIDING` (fusion made the aiding's positions worse there); none
+    where the aiding is the ground truth (within :data:`AIDING_IS_TRUTH_M`: every track is above it)."""
     alone = float(scores["aiding_only"]["pos_rmse_m"])
-    ratios = {k: float(scores[f"{k}_at_aiding_stamps"]["pos_rmse_m"]) / alone if alone > 0 else math.nan
-              for k in ("causal", "smoothed")}
+    if not alone > AIDING_IS_TRUTH_M:
+        return {"ratio": None, "worse": [], "why": f"the aiding is the ground truth ({alone:.2g} m alone): no ratio"}
+    ratios = {k: float(scores[f"{k}_at_aiding_stamps"]["pos_rmse_m"]) / alone for k in ("causal", "smoothed")}
     return {"ratio": ratios, "worse": [k for k, r in ratios.items() if r > 1 + WORSE_THAN_AIDING]}
 
 
