@@ -286,6 +286,17 @@ class Estimate:
         return np.isfinite(v) & (v > 0) & ~(np.isfinite(s) & (s > 0.5 * v))
 
 
+def _reference_noise(white: np.ndarray, own: np.ndarray, band_limit: Optional[str]) -> Optional[str]:
+    """Why the residuals' white noise is not the IMU's (None: it is): a reference below the IMU's band, or a
+    density more than OWN_MARGIN x what the IMU's own samples allow (the reference's noise)."""
+    if band_limit is not None:
+        return band_limit
+    if np.any(white > OWN_MARGIN * own):
+        return (f"the residuals' white noise ({_rms(white):.3g}) lies above {OWN_MARGIN:g}x the density the IMU's own "
+                f"samples allow ({_rms(own):.3g}, their second differences in motion): it is the reference's noise")
+    return None
+
+
 def candidates(residual: Optional[ResidualNoise], allan: Optional[AllanNoise], min_still_s: float,
                band_limit: Optional[str] = None) -> List[Estimate]:
     """Every estimate of the four Kalibr figures and the bias instability, best first per figure.
@@ -318,18 +329,13 @@ def candidates(residual: Optional[ResidualNoise], allan: Optional[AllanNoise], m
                 continue
             info = {"reference_s": round(residual.seconds, 3), "tau_s": list(pl.tau_range), "points": pl.points}
             own = getattr(residual, f"{key}_own")
-            if band_limit is not None:
+            why = _reference_noise(pl.white, own, band_limit)
+            if why is not None:  # a bound, never the IMU's value
+                detail = {**info, "fit_per_axis": [float(x) for x in pl.white], "why": why}
+                if band_limit is None:
+                    detail["own_density_per_axis"] = [float(x) for x in own]
                 out.append(Estimate(f"{sensor}_noise_density", np.fmin(pl.white, upper_bound(dev, 1.0, slice(0, 3))),
-                                    np.full(3, np.nan), "residuals", "upper bound",
-                                    {**info, "fit_per_axis": [float(x) for x in pl.white], "why": band_limit}))
-            elif np.any(pl.white > OWN_MARGIN * own):  # the reference's noise (OWN_MARGIN): a bound, never the IMU's value
-                bound = np.fmin(pl.white, upper_bound(dev, 1.0, slice(0, 3)))
-                out.append(Estimate(f"{sensor}_noise_density", bound, np.full(3, np.nan), "residuals", "upper bound",
-                                    {**info, "fit_per_axis": [float(x) for x in pl.white],
-                                     "own_density_per_axis": [float(x) for x in own],
-                                     "why": f"the residuals' white noise ({_rms(pl.white):.3g}) lies above "
-                                            f"{OWN_MARGIN:g}x the density the IMU's own samples allow ({_rms(own):.3g}, "
-                                            "their second differences in motion): it is the reference's noise"}))
+                                    np.full(3, np.nan), "residuals", "upper bound", detail))
             else:
                 out.append(Estimate(f"{sensor}_noise_density", pl.white, pl.white_std, "residuals", "fit", info))
             out.append(Estimate(f"{sensor}_random_walk", pl.random_walk, pl.random_walk_std, "residuals", "fit", info))

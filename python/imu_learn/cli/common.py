@@ -6,7 +6,7 @@ wrapper (:func:`run_command`).
   line on stderr and exits 2; with ``--traceback`` it is re-raised instead.
 * Ctrl-C prints ``imu-learn <cmd>: interrupted`` (and what was kept) and exits 130. SIGTERM (``timeout``,
   ``docker stop``, a batch scheduler) stops the same way, through the same clean-up, and exits 143
-  (:func:`sigterm_as_interrupt`).
+  (:func:`imu_learn.cli.interrupt.sigterm_as_interrupt`).
 * Any other exception is a bug: it is never caught, Python prints its traceback.
 * Logging of the library goes to stderr as ``imu-learn <cmd>: message`` (INFO; WARNING with
   ``--quiet``, which also turns the progress bars off). Results go to stdout.
@@ -17,12 +17,10 @@ import argparse
 import contextlib
 import importlib
 import logging
-import signal
 import sys
-import threading
 from typing import Any, Callable, Dict, Iterator, List, Optional, Sequence, Union
 
-from imu_learn.cli.interrupt import held_sigint
+from imu_learn.cli.interrupt import held_sigint, sigterm_as_interrupt
 from imu_learn.data.formats import USER_CSV
 from imu_learn.data.formats.csv_columns import ACC_UNITS, DEFAULT_COLUMNS, GYRO_UNITS, TIME_UNITS, CsvColumns
 from imu_learn.errors import ImuError, one_line
@@ -148,27 +146,6 @@ def parser(name: str) -> argparse.ArgumentParser:
     mod.add_arguments(p)
     add_common(p)
     return p
-
-
-@contextlib.contextmanager
-def sigterm_as_interrupt() -> Iterator[List[int]]:
-    """Within the block SIGTERM is raised as a Ctrl-C (SIGINT to this process), so the outputs' clean-up runs
-    as for one, and Ctrl-C held while outputs go in holds it too; yields a list that gets SIGTERM's number
-    once one came. Where SIGTERM is not at its default (a caller's handler) or off the main thread: as is."""
-    came: List[int] = []
-    if threading.current_thread() is not threading.main_thread() or signal.getsignal(signal.SIGTERM) != signal.SIG_DFL:
-        yield came
-        return
-
-    def as_sigint(signum: int, frame: Any) -> None:
-        came.append(signum)
-        signal.raise_signal(signal.SIGINT)
-
-    signal.signal(signal.SIGTERM, as_sigint)
-    try:
-        yield came
-    finally:
-        signal.signal(signal.SIGTERM, signal.SIG_DFL)
 
 
 def run_command(name: str, argv: Optional[Sequence[str]] = None, **hooks: Any) -> int:

@@ -5,7 +5,7 @@ from __future__ import annotations
 import argparse
 import time
 from pathlib import Path
-from typing import Any, Callable, List, Optional, Sequence
+from typing import Any, Callable, List, Optional, Sequence, Tuple
 
 from imu_learn.baselines.registry import REGISTRY, is_method
 from imu_learn.cli.common import add_data_root, run_command
@@ -38,13 +38,13 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help="load fitted methods from the report folder when settings and split match")
 
 
-def _stamp(path: Path) -> Optional[int]:
+def _stamp(path: Path) -> Optional[Tuple[int, int]]:
     """``path``'s inode and modification time (None: absent): a report swapped in is another file."""
     try:
         st = path.stat()
     except FileNotFoundError:
         return None
-    return st.st_ino * 10 ** 20 + st.st_mtime_ns
+    return st.st_ino, st.st_mtime_ns
 
 
 def run(args: argparse.Namespace, rest: List[str], keep: Callable[[Any], None]) -> int:

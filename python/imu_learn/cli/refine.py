@@ -130,15 +130,15 @@ def run(args: argparse.Namespace, rest: List[str], keep: Callable[[Any], None]) 
             **correction.summary(plan, rec, rate, correction.guard_entry(plan, rec, rate)),
             "bias": bias,
         }
-        write_summary(summary_path(args.out, target), summary)
         written[:] = [target, summary_path(args.out, target)]
+        write_summary(written[1], summary)
 
     untouched = " (the input folder's copy in OUT is not refined)" if args.copy_folder else f" ({args.out} is as it was)"
     keep(lambda: f"{written[0]} and {written[1]} are this run's, complete" if written else
          f"nothing of this run's refined IMU is written{untouched}")
     target = rewrite_recording(src, args.input, args.out, [plan.apply], args.copy_folder, args.fill_covariance,
                                with_summary)
-    where = summary_path(args.out, target)
+    where = written[1]
     at = f"recording at {rates.hz(rate)}" if rate else "recording without stamps"
     print(f"refined IMU ({'; '.join(plan.words)}; {at}) written to {target}; summary {where}")
     return 0
