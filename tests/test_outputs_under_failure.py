@@ -16,7 +16,6 @@ import os
 import signal
 import subprocess
 import sys
-import threading
 import time
 from pathlib import Path
 
@@ -491,8 +490,10 @@ def test_fit_signal_midway_through_a_checkpoint_then_resume(tmp_path, sig):
     # checkpoint is written: that write is let go on (hold, then released) and the run stops after it
     action = "hold" if sig == signal.SIGTERM else "pause"
     proc = faulty_cli("*last.pt*", 2, action, marker, "imu_learn.fit", *fit_new(run, 3))
-    if sig == signal.SIGTERM:
-        threading.Timer(1.0, lambda: Path(str(marker) + ".go").write_text("")).start()
+    if sig == signal.SIGTERM:  # released only once the signal is in (released before, it met another moment)
+        release = Path(str(marker) + ".go")
+        send = proc.send_signal
+        proc.send_signal = lambda s: (send(s), time.sleep(0.5), release.write_text(""))
     signal_midway(proc, marker, sig)
     assert proc.returncode == (143 if sig == signal.SIGTERM else -sig)
     for p in run.iterdir():
