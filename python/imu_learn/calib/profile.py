@@ -42,6 +42,7 @@ import numpy as np
 from imu_learn.baselines.affine import Floor, TraditionalParams
 from imu_learn.errors import ProfileError
 from imu_learn.util.atomic import atomic_write_text
+from imu_learn.util.file_kind import mix_up
 
 PROFILE_FORMAT = "imu-learn device profile"
 PROFILE_VERSION = 1
@@ -120,18 +121,6 @@ class Affine:
     def to_dict(self) -> Dict[str, Any]:
         return {"unit": self.unit, "matrix": _arr(self.matrix), "matrix_std": _arr(self.matrix_std),
                 "bias": _arr(self.bias), "bias_std": _arr(self.bias_std)}
-
-
-def _not_a_profile(path: Path) -> str:
-    """What a file given as a profile more likely is, and what takes it."""
-    suffix = path.suffix.lower()
-    if suffix in (".pt", ".pth", ".ckpt"):
-        return ": a checkpoint? give it with --checkpoint"
-    if suffix in (".onnx", ".ts"):
-        return ": an exported model (imu-learn export)? imu-learn applies checkpoints (--checkpoint)"
-    if suffix in (".yaml", ".yml"):
-        return ": imu.yaml is the noise in Kalibr's form; give the profile.json beside it"
-    return ""
 
 
 @dataclass
@@ -286,12 +275,12 @@ class Profile:
         try:
             text = path.read_text(encoding="utf-8")
         except UnicodeDecodeError:
-            raise ProfileError(f"{path}: a binary file, not a device profile (profile.json){_not_a_profile(path)}",
+            raise ProfileError(f"{path}: a binary file, not a device profile (profile.json){mix_up(path, 'profile')}",
                                str(path)) from None
         try:
             d = json.loads(text)
         except json.JSONDecodeError as e:
-            raise ProfileError(f"{path}:{e.lineno}: not JSON ({e.msg}){_not_a_profile(path)}", str(path), e.lineno,
+            raise ProfileError(f"{path}:{e.lineno}: not JSON ({e.msg}){mix_up(path, 'profile')}", str(path), e.lineno,
                                e.colno) from None
         return cls.from_dict(d, str(path))
 

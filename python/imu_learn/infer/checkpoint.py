@@ -47,6 +47,7 @@ from imu_learn.infer.windowing import apply, attach, windowing_of_config
 from imu_learn.nn.config import ARGS_BEFORE
 from imu_learn.nn.model import ImuRefiner, ModelConfig
 from imu_learn.util.atomic import atomic_write_bytes
+from imu_learn.util.file_kind import mix_up
 
 FORMAT = "imu_learn.checkpoint.v1"
 # What the model is for (module doc), kept at the top level of a checkpoint when known.
@@ -240,19 +241,6 @@ def write_checkpoint(path: Path, state: Dict[str, Any]) -> None:
     atomic_write_bytes(path, lambda f: torch.save(signed, f))
 
 
-def _what_it_is(path: Path) -> str:
-    """What a file given as a checkpoint more likely is, and what takes it (empty: nothing known)."""
-    if path.is_dir():
-        return ": a folder; give its best.pt or last.pt"
-    with open(path, "rb") as f:
-        head = f.read(64).lstrip()
-    if head.startswith(b"{"):
-        return ": a JSON file (a device profile? apply it with --profile)"
-    if path.suffix.lower() in (".onnx", ".ts"):
-        return ": an exported model (imu-learn export); imu-learn applies the checkpoint it came from"
-    return ""
-
-
 def load_checkpoint(path: Path, map_location: str = "cpu") -> Dict[str, Any]:
     path = Path(path)
     if not path.exists():
@@ -264,7 +252,7 @@ def load_checkpoint(path: Path, map_location: str = "cpu") -> Dict[str, Any]:
             warnings.simplefilter("ignore")
             state = torch.load(path, map_location=map_location, weights_only=True)
     except Exception as e:  # torch raises many kinds for a damaged file; all mean "corrupt"
-        what = _what_it_is(path)
+        what = mix_up(path, "checkpoint")
         first = str(e).strip().splitlines()[0] if str(e).strip() else ""
         # torch's advice to load with weights_only=False (arbitrary code) is no fix for a file that is not a checkpoint
         why = "" if what else (" (torch cannot read it as a checkpoint)" if first.startswith("Weights only load failed")
