@@ -15,6 +15,11 @@ from scipy.spatial.transform import Rotation
 from imu_learn.errors import InvalidInputError
 
 MOUNT_TOL_DEG = 20.0  # a given forward axis this far from the track's: named in a warning
+# The track shows a forward axis where the levelled specific force follows its accelerations with a gain
+# of this much at least (a car 1.05, a hand-held walk 0.39; a drone, whose body turns apart from its track,
+# 0.05-0.09 on EuRoC's flights) and the axis' yaw is this well determined [deg] (car 0.3, walk 3.2).
+TRACK_MIN_GAIN = 0.25
+TRACK_MAX_ANGLE_STD_DEG = 10.0
 
 
 def forward_mounting(t_ns: np.ndarray, acc: np.ndarray, fix_t_ns: np.ndarray, fix_p: np.ndarray,
@@ -54,12 +59,16 @@ def forward_mounting(t_ns: np.ndarray, acc: np.ndarray, fix_t_ns: np.ndarray, fi
     y = np.concatenate([fh[:, 0], fh[:, 1]])
     cs, *_ = np.linalg.lstsq(A, y, rcond=None)
     res = float(np.sqrt(np.mean((A @ cs - y) ** 2)))
+    gain = float(np.hypot(cs[0], cs[1]))  # 1: the specific force is the track's acceleration
+    # the forward axis' yaw: its standard deviation from the fit's residual
+    angle_std_deg = math.degrees(res / max(gain * float(np.sqrt(np.sum(A ** 2) / 2)), 1e-12))
     fwd_l = np.array([cs[0], cs[1], 0.0]) / max(np.hypot(cs[0], cs[1]), 1e-12)
     fwd = R_lev.T @ fwd_l
     M = np.stack([fwd, np.cross(up, fwd), up])  # body = M imu: x forward, y left, z up
     yaw, pitch, roll = Rotation.from_matrix(M.T).as_euler("ZYX", degrees=True)
     return {"rpy_deg": [float(roll), float(pitch), float(yaw)], "forward_imu": fwd.tolist(), "up_imu": up.tolist(),
-            "fit_residual_mps2": res, "fixes_used": int(ok.sum())}
+            "fit_residual_mps2": res, "gain": gain, "angle_std_deg": angle_std_deg,
+            "fixes_used": int(ok.sum())}
 
 
 def _level_rotation(up: np.ndarray) -> np.ndarray:
@@ -86,3 +95,24 @@ def mounting_check(t_ns: np.ndarray, acc_imu: np.ndarray, fix_t_ns: np.ndarray, 
     angle = math.degrees(math.acos(float(np.clip(given @ np.asarray(est["forward_imu"]), -1.0, 1.0))))
     return {"checked": True, "angle_deg": round(angle, 2), "estimated_rpy_deg": [round(x, 2) for x in est["rpy_deg"]],
             "ok": angle <= MOUNT_TOL_DEG, "tolerance_deg": MOUNT_TOL_DEG}
+
+
+def track_forward(t_ns: np.ndarray, acc: np.ndarray, fix_t_ns: np.ndarray, fix_p: np.ndarray, gravity: float = 9.81,
+                  min_speed: float = 1.0) -> Dict[str, Any]:
+    """The forward axis a position track shows in the frame of ``acc`` (:func:`forward_mounting` over the
+    fixes faster than ``min_speed``), where the track shows one: a vehicle or walker moving along a body
+    axis (gain at least :data:`TRACK_MIN_GAIN`, yaw within :data:`TRACK_MAX_ANGLE_STD_DEG`); a drone
+    turning apart from its track shows none. {"shown": bool, "forward": (3,) or None, "why", the
+    estimate's figures}."""
+    try:
+        est = forward_mounting(t_ns, acc, fix_t_ns, fix_p, gravity, min_speed=min_speed)
+    except InvalidInputError as e:
+        return {"shown": False, "forward": None, "why": str(e)}
+    figures = {"gain": round(est["gain"], 3), "angle_std_deg": round(est["angle_std_deg"], 2),
+               "fixes_used": est["fixes_used"], "estimated_rpy_deg": [round(x, 2) for x in est["rpy_deg"]]}
+    if est["gain"] < TRACK_MIN_GAIN or est["angle_std_deg"] > TRACK_MAX_ANGLE_STD_DEG:
+        return {"shown": False, "forward": None, **figures,
+                "why": f"the specific force does not follow the track along one body axis (gain {est['gain']:.2f}, "
+                       f"at least {TRACK_MIN_GAIN:g}; yaw +-{est['angle_std_deg']:.1f} deg, at most "
+                       f"{TRACK_MAX_ANGLE_STD_DEG:g})"}
+    return {"shown": True, "forward": np.asarray(est["forward_imu"], dtype=np.float64), **figures, "why": ""}

@@ -66,7 +66,7 @@ class PositionKind(AidingKind):
 
     def start(self, imu: tuple, rows: AidingRows, lever: np.ndarray, bias0: np.ndarray, opts) -> Start:
         t_ns, gyro, acc = imu
-        return position_start(t_ns, gyro, acc, rows, lever, bias0, opts.gravity, opts.level_s)
+        return position_start(t_ns, gyro, acc, rows, lever, bias0, opts.gravity, opts.level_s, body_x_forward=opts.nhc)
 
     def build(self, rows, s0, R_WA, lever, opts, label, source, gnss=None):
         # fixes before the start (the track heading's first fast fix) are left out

@@ -3,15 +3,21 @@ gravity seen in it and takes the first pose's heading (:func:`pose_start`); posi
 heading from the track once moving (:func:`position_start`)."""
 from __future__ import annotations
 
+import logging
+from typing import Optional
+
 import numpy as np
 from scipy.spatial.transform import Rotation
 
 from imu_learn.core.still import MIN_STILL_START_S
 
 from ..aiding.types import AidingRows
+from ..mounting import MOUNT_TOL_DEG, track_forward
 from . import level as initial
 from .track import track_start
 from .types import Start
+
+log = logging.getLogger(__name__)
 
 
 def pose_start(t_ns, gyro, acc, rows: AidingRows, s0: int, bias0: np.ndarray, gravity: float, level_s: float
@@ -53,17 +59,46 @@ def pose_start(t_ns, gyro, acc, rows: AidingRows, s0: int, bias0: np.ndarray, gr
 
 
 def position_start(t_ns, gyro, acc, rows: AidingRows, lever: np.ndarray, bias0: np.ndarray, gravity: float,
-                   level_s: float) -> Start:
+                   level_s: float, body_x_forward: bool = False) -> Start:
     """The first state for position-only aiding ``rows``: levelled at the IMU's start, heading from the
-    track once moving (:func:`.track.track_start`), where the run starts."""
+    track once moving (:func:`.track.track_start`), where the run starts. The track's heading goes to the
+    body's x-axis where ``body_x_forward`` (``--nhc``: the mounting checked, :func:`..mounting.mounting_check`)
+    or where the track shows no other forward axis; else to the one it shows (:func:`..mounting.track_forward`:
+    a car's IMU mounted backwards, a walker's turned 90 deg, would otherwise start that far off), with a
+    warning naming ``--imu-rotation-rpy-deg``."""
     R_level, info = initial.attitude_from_accelerometer(t_ns, gyro, acc, gravity, acc_bias=bias0[3:],
                                                         level_s=level_s)
     still = info["still_s"] >= MIN_STILL_START_S
     level_end = int(np.searchsorted(t_ns, int(t_ns[0]) + int(round(info["levelled_over_s"] * 1e9))))
     # the gyro's mean over a still start is its bias: used to carry the attitude to the start
     gb = gyro[:level_end].mean(axis=0) if still else bias0[:3]
-    s0, e, R0, v0, h_info = track_start(t_ns, gyro, rows.sample, rows.p, R_level, level_end, gb)
+    forward = None if body_x_forward else forward_axis(t_ns, acc, rows, gravity, info)
+    s0, e, R0, v0, h_info = track_start(t_ns, gyro, rows.sample, rows.p, R_level, level_end, gb, forward=forward)
     info.update(h_info)
     info["velocity_source"] = "the track's central difference at the first fast fix"
     info["position_source"] = "the first fast fix (minus the lever arm)"
     return Start(s0, s0, R0, rows.p[e] - R0 @ lever, v0, bias0, info=info)
+
+
+def forward_axis(t_ns, acc, rows: AidingRows, gravity: float, info: dict) -> Optional[np.ndarray]:
+    """The body axis the track shows as forward (:func:`..mounting.track_forward`) where it is more than
+    :data:`..mounting.MOUNT_TOL_DEG` from the body's x-axis (one warning line), else None (the x-axis);
+    ``info["forward_axis"]`` says which."""
+    shown = track_forward(t_ns, acc, rows.t_ns, rows.p, gravity)
+    entry = {k: v for k, v in shown.items() if k != "forward"}
+    info["forward_axis"] = entry
+    if not shown["shown"]:
+        entry["used"] = "the body's x-axis (the track shows no forward axis)"
+        return None
+    forward = shown["forward"]
+    angle = float(np.degrees(np.arccos(np.clip(forward[0] / np.linalg.norm(forward), -1.0, 1.0))))
+    entry["angle_from_x_deg"] = round(angle, 2)
+    if angle <= MOUNT_TOL_DEG:
+        entry["used"] = "the body's x-axis (the track's forward axis is within the tolerance)"
+        return None
+    entry["used"] = "the track's forward axis"
+    rpy = ", ".join(f"{x:g}" for x in shown["estimated_rpy_deg"])
+    log.warning(f"the body's x-axis is {angle:.0f} deg from the axis the track moves along (a mounting of roll, pitch, "
+                f"yaw {rpy} deg estimated): the heading at the start puts that axis along the track; give "
+                "--imu-rotation-rpy-deg R,P,Y for the body frame you mean (with --nhc it is required)")
+    return forward

@@ -7,7 +7,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from typing import Dict, Tuple
+from typing import Dict, Optional, Tuple
 
 import numpy as np
 from scipy.spatial.transform import Rotation
@@ -19,14 +19,15 @@ from .level import level, rot_z
 
 
 def track_start(t_ns: np.ndarray, gyro: np.ndarray, fix_idx: np.ndarray, fix_p: np.ndarray, R_level: np.ndarray,
-                level_end: int, gyro_bias: np.ndarray, min_speed_mps: float = 1.0
-                ) -> Tuple[int, int, np.ndarray, np.ndarray, Dict[str, object]]:
+                level_end: int, gyro_bias: np.ndarray, min_speed_mps: float = 1.0,
+                forward: Optional[np.ndarray] = None) -> Tuple[int, int, np.ndarray, np.ndarray, Dict[str, object]]:
     """Heading from a position track, as GNSS/INS filters set it (and
     :func:`gnss_start` for the car): the first fix after the levelling
     window (IMU sample ``level_end``) whose horizontal speed (central difference of the fixes)
     exceeds ``min_speed_mps``; the levelled attitude carried there by the gyro (minus ``gyro_bias``),
     then turned about z so that the body x-axis points along the track (a vehicle moving along its
-    x-axis: a car, a walker's forward axis). Returns (start sample, fix number, R_WB, v, info)."""
+    x-axis: a car, a walker's forward axis), or the body axis ``forward`` (3,) where given (the one the
+    track shows, :func:`..mounting.track_forward`). Returns (start sample, fix number, R_WB, v, info)."""
     fix_idx = np.asarray(fix_idx, dtype=np.int64)
     tf = (t_ns[fix_idx] - int(t_ns[0])) * 1e-9
     v = np.gradient(fix_p, tf, axis=0) if len(tf) >= 2 else np.zeros_like(fix_p)
@@ -44,10 +45,13 @@ def track_start(t_ns: np.ndarray, gyro: np.ndarray, fix_idx: np.ndarray, fix_p: 
         for step in steps:
             R = R * step
     Rm = R.as_matrix()
-    turn = float(np.arctan2(v[e, 1], v[e, 0]) - np.arctan2(Rm[1, 0], Rm[0, 0]))
+    ahead = Rm @ (np.eye(3)[0] if forward is None else np.asarray(forward, dtype=np.float64))
+    turn = float(np.arctan2(v[e, 1], v[e, 0]) - np.arctan2(ahead[1], ahead[0]))
     R0 = rot_z(turn) @ Rm
+    axis = "body x-axis" if forward is None else \
+        f"the body axis ({', '.join(f'{x:.3f}' for x in forward)}) the track shows as forward"
     info = {"heading_source": f"the track once moving: fix {e} at {tf[e]:.2f} s, {speed[e]:.2f} m/s (> "
-                              f"{min_speed_mps:g}); body x-axis along the velocity",
+                              f"{min_speed_mps:g}); {axis} along the velocity",
             "start_after_first_sample_s": round(float(tf[e]), 3)}
     return s0, e, R0, v[e].copy(), info
 
