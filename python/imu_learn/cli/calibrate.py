@@ -88,8 +88,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--select", action=argparse.BooleanOptionalAction, default=None,
                    help="choose each sensor's terms (offset, bias, scale, affine, g-sensitivity, low-pass): the simplest "
                         "that no simpler one beats on a recording held out in turn (imu_learn.calib.select; "
-                        "profile.json's selection); --no-select: every term. Default: chosen for poses that cannot "
-                        "resolve accelerations (a VO of 20-30 Hz: every term overfits it), every term otherwise")
+                        "profile.json's selection); --no-select: every term (faster; on recordings it did not see such "
+                        "a profile can lose to raw). Default: chosen for a poses reference (motion capture, VIO/SLAM); "
+                        "positions and odometry fit the terms they observe")
     p.add_argument("--imu-only", action="store_true",
                    help="read each --input's IMU alone (no reference): the noise from its still stretches only")
     p.add_argument("--device", metavar="NAME", help="the device's name in the profile (default: the dataset a "
@@ -301,8 +302,8 @@ def _terms_line(selection: Dict[str, Any], kind: str) -> str:
                                                         + " (--no-select: every term)" if "by_default" in selection else ""))
     if "skipped" in selection:
         return f"terms: the reference's own ({selection['skipped']})"
-    return ("terms: every term of the floor, none chosen on held-out recordings (on recordings it did not see a "
-            "richer floor can lose to a simpler one); --select keeps only the terms held-out recordings support")
+    return ("terms: every term of the floor (--no-select), none chosen on held-out recordings (on recordings it did not "
+            "see a richer floor can lose to a simpler one)")
 
 
 def _vec(v: Any) -> str:
