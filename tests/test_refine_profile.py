@@ -110,3 +110,20 @@ def test_a_file_given_for_the_other_option_is_one_line_naming_the_right_one(tmp_
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and names in err[0] and "weights_only" not in err[0], err
     assert not out.exists()
+
+
+def test_a_noise_only_profile_says_the_readings_pass_unchanged(tmp_path, capsys):
+    """A profile of calibrate --imu-only holds no floor: refine writes the readings as they were, and says so
+    (a BROAD user's refined file was the input byte for byte under "refined IMU (the floor of profile ...)")."""
+    from imu_learn.calib.profile import noise_only
+
+    t, g, a = core.read_asl_imu(str(MH04 / IMU_REL))
+    noise_only("euroc", sample_rate_hz(t), {}).save(tmp_path / "profile.json")
+    out = tmp_path / "MH_04_noise"
+    assert refine_main(["--profile", str(tmp_path / "profile.json"), "--input", str(MH04), "--out", str(out),
+                        "--format", "euroc"]) == 0
+    cap = capsys.readouterr()
+    assert "holds the noise only" in cap.err and "pass unchanged" in cap.err
+    assert "no correction" in cap.out and "the floor of" not in cap.out
+    t2, g2, a2 = core.read_asl_imu(str(out / IMU_REL))
+    assert np.array_equal(t2, t) and np.array_equal(g2, g) and np.array_equal(a2, a)

@@ -159,7 +159,7 @@ def build(req: Request) -> Plan:
     if req.variance == "required" and req.checkpoint is None:
         raise ConfigError("--fill-covariance needs a --checkpoint with a covariance head")
     if req.profile is not None:
-        plan = from_profile(req.profile)
+        plan = from_profile(req.profile, req.command)
     elif req.checkpoint is not None:
         plan = from_checkpoint(req)
     elif req.calibration is not None:
@@ -172,11 +172,18 @@ def build(req: Request) -> Plan:
     return plan
 
 
-def from_profile(path: Path) -> Plan:
-    """The floor of a device profile."""
+def from_profile(path: Path, command: str = "imu-learn refine") -> Plan:
+    """The floor of a device profile; a noise-only one (no floor) corrects nothing: one warning line where
+    ``command`` writes readings (refine), since its output would otherwise pass for a correction."""
     profile = Profile.load(path)
     made = rates.MadeFor(f"profile {path}", profile.sample_rate_hz, profile.device)
-    plan = Plan([profile_step(profile)], [made], [f"the floor of {describe_profile(profile, str(path))}"],
+    words = f"the floor of {describe_profile(profile, str(path))}"
+    if profile.floor is None:  # calibrate --imu-only: its noise, nothing to correct the readings with
+        words = (f"no correction: {describe_profile(profile, str(path))} holds noise only (calibrate --imu-only), the "
+                 "readings pass unchanged")
+        (logger.warning if command == "imu-learn refine" else logger.info)(f"--profile {path}: it holds the noise only (no reference fitted a floor): the readings pass "
+                       "unchanged; calibrate against a reference (--groundtruth) for a correction")
+    plan = Plan([profile_step(profile)], [made], [words],
                 needs_stamps=True, training=profile.inputs or None, what=f"profile {path}", kind="profile")
     plan.gravity = _gravity(profile, plan.gravity)
     plan.prior = _prior(profile, str(path))

@@ -467,7 +467,8 @@ def resolve_frame(pairs: Sequence[Tuple[ImuData, GroundTruth]], options: FrameOp
         if off.rms > options.max_rate_residual * w_rms:
             raise ReferenceFrameError(
                 f"the reference's rotation rates do not match the IMU's in any frame (residual {off.rms:.3f} rad/s "
-                f"against {w_rms:.3f} rad/s of motion): a wrong file, unit or clock")
+                f"against {w_rms:.3f} rad/s of motion): a wrong file, unit or clock, or its quaternions in another "
+                "order (a TUM row is t x y z qx qy qz qw, scalar last)")
         r_imu_ref, lever0 = off.r_off, np.zeros(3)
         rot_std = rotation_spread(rates)
         if ratio < options.planar_ratio or rot_std > options.max_rotation_std_deg:
