@@ -95,9 +95,9 @@ def test_navsatfix_topic_is_gnss_aiding_like_the_pos_file(tmp_path, capsys):
     rc, _out, err = run(["--input", imu, "--format", "gnss-imu", "--imu-delay-s", -DELAY_S, "--aiding", pos,
                          "--out", tmp_path / "pos"] + common, capsys)
     assert rc == 0, err
-    # the bag's IMU stamps already carry the delay the .pos run removes: no --imu-delay-s
-    rc, _out, err = run(["--input", bag, "--aiding", bag, "--aiding-topic", "/fix", "--out", tmp_path / "bag"]
-                        + common, capsys)
+    # the bag's IMU stamps are the log's (DELAY_S late, as the .pos run reads them): the same delay removed
+    rc, _out, err = run(["--input", bag, "--aiding", bag, "--aiding-topic", "/fix", "--imu-delay-s", -DELAY_S,
+                         "--out", tmp_path / "bag"] + common, capsys)
     assert rc == 0, err
     s = json.loads((tmp_path / "bag" / "summary.json").read_text())
     assert s["aiding_kind"] == "position" and s["aiding_dropped"]["quality_not_used"] == 1  # the no-fix message

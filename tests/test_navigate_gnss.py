@@ -276,3 +276,29 @@ def test_imu_delay_auto_is_measured_against_the_fixes(tmp_path, capsys):
     assert rc == 0 and given == {"delay_s": -DELAY_S, "from": "--imu-delay-s"}
     rc, _, err = run(base + ["--imu-delay-s", "soon", "--out", tmp_path / "x"], capsys)
     assert rc == 2 and "--imu-delay-s: seconds (e.g. -0.2) or 'auto'" in err
+
+
+def test_no_imu_delay_given_is_measured_and_applied_where_clearly_better(tmp_path, capsys, monkeypatch):
+    """No --imu-delay-s with GNSS fixes: the delay ``auto`` finds, applied where its fit is clearly better
+    than at zero (one warning line), else none with the measured value in the summary (the drive: -0.20 s
+    applied, 116 m less at its first outage's end; the walk: -0.03 s, 0.407 against 0.413, not applied).
+    --imu-delay-s 0 keeps the stamps as they are."""
+    from imu_learn.fuse import navigate as nav
+
+    imu, pos, _ = synthetic_car(tmp_path)
+    base = ["--input", imu, "--aiding", pos, "--imu-rotation-rpy-deg", ",".join(map(str, RPY)),
+            "--lever-arm", ",".join(map(str, LEVER)), "--imu-noise", "1e-4,1e-3,1e-5,1e-4", "--keyframe-hz", 4]
+    rc, _, err = run(base + ["--out", tmp_path / "unset"], capsys)
+    assert rc == 0, err
+    d = json.loads((tmp_path / "unset" / "summary.json").read_text())["imu_delay"]
+    # the level car bounds its delay only (test_imu_delay_auto_is_measured_against_the_fixes): closer to it than 0
+    assert d["from"].startswith("fixes (no --imu-delay-s") and abs(d["delay_s"] + DELAY_S) < DELAY_S
+    assert d["rms_mps2"] <= nav.CLEAR_DELAY_FIT * d["rms_at_zero_mps2"] and "s off the GNSS fixes'" in err
+    rc, _, err = run(base + ["--imu-delay-s", "0", "--out", tmp_path / "zero", "--quiet"], capsys)
+    assert json.loads((tmp_path / "zero" / "summary.json").read_text())["imu_delay"] == \
+        {"delay_s": 0.0, "from": "--imu-delay-s"}
+    monkeypatch.setattr(nav, "CLEAR_DELAY_FIT", 0.1)  # a fit not clearly better: measured, not applied
+    rc, _, err = run(base + ["--out", tmp_path / "unclear", "--quiet"], capsys)
+    d = json.loads((tmp_path / "unclear" / "summary.json").read_text())["imu_delay"]
+    assert rc == 0 and d["delay_s"] == 0.0 and abs(d["measured_s"] + DELAY_S) < DELAY_S
+    assert "not clearly better" in d["from"] and "s off the GNSS fixes'" not in err

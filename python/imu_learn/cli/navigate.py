@@ -160,7 +160,9 @@ def add_arguments(ap: argparse.ArgumentParser) -> None:
     ap.add_argument("--imu-delay-s", default=None, metavar="S|auto",
                     help="added to every IMU stamp: a logging delay [s] (e.g. -0.2 on rtklibexplorer's drive); "
                          "'auto' (GNSS fixes): measured from the data, the accelerometer's specific-force norm "
-                         "against the fixes' accelerations outside --gaps (the summary's imu_delay)")
+                         "against the fixes' accelerations outside --gaps (the summary's imu_delay); without the "
+                         "option GNSS fixes get that measurement where it fits clearly better than 0 (a warning "
+                         "line), else 0")
     ap.add_argument("--lever-arm", default=None, metavar="X,Y,Z",
                     help="position aiding: the antenna from the IMU in the body frame [m] (instead of --extrinsics)")
     ap.add_argument("--nhc", action="store_true", default=None,
@@ -210,7 +212,7 @@ def options(args: argparse.Namespace):
     o = replace(o, **{k: v for k, v in plain.items() if v is not None})
     if args.imu_delay_s is not None:
         o = replace(o, **({"imu_delay_from": "fixes"} if args.imu_delay_s.strip().lower() == "auto"
-                          else {"imu_delay_s": parse_delay(args.imu_delay_s)}))
+                          else {"imu_delay_s": parse_delay(args.imu_delay_s), "imu_delay_from": "option"}))
     if args.gaps is not None:
         o = replace(o, gaps=parse_gaps(args.gaps))
     for name, n in (("imu_rotation_rpy_deg", 3), ("lever_arm", 3), ("imu_noise", 4), ("variance_scale", 2)):

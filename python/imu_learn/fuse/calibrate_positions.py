@@ -298,7 +298,7 @@ def smoother_pass(imu_path: Path, ref_path: Path, opts: PositionsOptions, rpy: S
     n = ImuNoise()
     noise = opts.imu_noise or (n.gyro_noise_density, n.acc_noise_density, n.gyro_random_walk, n.acc_random_walk)
     nav = NavigateOptions(aiding_kind="position", aiding_format="auto", keyframe_hz=opts.keyframe_hz,
-                          imu_rotation_rpy_deg=tuple(float(x) for x in rpy), imu_delay_s=opts.imu_delay_s,
+                          imu_rotation_rpy_deg=tuple(float(x) for x in rpy), imu_delay_s=opts.imu_delay_s, imu_delay_from="option",
                           lever_arm=None if opts.lever_arm is None else tuple(opts.lever_arm), nhc=opts.nhc,
                           imu_noise=tuple(float(x) for x in noise))
     return navigate(Sources(input=Path(imu_path), aiding=Path(ref_path), fmt=opts.fmt, columns=opts.columns,
