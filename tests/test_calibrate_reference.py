@@ -199,3 +199,21 @@ def test_positions_in_cm_or_mm_are_refused_naming_the_unit(tmp_path, capsys, fac
     assert code == 2 and f"positions in {unit}? give them in metres" in err
     assert f"x{factor:.4g}"[:3] in err  # the factor it read, e.g. x101.6 or x1016
     assert not (tmp_path / "out" / "profile.json").exists()
+
+
+def test_navigate_turns_the_reference_poses_by_the_profiles_rotation(tmp_path, capsys):
+    """A VIO's camera poses calibrated against, then navigated with the profile: the rotation calibrate
+    estimated turns them into the IMU frame (your-device.md's step 4 was refused before, naming
+    --extrinsics, although the profile held the rotation); without the profile they are refused."""
+    ref = write_reference(tmp_path / "camera.tum", world_deg=100.0, every=10)
+    p = calibrate(tmp_path / "cal", "--groundtruth", str(ref), "--no-select")
+    assert p["reference"]["applied"]["rotation"]
+    nav = ["navigate", "--input", str(REC), "--aiding", str(ref), "--aiding-kind", "pose", "--quiet"]
+    capsys.readouterr()
+    assert main(nav + ["--out", str(tmp_path / "without")]) == 2
+    assert "--extrinsics" in capsys.readouterr().err
+    assert main(nav + ["--profile", str(tmp_path / "cal" / "profile.json"), "--out", str(tmp_path / "nav")]) == 0
+    assert "by the rotation of --profile's reference" in capsys.readouterr().err
+    s = json.loads((tmp_path / "nav" / "summary.json").read_text())
+    check = s["aiding_estimates"]["frame_check"]
+    assert check["verdict"] == "same frame" and check["rotation_deg"] < 0.5, check

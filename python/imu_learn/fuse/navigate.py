@@ -644,7 +644,7 @@ def aiding_rows(src: Sources, opts: NavigateOptions, t_ns: np.ndarray, T_BS: Opt
     traj, offset = shift_trajectory(traj, imu.t_ns, imu.gyro)
     rows = select_rows(traj, t_ns, T_BS, opts)
     rows.offset = offset
-    rows.frame = checked_frame(src, rows, imu, opts.max_relative_gap_s)
+    rows.frame = checked_frame(src, rows, imu, opts.max_relative_gap_s, from_profile=T_BS is not None)
     return with_noise(rows, imu.t_ns, imu.gyro, imu.acc, opts.max_relative_gap_s), len(traj), None, opts
 
 
@@ -664,13 +664,17 @@ def checked_up(src: Sources, opts: NavigateOptions, rows: AidingRows, imu: Imu) 
     return check
 
 
-def checked_frame(src: Sources, rows: AidingRows, imu: Imu, max_gap_s: float) -> FrameCheck:
+def checked_frame(src: Sources, rows: AidingRows, imu: Imu, max_gap_s: float, from_profile: bool = False) -> FrameCheck:
     """The aiding poses' body frame against the IMU's (:mod:`.aiding.frame`), before any fusion:
-    refused (exit 2) when it is not the IMU's, naming ``--extrinsics``; one warning line when it is a
-    little off or cannot be told."""
+    refused (exit 2) when it is not the IMU's, naming ``--extrinsics`` (``from_profile``: after the rotation
+    of the profile's reference, :func:`aiding_extrinsic`); one warning line when it is a little off or
+    cannot be told."""
     check = check_frame(imu.t_ns, imu.gyro, rows, max_gap_s)
     if check.verdict == "refused":
-        if src.extrinsics is None:
+        if src.extrinsics is None and from_profile:
+            fix = ("after the rotation of --profile's reference: that reference's sensor is not this aiding's; pass "
+                   "--extrinsics with this sensor's pose in the IMU frame (a Kalibr/EuRoC sensor.yaml T_BS)")
+        elif src.extrinsics is None:
             fix = ("they are another sensor's poses (a camera's?): pass --extrinsics with that sensor's pose in the "
                    "IMU frame (a Kalibr/EuRoC sensor.yaml T_BS)")
         else:
@@ -844,8 +848,8 @@ def read_inputs(src: Sources, opts: NavigateOptions) -> Inputs:
     opts.check()
     gt_span = check_inputs(src)
     kind = kind_of(opts.aiding_kind)
-    T_BS = read_t_bs(src.extrinsics) if src.extrinsics is not None else None
-    if opts.lever_arm is not None and T_BS is not None:
+    T_BS = aiding_extrinsic(src, kind)
+    if opts.lever_arm is not None and src.extrinsics is not None:
         raise ConfigError("--lever-arm and --extrinsics both give the antenna's lever arm: pass one")
     sol = read_geodetic(src, opts) if is_geodetic(src, opts) else None
     if truth_is_fixes(src) and sol is None:
@@ -867,6 +871,30 @@ def read_inputs(src: Sources, opts: NavigateOptions) -> Inputs:
     rows, rows_read, gnss, opts = aiding_rows(src, opts, t_ns, T_BS, lever, imu, sol)
     warn_unaided_end(src, rows, t_ns, opts.gaps)
     return Inputs(opts, kind, moving_imu(src, opts, imu, rows), lever, rows, rows_read, gnss)
+
+
+def aiding_extrinsic(src: Sources, kind: AidingKind) -> Optional[np.ndarray]:
+    """The aiding sensor's pose in the IMU frame (T_BS, 4x4): ``--extrinsics``; else, for poses, the rotation
+    ``imu-learn calibrate`` estimated and applied between its reference and the IMU (``--profile``'s
+    ``reference.rotation_imu_from_reference``, with its lever arm where that was applied), one warning line
+    saying so (a VIO's camera poses calibrated against, then navigated with: refused before, naming
+    --extrinsics, though the profile held the rotation); the frame check judges it as it judges --extrinsics."""
+    if src.extrinsics is not None:
+        return read_t_bs(src.extrinsics)
+    if src.profile is None or not kind.poses:
+        return None
+    ref = Profile.load(src.profile).reference or {}
+    applied = ref.get("applied") or {}
+    if not applied.get("rotation") or ref.get("rotation_imu_from_reference") is None:
+        return None
+    T = np.eye(4)
+    T[:3, :3] = np.asarray(ref["rotation_imu_from_reference"], dtype=np.float64)
+    if applied.get("lever_arm") and ref.get("lever_arm_m") is not None:
+        T[:3, 3] = np.asarray(ref["lever_arm_m"], dtype=np.float64)
+    log.warning(f"--aiding {Path(src.aiding).name}: its poses turned into the IMU frame by the rotation of --profile's "
+                f"reference ({float(ref.get('rotation_deg', float('nan'))):.2f} deg, estimated by imu-learn calibrate); "
+                "--extrinsics gives another")
+    return T
 
 
 UNAIDED_END_S = 5.0  # an aiding that stops this long before the IMU gets a warning (the tracks' end is unaided)

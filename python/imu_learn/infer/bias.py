@@ -437,7 +437,9 @@ def choices(navigate: bool = False) -> Tuple[str, ...]:
 
 def help_text(navigate: bool = False) -> str:
     """``--bias``'s help, made from the registry (the same words for refine and navigate)."""
-    items = "; ".join(f"{n}: {e.help}" for n, e in REGISTRY.items() if e.navigate or not navigate)
+    # navigate takes no --bias-model: what refine's help says of one is left out there
+    items = "; ".join(f"{n}: {e.help.replace(' (with --bias-model, the learned one too)', '') if navigate else e.help}"
+                      for n, e in REGISTRY.items() if e.navigate or not navigate)
     where = ("on the IMU as fused (after --profile's floor, --checkpoint or --calibration), subtracted before the "
              "fusion" if navigate else "after the profile and model")
     return (f"the recording's own gyro bias, estimated {where} and bounded by the device's bias spread "
