@@ -278,3 +278,13 @@ def test_evaluate_refuses_a_profile_fitted_on_a_test_recording_and_warns_on_anot
     with caplog.at_level(logging.WARNING, logger="imu_learn.eval.run"):
         check_profiles(["raw", "timing"], ["V1_01_easy"], [s])  # no profile: nothing to check
     assert not caplog.records
+    # a test recording under another name (a user's CSV of it): its stamps give it away
+    t0, t1 = int(s.t_ns[0]), int(s.t_ns[-1])
+    renamed = {"recording": "my_imu.csv", "train": [{"t0_ns": t0, "t1_ns": t0 + (t1 - t0) * 8 // 10}],
+               "val": [{"t0_ns": t0 + (t1 - t0) * 8 // 10, "t1_ns": t1}]}
+    path.write_text(json.dumps({**shipped, "sources": [renamed]}))
+    with pytest.raises(ConfigError, match="fitted on my_imu.csv, whose stamps are test recording"):
+        check_profiles([f"profile:{path}"], ["MH_04_difficult"], [s])
+    later = {**renamed, "train": [{"t0_ns": t1 + 10**9, "t1_ns": t1 + 10**10}], "val": []}
+    path.write_text(json.dumps({**shipped, "sources": [later]}))
+    check_profiles([f"profile:{path}"], ["MH_04_difficult"], [s])  # other stamps: scored

@@ -294,6 +294,10 @@ def check_profiles(methods: List[str], test_entries: List[str], test: Seq[Segmen
         for r in sorted(tests & fitted):
             raise ConfigError(f"{name}: the profile was fitted on {r}, a test recording here (test sequences must "
                               "never be seen in training or selection): score it on recordings it did not see")
+        for r, source in _same_stamps(d.get("sources") or [], test):
+            raise ConfigError(f"{name}: the profile was fitted on {source}, whose stamps are test recording {r}'s (the "
+                              "same data under another name; test sequences must never be seen in training or "
+                              "selection): score it on recordings it did not see")
         seen = set()
         for seg in sorted(test, key=len, reverse=True):  # each test recording once, its longest segment
             rec = recording_name(seg.name)
@@ -304,6 +308,27 @@ def check_profiles(methods: List[str], test_entries: List[str], test: Seq[Segmen
                                                    f"profile {path}", device_only=True)
             if warning:
                 logger.warning("%s: %s", rec, warning)
+
+
+def _same_stamps(sources: List[Any], test: Seq[Segment]) -> List[Tuple[str, str]]:
+    """(test recording, profile source) pairs where a stretch the profile was fitted on (its ``sources``'
+    ``train`` / ``val`` spans, stamps in ns) lies mostly (over half of it) inside a test segment's stamps: a
+    test recording converted to a CSV is another name for the same data (a user's MH_04 as ``my_imu.csv``)."""
+    out = []
+    for src in sources:
+        if not isinstance(src, dict):
+            continue
+        for part in (src.get("train") or []) + (src.get("val") or []):
+            t0, t1 = part.get("t0_ns") if isinstance(part, dict) else None, part.get("t1_ns") if isinstance(part, dict) else None
+            if not isinstance(t0, int) or not isinstance(t1, int) or t1 <= t0:
+                continue
+            for seg in test:
+                inside = min(t1, int(seg.t_ns[-1])) - max(t0, int(seg.t_ns[0]))
+                if inside > 0.5 * (t1 - t0):
+                    pair = (recording_name(seg.name), str(src.get("recording", "?")))
+                    if pair not in out:
+                        out.append(pair)
+    return out
 
 
 # ---------------------------------------------------------------------------------------------
