@@ -14,7 +14,7 @@ import yaml
 
 from imu_learn.calib import noise as nz
 from imu_learn.calib.kalibr import kalibr_yaml
-from imu_learn.calib.profile import CLASS_DEFAULTS, NOISE_KEYS, NoiseTerm, Profile, noise_only
+from imu_learn.calib.profile import CLASS_DEFAULT_SOURCE, CLASS_DEFAULTS, NOISE_KEYS, NoiseTerm, Profile, noise_only
 from imu_learn.calib.run import noise_terms
 from imu_learn.data import synthetic as syn
 from imu_learn.data.types import Segment
@@ -165,6 +165,24 @@ def test_an_unobserved_random_walk_is_written_as_the_class_default_with_its_boun
     old = dict(terms, gyroscope_random_walk=NoiseTerm(np.full(3, bound), bound, math.nan, rw.unit, "allan",
                                                       {"kind": "upper bound"}))
     assert noise_only("my-imu", 200.0, old).kalibr()["gyroscope_random_walk"] == CLASS_DEFAULTS["gyroscope_random_walk"]
+
+
+def test_a_bound_below_the_class_default_is_the_value(tmp_path):
+    """Where the data bound an unobserved figure below the class default, the default would contradict
+    them: the value is the bound (BROAD's accelerometer random walk: 7.7e-4 against 3e-3); a bound above
+    the default never is (the test above)."""
+    from imu_learn.calib.profile import unobserved_term
+
+    d = CLASS_DEFAULTS["accelerometer_random_walk"]
+    low = unobserved_term("accelerometer_random_walk", np.full(3, 0.25 * d), 0.25 * d, "allan", {})
+    high = unobserved_term("accelerometer_random_walk", np.full(3, 4 * d), 4 * d, "allan", {})
+    assert low.value == pytest.approx(0.25 * d) and low.bounded_only and "upper bound" in low.detail["value_from"]
+    assert high.value == d
+    prof = noise_only("my-imu", 200.0, {"accelerometer_random_walk": low})
+    prof.save(tmp_path / "profile.json")
+    back = Profile.load(tmp_path / "profile.json")
+    assert back.kalibr()["accelerometer_random_walk"] == pytest.approx(0.25 * d)
+    assert f"below the {CLASS_DEFAULT_SOURCE}" in kalibr_yaml(back)
 
 
 # -- Kalibr's imu.yaml -------------------------------------------------------------------------------

@@ -9,7 +9,7 @@ import math
 from pathlib import Path
 from typing import Union
 
-from imu_learn.calib.profile import CLASS_DEFAULT_SOURCE, NOISE_KEYS, NOISE_UNITS, Profile
+from imu_learn.calib.profile import NOISE_KEYS, NOISE_UNITS, Profile, unobserved_value
 from imu_learn.util.atomic import atomic_write_text
 
 ROSTOPIC_PLACEHOLDER = "/imu0"
@@ -31,7 +31,7 @@ def kalibr_yaml(profile: Profile, rostopic: str = ROSTOPIC_PLACEHOLDER) -> str:
         term = profile.noise.get(key)
         if profile.unobserved_noise(key):
             src = term.detail.get("upper_bound_from", term.source)
-            why = f"not observed ({src} upper bound {_value(term.bound)}): {CLASS_DEFAULT_SOURCE}"
+            why = f"not observed ({src} upper bound {_value(term.bound)}): {unobserved_value(key, term.bound)[1]}"
         elif term is None:
             why = "not measured: fill in a value (e.g. the datasheet's)"
         else:

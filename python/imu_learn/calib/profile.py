@@ -154,11 +154,22 @@ class NoiseTerm:
         return float(self.value) if self.bounded_only else math.nan
 
 
+def unobserved_value(key: str, bound: float) -> Tuple[float, str]:
+    """(value, where it came from) of a figure no fit observed: the device-class default, or the data's upper
+    ``bound`` where that is lower (the default would contradict the data: BROAD's accelerometer random walk is
+    bounded by 7.7e-4, the class default 3e-3); never a bound above the default (bounds run to 10-100x it)."""
+    d = CLASS_DEFAULTS[key]
+    if bound is not None and math.isfinite(bound) and 0 < bound < d:
+        return float(bound), f"the data's upper bound {bound:.3g}, below the {CLASS_DEFAULT_SOURCE}'s {d:.3g}"
+    return d, CLASS_DEFAULT_SOURCE
+
+
 def unobserved_term(key: str, per_axis: np.ndarray, bound: float, source: str, detail: Dict[str, Any]) -> NoiseTerm:
-    """A figure that no fit observed: the class default as its value, the bound the data gave
-    (``per_axis``, ``bound``, from ``source``) in its detail."""
-    return NoiseTerm(np.full(3, math.nan), CLASS_DEFAULTS[key], math.nan, NOISE_UNITS[key], "class_default",
-                     {**detail, "kind": NOT_OBSERVED, "value_from": CLASS_DEFAULT_SOURCE, "upper_bound": _num(bound),
+    """A figure that no fit observed: its value :func:`unobserved_value` (the class default, or a lower
+    bound of the data), the bound the data gave (``per_axis``, ``bound``, from ``source``) in its detail."""
+    value, value_from = unobserved_value(key, bound)
+    return NoiseTerm(np.full(3, math.nan), value, math.nan, NOISE_UNITS[key], "class_default",
+                     {**detail, "kind": NOT_OBSERVED, "value_from": value_from, "upper_bound": _num(bound),
                       "upper_bound_per_axis": _arr(per_axis), "upper_bound_from": source})
 
 
@@ -315,8 +326,9 @@ class Profile:
 
     def kalibr(self) -> Dict[str, Optional[float]]:
         """The four Kalibr noise figures (None where the profile has none); a random walk that was not
-        observed (an upper bound) is the device-class default (:data:`CLASS_DEFAULTS`), never the bound."""
-        return {k: (CLASS_DEFAULTS[k] if self.unobserved_noise(k) else _num(self.noise[k].value) if k in self.noise
+        observed (an upper bound) is the device-class default (:data:`CLASS_DEFAULTS`), or the bound where that is
+        lower (:func:`unobserved_value`), never a bound above the default."""
+        return {k: (unobserved_value(k, self.noise[k].bound)[0] if self.unobserved_noise(k) else _num(self.noise[k].value) if k in self.noise
                     else None) for k in NOISE_KEYS}
 
     def unobserved_noise(self, key: str) -> bool:

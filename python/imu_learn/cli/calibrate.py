@@ -13,6 +13,7 @@ from typing import Any, Callable, Dict, List, Optional, Sequence
 
 from imu_learn.baselines.base import FitSettings
 from imu_learn.calib.odometry import OdometrySource, is_odometry_reference
+from imu_learn.calib.profile import unobserved_value
 from imu_learn.calib.run import SELECT_BY_DEFAULT_FOR, CalibInputs, CalibOptions, calibrate
 from imu_learn.calib.sources import (
     TRAIN,
@@ -276,8 +277,8 @@ def summary(p: Any) -> List[str]:
         lines.append(_terms_line(p.selection, p.reference.get("kind", "poses")))
     for k, t in p.noise.items():
         if p.unobserved_noise(k):
-            lines.append(f"{k}: {p.kalibr()[k]:.3e} {t.unit} (not observed: the MEMS class default; the data bound "
-                         f"it above by {t.bound:.3e})")
+            lines.append(f"{k}: {p.kalibr()[k]:.3e} {t.unit} (not observed: {unobserved_value(k, t.bound)[1]}; the data "
+                         f"bound it above by {t.bound:.3e})")
             continue
         lines.append(f"{k}: {t.value:.3e} {t.unit} ({t.source}, {t.detail.get('kind', 'fit')})")
     if p.reference and not all(v is False for v in p.reference.get("applied", {}).values()):

@@ -76,7 +76,7 @@ def from_profile(kalibr: Dict[str, Optional[float]], where: str, defaults: Seque
     values = {ours[name]: float(v) for name, v in kalibr.items() if name in ours and v is not None}
     source = f"profile {where}"
     if defaults:
-        source += f" ({', '.join(defaults)}: not observed, the MEMS class default)"
+        source += f" ({', '.join(defaults)}: not observed, the MEMS class default or the data's lower bound)"
     if missing:
         source += f" ({', '.join(missing)}: built-in EuRoC ADIS16448)"
     return ImuNoise(**values, source=source)
