@@ -254,6 +254,7 @@ def test_a_poses_reference_chooses_its_terms_by_default_and_no_select_warns(tmp_
     p = Profile.load(tmp_path / "default" / "profile.json")
     assert "a poses reference" in p.selection["by_default"] and {"gyro", "acc"} <= set(p.selection)
     assert "--no-select" not in err
+    assert "not selected: gyroscope.matrix: the gyro level chosen on held-out recordings is" in out  # not "not observed"
     rc, out, err = run(["calibrate", "--input", CROP, "--out", tmp_path / "every", "--no-select", "--no-plot"], capsys)
     assert rc == 0 and "--no-select: every term of the floor fitted" in err
     assert not Profile.load(tmp_path / "every" / "profile.json").selection

@@ -164,3 +164,24 @@ def test_fit_startup_bias_gyro_is_the_least_squares_minimum_of_the_metrics_integ
     scale = np.array([(cost(g_hat + e) - c0) / 1e-8 for e in 1e-4 * np.eye(3)])  # the curvature's size
     assert np.all(np.abs(grad) < 1e-5 * scale), (grad, scale)
     assert all(cost(g_hat + s * e) > c0 for e in 1e-4 * np.eye(3) for s in (-1, 1))
+
+
+def test_window_increments_are_the_cores_window_by_window_integration():
+    """relative_pose_errors composes each window from the recording's cumulative increments
+    (score.metrics.window_increments); the core's integrate_windows runs the same sums window by window:
+    they agree to round-off, on irregular stamps and a long recording (its cumulative γ reaches ~4 km)."""
+    from imu_learn.core.integration import integrate_windows
+    from imu_learn.score.metrics import window_increments
+
+    t_ns, gyro, acc = _motion(seconds=30.0)
+    rng = np.random.default_rng(3)
+    t_ns = t_ns + rng.integers(-400_000, 400_000, size=len(t_ns))  # jittered stamps (±0.4 ms of 5 ms)
+    seq = simulate_sequence(t_ns, gyro, acc, np.array([1.0, 0, 0, 0]), gravity=G)
+    k = np.arange(7, len(seq) - 401, 37)
+    for n in (1, 10, 400):
+        want = integrate_windows(seq, k.astype(np.uint64), np.array([n], dtype=np.uint64))
+        dq, dp, dt = window_increments(seq, k, k + n)
+        assert np.allclose(dt, want.dt[:, 0], rtol=0, atol=1e-12)
+        ang = 2 * np.arcsin(np.clip(np.linalg.norm(quat_mul(quat_conj(want.dq_wxyz[:, 0]), dq)[:, 1:], axis=1), 0, 1))
+        assert ang.max() < 1e-10
+        assert np.abs(dp - want.dp[:, 0]).max() < 1e-8 * max(1.0, np.abs(want.dp[:, 0]).max())

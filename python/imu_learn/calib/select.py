@@ -96,6 +96,7 @@ from imu_learn.calib.acc_positions import (
 from imu_learn.calib.fit import recordings_or_blocks, refit_groups, seed_all, spread, time_blocks
 from imu_learn.calib.profile import FloorFit
 from imu_learn.calib.sources import matched
+from imu_learn.core.integration import preintegrate
 from imu_learn.data.types import Segment, sample_rate_hz
 from imu_learn.score.metrics import fit_startup_bias, index_at, relative_pose_errors, remove_bias, rmse, with_imu
 from imu_learn.score.peers import attitude_errors
@@ -309,14 +310,17 @@ def score(floor: Floor, held: Sequence[Segment], horizons: Sequence[int], opts: 
         g, a = floor.apply(s.t_ns, s.gyro, s.acc)
         cal = with_imu(s, g, a)
         fixed = remove_bias(cal, *fit_startup_bias(cal, bias_s, gravity=gravity)) if fixed_cells else cal
+        # each variant integrated once, every horizon's windows composed from it
+        pre_fixed = preintegrate(fixed.t_ns, fixed.gyro, fixed.acc) if fixed_cells else None
+        pre_cal = preintegrate(cal.t_ns, cal.gyro, cal.acc) if "open_trans_m" in cells else None
         for n in horizons:
             if fixed_cells:
-                e = relative_pose_errors(fixed, int(n), opts.stride, gravity, first)
+                e = relative_pose_errors(fixed, int(n), opts.stride, gravity, first, pre=pre_fixed)
                 for c, key in (("rot_deg", "rot_rad"), ("trans_m", "trans_m")):
                     if c in cells:
                         _pool(pooled, f"{c} n={n}", e[key])
             if "open_trans_m" in cells:
-                e = relative_pose_errors(cal, int(n), opts.stride, gravity, first)
+                e = relative_pose_errors(cal, int(n), opts.stride, gravity, first, pre=pre_cal)
                 _pool(pooled, f"open_trans_m n={n}", e["trans_m"])
         if "aoe_deg" in cells:
             _pool(pooled, "aoe_deg", attitude_errors(s, g)["angle_rad"])
@@ -478,9 +482,15 @@ def fit_at_levels(train: List[Segment], val: List[Segment], settings: FitSetting
                   tau: float, opts: SelectOptions = SelectOptions()) -> Floor:
     """The floor at (gyro level, acc level) on all of ``train`` (``val`` selects a cut-off), offset ``tau``."""
     with thread_limits(1):
-        p = prepare(Fold("all", train, val, []), settings, replace(opts, tau=tau))
-        g = fit_gyro_levels(p.tr, p.va, p.grid, levels[0])[levels[0]]
-        a = fit_acc_levels(p.tr, p.va, p.grid, g, levels[1])[levels[1]]
+        return _fit_levels(train, val, settings, levels, tau, opts)
+
+
+def _fit_levels(train: List[Segment], val: List[Segment], settings: FitSettings, levels: Tuple[str, str],
+                tau: float, opts: SelectOptions) -> Floor:
+    """:func:`fit_at_levels` inside the caller's thread limits (several on the cores at once: :func:`_each`)."""
+    p = prepare(Fold("all", train, val, []), settings, replace(opts, tau=tau))
+    g = fit_gyro_levels(p.tr, p.va, p.grid, levels[0])[levels[0]]
+    a = fit_acc_levels(p.tr, p.va, p.grid, g, levels[1])[levels[1]]
     return floor_of(g, a, tau)
 
 
@@ -494,10 +504,14 @@ def level_spread(train: List[Segment], val: List[Segment], groups: Sequence[str]
     level's: a bias refitted with every term trades with terms the motion barely excites (a level
     robot's g-sensitivity: Fetch's gyro bias spread 34-138 mrad/s with every term, a few at ``bias``)."""
     usable = refit_groups(train, val, groups, val_groups, settings.window)
-    fits = []
-    for i, (g, (tr, va)) in enumerate(usable.items()):
+
+    def refit(item: Tuple[int, Tuple[str, Tuple[List[Segment], List[Segment]]]]) -> TraditionalParams:
+        i, (g, (tr, va)) = item
         progress(f"uncertainty at the chosen levels: refitting on {g} alone ({i + 1}/{len(usable)})")
-        fits.append(fit_at_levels(tr, va, settings, levels, tau, opts).params)
+        return _fit_levels(tr, va, settings, levels, tau, opts).params
+
+    with thread_limits(1):  # the refits on the cores, one thread each
+        fits = _each(refit, list(enumerate(usable.items())))
     out = masked_std(std, levels)
     if len(fits) < 2:
         return out

@@ -287,7 +287,11 @@ def summary(p: Any) -> List[str]:
                      f"applied: {', '.join(k for k, v in r['applied'].items() if v)}")
     for k, o in p.observed.items():
         if not o.get("observed", True):
-            lines.append(f"not observed: {k} (kept at its prior): {o['why']}")
+            why = str(o.get("why", ""))
+            if why.startswith("not selected: "):  # observed, but it did not pay on held-out data
+                lines.append(f"not selected: {k}: {why[len('not selected: '):]}")
+            else:
+                lines.append(f"not observed: {k} (kept at its prior): {why}")
     for u in p.unobservable:
         lines.append(f"not observed: {u['what']}: {u['why']}")
     return lines
