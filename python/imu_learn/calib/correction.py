@@ -98,6 +98,7 @@ class Plan:
     prior: BiasPrior = MEMS_PRIOR  # the device's bias spread after the steps (a profile's, else a MEMS gyro's)
     measured: Dict[str, Any] = field(default_factory=dict)  # what the steps measure as they run
     what: str = "nothing"  # the guard's name for what is applied ("model X", "profile X")
+    corrects: bool = True  # False: a noise-only profile, whose steps pass the readings unchanged
     kind: str = "raw"  # raw, profile, checkpoint, calibration
     covariance: bool = False  # the steps return a covariance head's per-sample variances
     model_profile: str = "none"  # a checkpoint's profile: none, applied (before the model), in-model (held by it)
@@ -159,7 +160,7 @@ def build(req: Request) -> Plan:
     if req.variance == "required" and req.checkpoint is None:
         raise ConfigError("--fill-covariance needs a --checkpoint with a covariance head")
     if req.profile is not None:
-        plan = from_profile(req.profile, req.command)
+        plan = from_profile(req.profile)
     elif req.checkpoint is not None:
         plan = from_checkpoint(req)
     elif req.calibration is not None:
@@ -172,21 +173,18 @@ def build(req: Request) -> Plan:
     return plan
 
 
-def from_profile(path: Path, command: str = "imu-learn refine") -> Plan:
-    """The floor of a device profile; a noise-only one (no floor) corrects nothing: one warning line where
-    ``command`` writes readings (refine), since its output would otherwise pass for a correction."""
+def from_profile(path: Path) -> Plan:
+    """The floor of a device profile (a noise-only one has none: ``corrects`` False)."""
     profile = Profile.load(path)
     made = rates.MadeFor(f"profile {path}", profile.sample_rate_hz, profile.device)
     words = f"the floor of {describe_profile(profile, str(path))}"
     if profile.floor is None:  # calibrate --imu-only: its noise, nothing to correct the readings with
-        words = (f"no correction: {describe_profile(profile, str(path))} holds noise only (calibrate --imu-only), the "
-                 "readings pass unchanged")
-        (logger.warning if command == "imu-learn refine" else logger.info)(f"--profile {path}: it holds the noise only (no reference fitted a floor): the readings pass "
-                       "unchanged; calibrate against a reference (--groundtruth) for a correction")
+        words = f"no floor: {describe_profile(profile, str(path))} holds noise only (calibrate --imu-only)"
     plan = Plan([profile_step(profile)], [made], [words],
                 needs_stamps=True, training=profile.inputs or None, what=f"profile {path}", kind="profile")
     plan.gravity = _gravity(profile, plan.gravity)
     plan.prior = _prior(profile, str(path))
+    plan.corrects = profile.floor is not None
     return plan
 
 

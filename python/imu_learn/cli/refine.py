@@ -112,6 +112,9 @@ def run(args: argparse.Namespace, rest: List[str], keep: Callable[[Any], None]) 
     if args.fill_covariance and args.checkpoint is None:
         raise ConfigError("--fill-covariance needs a --checkpoint with a covariance head")
     plan = correction.build(request(args))
+    if not plan.corrects and args.bias == "none":  # the output would pass for a correction
+        logger.warning(f"--profile {args.profile}: it holds the noise only (no reference fitted a floor): the readings "
+                       "pass unchanged; calibrate against a reference (--groundtruth) for a correction, or add --bias")
     add_bias_step(args, plan)
     src = read_imu_source(args.input, args.format, args.imu_topic, csv_layout(args))
     rec = recording(args, src)
