@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import json
 import math
+import re
 from pathlib import Path
 
 import numpy as np
@@ -213,7 +214,11 @@ def test_navigate_turns_the_reference_poses_by_the_profiles_rotation(tmp_path, c
     assert main(nav + ["--out", str(tmp_path / "without")]) == 2
     assert "--extrinsics" in capsys.readouterr().err
     assert main(nav + ["--profile", str(tmp_path / "cal" / "profile.json"), "--out", str(tmp_path / "nav")]) == 0
-    assert "by the rotation of --profile's reference" in capsys.readouterr().err
+    err = capsys.readouterr().err
+    assert "moved into the IMU frame by --profile's reference" in err and "rotation 119.0" in err
+    # the reference's origin is the IMU's here: the accelerometer's estimate of it (used where it is tight) near 0
+    origin = re.search(r"origin \(([^)]*)\)", err)
+    assert origin and all(abs(float(x)) < 2.0 for x in origin.group(1).split(",")), err  # [cm]
     s = json.loads((tmp_path / "nav" / "summary.json").read_text())
     check = s["aiding_estimates"]["frame_check"]
     assert check["verdict"] == "same frame" and check["rotation_deg"] < 0.5, check

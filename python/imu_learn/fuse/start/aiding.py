@@ -99,6 +99,7 @@ def forward_axis(t_ns, acc, rows: AidingRows, gravity: float, info: dict) -> Opt
     entry["used"] = "the track's forward axis"
     rpy = ", ".join(f"{x:g}" for x in shown["estimated_rpy_deg"])
     log.warning(f"the body's x-axis is {angle:.0f} deg from the axis the track moves along (a mounting of roll, pitch, "
-                f"yaw {rpy} deg estimated): the heading at the start puts that axis along the track; give "
+                f"yaw {rpy} deg estimated, a z-up body; roll + 180 for a z-down one): the heading at the start puts "
+                "that axis along the track; give "
                 "--imu-rotation-rpy-deg R,P,Y for the body frame you mean (with --nhc it is required)")
     return forward
