@@ -84,7 +84,9 @@ def test_the_paired_z_of_windows():
     assert not f.within_noise and "too few" in f.message
 
 
-def test_the_terms_are_chosen_by_default_for_a_reference_that_cannot_resolve_accelerations():
+def test_the_terms_are_chosen_by_default_for_every_poses_reference():
+    """Dense motion capture too (BROAD's every-term profile lost to raw on unseen trials); positions and
+    odometry fit what they observe; the option overrides."""
     from imu_learn.calib.run import selects
     from imu_learn.calib.sources import Source
 
@@ -96,5 +98,5 @@ def test_the_terms_are_chosen_by_default_for_a_reference_that_cannot_resolve_acc
         kind = "positions"
 
     sparse, dense, positions = (CalibInputs([], [], [], [], source=s()) for s in (Sparse, Source, Positions))
-    assert selects(None, sparse) and not selects(None, dense) and not selects(None, positions)
-    assert not selects(False, sparse) and selects(True, dense)
+    assert selects(None, sparse) and selects(None, dense) and not selects(None, positions)
+    assert not selects(False, sparse) and not selects(False, dense) and selects(True, dense)
