@@ -61,9 +61,9 @@ def crop_imu():
     return core.read_asl_imu(str(MH04 / IMU_REL))
 
 
-def untrained(path: Path, window: int = 200):
+def untrained(path: Path, window: int = 200, refine: str = "imu"):
     cfg = build_config({}, {"model.start": str(path), "model.hidden": 8, "model.fc": 8, "model.layers": 1,
-                            "data.window": window})
+                            "data.window": window, "model.refine": refine})
     cfg, start = trainer.profile_start(cfg)
     t, g, a = crop_imu()
     seg = Segment("x", t, g, a, np.zeros_like(g), np.zeros_like(g), np.tile([1.0, 0, 0, 0], (len(t), 1)))
@@ -72,9 +72,12 @@ def untrained(path: Path, window: int = 200):
     return cfg, model, start.profile
 
 
-def test_the_untrained_model_on_a_profile_is_its_floor(tmp_path):
+@pytest.mark.parametrize("refine", ["imu", "gyro"])
+def test_the_untrained_model_on_a_profile_is_its_floor(tmp_path, refine):
+    """A model refining the gyro alone (TUM-VI's config) holds the whole floor too: it passed the raw
+    accelerometer through, dropping the profile's (epoch 0 1.078x the floor in translation)."""
     path = profile_file(tmp_path)
-    cfg, model, prof = untrained(path)
+    cfg, model, prof = untrained(path, refine=refine)
     assert (cfg.model.start, cfg.model.fir_taps, cfg.model.fir_init_tau, cfg.model.calib) == ("profile", 3, 0.54, True)
     assert prof == Profile.load(path).to_dict()
     t, g, a = crop_imu()
@@ -183,3 +186,19 @@ def test_calibrate_learned_end_to_end(tmp_path, capsys):
     assert Profile.from_dict(state["profile"]).to_dict() == Profile.load(out / "profile.json").to_dict()
     assert {c["protocol"] for c in verdict["cells"]} == {"open loop", "start-up bias removed"}
     assert state["config"]["optim"]["epochs"] == 1 and state["config"]["seed"] == 3
+
+
+def test_the_run_config_of_input_recordings_is_one_fit_can_read_back():
+    """calibrate --learned's run config names each --input's format as fit reads it: an ASL folder was
+    written as format "asl", which `imu-learn fit --resume OUT/fit` refused ("format 'asl' unknown")."""
+    import argparse
+    from types import SimpleNamespace
+
+    from imu_learn.cli.calibrate import learned_base
+    from imu_learn.data.splits import find_all
+
+    args = argparse.Namespace(data_root=None, config=None, groundtruth=None, input=[MH01], val_fraction=0.15,
+                              format="auto")
+    cfg = learned_base(args, SimpleNamespace(sources=[{"max_gap_s": 0.05}]))
+    assert [r.format for r in cfg.data.roots] == ["euroc"]
+    assert list(find_all(cfg.data.roots)) == ["MH_01_easy"]

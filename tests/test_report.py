@@ -254,3 +254,19 @@ def test_floor_table_divides_each_learned_cell_by_the_best_floor_method():
     assert {x["floor"] for x in floor if x["term"] == "trans_m"} == {"raw"}
     assert all(x["ratio"] == pytest.approx(10.0) for x in floor if x["method"] == "proposed (fit run)" and x["term"] == "rot_rad")
     assert "## Learned methods (and shipped profiles) against the floor" in report.markdown(result, report.relative_pose_table(result), [], [], [])
+
+
+def test_a_learned_model_is_judged_against_the_profiles_in_the_run_too():
+    """A model trained on top of a profile: with profile:PATH in the run, the model's floor is the best of
+    raw and that profile (it was judged against raw alone, "0.99 (raw)" for a model 1.18x its profile); the
+    profile itself is judged against the floor methods only."""
+    result = make_result()
+    prof = "profile:cal/profile.json"
+    result["methods"] = result["methods"] + [prof]
+    result["rows"] += [{**x, "method": prof, "rot_rad": x["rot_rad"] / 4, "trans_m": x["trans_m"] / 4}
+                       for x in result["rows"] if x["method"] == "raw"]
+    floor = report.floor_table(result)
+    model = [x for x in floor if x["method"] == "proposed (fit run)"]
+    assert model and {x["floor"] for x in model} == {prof}
+    assert all(x["ratio"] == pytest.approx(20.0) for x in model)  # 5x raw, raw / 4 the profile
+    assert {x["floor"] for x in floor if x["method"] == prof} == {"raw"}

@@ -258,7 +258,9 @@ def learned_base(args: argparse.Namespace, inp: CalibInputs) -> Any:
     roots, train, val = [], [], []
     for path, gt, source in zip(args.input, gts, inp.sources):
         name = path.stem if path.is_file() else path.name
-        roots.append({"path": str(path), "format": args.format if args.format != "auto" else detect_format(path),
+        fmt = args.format if args.format != "auto" else detect_format(path)
+        # the run config names a dataset (`imu-learn fit --resume` reads it back): the ASL layout is EuRoC's reader
+        roots.append({"path": str(path), "format": {"asl": "euroc"}.get(fmt, fmt),
                       "groundtruth": str(gt) if gt else "", "max_gap_s": source["max_gap_s"]})
         train.append(name if f <= 0 else f"{name}[0:{1 - f:g}]")
         val += [] if f <= 0 else [f"{name}[{1 - f:g}:1]"]

@@ -503,20 +503,24 @@ def write_report(out_dir: Path, result: Dict[str, Any]) -> None:
 
 
 def floor_table(result: Dict[str, Any]) -> List[Dict[str, Any]]:
-    """Each learned method against the best floor method (:data:`FLOOR_METHODS` present in the run) per
-    variant, horizon and term, on the mean over test recordings: ``ratio`` = method / best floor
-    (below 1: learning pays), ``floor`` names the best floor method. Empty without a floor method."""
+    """Each learned method against the best floor method (:data:`FLOOR_METHODS` present in the run, and for a
+    learned model every ``profile:PATH`` in it: the profile it sits on) per variant, horizon and term, on the
+    mean over test recordings: ``ratio`` = method / best floor (below 1: learning pays), ``floor`` names the
+    best floor method. Empty without a floor method."""
     rel = {(x["method"], x["variant"], x["n"]): x for x in relative_pose_table(result) if x["sequence"] == "average"}
     floors = [m for m in result["methods"] if m in FLOOR_METHODS]
-    # a profile:PATH method is a floor that ships, judged against the run's floors as a learned method is
+    # a profile:PATH method is a floor that ships, judged against the run's floors as a learned method is; a
+    # learned model is judged against those floors and against every profile in the run (the one it sits on)
+    profiles = [m for m in result["methods"] if str(m).startswith("profile:")]
     learned = [m for m in result["methods"] if m not in FLOOR_METHODS and m not in REFERENCE_METHODS]
     out: List[Dict[str, Any]] = []
     for m in learned:
+        floors_m = floors if m in profiles else floors + profiles
         for v in VARIANTS:
             for n in [int(h) for h in result["eval"]["horizons"]]:
                 for key in ("rot_rad", "trans_m"):
                     mine = rel.get((m, v, n), {}).get(key, float("nan"))
-                    cands = [(rel[(f, v, n)][key], f) for f in floors
+                    cands = [(rel[(f, v, n)][key], f) for f in floors_m
                              if (f, v, n) in rel and math.isfinite(rel[(f, v, n)][key])]
                     if not cands or not math.isfinite(mine):
                         continue

@@ -222,7 +222,10 @@ def model_card(model: ImuRefiner, state: Dict[str, Any], checkpoint: Path, files
         "normalisation": {
             "inside_model": True,
             "mean": [float(v) for v in model.mean.float()], "std": [float(v) for v in model.std.float()],
-            "rule": "x_norm = (imu - mean) / std; refined = imu + output_scale * std * head(network(x_norm))",
+            "rule": ("cal = A imu + c where model.calib (the floor's affine calibration, inside the model; else cal = "
+                     "imu); x_norm = (cal - mean) / std; refined = cal + std * (refined_channels * output_scale * "
+                     "head(network(x_norm)) + fir(x_norm)) (fir: the floor's shift and low-pass where model.fir_taps, "
+                     "on every channel with model.calib)"),
             "output_scale": float(model.cfg.output_scale),
         },
         "model_args": model.model_args(),

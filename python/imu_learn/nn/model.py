@@ -104,6 +104,10 @@ class ImuRefiner(nn.Module):
             raise ValueError(f"model.refine: must be one of {', '.join(REFINE_CHANNELS)}, got {cfg.refine!r}")
         # Not persistent: derived from the config, so older checkpoints load unchanged.
         self.register_buffer("channels", torch.tensor(REFINE_CHANNELS[cfg.refine], dtype=torch.float32), persistent=False)
+        # the FIR branch's channels: every one where the model holds a floor (model.calib: a profile's or a fitted
+        # calibration, whose shift it carries), so a gyro-only refiner passes the accelerometer through that floor;
+        # otherwise the refined ones (a gyro-only model from raw passes the accelerometer through as read)
+        self.register_buffer("fir_channels", torch.ones(6) if cfg.calib else self.channels.clone(), persistent=False)
         # Start as the identity map: the regulariser and the paper both want training to begin
         # from the raw IMU's quality, not from noise.
         nn.init.zeros_(self.head.weight)
@@ -152,9 +156,9 @@ class ImuRefiner(nn.Module):
             raise ValueError("carried state needs the causal model (bidirectional LSTMs see the future)")
         mean = self.mean.to(imu.dtype)
         std = self.std.to(imu.dtype)
-        if self.cfg.calib:  # the fixed calibration, on the channels the model refines
-            cal = imu @ self.calib_A.to(imu.dtype).T + self.calib_c.to(imu.dtype)
-            imu = torch.where(self.channels.to(imu.dtype) > 0, cal, imu)
+        if self.cfg.calib:  # the fixed calibration on every channel: it is the floor (a profile's), and a
+            # model refining the gyro alone passes the accelerometer through its floor, not raw
+            imu = imu @ self.calib_A.to(imu.dtype).T + self.calib_c.to(imu.dtype)
         x = (imu - mean) / std
         linear = self._fir(x)
         new_state: State = []
@@ -163,11 +167,11 @@ class ImuRefiner(nn.Module):
             x, (h, c) = lstm(x, s)
             new_state.append((h, c))
             x = fc(x)
-        corr = self.cfg.output_scale * self.head(x)
-        if linear is not None:
-            corr = corr + linear
+        corr = self.channels.to(imu.dtype) * self.cfg.output_scale * self.head(x)  # the network: its channels
+        if linear is not None:  # the FIR branch (a floor's shift and low-pass)
+            corr = corr + self.fir_channels.to(imu.dtype) * linear
         var = self.variance(x) if self.cov_head is not None else None
-        return imu + std * self.channels.to(imu.dtype) * corr, var, new_state
+        return imu + std * corr, var, new_state
 
     @torch.no_grad()
     def floor(self, imu: Tensor) -> Tensor:
@@ -175,12 +179,11 @@ class ImuRefiner(nn.Module):
         (B, W, 6) -> (B, W, 6). For start = "profile" that is the profile's floor, fixed in training,
         and the loss regularises the network's residual on top of it (not the floor's own correction)."""
         if self.cfg.calib:
-            cal = imu @ self.calib_A.to(imu.dtype).T + self.calib_c.to(imu.dtype)
-            imu = torch.where(self.channels.to(imu.dtype) > 0, cal, imu)
+            imu = imu @ self.calib_A.to(imu.dtype).T + self.calib_c.to(imu.dtype)
         linear = self._fir((imu - self.mean.to(imu.dtype)) / self.std.to(imu.dtype))
         if linear is None:
             return imu
-        return imu + self.std.to(imu.dtype) * self.channels.to(imu.dtype) * linear
+        return imu + self.std.to(imu.dtype) * self.fir_channels.to(imu.dtype) * linear
 
     def _fir(self, x: Tensor) -> Optional[Tensor]:
         """The FIR branch on normalised input (B, W, 6) -> (B, W, 6), or None when off. Not scaled
