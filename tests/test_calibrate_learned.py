@@ -202,3 +202,20 @@ def test_the_run_config_of_input_recordings_is_one_fit_can_read_back():
     cfg = learned_base(args, SimpleNamespace(sources=[{"max_gap_s": 0.05}]))
     assert [r.format for r in cfg.data.roots] == ["euroc"]
     assert list(find_all(cfg.data.roots)) == ["MH_01_easy"]
+
+
+def test_a_model_calibrate_did_not_ship_is_named_when_applied(tmp_path, capsys):
+    """calibrate --learned keeps a model that lost to its profile as model.not_shipped.pt; refine (and
+    navigate, evaluate: one correction plan) applied it without a word."""
+    import shutil
+
+    ckpt = tmp_path / "model.not_shipped.pt"
+    shutil.copy(REPO / "models" / "euroc_adis16448.pt", ckpt)
+    assert refine_main(["--checkpoint", str(ckpt), "--input", str(MH04), "--out", str(tmp_path / "out"),
+                        "--format", "euroc"]) == 0
+    err = capsys.readouterr().err
+    assert "did not beat its profile on validation" in err and "--profile profile.json" in err
+    shutil.copy(ckpt, tmp_path / "model.pt")
+    assert refine_main(["--checkpoint", str(tmp_path / "model.pt"), "--input", str(MH04), "--out",
+                        str(tmp_path / "out2"), "--format", "euroc"]) == 0
+    assert "did not beat" not in capsys.readouterr().err

@@ -188,6 +188,9 @@ def from_profile(path: Path) -> Plan:
     return plan
 
 
+NOT_SHIPPED_SUFFIX = ".not_shipped.pt"  # calibrate --learned's name for a model its gate did not ship
+
+
 def from_checkpoint(req: Request) -> Plan:
     """The model of ``req.checkpoint``, after the profile it carries, if any (once)."""
     require_extra("train", f"{req.command} --checkpoint")
@@ -201,6 +204,10 @@ def from_checkpoint(req: Request) -> Plan:
         raise ConfigError(f"--device: {e}") from e
     state = load_checkpoint(req.checkpoint)
     model = model_from_checkpoint(state).to(device)
+    if Path(req.checkpoint).name.endswith(NOT_SHIPPED_SUFFIX):  # calibrate --learned's model that lost to its floor
+        logger.warning(f"--checkpoint {req.checkpoint}: this model did not beat its profile on validation "
+                       "(learned.json beside it says by how much); the profile alone is calibrate's result "
+                       "(--profile profile.json)")
     if req.variance == "required":
         require_covariance_head(model, req.checkpoint)
     record = imu_record(state)

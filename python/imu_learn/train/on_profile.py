@@ -26,6 +26,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Callable, Dict, List, Sequence
 
+from imu_learn.calib.correction import NOT_SHIPPED_SUFFIX
 from imu_learn.calib.profile import Profile
 from imu_learn.data.splits import Split, write_split
 from imu_learn.data.types import Segment
@@ -37,7 +38,7 @@ from imu_learn.train.config import RunConfig, build_config, to_toml
 from imu_learn.util.atomic import atomic_write_text
 
 Progress = Callable[[str], None]
-SHIPPED, NOT_SHIPPED = "model.pt", "model.not_shipped.pt"
+SHIPPED, NOT_SHIPPED = "model.pt", "model" + NOT_SHIPPED_SUFFIX  # refine --checkpoint warns on the second
 PROTOCOLS = ("open loop", "start-up bias removed")
 # Below the floor means below this ratio in every cell: the untrained model (epoch 0, the floor in
 # float32 with its low-pass as a FIR) scores within 2e-4 of 1, which is no gain.
