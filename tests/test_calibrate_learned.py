@@ -204,7 +204,7 @@ def test_the_run_config_of_input_recordings_is_one_fit_can_read_back():
     assert list(find_all(cfg.data.roots)) == ["MH_01_easy"]
 
 
-def test_a_model_calibrate_did_not_ship_is_named_when_applied(tmp_path, capsys):
+def test_a_model_calibrate_did_not_ship_is_named_when_applied(tmp_path, capsys, caplog):
     """calibrate --learned keeps a model that lost to its profile as model.not_shipped.pt; refine (and
     navigate, evaluate: one correction plan) applied it without a word."""
     import shutil
@@ -215,6 +215,13 @@ def test_a_model_calibrate_did_not_ship_is_named_when_applied(tmp_path, capsys):
                         "--format", "euroc"]) == 0
     err = capsys.readouterr().err
     assert "did not beat its profile on validation" in err and "--profile profile.json" in err
+    from imu_learn.eval.run import CheckpointRefiner
+
+    import logging
+
+    with caplog.at_level(logging.WARNING, logger="imu_learn.eval.run"):
+        CheckpointRefiner(ckpt)  # evaluate's --checkpoint says it too
+    assert "did not beat its profile on validation" in caplog.text
     shutil.copy(ckpt, tmp_path / "model.pt")
     assert refine_main(["--checkpoint", str(tmp_path / "model.pt"), "--input", str(MH04), "--out",
                         str(tmp_path / "out2"), "--format", "euroc"]) == 0
