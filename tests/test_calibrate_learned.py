@@ -215,9 +215,9 @@ def test_a_model_calibrate_did_not_ship_is_named_when_applied(tmp_path, capsys, 
                         "--format", "euroc"]) == 0
     err = capsys.readouterr().err
     assert "did not beat its profile on validation" in err and "--profile profile.json" in err
-    from imu_learn.eval.run import CheckpointRefiner
-
     import logging
+
+    from imu_learn.eval.run import CheckpointRefiner
 
     with caplog.at_level(logging.WARNING, logger="imu_learn.eval.run"):
         CheckpointRefiner(ckpt)  # evaluate's --checkpoint says it too

@@ -191,6 +191,16 @@ def from_profile(path: Path) -> Plan:
 NOT_SHIPPED_SUFFIX = ".not_shipped.pt"  # calibrate --learned's name for a model its gate did not ship
 
 
+def not_shipped(path: Path) -> Optional[str]:
+    """The one line that names a model calibrate --learned did not ship (None for any other file): refine,
+    navigate and evaluate say it where they apply one."""
+    if not Path(path).name.endswith(NOT_SHIPPED_SUFFIX):
+        return None
+    return (f"--checkpoint {path}: this model did not beat its profile on validation (learned.json beside it says "
+            "by how much); the profile alone is calibrate's result (--profile profile.json, or profile:profile.json "
+            "among evaluate's --methods)")
+
+
 def from_checkpoint(req: Request) -> Plan:
     """The model of ``req.checkpoint``, after the profile it carries, if any (once)."""
     require_extra("train", f"{req.command} --checkpoint")
@@ -204,10 +214,8 @@ def from_checkpoint(req: Request) -> Plan:
         raise ConfigError(f"--device: {e}") from e
     state = load_checkpoint(req.checkpoint)
     model = model_from_checkpoint(state).to(device)
-    if Path(req.checkpoint).name.endswith(NOT_SHIPPED_SUFFIX):  # calibrate --learned's model that lost to its floor
-        logger.warning(f"--checkpoint {req.checkpoint}: this model did not beat its profile on validation "
-                       "(learned.json beside it says by how much); the profile alone is calibrate's result "
-                       "(--profile profile.json)")
+    if not_shipped(req.checkpoint):
+        logger.warning(not_shipped(req.checkpoint))
     if req.variance == "required":
         require_covariance_head(model, req.checkpoint)
     record = imu_record(state)

@@ -43,7 +43,7 @@ from imu_learn.baselines.base import FitSettings, Method, PosePrediction, poses_
 from imu_learn.baselines.noise_floor import NOISE_FLOOR_NAME, GroundTruthImu
 from imu_learn.baselines.registry import DEFAULT_METHODS, REGISTRY, load_method_class, method_file, safe_name  # noqa: F401
 from imu_learn.baselines.registry import PREFIX as PROFILE_PREFIX
-from imu_learn.calib.correction import NOT_SHIPPED_SUFFIX
+from imu_learn.calib.correction import not_shipped
 from imu_learn.core.quat import rotation_angle
 from imu_learn.data.formats import read_recording
 from imu_learn.data.splits import (
@@ -239,9 +239,8 @@ class CheckpointRefiner(Method):
         self.device = torch.device(device)
         self.model = model_from_checkpoint(state).to(self.device)
         self.window = self.model.windowing.window  # the checkpoint's rule (imu_learn.infer.windowing)
-        if self.path.name.endswith(NOT_SHIPPED_SUFFIX):  # as refine says it (imu_learn.calib.correction)
-            logger.warning(f"--checkpoint {self.path}: this model did not beat its profile on validation (learned.json "
-                           "beside it); add profile:profile.json to --methods to see it against that profile")
+        if not_shipped(self.path):
+            logger.warning(not_shipped(self.path))
 
     def splits(self) -> Dict[str, List[str]]:
         sp = (self.config.get("data") or {}).get("split") or {}

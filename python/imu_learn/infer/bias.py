@@ -399,7 +399,7 @@ class Estimator:
     name: str
     run: Callable[[Context, np.ndarray, np.ndarray, np.ndarray], BiasEstimate]
     words: str
-    help: str
+    help: str  # {model}: where refine (which takes --bias-model) says what a model adds; navigate takes none
     navigate: bool = True
     needs_model: bool = False
 
@@ -407,7 +407,7 @@ class Estimator:
 REGISTRY: Dict[str, Estimator] = {e.name: e for e in (
     Estimator("auto", _auto, "the recording's own gyro bias removed: every estimator and the device prior combined by "
               "their uncertainties",
-              "every estimator without a model (with --bias-model, the learned one too) and the device prior, "
+              "every estimator without a model{model} and the device prior, "
               "combined by their uncertainties (recommended)"),
     Estimator("still", _still, "the recording's own gyro bias from its still stretches removed",
               "the mean gyro over its still stretches (the still rule: quiet, at gravity's norm, the gyro within "
@@ -437,9 +437,8 @@ def choices(navigate: bool = False) -> Tuple[str, ...]:
 
 def help_text(navigate: bool = False) -> str:
     """``--bias``'s help, made from the registry (the same words for refine and navigate)."""
-    # navigate takes no --bias-model: what refine's help says of one is left out there
-    items = "; ".join(f"{n}: {e.help.replace(' (with --bias-model, the learned one too)', '') if navigate else e.help}"
-                      for n, e in REGISTRY.items() if e.navigate or not navigate)
+    model = "" if navigate else " (with --bias-model, the learned one too)"
+    items = "; ".join(f"{n}: {e.help.format(model=model)}" for n, e in REGISTRY.items() if e.navigate or not navigate)
     where = ("on the IMU as fused (after --profile's floor, --checkpoint or --calibration), subtracted before the "
              "fusion" if navigate else "after the profile and model")
     return (f"the recording's own gyro bias, estimated {where} and bounded by the device's bias spread "
