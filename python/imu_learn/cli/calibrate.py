@@ -31,7 +31,6 @@ from imu_learn.data.formats import FORMATS, USER_CSV, detect_format
 from imu_learn.data.splits import data_root_dir, make_split, recording_name
 from imu_learn.errors import ConfigError
 from imu_learn.eval.run import load_eval_config
-from imu_learn.fuse.calibrate_positions import is_positions_reference, refuse_navigator_options, source_from_cli
 from imu_learn.settings import read_toml
 from imu_learn.train.config import build_config, load_config
 
@@ -160,6 +159,18 @@ class ConfigSource(Source):
         return CalibInputs(recordings=recordings, settings=settings, device=device, sources=sources, source=self)
 
 
+NAVIGATOR_DESTS = ("imu_rotation_rpy_deg", "imu_delay_s", "lever_arm")  # the options above for the positions kind
+
+
+def positions() -> Any:
+    """The positions reference's module (:mod:`imu_learn.fuse.calibrate_positions`), imported where a
+    --groundtruth file or its options are given: it brings the navigator (GTSAM's graph, scipy's
+    rotations), about 1 s of start-up a config's, still or ASL recording's calibration does not need."""
+    from imu_learn.fuse import calibrate_positions
+
+    return calibrate_positions
+
+
 def source_of(args: argparse.Namespace) -> Source:
     """The reference source the options name: --config's split, --imu-only's still recordings, a
     positions-only --groundtruth (GNSS), a planar odometry one (the yaw rate), else poses (any frame)."""
@@ -167,8 +178,8 @@ def source_of(args: argparse.Namespace) -> Source:
         return ConfigSource(args.config, args.data_root, args.device)
     if args.imu_only:
         return StillSource(args.input, args.format, csv_layout(args), args.device)
-    if any(is_positions_reference(g) for g in args.groundtruth or []):
-        return source_from_cli(args, csv_layout(args))  # positions only: attitude from the navigator's smoother
+    if args.groundtruth and any(positions().is_positions_reference(g) for g in args.groundtruth):
+        return positions().source_from_cli(args, csv_layout(args))  # positions only: the navigator's smoother's attitude
     if any(is_odometry_reference(g) for g in args.groundtruth or []):  # planar odometry: the yaw rate only
         return OdometrySource(args.input, args.groundtruth, args.format, csv_layout(args), args.max_gap_s,
                               args.val_fraction, args.device)
@@ -186,7 +197,8 @@ def run(args: argparse.Namespace, rest: List[str], keep: Callable[[Any], None]) 
     say = (lambda s: None) if args.quiet else (lambda s: logger.info("%s", s))
     say("reading the recordings")
     source = source_of(args)
-    refuse_navigator_options(args, source.kind)  # the navigator's options: the positions kind only
+    if any(getattr(args, k, None) is not None for k in NAVIGATOR_DESTS):  # the positions kind's options only
+        positions().refuse_navigator_options(args, source.kind)
     writes = source.kind == "positions"  # its reading runs the smoother, which writes into --out
 
     def kept() -> str:
