@@ -222,3 +222,27 @@ def test_navigate_turns_the_reference_poses_by_the_profiles_rotation(tmp_path, c
     s = json.loads((tmp_path / "nav" / "summary.json").read_text())
     check = s["aiding_estimates"]["frame_check"]
     assert check["verdict"] == "same frame" and check["rotation_deg"] < 0.5, check
+
+
+def test_the_profiles_reference_gives_navigate_its_extrinsic_and_origin():
+    """profile.json's reference entry read back as T_BS: the rotation calibrate applied, the origin from the applied
+    lever arm, else from the accelerometer's fit against the positions where within 2 cm, else zero; nothing where
+    no rotation was applied."""
+    from imu_learn.calib.reference import applied_extrinsic
+
+    R = np.array([[0.0, -1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, 1.0]])
+    base = {"rotation_imu_from_reference": R.tolist(), "rotation_deg": 90.0, "lever_arm_m": [0.1, 0.2, 0.3],
+            "applied": {"rotation": True, "lever_arm": True},
+            "accelerometer_from_positions": {"fit_lever": True, "lever_arm_m": [-0.01, -0.06, 0.003],
+                                             "lever_arm_std_m": [0.004, 0.005, 0.006]}}
+    T, deg, where = applied_extrinsic(base)
+    assert np.array_equal(T[:3, :3], R) and np.allclose(T[:3, 3], [0.1, 0.2, 0.3]) and deg == 90.0
+    assert np.array_equal(T[3], [0, 0, 0, 1]) and "10.0, 20.0, 30.0" in where
+    T, _, where = applied_extrinsic({**base, "applied": {"rotation": True, "lever_arm": False}})
+    assert np.allclose(T[:3, 3], [-0.01, -0.06, 0.003]) and "from the accelerometer" in where
+    loose = {**base, "applied": {"rotation": True}, "accelerometer_from_positions": {
+        "fit_lever": True, "lever_arm_m": [-0.01, -0.06, 0.003], "lever_arm_std_m": [0.004, 0.03, 0.006]}}
+    T, _, where = applied_extrinsic(loose)
+    assert np.array_equal(T[:3, 3], np.zeros(3)) and "not estimated" in where
+    assert applied_extrinsic({**base, "applied": {"rotation": False, "lever_arm": True}}) is None
+    assert applied_extrinsic({}) is None

@@ -64,6 +64,7 @@ from imu_learn.calib import correction
 from imu_learn.calib.metric_scale import ScaleFit
 from imu_learn.calib.plausible import LIMITS
 from imu_learn.calib.profile import Profile
+from imu_learn.calib.reference import applied_extrinsic
 from imu_learn.core.still import MEMS_PRIOR, MIN_STILL_START_S, BiasPrior
 from imu_learn.data import formats
 from imu_learn.data.formats import CsvColumns, rosbag
@@ -880,48 +881,20 @@ def read_inputs(src: Sources, opts: NavigateOptions) -> Inputs:
 def aiding_extrinsic(src: Sources, kind: AidingKind) -> Optional[np.ndarray]:
     """The aiding sensor's pose in the IMU frame (T_BS, 4x4): ``--extrinsics``; else, for poses, the rotation
     ``imu-learn calibrate`` estimated and applied between its reference and the IMU (``--profile``'s
-    ``reference.rotation_imu_from_reference``, with its lever arm where that was applied), one warning line
-    saying so (a VIO's camera poses calibrated against, then navigated with: refused before, naming
-    --extrinsics, though the profile held the rotation); the frame check judges it as it judges --extrinsics."""
+    reference, :func:`~imu_learn.calib.reference.applied_extrinsic`), one warning line saying so (a VIO's
+    camera poses calibrated against, then navigated with: refused before, naming --extrinsics, though the
+    profile held the rotation); the frame check judges it as it judges --extrinsics."""
     if src.extrinsics is not None:
         return read_t_bs(src.extrinsics)
     if src.profile is None or not kind.poses:
         return None
-    ref = Profile.load(src.profile).reference or {}
-    applied = ref.get("applied") or {}
-    if not applied.get("rotation") or ref.get("rotation_imu_from_reference") is None:
+    found = applied_extrinsic(Profile.load(src.profile).reference or {})
+    if found is None:
         return None
-    T = np.eye(4)
-    T[:3, :3] = np.asarray(ref["rotation_imu_from_reference"], dtype=np.float64)
-    lever, where = profile_lever(ref)
-    T[:3, 3] = lever
+    T, rotation_deg, where = found
     log.warning(f"--aiding {Path(src.aiding).name}: its poses moved into the IMU frame by --profile's reference, as "
-                f"imu-learn calibrate estimated it: rotation {float(ref.get('rotation_deg', float('nan'))):.2f} deg, "
-                f"{where}; --extrinsics gives another")
+                f"imu-learn calibrate estimated it: rotation {rotation_deg:.2f} deg, {where}; --extrinsics gives another")
     return T
-
-
-LEVER_MAX_STD_M = 0.02  # a reference origin estimated no better than this per axis is not used (zero instead)
-
-
-def profile_lever(ref: Dict[str, object]) -> Tuple[np.ndarray, str]:
-    """(the reference origin in the IMU frame [m], words) from a profile's ``reference``: its applied lever arm,
-    else the one the accelerometer's fit against the positions estimated (``accelerometer_from_positions``)
-    where it is within :data:`LEVER_MAX_STD_M` on every axis, else zero. EuRoC's camera on V1_03 with a profile
-    of MH_03 against ORB-SLAM2 (trial1): the origin at zero doubled the aligned RMSE (0.066 against 0.032 m
-    with cam0_sensor.yaml); the positions' estimate (-0.8, -5.8, 0.3) cm, cam0's (-2.2, -6.5, 1.0)."""
-    applied = ref.get("applied") or {}
-    if applied.get("lever_arm") and ref.get("lever_arm_m") is not None:
-        lever = np.asarray(ref["lever_arm_m"], dtype=np.float64)
-        return lever, f"origin ({', '.join(f'{100 * x:.1f}' for x in lever)}) cm"
-    fit = ref.get("accelerometer_from_positions") or {}
-    lever, std = fit.get("lever_arm_m"), fit.get("lever_arm_std_m")
-    if fit.get("fit_lever") and lever is not None and std is not None:
-        lever, std = np.asarray(lever, dtype=np.float64), np.asarray(std, dtype=np.float64)
-        if np.all(np.isfinite(std)) and np.all(std <= LEVER_MAX_STD_M):
-            return lever, (f"origin ({', '.join(f'{100 * x:.1f}' for x in lever)}) +- "
-                           f"({', '.join(f'{100 * x:.1f}' for x in std)}) cm from the accelerometer against its positions")
-    return np.zeros(3), "origin at the IMU's (not estimated: give --extrinsics with the sensor's position)"
 
 
 UNAIDED_END_S = 5.0  # an aiding that stops this long before the IMU gets a warning (the tracks' end is unaided)
