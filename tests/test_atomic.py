@@ -109,3 +109,19 @@ def test_permissions_are_what_open_would_give(tmp_path):
     finally:
         os.umask(mask)
         atomic._umask.cache_clear()
+
+
+def test_an_error_names_the_output_not_its_temporary():
+    """One rule for atomic files and staged folders: an error's file names are the output's."""
+    from pathlib import Path
+
+    from imu_learn.util.atomic import named
+
+    out, stage = Path("/o/run"), Path("/o/.run.x1.tmp")
+    assert named(OSError(28, "No space left on device"), Path("/o/x.csv")).filename == "/o/x.csv"
+    assert named(PermissionError(13, "Permission denied", "/o/.x.csv.ab.tmp"), Path("/o/x.csv")).filename == "/o/x.csv"
+    e = named(FileNotFoundError(2, "No such file", str(stage / "tracks" / "a.tum")), out, stage)
+    assert isinstance(e, FileNotFoundError) and e.filename == "/o/run/tracks/a.tum"
+    e = named(OSError(18, "Invalid cross-device link", str(stage), None, "/elsewhere/run"), out, stage)
+    assert (e.filename, e.filename2) == ("/o/run", "/elsewhere/run")
+    assert str(named(OSError(f"cannot write {stage}/a.bag"), out, stage)) == "cannot write /o/run/a.bag"

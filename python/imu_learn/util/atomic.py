@@ -43,7 +43,7 @@ def temp_beside(path: Path) -> Path:
     try:
         fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
     except OSError as e:  # a read-only or full folder: name the output, not a random temp name
-        raise _named(e, path) from None
+        raise named(e, path) from None
     try:
         os.fchmod(fd, _output_mode(path))
     finally:
@@ -51,12 +51,24 @@ def temp_beside(path: Path) -> Path:
     return Path(tmp)
 
 
-def _named(e: OSError, path: Path, tmp: Optional[Path] = None) -> OSError:
-    """``e`` again, naming the output ``path`` instead of the temporary file or nothing (a write to
-    a full disk raises without a file name), so a one-line report says which output failed."""
-    if e.errno is None:  # e.g. imu_core's writers: the temporary file's name is in the message
-        return type(e)(str(e).replace(str(tmp), str(path))) if tmp is not None and str(tmp) in str(e) else e
-    return type(e)(e.errno, e.strerror, str(path))
+def named(e: OSError, final: Path, tmp: Optional[Path] = None) -> OSError:
+    """``e`` again, naming the output ``final`` instead of a temporary, so a one-line report says which
+    output failed, not a temporary that is gone: without ``tmp`` (a temporary with a random name, or
+    none: a write to a full disk raises without a file name) ``final`` alone; with ``tmp`` (a file, or
+    a staging folder) every name under it moved under ``final`` (a file inside the staging folder named
+    inside the output folder). The one rule for atomic files and staged folders."""
+    def final_name(name: object) -> object:
+        text = "" if name is None else str(name)
+        if tmp is None or name is None:
+            return str(final)
+        return str(final) + text[len(str(tmp)):] if text.startswith(str(tmp)) else name
+
+    if e.errno is None:  # e.g. imu_core's writers: the temporary's name is in the message
+        message = str(e).replace(str(tmp), str(final)) if tmp is not None else str(e)
+        return type(e)(message) if message != str(e) else e
+    if e.filename2 is not None and tmp is not None:
+        return type(e)(e.errno, e.strerror, final_name(e.filename), None, final_name(e.filename2))
+    return type(e)(e.errno, e.strerror, final_name(e.filename))
 
 
 def _fsync_file(path: Path) -> None:
@@ -97,7 +109,7 @@ def atomic_write_path(path: PathLike, fill: Callable[[Path], None]) -> None:
         except FileNotFoundError:
             pass
         if isinstance(e, OSError) and (e.filename is None or str(e.filename) == str(tmp)):
-            raise _named(e, path, tmp) from e
+            raise named(e, path, tmp) from e
         raise
     _fsync_dir(path.parent)
 
@@ -142,7 +154,7 @@ def atomic_write_dir(path: PathLike, fill: Callable[[Path], None], replace: bool
     try:
         holder = Path(tempfile.mkdtemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent))
     except OSError as e:
-        raise _named(e, path) from None
+        raise named(e, path) from None
     try:
         tmp = holder / path.name  # the name a writer may embed in its files (rosbags names storage after it)
         fill(tmp)
@@ -152,7 +164,7 @@ def atomic_write_dir(path: PathLike, fill: Callable[[Path], None], replace: bool
     except BaseException as e:
         shutil.rmtree(holder, ignore_errors=True)
         if isinstance(e, OSError) and (e.filename is None or str(e.filename).startswith(str(holder))):
-            raise _named(e, path) from e
+            raise named(e, path) from e
         raise
     os.rmdir(holder)
     _fsync_dir(path.parent)

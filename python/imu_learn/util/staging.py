@@ -26,7 +26,7 @@ from contextlib import contextmanager
 from pathlib import Path
 from typing import Callable, Collection, Iterator, Optional, Union
 
-from .atomic import _fsync_dir, _umask
+from .atomic import _fsync_dir, _umask, named
 from .interrupts import held_interrupts
 
 PathLike = Union[str, "os.PathLike[str]"]
@@ -145,22 +145,7 @@ def staged_dir(out: PathLike, owned: Collection[str] = (),
                 on_commit()
     except OSError as e:
         shutil.rmtree(stage, ignore_errors=True)
-        raise _final_name(e, stage, target) from None
+        raise named(e, target, stage) from None
     except BaseException:
         shutil.rmtree(stage, ignore_errors=True)
         raise
-
-
-def _final_name(e: OSError, stage: Path, target: Path) -> OSError:
-    """``e`` naming the output's final path where it names the staging folder's (a one-line report
-    names the file the user asked for, not a folder that is gone)."""
-    def final(name: object) -> object:
-        text = str(name) if name is not None else ""
-        return str(target) + text[len(str(stage)):] if text.startswith(str(stage)) else name
-
-    message = str(e).replace(str(stage), str(target))
-    if e.errno is None:
-        return type(e)(message) if message != str(e) else e
-    out = type(e)(e.errno, e.strerror, final(e.filename), None, final(e.filename2)) if e.filename2 is not None \
-        else type(e)(e.errno, e.strerror, final(e.filename))
-    return out
