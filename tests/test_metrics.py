@@ -170,7 +170,7 @@ def test_window_increments_are_the_cores_window_by_window_integration():
     """relative_pose_errors composes each window from the recording's cumulative increments
     (score.metrics.window_increments); the core's integrate_windows runs the same sums window by window:
     they agree to round-off, on irregular stamps and a long recording (its cumulative γ reaches ~4 km)."""
-    from imu_learn.core.integration import integrate_windows
+    from imu_learn.core.integration import integrate_windows, preintegrate
     from imu_learn.score.metrics import window_increments
 
     t_ns, gyro, acc = _motion(seconds=30.0)
@@ -180,7 +180,7 @@ def test_window_increments_are_the_cores_window_by_window_integration():
     k = np.arange(7, len(seq) - 401, 37)
     for n in (1, 10, 400):
         want = integrate_windows(seq, k.astype(np.uint64), np.array([n], dtype=np.uint64))
-        dq, dp, dt = window_increments(seq, k, k + n)
+        dq, dp, dt = window_increments(preintegrate(seq.t_ns, seq.gyro, seq.acc), k, k + n)
         assert np.allclose(dt, want.dt[:, 0], rtol=0, atol=1e-12)
         ang = 2 * np.arcsin(np.clip(np.linalg.norm(quat_mul(quat_conj(want.dq_wxyz[:, 0]), dq)[:, 1:], axis=1), 0, 1))
         assert ang.max() < 1e-10

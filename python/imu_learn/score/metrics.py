@@ -29,7 +29,7 @@ from typing import Sequence as Seq
 
 import numpy as np
 
-from imu_learn.core.integration import integrate_windows, preintegrate, rotation_window_sums, window_labels
+from imu_learn.core.integration import Increments, integrate_windows, preintegrate, rotation_window_sums, window_labels
 from imu_learn.core.quat import quat_conj, quat_log, quat_mul, quat_rotate, so3_right_jacobian_inverse
 from imu_learn.data.types import Segment
 from imu_learn.errors import InvalidInputError
@@ -69,7 +69,7 @@ def index_at(seq: Segment, seconds: float) -> int:
 
 def relative_pose_errors(
     seq: Segment, n: int, stride: int = 1, gravity: float = GRAVITY, first: int = 0, last: Optional[int] = None,
-    pre: Optional[Any] = None,
+    pre: Optional[Increments] = None,
 ) -> Dict[str, np.ndarray]:
     """Per-window errors of dead reckoning over ``n`` samples from the ground-truth state.
 
@@ -86,7 +86,7 @@ def relative_pose_errors(
         return {"starts": starts, "rot_rad": np.zeros(0), "trans_m": np.zeros(0)}
     k = starts.astype(np.int64)
     j = k + n
-    dq, dp, dt = window_increments(seq if pre is None else pre, k, j)
+    dq, dp, dt = window_increments(preintegrate(seq.t_ns, seq.gyro, seq.acc) if pre is None else pre, k, j)
     g = np.array([0.0, 0.0, -gravity])
     q_k = seq.q_wxyz[k]
     q_hat = quat_mul(q_k, dq)
@@ -96,13 +96,12 @@ def relative_pose_errors(
     return {"starts": starts, "rot_rad": rot, "trans_m": trans}
 
 
-def window_increments(src: Any, k: np.ndarray, j: np.ndarray) -> Tuple[np.ndarray, np.ndarray, np.ndarray]:
+def window_increments(pre: Increments, k: np.ndarray, j: np.ndarray) -> Tuple[np.ndarray, np.ndarray, np.ndarray]:
     """(Δq (M, 4), Δγ (M, 3), Δt (M,)) of the IMU over samples k..j-1 for each pair, composed from the
-    cumulative increments (``src``: a segment, preintegrated here, or its
-    :func:`~imu_learn.core.integration.preintegrate`): Δq_kj = q_kᵀ q_j, Δγ_kj = R_kᵀ (γ_j − γ_k − β_k Δt_kj);
-    the same sums the core's ``integrate_windows`` runs window by window (to 1e-10 m on a 100 s flight),
-    in one pass over the recording instead of one per window."""
-    pre = preintegrate(src.t_ns, src.gyro, src.acc) if hasattr(src, "gyro") else src
+    recording's cumulative increments ``pre`` (:func:`~imu_learn.core.integration.preintegrate`):
+    Δq_kj = q_kᵀ q_j, Δγ_kj = R_kᵀ (γ_j − γ_k − β_k Δt_kj); the same sums the core's ``integrate_windows``
+    runs window by window (to 1e-10 m on a 100 s flight), in one pass over the recording instead of one
+    per window."""
     qk = quat_conj(pre.dq_wxyz[k])
     dt = pre.dt[j] - pre.dt[k]
     return quat_mul(qk, pre.dq_wxyz[j]), quat_rotate(qk, pre.dp[j] - pre.dp[k] - pre.dv[k] * dt[:, None]), dt
