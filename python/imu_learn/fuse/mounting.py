@@ -92,9 +92,15 @@ def mounting_check(t_ns: np.ndarray, acc_imu: np.ndarray, fix_t_ns: np.ndarray, 
     except InvalidInputError as e:
         return {"checked": False, "why": str(e)}
     given = np.eye(3)[0] if mounting is None else np.asarray(mounting, dtype=np.float64)[0]
-    angle = math.degrees(math.acos(float(np.clip(given @ np.asarray(est["forward_imu"]), -1.0, 1.0))))
+    angle = angle_between_deg(given, est["forward_imu"])
     return {"checked": True, "angle_deg": round(angle, 2), "estimated_rpy_deg": [round(x, 2) for x in est["rpy_deg"]],
             "ok": angle <= MOUNT_TOL_DEG, "tolerance_deg": MOUNT_TOL_DEG}
+
+
+def angle_between_deg(a: Any, b: Any) -> float:
+    """The angle [deg] between two directions (any lengths): a given forward axis and the track's."""
+    a, b = np.asarray(a, dtype=np.float64), np.asarray(b, dtype=np.float64)
+    return math.degrees(math.acos(float(np.clip(a @ b / (np.linalg.norm(a) * np.linalg.norm(b)), -1.0, 1.0))))
 
 
 def track_forward(t_ns: np.ndarray, acc: np.ndarray, fix_t_ns: np.ndarray, fix_p: np.ndarray, gravity: float = 9.81,

@@ -12,7 +12,7 @@ from scipy.spatial.transform import Rotation
 from imu_learn.core.still import MIN_STILL_START_S
 
 from ..aiding.types import AidingRows
-from ..mounting import MOUNT_TOL_DEG, track_forward
+from ..mounting import MOUNT_TOL_DEG, angle_between_deg, track_forward
 from . import level as initial
 from .track import track_start
 from .types import Start
@@ -91,7 +91,7 @@ def forward_axis(t_ns, acc, rows: AidingRows, gravity: float, info: dict) -> Opt
         entry["used"] = "the body's x-axis (the track shows no forward axis)"
         return None
     forward = shown["forward"]
-    angle = float(np.degrees(np.arccos(np.clip(forward[0] / np.linalg.norm(forward), -1.0, 1.0))))
+    angle = angle_between_deg(np.eye(3)[0], forward)
     entry["angle_from_x_deg"] = round(angle, 2)
     if angle <= MOUNT_TOL_DEG:
         entry["used"] = "the body's x-axis (the track's forward axis is within the tolerance)"
