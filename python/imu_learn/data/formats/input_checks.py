@@ -310,6 +310,19 @@ def _rest(c: _Context) -> Optional[np.ndarray]:
     return None
 
 
+def white_noise(x: np.ndarray, idx: np.ndarray) -> float:
+    """The per-sample white noise of ``x`` over the samples ``idx`` (ascending), per axis the spread of
+    consecutive differences over sqrt(2), the median over the axes: a rest found on the accelerometer alone
+    may turn slowly (TUM-VI's hand-held rig: 0.058 rad/s of spread, refused as deg/s before), which the
+    differences leave out, while a gyro's noise read in the wrong unit is white and stays."""
+    idx = np.asarray(idx)
+    pairs = np.flatnonzero(np.diff(idx) == 1)
+    if not len(pairs):
+        return 0.0
+    d = x[idx[pairs + 1]] - x[idx[pairs]]
+    return float(np.median(np.std(d, axis=0))) / math.sqrt(2.0)
+
+
 def _median_norm(x: np.ndarray, rest: Optional[np.ndarray]) -> float:
     return float(np.median(np.linalg.norm(x if rest is None else x[rest], axis=1)))
 
@@ -379,7 +392,7 @@ def _check_gyro(c: _Context, rest: Optional[np.ndarray]) -> None:
             c.fail(f"|gyro| exceeds {p90:.3g} rad/s ({math.degrees(p90):.0f} deg/s) in a tenth of the samples, "
                    "faster than an IMU turns: the gyro columns look like deg/s; add --gyro-unit deg/s", "--gyro-unit")
         if rest is not None:
-            noise = float(np.median(np.std(c.gyro[rest], axis=0)))
+            noise = white_noise(c.gyro, rest)
             if noise > GYRO_REST_NOISE_MAX_RAD_S:
                 c.fail(f"the gyro's noise at rest is {noise:.3g} rad/s per axis, far above a gyro's in rad/s (and "
                        f"{noise * RAD_PER_DEG:.2g} rad/s read as deg/s): the gyro columns look like deg/s; add "
