@@ -201,3 +201,22 @@ def test_command_errors_are_one_line(tmp_path, capsys):
     assert groundtruth_main(["--input", str(tmp_path / "nowhere")]) == 2
     err = capsys.readouterr().err.splitlines()
     assert len(err) == 1 and err[0].startswith("imu-learn groundtruth: error: FileNotFoundError:")
+
+
+def test_command_refuses_when_no_ground_truth_matches_the_imu(tmp_path, capsys):
+    """Another recording's ground truth on this one's clock: the rates match in no frame; the command said "use"
+    it and exited 0. Now exit 2, one line naming the file and the causes; a matching file beside it is the one
+    named even where the other scores lower."""
+    rec = EUROC / "V1_01_easy"
+    own = rec / "groundtruth_pose.tum"
+    rows = np.loadtxt(own)
+    wrong = np.column_stack([rows[:, 0], rows[::-1, 1:]])  # the motion played backwards on the same stamps
+    path = tmp_path / "wrong.tum"
+    np.savetxt(path, wrong, fmt="%.9f")
+    assert groundtruth_main(["--input", str(rec), "--groundtruth", str(path)]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and err[0].startswith("imu-learn groundtruth: error: ConfigError: V1_01_easy: no ground truth "
+                                               f"matches its IMU: {path}: its rotation rates do not match"), err
+    assert "quaternions in another order" in err[0]
+    assert groundtruth_main(["--input", str(rec), "--groundtruth", str(path), "--groundtruth", str(own)]) == 0
+    assert capsys.readouterr().out.splitlines()[-1].startswith("V1_01_easy: use groundtruth_pose.tum")

@@ -9,6 +9,7 @@ from typing import Any, Callable, List, Optional, Sequence
 
 from imu_learn.cli.common import add_imu_input_options, csv_layout, run_command
 from imu_learn.data.formats import read_recording
+from imu_learn.errors import ConfigError
 from imu_learn.eval.groundtruth import CheckOptions, check, fmt_vec, gt_label, pick_best, summary_line
 
 DESCRIPTION = """Check a recording's ground truth against its own IMU, before training on it or scoring with it:
@@ -83,6 +84,8 @@ def run(args: argparse.Namespace, rest: List[str], keep: Callable[[Any], None]) 
         rows.append(row)
         print("\n".join(describe(row)), flush=True)
     best = pick_best(rows)[args.input.name]
+    if not best.rates_match:  # no file to use: refused, naming why (the verdict's causes)
+        raise ConfigError(f"{args.input.name}: no ground truth matches its IMU: {best.gt}: {best.verdict}")
     print(summary_line(args.input.name, rows, best))
     return 0
 

@@ -341,7 +341,8 @@ class GroundTruthCheck:
                          if abs(self.rate_ratio / k - 1) < 0.1), "")
             return (f"its rotation rates do not match the IMU's in any frame (residual {self.rate_residual:.3f} rad/s "
                     f"against {self.rate_rms:.3f} of motion): a gyro unit, a mirrored or swapped axis, another "
-                    f"recording{unit}")
+                    f"recording, or its quaternions in another order (a TUM row is t x y z qx qy qz qw, scalar last)"
+                    f"{unit}")
         if self.scale_off:
             return (f"its positions are x{self.scale:.4g} (± {self.scale_std:.2g}) the distances the accelerometer "
                     "measures: millimetres or centimetres, or a monocular VO without metric scale? (translation and "
@@ -433,10 +434,12 @@ def coarse_lag(imu: ImuData, gt: GroundTruth) -> float:
 def pick_best(rows: List[GroundTruthCheck]) -> dict:
     """Per recording, the GT file with the lowest bias-removed rotation RMSE over 1 s once its rotation
     and lag are applied (``after_hold``: what calibrate makes of it, as it estimates both; a later
-    candidate must beat an earlier one by 2 %: ties go to the first, the layout's own file)."""
+    candidate must beat an earlier one by 2 %: ties go to the first, the layout's own file); a file whose
+    rates match the IMU's in some frame before any that match in none."""
     best: dict = {}
     for r in rows:
-        if r.recording not in best or r.after_hold[0] < 0.98 * best[r.recording].after_hold[0]:
+        b = best.get(r.recording)
+        if b is None or (r.rates_match, -r.after_hold[0]) > (b.rates_match, -0.98 * b.after_hold[0]):
             best[r.recording] = r
     return best
 
