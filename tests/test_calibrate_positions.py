@@ -330,3 +330,14 @@ def test_calibrate_the_drive_from_its_rtk_fixes(tmp_path, capsys):
     assert d["reference"]["passes"] >= 1
     delay = d["reference"]["navigator"]["imu_delay"]  # estimated: the log is about 0.125-0.19 s late
     assert delay["from"].startswith("estimated") and -0.25 < delay["s"] < -0.1 and 0 < delay["std_s"] < 0.05
+
+
+def test_a_track_too_short_after_its_heading_is_one_line_not_a_traceback(tmp_path, capsys):
+    """The navigator's smoothed trajectory starts where the track first gives the heading; a recording that
+    moves late leaves too little to fit on: one line (exit 2) saying so, not a ValueError's traceback (exit 1)."""
+    rec, fixes = synthetic_drive(tmp_path, seconds=5.0)
+    rc = main(["calibrate", "--input", str(rec), "--groundtruth", str(fixes), "--imu-rotation-rpy-deg",
+               ",".join(map(str, RPY)), "--imu-delay-s", "0", "--out", str(tmp_path / "cal"), "--no-plot"])
+    err = capsys.readouterr().err.strip().splitlines()
+    assert rc == 2 and err[-1].startswith("imu-learn calibrate: error: InvalidInputError: "), err[-3:]
+    assert "shorter than the floor's window" in err[-1] and "starts" in err[-1]

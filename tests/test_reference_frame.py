@@ -77,8 +77,16 @@ def test_a_given_extrinsic_the_rates_contradict_is_refused_and_one_they_confirm_
     assert angle_deg(resolve_frame([(imu, ref)], extrinsics=Extrinsics(near, lever, "near.yaml")).r_imu_ref
                      @ near.T) < 1e-9
     off = rot([1, 0.5, -0.2], 0.6) @ r_true
-    with pytest.raises(ReferenceFrameError, match=r"off\.yaml.*0\.6.° off the one the rotation rates give"):
+    with pytest.raises(ReferenceFrameError, match=r"off\.yaml.*0\.6.° off the one the rotation rates give") as e:
         resolve_frame([(imu, ref)], extrinsics=Extrinsics(off, lever, "off.yaml"))
+    assert "T_SB" not in str(e.value)
+    # the file inverted (T_SB, the IMU in the camera's frame): named as such, not as a rectified camera's
+    with pytest.raises(ReferenceFrameError, match=r"its inverse 0\.0.°: the file holds T_SB"):
+        resolve_frame([(imu, ref)], extrinsics=Extrinsics(r_true.T, lever, "inverted.yaml"))
+    # another recording's reference (here the motion's rates mirrored on one axis): the file, whatever the extrinsic
+    mirrored = ImuData(imu.t_ns, imu.gyro * [1.0, 1.0, -1.0], imu.acc)
+    with pytest.raises(ReferenceFrameError, match="do not match the IMU's in any frame"):
+        resolve_frame([(mirrored, ref)], extrinsics=Extrinsics(r_true, lever, "true.yaml"))
 
 
 def test_a_reference_in_the_imu_frame_is_left_untouched():

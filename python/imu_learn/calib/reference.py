@@ -498,12 +498,12 @@ def resolve_frame(pairs: Sequence[Tuple[ImuData, GroundTruth]], options: FrameOp
     off = fit_offset(segs, m=m, max_shift=max(3, int(round(0.02 * imu_rate))))
     w_rms = motion_rms(segs, off.gyro_bias)
     method = extrinsics.source if extrinsics is not None else "estimated from rotation rates"
+    if off.rms > options.max_rate_residual * w_rms:  # the file itself, whatever --extrinsics says
+        raise ReferenceFrameError(
+            f"the reference's rotation rates do not match the IMU's in any frame (residual {off.rms:.3f} rad/s "
+            f"against {w_rms:.3f} rad/s of motion): a wrong file, unit or clock, a mirrored or swapped gyro axis, or "
+            "its quaternions in another order (a TUM row is t x y z qx qy qz qw, scalar last)")
     if extrinsics is None:
-        if off.rms > options.max_rate_residual * w_rms:
-            raise ReferenceFrameError(
-                f"the reference's rotation rates do not match the IMU's in any frame (residual {off.rms:.3f} rad/s "
-                f"against {w_rms:.3f} rad/s of motion): a wrong file, unit or clock, or its quaternions in another "
-                "order (a TUM row is t x y z qx qy qz qw, scalar last)")
         r_imu_ref, lever0 = off.r_off, np.zeros(3)
         rot_std = rotation_spread(rates)
         if ratio < options.planar_ratio or rot_std > options.max_rotation_std_deg:
@@ -562,6 +562,13 @@ def check_extrinsic_rotation(extrinsics: Extrinsics, r_rates: np.ndarray, rates:
     off = _angle_deg(r_rates @ extrinsics.r_imu_ref.T)
     if spread <= options.max_rotation_std_deg and off > max(options.extrinsic_tolerance_deg,
                                                             options.extrinsic_sigmas * spread):
+        inverted = _angle_deg(r_rates @ extrinsics.r_imu_ref)  # the file's rotation taken the other way
+        if inverted < max(options.extrinsic_tolerance_deg, options.extrinsic_sigmas * spread, 1.0):
+            raise ReferenceFrameError(
+                f"--extrinsics {extrinsics.source}: its rotation is {off:.2f}° off the one the rotation rates give, "
+                f"its inverse {inverted:.2f}°: the file holds T_SB (the IMU in the sensor's frame), not T_BS (the "
+                "sensor's pose in the IMU frame, Kalibr's and EuRoC's sensor.yaml); invert it, or leave --extrinsics "
+                "out to have the rotation estimated")
         raise ReferenceFrameError(
             f"--extrinsics {extrinsics.source}: its rotation is {off:.2f}° off the one the rotation rates give "
             f"(± {spread:.2f}°): the reference is in another frame than the file's (a rectified camera's?); leave "

@@ -419,6 +419,14 @@ def positions_floor(imu_path: Path, ref_path: Path, opts: PositionsOptions = Pos
             if not segs:
                 raise InvalidInputError(f"{ref_path}: the navigator's smoothed trajectory gives no stretch of reference")
             train, val = held_back(segs, opts.val_fraction)
+            longest = max(len(s) for s in train) if train else 0
+            if longest <= settings.window + 1:
+                start_s = float(summ.get("init", {}).get("start_after_first_sample_s") or 0.0)
+                raise InvalidInputError(
+                    f"{ref_path}: the navigator's smoothed trajectory leaves {longest / rate:.1f} s of the IMU to fit on "
+                    f"(it starts {start_s:.1f} s in, where the track first gives the heading: a fix faster than 1 m/s; "
+                    f"the last {opts.val_fraction:g} held back), shorter than the floor's window "
+                    f"({settings.window} samples): a longer recording, or one that moves sooner")
             applied = [_applied(s, floor) for s in train], [_applied(s, floor) for s in val]
             progress(f"positions: pass {k + 1}: the biases against the smoothed attitude")
             step, std, info = fit_biases(applied[0], applied[1], settings, opts.blocks, opts.max_windows)
