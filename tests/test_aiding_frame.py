@@ -104,3 +104,15 @@ def test_the_frame_check_and_the_noise_estimate_pair_the_same_rows():
         np.testing.assert_allclose(pairs.gyro, truth, atol=1e-9)  # 12000 steps composed two ways
         np.testing.assert_allclose(pairs.aiding, truth, atol=1e-12)
     assert len(set(np.diff(s)[dt > 0.3])) == 3  # the gaps the rule is tested on
+
+
+def test_rates_that_match_in_no_frame_are_the_files_fault_not_an_extrinsics():
+    """A mirrored gyro axis (or another recording's poses, the quaternions' order): no rotation maps the aiding's
+    rates onto the gyro's; refused as the file's (navigate blamed the extrinsic: 'check its direction')."""
+    t, w, R = motion(planar=False)
+    rows = rows_seen_through(R, Rotation.from_euler("z", 30, degrees=True))
+    good = check_frame(t, gyro_of(w), rows)
+    assert good.matches and good.verdict == "refused" and "30.0° from the IMU's" in good.why  # an extrinsic's
+    c = check_frame(t, gyro_of(w * [1.0, 1.0, -1.0]), rows)
+    assert c.verdict == "refused" and not c.matches and "do not match the IMU's in any frame" in c.why
+    assert c.to_dict()["matches_a_frame"] is False

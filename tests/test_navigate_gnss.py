@@ -240,10 +240,11 @@ def test_real_drive_first_minute(tmp_path, capsys):
     pos = DRIVE / "gnss_1934_sf.pos"
     rc, out, err = run(["--input", imu, "--format", "gnss-imu", "--aiding", pos, "--aiding-kind", "position",
                         "--aiding-format", "rtklib", "--imu-rotation-rpy-deg", "180,-6.79,185.35", "--imu-delay-s",
-                        "-0.125", "--nhc", "--out", tmp_path / "nav"], capsys)
+                        "-0.125", "--nhc", "--gnss-velocity-sigma", "0", "--out", tmp_path / "nav"], capsys)
     assert rc == 0, err
     s = json.loads((tmp_path / "nav" / "summary.json").read_text())
     assert s["counts"]["extra_factors"] > 0
+    assert s["gnss_velocities"] == {"used": False, "why": "--gnss-velocity-sigma 0: positions only"}
     sol = rtklib.read_pos(pos)
     d = read_tum(tmp_path / "nav" / "smoothed.tum")
     t = np.round(d[:, 0] * 1e9).astype(np.int64)
@@ -302,3 +303,27 @@ def test_no_imu_delay_given_is_measured_and_applied_where_clearly_better(tmp_pat
     d = json.loads((tmp_path / "unclear" / "summary.json").read_text())["imu_delay"]
     assert rc == 0 and d["delay_s"] == 0.0 and abs(d["measured_s"] + DELAY_S) < DELAY_S
     assert "not clearly better" in d["from"] and "s off the GNSS fixes'" not in err
+
+
+@pytest.mark.skipif(not (DRIVE / "imu_1934.csv").is_file(), reason="the gnss-imu drive is not on this machine "
+                    "(set IMU_LEARN_DATA to the data root)")
+def test_real_drive_parked_start_and_velocities_without_options(tmp_path, capsys):
+    """The drive as a user runs it (no mounting, delay or noise given) through the peer's first 15 s outage, which
+    begins 0.4 s after the track gives the heading. The car is parked 34 s with its engine running (0.7-2.7
+    deg/s of vibration: no IMU still rule passes): levelled over the rest its RTK track shows, the gyro's mean
+    there carrying the attitude to the start (the first 2 s and a zero bias carried it 34 s before: 47.8 m at the
+    outage's end); the fixes' velocities used at their measured 0.12 s lag; the white noise raised to the
+    IMU's at that rest."""
+    imu = crop_drive(tmp_path, 90.0)
+    pos = DRIVE / "gnss_1934_sf.pos"
+    rc, out, err = run(["--input", imu, "--aiding", pos, "--gaps", "36.77:15", "--groundtruth", pos,
+                        "--out", tmp_path / "nav"], capsys)
+    assert rc == 0, err
+    s = json.loads((tmp_path / "nav" / "summary.json").read_text())
+    assert s["init"]["attitude_source"].startswith("at rest as the position track shows it"), s["init"]
+    v = s["gnss_velocities"]
+    assert v["used"] and abs(v["lag"]["lag_s"] - 0.123) < 0.01 and v["lag"]["rms_after_mps"] < 0.5 * v["lag"]["rms_before_mps"]
+    assert "raised to what the IMU shows at rest over the rest the GNSS track shows" in s["imu_noise"]["source"]
+    assert s["imu_noise"]["gyroscope_noise_density"] > 2e-3
+    end = s["scores"]["causal"]["gaps"][0]["end_m"]
+    assert end < 25.0, end

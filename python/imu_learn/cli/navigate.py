@@ -168,6 +168,11 @@ def add_arguments(ap: argparse.ArgumentParser) -> None:
     ap.add_argument("--nhc", action="store_true", default=None,
                     help="wheeled platforms: the non-holonomic constraint (no sideways or vertical velocity in the "
                          f"body frame; sigma {d.nhc_sigma_lat_mps:g} / {d.nhc_sigma_vert_mps:g} m/s) at every keyframe")
+    ap.add_argument("--gnss-velocity-sigma", type=float, default=None, metavar="MPS",
+                    help=f"GNSS fixes with velocities (an RTKLIB .pos): each epoch's velocity as a factor too, this "
+                         f"sigma [m/s] (x2 for a float epoch; default {d.gnss_velocity_sigma_mps:g}), at the instant its "
+                         "lag behind the positions puts it (measured from the file: the summary's gnss_velocities); "
+                         "0: positions only")
     ap.add_argument("--imu-noise", default=None, metavar="GND,AND,GRW,ARW",
                     help="the IMU's gyro and acc noise densities and random walks (rad/s/sqrt(Hz), m/s^2/sqrt(Hz), "
                          "rad/s^2/sqrt(Hz), m/s^3/sqrt(Hz)); default: --profile's, else the recording's sensor.yaml, "
@@ -207,8 +212,10 @@ def options(args: argparse.Namespace):
                           "GNSS fixes)")
     # the kind None: found from the aiding by imu_learn.fuse.navigate.resolve_aiding (GNSS fixes are positions)
     o = NavigateOptions(aiding_kind=args.aiding_kind, aiding_format=args.aiding_format or "auto")
+    if args.gnss_velocity_sigma is not None and not (args.gnss_velocity_sigma >= 0):
+        raise ConfigError(f"--gnss-velocity-sigma: a sigma >= 0 m/s (0: positions only), got {args.gnss_velocity_sigma!r}")
     plain = {"keyframe_hz": args.keyframe_hz, "aiding_hz": args.aiding_hz, "aiding_scale": args.aiding_scale, "max_relative_gap_s": args.max_relative_gap_s,
-             "lag_s": args.lag_s}
+             "lag_s": args.lag_s, "gnss_velocity_sigma_mps": args.gnss_velocity_sigma}
     o = replace(o, **{k: v for k, v in plain.items() if v is not None})
     if args.imu_delay_s is not None:
         o = replace(o, **({"imu_delay_from": "fixes"} if args.imu_delay_s.strip().lower() == "auto"

@@ -87,12 +87,13 @@ from .aiding.frame import FrameCheck, check_frame
 from .aiding.kinds import GEODETIC_KIND, AidingKind, kind_of
 from .aiding.kinds import KINDS as AIDING_KINDS
 from .aiding.outages import in_windows
-from .aiding.rtklib import RtkSolution, fixes_on_imu, normal_gravity, read_pos
+from .aiding.rtklib import FLOAT_GAIN, RtkSolution, fixes_on_imu, normal_gravity, read_pos
 from .aiding.spans import SPANS_S
 from .aiding.tum import Trajectory, check_overlap, read_trajectory
-from .aiding.types import AidingRows
+from .aiding.types import AidingRows, GnssFixes
 from .factors import chain
 from .factors.nhc import NhcSettings, nhc_callback
+from .factors.velocity import velocity_callback, velocity_lag
 from .graph import IncrementalFusion, feed, samples_of
 from .inputs import checkpoint_bias, displacement_hook, displacement_model
 from .mounting import mounting_check
@@ -104,7 +105,9 @@ from .settings import FusionSettings, PriorSigmas
 from .start import Start
 from .start.delay import imu_delay
 from .start.gravity import GravityCheck, check_gravity
+from .start.level import still_start
 from .start.prior import profile_bias_sigmas
+from .start.track import rest_from_track
 
 log = logging.getLogger(__name__)
 
@@ -163,6 +166,10 @@ class NavigateOptions:
     nhc: bool = False
     nhc_sigma_lat_mps: float = 0.1
     nhc_sigma_vert_mps: float = 0.1
+    # GNSS fixes: each epoch's velocity (an RTKLIB .pos's vn, ve, vu) as a factor too, this sigma [m/s] for a
+    # fixed epoch (x2 for a float one, as its position), at the instant its lag behind the positions puts it
+    # (:func:`.factors.velocity.velocity_lag`, measured from the file outside the gaps); 0: positions only
+    gnss_velocity_sigma_mps: float = 0.05
     # white noise / random walk of the IMU (gyro_nd, acc_nd, gyro_rw, acc_rw) instead of the built-in
     imu_noise: Optional[Tuple[float, float, float, float]] = None
     # multiply a covariance head's per-sample gyro and acc variances (the `learned` input) by these:
@@ -424,7 +431,7 @@ def imu_noise(src: Sources, opts: NavigateOptions, own: Optional[ImuNoise], prof
     if own is not None:
         return own
     if imu is not None:
-        noise = fitted_noise(innovation_fit(src, opts, imu, sol))
+        noise = at_rest_floor(fitted_noise(innovation_fit(src, opts, imu, sol)), src, opts, imu, sol)
         log.warning(f"no --profile, --imu-noise or sensor.yaml: the IMU noise is {noise.source}; "
                     "imu-learn calibrate writes your device's noise (docs/your-device.md)")
         return noise
@@ -433,6 +440,37 @@ def imu_noise(src: Sources, opts: NavigateOptions, own: Optional[ImuNoise], prof
                 f"{noise.gyro_noise_density:g} rad/s/sqrt(Hz), acc {noise.acc_noise_density:g} m/s^2/sqrt(Hz)); "
                 "imu-learn calibrate writes your device's noise (docs/your-device.md)")
     return noise
+
+
+def at_rest_floor(noise: ImuNoise, src: Sources, opts: NavigateOptions,
+                  imu: Tuple[np.ndarray, np.ndarray, np.ndarray], sol: Optional[RtkSolution]) -> ImuNoise:
+    """``noise`` (fitted from the innovations) with each sensor's white noise raised to what the IMU shows at rest
+    where that is higher: the per-sample spread over the rest at the start (the IMU's still start, else the rest
+    the GNSS track shows, :func:`.start.track.rest_from_track`) times sqrt(dt), the RMS over the axes. The
+    innovations' one factor on the class default splits the noise between the sensors by the class's ratio; a
+    car parked with its engine running shows its own (the drive: gyro 3.0e-3 rad/s/sqrt(Hz) at rest against
+    the fit's 1.2e-3; docs/experiments/fusion_gnss.md measured 2.0-2.8e-3 of attitude drift in motion)."""
+    t_ns, gyro, acc = imu
+    t = (np.asarray(t_ns, dtype=np.int64) - int(t_ns[0])) * 1e-9
+    still = still_start(t_ns, gyro, acc, opts.gravity)
+    if still >= MIN_STILL_START_S:
+        span, where = (0, int(np.searchsorted(t, still))), f"the IMU's still start ({still:.2f} s)"
+    else:
+        rows = gnss_rows(src, sol, t_ns, np.zeros(3), opts)[1] if sol is not None else None
+        rest = None if rows is None else rest_from_track(t_ns, rows.sample, rows.p)
+        if rest is None or t[rest[1] - 1] - t[rest[0]] < MIN_STILL_START_S:
+            return noise
+        span, where = rest[:2], f"the rest the GNSS track shows ({t[rest[1] - 1] - t[rest[0]]:.2f} s)"
+    dt = float(np.median(np.diff(t[span[0]:span[1]])))
+    g, a = (float(np.sqrt(np.mean(np.var(x[span[0]:span[1]], axis=0)) * dt)) for x in (gyro, acc))
+    if g <= noise.gyro_noise_density and a <= noise.acc_noise_density:
+        return noise
+    raised = replace(noise, gyro_noise_density=max(g, noise.gyro_noise_density),
+                     acc_noise_density=max(a, noise.acc_noise_density))
+    return replace(raised, source=f"{noise.source}; white noise raised to what the IMU shows at rest over {where}: "
+                                  f"gyro {raised.gyro_noise_density:.3g} rad/s/sqrt(Hz), acc "
+                                  f"{raised.acc_noise_density:.3g} m/s^2/sqrt(Hz) (the fit's {noise.gyro_noise_density:.3g}, "
+                                  f"{noise.acc_noise_density:.3g})")
 
 
 def innovation_fit(src: Sources, opts: NavigateOptions, imu: Tuple[np.ndarray, np.ndarray, np.ndarray],
@@ -675,6 +713,8 @@ def checked_frame(src: Sources, rows: AidingRows, imu: Imu, max_gap_s: float, fr
     of the profile's reference, :func:`aiding_extrinsic`); one warning line when it is a little off or
     cannot be told."""
     check = check_frame(imu.t_ns, imu.gyro, rows, max_gap_s)
+    if check.verdict == "refused" and not check.matches:  # the file itself, whatever the extrinsic
+        raise ConfigError(f"--aiding {src.aiding}: {check.why}; check the file against the IMU (imu-learn groundtruth)")
     if check.verdict == "refused":
         if src.extrinsics is None and from_profile:
             fix = ("after the rotation of --profile's reference: that reference's sensor is not this aiding's; pass "
@@ -821,7 +861,8 @@ class Inputs:
 class Started:
     """What :func:`start_run` hands the fusion: the first state, the graph's aiding and the summary's
     counts of it, the IMU as fused (gyro, acc, variances or None) and its label, the summary's
-    ``bias`` entry and where the first bias came from."""
+    ``bias`` entry and where the first bias came from, the GNSS fixes' velocity hook (None: none) and
+    the summary's ``gnss_velocities`` entry."""
 
     st: Start
     aiding: object
@@ -830,6 +871,8 @@ class Started:
     label: str
     bias: Dict[str, object]
     bias_source: str
+    velocities: Optional[Callable] = None
+    velocity_entry: Dict[str, object] = field(default_factory=dict)
 
 
 def check_gaps(gaps: Tuple[OutageWindow, ...], duration_s: float) -> None:
@@ -939,7 +982,8 @@ def start_run(src: Sources, inp: Inputs) -> Started:
                                        vel_mps=0.05 if at_rest else opts.prior_vel_mps, **bias_kw))
     if src.displacement is not None:
         label += f" + displacements of {Path(src.displacement).name}"
-    return Started(st, aiding, counts, (gyro, acc, var), label, bias, bias_source)
+    hook, velocity_entry = gnss_velocities(aiding, None if inp.gnss is None else inp.gnss[1], opts, int(t_ns[0]))
+    return Started(st, aiding, counts, (gyro, acc, var), label, bias, bias_source, hook, velocity_entry)
 
 
 def final_bias_check(bias: np.ndarray) -> Dict[str, object]:
@@ -989,7 +1033,7 @@ def run_summary(src: Sources, out: Path, inp: Inputs, run: Started, res) -> Dict
         "final_bias": [round(float(b), 6) for b in res.smoothed_bias[-1]],
         "final_bias_check": final_bias_check(res.smoothed_bias[-1]),
         "aiding_up_check": None if rows.gravity is None else rows.gravity.to_dict(),
-        "bias": run.bias, "correction": imu.correction, "imu_delay": imu.delay,
+        "bias": run.bias, "correction": imu.correction, "imu_delay": imu.delay, "gnss_velocities": run.velocity_entry,
         "outputs": {"causal": str(out / "causal.tum"), "smoothed": str(out / "smoothed.tum")},
         "causal_frame": res.causal_frame,
         **frames(src, opts, None if inp.gnss is None else inp.gnss[1]),
@@ -1037,7 +1081,7 @@ def navigate(src: Sources, out: Path, opts: NavigateOptions = NavigateOptions(),
     t_start = time.perf_counter()
     inp = read_inputs(src, opts)
     run = start_run(src, inp)
-    res = fuse_run(src, inp.opts, inp.imu, run.fused, run.st, run.aiding, run.label, progress)
+    res = fuse_run(src, inp.opts, inp.imu, run.fused, run.st, run.aiding, run.label, progress, run.velocities)
     out = Path(out)
     summary = run_summary(src, out, inp, run, res)
     return write_run(src, out, inp, run, res, summary, written, t_start)
@@ -1137,15 +1181,16 @@ def write_outputs(src: Sources, out: Path, kf_t: np.ndarray, res, sol: Optional[
 
 
 def fuse_run(src: Sources, opts: NavigateOptions, imu: Imu, fused: tuple, st: Start, aiding, label: str,
-             progress: bool = False):
+             progress: bool = False, velocities: Optional[Callable] = None):
     """The factor graph from the start sample on: the IMU as fused (``fused``: gyro, acc, variances or
-    None), the aiding, ``--nhc`` and ``--displacement``'s factors (regressed from the raw IMU); the
-    samples streamed as :func:`imu_learn.fuse.graph.fuse` streams them, with a progress bar."""
+    None), the aiding, the GNSS fixes' ``velocities`` (:func:`gnss_velocities`), ``--nhc`` and
+    ``--displacement``'s factors (regressed from the raw IMU); the samples streamed as
+    :func:`imu_learn.fuse.graph.fuse` streams them, with a progress bar."""
     gyro, acc, var = fused
     sel = slice(st.start, None)
     settings = FusionSettings(imu.noise, opts.gravity, opts.keyframe_hz, st.prior,
                               **({} if opts.lag_s is None else {"lag_s": opts.lag_s}))
-    hooks = []
+    hooks = [] if velocities is None else [velocities]
     if opts.nhc:
         hooks.append(nhc_callback(NhcSettings(opts.nhc_sigma_lat_mps, opts.nhc_sigma_vert_mps),
                                   np.ascontiguousarray(gyro[sel])))
@@ -1180,6 +1225,32 @@ def fuse_run(src: Sources, opts: NavigateOptions, imu: Imu, fused: tuple, st: St
     except RuntimeError as e:  # GTSAM's IndeterminateLinearSystemException and kin
         raise AidingError(f"{src.aiding}: the factor graph could not be solved: {' '.join(str(e).split())[:300]}",
                           str(src.aiding), opts.aiding_kind) from None
+
+
+def gnss_velocities(fixes, sol: Optional[RtkSolution], opts: NavigateOptions, t0_ns: int
+                    ) -> Tuple[Optional[Callable], Dict[str, object]]:
+    """The graph's hook adding each fused GNSS fix's epoch velocity (:func:`.factors.velocity.velocity_callback`,
+    ``opts.gnss_velocity_sigma_mps``, float epochs x2) at the instant its lag puts it, the lag measured from
+    the file's fixed epochs outside ``--gaps`` (:func:`.factors.velocity.velocity_lag`; 0 where it cannot be,
+    said in the entry), and summary.json's ``gnss_velocities`` entry; (None, why) without GNSS fixes with
+    velocities or with the sigma 0. The rtklibexplorer/GNSS_IMU solutions' velocities lag their positions by
+    0.12 s (docs/experiments/fusion_gnss.md)."""
+    if sol is None or not isinstance(fixes, GnssFixes) or fixes.epoch is None:
+        return None, {"used": False, "why": "no GNSS fixes"}
+    if sol.vel_enu is None:
+        return None, {"used": False, "why": f"{Path(sol.path).name} has no velocity columns"}
+    if opts.gnss_velocity_sigma_mps <= 0:
+        return None, {"used": False, "why": "--gnss-velocity-sigma 0: positions only"}
+    rel = (np.asarray(sol.t_ns, dtype=np.int64) - t0_ns) * 1e-9
+    try:
+        lag = velocity_lag(sol, use=~in_windows(rel, opts.gaps))
+        lag_s, lag_entry = max(lag.lag_s, 0.0), {"lag_s": round(lag.lag_s, 4), "epochs": lag.epochs,
+                                                 "rms_before_mps": round(lag.rms_before_mps, 4),
+                                                 "rms_after_mps": round(lag.rms_after_mps, 4)}
+    except InvalidInputError as e:
+        lag_s, lag_entry = 0.0, {"lag_s": 0.0, "why": f"not measured: {e}"}
+    hook = velocity_callback(fixes, sol, opts.gnss_velocity_sigma_mps, FLOAT_GAIN, lag_s)
+    return hook, {"used": True, "sigma_mps": opts.gnss_velocity_sigma_mps, "float_gain": FLOAT_GAIN, "lag": lag_entry}
 
 
 def one_line(summary: Dict[str, object]) -> str:

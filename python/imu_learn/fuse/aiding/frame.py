@@ -17,6 +17,9 @@ rates that go with the aiding's main axis against that axis.
 * rotation (or the axis's angle) above :data:`MAX_ROTATION_DEG`: refused (exit 2), naming
   ``--extrinsics``; a camera's mounting is tens of degrees, a well-mounted sensor's residual a few;
 * above :data:`WARN_ROTATION_DEG`: one warning line (the fusion takes the poses as they are);
+* rates that no rotation maps onto the gyro's (the fit's residual above calibrate's share of the
+  motion, ``FrameOptions.max_rate_residual``): refused, naming the file (another recording's, a time
+  unit, the quaternions' order), not an extrinsic;
 * too few pairs or too little turning to tell: not checked, and the summary says so.
 
 The result goes into the summary's ``aiding.frame_check``."""
@@ -36,6 +39,9 @@ from imu_learn.fuse.aiding.types import AidingRows
 
 MAX_ROTATION_DEG = 5.0  # refused above: the calibrate plausibility rule's misalignment limit
 WARN_ROTATION_DEG = 1.0  # warned above: calibrate's ``identity_deg`` (below it a frame counts as the IMU's)
+NO_FRAME = ("its rotation rates do not match the IMU's in any frame (residual {:.3f} rad/s against {:.3f} of motion): "
+            "a trajectory of another recording, a time unit off, or its quaternions in another order (a TUM row is "
+            "t x y z qx qy qz qw, scalar last)")
 MIN_PAIRS = 20  # pairs of consecutive rows needed to tell
 MIN_RATE_RMS = 0.05  # rad/s: the centred rates' RMS below which the motion cannot tell the frame
 # rates over at least this span [s] (a 20 Hz VO: its pairs as they are): a 90-120 Hz motion capture's rates between consecutive rows carry its
@@ -54,10 +60,14 @@ class FrameCheck:
     pairs: int
     verdict: str
     why: str
+    # False: the rates match in no frame (another recording's trajectory, a time unit, the quaternions'
+    # order): refused, and no extrinsic is to blame
+    matches: bool = True
 
     def to_dict(self) -> Dict[str, object]:
         return {"rotation_deg": None if self.rotation_deg is None else round(self.rotation_deg, 2),
-                "axis_only": self.axis_only, "pairs": self.pairs, "verdict": self.verdict, "why": self.why}
+                "axis_only": self.axis_only, "pairs": self.pairs, "verdict": self.verdict, "why": self.why,
+                "matches_a_frame": self.matches}
 
 
 def paired_rates(imu_t_ns: np.ndarray, gyro: np.ndarray, rows: AidingRows, max_gap_s: float,
@@ -105,7 +115,11 @@ def check_frame(imu_t_ns: np.ndarray, gyro: np.ndarray, rows: AidingRows, max_ga
         d = (a - a.mean(0)).T @ (bc @ u)
         angle = math.degrees(math.acos(np.clip(d @ u / max(np.linalg.norm(d), 1e-12), -1.0, 1.0)))
     else:
-        angle = math.degrees(Rotation.from_matrix(kabsch(a, b)[0]).magnitude())
+        R, _, mse = kabsch(a, b)
+        angle = math.degrees(Rotation.from_matrix(R).magnitude())
+        motion = float(np.sqrt(np.mean(np.sum((a - a.mean(0)) ** 2, axis=1))))
+        if math.sqrt(mse) > FrameOptions.max_rate_residual * motion:  # calibrate's rule (calib.reference)
+            return FrameCheck(angle, False, n, "refused", NO_FRAME.format(math.sqrt(mse), motion), matches=False)
     what = "its main rotation axis is" if axis_only else "its body frame is"
     line = f"{what} {angle:.1f}° from the IMU's (from {n} rotation increments)"
     if angle > MAX_ROTATION_DEG:

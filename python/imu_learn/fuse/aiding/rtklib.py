@@ -282,8 +282,11 @@ def read_pos(path: Path) -> RtkSolution:
 
 # --- fixes on the IMU's samples --------------------------------------------------------------------
 
+FLOAT_GAIN = 2.0  # a float epoch's sigmas over a fixed one's (rtklibexplorer/GNSS_IMU's float_err_gain)
+
+
 def fixes_on_imu(sol: RtkSolution, imu_t_ns: np.ndarray, lever: Sequence[float] = (0.0, 0.0, 0.0),
-                 qualities: Sequence[int] = (1, 2), float_gain: float = 2.0, other_gain: float = 5.0,
+                 qualities: Sequence[int] = (1, 2), float_gain: float = FLOAT_GAIN, other_gain: float = 5.0,
                  sigma_floor_m: float = 0.0, move_to_sample: bool = True, label: Optional[str] = None) -> GnssFixes:
     """The solution's epochs with a quality in ``qualities`` as :class:`GnssFixes` at the nearest
     IMU sample (the time rules of :func:`imu_learn.fuse.aiding.snap_to_samples`; epochs outside the

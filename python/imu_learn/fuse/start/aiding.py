@@ -14,7 +14,7 @@ from imu_learn.core.still import MIN_STILL_START_S
 from ..aiding.types import AidingRows
 from ..mounting import MOUNT_TOL_DEG, angle_between_deg, track_forward
 from . import level as initial
-from .track import track_start
+from .track import rest_from_track, track_start
 from .types import Start
 
 log = logging.getLogger(__name__)
@@ -66,12 +66,14 @@ def position_start(t_ns, gyro, acc, rows: AidingRows, lever: np.ndarray, bias0: 
     or where the track shows no other forward axis; else to the one it shows (:func:`..mounting.track_forward`:
     a car's IMU mounted backwards, a walker's turned 90 deg, would otherwise start that far off), with a
     warning naming ``--imu-rotation-rpy-deg``."""
+    rest = rest_from_track(t_ns, rows.sample, rows.p)
     R_level, info = initial.attitude_from_accelerometer(t_ns, gyro, acc, gravity, acc_bias=bias0[3:],
-                                                        level_s=level_s)
-    still = info["still_s"] >= MIN_STILL_START_S
-    level_end = int(np.searchsorted(t_ns, int(t_ns[0]) + int(round(info["levelled_over_s"] * 1e9))))
-    # the gyro's mean over a still start is its bias: used to carry the attitude to the start
-    gb = gyro[:level_end].mean(axis=0) if still else bias0[:3]
+                                                        level_s=level_s, min_still_s=MIN_STILL_START_S, rest=rest)
+    first, level_end = info["levelled_samples"]
+    # the gyro's mean at rest (the IMU's still start, or the rest the track shows) is its bias: used to carry the
+    # attitude to the start
+    at_rest = info["still_s"] >= MIN_STILL_START_S or str(info["attitude_source"]).startswith("at rest")
+    gb = gyro[first:level_end].mean(axis=0) if at_rest else bias0[:3]
     forward = None if body_x_forward else forward_axis(t_ns, acc, rows, gravity, info)
     s0, e, R0, v0, h_info = track_start(t_ns, gyro, rows.sample, rows.p, R_level, level_end, gb, forward=forward)
     info.update(h_info)

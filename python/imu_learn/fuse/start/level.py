@@ -180,18 +180,27 @@ def level_aiding(up_A: np.ndarray, R_AB0: np.ndarray) -> Tuple[np.ndarray, np.nd
 
 def attitude_from_accelerometer(t_ns: np.ndarray, gyro: np.ndarray, acc: np.ndarray, gravity: float = 9.81,
                                 acc_bias: Optional[np.ndarray] = None, level_s: float = 2.0,
-                                min_still_s: float = 1.0) -> Tuple[np.ndarray, Dict[str, object]]:
+                                min_still_s: float = 1.0, rest: Optional[Tuple[int, int, str]] = None
+                                ) -> Tuple[np.ndarray, Dict[str, object]]:
     """(R_WB zero yaw, info): levelled from the mean specific force over the still start (at least
-    ``min_still_s`` long) or, without one, over the first ``level_s`` seconds (module docstring)."""
+    ``min_still_s`` long); without one, over ``rest`` (first sample, end sample, words: a rest the
+    aiding shows, :func:`imu_learn.fuse.start.track.rest_from_track`, a car parked with its engine
+    running whose vibration no IMU still rule passes), at least ``min_still_s`` long; else over the
+    first ``level_s`` seconds (module docstring). ``info["levelled_samples"]``: the samples averaged."""
     still = still_start(t_ns, gyro, acc, gravity)
     t = (np.asarray(t_ns, dtype=np.int64) - int(t_ns[0])) * 1e-9
+    i = np.arange(len(t))
     if still >= min_still_s:
         m, source = t < still, f"still start ({still:.2f} s at rest, accelerometer averaged over it)"
+    elif rest is not None and t[rest[1] - 1] - t[rest[0]] >= min_still_s:
+        m = (i >= rest[0]) & (i < rest[1])
+        source = f"at rest as {rest[2]} ({t[rest[1] - 1] - t[rest[0]]:.2f} s, accelerometer averaged over it)"
     else:
         m, source = t < level_s, (f"no still start: accelerometer averaged over the first {level_s:g} s while moving "
                                   "(its own accelerations tilt the estimate)")
     f = acc[m].mean(axis=0) - (np.zeros(3) if acc_bias is None else np.asarray(acc_bias))
     roll, pitch, R = level(f)
     info = {"attitude_source": source, "still_s": round(still, 3), "roll_deg": round(float(np.rad2deg(roll)), 3),
-            "pitch_deg": round(float(np.rad2deg(pitch)), 3), "levelled_over_s": round(float(t[m][-1]), 3)}
+            "pitch_deg": round(float(np.rad2deg(pitch)), 3), "levelled_over_s": round(float(t[m][-1]), 3),
+            "levelled_samples": [int(i[m][0]), int(i[m][-1]) + 1]}
     return R, info

@@ -18,6 +18,26 @@ from imu_learn.errors import InvalidInputError
 from .level import level, rot_z
 
 
+def rest_from_track(t_ns: np.ndarray, fix_idx: np.ndarray, fix_p: np.ndarray,
+                    max_speed_mps: float = STILL_MAX_SPEED_MPS) -> Optional[Tuple[int, int, str]]:
+    """The IMU samples (first, end) over which the position track shows the platform at rest from its
+    first fix (the horizontal speed of the fixes' central differences at most ``max_speed_mps``, a GNSS
+    still start's rule) up to the last such fix before it first moves, with words for the summary; None
+    where the first fix already moves. A car parked with its engine running vibrates beyond every IMU
+    still rule (the drive: 0.7-2.7 deg/s, 0.05-0.13 m/s^2 per sample) while its RTK fixes stand still."""
+    fix_idx = np.asarray(fix_idx, dtype=np.int64)
+    if len(fix_idx) < 3:
+        return None
+    tf = (t_ns[fix_idx] - int(t_ns[0])) * 1e-9
+    speed = np.linalg.norm(np.gradient(fix_p, tf, axis=0)[:, :2], axis=1)
+    moving = np.flatnonzero(speed > max_speed_mps)
+    last = (int(moving[0]) if len(moving) else len(fix_idx)) - 1
+    if last < 1:
+        return None
+    return int(fix_idx[0]), int(fix_idx[last]) + 1, (f"the position track shows it (fixes {0}-{last}, "
+                                                     f"{tf[0]:.2f}-{tf[last]:.2f} s, speed at most {max_speed_mps:g} m/s)")
+
+
 def track_start(t_ns: np.ndarray, gyro: np.ndarray, fix_idx: np.ndarray, fix_p: np.ndarray, R_level: np.ndarray,
                 level_end: int, gyro_bias: np.ndarray, min_speed_mps: float = 1.0,
                 forward: Optional[np.ndarray] = None) -> Tuple[int, int, np.ndarray, np.ndarray, Dict[str, object]]:
