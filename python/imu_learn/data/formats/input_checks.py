@@ -19,6 +19,7 @@ The checks, in order (each assumes the ones before it passed):
    (which the reader refuses as not a number) is explained the same way
    (:func:`explain_time_overflow`), as are decimal stamps that round to repeated ones in the stated
    unit (seconds read as ns; the reader refuses them as repeated: :func:`explain_repeated_stamps`).
+   Steps of the stamps longer than :data:`GAP_PERIODS` periods (samples missing): a warning.
 4. gyro and acc swapped: the gyro reads a gravity-like magnitude at rest and the acc does not.
 5. ``|acc|`` at rest near 1 (g read as m/s^2) or near 96 (m/s^2 read as g); elsewhere far from
    gravity: a warning.
@@ -105,6 +106,7 @@ def check_user_imu(path: Path, t_ns: np.ndarray, gyro: np.ndarray, acc: np.ndarr
     _check_rate(c)
     if len(c.t_ns) < MIN_SAMPLES:
         return
+    _warn_gaps(c)
     rest = _rest(c)
     _check_swap(c, rest)
     _check_acc(c, rest)
@@ -225,6 +227,26 @@ def _check_rate(c: _Context) -> None:
                "--time-unit")
     c.fail(f"{said}, and no time unit gives an IMU's rate ({_rate_text(RATE_RANGE_HZ[0])} to "
            f"{_rate_text(RATE_RANGE_HZ[1])}): is {c.column('t')} the time? fix --columns", "--columns")
+
+
+GAP_PERIODS = 10  # a step of the stamps this many median periods long: samples missing (a warning)
+
+
+def _warn_gaps(c: _Context) -> None:
+    """One warning where samples are missing: steps of the stamps longer than :data:`GAP_PERIODS` median
+    periods (a logger that dropped a second of rows; every command integrates the IMU across them)."""
+    period = median_period_ns(c.t_ns)
+    if period <= 0:
+        return
+    d = np.diff(c.t_ns)
+    gaps = np.flatnonzero(d > GAP_PERIODS * period)
+    if not len(gaps):
+        return
+    i = int(gaps[np.argmax(d[gaps])])
+    logger.warning("%s: %d gap(s) in the stamps longer than %d samples, the longest %.3g s after sample %d (%.3f s from "
+                   "the start): samples are missing there and the IMU is integrated across them; check the logger, or "
+                   "cut the file there", c.path, len(gaps), GAP_PERIODS, d[i] * 1e-9, i + 1,
+                   (c.t_ns[i] - c.t_ns[0]) * 1e-9)
 
 
 def _fitting_unit(rate: float, unit: str) -> Optional[str]:
