@@ -19,11 +19,12 @@ triples are correlated: the standard error is the regression's times √(2 strid
 
 The rule (:attr:`ScaleFit.off`): a reference is off metric where its scale is more than
 :data:`TOLERANCE` from 1 and :data:`SIGMAS` standard errors, and, where a constant accelerometer bias is
-fitted with it (calibrate), so is the fit without that bias, the same way. A multirotor tilts to
-accelerate, so a body-frame bias turned by the tilt reads as acceleration: the two trade, more the longer
-the span, and on EuRoC's motion-capture flights in the Vicon room the scale with the bias read 1.03-1.06
-over 0.5 s (1.11-1.22 over 1-2 s; V2_01 alone 1.056, applied, then refused for its acc scale 0.74),
-without it 1.02-1.03; the Machine Hall's 1.00 either way, ORB-SLAM2 positions x0.93 0.945 / 0.948.
+fitted with it (a part's optional fourth entry), so is the fit without that bias, the same way. No
+caller fits the bias now: a multirotor's specific force lies along its thrust axis at about g, so a
+body-frame bias there is nearly the scale's own column and the two trade, more the longer the span
+(EuRoC's motion-capture flights in the Vicon room read 1.03-1.06 over 0.5 s with it, 1.02-1.03
+without; ORB-SLAM2's stereo poses of V1_03 1.103 with it, 1.026 without; the Machine Hall's 1.00
+either way).
 A standard error above
 :data:`MAX_STD` of the scale is "not observed" (too little acceleration), and so is a fit whose
 1/s is not :data:`SIGMAS` standard errors above zero (the positions do not follow the accelerometer).
