@@ -4,6 +4,7 @@ Runs are tiny (1-layer model of width 8, window 50, 4 steps per epoch) so the fi
 """
 import csv
 import json
+import re
 import shutil
 import signal
 import subprocess
@@ -342,6 +343,24 @@ def test_resume_refuses_an_edited_config_toml(tmp_path, full_run, capsys):
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "model.hidden" in err[0] and "config.toml" in err[0], err
     assert snapshot(d) == before
+
+
+def test_a_newer_versions_root_keys_are_no_edit_but_a_roots_path_is(tmp_path, full_run):
+    """A run's config.toml written before data.roots' entries gained keys (a user CSV's columns and units) was
+    refused as edited after an update (the roots compared as one list); entry by entry, key by key, only keys
+    both hold count, and a root's changed path still does."""
+    from imu_learn.train.trainer import config_edits, resolve_config
+
+    cfg, _ = resolve_config(None, full_run, {})
+    text = (full_run / "config.toml").read_text()
+    older = "".join(ln for ln in text.splitlines(keepends=True)
+                    if ln.split("=")[0].strip() not in ("columns", "time_unit", "gyro_unit", "acc_unit"))
+    assert older != text
+    (tmp_path / "config.toml").write_text(older)
+    assert config_edits(tmp_path / "config.toml", cfg) == []
+    moved = re.sub(r'(?m)^path = "(.*)"$', r'path = "\1_moved"', older, count=1)  # the first root's path
+    (tmp_path / "config.toml").write_text(moved)
+    assert config_edits(tmp_path / "config.toml", cfg) == ["data.roots.0.path"]
 
 
 def test_a_run_stopped_before_its_first_save_starts_again_on_resume(tmp_path, full_run, capsys):

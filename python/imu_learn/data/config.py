@@ -21,7 +21,8 @@ def resolve_data_root(command_line: Optional[str] = None, config: Optional[str] 
 class RootConfig:
     """Where recordings are. ``path`` is a dataset folder (every recording under it is found, as
     ``just labels`` finds them) or one recording (an ASL folder, a Blackbird folder, a ``.mat``).
-    ``format``: euroc, tum-vi, blackbird, broad, kaist or rosbag (``imu_topic`` / ``groundtruth_topic``). ``groundtruth``: a separate TUM/ASL file,
+    ``format``: euroc, tum-vi, blackbird, broad, kaist, fetch, rosbag (``imu_topic`` / ``groundtruth_topic``)
+    or csv-columns (a user's CSV: ``columns`` and the units, with its ``groundtruth``). ``groundtruth``: a separate TUM/ASL file,
     only for a ``path`` that is a single recording. Relative paths are taken from
     ``data.data_root`` when one is set, else from the working directory, else from the repository
     root."""
@@ -38,6 +39,12 @@ class RootConfig:
     # format = "rosbag": the IMU and ground-truth topics (empty: each bag's only one).
     imu_topic: str = ""
     groundtruth_topic: str = ""
+    # format = "csv-columns": a user's CSV (one recording, ``groundtruth`` its reference), read as the
+    # commands' --columns / --time-unit / --gyro-unit / --acc-unit read it (docs/refine.md)
+    columns: str = ""
+    time_unit: str = "ns"
+    gyro_unit: str = "rad/s"
+    acc_unit: str = "m/s2"
 
 
 @dataclass

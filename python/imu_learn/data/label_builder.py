@@ -31,6 +31,7 @@ from imu_learn.data.cache import (
     write_segment,
 )
 from imu_learn.data.datasets import find_recordings
+from imu_learn.data.formats import CsvColumns
 from imu_learn.data.loading import AlignOptions, load_recording
 from imu_learn.data.types import Segment as SeqType
 from imu_learn.errors import TooShortError
@@ -52,12 +53,14 @@ class RecordingSource:
     groundtruth: Optional[Path] = None  # a separate ground-truth file (fit's data.roots[i].groundtruth)
     options: AlignOptions = AlignOptions()
     topics: Dict[str, str] = field(default_factory=dict)  # rosbag: imu_topic / groundtruth_topic
+    columns: Optional[CsvColumns] = None  # a user's CSV: its column map and units
 
     def settings(self) -> Dict[str, Any]:
         topics = {k: v for k, v in self.topics.items() if v}
         gt = str(self.groundtruth.resolve()) if self.groundtruth is not None else None
         return {"format": self.format, "groundtruth": gt, "align": asdict(self.options),
-                **({"topics": topics} if topics else {})}
+                **({"topics": topics} if topics else {}),
+                **({"columns": asdict(self.columns)} if self.columns is not None else {})}
 
     def fingerprint(self) -> str:
         """Changes when any source file (the recording's files and the ground-truth file) changes
@@ -91,7 +94,7 @@ def build_recording(out: Path, src: RecordingSource, settings: Dict[str, Any]) -
     fractions, gravity of the label tables)."""
     t0 = time.perf_counter()
     rec = load_recording(src.path, format=src.format, groundtruth=src.groundtruth, options=src.options,
-                         **{k: v for k, v in src.topics.items() if v})
+                         columns=src.columns, **{k: v for k, v in src.topics.items() if v})
     window = int(settings["window"])
     require_one_window(src.path, rec.segments, window)
     segments = []

@@ -8,7 +8,7 @@ from typing import List, Optional, Tuple, Union
 import numpy as np
 
 from imu_learn import _imu_core as core
-from imu_learn.data.formats import asl, blackbird, detect_format, fetch, read_recording
+from imu_learn.data.formats import CsvColumns, asl, blackbird, detect_format, fetch, read_recording
 from imu_learn.data.types import GroundTruth, ImuData, Recording, Segment
 
 PathLike = Union[str, Path]
@@ -81,13 +81,14 @@ def load_recording(
     allow_float_timestamps: bool = False,
     imu_topic: Optional[str] = None,
     groundtruth_topic: Optional[str] = None,
+    columns: Optional[CsvColumns] = None,
 ) -> Recording:
     """Read and align a recording; keeps the alignment report (what was dropped, gaps). The topics
-    are for ROS bags only (see :func:`load_sequence`)."""
+    are for ROS bags only (see :func:`load_sequence`); ``columns`` for a user's CSV."""
     path = Path(path)
     gt_path = None if groundtruth is None else Path(groundtruth)
-    imu, gt = read_recording(path, format, gt_path, allow_float_timestamps, imu_topic, groundtruth_topic)
-    name = path.stem if path.suffix in (".mat", ".bag") else path.name
+    imu, gt = read_recording(path, format, gt_path, allow_float_timestamps, imu_topic, groundtruth_topic, columns)
+    name = path.stem if path.suffix in (".mat", ".bag") or columns is not None else path.name
     return align(imu, gt, options, name=name, sources=source_files(path, format, gt_path))
 
 
@@ -117,6 +118,7 @@ def load_sequence(
     allow_float_timestamps: bool = False,
     imu_topic: Optional[str] = None,
     groundtruth_topic: Optional[str] = None,
+    columns: Optional[CsvColumns] = None,
 ) -> List[Segment]:
     """Load a recording as a list of aligned ``Segment`` segments (one unless ground truth has gaps).
 
@@ -127,4 +129,4 @@ def load_sequence(
     PoseStamped / TransformStamped / Odometry topic; each may be left out when the bag has one.
     """
     return load_recording(path, format, groundtruth, options, allow_float_timestamps, imu_topic,
-                          groundtruth_topic).segments
+                          groundtruth_topic, columns).segments

@@ -40,6 +40,7 @@ import numpy as np
 
 from imu_learn.data.config import DataConfig, RootConfig
 from imu_learn.data.datasets import DATASETS, find_recordings
+from imu_learn.data.formats import USER_CSV, CsvColumns
 from imu_learn.data.label_builder import RecordingSource, cached_segments
 from imu_learn.data.loading import AlignOptions, load_sequence
 from imu_learn.data.types import Segment
@@ -163,9 +164,19 @@ def groundtruth_paths(roots: List[RootConfig], data_root: Optional[Path]) -> Dic
 
 def _format_for(root: RootConfig) -> str:
     fmt = root.format
-    if fmt not in DATASETS:
-        raise ConfigError(f"data.roots: format {fmt!r} unknown; known: {', '.join(DATASETS)}")
+    if fmt not in DATASETS + (USER_CSV,):
+        raise ConfigError(f"data.roots: format {fmt!r} unknown; known: {', '.join(DATASETS + (USER_CSV,))}")
+    if fmt == USER_CSV and not (root.columns and root.groundtruth):
+        raise ConfigError(f"data.roots: format {USER_CSV!r} is one user's CSV recording: give its path, its columns "
+                          "(and time_unit, gyro_unit, acc_unit as the commands' options) and its groundtruth file")
     return fmt
+
+
+def root_columns(root: RootConfig) -> Optional[CsvColumns]:
+    """A ``csv-columns`` root's column map and units (None for a dataset layout)."""
+    if root.format != USER_CSV:
+        return None
+    return CsvColumns(root.columns, root.time_unit, root.gyro_unit, root.acc_unit)
 
 
 def find_all(roots: List[RootConfig], data_root: Optional[Path] = None) -> Dict[str, Tuple[Path, RootConfig]]:
@@ -176,7 +187,7 @@ def find_all(roots: List[RootConfig], data_root: Optional[Path] = None) -> Dict[
         fmt = _format_for(root)
         path = resolve_data_path(root.path, data_root, f"data.roots[{i}].path")
         if root.groundtruth:
-            recs = [(path.stem if path.suffix in (".mat", ".bag") else path.name, path)]
+            recs = [(path.stem if path.suffix in (".mat", ".bag") or fmt == USER_CSV else path.name, path)]
         else:
             recs = find_recordings(fmt, path)
         for name, p in recs:
@@ -221,7 +232,7 @@ def recording_source(name: str, path: Path, root: RootConfig, groundtruth: Optio
     topics = {"imu_topic": root.imu_topic, "groundtruth_topic": root.groundtruth_topic}
     return RecordingSource(name, path, root.format, groundtruth,
                            AlignOptions(max_gap_s=root.max_gap_s, gt_time_offset_s=root.gt_time_offset_s),
-                           {k: v for k, v in topics.items() if v})
+                           {k: v for k, v in topics.items() if v}, root_columns(root))
 
 
 def from_label_cache(data: DataConfig, entries: Dict[str, List[SplitEntry]],
@@ -277,7 +288,8 @@ def make_split(data: DataConfig, min_len: Optional[int] = None) -> Split:
             if e.name not in cache:
                 src = recording_source(e.name, path, root, gt_paths.get(id(root)))
                 cache[e.name] = load_sequence(src.path, src.format, src.groundtruth, options=src.options,
-                                              imu_topic=root.imu_topic or None, groundtruth_topic=root.groundtruth_topic or None)
+                                              imu_topic=root.imu_topic or None, groundtruth_topic=root.groundtruth_topic or None,
+                                              columns=src.columns)
             parts = cut(cache[e.name], e.start, e.stop, e.name)
             kept = [s for s in parts if len(s) >= min_len]
             if not kept:  # the entry would silently add nothing to its split

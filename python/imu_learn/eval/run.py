@@ -54,6 +54,7 @@ from imu_learn.data.splits import (
     parse_entry,
     recording_name,
     resolve_path,
+    root_columns,
     split_signature,
 )
 from imu_learn.data.types import Segment, sample_rate_hz
@@ -445,7 +446,7 @@ def _ground_truth_kinds(run: RunConfig, test_entries: List[str]) -> Dict[str, st
         if rec in out or rec not in found:
             continue
         path, root = found[rec]
-        _, gt = read_recording(path, root.format, gt_paths.get(id(root)))
+        _, gt = read_recording(path, root.format, gt_paths.get(id(root)), columns=root_columns(root))
         out[rec] = "pose-only (velocity derived)" if gt.v is None else "with velocity"
     return out
 

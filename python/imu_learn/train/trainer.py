@@ -940,6 +940,8 @@ def config_edits(path: Path, cfg: RunConfig) -> List[str]:
         return []
 
     def flat(d: Any, prefix: str = "") -> Dict[str, Any]:
+        if isinstance(d, list) and d and all(isinstance(x, dict) for x in d):  # data.roots: entry by entry, key by key
+            return {f"{prefix[:-1]}#": len(d), **{k: v for i, x in enumerate(d) for k, v in flat(x, f"{prefix}{i}.").items()}}
         if not isinstance(d, dict):
             return {prefix[:-1]: d}
         return {k: v for key, val in d.items() for k, v in flat(val, f"{prefix}{key}.").items()}
