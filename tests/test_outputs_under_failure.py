@@ -734,3 +734,19 @@ def test_fuse_unreadable_results_are_redone_with_a_message(tmp_path, capsys):
     out_text = capsys.readouterr().out
     assert str(out / "results.json") in out_text and "done again" in out_text
     assert json.loads((out / "results.json").read_text())["runs"].keys() == good["runs"].keys()
+
+
+@pytest.mark.parametrize("command", ["calibrate", "navigate"])
+def test_an_out_that_cannot_be_written_is_refused_before_any_work(tmp_path, capsys, command):
+    """calibrate and navigate named a file or a read-only --out only when their outputs went in, after the
+    work (8-28 s on the helpers' runs), leaving their staging folders behind; now before reading anything
+    (the inputs here do not even exist)."""
+    from imu_learn.cli import main
+
+    afile = tmp_path / "afile"
+    afile.write_text("mine\n")
+    extra = ["--aiding", str(tmp_path / "none.pos")] if command == "navigate" else []
+    assert main([command, "--input", str(tmp_path / "nowhere"), *extra, "--out", str(afile)]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "NotADirectoryError" in err[0] and "exists and is not a folder" in err[0], err
+    assert afile.read_text() == "mine\n" and sorted(p.name for p in tmp_path.iterdir()) == ["afile"]

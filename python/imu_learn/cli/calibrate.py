@@ -33,6 +33,7 @@ from imu_learn.errors import ConfigError
 from imu_learn.eval.run import load_eval_config
 from imu_learn.settings import read_toml
 from imu_learn.train.config import build_config, load_config
+from imu_learn.util.staging import check_writable
 
 logger = logging.getLogger(__name__)
 
@@ -194,6 +195,7 @@ def run(args: argparse.Namespace, rest: List[str], keep: Callable[[Any], None]) 
     if args.config and args.imu_only:
         raise ConfigError("--imu-only reads --input recordings, not a config's split")
     check_learned(args)
+    check_writable(args.out)  # before any work: a file or a read-only folder is named now, not after the fit
     say = (lambda s: None) if args.quiet else (lambda s: logger.info("%s", s))
     say("reading the recordings")
     source = source_of(args)

@@ -26,6 +26,7 @@ from imu_learn.fuse.navigate import (
 from imu_learn.infer.bias import choices as bias_choices
 from imu_learn.infer.bias import help_text as bias_help
 from imu_learn.util.extras import require
+from imu_learn.util.staging import check_writable
 
 logger = logging.getLogger(__name__)
 
@@ -278,6 +279,7 @@ def run(args: argparse.Namespace, rest: List[str], keep: Callable[[Any], None]) 
     set_torch_threads(args.threads)
     require_gtsam("navigate")
     out = args.out or Path("out") / args.input.name
+    check_writable(out)  # before the fusion: a file or a read-only folder is named now, not after minutes
     done: List[bool] = []  # the outputs go in all at once, at the end (imu_learn.util.staging)
     keep(lambda: f"{out} holds this run's complete outputs" if done else f"nothing of this run is written to {out}")
     src = Sources(args.input, args.aiding, fmt=args.format or "auto", aiding_topic=args.aiding_topic,

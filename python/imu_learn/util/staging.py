@@ -71,7 +71,11 @@ def _swappable(target: Path, stage: Path) -> bool:
 
 def _swap(stage: Path, target: Path) -> None:
     holder = Path(tempfile.mkdtemp(prefix=f".{target.name}.", suffix=".old", dir=target.parent))
-    os.rename(target, holder / target.name)
+    try:
+        os.rename(target, holder / target.name)
+    except BaseException:  # a folder that cannot move (read-only): nothing aside, no holder left behind
+        os.rmdir(holder)
+        raise
     try:
         os.rename(stage, target)
     except BaseException:
@@ -104,6 +108,28 @@ def _move_entries(stage: Path, target: Path, owned: Collection[str]) -> None:
         raise
     shutil.rmtree(holder, ignore_errors=True)
     os.rmdir(stage)
+
+
+def _remove(stage: Path) -> None:
+    """The staging folder gone (writable first: :func:`commit` gives it the output folder's mode)."""
+    try:
+        os.chmod(stage, 0o700)
+    except OSError:
+        pass
+    shutil.rmtree(stage, ignore_errors=True)
+
+
+def check_writable(out: PathLike) -> None:
+    """Before any work: ``out`` is a folder that can be written (it, or where it would be created), else
+    the error a staged write would end in, named now (a calibration or a fusion of minutes did its work
+    first, then failed, leaving its temporary folders behind)."""
+    target = _target(Path(out))
+    if os.path.lexists(target) and not target.is_dir():
+        raise NotADirectoryError(20, "exists and is not a folder (give --out a folder)", str(out))
+    where = target if target.is_dir() else next((p for p in target.parents if p.is_dir()), None)
+    if where is None or not os.access(where, os.W_OK | os.X_OK):
+        raise PermissionError(13, f"cannot be written ({where} is not writable): give --out a folder you can write",
+                              str(out))
 
 
 def commit(stage: Path, out: Path, owned: Collection[str] = ()) -> None:
@@ -144,8 +170,8 @@ def staged_dir(out: PathLike, owned: Collection[str] = (),
             if on_commit is not None:
                 on_commit()
     except OSError as e:
-        shutil.rmtree(stage, ignore_errors=True)
+        _remove(stage)
         raise named(e, target, stage) from None
     except BaseException:
-        shutil.rmtree(stage, ignore_errors=True)
+        _remove(stage)
         raise
