@@ -113,7 +113,18 @@ def test_pyproject_declares_the_console_script():
     except ImportError:  # Python < 3.11
         import tomli as tomllib
     project = tomllib.loads((REPO / "pyproject.toml").read_text())["project"]
-    assert project["scripts"] == {"imu-learn": "imu_learn.cli:main"}
+    assert project["scripts"] == {"imu-learn": "imu_learn.cli:entry"}
+
+
+def test_a_ctrl_c_once_the_command_finished_does_not_fail_the_run():
+    """A Ctrl-C after a command finished (its outputs complete and said so) made the exit 130 without a word; the
+    console entry ignores it while the process exits (here sent by the process to itself as it exits)."""
+    code = ("import atexit, os, signal, sys; sys.argv = ['imu-learn', '--help']; "
+            "atexit.register(lambda: os.kill(os.getpid(), signal.SIGINT)); "
+            "from imu_learn.cli import entry; entry()")
+    done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)
+    assert done.returncode == 0 and done.stderr == "", (done.returncode, done.stderr)
+    assert done.stdout.startswith("usage: imu-learn <command>")
 
 
 @pytest.mark.parametrize("stage", ["fit", "refine", "evaluate", "labels", "export"])

@@ -1,6 +1,4 @@
 """``python -m imu_learn.cli``: the same as ``imu-learn``."""
-import sys
+from imu_learn.cli import entry
 
-from imu_learn.cli import main
-
-sys.exit(main())
+entry()
