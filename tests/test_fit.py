@@ -363,6 +363,14 @@ def test_a_newer_versions_root_keys_are_no_edit_but_a_roots_path_is(tmp_path, fu
     assert config_edits(tmp_path / "config.toml", cfg) == ["data.roots.0.path"]
 
 
+def test_resume_refuses_another_out(tmp_path, full_run, capsys):
+    """--out with --resume was ignored without a word (the run trained on in its own folder)."""
+    assert fit_cli.main(["--resume", str(full_run), "--out", str(tmp_path / "other")]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "a resumed run continues in its own folder" in err[0], err
+    assert not (tmp_path / "other").exists()
+
+
 def test_a_run_stopped_before_its_first_save_starts_again_on_resume(tmp_path, full_run, capsys):
     """Ctrl-C while the run's profile was fitted leaves config.toml and split.json, no last.pt: --resume
     starts the run again from its config (it was a FileNotFoundError)."""

@@ -53,6 +53,9 @@ def run(args: argparse.Namespace, rest: List[str], keep: Callable[[Any], None],
         raise ConfigError("--data.data_root: set the data root with --data-root DIR (or IMU_LEARN_DATA)")
     if args.data_root:
         overrides["data.data_root"] = args.data_root
+    if args.resume is not None and args.out is not None and Path(args.out).resolve() != Path(args.resume).resolve():
+        raise ConfigError(f"--out {args.out}: a resumed run continues in its own folder ({args.resume}); leave --out "
+                          "out, or copy the run folder there and resume that")
     from imu_learn.train import trainer
 
     cfg, state = trainer.resolve_config(args.config, args.resume, overrides)
