@@ -133,7 +133,7 @@ pub enum ImuError {
 
     /// A row (or the header) ends before a column the caller's column map reads.
     #[error(
-        "{}:{line}:{column}: field {field:?} is missing: the line has {found} fields, the column map \
+        "{}:{line}:{column}: field {field:?} is missing: the line has {found} field(s), the column map \
          reads column {column}",
         path.display()
     )]
