@@ -171,6 +171,23 @@ def test_a_moving_start_is_levelled_over_the_first_seconds_and_says_so():
     assert info["levelled_over_s"] == pytest.approx(1.995)
 
 
+def test_a_rest_the_aiding_shows_levels_a_vibrating_imu_unless_the_imu_turns():
+    """A car parked with its engine running: no IMU still rule passes (0.03 rad/s, 0.1 m/s^2 per sample), its
+    track stands still; levelled over that rest (the tilt to 0.05 deg) instead of the first 2 s; a device turned
+    in a hand while its carrier stands (0.2 rad/s on average) is not a rest."""
+    t_ns, gyro, acc, R = still_imu(4.0, -3.0, seconds=20.0)
+    rng = np.random.default_rng(5)
+    gyro = gyro + rng.normal(0, 0.03, gyro.shape) + [0.004, -0.002, 0.003]  # vibration and a bias
+    acc = acc + rng.normal(0, 0.1, acc.shape)
+    rest = (0, len(t_ns) - 200, "the position track shows it")
+    _, info = init.attitude_from_accelerometer(t_ns, gyro, acc, rest=rest)
+    assert info["still_s"] == 0.0 and info["attitude_source"].startswith("at rest as the position track shows it")
+    assert abs(info["roll_deg"] - 4.0) < 0.05 and abs(info["pitch_deg"] + 3.0) < 0.05
+    assert info["levelled_samples"] == [0, len(t_ns) - 200]
+    _, info = init.attitude_from_accelerometer(t_ns, gyro + [0.0, 0.0, 0.2], acc, rest=rest)
+    assert info["attitude_source"].startswith("no still start")
+
+
 def test_world_from_aiding_keeps_the_aidings_heading_and_levels_it():
     R_level = Rotation.from_euler("ZYX", [0.0, 0.2, -0.1]).as_matrix()
     R_WB_true = Rotation.from_euler("ZYX", [0.7, 0.2, -0.1]).as_matrix()

@@ -178,6 +178,14 @@ def level_aiding(up_A: np.ndarray, R_AB0: np.ndarray) -> Tuple[np.ndarray, np.nd
     return R_WA, R_WA @ R_AB0
 
 
+def _rests(gyro: np.ndarray, acc: np.ndarray, span: Tuple[int, int, str], gravity: float) -> bool:
+    """Whether the IMU agrees with a rest the aiding shows over ``span``: on average, the still rule
+    (:func:`imu_learn.core.still.at_rest`: the mean gyro a MEMS gyro's bias, the mean specific force
+    gravity's norm); a device turned in a hand while its carrier stands fails it."""
+    g, a = gyro[span[0]:span[1]].mean(axis=0), acc[span[0]:span[1]].mean(axis=0)
+    return bool(at_rest(g, float(np.linalg.norm(a)), gravity, MEMS_PRIOR, acc_tol=ACC_NORM_TOL))
+
+
 def attitude_from_accelerometer(t_ns: np.ndarray, gyro: np.ndarray, acc: np.ndarray, gravity: float = 9.81,
                                 acc_bias: Optional[np.ndarray] = None, level_s: float = 2.0,
                                 min_still_s: float = 1.0, rest: Optional[Tuple[int, int, str]] = None
@@ -185,14 +193,15 @@ def attitude_from_accelerometer(t_ns: np.ndarray, gyro: np.ndarray, acc: np.ndar
     """(R_WB zero yaw, info): levelled from the mean specific force over the still start (at least
     ``min_still_s`` long); without one, over ``rest`` (first sample, end sample, words: a rest the
     aiding shows, :func:`imu_learn.fuse.start.track.rest_from_track`, a car parked with its engine
-    running whose vibration no IMU still rule passes), at least ``min_still_s`` long; else over the
+    running whose vibration no IMU still rule passes), at least ``min_still_s`` long and the IMU's mean
+    readings there a rest's (:func:`_rests`); else over the
     first ``level_s`` seconds (module docstring). ``info["levelled_samples"]``: the samples averaged."""
     still = still_start(t_ns, gyro, acc, gravity)
     t = (np.asarray(t_ns, dtype=np.int64) - int(t_ns[0])) * 1e-9
     i = np.arange(len(t))
     if still >= min_still_s:
         m, source = t < still, f"still start ({still:.2f} s at rest, accelerometer averaged over it)"
-    elif rest is not None and t[rest[1] - 1] - t[rest[0]] >= min_still_s:
+    elif rest is not None and t[rest[1] - 1] - t[rest[0]] >= min_still_s and _rests(gyro, acc, rest, gravity):
         m = (i >= rest[0]) & (i < rest[1])
         source = f"at rest as {rest[2]} ({t[rest[1] - 1] - t[rest[0]]:.2f} s, accelerometer averaged over it)"
     else:
