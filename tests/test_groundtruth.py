@@ -220,3 +220,15 @@ def test_command_refuses_when_no_ground_truth_matches_the_imu(tmp_path, capsys):
     assert "quaternions in another order" in err[0]
     assert groundtruth_main(["--input", str(rec), "--groundtruth", str(path), "--groundtruth", str(own)]) == 0
     assert capsys.readouterr().out.splitlines()[-1].startswith("V1_01_easy: use groundtruth_pose.tum")
+
+
+@pytest.mark.parametrize("text", ["1403715274.302143 0.1 0.2 0.3\n1403715274.312143 0.1 0.2 0.4\n",
+                                  "t,x,y,z\n1403715274.302143,0.1,0.2,0.3\n"])
+def test_a_positions_only_file_is_named_as_such(tmp_path, capsys, text):
+    """A 4-column TUM or CSV (t x y z) ended in 'expected 8 columns, found 4' or a header error listing ASL's
+    headers; it names what the file is and where positions go."""
+    path = tmp_path / "positions.tum"
+    path.write_text(text)
+    assert groundtruth_main(["--input", str(EUROC / "MH_04_difficult"), "--groundtruth", str(path)]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "positions only (t x y z)" in err[0] and "--aiding" in err[0], err

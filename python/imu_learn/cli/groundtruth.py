@@ -73,11 +73,27 @@ def describe(row: Any) -> List[str]:
             f"  verdict: {row.verdict}"]
 
 
+def positions_only(path: Path) -> bool:
+    """Whether a trajectory file's first row holds four fields (t x y z): positions without orientation."""
+    try:
+        with open(path, encoding="utf-8", errors="replace") as fh:
+            for line in fh:
+                text = line.strip()
+                if text and not text.startswith("#") and not text[0].isalpha():
+                    return len([f for f in text.replace(",", " ").split() if f]) == 4
+    except OSError:
+        return False
+    return False
+
+
 def run(args: argparse.Namespace, rest: List[str], keep: Callable[[Any], None]) -> int:
     options = CheckOptions(max_gap_s=args.max_gap_s, yaw_from_acc=args.yaw_from_acc)
     rows = []
     columns = csv_layout(args)
     for gt_file in args.groundtruth or [None]:
+        if gt_file is not None and positions_only(gt_file):
+            raise ConfigError(f"{gt_file}: positions only (t x y z): this check needs a reference's orientation; "
+                              "calibrate takes positions as --groundtruth (the biases they observe), navigate as --aiding")
         imu, gt = read_recording(args.input, args.format, groundtruth=gt_file, imu_topic=args.imu_topic,
                                  groundtruth_topic=args.groundtruth_topic, columns=columns)
         row, _ = check(imu, gt, args.input.name, label(args.input, gt_file), options)
