@@ -145,7 +145,7 @@ def test_summary_counts_the_nhc_factors(tmp_path, capsys):
     _imu, _pos, _t, _p = weaving_car(tmp_path, seconds=12.0)
     out = tmp_path / "nav"
     rc = main(["navigate", "--quiet", "--input", str(tmp_path / "imu_0001.csv"), "--format", "gnss-imu", "--aiding",
-               str(tmp_path / "gnss_0001.pos"), "--imu-noise", "1e-4,1e-3,1e-5,1e-4", "--nhc", "--out", str(out)])
+               str(tmp_path / "gnss_0001.pos"), "--imu-noise", "1e-4,1e-3,1e-5,1e-4", "--nhc", "--gnss-velocity-sigma", "0", "--out", str(out)])
     assert rc == 0, capsys.readouterr().err
     s = json.loads((out / "summary.json").read_text())
     assert s["counts"]["extra_factors"] == s["keyframes"]
