@@ -177,7 +177,8 @@ def add_arguments(ap: argparse.ArgumentParser) -> None:
     ap.add_argument("--imu-noise", default=None, metavar="GND,AND,GRW,ARW",
                     help="the IMU's gyro and acc noise densities and random walks (rad/s/sqrt(Hz), m/s^2/sqrt(Hz), "
                          "rad/s^2/sqrt(Hz), m/s^3/sqrt(Hz)); default: --profile's, else the recording's sensor.yaml, "
-                         "else the MEMS class default scaled to the aiding's innovations (with a warning)")
+                         "else the MEMS class default scaled to the aiding's innovations, each white noise raised to "
+                         "the IMU's at a rest at the start where higher (with a warning)")
     ap.add_argument("--bias", choices=bias_choices(navigate=True), default="none", help=bias_help(navigate=True))
     ap.add_argument("--threads", type=int, default=None, metavar="N",
                     help="torch threads for the --checkpoint's model (default: torch's own)")
