@@ -499,10 +499,7 @@ def resolve_frame(pairs: Sequence[Tuple[ImuData, GroundTruth]], options: FrameOp
     w_rms = motion_rms(segs, off.gyro_bias)
     method = extrinsics.source if extrinsics is not None else "estimated from rotation rates"
     if off.rms > options.max_rate_residual * w_rms:  # the file itself, whatever --extrinsics says
-        raise ReferenceFrameError(
-            f"the reference's rotation rates do not match the IMU's in any frame (residual {off.rms:.3f} rad/s "
-            f"against {w_rms:.3f} rad/s of motion): a wrong file, unit or clock, a mirrored or swapped gyro axis, or "
-            "its quaternions in another order (a TUM row is t x y z qx qy qz qw, scalar last)")
+        raise ReferenceFrameError(f"the reference's {no_frame(off.rms, w_rms)}")
     if extrinsics is None:
         r_imu_ref, lever0 = off.r_off, np.zeros(3)
         rot_std = rotation_spread(rates)
@@ -545,6 +542,14 @@ def resolve_frame(pairs: Sequence[Tuple[ImuData, GroundTruth]], options: FrameOp
                     resolves_acceleration(ref_rate, options.floor_window_s or FitSettings().window / imu_rate,
                                           options.acc_span_fraction), applied, ratio,
                     "" if metric.observed else (metric.reason or "no estimate"))
+
+
+def no_frame(residual: float, motion: float) -> str:
+    """The words for rotation rates that no rotation maps onto the gyro's (the fit's ``residual`` against the
+    ``motion``'s RMS, rad/s), and their usual causes: one text for calibrate, groundtruth and navigate."""
+    return (f"rotation rates do not match the IMU's in any frame (residual {residual:.3f} rad/s against {motion:.3f} "
+            "rad/s of motion): a gyro unit, a mirrored or swapped axis, another recording (or a clock off), or its "
+            "quaternions in another order (a TUM row is t x y z qx qy qz qw, scalar last)")
 
 
 def check_extrinsic_rotation(extrinsics: Extrinsics, r_rates: np.ndarray, rates: Rates, ratio: float,

@@ -57,6 +57,9 @@ TIME_OFFSET_PRIOR_SAMPLES = 0.5  # an unobserved time offset: the zero-order hol
 ACC_MAX_SCALE_STD = 0.02  # the positions' fit of the accelerometer is kept where its scales are this certain
 MATCH_MIN_PERIODS = 2.0  # a reference this many IMU periods apart or more: the floor sees the IMU through its slerp
 # profile.json's ``observed``: the floor's parameters a reference may or may not observe
+# calibrate's options of navigate's names for a positions reference (its module reads them; the CLI refuses
+# them with another kind before importing it)
+NAVIGATOR_OPTIONS = ("imu_rotation_rpy_deg", "imu_delay_s", "lever_arm")
 OBSERVABLE = ("time_offset", "gyroscope.matrix", "gyroscope.bias", "g_sensitivity", "accelerometer.matrix",
               "accelerometer.bias", "cutoff_gyro", "cutoff_acc")
 

@@ -16,6 +16,7 @@ from imu_learn.calib.odometry import OdometrySource, is_odometry_reference
 from imu_learn.calib.profile import unobserved_value
 from imu_learn.calib.run import SELECT_BY_DEFAULT_FOR, CalibInputs, CalibOptions, calibrate
 from imu_learn.calib.sources import (
+    NAVIGATOR_OPTIONS,
     TRAIN,
     VAL,
     PosesSource,
@@ -160,7 +161,6 @@ class ConfigSource(Source):
         return CalibInputs(recordings=recordings, settings=settings, device=device, sources=sources, source=self)
 
 
-NAVIGATOR_DESTS = ("imu_rotation_rpy_deg", "imu_delay_s", "lever_arm")  # the options above for the positions kind
 
 
 def positions() -> Any:
@@ -199,7 +199,7 @@ def run(args: argparse.Namespace, rest: List[str], keep: Callable[[Any], None]) 
     say = (lambda s: None) if args.quiet else (lambda s: logger.info("%s", s))
     say("reading the recordings")
     source = source_of(args)
-    if any(getattr(args, k, None) is not None for k in NAVIGATOR_DESTS):  # the positions kind's options only
+    if any(getattr(args, k, None) is not None for k in NAVIGATOR_OPTIONS):  # the positions kind's options only
         positions().refuse_navigator_options(args, source.kind)
     writes = source.kind == "positions"  # its reading runs the smoother, which writes into --out
 

@@ -73,6 +73,11 @@ def align(
     return Recording(name=name, segments=seqs, report=report)
 
 
+def recording_label(path: Path, user_csv: bool = False) -> str:
+    """A recording's name from its path: a file's stem (a ``.mat``, a ``.bag``, a user's CSV), a folder's name."""
+    return path.stem if path.suffix in (".mat", ".bag") or user_csv else path.name
+
+
 def load_recording(
     path: PathLike,
     format: str = "auto",
@@ -88,7 +93,7 @@ def load_recording(
     path = Path(path)
     gt_path = None if groundtruth is None else Path(groundtruth)
     imu, gt = read_recording(path, format, gt_path, allow_float_timestamps, imu_topic, groundtruth_topic, columns)
-    name = path.stem if path.suffix in (".mat", ".bag") or columns is not None else path.name
+    name = recording_label(path, columns is not None)
     return align(imu, gt, options, name=name, sources=source_files(path, format, gt_path))
 
 

@@ -42,7 +42,7 @@ from imu_learn.data.config import DataConfig, RootConfig
 from imu_learn.data.datasets import DATASETS, find_recordings
 from imu_learn.data.formats import USER_CSV, CsvColumns
 from imu_learn.data.label_builder import RecordingSource, cached_segments
-from imu_learn.data.loading import AlignOptions, load_sequence
+from imu_learn.data.loading import AlignOptions, load_sequence, recording_label
 from imu_learn.data.types import Segment
 from imu_learn.errors import (
     ConfigError,
@@ -187,7 +187,7 @@ def find_all(roots: List[RootConfig], data_root: Optional[Path] = None) -> Dict[
         fmt = _format_for(root)
         path = resolve_data_path(root.path, data_root, f"data.roots[{i}].path")
         if root.groundtruth:
-            recs = [(path.stem if path.suffix in (".mat", ".bag") or fmt == USER_CSV else path.name, path)]
+            recs = [(recording_label(path, fmt == USER_CSV), path)]
         else:
             recs = find_recordings(fmt, path)
         for name, p in recs:

@@ -57,6 +57,7 @@ from imu_learn.calib.reference import (
     level_rotation,
     matched_rates,
     motion_rms,
+    no_frame,
     planar_ratio,
     planar_rotation,
     reference_scale,
@@ -339,10 +340,7 @@ class GroundTruthCheck:
                          ((math.pi / 180, "deg/s read as rad/s (--gyro-unit)"),
                           (180 / math.pi, "rad/s read as deg/s (--gyro-unit)"))
                          if abs(self.rate_ratio / k - 1) < 0.1), "")
-            return (f"its rotation rates do not match the IMU's in any frame (residual {self.rate_residual:.3f} rad/s "
-                    f"against {self.rate_rms:.3f} of motion): a gyro unit, a mirrored or swapped axis, another "
-                    f"recording, or its quaternions in another order (a TUM row is t x y z qx qy qz qw, scalar last)"
-                    f"{unit}")
+            return f"its {no_frame(self.rate_residual, self.rate_rms)}{unit}"
         if self.scale_off:
             return (f"its positions are x{self.scale:.4g} (± {self.scale_std:.2g}) the distances the accelerometer "
                     "measures: millimetres or centimetres, or a monocular VO without metric scale? (translation and "

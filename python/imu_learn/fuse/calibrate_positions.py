@@ -56,7 +56,7 @@ from imu_learn.calib import fit as ff
 from imu_learn.calib import run as cr
 from imu_learn.calib.frames import default_gap_s
 from imu_learn.calib.profile import FloorFit, Profile
-from imu_learn.calib.sources import OBSERVABLE, TRAIN, VAL, CalibInputs, Recording, Source, span
+from imu_learn.calib.sources import NAVIGATOR_OPTIONS, OBSERVABLE, TRAIN, VAL, CalibInputs, Recording, Source, span
 from imu_learn.calib.sources import held_back as _held_back
 from imu_learn.core.quat import xyzw_to_wxyz
 from imu_learn.core.stamps import sample_rate_hz
@@ -571,7 +571,6 @@ def source_from_cli(args: Any, columns: Optional[CsvColumns] = None) -> Position
     return PositionsSource(args.input[0], args.groundtruth[0], opts, Path(args.out) / "positions", args.device)
 
 
-NAVIGATOR_OPTIONS = ("imu_rotation_rpy_deg", "imu_delay_s", "lever_arm")  # calibrate's options of navigate's names
 
 
 def navigator_options(args: Any) -> Dict[str, Any]:

@@ -105,7 +105,7 @@ from .settings import FusionSettings, PriorSigmas
 from .start import Start
 from .start.delay import imu_delay
 from .start.gravity import GravityCheck, check_gravity
-from .start.level import still_start
+from .start.level import start_rest
 from .start.prior import profile_bias_sigmas
 from .start.track import rest_from_track
 
@@ -423,15 +423,18 @@ def imu_noise(src: Sources, opts: NavigateOptions, own: Optional[ImuNoise], prof
     else the built-in device's (one warning line each)."""
     if opts.imu_noise is not None:
         return ImuNoise(*opts.imu_noise, source="--imu-noise")
+    # GNSS: the fixes as the run fuses them, read once for the innovations' fit and the track's rest
+    rows = gnss_rows(src, sol, imu[0], np.zeros(3), opts)[1] if sol is not None and imu is not None else None
     if profile is not None:
         noise = from_profile(profile.kalibr(), str(src.profile), [k for k in profile.kalibr() if profile.unobserved_noise(k)])
         # GNSS: the profile's white noise (at rest) raised to the moving IMU's as pose aiding's is (:func:`moving_imu`);
         # pose aiding's rows are read (and their frame checked) later
-        return in_motion(noise, innovation_fit(src, opts, imu, sol)) if sol is not None and imu is not None else noise
+        return in_motion(noise, innovation_fit(src, opts, imu, sol, rows)) if rows is not None else noise
     if own is not None:
         return own
     if imu is not None:
-        noise = at_rest_floor(fitted_noise(innovation_fit(src, opts, imu, sol)), src, opts, imu, sol)
+        rest = None if rows is None else rest_from_track(imu[0], rows.sample, rows.p)
+        noise = at_rest_floor(fitted_noise(innovation_fit(src, opts, imu, sol, rows)), imu, rest, opts.gravity)
         log.warning(f"no --profile, --imu-noise or sensor.yaml: the IMU noise is {noise.source}; "
                     "imu-learn calibrate writes your device's noise (docs/your-device.md)")
         return noise
@@ -442,27 +445,23 @@ def imu_noise(src: Sources, opts: NavigateOptions, own: Optional[ImuNoise], prof
     return noise
 
 
-def at_rest_floor(noise: ImuNoise, src: Sources, opts: NavigateOptions,
-                  imu: Tuple[np.ndarray, np.ndarray, np.ndarray], sol: Optional[RtkSolution]) -> ImuNoise:
+def at_rest_floor(noise: ImuNoise, imu: Tuple[np.ndarray, np.ndarray, np.ndarray],
+                  rest: Optional[Tuple[int, int, str]], gravity: float) -> ImuNoise:
     """``noise`` (fitted from the innovations) with each sensor's white noise raised to what the IMU shows at rest
-    where that is higher: the per-sample spread over the rest at the start (the IMU's still start, else the rest
-    the GNSS track shows, :func:`.start.track.rest_from_track`) times sqrt(dt), the RMS over the axes. The
+    where that is higher: the per-sample spread over the rest at the start (:func:`.start.level.start_rest`: the
+    IMU's still start, else ``rest``, the one the GNSS track shows) times sqrt(dt), the RMS over the axes. The
     innovations' one factor on the class default splits the noise between the sensors by the class's ratio; a
     car parked with its engine running shows its own (the drive: gyro 3.0e-3 rad/s/sqrt(Hz) at rest against
     the fit's 1.2e-3; docs/experiments/fusion_gnss.md measured 2.0-2.8e-3 of attitude drift in motion)."""
     t_ns, gyro, acc = imu
-    t = (np.asarray(t_ns, dtype=np.int64) - int(t_ns[0])) * 1e-9
-    still = still_start(t_ns, gyro, acc, opts.gravity)
-    if still >= MIN_STILL_START_S:
-        span, where = (0, int(np.searchsorted(t, still))), f"the IMU's still start ({still:.2f} s)"
-    else:
-        rows = gnss_rows(src, sol, t_ns, np.zeros(3), opts)[1] if sol is not None else None
-        rest = None if rows is None else rest_from_track(t_ns, rows.sample, rows.p)
-        if rest is None or t[rest[1] - 1] - t[rest[0]] < MIN_STILL_START_S:
-            return noise
-        span, where = rest[:2], f"the rest the GNSS track shows ({t[rest[1] - 1] - t[rest[0]]:.2f} s)"
-    dt = float(np.median(np.diff(t[span[0]:span[1]])))
-    g, a = (float(np.sqrt(np.mean(np.var(x[span[0]:span[1]], axis=0)) * dt)) for x in (gyro, acc))
+    span = start_rest(t_ns, gyro, acc, gravity, rest, MIN_STILL_START_S)
+    if span is None:
+        return noise
+    first, end, kind, seconds = span
+    where = f"the IMU's still start ({seconds:.2f} s)" if kind == "still" else \
+        f"the rest the GNSS track shows ({seconds:.2f} s)"
+    dt = float(np.median(np.diff(t_ns[first:end]))) * 1e-9
+    g, a = (float(np.sqrt(np.mean(np.var(x[first:end], axis=0)) * dt)) for x in (gyro, acc))
     if g <= noise.gyro_noise_density and a <= noise.acc_noise_density:
         return noise
     raised = replace(noise, gyro_noise_density=max(g, noise.gyro_noise_density),
@@ -474,12 +473,13 @@ def at_rest_floor(noise: ImuNoise, src: Sources, opts: NavigateOptions,
 
 
 def innovation_fit(src: Sources, opts: NavigateOptions, imu: Tuple[np.ndarray, np.ndarray, np.ndarray],
-                   sol: Optional[RtkSolution] = None) -> NoiseFit:
+                   sol: Optional[RtkSolution] = None, rows: Optional[AidingRows] = None) -> NoiseFit:
     """The IMU's white noise fitted from the aiding's innovations (:mod:`.noise_fit`) on ``imu`` (stamps,
-    gyro, acc as fused); the geodetic fixes ``sol`` when the aiding is GNSS."""
+    gyro, acc as fused); the geodetic fixes ``sol`` when the aiding is GNSS (``rows``: them as the run fuses
+    them, :func:`gnss_rows`, when already read)."""
     t_ns, gyro, acc = imu
     if sol is not None:
-        _, rows = gnss_rows(src, sol, t_ns, np.zeros(3), opts)
+        rows = rows if rows is not None else gnss_rows(src, sol, t_ns, np.zeros(3), opts)[1]
         gravity = normal_gravity(sol.origin_llh[0], sol.origin_llh[2])
     else:
         T_BS = read_t_bs(src.extrinsics) if src.extrinsics is not None else None
@@ -597,6 +597,12 @@ def read_body_imu(src: Sources, opts: NavigateOptions, sol: Optional[RtkSolution
                fixed.summary, delay, check)
 
 
+def outside_gaps(sol: RtkSolution, t0_ns: int, gaps: Tuple[OutageWindow, ...]) -> np.ndarray:
+    """The solution's epochs outside ``--gaps`` (windows in seconds from the IMU's first sample ``t0_ns``): the
+    fixes the run fuses, the ones the delay, the velocities' lag and the mounting are measured on."""
+    return ~in_windows((np.asarray(sol.t_ns, dtype=np.int64) - int(t0_ns)) * 1e-9, gaps)
+
+
 def check_mounting(t_ns: np.ndarray, acc_imu: np.ndarray, sol: Optional[RtkSolution], mounting: Optional[np.ndarray],
                    opts: NavigateOptions, force: bool = False) -> Dict[str, object]:
     """With ``--nhc`` and GNSS fixes: the body's forward axis (``--imu-rotation-rpy-deg``, else the IMU's x)
@@ -604,7 +610,7 @@ def check_mounting(t_ns: np.ndarray, acc_imu: np.ndarray, sol: Optional[RtkSolut
     else not checked."""
     if not opts.nhc or sol is None:
         return {"checked": False, "why": "checked with --nhc and GNSS fixes only (the forward axis of a wheeled vehicle)"}
-    keep = ~in_windows((sol.t_ns - t_ns[0]) * 1e-9, opts.gaps)  # the fixes the run fuses, none withheld
+    keep = outside_gaps(sol, int(t_ns[0]), opts.gaps)  # the fixes the run fuses, none withheld
     check = mounting_check(t_ns, acc_imu, sol.t_ns[keep], sol.enu[keep], mounting,
                            normal_gravity(sol.origin_llh[0], sol.origin_llh[2]))
     if check.get("checked") and not check["ok"]:
@@ -626,9 +632,8 @@ def measured_delay(sol: Optional[RtkSolution], opts: NavigateOptions, t_ns: np.n
     if sol is None:
         raise ConfigError("--imu-delay-s auto measures the delay against GNSS fixes (an RTKLIB .pos or a NavSatFix "
                           "topic); with this aiding give the delay in seconds")
-    rel_s = (np.asarray(sol.t_ns, dtype=np.int64) - int(t_ns[0])) * 1e-9
     est = imu_delay(t_ns, acc, sol, normal_gravity(sol.origin_llh[0], sol.origin_llh[2]),
-                    use=~in_windows(rel_s, opts.gaps))
+                    use=outside_gaps(sol, int(t_ns[0]), opts.gaps))
     if opts.imu_delay_from == "fixes":  # without the option :func:`unset_delay` says what it did with it
         log.info("IMU time offset from the fixes: %+.3f s (specific-force norm RMS %.3f m/s^2, %.3f at 0 s; %d epochs)",
                  est.delay_s, est.rms_mps2, est.rms_at_zero_mps2, est.epochs)
@@ -1241,9 +1246,8 @@ def gnss_velocities(fixes, sol: Optional[RtkSolution], opts: NavigateOptions, t0
         return None, {"used": False, "why": f"{Path(sol.path).name} has no velocity columns"}
     if opts.gnss_velocity_sigma_mps <= 0:
         return None, {"used": False, "why": "--gnss-velocity-sigma 0: positions only"}
-    rel = (np.asarray(sol.t_ns, dtype=np.int64) - t0_ns) * 1e-9
     try:
-        lag = velocity_lag(sol, use=~in_windows(rel, opts.gaps))
+        lag = velocity_lag(sol, use=outside_gaps(sol, t0_ns, opts.gaps))
         lag_s, lag_entry = max(lag.lag_s, 0.0), {"lag_s": round(lag.lag_s, 4), "epochs": lag.epochs,
                                                  "rms_before_mps": round(lag.rms_before_mps, 4),
                                                  "rms_after_mps": round(lag.rms_after_mps, 4)}

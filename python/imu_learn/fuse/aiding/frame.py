@@ -33,15 +33,12 @@ import numpy as np
 from scipy.spatial.transform import Rotation
 
 from imu_learn.calib.frames import kabsch
-from imu_learn.calib.reference import FrameOptions, glitch_cap, planar_ratio
+from imu_learn.calib.reference import FrameOptions, glitch_cap, no_frame, planar_ratio
 from imu_learn.fuse.aiding.pairs import rotation_pairs
 from imu_learn.fuse.aiding.types import AidingRows
 
 MAX_ROTATION_DEG = 5.0  # refused above: the calibrate plausibility rule's misalignment limit
 WARN_ROTATION_DEG = 1.0  # warned above: calibrate's ``identity_deg`` (below it a frame counts as the IMU's)
-NO_FRAME = ("its rotation rates do not match the IMU's in any frame (residual {:.3f} rad/s against {:.3f} of motion): "
-            "a trajectory of another recording, a time unit off, or its quaternions in another order (a TUM row is "
-            "t x y z qx qy qz qw, scalar last)")
 MIN_PAIRS = 20  # pairs of consecutive rows needed to tell
 MIN_RATE_RMS = 0.05  # rad/s: the centred rates' RMS below which the motion cannot tell the frame
 # rates over at least this span [s] (a 20 Hz VO: its pairs as they are): a 90-120 Hz motion capture's rates between consecutive rows carry its
@@ -119,7 +116,7 @@ def check_frame(imu_t_ns: np.ndarray, gyro: np.ndarray, rows: AidingRows, max_ga
         angle = math.degrees(Rotation.from_matrix(R).magnitude())
         motion = float(np.sqrt(np.mean(np.sum((a - a.mean(0)) ** 2, axis=1))))
         if math.sqrt(mse) > FrameOptions.max_rate_residual * motion:  # calibrate's rule (calib.reference)
-            return FrameCheck(angle, False, n, "refused", NO_FRAME.format(math.sqrt(mse), motion), matches=False)
+            return FrameCheck(angle, False, n, "refused", f"its {no_frame(math.sqrt(mse), motion)}", matches=False)
     what = "its main rotation axis is" if axis_only else "its body frame is"
     line = f"{what} {angle:.1f}° from the IMU's (from {n} rotation increments)"
     if angle > MAX_ROTATION_DEG:

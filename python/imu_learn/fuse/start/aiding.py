@@ -72,8 +72,7 @@ def position_start(t_ns, gyro, acc, rows: AidingRows, lever: np.ndarray, bias0: 
     first, level_end = info["levelled_samples"]
     # the gyro's mean at rest (the IMU's still start, or the rest the track shows) is its bias: used to carry the
     # attitude to the start
-    at_rest = info["still_s"] >= MIN_STILL_START_S or str(info["attitude_source"]).startswith("at rest")
-    gb = gyro[first:level_end].mean(axis=0) if at_rest else bias0[:3]
+    gb = gyro[first:level_end].mean(axis=0) if info["rest_from"] is not None else bias0[:3]
     forward = None if body_x_forward else forward_axis(t_ns, acc, rows, gravity, info)
     s0, e, R0, v0, h_info = track_start(t_ns, gyro, rows.sample, rows.p, R_level, level_end, gb, forward=forward)
     info.update(h_info)

@@ -186,30 +186,46 @@ def _rests(gyro: np.ndarray, acc: np.ndarray, span: Tuple[int, int, str], gravit
     return bool(at_rest(g, float(np.linalg.norm(a)), gravity, MEMS_PRIOR, acc_tol=ACC_NORM_TOL))
 
 
+def start_rest(t_ns: np.ndarray, gyro: np.ndarray, acc: np.ndarray, gravity: float,
+               rest: Optional[Tuple[int, int, str]] = None, min_still_s: float = 1.0,
+               still: Optional[float] = None) -> Optional[Tuple[int, int, str, float]]:
+    """The rest at the start, the one rule the levelling and the navigator's noise at rest share: (first
+    sample, end sample, "still" or "aiding", seconds). The IMU's still start (:func:`still_start`; ``still``
+    its seconds when already found) at least ``min_still_s`` long; else ``rest`` (first, end, words: a rest
+    the aiding shows, :func:`imu_learn.fuse.start.track.rest_from_track`, a car parked with its engine running
+    whose vibration no IMU still rule passes) at least ``min_still_s`` long where the IMU's mean readings
+    there are a rest's (:func:`_rests`); else None."""
+    still = still_start(t_ns, gyro, acc, gravity) if still is None else still
+    t = (np.asarray(t_ns, dtype=np.int64) - int(t_ns[0])) * 1e-9
+    if still >= min_still_s:
+        return 0, int(np.searchsorted(t, still)), "still", still
+    if rest is not None and t[rest[1] - 1] - t[rest[0]] >= min_still_s and _rests(gyro, acc, rest, gravity):
+        return rest[0], rest[1], "aiding", float(t[rest[1] - 1] - t[rest[0]])
+    return None
+
+
 def attitude_from_accelerometer(t_ns: np.ndarray, gyro: np.ndarray, acc: np.ndarray, gravity: float = 9.81,
                                 acc_bias: Optional[np.ndarray] = None, level_s: float = 2.0,
                                 min_still_s: float = 1.0, rest: Optional[Tuple[int, int, str]] = None
                                 ) -> Tuple[np.ndarray, Dict[str, object]]:
-    """(R_WB zero yaw, info): levelled from the mean specific force over the still start (at least
-    ``min_still_s`` long); without one, over ``rest`` (first sample, end sample, words: a rest the
-    aiding shows, :func:`imu_learn.fuse.start.track.rest_from_track`, a car parked with its engine
-    running whose vibration no IMU still rule passes), at least ``min_still_s`` long and the IMU's mean
-    readings there a rest's (:func:`_rests`); else over the
-    first ``level_s`` seconds (module docstring). ``info["levelled_samples"]``: the samples averaged."""
+    """(R_WB zero yaw, info): levelled from the mean specific force over the rest at the start
+    (:func:`start_rest`: the IMU's still start, else ``rest``, the one the aiding shows), else over the first
+    ``level_s`` seconds (module docstring). ``info["levelled_samples"]``: the samples averaged; ``info["rest_from"]``:
+    "still", "aiding" or None (moving)."""
     still = still_start(t_ns, gyro, acc, gravity)
     t = (np.asarray(t_ns, dtype=np.int64) - int(t_ns[0])) * 1e-9
     i = np.arange(len(t))
-    if still >= min_still_s:
-        m, source = t < still, f"still start ({still:.2f} s at rest, accelerometer averaged over it)"
-    elif rest is not None and t[rest[1] - 1] - t[rest[0]] >= min_still_s and _rests(gyro, acc, rest, gravity):
-        m = (i >= rest[0]) & (i < rest[1])
-        source = f"at rest as {rest[2]} ({t[rest[1] - 1] - t[rest[0]]:.2f} s, accelerometer averaged over it)"
-    else:
+    span = start_rest(t_ns, gyro, acc, gravity, rest, min_still_s, still)
+    if span is None:
         m, source = t < level_s, (f"no still start: accelerometer averaged over the first {level_s:g} s while moving "
                                   "(its own accelerations tilt the estimate)")
+    else:
+        m = (i >= span[0]) & (i < span[1])
+        source = (f"still start ({still:.2f} s at rest, accelerometer averaged over it)" if span[2] == "still" else
+                  f"at rest as {rest[2]} ({span[3]:.2f} s, accelerometer averaged over it)")  # type: ignore[index]
     f = acc[m].mean(axis=0) - (np.zeros(3) if acc_bias is None else np.asarray(acc_bias))
     roll, pitch, R = level(f)
     info = {"attitude_source": source, "still_s": round(still, 3), "roll_deg": round(float(np.rad2deg(roll)), 3),
             "pitch_deg": round(float(np.rad2deg(pitch)), 3), "levelled_over_s": round(float(t[m][-1]), 3),
-            "levelled_samples": [int(i[m][0]), int(i[m][-1]) + 1]}
+            "levelled_samples": [int(i[m][0]), int(i[m][-1]) + 1], "rest_from": None if span is None else span[2]}
     return R, info

@@ -18,6 +18,15 @@ from imu_learn.errors import InvalidInputError
 from .level import level, rot_z
 
 
+def track_velocity(t_ns: np.ndarray, fix_idx: np.ndarray, fix_p: np.ndarray
+                   ) -> Tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(fix times [s from the IMU's first sample], velocity (central differences of the fixes; zero with
+    fewer than two), horizontal speed) of a position track on the IMU's samples ``fix_idx``."""
+    tf = (t_ns[np.asarray(fix_idx, dtype=np.int64)] - int(t_ns[0])) * 1e-9
+    v = np.gradient(fix_p, tf, axis=0) if len(tf) >= 2 else np.zeros_like(fix_p)
+    return tf, v, np.linalg.norm(v[:, :2], axis=1)
+
+
 def rest_from_track(t_ns: np.ndarray, fix_idx: np.ndarray, fix_p: np.ndarray,
                     max_speed_mps: float = STILL_MAX_SPEED_MPS) -> Optional[Tuple[int, int, str]]:
     """The IMU samples (first, end) over which the position track shows the platform at rest from its
@@ -28,8 +37,7 @@ def rest_from_track(t_ns: np.ndarray, fix_idx: np.ndarray, fix_p: np.ndarray,
     fix_idx = np.asarray(fix_idx, dtype=np.int64)
     if len(fix_idx) < 3:
         return None
-    tf = (t_ns[fix_idx] - int(t_ns[0])) * 1e-9
-    speed = np.linalg.norm(np.gradient(fix_p, tf, axis=0)[:, :2], axis=1)
+    tf, _, speed = track_velocity(t_ns, fix_idx, fix_p)
     moving = np.flatnonzero(speed > max_speed_mps)
     last = (int(moving[0]) if len(moving) else len(fix_idx)) - 1
     if last < 1:
@@ -49,9 +57,7 @@ def track_start(t_ns: np.ndarray, gyro: np.ndarray, fix_idx: np.ndarray, fix_p: 
     x-axis: a car, a walker's forward axis), or the body axis ``forward`` (3,) where given (the one the
     track shows, :func:`..mounting.track_forward`). Returns (start sample, fix number, R_WB, v, info)."""
     fix_idx = np.asarray(fix_idx, dtype=np.int64)
-    tf = (t_ns[fix_idx] - int(t_ns[0])) * 1e-9
-    v = np.gradient(fix_p, tf, axis=0) if len(tf) >= 2 else np.zeros_like(fix_p)
-    speed = np.linalg.norm(v[:, :2], axis=1)
+    tf, v, speed = track_velocity(t_ns, fix_idx, fix_p)
     moving = (fix_idx >= level_end) & (speed > min_speed_mps)
     if not moving.any():
         raise InvalidInputError(f"position aiding: no fix faster than {min_speed_mps:g} m/s after the levelling window: "
