@@ -10,6 +10,7 @@ import math
 import os
 import struct
 from pathlib import Path
+from types import SimpleNamespace
 
 import numpy as np
 import pytest
@@ -19,6 +20,7 @@ from imu_learn.cli import main
 from imu_learn.data import formats
 from imu_learn.data.formats import gnss_imu
 from imu_learn.fuse.aiding import rtklib
+from imu_learn.fuse.score import score_against_fixes
 from imu_learn.fuse.start.delay import imu_delay
 
 G_UNIT = 9.80665
@@ -327,3 +329,22 @@ def test_real_drive_parked_start_and_velocities_without_options(tmp_path, capsys
     assert s["imu_noise"]["gyroscope_noise_density"] > 2e-3
     end = s["scores"]["causal"]["gaps"][0]["end_m"]
     assert end < 25.0, end
+
+
+def test_gap_scores_against_fixes_give_the_horizontal_error_beside_the_3d_one():
+    """GNSS/INS filters are judged by the horizontal error when the fixes return: a track 0.3 m east, 0.4 m
+    north and 1.2 m up of every fix scores 1.3 m 3-D and 0.5 m horizontally in each gap (the 3-D figure
+    alone was compared with the peers' horizontal one)."""
+    t_ns = np.arange(0, 60_000_000_000, 200_000_000, dtype=np.int64)
+    enu = np.stack([np.linspace(0.0, 300.0, len(t_ns)), np.zeros(len(t_ns)), np.zeros(len(t_ns))], axis=1)
+    fixes = rtklib.RtkSolution("rover.pos", t_ns, enu, np.full_like(enu, 0.01), None, np.ones(len(t_ns), int),
+                               np.arange(1, len(t_ns) + 1), (40.0, -105.0, 1600.0), "llh")
+    kf_t = np.arange(0, 60_000_000_000, 100_000_000, dtype=np.int64)
+    p = np.stack([np.interp(kf_t, t_ns, enu[:, k]) for k in range(3)], axis=1) + [0.3, 0.4, 1.2]
+    R = np.repeat(np.eye(3)[None], len(kf_t), axis=0)
+    res = SimpleNamespace(causal_p=p, causal_R=R, smoothed_p=p, smoothed_R=R)
+    sc = score_against_fixes(fixes, kf_t, res, np.zeros(3), fixes.origin_llh, 0, gaps=[(20.0, 10.0), (40.0, 5.0)])
+    for gap in sc["causal"]["gaps"]:
+        assert gap["end_m"] == pytest.approx(1.3, abs=1e-6) and gap["rmse_m"] == pytest.approx(1.3, abs=1e-6)
+        assert gap["horizontal"]["end_m"] == pytest.approx(0.5, abs=1e-6)
+        assert gap["horizontal"]["max_m"] == pytest.approx(0.5, abs=1e-6)

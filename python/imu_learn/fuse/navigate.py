@@ -1281,9 +1281,11 @@ def one_line(summary: Dict[str, object]) -> str:
                          + " the aiding alone: fusion made its positions worse there)")
         elif sc.get("aiding_only"):
             text += f", aiding alone {sc['aiding_only']['pos_rmse_m']:.3f} m"
-        ends = [g["end_m"] for g in sc["causal"].get("gaps") or [] if g.get("end_m") is not None]
-        if ends:
-            text += f"; causal at the gaps' ends {', '.join(f'{e:.2f}' for e in ends)} m"
+        gaps = [g for g in sc["causal"].get("gaps") or [] if g.get("end_m") is not None]
+        if gaps:
+            text += f"; causal at the gaps' ends {', '.join(format(g['end_m'], '.2f') for g in gaps)} m"
+            if all("horizontal" in g for g in gaps):
+                text += f" (horizontally {', '.join(format(g['horizontal']['end_m'], '.2f') for g in gaps)} m)"
     if one_line_text(s.get("aiding_estimates")):
         text += f"; {one_line_text(s.get('aiding_estimates'))}"
     return text + f" -> {Path(str(s['outputs']['smoothed'])).parent} ({s['seconds']:.0f} s)"

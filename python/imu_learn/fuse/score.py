@@ -217,7 +217,8 @@ def score_against_fixes(fixes, kf_t: np.ndarray, res, lever: np.ndarray, origin_
     position plus its attitude times ``lever``) linearly interpolated at the fixes' stamps, in the run's ENU
     frame at ``origin_llh`` (no alignment: one world); 3-D and horizontal RMSE, and inside each ``--gaps``
     window (``gaps``: seconds from ``t0_ns``, the first IMU sample) its RMSE, maximum and the error when the
-    aiding returns, at the fixes the run withheld there."""
+    aiding returns, at the fixes the run withheld there, 3-D and (``horizontal``) in east-north, the GNSS/INS
+    peers' figure."""
     fixed = np.asarray(fixes.q) == 1
     t = np.asarray(fixes.t_ns, dtype=np.int64)[fixed]
     p_gt = llh_to_enu(enu_to_llh(np.asarray(fixes.enu)[fixed], fixes.origin_llh), origin_llh)
@@ -238,7 +239,10 @@ def score_against_fixes(fixes, kf_t: np.ndarray, res, lever: np.ndarray, origin_
         e = np.linalg.norm(d, axis=1)
         s: Dict[str, object] = {"pos_rmse_m": rmse(e), "horizontal_rmse_m": rmse(np.linalg.norm(d[:, :2], axis=1))}
         if gaps:
-            s["gaps"] = [window_errors(e, rel_s, a, g, missing=None) for a, g in gaps]
+            e_h = np.linalg.norm(d[:, :2], axis=1)
+            s["gaps"] = [{**window_errors(e, rel_s, a, g, missing=None),
+                          "horizontal": {k: v for k, v in window_errors(e_h, rel_s, a, g, missing=None).items()
+                                         if k.endswith("_m")}} for a, g in gaps]
             m = in_windows(rel_s, gaps)
             s["outside_gaps_rmse_m"] = rmse(e[~m]) if (~m).any() else None
         out[kind] = s
