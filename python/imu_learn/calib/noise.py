@@ -43,6 +43,7 @@ from typing import Dict, List, Optional, Sequence, Tuple
 import numpy as np
 
 from imu_learn.core.allan import AllanDeviation, NoiseFit, allan_deviation, fit_noise
+from imu_learn.core.nnls import nonneg_lstsq
 from imu_learn.core.quat import quat_conj, quat_log, quat_mul, quat_rotate
 from imu_learn.core.stamps import median_period_ns
 from imu_learn.core.still import StillSettings, moving_std, still_stretches  # noqa: F401  (the one detector)
@@ -115,8 +116,6 @@ class PowerLawFit:
 
 def power_law_fit(dev: AllanDeviation, max_rel_err: float = MAX_REL_ERR) -> PowerLawFit:
     """The non-negative weighted least-squares fit of σ²(τ) (module doc), each axis of ``dev``."""
-    from scipy.optimize import nnls
-
     use = dev.rel_err <= max_rel_err
     tau, rel = dev.tau_s[use], dev.rel_err[use]
     k = dev.adev.shape[1]
@@ -129,7 +128,7 @@ def power_law_fit(dev: AllanDeviation, max_rel_err: float = MAX_REL_ERR) -> Powe
     for j in range(k):
         y = dev.adev[use, j] ** 2
         w = 1.0 / (2.0 * rel * y)  # σ² of a variance point ≈ (2 rel y)²
-        c, _ = nnls(A * w[:, None], y * w)
+        c, _ = nonneg_lstsq(A * w[:, None], y * w)
         r = (A @ c - y) * w
         active = c > 0
         cov = np.full((4, 4), np.nan)

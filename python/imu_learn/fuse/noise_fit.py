@@ -35,11 +35,11 @@ from dataclasses import dataclass
 from typing import List, Optional, Tuple
 
 import numpy as np
-from scipy.optimize import nnls
 
 from imu_learn.calib import metric_scale
 from imu_learn.calib.metric_scale import ScaleFit
 from imu_learn.calib.profile import CLASS_DEFAULT_SOURCE, CLASS_DEFAULTS
+from imu_learn.core.nnls import nonneg_lstsq
 
 from .aiding.noise import detrend, robust_sigma
 from .aiding.pairs import gyro_orientation, runs, within
@@ -164,7 +164,7 @@ def _solve(rows, parts, spans) -> NoiseFit:
                                                     "2 needed")
     v = np.array([r[0] for r in rows])
     X = np.array([[r[1], r[2]] for r in rows]) / v[:, None]
-    (alpha, beta), _ = nnls(X, np.ones(len(rows)))
+    (alpha, beta), _ = nonneg_lstsq(X, np.ones(len(rows)))
     factor = float(np.sqrt(beta))
     q = np.concatenate([e ** 2 / (alpha * G + beta * B) for e, G, B in parts]) if beta > 0 or alpha > 0 else None
     chi2 = None if q is None else round(float(np.median(q)) / CHI2_1_MEDIAN, 3)
