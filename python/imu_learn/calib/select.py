@@ -65,6 +65,7 @@ floor's own (numpy, no torch).
 """
 from __future__ import annotations
 
+import json
 import math
 import time
 from concurrent.futures import ThreadPoolExecutor
@@ -402,11 +403,17 @@ def _each(fn: Callable[[Any], Any], items: Sequence[Any]) -> List[Any]:
 
 def _table(preps: List[Prepared], floors: Callable[[Prepared, str], Floor], levels: Sequence[str],
            horizons: Tuple[int, ...], opts: SelectOptions, gravity: float, cells: Tuple[str, ...]) -> Table:
-    jobs = [(lv, p) for lv in levels for p in preps]
-    scores = _each(lambda j: score(floors(j[1], j[0]), j[1].fold.held, horizons, opts, gravity, cells), jobs)
+    """Every level's held-out cells on every fold; a floor equal to another level's on the same fold (a
+    low-pass level whose cut-off came out None is the level below it) is scored once."""
+    jobs = [(lv, p, floors(p, lv)) for lv in levels for p in preps]
+    keys = [(p.fold.name, json.dumps(f.to_dict(), sort_keys=True)) for _, p, f in jobs]
+    first = {k: i for i, k in reversed(list(enumerate(keys)))}
+    unique = sorted(set(first.values()))
+    scores = dict(zip(unique, _each(lambda i: score(jobs[i][2], jobs[i][1].fold.held, horizons, opts, gravity, cells),
+                                    unique)))
     out: Table = {lv: {} for lv in levels}
-    for (lv, p), sc in zip(jobs, scores):
-        out[lv][p.fold.name] = sc
+    for (lv, p, _), k in zip(jobs, keys):
+        out[lv][p.fold.name] = dict(scores[first[k]])
     return out
 
 
