@@ -68,3 +68,17 @@ def test_fit_improves_loss_and_passes_the_accelerometer_through(mh):
     assert g.shape == (len(mh[1]), 3) and g.dtype == np.float64
     np.testing.assert_array_equal(a, mh[1].acc)
     assert np.abs(g - mh[1].gyro).max() > 1e-4  # it learned something
+
+
+def test_training_shows_progress_only_when_asked_and_progress_is_not_part_of_the_fit(mh, capsys):
+    """A learned baseline's training is a long job inside evaluate: a bar on stderr while it trains
+    (evaluate passes its progress flag), none when quiet; the fit records' signature leaves it out so a
+    saved fit is reused either way."""
+    train, val = mh
+    for progress in (True, False):
+        st = FitSettings(window=64, batch_size=4, steps=3, lr=1e-3, seed=0, threads=1, progress=progress)
+        small().fit([train], [val], st)
+        err = capsys.readouterr().err
+        assert ("gyro-denoise: fit" in err) == progress, err
+    a, b = FitSettings(progress=True).record(), FitSettings(progress=False).record()
+    assert a == b and "progress" not in a and a["steps"] == FitSettings().steps

@@ -11,11 +11,13 @@ Two kinds of method:
 """
 from __future__ import annotations
 
-from dataclasses import dataclass
+import sys
+from dataclasses import asdict, dataclass
 from pathlib import Path
-from typing import Dict, List, Optional, Tuple
+from typing import Any, Dict, Iterable, List, Optional, Tuple
 
 import numpy as np
+from tqdm import tqdm
 
 from imu_learn.core.integration import integrate_windows
 from imu_learn.core.quat import quat_mul, quat_rotate  # noqa: F401  (re-exported: baselines use them from here)
@@ -37,6 +39,22 @@ class FitSettings:
     # The horizons [IMU samples] the evaluation scores in its table (eval.horizons): a regressor
     # may fit one model per horizon (the end-to-end baseline does); empty: ``window`` only.
     horizons: Tuple[int, ...] = ()
+    # A bar on stderr while a learned baseline trains (evaluate's progress); not part of what a fit is
+    # (:meth:`record` leaves it out, so a saved fit is reused with or without it).
+    progress: bool = False
+
+    def record(self) -> Dict[str, Any]:
+        """The settings that make a fit, as plain values (the fit records' signature)."""
+        d = asdict(self)
+        d.pop("progress")
+        return d
+
+
+def fit_steps(steps: int, settings: FitSettings, what: str) -> Iterable[int]:
+    """``range(steps)`` of a learned baseline's training loop, with a progress bar on stderr where
+    ``settings.progress`` (evaluate's --quiet turns it off)."""
+    return tqdm(range(int(steps)), desc=f"{what}: fit", unit="step", disable=not settings.progress, leave=False,
+                dynamic_ncols=True, file=sys.stderr, mininterval=1.0)
 
 
 @dataclass(frozen=True)

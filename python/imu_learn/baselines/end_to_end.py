@@ -55,7 +55,7 @@ import numpy as np
 import torch
 from torch import nn
 
-from imu_learn.baselines.base import FitSettings, Method, PosePrediction
+from imu_learn.baselines.base import FitSettings, Method, PosePrediction, fit_steps
 from imu_learn.core.batches import AugmentConfig, BatchConfig, BatchSampler, batch_seed
 from imu_learn.core.quat import quat_mul, quat_rotate
 from imu_learn.data.types import Segment
@@ -240,7 +240,7 @@ class EndToEnd(Method):
         checks = {max(1, round(i * steps / n_checks)) for i in range(1, n_checks + 1)}  # evenly spaced, the last step included
         log: Dict[str, list] = {"train_loss": [], "val_loss": [], "val_step": []}
         best, best_state = float("inf"), None
-        for step in range(steps):
+        for step in fit_steps(steps, settings, "end-to-end"):
             b = sampler.sample(batch_seed(settings.seed, 0, step))
             n = W
             if c.multi_length:

@@ -34,7 +34,7 @@ import numpy as np
 import torch
 from torch import nn
 
-from imu_learn.baselines.base import FitSettings, Method
+from imu_learn.baselines.base import FitSettings, Method, fit_steps
 from imu_learn.data.types import Segment
 from imu_learn.nn.device import pick_device
 from imu_learn.nn.losses import huber_norm
@@ -214,7 +214,7 @@ class GyroDenoise(Method):
         log: Dict[str, list] = {"train_loss": [], "val_loss": []}
         val_every = max(1, settings.steps // 20)
         self.model.train()
-        for step in range(settings.steps):
+        for step in fit_steps(settings.steps, settings, "gyro-denoise"):
             imu, dt, q = self._windows(train, W, settings.batch_size, rng, R)
             loss = self._loss(imu, dt, q, R)
             opt.zero_grad(set_to_none=True)

@@ -32,7 +32,7 @@ import numpy as np
 import torch
 from torch import nn
 
-from imu_learn.baselines.base import FitSettings, Method
+from imu_learn.baselines.base import FitSettings, Method, fit_steps
 from imu_learn.core.batches import AugmentConfig, Batch, BatchConfig, BatchSampler, batch_seed
 from imu_learn.data.config import DataConfig
 from imu_learn.data.types import Segment
@@ -110,7 +110,7 @@ def train_refiner(
     checks = {max(1, round(i * steps / n_checks)) for i in range(1, n_checks + 1)}  # evenly spaced, the last step included
     log: Dict[str, list] = {"train_loss": [], "val_loss": [], "val_step": []}
     best, best_state = float("inf"), None
-    for step in range(steps):
+    for step in fit_steps(steps, settings, "refiner"):
         b = sampler.sample(batch_seed(settings.seed, 0, step))
         model.train()
         loss = loss_fn(model, b, device, True)
@@ -195,7 +195,7 @@ class Proposed(Method):
         bc = BatchConfig(window=W, batch_size=settings.batch_size, gravity=settings.gravity, augment=augment)
         log = train_refiner(self.model, train, val, settings, bc, self._loss, c.evals, c.grad_clip, c.val_stride)
         self.run_config = {"method": self.name, "data": {"window": W, "gravity": settings.gravity},
-                           "fit_settings": asdict(settings), "loss": asdict(c.loss), "augment": asdict(augment)}
+                           "fit_settings": settings.record(), "loss": asdict(c.loss), "augment": asdict(augment)}
         self._best = min(log["val_loss"]) if log["val_loss"] else None
         self._steps = int(settings.steps)
         return log

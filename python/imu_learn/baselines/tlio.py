@@ -72,7 +72,7 @@ import numpy as np
 import torch
 from torch import nn
 
-from imu_learn.baselines.base import FitSettings, Method, PosePrediction, poses_from_imu
+from imu_learn.baselines.base import FitSettings, Method, PosePrediction, fit_steps, poses_from_imu
 from imu_learn.core.batches import BatchConfig, BatchSampler, batch_seed
 from imu_learn.core.quat import quat_rotate
 from imu_learn.data.types import Segment, sample_rate_hz
@@ -283,7 +283,7 @@ class TlioStyle(Method):
         log: Dict[str, list] = {"train_loss": [], "phase": [], "val_mse": [], "val_nll": [], "val_step": [],
                                 "window": [W], "mse_steps": [n_mse], "nll_steps": [steps - n_mse]}
         best, best_state = float("inf"), None
-        for step in range(steps):
+        for step in fit_steps(steps, settings, "tlio-style"):
             b = sampler.sample(batch_seed(settings.seed, 0, step))
             x, d = self._windows(world, train, b.seq_index, b.start, rng if c.yaw_augment else None)
             xt = torch.as_tensor(x, dtype=torch.float32, device=self.device)

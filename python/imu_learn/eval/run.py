@@ -30,7 +30,7 @@ import random
 import re
 import sys
 import time
-from dataclasses import asdict, dataclass, field, fields
+from dataclasses import asdict, dataclass, field, fields, replace
 from pathlib import Path
 from typing import Any, Callable, Dict, List, Optional, Tuple
 from typing import Sequence as Seq
@@ -481,7 +481,7 @@ def prepare_method(name: str, factory: Callable[[], Method], res: Resolved, spli
     fname = safe_name(name)
     rec_path = methods_dir / f"{fname}.record.json"  # not <name>.json: that is where e.g. traditional saves its fit
     file = method_file(methods_dir, name, method)
-    sig = {"fit_settings": asdict(settings), "split": split_signature(split.record, ("train", "val")), "class": type(method).__qualname__}
+    sig = {"fit_settings": settings.record(), "split": split_signature(split.record, ("train", "val")), "class": type(method).__qualname__}
     if reuse and rec_path.exists():
         old = _read_record(rec_path)
         same = old is not None and all(old.get(k) == json.loads(json.dumps(v)) for k, v in sig.items())
@@ -693,7 +693,7 @@ def _result(res: Resolved, settings: FitSettings, methods: List[str], split: Any
         "eval": asdict(cfg.eval),
         "stride": res.stride,
         "startup_bias_s": res.startup_bias_s,
-        "fit_settings": asdict(settings),
+        "fit_settings": settings.record(),
         "seed": cfg.seed,
         "methods": [n for n, _ in rows.methods],
         "requested": list(methods),
@@ -727,7 +727,7 @@ def run_evaluation(res: Resolved, methods: List[str], out_dir: Path, reuse: bool
 
     t_start = time.time() if t_start is None else t_start
     cfg, data = res.cfg, res.run.data
-    settings = res.fit_settings()
+    settings = replace(res.fit_settings(), progress=progress)
     torch.set_num_threads(settings.threads)
     split = make_split(data)
     if not split.test:
