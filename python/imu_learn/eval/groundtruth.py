@@ -324,6 +324,7 @@ class GroundTruthCheck:
     scale: float = math.nan
     scale_std: float = math.nan
     scale_off: bool = False
+    imu_rate_hz: float = math.nan  # the IMU's: the scores' horizons are IMU samples
 
     @property
     def levelled(self) -> bool:
@@ -405,7 +406,7 @@ def check(imu: ImuData, gt: GroundTruth, recording: str, label: str,
     row = GroundTruthCheck(recording, label, gt_rate_hz(gt), sum(len(s) for s in segs), len(segs),
               bias_removed_score(segs, 10), bias_removed_score(segs, 200), angle, axis, 1e3 * off.tau_s,
               bias_removed_score(rotated, 200), bias_removed_score(held, 200), 100 * lever, 100 * lever_se, yaw, observed,
-              tilt, off.rms, w_rms, ratio)
+              tilt, off.rms, w_rms, ratio, imu_rate_hz=1e9 / median_period_ns(imu.t_ns))
     metric = reference_scale([segs], off.r_off, gt_rate_hz(gt), np.zeros(3))
     if metric.observed:
         row = replace(row, scale=float(metric.scale), scale_std=float(metric.std), scale_off=bool(metric.off))
@@ -447,7 +448,7 @@ def summary_line(rec: str, rows: List[GroundTruthCheck], best: GroundTruthCheck)
     reference's rotation and lag are applied (a
     camera-frame VO read 11.3° before its 89° rotation, 0.22° after: the former beside "use" misled)."""
     others = "; ".join(f"{r.gt}: {r.after_hold[0]:.3f}°" for r in rows if r.recording == rec and r is not best)
-    return (f"{rec}: use {best.gt} ({best.verdict}; over 200 samples ({200 / best.rate_hz:.2g} s) rot "
+    return (f"{rec}: use {best.gt} ({best.verdict}; over 200 samples ({200 / best.imu_rate_hz:.2g} s) rot "
             f"{best.after_hold[0]:.3f}°, trans {best.after_hold[1]:.4f} m "
             "after its rotation and lag)" + (f" — others {others}" if others else ""))
 
