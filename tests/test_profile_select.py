@@ -252,7 +252,7 @@ def test_select_floor_keeps_the_sources_accelerometer_for_a_reference_without_ac
     ones = TraditionalParams(np.ones((3, 3)), np.ones(3), np.ones((3, 3)), np.full((3, 3), 2.0), np.full(3, 2.0))
     fit, entry = sel.select_floor(inp, FloorFit(full, {}, ones, []), opts=GYRO_ONLY)
     p = fit.floor.params
-    assert entry["gyro"] == "bias" and entry["acc"].startswith("not selected: the accelerometer is not fitted from")
+    assert entry["gyro"] == "bias" and entry["acc"] == "the floor's fit (bias and matrix); the accelerometer from the reference's positions not fitted"
     assert "source's" in entry["floor"]
     assert np.array_equal(p.M_a, M_a) and np.array_equal(p.b_a, b_a) and p.cutoff_acc is None and p.cutoff_gyro is None
     assert np.array_equal(p.M_g, np.eye(3)) and np.array_equal(p.G, np.zeros((3, 3)))

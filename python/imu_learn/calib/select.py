@@ -646,7 +646,8 @@ def _positions_acc_level(inp: Any, fit: FloorFit, entry: Dict[str, Any], progres
     acc_full = getattr(source, "acc_fit", None)
     names, recs, gyros = source.positions_data(inp, fit.floor) if acc_full is not None else ([], [], [])
     if acc_full is None:
-        entry["acc"] = "not selected: the accelerometer is not fitted from the reference's positions"
+        refused = getattr(source, "acc_refused", None)
+        entry["acc"] = _source_acc(fit, f"refused, {refused}" if refused else "not fitted")
         return fit
     held = (names, recs, gyros)
     if len(recs) < 2:  # one recording: four time blocks of it held out in turn (the gyroscope's rule)
@@ -660,7 +661,7 @@ def _positions_acc_level(inp: Any, fit: FloorFit, entry: Dict[str, Any], progres
         level, table, steps = select_acc_from_positions(*held, acc_full.options, tau, gravity)
         acc = fit_acc_from_positions(recs, acc_full.options, tau, gravity, gyros, free_indices("acc", level))
     except ValueError as e:
-        entry["acc"] = f"not selected: {e}"
+        entry["acc"] = _source_acc(fit, str(e))
         return fit
     progress(f"selection: accelerometer {level} (from the positions)")
     entry["acc"] = level
@@ -672,3 +673,11 @@ def _positions_acc_level(inp: Any, fit: FloorFit, entry: Dict[str, Any], progres
     a = masked_std(fit.std, ("affine", level))
     return replace(fit, floor=fit.floor.with_params(M_a=acc.M_a.copy(), b_a=acc.b_a.copy()),
                    std=replace(fit.std, M_a=a.M_a, b_a=a.b_a))
+
+
+def _source_acc(fit: FloorFit, why: str) -> str:
+    """The selection entry's ``acc`` where no level was chosen from the positions: what the floor holds (the
+    source's fit: a bias with the matrix at its prior for a reference that cannot resolve accelerations)."""
+    p = fit.floor.params
+    held = "bias, the matrix at its prior (identity)" if np.array_equal(p.M_a, np.eye(3)) else "bias and matrix"
+    return f"the floor's fit ({held}); the accelerometer from the reference's positions {why}"
