@@ -168,6 +168,9 @@ def test_simulated_outages_are_scored_against_the_fixes_the_run_withheld(tmp_pat
         assert gap["start_s"] == 20.0 and gap["rmse_m"] is not None and gap["max_m"] >= gap["rmse_m"]
     assert sc["causal"]["gaps"][0]["max_m"] > sc["causal"]["outside_gaps_rmse_m"]  # it coasts there
     assert "causal at the gaps' ends" in out
+    # the rows before the graph's start (the levelling and heading) are counted apart from the fused ones
+    before = json.loads((tmp_path / "nav" / "summary.json").read_text())["fixes_before_start"]
+    assert before > 0 and f"position rows ({before} before the start, for its attitude;" in out
 
 
 def test_synthetic_car_navigated_with_mounting_delay_lever_and_nhc(tmp_path, capsys):

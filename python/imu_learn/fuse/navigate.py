@@ -1262,8 +1262,10 @@ def one_line(summary: Dict[str, object]) -> str:
     s = summary
     conv = s["convergence"]["converged_s"]
     text = (f"{Path(str(s['input'])).name}: {s['keyframes']} keyframes over {s['duration_s']:.1f} s, "
-            f"{s['aiding_rows_used']} {s['aiding_kind']} rows ({s['imu_input']} IMU); "
-            f"causal within {s['convergence']['pos_tol_m']:g} m / {s['convergence']['rot_tol_deg']:g} deg of smoothed "
+            f"{s['aiding_rows_used']} {s['aiding_kind']} rows"
+            + (f" ({s['fixes_before_start']} before the start, for its attitude; {s['imu_input']} IMU); "
+               if s.get("fixes_before_start") else f" ({s['imu_input']} IMU); ")
+            + f"causal within {s['convergence']['pos_tol_m']:g} m / {s['convergence']['rot_tol_deg']:g} deg of smoothed "
             + (f"from {conv:.1f} s" if conv is not None else "not by the end"))
     sc = s.get("scores")
     if sc:
