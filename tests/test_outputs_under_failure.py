@@ -27,6 +27,7 @@ import faults
 from imu_learn import _imu_core as core
 from imu_learn.baselines.base import Raw
 from imu_learn.cli import labels as labels_cli
+from imu_learn.cli import main as cli_main
 from imu_learn.data import cache
 from imu_learn.errors import CacheError
 from imu_learn.infer.checkpoint import CheckpointError, load_checkpoint, save_checkpoint
@@ -750,3 +751,26 @@ def test_an_out_that_cannot_be_written_is_refused_before_any_work(tmp_path, caps
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "NotADirectoryError" in err[0] and "exists and is not a folder" in err[0], err
     assert afile.read_text() == "mine\n" and sorted(p.name for p in tmp_path.iterdir()) == ["afile"]
+
+
+@pytest.mark.parametrize("edit, field", [
+    (lambda s: s.pop("model"), "field 'model' (the weights) is missing"),
+    (lambda s: s.update(model_args={**s["model_args"], "hidden": 7}), "its model_args do not rebuild its weights"),
+    (lambda s: s["model"].update({k: torch.full_like(v, float("nan"))
+                                  for k, v in list(s["model"].items()) if "weight" in k}), "holds NaN"),
+    (lambda s: s["model"].update(std=torch.zeros_like(s["model"]["std"])), "field 'model.std'"),
+])
+def test_a_checkpoint_edited_without_its_digest_is_refused_naming_the_field(tmp_path, capsys, edit, field):
+    """A checkpoint saved again without its digest (so nothing vouches for it) whose weights are missing,
+    NaN, unnormalised or do not fit its model_args: one line naming the field, at load, for every command
+    (it ended in a traceback, exit 1, or in NaN output blamed on the recording)."""
+    state = load_checkpoint(REPO / "models" / "euroc_adis16448.pt")
+    state = {k: (dict(v) if isinstance(v, dict) else v) for k, v in state.items() if k != "digest"}
+    edit(state)
+    path = tmp_path / "edited.pt"
+    torch.save(state, path)
+    with pytest.raises(CheckpointError, match=field.replace("(", r"\(").replace(")", r"\)")):
+        load_checkpoint(path)
+    capsys.readouterr()
+    assert cli_main(["checkpoint", "info", str(path)]) == 2
+    one_error_line(capsys.readouterr().err, "CheckpointError", str(path))

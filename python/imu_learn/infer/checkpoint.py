@@ -265,7 +265,35 @@ def load_checkpoint(path: Path, map_location: str = "cpu") -> Dict[str, Any]:
     if DIGEST_KEY in state and state[DIGEST_KEY] != content_digest(state):
         raise CheckpointError(f"{path}: truncated or modified: its content does not match the sha256 "
                               "recorded when it was written")
+    check_content(path, state)
     return state
+
+
+def check_content(path: Path, state: Dict[str, Any]) -> None:
+    """What the digest cannot vouch for (a checkpoint edited and saved without one, or written before
+    digests): the weights present, finite, a positive input normalisation, and the model they rebuild
+    (``model_args`` against their shapes); a CheckpointError naming the field otherwise."""
+    weights = state.get("model")
+    if not isinstance(weights, dict) or not weights:
+        raise CheckpointError(f"{path}: field 'model' (the weights) is missing or empty: not a usable checkpoint")
+    if not isinstance(state.get("model_args"), dict):
+        raise CheckpointError(f"{path}: field 'model_args' is missing: the model cannot be rebuilt")
+    for key, value in weights.items():
+        if not torch.is_tensor(value):
+            raise CheckpointError(f"{path}: field 'model.{key}' is a {type(value).__name__}, not a tensor")
+        if value.is_floating_point() and not bool(torch.isfinite(value).all()):
+            raise CheckpointError(f"{path}: field 'model.{key}' holds NaN or infinite values: the model would "
+                                  "write NaN for every sample")
+    std = weights.get("std")
+    if torch.is_tensor(std) and bool((std <= 0).any()):
+        raise CheckpointError(f"{path}: field 'model.std' (the input normalisation) is not positive: "
+                              f"{[round(float(x), 6) for x in std.flatten()]}")
+    try:
+        model_from_checkpoint(state)
+    except (TypeError, ValueError, KeyError, RuntimeError) as e:
+        lines = [ln.strip() for ln in str(e).strip().splitlines() if ln.strip()]
+        why = " ".join(lines[:2])[:300]
+        raise CheckpointError(f"{path}: its model_args do not rebuild its weights ({type(e).__name__}: {why})") from e
 
 
 def model_from_checkpoint(state: Dict[str, Any]) -> ImuRefiner:
