@@ -153,6 +153,7 @@ def test_the_spread_at_the_chosen_levels_is_that_of_each_recordings_bias():
 def test_evaluate_scores_a_profile_as_it_ships(tmp_path):
     """``profile:PATH`` applies the profile's floor exactly as Profile.apply; a malformed one is refused."""
     from floors import set_floor
+    from imu_learn.baselines.affine import Floor
     from imu_learn.baselines.registry import is_method, load_method_class
     from imu_learn.calib.profile import Profile
     from imu_learn.errors import ProfileError
@@ -165,13 +166,14 @@ def test_evaluate_scores_a_profile_as_it_ships(tmp_path):
     assert is_method(name) and not is_method("profile:")
     method = load_method_class(name)()
     g, a = method.refine(s)
+    fp = Floor.from_dict(m.to_dict()).params  # the derived fields agree with the floor (a profile checks it)
     p = Profile.from_dict({"format": "imu-learn device profile", "version": 1, "device": "x", "sample_rate_hz": 200.0,
                            "time_offset_s": 0.0, "time_offset_s_std": None,
-                           "gyroscope": {"unit": "rad/s", "matrix": np.eye(3).tolist(), "bias": [0, 0, 0],
+                           "gyroscope": {"unit": "rad/s", "matrix": fp.M_g.tolist(), "bias": fp.b_g.tolist(),
                                          "matrix_std": np.eye(3).tolist(), "bias_std": [0, 0, 0]},
-                           "accelerometer": {"unit": "m/s^2", "matrix": np.eye(3).tolist(), "bias": [0, 0, 0],
+                           "accelerometer": {"unit": "m/s^2", "matrix": fp.M_a.tolist(), "bias": fp.b_a.tolist(),
                                              "matrix_std": np.eye(3).tolist(), "bias_std": [0, 0, 0]},
-                           "g_sensitivity_rad_s_per_mps2": np.zeros((3, 3)).tolist(), "gravity_mps2": 9.81,
+                           "g_sensitivity_rad_s_per_mps2": fp.G.tolist(), "gravity_mps2": 9.81,
                            "gravity_mps2_std": None, "floor": m.to_dict()})
     g2, a2 = p.apply(s.t_ns, s.gyro, s.acc)
     assert np.array_equal(g, g2) and np.array_equal(a, a2) and not np.allclose(g, s.gyro)

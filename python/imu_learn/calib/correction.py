@@ -29,10 +29,11 @@ from typing import Any, Dict, List, Optional, Tuple
 import numpy as np
 
 from imu_learn.baselines.registry import REGISTRY, load_method_class
+from imu_learn.calib.plausible import parameter_findings
 from imu_learn.calib.profile import Profile
 from imu_learn.core.still import MEMS_PRIOR, BiasPrior
 from imu_learn.data.types import Segment, sample_rate_hz
-from imu_learn.errors import ConfigError, InvalidInputError
+from imu_learn.errors import ConfigError, ImplausibleProfileError, InvalidInputError
 from imu_learn.infer import guard, rates
 from imu_learn.infer.rewrite import Step, measured
 from imu_learn.util.extras import require_extra
@@ -160,7 +161,7 @@ def build(req: Request) -> Plan:
     if req.variance == "required" and req.checkpoint is None:
         raise ConfigError("--fill-covariance needs a --checkpoint with a covariance head")
     if req.profile is not None:
-        plan = from_profile(req.profile)
+        plan = from_profile(req.profile, req.force)
     elif req.checkpoint is not None:
         plan = from_checkpoint(req)
     elif req.calibration is not None:
@@ -173,9 +174,19 @@ def build(req: Request) -> Plan:
     return plan
 
 
-def from_profile(path: Path) -> Plan:
-    """The floor of a device profile (a noise-only one has none: ``corrects`` False)."""
+def from_profile(path: Path, force: bool = False) -> Plan:
+    """The floor of a device profile (a noise-only one has none: ``corrects`` False); a floor outside what a
+    MEMS IMU can be (:func:`imu_learn.calib.plausible.parameter_findings`, calibrate's limits: a profile
+    edited by hand or written by another tool) is refused unless ``force`` (then a warning line)."""
     profile = Profile.load(path)
+    findings = parameter_findings(profile.floor, profile.gravity_mps2) if profile.floor is not None else []
+    if findings:
+        more = f" (and {len(findings) - 1} more)" if len(findings) > 1 else ""
+        text = (f"{path}: field '{findings[0].field}': {findings[0].message}{more}; outside what calibrate writes for "
+                "a MEMS IMU (edited, or from another tool?)")
+        if not force:
+            raise ImplausibleProfileError(text + "; --force applies it anyway", field=findings[0].field)
+        logger.warning("%s; applied (--force)", text)
     made = rates.MadeFor(f"profile {path}", profile.sample_rate_hz, profile.device)
     words = f"the floor of {describe_profile(profile, str(path))}"
     if profile.floor is None:  # calibrate --imu-only: its noise, nothing to correct the readings with

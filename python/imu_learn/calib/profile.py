@@ -310,7 +310,7 @@ class Profile:
             Floor.check_dict(floor, lambda k, what: ProfileError(f"{where}: field 'floor.{k}': {what}", where,
                                                                 field=f"floor.{k}"))
         noise = {k: r.noise(k) for k in r.get("noise", dict, {})}
-        return cls(
+        out = cls(
             device=r.get("device", str), sample_rate_hz=r.number("sample_rate_hz"),
             time_offset_s=r.number("time_offset_s"), time_offset_s_std=r.number("time_offset_s_std", True),
             gyro=r.affine("gyroscope"), acc=r.affine("accelerometer"),
@@ -323,6 +323,29 @@ class Profile:
             selection=r.get("selection", dict, {}), bias_prior=r.get("bias_prior", dict, {}),
             created=r.get("created", str, ""),
         )
+        if out.floor is not None:
+            out._check_derived(where)
+        return out
+
+    def _check_derived(self, where: str) -> None:
+        """The fields derived from the floor (what refine and navigate apply is the floor; the others say it
+        in the profile's units) agree with it: a hand-edited profile whose blocks were swapped or changed on
+        one side only is refused, naming the field, rather than applied as one thing and read as another."""
+        p = self.floor.params
+        pairs = (("gyroscope.matrix", self.gyro.matrix, p.M_g, "M_g"), ("gyroscope.bias", self.gyro.bias, p.b_g, "b_g"),
+                 ("accelerometer.matrix", self.acc.matrix, p.M_a, "M_a"),
+                 ("accelerometer.bias", self.acc.bias, p.b_a, "b_a"),
+                 ("g_sensitivity_rad_s_per_mps2", self.g_sensitivity, p.G, "G"))
+        for name, top, floor_value, key in pairs:
+            if not np.allclose(top, floor_value, rtol=1e-6, atol=1e-9):
+                raise ProfileError(f"{where}: field '{name}' disagrees with 'floor.{key}' (edited on one side only?): "
+                                   "the floor is what is applied; write the profile again with imu-learn calibrate",
+                                   where, field=name)
+        for name, unit in (("gyroscope", UNITS["gyroscope"]), ("accelerometer", UNITS["accelerometer"])):
+            got = (self.gyro if name == "gyroscope" else self.acc).unit
+            if got != unit:
+                raise ProfileError(f"{where}: field '{name}.unit' is {got!r}, not {unit!r}: blocks swapped or edited?",
+                                   where, field=f"{name}.unit")
 
     def kalibr(self) -> Dict[str, Optional[float]]:
         """The four Kalibr noise figures (None where the profile has none); a random walk that was not

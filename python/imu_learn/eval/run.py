@@ -44,6 +44,8 @@ from imu_learn.baselines.noise_floor import NOISE_FLOOR_NAME, GroundTruthImu
 from imu_learn.baselines.registry import DEFAULT_METHODS, REGISTRY, load_method_class, method_file, safe_name  # noqa: F401
 from imu_learn.baselines.registry import PREFIX as PROFILE_PREFIX
 from imu_learn.calib.correction import not_shipped
+from imu_learn.calib.plausible import parameter_findings
+from imu_learn.calib.profile import Profile
 from imu_learn.core.quat import rotation_angle
 from imu_learn.data.formats import read_recording
 from imu_learn.data.splits import (
@@ -60,6 +62,7 @@ from imu_learn.data.splits import (
 from imu_learn.data.types import Segment, sample_rate_hz
 from imu_learn.errors import (
     ConfigError,
+    ImplausibleProfileError,
     ImuError,
     MethodError,
     one_line,
@@ -289,11 +292,15 @@ def check_profiles(methods: List[str], test_entries: List[str], test: Seq[Segmen
         if not name.startswith(PROFILE_PREFIX):
             continue
         path = name[len(PROFILE_PREFIX):]
-        try:
-            d = json.loads(Path(path).read_text())
-        except (OSError, ValueError):  # missing or malformed: the method's own reader names it
+        if not Path(path).is_file():  # missing: the method's own reader names it
             continue
-        d = d if isinstance(d, dict) else {}
+        profile = Profile.load(path)  # malformed or edited: refine's reader names the field
+        findings = parameter_findings(profile.floor, profile.gravity_mps2) if profile.floor is not None else []
+        if findings:
+            f = findings[0]
+            raise ImplausibleProfileError(f"{name}: field '{f.field}': {f.message}; outside what calibrate writes for "
+                                          "a MEMS IMU (edited, or from another tool?)", field=f.field)
+        d = json.loads(Path(path).read_text())
         fitted = {Path(str(s.get("recording", ""))).name for s in d.get("sources") or [] if isinstance(s, dict)}
         for r in sorted(tests & fitted):
             raise ConfigError(f"{name}: the profile was fitted on {r}, a test recording here (test sequences must "
@@ -308,6 +315,9 @@ def check_profiles(methods: List[str], test_entries: List[str], test: Seq[Segmen
             if rec in seen:
                 continue
             seen.add(rec)
+            # refine's rate rule: a profile's time offset and low-pass are in samples of its rate
+            rates.check(rec, sample_rate_hz(seg.t_ns), None, [rates.MadeFor(f"profile {path}", profile.sample_rate_hz,
+                                                                             profile.device)])
             _entry, warning, _info = guard.verdict(d.get("inputs"), guard.input_stats(seg.t_ns, seg.gyro, seg.acc),
                                                    f"profile {path}", device_only=True)
             if warning:
