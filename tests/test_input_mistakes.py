@@ -21,6 +21,7 @@ from imu_learn.errors import ColumnCountError, ImplausibleInputError
 G = 9.80665
 RATE = 200.0
 T0_NS = 1_403_636_579_758_560_000  # a EuRoC stamp: Unix time in ns
+REPO = Path(__file__).resolve().parents[1]
 MAP = "t,gx,gy,gz,ax,ay,az"
 
 
@@ -318,3 +319,32 @@ def test_missing_samples_are_a_warning_naming_where(tmp_path, caplog):
     with caplog.at_level(logging.WARNING, logger="imu_learn"):
         read_imu_source(write(tmp_path / "few.csv", t[few], g[few], a[few]), columns=CsvColumns(MAP))
     assert caplog.records == []
+
+
+ASL_HEADER = ("#timestamp [ns],w_RS_S_x [rad s^-1],w_RS_S_y [rad s^-1],w_RS_S_z [rad s^-1],a_RS_S_x [m s^-2],"
+              "a_RS_S_y [m s^-2],a_RS_S_z [m s^-2]")
+
+
+@pytest.mark.parametrize("name, edit, says, option", [
+    ("degs", lambda t, g, a: (t, np.degrees(g), a), "the gyro columns look like deg/s", "--gyro-unit"),
+    ("g", lambda t, g, a: (t, g, a / G), "the acc columns look like units of g", "--acc-unit"),
+    ("ms", lambda t, g, a: (t // 1_000_000, g, a), "they look like milliseconds", "--time-unit"),
+])
+def test_an_asl_file_in_other_units_is_named_before_any_work(tmp_path, capsys, caplog, name, edit, says, option):
+    """An IMU CSV under EuRoC's header (ns, rad/s, m/s^2) whose numbers are a logger's deg/s, g or ms: refine
+    wrote it with a statistics warning, labels built a cache from it. Now the user-CSV checks that decide
+    stop the read in one line naming the unit and how to read the file as a CSV of one's own; the file in
+    its own units passes without a word."""
+    t, g, a = samples()
+    good = write(tmp_path / "good.csv", t, g, a, header=ASL_HEADER)
+    with caplog.at_level(logging.WARNING):
+        read_imu_source(good)
+    assert not caplog.records
+    bad = write(tmp_path / f"{name}.csv", *edit(t, g, a), header=ASL_HEADER)
+    with pytest.raises(ImplausibleInputError, match=says) as e:
+        read_imu_source(bad)
+    assert e.value.option == option and "--columns t,gx,gy,gz,ax,ay,az" in str(e.value)
+    rc = main(["refine", "--input", str(bad), "--profile", str(REPO / "models/profiles/euroc_adis16448/profile.json"),
+               "--out", str(tmp_path / "out.csv")])
+    err = [ln for ln in capsys.readouterr().err.splitlines() if ln.strip()]
+    assert rc == 2 and len(err) == 1 and says in err[0] and not (tmp_path / "out.csv").exists(), err

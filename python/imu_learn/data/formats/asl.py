@@ -14,6 +14,7 @@ from imu_learn.util.atomic import atomic_write_path
 
 from .csv_columns import last_line
 from .groundtruth import read_groundtruth
+from .input_checks import check_fixed_units
 from .source import ImuSource
 
 NAME = "asl"
@@ -74,7 +75,9 @@ def _read_imu_csv(path: Path, f: Path, allow_float_timestamps: bool = False):
     """The core's reading of IMU CSV ``f`` (of ``path``); a header that is not EuRoC's on a file given as
     such gets a note naming the options of a CSV of the user's own."""
     try:
-        return core.read_asl_imu(str(f), allow_float_timestamps)
+        t_ns, gyro, acc = core.read_asl_imu(str(f), allow_float_timestamps)
+        check_fixed_units(f, t_ns, gyro, acc, "an ASL (EuRoC) IMU file")
+        return t_ns, gyro, acc
     except HeaderError as e:
         if Path(path).is_file():  # a CSV of the user's own, read as EuRoC's layout for want of a column map
             e.add_note("a CSV of your own: name its columns with --columns (e.g. t,gx,gy,gz,ax,ay,az) and its units "

@@ -92,6 +92,28 @@ _UNIT_WORDS = {"s": "seconds", "ms": "milliseconds", "us": "microseconds", "ns":
 _AXES = ("gx", "gy", "gz", "ax", "ay", "az")
 
 
+def check_fixed_units(path: Path, t_ns: np.ndarray, gyro: np.ndarray, acc: np.ndarray, layout_words: str) -> None:
+    """A file whose layout fixes its units (``layout_words``, e.g. an ASL IMU CSV: ns, rad/s, m/s^2) but
+    whose numbers are in others (a logger's deg/s, g or ms under EuRoC's header): the checks of a user's CSV
+    that decide (3-6 of the module doc, no warnings), each stopping with one line that names the mistake
+    and how to read the file as what it is, a CSV of the user's own with its units."""
+    c = _Context(Path(path), np.asarray(t_ns, dtype=np.int64), np.asarray(gyro, dtype=np.float64),
+                 np.asarray(acc, dtype=np.float64), CsvColumns(), [], 0)
+    c.warn = False
+    try:
+        _check_rate(c)
+        if len(c.t_ns) < MIN_SAMPLES:
+            return
+        rest = _rest(c)
+        _check_swap(c, rest)
+        _check_acc(c, rest)
+        _check_gyro(c, rest)
+    except ImplausibleInputError as e:
+        raise ImplausibleInputError(f"{e} ({layout_words} holds ns, rad/s and m/s^2: read this file as a CSV of your "
+                                    f"own, --columns t,gx,gy,gz,ax,ay,az with {e.option} as named)", path=e.path,
+                                    option=e.option) from None
+
+
 def check_user_imu(path: Path, t_ns: np.ndarray, gyro: np.ndarray, acc: np.ndarray, layout: CsvColumns,
                    names: Sequence[str] = (), fields: int = 0) -> None:
     """Raise :class:`ImplausibleInputError` for the first mistake found in a user's CSV read with
@@ -122,6 +144,7 @@ class _Context:
         self.at = {e: i for i, e in enumerate(entries) if e != "_"}
         self.deg = layout.gyro_unit == "deg/s"
         self.in_g = layout.acc_unit == "g"
+        self.warn = True  # the warnings where the data cannot decide (a file of fixed units: the clear cases only)
 
     def gyro_raw(self) -> np.ndarray:
         """The gyro in the file's own numbers."""
@@ -400,7 +423,7 @@ def _check_acc(c: _Context, rest: Optional[np.ndarray]) -> None:
     if c.in_g and _in(a, MPS2_AS_G_RANGE):
         c.fail(f"|acc| {where} is {a / STANDARD_GRAVITY:.3g} g ({a:.3g} m/s2) with --acc-unit g, near 9.81 g: "
                "the acc columns look like m/s2; add --acc-unit m/s2", "--acc-unit")
-    if not _in(a, GRAVITY_WARN_RANGE_MPS2):
+    if c.warn and not _in(a, GRAVITY_WARN_RANGE_MPS2):
         logger.warning("%s: |acc| %s is %.3g m/s2, far from gravity (9.81): check --acc-unit (%s) and --columns",
                        c.path, where, a, c.layout.acc_unit)
 
@@ -420,7 +443,7 @@ def _check_gyro(c: _Context, rest: Optional[np.ndarray]) -> None:
                        f"{noise * RAD_PER_DEG:.2g} rad/s read as deg/s): the gyro columns look like deg/s; add "
                        "--gyro-unit deg/s", "--gyro-unit")
             at_rest = float(np.median(w[rest]))
-            if at_rest > GYRO_REST_WARN_RAD_S:
+            if c.warn and at_rest > GYRO_REST_WARN_RAD_S:
                 logger.warning("%s: |gyro| at rest is %.3g rad/s (%.0f deg/s): if the gyro columns are in deg/s, add "
                                "--gyro-unit deg/s", c.path, at_rest, math.degrees(at_rest))
         return
