@@ -348,3 +348,20 @@ def test_an_asl_file_in_other_units_is_named_before_any_work(tmp_path, capsys, c
                "--out", str(tmp_path / "out.csv")])
     err = [ln for ln in capsys.readouterr().err.splitlines() if ln.strip()]
     assert rc == 2 and len(err) == 1 and says in err[0] and not (tmp_path / "out.csv").exists(), err
+
+
+def test_refine_replaces_its_own_output_never_a_users_file(tmp_path, capsys):
+    """--out naming an existing file that refine did not write (no summary beside it) was overwritten without
+    a word; refine's own earlier output (its summary beside it) is replaced as before."""
+    t, g, a = samples()
+    src = write(tmp_path / "imu.csv", t, g, a, header=ASL_HEADER)
+    mine = tmp_path / "mine.csv"
+    mine.write_text("precious\n")
+    profile = str(REPO / "models/profiles/euroc_adis16448/profile.json")
+    assert main(["refine", "--input", str(src), "--profile", profile, "--out", str(mine)]) == 2
+    err = [ln for ln in capsys.readouterr().err.splitlines() if ln.strip()]
+    assert len(err) == 1 and "exists and is not an earlier refine output" in err[0], err
+    assert mine.read_text() == "precious\n"
+    out = tmp_path / "out.csv"
+    assert main(["refine", "--input", str(src), "--profile", profile, "--out", str(out)]) == 0
+    assert main(["refine", "--input", str(src), "--profile", profile, "--out", str(out)]) == 0  # its own: replaced

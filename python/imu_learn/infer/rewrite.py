@@ -80,6 +80,10 @@ def check_output(src: ImuSource, input: Path, output: Path, copy_folder: bool = 
     target = output_file(src, output)
     if _same(target, src.imu_file) or _same(output, input):
         raise InvalidInputError(f"refusing to overwrite the input: OUT {output} is the input {input}")
+    summary = summary_path(output, target)
+    if target.exists() and not summary.is_file():  # a file of the user's (another recording's IMU, a log)
+        raise InvalidInputError(f"{target} exists and is not an earlier refine output (no {summary.name} beside it): "
+                                "refine replaces only its own outputs; remove it or give OUT a new name")
     return target
 
 
