@@ -17,6 +17,7 @@ from imu_learn.cli import main
 from imu_learn.data.formats import CsvColumns, read_imu_source, write_imu
 from imu_learn.data.formats.csv_columns import read_csv_columns
 from imu_learn.errors import ColumnCountError, ImplausibleInputError
+from imu_learn.infer import rewrite
 
 G = 9.80665
 RATE = 200.0
@@ -365,3 +366,17 @@ def test_refine_replaces_its_own_output_never_a_users_file(tmp_path, capsys):
     out = tmp_path / "out.csv"
     assert main(["refine", "--input", str(src), "--profile", profile, "--out", str(out)]) == 0
     assert main(["refine", "--input", str(src), "--profile", profile, "--out", str(out)]) == 0  # its own: replaced
+
+
+def test_refine_names_an_unwritable_out_before_the_work(tmp_path, capsys, monkeypatch):
+    """A read-only OUT failed with PermissionError after the whole inference; it is named first (the check
+    is os.access, which a root test process passes: the test makes it say no)."""
+    t, g, a = samples()
+    src = write(tmp_path / "imu.csv", t, g, a, header=ASL_HEADER)
+    monkeypatch.setattr(rewrite.os, "access", lambda *_: False)
+    called = []
+    monkeypatch.setattr(rewrite, "summary_path", lambda *a: called.append(a) or tmp_path / "x")
+    rc = main(["refine", "--input", str(src), "--profile", str(REPO / "models/profiles/euroc_adis16448/profile.json"),
+               "--out", str(tmp_path / "ro" / "out.csv")])
+    err = [ln for ln in capsys.readouterr().err.splitlines() if ln.strip()]
+    assert rc == 2 and len(err) == 1 and "cannot be written" in err[0] and not called, err

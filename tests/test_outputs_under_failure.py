@@ -774,3 +774,13 @@ def test_a_checkpoint_edited_without_its_digest_is_refused_naming_the_field(tmp_
     capsys.readouterr()
     assert cli_main(["checkpoint", "info", str(path)]) == 2
     one_error_line(capsys.readouterr().err, "CheckpointError", str(path))
+
+
+def test_a_text_file_or_a_cut_copy_given_as_checkpoint_says_what_it_is(tmp_path, capsys):
+    text = tmp_path / "notes.pt"
+    text.write_text("hello world\n")
+    cut = tmp_path / "cut.pt"
+    cut.write_bytes((REPO / "models" / "euroc_adis16448.pt").read_bytes()[:1000])
+    for path, words in ((text, "not a torch file: it holds text"), (cut, "truncated: the torch archive has no end")):
+        with pytest.raises(CheckpointError, match=words):
+            load_checkpoint(path)

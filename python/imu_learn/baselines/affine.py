@@ -90,8 +90,11 @@ class TraditionalParams:
                 raise fail(k, "missing") from None
             except (TypeError, ValueError):
                 raise fail(k, f"expected numbers of shape {shape}") from None
-            if a.shape != shape or not np.all(np.isfinite(a)):
-                raise fail(k, f"expected finite numbers of shape {shape}")
+            if a.shape != shape:
+                raise fail(k, f"expected numbers of shape {shape}, got shape {a.shape}")
+            if not np.all(np.isfinite(a)):
+                raise fail(k, f"holds NaN or infinite values (at {np.argwhere(~np.isfinite(a))[0].tolist()}); "
+                              "expected finite numbers")
         for k in CUTOFFS:
             v = d.get(k)
             if v is not None and (isinstance(v, bool) or not isinstance(v, (int, float)) or not v > 0):

@@ -444,8 +444,11 @@ class _Reader:
             a = np.array(raw if not nullable else _nulls_to_nan(raw), dtype=np.float64)
         except (TypeError, ValueError):
             raise self.fail(key, f"expected numbers of shape {shape}") from None
-        if a.shape != shape or (not nullable and not np.all(np.isfinite(a))):
-            raise self.fail(key, f"expected finite numbers of shape {shape}, got shape {a.shape}")
+        if a.shape != shape:
+            raise self.fail(key, f"expected numbers of shape {shape}, got shape {a.shape}")
+        if not nullable and not np.all(np.isfinite(a)):
+            raise self.fail(key, f"holds NaN or infinite values (at {np.argwhere(~np.isfinite(a))[0].tolist()}); "
+                                 "expected finite numbers")
         return a
 
     def affine(self, key: str) -> Affine:

@@ -256,7 +256,9 @@ def load_checkpoint(path: Path, map_location: str = "cpu") -> Dict[str, Any]:
         first = str(e).strip().splitlines()[0] if str(e).strip() else ""
         # torch's advice to load with weights_only=False (arbitrary code) is no fix for a file that is not a checkpoint
         why = "" if what else (" (torch cannot read it as a checkpoint)" if first.startswith("Weights only load failed")
-                               else f" ({type(e).__name__}: {first[:200]})")
+                               else _not_torch(path) or (" (truncated: the torch archive has no end; copy it again)"
+                                                         if "central directory" in first
+                                                         else f" ({type(e).__name__}: {first[:200]})"))
         raise CheckpointError(f"{path}: not a readable checkpoint{what}{why}") from e
     if not isinstance(state, dict) or state.get("format") != FORMAT:
         raise CheckpointError(f"{path}: not an imu_learn checkpoint of format {FORMAT}")
@@ -267,6 +269,19 @@ def load_checkpoint(path: Path, map_location: str = "cpu") -> Dict[str, Any]:
                               "recorded when it was written")
     check_content(path, state)
     return state
+
+
+def _not_torch(path: Path) -> str:
+    """Words for a file that is not a torch save at all (neither a zip archive nor a pickle), else ""."""
+    try:
+        with open(path, "rb") as f:
+            head = f.read(4)
+    except OSError:
+        return ""
+    if head.startswith(b"PK") or head.startswith(b"\x80"):
+        return ""
+    return " (not a torch file: it holds text)" if head and all(32 <= b < 127 or b in (9, 10, 13) for b in head) \
+        else " (not a torch file)"
 
 
 def check_content(path: Path, state: Dict[str, Any]) -> None:

@@ -80,6 +80,10 @@ def check_output(src: ImuSource, input: Path, output: Path, copy_folder: bool = 
     target = output_file(src, output)
     if _same(target, src.imu_file) or _same(output, input):
         raise InvalidInputError(f"refusing to overwrite the input: OUT {output} is the input {input}")
+    where = next((p for p in (target.parent, *target.parent.parents) if p.is_dir()), None)
+    if where is None or not os.access(where, os.W_OK | os.X_OK):  # named before the work, not after it
+        raise PermissionError(13, f"cannot be written ({where} is not writable): give OUT a place you can write",
+                              str(target))
     summary = summary_path(output, target)
     if target.exists() and not summary.is_file():  # a file of the user's (another recording's IMU, a log)
         raise InvalidInputError(f"{target} exists and is not an earlier refine output (no {summary.name} beside it): "

@@ -21,7 +21,8 @@ def mix_up(path: Path, wanted: str) -> str:
     if path.is_dir():
         return ": a folder; give its best.pt or last.pt" if wanted == "checkpoint" else ""
     if wanted != "profile" and _starts_with_brace(path):
-        return ": a JSON file (a device profile? apply it with --profile)"
+        return (": a JSON file (a device profile? refine and navigate apply it with --profile; export takes a "
+                "checkpoint only)")
     for suffixes, (kind, words) in _SUFFIXES.items():
         if path.suffix.lower() in suffixes and kind != wanted:
             return f": {words}"
