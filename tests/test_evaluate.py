@@ -492,3 +492,11 @@ def test_a_checkpoint_with_a_covariance_head_gets_the_calibration_table(tmp_path
     by = {(r["input"], r["covariance"], r["n"]): r["summary"]["all"] for r in cal if r["sequence"] == "all test"}
     assert by[("raw", "datasheet", 200)]["mean_nees"] > by[("raw", "learned", 200)]["mean_nees"]
     assert "## Calibration of the increments' covariance" in (out / "report.md").read_text()
+
+
+def test_a_missing_base_names_the_config_and_its_key(tmp_path, capsys):
+    cfg = tmp_path / "eval_x.toml"
+    cfg.write_text('base = "nofile.toml"\n')
+    assert ev_cli.main(["--config", str(cfg), "--out", str(tmp_path / "out")]) == 2
+    err = [ln for ln in capsys.readouterr().err.splitlines() if ln.strip()]
+    assert len(err) == 1 and f"{cfg}: base = 'nofile.toml': no such run config" in err[0], err

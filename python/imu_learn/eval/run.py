@@ -192,6 +192,9 @@ def load_eval_config(path: Optional[Path] = None, overrides: Seq[str] = ()) -> R
     merged = merge(raw, nested)
     cfg = from_dict(EvalConfig, merged)
     base_path = _resolve_base(cfg.base, Path(path) if path else None) if cfg.base else None
+    if base_path is not None and not base_path.is_file():
+        raise ConfigError(f"{path or 'the config'}: base = {cfg.base!r}: no such run config (a path relative to the "
+                          "config's folder, the working directory or the checkout)")
     base = read_toml(base_path) if base_path is not None else {}
     run = build_config(merge(base, {"data": data_over}), parse_overrides(flat_data))
     if not cfg.name:
