@@ -15,7 +15,7 @@ from __future__ import annotations
 import logging
 import math
 import time
-from dataclasses import asdict, dataclass
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Callable, Dict, List, Optional, Sequence, Tuple
 
@@ -189,7 +189,7 @@ def floor_profile(inp: CalibInputs, progress: Progress, uncertainty: bool = True
     prof = Profile.of_floor(
         inp.device, rate, period, f, std, g, g_std,
         fit_log={**fit.log_entries(), "gravity_per_group": g_per, "floor_gravity_mps2": inp.settings.gravity,
-                 "floor_settings": asdict(inp.settings), "g_sensitivity_std": std.G},
+                 "floor_settings": inp.settings.record(), "g_sensitivity_std": std.G},
         selection=selection,
     )
     return prof, before, after
