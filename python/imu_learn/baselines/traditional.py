@@ -179,6 +179,9 @@ class _RotResiduals:
     def __init__(self, w: _Windows) -> None:
         self.w = w
         self._last: Optional[Tuple[np.ndarray, np.ndarray, Optional[np.ndarray]]] = None  # (θ, Q (B, H, 4), sums)
+        # within a solve (:func:`_solve`): each trial also takes the Jacobian's sums, as an accepted one
+        # needs them next (one pass per iteration, not a plain pass and then a pass with sums)
+        self.sums_on_call = False
 
     def _sums(self, theta: np.ndarray, jacobian: bool) -> Tuple[np.ndarray, Optional[np.ndarray]]:
         """Q at the horizons (B, H, 4) and, with ``jacobian``, the sums (B, H, 9, 7) at θ."""
@@ -190,7 +193,7 @@ class _RotResiduals:
         return last[1], last[2]
 
     def __call__(self, theta: np.ndarray) -> np.ndarray:
-        Q = self._sums(theta, False)[0]
+        Q = self._sums(theta, self.sums_on_call)[0]
         return quat_log(quat_mul(self.w.dq, quat_conj(Q))).reshape(-1)
 
     def jacobian(self, theta: np.ndarray, r: np.ndarray, cols: Optional[np.ndarray] = None) -> np.ndarray:
@@ -291,6 +294,19 @@ def _solve(res: Any, x0: np.ndarray, prior_idx: np.ndarray, prior: float, delta:
     def cost(x: np.ndarray, r: np.ndarray) -> float:
         return _huber_cost(r, delta) + 0.5 * float((pmask * x * x).sum())
 
+    inner = getattr(res, "res", res)  # a level's subset wraps the residuals
+    if hasattr(inner, "sums_on_call"):
+        inner.sums_on_call = True
+        try:
+            return _lm(res, x0, cost, delta, max_iter, tol, pmask)
+        finally:
+            inner.sums_on_call = False
+    return _lm(res, x0, cost, delta, max_iter, tol, pmask)
+
+
+def _lm(res: Any, x0: np.ndarray, cost: Callable[[np.ndarray, np.ndarray], float], delta: float, max_iter: int,
+        tol: float, pmask: np.ndarray) -> np.ndarray:
+    """:func:`_solve`'s iterations."""
     x = np.array(x0, dtype=np.float64)
     r = res(x)
     c = cost(x, r)
