@@ -191,7 +191,9 @@ def test_argparse_errors_exit_2_with_the_command_name(capsys):
     with pytest.raises(SystemExit) as e:
         main(["export", "--checkpoint", str(MODEL)])
     assert e.value.code == 2
-    assert capsys.readouterr().err.splitlines()[-1] == "imu-learn export: error: the following arguments are required: --out"
+    err = capsys.readouterr().err.splitlines()
+    assert err == ["imu-learn export: error: the following arguments are required: --out (imu-learn export --help lists "
+                   "the options)"], err  # one line, not the usage block
 
 
 # ---- (c) a malformed input file --------------------------------------------------------------

@@ -139,6 +139,16 @@ def test_extrinsics_missing_file(tmp_path):
         read_t_bs(tmp_path / "nope.yaml")
 
 
+def test_extrinsics_a_binary_file_or_a_folder_is_named(tmp_path):
+    """A non-UTF-8 file ended in a UnicodeDecodeError traceback (exit 1); a folder in 'No such file'."""
+    binary = tmp_path / "binary.yaml"
+    binary.write_bytes(b"\x00\x01\xff\xfe garbage")
+    with pytest.raises(ExtrinsicsError, match="not a text YAML file"):
+        read_t_bs(binary)
+    with pytest.raises(ExtrinsicsError, match="a folder, not a sensor.yaml"):
+        read_t_bs(tmp_path)
+
+
 # ---- the first state from the data -----------------------------------------------------------------------
 
 

@@ -2,11 +2,16 @@
 refused first (exit 2, one line), with no track written (imu_learn.fuse.navigate.check_inputs)."""
 from __future__ import annotations
 
+import logging
 import shutil
 from pathlib import Path
 
+import pytest
+
 from crops import CROP, SHIPPED
 from imu_learn.cli import main
+from imu_learn.errors import ConfigError
+from imu_learn.fuse import navigate as nav
 
 GT_REL = Path("mav0") / "state_groundtruth_estimate0" / "data.csv"
 
@@ -116,3 +121,17 @@ def test_a_lever_arm_of_metres_is_named_before_the_fusion(tmp_path, capsys, monk
             pass
         err = capsys.readouterr().err
         assert ("lever arm is 5 m long" in err) == warned, err
+
+
+def test_gaps_and_keyframe_rates_a_user_can_get_wrong(caplog):
+    """A negative --gaps start was accepted (the first seconds dropped without a word); overlapping windows
+    and one running past the end pass with a warning."""
+    with pytest.raises(ConfigError, match="START must be at least 0"):
+        nav.parse_gaps("-5:10")
+    with pytest.raises(ConfigError, match="DURATION above 0"):
+        nav.parse_gaps("5:0")
+    with caplog.at_level(logging.WARNING):
+        assert nav.parse_gaps("30:10,35:10") == ((30.0, 10.0), (35.0, 10.0))
+        nav.check_gaps(((95.0, 20.0),), 101.6)
+    text = caplog.text
+    assert "overlap" in text and "runs past the recording's end" in text

@@ -18,7 +18,7 @@ import contextlib
 import importlib
 import logging
 import sys
-from typing import Any, Callable, Dict, Iterator, List, Optional, Sequence, Union
+from typing import Any, Callable, Dict, Iterator, List, NoReturn, Optional, Sequence, Union
 
 from imu_learn.cli.interrupt import held_sigint, sigterm_as_interrupt
 from imu_learn.data.formats import USER_CSV
@@ -138,9 +138,19 @@ def csv_layout(args: argparse.Namespace) -> Optional[CsvColumns]:
     return CsvColumns(**given, columns_named="columns" in given) if given else None
 
 
+class OneLineParser(argparse.ArgumentParser):
+    """argparse with its errors in one line (exit 2), as every other error of the CLI: the usage block
+    of a command with thirty options hid the one line that said what was wrong."""
+
+    def error(self, message: str) -> NoReturn:  # type: ignore[override]
+        hint = ("; a value that starts with '-' is written --OPTION=VALUE (e.g. --gaps=-5:10)"
+                if "expected one argument" in message else "")
+        self.exit(2, f"{self.prog}: error: {message}{hint} ({self.prog} --help lists the options)\n")
+
+
 def parser(name: str) -> argparse.ArgumentParser:
     mod = importlib.import_module(f"imu_learn.cli.{name}")
-    p = argparse.ArgumentParser(prog=prog(name), allow_abbrev=False, description=mod.DESCRIPTION,
+    p = OneLineParser(prog=prog(name), allow_abbrev=False, description=mod.DESCRIPTION,
                                 epilog=getattr(mod, "EPILOG", None),
                                 formatter_class=argparse.RawDescriptionHelpFormatter)
     mod.add_arguments(p)

@@ -50,6 +50,7 @@ positions) is scored the same way beside it.
 from __future__ import annotations
 
 import logging
+import math
 import sys
 import time
 from dataclasses import asdict, dataclass, field, replace
@@ -242,9 +243,17 @@ def parse_gaps(text: str) -> Tuple[OutageWindow, ...]:
         try:
             if not sep:
                 raise ValueError
-            out.append(OutageWindow(float(a), float(b)))
+            w = OutageWindow(float(a), float(b))
         except ValueError:
             raise ConfigError(f"--gaps: {part!r} is not START:DURATION (seconds)") from None
+        if not (math.isfinite(w[0]) and math.isfinite(w[1])) or w[0] < 0 or w[1] <= 0:
+            raise ConfigError(f"--gaps: {part!r}: START must be at least 0 and DURATION above 0 (seconds from the first "
+                              "IMU sample)")
+        out.append(w)
+    ordered = sorted(out)
+    for (a0, d0), (a1, _) in zip(ordered, ordered[1:]):
+        if a1 < a0 + d0:
+            log.warning(f"--gaps: {a0:g}:{d0:g} and {a1:g}:... overlap: one gap from {a0:g} s")
     return tuple(out)
 
 
@@ -887,6 +896,9 @@ def check_gaps(gaps: Tuple[OutageWindow, ...], duration_s: float) -> None:
         if start >= duration_s or start + dur <= 0.0:
             raise ConfigError(f"--gaps {start:g}:{dur:g} lies outside the recording (0 to {duration_s:.1f} s from its "
                               "first IMU sample): give START in seconds from the first sample")
+        if start + dur > duration_s:
+            log.warning(f"--gaps {start:g}:{dur:g} runs past the recording's end ({duration_s:.1f} s): the aiding is "
+                        "dropped to the end, and no fix returns to score that gap's end")
 
 
 LEVER_ARM_WARN_M = 3.0  # a lever arm longer than this gets a warning before the fusion (a car's antenna: 0.5-2 m)
@@ -914,6 +926,10 @@ def read_inputs(src: Sources, opts: NavigateOptions) -> Inputs:
         raise ConfigError(f"--groundtruth {src.groundtruth}: its stamps [{gt_span[0]}, {gt_span[1]}] ns do not overlap "
                           f"the IMU's [{int(t_ns[0])}, {int(t_ns[-1])}] ns (same clock?)")
     check_gaps(opts.gaps, float((t_ns[-1] - t_ns[0]) * 1e-9))
+    rate = 1e9 / max(float(np.median(np.diff(t_ns))), 1.0) if len(t_ns) > 1 else None
+    if rate and opts.keyframe_hz > rate:
+        log.warning(f"--keyframe-hz {opts.keyframe_hz:g} is above the IMU's rate ({rate:.0f} Hz): every IMU sample is a "
+                    f"keyframe: about {rate / 10:.0f}x the keyframes of the default 10 Hz, and its time")
     lever = T_BS[:3, 3] if (T_BS is not None and kind.lever) else np.zeros(3)
     if opts.lever_arm is not None:
         lever = np.asarray(opts.lever_arm, dtype=np.float64)

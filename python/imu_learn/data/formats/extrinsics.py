@@ -37,8 +37,16 @@ def read_t_bs(path: Union[str, Path]) -> np.ndarray:
     """The 4x4 ``T_BS`` (sensor to body) of a Kalibr/ASL ``sensor.yaml`` (module docstring)."""
     path = Path(path)
     src = str(path)
+    if path.is_dir():
+        raise ExtrinsicsError(f"{src}: a folder, not a sensor.yaml (give the file holding T_BS, e.g. "
+                              f"{path / 'sensor.yaml'})", src, None, None, None)
     if not path.is_file():
         raise FileNotFoundError(2, "No such file or directory", src)
+    try:
+        path.read_text(encoding="utf-8")
+    except UnicodeDecodeError as e:
+        raise ExtrinsicsError(f"{src}: not a text YAML file (byte {e.start} is not UTF-8): give the sensor.yaml "
+                              "holding T_BS", src, None, None, None) from None
     lines = path.read_text(encoding="utf-8", errors="replace").splitlines()
     at = _line_of(lines, "T_BS")
     try:
