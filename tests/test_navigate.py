@@ -674,3 +674,10 @@ def test_window_errors_end_is_the_last_keyframe_inside_the_window():
     assert w["end_m"] == 2.0 and w["max_m"] == 3.0
     assert w["rmse_m"] == pytest.approx(np.sqrt((1 + 9 + 4) / 3))
     assert window_errors(e, rel_s, 5.5, 1.0, missing=None)["end_m"] is None
+
+
+def test_a_tum_file_with_ns_stamps_says_so(tmp_path):
+    path = tmp_path / "ns.tum"
+    path.write_text("1403638127295097088 0 0 0 0 0 0 1\n1403638127345097088 0 0 0 0 0 0 1\n")
+    with pytest.raises(NotNumericError, match="looks like ns since an epoch; TUM stamps are seconds"):
+        read_tum(path)

@@ -108,6 +108,8 @@ def _reworded(e: ParseError, src: str, layout: str) -> ParseError:
     elif isinstance(e, NotNumericError):
         what = ("an integer ns stamp" if layout == "asl" else "a number of seconds") if col == 1 else "a number"
         msg = f"{where}: {value!r} is not {what}"
+        if col == 1 and layout != "asl" and str(value).strip().isdigit() and len(str(value).strip()) >= 16:
+            msg += ": it looks like ns since an epoch; TUM stamps are seconds (divide the first column by 1e9)"
     elif isinstance(e, NonFiniteError):
         msg = f"{where}: {value!r} is not finite"
     elif isinstance(e, ColumnCountError):
