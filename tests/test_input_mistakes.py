@@ -18,6 +18,7 @@ from imu_learn.data.formats import CsvColumns, read_imu_source, write_imu
 from imu_learn.data.formats.csv_columns import read_csv_columns
 from imu_learn.errors import ColumnCountError, ImplausibleInputError
 from imu_learn.infer import rewrite
+from imu_learn.util.staging import can_create_in, check_writable
 
 G = 9.80665
 RATE = 200.0
@@ -380,3 +381,11 @@ def test_refine_names_an_unwritable_out_before_the_work(tmp_path, capsys, monkey
                "--out", str(tmp_path / "ro" / "out.csv")])
     err = [ln for ln in capsys.readouterr().err.splitlines() if ln.strip()]
     assert rc == 2 and len(err) == 1 and "cannot be written" in err[0] and not called, err
+
+
+@pytest.mark.skipif(not Path("/proc/self").is_dir(), reason="needs Linux's /proc, a folder nothing can be made in")
+def test_an_out_where_nothing_can_be_made_is_named_before_the_work(tmp_path, capsys):
+    """--out /proc/nope passed os.access as root and failed after the work, naming a staging folder."""
+    assert can_create_in(tmp_path) and not can_create_in(Path("/proc"))
+    with pytest.raises(PermissionError, match="cannot be written"):
+        check_writable(Path("/proc/nope"))

@@ -30,6 +30,7 @@ from imu_learn.infer.bias import Step, still_along_gravity  # noqa: F401  (their
 from imu_learn.infer.guard import residual_rms
 from imu_learn.util.atomic import atomic_write_text
 from imu_learn.util.interrupts import held_interrupts
+from imu_learn.util.staging import can_create_in
 
 
 def output_file(src: ImuSource, out: Path) -> Path:
@@ -81,7 +82,7 @@ def check_output(src: ImuSource, input: Path, output: Path, copy_folder: bool = 
     if _same(target, src.imu_file) or _same(output, input):
         raise InvalidInputError(f"refusing to overwrite the input: OUT {output} is the input {input}")
     where = next((p for p in (target.parent, *target.parent.parents) if p.is_dir()), None)
-    if where is None or not os.access(where, os.W_OK | os.X_OK):  # named before the work, not after it
+    if where is None or not os.access(where, os.W_OK | os.X_OK) or not can_create_in(where):  # before the work
         raise PermissionError(13, f"cannot be written ({where} is not writable): give OUT a place you can write",
                               str(target))
     summary = summary_path(output, target)

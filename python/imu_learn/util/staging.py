@@ -127,9 +127,23 @@ def check_writable(out: PathLike) -> None:
     if os.path.lexists(target) and not target.is_dir():
         raise NotADirectoryError(20, "exists and is not a folder (give --out a folder)", str(out))
     where = target if target.is_dir() else next((p for p in target.parents if p.is_dir()), None)
-    if where is None or not os.access(where, os.W_OK | os.X_OK):
+    if where is None or not os.access(where, os.W_OK | os.X_OK) or not can_create_in(where):
         raise PermissionError(13, f"cannot be written ({where} is not writable): give --out a folder you can write",
                               str(out))
+
+
+def can_create_in(folder: Path) -> bool:
+    """Whether a folder can be made in ``folder`` (and removed): what os.access cannot tell for root, a
+    read-only file system or a kernel's (/proc)."""
+    try:
+        probe = tempfile.mkdtemp(prefix=".imu_learn_probe.", dir=folder)
+    except OSError:
+        return False
+    try:
+        os.rmdir(probe)
+    except OSError:
+        pass
+    return True
 
 
 def commit(stage: Path, out: Path, owned: Collection[str] = ()) -> None:
