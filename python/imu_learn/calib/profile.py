@@ -32,7 +32,7 @@ from __future__ import annotations
 
 import json
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from datetime import datetime, timezone
 from pathlib import Path
 from typing import Any, Dict, List, Optional, Tuple, Union
@@ -216,6 +216,13 @@ class Profile:
         if name == "floor":
             value = Floor.of(value)
         super().__setattr__(name, value)
+        if name == "floor" and value is not None and "gyro" in self.__dict__:
+            # the floor is what is applied: the sensors' blocks and the g-sensitivity are derived from it
+            # (their standard deviations and units kept), so they never say one thing while it does another
+            p = value.params
+            super().__setattr__("gyro", replace(self.gyro, matrix=p.M_g.copy(), bias=p.b_g.copy()))
+            super().__setattr__("acc", replace(self.acc, matrix=p.M_a.copy(), bias=p.b_a.copy()))
+            super().__setattr__("g_sensitivity", p.G.copy())
 
     @classmethod
     def of_floor(cls, device: str, sample_rate_hz: float, period_s: float, floor: Floor, std: TraditionalParams,
@@ -310,11 +317,14 @@ class Profile:
             Floor.check_dict(floor, lambda k, what: ProfileError(f"{where}: field 'floor.{k}': {what}", where,
                                                                 field=f"floor.{k}"))
         noise = {k: r.noise(k) for k in r.get("noise", dict, {})}
-        out = cls(
+        gyro, acc = r.affine("gyroscope"), r.affine("accelerometer")
+        G = r.array("g_sensitivity_rad_s_per_mps2", (3, 3))
+        if floor:
+            _check_derived(where, Floor.from_dict(floor).params, gyro, acc, G)
+        return cls(
             device=r.get("device", str), sample_rate_hz=r.number("sample_rate_hz"),
             time_offset_s=r.number("time_offset_s"), time_offset_s_std=r.number("time_offset_s_std", True),
-            gyro=r.affine("gyroscope"), acc=r.affine("accelerometer"),
-            g_sensitivity=r.array("g_sensitivity_rad_s_per_mps2", (3, 3)),
+            gyro=gyro, acc=acc, g_sensitivity=G,
             gravity_mps2=r.number("gravity_mps2", True), gravity_mps2_std=r.number("gravity_mps2_std", True),
             floor=floor, noise=noise, noise_estimates=r.get("noise_estimates", list, []),
             sources=r.get("sources", list, []), unobservable=r.get("unobservable", list, []),
@@ -323,29 +333,6 @@ class Profile:
             selection=r.get("selection", dict, {}), bias_prior=r.get("bias_prior", dict, {}),
             created=r.get("created", str, ""),
         )
-        if out.floor is not None:
-            out._check_derived(where)
-        return out
-
-    def _check_derived(self, where: str) -> None:
-        """The fields derived from the floor (what refine and navigate apply is the floor; the others say it
-        in the profile's units) agree with it: a hand-edited profile whose blocks were swapped or changed on
-        one side only is refused, naming the field, rather than applied as one thing and read as another."""
-        p = self.floor.params
-        pairs = (("gyroscope.matrix", self.gyro.matrix, p.M_g, "M_g"), ("gyroscope.bias", self.gyro.bias, p.b_g, "b_g"),
-                 ("accelerometer.matrix", self.acc.matrix, p.M_a, "M_a"),
-                 ("accelerometer.bias", self.acc.bias, p.b_a, "b_a"),
-                 ("g_sensitivity_rad_s_per_mps2", self.g_sensitivity, p.G, "G"))
-        for name, top, floor_value, key in pairs:
-            if not np.allclose(top, floor_value, rtol=1e-6, atol=1e-9):
-                raise ProfileError(f"{where}: field '{name}' disagrees with 'floor.{key}' (edited on one side only?): "
-                                   "the floor is what is applied; write the profile again with imu-learn calibrate",
-                                   where, field=name)
-        for name, unit in (("gyroscope", UNITS["gyroscope"]), ("accelerometer", UNITS["accelerometer"])):
-            got = (self.gyro if name == "gyroscope" else self.acc).unit
-            if got != unit:
-                raise ProfileError(f"{where}: field '{name}.unit' is {got!r}, not {unit!r}: blocks swapped or edited?",
-                                   where, field=f"{name}.unit")
 
     def kalibr(self) -> Dict[str, Optional[float]]:
         """The four Kalibr noise figures (None where the profile has none); a random walk that was not
@@ -509,3 +496,21 @@ class FloorFit:
 
     def log_entries(self) -> Dict[str, Any]:
         return self.entries if self.entries is not None else {"floor": self.log, "groups": self.groups}
+
+
+def _check_derived(where: str, p: TraditionalParams, gyro: Affine, acc: Affine, G: np.ndarray) -> None:
+    """A saved profile's derived blocks agree with its floor (what refine and navigate apply is the floor;
+    the blocks say it in the profile's units): a hand-edited profile whose blocks were swapped or changed
+    on one side only is refused, naming the field, rather than applied as one thing and read as another."""
+    pairs = (("gyroscope.matrix", gyro.matrix, p.M_g, "M_g"), ("gyroscope.bias", gyro.bias, p.b_g, "b_g"),
+             ("accelerometer.matrix", acc.matrix, p.M_a, "M_a"), ("accelerometer.bias", acc.bias, p.b_a, "b_a"),
+             ("g_sensitivity_rad_s_per_mps2", G, p.G, "G"))
+    for name, top, floor_value, key in pairs:
+        if not np.allclose(top, floor_value, rtol=1e-6, atol=1e-9):
+            raise ProfileError(f"{where}: field '{name}' disagrees with 'floor.{key}' (edited on one side only?): the "
+                               "floor is what is applied; write the profile again with imu-learn calibrate", where,
+                               field=name)
+    for name, block in (("gyroscope", gyro), ("accelerometer", acc)):
+        if block.unit != UNITS[name]:
+            raise ProfileError(f"{where}: field '{name}.unit' is {block.unit!r}, not {UNITS[name]!r}: blocks swapped "
+                               "or edited?", where, field=f"{name}.unit")
