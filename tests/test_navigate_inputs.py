@@ -135,3 +135,17 @@ def test_gaps_and_keyframe_rates_a_user_can_get_wrong(caplog):
         nav.check_gaps(((95.0, 20.0),), 101.6)
     text = caplog.text
     assert "overlap" in text and "runs past the recording's end" in text
+
+
+def test_an_aiding_file_too_short_to_start_from_is_named(tmp_path, capsys):
+    """Four camera poses (0.15 s) inside the IMU's span failed at the start ('gravity from aiding: the aiding
+    spans 0.10 s'), after warnings and without the file's name."""
+    rec = SHIPPED / CROP
+    t0 = int((rec / "mav0" / "imu0" / "data.csv").read_text().splitlines()[1].split(",")[0])
+    short = tmp_path / "short.tum"
+    short.write_text("".join(f"{(t0 + 5_000_000_000 + k * 50_000_000) * 1e-9:.6f} 0 0 0 0 0 0 1\n" for k in range(4)))
+    rc = main(["navigate", "--input", str(rec), "--aiding", str(short), "--aiding-kind", "pose", "--quiet",
+               "--out", str(tmp_path / "out")])
+    err = [ln for ln in capsys.readouterr().err.splitlines() if ln.strip()]
+    assert rc == 2 and len(err) == 1, err
+    assert f"--aiding {short}: 4 row(s) over 0.15 s inside the IMU's span" in err[0]

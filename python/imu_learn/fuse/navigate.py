@@ -679,6 +679,9 @@ def unset_delay(sol: RtkSolution, opts: NavigateOptions, t_ns: np.ndarray, acc: 
                     f"{CLEAR_DELAY_FIT:g}x)"}
 
 
+MIN_AIDING_SPAN_S = 1.0  # the least aiding inside the IMU's span (the start's gravity from it needs 0.4 s)
+
+
 def aiding_rows(src: Sources, opts: NavigateOptions, t_ns: np.ndarray, T_BS: Optional[np.ndarray],
                 lever: np.ndarray, imu: Optional[Imu] = None,
                 sol: Optional[RtkSolution] = None) -> Tuple[AidingRows, int, Optional[object], NavigateOptions]:
@@ -692,6 +695,11 @@ def aiding_rows(src: Sources, opts: NavigateOptions, t_ns: np.ndarray, T_BS: Opt
         opts = replace(opts, gravity=round(normal_gravity(sol.origin_llh[0], sol.origin_llh[2]), 6))
         return rows, len(rows.sample) + sum(rows.dropped.values()), (gnss, sol), opts
     traj = read_aiding(src, opts)
+    inside = (traj.t_ns >= t_ns[0]) & (traj.t_ns <= t_ns[-1])
+    span_s = float(np.ptp(traj.t_ns[inside])) * 1e-9 if inside.sum() >= 2 else 0.0
+    if inside.any() and span_s < MIN_AIDING_SPAN_S:  # the start needs gravity and motion from its first seconds
+        raise ConfigError(f"--aiding {src.aiding}: {int(inside.sum())} row(s) over {span_s:.2f} s inside the IMU's span; "
+                          f"at least {MIN_AIDING_SPAN_S:g} s of aiding is needed to start from")
     if imu is not None and not kind_of(opts.aiding_kind).poses:
         rows = select_rows(traj, t_ns, T_BS, opts)
         rows.gravity = checked_up(src, opts, rows, imu)
