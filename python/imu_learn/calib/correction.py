@@ -29,7 +29,7 @@ from typing import Any, Dict, List, Optional, Tuple
 import numpy as np
 
 from imu_learn.baselines.registry import REGISTRY, load_method_class
-from imu_learn.calib.plausible import parameter_findings
+from imu_learn.calib.plausible import applied_floor_finding
 from imu_learn.calib.profile import Profile
 from imu_learn.core.still import MEMS_PRIOR, BiasPrior
 from imu_learn.data.types import Segment, sample_rate_hz
@@ -179,13 +179,11 @@ def from_profile(path: Path, force: bool = False) -> Plan:
     MEMS IMU can be (:func:`imu_learn.calib.plausible.parameter_findings`, calibrate's limits: a profile
     edited by hand or written by another tool) is refused unless ``force`` (then a warning line)."""
     profile = Profile.load(path)
-    findings = parameter_findings(profile.floor, profile.gravity_mps2) if profile.floor is not None else []
-    if findings:
-        more = f" (and {len(findings) - 1} more)" if len(findings) > 1 else ""
-        text = (f"{path}: field '{findings[0].field}': {findings[0].message}{more}; outside what calibrate writes for "
-                "a MEMS IMU (edited, or from another tool?)")
+    finding = applied_floor_finding(profile.floor, profile.gravity_mps2, str(path))
+    if finding is not None:
+        text, where = finding
         if not force:
-            raise ImplausibleProfileError(text + "; --force applies it anyway", field=findings[0].field)
+            raise ImplausibleProfileError(text + "; --force applies it anyway", field=where)
         logger.warning("%s; applied (--force)", text)
     made = rates.MadeFor(f"profile {path}", profile.sample_rate_hz, profile.device)
     words = f"the floor of {describe_profile(profile, str(path))}"

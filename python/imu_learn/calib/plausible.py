@@ -194,3 +194,15 @@ def held_back_findings(errs: Dict[str, float]) -> List[Finding]:
                                                     f"{errs['raw_trans_m']:.4f} m over {errs['window_samples']} "
                                                     f"samples{words})", within))
     return out
+
+
+def applied_floor_finding(floor: Any, gravity_mps2: Optional[float], where: str) -> Optional[Tuple[str, str]]:
+    """(the one line, the field) saying why a profile's floor about to be applied (refine, navigate, evaluate's
+    ``profile:``) lies outside what calibrate writes for a MEMS IMU (:func:`parameter_findings`), or None."""
+    findings = parameter_findings(floor, gravity_mps2) if floor is not None else []
+    if not findings:
+        return None
+    f = findings[0]
+    more = f" (and {len(findings) - 1} more)" if len(findings) > 1 else ""
+    return (f"{where}: field '{f.field}': {f.message}{more}; outside what calibrate writes for a MEMS IMU (edited, or "
+            "from another tool?)", f.field)

@@ -44,7 +44,7 @@ from imu_learn.baselines.noise_floor import NOISE_FLOOR_NAME, GroundTruthImu
 from imu_learn.baselines.registry import DEFAULT_METHODS, REGISTRY, load_method_class, method_file, safe_name  # noqa: F401
 from imu_learn.baselines.registry import PREFIX as PROFILE_PREFIX
 from imu_learn.calib.correction import not_shipped
-from imu_learn.calib.plausible import parameter_findings
+from imu_learn.calib.plausible import applied_floor_finding
 from imu_learn.calib.profile import Profile
 from imu_learn.core.quat import rotation_angle
 from imu_learn.data.formats import read_recording
@@ -298,17 +298,14 @@ def check_profiles(methods: List[str], test_entries: List[str], test: Seq[Segmen
         if not Path(path).is_file():  # missing: the method's own reader names it
             continue
         profile = Profile.load(path)  # malformed or edited: refine's reader names the field
-        findings = parameter_findings(profile.floor, profile.gravity_mps2) if profile.floor is not None else []
-        if findings:
-            f = findings[0]
-            raise ImplausibleProfileError(f"{name}: field '{f.field}': {f.message}; outside what calibrate writes for "
-                                          "a MEMS IMU (edited, or from another tool?)", field=f.field)
-        d = json.loads(Path(path).read_text())
-        fitted = {Path(str(s.get("recording", ""))).name for s in d.get("sources") or [] if isinstance(s, dict)}
+        finding = applied_floor_finding(profile.floor, profile.gravity_mps2, name)
+        if finding is not None:
+            raise ImplausibleProfileError(finding[0], field=finding[1])
+        fitted = {Path(str(s.get("recording", ""))).name for s in profile.sources or [] if isinstance(s, dict)}
         for r in sorted(tests & fitted):
             raise ConfigError(f"{name}: the profile was fitted on {r}, a test recording here (test sequences must "
                               "never be seen in training or selection): score it on recordings it did not see")
-        for r, source in _same_stamps(d.get("sources") or [], test):
+        for r, source in _same_stamps(profile.sources or [], test):
             raise ConfigError(f"{name}: the profile was fitted on {source}, whose stamps are test recording {r}'s (the "
                               "same data under another name; test sequences must never be seen in training or "
                               "selection): score it on recordings it did not see")
@@ -321,7 +318,7 @@ def check_profiles(methods: List[str], test_entries: List[str], test: Seq[Segmen
             # refine's rate rule: a profile's time offset and low-pass are in samples of its rate
             rates.check(rec, sample_rate_hz(seg.t_ns), None, [rates.MadeFor(f"profile {path}", profile.sample_rate_hz,
                                                                              profile.device)])
-            _entry, warning, _info = guard.verdict(d.get("inputs"), guard.input_stats(seg.t_ns, seg.gyro, seg.acc),
+            _entry, warning, _info = guard.verdict(profile.inputs or None, guard.input_stats(seg.t_ns, seg.gyro, seg.acc),
                                                    f"profile {path}", device_only=True)
             if warning:
                 logger.warning("%s: %s", rec, warning)

@@ -66,6 +66,7 @@ from imu_learn.calib.metric_scale import ScaleFit
 from imu_learn.calib.plausible import LIMITS
 from imu_learn.calib.profile import Profile
 from imu_learn.calib.reference import applied_extrinsic
+from imu_learn.core.stamps import sample_rate_hz
 from imu_learn.core.still import MEMS_PRIOR, MIN_STILL_START_S, BiasPrior
 from imu_learn.data import formats
 from imu_learn.data.formats import CsvColumns, rosbag
@@ -934,7 +935,7 @@ def read_inputs(src: Sources, opts: NavigateOptions) -> Inputs:
         raise ConfigError(f"--groundtruth {src.groundtruth}: its stamps [{gt_span[0]}, {gt_span[1]}] ns do not overlap "
                           f"the IMU's [{int(t_ns[0])}, {int(t_ns[-1])}] ns (same clock?)")
     check_gaps(opts.gaps, float((t_ns[-1] - t_ns[0]) * 1e-9))
-    rate = 1e9 / max(float(np.median(np.diff(t_ns))), 1.0) if len(t_ns) > 1 else None
+    rate = sample_rate_hz(t_ns) if len(t_ns) > 1 else None
     if rate and opts.keyframe_hz > rate:
         log.warning(f"--keyframe-hz {opts.keyframe_hz:g} is above the IMU's rate ({rate:.0f} Hz): every IMU sample is a "
                     f"keyframe: about {rate / 10:.0f}x the keyframes of the default 10 Hz, and its time")

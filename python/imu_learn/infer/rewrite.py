@@ -30,7 +30,7 @@ from imu_learn.infer.bias import Step, still_along_gravity  # noqa: F401  (their
 from imu_learn.infer.guard import residual_rms
 from imu_learn.util.atomic import atomic_write_text
 from imu_learn.util.interrupts import held_interrupts
-from imu_learn.util.staging import can_create_in
+from imu_learn.util.staging import check_can_make
 
 
 def output_file(src: ImuSource, out: Path) -> Path:
@@ -81,10 +81,7 @@ def check_output(src: ImuSource, input: Path, output: Path, copy_folder: bool = 
     target = output_file(src, output)
     if _same(target, src.imu_file) or _same(output, input):
         raise InvalidInputError(f"refusing to overwrite the input: OUT {output} is the input {input}")
-    where = next((p for p in (target.parent, *target.parent.parents) if p.is_dir()), None)
-    if where is None or not os.access(where, os.W_OK | os.X_OK) or not can_create_in(where):  # before the work
-        raise PermissionError(13, f"cannot be written ({where} is not writable): give OUT a place you can write",
-                              str(target))
+    check_can_make(target.parent, str(target), "give OUT a place you can write")  # before the work
     summary = summary_path(output, target)
     if target.exists() and not summary.is_file():  # a file of the user's (another recording's IMU, a log)
         raise InvalidInputError(f"{target} exists and is not an earlier refine output (no {summary.name} beside it): "

@@ -126,10 +126,15 @@ def check_writable(out: PathLike) -> None:
     target = _target(Path(out))
     if os.path.lexists(target) and not target.is_dir():
         raise NotADirectoryError(20, "exists and is not a folder (give --out a folder)", str(out))
-    where = target if target.is_dir() else next((p for p in target.parents if p.is_dir()), None)
+    check_can_make(target, str(out), "give --out a folder you can write")
+
+
+def check_can_make(path: Path, named: str, fix: str) -> None:
+    """Before any work: ``path`` (a folder or a file) can be made, in it or in its nearest existing folder, else
+    the PermissionError naming ``named`` and the ``fix``."""
+    where = path if path.is_dir() else next((p for p in path.parents if p.is_dir()), None)
     if where is None or not os.access(where, os.W_OK | os.X_OK) or not can_create_in(where):
-        raise PermissionError(13, f"cannot be written ({where} is not writable): give --out a folder you can write",
-                              str(out))
+        raise PermissionError(13, f"cannot be written ({where} is not writable): {fix}", named)
 
 
 def can_create_in(folder: Path) -> bool:
