@@ -22,6 +22,7 @@ from imu_learn.data.types import Segment
 from imu_learn.errors import ConfigError
 from imu_learn.eval.run import check_profiles
 from imu_learn.score.metrics import simulate_sequence
+from imu_learn.util.helper import Split
 
 pytest.importorskip("torch")
 from imu_learn.calib import select as sel  # noqa: E402  (torch)
@@ -105,6 +106,17 @@ def test_the_chosen_level_is_never_beaten_by_a_simpler_one(bias_only, scaled):
             assert beaten(s, sensor) == []
             assert all(math.isfinite(v) for cells in s.figures[sensor][getattr(s, sensor)].values()
                        for v in cells.values())
+
+
+def test_the_folds_split_with_a_helper_process_give_the_figures_of_one_process(monkeypatch):
+    """The folds on two processes (the default on two cores) and all in this one: the same table."""
+    data = device(False)
+    monkeypatch.setattr(sel, "Split", lambda items: Split(items, helper=True))
+    split = sel.select_levels(*data, SETTINGS, OPTS)
+    monkeypatch.setattr(sel, "Split", lambda items: Split(items, helper=False))
+    alone = sel.select_levels(*data, SETTINGS, OPTS)
+    assert split.figures == alone.figures and split.folds == alone.folds
+    assert (split.gyro, split.acc, split.steps) == (alone.gyro, alone.acc, alone.steps)
 
 
 def test_the_rule_on_a_table_by_hand():

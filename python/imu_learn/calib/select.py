@@ -31,9 +31,10 @@ scores: :mod:`imu_learn.score.metrics`, :mod:`imu_learn.score.peers`). The cells
   start-up bias removed, and open loop (no AOE exists for it; without an open-loop cell no accelerometer
   bias could ever be chosen: the start-up bias removal absorbs it).
 
-Each table scores only the cells its rule reads (profile.json's held-out figures hold those). The folds'
-fits and the held-out scores run on the process's cores, one thread each (numpy's loops and the core's
-integration release the GIL; BLAS and rayon at one thread): the same figures as one after another.
+Each table scores only the cells its rule reads (profile.json's held-out figures hold those). The folds
+are split between this process and a helper process, each fold's fits and held-out scores where the
+fold is held (:class:`~imu_learn.util.helper.Split`; one thread per pool each): the same figures as one
+after another.
 
 The rule. Levels are visited from the simplest; ``chosen`` starts at ``offset``. A richer level L
 becomes ``chosen`` only if (1) no simpler level beats it: in every held-out cell of every fold its
@@ -101,6 +102,7 @@ from imu_learn.core.integration import preintegrate
 from imu_learn.data.types import Segment, sample_rate_hz
 from imu_learn.score.metrics import fit_startup_bias, index_at, relative_pose_errors, remove_bias, rmse, with_imu
 from imu_learn.score.peers import attitude_errors
+from imu_learn.util.helper import Split
 from imu_learn.util.threads import cores, thread_limits
 
 Progress = Callable[[str], None]
@@ -401,88 +403,99 @@ def _each(fn: Callable[[Any], Any], items: Sequence[Any]) -> List[Any]:
         return list(pool.map(fn, items))
 
 
-def _table(preps: List[Prepared], floors: Callable[[Prepared, str], Floor], levels: Sequence[str],
-           horizons: Tuple[int, ...], opts: SelectOptions, gravity: float, cells: Tuple[str, ...]) -> Table:
-    """Every level's held-out cells on every fold; a floor equal to another level's on the same fold (a
-    low-pass level whose cut-off came out None is the level below it) is scored once."""
-    jobs = [(lv, p, floors(p, lv)) for lv in levels for p in preps]
-    keys = [(p.fold.name, json.dumps(f.to_dict(), sort_keys=True)) for _, p, f in jobs]
-    first = {k: i for i, k in reversed(list(enumerate(keys)))}
-    unique = sorted(set(first.values()))
-    scores = dict(zip(unique, _each(lambda i: score(jobs[i][2], jobs[i][1].fold.held, horizons, opts, gravity, cells),
-                                    unique)))
-    out: Table = {lv: {} for lv in levels}
-    for (lv, p, _), k in zip(jobs, keys):
-        out[lv][p.fold.name] = dict(scores[first[k]])
+def fold_rows(floors: Dict[str, Floor], held: Sequence[Segment], horizons: Tuple[int, ...], opts: SelectOptions,
+              gravity: float, cells: Tuple[str, ...]) -> Dict[str, Dict[str, float]]:
+    """Every level's held-out cells on one fold (level -> cell -> error); a floor equal to another
+    level's (a low-pass level whose cut-off came out None is the level below it) is scored once."""
+    scored: Dict[str, Dict[str, float]] = {}
+    out = {}
+    for level, floor in floors.items():
+        key = json.dumps(floor.to_dict(), sort_keys=True)
+        if key not in scored:
+            scored[key] = score(floor, held, horizons, opts, gravity, cells)
+        out[level] = dict(scored[key])
     return out
+
+
+def _fold_info(p: Prepared, top: str) -> Dict[str, Any]:
+    return {"held_out": p.fold.name, "time_offset_samples": p.tau, "cutoff_gyro": p.gyro[top][1],
+            "train_segments": len(p.fold.train), "held_out_samples": int(sum(len(s) for s in p.fold.held))}
+
+
+def _gyro_step(fold: Fold, state: Dict[str, Any], settings: FitSettings, opts: SelectOptions, levels: Tuple[str, ...],
+               horizons: Tuple[int, ...], gyro_only: bool) -> Tuple[Dict[str, Dict[str, float]], Dict[str, Any]]:
+    """A fold's time offset, its gyroscope's levels (the accelerometer at its full level, or at ``bias``
+    for a reference that cannot resolve accelerations) and their held-out rows; the fold kept in ``state``."""
+    with thread_limits(1):
+        top = levels[-1]
+        p = prepare(fold, settings, opts)
+        if gyro_only:
+            p.grid = [None]
+        p.gyro = fit_gyro_levels(p.tr, p.va, p.grid, top)
+        acc = ("bias", "bias") if gyro_only else ("lowpass", "full")
+        p.acc = {acc[1]: fit_acc_levels(p.tr, p.va, p.grid, p.gyro[top], acc[0])[acc[0]]}
+        state["prep"] = p
+        floors = {lv: floor_of(p.gyro[lv], p.acc[acc[1]], p.tau) for lv in levels}
+        cells = GYRO_ONLY_CELLS if gyro_only else CELLS["gyro"]
+        info = _fold_info(p, top)
+        if gyro_only:
+            info["cutoff_gyro"] = None
+        return fold_rows(floors, fold.held, horizons, opts, settings.gravity, cells), info
+
+
+def _acc_step(fold: Fold, state: Dict[str, Any], g_level: str, horizons: Tuple[int, ...], opts: SelectOptions,
+              gravity: float) -> Dict[str, Dict[str, float]]:
+    """A fold's accelerometer levels with the gyroscope at ``g_level``, and their held-out rows."""
+    with thread_limits(1):
+        p: Prepared = state["prep"]
+        p.acc = fit_acc_levels(p.tr, p.va, p.grid, p.gyro[g_level])
+        floors = {lv: floor_of(p.gyro[g_level], p.acc[lv], p.tau) for lv in ACC_LEVELS}
+        return fold_rows(floors, fold.held, horizons, opts, gravity, CELLS["acc"])
+
+
+def _tabled(fs: Sequence[Fold], rows: Sequence[Dict[str, Dict[str, float]]], levels: Sequence[str]) -> Table:
+    return {lv: {f.name: r[lv] for f, r in zip(fs, rows)} for lv in levels}
 
 
 def select_levels(train: List[Segment], val: List[Segment], groups: Sequence[str], val_groups: Sequence[str],
                   settings: FitSettings, opts: SelectOptions = SelectOptions(),
                   progress: Progress = lambda s: None) -> Selection:
     """Each level fitted on every fold and scored on its held-out part; the gyro's level chosen first
-    (the accelerometer at its full level), then the accelerometer's (the gyro at its chosen level)."""
+    (the accelerometer at its full level), then the accelerometer's (the gyro at its chosen level).
+    The folds are split between this process and a helper process (:class:`~imu_learn.util.helper.Split`:
+    the same figures as one after another)."""
     t0 = time.time()
     horizons = tuple(sorted({int(n) for n in settings.horizons})) or opts.horizons
     fs = folds(train, val, groups, val_groups)
     kind = "leave one recording out" if len(set(groups)) >= 2 else "four time blocks of one recording"
-    if opts.gyro_only:
-        return _select_gyro_only(fs, kind, horizons, settings, opts, progress, t0)
-    top = opts.gyro_upto or GYRO_LEVELS[-1]
-    levels = GYRO_LEVELS[:GYRO_LEVELS.index(top) + 1]
-    with thread_limits(1):
-        def fold_fit(item: Tuple[int, Fold]) -> Prepared:
-            i, f = item
-            progress(f"selection: {f.name} held out ({i + 1}/{len(fs)}): the gyroscope's levels")
-            p = prepare(f, settings, opts)
-            p.gyro = fit_gyro_levels(p.tr, p.va, p.grid, top)
-            p.acc = {"full": fit_acc_levels(p.tr, p.va, p.grid, p.gyro[top])["lowpass"]}
-            return p
+    names, top = (GYRO_ONLY_LEVELS, opts.gyro_upto if opts.gyro_upto in GYRO_ONLY_LEVELS else GYRO_ONLY_LEVELS[-1]) \
+        if opts.gyro_only else (GYRO_LEVELS, opts.gyro_upto or GYRO_LEVELS[-1])
+    levels = names[:names.index(top) + 1]
+    cells = GYRO_ONLY_CELLS if opts.gyro_only else CELLS["gyro"]
+    what = "the gyroscope's levels" + (" (rotation only)" if opts.gyro_only else "")
+    with Split(fs) as split:
+        if split.theirs:
+            progress(f"selection: {len(fs)} folds, " + ", ".join(fs[i].name for i in split.theirs)
+                     + " held out in a helper process")
 
-        preps = _each(fold_fit, list(enumerate(fs)))
-        gyro_t = _table(preps, lambda p, lv: floor_of(p.gyro[lv], p.acc["full"], p.tau), levels, horizons, opts,
-                        settings.gravity, CELLS["gyro"])
+        def fold_progress(i: int) -> None:
+            progress(f"selection: {fs[i].name} held out ({i + 1}/{len(fs)}): {what}")
+
+        out = split.step(_gyro_step, settings, opts, levels, horizons, opts.gyro_only, on_item=fold_progress)
+        gyro_t = _tabled(fs, [r for r, _ in out], levels)
         if not any(math.isfinite(v) for row in gyro_t["offset"].values() for v in row.values()):
             raise ValueError(f"no held-out segment is longer than the start-up bias span and {min(horizons)} samples")
-        g_level, g_steps = choose(levels, gyro_t, CELLS["gyro"])
+        g_level, g_steps = choose(levels, gyro_t, cells)
+        fold_info = [info for _, info in out]
+        if opts.gyro_only:
+            progress(f"selection: gyroscope {g_level}; the accelerometer from the reference's positions next")
+            return Selection(g_level, "not selected", kind, fold_info, {"gyro": gyro_t, "acc": {}},
+                             {"gyro": g_steps, "acc": []}, horizons, time.time() - t0, levels, GYRO_ONLY_CELLS)
         progress(f"selection: gyroscope {g_level}; the accelerometer's levels")
-        for p, acc in zip(preps, _each(lambda p: fit_acc_levels(p.tr, p.va, p.grid, p.gyro[g_level]), preps)):
-            p.acc = acc
-        acc_t = _table(preps, lambda p, lv: floor_of(p.gyro[g_level], p.acc[lv], p.tau), ACC_LEVELS, horizons, opts,
-                       settings.gravity, CELLS["acc"])
-        a_level, a_steps = choose(ACC_LEVELS, acc_t, CELLS["acc"])
-    fold_info = [{"held_out": p.fold.name, "time_offset_samples": p.tau, "cutoff_gyro": p.gyro[top][1],
-                  "train_segments": len(p.fold.train), "held_out_samples": int(sum(len(s) for s in p.fold.held))}
-                 for p in preps]
+        acc_t = _tabled(fs, split.step(_acc_step, g_level, horizons, opts, settings.gravity), ACC_LEVELS)
+    a_level, a_steps = choose(ACC_LEVELS, acc_t, CELLS["acc"])
     return Selection(g_level, a_level, kind, fold_info, {"gyro": gyro_t, "acc": acc_t},
                      {"gyro": g_steps, "acc": a_steps}, horizons, time.time() - t0, levels)
-
-
-def _select_gyro_only(fs: List[Fold], kind: str, horizons: Tuple[int, ...], settings: FitSettings,
-                      opts: SelectOptions, progress: Progress, t0: float) -> Selection:
-    """:func:`select_levels` for a reference that cannot resolve accelerations (``opts.gyro_only``)."""
-    top = opts.gyro_upto if opts.gyro_upto in GYRO_ONLY_LEVELS else GYRO_ONLY_LEVELS[-1]
-    levels = GYRO_ONLY_LEVELS[:GYRO_ONLY_LEVELS.index(top) + 1]
-    with thread_limits(1):
-        preps = []
-        for i, f in enumerate(fs):
-            progress(f"selection: {f.name} held out ({i + 1}/{len(fs)}): the gyroscope's levels (rotation only)")
-            p = prepare(f, settings, opts)
-            p.grid = [None]
-            p.gyro = fit_gyro_levels(p.tr, p.va, p.grid, top)
-            p.acc = {"bias": fit_acc_levels(p.tr, p.va, p.grid, p.gyro[top], "bias")["bias"]}
-            preps.append(p)
-        gyro_t = _table(preps, lambda p, lv: floor_of(p.gyro[lv], p.acc["bias"], p.tau), levels, horizons, opts,
-                        settings.gravity, GYRO_ONLY_CELLS)
-    if not any(math.isfinite(v) for row in gyro_t["offset"].values() for v in row.values()):
-        raise ValueError(f"no held-out segment is longer than the start-up bias span and {min(horizons)} samples")
-    g_level, g_steps = choose(levels, gyro_t, GYRO_ONLY_CELLS)
-    progress(f"selection: gyroscope {g_level}; the accelerometer from the reference's positions next")
-    fold_info = [{"held_out": p.fold.name, "time_offset_samples": p.tau, "cutoff_gyro": None,
-                  "train_segments": len(p.fold.train), "held_out_samples": int(sum(len(s) for s in p.fold.held))}
-                 for p in preps]
-    return Selection(g_level, "not selected", kind, fold_info, {"gyro": gyro_t, "acc": {}}, {"gyro": g_steps, "acc": []},
-                     horizons, time.time() - t0, levels, GYRO_ONLY_CELLS)
 
 
 def fit_at_levels(train: List[Segment], val: List[Segment], settings: FitSettings, levels: Tuple[str, str],

@@ -1,0 +1,206 @@
+"""Work split between this process and one helper process, each side keeping its items' state.
+
+Why a process and not a thread. calibrate's held-out selection fits and scores five folds; each is
+thousands of short numpy calls and core calls between stretches of Python, so two threads of one
+process take turns on the GIL and gained only 1.1-1.4x on two cores. A second process has its own
+interpreter. The helper is a fresh interpreter (``python -c``, this process's ``sys.path``), not a
+fork: a forked child of a process whose core has started rayon's pool would wait forever on that
+pool's missing worker threads.
+
+How. :class:`Split` assigns every other item to the helper (the helper starts while this process
+works on its own first item, so its start-up overlaps). :meth:`Split.step` runs one module-level
+function ``fn(item, state, *args)`` on every item, where ``state`` is that item's dict kept between
+steps on the side that holds the item; arguments and results travel pickled over the helper's
+stdin and stdout, the items once. The helper runs one thread per pool (rayon, OpenMP, OpenBLAS) and
+its own session, so a Ctrl-C at the terminal reaches only this process, which ends the helper on
+the way out (:meth:`Split.close`, also when the block is left by an exception).
+
+Nothing depends on the helper: where it cannot start, dies or answers with something other than a
+result or an exception of its own, this process runs the helper's items itself, replaying the
+steps so far in order (the same functions on the same items: the same results). An exception raised
+by ``fn`` in the helper is raised here, as it would have been had the item run here.
+"""
+from __future__ import annotations
+
+import os
+import pickle
+import queue
+import subprocess
+import sys
+import threading
+from typing import Any, Callable, Dict, List, Optional, Sequence, Tuple
+
+from imu_learn.util.threads import ENV_KEYS, cores
+
+Step = Tuple[Callable[..., Any], Tuple[Any, ...]]
+
+
+def _helper_env() -> Dict[str, str]:
+    """This process's environment with every pool of the helper at one thread (it runs one item at a
+    time on its core), OpenMP's waiting threads passive."""
+    env = dict(os.environ)
+    env.update({k: "1" for k in ENV_KEYS})
+    env["OMP_WAIT_POLICY"] = "PASSIVE"
+    return env
+
+
+class _Helper:
+    """The helper process: messages pickled to its stdin, replies read from its stdout."""
+
+    def __init__(self) -> None:
+        code = f"import sys; sys.path[:0] = {list(sys.path)!r}; from imu_learn.util.helper import serve; serve()"
+        self.proc = subprocess.Popen([sys.executable, "-c", code], stdin=subprocess.PIPE, stdout=subprocess.PIPE,
+                                     env=_helper_env(), start_new_session=True)
+        self._queue: queue.Queue[Optional[bytes]] = queue.Queue()
+        self._error: Optional[BaseException] = None
+        self._writer = threading.Thread(target=self._write, daemon=True)
+        self._writer.start()
+
+    def _write(self) -> None:
+        """The writer thread: each queued message in turn (the pipe holds 64 KiB, so a large message
+        waits for the helper to read it; this process goes on meanwhile)."""
+        while True:
+            data = self._queue.get()
+            if data is None:
+                return
+            try:
+                assert self.proc.stdin is not None
+                self.proc.stdin.write(data)
+                self.proc.stdin.flush()
+            except (OSError, ValueError) as e:
+                self._error = e
+                return
+
+    def send(self, msg: Any) -> None:
+        if self._error is not None:
+            raise OSError(f"the helper process stopped reading ({self._error})")
+        self._queue.put(pickle.dumps(msg, protocol=pickle.HIGHEST_PROTOCOL))
+
+    def receive(self) -> Tuple[str, Any]:
+        assert self.proc.stdout is not None
+        reply = pickle.load(self.proc.stdout)
+        if not (isinstance(reply, tuple) and len(reply) == 2 and reply[0] in ("ok", "raised")):
+            raise OSError(f"the helper process answered {type(reply).__name__}")
+        return reply
+
+    def close(self) -> None:
+        self._queue.put(None)
+        if self.proc.poll() is None:
+            self.proc.kill()  # a writer blocked on a full pipe returns with an error
+        for pipe in (self.proc.stdin, self.proc.stdout):
+            try:
+                if pipe is not None:
+                    pipe.close()
+            except OSError:
+                pass
+        if self.proc.poll() is None:
+            self.proc.kill()
+        self.proc.wait()
+
+
+class Split:
+    """Items split between this process and one helper process (module doc); use as a context manager.
+
+    ``helper=False``, one core or fewer than two items: every item here."""
+
+    def __init__(self, items: Sequence[Any], helper: Optional[bool] = None) -> None:
+        self.items = list(items)
+        self.state: Dict[int, Dict[str, Any]] = {i: {} for i in range(len(self.items))}
+        self.history: List[Step] = []
+        use = (cores() >= 2 if helper is None else helper) and len(self.items) >= 2
+        self.theirs: List[int] = list(range(1, len(self.items), 2)) if use else []
+        self._helper: Optional[_Helper] = None
+        if use:
+            try:
+                self._helper = _Helper()
+                self._helper.send(("items", {i: self.items[i] for i in self.theirs}))
+            except (OSError, pickle.PicklingError, ValueError):
+                self._fallback()
+
+    @property
+    def mine(self) -> List[int]:
+        """The items this process runs."""
+        return [i for i in range(len(self.items)) if i not in self.theirs]
+
+    def __enter__(self) -> Split:
+        return self
+
+    def __exit__(self, *exc: Any) -> None:
+        self.close()
+
+    def close(self) -> None:
+        """End the helper (its items' state goes with it)."""
+        if self._helper is not None:
+            self._helper.close()
+            self._helper = None
+
+    def _fallback(self) -> None:
+        """Run the helper's items here from now on, their state rebuilt by replaying the steps so far."""
+        self.close()
+        theirs, self.theirs = self.theirs, []
+        for fn, args in self.history[:-1] if self.history else []:
+            for i in theirs:
+                fn(self.items[i], self.state[i], *args)
+
+    def step(self, fn: Callable[..., Any], *args: Any, on_item: Callable[[int], None] = lambda i: None) -> List[Any]:
+        """``fn(item, state, *args)`` on every item, results in item order. ``fn`` a module-level function
+        (it travels by name), ``args`` picklable. ``on_item(i)`` is called here before each item this
+        process runs (progress)."""
+        self.history.append((fn, args))
+        out: Dict[int, Any] = {}
+        if self._helper is not None:
+            try:
+                self._helper.send(("step", fn, args))
+            except (OSError, pickle.PicklingError, ValueError, AttributeError):
+                self._fallback()
+        for i in self.mine:
+            on_item(i)
+            out[i] = fn(self.items[i], self.state[i], *args)
+        if self._helper is not None:
+            try:
+                kind, value = self._helper.receive()
+            except (OSError, EOFError, pickle.UnpicklingError, ValueError, AttributeError, ImportError):
+                kind, value = "lost", None
+            if kind == "raised":
+                raise value
+            if kind == "ok":
+                out.update(value)
+            else:
+                theirs = self.theirs
+                self._fallback()
+                for i in theirs:
+                    on_item(i)
+                    out[i] = fn(self.items[i], self.state[i], *args)
+        return [out[i] for i in range(len(self.items))]
+
+
+def serve() -> None:
+    """The helper's loop: ("items", {i: item}) adds items; ("step", fn, args) runs ``fn`` on each and
+    answers ("ok", {i: result}) or ("raised", the exception); end of input ends it."""
+    out = os.fdopen(os.dup(1), "wb")
+    os.dup2(2, 1)  # anything the work prints goes to stderr, never into the replies
+    items: Dict[int, Any] = {}
+    state: Dict[int, Dict[str, Any]] = {}
+    while True:
+        try:
+            msg = pickle.load(sys.stdin.buffer)
+        except (EOFError, OSError):
+            return
+        if msg[0] == "items":
+            items.update(msg[1])
+            state.update({i: {} for i in msg[1]})
+            continue
+        _, fn, args = msg
+        try:
+            reply: Tuple[str, Any] = ("ok", {i: fn(items[i], state[i], *args) for i in sorted(items)})
+            data = pickle.dumps(reply, protocol=pickle.HIGHEST_PROTOCOL)
+        except Exception as e:  # raised where the item would have run here
+            try:
+                data = pickle.dumps(("raised", e), protocol=pickle.HIGHEST_PROTOCOL)
+            except Exception:
+                data = pickle.dumps(("raised", RuntimeError(f"{type(e).__name__}: {e}")))
+        try:
+            out.write(data)
+            out.flush()
+        except OSError:
+            return

@@ -1,0 +1,87 @@
+"""Work split with a helper process (util.helper.Split): the same results as one process, state kept
+between steps on the side that holds each item, the helper's exceptions raised here, and the work
+finished here when the helper dies or cannot start."""
+from __future__ import annotations
+
+import os
+import signal
+
+import numpy as np
+import pytest
+
+import imu_learn.util.helper as helper
+from imu_learn.util.helper import Split
+
+
+def accumulate(item, state, k):
+    """A step with state: the item's running sum of k * item, and where it ran."""
+    state["sum"] = state.get("sum", 0.0) + k * float(np.sum(item))
+    return state["sum"], os.getpid()
+
+
+def fail_on_odd(item, state):
+    if int(item[0]) % 2:
+        raise ValueError(f"item {int(item[0])} is odd")
+    return int(item[0])
+
+
+ITEMS = [np.full(1000, i, dtype=np.float64) for i in range(5)]
+
+
+def sums(split: Split) -> list:
+    first = split.step(accumulate, 1.0)
+    second = split.step(accumulate, 2.0)
+    return [v for v, _ in first] + [v for v, _ in second]
+
+
+def expected() -> list:
+    return [1000.0 * i for i in range(5)] + [3000.0 * i for i in range(5)]
+
+
+def test_the_helper_runs_every_other_item_with_its_state_and_the_same_results():
+    with Split(ITEMS, helper=True) as split:
+        assert split.theirs == [1, 3]
+        first = split.step(accumulate, 1.0)
+        second = split.step(accumulate, 2.0)
+    pids = [pid for _, pid in first]
+    assert [pids[i] == os.getpid() for i in range(5)] == [True, False, True, False, True]
+    assert [pid for _, pid in second] == pids  # each item stays where its state is
+    assert [v for v, _ in first] + [v for v, _ in second] == expected()
+    with Split(ITEMS, helper=False) as alone:
+        assert alone.theirs == [] and sums(alone) == expected()
+
+
+def test_an_exception_in_the_helper_is_raised_here_as_itself():
+    with Split([np.array([0.0]), np.array([1.0])], helper=True) as split:
+        assert split.theirs == [1]
+        with pytest.raises(ValueError, match="item 1 is odd"):
+            split.step(fail_on_odd)
+
+
+def test_a_helper_that_dies_between_steps_leaves_its_items_to_this_process():
+    with Split(ITEMS, helper=True) as split:
+        first = split.step(accumulate, 1.0)
+        os.kill(split._helper.proc.pid, signal.SIGKILL)
+        split._helper.proc.wait()
+        second = split.step(accumulate, 2.0)  # the lost items' first step replayed here
+        assert split.theirs == []
+    assert [v for v, _ in first] + [v for v, _ in second] == expected()
+    assert all(pid == os.getpid() for _, pid in second)
+
+
+def test_a_helper_that_cannot_start_leaves_every_item_here(monkeypatch):
+    def broken(*a, **k):
+        raise OSError("no processes here")
+
+    monkeypatch.setattr(helper.subprocess, "Popen", broken)
+    with Split(ITEMS, helper=True) as split:
+        assert split.theirs == []
+        assert sums(split) == expected()
+
+
+def test_closing_ends_the_helper():
+    split = Split(ITEMS, helper=True)
+    proc = split._helper.proc
+    split.step(accumulate, 1.0)
+    split.close()
+    assert proc.poll() is not None
