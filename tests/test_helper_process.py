@@ -85,3 +85,12 @@ def test_closing_ends_the_helper():
     split.step(accumulate, 1.0)
     split.close()
     assert proc.poll() is not None
+
+
+def test_a_helper_that_cannot_load_a_step_leaves_its_items_here_quietly(monkeypatch, capfd):
+    """The helper's sys.path without this test module: it cannot unpickle the step's function."""
+    monkeypatch.setattr(helper.sys, "path", ["/nonexistent"])
+    with Split(ITEMS, helper=True) as split:
+        assert sums(split) == expected()
+        assert split.theirs == []
+    assert "Traceback" not in capfd.readouterr().err

@@ -48,7 +48,9 @@ class _Helper:
     """The helper process: messages pickled to its stdin, replies read from its stdout."""
 
     def __init__(self) -> None:
-        code = f"import sys; sys.path[:0] = {list(sys.path)!r}; from imu_learn.util.helper import serve; serve()"
+        # an interpreter that cannot import the package exits quietly (3): its items then run here
+        code = (f"import sys\nsys.path[:0] = {list(sys.path)!r}\ntry:\n    from imu_learn.util.helper import serve\n"
+                "except Exception:\n    sys.exit(3)\nserve()")
         self.proc = subprocess.Popen([sys.executable, "-c", code], stdin=subprocess.PIPE, stdout=subprocess.PIPE,
                                      env=_helper_env(), start_new_session=True)
         self._queue: queue.Queue[Optional[bytes]] = queue.Queue()
@@ -184,8 +186,8 @@ def serve() -> None:
     while True:
         try:
             msg = pickle.load(sys.stdin.buffer)
-        except (EOFError, OSError):
-            return
+        except Exception:  # the end of input, or a message it cannot load (a step's module not importable
+            return  # here): it stops, and its items run in the process that sent it
         if msg[0] == "items":
             items.update(msg[1])
             state.update({i: {} for i in msg[1]})
