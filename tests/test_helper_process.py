@@ -94,3 +94,35 @@ def test_a_helper_that_cannot_load_a_step_leaves_its_items_here_quietly(monkeypa
         assert sums(split) == expected()
         assert split.theirs == []
     assert "Traceback" not in capfd.readouterr().err
+
+
+def fail_here(item, state):
+    """Fails on the items this process runs (item 0), succeeds in the helper."""
+    if os.getpid() == int(item[1]):
+        raise RuntimeError("failed here")
+    return float(item[0])
+
+
+def test_splits_in_a_shared_block_reuse_one_helper_and_start_clean():
+    with helper.shared_helper(("test_helper_process",)):
+        with Split(ITEMS) as first:  # no start=True: the shared helper
+            a = first.step(accumulate, 1.0)
+        with Split(ITEMS) as second:
+            b = second.step(accumulate, 1.0)  # a fresh state: not the first Split's sums
+        assert [v for v, _ in a] == [v for v, _ in b] == expected()[:5]
+        assert a[1][1] == b[1][1] != os.getpid()  # the same helper process
+    assert not helper._shared
+    with Split(ITEMS) as alone:  # outside the block, without start=True: no helper
+        assert alone.theirs == []
+
+
+def test_a_split_left_with_a_reply_unread_does_not_hand_it_to_the_next():
+    items = [np.array([0.0, os.getpid()]), np.array([1.0, os.getpid()])]
+    with helper.shared_helper():
+        with pytest.raises(RuntimeError, match="failed here"):
+            with Split(items) as split:
+                pid = split._helper.proc.pid
+                split.step(fail_here)  # raised here while the helper's reply was on its way
+        with Split(ITEMS) as after:
+            assert [v for v, _ in after.step(accumulate, 1.0)] == expected()[:5]
+            assert after._helper is None or after._helper.proc.pid != pid

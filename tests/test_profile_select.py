@@ -111,9 +111,9 @@ def test_the_chosen_level_is_never_beaten_by_a_simpler_one(bias_only, scaled):
 def test_the_folds_split_with_a_helper_process_give_the_figures_of_one_process(monkeypatch):
     """The folds on two processes (the default on two cores) and all in this one: the same table."""
     data = device(False)
-    monkeypatch.setattr(sel, "Split", lambda items: Split(items, helper=True))
+    monkeypatch.setattr(sel, "Split", lambda items, **kw: Split(items, helper=True))
     split = sel.select_levels(*data, SETTINGS, OPTS)
-    monkeypatch.setattr(sel, "Split", lambda items: Split(items, helper=False))
+    monkeypatch.setattr(sel, "Split", lambda items, **kw: Split(items, helper=False))
     alone = sel.select_levels(*data, SETTINGS, OPTS)
     assert split.figures == alone.figures and split.folds == alone.folds
     assert (split.gyro, split.acc, split.steps) == (alone.gyro, alone.acc, alone.steps)

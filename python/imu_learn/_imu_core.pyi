@@ -140,6 +140,14 @@ def integrate_windows(t_ns: _I64, gyro: _F64, acc: _F64, starts: _Idx, horizons:
     longest horizon below N (InvalidInputError otherwise, even with no starts); no starts give
     empty (0, H, ...) arrays."""
 
+def offset_rotation_angles(
+    t_ns: _I64, gyro: _F64, starts: _Idx, horizons: _Idx, dq_ref: _F64, tau: float, period_ns: float,
+) -> _F64:
+    """Rotation residual angles [rad] (W*H,) of the windows (starts, horizons as window_labels lays
+    them out; dq_ref (W*H, 4) their reference rotations) with the gyro linearly interpolated at
+    t + tau * period_ns (ends held; np.interp's values bit for bit) and integrated by zero-order
+    hold as integrate_windows does. Inputs checked as integrate_windows checks them."""
+
 def rotation_window_sums(
     gyro: _F64, acc_g: _F64, dt: _F64, theta: _F64, horizons: _Idx, jacobian: bool,
 ) -> Dict[str, Optional[_F64]]:

@@ -5,7 +5,8 @@
 //! `integrate` (Δq/Δβ/Δγ from IMU samples), `covariance` (their covariance under per-sample
 //! noise) and `so3` as the shared maths; `allan` characterises a sensor's noise (overlapping Allan
 //! deviation and its slope fits); `rotsums` is the per-sample work of the traditional baseline's
-//! gyro fit (rotations and Jacobian sums over windows). Nothing here knows Python; the bindings
+//! gyro fit (rotations and Jacobian sums over windows), `offset` the cost of its time offset's
+//! search. Nothing here knows Python; the bindings
 //! live in `python` behind the `python` feature.
 
 pub mod align;
@@ -16,6 +17,7 @@ pub mod error;
 pub mod integrate;
 pub mod io;
 pub mod labels;
+pub mod offset;
 pub mod par;
 pub mod rotsums;
 pub mod so3;

@@ -40,8 +40,7 @@ from typing import Sequence as Seq
 import numpy as np
 
 from imu_learn.baselines.base import FitSettings, Method
-from imu_learn.core.integration import PAPER_FRACTIONS, integrate_windows, window_labels
-from imu_learn.core.quat import rotation_angle
+from imu_learn.core.integration import PAPER_FRACTIONS, offset_rotation_angles, window_labels
 from imu_learn.data.types import Segment, median_period_ns
 
 GOLDEN = (math.sqrt(5.0) - 1.0) / 2.0
@@ -86,12 +85,7 @@ class RotationWindows:
 
     def angles(self, tau: float) -> np.ndarray:
         """Rotation residual angles [rad] of every window and horizon with the gyro shifted by tau."""
-        out = []
-        for s, per, lab in self.items:
-            g = resample(s.t_ns, s.gyro, tau, per)
-            ss = Segment(s.name, s.t_ns, g, s.acc, s.p, s.v, s.q_wxyz)
-            inc = integrate_windows(ss, lab.starts, lab.horizons)
-            out.append(rotation_angle(lab.dq_wxyz, inc.dq_wxyz).ravel())
+        out = [offset_rotation_angles(s.t_ns, s.gyro, lab, tau, per) for s, per, lab in self.items]
         return np.concatenate(out) if out else np.zeros(0)
 
     def cost(self, tau: float, delta: float) -> float:

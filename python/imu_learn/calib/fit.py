@@ -41,6 +41,7 @@ from imu_learn.calib.profile import FloorFit, apply_floor  # noqa: F401  (FloorF
 from imu_learn.core.quat import quat_rotate
 from imu_learn.data.splits import cut
 from imu_learn.data.types import Segment, median_period_ns
+from imu_learn.util.helper import Split
 
 Progress = Callable[[str], None]
 
@@ -125,17 +126,24 @@ def fit_floor(train: List[Segment], val: List[Segment], settings: FitSettings, g
     floor = Floor.from_dict(method.to_dict())
     if not uncertainty:
         return FloorFit(floor, log, TraditionalParams.unknown(), [])
-    fits: List[TraditionalParams] = []
-    info = []
-    usable = refit_groups(train, val, groups, val_groups, settings.window)
-    for i, (g, (tr, va)) in enumerate(usable.items()):
-        progress(f"uncertainty: refitting on {g} alone ({i + 1}/{len(usable)})")
-        m = refit_once(method, tr, va, settings, max(GROUP_MIN_WINDOWS, method.max_windows // len(usable)))
-        p = TraditionalParams.from_dict(m.to_dict())
-        fits.append(p)
-        info.append({"group": g, "segments": len(tr), "samples": int(sum(len(s) for s in tr)),
-                     "time_offset_samples": float(p.time_offset), "b_g": p.b_g.tolist(), "b_a": p.b_a.tolist()})
+    usable = list(refit_groups(train, val, groups, val_groups, settings.window).items())
+
+    def refit_progress(i: int) -> None:
+        progress(f"uncertainty: refitting on {usable[i][0]} alone ({i + 1}/{len(usable)})")
+
+    max_windows = max(GROUP_MIN_WINDOWS, method.max_windows // max(1, len(usable)))
+    with Split([tv for _, tv in usable]) as split:  # with the command's helper process where it has one
+        fits = split.step(_refit_params, method, settings, max_windows, on_item=refit_progress)
+    info = [{"group": g, "segments": len(tr), "samples": int(sum(len(s) for s in tr)),
+             "time_offset_samples": float(p.time_offset), "b_g": p.b_g.tolist(), "b_a": p.b_a.tolist()}
+            for (g, (tr, _)), p in zip(usable, fits)]
     return FloorFit(floor, log, spread(fits), info)
+
+
+def _refit_params(item: Tuple[List[Segment], List[Segment]], state: Dict[str, Any], method: TraditionalTiming,
+                  settings: FitSettings, max_windows: int) -> TraditionalParams:
+    """One group's refit (:func:`refit_once`) as its parameters."""
+    return TraditionalParams.from_dict(refit_once(method, item[0], item[1], settings, max_windows).to_dict())
 
 
 def spread(fits: Sequence[TraditionalParams]) -> TraditionalParams:

@@ -69,7 +69,6 @@ from __future__ import annotations
 import json
 import math
 import time
-from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field, replace
 from typing import Any, Callable, Dict, List, Optional, Sequence, Tuple
 
@@ -103,7 +102,7 @@ from imu_learn.data.types import Segment, sample_rate_hz
 from imu_learn.score.metrics import fit_startup_bias, index_at, relative_pose_errors, remove_bias, rmse, with_imu
 from imu_learn.score.peers import attitude_errors
 from imu_learn.util.helper import Split
-from imu_learn.util.threads import cores, thread_limits
+from imu_learn.util.threads import thread_limits
 
 Progress = Callable[[str], None]
 GYRO_LEVELS = ("offset", "bias", "scale", "affine", "g_sensitivity", "lowpass")
@@ -393,16 +392,6 @@ class Selection:
                 "seconds": round(self.seconds, 1)}
 
 
-def _each(fn: Callable[[Any], Any], items: Sequence[Any]) -> List[Any]:
-    """``[fn(x) for x in items]`` on the process's cores, one thread each (the fits and scores release
-    the GIL in numpy's and the core's loops; BLAS and rayon held at one thread by the caller)."""
-    n = min(cores(), len(items))
-    if n <= 1:
-        return [fn(x) for x in items]
-    with ThreadPoolExecutor(n) as pool:
-        return list(pool.map(fn, items))
-
-
 def fold_rows(floors: Dict[str, Floor], held: Sequence[Segment], horizons: Tuple[int, ...], opts: SelectOptions,
               gravity: float, cells: Tuple[str, ...]) -> Dict[str, Dict[str, float]]:
     """Every level's held-out cells on one fold (level -> cell -> error); a floor equal to another
@@ -473,7 +462,7 @@ def select_levels(train: List[Segment], val: List[Segment], groups: Sequence[str
     levels = names[:names.index(top) + 1]
     cells = GYRO_ONLY_CELLS if opts.gyro_only else CELLS["gyro"]
     what = "the gyroscope's levels" + (" (rotation only)" if opts.gyro_only else "")
-    with Split(fs) as split:
+    with Split(fs, start=True) as split:
         if split.theirs:
             progress(f"selection: {len(fs)} folds, " + ", ".join(fs[i].name for i in split.theirs)
                      + " held out in a helper process")
@@ -507,11 +496,18 @@ def fit_at_levels(train: List[Segment], val: List[Segment], settings: FitSetting
 
 def _fit_levels(train: List[Segment], val: List[Segment], settings: FitSettings, levels: Tuple[str, str],
                 tau: float, opts: SelectOptions) -> Floor:
-    """:func:`fit_at_levels` inside the caller's thread limits (several on the cores at once: :func:`_each`)."""
+    """:func:`fit_at_levels` inside the caller's thread limits."""
     p = prepare(Fold("all", train, val, []), settings, replace(opts, tau=tau))
     g = fit_gyro_levels(p.tr, p.va, p.grid, levels[0])[levels[0]]
     a = fit_acc_levels(p.tr, p.va, p.grid, g, levels[1])[levels[1]]
     return floor_of(g, a, tau)
+
+
+def _level_refit(item: Tuple[List[Segment], List[Segment]], state: Dict[str, Any], settings: FitSettings,
+                 levels: Tuple[str, str], tau: float, opts: SelectOptions) -> TraditionalParams:
+    """One recording's (or time block's) refit at the chosen levels (:func:`level_spread`)."""
+    with thread_limits(1):
+        return _fit_levels(item[0], item[1], settings, levels, tau, opts).params
 
 
 def level_spread(train: List[Segment], val: List[Segment], groups: Sequence[str], val_groups: Sequence[str],
@@ -523,15 +519,13 @@ def level_spread(train: List[Segment], val: List[Segment], groups: Sequence[str]
     (:func:`masked_std`); the time offset's and the cut-offs' kept. The full floor's spread misstates a
     level's: a bias refitted with every term trades with terms the motion barely excites (a level
     robot's g-sensitivity: Fetch's gyro bias spread 34-138 mrad/s with every term, a few at ``bias``)."""
-    usable = refit_groups(train, val, groups, val_groups, settings.window)
+    usable = list(refit_groups(train, val, groups, val_groups, settings.window).items())
 
-    def refit(item: Tuple[int, Tuple[str, Tuple[List[Segment], List[Segment]]]]) -> TraditionalParams:
-        i, (g, (tr, va)) = item
-        progress(f"uncertainty at the chosen levels: refitting on {g} alone ({i + 1}/{len(usable)})")
-        return _fit_levels(tr, va, settings, levels, tau, opts).params
+    def refit_progress(i: int) -> None:
+        progress(f"uncertainty at the chosen levels: refitting on {usable[i][0]} alone ({i + 1}/{len(usable)})")
 
-    with thread_limits(1):  # the refits on the cores, one thread each
-        fits = _each(refit, list(enumerate(usable.items())))
+    with Split([tv for _, tv in usable]) as split:  # with the command's helper process where it has one
+        fits = split.step(_level_refit, settings, levels, tau, opts, on_item=refit_progress)
     out = masked_std(std, levels)
     if len(fits) < 2:
         return out

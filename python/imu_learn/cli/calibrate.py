@@ -8,6 +8,7 @@ import argparse
 import logging
 import math
 import sys
+from contextlib import nullcontext
 from pathlib import Path
 from typing import Any, Callable, Dict, List, Optional, Sequence
 
@@ -34,6 +35,7 @@ from imu_learn.errors import ConfigError
 from imu_learn.eval.run import load_eval_config
 from imu_learn.settings import read_toml
 from imu_learn.train.config import build_config, load_config
+from imu_learn.util.helper import shared_helper
 from imu_learn.util.staging import check_writable
 
 logger = logging.getLogger(__name__)
@@ -189,6 +191,9 @@ def source_of(args: argparse.Namespace) -> Source:
                        {"imu_topic": args.imu_topic, "groundtruth_topic": args.groundtruth_topic})
 
 
+HELPER_STEPS = ("imu_learn.calib.fit", "imu_learn.calib.select")  # where the helper process's steps live
+
+
 def run(args: argparse.Namespace, rest: List[str], keep: Callable[[Any], None]) -> int:
     if bool(args.input) == bool(args.config):
         raise ConfigError("give --input REC (repeatable) or --config TOML, not both and not neither")
@@ -211,12 +216,14 @@ def run(args: argparse.Namespace, rest: List[str], keep: Callable[[Any], None]) 
 
     if writes:
         keep(kept)
-    inp = source.read(say)
-    if not writes:
-        keep(kept)
-    res = calibrate(inp, args.out, CalibOptions(min_still_s=args.min_still_s, plot=not args.no_plot, force=args.force,
-                                                 select=args.select),
-                    say)
+    # a poses reference's floor, refits and held-out folds are split with a helper process, started
+    # now so that its imports overlap the reading
+    with shared_helper(HELPER_STEPS) if source.kind == "poses" else nullcontext():
+        inp = source.read(say)
+        if not writes:
+            keep(kept)
+        res = calibrate(inp, args.out, CalibOptions(min_still_s=args.min_still_s, plot=not args.no_plot,
+                                                     force=args.force, select=args.select), say)
     p = res.profile
     for line in summary(p):
         print(line)

@@ -85,6 +85,18 @@ def _indices(x: np.ndarray, name: str) -> np.ndarray:
     return np.ascontiguousarray(a, dtype=np.uint64 if np.issubdtype(a.dtype, np.unsignedinteger) else np.int64)
 
 
+def offset_rotation_angles(t_ns: np.ndarray, gyro: np.ndarray, labels: WindowLabels, tau: float,
+                           period_ns: float) -> np.ndarray:
+    """Rotation residual angles [rad] of ``labels``' windows (every window and horizon, flattened) with
+    the gyro linearly interpolated at t + ``tau`` · ``period_ns`` (ends held) and integrated as
+    :func:`integrate_windows` integrates: the timing floor's search cost in one core call
+    (``timing.resample``, :func:`integrate_windows` and ``quat.rotation_angle`` in numpy are its oracle)."""
+    return core.offset_rotation_angles(
+        np.ascontiguousarray(t_ns, dtype=np.int64), _f64(gyro), _indices(labels.starts, "starts"),
+        _indices(labels.horizons, "horizons"), _f64(np.reshape(labels.dq_wxyz, (-1, 4))), float(tau), float(period_ns),
+    )
+
+
 def rotation_window_sums(gyro: np.ndarray, acc_g: np.ndarray, dt: np.ndarray, theta: np.ndarray,
                          horizons: Seq[int], jacobian: bool) -> Dict[str, Optional[np.ndarray]]:
     """The floor's gyro model on B windows of W samples (the core's ``rotation_window_sums``): rates

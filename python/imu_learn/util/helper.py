@@ -22,13 +22,15 @@ by ``fn`` in the helper is raised here, as it would have been had the item run h
 """
 from __future__ import annotations
 
+import importlib
 import os
 import pickle
 import queue
 import subprocess
 import sys
 import threading
-from typing import Any, Callable, Dict, List, Optional, Sequence, Tuple
+from contextlib import contextmanager
+from typing import Any, Callable, Dict, Iterator, List, Optional, Sequence, Tuple
 
 from imu_learn.util.threads import ENV_KEYS, cores
 
@@ -100,21 +102,57 @@ class _Helper:
         self.proc.wait()
 
 
+_shared: List[_Helper] = []  # the helper a command started for its whole run (:func:`shared_helper`)
+_busy: List[bool] = [False]
+
+
+@contextmanager
+def shared_helper(preload: Sequence[str] = ()) -> Iterator[None]:
+    """One helper process for the block (a command's run), started now so that its start-up overlaps
+    the work before the first :class:`Split`: it imports the modules named in ``preload`` (those its
+    steps live in) at once. Every Split in the block uses it (one at a time) and clears its items
+    when done. None on one core."""
+    if cores() < 2 or _shared:
+        yield
+        return
+    try:
+        h: Optional[_Helper] = _Helper()
+        h.send(("import", list(preload)))
+    except OSError:
+        h = None
+    if h is not None:
+        _shared.append(h)
+    try:
+        yield
+    finally:
+        if h is not None:
+            if h in _shared:  # a Split that lost it (or left a reply unread) has removed and ended it
+                _shared.remove(h)
+            h.close()
+
+
 class Split:
     """Items split between this process and one helper process (module doc); use as a context manager.
 
-    ``helper=False``, one core or fewer than two items: every item here."""
+    The helper: the block's :func:`shared_helper` where one is running and free; else, with
+    ``start``, one of its own (for work long enough to hide its start-up); else none. ``helper``
+    True or False forces one (of its own where no shared one is free) or none. One core or fewer
+    than two items: every item here."""
 
-    def __init__(self, items: Sequence[Any], helper: Optional[bool] = None) -> None:
+    def __init__(self, items: Sequence[Any], helper: Optional[bool] = None, start: bool = False) -> None:
         self.items = list(items)
         self.state: Dict[int, Dict[str, Any]] = {i: {} for i in range(len(self.items))}
         self.history: List[Step] = []
-        use = (cores() >= 2 if helper is None else helper) and len(self.items) >= 2
+        shared = _shared[0] if _shared and not _busy[0] and helper is not False else None
+        use = len(self.items) >= 2 and (helper if helper is not None else cores() >= 2 and (shared is not None or start))
         self.theirs: List[int] = list(range(1, len(self.items), 2)) if use else []
         self._helper: Optional[_Helper] = None
+        self._shared = False
+        self._pending = False  # a step sent whose reply is not read yet
         if use:
             try:
-                self._helper = _Helper()
+                self._helper, self._shared = (shared, True) if shared is not None else (_Helper(), False)
+                _busy[0] = _busy[0] or self._shared
                 self._helper.send(("items", {i: self.items[i] for i in self.theirs}))
             except (OSError, pickle.PicklingError, ValueError):
                 self._fallback()
@@ -130,15 +168,28 @@ class Split:
     def __exit__(self, *exc: Any) -> None:
         self.close()
 
-    def close(self) -> None:
-        """End the helper (its items' state goes with it)."""
-        if self._helper is not None:
-            self._helper.close()
-            self._helper = None
+    def close(self, drop: bool = False) -> None:
+        """End the helper, or clear a shared one's items (their state goes with them). A shared helper
+        with a reply not read (the block left between a step's request and its reply) or ``drop`` is
+        ended too: the next Split must not read that reply as its own."""
+        if self._helper is None:
+            return
+        h, self._helper = self._helper, None
+        if self._shared:
+            _busy[0] = False
+            if not (drop or self._pending):
+                try:
+                    h.send(("reset",))
+                    return
+                except OSError:
+                    pass
+            if h in _shared:
+                _shared.remove(h)
+        h.close()
 
     def _fallback(self) -> None:
         """Run the helper's items here from now on, their state rebuilt by replaying the steps so far."""
-        self.close()
+        self.close(drop=True)
         theirs, self.theirs = self.theirs, []
         for fn, args in self.history[:-1] if self.history else []:
             for i in theirs:
@@ -153,6 +204,7 @@ class Split:
         if self._helper is not None:
             try:
                 self._helper.send(("step", fn, args))
+                self._pending = True
             except (OSError, pickle.PicklingError, ValueError, AttributeError):
                 self._fallback()
         for i in self.mine:
@@ -161,6 +213,7 @@ class Split:
         if self._helper is not None:
             try:
                 kind, value = self._helper.receive()
+                self._pending = False
             except (OSError, EOFError, pickle.UnpicklingError, ValueError, AttributeError, ImportError):
                 kind, value = "lost", None
             if kind == "raised":
@@ -177,8 +230,9 @@ class Split:
 
 
 def serve() -> None:
-    """The helper's loop: ("items", {i: item}) adds items; ("step", fn, args) runs ``fn`` on each and
-    answers ("ok", {i: result}) or ("raised", the exception); end of input ends it."""
+    """The helper's loop: ("import", [module]) imports them; ("items", {i: item}) adds items;
+    ("reset",) drops them; ("step", fn, args) runs ``fn`` on each and answers ("ok", {i: result}) or
+    ("raised", the exception); end of input ends it."""
     out = os.fdopen(os.dup(1), "wb")
     os.dup2(2, 1)  # anything the work prints goes to stderr, never into the replies
     items: Dict[int, Any] = {}
@@ -188,6 +242,17 @@ def serve() -> None:
             msg = pickle.load(sys.stdin.buffer)
         except Exception:  # the end of input, or a message it cannot load (a step's module not importable
             return  # here): it stops, and its items run in the process that sent it
+        if msg[0] == "import":
+            for name in msg[1]:
+                try:
+                    importlib.import_module(name)
+                except Exception:  # a step that needs it fails to load, and its items run in the sender
+                    pass
+            continue
+        if msg[0] == "reset":
+            items.clear()
+            state.clear()
+            continue
         if msg[0] == "items":
             items.update(msg[1])
             state.update({i: {} for i in msg[1]})

@@ -18,6 +18,7 @@ use crate::covariance::{self, Cov9, Var6};
 use crate::error::ImuError;
 use crate::integrate::{self, PreintegratedMut};
 use crate::labels::{self, GroundTruthView, Labels, LabelsMut};
+use crate::offset;
 use crate::python::arrays::{
     flat_mut, out1, out2, out2_flat, out3, out3_flat, pooled_arrays, rows, rows_mut, slice1, try_zeroed, zeros,
     BufferPool,
@@ -269,6 +270,31 @@ impl Indices<'_> {
             Indices::List(v) => convert(v, bad),
         }
     }
+}
+
+#[pyfunction]
+#[allow(clippy::too_many_arguments)]
+fn offset_rotation_angles<'py>(
+    py: Python<'py>,
+    t_ns: PyReadonlyArray1<'py, i64>,
+    gyro: PyReadonlyArray2<'py, f64>,
+    starts: Indices<'py>,
+    horizons: Indices<'py>,
+    dq_ref: PyReadonlyArray2<'py, f64>,
+    tau: f64,
+    period_ns: f64,
+) -> PyResult<Bound<'py, numpy::PyArray1<f64>>> {
+    let (t, g, q) = (
+        slice1(&t_ns, "t_ns")?,
+        rows::<3>(&gyro, "gyro")?,
+        rows::<4>(&dq_ref, "dq_ref")?,
+    );
+    let starts = starts.to_usize("starts")?;
+    let horizons = horizons.to_usize("horizons")?;
+    let a = py
+        .allow_threads(|| offset::offset_rotation_angles(t, g, &starts, &horizons, q, tau, period_ns))
+        .map_err(to_py)?;
+    Ok(out1(py, a))
 }
 
 #[pyfunction]
@@ -632,6 +658,7 @@ pub fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(preintegrate, m)?)?;
     m.add_function(wrap_pyfunction!(window_labels, m)?)?;
     m.add_function(wrap_pyfunction!(integrate_windows, m)?)?;
+    m.add_function(wrap_pyfunction!(offset_rotation_angles, m)?)?;
     m.add_function(wrap_pyfunction!(rotation_window_sums, m)?)?;
     m.add_function(wrap_pyfunction!(velocity_window_sums, m)?)?;
     m.add_function(wrap_pyfunction!(increment_covariance, m)?)?;
