@@ -119,6 +119,29 @@ def test_the_folds_split_with_a_helper_process_give_the_figures_of_one_process(m
     assert (split.gyro, split.acc, split.steps) == (alone.gyro, alone.acc, alone.steps)
 
 
+class LosesItsHelper(Split):
+    """A Split whose helper process is killed while it works on its folds (once this process has made
+    its folds' scoring jobs): its folds end up run, and scored, here."""
+
+    def step_and_share(self, fn, args, on_item=lambda i: None, then=None):
+        def kill_then(done):
+            if self._helper is not None:
+                self._helper.proc.kill()
+                self._helper.proc.wait()
+            return then(done)
+
+        return super().step_and_share(fn, args, on_item, kill_then)
+
+
+def test_a_helper_lost_mid_selection_leaves_the_same_figures(monkeypatch):
+    data = device(False)
+    monkeypatch.setattr(sel, "Split", lambda items, **kw: LosesItsHelper(items, helper=True))
+    lost = sel.select_levels(*data, SETTINGS, OPTS)
+    monkeypatch.setattr(sel, "Split", lambda items, **kw: Split(items, helper=False))
+    alone = sel.select_levels(*data, SETTINGS, OPTS)
+    assert lost.figures == alone.figures and (lost.gyro, lost.acc) == (alone.gyro, alone.acc)
+
+
 def test_the_rule_on_a_table_by_hand():
     """bias gains 50 % on fold a; scale gains 3 % on fold a but is 2 % worse on fold b than bias:
     beaten, skipped; affine gains 3 % and 2 % over bias, no worse than any simpler level (the skipped

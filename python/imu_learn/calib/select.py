@@ -68,6 +68,7 @@ from __future__ import annotations
 
 import json
 import math
+import os
 import time
 from dataclasses import dataclass, field, replace
 from typing import Any, Callable, Dict, List, Optional, Sequence, Tuple
@@ -392,18 +393,88 @@ class Selection:
                 "seconds": round(self.seconds, 1)}
 
 
-def fold_rows(floors: Dict[str, Floor], held: Sequence[Segment], horizons: Tuple[int, ...], opts: SelectOptions,
-              gravity: float, cells: Tuple[str, ...]) -> Dict[str, Dict[str, float]]:
-    """Every level's held-out cells on one fold (level -> cell -> error); a floor equal to another
-    level's (a low-pass level whose cut-off came out None is the level below it) is scored once."""
-    scored: Dict[str, Dict[str, float]] = {}
-    out = {}
+Rows = Dict[str, Dict[str, float]]  # one fold's: level -> cell -> error
+
+
+def distinct(floors: Dict[str, Floor]) -> Tuple[List[Floor], Dict[str, int]]:
+    """A fold's floors once each (a low-pass level whose cut-off came out None is the level below it),
+    and each level's index among them."""
+    keys: Dict[str, int] = {}
+    unique: List[Floor] = []
+    where = {}
     for level, floor in floors.items():
         key = json.dumps(floor.to_dict(), sort_keys=True)
-        if key not in scored:
-            scored[key] = score(floor, held, horizons, opts, gravity, cells)
-        out[level] = dict(scored[key])
-    return out
+        if key not in keys:
+            keys[key] = len(unique)
+            unique.append(floor)
+        where[level] = keys[key]
+    return unique, where
+
+
+def fold_rows(floors: Dict[str, Floor], held: Sequence[Segment], horizons: Tuple[int, ...], opts: SelectOptions,
+              gravity: float, cells: Tuple[str, ...]) -> Rows:
+    """Every level's held-out cells on one fold, each distinct floor scored once."""
+    unique, where = distinct(floors)
+    scored = [score(f, held, horizons, opts, gravity, cells) for f in unique]
+    return {level: dict(scored[k]) for level, k in where.items()}
+
+
+@dataclass(frozen=True)
+class Scoring:
+    """How a step scores its fold's levels: at once where it runs in the helper process; where it runs
+    in ``defer_pid`` (this process, which holds more folds), the floors go back unscored and their
+    scores are shared by both processes (:meth:`~imu_learn.util.helper.Split.step_and_share`)."""
+
+    horizons: Tuple[int, ...]
+    opts: SelectOptions
+    gravity: float
+    cells: Tuple[str, ...]
+    defer_pid: int
+
+    def rows(self, floors: Dict[str, Floor], held: Sequence[Segment]) -> Tuple[Optional[Rows], Dict[str, Floor]]:
+        if os.getpid() == self.defer_pid:
+            return None, floors
+        with thread_limits(1):
+            return fold_rows(floors, held, self.horizons, self.opts, self.gravity, self.cells), {}
+
+
+class SharedScores:
+    """The scores :class:`Scoring` deferred: the jobs of this process's folds (``jobs``, the ``then`` of
+    :meth:`~imu_learn.util.helper.Split.step_and_share`), then every fold's rows (``table``); a fold
+    deferred after the jobs were made (the helper's, run here because the helper was lost) is
+    scored there."""
+
+    def __init__(self, fs: Sequence[Fold], scoring: Scoring) -> None:
+        self.fs, self.scoring = fs, scoring
+        self.folds: List[int] = []  # this process's folds, in the jobs' order
+
+    def _args(self, i: int, f: Floor) -> Tuple[Any, ...]:
+        sc = self.scoring
+        return f, self.fs[i].held, sc.horizons, sc.opts, sc.gravity, sc.cells
+
+    def jobs(self, done: Dict[int, Tuple[Optional[Rows], Dict[str, Floor]]]
+             ) -> Tuple[Callable[..., Any], List[Tuple[Any, ...]]]:
+        self.folds = sorted(i for i, (rows, _) in done.items() if rows is None)
+        return score_job, [self._args(i, f) for i in self.folds for f in distinct(done[i][1])[0]]
+
+    def table(self, out: Sequence[Tuple[Optional[Rows], Dict[str, Floor]]], scores: Sequence[Dict[str, float]],
+              levels: Sequence[str]) -> Table:
+        shared = iter(scores)
+        rows = []
+        for i, (r, floors) in enumerate(out):
+            if r is None:
+                unique, where = distinct(floors)
+                got = [next(shared) if i in self.folds else score_job(*self._args(i, f)) for f in unique]
+                r = {level: dict(got[j]) for level, j in where.items()}
+            rows.append(r)
+        return {lv: {f.name: r[lv] for f, r in zip(self.fs, rows)} for lv in levels}
+
+
+def score_job(floor: Floor, held: Sequence[Segment], horizons: Tuple[int, ...], opts: SelectOptions, gravity: float,
+              cells: Tuple[str, ...]) -> Dict[str, float]:
+    """:func:`score` at one thread per pool (a shared job, in either process)."""
+    with thread_limits(1):
+        return score(floor, held, horizons, opts, gravity, cells)
 
 
 def _fold_info(p: Prepared, top: str) -> Dict[str, Any]:
@@ -412,9 +483,10 @@ def _fold_info(p: Prepared, top: str) -> Dict[str, Any]:
 
 
 def _gyro_step(fold: Fold, state: Dict[str, Any], settings: FitSettings, opts: SelectOptions, levels: Tuple[str, ...],
-               horizons: Tuple[int, ...], gyro_only: bool) -> Tuple[Dict[str, Dict[str, float]], Dict[str, Any]]:
+               gyro_only: bool, scoring: Scoring) -> Tuple[Tuple[Optional[Rows], Dict[str, Floor]], Dict[str, Any]]:
     """A fold's time offset, its gyroscope's levels (the accelerometer at its full level, or at ``bias``
-    for a reference that cannot resolve accelerations) and their held-out rows; the fold kept in ``state``."""
+    for a reference that cannot resolve accelerations) and their held-out rows (or floors:
+    :class:`Scoring`); the fold kept in ``state``."""
     with thread_limits(1):
         top = levels[-1]
         p = prepare(fold, settings, opts)
@@ -425,25 +497,20 @@ def _gyro_step(fold: Fold, state: Dict[str, Any], settings: FitSettings, opts: S
         p.acc = {acc[1]: fit_acc_levels(p.tr, p.va, p.grid, p.gyro[top], acc[0])[acc[0]]}
         state["prep"] = p
         floors = {lv: floor_of(p.gyro[lv], p.acc[acc[1]], p.tau) for lv in levels}
-        cells = GYRO_ONLY_CELLS if gyro_only else CELLS["gyro"]
         info = _fold_info(p, top)
         if gyro_only:
             info["cutoff_gyro"] = None
-        return fold_rows(floors, fold.held, horizons, opts, settings.gravity, cells), info
+    return scoring.rows(floors, fold.held), info
 
 
-def _acc_step(fold: Fold, state: Dict[str, Any], g_level: str, horizons: Tuple[int, ...], opts: SelectOptions,
-              gravity: float) -> Dict[str, Dict[str, float]]:
-    """A fold's accelerometer levels with the gyroscope at ``g_level``, and their held-out rows."""
+def _acc_step(fold: Fold, state: Dict[str, Any], g_level: str, scoring: Scoring
+              ) -> Tuple[Optional[Rows], Dict[str, Floor]]:
+    """A fold's accelerometer levels with the gyroscope at ``g_level``, and their held-out rows (or floors)."""
     with thread_limits(1):
         p: Prepared = state["prep"]
         p.acc = fit_acc_levels(p.tr, p.va, p.grid, p.gyro[g_level])
         floors = {lv: floor_of(p.gyro[g_level], p.acc[lv], p.tau) for lv in ACC_LEVELS}
-        return fold_rows(floors, fold.held, horizons, opts, gravity, CELLS["acc"])
-
-
-def _tabled(fs: Sequence[Fold], rows: Sequence[Dict[str, Dict[str, float]]], levels: Sequence[str]) -> Table:
-    return {lv: {f.name: r[lv] for f, r in zip(fs, rows)} for lv in levels}
+    return scoring.rows(floors, fold.held)
 
 
 def select_levels(train: List[Segment], val: List[Segment], groups: Sequence[str], val_groups: Sequence[str],
@@ -462,7 +529,9 @@ def select_levels(train: List[Segment], val: List[Segment], groups: Sequence[str
     levels = names[:names.index(top) + 1]
     cells = GYRO_ONLY_CELLS if opts.gyro_only else CELLS["gyro"]
     what = "the gyroscope's levels" + (" (rotation only)" if opts.gyro_only else "")
-    with Split(fs, start=True) as split:
+    gyro_scoring = Scoring(horizons, opts, settings.gravity, cells, os.getpid())
+    acc_scoring = replace(gyro_scoring, cells=CELLS["acc"])
+    with Split(fs, start=True) as split, thread_limits(1):
         if split.theirs:
             progress(f"selection: {len(fs)} folds, " + ", ".join(fs[i].name for i in split.theirs)
                      + " held out in a helper process")
@@ -470,8 +539,10 @@ def select_levels(train: List[Segment], val: List[Segment], groups: Sequence[str
         def fold_progress(i: int) -> None:
             progress(f"selection: {fs[i].name} held out ({i + 1}/{len(fs)}): {what}")
 
-        out = split.step(_gyro_step, settings, opts, levels, horizons, opts.gyro_only, on_item=fold_progress)
-        gyro_t = _tabled(fs, [r for r, _ in out], levels)
+        shared = SharedScores(fs, gyro_scoring)
+        out, scores = split.step_and_share(_gyro_step, (settings, opts, levels, opts.gyro_only, gyro_scoring),
+                                           fold_progress, lambda done: shared.jobs({i: r for i, (r, _) in done.items()}))
+        gyro_t = shared.table([r for r, _ in out], scores, levels)
         if not any(math.isfinite(v) for row in gyro_t["offset"].values() for v in row.values()):
             raise ValueError(f"no held-out segment is longer than the start-up bias span and {min(horizons)} samples")
         g_level, g_steps = choose(levels, gyro_t, cells)
@@ -481,7 +552,9 @@ def select_levels(train: List[Segment], val: List[Segment], groups: Sequence[str
             return Selection(g_level, "not selected", kind, fold_info, {"gyro": gyro_t, "acc": {}},
                              {"gyro": g_steps, "acc": []}, horizons, time.time() - t0, levels, GYRO_ONLY_CELLS)
         progress(f"selection: gyroscope {g_level}; the accelerometer's levels")
-        acc_t = _tabled(fs, split.step(_acc_step, g_level, horizons, opts, settings.gravity), ACC_LEVELS)
+        shared = SharedScores(fs, acc_scoring)
+        out, scores = split.step_and_share(_acc_step, (g_level, acc_scoring), then=shared.jobs)
+        acc_t = shared.table(out, scores, ACC_LEVELS)
     a_level, a_steps = choose(ACC_LEVELS, acc_t, CELLS["acc"])
     return Selection(g_level, a_level, kind, fold_info, {"gyro": gyro_t, "acc": acc_t},
                      {"gyro": g_steps, "acc": a_steps}, horizons, time.time() - t0, levels)

@@ -148,7 +148,7 @@ class Split:
         self.theirs: List[int] = list(range(1, len(self.items), 2)) if use else []
         self._helper: Optional[_Helper] = None
         self._shared = False
-        self._pending = False  # a step sent whose reply is not read yet
+        self._pending = 0  # replies not read yet
         if use:
             try:
                 self._helper, self._shared = (shared, True) if shared is not None else (_Helper(), False)
@@ -187,11 +187,12 @@ class Split:
                 _shared.remove(h)
         h.close()
 
-    def _fallback(self) -> None:
-        """Run the helper's items here from now on, their state rebuilt by replaying the steps so far."""
+    def _fallback(self, replay: int = 0) -> None:
+        """Run the helper's items here from now on, their state rebuilt by replaying the first
+        ``replay`` steps."""
         self.close(drop=True)
         theirs, self.theirs = self.theirs, []
-        for fn, args in self.history[:-1] if self.history else []:
+        for fn, args in self.history[:replay]:
             for i in theirs:
                 fn(self.items[i], self.state[i], *args)
 
@@ -199,40 +200,76 @@ class Split:
         """``fn(item, state, *args)`` on every item, results in item order. ``fn`` a module-level function
         (it travels by name), ``args`` picklable. ``on_item(i)`` is called here before each item this
         process runs (progress)."""
+        return self.step_and_share(fn, args, on_item)[0]
+
+    def step_and_share(self, fn: Callable[..., Any], args: Tuple[Any, ...], on_item: Callable[[int], None] = lambda i: None,
+                       then: Optional[Callable[[Dict[int, Any]], Tuple[Callable[..., Any], List[Tuple[Any, ...]]]]] = None
+                       ) -> Tuple[List[Any], List[Any]]:
+        """:meth:`step`, then jobs shared by both sides: ``then(results of this process's items)`` gives
+        ``(job_fn, jobs)``, and ``job_fn(*job)`` runs on every job, every other one in the helper after
+        its items (the work this process's items left, e.g. their scores, shared so that the side with
+        fewer items takes half of it). Returns (the step's results in item order, the jobs' in order)."""
         self.history.append((fn, args))
         out: Dict[int, Any] = {}
         if self._helper is not None:
             try:
                 self._helper.send(("step", fn, args))
-                self._pending = True
+                self._pending += 1
             except (OSError, pickle.PicklingError, ValueError, AttributeError):
-                self._fallback()
+                self._fallback(len(self.history) - 1)
         for i in self.mine:
             on_item(i)
             out[i] = fn(self.items[i], self.state[i], *args)
-        if self._helper is not None:
+        job_fn, jobs = then(dict(out)) if then is not None else (None, [])
+        done: Dict[int, Any] = {}
+        shared = [k for k in range(len(jobs)) if k % 2 == 1] if self._helper is not None else []
+        if shared:
             try:
-                kind, value = self._helper.receive()
-                self._pending = False
-            except (OSError, EOFError, pickle.UnpicklingError, ValueError, AttributeError, ImportError):
-                kind, value = "lost", None
-            if kind == "raised":
-                raise value
+                self._helper.send(("jobs", job_fn, [jobs[k] for k in shared]))
+                self._pending += 1
+            except (OSError, pickle.PicklingError, ValueError, AttributeError):
+                shared = []  # the step's reply is still read below
+        for k in range(len(jobs)):
+            if k not in shared:
+                done[k] = job_fn(*jobs[k])
+        if self._helper is not None:
+            theirs = list(self.theirs)
+            kind, value = self._reply()
             if kind == "ok":
                 out.update(value)
             else:
-                theirs = self.theirs
-                self._fallback()
+                self._fallback(len(self.history) - 1)
                 for i in theirs:
                     on_item(i)
                     out[i] = fn(self.items[i], self.state[i], *args)
-        return [out[i] for i in range(len(self.items))]
+            if shared:
+                kind, value = self._reply() if self._helper is not None else ("lost", None)
+                if kind == "ok":
+                    done.update(zip(shared, value))
+                else:
+                    self._fallback(len(self.history))
+                    done.update({k: job_fn(*jobs[k]) for k in shared})
+        return [out[i] for i in range(len(self.items))], [done[k] for k in range(len(jobs))]
+
+    def _reply(self) -> Tuple[str, Any]:
+        """The helper's next reply: ("ok", value), or ("lost", None) where it cannot give one; an
+        exception it raised is raised here."""
+        assert self._helper is not None
+        try:
+            kind, value = self._helper.receive()
+            self._pending -= 1
+        except (OSError, EOFError, pickle.UnpicklingError, ValueError, AttributeError, ImportError):
+            return "lost", None
+        if kind == "raised":
+            raise value
+        return kind, value
 
 
 def serve() -> None:
     """The helper's loop: ("import", [module]) imports them; ("items", {i: item}) adds items;
     ("reset",) drops them; ("step", fn, args) runs ``fn`` on each and answers ("ok", {i: result}) or
-    ("raised", the exception); end of input ends it."""
+    ("raised", the exception); ("jobs", fn, [args]) runs ``fn(*args)`` on each and answers ("ok",
+    [result]) or ("raised", ...); end of input ends it."""
     out = os.fdopen(os.dup(1), "wb")
     os.dup2(2, 1)  # anything the work prints goes to stderr, never into the replies
     items: Dict[int, Any] = {}
@@ -259,7 +296,10 @@ def serve() -> None:
             continue
         _, fn, args = msg
         try:
-            reply: Tuple[str, Any] = ("ok", {i: fn(items[i], state[i], *args) for i in sorted(items)})
+            if msg[0] == "jobs":
+                reply: Tuple[str, Any] = ("ok", [fn(*job) for job in args])
+            else:
+                reply = ("ok", {i: fn(items[i], state[i], *args) for i in sorted(items)})
             data = pickle.dumps(reply, protocol=pickle.HIGHEST_PROTOCOL)
         except Exception as e:  # raised where the item would have run here
             try:
