@@ -273,20 +273,30 @@ def matched_rates(segs: Sequence[Segment], m: int) -> Rates:
 
 
 def rotation_spread(rates: Rates, blocks: int = 20, seed: int = 0) -> float:
-    """Standard deviation [deg] of the fitted rotation over blocks of windows resampled (a bootstrap)."""
+    """Standard deviation [deg] of the fitted rotation over blocks of windows resampled (a bootstrap).
+    Each draw's rotation is Kabsch's on the drawn blocks, from their sums (count, Σa, Σb, Σ b aᵀ per
+    block, taken once): the cross-covariance of a draw is Σ S_ba − (Σ S_b)(Σ S_a)ᵀ / n."""
     a, b = rates
     if not len(a):
         return math.nan
     r0 = kabsch(a, b)[0]
     edges = np.linspace(0, len(a), blocks + 1).astype(int)
+    n = np.diff(edges).astype(np.float64)
+    s_a = np.stack([a[edges[j]:edges[j + 1]].sum(0) for j in range(blocks)])
+    s_b = np.stack([b[edges[j]:edges[j + 1]].sum(0) for j in range(blocks)])
+    s_ba = np.stack([b[edges[j]:edges[j + 1]].T @ a[edges[j]:edges[j + 1]] for j in range(blocks)])
     rng = np.random.default_rng(seed)
     angles = []
     for _ in range(30):
         pick = rng.integers(0, blocks, blocks)
-        idx = np.concatenate([np.arange(edges[j], edges[j + 1]) for j in pick])
-        r = kabsch(a[idx], b[idx])[0]
-        angles.append(_angle_deg(r @ r0.T))
-    return float(np.sqrt(np.mean(np.square(angles))))
+        count = n[pick].sum()
+        if count < 3:
+            continue
+        h = s_ba[pick].sum(0) - np.outer(s_b[pick].sum(0), s_a[pick].sum(0)) / count
+        u, _, vt = np.linalg.svd(h)
+        d = np.diag([1.0, 1.0, np.sign(np.linalg.det(vt.T @ u.T))])
+        angles.append(_angle_deg(vt.T @ d @ u.T @ r0.T))
+    return float(np.sqrt(np.mean(np.square(angles)))) if angles else math.nan
 
 
 def _angle_deg(r: np.ndarray) -> float:

@@ -707,15 +707,21 @@ def select_acc_from_positions(names: Sequence[str], recs: Sequence[Sequence[Segm
     3-vector's norm); the rule of :func:`choose`. Each segment's rows are built once
     (:func:`recording_rows`: they depend on neither the level nor the fold)."""
     rows = recording_rows(recs, options, tau, gravity, gyros)
-    attitude = ATTITUDE[True]
-    table: Table = {lv: {} for lv in POSITION_ACC_LEVELS}
-    for r, name in enumerate(names):
-        rest = [x for i, x in enumerate(rows) if i != r]
-        for lv in POSITION_ACC_LEVELS:
-            acc = fit_acc_from_rows(rest, options, free_indices("acc", lv), attitude)
-            table[lv][name] = {POSITION_ACC_CELLS[0]: heldout_rms_rows(acc, rows[r])}
+    with Split(list(range(len(names)))) as split:  # with the command's helper process where it has one
+        held = split.step(_positions_fold, rows, options)
+    table: Table = {lv: {name: {POSITION_ACC_CELLS[0]: h[lv]} for name, h in zip(names, held)}
+                    for lv in POSITION_ACC_LEVELS}
     level, steps = choose(POSITION_ACC_LEVELS, table, POSITION_ACC_CELLS)
     return level, table, steps
+
+
+def _positions_fold(r: int, state: Dict[str, Any], rows: Sequence[Sequence[Any]], options: AccOptions
+                    ) -> Dict[str, float]:
+    """Recording ``r`` held out: each level's fit on the others' rows, its held-out residual."""
+    rest = [x for i, x in enumerate(rows) if i != r]
+    with thread_limits(1):
+        return {lv: heldout_rms_rows(fit_acc_from_rows(rest, options, free_indices("acc", lv), ATTITUDE[True]), rows[r])
+                for lv in POSITION_ACC_LEVELS}
 
 
 def _positions_acc_level(inp: Any, fit: FloorFit, entry: Dict[str, Any], progress: Progress) -> FloorFit:
