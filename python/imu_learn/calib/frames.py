@@ -84,11 +84,16 @@ def mean_rates(seq: Segment, m: int) -> Tuple[np.ndarray, np.ndarray]:
 def kabsch(a: np.ndarray, b: np.ndarray) -> Tuple[np.ndarray, np.ndarray, float]:
     """R (proper rotation), c minimising Σ|a − R b − c|²; returns (R, c, mean squared residual)."""
     am, bm = a.mean(0), b.mean(0)
-    u, _, vt = np.linalg.svd((b - bm).T @ (a - am))
-    d = np.diag([1.0, 1.0, np.sign(np.linalg.det(vt.T @ u.T))])
-    r = vt.T @ d @ u.T
+    r = rotation_of_cross((b - bm).T @ (a - am))
     c = am - r @ bm
     return r, c, float(np.mean(np.sum((a - b @ r.T - c) ** 2, axis=1)))
+
+
+def rotation_of_cross(h: np.ndarray) -> np.ndarray:
+    """The proper rotation R maximising tr(R H) for the cross-covariance H = Σ (b − b̄)(a − ā)ᵀ (Kabsch)."""
+    u, _, vt = np.linalg.svd(h)
+    d = np.diag([1.0, 1.0, np.sign(np.linalg.det(vt.T @ u.T))])
+    return vt.T @ d @ u.T
 
 
 def shifted_pairs(rates: List[Tuple[np.ndarray, np.ndarray]], shift: float) -> Tuple[np.ndarray, np.ndarray]:

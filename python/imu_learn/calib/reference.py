@@ -50,6 +50,7 @@ from imu_learn.calib.frames import (
     kabsch,
     mean_rates,
     rotation_matrices,
+    rotation_of_cross,
     segments,
 )
 from imu_learn.core.quat import quat_conj, quat_from_matrix, quat_mul, quat_rotate
@@ -293,9 +294,7 @@ def rotation_spread(rates: Rates, blocks: int = 20, seed: int = 0) -> float:
         if count < 3:
             continue
         h = s_ba[pick].sum(0) - np.outer(s_b[pick].sum(0), s_a[pick].sum(0)) / count
-        u, _, vt = np.linalg.svd(h)
-        d = np.diag([1.0, 1.0, np.sign(np.linalg.det(vt.T @ u.T))])
-        angles.append(_angle_deg(vt.T @ d @ u.T @ r0.T))
+        angles.append(_angle_deg(rotation_of_cross(h) @ r0.T))
     return float(np.sqrt(np.mean(np.square(angles)))) if angles else math.nan
 
 
