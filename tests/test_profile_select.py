@@ -108,13 +108,20 @@ def test_the_chosen_level_is_never_beaten_by_a_simpler_one(bias_only, scaled):
                        for v in cells.values())
 
 
+def selections(monkeypatch, split_class) -> tuple:
+    """The bias-only device's selection with its folds split by ``split_class`` (a helper process forced),
+    and with every fold in this process."""
+    data = device(False)
+    out = []
+    for make in (lambda items, **kw: split_class(items, helper=True), lambda items, **kw: Split(items, helper=False)):
+        monkeypatch.setattr(sel, "Split", make)
+        out.append(sel.select_levels(*data, SETTINGS, OPTS))
+    return tuple(out)
+
+
 def test_the_folds_split_with_a_helper_process_give_the_figures_of_one_process(monkeypatch):
     """The folds on two processes (the default on two cores) and all in this one: the same table."""
-    data = device(False)
-    monkeypatch.setattr(sel, "Split", lambda items, **kw: Split(items, helper=True))
-    split = sel.select_levels(*data, SETTINGS, OPTS)
-    monkeypatch.setattr(sel, "Split", lambda items, **kw: Split(items, helper=False))
-    alone = sel.select_levels(*data, SETTINGS, OPTS)
+    split, alone = selections(monkeypatch, Split)
     assert split.figures == alone.figures and split.folds == alone.folds
     assert (split.gyro, split.acc, split.steps) == (alone.gyro, alone.acc, alone.steps)
 
@@ -134,11 +141,7 @@ class LosesItsHelper(Split):
 
 
 def test_a_helper_lost_mid_selection_leaves_the_same_figures(monkeypatch):
-    data = device(False)
-    monkeypatch.setattr(sel, "Split", lambda items, **kw: LosesItsHelper(items, helper=True))
-    lost = sel.select_levels(*data, SETTINGS, OPTS)
-    monkeypatch.setattr(sel, "Split", lambda items, **kw: Split(items, helper=False))
-    alone = sel.select_levels(*data, SETTINGS, OPTS)
+    lost, alone = selections(monkeypatch, LosesItsHelper)
     assert lost.figures == alone.figures and (lost.gyro, lost.acc) == (alone.gyro, alone.acc)
 
 
