@@ -126,3 +126,21 @@ def test_a_split_left_with_a_reply_unread_does_not_hand_it_to_the_next():
         with Split(ITEMS) as after:
             assert [v for v, _ in after.step(accumulate, 1.0)] == expected()[:5]
             assert after._helper is None or after._helper.proc.pid != pid
+
+
+def test_a_start_up_that_prints_is_not_read_as_a_reply(tmp_path, monkeypatch, capfd):
+    """A site customisation that prints a banner when any interpreter starts (text that begins like a
+    pickle opcode: 'B' announces a huge read) went into the replies and hung the command."""
+    (tmp_path / "sitecustomize.py").write_text('print("Boot environment: lab-A")\n')
+    monkeypatch.setenv("PYTHONPATH", str(tmp_path))
+    signal.signal(signal.SIGALRM, lambda *a: (_ for _ in ()).throw(TimeoutError("the split hung")))
+    signal.alarm(60)
+    try:
+        with Split(ITEMS, helper=True) as split:
+            out = split.step(accumulate, 1.0)
+            assert split.theirs == [1, 3]  # the helper kept its items: nothing went wrong
+    finally:
+        signal.alarm(0)
+    assert [v for v, _ in out] == expected()[:5]
+    assert out[1][1] != os.getpid()
+    assert "Boot environment" in capfd.readouterr().err  # the banner shows, on stderr

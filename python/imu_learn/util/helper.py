@@ -10,10 +10,13 @@ pool's missing worker threads.
 How. :class:`Split` assigns every other item to the helper (the helper starts while this process
 works on its own first item, so its start-up overlaps). :meth:`Split.step` runs one module-level
 function ``fn(item, state, *args)`` on every item, where ``state`` is that item's dict kept between
-steps on the side that holds the item; arguments and results travel pickled over the helper's
-stdin and stdout, the items once. The helper runs one thread per pool (rayon, OpenMP, OpenBLAS) and
-its own session, so a Ctrl-C at the terminal reaches only this process, which ends the helper on
-the way out (:meth:`Split.close`, also when the block is left by an exception).
+steps on the side that holds the item; arguments and results travel pickled, in frames, over two
+pipes of their own (not its stdin and stdout: a site customisation that prints at start-up must not
+be read as a reply), the items once. A command may start one helper for its whole run
+(:func:`shared_helper`) so that its start-up overlaps the command's reading. The helper runs one
+thread per pool (rayon, OpenMP, OpenBLAS), this interpreter's flags (-I, -E ...) and its own
+session, so a Ctrl-C at the terminal reaches only this process, which ends the helper on the way
+out (:meth:`Split.close`, also when the block is left by an exception).
 
 Nothing depends on the helper: where it cannot start, dies or answers with something other than a
 result or an exception of its own, this process runs the helper's items itself, replaying the
@@ -26,11 +29,12 @@ import importlib
 import os
 import pickle
 import queue
+import struct
 import subprocess
 import sys
 import threading
 from contextlib import contextmanager
-from typing import Any, Callable, Dict, Iterator, List, Optional, Sequence, Tuple
+from typing import Any, BinaryIO, Callable, Dict, Iterator, List, Optional, Sequence, Tuple
 
 from imu_learn.util.threads import ENV_KEYS, cores
 
@@ -46,31 +50,75 @@ def _helper_env() -> Dict[str, str]:
     return env
 
 
+MAGIC = b"IMUH"  # each message: MAGIC, its length (8 bytes, little-endian), the pickle
+HEADER = struct.Struct("<4sQ")
+
+
+def write_frame(f: BinaryIO, data: bytes) -> None:
+    f.write(HEADER.pack(MAGIC, len(data)) + data)
+    f.flush()
+
+
+def read_frame(f: BinaryIO) -> bytes:
+    """One message's pickle; EOFError at the end of input, OSError on anything that is not a frame."""
+    head = f.read(HEADER.size)
+    if len(head) < HEADER.size:
+        raise EOFError("the other process closed its end")
+    magic, n = HEADER.unpack(head)
+    if magic != MAGIC:
+        raise OSError(f"not a message from the other process ({head!r})")
+    data = f.read(n)
+    if len(data) < n:
+        raise EOFError("the other process closed its end mid-message")
+    return data
+
+
+def _interpreter_flags() -> List[str]:
+    """This interpreter's flags that a child should share (-I, -E, -s ...), as multiprocessing passes them."""
+    try:
+        return list(subprocess._args_from_interpreter_flags())  # type: ignore[attr-defined]
+    except Exception:
+        return ["-I"] if sys.flags.isolated else []
+
+
 class _Helper:
-    """The helper process: messages pickled to its stdin, replies read from its stdout."""
+    """The helper process. Messages and replies travel in frames (:func:`write_frame`) over two pipes
+    of their own, not its stdin and stdout: whatever its start-up prints (a site customisation's
+    banner) goes to stderr and can never be read as a reply."""
 
     def __init__(self) -> None:
+        child_in, to_child = os.pipe()  # (read end, write end)
+        from_child, child_out = os.pipe()
         # an interpreter that cannot import the package exits quietly (3): its items then run here
         code = (f"import sys\nsys.path[:0] = {list(sys.path)!r}\ntry:\n    from imu_learn.util.helper import serve\n"
-                "except Exception:\n    sys.exit(3)\nserve()")
-        self.proc = subprocess.Popen([sys.executable, "-c", code], stdin=subprocess.PIPE, stdout=subprocess.PIPE,
-                                     env=_helper_env(), start_new_session=True)
+                f"except Exception:\n    sys.exit(3)\nserve({child_in}, {child_out})")
+        try:
+            self.proc = subprocess.Popen([sys.executable, *_interpreter_flags(), "-c", code], stdin=subprocess.DEVNULL,
+                                         stdout=sys.stderr.fileno() if _has_fileno(sys.stderr) else subprocess.DEVNULL,
+                                         env=_helper_env(), start_new_session=True, pass_fds=(child_in, child_out))
+        except BaseException:
+            os.close(to_child)
+            os.close(from_child)
+            raise
+        finally:
+            os.close(child_in)
+            os.close(child_out)
+        self._out = os.fdopen(to_child, "wb")
+        self._in = os.fdopen(from_child, "rb")
         self._queue: queue.Queue[Optional[bytes]] = queue.Queue()
         self._error: Optional[BaseException] = None
         self._writer = threading.Thread(target=self._write, daemon=True)
         self._writer.start()
 
     def _write(self) -> None:
-        """The writer thread: each queued message in turn (the pipe holds 64 KiB, so a large message
+        """The writer thread: each queued message in turn (a pipe holds 64 KiB, so a large message
         waits for the helper to read it; this process goes on meanwhile)."""
         while True:
             data = self._queue.get()
             if data is None:
                 return
             try:
-                assert self.proc.stdin is not None
-                self.proc.stdin.write(data)
-                self.proc.stdin.flush()
+                write_frame(self._out, data)
             except (OSError, ValueError) as e:
                 self._error = e
                 return
@@ -81,8 +129,7 @@ class _Helper:
         self._queue.put(pickle.dumps(msg, protocol=pickle.HIGHEST_PROTOCOL))
 
     def receive(self) -> Tuple[str, Any]:
-        assert self.proc.stdout is not None
-        reply = pickle.load(self.proc.stdout)
+        reply = pickle.loads(read_frame(self._in))
         if not (isinstance(reply, tuple) and len(reply) == 2 and reply[0] in ("ok", "raised")):
             raise OSError(f"the helper process answered {type(reply).__name__}")
         return reply
@@ -91,15 +138,20 @@ class _Helper:
         self._queue.put(None)
         if self.proc.poll() is None:
             self.proc.kill()  # a writer blocked on a full pipe returns with an error
-        for pipe in (self.proc.stdin, self.proc.stdout):
+        for pipe in (self._out, self._in):
             try:
-                if pipe is not None:
-                    pipe.close()
+                pipe.close()
             except OSError:
                 pass
-        if self.proc.poll() is None:
-            self.proc.kill()
         self.proc.wait()
+
+
+def _has_fileno(f: Any) -> bool:
+    try:
+        f.fileno()
+        return True
+    except (AttributeError, OSError, ValueError):
+        return False
 
 
 _shared: List[_Helper] = []  # the helper a command started for its whole run (:func:`shared_helper`)
@@ -265,18 +317,18 @@ class Split:
         return kind, value
 
 
-def serve() -> None:
-    """The helper's loop: ("import", [module]) imports them; ("items", {i: item}) adds items;
-    ("reset",) drops them; ("step", fn, args) runs ``fn`` on each and answers ("ok", {i: result}) or
-    ("raised", the exception); ("jobs", fn, [args]) runs ``fn(*args)`` on each and answers ("ok",
-    [result]) or ("raised", ...); end of input ends it."""
-    out = os.fdopen(os.dup(1), "wb")
-    os.dup2(2, 1)  # anything the work prints goes to stderr, never into the replies
+def serve(inp_fd: int, out_fd: int) -> None:
+    """The helper's loop, reading frames from ``inp_fd`` and writing replies to ``out_fd``: ("import",
+    [module]) imports them; ("items", {i: item}) adds items; ("reset",) drops them; ("step", fn, args)
+    runs ``fn`` on each and answers ("ok", {i: result}) or ("raised", the exception); ("jobs", fn,
+    [args]) runs ``fn(*args)`` on each and answers ("ok", [result]) or ("raised", ...); end of input
+    ends it."""
+    inp, out = os.fdopen(inp_fd, "rb"), os.fdopen(out_fd, "wb")
     items: Dict[int, Any] = {}
     state: Dict[int, Dict[str, Any]] = {}
     while True:
         try:
-            msg = pickle.load(sys.stdin.buffer)
+            msg = pickle.loads(read_frame(inp))
         except Exception:  # the end of input, or a message it cannot load (a step's module not importable
             return  # here): it stops, and its items run in the process that sent it
         if msg[0] == "import":
@@ -307,7 +359,6 @@ def serve() -> None:
             except Exception:
                 data = pickle.dumps(("raised", RuntimeError(f"{type(e).__name__}: {e}")))
         try:
-            out.write(data)
-            out.flush()
+            write_frame(out, data)
         except OSError:
             return
