@@ -14,6 +14,7 @@ import pytest
 from crops import EASY, SHIPPED
 from imu_learn.calib.run import NOT_SELECTED
 from imu_learn.calib.select import POSITION_ACC_LEVELS
+from imu_learn.calib.sources import PosesSource
 from imu_learn.cli import main
 from imu_learn.core.quat import quat_from_matrix, quat_mul, wxyz_to_xyzw
 from imu_learn.data.formats import read_recording
@@ -246,3 +247,20 @@ def test_the_profiles_reference_gives_navigate_its_extrinsic_and_origin():
     assert np.array_equal(T[:3, 3], np.zeros(3)) and "not estimated" in where
     assert applied_extrinsic({**base, "applied": {"rotation": False, "lever_arm": True}}) is None
     assert applied_extrinsic({}) is None
+
+
+def test_a_refused_positions_fit_leaves_the_accelerometers_matrix_exactly_at_its_prior(tmp_path, monkeypatch):
+    """A 20 Hz reference whose positions cannot tell the accelerometer's scale: the bias-only floor holds
+    the matrix at the identity by a prior; the profile writes the identity itself (not 1 - 3e-11) with
+    no spread, as its "kept at the prior" says."""
+    def refused(self, inp, fit, progress=lambda s: None, uncertainty=True):
+        self.acc_refused = "the motion leaves the accelerometer's scale uncertain (a test)"
+        return fit
+
+    monkeypatch.setattr(PosesSource, "acc_from_positions", refused)
+    ref = write_reference(tmp_path / "vo.tum", world_deg=100.0, every=10)
+    p = calibrate(tmp_path / "out", "--groundtruth", str(ref))
+    assert p["accelerometer"]["matrix"] == np.eye(3).tolist()
+    assert all(v is None for row in p["accelerometer"]["matrix_std"] for v in row)
+    assert not p["observed"]["accelerometer.matrix"]["observed"]
+    assert "the matrix at its prior (identity)" in p["selection"]["acc"]

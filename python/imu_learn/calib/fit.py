@@ -121,7 +121,9 @@ def fit_floor(train: List[Segment], val: List[Segment], settings: FitSettings, g
               terms: Optional[Dict[str, Any]] = None) -> FloorFit:
     """The floor on all of ``train`` (``val`` for its selection; ``terms``: :func:`fit_once`'s), then on
     each group alone (``uncertainty=False``: not; every standard deviation NaN)."""
-    progress(f"fitting the floor (traditional+timing) on {len(train)} segments, {sum(len(s) for s in train)} samples")
+    n = len(train)
+    progress(f"fitting the floor (traditional+timing) on {n} segment{'s' if n != 1 else ''}, "
+             f"{sum(len(s) for s in train)} samples")
     method, log = fit_once(train, val, settings, terms=terms)
     floor = Floor.from_dict(method.to_dict())
     if not uncertainty:

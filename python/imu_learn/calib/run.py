@@ -233,17 +233,31 @@ def keep_unsupported_at_prior(prof: Profile, inp: CalibInputs, errs: Dict[str, A
     while found and all(f.within_noise for f in found):
         f = found[0]
         sensor = HELD_BACK_SENSORS[f.field]
-        if any(k["sensor"] == sensor for k in kept):
-            break
+        if any(k["sensor"] == sensor for k in kept) or _at_prior_already(prof, sensor):
+            break  # nothing of this sensor's left to hold (the raise is the time offset's or the noise's)
         why = f"the held-back block cannot tell the fitted terms from none: {f.message}"
         at_prior(prof, sensor)
         kept.append({"sensor": sensor, "why": why})
         for k in PRIOR_TERMS[sensor]:
             prof.observed[k] = {"observed": False, "why": why}
         logger.warning("%s: the fitted terms kept at their prior (identity, zero bias, no filter): %s", sensor, why)
+        short = "gyro" if sensor == "gyroscope" else "acc"
+        if short in prof.selection:  # the summary's "terms chosen" line says what the profile now holds
+            prof.selection[short] = f"{prof.selection[short]}, then kept at its prior (the held-back block)"
         errs = _held_back(prof, inp)
         found = held_back_findings(errs)
     return errs, kept
+
+
+def _at_prior_already(prof: Profile, sensor: str) -> bool:
+    """Whether ``sensor``'s terms are all at their prior (identity, zero bias, no g-sensitivity, no
+    low-pass): a level ``offset`` chose none of them."""
+    assert prof.floor is not None
+    p = prof.floor.params
+    if sensor == "gyroscope":
+        return (np.array_equal(p.M_g, np.eye(3)) and not np.any(p.b_g) and not np.any(p.G)
+                and p.cutoff_gyro is None)
+    return np.array_equal(p.M_a, np.eye(3)) and not np.any(p.b_a) and p.cutoff_acc is None
 
 
 # per sensor and chosen level, the floor parameters --select left at their prior

@@ -417,6 +417,10 @@ class PosesSource(Source):
             fit.log["time_offset_fitted_on_the_moved_reference"] = [fit.floor.params.time_offset]
             fit.floor = fit.floor.with_params(time_offset=TIME_OFFSET_PRIOR_SAMPLES)
             fit.std = replace(fit.std, time_offset=np.float64(np.nan))
+        if self.floor_terms():  # the bias-only accelerometer: its matrix held at the identity by a prior,
+            # written as the identity it stands for (not 1 - 3e-11), its spread unknown
+            fit.floor = fit.floor.with_params(M_a=np.eye(3))
+            fit.std = replace(fit.std, M_a=np.full((3, 3), np.nan))
         if self.frame is not None and not self.frame.resolves_acceleration and self.acc_options is not None:
             fit = self.acc_from_positions(inp, fit, progress, uncertainty)
         return fit
@@ -453,7 +457,7 @@ class PosesSource(Source):
         worst = float(np.max(np.diag(acc.M_a_std)))
         if not worst <= ACC_MAX_SCALE_STD:
             self.acc_refused = (f"the motion leaves the accelerometer's scale uncertain from the positions "
-                                f"(standard error up to {worst:.3f}, limit {ACC_MAX_SCALE_STD:g})")
+                                f"(standard error up to {worst:.3g}, limit {ACC_MAX_SCALE_STD:g})")
             progress(f"accelerometer from positions refused: {self.acc_refused}")
             return fit
         self.acc_fit = acc

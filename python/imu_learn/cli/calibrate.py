@@ -297,7 +297,8 @@ def summary(p: Any) -> List[str]:
         lines.append(f"time offset {p.time_offset_s * 1e3:+.3f} ms ({spread}); "
                      f"gyro bias {_vec(p.gyro.bias)} rad/s; acc bias {_vec(p.acc.bias)} m/s^2; "
                      f"gravity {p.gravity_mps2:.4f} m/s^2")
-        lines.append(_terms_line(p.selection, p.reference.get("kind", "poses")))
+        lines.append(_terms_line(p.selection, p.reference.get("kind", "poses"),
+                                 bool(p.observed.get("time_offset", {}).get("observed", True))))
     for k, t in p.noise.items():
         if p.unobserved_noise(k):
             lines.append(f"{k}: {p.kalibr()[k]:.3e} {t.unit} (not observed: {unobserved_value(k, t.bound)[1]}; the data "
@@ -320,14 +321,19 @@ def summary(p: Any) -> List[str]:
     return lines
 
 
-def _terms_line(selection: Dict[str, Any], kind: str) -> str:
-    """Which of the floor's terms the profile holds and how they were chosen."""
+def _terms_line(selection: Dict[str, Any], kind: str, offset_observed: bool = True) -> str:
+    """Which of the floor's terms the profile holds and how they were chosen (the level ``offset`` is the
+    time offset alone: no term at all where the time offset is held at its prior)."""
     if kind != "poses":
         return f"terms: those a {kind} reference observes (the others at their prior)"
     if "gyro" in selection:
-        return (f"terms chosen on held-out recordings ({selection['held_out']}): gyroscope {selection['gyro']}, "
-                f"accelerometer {selection['acc']}" + ("; by default for " + SELECT_BY_DEFAULT_FOR
-                                                        + " (--no-select: every term)" if "by_default" in selection else ""))
+        def level(x: Any) -> str:
+            return (("offset (the time offset alone)" if offset_observed else "none (the time offset held at its prior)")
+                    if x == "offset" else str(x))
+
+        return (f"terms chosen on held-out recordings ({selection['held_out']}): gyroscope {level(selection['gyro'])}, "
+                f"accelerometer {level(selection['acc'])}" + ("; by default for " + SELECT_BY_DEFAULT_FOR
+                                                             + " (--no-select: every term)" if "by_default" in selection else ""))
     if "skipped" in selection:
         return f"terms: the reference's own ({selection['skipped']})"
     return ("terms: every term of the floor (--no-select), none chosen on held-out recordings (on recordings it did not "
