@@ -42,6 +42,7 @@ from imu_learn.core.quat import quat_rotate
 from imu_learn.data.splits import cut
 from imu_learn.data.types import Segment, median_period_ns
 from imu_learn.util.helper import Split
+from imu_learn.util.threads import thread_limits
 
 Progress = Callable[[str], None]
 
@@ -144,8 +145,10 @@ def fit_floor(train: List[Segment], val: List[Segment], settings: FitSettings, g
 
 def _refit_params(item: Tuple[List[Segment], List[Segment]], state: Dict[str, Any], method: TraditionalTiming,
                   settings: FitSettings, max_windows: int) -> TraditionalParams:
-    """One group's refit (:func:`refit_once`) as its parameters."""
-    return TraditionalParams.from_dict(refit_once(method, item[0], item[1], settings, max_windows).to_dict())
+    """One group's refit (:func:`refit_once`) as its parameters, one thread per pool (the other process
+    works beside it)."""
+    with thread_limits(1):
+        return TraditionalParams.from_dict(refit_once(method, item[0], item[1], settings, max_windows).to_dict())
 
 
 def spread(fits: Sequence[TraditionalParams]) -> TraditionalParams:
