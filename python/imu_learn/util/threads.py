@@ -62,7 +62,11 @@ def _openblas_setters() -> List[Tuple[Any, Any]]:
     """(set, get) ``openblas_[sg]et_num_threads`` of every OpenBLAS this process has loaded (numpy's and
     scipy's ``scipy_openblas`` builds prefix and suffix the names; get None where absent), found
     through /proc/self/maps; empty where there is none or no such file (not Linux). What
-    threadpoolctl does for OpenBLAS, without the dependency."""
+    threadpoolctl does for OpenBLAS, without the dependency. The maps are read again only once modules
+    were imported since (a library loads with a module: numpy's, scipy's)."""
+    loaded = len(sys.modules)
+    if _SCANNED and _SCANNED[0][0] == loaded:
+        return _SCANNED[0][1]
     try:
         with open("/proc/self/maps") as f:
             paths = {p for p in (line.split()[-1] for line in f) if "openblas" in os.path.basename(p).lower() and ".so" in p}
@@ -89,10 +93,12 @@ def _openblas_setters() -> List[Tuple[Any, Any]]:
                 _LIBS[path].append((fn, getter))
                 break
         out += _LIBS[path]
+    _SCANNED[:] = [(loaded, out)]
     return out
 
 
 _LIBS: Dict[str, List[Tuple[Any, Any]]] = {}  # path -> its (set, get), looked up once
+_SCANNED: List[Tuple[int, List[Tuple[Any, Any]]]] = []  # (modules loaded, the setters then): the last scan
 
 
 @contextmanager
