@@ -170,7 +170,7 @@ def shared_helper(preload: Sequence[str] = ()) -> Iterator[None]:
     try:
         h: Optional[_Helper] = _Helper()
         h.send(("import", list(preload)))
-    except OSError:
+    except Exception:  # no helper where none can start (no pipes to pass: not POSIX): the work runs here
         h = None
     if h is not None:
         _shared.append(h)
@@ -206,7 +206,7 @@ class Split:
                 self._helper, self._shared = (shared, True) if shared is not None else (_Helper(), False)
                 _busy[0] = _busy[0] or self._shared
                 self._helper.send(("items", {i: self.items[i] for i in self.theirs}))
-            except (OSError, pickle.PicklingError, ValueError):
+            except Exception:  # it cannot start or the items cannot travel: every item here
                 self._fallback()
 
     @property
