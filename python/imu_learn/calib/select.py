@@ -531,7 +531,7 @@ def select_levels(train: List[Segment], val: List[Segment], groups: Sequence[str
     what = "the gyroscope's levels" + (" (rotation only)" if opts.gyro_only else "")
     gyro_scoring = Scoring(horizons, opts, settings.gravity, cells, os.getpid())
     acc_scoring = replace(gyro_scoring, cells=CELLS["acc"])
-    with Split(fs, start=True) as split, thread_limits(1):
+    with Split(fs, start=True) as split:  # each step and scoring job holds its pools at one thread
         if split.theirs:
             progress(f"selection: {len(fs)} folds, " + ", ".join(fs[i].name for i in split.theirs)
                      + " held out in a helper process")
