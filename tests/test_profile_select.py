@@ -272,13 +272,12 @@ def test_select_floor_keeps_the_sources_accelerometer_for_a_reference_without_ac
     accelerometer (matrix, bias, standard deviations) exactly the source's fit's where the source did not
     fit it from positions (nothing to choose its level on; the level from positions:
     tests/test_acc_positions.py)."""
-    from imu_learn.baselines.traditional import ACC_BIAS_ONLY
     from imu_learn.calib.profile import FloorFit
     from imu_learn.calib.sources import CalibInputs, Source
 
     class VoLike(Source):
         def floor_terms(self):
-            return {"cutoffs_hz": (None,), "acc_prior": ACC_BIAS_ONLY}
+            return {"cutoffs_hz": (None,), "held": ("acc",)}
 
         def match_kernel(self, inp):
             return np.full(3, 1 / 3)  # a reference 3 IMU samples apart: its triangle

@@ -13,7 +13,6 @@ import numpy as np
 import pytest
 
 from imu_learn.baselines.base import FitSettings
-from imu_learn.baselines.traditional import ACC_BIAS_ONLY
 from imu_learn.calib import fit as ff
 from imu_learn.calib.reference import FrameFit
 from imu_learn.calib.sources import (
@@ -123,7 +122,7 @@ def test_a_known_gyro_is_recovered_from_a_20_hz_reference_only_through_its_inter
                          g_up=np.zeros((2, 3)), rate_hz=20.0, resolves_acceleration=False)
     kern = src.match_kernel(inp)
     assert len(kern) == 19
-    terms = {"cutoffs_hz": (None,), "acc_prior": ACC_BIAS_ONLY}
+    terms = {"cutoffs_hz": (None,), "held": ("acc",)}
 
     def gyro_of(x: CalibInputs):
         m, _ = ff.fit_once(x.train, x.val, x.settings, terms=terms)

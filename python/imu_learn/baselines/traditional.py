@@ -89,7 +89,7 @@ from imu_learn.data.types import Segment, sample_rate_hz
 from imu_learn.util.threads import thread_limits
 
 DEFAULT_CUTOFFS: Tuple[Optional[float], ...] = (None, 40.0, 20.0, 10.0, 5.0)
-ACC_BIAS_ONLY = 1e6  # ``acc_prior`` that holds M_a at the identity (|M_a - I| below 1e-9 on real data)
+BIAS_ONLY = {"gyro": np.r_[9:12], "acc": np.r_[9:12]}  # what a sensor in ``held`` fits: its bias alone
 TOL = 1e-8  # the solve's stopping rule (relative cost decrease or step; module doc)
 ACC_TOL = 1e-12  # the accelerometer stage's: a residual there is a product with Φ (~1 ms), so it runs to the end
 
@@ -278,14 +278,39 @@ def _huber_cost(r: np.ndarray, delta: float) -> float:
     return float(np.where(n <= delta, 0.5 * n * n, delta * (n - 0.5 * delta)).sum())
 
 
+class Subset:
+    """Residuals of a full θ restricted to its ``free`` entries, the rest held at ``full``'s values."""
+
+    def __init__(self, res: Any, free: np.ndarray, full: np.ndarray) -> None:
+        self.res, self.free, self.full = res, np.asarray(free), np.asarray(full, dtype=np.float64)
+
+    def theta(self, x: np.ndarray) -> np.ndarray:
+        th = self.full.copy()
+        th[self.free] = x
+        return th
+
+    def __call__(self, x: np.ndarray) -> np.ndarray:
+        return self.res(self.theta(x))
+
+    def jacobian(self, x: np.ndarray, r: np.ndarray) -> np.ndarray:
+        return self.res.jacobian(self.theta(x), r, self.free)
+
+
 def _solve(res: Any, x0: np.ndarray, prior_idx: np.ndarray, prior: float, delta: float, max_iter: int,
-           tol: Optional[float] = None) -> np.ndarray:
-    """Levenberg–Marquardt with Huber IRLS weights on Σ ρ_δ(|r_j(θ)|) + ½ prior² |θ[prior_idx]|².
+           tol: Optional[float] = None, free: Optional[np.ndarray] = None) -> np.ndarray:
+    """Levenberg–Marquardt with Huber IRLS weights on Σ ρ_δ(|r_j(θ)|) + ½ prior² |θ[prior_idx]|²
+    (``free``: over those entries of θ alone, the others held at ``x0``'s values).
 
     ``res(θ)`` gives the residuals (R,) and ``res.jacobian(θ, r)`` their exact Jacobian (R, P) (both
     of :meth:`Traditional.fit`'s stages have one). Stops when a step lowers the cost by at most
     ``tol`` of it or moves θ by at most ``tol`` (1 + |θ|) (default: the residuals' own ``tol``, else
     :data:`TOL`), or when no damping finds a lower cost."""
+    if free is not None:
+        free = np.asarray(free, dtype=np.int64)
+        out = np.array(x0, dtype=np.float64)
+        out[free] = _solve(Subset(res, free, out), out[free], np.flatnonzero(np.isin(free, prior_idx)), prior, delta,
+                           max_iter, getattr(res, "tol", TOL) if tol is None else tol)
+        return out
     tol = getattr(res, "tol", TOL) if tol is None else tol
     P = len(x0)
     pmask = np.zeros(P)
@@ -357,7 +382,7 @@ class Traditional(Method):
         max_shift: float = 3.0,
         offset_window: int = 10,
         threads: int = 1,
-        acc_prior: Optional[float] = None,
+        held: Tuple[str, ...] = (),
     ) -> None:
         self.cutoffs_hz = tuple(cutoffs_hz)
         self.filter_order = filter_order
@@ -371,9 +396,9 @@ class Traditional(Method):
         self.max_shift = max_shift
         self.offset_window = offset_window
         self.threads = threads
-        # the prior on the accelerometer matrix (M_a - I); None: ``prior``. A large one (ACC_BIAS_ONLY) holds
-        # M_a at the identity: a reference that cannot resolve accelerations observes the acc bias only
-        self.acc_prior = acc_prior
+        # the sensors ("gyro", "acc") whose bias alone is fitted, their matrix (and the gyro's G) held at the
+        # identity (zero): a reference that cannot resolve accelerations observes the acc bias only
+        self.held = tuple(held)
         self.params = TraditionalParams.identity()
 
     # -- applying the model ---------------------------------------------------------------------
@@ -420,7 +445,8 @@ class Traditional(Method):
             return _RotResiduals(w)
 
         theta_g, c_g, val_rot, wg = self._fit_at_best_cutoff(
-            rot, lambda c: tr.windows(c, None), lambda c: va.windows(c, None), grid, np.zeros(21), g_idx, self.huber_rot)
+            rot, lambda c: tr.windows(c, None), lambda c: va.windows(c, None), grid, np.zeros(21), g_idx, self.huber_rot,
+            self._free("gyro"))
         g_before, g_after = _rms(rot(wg), np.zeros(21)), _rms(rot(wg), theta_g)
 
         # 2. accel with the gyro model fixed: the same on velocity/position residuals (the rotations
@@ -437,7 +463,7 @@ class Traditional(Method):
 
         theta_a, c_a, val_vel, wa = self._fit_at_best_cutoff(
             vel, lambda c: tr.windows(c_g, c), lambda c: va.windows(c_g, c), grid, np.zeros(12), a_idx, self.huber_vel,
-            self._acc_prior)
+            self._free("acc"))
         # "before" = raw IMU (identity model, no filter) on the same windows
         raw = tr.windows(None, None)
         a_before = _rms(_VelResiduals(raw.gyro, raw), np.zeros(12))  # the identity gyro model: the raw rates
@@ -479,9 +505,10 @@ class Traditional(Method):
         w = tr.windows(start.cutoff_gyro, start.cutoff_acc)
         g0 = np.concatenate([(start.M_g - np.eye(3)).ravel(), start.b_g, start.G.ravel()])
         a0 = np.concatenate([(start.M_a - np.eye(3)).ravel(), start.b_a])
-        theta_g = _solve(_RotResiduals(w), g0, np.r_[0:9, 12:21], self.prior, self.huber_rot, self.max_iter)
+        theta_g = _solve(_RotResiduals(w), g0, np.r_[0:9, 12:21], self.prior, self.huber_rot, self.max_iter,
+                         free=self._free("gyro"))
         vel = _VelResiduals(_gyro_model(theta_g, w.gyro, w.acc_g), w)
-        theta_a = _solve(vel, a0, np.r_[0:9], self._acc_prior, self.huber_vel, self.max_iter)
+        theta_a = _solve(vel, a0, np.r_[0:9], self.prior, self.huber_vel, self.max_iter, free=self._free("acc"))
         self.params = TraditionalParams(
             M_g=np.eye(3) + theta_g[:9].reshape(3, 3), b_g=theta_g[9:12].copy(), G=theta_g[12:21].reshape(3, 3).copy(),
             M_a=np.eye(3) + theta_a[:9].reshape(3, 3), b_a=theta_a[9:12].copy(),
@@ -504,24 +531,24 @@ class Traditional(Method):
         kept = tau if got < zero else 0.0
         return kept, {"tau_samples": [kept], "tau_fitted": [tau], "tau_val_cost": [zero, got]}
 
-    @property
-    def _acc_prior(self) -> float:
-        return self.prior if self.acc_prior is None else self.acc_prior
+    def _free(self, sensor: str) -> Optional[np.ndarray]:
+        """The entries of ``sensor``'s θ that are fitted (None: all)."""
+        return BIAS_ONLY[sensor] if sensor in self.held else None
 
     def _fit_at_best_cutoff(self, residuals: Callable, train_at: Callable, val_at: Callable, grid: list,
-                            theta0: np.ndarray, idx: np.ndarray, huber: float, prior: Optional[float] = None) -> tuple:
+                            theta0: np.ndarray, idx: np.ndarray, huber: float, free: Optional[np.ndarray] = None
+                            ) -> tuple:
         """One stage of :meth:`fit`: solve at the grid's first cutoff, score every cutoff on the
-        validation windows, re-solve at the best one (``prior``: on ``idx``, default ``self.prior``).
-        Returns (theta, chosen cutoff, validation RMS per cutoff, the training windows at the chosen
-        cutoff)."""
-        prior = self.prior if prior is None else prior
+        validation windows, re-solve at the best one (the prior on ``idx``; ``free``: only those entries
+        solved, :func:`_solve`). Returns (theta, chosen cutoff, validation RMS per cutoff, the training
+        windows at the chosen cutoff)."""
         first = grid[0]
-        theta = _solve(residuals(train_at(first)), theta0, idx, prior, huber, self.max_iter)
+        theta = _solve(residuals(train_at(first)), theta0, idx, self.prior, huber, self.max_iter, free=free)
         val = [_rms(residuals(val_at(c)), theta) for c in grid]
         chosen = grid[int(np.argmin(val))]
         windows = train_at(chosen)
         if chosen != first:
-            theta = _solve(residuals(windows), theta, idx, prior, huber, self.max_iter)
+            theta = _solve(residuals(windows), theta, idx, self.prior, huber, self.max_iter, free=free)
         return theta, chosen, val, windows
 
     # -- persistence ----------------------------------------------------------------------------

@@ -72,10 +72,10 @@ def fit_once(train: List[Segment], val: List[Segment], settings: FitSettings,
 def refit_once(method: TraditionalTiming, train: List[Segment], val: List[Segment], settings: FitSettings,
                max_windows: int) -> TraditionalTiming:
     """``method``'s floor refitted on a part of its data: the time offset searched again, the affine
-    parameters solved again from ``method``'s (its cutoffs and its acc prior kept;
+    parameters solved again from ``method``'s (its cutoffs and what it holds at the prior kept;
     :meth:`TraditionalTiming.refit`)."""
     seed_all(settings.seed)
-    m = TraditionalTiming(max_windows=max_windows, acc_prior=method.acc_prior)
+    m = TraditionalTiming(max_windows=max_windows, held=method.held)
     m.refit(list(train), list(val), method.params, settings)
     return m
 

@@ -80,6 +80,7 @@ from imu_learn.baselines.base import FitSettings
 from imu_learn.baselines.timing import RotationWindows, fit_offset_near, shifted
 from imu_learn.baselines.traditional import (
     DEFAULT_CUTOFFS,
+    Subset,
     _Data,
     _gyro_model,
     _rms,
@@ -155,31 +156,13 @@ def free_indices(sensor: str, level: str) -> np.ndarray:
     return np.arange(21 if sensor == "gyro" else 12)
 
 
-class _Subset:
-    """Residuals of a full θ restricted to the ``free`` entries (the rest held at ``full``'s values)."""
-
-    def __init__(self, res: Any, free: np.ndarray, full: np.ndarray) -> None:
-        self.res, self.free, self.full = res, np.asarray(free), np.asarray(full, dtype=np.float64)
-
-    def theta(self, x: np.ndarray) -> np.ndarray:
-        th = self.full.copy()
-        th[self.free] = x
-        return th
-
-    def __call__(self, x: np.ndarray) -> np.ndarray:
-        return self.res(self.theta(x))
-
-    def jacobian(self, x: np.ndarray, r: np.ndarray) -> np.ndarray:
-        return self.res.jacobian(self.theta(x), r, self.free)
-
-
 def solve_level(res: Any, theta: np.ndarray, free: np.ndarray, huber: float) -> np.ndarray:
     """θ with its ``free`` entries solved from their current values (the floor's prior on M − I and G)."""
     out = np.zeros_like(theta)
     if free.size == 0:
         return out
     prior_idx = np.flatnonzero((free < 9) | (free >= 12))
-    x = _solve(_Subset(res, free, np.zeros_like(theta)), theta[free], prior_idx, PRIOR, huber, MAX_ITER)
+    x = _solve(Subset(res, free, np.zeros_like(theta)), theta[free], prior_idx, PRIOR, huber, MAX_ITER)
     out[free] = x
     return out
 

@@ -36,7 +36,6 @@ from typing import Any, Callable, Dict, List, Optional, Sequence, Tuple
 import numpy as np
 
 from imu_learn.baselines.base import FitSettings
-from imu_learn.baselines.traditional import ACC_BIAS_ONLY
 from imu_learn.calib import fit as ff
 from imu_learn.calib.acc_positions import AccFit, AccOptions, fit_acc_from_positions, recording_spread
 from imu_learn.calib.frames import default_gap_s
@@ -391,7 +390,7 @@ class PosesSource(Source):
         held at the identity."""
         if self.frame is None or self.frame.resolves_acceleration:
             return {}
-        return {"cutoffs_hz": (None,), "acc_prior": ACC_BIAS_ONLY}
+        return {"cutoffs_hz": (None,), "held": ("acc",)}
 
     def fit_floor(self, inp: CalibInputs, progress: Progress = lambda s: None, uncertainty: bool = True) -> FloorFit:
         """The affine floor; on a reference whose stamps were moved by its own lag, the time offset kept
@@ -417,9 +416,7 @@ class PosesSource(Source):
             fit.log["time_offset_fitted_on_the_moved_reference"] = [fit.floor.params.time_offset]
             fit.floor = fit.floor.with_params(time_offset=TIME_OFFSET_PRIOR_SAMPLES)
             fit.std = replace(fit.std, time_offset=np.float64(np.nan))
-        if self.floor_terms():  # the bias-only accelerometer: its matrix held at the identity by a prior,
-            # written as the identity it stands for (not 1 - 3e-11), its spread unknown
-            fit.floor = fit.floor.with_params(M_a=np.eye(3))
+        if self.floor_terms():  # the bias-only accelerometer: its matrix held at the identity, its spread unknown
             fit.std = replace(fit.std, M_a=np.full((3, 3), np.nan))
         if self.frame is not None and not self.frame.resolves_acceleration and self.acc_options is not None:
             fit = self.acc_from_positions(inp, fit, progress, uncertainty)

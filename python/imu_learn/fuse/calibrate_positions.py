@@ -11,7 +11,7 @@ A reference of positions alone cannot be compared with the gyroscope directly
    aligned onto the IMU stamps (:func:`imu_learn.data.loading.align`: slerp, velocity from a local
    quadratic fit of the positions) as a 6-DoF reference.
 2. The bias-only floor against it: :func:`imu_learn.calib.fit.fit_once` with ``terms`` holding every
-   matrix at the identity and G at zero (``prior`` and ``acc_prior`` = ``ACC_BIAS_ONLY``), no
+   matrix at the identity and G at zero (``held`` = both sensors: the biases alone solved), no
    low-pass (``cutoffs_hz=(None,)``) and no time offset (``fit_offset=False``): TraditionalTiming's own
    windowed rotation and velocity residuals, robust (Huber), so the gyro bias is the robust mean of
    ω_imu − ω_smoothed over its windows and the acc bias that of the velocity increments. Its standard
@@ -78,9 +78,7 @@ from imu_learn.infer.rates import recording_device
 Progress = Callable[[str], None]
 
 WHY = "from positions via the navigator's smoothed attitude"
-BIAS_ONLY = 1e6  # the priors that hold M_g, G and M_a at the identity / zero (baselines.traditional.ACC_BIAS_ONLY)
 FLOOR_KEYS = OBSERVABLE
-HELD = ("M_g", "G", "M_a")  # what the bias-only fit holds at its prior (the fit log's held_at_prior_max_abs)
 BIASES = ("b_g", "b_a")  # what it fits
 
 
@@ -328,10 +326,9 @@ def fit_biases(train: List[Segment], val: List[Segment], settings: FitSettings, 
     """(bias-only floor, its standard errors (of b_g and b_a from ``blocks`` time blocks; the rest, held
     at the prior, NaN), the fit log):
     :func:`imu_learn.calib.fit.fit_once` with the matrices held (module docstring)."""
-    terms = {"cutoffs_hz": (None,), "prior": BIAS_ONLY, "acc_prior": BIAS_ONLY, "fit_offset": False}
+    terms = {"cutoffs_hz": (None,), "held": ("gyro", "acc"), "fit_offset": False}
     method, log = ff.fit_once(train, val, settings, max_windows, terms)
-    p, prior = TraditionalParams.from_dict(method.to_dict()), TraditionalParams.identity()
-    held = {k: float(np.max(np.abs(p.estimate(k) - prior.estimate(k)))) for k in HELD}
+    p = TraditionalParams.from_dict(method.to_dict())
     floor = bias_floor(p.b_g, p.b_a)
     per: List[TraditionalParams] = []
     for tr, _ in ff.time_blocks(train, blocks).values():
@@ -344,7 +341,7 @@ def fit_biases(train: List[Segment], val: List[Segment], settings: FitSettings, 
     std = TraditionalParams.unknown()  # what is held at its prior has none
     if k >= 2:
         std = replace(std, **{n: np.std(v, axis=0, ddof=1) / math.sqrt(k) for n, v in values.items()})
-    info = {"log": log, "held_at_prior_max_abs": held, "blocks": {n: v.tolist() for n, v in values.items()}}
+    info = {"log": log, "blocks": {n: v.tolist() for n, v in values.items()}}
     return floor, std, info
 
 
@@ -438,7 +435,7 @@ def positions_floor(imu_path: Path, ref_path: Path, opts: PositionsOptions = Pos
                            "change_b_a": d_a.tolist(), "std_b_g": std.b_g.tolist(), "std_b_a": std.b_a.tolist(),
                            "smoother_final_bias_imu": {"b_g": (M.T @ fb[:3]).tolist(), "b_a": (M.T @ fb[3:]).tolist()},
                            "keyframes": summ["keyframes"], "fixes": summ.get("position_fixes"),
-                           "fit": {"held_at_prior_max_abs": info["held_at_prior_max_abs"], "blocks": info["blocks"]},
+                           "fit": {"blocks": info["blocks"]},
                            "seconds": round(time.perf_counter() - t0, 1)})
             progress(f"positions: pass {k + 1}: gyro bias {_vec(total_g)} rad/s (change {_vec(d_g)}, std "
                      f"{_vec(std.b_g)}), acc bias {_vec(total_a)} m/s^2 (change {_vec(d_a)}, std {_vec(std.b_a)})")
@@ -457,7 +454,7 @@ def positions_floor(imu_path: Path, ref_path: Path, opts: PositionsOptions = Pos
                           "imu_noise": None if opts.imu_noise is None else list(opts.imu_noise),
                           "keyframe_hz": opts.keyframe_hz, "nhc": opts.nhc, "gravity_mps2": gravity},
             "passes": len(passes), "converged": bool(converged),
-            "floor_fit": "calib.fit.fit_once, terms cutoffs_hz=(None,), prior=acc_prior=1e6 (M_g, G, M_a held), "
+            "floor_fit": "calib.fit.fit_once, terms cutoffs_hz=(None,), held=(gyro, acc) (M_g, G, M_a held), "
                          "fit_offset=False",
         }
         return PositionsFloor(floor, std, observed(), reference, passes, train, val, gravity)
