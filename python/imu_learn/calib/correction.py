@@ -69,7 +69,8 @@ class Request:
 @dataclass
 class Recording:
     """The recording's IMU as read: ``name`` names it in messages (the input path), ``fmt`` the layout
-    it was read as, ``given_format`` the ``--format`` asked for, ``imu_name`` its device if given."""
+    it was read as, ``given_format`` the ``--format`` asked for, ``imu_name`` its device if given,
+    ``gyro_unit`` the unit a user's CSV declared for its gyro columns (None: the format fixes it)."""
 
     name: str
     t_ns: Optional[np.ndarray]
@@ -78,6 +79,7 @@ class Recording:
     fmt: str = ""
     given_format: str = "auto"
     imu_name: Optional[str] = None
+    gyro_unit: Optional[str] = None
 
     @property
     def device(self) -> Optional[str]:
@@ -287,8 +289,9 @@ def from_calibration(path: Path) -> Plan:
 
 
 def check(plan: Plan, rec: Recording, force: bool = False) -> Optional[float]:
-    """The recording's rate (None: no stamps); stops on a rate more than 5 % off (unless ``force``)
-    and logs a warning line for each mismatch it lets through."""
+    """The recording's rate (None: no stamps); stops on a rate more than 5 % off or on a gyro unit the
+    training data contradict (:func:`imu_learn.infer.guard.unit_mistake`), unless ``force``, and logs a
+    warning line for each mismatch it lets through."""
     if rec.t_ns is None and plan.needs_stamps:
         raise InvalidInputError(f"{rec.name} has no stamps of its own ({rec.fmt}); {plan.stamps_for} needs them")
     rate = sample_rate_hz(rec.t_ns) if rec.t_ns is not None else None
@@ -296,6 +299,11 @@ def check(plan: Plan, rec: Recording, force: bool = False) -> Optional[float]:
         logger.warning(line)
     for line in rates.unchecked(rate, plan.made_for):
         logger.info(line)
+    unit = guard.unit_mistake(plan.training, rec.gyro, rec.gyro_unit, plan.what)
+    if unit and not force:
+        raise InvalidInputError(f"{rec.name}: {unit}, or --force to apply it anyway")
+    if unit:
+        logger.warning("%s: %s (applied: --force)", rec.name, unit)
     return rate
 
 

@@ -84,7 +84,8 @@ def request(args: argparse.Namespace) -> correction.Request:
 
 
 def recording(args: argparse.Namespace, src: ImuSource) -> correction.Recording:
-    return correction.Recording(str(args.input), src.t_ns, src.gyro, src.acc, src.fmt, args.format, args.imu_name)
+    return correction.Recording(str(args.input), src.t_ns, src.gyro, src.acc, src.fmt, args.format, args.imu_name,
+                                src.layout.gyro_unit if src.layout is not None else None)
 
 
 def add_bias_step(args: argparse.Namespace, plan: correction.Plan) -> None:

@@ -584,8 +584,9 @@ def read_body_imu(src: Sources, opts: NavigateOptions, sol: Optional[RtkSolution
         profile=src.profile if floor else None, checkpoint=src.checkpoint, calibration=src.calibration,
         noise_profile=None if floor else src.profile, force=src.force, variance="if-head", command="imu-learn navigate"))
     label = input_label(src, opts, plan, floor)
-    fixed = correction.correct(plan, correction.Recording(str(src.input), t_ns, gyro, acc, fmt, src.fmt, src.imu_name),
-                               src.force)
+    rec = correction.Recording(str(src.input), t_ns, gyro, acc, fmt, src.fmt, src.imu_name,
+                               src.columns.gyro_unit if src.columns is not None else None)
+    fixed = correction.correct(plan, rec, src.force)
     gyro, acc, var = fixed.gyro, fixed.acc, fixed.var
     acc_imu = acc
     mounting = None

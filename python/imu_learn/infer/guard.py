@@ -25,7 +25,10 @@ training flight already moves its shares by more than a different device does):
   on a training recording (plus 1e-4 rad/s, 1e-3 m/s^2), per axis.
 
 Any statistic outside is a warning (one line naming the worst few); the verdict and every figure go
-into refine's summary. It warns, never stops: a recording can be unlike the training data and still
+into refine's summary. One case stops (:func:`unit_mistake`, before any work): the gyro's per-axis medians
+outside the location bound as read and inside it once the unit the user declared (``--gyro-unit``) is
+swapped for the other (x 180/pi, x pi/180): the profile's own device then decides the unit. Otherwise it
+warns, never stops: a recording can be unlike the training data and still
 be refined well, and one like it can still be refined badly; the guard says only that the model is
 used outside what it saw. A checkpoint or profile without ``inputs`` (written before this) cannot be
 checked: one info line.
@@ -125,6 +128,39 @@ def _check(name: str, value: Any, lo: np.ndarray, hi: np.ndarray, allowed_lo: np
     return out
 
 
+def _location_bounds(recs: List[Dict[str, Any]], key: str) -> Tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """(lo, hi, allowed lo, allowed hi) of a location statistic: the training's range widened by
+    max(half of it, :data:`SHIFT_FLOOR`) either side."""
+    lo, hi = _training_range(recs, key)
+    m = np.maximum(0.5 * (hi - lo), SHIFT_FLOOR[key])
+    return lo, hi, lo - m, hi + m
+
+
+# the unit a user declared for the gyro columns -> (the factor from what was read to what the other unit
+# reads, the other unit's option)
+OTHER_GYRO_UNIT = {"deg/s": (180.0 / math.pi, "drop --gyro-unit deg/s (the columns are in rad/s)"),
+                   "rad/s": (math.pi / 180.0, "add --gyro-unit deg/s")}
+
+
+def unit_mistake(training: Optional[Dict[str, Any]], gyro: np.ndarray, gyro_unit: Optional[str], what: str
+                 ) -> Optional[str]:
+    """One line (None: no such mistake) where the gyro's per-axis medians [rad/s, as read in ``gyro_unit``]
+    lie outside the location bound of ``what``'s training recordings and inside it once read in the other
+    unit (module doc). ``gyro_unit`` None: the format fixes the unit (nothing declared to doubt)."""
+    if not training or not training.get("recordings") or gyro_unit not in OTHER_GYRO_UNIT or not len(gyro):
+        return None
+    _, _, a_lo, a_hi = _location_bounds(training["recordings"], "gyro_median")
+    med = np.median(np.asarray(gyro, dtype=np.float64), axis=0)
+    k, fix = OTHER_GYRO_UNIT[gyro_unit]
+    outside = (med < a_lo) | (med > a_hi)
+    if not outside.any() or np.any((med * k < a_lo) | (med * k > a_hi)):
+        return None
+    axes = "".join("xyz"[i] for i in np.flatnonzero(outside))
+    return (f"the gyro's median per axis ({', '.join(f'{v:.3g}' for v in med)} rad/s, read as {gyro_unit}) lies "
+            f"outside what {what}'s device reads on axis {axes} (allowed {', '.join(f'{lo:.3g}..{hi:.3g}' for lo, hi in zip(a_lo, a_hi))}) "
+            f"and inside it read in the other unit (x{k:.4g}): {fix}")
+
+
 def compare(training: Dict[str, Any], recording: Dict[str, Any],
             residual: Optional[Dict[str, Any]] = None, training_residual: Optional[Sequence[Dict[str, Any]]] = None,
             device_only: bool = False) -> List[Dict[str, Any]]:
@@ -139,9 +175,7 @@ def compare(training: Dict[str, Any], recording: Dict[str, Any],
     for sensor in ("gyro", "acc"):
         mean_std = np.mean([r[f"{sensor}_std"] for r in recs], axis=0)
         key = f"{sensor}_median"
-        lo, hi = _training_range(recs, key)
-        m = np.maximum(0.5 * (hi - lo), SHIFT_FLOOR[key])
-        out += _check(key, recording[key], lo, hi, lo - m, hi + m, "within max(half the training range, the floor)")
+        out += _check(key, recording[key], *_location_bounds(recs, key), "within max(half the training range, the floor)")
         if device_only:
             continue
         lo, hi = _training_range(recs, f"{sensor}_p01")
@@ -156,9 +190,7 @@ def compare(training: Dict[str, Any], recording: Dict[str, Any],
             lo, hi = _training_range(recs, key)
             out += _check(key, recording[key], lo, hi, np.full(len(lo), -np.inf), hi * SPREAD_FACTOR,
                           f"at most {SPREAD_FACTOR:g} x the largest")
-    lo, hi = _training_range(recs, "acc_norm_median")
-    m = np.maximum(0.5 * (hi - lo), SHIFT_FLOOR["acc_norm_median"])
-    out += _check("acc_norm_median", recording["acc_norm_median"], lo, hi, lo - m, hi + m,
+    out += _check("acc_norm_median", recording["acc_norm_median"], *_location_bounds(recs, "acc_norm_median"),
                   f"within max(half the training range, {SHIFT_FLOOR['acc_norm_median']:g} m/s^2)")
     if residual is not None and training_residual:
         for sensor in ("gyro", "acc"):
