@@ -91,3 +91,33 @@ def core_read(path):
     from imu_learn import _imu_core as core
 
     return core.read_asl_imu(str(path))
+
+
+def test_refine_warns_where_the_bias_model_was_trained_on_another_device(tmp_path, caplog):
+    """A bias estimator learns its own device's bias (trained on gyro minus that device's mean): one warning
+    line where the profile is another device's, none where they agree (the DATASET_SENSOR naming)."""
+    import logging
+    import math
+
+    from imu_learn.calib.profile import Affine, Profile
+    from imu_learn.cli.refine import main
+    from test_still_bias import IMU_REL, write_asl
+
+    t, g, a = imu(45.0)
+    src = write_asl(tmp_path / "in", t, g, a)
+    for device in ("fetch", "tumvi"):
+        save_bias_net(BiasNet(), tmp_path / f"{device}.pt", {"device": device})
+    eye = Affine(np.eye(3), np.zeros(3), "rad/s")
+    prof = Profile(device="tumvi_bmi160", sample_rate_hz=200.0, time_offset_s=0.0, time_offset_s_std=math.nan,
+                   gyro=eye, acc=Affine(np.eye(3), np.zeros(3), "m/s^2"), g_sensitivity=np.zeros((3, 3)),
+                   gravity_mps2=9.80665, gravity_mps2_std=math.nan, floor={})
+    prof.save(tmp_path / "profile.json")
+    base = ["--profile", str(tmp_path / "profile.json"), "--input", str(src / IMU_REL), "--bias", "learned"]
+    with caplog.at_level(logging.WARNING):
+        assert main([*base, "--out", str(tmp_path / "a.csv"), "--bias-model", str(tmp_path / "fetch.pt")]) == 0
+    lines = [r.getMessage() for r in caplog.records if "trained on device" in r.getMessage()]
+    assert len(lines) == 1 and "'fetch'" in lines[0] and "'tumvi_bmi160'" in lines[0], lines
+    caplog.clear()
+    with caplog.at_level(logging.WARNING):
+        assert main([*base, "--out", str(tmp_path / "b.csv"), "--bias-model", str(tmp_path / "tumvi.pt")]) == 0
+    assert not [r for r in caplog.records if "trained on device" in r.getMessage()]

@@ -65,7 +65,7 @@ def load_method_class(name: str) -> Optional[Callable[[], Method]]:
         floor = importlib.import_module("imu_learn.baselines.profile_floor").ProfileFloor
         return lambda: floor(Path(name[len(PREFIX):]))
     if name not in REGISTRY:
-        raise ConfigError(f"methods: unknown method {name!r} (known: {', '.join(REGISTRY)})")
+        raise ConfigError(f"methods: unknown method {name!r} (known: {known()})")
     entry = REGISTRY[name]
     if callable(entry):
         return entry
@@ -86,3 +86,8 @@ def load_method_class(name: str) -> Optional[Callable[[], Method]]:
     if len(pick) != 1:
         raise ConfigError(f"methods: {module} defines {len(pick)} Method classes named {name!r}; cannot pick one")
     return pick[0]
+
+
+def known() -> str:
+    """The method names an unknown one is told of: the registered ones and ``profile:PATH``."""
+    return ", ".join([*REGISTRY, f"{PREFIX}PATH (a profile.json)"])

@@ -17,7 +17,7 @@ from imu_learn.cli.common import add_imu_input_options, csv_layout, run_command
 from imu_learn.data.formats import FORMATS, USER_CSV, ImuSource, read_imu_source
 from imu_learn.errors import ConfigError
 from imu_learn.infer import rates
-from imu_learn.infer.bias import REGISTRY, bias_step, choices, help_text
+from imu_learn.infer.bias import REGISTRY, bias_step, choices, help_text, model_device
 from imu_learn.infer.bias import bias_entry as own_bias_entry
 from imu_learn.infer.rewrite import rewrite_recording, summary_path, write_summary
 from imu_learn.util.extras import require_extra
@@ -93,6 +93,13 @@ def add_bias_step(args: argparse.Namespace, plan: correction.Plan) -> None:
         raise ConfigError("--bias-model is the estimator of --bias learned (or one of auto's)")
     if args.bias == "learned" or args.bias_model is not None:
         require_extra("train", f"imu-learn refine --bias {args.bias} --bias-model")
+    if args.bias_model is not None:  # its device checked as a model's or profile's is (a warning line each)
+        made = rates.MadeFor(f"bias model {args.bias_model}", None, model_device(args.bias_model))
+        for m in plan.made_for:
+            if made.device and m.device and not rates.same_device(made.device, m.device):
+                logger.warning(f"{made.what} was trained on device {made.device!r} but {m.what} is for {m.device!r}: "
+                               "a bias estimator learns its own device's bias; use one trained on this device")
+        plan.made_for.append(made)
     if args.bias != "none":
         plan.steps.append(bias_step(args.bias, plan.gravity, plan.measured, args.bias_model, plan.prior))
         plan.words.append(REGISTRY[args.bias].words)

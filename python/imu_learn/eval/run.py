@@ -295,8 +295,8 @@ def check_profiles(methods: List[str], test_entries: List[str], test: Seq[Segmen
         if not name.startswith(PROFILE_PREFIX):
             continue
         path = name[len(PROFILE_PREFIX):]
-        if not Path(path).is_file():  # missing: the method's own reader names it
-            continue
+        if not Path(path).is_file():  # before any method is fitted or written
+            raise FileNotFoundError(2, "No such file or directory (--methods profile:PATH)", path)
         profile = Profile.load(path)  # malformed or edited: refine's reader names the field
         finding = applied_floor_finding(profile.floor, profile.gravity_mps2, name)
         if finding is not None:
@@ -317,7 +317,7 @@ def check_profiles(methods: List[str], test_entries: List[str], test: Seq[Segmen
             seen.add(rec)
             # refine's rate rule: a profile's time offset and low-pass are in samples of its rate
             rates.check(rec, sample_rate_hz(seg.t_ns), None, [rates.MadeFor(f"profile {path}", profile.sample_rate_hz,
-                                                                             profile.device)])
+                                                                             profile.device)], forceable=False)
             _entry, warning, _info = guard.verdict(profile.inputs or None, guard.input_stats(seg.t_ns, seg.gyro, seg.acc),
                                                    f"profile {path}", device_only=True)
             if warning:

@@ -300,6 +300,14 @@ def _learned(ctx: Context, t_ns: np.ndarray, gyro: np.ndarray, acc: np.ndarray) 
     return BiasEstimate("learned", np.asarray(b, dtype=np.float64), info_diag(np.full(3, LEARNED_STD)), detail)
 
 
+def model_device(path: Path) -> Optional[str]:
+    """The device a ``--bias-model`` was trained on (its record's ``device``; None: not recorded); the file is
+    read and checked here, before the recording is."""
+    from imu_learn.nn.bias_net import load_bias_net
+
+    return load_bias_net(path, with_record=True)[1].get("device")
+
+
 def _rest_sigma(prior: BiasPrior) -> np.ndarray:
     return (np.full(3, STILL_STD_FLOOR) if prior.still_error_std is None
             else np.maximum(STILL_STD_FLOOR, np.asarray(prior.still_error_std)))

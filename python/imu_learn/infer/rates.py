@@ -52,7 +52,7 @@ def _key(name: str) -> str:
     return "".join(c for c in name.lower() if c.isalnum())
 
 
-def _same_device(recording: str, made_for: str) -> bool:
+def same_device(recording: str, made_for: str) -> bool:
     """Whether a recording of device ``recording`` is one ``made_for`` (devices joined by "+") was made for:
     the same name, or a profile named ``DATASET_SENSOR`` (the shipped ones: ``fetch_debias``,
     ``tumvi_bmi160``) for a recording of that dataset's format; case and punctuation aside."""
@@ -61,19 +61,21 @@ def _same_device(recording: str, made_for: str) -> bool:
 
 
 def check(recording: str, rate_hz: Optional[float], device: Optional[str], made_for: Sequence[MadeFor],
-          force: bool = False) -> List[str]:
+          force: bool = False, forceable: bool = True) -> List[str]:
     """The warning lines for applying each of ``made_for`` to a recording (``recording`` names it)
     of rate ``rate_hz`` and ``device``; raises :class:`InvalidInputError` (one line, both rates)
-    for a rate more than :data:`TOLERANCE` off unless ``force``."""
+    for a rate more than :data:`TOLERANCE` off unless ``force`` (``forceable``: the command has a
+    ``--force``, which the line then offers)."""
     warnings: List[str] = []
     for m in made_for:
         if rate_hz and m.sample_rate_hz and abs(rate_hz - m.sample_rate_hz) > TOLERANCE * m.sample_rate_hz:
             line = (f"{recording} is sampled at {hz(rate_hz)} but {m.what} is for {hz(m.sample_rate_hz)} "
                     f"(more than {TOLERANCE * 100:.0f} % off)")
             if not force:
-                raise InvalidInputError(f"{line}; use a model or profile made at this rate, or --force to apply it anyway")
+                raise InvalidInputError(f"{line}; use a model or profile made at this rate"
+                                        + (", or --force to apply it anyway" if forceable else ""))
             warnings.append(f"{line}; applied anyway (--force)")
-        if device and m.device and not _same_device(device, m.device):
+        if device and m.device and not same_device(device, m.device):
             warnings.append(f"{recording} is from device {device!r} but {m.what} was made for {m.device!r}; check it "
                             "on your recording first (docs/refine.md)")
     return warnings
