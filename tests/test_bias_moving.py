@@ -5,6 +5,8 @@ uncertainty (a constant estimate cannot: the ramp is many of its sigmas long); t
 ``moving`` subtracts the per-sample bias and is gated by a profile's measured figures (``auto``'s constant where they keep it out)."""
 from __future__ import annotations
 
+import logging
+
 import numpy as np
 
 from imu_learn.core.bias_gravity import MovingSettings, hat_weights, moving_gravity_bias
@@ -71,7 +73,7 @@ def test_hat_weights_interpolate_and_sum_to_one():
     assert np.allclose(W @ np.array([0.0, 1.0, 3.0]), [0.0, 0.0, 0.5, 1.0, 2.0, 3.0, 3.0])
 
 
-def test_the_registry_subtracts_per_sample_and_the_gate_keeps_it_out():
+def test_the_registry_subtracts_per_sample_and_the_gate_keeps_it_out(caplog):
     t, g, a, b = ramping()
     ctx = Context(9.81, BiasPrior.from_bias_std([0.01] * 3, "test"))
     est = moving_raw(ctx, t, g, a)
@@ -86,7 +88,10 @@ def test_the_registry_subtracts_per_sample_and_the_gate_keeps_it_out():
                               "still": {"error": 0.001, "profile_alone": 0.004}}}
     worse = BiasPrior.from_bias_std([0.01] * 3, "test", measured=measured)
     sink, sink_auto = {}, {}
-    out, _, _ = bias_step("moving", 9.81, sink, prior=worse)(t, g, a)
+    with caplog.at_level(logging.WARNING):
+        out, _, _ = bias_step("moving", 9.81, sink, prior=worse)(t, g, a)
+    said = [r.getMessage() for r in caplog.records if r.getMessage().startswith("--bias moving:")]
+    assert len(said) == 1 and "than still (1)" in said[0] and "auto's constant estimate" in said[0], said
     auto, _, _ = bias_step("auto", 9.81, sink_auto, prior=worse)(t, g, a)
     assert np.array_equal(out, auto) and np.ptp((g - out)[:, 0]) < 1e-12  # constant
     assert sink["moving"].detail["moving_gate"]["entered"] is False
