@@ -16,7 +16,7 @@ import pytest
 from imu_learn.cli import main
 from imu_learn.data.formats import CsvColumns, read_imu_source, write_imu
 from imu_learn.data.formats.csv_columns import read_csv_columns
-from imu_learn.errors import ColumnCountError, ImplausibleInputError
+from imu_learn.errors import ColumnCountError, ImplausibleInputError, InvalidInputError
 from imu_learn.infer import rewrite
 from imu_learn.util.staging import can_create_in, check_writable
 
@@ -389,3 +389,15 @@ def test_an_out_where_nothing_can_be_made_is_named_before_the_work(tmp_path, cap
     assert can_create_in(tmp_path) and not can_create_in(Path("/proc"))
     with pytest.raises(PermissionError, match="cannot be written"):
         check_writable(Path("/proc/nope"))
+
+
+def test_a_folder_with_a_users_csv_option_names_its_imu_file(tmp_path):
+    """``--skip-bad-lines`` (or any option of a user's CSV) on a recording's folder: one line naming the
+    options and the IMU file inside to give instead (not --columns alone: none was given)."""
+    imu = tmp_path / "rec" / "mav0" / "imu0" / "data.csv"
+    imu.parent.mkdir(parents=True)
+    imu.write_text("t,gx,gy,gz,ax,ay,az\n")
+    with pytest.raises(InvalidInputError) as e:
+        read_imu_source(tmp_path / "rec", columns=CsvColumns(skip_bad_lines=True, columns_named=False))
+    msg = str(e.value)
+    assert "--skip-bad-lines" in msg and str(imu) in msg and "give its IMU file as --input" in msg, msg

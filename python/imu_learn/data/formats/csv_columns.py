@@ -141,7 +141,10 @@ def read_imu_source(path: Path, layout: CsvColumns) -> ImuSource:
     lines skipped. The samples are checked first (:func:`read_checked`)."""
     path = Path(path)
     if path.is_dir():
-        raise InvalidInputError(f"{path}: a folder; a user's CSV (--columns) is one file")
+        imu = next(iter(sorted(path.glob("*/imu0/data.csv")) + sorted(path.glob("imu0/data.csv"))), None)
+        raise InvalidInputError(f"{path}: a folder; the options of a user's own CSV (--columns, --time-unit, --gyro-unit, "
+                                "--acc-unit, --skip-bad-lines) read one file: give its IMU file as --input"
+                                + (f" ({imu})" if imu is not None else ""))
     imu, skipped = read_checked(path, layout)
     return ImuSource(NAME, path, path.parent, Path(path.name), imu.t_ns, imu.gyro, imu.acc, layout=layout,
                      skipped_lines=skipped)
