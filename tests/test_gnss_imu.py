@@ -112,6 +112,22 @@ def test_reader_drops_a_cut_last_line(tmp_path, tail):
     assert len(log.imu.t_ns) == 3
 
 
+def test_a_folder_with_one_log_is_detected_and_one_with_two_names_the_file(tmp_path):
+    from imu_learn.data.formats import detect_format, read_imu_source
+
+    d = tmp_path / "drive"
+    d.mkdir()
+    f = write_csv(d / "imu.csv", rows_at([1000, 1010, 1020, 1030]))
+    write_tag(d / "imu.csv.tag", end_ms=20)
+    (d / "notes.csv").write_text("a,b\n")  # a CSV without a tag is not a log
+    assert detect_format(d) == "gnss-imu" and detect_format(f) == "gnss-imu"
+    assert len(read_imu_source(d).t_ns) == 3
+    write_csv(d / "imu2.csv", rows_at([1000, 1010, 1020, 1030]))
+    write_tag(d / "imu2.csv.tag", end_ms=20)
+    with pytest.raises(InvalidInputError, match=r"give it with --format .*gnss-imu.*or a CSV of your own"):
+        detect_format(d)
+
+
 def test_reader_last_line_with_newline_is_kept_when_whole(tmp_path):
     f = write_csv(tmp_path / "imu.csv", rows_at([1000, 1010, 1020, 1030]))
     write_tag(tmp_path / "imu.csv.tag", end_ms=20)

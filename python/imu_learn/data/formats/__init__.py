@@ -73,7 +73,8 @@ def detect_format(path: Path) -> str:
         if module.detect(path):
             return module.NAME
     raise InvalidInputError(
-        f"{path}: cannot tell the dataset format from its layout; pass format= one of {sorted(FORMATS)}"
+        f"{path}: cannot tell the dataset format from its layout; give it with --format (format= in Python), one of "
+        f"{', '.join(sorted(FORMATS))}, or a CSV of your own with --columns"
     )
 
 

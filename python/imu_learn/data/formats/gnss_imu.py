@@ -239,16 +239,20 @@ def tag_path(path: Path) -> Path:
     return path.with_name(path.name + ".tag")
 
 
-def detect(path: Path) -> bool:
-    """An IMU ``.csv`` file with its RTKLIB time tag ``<name>.csv.tag`` beside it (only a file: a
-    folder may hold several logs)."""
-    path = Path(path)
+def _tagged(path: Path) -> bool:
     return path.is_file() and path.suffix.lower() == ".csv" and tag_path(path).is_file()
+
+
+def detect(path: Path) -> bool:
+    """An IMU ``.csv`` file with its RTKLIB time tag ``<name>.csv.tag`` beside it, or a folder holding
+    exactly one such log (a folder of several names none: the log is then given by its file)."""
+    path = Path(path)
+    return _tagged(path) or (path.is_dir() and sum(1 for p in path.glob("*.csv") if _tagged(p)) == 1)
 
 
 def find_recordings(root: Path) -> List[Path]:
     """Every IMU CSV with its time tag under ``root``."""
-    return sorted(p for p in Path(root).rglob("*.csv") if detect(p))
+    return sorted(p for p in Path(root).rglob("*.csv") if _tagged(p))
 
 
 def _imu_file(path: Path) -> Path:
