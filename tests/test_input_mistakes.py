@@ -401,3 +401,19 @@ def test_a_folder_with_a_users_csv_option_names_its_imu_file(tmp_path):
         read_imu_source(tmp_path / "rec", columns=CsvColumns(skip_bad_lines=True, columns_named=False))
     msg = str(e.value)
     assert "--skip-bad-lines" in msg and str(imu) in msg and "give its IMU file as --input" in msg, msg
+
+
+def test_an_out_naming_a_file_of_another_format_is_refused(tmp_path, capsys):
+    """OUT ``um.hdf5`` for a CSV input: refused in one line (it was made a folder named um.hdf5 holding a CSV)."""
+    src = tmp_path / "imu.csv"
+    rng = np.random.default_rng(0)
+    g, a = 0.01 + 1e-3 * rng.standard_normal((400, 3)), np.array([0.1, 0.2, 9.8]) + 0.01 * rng.standard_normal((400, 3))
+    src.write_text("t,gx,gy,gz,ax,ay,az\n" + "".join(f"{i * 5_000_000},{','.join(f'{v:.6f}' for v in (*g[i], *a[i]))}\n"
+                                                       for i in range(400)))
+    out = tmp_path / "um.hdf5"
+    profile = Path(__file__).resolve().parents[1] / "models" / "profiles" / "euroc_adis16448" / "profile.json"
+    assert main(["refine", "--profile", str(profile), "--input", str(src), "--columns", "t,gx,gy,gz,ax,ay,az",
+                 "--out", str(out)]) == 2
+    err = capsys.readouterr().err
+    assert "names a .hdf5 file" in err and "give OUT ending in .csv or a folder" in err, err
+    assert not out.exists()

@@ -32,6 +32,9 @@ from imu_learn.util.atomic import atomic_write_text
 from imu_learn.util.interrupts import held_interrupts
 from imu_learn.util.staging import check_can_make
 
+# file endings that name a data file, not a folder: an OUT ending in one other than the input's is refused
+DATA_SUFFIXES = (".csv", ".txt", ".tum", ".hdf5", ".h5", ".mat", ".bag", ".mcap", ".db3", ".json", ".npz", ".npy")
+
 
 def output_file(src: ImuSource, out: Path) -> Path:
     """The file to write for OUT: OUT itself when it names a file of the input's kind, else the
@@ -78,6 +81,10 @@ def check_output(src: ImuSource, input: Path, output: Path, copy_folder: bool = 
     if src.fmt == formats.rosbag.NAME and (output / formats.rosbag.ROS2_METADATA).is_file():
         raise InvalidInputError(f"{output} exists already and is a ROS 2 bag (a bag folder is never replaced, nor "
                                 "written into): remove it or give OUT a new name")
+    own = src.imu_file.suffix.lower()
+    if output.suffix.lower() in DATA_SUFFIXES and output.suffix.lower() != own and not output.is_dir():
+        raise InvalidInputError(f"OUT {output} names a {output.suffix} file, but refine writes the input's own format "
+                                f"({src.fmt}, a {own or 'folder'} file): give OUT ending in {own} or a folder")
     target = output_file(src, output)
     if _same(target, src.imu_file) or _same(output, input):
         raise InvalidInputError(f"refusing to overwrite the input: OUT {output} is the input {input}")
