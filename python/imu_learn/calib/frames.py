@@ -48,20 +48,27 @@ def segments(imu: ImuData, gt: GroundTruth, max_gap_s: float, shift_s: float = 0
                              getattr(e, "imu_path", None)) from e
 
 
-def gap_hint(gt: GroundTruth, max_gap_s: float) -> Optional[str]:
-    """Why a reference with frequent dropouts leaves no stretch long enough at ``max_gap_s``, and the
-    ``--max-gap-s`` that keeps it (1.1 × its 99th-percentile spacing, to 10 ms: a motion-capture system
-    dropping a frame or five, Fetch's up to 66 ms); None where its spacing is not the cause."""
+def bridging_gap_s(gt: GroundTruth, max_gap_s: float) -> Optional[float]:
+    """The gap that keeps a reference with frequent dropouts whole where ``max_gap_s`` splits it: 1.1 × its
+    99th-percentile spacing, to 10 ms (a motion-capture system dropping a frame or five, Fetch's up to 66 ms);
+    None where its spacing is not the cause (no gap above ``max_gap_s``, or the spacing itself above 0.5 s)."""
     d = np.diff(np.asarray(gt.t_ns, dtype=np.int64)) * 1e-9
-    n_gaps = int(np.sum(d > max_gap_s))
-    if len(d) == 0 or n_gaps == 0:
+    if len(d) == 0 or not np.any(d > max_gap_s):
         return None
     s = math.ceil(110 * float(np.percentile(d, 99))) / 100
-    if s <= max_gap_s or s > 0.5:
+    return None if s <= max_gap_s or s > 0.5 else s
+
+
+def gap_hint(gt: GroundTruth, max_gap_s: float, option: str = "--max-gap-s") -> Optional[str]:
+    """Why a reference with frequent dropouts leaves no stretch long enough at ``max_gap_s``, and the
+    ``option`` value that keeps it (:func:`bridging_gap_s`); None where its spacing is not the cause."""
+    s = bridging_gap_s(gt, max_gap_s)
+    if s is None:
         return None
-    return (f"the reference has {n_gaps} gaps longer than {max_gap_s:g} s (the longest {1e3 * float(d.max()):.0f} ms), "
-            f"which leave no stretch long enough; --max-gap-s {s:g} bridges 99 % of its spacing by interpolation "
-            "(fine for a slow platform; a fast one wants a reference without dropouts)")
+    d = np.diff(np.asarray(gt.t_ns, dtype=np.int64)) * 1e-9
+    return (f"the reference has {int(np.sum(d > max_gap_s))} gaps longer than {max_gap_s:g} s (the longest "
+            f"{1e3 * float(d.max()):.0f} ms), which leave no stretch long enough; {option} {s:g} bridges 99 % of its "
+            "spacing by interpolation (fine for a slow platform; a fast one wants a reference without dropouts)")
 
 
 def log_q(q: np.ndarray) -> np.ndarray:

@@ -8,9 +8,20 @@ from pathlib import Path
 from typing import Any, Callable, List, Optional, Sequence
 
 from imu_learn.cli.common import add_imu_input_options, csv_layout, run_command
-from imu_learn.data.formats import read_recording
+from imu_learn.data.datasets import MAX_GAP_S, dataset_max_gap_s
+from imu_learn.data.formats import detect_format, read_recording
+from imu_learn.data.types import GroundTruth
 from imu_learn.errors import ConfigError
-from imu_learn.eval.groundtruth import CheckOptions, check, fmt_vec, gt_label, pick_best, summary_line
+from imu_learn.eval.groundtruth import (
+    CheckOptions,
+    check,
+    default_gap_s,
+    fmt_vec,
+    gt_label,
+    kept_note,
+    pick_best,
+    summary_line,
+)
 
 DESCRIPTION = """Check a recording's ground truth against its own IMU, before training on it or scoring with it:
 bias-removed relative pose RMSE over 10 and 200 IMU samples, the rotation R_off from the ground
@@ -23,7 +34,7 @@ EPILOG = """examples:
   imu-learn groundtruth --input datasets/euroc/MH_04_difficult
   imu-learn groundtruth --input datasets/euroc/V1_01_easy --groundtruth datasets/euroc/V1_01_easy/groundtruth_pose.tum \\
       --groundtruth datasets/euroc/V1_01_easy/groundtruth_state_20hz.csv
-  imu-learn groundtruth --input robot/run1 --format fetch --max-gap-s 0.1
+  imu-learn groundtruth --input robot/run1 --format fetch                  (its motion capture's gaps: 0.1 s by default)
   imu-learn groundtruth --input my_imu.csv --columns t,_,gx,gy,gz,ax,ay,az --time-unit s --groundtruth mocap.tum"""
 
 
@@ -32,8 +43,10 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--groundtruth", type=Path, action="append", metavar="FILE",
                    help="a ground-truth file to check (repeat for several; default: the format's own)")
     p.add_argument("--format", default="auto", help="the recording's layout (default: detected)")
+    own = ", ".join(f"{k} {v:g}" for k, v in MAX_GAP_S.items())
     p.add_argument("--max-gap-s", type=float, default=None, metavar="S",
-                   help="split at ground-truth gaps longer than S (default 0.05, or 1.5 periods of sparse ground truth)")
+                   help="split at ground-truth gaps longer than S (default 0.05, or 1.5 periods of sparse ground truth; "
+                        f"at least a dataset's own where its reference is known to drop frames: {own})")
     p.add_argument("--yaw-from-acc", action="store_true",
                    help="fit R_off on specific force (a ground robot turning about z only: the gyro leaves its yaw free; "
                         "chosen by itself where the rates turn about one axis only)")
@@ -86,8 +99,15 @@ def positions_only(path: Path) -> bool:
     return False
 
 
+def gap_s(args: argparse.Namespace, fmt: Optional[str], gt: GroundTruth) -> float:
+    """The ground-truth gap that splits the recording: --max-gap-s, else the check's default
+    (:func:`default_gap_s`), raised to the dataset's own where its reference needs one (labels' default)."""
+    if args.max_gap_s is not None:
+        return args.max_gap_s
+    return max(default_gap_s(gt), dataset_max_gap_s(fmt) or 0.0)
+
+
 def run(args: argparse.Namespace, rest: List[str], keep: Callable[[Any], None]) -> int:
-    options = CheckOptions(max_gap_s=args.max_gap_s, yaw_from_acc=args.yaw_from_acc)
     rows = []
     columns = csv_layout(args)
     for gt_file in args.groundtruth or [None]:
@@ -96,9 +116,15 @@ def run(args: argparse.Namespace, rest: List[str], keep: Callable[[Any], None]) 
                               "calibrate takes positions as --groundtruth (the biases they observe), navigate as --aiding")
         imu, gt = read_recording(args.input, args.format, groundtruth=gt_file, imu_topic=args.imu_topic,
                                  groundtruth_topic=args.groundtruth_topic, columns=columns)
-        row, _ = check(imu, gt, args.input.name, label(args.input, gt_file), options)
+        fmt = None if columns is not None else detect_format(args.input) if args.format == "auto" else args.format
+        gap = gap_s(args, fmt, gt)
+        row, _ = check(imu, gt, args.input.name, label(args.input, gt_file),
+                       CheckOptions(max_gap_s=gap, yaw_from_acc=args.yaw_from_acc))
         rows.append(row)
         print("\n".join(describe(row)), flush=True)
+        note = kept_note(imu, gt, row.samples, gap)
+        if note is not None:
+            print(f"  note: {note}", flush=True)
     best = pick_best(rows)[args.input.name]
     if not best.rates_match:  # no file to use: refused, naming why (the verdict's causes)
         raise ConfigError(f"{args.input.name}: no ground truth matches its IMU: {best.gt}: {best.verdict}")

@@ -3,7 +3,7 @@ from __future__ import annotations
 
 import os
 from pathlib import Path
-from typing import List, Tuple
+from typing import Dict, List, Optional, Tuple
 
 from imu_learn.data.formats import FORMATS
 from imu_learn.errors import InvalidInputError, NoRecordingsError
@@ -20,6 +20,20 @@ LOOKED_FOR = {
     "fetch": "folders holding mav0/imu0/data.csv with the Fetch header (# timestamp, wx, wy, wz, ax, ay, az)",
     "rosbag": "ROS 1 .bag files and ROS 2 bag folders (holding metadata.yaml)",
 }
+
+# The ground-truth gap [s] a dataset's reference is known to need bridged, where the loader's 0.05 s
+# (AlignOptions.max_gap_s) splits it: the default of `imu-learn labels` (--max-gap) and of
+# `imu-learn groundtruth` (--max-gap-s) for that format. Fetch: its ~100 Hz motion capture drops frames
+# (gaps up to 70 ms, 55-190 per recording longer than 50 ms, which leave 04_eight no 1 s segment and
+# 08_origin 151 of 4585 samples); 0.1 s keeps every recording whole, the gaps bridged by interpolation
+# (configs/fetch.toml).
+MAX_GAP_S: Dict[str, float] = {"fetch": 0.1}
+
+
+def dataset_max_gap_s(dataset: Optional[str]) -> Optional[float]:
+    """The ground-truth gap [s] that ``dataset``'s reference needs (:data:`MAX_GAP_S`); None where the
+    caller's own default holds."""
+    return MAX_GAP_S.get(dataset) if dataset else None
 
 
 def find_recordings(dataset: str, root: Path) -> List[Tuple[str, Path]]:

@@ -30,7 +30,7 @@ from imu_learn.data.cache import (
     write_progress,
     write_segment,
 )
-from imu_learn.data.datasets import find_recordings
+from imu_learn.data.datasets import dataset_max_gap_s, find_recordings
 from imu_learn.data.formats import CsvColumns
 from imu_learn.data.loading import AlignOptions, load_recording
 from imu_learn.data.types import Segment as SeqType
@@ -110,6 +110,13 @@ def build_recording(out: Path, src: RecordingSource, settings: Dict[str, Any]) -
     return entry, list(rec.segments)
 
 
+def dataset_options(dataset: Optional[str]) -> AlignOptions:
+    """How ``labels`` aligns a dataset's recordings by default: :class:`AlignOptions` with the dataset's own
+    ``max_gap_s`` where its reference needs one (:func:`~imu_learn.data.datasets.dataset_max_gap_s`)."""
+    gap = dataset_max_gap_s(dataset)
+    return AlignOptions() if gap is None else AlignOptions(max_gap_s=gap)
+
+
 @holding_cache_lock("out")  # two runs on one folder take turns instead of mixing their files
 def build_cache(
     dataset: str,
@@ -118,13 +125,15 @@ def build_cache(
     window: int = 200,
     stride: int = 10,
     gravity: float = 9.81,
-    options: AlignOptions = AlignOptions(),
+    options: Optional[AlignOptions] = None,
     rebuild: bool = False,
     progress: bool = True,
     topics: Optional[Dict[str, str]] = None,
 ) -> dict:
-    """``topics``: ``imu_topic`` / ``groundtruth_topic`` for ROS bags (each may be left out where
+    """``options``: how ground truth is aligned (None: :func:`dataset_options`).
+    ``topics``: ``imu_topic`` / ``groundtruth_topic`` for ROS bags (each may be left out where
     every bag has one)."""
+    options = dataset_options(dataset) if options is None else options
     topics = {k: v for k, v in (topics or {}).items() if v}
     settings = {
         **label_settings(dataset, window, stride, gravity),

@@ -39,6 +39,7 @@ from scipy.signal import savgol_filter
 
 from imu_learn.calib.frames import (  # noqa: F401  (re-exported: the check's vocabulary)
     Offset,
+    bridging_gap_s,
     default_gap_s,
     fit_acc_rotation,
     fit_offset,
@@ -65,11 +66,13 @@ from imu_learn.calib.reference import (
 from imu_learn.core.integration import integrate_windows, window_labels
 from imu_learn.core.quat import quat_conj, quat_from_matrix, quat_mul
 from imu_learn.data.formats import read_recording
+from imu_learn.data.loading import AlignOptions
 from imu_learn.data.types import GroundTruth, ImuData, Segment, median_period_ns
 from imu_learn.errors import ReferenceFrameError, TooShortError
 from imu_learn.score.metrics import fit_startup_bias, index_at, relative_pose_errors, remove_bias, rmse, with_imu
 
 MIN_SAMPLES = 200  # the longest scored window (n=200): a shorter recording cannot be checked
+KEPT_NOTE = 0.8  # a check keeping less of the IMU samples inside the reference's span says so (kept_note)
 DRIFT_GAP_S = 0.3  # segments for the 5 s / 20 s drift (windows must fit inside one segment)
 G = 9.81
 
@@ -264,6 +267,25 @@ def gap_stats(gt: GroundTruth) -> Tuple[int, int, float, float]:
     """(gaps > 50 ms, gaps > 0.3 s, longest gap [s], time in gaps > 50 ms [s])."""
     d = np.diff(gt.t_ns) * 1e-9
     return int((d > 0.05).sum()), int((d > 0.3).sum()), float(d.max()), float(d[d > 0.05].sum())
+
+
+def kept_note(imu: ImuData, gt: GroundTruth, kept: int, max_gap_s: float, option: str = "--max-gap-s") -> Optional[str]:
+    """What a check (or labels) says when its segments keep less than :data:`KEPT_NOTE` of the IMU samples
+    inside the reference's span: how many, the gaps that split it and the ``option`` value that keeps more
+    (:func:`bridging_gap_s`); None where it keeps enough."""
+    t = np.asarray(imu.t_ns, dtype=np.int64)
+    spanned = int(np.count_nonzero((t >= gt.t_ns[0]) & (t <= gt.t_ns[-1]))) if len(gt.t_ns) else 0
+    if spanned == 0 or kept >= KEPT_NOTE * spanned:
+        return None
+    d = np.diff(np.asarray(gt.t_ns, dtype=np.int64)) * 1e-9
+    n_gaps = int(np.sum(d > max_gap_s))
+    keeps = bridging_gap_s(gt, max_gap_s)
+    fix = (f"{option} {keeps:g} keeps more, bridging 99 % of its spacing by interpolation (fine for a slow platform)"
+           if keeps is not None else f"a larger {option} keeps more, bridging them by interpolation (fine only "
+           "where the motion is slow across them)")
+    return (f"kept {kept} of the {spanned} IMU samples inside the reference's span ({100 * kept / spanned:.0f} %): "
+            f"its {n_gaps} gaps longer than {max_gap_s:g} s (the longest {1e3 * float(d.max()):.0f} ms) split it "
+            f"into stretches, those under {AlignOptions.min_segment_s:g} s dropped; {fix}")
 
 
 def survival(imu: ImuData, gt: GroundTruth, max_gap_s: float) -> Tuple[float, int, float, float, float]:
