@@ -208,3 +208,20 @@ def test_find_recordings_uses_each_layouts_own_rule(tmp_path, dataset):
     names = [n for n, _p in find_recordings(dataset, tmp_path)]
     assert names == (["a_one_01_trial", "b_two_01_trial"] if name == "broad" else
                      ["a_MH_01", "b_V1_01"] if name == "asl" else ["a_one", "b_two"])
+
+
+@pytest.mark.parametrize("end", [b"\r\n", b"\n"])
+def test_an_asl_imu_file_is_written_back_with_its_own_line_ends(tmp_path, end):
+    """EuRoC's zips hold CRLF files: a refined copy keeps them (and LF stays LF), every line."""
+    src_file = SHIPPED_ASL / "mav0" / "imu0" / "data.csv"
+    lines = src_file.read_bytes().replace(b"\r\n", b"\n").split(b"\n")[:300]
+    rec = tmp_path / "rec"
+    (rec / "mav0" / "imu0").mkdir(parents=True)
+    (rec / "mav0" / "imu0" / "data.csv").write_bytes(end.join(lines) + end)
+    src = read_imu_source(rec)
+    out = tmp_path / "out.csv"
+    write_imu(src, out, src.gyro + 1e-3, src.acc)
+    raw = out.read_bytes()
+    assert raw.count(b"\n") == len(lines) and raw.count(b"\r\n") == (len(lines) if end == b"\r\n" else 0)
+    back = read_imu_source(out, "asl")
+    np.testing.assert_array_equal(back.gyro, src.gyro + 1e-3)

@@ -29,7 +29,8 @@ def read_asl_imu(path: _Path, allow_float_timestamps: bool = False) -> Tuple[_I6
 def read_asl_imu_header(path: _Path) -> str:
     """The file's first line, as written."""
 
-def write_asl_imu(path: _Path, t_ns: _I64, gyro: _F64, acc: _F64, header: Optional[str] = None) -> None:
+def write_asl_imu(path: _Path, t_ns: _I64, gyro: _F64, acc: _F64, header: Optional[str] = None,
+                  crlf: bool = False) -> None:
     """Write an ASL IMU CSV atomically (temp file + rename)."""
 
 def read_asl_state(path: _Path, allow_float_timestamps: bool = False) -> Dict[str, Optional[_F64]]:

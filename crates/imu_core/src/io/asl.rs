@@ -166,7 +166,14 @@ pub(crate) fn check_stamps(t_ns: &[i64]) -> Result<()> {
 /// Writes an ASL IMU file: integer ns, floats in shortest round-trip form (they read back
 /// bit-for-bit). `header` defaults to [`IMU_HEADER`]; a given one must be a valid IMU header.
 pub fn write_imu(path: impl AsRef<Path>, samples: &ImuSamples, header: Option<&str>) -> Result<()> {
+    write_imu_lines(path, samples, header, false)
+}
+
+/// [`write_imu`] with every line ended by `\r\n` where `crlf` (the EuRoC zips' own line ends, kept
+/// where a refined copy replaces such a file).
+pub fn write_imu_lines(path: impl AsRef<Path>, samples: &ImuSamples, header: Option<&str>, crlf: bool) -> Result<()> {
     let path = path.as_ref();
+    let end = if crlf { "\r\n" } else { "\n" };
     let header = header.unwrap_or(IMU_HEADER);
     if header.contains(['\n', '\r']) || !header_matches(header, IMU_HEADER) {
         return Err(ImuError::invalid(format!(
@@ -184,15 +191,15 @@ pub fn write_imu(path: impl AsRef<Path>, samples: &ImuSamples, header: Option<&s
     check_stamps(&samples.t_ns)?;
     let mut out = String::with_capacity(header.len() + 1 + n * 128);
     out.push_str(header);
-    out.push('\n');
+    out.push_str(end);
     for i in 0..n {
         let (g, a) = (samples.gyro[i], samples.acc[i]);
         check_finite("gyro", i, &g)?;
         check_finite("acc", i, &a)?;
         // Writing to a String cannot fail.
-        let _ = writeln!(
+        let _ = write!(
             out,
-            "{},{},{},{},{},{},{}",
+            "{},{},{},{},{},{},{}{end}",
             samples.t_ns[i], g[0], g[1], g[2], a[0], a[1], a[2]
         );
     }

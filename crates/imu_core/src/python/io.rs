@@ -56,7 +56,7 @@ fn read_asl_imu_header(py: Python<'_>, path: PathBuf) -> PyResult<String> {
 }
 
 #[pyfunction]
-#[pyo3(signature = (path, t_ns, gyro, acc, header=None))]
+#[pyo3(signature = (path, t_ns, gyro, acc, header=None, crlf=false))]
 fn write_asl_imu(
     py: Python<'_>,
     path: PathBuf,
@@ -64,13 +64,14 @@ fn write_asl_imu(
     gyro: PyReadonlyArray2<'_, f64>,
     acc: PyReadonlyArray2<'_, f64>,
     header: Option<String>,
+    crlf: bool,
 ) -> PyResult<()> {
     let s = ImuSamples {
         t_ns: slice1(&t_ns, "t_ns")?.to_vec(),
         gyro: rows::<3>(&gyro, "gyro")?.to_vec(),
         acc: rows::<3>(&acc, "acc")?.to_vec(),
     };
-    py.allow_threads(|| asl::write_imu(&path, &s, header.as_deref()))
+    py.allow_threads(|| asl::write_imu_lines(&path, &s, header.as_deref(), crlf))
         .map_err(to_py)
 }
 

@@ -122,11 +122,14 @@ def read_imu_source(path: Path) -> ImuSource:
 
 
 def write_imu(src: ImuSource, out: Path, gyro: np.ndarray, acc: np.ndarray) -> None:
-    """``out``: ``src``'s IMU CSV with gyro and acc replaced. The original header line and integer
-    ns stamps are kept; values are the shortest text that reads back to the same float64."""
+    """``out``: ``src``'s IMU CSV with gyro and acc replaced. The original header line, its line ends
+    (the EuRoC zips' CRLF or LF) and integer ns stamps are kept; values are the shortest text that reads
+    back to the same float64."""
     header = core.read_asl_imu_header(str(src.imu_file)).rstrip("\r\n")
+    with open(src.imu_file, "rb") as fh:
+        crlf = fh.readline().endswith(b"\r\n")
     g, a = np.ascontiguousarray(gyro), np.ascontiguousarray(acc)
-    atomic_write_path(out, lambda tmp: core.write_asl_imu(str(tmp), src.t_ns, g, a, header))
+    atomic_write_path(out, lambda tmp: core.write_asl_imu(str(tmp), src.t_ns, g, a, header, crlf))
 
 
 # --------------------------------------------------------------------------------------------
