@@ -74,3 +74,13 @@ def test_groundtruth_says_when_its_gap_keeps_much_less_than_the_recording(fetch,
     notes = [line for line in out.splitlines() if "note:" in line]
     assert len(notes) == 1, out
     assert "kept 1537 of the 4911 IMU samples" in notes[0] and "--max-gap-s 0.07 keeps more" in notes[0], notes
+
+
+def test_labels_says_where_its_gaps_leave_a_recording_without_windows(fetch, tmp_path, capsys):
+    rc, out, err = run(["labels", "fetch", "--data-root", fetch.parent, "--out", tmp_path / "c", "-q",
+                        "--max-gap", "0.06"], capsys)
+    assert rc == 0, err
+    said = [line for line in out.splitlines() if "a larger --max-gap (now 0.06 s) keeps more" in line]
+    assert any(line.startswith("04_eight:") for line in said), out
+    rc, out, err = run(["labels", "fetch", "--data-root", fetch.parent, "--out", tmp_path / "d", "-q"], capsys)
+    assert rc == 0 and "keeps more" not in out, out

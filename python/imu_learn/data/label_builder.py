@@ -224,16 +224,22 @@ def cached_segments(
 
 
 def summary(manifest: dict, out: Path) -> str:
-    """What ``imu-learn labels`` prints: one line per recording (segments, windows, samples dropped)
-    and the cache folder."""
+    """What ``imu-learn labels`` prints: one line per recording (segments, windows, samples dropped; a
+    recording whose gaps leave more than a fifth of its samples inside the reference's span without a
+    window says so, naming ``--max-gap``) and the cache folder."""
     lines = []
     for r in manifest["recordings"]:
         rep = r["report"]
         segs = ", ".join(f"{s['samples']} samples / {s['windows']} windows" for s in r["segments"])
+        kept, in_gaps = sum(s["samples"] for s in r["segments"]), rep.get("dropped_in_gaps", 0)
+        unused = in_gaps + sum(s["samples"] for s in r["segments"] if not s["windows"])
+        lost = (f"; {100 * unused / (kept + in_gaps):.0f} % of its samples inside the reference's span are in its "
+                f"gaps or in stretches too short for a window: a larger --max-gap (now "
+                f"{manifest['settings']['align']['max_gap_s']:g} s) keeps more") if unused > 0.2 * (kept + in_gaps) else ""
         lines.append(
             f"{r['name']}: {len(r['segments'])} segment(s) [{segs}]; dropped "
             f"{rep.get('dropped_before', 0)} before, {rep.get('dropped_after', 0)} after, "
-            f"{rep.get('dropped_in_gaps', 0)} in gaps"
+            f"{in_gaps} in gaps{lost}"
         )
     lines.append(f"cache: {out} (format v{CACHE_VERSION})")
     return "\n".join(lines)
