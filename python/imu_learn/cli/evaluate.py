@@ -7,7 +7,7 @@ import time
 from pathlib import Path
 from typing import Any, Callable, List, Optional, Sequence, Tuple
 
-from imu_learn.baselines.registry import REGISTRY, is_method
+from imu_learn.baselines.registry import REGISTRY, is_method, known
 from imu_learn.cli.common import add_data_root, run_command
 from imu_learn.errors import ConfigError
 from imu_learn.eval import report
@@ -58,10 +58,11 @@ def run(args: argparse.Namespace, rest: List[str], keep: Callable[[Any], None]) 
     methods = [m.strip() for m in args.methods.split(",") if m.strip()] if args.methods else list(res.cfg.methods)
     for m in methods:
         if not is_method(m):
-            raise ConfigError(f"--methods: unknown method {m!r} (known: {', '.join(REGISTRY)})")
+            raise ConfigError(f"--methods: unknown method {m!r} (known: {known()})")
     if args.checkpoint is not None and not args.checkpoint.exists():
         raise FileNotFoundError(2, "No such file or directory", str(args.checkpoint))
     out = args.out or Path(res.cfg.reports_dir) / res.cfg.name
+    report.check_out(out)  # a report.md (or CSV) of the user's in OUT: refused before any fitting
     before = _stamp(out / "report.md")
 
     def kept() -> str:

@@ -23,6 +23,7 @@ from imu_learn.score.protocol import (
 )
 from imu_learn.util.atomic import atomic_write_bytes, atomic_write_text
 from imu_learn.util.extras import require
+from imu_learn.util.outputs import check_replaceable
 from imu_learn.util.staging import staged_dir
 
 # ---------------------------------------------------------------------------------------------
@@ -485,10 +486,40 @@ CSV_NAMES = ("relative_pose.csv", "airimu_figures.csv", "integration_error.csv",
 REPORT_NAMES = CSV_NAMES + ("result.json", "report.md") + tuple(f"integration_error_{v}.png" for v in VARIANTS)
 
 
+def is_result(path: Path) -> bool:
+    """Whether the file ``path`` is an evaluation's ``result.json`` (a JSON object with the result's
+    ``config_name``, ``methods`` and ``eval``, which every report has written)."""
+    try:
+        saved = json.loads(Path(path).read_text(encoding="utf-8"))
+    except (OSError, UnicodeDecodeError, ValueError):
+        return False
+    return (isinstance(saved, dict) and "config_name" in saved and isinstance(saved.get("methods"), list)
+            and isinstance(saved.get("eval"), dict))
+
+
+def check_out(out_dir: Path) -> None:
+    """Before any work: each file of :data:`REPORT_NAMES` already in ``out_dir`` belongs to an earlier
+    report (an evaluation's ``result.json`` is beside it), else the InvalidInputError naming it
+    (:func:`imu_learn.util.outputs.check_replaceable`): a user's report.md or CSV is never replaced."""
+    out_dir = Path(out_dir)
+    own = is_result(out_dir / "result.json")
+
+    def not_own(path: Path) -> Optional[str]:
+        if own:
+            return None
+        return "not an evaluation's result" if path.name == "result.json" else "no evaluation result.json beside it"
+
+    names = ["result.json"] + [n for n in REPORT_NAMES if n != "result.json"]  # the marker first
+    check_replaceable([out_dir / name for name in names], not_own, "evaluate", "remove it or give --out a new folder")
+
+
 def write_report(out_dir: Path, result: Dict[str, Any]) -> None:
     """Every file of the report into a staging folder, put in ``out_dir`` together at the end
     (:func:`imu_learn.util.staging.staged_dir`): an interrupted or failed rerun leaves the previous
-    report whole (its CSVs never beside another run's report.md); methods/ is kept."""
+    report whole (its CSVs never beside another run's report.md); methods/ is kept. A file of the
+    report's names that an earlier report did not write is refused (:func:`check_out`; the command
+    checks first, before fitting)."""
+    check_out(out_dir)
     rel = relative_pose_table(result)
     air = airimu_table(result)
     curves = curve_table(result)
@@ -537,7 +568,7 @@ def summary_text(result: Dict[str, Any]) -> str:
     hs = [int(n) for n in result["eval"]["horizons"]]
     n0, nl = hs[0], hs[-1]
     w = max([len(m) for m in result["methods"]] + [6])
-    head = (f"{'method':<{w}}  {'variant':<12}  {f'n={n0} t[m]':>11}  {f'n={n0} r[rad]':>12}  "
+    head = (f"{'method':<{w}}  {'variant':<12}  {f'n={n0} t[m]':>11}  {f'n={n0} r[deg]':>12}  "
             f"{f'n={nl} t[m]':>11}  {f'n={nl} r[deg]':>12}  {'1s rot[deg]':>11}  {'1s pos[m]':>10}")
     lines = [f"{result['config_name']}: test {', '.join(result['test_sequences'])}; mean over test recordings; "
              f"windows every {result['stride']} samples from {result['startup_bias_s']:g} s",
@@ -547,7 +578,7 @@ def summary_text(result: Dict[str, Any]) -> str:
             a, b, c = rel.get((m, v, n0)), rel.get((m, v, nl)), air.get((m, v))
             g = lambda d, k: _f(d[k]) if d else "-"  # noqa: E731
             lines.append(f"{m:<{w}}  {VARIANT_SHORT[v]:<12}  "
-                         f"{g(a, 'trans_m'):>11}  {g(a, 'rot_rad'):>12}  {g(b, 'trans_m'):>11}  "
+                         f"{g(a, 'trans_m'):>11}  {g(a, 'rot_deg'):>12}  {g(b, 'trans_m'):>11}  "
                          f"{(_f(b['rot_deg'], '{:.3f}') if b else '-'):>12}  "
                          f"{(_f(c['rot_1s_deg'], '{:.3f}') if c else '-'):>11}  {g(c, 'pos_1s_m'):>10}")
     peers = {x["method"]: x for x in peers_table(result) if x["sequence"] == "average"

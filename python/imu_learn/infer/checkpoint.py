@@ -48,6 +48,7 @@ from imu_learn.nn.config import ARGS_BEFORE
 from imu_learn.nn.model import ImuRefiner, ModelConfig
 from imu_learn.util.atomic import atomic_write_bytes
 from imu_learn.util.file_kind import mix_up
+from imu_learn.util.outputs import check_replaceable
 
 FORMAT = "imu_learn.checkpoint.v1"
 # What the model is for (module doc), kept at the top level of a checkpoint when known.
@@ -345,12 +346,15 @@ def strip_checkpoint(src: Path, dst: Path) -> Dict[str, Any]:
     model args, weights (normalisation buffers included), config, epoch, step, best metric, code
     version, and from ``extra`` the best epoch, training time and world size. The optimiser state
     and the metrics history are dropped; ``extra["stripped_from"]`` names the source
-    (``<run folder name>/<file>``); the config loses the machine's absolute folders
-    (:func:`without_machine_paths`). Weights are copied unchanged, so refining with the stripped
-    checkpoint gives bit-identical output. Returns the stripped state."""
+    (``<run folder name>/<file>``; a stripped source keeps its own, the run it came from); the config
+    loses the machine's absolute folders (:func:`without_machine_paths`). Weights are copied unchanged,
+    so refining with the stripped checkpoint gives bit-identical output. ``dst`` may be an earlier
+    stripped copy (it carries ``stripped_from``), never another file (:func:`check_replaceable`).
+    Returns the stripped state."""
     src, dst = Path(src), Path(dst)
     if src.exists() and dst.exists() and os.path.samefile(src, dst):
         raise CheckpointError(f"{dst}: is the source checkpoint; write the stripped copy elsewhere")
+    check_replaceable([dst], _not_stripped, "checkpoint strip", "remove it or give DST a new name")
     state = load_checkpoint(src)
     out: Dict[str, Any] = {k: state.get(k) for k in STRIPPED_KEYS}
     out.update({k: state[k] for k in RECORD_KEYS if state.get(k) is not None})
@@ -359,11 +363,31 @@ def strip_checkpoint(src: Path, dst: Path) -> Dict[str, Any]:
     out["optimizer"] = None
     extra = state.get("extra") or {}
     out["extra"] = {k: extra[k] for k in STRIPPED_EXTRA if k in extra}
-    out["extra"]["stripped_from"] = f"{src.resolve().parent.name}/{src.name}"
+    out["extra"]["stripped_from"] = extra.get("stripped_from") or f"{src.resolve().parent.name}/{src.name}"
     model_from_checkpoint(out)  # refuse to write something that does not rebuild
 
     write_checkpoint(dst, out)
     return out
+
+
+def _not_stripped(path: Path) -> Optional[str]:
+    """None where ``path`` is a checkpoint that :func:`strip_checkpoint` wrote (``extra.stripped_from``),
+    else what it is instead."""
+    try:
+        with open(path, "rb") as f:
+            if f.read(2) != b"PK":  # not a torch archive: nothing to load
+                return "not a checkpoint"
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            state = torch.load(path, map_location="cpu", weights_only=True)
+    except Exception:  # unreadable, or not a torch save: not one of strip's outputs either way
+        return "not a checkpoint"
+    if not isinstance(state, dict) or state.get("format") != FORMAT:
+        return "not an imu_learn checkpoint"
+    extra = state.get("extra")
+    if not (isinstance(extra, dict) and extra.get("stripped_from")):
+        return "a checkpoint without extra.stripped_from, which a stripped copy carries"
+    return None
 
 
 def describe(state: Dict[str, Any]) -> Dict[str, Any]:

@@ -12,6 +12,9 @@ writes into DIR:
   the model, the model args, and the largest difference of each export from the torch model
   measured right after export on the trace length and on a different length/batch.
 
+Only an earlier export's files are replaced: a ``model.json`` in DIR that is no export card, or a
+``model.ts``/``model.onnx`` whose sha256 is not the one the card beside it records, is refused before any work.
+
 Both exports take RAW IMU (gyro rad/s then acc m/s^2, the order and units of the training data):
 the per-channel mean/std normalisation is stored inside the model, and the output is the refined
 IMU (raw + correction) in the same units. For the causal model the exports are the stateless
@@ -34,6 +37,7 @@ from imu_learn.infer.windowing import windowing_of
 from imu_learn.nn.model import ImuRefiner
 from imu_learn.util.atomic import atomic_write_path, atomic_write_text
 from imu_learn.util.digest import file_sha256
+from imu_learn.util.outputs import check_replaceable
 from imu_learn.util.staging import staged_dir
 
 CHANNELS = ["gyro_x", "gyro_y", "gyro_z", "acc_x", "acc_y", "acc_z"]
@@ -254,13 +258,53 @@ OPSETS = (9, 20)  # the ONNX opsets torch's TorchScript-based exporter writes an
 OUTPUTS = ("model.ts", "model.onnx", "model.json")
 
 
+def _card(path: Path) -> Optional[Dict[str, Any]]:
+    """The export card in the file ``path`` (this format, or one written before cards named their format:
+    every card holds ``source_checkpoint`` and the exports' ``sha256``), else None."""
+    try:
+        card = json.loads(path.read_text(encoding="utf-8"))
+    except (OSError, UnicodeDecodeError, ValueError):
+        return None
+    if not (isinstance(card, dict) and card.get("format", CARD_FORMAT) == CARD_FORMAT
+            and isinstance(card.get("source_checkpoint"), dict) and isinstance(card.get("sha256"), dict)):
+        return None
+    return card
+
+
+def check_out(out: Path) -> None:
+    """Before any work: each of :data:`OUTPUTS` already in ``out`` is an earlier export's, else the
+    InvalidInputError naming it (:func:`imu_learn.util.outputs.check_replaceable`). An earlier export is
+    its card ``model.json``, and the ``model.ts`` and ``model.onnx`` whose sha256 that card records."""
+    out = Path(out)
+    card = _card(out / "model.json")
+
+    def not_own(path: Path) -> Optional[str]:
+        if card is None:
+            return "no export card model.json beside it" if path.name != "model.json" else "not an export's card"
+        if path.name == "model.json":
+            return None
+        try:
+            digest = file_sha256(path)
+        except OSError:
+            return "it cannot be read"
+        if card["sha256"].get(path.name) != digest:
+            return "its sha256 is not the one the export card model.json beside it records"
+        return None
+
+    # the card first: without it neither export can be told an earlier one
+    check_replaceable([out / name for name in ("model.json", "model.ts", "model.onnx")], not_own, "export",
+                      "remove it or give --out a new folder")
+
+
 def export(checkpoint: Path, out: Path, window: int = 200, opset: int = 17, seed: int = 0) -> Dict[str, Any]:
     """Write model.ts, model.onnx and model.json into ``out``, all three or none (a staging folder swapped
-    in at the end: a Ctrl-C or a failed export leaves ``out`` as it was); returns the JSON card."""
+    in at the end: a Ctrl-C or a failed export leaves ``out`` as it was); returns the JSON card. Files of
+    ``out`` an earlier export did not write are refused first (:func:`check_out`)."""
     if window < 2:
         raise InvalidInputError(f"--window must be >= 2, got {window}")
     if not OPSETS[0] <= int(opset) <= OPSETS[1]:
         raise ConfigError(f"--opset {opset}: the exporter writes ONNX opsets {OPSETS[0]}-{OPSETS[1]} (default 17)")
+    check_out(Path(out))
     state = load_checkpoint(Path(checkpoint))
     model = model_from_checkpoint(state).cpu().float().eval()
     example, other = example_inputs(model, window, seed)
