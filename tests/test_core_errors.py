@@ -2,6 +2,7 @@
 them: a huge, negative or zero horizon, starts past the end, a huge batch are typed errors naming
 the argument, never a pyo3 PanicException or an abort. Each case runs in a child
 process too, so an abort (which would kill pytest itself) shows up as a failure, not a crash."""
+import os
 import subprocess
 import sys
 import textwrap
@@ -179,3 +180,32 @@ def test_no_case_aborts_the_process():
     r = subprocess.run([sys.executable, "-c", CHILD], capture_output=True, text=True, timeout=120)
     assert r.returncode == 0 and "all typed" in r.stdout, (r.returncode, r.stdout, r.stderr[-2000:])
     assert "PanicException" not in r.stderr
+
+
+LIMITED = """
+import resource, sys
+import numpy as np
+resource.setrlimit(resource.RLIMIT_AS, (3 * 2**30, 3 * 2**30))
+from imu_learn import _imu_core as core, errors
+n = 2000
+t = (np.arange(n) * 5_000_000).astype(np.int64)
+g, a, p, v = (np.zeros((n, 3)) for _ in range(4))
+q = np.tile([1.0, 0.0, 0.0, 0.0], (n, 1))
+calls = {"integrate_windows": lambda: core.integrate_windows(t, g, a, np.zeros(10**5, np.int64), np.ones(10**4, np.int64)),
+         "window_labels": lambda: core.window_labels(t, p, v, q, 200, 1, [0.001] * 10**6, 9.81)}
+try:
+    calls[sys.argv[1]]()
+    print("no error")
+except (errors.InvalidInputError, MemoryError) as e:
+    print("typed", type(e).__name__)
+"""
+
+
+@pytest.mark.skipif(sys.platform != "linux", reason="RLIMIT_AS bounds the address space on Linux")
+@pytest.mark.parametrize("call", ["integrate_windows", "window_labels"])
+def test_windows_times_horizons_past_memory_is_an_error_not_an_abort(call):
+    """A request whose outputs cannot be allocated (here under a 3 GiB address-space limit): a typed
+    error or MemoryError, not the abort (SIGABRT) or PanicException it was."""
+    r = subprocess.run([sys.executable, "-c", LIMITED, call], capture_output=True, text=True, timeout=120,
+                       env={**os.environ, "RAYON_NUM_THREADS": "1", "OMP_NUM_THREADS": "1"})
+    assert r.returncode == 0 and r.stdout.startswith("typed"), (r.returncode, r.stdout, r.stderr[-500:])

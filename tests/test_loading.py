@@ -115,3 +115,28 @@ def test_every_shared_euroc_groundtruth_file_reads(shared):
     for f in sorted((shared / "euroc-groundtruth").glob("*.csv")):
         gt = read_groundtruth(f)
         assert gt.v is not None and len(gt) > 1000
+
+
+def _arrays(n: int = 2000, rate: float = 200.0):
+    t = (np.arange(n) * 1e9 / rate).astype(np.int64)
+    rng = np.random.default_rng(0)
+    imu = il.ImuData(t, 0.01 * rng.standard_normal((n, 3)), np.array([0.0, 0.0, 9.81]) + 0.1 * rng.standard_normal((n, 3)))
+    p = np.stack([np.linspace(0, 1, n), np.zeros(n), np.zeros(n)], axis=1)
+    q = np.tile([1.0, 0.0, 0.0, 0.0], (n, 1))
+    return imu, t, p, q
+
+
+def test_align_makes_nan_ground_truth_rows_gaps_and_refuses_a_nan_imu_sample():
+    """Arrays handed to ``il.align`` (not through a format's reader): a motion-capture dropout written
+    as NaN rows becomes a gap between segments, never NaN labels; a NaN IMU sample is refused."""
+    imu, t, p, q = _arrays()
+    q[900:950] = np.nan
+    rec = il.align(imu, il.GroundTruth(t, p, q))
+    assert len(rec.segments) == 2 and rec.report["gt_rows_not_finite"] == 50
+    for s in rec.segments:
+        assert np.isfinite(s.q_wxyz).all() and np.isfinite(s.v).all() and np.isfinite(s.p).all()
+    assert "gt_rows_not_finite" not in il.align(imu, il.GroundTruth(t, p, np.nan_to_num(q, nan=1.0))).report
+    gyro = imu.gyro.copy()
+    gyro[7, 1] = np.inf
+    with pytest.raises(il.InvalidInputError, match="gyro row 7 is not finite"):
+        il.align(il.ImuData(imu.t_ns, gyro, imu.acc), il.GroundTruth(t, p, q))

@@ -68,3 +68,22 @@ def test_evaluate_profile_method_gets_refines_checks(tmp_path):
         check_profiles([f"profile:{edited(tmp_path, 'implausible', swap_biases)}"], ["MH_04_difficult"], [seg])
     with pytest.raises(ProfileError, match="disagrees"):
         check_profiles([f"profile:{edited(tmp_path, 'swapped', swap_blocks)}"], ["MH_04_difficult"], [seg])
+
+
+def test_apply_refuses_stamps_it_would_resample_wrongly():
+    """Profile.apply on arrays: float seconds (truncated to int64 they were all 0 or 1), repeated or
+    reversed stamps and rows that do not match them gave finite, wrong output (up to 2 rad/s off);
+    each is now refused naming the argument. Right stamps give the same bits as before."""
+    prof = Profile.load(EUROC)
+    n = 400
+    t = np.arange(n, dtype=np.int64) * 5_000_000
+    rng = np.random.default_rng(0)
+    g, a = rng.standard_normal((n, 3)), rng.standard_normal((n, 3)) + [0.0, 0.0, 9.81]
+    out = prof.apply(t, g, a)
+    assert np.array_equal(out[0], prof.floor.apply(t, g, a)[0])
+    for bad, says in ((t * 1e-9, "integer nanoseconds"), (np.r_[t[:10], t[9:-1]], r"t_ns\[10\]"),
+                      (t[::-1].copy(), r"t_ns\[1\]")):
+        with pytest.raises(InvalidInputError, match=says):
+            prof.apply(bad, g, a)
+    with pytest.raises(InvalidInputError, match=r"gyro must be \(400, 3\)"):
+        prof.apply(t, g[:, :2], a)

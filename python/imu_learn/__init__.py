@@ -2,6 +2,7 @@
 
 Public API (see README):
     load_sequence, load_recording, read_imu, align, AlignOptions   -- data in
+    CsvColumns                                                      -- a CSV of your own (columns=)
     preintegrate, window_labels, integrate_windows                  -- increments
     BatchConfig, AugmentConfig, BatchSampler, make_batch            -- training batches
     errors: ImuError and its subclasses
@@ -12,6 +13,43 @@ command installs its Ctrl-C rule before numpy, torch or the core load.
 from __future__ import annotations
 
 import importlib
+from typing import TYPE_CHECKING, List
+
+if TYPE_CHECKING:  # what __getattr__ loads on first use, for type checkers (kept equal to _EXPORTS by a test)
+    from imu_learn._imu_core import __version__
+    from imu_learn.core.batches import AugmentConfig, Batch, BatchConfig, BatchSampler, make_batch
+    from imu_learn.core.integration import (
+        PAPER_FRACTIONS,
+        Increments,
+        WindowLabels,
+        integrate_windows,
+        preintegrate,
+        window_labels,
+    )
+    from imu_learn.core.quat import wxyz_to_xyzw, xyzw_to_wxyz
+    from imu_learn.data.formats import CsvColumns
+    from imu_learn.data.loading import AlignOptions, align, load_recording, load_sequence, read_imu
+    from imu_learn.data.types import GroundTruth, ImuData, Recording, Segment
+    from imu_learn.errors import (
+        AidingError,
+        AidingOverlapError,
+        AlignmentError,
+        CacheError,
+        ColumnCountError,
+        FloatTimestampError,
+        HeaderError,
+        ImuError,
+        InvalidInputError,
+        MissingExtraError,
+        NonFiniteError,
+        NoOverlapError,
+        NoRecordingsError,
+        NotNumericError,
+        ParseError,
+        TimestampError,
+        TooFewRowsError,
+        TooShortError,
+    )
 
 _EXPORTS = {
     "__version__": "imu_learn._imu_core",
@@ -20,6 +58,7 @@ _EXPORTS = {
                      "window_labels"), "imu_learn.core.integration"),
     **dict.fromkeys(("wxyz_to_xyzw", "xyzw_to_wxyz"), "imu_learn.core.quat"),
     **dict.fromkeys(("AlignOptions", "align", "load_recording", "load_sequence", "read_imu"), "imu_learn.data.loading"),
+    "CsvColumns": "imu_learn.data.formats",
     **dict.fromkeys(("GroundTruth", "ImuData", "Recording", "Segment"), "imu_learn.data.types"),
     **dict.fromkeys(("AidingError", "AidingOverlapError", "AlignmentError", "CacheError", "ColumnCountError",
                      "FloatTimestampError", "HeaderError", "ImuError", "InvalidInputError", "MissingExtraError",
@@ -29,7 +68,7 @@ _EXPORTS = {
 
 __all__ = [
     "__version__",
-    "AlignOptions", "align", "load_recording", "load_sequence", "read_imu",
+    "AlignOptions", "align", "load_recording", "load_sequence", "read_imu", "CsvColumns",
     "preintegrate", "window_labels", "integrate_windows", "Increments", "WindowLabels", "PAPER_FRACTIONS",
     "AugmentConfig", "BatchConfig", "BatchSampler", "Batch", "make_batch",
     "ImuData", "GroundTruth", "Segment", "Recording", "wxyz_to_xyzw", "xyzw_to_wxyz",
@@ -54,5 +93,5 @@ def __getattr__(name: str) -> object:
     raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
 
 
-def __dir__() -> list:
+def __dir__() -> List[str]:
     return sorted(set(globals()) | set(_EXPORTS))

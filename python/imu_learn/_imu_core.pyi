@@ -11,17 +11,30 @@ Index arguments (_Idx) take a 1-d uint64 or int64 array or a list of ints; a neg
 InvalidInputError (never wrapped to 2^64 - 1).
 """
 from os import PathLike
-from typing import Dict, List, Optional, Sequence, Tuple, Union
+from typing import Any, Dict, List, Optional, Sequence, Tuple, TypedDict, Union
 
 import numpy as np
 import numpy.typing as npt
 
 __version__: str
 
-_Path = Union[str, PathLike]
+_Path = Union[str, PathLike[str]]
 _I64 = npt.NDArray[np.int64]
 _Idx = Union[npt.NDArray[np.uint64], npt.NDArray[np.int64], Sequence[int]]
 _F64 = npt.NDArray[np.float64]
+
+
+class _GroundTruth(TypedDict):
+    """A ground-truth reader's result: stamps, positions and w,x,y,z quaternions always; velocity and the
+    biases where the file holds them (else None)."""
+
+    t_ns: _I64
+    p: _F64
+    q_wxyz: _F64
+    v: Optional[_F64]
+    bias_gyro: Optional[_F64]
+    bias_acc: Optional[_F64]
+
 
 def read_asl_imu(path: _Path, allow_float_timestamps: bool = False) -> Tuple[_I64, _F64, _F64]:
     """ASL IMU CSV -> (t_ns, gyro, acc)."""
@@ -33,16 +46,16 @@ def write_asl_imu(path: _Path, t_ns: _I64, gyro: _F64, acc: _F64, header: Option
                   crlf: bool = False) -> None:
     """Write an ASL IMU CSV atomically (temp file + rename)."""
 
-def read_asl_state(path: _Path, allow_float_timestamps: bool = False) -> Dict[str, Optional[_F64]]:
+def read_asl_state(path: _Path, allow_float_timestamps: bool = False) -> _GroundTruth:
     """ASL state ground truth -> {t_ns, p, q_wxyz, v, bias_gyro, bias_acc}."""
 
-def read_asl_pose(path: _Path, allow_float_timestamps: bool = False) -> Dict[str, Optional[_F64]]:
+def read_asl_pose(path: _Path, allow_float_timestamps: bool = False) -> _GroundTruth:
     """ASL pose ground truth (TUM-VI mocap0) -> {t_ns, p, q_wxyz, v=None, ...}."""
 
 def read_asl_position(path: _Path, allow_float_timestamps: bool = False) -> Tuple[_I64, _F64]:
     """ASL position file (EuRoC leica0: t, p_RS_R) -> (t_ns (N,), p (N, 3))."""
 
-def read_tum(path: _Path, allow_float_timestamps: bool = False) -> Dict[str, Optional[_F64]]:
+def read_tum(path: _Path, allow_float_timestamps: bool = False) -> _GroundTruth:
     """TUM ground truth (8 columns, or 11 with velocity) -> {t_ns, p, q_wxyz, v, ...}. '#' comment
     lines and blank lines are skipped anywhere; stamps in seconds are exact (half to even past the
     ns)."""
@@ -71,7 +84,7 @@ def write_tum(path: _Path, t_ns: _I64, p: _F64, q_wxyz: _F64) -> None:
 def read_kaist_imu(path: _Path, allow_float_timestamps: bool = False) -> Tuple[_I64, _F64, _F64]:
     """KAIST ``xsens_imu.csv`` -> (t_ns, gyro, acc)."""
 
-def read_kaist_pose(path: _Path, allow_float_timestamps: bool = False) -> Dict[str, Optional[_F64]]:
+def read_kaist_pose(path: _Path, allow_float_timestamps: bool = False) -> _GroundTruth:
     """KAIST ``global_pose.csv`` -> {t_ns, p, q_wxyz, v=None, ...}."""
 
 def read_csv_columns(path: _Path, columns: str, time_unit: str, gyro_unit: str, acc_unit: str) -> Tuple[_I64, _F64, _F64]:
@@ -85,7 +98,7 @@ def read_csv_columns(path: _Path, columns: str, time_unit: str, gyro_unit: str, 
 
 def read_csv_columns_checked(
     path: _Path, columns: str, time_unit: str, gyro_unit: str, acc_unit: str, skip_bad_lines: bool = False
-) -> Dict[str, object]:
+) -> Dict[str, Any]:
     """A user's IMU CSV read as read_csv_columns does, with what plausibility checks need -> {t_ns,
     gyro [rad/s], acc [m/s^2], skipped: [(line, problem)] (skip_bad_lines: lines too short for the map
     or with a field that is not a finite number, passed over instead of raising, each with the error
@@ -110,7 +123,7 @@ def allan_deviation(
     rel_err (T,) = 1/sqrt(2 (N/m - 1)), adev (T, k)}. Cumulative sums, O(N) per cluster size, the
     GIL released."""
 
-def allan_fit(tau_s: _F64, adev: _F64, rel_err: _F64) -> Dict[str, object]:
+def allan_fit(tau_s: _F64, adev: _F64, rel_err: _F64) -> Dict[str, Any]:
     """Slope fits of each axis of adev (T, k) -> {white: {value (k,) N at tau = 1 s on the -1/2
     line, rel_err, tau_lo, tau_hi, points}, random_walk: {... K at tau = 3 s on the +1/2 line},
     bias_instability (k,) = min adev / 0.664, tau_bias, bias_rel_err, bias_observed (bool: the
@@ -120,7 +133,7 @@ def align(
     imu_t_ns: _I64, gyro: _F64, acc: _F64, gt_t_ns: _I64, p: _F64, q_wxyz: _F64, v: Optional[_F64],
     max_gap_ns: int, min_segment_samples: int, velocity_half_window: int,
     imu_source: Optional[_Path] = None, gt_source: Optional[_Path] = None,
-) -> Tuple[List[Dict[str, np.ndarray]], Dict[str, object]]:
+) -> Tuple[List[Dict[str, np.ndarray]], Dict[str, Any]]:
     """Ground truth onto IMU stamps -> (segments as dicts of t_ns/gyro/acc/p/v/q_wxyz, report).
     imu_source / gt_source: the files the arrays came from, named by the errors (NoOverlapError,
     AlignmentError: ``path`` = gt_source, ``imu_path`` = imu_source)."""

@@ -650,38 +650,51 @@ pub fn integrate_windows(
         wanted[n].push(h);
     }
     let nh = horizons.len();
-    let one = |&k: &usize| {
-        let mut incs = vec![
-            Increment {
-                dq_wxyz: [1.0, 0.0, 0.0, 0.0],
-                dv: [0.0; 3],
-                dp: [0.0; 3],
-                dt: 0.0
-            };
-            nh
-        ];
-        integrate_from(t_ns, gyro, acc, k, max_h, |j, inc| {
-            for &h in &wanted[j] {
-                incs[h] = inc;
-            }
-        });
-        incs
+    // Every buffer is reserved fallibly before any work: windows × horizons past memory is an error
+    // naming them, never an abort.
+    let total = starts
+        .len()
+        .checked_mul(nh)
+        .ok_or_else(|| ImuError::invalid(format!("{} windows × {nh} horizons overflow", starts.len())))?;
+    let alloc = |what: &str| {
+        ImuError::invalid(format!(
+            "{} windows × {nh} horizons: {what} ({total} entries) cannot be allocated",
+            starts.len()
+        ))
     };
-    let per_window: Vec<Vec<Increment>> = if crate::par::parallel() {
-        starts.par_iter().map(one).collect()
-    } else {
-        starts.iter().map(one).collect()
+    let identity = Increment {
+        dq_wxyz: [1.0, 0.0, 0.0, 0.0],
+        dv: [0.0; 3],
+        dp: [0.0; 3],
+        dt: 0.0,
     };
-    let total = starts.len() * nh;
+    let mut incs: Vec<Increment> = Vec::new();
+    incs.try_reserve_exact(total).map_err(|_| alloc("the increments"))?;
+    incs.resize(total, identity);
     let mut out = Labels {
         starts: starts.to_vec(),
         horizons: horizons.to_vec(),
-        dq_wxyz: Vec::with_capacity(total),
-        dv: Vec::with_capacity(total),
-        dp: Vec::with_capacity(total),
-        dt: Vec::with_capacity(total),
+        ..Labels::default()
     };
-    for inc in per_window.into_iter().flatten() {
+    out.dq_wxyz.try_reserve_exact(total).map_err(|_| alloc("dq_wxyz"))?;
+    out.dv.try_reserve_exact(total).map_err(|_| alloc("dv"))?;
+    out.dp.try_reserve_exact(total).map_err(|_| alloc("dp"))?;
+    out.dt.try_reserve_exact(total).map_err(|_| alloc("dt"))?;
+    let one = |(chunk, &k): (&mut [Increment], &usize)| {
+        integrate_from(t_ns, gyro, acc, k, max_h, |j, inc| {
+            for &h in &wanted[j] {
+                chunk[h] = inc;
+            }
+        });
+    };
+    if nh > 0 {
+        if crate::par::parallel() {
+            incs.par_chunks_mut(nh).zip(starts.par_iter()).for_each(one);
+        } else {
+            incs.chunks_mut(nh).zip(starts.iter()).for_each(one);
+        }
+    }
+    for inc in incs {
         out.dq_wxyz.push(inc.dq_wxyz);
         out.dv.push(inc.dv);
         out.dp.push(inc.dp);

@@ -237,14 +237,27 @@ pub fn labels_at(seq: &Sequence, starts: &[usize], horizons: &[usize], gravity: 
     check_sequence(seq)?;
     // Checked before the buffers are sized by the caller's arguments.
     check_windows(seq.len(), starts, horizons)?;
-    let total = starts.len() * horizons.len();
+    let total = starts.len().checked_mul(horizons.len()).ok_or_else(|| {
+        ImuError::invalid(format!(
+            "{} windows × {} horizons overflow",
+            starts.len(),
+            horizons.len()
+        ))
+    })?;
+    let alloc = |e| {
+        ImuError::invalid(format!(
+            "{} windows × {} horizons cannot be allocated ({e})",
+            starts.len(),
+            horizons.len()
+        ))
+    };
     let mut out = Labels {
         starts: starts.to_vec(),
         horizons: horizons.to_vec(),
-        dq_wxyz: vec![[0.0; 4]; total],
-        dv: vec![[0.0; 3]; total],
-        dp: vec![[0.0; 3]; total],
-        dt: vec![0.0; total],
+        dq_wxyz: crate::batch::try_zeroed_vec(total).map_err(alloc)?,
+        dv: crate::batch::try_zeroed_vec(total).map_err(alloc)?,
+        dp: crate::batch::try_zeroed_vec(total).map_err(alloc)?,
+        dt: crate::batch::try_zeroed_vec(total).map_err(alloc)?,
     };
     labels_into(
         GroundTruthView::of(seq),

@@ -40,7 +40,8 @@ from typing import Any, Dict, List, Optional, Tuple, Union
 import numpy as np
 
 from imu_learn.baselines.affine import Floor, TraditionalParams
-from imu_learn.errors import ProfileError
+from imu_learn.core.stamps import checked_stamps_ns
+from imu_learn.errors import InvalidInputError, ProfileError
 from imu_learn.util.atomic import atomic_write_text
 from imu_learn.util.file_kind import mix_up
 
@@ -242,12 +243,18 @@ class Profile:
     def apply(self, t_ns: np.ndarray, gyro: np.ndarray, acc: np.ndarray) -> Tuple[np.ndarray, np.ndarray]:
         """Floor-calibrated (gyro, acc), each (N, 3) float64: the time offset, then the low-pass and
         the affine model, exactly as ``traditional+timing``'s ``refine`` (same operations in the same
-        order, so the same bits). A profile without a floor (noise only) returns copies."""
+        order, so the same bits). A profile without a floor (noise only) returns copies. ``t_ns``: int64
+        nanoseconds, strictly increasing, one per row of ``gyro`` and ``acc`` ((N, 3)); anything else is
+        an :class:`~imu_learn.errors.InvalidInputError` (the time offset resamples along them)."""
         gyro = np.asarray(gyro, dtype=np.float64)
         acc = np.asarray(acc, dtype=np.float64)
+        t = checked_stamps_ns(t_ns)
+        for what, x in (("gyro", gyro), ("acc", acc)):
+            if x.shape != (len(t), 3):
+                raise InvalidInputError(f"{what} must be ({len(t)}, 3), one row per stamp, got {x.shape}")
         if self.floor is None:
             return gyro.copy(), acc.copy()
-        return self.floor.apply(np.asarray(t_ns, dtype=np.int64), gyro, acc)
+        return self.floor.apply(t, gyro, acc)
 
     @property
     def has_floor(self) -> bool:

@@ -15,20 +15,30 @@ PAPER_FRACTIONS = (0.2, 0.4, 0.6, 0.8, 1.0)
 
 class ImuArrays(Protocol):
     """What the core reads of IMU samples (:class:`imu_learn.data.types.ImuData` has them; the core
-    sits below data and takes anything that does)."""
+    sits below data and takes anything that does). Read-only members, so a frozen dataclass matches."""
 
-    t_ns: np.ndarray
-    gyro: np.ndarray
-    acc: np.ndarray
+    @property
+    def t_ns(self) -> np.ndarray: ...
+
+    @property
+    def gyro(self) -> np.ndarray: ...
+
+    @property
+    def acc(self) -> np.ndarray: ...
 
 
 class SegmentArrays(ImuArrays, Protocol):
     """What the core reads of a segment: IMU samples and ground truth on the same stamps
     (:class:`imu_learn.data.types.Segment` has them)."""
 
-    p: np.ndarray
-    v: np.ndarray
-    q_wxyz: np.ndarray
+    @property
+    def p(self) -> np.ndarray: ...
+
+    @property
+    def v(self) -> np.ndarray: ...
+
+    @property
+    def q_wxyz(self) -> np.ndarray: ...
 
 
 @dataclass(frozen=True)

@@ -10,6 +10,7 @@ import numpy as np
 from imu_learn import _imu_core as core
 from imu_learn.data.formats import CsvColumns, asl, blackbird, detect_format, fetch, read_recording
 from imu_learn.data.types import GroundTruth, ImuData, Recording, Segment
+from imu_learn.errors import InvalidInputError
 
 PathLike = Union[str, Path]
 
@@ -47,10 +48,25 @@ def align(
 ) -> Recording:
     """Interpolate ground truth onto the IMU stamps; one ``Segment`` per gap-free segment.
 
+    Ground-truth rows with a non-finite position, rotation or velocity (a motion-capture dropout written
+    as NaN) are left out, so they become gaps (``report["gt_rows_not_finite"]`` counts them); a
+    non-finite IMU sample is an :class:`~imu_learn.errors.InvalidInputError` naming its row.
     ``sources``: the (IMU, ground-truth) files the data came from, named by alignment errors
     (:class:`~imu_learn.errors.NoOverlapError` and the other :class:`~imu_learn.errors.AlignmentError`).
     """
     imu_source, gt_source = (None if s is None else str(s) for s in sources)
+    for what, x in (("gyro", imu.gyro), ("acc", imu.acc)):
+        bad = np.flatnonzero(~np.isfinite(np.asarray(x, dtype=np.float64)).all(axis=1))
+        if len(bad):
+            raise InvalidInputError(f"{imu_source or 'the IMU'}: {what} row {int(bad[0])} is not finite "
+                                    f"({len(bad)} such rows): the IMU samples must all be numbers")
+    keep = np.isfinite(gt.p).all(axis=1) & np.isfinite(gt.q_wxyz).all(axis=1)
+    if gt.v is not None:
+        keep &= np.isfinite(gt.v).all(axis=1)
+    dropped = int(len(keep) - keep.sum())
+    if dropped:
+        gt = GroundTruth(t_ns=gt.t_ns[keep], p=gt.p[keep], q_wxyz=gt.q_wxyz[keep],
+                         v=None if gt.v is None else gt.v[keep])
     rate = (len(imu) - 1) / max((imu.t_ns[-1] - imu.t_ns[0]) * 1e-9, 1e-9) if len(imu) > 1 else 1.0
     segs, report = core.align(
         np.ascontiguousarray(imu.t_ns, dtype=np.int64),
@@ -70,6 +86,8 @@ def align(
         Segment(name=f"{name}#{i}" if len(segs) > 1 else name, **seg)  # type: ignore[arg-type]
         for i, seg in enumerate(segs)
     ]
+    if dropped:
+        report = {**report, "gt_rows_not_finite": dropped}
     return Recording(name=name, segments=seqs, report=report)
 
 
@@ -127,8 +145,9 @@ def load_sequence(
 ) -> List[Segment]:
     """Load a recording as a list of aligned ``Segment`` segments (one unless ground truth has gaps).
 
-    ``format``: "auto", "euroc", "tum-vi", "asl", "blackbird", "broad", "kaist" or "rosbag" (a ROS 1
-    ``.bag`` or a ROS 2 bag folder).
+    ``format``: "auto" or one of :data:`imu_learn.data.formats.FORMATS` ("euroc", "tum-vi", "asl",
+    "blackbird", "broad", "kaist", "fetch", "gnss-imu", "rosbag": a ROS 1 ``.bag`` or a ROS 2 bag folder).
+    ``columns``: a CSV of your own (:class:`~imu_learn.data.formats.CsvColumns`), with ``groundtruth``.
     ``groundtruth``: a separate TUM (``t[s] tx ty tz qx qy qz qw``) or ASL ground-truth file.
     ``imu_topic`` / ``groundtruth_topic`` (bags only): the sensor_msgs/msg/Imu topic and the
     PoseStamped / TransformStamped / Odometry topic; each may be left out when the bag has one.

@@ -91,14 +91,18 @@ pub fn out3_flat<'py>(
         .map_err(|e| shape_err(e.to_string()))
 }
 
-/// A zero-filled C-order array allocated by numpy, for a result the core writes in place. numpy
-/// asks the kernel for huge pages on large arrays, so filling one takes far fewer page faults
-/// than filling a fresh `Vec` and moving it (which is what dominated labels and batches).
-pub fn zeros<'py, T: numpy::Element, D: Dimension>(
+/// A zero-filled C-order float64 array allocated by numpy, for a result the core writes in place.
+/// numpy asks the kernel for huge pages on large arrays, so filling one takes far fewer page faults
+/// than filling a fresh `Vec` and moving it (which is what dominated labels and batches). Made by
+/// `numpy.zeros`, so a size that cannot be allocated is numpy's `MemoryError` (or `ValueError`: too
+/// big for an array), never a panic.
+pub fn zeros<'py, D: Dimension>(
     py: Python<'py>,
     dims: impl IntoDimension<Dim = D>,
-) -> Bound<'py, PyArray<T, D>> {
-    PyArray::zeros(py, dims, false)
+) -> PyResult<Bound<'py, PyArray<f64, D>>> {
+    let shape: Vec<usize> = dims.into_dimension().slice().to_vec();
+    let a = py.import("numpy")?.call_method1("zeros", (shape,))?;
+    Ok(a.downcast_into::<PyArray<f64, D>>()?)
 }
 
 /// Float64 storage that batch outputs are carved from, shared by a `SequenceSet` and the arrays

@@ -205,10 +205,10 @@ fn window_labels<'py>(
         .and_then(|x| gt.check().map(|()| x))
         .map_err(to_py)?;
     let (nw, nh) = (starts.len(), hs.len());
-    let dq = zeros::<f64, _>(py, [nw, nh, 4]);
-    let dv = zeros::<f64, _>(py, [nw, nh, 3]);
-    let dp = zeros::<f64, _>(py, [nw, nh, 3]);
-    let dt = zeros::<f64, _>(py, [nw, nh]);
+    let dq = zeros(py, [nw, nh, 4])?;
+    let dv = zeros(py, [nw, nh, 3])?;
+    let dp = zeros(py, [nw, nh, 3])?;
+    let dt = zeros(py, [nw, nh])?;
     {
         let (mut dq_w, mut dv_w, mut dp_w, mut dt_w) = (dq.readwrite(), dv.readwrite(), dp.readwrite(), dt.readwrite());
         let out = LabelsMut {
