@@ -209,3 +209,39 @@ def test_windows_times_horizons_past_memory_is_an_error_not_an_abort(call):
     r = subprocess.run([sys.executable, "-c", LIMITED, call], capture_output=True, text=True, timeout=120,
                        env={**os.environ, "RAYON_NUM_THREADS": "1", "OMP_NUM_THREADS": "1"})
     assert r.returncode == 0 and r.stdout.startswith("typed"), (r.returncode, r.stdout, r.stderr[-500:])
+
+
+def test_window_labels_refuse_ground_truth_that_gave_nan_or_garbage_labels():
+    """NaN in p, v or q, a zero quaternion, a non-finite gravity and stamps that do not increase gave
+    NaN (or finite, wrong) labels without a word; each is an InvalidInputError naming what."""
+    n = 600
+    t = (np.arange(n) * 5_000_000).astype(np.int64)
+    p, v = np.zeros((n, 3)), np.zeros((n, 3))
+    q = np.tile([1.0, 0.0, 0.0, 0.0], (n, 1))
+    core.window_labels(t, p, v, q, 200, 10, [1.0], 9.81)  # the good case runs
+    cases = []
+    for name, arr in (("p", p), ("v", v), ("q_wxyz", q)):
+        bad = arr.copy()
+        bad[250, 0] = np.nan
+        cases.append(({name: bad}, rf"{name}\[250\]"))
+    zero_q = q.copy()
+    zero_q[300] = 0.0
+    cases.append(({"q_wxyz": zero_q}, r"q_wxyz\[300\].*not a rotation"))
+    cases.append(({"t_ns": np.zeros(n, dtype=np.int64)}, r"t_ns\[1\]"))
+    cases.append(({"t_ns": t[::-1].copy()}, r"t_ns\[1\]"))
+    cases.append(({"gravity": float("nan")}, "gravity"))
+    for change, says in cases:
+        args = {"t_ns": t, "p": p, "v": v, "q_wxyz": q, "gravity": 9.81, **change}
+        with pytest.raises(errors.InvalidInputError, match=says):
+            core.window_labels(args["t_ns"], args["p"], args["v"], args["q_wxyz"], 200, 10, [1.0], args["gravity"])
+
+
+def test_a_sequence_set_refuses_a_nan_sample_it_would_put_in_batches():
+    n = 600
+    t = (np.arange(n) * 5_000_000).astype(np.int64)
+    g, a, p, v = (np.zeros((n, 3)) for _ in range(4))
+    q = np.tile([1.0, 0.0, 0.0, 0.0], (n, 1))
+    core.SequenceSet([(t, g, a, p, v, q)])
+    g[123, 2] = np.nan
+    with pytest.raises(errors.InvalidInputError, match=r"sequence 0: gyro\[123\]"):
+        core.SequenceSet([(t, g, a, p, v, q)])

@@ -165,7 +165,7 @@ fn check_lengths(what: &str, n: usize, gyro: &[Vec3], acc: &[Vec3]) -> Result<()
     Ok(())
 }
 
-fn check_finite(gyro: &[Vec3], acc: &[Vec3]) -> Result<()> {
+pub(crate) fn check_finite(gyro: &[Vec3], acc: &[Vec3]) -> Result<()> {
     // A float is ±inf or NaN exactly when its 11 exponent bits are all set. OR-ing that flag over
     // every value is branch-free integer work the compiler vectorises (a floating-point sum would
     // be one long chain of dependent adds); only a failure pays for finding the first bad row.
@@ -186,7 +186,7 @@ fn check_finite(gyro: &[Vec3], acc: &[Vec3]) -> Result<()> {
     Ok(())
 }
 
-fn check_stamps(t_ns: &[i64]) -> Result<()> {
+pub(crate) fn check_stamps(t_ns: &[i64]) -> Result<()> {
     // Branch-free over all pairs first (the compiler vectorises it; an early-exit search does
     // not), then look for the first bad pair only on failure.
     if t_ns.windows(2).fold(true, |ok, w| ok & (w[1] > w[0])) {

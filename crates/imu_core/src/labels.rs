@@ -53,13 +53,34 @@ impl<'a> GroundTruthView<'a> {
         self.t_ns.is_empty()
     }
 
-    /// p, v and q have the length of t_ns.
+    /// p, v and q have the length of t_ns; the stamps strictly increase; every value is finite and
+    /// every quaternion is a rotation (norm above 0.5: a zero or NaN row gave NaN labels).
     pub fn check(&self) -> Result<()> {
         let n = self.t_ns.len();
         let lens = [self.p.len(), self.v.len(), self.q_wxyz.len()];
         if lens.iter().any(|&l| l != n) {
             return Err(ImuError::invalid(format!(
                 "ground-truth arrays differ in length: t_ns {n}, p/v/q {lens:?}"
+            )));
+        }
+        crate::integrate::check_stamps(self.t_ns)?;
+        let bad = |name: &str, i: usize, row: &[f64]| {
+            ImuError::invalid(format!("ground truth {name}[{i}] = {row:?} is not finite"))
+        };
+        if let Some(i) = self.p.iter().position(|r| r.iter().any(|x| !x.is_finite())) {
+            return Err(bad("p", i, &self.p[i]));
+        }
+        if let Some(i) = self.v.iter().position(|r| r.iter().any(|x| !x.is_finite())) {
+            return Err(bad("v", i, &self.v[i]));
+        }
+        if let Some(i) = self
+            .q_wxyz
+            .iter()
+            .position(|q| q.iter().any(|x| !x.is_finite()) || q.iter().map(|x| x * x).sum::<f64>() <= 0.25)
+        {
+            return Err(ImuError::invalid(format!(
+                "ground truth q_wxyz[{i}] = {:?} is not a rotation (its norm is not near 1)",
+                self.q_wxyz[i]
             )));
         }
         Ok(())
@@ -285,6 +306,9 @@ pub fn labels_into(
 ) -> Result<()> {
     gt.check()?;
     check_windows(gt.len(), starts, horizons)?;
+    if !gravity.is_finite() {
+        return Err(ImuError::invalid(format!("gravity = {gravity} is not finite")));
+    }
     let nh = horizons.len();
     let total = starts.len() * nh;
     let lens = [out.dq_wxyz.len(), out.dv.len(), out.dp.len(), out.dt.len()];
@@ -333,7 +357,8 @@ pub fn window_labels(seq: &Sequence, window: usize, stride: usize, fractions: &[
     labels_at(seq, &starts, &hs, gravity)
 }
 
-/// All arrays of a sequence have its length.
+/// All arrays of a sequence have its length, its stamps strictly increase and its values are finite
+/// (its quaternions rotations: [`GroundTruthView::check`]).
 pub fn check_sequence(seq: &Sequence) -> Result<()> {
     let n = seq.t_ns.len();
     let lens = [
@@ -348,5 +373,6 @@ pub fn check_sequence(seq: &Sequence) -> Result<()> {
             "sequence arrays differ in length: t_ns {n}, gyro/acc/p/v/q {lens:?}"
         )));
     }
-    Ok(())
+    GroundTruthView::of(seq).check()?;
+    crate::integrate::check_finite(&seq.gyro, &seq.acc)
 }
