@@ -245,3 +245,12 @@ def test_a_sequence_set_refuses_a_nan_sample_it_would_put_in_batches():
     g[123, 2] = np.nan
     with pytest.raises(errors.InvalidInputError, match=r"sequence 0: gyro\[123\]"):
         core.SequenceSet([(t, g, a, p, v, q)])
+
+
+def test_derive_velocity_refuses_stamps_and_positions_it_would_fit_wrongly():
+    p = np.stack([T * 1e-9, np.zeros(N), np.zeros(N)], axis=1)
+    np.testing.assert_allclose(core.derive_velocity(T, p, 5)[:, 0], 1.0, atol=1e-9)
+    for t, q, hw, says in ((np.zeros(N, dtype=np.int64), p, 5, r"t_ns\[1\]"), (T[::-1].copy(), p, 5, r"t_ns\[1\]"),
+                           (T, p, 0, "half_window = 0"), (T, np.where(np.arange(N)[:, None] == 3, np.nan, p), 5, r"p\[3\]")):
+        with pytest.raises(errors.InvalidInputError, match=says):
+            core.derive_velocity(t, q, hw)

@@ -139,7 +139,8 @@ def align(
     AlignmentError: ``path`` = gt_source, ``imu_path`` = imu_source)."""
 
 def derive_velocity(t_ns: _I64, p: _F64, half_window: int) -> _F64:
-    """Velocity from positions by a local quadratic fit over +-half_window samples."""
+    """Velocity from positions by a local quadratic fit over +-half_window samples (at least 1); stamps
+    strictly increasing and positions finite, else InvalidInputError."""
 
 def preintegrate(t_ns: _I64, gyro: _F64, acc: _F64) -> Tuple[_F64, _F64, _F64, _F64]:
     """Cumulative (dq_wxyz, dv, dp, dt); row j covers [t_0, t_j]."""

@@ -118,6 +118,15 @@ fn derive_velocity<'py>(
     if t.len() != p.len() {
         return Err(to_py(ImuError::invalid("t_ns and p differ in length")));
     }
+    if half_window == 0 {
+        return Err(to_py(ImuError::invalid(
+            "half_window = 0: the quadratic fit needs at least 1 sample each side",
+        )));
+    }
+    crate::integrate::check_stamps(t).map_err(to_py)?;
+    if let Some(i) = p.iter().position(|r| r.iter().any(|x| !x.is_finite())) {
+        return Err(to_py(ImuError::invalid(format!("p[{i}] = {:?} is not finite", p[i]))));
+    }
     let v = py.allow_threads(|| core_align::derive_velocity(t, p, half_window));
     out2(py, v)
 }
