@@ -6,6 +6,7 @@ import os
 import subprocess
 import sys
 import textwrap
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -254,3 +255,10 @@ def test_derive_velocity_refuses_stamps_and_positions_it_would_fit_wrongly():
                            (T, p, 0, "half_window = 0"), (T, np.where(np.arange(N)[:, None] == 3, np.nan, p), 5, r"p\[3\]")):
         with pytest.raises(errors.InvalidInputError, match=says):
             core.derive_velocity(t, q, hw)
+
+
+@pytest.mark.parametrize("window, stride", [(200, -1), (200, 0), (-5, 10)])
+def test_public_window_labels_name_a_window_or_stride_below_one(window, stride):
+    seg = il.load_sequence(Path(__file__).resolve().parents[1] / "datasets" / "euroc" / "V1_01_easy")[0]
+    with pytest.raises(errors.InvalidInputError, match="must be at least 1 sample"):
+        il.window_labels(seg, window, stride)

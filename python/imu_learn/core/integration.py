@@ -77,6 +77,9 @@ def window_labels(
     seq: SegmentArrays, window: int, stride: int = 1, fractions: Seq[float] = PAPER_FRACTIONS, gravity: float = 9.81
 ) -> WindowLabels:
     """Ground-truth Δq/Δβ/Δγ for every window (start step ``stride``) at ``fractions`` of ``window``."""
+    for name, value in (("window", window), ("stride", stride)):
+        if int(value) < 1:
+            raise InvalidInputError(f"{name} = {value}: it must be at least 1 sample")
     d = core.window_labels(
         np.ascontiguousarray(seq.t_ns, dtype=np.int64), _f64(seq.p), _f64(seq.v), _f64(seq.q_wxyz),
         int(window), int(stride), [float(f) for f in fractions], float(gravity),
