@@ -79,7 +79,7 @@ def window_labels(
     """Ground-truth Δq/Δβ/Δγ for every window (start step ``stride``) at ``fractions`` of ``window``."""
     for name, value in (("window", window), ("stride", stride)):
         if int(value) < 1:
-            raise InvalidInputError(f"{name} = {value}: it must be at least 1 sample")
+            raise InvalidInputError(f"{name} must be at least 1 sample")  # the core's words for a window
     d = core.window_labels(
         np.ascontiguousarray(seq.t_ns, dtype=np.int64), _f64(seq.p), _f64(seq.v), _f64(seq.q_wxyz),
         int(window), int(stride), [float(f) for f in fractions], float(gravity),
