@@ -95,10 +95,8 @@ def add_bias_step(args: argparse.Namespace, plan: correction.Plan) -> None:
         require_extra("train", f"imu-learn refine --bias {args.bias} --bias-model")
     if args.bias_model is not None:  # its device checked as a model's or profile's is (a warning line each)
         made = rates.MadeFor(f"bias model {args.bias_model}", None, model_device(args.bias_model))
-        for m in plan.made_for:
-            if made.device and m.device and not rates.same_device(made.device, m.device):
-                logger.warning(f"{made.what} was trained on device {made.device!r} but {m.what} is for {m.device!r}: "
-                               "a bias estimator learns its own device's bias; use one trained on this device")
+        for line in rates.other_devices(made, plan.made_for):
+            logger.warning(line)
         plan.made_for.append(made)
     if args.bias != "none":
         plan.steps.append(bias_step(args.bias, plan.gravity, plan.measured, args.bias_model, plan.prior))

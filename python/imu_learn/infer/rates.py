@@ -81,6 +81,14 @@ def check(recording: str, rate_hz: Optional[float], device: Optional[str], made_
     return warnings
 
 
+def other_devices(added: MadeFor, made_for: Sequence[MadeFor]) -> List[str]:
+    """The warning lines for applying ``added`` (a bias estimator) together with each of ``made_for`` made
+    for another device (the recording's own device is :func:`check`'s)."""
+    return [f"{added.what} was trained on device {added.device!r} but {m.what} is for {m.device!r}: a bias "
+            "estimator learns its own device's bias; use one trained on this device"
+            for m in made_for if added.device and m.device and not same_device(added.device, m.device)]
+
+
 def unchecked(rate_hz: Optional[float], made_for: Sequence[MadeFor]) -> List[str]:
     """Info lines for what :func:`check` could not check (a rate unknown on either side)."""
     lines = [f"{m.what} records no sample rate: the recording's rate is not checked"
