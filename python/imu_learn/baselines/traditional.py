@@ -238,22 +238,50 @@ class _VelResiduals:
         # prediction Σ R dt (M a − c) = Σ_ij Sx[.., i, j] M_ij − Σ_i Sx[.., i, 3] c_i, M = I + D
         y0 = Sx[..., 0, 0] + Sx[..., 1, 1] + Sx[..., 2, 2]  # (2, B, H, 3)
         self.y = (np.stack((w.dv, w.dp)) - y0).reshape(-1)
-        self.phi_d = Sx[..., :3].reshape(2 * B * H * 3, 9)
-        self.phi_c = -Sx[..., 3].reshape(2 * B * H * 3, 3)
+        # Φ = (Φ_D, Φ_c) (2·B·H·3, 12): r = y − Φ (D, c), c = M_a b_a; its Gram matrix once (:meth:`normal`)
+        self.phi = np.ascontiguousarray(np.concatenate((Sx[..., :3].reshape(2 * B * H * 3, 9),
+                                                        -Sx[..., 3].reshape(2 * B * H * 3, 3)), axis=1))
+        self.gram = self.phi.T @ self.phi
+
+    @staticmethod
+    def _dc(theta: np.ndarray) -> np.ndarray:
+        """(D, c) (12,) of θ = (D, b): c = (I + D) b."""
+        return np.concatenate((theta[:9], (np.eye(3) + theta[:9].reshape(3, 3)) @ theta[9:12]))
+
+    @staticmethod
+    def _chain(theta: np.ndarray) -> np.ndarray:
+        """∂(D, c)/∂(D, b) (12, 12): the identity on D, ∂c_i/∂D_ij = b_j, ∂c/∂b = M_a."""
+        T = np.eye(12)
+        for i in range(3):
+            T[9 + i, 3 * i:3 * i + 3] = theta[9:12]
+        T[9:, 9:] = np.eye(3) + theta[:9].reshape(3, 3)
+        return T
 
     def __call__(self, theta: np.ndarray) -> np.ndarray:
-        M = np.eye(3) + theta[:9].reshape(3, 3)
-        return self.y - self.phi_d @ theta[:9] - self.phi_c @ (M @ theta[9:12])
+        return self.y - self.phi @ self._dc(theta)
 
     def jacobian(self, theta: np.ndarray, r: Optional[np.ndarray] = None, cols: Optional[np.ndarray] = None
                  ) -> np.ndarray:
-        """The exact Jacobian (2·B·H·3, 12) at θ (r unused), or its columns ``cols``: ∂r/∂D_ij = −Φ_D[:, ij] −
-        Φ_c[:, i] b_j, ∂r/∂b = −Φ_c M_a."""
-        M = np.eye(3) + theta[:9].reshape(3, 3)
-        b = theta[9:12]
-        dD = self.phi_d + (self.phi_c[:, :, None] * b[None, None, :]).reshape(-1, 9)
-        J = -np.concatenate((dD, self.phi_c @ M), axis=1)
-        return J if cols is None else J[:, cols]
+        """The exact Jacobian (2·B·H·3, 12) at θ (r unused), or its columns ``cols``: −Φ ∂(D, c)/∂(D, b)
+        (∂r/∂D_ij = −Φ_D[:, ij] − Φ_c[:, i] b_j, ∂r/∂b = −Φ_c M_a)."""
+        T = self._chain(theta)
+        return -self.phi @ (T if cols is None else T[:, cols])
+
+    def normal(self, theta: np.ndarray, r: np.ndarray, w: np.ndarray, cols: Optional[np.ndarray] = None
+               ) -> Tuple[np.ndarray, np.ndarray]:
+        """Jᵀ W J and Jᵀ W r (W = diag(w), the IRLS weights) at θ without forming J (:func:`_lm`): with
+        T = ∂(D, c)/∂(D, b), Jᵀ W J = Tᵀ (Φᵀ W Φ) T, and Φᵀ W Φ is the Gram matrix less the rows the
+        weights take down (Huber's: few). ``cols``: the entries a subset frees."""
+        T = self._chain(theta)
+        if cols is not None:
+            T = T[:, cols]
+        down = np.flatnonzero(w < 1.0)
+        if 4 * len(down) < len(w):
+            P = self.phi[down]
+            G = self.gram - P.T @ (P * (1.0 - w[down])[:, None])
+        else:
+            G = self.phi.T @ (self.phi * w[:, None])
+        return T.T @ G @ T, -(T.T @ (self.phi.T @ (w * r)))
 
 
 def _rms(res: Callable[[np.ndarray], np.ndarray], theta: np.ndarray) -> float:
@@ -295,6 +323,11 @@ class Subset:
     def jacobian(self, x: np.ndarray, r: np.ndarray) -> np.ndarray:
         return self.res.jacobian(self.theta(x), r, self.free)
 
+    def normal(self, x: np.ndarray, r: np.ndarray, w: np.ndarray) -> Tuple[np.ndarray, np.ndarray]:
+        if hasattr(self.res, "normal"):
+            return self.res.normal(self.theta(x), r, w, self.free)
+        return _weighted_normal(self.jacobian(x, r), r, w)
+
 
 def _solve(res: Any, x0: np.ndarray, prior_idx: np.ndarray, prior: float, delta: float, max_iter: int,
            tol: Optional[float] = None, free: Optional[np.ndarray] = None) -> np.ndarray:
@@ -329,6 +362,20 @@ def _solve(res: Any, x0: np.ndarray, prior_idx: np.ndarray, prior: float, delta:
     return _lm(res, x0, cost, delta, max_iter, tol, pmask)
 
 
+def _weighted_normal(J: np.ndarray, r: np.ndarray, w: np.ndarray) -> Tuple[np.ndarray, np.ndarray]:
+    """Jᵀ W J and Jᵀ W r of a Jacobian J (R, P), W = diag(w)."""
+    Jw = J * w[:, None]
+    return J.T @ Jw, Jw.T @ r
+
+
+def _normal(res: Any, x: np.ndarray, r: np.ndarray, w: np.ndarray) -> Tuple[np.ndarray, np.ndarray]:
+    """Jᵀ W J (P, P) and Jᵀ W r (P,) at x: the residuals' own ``normal`` where they have one (linear
+    residuals: without forming J), else from ``jacobian``."""
+    if hasattr(res, "normal"):
+        return res.normal(x, r, w)
+    return _weighted_normal(res.jacobian(x, r), r, w)
+
+
 def _lm(res: Any, x0: np.ndarray, cost: Callable[[np.ndarray, np.ndarray], float], delta: float, max_iter: int,
         tol: float, pmask: np.ndarray) -> np.ndarray:
     """:func:`_solve`'s iterations."""
@@ -337,10 +384,8 @@ def _lm(res: Any, x0: np.ndarray, cost: Callable[[np.ndarray, np.ndarray], float
     c = cost(x, r)
     lam = 1e-3
     for _ in range(max_iter):
-        J = res.jacobian(x, r)  # (R, P)
-        Jw = J * _huber_weights(r, delta)[:, None]
-        A = J.T @ Jw + np.diag(pmask)
-        g = Jw.T @ r + pmask * x
+        A, g = _normal(res, x, r, _huber_weights(r, delta))
+        A, g = A + np.diag(pmask), g + pmask * x
         improved = False
         for _ in range(10):
             d = np.linalg.solve(A + lam * np.diag(np.diagonal(A)), -g)
