@@ -153,16 +153,25 @@ class _Data:
         into one array, once per (signal, cutoff): the grid asks for the same ones many times."""
         key = ("gather", which, cutoff)
         if key not in self._cache:
-            ar = np.arange(self.window)
-            if which in ("gyro", "acc"):
-                src = self._filtered(which, cutoff)
-                parts = [src[i][lab.starts.astype(np.int64)[:, None] + ar] for i, (_, _, _, lab) in enumerate(self.items)]
-            elif which == "dt":
-                parts = [dt[lab.starts.astype(np.int64)[:, None] + ar] for _, _, dt, lab in self.items]
+            if which in ("gyro", "acc", "dt"):
+                src = self._filtered(which, cutoff) if which != "dt" else [dt for _, _, dt, _ in self.items]
+                self._cache[key] = self._windows_of(src)
             else:
                 parts = [getattr(lab, "dq_wxyz" if which == "dq" else which) for _, _, _, lab in self.items]
-            self._cache[key] = np.ascontiguousarray(np.concatenate(parts), dtype=np.float64)
+                self._cache[key] = np.ascontiguousarray(np.concatenate(parts), dtype=np.float64)
         return self._cache[key]
+
+    def _windows_of(self, src: List[np.ndarray]) -> np.ndarray:
+        """Every item's windows of its signal in ``src`` (one per item, (N,) or (N, 3)), one after another
+        in one array (B, W) or (B, W, 3), gathered straight into it."""
+        ar = np.arange(self.window)
+        counts = [len(lab.starts) for _, _, _, lab in self.items]
+        out = np.empty((sum(counts), self.window) + src[0].shape[1:], dtype=np.float64)
+        k = 0
+        for x, (_, _, _, lab), n in zip(src, self.items, counts):
+            np.take(np.asarray(x, dtype=np.float64), lab.starts.astype(np.int64)[:, None] + ar, axis=0, out=out[k:k + n])
+            k += n
+        return out
 
     def windows(self, cutoff_gyro: Optional[float], cutoff_acc: Optional[float]) -> _Windows:
         g = self._gathered
@@ -238,10 +247,11 @@ class _VelResiduals:
         # prediction Σ R dt (M a − c) = Σ_ij Sx[.., i, j] M_ij − Σ_i Sx[.., i, 3] c_i, M = I + D
         y0 = Sx[..., 0, 0] + Sx[..., 1, 1] + Sx[..., 2, 2]  # (2, B, H, 3)
         self.y = (np.stack((w.dv, w.dp)) - y0).reshape(-1)
-        # Φ = (Φ_D, Φ_c) (2·B·H·3, 12): r = y − Φ (D, c), c = M_a b_a; its Gram matrix once (:meth:`normal`)
+        # Φ = (Φ_D, Φ_c) (2·B·H·3, 12): r = y − Φ (D, c), c = M_a b_a; its Gram matrix once a solve asks
+        # (:meth:`normal`; residuals that only score a cut-off never do)
         self.phi = np.ascontiguousarray(np.concatenate((Sx[..., :3].reshape(2 * B * H * 3, 9),
                                                         -Sx[..., 3].reshape(2 * B * H * 3, 3)), axis=1))
-        self.gram = self.phi.T @ self.phi
+        self._gram: Optional[np.ndarray] = None
 
     @staticmethod
     def _dc(theta: np.ndarray) -> np.ndarray:
@@ -277,8 +287,10 @@ class _VelResiduals:
             T = T[:, cols]
         down = np.flatnonzero(w < 1.0)
         if 4 * len(down) < len(w):
+            if self._gram is None:
+                self._gram = self.phi.T @ self.phi
             P = self.phi[down]
-            G = self.gram - P.T @ (P * (1.0 - w[down])[:, None])
+            G = self._gram - P.T @ (P * (1.0 - w[down])[:, None])
         else:
             G = self.phi.T @ (self.phi * w[:, None])
         return T.T @ G @ T, -(T.T @ (self.phi.T @ (w * r)))
