@@ -163,6 +163,12 @@ def offset_rotation_angles(
     t + tau * period_ns (ends held; np.interp's values bit for bit) and integrated by zero-order
     hold as integrate_windows does. Inputs checked as integrate_windows checks them."""
 
+def filtfilt_section(x: _F64, sos: _F64) -> _F64:
+    """x (N, C) float64 C-contiguous, N > 9, filtered by one second-order section sos (6,) = (b0, b1,
+    b2, a0, a1, a2) forward and backward, each column alone: scipy.signal.sosfiltfilt for one section
+    (odd padding of 9 samples, each pass started in the steady state of its first sample). A short x,
+    a non-finite sos, a0 = 0 or a pole at z = 1 raise InvalidInputError."""
+
 def rotation_window_sums(
     gyro: _F64, acc_g: _F64, dt: _F64, theta: _F64, horizons: _Idx, jacobian: bool,
 ) -> Dict[str, Optional[_F64]]:

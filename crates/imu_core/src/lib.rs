@@ -6,7 +6,7 @@
 //! noise) and `so3` as the shared maths; `allan` characterises a sensor's noise (overlapping Allan
 //! deviation and its slope fits); `rotsums` is the per-sample work of the traditional baseline's
 //! gyro fit (rotations and Jacobian sums over windows), `offset` the cost of its time offset's
-//! search. Nothing here knows Python; the bindings
+//! search, `filter` the floor's zero-phase low-pass. Nothing here knows Python; the bindings
 //! live in `python` behind the `python` feature.
 
 pub mod align;
@@ -14,6 +14,7 @@ pub mod allan;
 pub mod batch;
 pub mod covariance;
 pub mod error;
+pub mod filter;
 pub mod integrate;
 pub mod io;
 pub mod labels;

@@ -7,9 +7,9 @@ and of what a device profile applies (:meth:`imu_learn.calib.profile.Profile.app
 after the time offset (gyro and acc resampled at t + time_offset samples, :func:`.timing.resample`).
 LP is a zero-phase Butterworth low-pass of each axis (``None``: no filter): ``scipy.signal``'s
 ``butter`` and ``sosfiltfilt`` (odd padding of 3 × (2 · sections + 1) samples, each pass started in
-the steady state of its first sample). The floor's order 2 (every saved floor's) is computed here in
-numpy (:func:`butter2`, :func:`filtfilt2`): importing ``scipy.signal`` costs about 1 s of CPU
-(scipy 1.17), a fifth of ``imu-learn calibrate``; other orders import it."""
+the steady state of its first sample). The floor's order 2 (every saved floor's) is computed without
+scipy (:func:`butter2` here, :func:`filtfilt2` in the core): importing ``scipy.signal`` costs about 1 s
+of CPU (scipy 1.17), a fifth of ``imu-learn calibrate``; other orders import it."""
 from __future__ import annotations
 
 import math
@@ -20,6 +20,7 @@ from typing import Any, Callable, Dict, Iterator, Optional, Tuple
 import numpy as np
 
 from imu_learn.baselines.timing import resample
+from imu_learn.core.filtering import filtfilt_section
 from imu_learn.core.stamps import median_period_ns, sample_rate_hz
 
 # The floor's parameters by name: the one home of the keys of its saved dict (a device profile's
@@ -179,38 +180,12 @@ def butter2(cutoff_hz: float, fs: float) -> np.ndarray:
     return np.array([[b0, 2.0 * b0, b0, 1.0, 2.0 * (k * k - 1.0) * norm, (1.0 - s2 * k + k * k) * norm]])
 
 
-def _section_response(sos: np.ndarray) -> Tuple[np.ndarray, float]:
-    """The impulse response of one second-order section with complex poles r e^{±iθ} (a Butterworth
-    low-pass below Nyquist), until r^k falls below 1e-18 of its scale, and its gain at DC."""
-    b0, b1, b2, _, a1, a2 = (float(v) for v in sos[0])
-    r, th = math.sqrt(a2), math.atan2(math.sqrt(4.0 * a2 - a1 * a1), -a1)
-    k = np.arange(int(math.ceil(math.log(1e-18 * math.sin(th)) / math.log(r))) + 3)
-    g = r ** k * np.sin((k + 1) * th) / math.sin(th)  # of 1 / (1 + a1 z⁻¹ + a2 z⁻²)
-    h = b0 * g
-    h[1:] += b1 * g[:-1]
-    h[2:] += b2 * g[:-2]
-    return h, (b0 + b1 + b2) / (1.0 + a1 + a2)
-
-
-def _steady_pass(x: np.ndarray, h: np.ndarray, dc: float) -> np.ndarray:
-    """One causal pass of the filter over x (N, C) started in the steady state of x[0] (scipy's
-    ``zi = sosfilt_zi(sos) * x[0]``): dc · x[0] plus the response at rest to x − x[0] (an FFT
-    convolution with h, exact where h has decayed below the rounding)."""
-    n = len(x) + len(h) - 1
-    nfft = 1 << (n - 1).bit_length()
-    d = np.fft.irfft(np.fft.rfft(x - x[0], nfft, axis=0) * np.fft.rfft(h, nfft)[:, None], nfft, axis=0)
-    return d[:len(x)] + dc * x[0]
-
-
 def filtfilt2(sos: np.ndarray, x: np.ndarray) -> np.ndarray:
     """``scipy.signal.sosfiltfilt(sos, x, axis=0)`` for one Butterworth low-pass section (:func:`butter2`)
-    on x (N, C), N > 9: odd extension by 9 samples, a forward and a backward steady-state pass.
-    Agrees with scipy's to ~1e-14 of max |x| (tests/test_floor_numpy.py)."""
-    pad = 9
-    h, dc = _section_response(sos)
-    ext = np.concatenate((2.0 * x[:1] - x[pad:0:-1], x, 2.0 * x[-1:] - x[-2:-pad - 2:-1]))
-    y = _steady_pass(_steady_pass(ext, h, dc)[::-1], h, dc)[::-1]
-    return np.ascontiguousarray(y[pad:-pad])
+    on x (N, C), N > 9: odd extension by 9 samples, a forward and a backward steady-state pass (the
+    core's :func:`~imu_learn.core.filtering.filtfilt_section`). Agrees with scipy's to ~1e-14 of max |x|
+    (tests/test_floor_numpy.py)."""
+    return filtfilt_section(sos, x)
 
 
 def lowpass(x: np.ndarray, fs: float, cutoff_hz: Optional[float], order: int = 2) -> np.ndarray:

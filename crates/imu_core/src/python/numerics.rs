@@ -16,6 +16,7 @@ use crate::align::{self as core_align, AlignOptions, Sources};
 use crate::batch::{self, AugmentConfig, Batch, BatchConfig, BatchMut, BatchPlan};
 use crate::covariance::{self, Cov9, Var6};
 use crate::error::ImuError;
+use crate::filter;
 use crate::integrate::{self, PreintegratedMut};
 use crate::labels::{self, GroundTruthView, Labels, LabelsMut};
 use crate::offset;
@@ -661,7 +662,30 @@ impl SequenceSet {
     }
 }
 
+#[pyfunction]
+fn filtfilt_section<'py>(
+    py: Python<'py>,
+    x: PyReadonlyArray2<'py, f64>,
+    sos: PyReadonlyArray1<'py, f64>,
+) -> PyResult<Bound<'py, PyArray2<f64>>> {
+    let (n, cols) = (x.shape()[0], x.shape()[1]);
+    let xs = x.as_slice().map_err(|_| {
+        to_py(ImuError::invalid(
+            "x must be C-contiguous (use numpy.ascontiguousarray)",
+        ))
+    })?;
+    let s = slice1(&sos, "sos")?;
+    let section: &filter::Section = s
+        .try_into()
+        .map_err(|_| to_py(ImuError::invalid(format!("sos has {} entries, expected 6", s.len()))))?;
+    let out = py
+        .allow_threads(|| filter::filtfilt_section(xs, n, cols, section))
+        .map_err(to_py)?;
+    out2_flat(py, out, n, cols)
+}
+
 pub fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
+    m.add_function(wrap_pyfunction!(filtfilt_section, m)?)?;
     m.add_function(wrap_pyfunction!(align, m)?)?;
     m.add_function(wrap_pyfunction!(derive_velocity, m)?)?;
     m.add_function(wrap_pyfunction!(preintegrate, m)?)?;
