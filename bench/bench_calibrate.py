@@ -5,7 +5,8 @@ synthetic recording at a low rate.
                                                                  [--seconds 400] [--rate 30] [--quick]
 
 Each run is the command itself in a fresh process (``python -m imu_learn.cli calibrate ... --no-plot``),
-so "wall s" includes the interpreter, the imports (torch, scipy) and reading the recordings;
+so "wall s" includes the interpreter, the imports (their bytecode cached, as in a user's installation:
+``PYTHONDONTWRITEBYTECODE`` is dropped for the runs) and reading the recordings;
 "own s" is what the command reports for its own work ("calibrate took ... s": the floor, its
 uncertainty refits, gravity, the noise, the files). Cases:
 
@@ -185,6 +186,12 @@ def main(argv: Optional[List[str]] = None) -> int:
     print(f"{'case':34s} {'wall s':>7s} {'':7s}   {'own s':>7s} {'':7s}   {'CPU s':>7s}")
     print(f"{'':34s} {'min':>7s} {'median':>7s}   {'min':>7s} {'median':>7s}   {'min':>7s} {'median':>7s}")
     env = dict(os.environ)
+    # as a user's runs: the modules' bytecode cached (written by a first run), not compiled in every run
+    # (PYTHONDONTWRITEBYTECODE, set on some machines, adds ~0.3 s of compiling to each run's start-up)
+    if env.pop("PYTHONDONTWRITEBYTECODE", None) is not None:
+        print("# PYTHONDONTWRITEBYTECODE dropped for the runs (bytecode cached as in a user's installation)")
+    subprocess.run([sys.executable, "-m", "imu_learn.cli", "calibrate", "--help"], env=env, cwd=REPO,
+                   capture_output=True, check=False)
     root = data_root(args.data_root)
     if root is None:
         print("euroc: skipped (no data root with EuRoC's training flights: set IMU_LEARN_DATA or --data-root)")
