@@ -349,7 +349,8 @@ def _solve(res: Any, x0: np.ndarray, prior_idx: np.ndarray, prior: float, delta:
     ``res(θ)`` gives the residuals (R,) and ``res.jacobian(θ, r)`` their exact Jacobian (R, P) (both
     of :meth:`Traditional.fit`'s stages have one). Stops when a step lowers the cost by at most
     ``tol`` of it or moves θ by at most ``tol`` (1 + |θ|) (default: the residuals' own ``tol``, else
-    :data:`TOL`), or when no damping finds a lower cost."""
+    :data:`TOL`), or when no damping finds a lower cost; a step whose predicted decrease (the
+    iteration's quadratic model) or length is that small is not evaluated (:func:`_converged`)."""
     if free is not None:
         free = np.asarray(free, dtype=np.int64)
         out = np.array(x0, dtype=np.float64)
@@ -388,6 +389,12 @@ def _normal(res: Any, x: np.ndarray, r: np.ndarray, w: np.ndarray) -> Tuple[np.n
     return _weighted_normal(res.jacobian(x, r), r, w)
 
 
+def _converged(d: np.ndarray, x: np.ndarray, c: float, decrease: float, tol: float) -> bool:
+    """:func:`_solve`'s stopping rule: a step d from x that moves θ by at most ``tol`` (1 + |x|) or lowers
+    the cost c by at most ``tol`` of it (taken, or as the iteration's quadratic model predicts it)."""
+    return float(np.linalg.norm(d)) <= tol * (1.0 + float(np.linalg.norm(x))) or decrease <= tol * c
+
+
 def _lm(res: Any, x0: np.ndarray, cost: Callable[[np.ndarray, np.ndarray], float], delta: float, max_iter: int,
         tol: float, pmask: np.ndarray) -> np.ndarray:
     """:func:`_solve`'s iterations."""
@@ -399,8 +406,10 @@ def _lm(res: Any, x0: np.ndarray, cost: Callable[[np.ndarray, np.ndarray], float
         A, g = _normal(res, x, r, _huber_weights(r, delta))
         A, g = A + np.diag(pmask), g + pmask * x
         improved = False
-        for _ in range(10):
+        for attempt in range(10):
             d = np.linalg.solve(A + lam * np.diag(np.diagonal(A)), -g)
+            if attempt == 0 and _converged(d, x, c, -float(g @ d + 0.5 * d @ A @ d), tol):
+                return x  # the step the model offers is below the tolerance: not worth a pass over the windows
             xn = x + d
             rn = res(xn)
             cn = cost(xn, rn)
@@ -410,7 +419,7 @@ def _lm(res: Any, x0: np.ndarray, cost: Callable[[np.ndarray, np.ndarray], float
             lam *= 10.0
         if not improved:
             break
-        small = float(np.linalg.norm(d)) <= tol * (1.0 + float(np.linalg.norm(x))) or (c - cn) <= tol * c
+        small = _converged(d, x, c, c - cn, tol)
         x, r, c = xn, rn, cn
         lam = max(lam / 10.0, 1e-9)
         if small:
