@@ -19,8 +19,11 @@ from imu_learn.baselines.traditional import (
     TraditionalTiming,
     _Data,
     _gyro_model,
+    _huber_weights,
     _RotResiduals,
+    _solve,
     _VelResiduals,
+    _weighted_normal,
 )
 from imu_learn.core.integration import preintegrate
 from imu_learn.data.types import Segment
@@ -187,3 +190,46 @@ def test_a_jacobians_columns_alone_are_its_full_columns(crop_split):
     full = rot.jacobian(theta, r)
     for cols in ([9, 10, 11], [0, 4, 8, 9, 10, 11], list(range(12)), [12, 15, 20], [3, 13]):
         np.testing.assert_allclose(rot.jacobian(theta, r, np.asarray(cols)), full[:, cols], rtol=1e-12, atol=1e-15)
+
+
+def test_the_accelerometers_normal_equations_are_its_jacobians(crop_split):
+    """The accelerometer stage's Jᵀ W J and Jᵀ W r from Φ's Gram matrix (the rows Huber takes down
+    subtracted; or summed directly where many are) equal those of its exact Jacobian, for every
+    column subset a level frees."""
+    d = _Data([crop_split[0]], 100, 40, G)
+    w = d.windows(None, None)
+    rng = np.random.default_rng(5)
+    res = _VelResiduals(_gyro_model(np.zeros(21), w.gyro, w.acc_g), d.windows(None, 10.0))
+    theta = np.concatenate([0.01 * rng.standard_normal(9), 0.05 * rng.standard_normal(3)])
+    r = res(theta)
+    for delta in (np.inf, float(np.median(np.abs(r))) * 3, float(np.median(np.abs(r))) * 0.5):  # none, few, most down
+        wts = _huber_weights(r, delta)
+        for cols in (None, np.array([9, 10, 11]), np.array([0, 4, 8, 9, 10, 11]), np.arange(12)):
+            A, g = res.normal(theta, r, wts, cols)
+            A_j, g_j = _weighted_normal(res.jacobian(theta, r, cols), r, wts)
+            np.testing.assert_allclose(A, A_j, rtol=1e-9, atol=1e-12 * np.abs(A_j).max())
+            np.testing.assert_allclose(g, g_j, rtol=1e-9, atol=1e-12 * np.abs(g_j).max())
+
+
+@pytest.mark.parametrize("stage", ["rotation", "velocity"])
+def test_a_solve_stops_within_its_tolerance_of_the_minimum(crop_split, stage):
+    """The solve's stopping rule (a step not taken where the model predicts a decrease under tol of the
+    cost): its cost is within tol of the cost a solve run to 1e-15 reaches."""
+    d = _Data([crop_split[0]], 100, 60, G)
+    w = d.windows(None, None)
+    if stage == "rotation":
+        res, x0, prior_idx, delta, tol = _RotResiduals(w), np.zeros(21), np.r_[0:9, 12:21], 0.01, 1e-8
+    else:
+        res = _VelResiduals(_gyro_model(np.zeros(21), w.gyro, w.acc_g), w)
+        x0, prior_idx, delta, tol = np.zeros(12), np.r_[0:9], 0.1, 1e-8
+
+    def cost(x):
+        r = res(x).reshape(-1, 3)
+        n = np.sqrt((r * r).sum(-1))
+        return float(np.where(n <= delta, 0.5 * n * n, delta * (n - 0.5 * delta)).sum()
+                     + 0.5 * 1e-6 * (x[prior_idx] ** 2).sum())
+
+    x = _solve(res, x0, prior_idx, 1e-3, delta, 50, tol)
+    best = _solve(res, x0, prior_idx, 1e-3, delta, 200, 1e-15)
+    assert cost(best) <= cost(x) <= cost(best) * (1 + 10 * tol)
+    assert cost(x) < 0.5 * cost(x0)  # it solved something
