@@ -144,3 +144,53 @@ def test_a_start_up_that_prints_is_not_read_as_a_reply(tmp_path, monkeypatch, ca
     assert [v for v, _ in out] == expected()[:5]
     assert out[1][1] != os.getpid()
     assert "Boot environment" in capfd.readouterr().err  # the banner shows, on stderr
+
+
+def side_job(x, fail=False):
+    """A submitted job: where it ran and what it made (or its exception)."""
+    if fail:
+        raise ValueError(f"side job {x} failed")
+    return 2 * x, os.getpid()
+
+
+def slow_side_job(seconds):
+    import time
+    time.sleep(seconds)
+    return os.getpid()
+
+
+def test_a_submitted_job_runs_in_the_helper_before_its_items_and_the_step_is_unchanged():
+    with Split(ITEMS, helper=True) as split:
+        ticket = split.submit(side_job, 21)
+        got = sums(split)
+        value, pid = split.result(ticket)
+    assert got == expected()
+    assert value == 42 and pid != os.getpid()
+    with Split(ITEMS, helper=False) as alone:  # no helper: at once, here
+        ticket = alone.submit(side_job, 21)
+        assert alone.result(ticket) == (42, os.getpid()) and sums(alone) == expected()
+
+
+def test_a_submitted_jobs_exception_is_raised_by_its_result_not_by_the_step():
+    with Split(ITEMS, helper=True) as split:
+        ticket = split.submit(side_job, 1, True)
+        assert sums(split) == expected()
+        with pytest.raises(ValueError, match="side job 1 failed"):
+            split.result(ticket)
+    with Split(ITEMS, helper=False) as alone:
+        ticket = alone.submit(side_job, 1, True)
+        with pytest.raises(ValueError, match="side job 1 failed"):
+            alone.result(ticket)
+
+
+def test_a_helper_that_dies_during_a_submitted_job_leaves_it_and_its_items_here():
+    with Split(ITEMS, helper=True) as split:
+        ticket = split.submit(slow_side_job, 0.3)
+        os.kill(split._helper.proc.pid, signal.SIGKILL)
+        split._helper.proc.wait()
+        first = split.step(accumulate, 1.0)  # the job's reply lost: it and the helper's items run here
+        second = split.step(accumulate, 2.0)
+        assert split.theirs == []
+        assert split.result(ticket) == os.getpid()
+    assert [v for v, _ in first] + [v for v, _ in second] == expected()
+    assert all(pid == os.getpid() for _, pid in first + second)
