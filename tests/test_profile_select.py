@@ -327,36 +327,3 @@ def test_evaluate_refuses_a_profile_fitted_on_a_test_recording_and_warns_on_anot
     later = {**renamed, "train": [{"t0_ns": t1 + 10**9, "t1_ns": t1 + 10**10}], "val": []}
     path.write_text(json.dumps({**shipped, "sources": [later]}))
     check_profiles([f"profile:{path}"], ["MH_04_difficult"], [s])  # other stamps: scored
-
-
-def test_the_floor_fitted_beside_the_folds_is_the_floor_fitted_first():
-    """calibrate's path for a plain floor (``fit_and_select``: the floor's time offset first, the rest of its
-    fit in the helper process beside the folds, its spread after them) gives the floor, the spread and the
-    selection of the floor fitted first and then the selection (``select_floor``)."""
-    from imu_learn.calib.run import CalibInputs
-
-    recs = [recording(i, np.eye(3), np.eye(3), seconds=12.0) for i in range(3)]
-    names = [r.name for r in recs]
-    inp = CalibInputs([cut([r], 0.0, 0.85, r.name)[0] for r in recs], [cut([r], 0.85, 1.0, r.name)[0] for r in recs],
-                      names, names, settings=SETTINGS, device="synthetic")
-    assert inp.source.plain_floor(inp)
-    beside, entry = sel.fit_and_select(inp)
-    first, entry_first = sel.select_floor(inp, inp.source.fit_floor(inp))
-
-    def flat(d):
-        return np.concatenate([np.ravel(np.asarray(v, dtype=np.float64)) for k, v in sorted(d.items())
-                               if k not in ("method", "cutoff_gyro", "cutoff_acc", "filter_order")])
-
-    assert beside.floor.to_dict()["cutoff_acc"] == first.floor.to_dict()["cutoff_acc"]
-    np.testing.assert_allclose(flat(beside.floor.to_dict()), flat(first.floor.to_dict()), rtol=1e-9, atol=1e-12)
-    for k in ("M_g", "b_g", "G", "M_a", "b_a", "time_offset"):
-        np.testing.assert_allclose(np.asarray(getattr(beside.std, k), dtype=np.float64),
-                                   np.asarray(getattr(first.std, k), dtype=np.float64), rtol=1e-6, atol=1e-12)
-    assert (entry["gyro"], entry["acc"]) == (entry_first["gyro"], entry_first["acc"])
-    for sensor, table in entry["held_out_figures"].items():
-        for level, folds in table.items():
-            for fold, cells in folds.items():
-                for cell, v in cells.items():
-                    assert v == pytest.approx(entry_first["held_out_figures"][sensor][level][fold][cell], rel=1e-9)
-    assert beside.log.keys() == first.log.keys()
-    assert [g["group"] for g in beside.groups] == [g["group"] for g in first.groups]

@@ -474,40 +474,28 @@ class Traditional(Method):
 
     # -- fitting --------------------------------------------------------------------------------
 
-    def fit(self, train: List[Segment], val: List[Segment], settings: FitSettings = FitSettings(),
-            offset: Optional[Tuple[float, Dict[str, list]]] = None) -> Dict[str, list]:
-        """The model on ``train`` (``val`` selects the cutoffs and keeps or refuses the time offset);
-        ``offset``: the time offset and its log as :meth:`time_offset` gives them, not searched again."""
+    def fit(self, train: List[Segment], val: List[Segment], settings: FitSettings = FitSettings()) -> Dict[str, list]:
         with thread_limits(min(self.threads, settings.threads)):
-            return self._fit(train, val, settings, offset)
-
-    def time_offset(self, train: List[Segment], val: List[Segment], settings: FitSettings = FitSettings()
-                    ) -> Tuple[float, Dict[str, list]]:
-        """What :meth:`fit` finds first (``fit_offset``; else 0): the time offset [samples] and its log."""
-        with thread_limits(min(self.threads, settings.threads)):
-            return self._offset_first(train, val, settings)[1:3]
+            return self._fit(train, val, settings)
 
     def _offset_first(self, train: List[Segment], val: List[Segment], settings: FitSettings,
-                      shift_val: bool = True, start: Optional[float] = None,
-                      offset: Optional[Tuple[float, Dict[str, list]]] = None
+                      shift_val: bool = True, start: Optional[float] = None
                       ) -> Tuple[int, float, Dict[str, list], List[Segment], List[Segment]]:
         """What :meth:`fit` and :meth:`refit` do first: the window and (``fit_offset``) the time
-        offset (searched from ``start`` where given; ``offset``: given, with its log), with the training
-        split (and ``val`` where ``shift_val``) resampled at it.
+        offset (searched from ``start`` where given), with the training split (and ``val`` where
+        ``shift_val``) resampled at it.
         Returns (window, tau, its log, train, val)."""
         window = int(self.window or settings.window)
         if not self.fit_offset:
             return window, 0.0, {}, train, val
         if not any(len(s) > window for s in train):
             raise ValueError(f"no training sequence is longer than the window ({window} samples)")
-        tau, tau_log = offset if offset is not None else self._fit_time_offset(
-            train, val, self.offset_window, settings.gravity, start)
-        return (window, tau, dict(tau_log), [shifted(s, tau) for s in train],
+        tau, tau_log = self._fit_time_offset(train, val, self.offset_window, settings.gravity, start)
+        return (window, tau, tau_log, [shifted(s, tau) for s in train],
                 [shifted(s, tau) for s in val] if shift_val else val)
 
-    def _fit(self, train: List[Segment], val: List[Segment], settings: FitSettings,
-             offset: Optional[Tuple[float, Dict[str, list]]] = None) -> Dict[str, list]:
-        window, tau, tau_log, train, val = self._offset_first(train, val, settings, offset=offset)
+    def _fit(self, train: List[Segment], val: List[Segment], settings: FitSettings) -> Dict[str, list]:
+        window, tau, tau_log, train, val = self._offset_first(train, val, settings)
         tr = _Data(train, window, self.max_windows, settings.gravity, self.filter_order)
         if len(tr) == 0:
             raise ValueError(f"no training sequence is longer than the window ({window} samples)")

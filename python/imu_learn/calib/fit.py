@@ -58,25 +58,15 @@ def seed_all(seed: int) -> None:
 
 
 def fit_once(train: List[Segment], val: List[Segment], settings: FitSettings,
-             max_windows: Optional[int] = None, terms: Optional[Dict[str, Any]] = None,
-             offset: Optional[Tuple[float, Dict[str, list]]] = None) -> Tuple[TraditionalTiming, Dict[str, list]]:
+             max_windows: Optional[int] = None, terms: Optional[Dict[str, Any]] = None) -> Tuple[TraditionalTiming, Dict[str, list]]:
     """``imu-learn evaluate``'s fit of the floor (``max_windows``: the method's default unless given;
     ``terms``: keywords of :class:`TraditionalTiming` that restrict it to what the reference observes,
-    e.g. no low-pass, the acc bias only; ``offset``: its time offset as :func:`floor_time_offset` gives
-    it, not searched again; the method sizes its own threads: its ``threads``)."""
+    e.g. no low-pass, the acc bias only; the method sizes its own threads: its ``threads``)."""
     seed_all(settings.seed)
     kw = dict(terms or {}, **({} if max_windows is None else {"max_windows": max_windows}))
     method = TraditionalTiming(**kw)
-    log = method.fit(list(train), list(val), settings, offset) or {}
+    log = method.fit(list(train), list(val), settings) or {}
     return method, log
-
-
-def floor_time_offset(train: List[Segment], val: List[Segment], settings: FitSettings,
-                      terms: Optional[Dict[str, Any]] = None) -> Tuple[float, Dict[str, list]]:
-    """What :func:`fit_once` finds first: the floor's time offset [samples] and its log (the selection's
-    folds start their own searches from it while the rest of the fit runs beside them)."""
-    seed_all(settings.seed)
-    return TraditionalTiming(**dict(terms or {})).time_offset(list(train), list(val), settings)
 
 
 def refit_once(method: TraditionalTiming, train: List[Segment], val: List[Segment], settings: FitSettings,
@@ -132,25 +122,13 @@ def fit_floor(train: List[Segment], val: List[Segment], settings: FitSettings, g
               terms: Optional[Dict[str, Any]] = None) -> FloorFit:
     """The floor on all of ``train`` (``val`` for its selection; ``terms``: :func:`fit_once`'s), then on
     each group alone (``uncertainty=False``: not; every standard deviation NaN)."""
-    progress(fitting_message(train))
-    method, log = fit_once(train, val, settings, terms=terms)
-    if not uncertainty:
-        return FloorFit(Floor.from_dict(method.to_dict()), log, TraditionalParams.unknown(), [])
-    return with_spread(method, log, train, val, settings, groups, val_groups, progress)
-
-
-def fitting_message(train: Sequence[Segment]) -> str:
-    """The progress line of the floor's fit."""
     n = len(train)
-    return (f"fitting the floor (traditional+timing) on {n} segment{'s' if n != 1 else ''}, "
-            f"{sum(len(s) for s in train)} samples")
-
-
-def with_spread(method: TraditionalTiming, log: Dict[str, list], train: List[Segment], val: List[Segment],
-                settings: FitSettings, groups: Sequence[str], val_groups: Sequence[str],
-                progress: Progress = lambda s: None) -> FloorFit:
-    """The floor :func:`fit_once` fitted, with its spread between the groups (each refitted alone)."""
+    progress(f"fitting the floor (traditional+timing) on {n} segment{'s' if n != 1 else ''}, "
+             f"{sum(len(s) for s in train)} samples")
+    method, log = fit_once(train, val, settings, terms=terms)
     floor = Floor.from_dict(method.to_dict())
+    if not uncertainty:
+        return FloorFit(floor, log, TraditionalParams.unknown(), [])
     usable = list(refit_groups(train, val, groups, val_groups, settings.window).items())
 
     def refit_progress(i: int) -> None:

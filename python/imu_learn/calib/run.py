@@ -38,7 +38,7 @@ from imu_learn.calib.profile import (
     noise_only,
     unobserved_term,
 )
-from imu_learn.calib.select import fit_and_select, select_floor, skip_reason
+from imu_learn.calib.select import select_floor
 from imu_learn.calib.sources import TIME_OFFSET_PRIOR_SAMPLES, CalibInputs, Recording, StillPiece
 from imu_learn.core.stamps import median_period_ns, sample_rate_hz
 from imu_learn.errors import ImplausibleProfileError, InvalidInputError
@@ -175,11 +175,8 @@ def floor_profile(inp: CalibInputs, progress: Progress, uncertainty: bool = True
     """The floor part of the profile (with the reference): the floor its source fits, and the
     residuals before/after it (``uncertainty=False``: no refits per recording, the standard
     deviations NaN; ``select``: its terms chosen on held-out recordings, :mod:`imu_learn.calib.select`)."""
-    if select and uncertainty and skip_reason(inp) is None and inp.source.plain_floor(inp):
-        fit, selection = fit_and_select(inp, progress)  # the same figures, the floor's fit beside the folds
-    else:
-        fit = inp.source.fit_floor(inp, progress, uncertainty)
-        fit, selection = select_floor(inp, fit, progress) if select else (fit, {})
+    fit = inp.source.fit_floor(inp, progress, uncertainty)
+    fit, selection = select_floor(inp, fit, progress) if select else (fit, {})
     f, std = fit.floor, fit.std
     segs, groups = inp.train + inp.val, inp.groups + inp.val_groups
     progress("gravity and the residual noise")

@@ -96,17 +96,7 @@ from imu_learn.calib.acc_positions import (
     heldout_rms_rows,
     recording_rows,
 )
-from imu_learn.calib.fit import (
-    fit_once,
-    fitting_message,
-    floor_time_offset,
-    recordings_or_blocks,
-    refit_groups,
-    seed_all,
-    spread,
-    time_blocks,
-    with_spread,
-)
+from imu_learn.calib.fit import recordings_or_blocks, refit_groups, seed_all, spread, time_blocks
 from imu_learn.calib.profile import FloorFit
 from imu_learn.calib.sources import matched
 from imu_learn.core.integration import preintegrate
@@ -375,7 +365,6 @@ class Selection:
     seconds: float = 0.0
     gyro_levels: Tuple[str, ...] = GYRO_LEVELS
     gyro_cells: Tuple[str, ...] = CELLS["gyro"]
-    side: Any = field(default=None, repr=False)  # the result of select_levels' side job (not in to_dict)
 
     def to_dict(self) -> Dict[str, Any]:
         gyro_only = self.gyro_cells != CELLS["gyro"]
@@ -509,14 +498,11 @@ def _acc_step(fold: Fold, state: Dict[str, Any], g_level: str, scoring: Scoring
 
 def select_levels(train: List[Segment], val: List[Segment], groups: Sequence[str], val_groups: Sequence[str],
                   settings: FitSettings, opts: SelectOptions = SelectOptions(),
-                  progress: Progress = lambda s: None, side: Optional[Tuple[Callable[..., Any], Tuple[Any, ...]]] = None
-                  ) -> Selection:
+                  progress: Progress = lambda s: None) -> Selection:
     """Each level fitted on every fold and scored on its held-out part; the gyro's level chosen first
     (the accelerometer at its full level), then the accelerometer's (the gyro at its chosen level).
     The folds are split between this process and a helper process (:class:`~imu_learn.util.helper.Split`:
-    the same figures as one after another). ``side`` (fn, args): a job the helper runs before its folds
-    (:meth:`~imu_learn.util.helper.Split.submit`; here first where there is none), its result in the
-    selection's ``side``."""
+    the same figures as one after another)."""
     t0 = time.time()
     horizons = tuple(sorted({int(n) for n in settings.horizons})) or opts.horizons
     fs = folds(train, val, groups, val_groups)
@@ -529,7 +515,6 @@ def select_levels(train: List[Segment], val: List[Segment], groups: Sequence[str
     gyro_scoring = Scoring(horizons, opts, settings.gravity, cells, os.getpid())
     acc_scoring = replace(gyro_scoring, cells=CELLS["acc"])
     with Split(fs, start=True) as split:  # each step and scoring job holds its pools at one thread
-        ticket = split.submit(side[0], *side[1]) if side is not None else None
         if split.theirs:
             progress(f"selection: {len(fs)} folds, " + ", ".join(fs[i].name for i in split.theirs)
                      + " held out in a helper process")
@@ -548,16 +533,14 @@ def select_levels(train: List[Segment], val: List[Segment], groups: Sequence[str
         if opts.gyro_only:
             progress(f"selection: gyroscope {g_level}; the accelerometer from the reference's positions next")
             return Selection(g_level, "not selected", kind, fold_info, {"gyro": gyro_t, "acc": {}},
-                             {"gyro": g_steps, "acc": []}, horizons, time.time() - t0, levels, GYRO_ONLY_CELLS,
-                             side=None if ticket is None else split.result(ticket))
+                             {"gyro": g_steps, "acc": []}, horizons, time.time() - t0, levels, GYRO_ONLY_CELLS)
         progress(f"selection: gyroscope {g_level}; the accelerometer's levels")
         shared = SharedScores(fs, acc_scoring)
         out, scores = split.step_and_share(_acc_step, (g_level, acc_scoring), then=shared.jobs)
         acc_t = shared.table(out, scores, ACC_LEVELS)
-        side_result = None if ticket is None else split.result(ticket)
     a_level, a_steps = choose(ACC_LEVELS, acc_t, CELLS["acc"])
     return Selection(g_level, a_level, kind, fold_info, {"gyro": gyro_t, "acc": acc_t},
-                     {"gyro": g_steps, "acc": a_steps}, horizons, time.time() - t0, levels, side=side_result)
+                     {"gyro": g_steps, "acc": a_steps}, horizons, time.time() - t0, levels)
 
 
 def fit_at_levels(train: List[Segment], val: List[Segment], settings: FitSettings, levels: Tuple[str, str],
@@ -665,36 +648,6 @@ def select_floor(inp: Any, fit: FloorFit, progress: Progress = lambda s: None,
     entry = sel.to_dict()
     if only:
         return _gyro_only_floor(inp, data, fit, sel, entry, tau, opts, progress)
-    return _at_levels(inp, fit, sel, entry, tau, opts, progress)
-
-
-def fit_and_select(inp: Any, progress: Progress = lambda s: None) -> Tuple[FloorFit, Dict[str, Any]]:
-    """:func:`select_floor` on the floor :meth:`~imu_learn.calib.sources.Source.fit_floor` fits, for a source
-    whose floor is the plain fit of its recordings (:meth:`~imu_learn.calib.sources.Source.plain_floor`),
-    with the same figures in less time: the floor's time offset first (all the folds need of the floor),
-    then the rest of its fit in the helper process beside this process's folds, then its spread between
-    the recordings."""
-    terms = inp.source.floor_terms()
-    progress(fitting_message(inp.train))
-    offset = floor_time_offset(inp.train, inp.val, inp.settings, terms)
-    tau = float(offset[0])
-    frame = getattr(inp.source, "frame", None)
-    upto = "bias" if frame is not None and frame.turns_about_one_axis else None
-    opts = SelectOptions(tau_near=tau, gyro_upto=upto)
-    side = (fit_once, (inp.train, inp.val, inp.settings, None, terms, offset))
-    try:
-        sel = select_levels(inp.train, inp.val, inp.groups, inp.val_groups, inp.settings, opts, progress, side)
-    except ValueError as e:  # too little data to hold any out: the full floor, and why
-        return inp.source.fit_floor(inp, progress), {"skipped": f"no selection: {e}"}
-    method, log = sel.side
-    fit = with_spread(method, log, inp.train, inp.val, inp.settings, inp.groups, inp.val_groups, progress)
-    return _at_levels(inp, fit, sel, sel.to_dict(), tau, opts, progress)
-
-
-def _at_levels(inp: Any, fit: FloorFit, sel: Selection, entry: Dict[str, Any], tau: float, opts: SelectOptions,
-               progress: Progress) -> Tuple[FloorFit, Dict[str, Any]]:
-    """The floor at the selection's levels on all the training recordings, with its spread (``fit`` as it
-    is where the levels are all it has)."""
     levels = (sel.gyro, sel.acc)
     if levels == full_levels(fit.floor):
         entry["floor"] = "the full floor's fit: the chosen levels are all it has"

@@ -175,12 +175,6 @@ class Source:
         return ff.fit_floor(inp.train, inp.val, inp.settings, inp.groups, inp.val_groups, progress, uncertainty,
                             self.floor_terms())
 
-    def plain_floor(self, inp: CalibInputs) -> bool:
-        """Whether :meth:`fit_floor` is the plain fit of the recordings as they are, every term free (the
-        selection may then run beside it: :func:`imu_learn.calib.select.fit_and_select`). A source that
-        fits its floor its own way says False unless it says otherwise."""
-        return type(self).fit_floor is Source.fit_floor and not self.floor_terms()
-
     def reference(self) -> Dict[str, Any]:
         """profile.json's ``reference`` entry (empty: the reference as given)."""
         return {}
@@ -427,11 +421,6 @@ class PosesSource(Source):
         if self.frame is not None and not self.frame.resolves_acceleration and self.acc_options is not None:
             fit = self.acc_from_positions(inp, fit, progress, uncertainty)
         return fit
-
-    def plain_floor(self, inp: CalibInputs) -> bool:
-        """A reference as dense as the IMU, its stamps not moved by a lag, every term free."""
-        return (not self.floor_terms() and len(self.match_kernel(inp)) == 1
-                and not (self.frame is not None and self.frame.applied.get("lag")))
 
     def match_kernel(self, inp: CalibInputs) -> np.ndarray:
         """The reference's interpolation on the IMU's samples (:func:`interpolation_kernel`; ``[1]``: a

@@ -201,10 +201,6 @@ class Split:
         self._helper: Optional[_Helper] = None
         self._shared = False
         self._pending = 0  # replies not read yet
-        # submitted jobs (:meth:`submit`): [fn, args, ("ok", result) or ("raised", exception) once done]; the
-        # tickets whose replies are not read yet, in the order they were sent
-        self._submitted: List[List[Any]] = []
-        self._unread: List[int] = []
         if use:
             try:
                 self._helper, self._shared = (shared, True) if shared is not None else (_Helper(), False)
@@ -245,65 +241,12 @@ class Split:
 
     def _fallback(self, replay: int = 0) -> None:
         """Run the helper's items here from now on, their state rebuilt by replaying the first
-        ``replay`` steps; submitted jobs it had not answered run here too."""
+        ``replay`` steps."""
         self.close(drop=True)
         theirs, self.theirs = self.theirs, []
-        unread, self._unread = self._unread, []
-        for t in unread:
-            self._run_here(t)
         for fn, args in self.history[:replay]:
             for i in theirs:
                 fn(self.items[i], self.state[i], *args)
-
-    def submit(self, fn: Callable[..., Any], *args: Any) -> int:
-        """``fn(*args)`` (a module-level function, picklable arguments) in the helper before its part of
-        the next step, or here at once where there is no helper; returns a ticket for :meth:`result`. For
-        work this process would otherwise do before the step: the helper does it beside this process's
-        items (so the helper should then hold the fewer items)."""
-        ticket = len(self._submitted)
-        self._submitted.append([fn, args, None])
-        if self._helper is not None:
-            try:
-                self._helper.send(("jobs", fn, [args]))
-                self._pending += 1
-                self._unread.append(ticket)
-                return ticket
-            except (OSError, pickle.PicklingError, ValueError, AttributeError):
-                self._fallback(len(self.history))
-        self._run_here(ticket)
-        return ticket
-
-    def result(self, ticket: int) -> Any:
-        """A submitted job's result (its exception raised here, as had it run here)."""
-        self._read_submitted(len(self.history))
-        kind, value = self._submitted[ticket][2]
-        if kind == "raised":
-            raise value
-        return value
-
-    def _run_here(self, ticket: int) -> None:
-        fn, args, _ = self._submitted[ticket]
-        try:
-            self._submitted[ticket][2] = ("ok", fn(*args))
-        except Exception as e:  # kept for :meth:`result`: the step that runs beside it is not its caller
-            self._submitted[ticket][2] = ("raised", e)
-
-    def _read_submitted(self, replay: int) -> bool:
-        """The replies of the submitted jobs not read yet (sent before anything after them: they come
-        first). Where the helper is lost meanwhile, those jobs and its items run here (the first ``replay``
-        steps replayed: :meth:`_fallback`); returns False then."""
-        while self._unread and self._helper is not None:
-            t = self._unread[0]
-            try:
-                kind, value = self._reply()
-            except Exception as e:  # the job raised in the helper: kept for :meth:`result`
-                kind, value = "raised", e
-            if kind == "lost":
-                self._fallback(replay)
-                return False
-            self._unread.pop(0)
-            self._submitted[t][2] = ("ok", value[0]) if kind == "ok" else ("raised", value)
-        return True
 
     def step(self, fn: Callable[..., Any], *args: Any, on_item: Callable[[int], None] = lambda i: None) -> List[Any]:
         """``fn(item, state, *args)`` on every item, results in item order. ``fn`` a module-level function
@@ -341,21 +284,16 @@ class Split:
         for k in range(len(jobs)):
             if k not in shared:
                 done[k] = job_fn(*jobs[k])
-        theirs = list(self.theirs)
-        # jobs submitted before this step: their replies come first (the helper lost there: its items here)
-        lost = bool(theirs) and not self._read_submitted(len(self.history) - 1)
         if self._helper is not None:
+            theirs = list(self.theirs)
             kind, value = self._reply()
             if kind == "ok":
                 out.update(value)
             else:
-                lost = True
                 self._fallback(len(self.history) - 1)
-        if lost:
-            for i in theirs:
-                on_item(i)
-                out[i] = fn(self.items[i], self.state[i], *args)
-        if theirs:
+                for i in theirs:
+                    on_item(i)
+                    out[i] = fn(self.items[i], self.state[i], *args)
             if shared:
                 kind, value = self._reply() if self._helper is not None else ("lost", None)
                 if kind == "ok":
