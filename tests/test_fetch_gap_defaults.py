@@ -35,6 +35,25 @@ def test_fetch_has_its_own_gap_and_the_others_keep_the_loaders():
     assert dataset_max_gap_s("euroc") is None and dataset_options("euroc") == AlignOptions()
 
 
+def test_a_config_root_without_a_gap_takes_its_formats_own():
+    """A config's data root that leaves ``max_gap_s`` unset aligns with its format's gap (Fetch's 0.1 s:
+    a user's own Fetch config keeps every recording whole, as ``labels fetch`` does), an explicit one as
+    written; a saved config's null reads back as unset, a string is refused."""
+    from imu_learn.data.config import RootConfig
+    from imu_learn.data.splits import recording_source, root_max_gap_s
+    from imu_learn.errors import ConfigError
+    from imu_learn.settings import from_dict
+
+    fetch = from_dict(RootConfig, {"path": "fetch", "format": "fetch"})
+    assert fetch.max_gap_s is None and root_max_gap_s(fetch) == 0.1
+    assert recording_source("01_square", Path("x"), fetch, None).options.max_gap_s == 0.1
+    assert root_max_gap_s(from_dict(RootConfig, {"path": "e", "format": "euroc"})) == AlignOptions().max_gap_s
+    assert root_max_gap_s(from_dict(RootConfig, {"path": "f", "format": "fetch", "max_gap_s": 0.03})) == 0.03
+    assert from_dict(RootConfig, {"path": "f", "format": "fetch", "max_gap_s": None}).max_gap_s is None
+    with pytest.raises(ConfigError, match="max_gap_s: expected a number"):
+        from_dict(RootConfig, {"path": "f", "max_gap_s": "0.1"})
+
+
 def test_labels_for_fetch_need_no_option(fetch, tmp_path, capsys):
     rc, out, err = run(["labels", "fetch", "--data-root", fetch.parent, "--out", tmp_path / "c", "-q"], capsys)
     assert rc == 0, err

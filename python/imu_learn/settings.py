@@ -55,6 +55,12 @@ def _convert(key: str, value: Any, tp: Any) -> Any:
             raise ConfigError(f"{key}: expected a {_type_name(tp)}, got {value!r}")
         items = [_convert(f"{key}[{i}]", v, args[0]) if args else v for i, v in enumerate(value)]
         return tuple(items) if origin in (tuple, Tuple) else items
+    if origin is typing.Union:  # Optional[X]: None (a saved config's null, or the default) or an X
+        args = [a for a in typing.get_args(tp) if a is not type(None)]
+        if value is None and len(args) < len(typing.get_args(tp)):
+            return None
+        if len(args) == 1:
+            return _convert(key, value, args[0])
     if tp is bool:
         if not isinstance(value, bool):
             raise ConfigError(f"{key}: expected true or false, got {value!r}")

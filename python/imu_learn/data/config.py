@@ -31,8 +31,9 @@ class RootConfig:
     format: str = "euroc"
     groundtruth: str = ""
     # Ground-truth stamps further apart than this split a recording (AlignOptions.max_gap_s);
-    # raise it for sparse ground truth, e.g. 0.06 for EuRoC's 20 Hz ASL state files.
-    max_gap_s: float = 0.05
+    # raise it for sparse ground truth, e.g. 0.06 for EuRoC's 20 Hz ASL state files. Unset: the
+    # format's own where its reference needs one (data.datasets.MAX_GAP_S: Fetch 0.1 s), else 0.05.
+    max_gap_s: Optional[float] = None
     # Added to the ground truth's stamps (AlignOptions.gt_time_offset_s) where its clock is measured
     # to be off the IMU's (imu-learn groundtruth: a ground truth late by tau gets -tau).
     gt_time_offset_s: float = 0.0

@@ -39,7 +39,7 @@ from typing import Sequence as Seq
 import numpy as np
 
 from imu_learn.data.config import DataConfig, RootConfig
-from imu_learn.data.datasets import DATASETS, find_recordings
+from imu_learn.data.datasets import DATASETS, dataset_max_gap_s, find_recordings
 from imu_learn.data.formats import USER_CSV, CsvColumns
 from imu_learn.data.label_builder import RecordingSource, cached_segments
 from imu_learn.data.loading import AlignOptions, load_sequence, recording_label
@@ -231,8 +231,17 @@ def recording_source(name: str, path: Path, root: RootConfig, groundtruth: Optio
     depends on)."""
     topics = {"imu_topic": root.imu_topic, "groundtruth_topic": root.groundtruth_topic}
     return RecordingSource(name, path, root.format, groundtruth,
-                           AlignOptions(max_gap_s=root.max_gap_s, gt_time_offset_s=root.gt_time_offset_s),
+                           AlignOptions(max_gap_s=root_max_gap_s(root), gt_time_offset_s=root.gt_time_offset_s),
                            {k: v for k, v in topics.items() if v}, root_columns(root))
+
+
+def root_max_gap_s(root: RootConfig) -> float:
+    """The ground-truth gap [s] that splits a root's recordings: its ``max_gap_s``, else its format's own
+    (:func:`~imu_learn.data.datasets.dataset_max_gap_s`), else :class:`AlignOptions`'s."""
+    if root.max_gap_s is not None:
+        return float(root.max_gap_s)
+    gap = dataset_max_gap_s(root.format)
+    return AlignOptions.max_gap_s if gap is None else gap
 
 
 def from_label_cache(data: DataConfig, entries: Dict[str, List[SplitEntry]],

@@ -170,7 +170,7 @@ def validate(cfg: RunConfig) -> None:
     need(len(d.roots) > 0, "data.roots", "give at least one root")
     for i, r in enumerate(d.roots):
         need(bool(r.path), f"data.roots[{i}].path", "is empty")
-        need(r.max_gap_s > 0, f"data.roots[{i}].max_gap_s", f"must be positive, got {r.max_gap_s}")
+        need(r.max_gap_s is None or r.max_gap_s > 0, f"data.roots[{i}].max_gap_s", f"must be positive, got {r.max_gap_s}")
     need(len(d.split.train) > 0, "data.split.train", "give at least one sequence")
     need(len(d.split.val) > 0, "data.split.val", "give at least one sequence")
     need(o.lr > 0, "optim.lr", f"must be positive, got {o.lr}")
