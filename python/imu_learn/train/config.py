@@ -21,7 +21,7 @@ from __future__ import annotations
 
 from dataclasses import asdict, dataclass, field, fields, is_dataclass
 from pathlib import Path
-from typing import Any, Dict, List, Sequence
+from typing import Any, Dict, List, Sequence, Tuple
 
 from imu_learn.data.config import DataConfig, RootConfig, SplitConfig, resolve_data_root  # noqa: F401  (re-exported)
 from imu_learn.errors import ConfigError
@@ -225,18 +225,22 @@ def to_toml(cfg: RunConfig) -> str:
             return "[" + ", ".join(val(x) for x in v) + "]"
         return repr(v)
 
-    lines = [f"{k} = {val(v)}" for k, v in d.items() if not isinstance(v, dict)]
+    def pairs(table: Dict[str, Any]) -> List[Tuple[str, Any]]:
+        """A table's entries that TOML can hold: an unset optional (None) is left out (it reads back unset)."""
+        return [(k, v) for k, v in table.items() if v is not None]
+
+    lines = [f"{k} = {val(v)}" for k, v in pairs(d) if not isinstance(v, dict)]
     for sec in ("data", "model", "loss", "optim"):
         body = d[sec]
         lines.append(f"\n[{sec}]")
-        lines += [f"{k} = {val(v)}" for k, v in body.items() if not isinstance(v, (dict, list)) or (isinstance(v, list) and not (v and isinstance(v[0], dict)))]
+        lines += [f"{k} = {val(v)}" for k, v in pairs(body) if not isinstance(v, (dict, list)) or (isinstance(v, list) and not (v and isinstance(v[0], dict)))]
         for k, v in body.items():
             if isinstance(v, dict):
                 lines.append(f"\n[{sec}.{k}]")
-                lines += [f"{kk} = {val(vv)}" for kk, vv in v.items()]
+                lines += [f"{kk} = {val(vv)}" for kk, vv in pairs(v)]
         for k, v in body.items():
             if isinstance(v, list) and v and isinstance(v[0], dict):
                 for item in v:
                     lines.append(f"\n[[{sec}.{k}]]")
-                    lines += [f"{kk} = {val(vv)}" for kk, vv in item.items()]
+                    lines += [f"{kk} = {val(vv)}" for kk, vv in pairs(item)]
     return "\n".join(lines) + "\n"
