@@ -158,6 +158,17 @@ def parser(name: str) -> argparse.ArgumentParser:
     return p
 
 
+def _end_progress() -> None:
+    """Close the progress bars a stopped command left open (tqdm's, where it is loaded), so that the
+    command's last line starts a line of its own instead of following a bar's text."""
+    tqdm = sys.modules.get("tqdm")
+    for bar in list(getattr(getattr(tqdm, "tqdm", None), "_instances", None) or ()):
+        try:
+            bar.close()
+        except Exception:  # pragma: no cover - a bar that cannot close must not hide the message
+            pass
+
+
 def run_command(name: str, argv: Optional[Sequence[str]] = None, **hooks: Any) -> int:
     """Parse ``argv`` for subcommand ``name`` and run it under the one error rule (module doc)."""
     with sigterm_as_interrupt() as terminated:
@@ -185,9 +196,11 @@ def _run_command(name: str, argv: Optional[Sequence[str]], terminated: List[int]
     except KNOWN_ERRORS as e:
         if args.traceback:
             raise
+        _end_progress()
         sys.stderr.write(f"{prog(name)}: error: {one_line(e)}\n")
         return EXIT_ERROR
     except KeyboardInterrupt:
+        _end_progress()
         said = [k() if callable(k) else k for k in kept]
         said = [s for s in said if s]
         word = "terminated (SIGTERM)" if terminated else "interrupted"
