@@ -65,3 +65,27 @@ def test_bad_inputs_are_named():
         offset_rotation_angles(s.t_ns, s.gyro, lab, float("nan"), per)
     with pytest.raises(InvalidInputError):
         offset_rotation_angles(s.t_ns[::-1].copy(), s.gyro, lab, 0.5, per)
+
+
+@pytest.mark.parametrize("kind", ["many", "two", "half", "outliers"])
+def test_the_sample_period_is_numpys_median_with_few_or_many_distinct_periods(kind):
+    """median_period_ns's shortcut (a candidate that holds both middle ranks) against np.median: periods
+    drawn from many values, from two (EuRoC's 4999936/5000192 ns) in any share, exactly half and half (an
+    even count: the median is their mean), one period with outliers; short and long, alone and pooled."""
+    rng = np.random.default_rng(len(kind))
+    for trial in range(300):
+        n = int(rng.integers(2, 40)) if trial % 3 else int(rng.integers(40, 5000))
+        if kind == "many":
+            d = rng.integers(4_000_000, 6_000_000, n)
+        elif kind == "two":
+            d = np.where(rng.random(n) < rng.random(), 4_999_936, 5_000_192)
+        elif kind == "half":
+            n += n % 2
+            d = rng.permutation(np.repeat([4_999_936, 5_000_192], n // 2))
+        else:
+            d = np.where(rng.random(n) < 0.02, 10_000_000, 5_000_000)
+        t = np.concatenate(([0], np.cumsum(d))).astype(np.int64)  # its periods are d
+        parts = (t[: n // 3], t[n // 3:]) if trial % 2 else (t,)
+        want = np.median(np.concatenate([np.diff(p) for p in parts if len(p) > 1]))
+        assert median_period_ns(*parts) == want, (trial, n)
+    assert median_period_ns(t[:1]) == 0.0 and median_period_ns() == 0.0
