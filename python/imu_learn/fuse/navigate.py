@@ -55,7 +55,7 @@ import sys
 import time
 from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
-from typing import Callable, Dict, Optional, Tuple
+from typing import Any, Callable, Dict, Optional, Tuple
 
 import numpy as np
 from scipy.spatial.transform import Rotation
@@ -1247,15 +1247,24 @@ def fuse_run(src: Sources, opts: NavigateOptions, imu: Imu, fused: tuple, st: St
                       mininterval=1.0, disable=not progress, file=sys.stderr, leave=False) as bar:
                 feed(inc, samples_of(np.ascontiguousarray(gyro[sel]), np.ascontiguousarray(acc[sel]),
                                      None if var is None else np.ascontiguousarray(var[sel])), on_state=on_state)
-                bar.set_description("navigate: smoothing")
-                bar.total, bar.unit, bar.unit_scale = None, "iteration", False
-                bar.reset()  # the batch pass's iterations, counted (no total known)
-                res = inc.smooth(progress=lambda *_: (bar.update(1), bar.refresh()))
+                res = inc.smooth(progress=batch_pass_progress(bar))
         res.seconds = time.perf_counter() - t0
         return res
     except RuntimeError as e:  # GTSAM's IndeterminateLinearSystemException and kin
         raise AidingError(f"{src.aiding}: the factor graph could not be solved: {' '.join(str(e).split())[:300]}",
                           str(src.aiding), opts.aiding_kind) from None
+
+
+def batch_pass_progress(bar: Any) -> Callable[..., Any]:
+    """The fusion's bar turned to the batch pass: its label now, then its iterations counted (no total
+    known), each shown as it ends. Shown from here on, so its delay is dropped: tqdm takes a bar reset
+    within its delay for one never shown and leaves its text behind when it closes (a Ctrl-C's line then
+    ran into it)."""
+    bar.set_description("navigate: smoothing")
+    bar.total, bar.unit, bar.unit_scale = None, "iteration", False
+    bar.reset()
+    bar.delay = 0
+    return lambda *_: (bar.update(1), bar.refresh())
 
 
 def gnss_velocities(fixes, sol: Optional[RtkSolution], opts: NavigateOptions, t0_ns: int
