@@ -129,3 +129,31 @@ def test_a_profiles_white_noise_is_raised_to_the_moving_imus_with_pose_aiding():
     assert not short.used
     same = in_motion(quiet, short)
     assert same.acc_noise_density == quiet.acc_noise_density and "no in-motion fit" in same.source
+
+
+def test_a_profile_that_measured_no_noise_writes_the_class_default_and_navigate_fits_its_own(tmp_path, capsys):
+    """calibrate --imu-only on a recording that never rests measures no noise: imu.yaml holds the
+    device-class default with a line saying so (not .nan), and navigate --profile with it fits the
+    noise from the aiding's innovations as without a profile (not the built-in ADIS16448's)."""
+    import yaml
+
+    from imu_learn.calib.profile import CLASS_DEFAULT_SOURCE, CLASS_DEFAULTS
+    from imu_learn.cli import main
+
+    rec, fixes = write_asl(tmp_path, *recording(seconds=60.0)[:5])
+    cal = tmp_path / "cal"
+    rc = main(["calibrate", "--imu-only", "--input", str(rec), "--out", str(cal), "--no-plot", "--quiet"])
+    assert rc == 0, capsys.readouterr().err
+    text = (cal / "imu.yaml").read_text()
+    assert yaml.safe_load(text) | CLASS_DEFAULTS == yaml.safe_load(text)  # every figure the class default
+    assert ".nan" not in text and text.count(f"not measured (no reference, no still stretch): the {CLASS_DEFAULT_SOURCE}") == 4
+    capsys.readouterr()
+    out = tmp_path / "out"
+    rc = main(["navigate", "--input", str(rec), "--aiding", str(fixes), "--aiding-kind", "position",
+               "--profile", str(cal / "profile.json"), "--out", str(out)])
+    err = capsys.readouterr().err
+    assert rc == 0, err
+    s = json.loads((out / "summary.json").read_text())
+    assert s["noise"].startswith("fitted from the aiding's innovations: x"), s["noise"]
+    assert 0.5 < s["imu_noise"]["accelerometer_noise_density"] / TRUE_ACC < 2.0
+    assert sum("measured no noise" in line for line in err.splitlines()) == 1

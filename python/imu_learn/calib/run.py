@@ -138,7 +138,8 @@ def unobservable(has_ref: bool, allan: Optional[nz.AllanNoise], noise: Dict[str,
     for key in NOISE_KEYS:
         t = noise.get(key)
         if t is None:
-            out.append({"what": key, "why": "no estimate: neither a reference nor a still stretch"})
+            out.append({"what": key, "why": "no estimate: neither a reference nor a still stretch; imu.yaml holds the "
+                                            f"{CLASS_DEFAULT_SOURCE} (put your datasheet's there)"})
         elif t.bounded_only:
             src = t.detail.get("upper_bound_from", t.source)
             bound = "min over τ of the Allan deviation on the term's line"

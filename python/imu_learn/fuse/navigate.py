@@ -435,7 +435,9 @@ def imu_noise(src: Sources, opts: NavigateOptions, own: Optional[ImuNoise], prof
         return ImuNoise(*opts.imu_noise, source="--imu-noise")
     # GNSS: the fixes as the run fuses them, read once for the innovations' fit and the track's rest
     rows = gnss_rows(src, sol, imu[0], np.zeros(3), opts)[1] if sol is not None and imu is not None else None
-    if profile is not None:
+    # a profile that measured no noise (no reference and no still stretch) gives none: the recording's own below
+    blank = profile is not None and all(v is None for v in profile.kalibr().values())
+    if profile is not None and not blank:
         noise = from_profile(profile.kalibr(), str(src.profile), [k for k in profile.kalibr() if profile.unobserved_noise(k)])
         # GNSS: the profile's white noise (at rest) raised to the moving IMU's as pose aiding's is (:func:`moving_imu`);
         # pose aiding's rows are read (and their frame checked) later
@@ -445,7 +447,9 @@ def imu_noise(src: Sources, opts: NavigateOptions, own: Optional[ImuNoise], prof
     if imu is not None:
         rest = None if rows is None else rest_from_track(imu[0], rows.sample, rows.p)
         noise = at_rest_floor(fitted_noise(innovation_fit(src, opts, imu, sol, rows)), imu, rest, opts.gravity)
-        log.warning(f"no --profile, --imu-noise or sensor.yaml: the IMU noise is {noise.source}; "
+        why = (f"the profile {src.profile} measured no noise (no reference, no still stretch)" if blank
+               else "no --profile, --imu-noise or sensor.yaml")
+        log.warning(f"{why}: the IMU noise is {noise.source}; "
                     "imu-learn calibrate writes your device's noise (docs/your-device.md)")
         return noise
     noise = ImuNoise()
