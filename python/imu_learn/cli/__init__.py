@@ -27,7 +27,8 @@ try:  # the command's start (typing, numpy, the core): a Ctrl-C here exits 130 i
     with held_sigint():
         from typing import Any, List, Optional
 
-        from imu_learn.cli.common import COMMANDS, EXIT_ERROR, run_command
+        from imu_learn.cli.common import COMMANDS, EXIT_ERROR, EXIT_INTERRUPTED, EXIT_TERMINATED, run_command
+        from imu_learn.cli.interrupt import exit_interrupted
 except KeyboardInterrupt:
     sys.stderr.write("imu-learn: interrupted\n")
     raise SystemExit(130) from None
@@ -62,6 +63,8 @@ def entry() -> None:
     code = main()
     if threading.current_thread() is threading.main_thread():
         signal.signal(signal.SIGINT, signal.SIG_IGN)
+        if code in (EXIT_INTERRUPTED, EXIT_TERMINATED):
+            exit_interrupted(code)  # not finalised: a module a Ctrl-C cut short could crash it
     sys.exit(code)
 
 

@@ -4,7 +4,8 @@ wrapper (:func:`run_command`).
 * A known error (:class:`imu_learn.errors.ImuError` and its subclasses, :class:`OSError` incl.
   FileNotFoundError / PermissionError) prints ``imu-learn <cmd>: error: <Class>: <message>`` on one
   line on stderr and exits 2; with ``--traceback`` it is re-raised instead.
-* Ctrl-C prints ``imu-learn <cmd>: interrupted`` (and what was kept) and exits 130. SIGTERM (``timeout``,
+* Ctrl-C prints ``imu-learn <cmd>: interrupted`` (and what was kept) and exits 130, also where it came
+  out as an exception it caused (a Ctrl-C inside an import: RuntimeError, ImportError). SIGTERM (``timeout``,
   ``docker stop``, a batch scheduler) stops the same way, through the same clean-up, and exits 143
   (:func:`imu_learn.cli.interrupt.sigterm_as_interrupt`).
 * Any other exception is a bug: it is never caught, Python prints its traceback.
@@ -20,11 +21,12 @@ import logging
 import sys
 from typing import Any, Callable, Dict, Iterator, List, NoReturn, Optional, Sequence, Union
 
-from imu_learn.cli.interrupt import held_sigint, sigterm_as_interrupt
+from imu_learn.cli.interrupt import held_sigint, interrupts_not_lost, sigterm_as_interrupt
 from imu_learn.data.formats import USER_CSV
 from imu_learn.data.formats.csv_columns import ACC_UNITS, DEFAULT_COLUMNS, GYRO_UNITS, TIME_UNITS, CsvColumns
 from imu_learn.errors import ImuError, one_line
 from imu_learn.settings import DATA_ROOT_ENV
+from imu_learn.util.extras import interrupted
 
 EXIT_OK = 0
 EXIT_ERROR = 2
@@ -171,7 +173,7 @@ def _end_progress() -> None:
 
 def run_command(name: str, argv: Optional[Sequence[str]] = None, **hooks: Any) -> int:
     """Parse ``argv`` for subcommand ``name`` and run it under the one error rule (module doc)."""
-    with sigterm_as_interrupt() as terminated:
+    with sigterm_as_interrupt() as terminated, interrupts_not_lost():
         code = _run_command(name, argv, terminated, **hooks)
     return EXIT_TERMINATED if terminated and code == EXIT_INTERRUPTED else code
 
@@ -193,16 +195,29 @@ def _run_command(name: str, argv: Optional[Sequence[str]], terminated: List[int]
     try:
         with logging_to_stderr(name, args.quiet):
             return int(mod.run(args, rest, kept.append, **hooks) or EXIT_OK)
+    except KeyboardInterrupt:
+        return _stopped(name, kept, terminated)
     except KNOWN_ERRORS as e:
+        if interrupted(e):
+            return _stopped(name, kept, terminated)
         if args.traceback:
             raise
         _end_progress()
         sys.stderr.write(f"{prog(name)}: error: {one_line(e)}\n")
         return EXIT_ERROR
-    except KeyboardInterrupt:
-        _end_progress()
-        said = [k() if callable(k) else k for k in kept]
-        said = [s for s in said if s]
-        word = "terminated (SIGTERM)" if terminated else "interrupted"
-        sys.stderr.write(f"{prog(name)}: {word}{'; ' + '; '.join(said) if said else ''}\n")
-        return EXIT_INTERRUPTED
+    except Exception as e:
+        # a Ctrl-C that landed in an import (a class's __set_name__, a C extension's initialisation)
+        # comes out as another exception that it caused (RuntimeError, ImportError): an interrupt still
+        if interrupted(e):
+            return _stopped(name, kept, terminated)
+        raise
+
+
+def _stopped(name: str, kept: List[Kept], terminated: List[int]) -> int:
+    """The one line of a Ctrl-C (or SIGTERM): what the command has kept, exit 130."""
+    _end_progress()
+    said = [k() if callable(k) else k for k in kept]
+    said = [s for s in said if s]
+    word = "terminated (SIGTERM)" if terminated else "interrupted"
+    sys.stderr.write(f"{prog(name)}: {word}{'; ' + '; '.join(said) if said else ''}\n")
+    return EXIT_INTERRUPTED
