@@ -2,6 +2,6 @@
 if __name__ == "__main__":
     import sys
 
-    from imu_learn.cli import main
+    from imu_learn.cli import entry
 
-    sys.exit(main(["evaluate", *sys.argv[1:]]))
+    entry(["evaluate", *sys.argv[1:]])

@@ -2,6 +2,6 @@
 if __name__ == "__main__":
     import sys
 
-    from imu_learn.cli import main
+    from imu_learn.cli import entry
 
-    sys.exit(main(["fit", *sys.argv[1:]]))
+    entry(["fit", *sys.argv[1:]])

@@ -55,12 +55,12 @@ def main(argv: Optional[List[str]] = None, **hooks: Any) -> int:
     return run_command(name, rest, **hooks)
 
 
-def entry() -> None:
-    """The console command (``imu-learn``, ``python -m imu_learn.cli``): :func:`main`, then Ctrl-C ignored while
-    the process exits. A Ctrl-C that came once the command had finished (its outputs complete and said so)
-    made the exit 130 without a word, as if the run had failed (refine and labels, 0.1-0.8 s after their
-    last line)."""
-    code = main()
+def entry(argv: Optional[List[str]] = None) -> None:
+    """The console command (``imu-learn``, ``python -m imu_learn.cli``, ``python -m imu_learn.<stage>`` with
+    ``argv``): :func:`main`, then Ctrl-C ignored while the process exits. A Ctrl-C that came once the command
+    had finished (its outputs complete and said so) made the exit 130 without a word, as if the run had
+    failed (refine and labels, 0.1-0.8 s after their last line)."""
+    code = main(argv)
     if threading.current_thread() is threading.main_thread():
         signal.signal(signal.SIGINT, signal.SIG_IGN)
         if code in (EXIT_INTERRUPTED, EXIT_TERMINATED):
