@@ -9,6 +9,10 @@ SIGINT is sent ``delay`` seconds after "smoothing" appears on stderr. Each exit 
 run written) or 0 (the run had finished); the counts of every other status are printed with the
 delays that gave them. The window where the plot imports matplotlib depends on the machine: scan
 coarsely first (``--from 0 --to 1.5 --step 0.05``).
+
+Writes: one line per process and the counts per exit status on stdout (docs/robustness.md); its runs'
+outputs in a temporary folder, removed at the end.
+Data: the shipped crop ``datasets/euroc/MH_04_difficult`` (no data root needed).
 """
 from __future__ import annotations
 

@@ -78,7 +78,7 @@ def test_an_interrupted_process_exits_130_at_once_with_its_exit_handlers_run(tmp
         import imu_learn.cli as cli
         atexit.register(lambda: pathlib.Path({str(marker)!r}).write_text("ran"))
         threading.Thread(target=time.sleep, args=(60,)).start()  # not a daemon: finalising waits for it
-        cli.main = lambda: 130
+        cli.main = lambda argv=None: 130
         cli.entry()
     """)
     t = time.monotonic()

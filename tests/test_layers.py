@@ -213,7 +213,7 @@ def test_stage_modules_only_dispatch_to_the_cli():
         tree = ast.parse((PKG / f"{stage}.py").read_text())
         body = [n for n in tree.body if not (isinstance(n, ast.Expr) and isinstance(n.value, ast.Constant))]
         assert len(body) == 1 and isinstance(body[0], ast.If) and "__main__" in ast.unparse(body[0].test), stage
-        assert f'main(["{stage}", *sys.argv[1:]])' in ast.unparse(body[0]).replace("'", '"'), stage
+        assert f'entry(["{stage}", *sys.argv[1:]])' in ast.unparse(body[0]).replace("'", '"'), stage
         assert (PKG / "cli" / f"{stage}.py").exists(), stage
 
 
