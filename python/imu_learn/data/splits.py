@@ -39,9 +39,9 @@ from typing import Sequence as Seq
 import numpy as np
 
 from imu_learn.data.config import DataConfig, RootConfig
-from imu_learn.data.datasets import DATASETS, dataset_max_gap_s, find_recordings
+from imu_learn.data.datasets import DATASETS, find_recordings
 from imu_learn.data.formats import USER_CSV, CsvColumns
-from imu_learn.data.label_builder import RecordingSource, cached_segments
+from imu_learn.data.label_builder import RecordingSource, cached_segments, dataset_options
 from imu_learn.data.loading import AlignOptions, load_sequence, recording_label
 from imu_learn.data.types import Segment
 from imu_learn.errors import (
@@ -236,12 +236,9 @@ def recording_source(name: str, path: Path, root: RootConfig, groundtruth: Optio
 
 
 def root_max_gap_s(root: RootConfig) -> float:
-    """The ground-truth gap [s] that splits a root's recordings: its ``max_gap_s``, else its format's own
-    (:func:`~imu_learn.data.datasets.dataset_max_gap_s`), else :class:`AlignOptions`'s."""
-    if root.max_gap_s is not None:
-        return float(root.max_gap_s)
-    gap = dataset_max_gap_s(root.format)
-    return AlignOptions.max_gap_s if gap is None else gap
+    """The ground-truth gap [s] that splits a root's recordings: its ``max_gap_s``, else the one ``labels``
+    aligns its format with (:func:`~imu_learn.data.label_builder.dataset_options`)."""
+    return float(root.max_gap_s) if root.max_gap_s is not None else dataset_options(root.format).max_gap_s
 
 
 def from_label_cache(data: DataConfig, entries: Dict[str, List[SplitEntry]],

@@ -436,9 +436,10 @@ def imu_noise(src: Sources, opts: NavigateOptions, own: Optional[ImuNoise], prof
     # GNSS: the fixes as the run fuses them, read once for the innovations' fit and the track's rest
     rows = gnss_rows(src, sol, imu[0], np.zeros(3), opts)[1] if sol is not None and imu is not None else None
     # a profile that measured no noise (no reference and no still stretch) gives none: the recording's own below
-    blank = profile is not None and all(v is None for v in profile.kalibr().values())
+    kalibr = profile.kalibr() if profile is not None else {}
+    blank = profile is not None and all(v is None for v in kalibr.values())
     if profile is not None and not blank:
-        noise = from_profile(profile.kalibr(), str(src.profile), [k for k in profile.kalibr() if profile.unobserved_noise(k)])
+        noise = from_profile(kalibr, str(src.profile), [k for k in kalibr if profile.unobserved_noise(k)])
         # GNSS: the profile's white noise (at rest) raised to the moving IMU's as pose aiding's is (:func:`moving_imu`);
         # pose aiding's rows are read (and their frame checked) later
         return in_motion(noise, innovation_fit(src, opts, imu, sol, rows)) if rows is not None else noise
