@@ -432,6 +432,30 @@ def test_cli_input_errors_are_one_line(crop_without_groundtruth, tmp_path, capsy
     assert not (tmp_path / "o").exists()
 
 
+def test_a_users_csv_with_camera_poses_is_refused_before_any_noise_fit(crop_without_groundtruth, tmp_path, capsys,
+                                                                       monkeypatch):
+    """A user's CSV (no sensor.yaml beside it, so the IMU noise is fitted from the aiding's innovations)
+    with the camera's poses and no extrinsic: refused in one line before that fit (it ran first and warned
+    of a factor off its bounds, x163 on MH_04's ORB-SLAM2 poses); with the extrinsic the fit runs on the
+    checked rows and says so."""
+    import imu_learn.fuse.navigate as nav
+
+    rec, tum, yaml = crop_without_groundtruth
+    csv = tmp_path / "imu.csv"
+    shutil.copy(rec / "mav0" / "imu0" / "data.csv", csv)
+    fits, fit_noise = [], nav.fit_noise
+    monkeypatch.setattr(nav, "fit_noise", lambda *a, **k: fits.append(len(a[3])) or fit_noise(*a, **k))
+    base = ["navigate", "--input", str(csv), "--aiding", str(tum), "--aiding-kind", "pose"]
+    assert main(base + ["--out", str(tmp_path / "refused")]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "--extrinsics" in err and fits == [], err
+    assert main(base + ["--extrinsics", str(yaml), "--out", str(tmp_path / "o")]) == 0
+    err = capsys.readouterr().err
+    assert "the IMU noise is fitted from the aiding's innovations" in err and len(fits) == 1, err
+    s = json.loads((tmp_path / "o" / "summary.json").read_text())
+    assert s["imu_noise"]["source"].startswith("fitted from the aiding's innovations")
+
+
 # ---- a real recording with real camera poses -----------------------------------------------------------
 
 

@@ -410,7 +410,7 @@ class Imu:
     t_ns: np.ndarray
     gyro: np.ndarray
     acc: np.ndarray
-    noise: ImuNoise
+    noise: Optional[ImuNoise]  # None while it waits for the checked aiding rows (:func:`moving_imu`)
     file: str
     mounting: Optional[np.ndarray] = None
     floor: Optional[str] = None  # the profile whose floor was applied (sensor frame, before the mounting)
@@ -423,14 +423,16 @@ class Imu:
 
 def imu_noise(src: Sources, opts: NavigateOptions, own: Optional[ImuNoise], profile: Optional[Profile],
               imu: Optional[Tuple[np.ndarray, np.ndarray, np.ndarray]] = None,
-              sol: Optional[RtkSolution] = None) -> ImuNoise:
+              sol: Optional[RtkSolution] = None) -> Optional[ImuNoise]:
     """The noise the graph assumes: ``--imu-noise``, else the profile's (its white noise raised to the moving
     IMU's, :func:`in_motion`: with GNSS fixes ``sol`` here, with pose aiding once the rows are read,
     :func:`moving_imu`), else the recording's
     sensor.yaml, else with ``imu`` (its stamps, gyro, acc as fused: corrected, in the body frame, the
     stamps delayed) the MEMS class default scaled to
-    the aiding's innovations (:mod:`.noise_fit`; the geodetic fixes ``sol`` when the aiding is GNSS),
-    else the built-in device's (one warning line each)."""
+    the aiding's innovations (:mod:`.noise_fit`): here for the geodetic fixes ``sol``; None for poses and
+    positions of a trajectory file, whose fit waits for their rows read and checked (:func:`moving_imu`: a
+    file in another frame or unit is refused before any fit); else the built-in device's (one warning line
+    each)."""
     if opts.imu_noise is not None:
         return ImuNoise(*opts.imu_noise, source="--imu-noise")
     # GNSS: the fixes as the run fuses them, read once for the innovations' fit and the track's rest
@@ -442,17 +444,14 @@ def imu_noise(src: Sources, opts: NavigateOptions, own: Optional[ImuNoise], prof
         noise = from_profile(kalibr, str(src.profile), [k for k in kalibr if profile.unobserved_noise(k)])
         # GNSS: the profile's white noise (at rest) raised to the moving IMU's as pose aiding's is (:func:`moving_imu`);
         # pose aiding's rows are read (and their frame checked) later
-        return in_motion(noise, innovation_fit(src, opts, imu, sol, rows)) if rows is not None else noise
+        return in_motion(noise, innovation_fit(opts, imu, sol, rows)) if rows is not None else noise
     if own is not None:
         return own
+    if imu is not None and rows is None:  # pose or position aiding: fitted once its rows are read and checked
+        return None
     if imu is not None:
-        rest = None if rows is None else rest_from_track(imu[0], rows.sample, rows.p)
-        noise = at_rest_floor(fitted_noise(innovation_fit(src, opts, imu, sol, rows)), imu, rest, opts.gravity)
-        why = (f"the profile {src.profile} measured no noise (no reference, no still stretch)" if blank
-               else "no --profile, --imu-noise or sensor.yaml")
-        log.warning(f"{why}: the IMU noise is {noise.source}; "
-                    "imu-learn calibrate writes your device's noise (docs/your-device.md)")
-        return noise
+        rest = rest_from_track(imu[0], rows.sample, rows.p)
+        return fitted_at_rest(src, opts, innovation_fit(opts, imu, sol, rows), imu, rest)
     noise = ImuNoise()
     log.warning(f"no --profile or --imu-noise: the IMU noise is the built-in EuRoC ADIS16448's (gyro "
                 f"{noise.gyro_noise_density:g} rad/s/sqrt(Hz), acc {noise.acc_noise_density:g} m/s^2/sqrt(Hz)); "
@@ -487,19 +486,26 @@ def at_rest_floor(noise: ImuNoise, imu: Tuple[np.ndarray, np.ndarray, np.ndarray
                                   f"{noise.acc_noise_density:.3g})")
 
 
-def innovation_fit(src: Sources, opts: NavigateOptions, imu: Tuple[np.ndarray, np.ndarray, np.ndarray],
-                   sol: Optional[RtkSolution] = None, rows: Optional[AidingRows] = None) -> NoiseFit:
-    """The IMU's white noise fitted from the aiding's innovations (:mod:`.noise_fit`) on ``imu`` (stamps,
-    gyro, acc as fused); the geodetic fixes ``sol`` when the aiding is GNSS (``rows``: them as the run fuses
-    them, :func:`gnss_rows`, when already read)."""
+def fitted_at_rest(src: Sources, opts: NavigateOptions, fit: NoiseFit,
+                   imu: Tuple[np.ndarray, np.ndarray, np.ndarray], rest: Optional[Tuple[int, int, str]]) -> ImuNoise:
+    """No noise given (no --imu-noise, sensor.yaml, or a profile that measured some): the class default scaled
+    by the aiding's innovations ``fit``, its white noise raised to the IMU's at rest (:func:`at_rest_floor`);
+    one warning line saying so."""
+    noise = at_rest_floor(fitted_noise(fit), imu, rest, opts.gravity)
+    why = (f"the profile {src.profile} measured no noise (no reference, no still stretch)" if src.profile is not None
+           else "no --profile, --imu-noise or sensor.yaml")
+    log.warning(f"{why}: the IMU noise is {noise.source}; "
+                "imu-learn calibrate writes your device's noise (docs/your-device.md)")
+    return noise
+
+
+def innovation_fit(opts: NavigateOptions, imu: Tuple[np.ndarray, np.ndarray, np.ndarray], sol: RtkSolution,
+                   rows: AidingRows) -> NoiseFit:
+    """The IMU's white noise fitted from the GNSS fixes' innovations (:mod:`.noise_fit`) on ``imu`` (stamps,
+    gyro, acc as fused); ``rows``: the fixes ``sol`` as the run fuses them (:func:`gnss_rows`)."""
     t_ns, gyro, acc = imu
-    if sol is not None:
-        rows = rows if rows is not None else gnss_rows(src, sol, t_ns, np.zeros(3), opts)[1]
-        gravity = normal_gravity(sol.origin_llh[0], sol.origin_llh[2])
-    else:
-        T_BS = read_t_bs(src.extrinsics) if src.extrinsics is not None else None
-        rows, gravity = select_rows(read_aiding(src, opts), t_ns, T_BS, opts), opts.gravity
-    return fit_noise(t_ns, gyro, acc, rows.t_ns, rows.p, rows.R, gravity, opts.max_relative_gap_s)
+    return fit_noise(t_ns, gyro, acc, rows.t_ns, rows.p, rows.R, normal_gravity(sol.origin_llh[0], sol.origin_llh[2]),
+                     opts.max_relative_gap_s)
 
 
 def moving_imu(src: Sources, opts: NavigateOptions, imu: Imu, rows: AidingRows) -> Imu:
@@ -507,9 +513,14 @@ def moving_imu(src: Sources, opts: NavigateOptions, imu: Imu, rows: AidingRows) 
     IMU (:mod:`.noise_fit`, on those rows) refuse positions that are not metric (:func:`.noise_fit.fit_scale`
     off 1: a monocular VO, mm or cm; the fix names ``--aiding-scale``) or do not follow the accelerometer
     (a noise fit beyond :data:`.noise_fit.FACTOR_BOUNDS`' upper end: no IMU is that noisy), and raise a
-    profile's white noise to the moving IMU's (:func:`in_motion`). Other aiding: ``imu``."""
+    profile's white noise to the moving IMU's (:func:`in_motion`). With no noise given (``imu.noise`` None:
+    :func:`imu_noise` leaves it to the checked rows) the class default scaled by these innovations
+    (:func:`fitted_at_rest`), for position rows too."""
     if not kind_of(opts.aiding_kind).poses:
-        return imu
+        if imu.noise is not None:
+            return imu
+        fit = fit_noise(imu.t_ns, imu.gyro, imu.acc, rows.t_ns, rows.p, rows.R, opts.gravity, opts.max_relative_gap_s)
+        return replace(imu, noise=fitted_at_rest(src, opts, fit, (imu.t_ns, imu.gyro, imu.acc), None))
     prep = prepare(imu.t_ns, imu.gyro, imu.acc, rows.t_ns, opts.max_relative_gap_s)
     rows.scale = fit_scale(rows.p, rows.R, prep)
     check_scale(src, opts, rows.scale)
@@ -519,6 +530,8 @@ def moving_imu(src: Sources, opts: NavigateOptions, imu: Imu, rows: AidingRows) 
         raise ConfigError(f"--aiding {src.aiding}: its positions do not follow the accelerometer (their changes of "
                           f"velocity need x{fit.factor:.3g} the MEMS class noise, at most x{FACTOR_BOUNDS[1]:g} fits "
                           "any IMU): positions in mm or cm, or a monocular VO without metric scale? give them in metres")
+    if imu.noise is None:  # no noise given: the class default scaled by these innovations
+        return replace(imu, noise=fitted_at_rest(src, opts, fit, (imu.t_ns, imu.gyro, imu.acc), None))
     if src.profile is None or opts.imu_noise is not None:  # the noise is not the profile's
         return imu
     return replace(imu, noise=in_motion(imu.noise, fit))
