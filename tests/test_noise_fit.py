@@ -132,9 +132,10 @@ def test_a_profiles_white_noise_is_raised_to_the_moving_imus_with_pose_aiding():
 
 
 def test_a_profile_that_measured_no_noise_writes_the_class_default_and_navigate_fits_its_own(tmp_path, capsys):
-    """calibrate --imu-only on a recording that never rests measures no noise: imu.yaml holds the
-    device-class default with a line saying so (not .nan), and navigate --profile with it fits the
-    noise from the aiding's innovations as without a profile (not the built-in ADIS16448's)."""
+    """calibrate --imu-only on a recording that never rests measures no noise: refused in one line (exit 2,
+    nothing written) naming the rest it needs and --force; with --force imu.yaml holds the device-class
+    default with a line saying so (not .nan), and navigate --profile with it fits the noise from the
+    aiding's innovations as without a profile (not the built-in ADIS16448's)."""
     import yaml
 
     from imu_learn.calib.profile import CLASS_DEFAULT_SOURCE, CLASS_DEFAULTS
@@ -143,7 +144,12 @@ def test_a_profile_that_measured_no_noise_writes_the_class_default_and_navigate_
     rec, fixes = write_asl(tmp_path, *recording(seconds=60.0)[:5])
     cal = tmp_path / "cal"
     rc = main(["calibrate", "--imu-only", "--input", str(rec), "--out", str(cal), "--no-plot", "--quiet"])
-    assert rc == 0, capsys.readouterr().err
+    err = capsys.readouterr().err
+    assert rc == 2 and err.count("\n") == 1 and "NothingObservedError" in err and "--force" in err, err
+    assert "0.0 s at rest" in err and not cal.exists()
+    rc = main(["calibrate", "--imu-only", "--input", str(rec), "--out", str(cal), "--no-plot", "--quiet", "--force"])
+    err = capsys.readouterr().err
+    assert rc == 0 and "written with --force" in err, err
     text = (cal / "imu.yaml").read_text()
     assert yaml.safe_load(text) | CLASS_DEFAULTS == yaml.safe_load(text)  # every figure the class default
     assert ".nan" not in text and text.count(f"not measured (no reference, no still stretch): the {CLASS_DEFAULT_SOURCE}") == 4

@@ -279,3 +279,9 @@ class ImplausibleProfileError(ImuError, ValueError):
     def __init__(self, message: str, field: Optional[str] = None) -> None:
         super().__init__(message)
         self.field = field
+
+
+class NothingObservedError(ImuError, ValueError):
+    """The recordings observe nothing of what the command would write: ``calibrate --imu-only`` on a
+    recording that never rests measures no noise figure (a profile of class defaults would pass for a
+    measurement). ``imu-learn calibrate --force`` writes the class defaults, each marked not measured."""

@@ -41,7 +41,7 @@ from imu_learn.calib.profile import (
 from imu_learn.calib.select import select_floor
 from imu_learn.calib.sources import TIME_OFFSET_PRIOR_SAMPLES, CalibInputs, Recording, StillPiece
 from imu_learn.core.stamps import median_period_ns, sample_rate_hz
-from imu_learn.errors import ImplausibleProfileError, InvalidInputError
+from imu_learn.errors import ImplausibleProfileError, InvalidInputError, NothingObservedError
 from imu_learn.infer.guard import training_inputs
 from imu_learn.util.staging import staged_dir
 
@@ -325,6 +325,21 @@ def plausibility(prof: Profile, inp: CalibInputs, options: CalibOptions, progres
     return checks
 
 
+def observed_anything(noise: Dict[str, NoiseTerm], allan: Optional[nz.AllanNoise], inp: CalibInputs,
+                      options: CalibOptions) -> None:
+    """``--imu-only`` (no reference): refused (:class:`NothingObservedError`) where no noise figure was measured
+    (no still stretch): its profile would hold class defaults only; ``--force`` writes them, with a warning."""
+    if any(noise.get(k) is not None for k in NOISE_KEYS):
+        return
+    still_s = allan.seconds if allan else 0.0
+    text = (f"calibrate --imu-only: nothing measured in {', '.join(p.name for p in inp.imu_only)}: no reference and "
+            f"{still_s:.1f} s at rest (the noise needs still stretches of >= {options.min_still_s:g} s in total)")
+    if not options.force:
+        raise NothingObservedError(text + "; record the IMU at rest for a minute, or give a reference "
+                                          "(--groundtruth), or write the MEMS class defaults with --force")
+    logger.warning("%s; written with --force: imu.yaml holds the MEMS class defaults, marked not measured", text)
+
+
 OUTPUT_NAMES = ("profile.json", "imu.yaml", "calibration.png")  # what calibrate writes into its folder
 
 
@@ -356,6 +371,8 @@ def calibrate(inp: CalibInputs, out_dir: Path, options: CalibOptions = CalibOpti
     allan = nz.allan_noise(pieces)
     cands = nz.candidates(after, allan, options.min_still_s, inp.source.band_limit() if has_ref else None)
     noise = noise_terms(nz.choose(cands, NOISE_KEYS))
+    if not has_ref:
+        observed_anything(noise, allan, inp, options)
     prof.noise = {**noise, **bias_instability(cands)}
     prof.noise_estimates = estimate_dicts(cands)
     prof.sources = inp.sources + ([{"still_stretches": allan.stretches, "still_s": round(allan.seconds, 3)}] if allan else [])

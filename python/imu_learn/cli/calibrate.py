@@ -88,7 +88,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--groundtruth-topic", help="ROS bags: the pose topic of the reference (default: the bag's only one)")
     p.add_argument("--force", action="store_true",
                    help="write a profile that fails a plausibility check (scale, misalignment, bias, gravity, the "
-                        "held-back block), with a warning, instead of stopping")
+                        "held-back block), or with --imu-only one that measured nothing (the class defaults), with a "
+                        "warning, instead of stopping")
     p.add_argument("--select", action=argparse.BooleanOptionalAction, default=None,
                    help="choose each sensor's terms (offset, bias, scale, affine, g-sensitivity, low-pass): the simplest "
                         "that no simpler one beats on a recording held out in turn (imu_learn.calib.select; "
