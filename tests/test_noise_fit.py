@@ -163,3 +163,34 @@ def test_a_profile_that_measured_no_noise_writes_the_class_default_and_navigate_
     assert s["noise"].startswith("fitted from the aiding's innovations: x"), s["noise"]
     assert 0.5 < s["imu_noise"]["accelerometer_noise_density"] / TRUE_ACC < 2.0
     assert sum("measured no noise" in line for line in err.splitlines()) == 1
+
+
+def test_the_white_noise_at_rest_is_raised_axis_by_axis():
+    """A car parked with its engine running shakes one gyro axis most (the drive: 1.1e-3, 4.0e-3, 1.6e-4
+    rad/s/sqrt(Hz) at rest): each axis is raised to its own spread where above the innovations' fit, the
+    graph's covariance is that diagonal (GTSAM's own matrix read back), the summary's density their RMS;
+    a rest quieter than the fit on every axis leaves the noise as it was."""
+    from imu_learn.fuse.navigate import at_rest_floor
+
+    rng = np.random.default_rng(3)
+    rate, n = 100.0, 3000
+    t_ns = 10 ** 18 + np.arange(n, dtype=np.int64) * 10_000_000
+    axes = np.array([1.1e-3, 4.0e-3, 1.6e-4])
+    gyro = rng.normal(0.0, 1.0, (n, 3)) * axes * np.sqrt(rate)
+    acc = rng.normal(0.0, 2e-3 * np.sqrt(rate), (n, 3)) + [0.0, 0.0, G]
+    fit = ImuNoise(1.2e-3, 1.4e-2, 2e-5, 3e-3, source="fit")
+    raised = at_rest_floor(fit, (t_ns, gyro, acc), (0, n, "a rest"), G)
+    assert raised.gyro_axes[0] == raised.gyro_axes[2] == 1.2e-3  # below the fit: the fit's
+    assert raised.gyro_axes[1] == pytest.approx(4.0e-3, rel=0.05)
+    assert raised.acc_axes == (1.4e-2,) * 3
+    assert raised.gyro_noise_density == pytest.approx(np.sqrt(np.mean(axes ** 2)), rel=0.05)
+    assert raised.acc_noise_density == 1.4e-2 and "axis by axis" in raised.source
+    cov = raised.gtsam_params(G).getGyroscopeCovariance()
+    assert np.allclose(cov, np.diag(np.square(raised.gyro_axes)), rtol=1e-12, atol=0)
+    assert np.allclose(ImuNoise(2e-3, 1e-2).gtsam_params(G).getGyroscopeCovariance(), 4e-6 * np.eye(3))
+    d = raised.to_dict()
+    assert d["gyroscope_noise_density_axes"] == list(raised.gyro_axes) and "accelerometer_noise_density_axes" in d
+    quiet = at_rest_floor(ImuNoise(5e-3, 1.4e-2, source="fit"), (t_ns, gyro, acc), (0, n, "a rest"), G)
+    assert quiet.gyro_axes is None and quiet.source == "fit"
+    with pytest.raises(Exception, match="three positive numbers"):
+        ImuNoise(gyro_axes=(1e-3, 0.0, 1e-3))

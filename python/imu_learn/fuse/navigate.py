@@ -461,12 +461,14 @@ def imu_noise(src: Sources, opts: NavigateOptions, own: Optional[ImuNoise], prof
 
 def at_rest_floor(noise: ImuNoise, imu: Tuple[np.ndarray, np.ndarray, np.ndarray],
                   rest: Optional[Tuple[int, int, str]], gravity: float) -> ImuNoise:
-    """``noise`` (fitted from the innovations) with each sensor's white noise raised to what the IMU shows at rest
-    where that is higher: the per-sample spread over the rest at the start (:func:`.start.level.start_rest`: the
-    IMU's still start, else ``rest``, the one the GNSS track shows) times sqrt(dt), the RMS over the axes. The
-    innovations' one factor on the class default splits the noise between the sensors by the class's ratio; a
-    car parked with its engine running shows its own (the drive: gyro 3.0e-3 rad/s/sqrt(Hz) at rest against
-    the fit's 1.2e-3; docs/experiments/fusion_gnss.md measured 2.0-2.8e-3 of attitude drift in motion)."""
+    """``noise`` (fitted from the innovations) with each sensor's white noise raised, axis by axis, to what the
+    IMU shows at rest where that is higher: the per-sample spread of each body axis over the rest at the start
+    (:func:`.start.level.start_rest`: the IMU's still start, else ``rest``, the one the GNSS track shows) times
+    sqrt(dt). The innovations' one factor on the class default splits the noise between the sensors by the
+    class's ratio; a car parked with its engine running shows its own, on one axis most (the drive: gyro 1.1e-3,
+    4.0e-3, 1.6e-4 rad/s/sqrt(Hz) at rest against the fit's 1.2e-3; docs/experiments/fusion_gnss.md, "Where the
+    gaps fall"). The densities (the summary's figure) are the axes' RMS where above the fit; the graph takes
+    the axes (:attr:`ImuNoise.gyro_axes`)."""
     t_ns, gyro, acc = imu
     span = start_rest(t_ns, gyro, acc, gravity, rest, MIN_STILL_START_S)
     if span is None:
@@ -475,15 +477,18 @@ def at_rest_floor(noise: ImuNoise, imu: Tuple[np.ndarray, np.ndarray, np.ndarray
     where = f"the IMU's still start ({seconds:.2f} s)" if kind == "still" else \
         f"the rest the GNSS track shows ({seconds:.2f} s)"
     dt = float(np.median(np.diff(t_ns[first:end]))) * 1e-9
-    g, a = (float(np.sqrt(np.mean(np.var(x[first:end], axis=0)) * dt)) for x in (gyro, acc))
-    if g <= noise.gyro_noise_density and a <= noise.acc_noise_density:
+    g, a = (np.sqrt(np.var(x[first:end], axis=0) * dt) for x in (gyro, acc))
+    fit = (noise.gyro_noise_density, noise.acc_noise_density)
+    if np.all(g <= fit[0]) and np.all(a <= fit[1]):
         return noise
-    raised = replace(noise, gyro_noise_density=max(g, noise.gyro_noise_density),
-                     acc_noise_density=max(a, noise.acc_noise_density))
-    return replace(raised, source=f"{noise.source}; white noise raised to what the IMU shows at rest over {where}: "
-                                  f"gyro {raised.gyro_noise_density:.3g} rad/s/sqrt(Hz), acc "
-                                  f"{raised.acc_noise_density:.3g} m/s^2/sqrt(Hz) (the fit's {noise.gyro_noise_density:.3g}, "
-                                  f"{noise.acc_noise_density:.3g})")
+    g_axes, a_axes = (tuple(float(v) for v in np.maximum(x, f)) for x, f in ((g, fit[0]), (a, fit[1])))
+    raised = replace(noise, gyro_noise_density=max(float(np.sqrt(np.mean(g ** 2))), fit[0]),
+                     acc_noise_density=max(float(np.sqrt(np.mean(a ** 2))), fit[1]), gyro_axes=g_axes, acc_axes=a_axes)
+    axes = "; ".join(f"{name} ({', '.join(f'{v:.3g}' for v in x)}) {unit}" for name, x, unit in
+                     (("gyro", g_axes, "rad/s/sqrt(Hz)"), ("acc", a_axes, "m/s^2/sqrt(Hz)")))
+    return replace(raised, source=f"{noise.source}; white noise raised to what the IMU shows at rest over {where}, "
+                                  f"axis by axis: {axes} (RMS gyro {raised.gyro_noise_density:.3g}, acc "
+                                  f"{raised.acc_noise_density:.3g}; the fit's {fit[0]:.3g}, {fit[1]:.3g})")
 
 
 def fitted_at_rest(src: Sources, opts: NavigateOptions, fit: NoiseFit,

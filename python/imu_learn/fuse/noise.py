@@ -9,7 +9,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Dict, Optional, Sequence
+from typing import Dict, Optional, Sequence, Tuple
 
 import numpy as np
 
@@ -33,12 +33,27 @@ class ImuNoise:
     acc_random_walk: float = 3.0e-3
     integration_sigma: float = 1e-4  # [m/s^2/sqrt(Hz)]-like slack on position integration (GTSAM's default style)
     source: str = BUILT_IN
+    # the white noise per body axis where it was measured per axis (navigate's rest floor: a car's engine shakes
+    # one axis 25x another); None: the density above on every axis. The graph takes these, the summary both
+    gyro_axes: Optional[Tuple[float, float, float]] = None
+    acc_axes: Optional[Tuple[float, float, float]] = None
 
     def __post_init__(self) -> None:
         for k in ("gyro_noise_density", "acc_noise_density", "gyro_random_walk", "acc_random_walk"):
             v = getattr(self, k)
             if not (np.isfinite(v) and v > 0):
                 raise InvalidInputError(f"noise.{k} must be a positive number, got {v!r}")
+        for k in ("gyro_axes", "acc_axes"):
+            v = getattr(self, k)
+            if v is not None and not (len(v) == 3 and all(np.isfinite(x) and x > 0 for x in v)):
+                raise InvalidInputError(f"noise.{k} must be three positive numbers, got {v!r}")
+
+    def white_covariances(self) -> Tuple[np.ndarray, np.ndarray]:
+        """The gyro's and accelerometer's continuous-time white-noise covariances (3x3): per axis where
+        measured so, else the density on every axis."""
+        return tuple(np.diag(np.square(axes)) if axes is not None else density ** 2 * np.eye(3)
+                     for axes, density in ((self.gyro_axes, self.gyro_noise_density),
+                                           (self.acc_axes, self.acc_noise_density)))
 
     @classmethod
     def from_sensor_yaml(cls, path: Path) -> ImuNoise:
@@ -51,7 +66,9 @@ class ImuNoise:
 
     def to_dict(self) -> dict:
         """The four densities under Kalibr's names, and where they came from (summary.json)."""
-        return {**{v: float(getattr(self, k)) for k, v in SENSOR_KEYS.items()}, "source": self.source}
+        axes = {f"{SENSOR_KEYS[k.replace('_axes', '_noise_density')]}_axes": [float(x) for x in getattr(self, k)]
+                for k in ("gyro_axes", "acc_axes") if getattr(self, k) is not None}
+        return {**{v: float(getattr(self, k)) for k, v in SENSOR_KEYS.items()}, **axes, "source": self.source}
 
     def gtsam_params(self, gravity: float):
         """``PreintegrationCombinedParams`` for a z-up world with gravity ``gravity`` [m/s^2]."""
@@ -59,8 +76,9 @@ class ImuNoise:
 
         p = gtsam.PreintegrationCombinedParams.MakeSharedU(gravity)
         eye = np.eye(3)
-        p.setGyroscopeCovariance(self.gyro_noise_density ** 2 * eye)
-        p.setAccelerometerCovariance(self.acc_noise_density ** 2 * eye)
+        gyro, acc = self.white_covariances()
+        p.setGyroscopeCovariance(gyro)
+        p.setAccelerometerCovariance(acc)
         p.setIntegrationCovariance(self.integration_sigma ** 2 * eye)
         p.setBiasOmegaCovariance(self.gyro_random_walk ** 2 * eye)
         p.setBiasAccCovariance(self.acc_random_walk ** 2 * eye)
