@@ -521,17 +521,16 @@ def moving_imu(src: Sources, opts: NavigateOptions, imu: Imu, rows: AidingRows) 
     profile's white noise to the moving IMU's (:func:`in_motion`). With no noise given (``imu.noise`` None:
     :func:`imu_noise` leaves it to the checked rows) the class default scaled by these innovations
     (:func:`fitted_at_rest`), for position rows too."""
-    if not kind_of(opts.aiding_kind).poses:
-        if imu.noise is not None:
-            return imu
-        fit = fit_noise(imu.t_ns, imu.gyro, imu.acc, rows.t_ns, rows.p, rows.R, opts.gravity, opts.max_relative_gap_s)
-        return replace(imu, noise=fitted_at_rest(src, opts, fit, (imu.t_ns, imu.gyro, imu.acc), None))
+    poses = kind_of(opts.aiding_kind).poses
+    if not poses and imu.noise is not None:
+        return imu
     prep = prepare(imu.t_ns, imu.gyro, imu.acc, rows.t_ns, opts.max_relative_gap_s)
-    rows.scale = fit_scale(rows.p, rows.R, prep)
-    check_scale(src, opts, rows.scale)
+    if poses:
+        rows.scale = fit_scale(rows.p, rows.R, prep)
+        check_scale(src, opts, rows.scale)
     fit = fit_noise(imu.t_ns, imu.gyro, imu.acc, rows.t_ns, rows.p, rows.R, opts.gravity, opts.max_relative_gap_s,
                     prep=prep)
-    if fit.factor is not None and fit.factor > FACTOR_BOUNDS[1]:
+    if poses and fit.factor is not None and fit.factor > FACTOR_BOUNDS[1]:
         raise ConfigError(f"--aiding {src.aiding}: its positions do not follow the accelerometer (their changes of "
                           f"velocity need x{fit.factor:.3g} the MEMS class noise, at most x{FACTOR_BOUNDS[1]:g} fits "
                           "any IMU): positions in mm or cm, or a monocular VO without metric scale? give them in metres")

@@ -66,8 +66,9 @@ class ImuNoise:
 
     def to_dict(self) -> dict:
         """The four densities under Kalibr's names, and where they came from (summary.json)."""
-        axes = {f"{SENSOR_KEYS[k.replace('_axes', '_noise_density')]}_axes": [float(x) for x in getattr(self, k)]
-                for k in ("gyro_axes", "acc_axes") if getattr(self, k) is not None}
+        axes = {name: [float(x) for x in v] for name, v in (("gyroscope_noise_density_axes", self.gyro_axes),
+                                                             ("accelerometer_noise_density_axes", self.acc_axes))
+                if v is not None}
         return {**{v: float(getattr(self, k)) for k, v in SENSOR_KEYS.items()}, **axes, "source": self.source}
 
     def gtsam_params(self, gravity: float):
