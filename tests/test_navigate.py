@@ -28,6 +28,7 @@ from imu_learn.errors import (
 )
 from imu_learn.fuse.aiding.tum import check_overlap, read_trajectory, read_tum, seconds_to_ns
 from imu_learn.fuse.inputs import checkpoint_bias
+from imu_learn.fuse.navigate import NavigateOptions, dense_aiding_note
 from imu_learn.fuse.score import convergence, interpolate_groundtruth, umeyama, window_errors
 from imu_learn.fuse.start import level as init
 
@@ -643,7 +644,6 @@ def test_variance_scale_multiplies_the_learned_variances_and_needs_a_covariance_
     them over the keyframe interval); without a covariance head, without a checkpoint or not G,A > 0: refused."""
     from imu_learn.errors import ConfigError
     from imu_learn.fuse.inputs import checkpoint_input
-    from imu_learn.fuse.navigate import NavigateOptions
 
     models = SHIPPED.parent / "models"
     rng = np.random.default_rng(0)
@@ -705,3 +705,21 @@ def test_a_tum_file_with_ns_stamps_says_so(tmp_path):
     path.write_text("1403638127295097088 0 0 0 0 0 0 1\n1403638127345097088 0 0 0 0 0 0 1\n")
     with pytest.raises(NotNumericError, match="looks like ns since an epoch; TUM stamps are seconds"):
         read_tum(path)
+
+
+@pytest.mark.parametrize("rate_hz, kind, aiding_hz, said", [(120.0, "pose", None, True), (120.0, "relative-pose", None, True),
+                                                           (120.0, "pose", 20.0, False), (20.0, "pose", None, False),
+                                                           (120.0, "position", None, False)])
+def test_dense_pose_aiding_gets_one_line_naming_aiding_hz(rate_hz, kind, aiding_hz, said, caplog):
+    """Pose rows faster than DENSE_AIDING_HZ, not thinned: one line naming --aiding-hz (each row is a
+    keyframe; fusion's time grows faster than the rows); nothing at 20 Hz, with --aiding-hz, or for fixes."""
+    t_ns = np.arange(0, int(10e9), int(round(1e9 / rate_hz)), dtype=np.int64)
+    opts = NavigateOptions(aiding_kind=kind, aiding_hz=aiding_hz)
+    with caplog.at_level("INFO", logger="imu_learn.fuse.navigate"):
+        rate = dense_aiding_note(t_ns, "/data/mocap.tum", opts)
+    lines = [r.getMessage() for r in caplog.records if "--aiding-hz" in r.getMessage()]
+    assert (rate is not None) == said
+    assert len(lines) == int(said)
+    if said:
+        assert rate == pytest.approx(rate_hz, rel=1e-3)
+        assert lines[0].startswith("mocap.tum: pose aiding at 120 Hz")

@@ -274,6 +274,10 @@ def body_poses(traj: Trajectory, T_BS: Optional[np.ndarray]) -> Tuple[np.ndarray
     return R @ T_SB[:3, :3], p + R @ T_SB[:3, 3]
 
 
+# pose aiding faster than this: one line suggesting --aiding-hz (:func:`dense_aiding_note`)
+DENSE_AIDING_HZ = 50.0
+
+
 def thin(t_ns: np.ndarray, rate_hz: Optional[float]) -> np.ndarray:
     """Mask keeping the first row of each 1/rate_hz bin (all rows when rate_hz is None)."""
     if rate_hz is None:
@@ -282,6 +286,21 @@ def thin(t_ns: np.ndarray, rate_hz: Optional[float]) -> np.ndarray:
     keep = np.zeros(len(t_ns), dtype=bool)
     keep[np.unique(bins, return_index=True)[1]] = True
     return keep
+
+
+def dense_aiding_note(t_ns: np.ndarray, path: str, opts: NavigateOptions) -> Optional[float]:
+    """One line where pose aiding comes faster than :data:`DENSE_AIDING_HZ` and ``--aiding-hz`` was not
+    given: every row is a keyframe, and the causal solver's window then holds hundreds of them at a time
+    (TUM-VI room 3's 120 Hz motion capture: 175 s for its 141 s; at 20 Hz 10 s; docs/navigate.md). Returns
+    the rate [Hz] it found (None: under it, thinned already, or fewer than two rows)."""
+    if opts.aiding_hz is not None or len(t_ns) < 2 or not kind_of(opts.aiding_kind).poses:
+        return None
+    rate = (len(t_ns) - 1) / max((int(t_ns[-1]) - int(t_ns[0])) * 1e-9, 1e-9)
+    if rate <= DENSE_AIDING_HZ:
+        return None
+    log.info("%s: pose aiding at %.0f Hz, every row a keyframe: fusion may take longer than the recording; "
+             "--aiding-hz 20 thins it (docs/navigate.md, \"Dense aiding\")", Path(path).name, rate)
+    return rate
 
 
 def select_rows(traj: Trajectory, imu_t_ns: np.ndarray, T_BS: Optional[np.ndarray], opts: NavigateOptions) -> AidingRows:
@@ -306,6 +325,7 @@ def select_rows(traj: Trajectory, imu_t_ns: np.ndarray, T_BS: Optional[np.ndarra
     th = thin(traj.t_ns[idx], opts.aiding_hz)
     dropped["thinned"] = int((~th).sum())
     idx = idx[th]
+    dense_aiding_note(traj.t_ns[idx], traj.path, opts)
     if len(idx) < 2:
         raise AidingError(f"{traj.path}: {len(idx)} aiding row(s) left inside the IMU's span (dropped: "
                           f"{', '.join(f'{v} {k}' for k, v in dropped.items() if v)}); at least 2 needed",
@@ -1282,8 +1302,8 @@ def batch_pass_progress(bar: Any) -> Callable[..., Any]:
     known), each shown as it ends. Shown from here on, so its delay is dropped: tqdm takes a bar reset
     within its delay for one never shown and leaves its text behind when it closes (a Ctrl-C's line then
     ran into it)."""
-    bar.set_description("navigate: smoothing")
-    bar.total, bar.unit, bar.unit_scale = None, "iteration", False
+    bar.set_description_str("navigate: smoothing")  # set_description would add a second ": "
+    bar.total, bar.unit, bar.unit_scale = None, " iteration", False
     bar.reset()
     bar.delay = 0
     return lambda *_: (bar.update(1), bar.refresh())
