@@ -1302,7 +1302,7 @@ def batch_pass_progress(bar: Any) -> Callable[..., Any]:
     known), each shown as it ends. Shown from here on, so its delay is dropped: tqdm takes a bar reset
     within its delay for one never shown and leaves its text behind when it closes (a Ctrl-C's line then
     ran into it)."""
-    bar.set_description_str("navigate: smoothing")  # set_description would add a second ": "
+    bar.set_description_str("navigate: smoothing", refresh=False)  # set_description would add a second ": "
     bar.total, bar.unit, bar.unit_scale = None, " iteration", False
     bar.reset()
     bar.delay = 0
