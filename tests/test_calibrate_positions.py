@@ -318,6 +318,8 @@ def test_calibrate_the_drive_from_its_rtk_fixes(tmp_path, capsys):
                "--out", str(tmp_path / "cal"), "--no-plot"])
     out = capsys.readouterr()
     assert rc == 0, out.err
+    # the reader's lines once, not again for each of the navigator's passes
+    assert out.err.count("mapped onto the tag") == 1 and out.err.count("possibly cut line") == 1, out.err
     prof = Profile.load(tmp_path / "cal" / "profile.json")
     assert prof.reference["kind"] == "positions"
     assert prof.observed["gyroscope.bias"]["observed"] and prof.observed["accelerometer.bias"]["observed"]

@@ -40,12 +40,14 @@ reference, its floor this bias-only one; :func:`calibrate_positions` writes the 
 """
 from __future__ import annotations
 
+import logging
 import math
 import tempfile
 import time
+from contextlib import contextmanager
 from dataclasses import dataclass, field, replace
 from pathlib import Path
-from typing import Any, Callable, Dict, List, Optional, Sequence, Tuple
+from typing import Any, Callable, Dict, Iterator, List, Optional, Sequence, Tuple
 
 import numpy as np
 from scipy.spatial.transform import Rotation
@@ -299,8 +301,22 @@ def smoother_pass(imu_path: Path, ref_path: Path, opts: PositionsOptions, rpy: S
                           imu_rotation_rpy_deg=tuple(float(x) for x in rpy), imu_delay_s=opts.imu_delay_s, imu_delay_from="option",
                           lever_arm=None if opts.lever_arm is None else tuple(opts.lever_arm), nhc=opts.nhc,
                           imu_noise=tuple(float(x) for x in noise))
-    return navigate(Sources(input=Path(imu_path), aiding=Path(ref_path), fmt=opts.fmt, columns=opts.columns,
-                            profile=prof), out, nav)
+    with readers_said():
+        return navigate(Sources(input=Path(imu_path), aiding=Path(ref_path), fmt=opts.fmt, columns=opts.columns,
+                                profile=prof), out, nav)
+
+
+@contextmanager
+def readers_said() -> Iterator[None]:
+    """For the block: the recording readers' INFO lines (cut lines left out, a clock's mapping) held back;
+    :func:`positions_floor` said them when it read the recording first, and each pass reads it again."""
+    log = logging.getLogger(formats.__name__)
+    level = log.level
+    log.setLevel(logging.WARNING)
+    try:
+        yield
+    finally:
+        log.setLevel(level)
 
 
 def smoothed_groundtruth(smoothed_tum: Path, mounting: np.ndarray, delay_s: float) -> GroundTruth:
