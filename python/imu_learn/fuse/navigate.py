@@ -295,7 +295,7 @@ def dense_aiding_note(t_ns: np.ndarray, path: str, opts: NavigateOptions) -> Opt
     the rate [Hz] it found (None: under it, thinned already, or fewer than two rows)."""
     if opts.aiding_hz is not None or len(t_ns) < 2 or not kind_of(opts.aiding_kind).poses:
         return None
-    rate = (len(t_ns) - 1) / max((int(t_ns[-1]) - int(t_ns[0])) * 1e-9, 1e-9)
+    rate = sample_rate_hz(t_ns)  # the package's one rate rule (median period): a capture's dropouts do not lower it
     if rate <= DENSE_AIDING_HZ:
         return None
     log.info("%s: pose aiding at %.0f Hz, every row a keyframe: fusion may take longer than the recording; "
