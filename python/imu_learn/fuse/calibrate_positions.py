@@ -40,14 +40,12 @@ reference, its floor this bias-only one; :func:`calibrate_positions` writes the 
 """
 from __future__ import annotations
 
-import logging
 import math
 import tempfile
 import time
-from contextlib import contextmanager
 from dataclasses import dataclass, field, replace
 from pathlib import Path
-from typing import Any, Callable, Dict, Iterator, List, Optional, Sequence, Tuple
+from typing import Any, Callable, Dict, List, Optional, Sequence, Tuple
 
 import numpy as np
 from scipy.spatial.transform import Rotation
@@ -73,7 +71,7 @@ from imu_learn.fuse.aiding.detect import detect
 from imu_learn.fuse.aiding.rtklib import normal_gravity, read_pos
 from imu_learn.fuse.aiding.tum import Trajectory, check_overlap, read_trajectory
 from imu_learn.fuse.mounting import _level_rotation, forward_mounting
-from imu_learn.fuse.navigate import NavigateOptions, Sources, navigate, parse_vector
+from imu_learn.fuse.navigate import ImuRecording, NavigateOptions, Sources, navigate, parse_vector, read_imu
 from imu_learn.fuse.noise import ImuNoise
 from imu_learn.infer.rates import recording_device
 
@@ -285,10 +283,11 @@ def _bias_profile(floor: Floor, device: str, rate: float) -> Profile:
     return Profile.of_floor(device, rate, 1.0 / rate, floor, TraditionalParams.unknown(), math.nan, math.nan)
 
 
-def smoother_pass(imu_path: Path, ref_path: Path, opts: PositionsOptions, rpy: Sequence[float],
+def smoother_pass(rec: ImuRecording, imu_path: Path, ref_path: Path, opts: PositionsOptions, rpy: Sequence[float],
                   floor: Optional[Floor], out: Path, device: str, rate: float) -> Dict[str, Any]:
-    """The navigator over the whole recording (positions as aiding, no gaps), with ``floor`` applied
-    through a profile when given; returns its summary (the trajectories in ``out``)."""
+    """The navigator over the whole recording ``imu_path`` (its IMU ``rec``, read once for every pass;
+    positions as aiding, no gaps), with ``floor`` applied through a profile when given; returns its
+    summary (the trajectories in ``out``)."""
 
     out.mkdir(parents=True, exist_ok=True)
     prof = None
@@ -301,22 +300,8 @@ def smoother_pass(imu_path: Path, ref_path: Path, opts: PositionsOptions, rpy: S
                           imu_rotation_rpy_deg=tuple(float(x) for x in rpy), imu_delay_s=opts.imu_delay_s, imu_delay_from="option",
                           lever_arm=None if opts.lever_arm is None else tuple(opts.lever_arm), nhc=opts.nhc,
                           imu_noise=tuple(float(x) for x in noise))
-    with readers_said():
-        return navigate(Sources(input=Path(imu_path), aiding=Path(ref_path), fmt=opts.fmt, columns=opts.columns,
-                                profile=prof), out, nav)
-
-
-@contextmanager
-def readers_said() -> Iterator[None]:
-    """For the block: the recording readers' INFO lines (cut lines left out, a clock's mapping) held back;
-    :func:`positions_floor` said them when it read the recording first, and each pass reads it again."""
-    log = logging.getLogger(formats.__name__)
-    level = log.level
-    log.setLevel(logging.WARNING)
-    try:
-        yield
-    finally:
-        log.setLevel(level)
+    return navigate(Sources(input=Path(imu_path), aiding=Path(ref_path), fmt=opts.fmt, columns=opts.columns,
+                            profile=prof, recording=rec), out, nav)
 
 
 def smoothed_groundtruth(smoothed_tum: Path, mounting: np.ndarray, delay_s: float) -> GroundTruth:
@@ -387,11 +372,8 @@ def positions_floor(imu_path: Path, ref_path: Path, opts: PositionsOptions = Pos
     navigator outputs go (default: a temporary folder, removed)."""
 
     imu_path, ref_path = Path(imu_path), Path(ref_path)
-    src = formats.read_imu_source(imu_path, opts.fmt, columns=opts.columns)
-    if src.t_ns is None:
-        raise InvalidInputError(f"{imu_path}: the recording has no IMU stamps of its own; navigation needs them")
-    imu = ImuData(t_ns=np.asarray(src.t_ns, dtype=np.int64), gyro=np.asarray(src.gyro, dtype=np.float64),
-                  acc=np.asarray(src.acc, dtype=np.float64))
+    rec = read_imu(imu_path, opts.fmt, opts.columns)  # once: every smoother pass takes it
+    imu = ImuData(t_ns=rec.t_ns, gyro=np.asarray(rec.gyro, dtype=np.float64), acc=np.asarray(rec.acc, dtype=np.float64))
     rate = float(sample_rate_hz(imu.t_ns))
     track, gravity, ref_fmt = read_fix_track(ref_path)
     check_overlap(track, imu.t_ns, "positions")  # another recording's fixes: named before any estimate
@@ -426,7 +408,7 @@ def positions_floor(imu_path: Path, ref_path: Path, opts: PositionsOptions = Pos
             t0 = time.perf_counter()
             progress(f"positions: pass {k + 1}: the navigator's smoother over {name}"
                      + (" with the floor so far" if floor is not None else ""))
-            summ = smoother_pass(imu_path, ref_path, opts, rpy, floor, Path(work) / f"pass{k + 1}", device, rate)
+            summ = smoother_pass(rec, imu_path, ref_path, opts, rpy, floor, Path(work) / f"pass{k + 1}", device, rate)
             gt = smoothed_groundtruth(Path(summ["outputs"]["smoothed"]), M, opts.imu_delay_s)
             segs = reference_segments(imu, gt, name)
             if not segs:

@@ -345,16 +345,31 @@ def select_rows(traj: Trajectory, imu_t_ns: np.ndarray, T_BS: Optional[np.ndarra
 # --------------------------------------------------------------------------------------------
 
 
-def read_imu(path: Path, fmt: str = "auto", columns: Optional[CsvColumns] = None):
-    """(t_ns, gyro, acc, the recording's own noise (its sensor.yaml) or None, source file, layout) of
-    a recording, or of a user's CSV (``columns``): the IMU only (no ground truth is read)."""
+@dataclass(frozen=True)
+class ImuRecording:
+    """A recording's IMU as :func:`read_imu` read it: stamps, samples (read-only: a run that holds it
+    again may not change it), the recording's own noise (its sensor.yaml) or None, the source file and
+    its layout."""
+
+    t_ns: np.ndarray
+    gyro: np.ndarray
+    acc: np.ndarray
+    noise: Optional[ImuNoise]
+    file: str
+    fmt: str
+
+
+def read_imu(path: Path, fmt: str = "auto", columns: Optional[CsvColumns] = None) -> ImuRecording:
+    """The IMU of a recording, or of a user's CSV (``columns``): the IMU only (no ground truth is read)."""
     src = formats.read_imu_source(Path(path), fmt, columns=columns)
     if src.t_ns is None:
         raise InvalidInputError(f"{path}: the recording has no IMU stamps of its own; navigation needs them")
     yaml = imu_sensor_yaml(src.root) if src.fmt == "asl" else None
     noise = ImuNoise.from_sensor_yaml(yaml) if yaml is not None else None
-    return (np.asarray(src.t_ns, dtype=np.int64), np.asarray(src.gyro), np.asarray(src.acc), noise,
-            str(src.imu_file), src.fmt)
+    arrays = [np.asarray(src.t_ns, dtype=np.int64), np.asarray(src.gyro), np.asarray(src.acc)]
+    for a in arrays:
+        a.setflags(write=False)
+    return ImuRecording(*arrays, noise, str(src.imu_file), src.fmt)
 
 
 def read_aiding(src: Sources, opts: NavigateOptions) -> Trajectory:
@@ -420,6 +435,7 @@ class Sources:
     calibration: Optional[Path] = None
     force: bool = False  # apply a profile or model made for another rate (a warning), as refine --force
     imu_name: Optional[str] = None  # the recording's device, checked against the profile's or model's
+    recording: Optional[ImuRecording] = None  # ``input``'s IMU already read (:func:`read_imu`); None: read here
 
 
 @dataclass
@@ -614,7 +630,8 @@ def read_body_imu(src: Sources, opts: NavigateOptions, sol: Optional[RtkSolution
     carries, once) or the fit, then the guard) in the IMU's own frame, then in the body frame
     (``--imu-rotation-rpy-deg``), its stamps moved by ``--imu-delay-s`` (``auto``: measured against the
     geodetic fixes ``sol``), with its noise (:func:`imu_noise`)."""
-    t_ns, gyro, acc, own, imu_file, fmt = read_imu(src.input, src.fmt, src.columns)
+    read = src.recording if src.recording is not None else read_imu(src.input, src.fmt, src.columns)
+    t_ns, gyro, acc, own, imu_file, fmt = read.t_ns, read.gyro, read.acc, read.noise, read.file, read.fmt
     profile = load_profile(src)
     if src.calibration is not None and src.checkpoint is not None:
         raise ConfigError("--calibration and --checkpoint both refine the IMU: pass one")
