@@ -43,6 +43,7 @@ from __future__ import annotations
 import math
 import tempfile
 import time
+from contextlib import nullcontext
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any, Callable, Dict, List, Optional, Sequence, Tuple
@@ -364,17 +365,31 @@ def observed() -> Dict[str, Dict[str, Any]]:
     return out
 
 
-def positions_floor(imu_path: Path, ref_path: Path, opts: PositionsOptions = PositionsOptions(),
-                    work: Optional[Path] = None, progress: Progress = lambda s: None,
-                    device: str = "unknown") -> PositionsFloor:
-    """The bias-only floor of the recording ``imu_path`` from the positions in ``ref_path``, with its
-    standard errors, observed flags and passes (module docstring). ``work``: where each pass's
-    navigator outputs go (default: a temporary folder, removed)."""
+@dataclass(frozen=True)
+class _Setup:
+    """What every pass of :func:`positions_floor` shares: the recording's IMU (read once), the fixes'
+    format and gravity, the navigator's options with the delay settled, the mounting and where the
+    delay and mounting came from."""
 
-    imu_path, ref_path = Path(imu_path), Path(ref_path)
+    imu_path: Path
+    ref_path: Path
+    rec: ImuRecording
+    imu: ImuData
+    rate: float
+    name: str
+    opts: PositionsOptions
+    rpy: List[float]
+    gravity: float
+    ref_fmt: str
+    delay_info: Dict[str, Any]
+    mount_info: Dict[str, Any]
+
+
+def _setup(imu_path: Path, ref_path: Path, opts: PositionsOptions, progress: Progress) -> _Setup:
+    """The recording and its fixes read and checked against each other, the IMU's logging delay and its
+    mounting given or estimated from the track."""
     rec = read_imu(imu_path, opts.fmt, opts.columns)  # once: every smoother pass takes it
     imu = ImuData(t_ns=rec.t_ns, gyro=np.asarray(rec.gyro, dtype=np.float64), acc=np.asarray(rec.acc, dtype=np.float64))
-    rate = float(sample_rate_hz(imu.t_ns))
     track, gravity, ref_fmt = read_fix_track(ref_path)
     check_overlap(track, imu.t_ns, "positions")  # another recording's fixes: named before any estimate
     fix_t, fix_p = track.t_ns, track.p
@@ -388,43 +403,78 @@ def positions_floor(imu_path: Path, ref_path: Path, opts: PositionsOptions = Pos
         rpy, mount_info = [float(x) for x in opts.imu_rotation_rpy_deg], {"from": "given"}
     else:
         progress("positions: the IMU's forward axis from the track")
-        est = forward_mounting(imu.t_ns + int(round(opts.imu_delay_s * 1e9)), imu.acc, fix_t, fix_p, gravity)
+        est = forward_mounting(imu.t_ns + int(round(delay * 1e9)), imu.acc, fix_t, fix_p, gravity)
         rpy, mount_info = est["rpy_deg"], {"from": "estimated from the track (forward_mounting)", **est}
-    M = mounting_rotation(rpy)
     name = imu_path.stem if imu_path.is_file() else imu_path.name
-    settings = FitSettings(gravity=gravity)
-    tmp = None
-    if work is None:
-        tmp = tempfile.TemporaryDirectory(prefix="imu-learn-positions-")
-        work = Path(tmp.name)
-    try:
+    return _Setup(imu_path, ref_path, rec, imu, float(sample_rate_hz(imu.t_ns)), name, opts, rpy, gravity, ref_fmt,
+                  delay_info, mount_info)
+
+
+def _pass_reference(run: _Setup, summ: Dict[str, Any], settings: FitSettings) -> Tuple[List[Segment], List[Segment]]:
+    """(fitted, held-back) segments of the IMU with a pass's smoothed trajectory as its reference;
+    refused where the trajectory leaves less than the floor's window to fit on."""
+    gt = smoothed_groundtruth(Path(summ["outputs"]["smoothed"]), mounting_rotation(run.rpy), float(run.opts.imu_delay_s))
+    segs = reference_segments(run.imu, gt, run.name)
+    if not segs:
+        raise InvalidInputError(f"{run.ref_path}: the navigator's smoothed trajectory gives no stretch of reference")
+    train, val = held_back(segs, run.opts.val_fraction)
+    longest = max(len(s) for s in train) if train else 0
+    if longest <= settings.window + 1:
+        start_s = float(summ.get("init", {}).get("start_after_first_sample_s") or 0.0)
+        raise InvalidInputError(
+            f"{run.ref_path}: the navigator's smoothed trajectory leaves {longest / run.rate:.1f} s of the IMU to fit on "
+            f"(it starts {start_s:.1f} s in, where the track first gives the heading: a fix faster than 1 m/s; "
+            f"the last {run.opts.val_fraction:g} held back), shorter than the floor's window "
+            f"({settings.window} samples): a longer recording, or one that moves sooner")
+    return train, val
+
+
+def _reference_entry(run: _Setup, passes: List[Dict[str, Any]]) -> Dict[str, Any]:
+    """profile.json's ``reference`` for the positions: the method, the navigator's settings, the passes."""
+    last = passes[-1]
+    converged = len(passes) > 1 and all(abs(c) < s for c, s in zip(last["change_b_g"] + last["change_b_a"],
+                                                                     last["std_b_g"] + last["std_b_a"]))
+    opts = run.opts
+    return {
+        "kind": "positions", "file": str(run.ref_path), "format": run.ref_fmt,
+        "method": "attitude a latent state: the navigator's smoothed trajectory (positions as aiding, no outages) "
+                  "as the reference, the bias-only floor fitted against it, the smoother run again with it; "
+                  "repeated until the biases change by less than their standard error",
+        "navigator": {"imu_rotation_rpy_deg": run.rpy, "mounting": run.mount_info, "imu_delay_s": opts.imu_delay_s,
+                      "imu_delay": run.delay_info, "lever_arm_m": None if opts.lever_arm is None else list(opts.lever_arm),
+                      "imu_noise": None if opts.imu_noise is None else list(opts.imu_noise),
+                      "keyframe_hz": opts.keyframe_hz, "nhc": opts.nhc, "gravity_mps2": run.gravity},
+        "passes": len(passes), "converged": bool(converged),
+        "floor_fit": "calib.fit.fit_once, terms cutoffs_hz=(None,), held=(gyro, acc) (M_g, G, M_a held), "
+                     "fit_offset=False",
+    }
+
+
+def positions_floor(imu_path: Path, ref_path: Path, opts: PositionsOptions = PositionsOptions(),
+                    work: Optional[Path] = None, progress: Progress = lambda s: None,
+                    device: str = "unknown") -> PositionsFloor:
+    """The bias-only floor of the recording ``imu_path`` from the positions in ``ref_path``, with its
+    standard errors, observed flags and passes (module docstring). ``work``: where each pass's
+    navigator outputs go (default: a temporary folder, removed)."""
+
+    run = _setup(Path(imu_path), Path(ref_path), opts, progress)
+    M, settings = mounting_rotation(run.rpy), FitSettings(gravity=run.gravity)
+    where = tempfile.TemporaryDirectory(prefix="imu-learn-positions-") if work is None else nullcontext(str(work))
+    with where as folder:
+        work = Path(folder)
         floor: Optional[Floor] = None
         total_g, total_a = np.zeros(3), np.zeros(3)
         passes: List[Dict[str, Any]] = []
-        std = TraditionalParams.unknown()
-        train: List[Segment] = []
-        val: List[Segment] = []
         for k in range(max(1, opts.max_iterations)):
             t0 = time.perf_counter()
-            progress(f"positions: pass {k + 1}: the navigator's smoother over {name}"
+            progress(f"positions: pass {k + 1}: the navigator's smoother over {run.name}"
                      + (" with the floor so far" if floor is not None else ""))
-            summ = smoother_pass(rec, imu_path, ref_path, opts, rpy, floor, Path(work) / f"pass{k + 1}", device, rate)
-            gt = smoothed_groundtruth(Path(summ["outputs"]["smoothed"]), M, opts.imu_delay_s)
-            segs = reference_segments(imu, gt, name)
-            if not segs:
-                raise InvalidInputError(f"{ref_path}: the navigator's smoothed trajectory gives no stretch of reference")
-            train, val = held_back(segs, opts.val_fraction)
-            longest = max(len(s) for s in train) if train else 0
-            if longest <= settings.window + 1:
-                start_s = float(summ.get("init", {}).get("start_after_first_sample_s") or 0.0)
-                raise InvalidInputError(
-                    f"{ref_path}: the navigator's smoothed trajectory leaves {longest / rate:.1f} s of the IMU to fit on "
-                    f"(it starts {start_s:.1f} s in, where the track first gives the heading: a fix faster than 1 m/s; "
-                    f"the last {opts.val_fraction:g} held back), shorter than the floor's window "
-                    f"({settings.window} samples): a longer recording, or one that moves sooner")
-            applied = [_applied(s, floor) for s in train], [_applied(s, floor) for s in val]
+            summ = smoother_pass(run.rec, run.imu_path, run.ref_path, run.opts, run.rpy, floor, work / f"pass{k + 1}",
+                                 device, run.rate)
+            train, val = _pass_reference(run, summ, settings)
             progress(f"positions: pass {k + 1}: the biases against the smoothed attitude")
-            step, std, info = fit_biases(applied[0], applied[1], settings, opts.blocks, opts.max_windows)
+            step, std, info = fit_biases([_applied(s, floor) for s in train], [_applied(s, floor) for s in val],
+                                         settings, opts.blocks, opts.max_windows)
             d_g, d_a = step.params.b_g, step.params.b_a
             total_g, total_a = total_g + d_g, total_a + d_a
             floor = bias_floor(total_g, total_a)
@@ -439,26 +489,8 @@ def positions_floor(imu_path: Path, ref_path: Path, opts: PositionsOptions = Pos
                      f"{_vec(std.b_g)}), acc bias {_vec(total_a)} m/s^2 (change {_vec(d_a)}, std {_vec(std.b_a)})")
             if k > 0 and np.all(np.abs(d_g) < std.b_g) and np.all(np.abs(d_a) < std.b_a):
                 break
-        assert floor is not None
-        converged = len(passes) > 1 and all(abs(c) < s for c, s in zip(passes[-1]["change_b_g"] + passes[-1]["change_b_a"],
-                                                                         passes[-1]["std_b_g"] + passes[-1]["std_b_a"]))
-        reference = {
-            "kind": "positions", "file": str(ref_path), "format": ref_fmt,
-            "method": "attitude a latent state: the navigator's smoothed trajectory (positions as aiding, no outages) "
-                      "as the reference, the bias-only floor fitted against it, the smoother run again with it; "
-                      "repeated until the biases change by less than their standard error",
-            "navigator": {"imu_rotation_rpy_deg": rpy, "mounting": mount_info, "imu_delay_s": opts.imu_delay_s,
-                          "imu_delay": delay_info, "lever_arm_m": None if opts.lever_arm is None else list(opts.lever_arm),
-                          "imu_noise": None if opts.imu_noise is None else list(opts.imu_noise),
-                          "keyframe_hz": opts.keyframe_hz, "nhc": opts.nhc, "gravity_mps2": gravity},
-            "passes": len(passes), "converged": bool(converged),
-            "floor_fit": "calib.fit.fit_once, terms cutoffs_hz=(None,), held=(gyro, acc) (M_g, G, M_a held), "
-                         "fit_offset=False",
-        }
-        return PositionsFloor(floor, std, observed(), reference, passes, train, val, gravity)
-    finally:
-        if tmp is not None:
-            tmp.cleanup()
+    assert floor is not None
+    return PositionsFloor(floor, std, observed(), _reference_entry(run, passes), passes, train, val, run.gravity)
 
 
 def held_back(segments: List[Segment], frac: float) -> Tuple[List[Segment], List[Segment]]:
