@@ -264,3 +264,47 @@ def test_a_refused_positions_fit_leaves_the_accelerometers_matrix_exactly_at_its
     assert all(v is None for row in p["accelerometer"]["matrix_std"] for v in row)
     assert not p["observed"]["accelerometer.matrix"]["observed"]
     assert "the matrix at its prior (identity)" in p["selection"]["acc"]
+
+
+def test_the_gyros_misalignment_rotation_goes_with_an_estimated_frame(tmp_path):
+    """A gyro whose axes are turned 0.8° (about x) off the IMU frame the ground truth is in (below the frame
+    check's 1°, which it leaves to the floor): against the ground truth as given the floor's M_g undoes the
+    turn; against the same poses in an unknown frame, the frame's rotation is estimated from the same rates
+    and takes the turn with it (the estimate 0.8° off the true rotation, M_g without the turn): profile.json
+    says the matrix was observed only in part."""
+    import shutil
+
+    from scipy.spatial.transform import Rotation
+
+    rec = tmp_path / "MH_01_turned"
+    shutil.copytree(REC, rec)
+    imu = rec / "mav0" / "imu0" / "data.csv"
+    head = imu.read_text().splitlines()[0]
+    rows = np.loadtxt(imu, delimiter=",", comments="#")
+    turn = Rotation.from_rotvec(np.radians([0.8, 0.0, 0.0])).as_matrix()
+    rows[:, 1:4] = rows[:, 1:4] @ turn.T  # what the gyro reads: its axes turned
+    np.savetxt(imu, rows, delimiter=",", header=head.lstrip("#"), comments="#",
+               fmt=["%d"] + ["%.12g"] * 6)
+
+    def run(out: Path, *extra: str) -> dict:
+        code = main(["calibrate", "--input", str(rec), "--out", str(out), "--no-plot", "--quiet", "--no-select", *extra])
+        assert code == 0
+        return json.loads((out / "profile.json").read_text())
+
+    def skew_deg(p: dict) -> np.ndarray:
+        m = np.asarray(p["gyroscope"]["matrix"])
+        k = (m - m.T) / 2
+        return np.degrees([k[2, 1], k[0, 2], k[1, 0]])
+
+    given = run(tmp_path / "given")
+    assert not given["reference"]["applied"].get("rotation")
+    assert skew_deg(given)[0] == pytest.approx(-0.8, abs=0.1)  # M_g undoes the turn
+    assert "partly" not in given["observed"]["gyroscope.matrix"]
+    ref = write_reference(tmp_path / "rotated.tum", world_deg=30.0)
+    moved = run(tmp_path / "moved", "--groundtruth", str(ref))
+    r = moved["reference"]
+    est = Rotation.from_matrix(np.asarray(r["rotation_imu_from_reference"]))
+    true = Rotation.from_quat(wxyz_to_xyzw(quat_axis_angle(R_TRUE_AXIS, R_TRUE_DEG)))
+    assert math.degrees((est * true.inv()).magnitude()) == pytest.approx(0.8, abs=0.1)  # the turn is in the frame
+    assert np.all(np.abs(skew_deg(moved)) < 0.1)  # and not in M_g
+    assert "misalignment rotation" in moved["observed"]["gyroscope.matrix"]["partly"]

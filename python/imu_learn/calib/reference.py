@@ -109,6 +109,9 @@ class Extrinsics:
     source: str
 
 
+ROTATION_FROM_RATES = "estimated from rotation rates"  # FrameFit.method: the rotation from the rates alone
+
+
 @dataclass
 class FrameFit:
     """What step 1-3 found (module doc); ``in_imu_frame``: nothing to change."""
@@ -128,7 +131,7 @@ class FrameFit:
     tilt_deg: float  # the largest of the reference worlds' z from up
     g_up: np.ndarray  # (recordings, 3): each recording's specific force of rest in its reference world
     rate_hz: float
-    method: str = "estimated from rotation rates"  # or the --extrinsics file, or specific force (planar)
+    method: str = ROTATION_FROM_RATES  # or the --extrinsics file, or from specific force (planar)
     resolves_acceleration: bool = True  # the acc scale/misalignment and the low-pass are observable
     applied: Dict[str, bool] = field(default_factory=dict)
     planar_ratio: float = math.nan  # the rates' second over largest spread, the lower sensor's (:func:`planar_ratio`)
@@ -506,7 +509,7 @@ def resolve_frame(pairs: Sequence[Tuple[ImuData, GroundTruth]], options: FrameOp
     ratio = planar_ratio(rates)
     off = fit_offset(segs, m=m, max_shift=max(3, int(round(0.02 * imu_rate))))
     w_rms = motion_rms(segs, off.gyro_bias)
-    method = extrinsics.source if extrinsics is not None else "estimated from rotation rates"
+    method = extrinsics.source if extrinsics is not None else ROTATION_FROM_RATES
     if off.rms > options.max_rate_residual * w_rms:  # the file itself, whatever --extrinsics says
         raise ReferenceFrameError(f"the reference's {no_frame(off.rms, w_rms)}")
     if extrinsics is None:

@@ -40,7 +40,15 @@ from imu_learn.calib import fit as ff
 from imu_learn.calib.acc_positions import AccFit, AccOptions, fit_acc_from_positions, recording_spread
 from imu_learn.calib.frames import default_gap_s
 from imu_learn.calib.profile import FloorFit
-from imu_learn.calib.reference import FrameFit, FrameOptions, frame_lines, read_extrinsics, resolve_frame, to_imu_frame
+from imu_learn.calib.reference import (
+    ROTATION_FROM_RATES,
+    FrameFit,
+    FrameOptions,
+    frame_lines,
+    read_extrinsics,
+    resolve_frame,
+    to_imu_frame,
+)
 from imu_learn.core.still import StillSettings, moving_mean, moving_std
 from imu_learn.data.formats import USER_CSV, detect_format, read_imu_source, read_recording, user_csv
 from imu_learn.data.loading import AlignOptions, align
@@ -74,6 +82,15 @@ class StillPiece:
     gyro: np.ndarray
     acc: np.ndarray
 
+
+# a reference's frame rotation estimated from the rotation rates takes the gyroscope's misalignment rotation
+# with it (Blackbird against its motion capture made into a camera's poses: the estimate 0.75 deg off the
+# true rotation, the motion-capture profile's gyro rotation 0.67 deg the other way); profile.json says so
+GYRO_ROTATION_WITH_FRAME = (
+    "its scales and non-orthogonality only: the rotation between the reference's frame and the IMU's was "
+    "estimated from the same rotation rates ({deg:.1f} deg, +-{std:.2f}), which takes the gyroscope's misalignment "
+    "rotation with it; the profile keeps the gyroscope's own axes as the IMU's frame (--extrinsics with a "
+    "calibrated rotation ties it to that rotation's frame instead)")
 
 @dataclass
 class Recording:
@@ -497,6 +514,9 @@ class PosesSource(Source):
                 out[k] = {"observed": False, "why": why}
             if self.acc_refused:
                 out["accelerometer.matrix"] = {"observed": False, "why": why + "; from its positions: " + self.acc_refused}
+        if ref is not None and ref.applied.get("rotation") and ref.method == ROTATION_FROM_RATES:
+            out["gyroscope.matrix"] = {"observed": True, "partly": GYRO_ROTATION_WITH_FRAME.format(
+                deg=ref.rotation_deg, std=ref.rotation_std_deg)}
         if ref is not None and ref.applied.get("level"):
             out["accelerometer.bias"] = {
                 "observed": True, "partly": "along gravity only: across it the bias and the tilt of the reference's "

@@ -311,6 +311,8 @@ def summary(p: Any) -> List[str]:
         lines.append(f"reference moved into the IMU frame: rotation {r['rotation_deg']:.2f}° ({r['rotation_from']}), "
                      f"applied: {', '.join(k for k, v in r['applied'].items() if v)}")
     for k, o in p.observed.items():
+        if o.get("observed", True) and o.get("partly"):
+            lines.append(f"partly observed: {k}: {o['partly']}")
         if not o.get("observed", True):
             why = str(o.get("why", ""))
             if why.startswith("not selected: "):  # observed, but it did not pay on held-out data
