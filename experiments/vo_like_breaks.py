@@ -25,15 +25,17 @@ import json
 import os
 import time
 from dataclasses import replace
-from decimal import Decimal
 from pathlib import Path
 
 import numpy as np
 from scipy.spatial.transform import Rotation
 
+from imu_learn.core.quat import wxyz_to_xyzw
+from imu_learn.data.formats.groundtruth import read_groundtruth
 from imu_learn.fuse.aiding import kinds
 from imu_learn.fuse.aiding.noise import PoseNoise
 from imu_learn.fuse.navigate import NavigateOptions, Sources, navigate, parse_gaps
+from imu_learn.fuse.output import write_trajectory
 
 REPO = Path(__file__).resolve().parents[1]
 PROFILE = REPO / "models" / "profiles" / "blackbird_clover" / "profile.json"
@@ -45,27 +47,21 @@ SIGMA_M, SIGMA_DEG, EVERY = 0.005, 0.2, 5  # per pose; every 5th ground-truth ro
 
 def make_vo(gt_txt: Path, out: Path, seed: int = 0) -> tuple:
     """(VO-like TUM file, its T_BS yaml, the ground truth as TUM) written into ``out`` from Blackbird's
-    ``stamped_groundtruth_imu.txt`` (t x y z qx qy qz qw ..., the IMU's pose in the world)."""
-    rows = [line.split() for line in gt_txt.read_text().splitlines() if line and not line.startswith("#")]
-    t = [Decimal(r[0]) for r in rows]
-    p = np.array([[float(x) for x in r[1:4]] for r in rows])
-    q = np.array([[float(x) for x in r[4:8]] for r in rows])
+    ``stamped_groundtruth_imu.txt`` (the IMU's pose in the world; the package's reader and writer)."""
+    gt = read_groundtruth(gt_txt)
     rng = np.random.default_rng(seed)
-    k = np.arange(0, len(t), EVERY)
-    R_wi = Rotation.from_quat(q[k]).as_matrix()
+    k = np.arange(0, len(gt.t_ns), EVERY)
+    R_wi = Rotation.from_quat(wxyz_to_xyzw(gt.q_wxyz[k])).as_matrix()
     R_vw = Rotation.from_euler("zyx", WORLD_RPY_DEG, degrees=True).as_matrix()
     R_vc = Rotation.from_rotvec(rng.normal(0, np.radians(SIGMA_DEG), (len(k), 3))).as_matrix() @ (R_vw @ R_wi @ R_BC)
-    p_vc = (R_vw @ (p[k] + np.einsum("nij,j->ni", R_wi, T_BC)).T).T + WORLD_SHIFT + rng.normal(0, SIGMA_M, (len(k), 3))
-    q_vc = Rotation.from_matrix(R_vc).as_quat()
-    out.mkdir(parents=True, exist_ok=True)
-    vo, yaml, gt = out / "vo.tum", out / "T_BC.yaml", out / "groundtruth.tum"
-    vo.write_text("".join(f"{t[j]} " + " ".join(f"{x:.6f}" for x in p_vc[i]) + " " +
-                          " ".join(f"{x:.9f}" for x in q_vc[i]) + "\n" for i, j in enumerate(k)))
+    p_vc = (R_vw @ (gt.p[k] + np.einsum("nij,j->ni", R_wi, T_BC)).T).T + WORLD_SHIFT + rng.normal(0, SIGMA_M, (len(k), 3))
+    vo, yaml, gt_tum = out / "vo.tum", out / "T_BC.yaml", out / "groundtruth.tum"
+    write_trajectory(vo, gt.t_ns[k], p_vc, R_vc)
+    write_trajectory(gt_tum, gt.t_ns, gt.p, Rotation.from_quat(wxyz_to_xyzw(gt.q_wxyz)).as_matrix())
     T = np.eye(4)
     T[:3, :3], T[:3, 3] = R_BC, T_BC
     yaml.write_text("%YAML:1.0\nT_BS:\n  cols: 4\n  rows: 4\n  data: [" + ", ".join(f"{x:.12g}" for x in T.ravel()) + "]\n")
-    gt.write_text("".join(f"{t[i]} " + " ".join(rows[i][1:8]) + "\n" for i in range(len(t))))
-    return vo, yaml, gt
+    return vo, yaml, gt_tum
 
 
 SHIPPED_NOISE, SHIPPED_INFLATION = kinds.relative_noise, kinds.world_inflation

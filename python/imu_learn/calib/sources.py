@@ -92,6 +92,7 @@ GYRO_ROTATION_WITH_FRAME = (
     "rotation with it; the profile keeps the gyroscope's own axes as the IMU's frame (--extrinsics with a "
     "calibrated rotation ties it to that rotation's frame instead)")
 
+
 @dataclass
 class Recording:
     """One block of a recording as calibrate uses it: ``name`` (the recording, as profile.json's

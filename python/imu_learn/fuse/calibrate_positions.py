@@ -374,9 +374,6 @@ class _Setup:
     imu_path: Path
     ref_path: Path
     rec: ImuRecording
-    imu: ImuData
-    rate: float
-    name: str
     opts: PositionsOptions
     rpy: List[float]
     gravity: float
@@ -384,12 +381,33 @@ class _Setup:
     delay_info: Dict[str, Any]
     mount_info: Dict[str, Any]
 
+    @property
+    def imu(self) -> ImuData:
+        return imu_data(self.rec)
+
+    @property
+    def rate(self) -> float:
+        return float(sample_rate_hz(self.rec.t_ns))
+
+    @property
+    def name(self) -> str:
+        return self.imu_path.stem if self.imu_path.is_file() else self.imu_path.name
+
+    @property
+    def mounting(self) -> np.ndarray:
+        return mounting_rotation(self.rpy)
+
+
+def imu_data(rec: ImuRecording) -> ImuData:
+    """The recording's IMU as the floor fits take it (no copy where it is float64 already)."""
+    return ImuData(t_ns=rec.t_ns, gyro=np.asarray(rec.gyro, dtype=np.float64), acc=np.asarray(rec.acc, dtype=np.float64))
+
 
 def _setup(imu_path: Path, ref_path: Path, opts: PositionsOptions, progress: Progress) -> _Setup:
     """The recording and its fixes read and checked against each other, the IMU's logging delay and its
     mounting given or estimated from the track."""
     rec = read_imu(imu_path, opts.fmt, opts.columns)  # once: every smoother pass takes it
-    imu = ImuData(t_ns=rec.t_ns, gyro=np.asarray(rec.gyro, dtype=np.float64), acc=np.asarray(rec.acc, dtype=np.float64))
+    imu = imu_data(rec)
     track, gravity, ref_fmt = read_fix_track(ref_path)
     check_overlap(track, imu.t_ns, "positions")  # another recording's fixes: named before any estimate
     fix_t, fix_p = track.t_ns, track.p
@@ -405,15 +423,13 @@ def _setup(imu_path: Path, ref_path: Path, opts: PositionsOptions, progress: Pro
         progress("positions: the IMU's forward axis from the track")
         est = forward_mounting(imu.t_ns + int(round(delay * 1e9)), imu.acc, fix_t, fix_p, gravity)
         rpy, mount_info = est["rpy_deg"], {"from": "estimated from the track (forward_mounting)", **est}
-    name = imu_path.stem if imu_path.is_file() else imu_path.name
-    return _Setup(imu_path, ref_path, rec, imu, float(sample_rate_hz(imu.t_ns)), name, opts, rpy, gravity, ref_fmt,
-                  delay_info, mount_info)
+    return _Setup(imu_path, ref_path, rec, opts, rpy, gravity, ref_fmt, delay_info, mount_info)
 
 
 def _pass_reference(run: _Setup, summ: Dict[str, Any], settings: FitSettings) -> Tuple[List[Segment], List[Segment]]:
     """(fitted, held-back) segments of the IMU with a pass's smoothed trajectory as its reference;
     refused where the trajectory leaves less than the floor's window to fit on."""
-    gt = smoothed_groundtruth(Path(summ["outputs"]["smoothed"]), mounting_rotation(run.rpy), float(run.opts.imu_delay_s))
+    gt = smoothed_groundtruth(Path(summ["outputs"]["smoothed"]), run.mounting, float(run.opts.imu_delay_s))
     segs = reference_segments(run.imu, gt, run.name)
     if not segs:
         raise InvalidInputError(f"{run.ref_path}: the navigator's smoothed trajectory gives no stretch of reference")
@@ -458,7 +474,7 @@ def positions_floor(imu_path: Path, ref_path: Path, opts: PositionsOptions = Pos
     navigator outputs go (default: a temporary folder, removed)."""
 
     run = _setup(Path(imu_path), Path(ref_path), opts, progress)
-    M, settings = mounting_rotation(run.rpy), FitSettings(gravity=run.gravity)
+    M, settings = run.mounting, FitSettings(gravity=run.gravity)
     where = tempfile.TemporaryDirectory(prefix="imu-learn-positions-") if work is None else nullcontext(str(work))
     with where as folder:
         work = Path(folder)
