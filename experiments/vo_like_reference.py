@@ -1,6 +1,7 @@
 """calibrate on Blackbird from a VO-like reference (its motion capture as a camera's 20 Hz poses in an
 unknown frame and world: experiments/vo_like_breaks.py's files) against its motion capture, both on the
-`train` recording, scored on the unseen `val` by ``imu-learn evaluate``; and the VO profile with the
+`train` recording, scored on the unseen `val` by ``imu-learn evaluate`` beside the simpler floors it fits
+on `train` against the motion capture (timing, traditional, traditional+timing); and the VO profile with the
 motion-capture gyro's misalignment rotation put back (its M_g and M_a premultiplied by the rotation of
 the motion-capture M_g's antisymmetric part), which the estimated frame took (profile.json's ``observed``).
 
@@ -60,7 +61,7 @@ def main() -> None:
         p["floor"][key] = p[sensor]["matrix"] = M.tolist()
     (a.out / "vo_profile_rotated").mkdir(parents=True, exist_ok=True)
     (a.out / "vo_profile_rotated" / "profile.json").write_text(json.dumps(p, indent=1))
-    methods = ",".join(["raw"] + [f"profile:{a.out / d / 'profile.json'}" for d in ("mocap", "vo_profile",
+    methods = ",".join(["raw", "timing", "traditional", "traditional+timing"] + [f"profile:{a.out / d / 'profile.json'}" for d in ("mocap", "vo_profile",
                                                                                      "vo_profile_rotated")])
     imu_learn("evaluate", "--config", str(REPO / "configs" / "eval_blackbird.toml"), "--methods", methods,
               "--out", str(a.out / "evaluate"))
