@@ -16,12 +16,16 @@ displacement from the gap's start against the truth's (rotated by a rigid alignm
 the gap), RMS over the gap and at its last keyframe before the camera returns.
 
     IMU_LEARN_DATA=<root> python experiments/navigate_vo_breaks.py [--trials trial0,trial1,trial2]
-        [--out reports/navigate_vo_breaks] [--tabulate-only]
+        [--out reports/navigate_vo_breaks] [--tabulate-only] [--raw]
 
 Data: under the data root, euroc/<flight> (ASL layout) and euroc-vo/orbslam2_stereo/<trial>/<VO>.txt
 with euroc-vo/cam0_sensor.yaml.
-Writes: OUT/<trial>/<none|30_10_70_10>/<flight>/ (navigate's outputs) and OUT/table.md; the figures of
-docs/experiments/navigate-vo.md ("The world's poses weighed as the map's slow error").
+With ``--raw`` the same runs without ``--profile`` go under OUT/raw/; the profile's table then puts each
+gap's coasting drift beside the raw IMU's.
+
+Writes: OUT/<trial>/<none|30_10_70_10>/<flight>/ (navigate's outputs) and OUT/table.md (with ``--raw``:
+OUT/raw/...); the figures of docs/experiments/navigate-vo.md ("The world's poses weighed as the map's slow
+error", "Re-measured").
 """
 from __future__ import annotations
 
@@ -50,11 +54,13 @@ def groundtruth(data: Path, rec: str) -> Path:
         flight / "mav0" / "state_groundtruth_estimate0" / "data.csv"
 
 
-def navigate(data: Path, trial: str, gaps: str, rec: str, out: Path) -> Optional[str]:
+def navigate(data: Path, trial: str, gaps: str, rec: str, out: Path, raw: bool = False) -> Optional[str]:
     cmd = [sys.executable, "-m", "imu_learn.cli", "navigate", "--quiet", "--input", str(data / "euroc" / rec),
            "--aiding", str(data / "euroc-vo" / "orbslam2_stereo" / trial / f"{FLIGHTS[rec]}.txt"),
            "--aiding-kind", "relative-pose", "--extrinsics", str(data / "euroc-vo" / "cam0_sensor.yaml"),
-           "--groundtruth", str(groundtruth(data, rec)), "--profile", PROFILE, "--out", str(out)]
+           "--groundtruth", str(groundtruth(data, rec)), "--out", str(out)]
+    if not raw:
+        cmd += ["--profile", PROFILE]
     if gaps != "none":
         cmd += ["--gaps", gaps]
     done = subprocess.run(cmd, capture_output=True, text=True)
@@ -106,30 +112,58 @@ def row(data: Path, trial: str, gaps: str, base: Path) -> str:
             f"| {sum(x <= 1.0 for x in sv)}, max {max(sv):.3f} {gap_cells}")
 
 
+def flight_rows(data: Path, trials: List[str], out: Path) -> List[str]:
+    """One row per flight and run: causal and smoothed over the VO at its stamps, without and with the gaps,
+    and each gap's coasting drift RMS (the raw IMU's beside it where ``out/raw`` holds the same run)."""
+    lines = ["| run | flight | causal / VO, smoothed / VO: no gaps | with the gaps | coasting drift RMS per gap [m] "
+             "| raw IMU's |", "|---|---|---|---|---|---|"]
+    for trial in trials:
+        for rec in FLIGHTS:
+            cells = []
+            for gaps in GAPS:
+                run = out / trial / gaps.replace(":", "_").replace(",", "_") / rec
+                if not (run / "summary.json").exists():
+                    cells.append("-")
+                    continue
+                r = json.loads((run / "summary.json").read_text())["scores"]["against_aiding"]["ratio"]
+                cells.append(f"{r['causal']:.3f}, {r['smoothed']:.3f}")
+            gapped = GAPS[1].replace(":", "_").replace(",", "_")
+            drift = [coast_drift(base / trial / gapped / rec, groundtruth(data, rec))
+                     if (base / trial / gapped / rec / "summary.json").exists() else []
+                     for base in (out, out / "raw")]
+            cells += [", ".join(f"{d['rms_m']:.2f}" for d in ds) or "-" for ds in drift]
+            lines.append(f"| {trial} | {rec} | " + " | ".join(cells) + " |")
+    return lines
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--trials", default="trial0,trial1,trial2")
     ap.add_argument("--out", type=Path, default=Path("reports/navigate_vo_breaks"))
     ap.add_argument("--tabulate-only", action="store_true", help="only the table, from OUT's runs")
+    ap.add_argument("--raw", action="store_true", help="the raw IMU (no --profile), its runs under OUT/raw/")
     args = ap.parse_args()
     data = Path(os.environ.get("IMU_LEARN_DATA", ""))
     if not (data / "euroc-vo").is_dir():
         sys.exit("set IMU_LEARN_DATA to the data root (euroc/, euroc-vo/)")
     trials = args.trials.split(",")
+    out = args.out / "raw" if args.raw else args.out
     if not args.tabulate_only:
         jobs = [(t, g, r) for t in trials for g in GAPS for r in FLIGHTS]
         with ThreadPoolExecutor(2) as pool:
-            for err in pool.map(lambda j: navigate(data, *j, args.out / j[0] / j[1].replace(":", "_").replace(",", "_")
-                                                  / j[2]), jobs):
+            for err in pool.map(lambda j: navigate(data, *j, out / j[0] / j[1].replace(":", "_").replace(",", "_")
+                                                  / j[2], args.raw), jobs):
                 if err:
                     print(err, file=sys.stderr)
     lines = ["| run | gaps | flights | causal, mean aligned RMSE [m] | causal <= VO at its stamps (flights), largest "
              "ratio | smoothed <= VO, largest ratio | in the gaps, RMS [m] | coasting drift RMS / mean end [m] |",
              "|---|---|---|---|---|---|---|---|"]
-    lines += [row(data, t, g, args.out / t / g.replace(":", "_").replace(",", "_")) for t in trials for g in GAPS]
+    lines += [row(data, t, g, out / t / g.replace(":", "_").replace(",", "_")) for t in trials for g in GAPS]
+    if not args.raw:
+        lines += [""] + flight_rows(data, trials, out)
     text = "\n".join(lines) + "\n"
-    args.out.mkdir(parents=True, exist_ok=True)
-    (args.out / "table.md").write_text(text)
+    out.mkdir(parents=True, exist_ok=True)
+    (out / "table.md").write_text(text)
     print(text)
 
 
