@@ -140,35 +140,29 @@ accelerometer_random_walk: 4.0e-03
 """
 
 
-@pytest.mark.parametrize("given", [False, True])
-def test_a_sensor_yamls_white_noise_is_raised_to_the_moving_imus_with_pose_aiding(tmp_path, capsys, given):
-    """A recording's own sensor.yaml holds a still figure (Kalibr's Allan deviation at rest, EuRoC's the
-    datasheet's), 10x too quiet for the moving IMU here: with pose aiding navigate raises its white noise to
-    the innovations' fit, as a profile's (within 2x of the truth; the random walks as the file gives them),
-    and the summary says so; ``--imu-noise`` is the user's own figures, kept as given."""
+def test_a_sensor_yamls_noise_is_kept_as_given_with_pose_aiding(tmp_path, capsys):
+    """A recording's own sensor.yaml is used as it is with pose aiding, even 10x quieter than the moving IMU:
+    raised to the innovations' fit as a profile's is, the raw IMU followed the camera closer at its stamps
+    but coasted through camera gaps 1.2-3x further (docs/experiments/navigate-vo.md, "A recording's
+    sensor.yaml raised in motion"): not kept, and this holds the choice."""
     from imu_learn.cli import main
 
-    t_ns, gyro, acc, aid_t, p, R = recording(seconds=60.0)
+    t_ns, gyro, acc, aid_t, p, R = recording(seconds=40.0)
     rec, _ = write_asl(tmp_path, t_ns, gyro, acc, aid_t, p)
-    (rec / "mav0" / "imu0" / "sensor.yaml").write_text(SENSOR_YAML.format(g=TRUE_GYRO / 10, a=TRUE_ACC / 10))
+    yaml = rec / "mav0" / "imu0" / "sensor.yaml"
+    yaml.write_text(SENSOR_YAML.format(g=TRUE_GYRO / 10, a=TRUE_ACC / 10))
     q = Rotation.from_matrix(R).as_quat()  # x, y, z, w
     poses = tmp_path / "poses.tum"
     poses.write_text("\n".join(f"{k // 10 ** 9}.{k % 10 ** 9:09d} {x[0]:.5f} {x[1]:.5f} {x[2]:.5f} "
                                f"{v[0]:.9f} {v[1]:.9f} {v[2]:.9f} {v[3]:.9f}" for k, x, v in zip(aid_t, p, q)) + "\n")
     out = tmp_path / "out"
-    noise = ["--imu-noise", f"{TRUE_GYRO / 10},{TRUE_ACC / 10},2e-5,4e-3"] if given else []
     rc = main(["navigate", "--quiet", "--input", str(rec), "--aiding", str(poses), "--aiding-kind", "pose",
-               "--out", str(out)] + noise)
+               "--out", str(out)])
     assert rc == 0, capsys.readouterr().err
     s = json.loads((out / "summary.json").read_text())["imu_noise"]
-    if given:
-        assert s["source"] == "--imu-noise"
-        assert (s["gyroscope_noise_density"], s["accelerometer_noise_density"]) == (TRUE_GYRO / 10, TRUE_ACC / 10)
-        return
-    assert s["source"].startswith(str(rec / "mav0" / "imu0" / "sensor.yaml")) and "raised" in s["source"]
-    assert 0.5 < s["accelerometer_noise_density"] / TRUE_ACC < 2.0
-    assert 0.5 < s["gyroscope_noise_density"] / TRUE_GYRO < 2.0
-    assert (s["gyroscope_random_walk"], s["accelerometer_random_walk"]) == (2e-5, 4e-3)
+    assert s["source"] == str(yaml)
+    assert s["gyroscope_noise_density"] == pytest.approx(TRUE_GYRO / 10)
+    assert s["accelerometer_noise_density"] == pytest.approx(TRUE_ACC / 10)
 
 
 def test_a_profile_that_measured_no_noise_writes_the_class_default_and_navigate_fits_its_own(tmp_path, capsys):

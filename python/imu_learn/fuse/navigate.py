@@ -462,12 +462,13 @@ def imu_noise(src: Sources, opts: NavigateOptions, own: Optional[ImuNoise], prof
               sol: Optional[RtkSolution] = None) -> Optional[ImuNoise]:
     """The noise the graph assumes: ``--imu-noise``, else the profile's (its white noise raised to the moving
     IMU's, :func:`in_motion`: with GNSS fixes ``sol`` here, with pose aiding once the rows are read,
-    :func:`moving_imu`), else the recording's sensor.yaml (with pose aiding its white noise raised as a
-    profile's, :func:`moving_imu`), else with ``imu`` (its stamps, gyro, acc as fused: corrected, in the body
-    frame, the stamps delayed) the MEMS class default scaled to the aiding's innovations (:mod:`.noise_fit`):
-    here for the geodetic fixes ``sol``; None for poses and positions of a trajectory file, whose fit waits for
-    their rows read and checked (:func:`moving_imu`: a file in another frame or unit is refused before any fit);
-    else the built-in device's (one warning line each)."""
+    :func:`moving_imu`), else the recording's
+    sensor.yaml, else with ``imu`` (its stamps, gyro, acc as fused: corrected, in the body frame, the
+    stamps delayed) the MEMS class default scaled to
+    the aiding's innovations (:mod:`.noise_fit`): here for the geodetic fixes ``sol``; None for poses and
+    positions of a trajectory file, whose fit waits for their rows read and checked (:func:`moving_imu`: a
+    file in another frame or unit is refused before any fit); else the built-in device's (one warning line
+    each)."""
     if opts.imu_noise is not None:
         return ImuNoise(*opts.imu_noise, source="--imu-noise")
     # GNSS: the fixes as the run fuses them, read once for the innovations' fit and the track's rest
@@ -553,8 +554,7 @@ def moving_imu(src: Sources, opts: NavigateOptions, imu: Imu, rows: AidingRows) 
     IMU (:mod:`.noise_fit`, on those rows) refuse positions that are not metric (:func:`.noise_fit.fit_scale`
     off 1: a monocular VO, mm or cm; the fix names ``--aiding-scale``) or do not follow the accelerometer
     (a noise fit beyond :data:`.noise_fit.FACTOR_BOUNDS`' upper end: no IMU is that noisy), and raise a
-    profile's or the recording's sensor.yaml's white noise (both measured at rest) to the moving IMU's
-    (:func:`in_motion`; ``--imu-noise`` is kept as given). With no noise given (``imu.noise`` None:
+    profile's white noise to the moving IMU's (:func:`in_motion`). With no noise given (``imu.noise`` None:
     :func:`imu_noise` leaves it to the checked rows) the class default scaled by these innovations
     (:func:`fitted_at_rest`), for position rows too."""
     poses = kind_of(opts.aiding_kind).poses
@@ -572,9 +572,9 @@ def moving_imu(src: Sources, opts: NavigateOptions, imu: Imu, rows: AidingRows) 
                           "any IMU): positions in mm or cm, or a monocular VO without metric scale? give them in metres")
     if imu.noise is None:  # no noise given: the class default scaled by these innovations
         return replace(imu, noise=fitted_at_rest(src, opts, fit, (imu.t_ns, imu.gyro, imu.acc), None))
-    if opts.imu_noise is not None:  # the user's own figures, as given
+    if src.profile is None or opts.imu_noise is not None:  # the noise is not the profile's
         return imu
-    return replace(imu, noise=in_motion(imu.noise, fit))  # a profile's or the recording's sensor.yaml: at rest
+    return replace(imu, noise=in_motion(imu.noise, fit))
 
 
 def check_scale(src: Sources, opts: NavigateOptions, fit: ScaleFit) -> None:
@@ -595,14 +595,14 @@ def check_scale(src: Sources, opts: NavigateOptions, fit: ScaleFit) -> None:
 
 
 def in_motion(noise: ImuNoise, fit: NoiseFit) -> ImuNoise:
-    """A profile's (or a sensor.yaml's) noise with its white noise raised to what the aiding's innovations
-    (poses, GNSS fixes) say the moving IMU has (:func:`innovation_fit`: one factor on the MEMS class default's gyro
-    and accelerometer white noise, as without a profile; a profile measures them at rest, where motors and roads
-    are quiet, or against a motion capture that resolves the IMU's band (a reference that cannot, the profile's
-    class default, :func:`imu_learn.calib.noise.candidates`), and a Kalibr or EuRoC sensor.yaml holds the Allan
-    deviation at rest or the datasheet's: on EuRoC's flights the fit is 6-11x the ADIS16448 profile's), each
-    sensor's where the fit is usable and higher; the random walks stay as given. The source says which
-    (docs/experiments/navigate-vo.md, "The IMU's noise in motion")."""
+    """A profile's noise with its white noise raised to what the aiding's innovations (poses, GNSS fixes) say
+    the moving IMU has (:func:`innovation_fit`: one factor on the MEMS class default's gyro and accelerometer white
+    noise, as without a profile; a profile measures them at rest, where motors and roads are quiet, or against a
+    motion capture that resolves the IMU's band (a reference that cannot, the profile's class default,
+    :func:`imu_learn.calib.noise.candidates`): on EuRoC's flights the fit is 6-11x the ADIS16448 profile's), each
+    sensor's where the fit is usable and
+    higher; the random walks stay the profile's. The source says which (docs/experiments/navigate-vo.md,
+    "The IMU's noise in motion")."""
     if not fit.used:
         return replace(noise, source=f"{noise.source}; no in-motion fit from the aiding's innovations ({fit.reason})")
     gyro, acc = (float(fit.factor) * w for w in CLASS_WHITE)
@@ -612,7 +612,7 @@ def in_motion(noise: ImuNoise, fit: NoiseFit) -> ImuNoise:
     raised = replace(noise, gyro_noise_density=max(gyro, noise.gyro_noise_density),
                      acc_noise_density=max(acc, noise.acc_noise_density))
     return replace(raised, source=f"{noise.source}; white noise (gyro {noise.gyro_noise_density:.3g}, acc "
-                                  f"{noise.acc_noise_density:.3g}: at rest) raised to gyro {raised.gyro_noise_density:.3g} "
+                                  f"{noise.acc_noise_density:.3g}: the profile's) raised to gyro {raised.gyro_noise_density:.3g} "
                                   f"rad/s/sqrt(Hz), acc {raised.acc_noise_density:.3g} m/s^2/sqrt(Hz), fitted from the "
                                   f"aiding's innovations in motion (x{float(fit.factor):.3g} the class default, chi2/dof "
                                   f"{fit.chi2_ratio}, {fit.residuals} residuals)")
