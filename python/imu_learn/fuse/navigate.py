@@ -29,9 +29,10 @@ A = C0 is ``T_A_Bk = T_C0_Ck T_BS^-1``, and the body motion between two frames
 * ``pose``: a prior factor on each aided body pose in the navigation frame W. A is rotated into W by
   ``R_WA``, estimated once at the start from the levelled attitude (:func:`.start.level.level_aiding`):
   its tilt error (the accelerometer bias over g, ~0.1-0.5 deg) then stays in every absolute pose
-  and pulls against gravity; the absolute poses' rotation sigma is loose for that reason
-  (``pose_sigma_rot_deg``). Estimating ``R_WA`` inside the graph would remove the error but is not
-  done here.
+  and pulls against gravity, and a SLAM map's attitude errs slowly (a degree or so, not white); the
+  absolute poses' rotation sigma is loose for that reason (``pose_sigma_rot_deg``, 10 deg: at 1 deg
+  the poses together held the IMU's tilt to those errors and each coast through a camera gap started
+  from them). Estimating ``R_WA`` inside the graph would remove the first error but is not done here.
 * ``position``: position fixes in their own world frame, taken as gravity-aligned (z up): a
   TUM/CSV/ASL file of positions (one sigma, ``position_sigma_m``), or an RTKLIB ``.pos`` file
   (:mod:`imu_learn.fuse.aiding.rtklib`: local ENU at its first epoch, each fix with its own sigmas, float
@@ -139,7 +140,9 @@ class NavigateOptions:
     # unbroken relative-pose aiding: each row also tied to the aiding's own world, one free state (:mod:`.aiding.spans`)
     relative_world: bool = True
     # absolute poses (in the aiding's world, rotated into W)
-    pose_sigma_rot_deg: float = 1.0
+    # 10 deg: the rotations are in a world levelled once and carry the map's slow attitude error; at 1 deg
+    # ~2000 poses pinned the IMU's tilt to them (EuRoC, ORB-SLAM2: gap ends 2x, docs/experiments/navigate-vo.md)
+    pose_sigma_rot_deg: float = 10.0
     pose_sigma_m: float = 0.02
     position_sigma_m: float = 0.05
     # pose aiding: multiply its positions by this (a monocular VO's scale; None: as read, checked metric)
