@@ -54,6 +54,11 @@ def groundtruth(data: Path, rec: str) -> Path:
         flight / "mav0" / "state_groundtruth_estimate0" / "data.csv"
 
 
+def folder(gaps: str) -> str:
+    """A gap setting's folder name (``30:10,70:10`` -> ``30_10_70_10``)."""
+    return gaps.replace(":", "_").replace(",", "_")
+
+
 def navigate(data: Path, trial: str, gaps: str, rec: str, out: Path, raw: bool = False) -> Optional[str]:
     cmd = [sys.executable, "-m", "imu_learn.cli", "navigate", "--quiet", "--input", str(data / "euroc" / rec),
            "--aiding", str(data / "euroc-vo" / "orbslam2_stereo" / trial / f"{FLIGHTS[rec]}.txt"),
@@ -121,13 +126,13 @@ def flight_rows(data: Path, trials: List[str], out: Path) -> List[str]:
         for rec in FLIGHTS:
             cells = []
             for gaps in GAPS:
-                run = out / trial / gaps.replace(":", "_").replace(",", "_") / rec
+                run = out / trial / folder(gaps) / rec
                 if not (run / "summary.json").exists():
                     cells.append("-")
                     continue
                 r = json.loads((run / "summary.json").read_text())["scores"]["against_aiding"]["ratio"]
                 cells.append(f"{r['causal']:.3f}, {r['smoothed']:.3f}")
-            gapped = GAPS[1].replace(":", "_").replace(",", "_")
+            gapped = folder(GAPS[1])
             drift = [coast_drift(base / trial / gapped / rec, groundtruth(data, rec))
                      if (base / trial / gapped / rec / "summary.json").exists() else []
                      for base in (out, out / "raw")]
@@ -151,14 +156,13 @@ def main() -> None:
     if not args.tabulate_only:
         jobs = [(t, g, r) for t in trials for g in GAPS for r in FLIGHTS]
         with ThreadPoolExecutor(2) as pool:
-            for err in pool.map(lambda j: navigate(data, *j, out / j[0] / j[1].replace(":", "_").replace(",", "_")
-                                                  / j[2], args.raw), jobs):
+            for err in pool.map(lambda j: navigate(data, *j, out / j[0] / folder(j[1]) / j[2], args.raw), jobs):
                 if err:
                     print(err, file=sys.stderr)
     lines = ["| run | gaps | flights | causal, mean aligned RMSE [m] | causal <= VO at its stamps (flights), largest "
              "ratio | smoothed <= VO, largest ratio | in the gaps, RMS [m] | coasting drift RMS / mean end [m] |",
              "|---|---|---|---|---|---|---|---|"]
-    lines += [row(data, t, g, out / t / g.replace(":", "_").replace(",", "_")) for t in trials for g in GAPS]
+    lines += [row(data, t, g, out / t / folder(g)) for t in trials for g in GAPS]
     if not args.raw:
         lines += [""] + flight_rows(data, trials, out)
     text = "\n".join(lines) + "\n"

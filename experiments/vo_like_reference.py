@@ -61,8 +61,8 @@ def main() -> None:
         p["floor"][key] = p[sensor]["matrix"] = M.tolist()
     (a.out / "vo_profile_rotated").mkdir(parents=True, exist_ok=True)
     (a.out / "vo_profile_rotated" / "profile.json").write_text(json.dumps(p, indent=1))
-    methods = ",".join(["raw", "timing", "traditional", "traditional+timing"] + [f"profile:{a.out / d / 'profile.json'}" for d in ("mocap", "vo_profile",
-                                                                                     "vo_profile_rotated")])
+    profiles = [f"profile:{a.out / d / 'profile.json'}" for d in ("mocap", "vo_profile", "vo_profile_rotated")]
+    methods = ",".join(["raw", "timing", "traditional", "traditional+timing"] + profiles)
     imu_learn("evaluate", "--config", str(REPO / "configs" / "eval_blackbird.toml"), "--methods", methods,
               "--out", str(a.out / "evaluate"))
 

@@ -146,15 +146,14 @@ def test_a_sensor_yamls_noise_is_kept_as_given_with_pose_aiding(tmp_path, capsys
     but coasted through camera gaps 1.2-3x further (docs/experiments/navigate-vo.md, "A recording's
     sensor.yaml raised in motion"): not kept, and this holds the choice."""
     from imu_learn.cli import main
+    from imu_learn.fuse.output import write_trajectory
 
     t_ns, gyro, acc, aid_t, p, R = recording(seconds=40.0)
     rec, _ = write_asl(tmp_path, t_ns, gyro, acc, aid_t, p)
     yaml = rec / "mav0" / "imu0" / "sensor.yaml"
     yaml.write_text(SENSOR_YAML.format(g=TRUE_GYRO / 10, a=TRUE_ACC / 10))
-    q = Rotation.from_matrix(R).as_quat()  # x, y, z, w
     poses = tmp_path / "poses.tum"
-    poses.write_text("\n".join(f"{k // 10 ** 9}.{k % 10 ** 9:09d} {x[0]:.5f} {x[1]:.5f} {x[2]:.5f} "
-                               f"{v[0]:.9f} {v[1]:.9f} {v[2]:.9f} {v[3]:.9f}" for k, x, v in zip(aid_t, p, q)) + "\n")
+    write_trajectory(poses, aid_t, p, R)  # the package's TUM writer
     out = tmp_path / "out"
     rc = main(["navigate", "--quiet", "--input", str(rec), "--aiding", str(poses), "--aiding-kind", "pose",
                "--out", str(out)])
