@@ -16,16 +16,18 @@ displacement from the gap's start against the truth's (rotated by a rigid alignm
 the gap), RMS over the gap and at its last keyframe before the camera returns.
 
     IMU_LEARN_DATA=<root> python experiments/navigate_vo_breaks.py [--trials trial0,trial1,trial2]
-        [--out reports/navigate_vo_breaks] [--tabulate-only] [--raw]
+        [--out reports/navigate_vo_breaks] [--tabulate-only] [--raw] [--extrinsics T_BS.yaml] [--keep-aiding-frame]
 
 Data: under the data root, euroc/<flight> (ASL layout) and euroc-vo/orbslam2_stereo/<trial>/<VO>.txt
 with euroc-vo/cam0_sensor.yaml.
 With ``--raw`` the same runs without ``--profile`` go under OUT/raw/; the profile's table then puts each
-gap's coasting drift beside the raw IMU's.
+gap's coasting drift beside the raw IMU's. ``--extrinsics`` gives another T_BS (ORB-SLAM2's rectified left
+camera: cam0's composed with its settings' LEFT.R transposed); ``--keep-aiding-frame`` passes navigate's
+(the poses not turned onto the gyro's frame).
 
 Writes: OUT/<trial>/<none|30_10_70_10>/<flight>/ (navigate's outputs) and OUT/table.md (with ``--raw``:
 OUT/raw/...); the figures of docs/experiments/navigate-vo.md ("The world's poses weighed as the map's slow
-error", "Re-measured").
+error", "Re-measured", "The poses' frame turned onto the gyro's").
 """
 from __future__ import annotations
 
@@ -59,15 +61,18 @@ def folder(gaps: str) -> str:
     return gaps.replace(":", "_").replace(",", "_")
 
 
-def navigate(data: Path, trial: str, gaps: str, rec: str, out: Path, raw: bool = False) -> Optional[str]:
+def navigate(data: Path, trial: str, gaps: str, rec: str, out: Path, raw: bool = False,
+             extrinsics: Optional[Path] = None, keep_frame: bool = False) -> Optional[str]:
     cmd = [sys.executable, "-m", "imu_learn.cli", "navigate", "--quiet", "--input", str(data / "euroc" / rec),
            "--aiding", str(data / "euroc-vo" / "orbslam2_stereo" / trial / f"{FLIGHTS[rec]}.txt"),
-           "--aiding-kind", "relative-pose", "--extrinsics", str(data / "euroc-vo" / "cam0_sensor.yaml"),
+           "--aiding-kind", "relative-pose", "--extrinsics", str(extrinsics or data / "euroc-vo" / "cam0_sensor.yaml"),
            "--groundtruth", str(groundtruth(data, rec)), "--out", str(out)]
     if not raw:
         cmd += ["--profile", PROFILE]
     if gaps != "none":
         cmd += ["--gaps", gaps]
+    if keep_frame:
+        cmd += ["--keep-aiding-frame"]
     done = subprocess.run(cmd, capture_output=True, text=True)
     return None if done.returncode == 0 else f"{rec}: exit {done.returncode}: {done.stderr.strip()[-300:]}"
 
@@ -147,6 +152,10 @@ def main() -> None:
     ap.add_argument("--out", type=Path, default=Path("reports/navigate_vo_breaks"))
     ap.add_argument("--tabulate-only", action="store_true", help="only the table, from OUT's runs")
     ap.add_argument("--raw", action="store_true", help="the raw IMU (no --profile), its runs under OUT/raw/")
+    ap.add_argument("--extrinsics", type=Path, default=None,
+                    help="the poses' T_BS yaml (default: DATA/euroc-vo/cam0_sensor.yaml)")
+    ap.add_argument("--keep-aiding-frame", action="store_true",
+                    help="navigate's --keep-aiding-frame: the poses fused in the extrinsic's frame, not turned onto the gyro's")
     args = ap.parse_args()
     data = Path(os.environ.get("IMU_LEARN_DATA", ""))
     if not (data / "euroc-vo").is_dir():
@@ -156,7 +165,8 @@ def main() -> None:
     if not args.tabulate_only:
         jobs = [(t, g, r) for t in trials for g in GAPS for r in FLIGHTS]
         with ThreadPoolExecutor(2) as pool:
-            for err in pool.map(lambda j: navigate(data, *j, out / j[0] / folder(j[1]) / j[2], args.raw), jobs):
+            for err in pool.map(lambda j: navigate(data, *j, out / j[0] / folder(j[1]) / j[2], args.raw,
+                                                 args.extrinsics, args.keep_aiding_frame), jobs):
                 if err:
                     print(err, file=sys.stderr)
     lines = ["| run | gaps | flights | causal, mean aligned RMSE [m] | causal <= VO at its stamps (flights), largest "

@@ -9,17 +9,19 @@ still+gravity`` and the peers' open-loop figures of the refined IMU against the 
 cam0's ``T_BS`` (euroc-vo/cam0_sensor.yaml).
 
 Kinds: ``mocap`` (the ground truth as given), ``mocap20hz`` (its every 10th pose: a 20 Hz reference
-already in the IMU's frame), ``orbslam2``, ``orbslam2+extrinsics`` (cam0's ``T_BS`` given), ``rot90``,
+already in the IMU's frame), ``orbslam2``, ``orbslam2+extrinsics`` (cam0's ``T_BS`` given, or ``--extrinsics``'s:
+the rectified left camera's, cam0's composed with ORB-SLAM2's ``LEFT.R``ᵀ), ``rot90``,
 ``rot119``, ``rot180`` (the ground truth's body rotated about (1, 2, 3)), ``late100ms``; a ``+select``
 suffix adds ``calibrate --select`` (the floor's terms chosen on held-out recordings), without it
 ``--no-select`` (every term).
 
     IMU_LEARN_DATA=<root> python experiments/reference_kinds.py [--out reports/reference_kinds] [--trial 0] \
-        [--kinds mocap,orbslam2,orbslam2+select]
+        [--kinds mocap,orbslam2,orbslam2+select] [--extrinsics T_BS.yaml]
 
 Data: under the data root, euroc/<flight>, euroc-vo/orbslam2_stereo/trial<k>/<code>.txt,
 euroc-vo/cam0_sensor.yaml. Prints one markdown table; writes OUT/results.json. Writes:
-docs/experiments/references.md ("6-DoF poses in another frame").
+docs/experiments/references.md ("6-DoF poses in another frame"; "ORB-SLAM2 runs 3 and 4, and V2_02's
+translation").
 """
 from __future__ import annotations
 
@@ -90,12 +92,15 @@ def main() -> int:
     ap.add_argument("--out", type=Path, default=Path("reports/reference_kinds"))
     ap.add_argument("--trial", type=int, default=0)
     ap.add_argument("--kinds", default="mocap,orbslam2,orbslam2+extrinsics,rot90,rot119,rot180,late100ms")
+    ap.add_argument("--extrinsics", type=Path, default=None,
+                    help="the T_BS yaml of the +extrinsics kinds and of the extrinsic's error (default: "
+                         "euroc-vo/cam0_sensor.yaml under the data root)")
     args = ap.parse_args()
     root = Path(os.environ.get("IMU_LEARN_DATA", "datasets"))
     out = args.out
     out.mkdir(parents=True, exist_ok=True)
     vo = root / "euroc-vo" / "orbslam2_stereo" / f"trial{args.trial}"
-    cam0 = root / "euroc-vo" / "cam0_sensor.yaml"
+    cam0 = args.extrinsics or root / "euroc-vo" / "cam0_sensor.yaml"
     exe = [sys.executable, "-m", "imu_learn.cli"]
     results: Dict[str, dict] = {}
     for kind in args.kinds.split(","):

@@ -7,7 +7,8 @@ import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
-from imu_learn.fuse.aiding.frame import MAX_ROTATION_DEG, check_frame
+from imu_learn.calib.frames import kabsch, trimmed_kabsch
+from imu_learn.fuse.aiding.frame import MAX_ROTATION_DEG, TURN_MIN_DEG, check_frame, turned_onto_gyro
 from imu_learn.fuse.aiding.noise import pose_noise
 from imu_learn.fuse.aiding.pairs import rotation_pairs
 from imu_learn.fuse.aiding.types import AidingRows
@@ -116,3 +117,48 @@ def test_rates_that_match_in_no_frame_are_the_files_fault_not_an_extrinsics():
     c = check_frame(t, gyro_of(w * [1.0, 1.0, -1.0]), rows)
     assert c.verdict == "refused" and not c.matches and "do not match the IMU's in any frame" in c.why
     assert c.to_dict()["matches_a_frame"] is False
+
+
+def test_a_frame_the_rates_fix_is_turned_onto_the_gyros():
+    """Poses 0.6° off the IMU's frame (a stereo VO's rectified camera behind the raw camera's T_BS): the rates
+    fix the rotation to a few hundredths of a degree, so the poses are turned onto the gyro's frame and then
+    are the body's own; a rotation below the rule's 0.3°, or one that only the main axis tells (planar
+    motion), is left as it is."""
+    t, w, R = motion(planar=False)
+    g = gyro_of(w)
+    axis = np.array([1.0, 2.0, -0.5]) / np.linalg.norm([1.0, 2.0, -0.5])
+    rows = rows_seen_through(R, Rotation.from_rotvec(np.deg2rad(0.6) * axis))
+    c = check_frame(t, g, rows)
+    assert c.verdict == "same frame" and c.resolved and c.spread_deg < 0.05
+    assert c.rotation_deg == pytest.approx(0.6, abs=0.05)
+    turned = turned_onto_gyro(rows, c)
+    assert turned.frame.turned and turned.frame.to_dict()["turned"] is True
+    left = (Rotation.from_matrix(turned.R) * R[rows.sample].inv()).magnitude()  # the body's own poses
+    assert np.degrees(left.max()) < 0.05
+    np.testing.assert_array_equal(turned.p, rows.p)
+    assert check_frame(t, g, turned).rotation_deg < 0.05
+    small = rows_seen_through(R, Rotation.from_rotvec(np.deg2rad(0.5 * TURN_MIN_DEG) * axis))
+    c_small = check_frame(t, g, small)
+    assert not c_small.resolved and turned_onto_gyro(small, c_small) is small
+    tp, wp, Rp = motion(planar=True)
+    planar = rows_seen_through(Rp, Rotation.from_euler("x", 2.0, degrees=True))
+    c_planar = check_frame(tp, gyro_of(wp), planar)
+    assert c_planar.axis_only and not c_planar.resolved and turned_onto_gyro(planar, c_planar) is planar
+
+
+def test_a_few_glitched_pairs_do_not_tilt_the_trimmed_rotation():
+    """Rate pairs through a known rotation with white noise, 3 % of them a VO's glitches (their rates turned
+    20° about one axis): plain Kabsch is pulled off by tenths of a degree, the trimmed fit stays within a
+    few hundredths, drops most glitches and keeps nearly every good pair."""
+    rng = np.random.default_rng(3)
+    R_true = Rotation.from_rotvec(np.deg2rad(0.6) * np.array([0.6, -0.8, 0.0]))
+    b = rng.normal(0, 0.4, (3000, 3))
+    a = b @ R_true.as_matrix().T + np.array([0.02, -0.01, 0.07]) + rng.normal(0, 0.01, b.shape)
+    bad = rng.choice(len(a), 90, replace=False)
+    a[bad] = b[bad] @ (R_true * Rotation.from_euler("z", 20, degrees=True)).as_matrix().T + [0.02, -0.01, 0.07]
+    err = lambda R: np.degrees((Rotation.from_matrix(R) * R_true.inv()).magnitude())  # noqa: E731
+    plain = err(kabsch(a, b)[0])
+    R, c, keep = trimmed_kabsch(a, b)
+    assert plain > 0.4 and err(R) < 0.1 and err(R) < plain / 5, (plain, err(R))
+    assert keep[bad].mean() < 0.2 and keep.sum() > 0.95 * (len(a) - len(bad))
+    np.testing.assert_allclose(c, [0.02, -0.01, 0.07], atol=2e-3)

@@ -304,6 +304,33 @@ def test_cli_navigates_the_crop_without_ground_truth(crop_without_groundtruth, t
     assert len(causal) == s["keyframes"] and causal.t_ns[0] >= read_tum(tum).t_ns[0]
 
 
+def test_poses_of_a_rectified_camera_are_turned_onto_the_gyros_frame(crop_without_groundtruth, tmp_path):
+    """A stereo VO reports its rectified left camera, turned from the raw camera that cam0's T_BS describes
+    (ORB-SLAM2 on EuRoC: 0.62°). The camera trajectory made through T_BS turned 0.8° (the oracle) and read
+    with the raw T_BS: the frame check finds the 0.8°, the rows are turned onto the gyro's frame (after
+    which the check finds next to nothing), and --keep-aiding-frame leaves them as given. Before the fusion
+    (read_inputs), so nothing is fused here."""
+    from dataclasses import replace
+
+    from imu_learn.fuse.aiding.frame import check_frame
+    from imu_learn.fuse.navigate import Sources, read_inputs
+
+    rec, _, yaml = crop_without_groundtruth
+    T = read_t_bs(yaml)
+    T_rect = T.copy()
+    T_rect[:3, :3] = T[:3, :3] @ Rotation.from_rotvec(np.deg2rad(0.8) * np.array([0.6, 0.0, -0.8])).as_matrix()
+    tum = camera_trajectory_from_groundtruth(SHIPPED / CROP / GT_REL, T_rect, tmp_path / "rectified.tum", step=5)
+    src = Sources(input=rec, aiding=tum, extrinsics=yaml)
+    angles = {}
+    for turn in (True, False):
+        inp = read_inputs(src, replace(NavigateOptions(), turn_aiding_frame=turn))
+        f = inp.rows.frame
+        assert f.rotation_deg == pytest.approx(0.8, abs=0.1) and f.spread_deg < 0.1
+        assert f.turned is turn and f.to_dict()["turned"] is turn
+        angles[turn] = check_frame(inp.imu.t_ns, inp.imu.gyro, inp.rows).rotation_deg
+    assert angles[True] < 0.1 and angles[False] == pytest.approx(0.8, abs=0.1)
+
+
 def _scaled_aiding(tum: Path, factor: float, path: Path) -> Path:
     rows = [line.split() for line in tum.read_text().splitlines() if line and not line.startswith("#")]
     path.write_text("".join(" ".join([r[0], *(f"{factor * float(x):.6f}" for x in r[1:4]), *r[4:]]) + "\n"

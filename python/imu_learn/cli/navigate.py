@@ -153,6 +153,10 @@ def add_arguments(ap: argparse.ArgumentParser) -> None:
                          f"{d.rel_sigma_trans_m:g}, absolute {d.pose_sigma_m:g}, position {d.position_sigma_m:g})")
     ap.add_argument("--max-relative-gap-s", type=float, default=None, metavar="S",
                     help=f"consecutive poses further apart are not chained (default {d.max_relative_gap_s:g})")
+    ap.add_argument("--keep-aiding-frame", action="store_true",
+                    help="fuse the poses in the frame given (after --extrinsics) even where their rotation rates put "
+                         "it clearly off the IMU's (by default turned onto the gyro's: at least 0.3 deg and 3 bootstrap "
+                         "spreads, e.g. a stereo VO's rectified camera against the raw camera's T_BS)")
     ap.add_argument("--lag-s", type=float, default=None, metavar="S",
                     help="the causal estimate's fixed-lag window (default: the factor graph's)")
     ap.add_argument("--imu-rotation-rpy-deg", default=None, metavar="R,P,Y",
@@ -231,6 +235,8 @@ def options(args: argparse.Namespace):
     o = profile_navigator(args, o)
     if args.nhc:
         o = replace(o, nhc=True)
+    if args.keep_aiding_frame:
+        o = replace(o, turn_aiding_frame=False)
     if args.bias != "none":
         o = replace(o, bias=args.bias)
     if args.sigma_rot_deg is not None:

@@ -86,7 +86,7 @@ from .aiding import bag as bag_aiding
 from .aiding.detect import FORMATS as DETECTED_FORMATS
 from .aiding.detect import detect as detect_aiding
 from .aiding.estimate import one_line_text, shift_trajectory, with_noise
-from .aiding.frame import FrameCheck, check_frame
+from .aiding.frame import FrameCheck, check_frame, turned_onto_gyro
 from .aiding.kinds import GEODETIC_KIND, AidingKind, kind_of
 from .aiding.kinds import KINDS as AIDING_KINDS
 from .aiding.outages import in_windows
@@ -139,6 +139,9 @@ class NavigateOptions:
     relative_spans_s: Tuple[float, ...] = SPANS_S
     # unbroken relative-pose aiding: each row also tied to the aiding's own world, one free state (:mod:`.aiding.spans`)
     relative_world: bool = True
+    # poses whose body frame the rates put clearly off the IMU's (after any extrinsic) turned onto it
+    # (:func:`.aiding.frame.turned_onto_gyro`); False: fused in the frame given
+    turn_aiding_frame: bool = True
     # absolute poses (in the aiding's world, rotated into W)
     # 10 deg: the rotations are in a world levelled once and carry the map's slow attitude error; at 1 deg
     # ~2000 poses pinned the IMU's tilt to them (EuRoC, ORB-SLAM2: gap ends 2x, docs/experiments/navigate-vo.md)
@@ -774,6 +777,12 @@ def aiding_rows(src: Sources, opts: NavigateOptions, t_ns: np.ndarray, T_BS: Opt
     rows = select_rows(traj, t_ns, T_BS, opts)
     rows.offset = offset
     rows.frame = checked_frame(src, rows, imu, opts.max_relative_gap_s, from_profile=T_BS is not None)
+    if opts.turn_aiding_frame and rows.frame.resolved:
+        rows = turned_onto_gyro(rows, rows.frame)
+        given = f"after --extrinsics {Path(src.extrinsics).name}" if src.extrinsics is not None else "as given"
+        log.warning(f"aiding frame: its poses are {rows.frame.rotation_deg:.2f} deg (+- {rows.frame.spread_deg:.2f}) "
+                    f"off the IMU's {given} (a rectified camera's?): turned onto the gyro's frame "
+                    "(--keep-aiding-frame fuses them as given)")
     return with_noise(rows, imu.t_ns, imu.gyro, imu.acc, opts.max_relative_gap_s), len(traj), None, opts
 
 

@@ -22,18 +22,28 @@ rates that go with the aiding's main axis against that axis.
   unit, the quaternions' order), not an extrinsic;
 * too few pairs or too little turning to tell: not checked, and the summary says so.
 
+Below the refusal, a rotation the rates fix (every axis turning) to at least :data:`TURN_MIN_DEG` and
+:data:`TURN_SPREADS` bootstrap spreads is a frame the poses are really in, and :func:`turned_onto_gyro`
+turns them onto the IMU's before the fusion (``--keep-aiding-frame`` keeps them as they are).
+ORB-SLAM2's stereo poses are the *rectified* left camera's, 0.62° from EuRoC's raw ``cam0`` (its
+settings' ``LEFT.R``), so ``--extrinsics cam0_sensor.yaml`` leaves them 0.6° off; the relative poses'
+translations are then rotated by that much in the body frame, which the filter takes into its tilt, and
+a camera gap coasts on it (docs/experiments/navigate-vo.md, "The poses' frame turned onto the gyro's").
+The same rule as calibrate's for a given extrinsic (:func:`imu_learn.calib.reference.check_extrinsic_rotation`,
+which refuses it there: a profile would carry the difference to every other recording).
+
 The result goes into the summary's ``aiding.frame_check``."""
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Dict, Optional
 
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-from imu_learn.calib.frames import kabsch
-from imu_learn.calib.reference import FrameOptions, glitch_cap, no_frame, planar_ratio
+from imu_learn.calib.frames import kabsch, trimmed_kabsch
+from imu_learn.calib.reference import FrameOptions, glitch_cap, no_frame, planar_ratio, rotation_spread
 from imu_learn.fuse.aiding.pairs import rotation_pairs
 from imu_learn.fuse.aiding.types import AidingRows
 
@@ -44,6 +54,8 @@ MIN_RATE_RMS = 0.05  # rad/s: the centred rates' RMS below which the motion cann
 # rates over at least this span [s] (a 20 Hz VO: its pairs as they are): a 90-120 Hz motion capture's rates between consecutive rows carry its
 # orientation noise / 10 ms (0.1-0.2 rad/s on Fetch), which spreads a ground robot's yaw over every axis
 MIN_SPAN_S = 0.05
+TURN_MIN_DEG = FrameOptions.extrinsic_tolerance_deg  # 0.3°: below it a frame is left as it is
+TURN_SPREADS = FrameOptions.extrinsic_sigmas  # and it must be this many bootstrap spreads off
 
 
 @dataclass(frozen=True)
@@ -60,11 +72,22 @@ class FrameCheck:
     # False: the rates match in no frame (another recording's trajectory, a time unit, the quaternions'
     # order): refused, and no extrinsic is to blame
     matches: bool = True
+    # every axis turning: the rotation (aiding body -> IMU: ω_imu ≈ R ω_aiding + bias) and its bootstrap spread
+    rotation: Optional[np.ndarray] = None
+    spread_deg: Optional[float] = None
+    turned: bool = False  # the poses were turned onto the IMU's frame by ``rotation`` (:func:`turned_onto_gyro`)
+
+    @property
+    def resolved(self) -> bool:
+        """A rotation the rates fix well enough to turn the poses by (module docstring)."""
+        return (self.rotation is not None and self.verdict in ("same frame", "warned") and self.spread_deg is not None
+                and self.rotation_deg >= TURN_MIN_DEG and self.rotation_deg > TURN_SPREADS * self.spread_deg)
 
     def to_dict(self) -> Dict[str, object]:
         return {"rotation_deg": None if self.rotation_deg is None else round(self.rotation_deg, 2),
+                "spread_deg": None if self.spread_deg is None else round(self.spread_deg, 3),
                 "axis_only": self.axis_only, "pairs": self.pairs, "verdict": self.verdict, "why": self.why,
-                "matches_a_frame": self.matches}
+                "matches_a_frame": self.matches, "turned": self.turned}
 
 
 def paired_rates(imu_t_ns: np.ndarray, gyro: np.ndarray, rows: AidingRows, max_gap_s: float,
@@ -111,16 +134,27 @@ def check_frame(imu_t_ns: np.ndarray, gyro: np.ndarray, rows: AidingRows, max_ga
         u = vt[0]
         d = (a - a.mean(0)).T @ (bc @ u)
         angle = math.degrees(math.acos(np.clip(d @ u / max(np.linalg.norm(d), 1e-12), -1.0, 1.0)))
-    else:
+    R = spread = None
+    if not axis_only:
         R, _, mse = kabsch(a, b)
         angle = math.degrees(Rotation.from_matrix(R).magnitude())
         motion = float(np.sqrt(np.mean(np.sum((a - a.mean(0)) ** 2, axis=1))))
         if math.sqrt(mse) > FrameOptions.max_rate_residual * motion:  # calibrate's rule (calib.reference)
             return FrameCheck(angle, False, n, "refused", f"its {no_frame(math.sqrt(mse), motion)}", matches=False)
+        R, _, keep = trimmed_kabsch(a, b)  # the rotation without the aiding's glitches
+        angle = math.degrees(Rotation.from_matrix(R).magnitude())
+        spread = rotation_spread((a[keep], b[keep]))
     what = "its main rotation axis is" if axis_only else "its body frame is"
     line = f"{what} {angle:.1f}° from the IMU's (from {n} rotation increments)"
-    if angle > MAX_ROTATION_DEG:
-        return FrameCheck(angle, axis_only, n, "refused", line)
-    if angle > WARN_ROTATION_DEG:
-        return FrameCheck(angle, axis_only, n, "warned", line)
-    return FrameCheck(angle, axis_only, n, "same frame", line)
+    verdict = "refused" if angle > MAX_ROTATION_DEG else ("warned" if angle > WARN_ROTATION_DEG else "same frame")
+    return FrameCheck(angle, axis_only, n, verdict, line, rotation=R, spread_deg=spread)
+
+
+def turned_onto_gyro(rows: AidingRows, check: FrameCheck) -> AidingRows:
+    """``rows`` with their body frame turned onto the IMU's by the check's rotation where it is
+    :attr:`FrameCheck.resolved` (R_WB = R_WA Rᵀ; the positions stay: the turn is about the IMU's origin,
+    0.7 mm on a 7 cm lever arm at 0.6°); the rows as they are otherwise."""
+    if not check.resolved or rows.R is None:
+        return rows
+    return replace(rows, R=np.einsum("nij,kj->nik", rows.R, check.rotation),
+                   frame=replace(check, turned=True))
