@@ -146,19 +146,23 @@ class Offset:
         return self.tau_s - self.hold_s
 
 
-def fit_offset(segs: List[Segment], m: int = 10, max_shift: int = 20) -> Offset:
+def fit_offset(segs: List[Segment], m: int = 10, max_shift: int = 20, trim: bool = False) -> Offset:
     """Constant rotation + gyro bias (Kabsch) and time offset (shift grid + parabola) between the
     gyro and the ground truth's angular rate. The rates are compared under the integrator's
     zero-order hold (sample k held on [t_k, t_k+1]); τ adds back the half period, so it is the
     offset of IMU samples taken at their stamps. R_off is re-fitted at the sub-sample shift (a
-    misalignment of half a sample alone tilts it by ~0.1°)."""
+    misalignment of half a sample alone tilts it by ~0.1°); with ``trim`` on the windows within 3
+    robust sigmas (:func:`trimmed_kabsch`: a VO's glitches), ``rms`` staying the plain fit's."""
     rates = [mean_rates(s, m) for s in segs if len(s) > m + 2 * max_shift + 2]
     costs = np.array([kabsch(*shifted_pairs(rates, s))[2] for s in range(-max_shift, max_shift + 1)])
     i = int(np.clip(np.argmin(costs), 1, len(costs) - 2))
     c_m, c_0, c_p = costs[i - 1: i + 2]
     shift = i - max_shift + (0.5 * (c_m - c_p) / (c_m - 2 * c_0 + c_p) if c_m - 2 * c_0 + c_p > 0 else 0.0)
     dt = float(np.median(np.concatenate([np.diff(s.t_ns) for s in segs]))) * 1e-9
-    r, c, cost = kabsch(*shifted_pairs(rates, shift))
+    a, b = shifted_pairs(rates, shift)
+    r, c, cost = kabsch(a, b)
+    if trim:
+        r, c, _ = trimmed_kabsch(a, b)
     return Offset(r, c, (shift + 0.5) * dt, 0.5 * dt, math.sqrt(cost))
 
 

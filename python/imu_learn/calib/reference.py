@@ -507,7 +507,7 @@ def resolve_frame(pairs: Sequence[Tuple[ImuData, GroundTruth]], options: FrameOp
     m = rate_window(imu_rate, ref_rate)
     rates = matched_rates(segs, m)
     ratio = planar_ratio(rates)
-    off = fit_offset(segs, m=m, max_shift=max(3, int(round(0.02 * imu_rate))))
+    off = fit_offset(segs, m=m, max_shift=max(3, int(round(0.02 * imu_rate))), trim=True)
     w_rms = motion_rms(segs, off.gyro_bias)
     method = extrinsics.source if extrinsics is not None else ROTATION_FROM_RATES
     if off.rms > options.max_rate_residual * w_rms:  # the file itself, whatever --extrinsics says
