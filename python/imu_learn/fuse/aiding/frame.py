@@ -153,7 +153,8 @@ def check_frame(imu_t_ns: np.ndarray, gyro: np.ndarray, rows: AidingRows, max_ga
 def turned_onto_gyro(rows: AidingRows, check: FrameCheck) -> AidingRows:
     """``rows`` with their body frame turned onto the IMU's by the check's rotation where it is
     :attr:`FrameCheck.resolved` (R_WB = R_WA Rᵀ; the positions stay: the turn is about the IMU's origin,
-    0.7 mm on a 7 cm lever arm at 0.6°); the rows as they are otherwise."""
+    0.7 mm on a 7 cm lever arm at 0.6°) and ``frame`` the check marked ``turned``; the rows as they are
+    otherwise."""
     if not check.resolved or rows.R is None:
         return rows
     return replace(rows, R=np.einsum("nij,kj->nik", rows.R, check.rotation),
