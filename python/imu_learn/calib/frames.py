@@ -96,14 +96,14 @@ def kabsch(a: np.ndarray, b: np.ndarray) -> Tuple[np.ndarray, np.ndarray, float]
     return r, c, float(np.mean(np.sum((a - b @ r.T - c) ** 2, axis=1)))
 
 
-def trimmed_kabsch(a: np.ndarray, b: np.ndarray, sigmas: float = 3.0, passes: int = 3
-                   ) -> Tuple[np.ndarray, np.ndarray, np.ndarray]:
+def trimmed_kabsch(a: np.ndarray, b: np.ndarray, sigmas: float = 3.0, passes: int = 3,
+                   start: Optional[Tuple[np.ndarray, np.ndarray]] = None) -> Tuple[np.ndarray, np.ndarray, np.ndarray]:
     """:func:`kabsch` refitted ``passes`` times on the pairs whose residual norm is within ``sigmas``
     robust standard deviations (1.4826 MAD) of the last fit's: a VO's relocalisations and glitches, a few
     per cent of its pairs, tilted a flight's rotation by up to 0.5° (EuRoC's ORB-SLAM2 runs; 0.1-0.2° once
-    trimmed). Returns (R, c, the pairs kept)."""
+    trimmed). ``start``: the plain fit's (R, c) where the caller has it. Returns (R, c, the pairs kept)."""
     keep = np.ones(len(a), dtype=bool)
-    r, c = kabsch(a, b)[:2]
+    r, c = start if start is not None else kabsch(a, b)[:2]
     for _ in range(passes):
         res = np.linalg.norm(a - b @ r.T - c, axis=1)
         new = res <= sigmas * 1.4826 * np.median(res[keep])
@@ -162,7 +162,7 @@ def fit_offset(segs: List[Segment], m: int = 10, max_shift: int = 20, trim: bool
     a, b = shifted_pairs(rates, shift)
     r, c, cost = kabsch(a, b)
     if trim:
-        r, c, _ = trimmed_kabsch(a, b)
+        r, c, _ = trimmed_kabsch(a, b, start=(r, c))
     return Offset(r, c, (shift + 0.5) * dt, 0.5 * dt, math.sqrt(cost))
 
 

@@ -778,8 +778,8 @@ def aiding_rows(src: Sources, opts: NavigateOptions, t_ns: np.ndarray, T_BS: Opt
     rows.offset = offset
     rows.frame = checked_frame(src, rows, imu, opts.max_relative_gap_s, from_profile=T_BS is not None,
                                turn=opts.turn_aiding_frame)
-    if rows.frame.turned:
-        rows = turned_onto_gyro(rows, rows.frame)
+    if opts.turn_aiding_frame:
+        rows = turned_onto_gyro(rows, rows.frame)  # where the check resolved the rotation (its line said so)
     return with_noise(rows, imu.t_ns, imu.gyro, imu.acc, opts.max_relative_gap_s), len(traj), None, opts
 
 
@@ -803,9 +803,9 @@ def checked_frame(src: Sources, rows: AidingRows, imu: Imu, max_gap_s: float, fr
                   turn: bool = False) -> FrameCheck:
     """The aiding poses' body frame against the IMU's (:mod:`.aiding.frame`), before any fusion:
     refused (exit 2) when it is not the IMU's, naming ``--extrinsics`` (``from_profile``: after the rotation
-    of the profile's reference, :func:`aiding_extrinsic`); with ``turn``, a rotation the rates resolve is
-    marked ``turned`` (the caller turns the rows, :func:`.aiding.frame.turned_onto_gyro`), one line saying
-    so; else one warning line when it is a little off or cannot be told."""
+    of the profile's reference, :func:`aiding_extrinsic`); with ``turn``, one line saying that a rotation
+    the rates resolve will be turned away (the caller turns the rows, :func:`.aiding.frame.turned_onto_gyro`);
+    else one warning line when it is a little off or cannot be told."""
     check = check_frame(imu.t_ns, imu.gyro, rows, max_gap_s)
     if turn and check.resolved:
         given = (f"after --extrinsics {Path(src.extrinsics).name}" if src.extrinsics is not None
@@ -813,7 +813,7 @@ def checked_frame(src: Sources, rows: AidingRows, imu: Imu, max_gap_s: float, fr
         log.warning(f"aiding frame: its poses are {check.rotation_deg:.2f} deg (+- {check.spread_deg:.2f}) off the "
                     f"IMU's {given} (a rectified camera's?): turned onto the gyro's frame (--keep-aiding-frame "
                     "fuses them as given)")
-        return replace(check, turned=True)
+        return check
     if check.verdict == "refused" and not check.matches:  # the file itself, whatever the extrinsic
         raise ConfigError(f"--aiding {src.aiding}: {check.why}; check the file against the IMU (imu-learn groundtruth)")
     if check.verdict == "refused":

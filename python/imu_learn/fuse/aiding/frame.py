@@ -136,12 +136,12 @@ def check_frame(imu_t_ns: np.ndarray, gyro: np.ndarray, rows: AidingRows, max_ga
         angle = math.degrees(math.acos(np.clip(d @ u / max(np.linalg.norm(d), 1e-12), -1.0, 1.0)))
     R = spread = None
     if not axis_only:
-        R, _, mse = kabsch(a, b)
+        R, c, mse = kabsch(a, b)
         angle = math.degrees(Rotation.from_matrix(R).magnitude())
         motion = float(np.sqrt(np.mean(np.sum((a - a.mean(0)) ** 2, axis=1))))
         if math.sqrt(mse) > FrameOptions.max_rate_residual * motion:  # calibrate's rule (calib.reference)
             return FrameCheck(angle, False, n, "refused", f"its {no_frame(math.sqrt(mse), motion)}", matches=False)
-        R, _, keep = trimmed_kabsch(a, b)  # the rotation without the aiding's glitches
+        R, _, keep = trimmed_kabsch(a, b, start=(R, c))  # the rotation without the aiding's glitches
         angle = math.degrees(Rotation.from_matrix(R).magnitude())
         spread = rotation_spread((a[keep], b[keep]))
     what = "its main rotation axis is" if axis_only else "its body frame is"
