@@ -28,16 +28,16 @@ T0_NS = 1_000_000_000_000
 
 
 def synthetic_drive(folder: Path, seconds: float = 90.0, seed: int = 0, imu_late_s: float = 0.0,
-                    tilt: float = 1.0):
+                    tilt: float = 1.0, cruise: float = 8.0):
     """ASL recording ``folder/car`` (IMU with biases and noise; its stamps ``imu_late_s`` late, a logging
     delay) and ``folder/fixes.tum`` (positions). ``tilt`` scales the pitch and roll rates (the roll the
-    track cannot tell wanders to tens of degrees at 1)."""
+    track cannot tell wanders to tens of degrees at 1); ``cruise`` the mean speed [m/s] (a walker's 1.5)."""
     rng = np.random.default_rng(seed)
     fs, sub = 100, 10
     dt = 1.0 / (fs * sub)
     tt = np.arange(int(seconds * fs * sub) + 1) * dt
     moving = np.clip((tt - 3.0) / 5.0, 0.0, 1.0)  # still for 3 s, then speeding up over 5 s
-    speed = moving * (8.0 + 2.0 * np.sin(0.3 * tt))
+    speed = moving * cruise * (1.0 + 0.25 * np.sin(0.3 * tt))
     dspeed = np.gradient(speed, dt)
     w = np.stack([tilt * 0.04 * np.sin(2 * np.pi * tt / 5.0), tilt * 0.05 * np.sin(2 * np.pi * tt / 9.0),
                   0.3 * np.sin(2 * np.pi * tt / 20.0) + 0.15 * np.sin(2 * np.pi * tt / 7.0)], axis=1) * moving[:, None]
@@ -83,10 +83,11 @@ def test_positions_reference_is_recognised(tmp_path):
 def test_forward_axis_from_the_track(tmp_path):
     rec, fixes = synthetic_drive(tmp_path, seconds=60.0)
     from imu_learn.data import formats
+    from imu_learn.fuse.mounting import forward_mounting
 
     src = formats.read_imu_source(rec)
     t, p, g, fmt = P.read_fixes(fixes)
-    est = P.forward_mounting(src.t_ns, src.acc, t, p, g)
+    est = forward_mounting(src.t_ns, src.acc, t, p, g)
     M = mounting_rotation(RPY)
     fwd = np.asarray(est["forward_imu"])
     assert np.degrees(np.arccos(np.clip(fwd @ M[0], -1, 1))) < 3.0  # the body x-axis in the IMU frame
@@ -111,6 +112,45 @@ def test_a_given_mounting_is_checked_against_the_tracks_forward_axis(tmp_path):
     assert none["ok"] == (np.degrees(np.arccos(np.clip(mounting_rotation(RPY)[0, 0], -1, 1))) <= MOUNT_TOL_DEG)
     slow = mounting_check(src.t_ns, src.acc, t[:10], p[:10], None, g)  # too few fast fixes: not checked
     assert not slow["checked"] and "--imu-rotation-rpy-deg" in slow["why"]
+
+
+def test_a_slow_track_gives_the_mounting_above_1_mps(tmp_path):
+    """calibrate's mounting from a walker's track (fuse.mounting.mounting_from_track): no fix over 3 m/s,
+    so the forward axis the track shows over 1 m/s (navigate's rule), up from the start (the real walk
+    was refused, "0 fixes faster than 3 m/s"); a track that shows no forward axis leaves the IMU's own
+    axes, refused where --nhc needs one."""
+    from imu_learn.data import formats
+    from imu_learn.errors import InvalidInputError
+    from imu_learn.fuse.mounting import forward_mounting, mounting_from_track
+
+    rec, fixes = synthetic_drive(tmp_path, seconds=60.0, cruise=1.5)
+    src = formats.read_imu_source(rec)
+    t, p, g, fmt = P.read_fixes(fixes)
+    with pytest.raises(InvalidInputError, match="faster than 3 m/s"):
+        forward_mounting(src.t_ns, src.acc, t, p, g)
+    est = mounting_from_track(src.t_ns, src.acc, t, p, g)
+    assert "over 1 m/s" in est["from"], est["from"]
+    M, E = mounting_rotation(RPY), mounting_rotation(est["rpy_deg"])
+    assert np.degrees(np.arccos(np.clip(E[0] @ M[0], -1, 1))) < 5.0, est  # forward
+    assert np.degrees(np.arccos(np.clip(E[2] @ M[2], -1, 1))) < 3.0, est  # up
+    fast = mounting_from_track(*synthetic_fast_fixes(tmp_path / "fast"), g)
+    assert "over 3 m/s" in fast["from"]
+    # a still track: no forward axis; the IMU's own axes, or refused for --nhc
+    none = mounting_from_track(src.t_ns, src.acc, t, p * 0.0, g)
+    assert none["rpy_deg"] == [0.0, 0.0, 0.0] and "own axes" in none["from"] and none["why"]
+    with pytest.raises(InvalidInputError, match="nor over 1 m/s"):
+        mounting_from_track(src.t_ns, src.acc, t, p * 0.0, g, need_forward=True)
+
+
+def synthetic_fast_fixes(folder: Path):
+    """(IMU stamps, specific force, fix stamps, fixes) of the 8 m/s car."""
+    from imu_learn.data import formats
+
+    folder.mkdir()
+    rec, fixes = synthetic_drive(folder, seconds=40.0)
+    src = formats.read_imu_source(rec)
+    t, p, g, fmt = P.read_fixes(fixes)
+    return src.t_ns, src.acc, t, p
 
 
 def _causal_rms(out: Path, fixes: Path, window_s) -> float:
@@ -223,6 +263,21 @@ def test_biases_from_positions_with_a_users_csv(tmp_path):
     np.testing.assert_allclose(prof.gyro.bias, B_G, atol=5e-4)
     np.testing.assert_allclose(prof.acc.bias, B_A, atol=0.03)
     assert prof.sources[0]["format"] == "csv-columns"
+
+
+def test_biases_from_a_walkers_positions(tmp_path):
+    """A walker's pace (1.5 m/s, no fix over 3 m/s), no mounting given: calibrate's navigator passes take
+    the forward axis the track shows over 1 m/s and the biases come back (before: exit 2, "0 fixes faster
+    than 3 m/s"; the real walk's fixes too)."""
+    from imu_learn.calib.run import CalibOptions
+
+    rec, fixes = synthetic_drive(tmp_path, seconds=60.0, cruise=1.5)
+    opts = P.PositionsOptions(imu_noise=(1e-3, 1e-2, 1e-5, 1e-4), max_iterations=2, max_windows=300, imu_delay_s=0.0)
+    P.calibrate_positions(rec, fixes, tmp_path / "cal", opts, CalibOptions(plot=False))
+    prof = Profile.load(tmp_path / "cal" / "profile.json")
+    np.testing.assert_allclose(prof.gyro.bias, B_G, atol=5e-4)
+    np.testing.assert_allclose(prof.acc.bias, B_A, atol=0.03)
+    assert "over 1 m/s" in prof.reference["navigator"]["mounting"]["from"]
 
 
 def test_imu_delay_from_the_track(tmp_path):

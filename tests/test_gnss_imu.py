@@ -128,6 +128,20 @@ def test_a_folder_with_one_log_is_detected_and_one_with_two_names_the_file(tmp_p
         detect_format(d)
 
 
+def test_a_log_without_ground_truth_names_the_fixes_beside_it(tmp_path):
+    """calibrate --input on a log's folder without --groundtruth: the RTKLIB .pos beside it is named as the
+    positions reference to pass (before: "pass one explicitly (TUM or ASL)", which a .pos is neither)."""
+    d = tmp_path / "walk"
+    d.mkdir()
+    write_csv(d / "imu.csv", rows_at([1000, 1010, 1020, 1030]))
+    write_tag(d / "imu.csv.tag", end_ms=20)
+    with pytest.raises(InvalidInputError, match=r"an RTKLIB \.pos of positions"):
+        gnss_imu.read_recording(d)
+    (d / "rover.pos").write_text("% header\n")
+    with pytest.raises(InvalidInputError, match=r"positions reference: --groundtruth .*rover\.pos"):
+        gnss_imu.read_recording(d)
+
+
 def test_reader_last_line_with_newline_is_kept_when_whole(tmp_path):
     f = write_csv(tmp_path / "imu.csv", rows_at([1000, 1010, 1020, 1030]))
     write_tag(tmp_path / "imu.csv.tag", end_ms=20)

@@ -255,7 +255,7 @@ def test_the_low_level_reader_stays_as_it_was(tmp_path):
 
 
 def test_a_cut_last_line_and_a_csv_without_its_map_name_the_option(tmp_path, capsys):
-    """A line cut short stops in one line that, where it is the file's last, names --skip-bad-lines; a CSV of
+    """A line cut short stops in one line that, where it is the file's first or last, names --skip-bad-lines; a CSV of
     one's own given without --columns (read as EuRoC's layout) names --columns and the unit options."""
     t, g, a = samples()
     f = write(tmp_path / "cut.csv", t, g, a)
@@ -268,6 +268,13 @@ def test_a_cut_last_line_and_a_csv_without_its_map_name_the_option(tmp_path, cap
     inner.write_text("\n".join(lines) + "\n")
     rc, err = calibrate(capsys, inner, "--columns", MAP, "--time-unit", "ns")
     assert rc == 2 and "ColumnCountError" in err and "--skip-bad-lines" not in err, err
+    first = write(tmp_path / "first.csv", t, g, a)  # a logger started mid-line (the GNSS/IMU walk's log)
+    lines = first.read_text().splitlines()
+    k = next(i for i, line in enumerate(lines) if line[:1].isdigit())
+    lines[k] = ",".join(lines[k].split(",")[3:])
+    first.write_text("\n".join(lines) + "\n")
+    rc, err = calibrate(capsys, first, "--columns", MAP, "--time-unit", "ns")
+    assert rc == 2 and "ColumnCountError" in err and "first line" in err and "--skip-bad-lines" in err, err
     rc = main(["calibrate", "--imu-only", "--input", str(write(tmp_path / "own.csv", t, g, a)), "--out",
                str(tmp_path / "o"), "--no-plot", "--quiet"])
     err = capsys.readouterr().err

@@ -22,9 +22,11 @@ A reference of positions alone cannot be compared with the gyroscope directly
    error, at most ``max_iterations`` passes.
 
 The mounting (which IMU axis is forward) matters to the navigator: it starts with the body x-axis along
-the track. Given (``imu_rotation_rpy_deg``) it is used as is; otherwise :func:`forward_mounting`
-estimates it from the data: the IMU's up from the accelerometer at the start, its forward from the
-horizontal specific force against the track's along- and cross-track accelerations. The IMU's logging
+the track. Given (``imu_rotation_rpy_deg``) it is used as is; otherwise
+:func:`..mounting.mounting_from_track` estimates it from the data: the IMU's up from the accelerometer at
+the start, its forward from the horizontal specific force against the track's along- and cross-track
+accelerations (over 3 m/s where the track has enough fixes, else over 1 m/s with navigate's checks; a
+track that shows no forward axis leaves the IMU's own axes, except with ``nhc``). The IMU's logging
 delay against the positions (``imu_delay_s``, the navigator's convention: added to every IMU stamp) is
 given, or estimated from the data (:func:`estimate_imu_delay`: the same levelled horizontal specific
 force against the track's, over a 1-D search of candidate delays); a lag left in leaks into the forward
@@ -71,7 +73,7 @@ from imu_learn.errors import ConfigError, InvalidInputError
 from imu_learn.fuse.aiding.detect import detect
 from imu_learn.fuse.aiding.rtklib import normal_gravity, read_pos
 from imu_learn.fuse.aiding.tum import Trajectory, check_overlap, read_trajectory
-from imu_learn.fuse.mounting import _level_rotation, forward_mounting
+from imu_learn.fuse.mounting import _level_rotation, mounting_from_track
 from imu_learn.fuse.navigate import ImuRecording, NavigateOptions, Sources, navigate, parse_vector, read_imu
 from imu_learn.fuse.noise import ImuNoise
 from imu_learn.infer.rates import recording_device
@@ -90,7 +92,7 @@ class PositionsOptions:
 
     fmt: str = "auto"  # the recording's layout
     columns: Optional[CsvColumns] = None  # a user's CSV: its column map and units (``--columns`` ...)
-    imu_rotation_rpy_deg: Optional[Tuple[float, float, float]] = None  # None: :func:`forward_mounting`
+    imu_rotation_rpy_deg: Optional[Tuple[float, float, float]] = None  # None: :func:`mounting_from_track`
     imu_delay_s: Optional[float] = None  # added to every IMU stamp; None: :func:`estimate_imu_delay`
     lever_arm: Optional[Tuple[float, float, float]] = None
     imu_noise: Optional[Tuple[float, float, float, float]] = None  # None: the navigator's built-in figures
@@ -421,8 +423,10 @@ def _setup(imu_path: Path, ref_path: Path, opts: PositionsOptions, progress: Pro
         rpy, mount_info = [float(x) for x in opts.imu_rotation_rpy_deg], {"from": "given"}
     else:
         progress("positions: the IMU's forward axis from the track")
-        est = forward_mounting(imu.t_ns + int(round(delay * 1e9)), imu.acc, fix_t, fix_p, gravity)
-        rpy, mount_info = est["rpy_deg"], {"from": "estimated from the track (forward_mounting)", **est}
+        est = mounting_from_track(imu.t_ns + int(round(delay * 1e9)), imu.acc, fix_t, fix_p, gravity, need_forward=opts.nhc)
+        rpy, mount_info = est["rpy_deg"], est
+        if "why" in est:
+            progress(f"positions: {est['from']} ({est['why']})")
     return _Setup(imu_path, ref_path, rec, opts, rpy, gravity, ref_fmt, delay_info, mount_info)
 
 

@@ -33,8 +33,7 @@ def forward_mounting(t_ns: np.ndarray, acc: np.ndarray, fix_t_ns: np.ndarray, fi
     "forward_imu", "up_imu", "fit_residual_mps2", "fixes_used"}."""
     t = (np.asarray(t_ns, dtype=np.int64) - int(t_ns[0])) * 1e-9
     tf = (np.asarray(fix_t_ns, dtype=np.int64) - int(t_ns[0])) * 1e-9
-    up = np.mean(acc[t <= t[0] + level_s], axis=0)
-    up = up / np.linalg.norm(up)
+    up = _start_up(t_ns, acc, level_s)
     R_lev = _level_rotation(up)  # IMU -> a gravity-aligned frame (z up)
     # the track: velocity and acceleration by central differences
     v = np.gradient(fix_p, tf, axis=0)
@@ -122,3 +121,38 @@ def track_forward(t_ns: np.ndarray, acc: np.ndarray, fix_t_ns: np.ndarray, fix_p
                        f"at least {TRACK_MIN_GAIN:g}; yaw +-{est['angle_std_deg']:.1f} deg, at most "
                        f"{TRACK_MAX_ANGLE_STD_DEG:g})"}
     return {"shown": True, "forward": np.asarray(est["forward_imu"], dtype=np.float64), **figures, "why": ""}
+
+
+def mounting_from_track(t_ns: np.ndarray, acc: np.ndarray, fix_t_ns: np.ndarray, fix_p: np.ndarray,
+                        gravity: float = 9.81, need_forward: bool = False) -> Dict[str, Any]:
+    """The mounting calibrate's navigator passes take where none is given: :func:`forward_mounting` over
+    the fixes faster than 3 m/s where the track has enough of them (a car); else the forward axis the
+    slower track shows (:func:`track_forward` over 1 m/s, with its gain and yaw checks: a walker, a slow
+    ground robot), up from the accelerometer's start; else, where the track shows none, the IMU's own axes
+    (roll, pitch, yaw 0: the navigator's start then heads the axis its own rule finds), refused where
+    ``need_forward`` (``--nhc`` holds the body's sideways velocity at zero). {"rpy_deg", "from", the
+    estimate's figures}."""
+    try:
+        return {**forward_mounting(t_ns, acc, fix_t_ns, fix_p, gravity), "from": "estimated from the track (fixes over 3 m/s)"}
+    except InvalidInputError as fast:
+        slow = track_forward(t_ns, acc, fix_t_ns, fix_p, gravity)
+        figures = {k: v for k, v in slow.items() if k not in ("forward", "shown", "why")}
+        if slow["shown"]:
+            up = _start_up(t_ns, acc)
+            fwd = slow["forward"] - (slow["forward"] @ up) * up
+            fwd /= np.linalg.norm(fwd)
+            M = np.stack([fwd, np.cross(up, fwd), up])  # body = M imu: x forward, y left, z up
+            yaw, pitch, roll = Rotation.from_matrix(M.T).as_euler("ZYX", degrees=True)
+            return {**figures, "rpy_deg": [float(roll), float(pitch), float(yaw)], "forward_imu": fwd.tolist(),
+                    "up_imu": up.tolist(), "from": "estimated from the track (fixes over 1 m/s; fewer than 20 over 3)"}
+        if need_forward:
+            raise InvalidInputError(f"{fast}; nor over 1 m/s: {slow['why']}") from None
+        return {**figures, "rpy_deg": [0.0, 0.0, 0.0], "why": slow["why"],
+                "from": "the IMU's own axes: the track shows no forward axis"}
+
+
+def _start_up(t_ns: np.ndarray, acc: np.ndarray, level_s: float = 2.0) -> np.ndarray:
+    """The IMU's up: its mean specific force over the first ``level_s`` (as :func:`forward_mounting`)."""
+    t = (np.asarray(t_ns, dtype=np.int64) - int(t_ns[0])) * 1e-9
+    up = np.mean(np.asarray(acc, dtype=np.float64)[t <= level_s], axis=0)
+    return up / np.linalg.norm(up)

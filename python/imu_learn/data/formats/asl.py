@@ -12,7 +12,7 @@ from imu_learn.data.types import GroundTruth, ImuData
 from imu_learn.errors import ColumnCountError, FloatTimestampError, HeaderError, InvalidInputError, ParseError
 from imu_learn.util.atomic import atomic_write_path
 
-from .csv_columns import last_line
+from .csv_columns import data_line_ends
 from .groundtruth import read_groundtruth
 from .input_checks import check_fixed_units
 from .source import ImuSource
@@ -84,7 +84,7 @@ def _read_imu_csv(path: Path, f: Path, allow_float_timestamps: bool = False):
                        "with --time-unit, --gyro-unit, --acc-unit (docs/your-device.md)")
         raise
     except ColumnCountError as e:
-        if e.line is not None and e.line == last_line(f):
+        if e.line is not None and e.line == data_line_ends(f)[1]:
             e.add_note(f"the last line, cut by the logger? delete it, or read {f} as a CSV of your own with "
                        "--columns t,gx,gy,gz,ax,ay,az --time-unit ns --skip-bad-lines")
         raise

@@ -89,14 +89,18 @@ def write_csv_columns(
     )
 
 
-def last_line(path: Path) -> int:
-    """The 1-based number of a text file's last non-blank line (0: none)."""
-    n = 0
+def data_line_ends(path: Path) -> Tuple[int, int]:
+    """The 1-based numbers of a text file's first line that starts with a number (not blank, a ``#``
+    comment or a header) and of its last non-blank line (0: none)."""
+    first = last = 0
     with open(path, "rb") as fh:
         for i, line in enumerate(fh, 1):
-            if line.strip():
-                n = i
-    return n
+            text = line.strip()
+            if text:
+                last = i
+                if not first and text[:1] in b"0123456789+-.":
+                    first = i
+    return first, last
 
 
 DECIMAL_COMMA = re.compile(r'= "[-+]?\d+,\d+" is not a number')  # 0,123: a locale's decimal comma
@@ -121,8 +125,11 @@ def read_checked(path: Path, layout: CsvColumns) -> Tuple[ImuData, Tuple[int, ..
             raise
         raise better from e
     except ColumnCountError as e:
-        if e.line is not None and e.line == last_line(Path(path)):
-            e.add_note("the last line, cut by the logger? --skip-bad-lines leaves such lines out (counted)")
+        if e.line is not None:
+            first, last = data_line_ends(Path(path))
+            if e.line in (first, last):
+                where = "last line, cut by the logger" if e.line == last else "first line, cut where the logger started"
+                e.add_note(f"the {where}? --skip-bad-lines leaves such lines out (counted)")
         raise
     skipped = tuple(int(line) for line, _ in r["skipped"])
     if skipped:

@@ -274,7 +274,10 @@ def read_recording(path: Path, groundtruth: Optional[Path] = None, allow_float_t
     position aiding: :mod:`imu_learn.fuse.aiding.rtklib`), so a ground truth must be given explicitly."""
     f = _imu_file(path)
     if groundtruth is None:
-        raise InvalidInputError(f"{f}: a {NAME} log has no ground-truth pose; pass one explicitly (TUM or ASL)")
+        pos = sorted(f.parent.glob("*.pos"))
+        hint = (f"; its RTKLIB fixes beside it are a positions reference: --groundtruth {pos[0]}" if pos
+                else " (TUM or ASL poses, or an RTKLIB .pos of positions)")
+        raise InvalidInputError(f"{f}: a {NAME} log has no ground-truth pose; pass one with --groundtruth{hint}")
     return read_imu_log(f, tag_path(f)).imu, read_groundtruth(Path(groundtruth))
 
 
