@@ -3,7 +3,7 @@ run's mean end error is where the gaps fall, and what two candidate changes do t
 (docs/experiments/fusion_gnss.md, "Where the gaps fall").
 
     IMU_LEARN_DATA=DIR python experiments/drive_gap_grids.py [--offsets 0,15,30] [--nhc]
-        [--variants rms,max,axes,rest-bias]
+        [--variants rms,max,axes,rest-bias] [--profile PROFILE.json]
 
 Each run is ``imu-learn navigate`` with no noise, mounting or delay given (``--nhc`` adds the mounting of
 docs/navigate.md and the constraint), the drive's fixes withheld in 15 s gaps every 45 s from 36.77 s
@@ -14,7 +14,9 @@ changed): ``axes`` is the package as it is (the white noise raised, axis by axis
 per-sample spread over the rest, a diagonal covariance in GTSAM's preintegration); ``rms`` the rule
 before it (one figure for the three axes: the RMS over the axes); ``max`` one figure, the largest axis's;
 ``rest-bias`` the package with the first state's bias from the parked rest the track shows (the gyro's
-mean; the accelerometer's excess over normal gravity along its mean).
+mean; the accelerometer's excess over normal gravity along its mean). ``--profile`` adds ``--profile P
+--force`` to every run (a device profile from another recording of the same IMU, made at another rate:
+calibrate on the walk's fixes; docs/experiments/fusion_gnss.md, "The walk's profile on the drive").
 
 Writes: on stdout navigate's one-line summary and one JSON line per run (variant, offset, NHC, the horizontal end of every gap, their
 mean, the causal horizontal RMSE); each run's outputs under a temporary folder, removed at the end.
@@ -29,6 +31,7 @@ import shutil
 import tempfile
 from dataclasses import replace
 from pathlib import Path
+from typing import Optional
 
 import numpy as np
 
@@ -64,7 +67,7 @@ def rest_bias(imu_csv: Path):
     return lambda checkpoint: (b.copy(), "the parked rest (experiment)")
 
 
-def run(variant: str, offset: float, nhc: bool, drive: Path, out: Path) -> dict:
+def run(variant: str, offset: float, nhc: bool, drive: Path, out: Path, profile: Optional[Path] = None) -> dict:
     """One navigate run with ``variant`` in place; its gap ends."""
     saved = (nav.at_rest_floor, nav.checkpoint_bias)
     if variant in ("rms", "max"):
@@ -75,6 +78,7 @@ def run(variant: str, offset: float, nhc: bool, drive: Path, out: Path) -> dict:
     argv = ["navigate", "--quiet", "--input", str(drive / "imu_1934.csv"), "--aiding", str(drive / "gnss_1934_sf.pos"),
             "--groundtruth", str(drive / "gnss_1934_sf.pos"), "--gaps", ",".join(f"{s:.2f}:15" for s in starts),
             "--out", str(out)] + (["--imu-rotation-rpy-deg", MOUNTING, "--nhc"] if nhc else [])
+    argv += ["--profile", str(profile), "--force"] if profile else []  # another recording's rate: its biases only
     try:
         entry(argv)
     except SystemExit as e:
@@ -84,7 +88,7 @@ def run(variant: str, offset: float, nhc: bool, drive: Path, out: Path) -> dict:
         nav.at_rest_floor, nav.checkpoint_bias = saved
     s = json.loads((out / "summary.json").read_text())["scores"]["causal"]
     ends = [g["horizontal"]["end_m"] for g in s["gaps"]]
-    return {"variant": variant, "offset_s": offset, "nhc": nhc, "ends_m": [round(e, 2) for e in ends],
+    return {"variant": variant, "offset_s": offset, "nhc": nhc, "profile": str(profile) if profile else None, "ends_m": [round(e, 2) for e in ends],
             "mean_m": round(float(np.mean(ends)), 3), "horizontal_rmse_m": round(s["horizontal_rmse_m"], 3)}
 
 
@@ -95,6 +99,7 @@ def main() -> None:
     ap.add_argument("--offsets", default="0,15,30", help="seconds added to the peer's gap schedule")
     ap.add_argument("--variants", default="axes,rms,max,rest-bias")
     ap.add_argument("--nhc", action="store_true", help="with the mounting and --nhc")
+    ap.add_argument("--profile", type=Path, help="a device profile given to every run")
     args = ap.parse_args()
     os.environ.setdefault("RAYON_NUM_THREADS", "1")
     drive = args.data / "gnss-imu" / "drive_0708"
@@ -102,7 +107,7 @@ def main() -> None:
     try:
         for offset in (float(x) for x in args.offsets.split(",")):
             for variant in args.variants.split(","):
-                print(json.dumps(run(variant, offset, args.nhc, drive, tmp / f"{variant}_{offset:g}")), flush=True)
+                print(json.dumps(run(variant, offset, args.nhc, drive, tmp / f"{variant}_{offset:g}", args.profile)), flush=True)
     finally:
         shutil.rmtree(tmp, ignore_errors=True)
 

@@ -109,6 +109,31 @@ def test_navigate_reads_the_fixes_once_for_the_delay_the_noise_fit_and_the_rows(
     assert inp.imu.t_ns[0] - int(src.t_ns[0]) == int(round(inp.imu.delay["delay_s"] * 1e9))
 
 
+def test_a_profiles_delay_is_checked_against_the_fixes(caplog):
+    """navigate --profile with calibrate's reference.navigator delay (its own recording's): the fixes of a log
+    0.2 s late replace a profile's 0 s, with one warning naming --imu-delay-s to keep it (the walk's profile on
+    the car drive, before: 0 s applied without a word); a profile's delay the fixes fit about as well is kept."""
+    import logging
+    from pathlib import Path
+
+    from imu_learn.fuse import navigate as nav
+
+    imu_t, acc, sol = drive(-0.2)
+    est = imu_delay(imu_t, acc, sol, G)
+    assert est.rms_at(0.0) == pytest.approx(est.rms_at_zero_mps2) and est.rms_at(-0.2) < 0.9 * est.rms_at(0.0)
+    prof = Path("profile.json")
+    with caplog.at_level(logging.WARNING):
+        got = nav.profile_delay(sol, nav.NavigateOptions(imu_delay_s=0.0, imu_delay_from="profile"), imu_t, acc, prof)
+    assert got["delay_s"] == pytest.approx(-0.2, abs=0.01) and got["profile_s"] == 0.0, got
+    assert "--imu-delay-s 0 keeps the profile's" in caplog.text
+    for near in (-0.2, -0.19):
+        kept = nav.profile_delay(sol, nav.NavigateOptions(imu_delay_s=near, imu_delay_from="profile"), imu_t, acc, prof)
+        assert kept["delay_s"] == near and kept["from"] == "the profile's reference.navigator", kept
+    few = nav.profile_delay(sol, nav.NavigateOptions(imu_delay_s=0.0, imu_delay_from="profile"), imu_t[:300], acc[:300],
+                            prof)
+    assert few["delay_s"] == 0.0 and "not measured" in few["checked"], few
+
+
 # --- the real drive (skipped without the data root) ------------------------------------------------
 
 def _data_root():

@@ -227,3 +227,33 @@ def test_the_white_noise_at_rest_is_raised_axis_by_axis():
     assert quiet.gyro_axes is None and quiet.source == "fit"
     with pytest.raises(Exception, match="three positive numbers"):
         ImuNoise(gyro_axes=(1e-3, 0.0, 1e-3))
+
+
+def test_a_profiles_noise_with_gnss_is_raised_to_the_rest_axis_by_axis(tmp_path):
+    """navigate --profile with GNSS fixes: the profile's white noise raised to the innovations' fit and then,
+    axis by axis, to what this recording's rest shows (a car's idling engine), as without a profile (before:
+    the rest's floor only without a profile; the walk's profile on the car drive lost it, outages 2-11 up to
+    3 m further)."""
+    from imu_learn.data import formats
+    from imu_learn.fuse import navigate as nav
+    from imu_learn.fuse.aiding import rtklib
+    from test_navigate_gnss import synthetic_car
+
+    class Quiet:  # a profile whose noise is the class default: what a positions reference writes
+        def kalibr(self):
+            return {"gyroscope_noise_density": 1.7e-4, "accelerometer_noise_density": 2e-3,
+                    "gyroscope_random_walk": 2e-5, "accelerometer_random_walk": 3e-3}
+
+        def unobserved_noise(self, key):
+            return True
+
+    imu, pos, _ = synthetic_car(tmp_path)
+    src = formats.read_imu_source(imu, "gnss-imu")
+    t_ns, gyro, acc = np.asarray(src.t_ns), np.array(src.gyro, dtype=np.float64), np.array(src.acc, dtype=np.float64)
+    still = (t_ns - t_ns[0]) * 1e-9 < 3.5  # the car's 4 s at rest: its engine shakes the gyro's y axis
+    gyro[still, 1] += np.random.default_rng(0).normal(0.0, 5e-3 * np.sqrt(100.0), int(still.sum()))
+    sol = rtklib.read_pos(pos)
+    opts = nav.NavigateOptions(aiding_kind=None, aiding_format="auto")
+    noise = nav.imu_noise(nav.Sources(imu, pos, profile=tmp_path / "p.json"), opts, None, Quiet(), (t_ns, gyro, acc), sol)
+    assert noise.source.startswith("profile ") and "axis by axis" in noise.source, noise.source
+    assert noise.gyro_axes[1] == pytest.approx(5e-3, rel=0.2) and noise.gyro_axes[1] > 2 * noise.gyro_axes[0]

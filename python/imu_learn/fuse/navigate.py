@@ -467,8 +467,8 @@ def imu_noise(src: Sources, opts: NavigateOptions, own: Optional[ImuNoise], prof
               imu: Optional[Tuple[np.ndarray, np.ndarray, np.ndarray]] = None,
               sol: Optional[RtkSolution] = None) -> Optional[ImuNoise]:
     """The noise the graph assumes: ``--imu-noise``, else the profile's (its white noise raised to the moving
-    IMU's, :func:`in_motion`: with GNSS fixes ``sol`` here, with pose aiding once the rows are read,
-    :func:`moving_imu`), else the recording's
+    IMU's, :func:`in_motion`: with GNSS fixes ``sol`` here, and to the rest's, :func:`at_rest_floor`; with pose
+    aiding once the rows are read, :func:`moving_imu`), else the recording's
     sensor.yaml, else with ``imu`` (its stamps, gyro, acc as fused: corrected, in the body frame, the
     stamps delayed) the MEMS class default scaled to
     the aiding's innovations (:mod:`.noise_fit`): here for the geodetic fixes ``sol``; None for poses and
@@ -484,9 +484,14 @@ def imu_noise(src: Sources, opts: NavigateOptions, own: Optional[ImuNoise], prof
     blank = profile is not None and all(v is None for v in kalibr.values())
     if profile is not None and not blank:
         noise = from_profile(kalibr, str(src.profile), [k for k in kalibr if profile.unobserved_noise(k)])
-        # GNSS: the profile's white noise (at rest) raised to the moving IMU's as pose aiding's is (:func:`moving_imu`);
-        # pose aiding's rows are read (and their frame checked) later
-        return in_motion(noise, innovation_fit(opts, imu, sol, rows)) if rows is not None else noise
+        # GNSS: the profile's white noise (at rest) raised to the moving IMU's as pose aiding's is (:func:`moving_imu`),
+        # then axis by axis to this recording's rest as without a profile (:func:`at_rest_floor`: the car's idling
+        # engine, which a profile made on another recording never saw); pose aiding's rows are read (and their frame
+        # checked) later
+        if rows is None:
+            return noise
+        moving = in_motion(noise, innovation_fit(opts, imu, sol, rows))
+        return at_rest_floor(moving, imu, rest_from_track(imu[0], rows.sample, rows.p), opts.gravity)
     if own is not None:
         return own
     if imu is not None and rows is None:  # pose or position aiding: fitted once its rows are read and checked
@@ -662,6 +667,7 @@ def read_body_imu(src: Sources, opts: NavigateOptions, sol: Optional[RtkSolution
             var = np.ascontiguousarray(np.hstack([var[:, :3] @ (mounting**2).T, var[:, 3:] @ (mounting**2).T]))
     delay = measured_delay(sol, opts, t_ns, acc) if opts.imu_delay_from == "fixes" else \
         unset_delay(sol, opts, t_ns, acc) if opts.imu_delay_from == "unset" and sol is not None and not opts.imu_delay_s \
+        else profile_delay(sol, opts, t_ns, acc, src.profile) if opts.imu_delay_from == "profile" and sol is not None \
         else {"delay_s": opts.imu_delay_s, "from": ("the profile's reference.navigator" if opts.imu_delay_from == "profile"
                                                     else "--imu-delay-s" if opts.imu_delay_from == "option"
                                                     else "none (no --imu-delay-s)")}
@@ -744,6 +750,32 @@ def unset_delay(sol: RtkSolution, opts: NavigateOptions, t_ns: np.ndarray, acc: 
             "from": f"none (no --imu-delay-s; the measured {float(est['delay_s']):+.3f} s fits not clearly better than "
                     f"0: {est['rms_mps2']:.3g} against {est['rms_at_zero_mps2']:.3g} m/s^2, more than "
                     f"{CLEAR_DELAY_FIT:g}x)"}
+
+
+def profile_delay(sol: RtkSolution, opts: NavigateOptions, t_ns: np.ndarray, acc: np.ndarray,
+                  profile: Optional[Path]) -> Dict[str, object]:
+    """A profile's delay (calibrate's ``reference.navigator``: its own recording's) checked against this
+    recording's GNSS fixes: kept where they fit it about as well as the delay they show, else the delay
+    they show, with one warning line (a log's delay moves between recordings: the walk's profile, held at
+    0 s, on the car drive, whose fixes show -0.20 s clearly, took its outages' mean end from 8.9 to 14.6 m);
+    kept as it is where the fixes cannot measure one."""
+    kept = {"delay_s": opts.imu_delay_s, "from": "the profile's reference.navigator"}
+    try:
+        est = imu_delay(t_ns, acc, sol, normal_gravity(sol.origin_llh[0], sol.origin_llh[2]),
+                        use=outside_gaps(sol, int(t_ns[0]), opts.gaps))
+    except InvalidInputError as e:
+        return {**kept, "checked": f"not measured from the fixes: {e}"}
+    at_profile = est.rms_at(float(opts.imu_delay_s))
+    measured = {"measured_s": round(est.delay_s, 4), "rms_mps2": round(est.rms_mps2, 4),
+                "rms_at_profile_mps2": round(at_profile, 4), "epochs": est.epochs}
+    if not est.rms_mps2 <= CLEAR_DELAY_FIT * at_profile:  # NaN (the profile's outside the grid) replaces it too
+        return {**kept, **measured, "checked": "the fixes fit it about as well as the delay they show"}
+    log.warning(f"the IMU's stamps are {est.delay_s:+.3f} s off the GNSS fixes' (measured: the specific force's norm "
+                f"fits the fixes' accelerations to {est.rms_mps2:.3g} m/s^2 there, {at_profile:.3g} at the "
+                f"{float(opts.imu_delay_s):+.3f} s of {profile}'s reference.navigator, from the recording it was "
+                f"calibrated on): applied; --imu-delay-s {float(opts.imu_delay_s):g} keeps the profile's")
+    return {**measured, "delay_s": round(est.delay_s, 4), "profile_s": opts.imu_delay_s,
+            "from": "fixes (the profile's delay fits them clearly worse)"}
 
 
 MIN_AIDING_SPAN_S = 1.0  # the least aiding inside the IMU's span (the start's gravity from it needs 0.4 s)

@@ -16,6 +16,7 @@ sets -0.125 s (too little, as the fusion's own fit residual outside the outages 
 """
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 from typing import Optional
 
@@ -30,13 +31,21 @@ GRID_S = (-0.5, 0.5, 0.005)  # trial delays [s]: first, last, step
 @dataclass(frozen=True)
 class DelayEstimate:
     """The delay [s] to add to the IMU's stamps, the RMS specific-force-norm residual there and at
-    zero delay [m/s^2], the epochs used, and the grid searched ``(first, last, step)`` [s]."""
+    zero delay [m/s^2], the epochs used, the grid searched ``(first, last, step)`` [s] and the residual
+    at each of its delays (NaN: too few epochs there)."""
 
     delay_s: float
     rms_mps2: float
     rms_at_zero_mps2: float
     epochs: int
     grid_s: tuple
+    grid_rms: tuple = ()
+
+    def rms_at(self, delay_s: float) -> float:
+        """The residual [m/s^2] at the grid's delay nearest ``delay_s`` (NaN outside the grid)."""
+        first, last, step = self.grid_s
+        k = int(round((delay_s - first) / step))
+        return float(self.grid_rms[k]) if 0 <= k < len(self.grid_rms) else math.nan
 
 
 def double_integral(t: np.ndarray, y: np.ndarray) -> np.ndarray:
@@ -96,4 +105,5 @@ def imu_delay(imu_t_ns: np.ndarray, acc: np.ndarray, sol, gravity: float, use: O
     curv = y0 - 2 * y1 + y2
     off = 0.5 * (y0 - y2) / curv if curv > 0 else 0.0
     zero = int(np.argmin(np.abs(grid)))
-    return DelayEstimate(float(grid[k] + off * step), float(y1), float(rms[zero]), n_used, (first, last, step))
+    return DelayEstimate(float(grid[k] + off * step), float(y1), float(rms[zero]), n_used, (first, last, step),
+                         tuple(float(x) for x in rms))
