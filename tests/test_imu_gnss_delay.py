@@ -110,9 +110,10 @@ def test_navigate_reads_the_fixes_once_for_the_delay_the_noise_fit_and_the_rows(
 
 
 def test_a_profiles_delay_is_checked_against_the_fixes(caplog):
-    """navigate --profile with calibrate's reference.navigator delay (its own recording's): the fixes of a log
-    0.2 s late replace a profile's 0 s, with one warning naming --imu-delay-s to keep it (the walk's profile on
-    the car drive, before: 0 s applied without a word); a profile's delay the fixes fit about as well is kept."""
+    """navigate --profile with calibrate's reference.navigator delay (its own recording's): where this log's
+    fixes fit it clearly worse than the delay they show, it is left out with one warning naming
+    --imu-delay-s to keep it, and the delay is decided as with none given (the walk's profile on the car
+    drive, before: 0 s applied without a word); a profile's delay the fixes fit about as well is kept."""
     import logging
     from pathlib import Path
 
@@ -122,10 +123,15 @@ def test_a_profiles_delay_is_checked_against_the_fixes(caplog):
     est = imu_delay(imu_t, acc, sol, G)
     assert est.rms_at(0.0) == pytest.approx(est.rms_at_zero_mps2) and est.rms_at(-0.2) < 0.9 * est.rms_at(0.0)
     prof = Path("profile.json")
-    with caplog.at_level(logging.WARNING):
-        got = nav.profile_delay(sol, nav.NavigateOptions(imu_delay_s=0.0, imu_delay_from="profile"), imu_t, acc, prof)
-    assert got["delay_s"] == pytest.approx(-0.2, abs=0.01) and got["profile_s"] == 0.0, got
-    assert "--imu-delay-s 0 keeps the profile's" in caplog.text
+    for given, want in ((0.0, -0.2), (0.2, -0.2)):
+        caplog.clear()
+        with caplog.at_level(logging.WARNING):
+            got = nav.profile_delay(sol, nav.NavigateOptions(imu_delay_s=given, imu_delay_from="profile"), imu_t, acc, prof)
+        assert got["delay_s"] == pytest.approx(want, abs=0.01) and got["profile_s"] == given, got
+        assert f"--imu-delay-s {given:g} keeps the profile's" in caplog.text
+    on_time, acc0, sol0 = drive(0.0)  # fixes that show none: the profile's 0.2 s left out, none applied
+    got = nav.profile_delay(sol0, nav.NavigateOptions(imu_delay_s=0.2, imu_delay_from="profile"), on_time, acc0, prof)
+    assert got["delay_s"] == 0.0 and got["from"].startswith("none"), got
     for near in (-0.2, -0.19):
         kept = nav.profile_delay(sol, nav.NavigateOptions(imu_delay_s=near, imu_delay_from="profile"), imu_t, acc, prof)
         assert kept["delay_s"] == near and kept["from"] == "the profile's reference.navigator", kept

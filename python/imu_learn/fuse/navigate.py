@@ -106,7 +106,7 @@ from .output import plot_navigation, write_json, write_trajectory, write_traject
 from .score import convergence, read_truth, score_against, score_against_fixes
 from .settings import FusionSettings, PriorSigmas
 from .start import Start
-from .start.delay import imu_delay
+from .start.delay import DelayEstimate, imu_delay
 from .start.gravity import GravityCheck, check_gravity
 from .start.level import start_rest
 from .start.prior import profile_bias_sigmas
@@ -706,16 +706,21 @@ def check_mounting(t_ns: np.ndarray, acc_imu: np.ndarray, sol: Optional[RtkSolut
     return check
 
 
+def delay_estimate(sol: RtkSolution, opts: NavigateOptions, t_ns: np.ndarray, acc: np.ndarray) -> DelayEstimate:
+    """The IMU's delay measured against the GNSS fixes ``sol`` outside ``--gaps`` (:func:`.start.delay.imu_delay`)."""
+    return imu_delay(t_ns, acc, sol, normal_gravity(sol.origin_llh[0], sol.origin_llh[2]),
+                     use=outside_gaps(sol, int(t_ns[0]), opts.gaps))
+
+
 def measured_delay(sol: Optional[RtkSolution], opts: NavigateOptions, t_ns: np.ndarray,
-                   acc: np.ndarray) -> Dict[str, object]:
+                   acc: np.ndarray, est: Optional[DelayEstimate] = None) -> Dict[str, object]:
     """``--imu-delay-s auto``: the delay to add to the IMU's stamps, measured against the GNSS fixes
     ``sol`` (None: the aiding is not GNSS fixes, refused) outside ``--gaps`` (:func:`.start.delay.imu_delay`:
     the specific force's norm, no attitude needed)."""
     if sol is None:
         raise ConfigError("--imu-delay-s auto measures the delay against GNSS fixes (an RTKLIB .pos or a NavSatFix "
                           "topic); with this aiding give the delay in seconds")
-    est = imu_delay(t_ns, acc, sol, normal_gravity(sol.origin_llh[0], sol.origin_llh[2]),
-                    use=outside_gaps(sol, int(t_ns[0]), opts.gaps))
+    est = delay_estimate(sol, opts, t_ns, acc) if est is None else est
     if opts.imu_delay_from == "fixes":  # without the option :func:`unset_delay` says what it did with it
         log.info("IMU time offset from the fixes: %+.3f s (specific-force norm RMS %.3f m/s^2, %.3f at 0 s; %d epochs)",
                  est.delay_s, est.rms_mps2, est.rms_at_zero_mps2, est.epochs)
@@ -729,13 +734,14 @@ def measured_delay(sol: Optional[RtkSolution], opts: NavigateOptions, t_ns: np.n
 CLEAR_DELAY_FIT = 0.9
 
 
-def unset_delay(sol: RtkSolution, opts: NavigateOptions, t_ns: np.ndarray, acc: np.ndarray) -> Dict[str, object]:
+def unset_delay(sol: RtkSolution, opts: NavigateOptions, t_ns: np.ndarray, acc: np.ndarray,
+                est: Optional[DelayEstimate] = None) -> Dict[str, object]:
     """No ``--imu-delay-s`` with GNSS fixes: the delay :func:`measured_delay` finds, applied where the data
     clearly support it (its fit at most :data:`CLEAR_DELAY_FIT` of the fit at zero; one warning line says so,
     a logger's delay left out costs the drive 116 m at its first outage's end), else none (the summary says
     why); none where it cannot be measured."""
     try:
-        est = measured_delay(sol, opts, t_ns, acc)
+        est = measured_delay(sol, opts, t_ns, acc, est)
     except InvalidInputError as e:
         return {"delay_s": 0.0, "from": f"none (no --imu-delay-s; not measured: {e})"}
     if est["rms_mps2"] <= CLEAR_DELAY_FIT * est["rms_at_zero_mps2"] and est["delay_s"]:
@@ -755,27 +761,26 @@ def unset_delay(sol: RtkSolution, opts: NavigateOptions, t_ns: np.ndarray, acc: 
 def profile_delay(sol: RtkSolution, opts: NavigateOptions, t_ns: np.ndarray, acc: np.ndarray,
                   profile: Optional[Path]) -> Dict[str, object]:
     """A profile's delay (calibrate's ``reference.navigator``: its own recording's) checked against this
-    recording's GNSS fixes: kept where they fit it about as well as the delay they show, else the delay
-    they show, with one warning line (a log's delay moves between recordings: the walk's profile, held at
-    0 s, on the car drive, whose fixes show -0.20 s clearly, took its outages' mean end from 8.9 to 14.6 m);
-    kept as it is where the fixes cannot measure one."""
+    recording's GNSS fixes: kept where they fit it about as well as the delay they show; else left out with
+    one warning line, and the delay decided as with none given (:func:`unset_delay`). A log's delay moves
+    between recordings: the walk's profile, held at 0 s, on the car drive, whose fixes show -0.20 s clearly,
+    took its outages' mean end from 8.5 to 14.6 m. Kept as it is where the fixes cannot measure one."""
     kept = {"delay_s": opts.imu_delay_s, "from": "the profile's reference.navigator"}
     try:
-        est = imu_delay(t_ns, acc, sol, normal_gravity(sol.origin_llh[0], sol.origin_llh[2]),
-                        use=outside_gaps(sol, int(t_ns[0]), opts.gaps))
+        est = delay_estimate(sol, opts, t_ns, acc)
     except InvalidInputError as e:
         return {**kept, "checked": f"not measured from the fixes: {e}"}
     at_profile = est.rms_at(float(opts.imu_delay_s))
-    measured = {"measured_s": round(est.delay_s, 4), "rms_mps2": round(est.rms_mps2, 4),
-                "rms_at_profile_mps2": round(at_profile, 4), "epochs": est.epochs}
-    if not est.rms_mps2 <= CLEAR_DELAY_FIT * at_profile:  # NaN (the profile's outside the grid) replaces it too
-        return {**kept, **measured, "checked": "the fixes fit it about as well as the delay they show"}
-    log.warning(f"the IMU's stamps are {est.delay_s:+.3f} s off the GNSS fixes' (measured: the specific force's norm "
-                f"fits the fixes' accelerations to {est.rms_mps2:.3g} m/s^2 there, {at_profile:.3g} at the "
-                f"{float(opts.imu_delay_s):+.3f} s of {profile}'s reference.navigator, from the recording it was "
-                f"calibrated on): applied; --imu-delay-s {float(opts.imu_delay_s):g} keeps the profile's")
-    return {**measured, "delay_s": round(est.delay_s, 4), "profile_s": opts.imu_delay_s,
-            "from": "fixes (the profile's delay fits them clearly worse)"}
+    if not est.rms_mps2 <= CLEAR_DELAY_FIT * at_profile:  # NaN (the profile's outside the grid) leaves it out too
+        return {**kept, "measured_s": round(est.delay_s, 4), "rms_mps2": round(est.rms_mps2, 4),
+                "rms_at_profile_mps2": round(at_profile, 4), "checked": "the fixes fit it about as well as the delay they show"}
+    log.warning(f"{profile}'s IMU delay {float(opts.imu_delay_s):+.3f} s (reference.navigator: the recording it was "
+                f"calibrated on) fits these GNSS fixes clearly worse ({at_profile:.3g} m/s^2) than the {est.delay_s:+.3f} s "
+                f"they show ({est.rms_mps2:.3g}): left out, the delay decided as with none given; --imu-delay-s "
+                f"{float(opts.imu_delay_s):g} keeps the profile's")
+    decided = unset_delay(sol, opts, t_ns, acc, est)
+    return {**decided, "profile_s": opts.imu_delay_s, "rms_at_profile_mps2": round(at_profile, 4),
+            "from": f"{decided['from']}; the profile's {float(opts.imu_delay_s):+.3f} s fits the fixes clearly worse"}
 
 
 MIN_AIDING_SPAN_S = 1.0  # the least aiding inside the IMU's span (the start's gravity from it needs 0.4 s)
