@@ -64,3 +64,24 @@ def test_a_gyroscope_put_at_its_prior_is_said_so_in_the_terms_line(monkeypatch, 
     assert np.array_equal(prof.floor.params.b_g, np.zeros(3))
     assert prof.selection["gyro"] == "offset, then kept at its prior (the held-back block)"
     assert "gyroscope: the fitted terms kept at their prior" in caplog.text
+
+
+def test_a_raise_within_the_noise_for_a_sensor_with_no_term_is_written(monkeypatch):
+    """calibrate's plausibility: the gyroscope at level offset (no term) and a held-back rotation raise within
+    the block's noise: written, the raise said under within_noise_at_prior (BROAD's trial 21 alone was refused,
+    0.215° against raw 0.215°, 0.1 standard errors); the same raise beyond the noise is refused."""
+    import pytest
+
+    from imu_learn.errors import ImplausibleProfileError
+
+    class Inp:
+        class source:
+            kind = "poses"
+
+    prof = profile(np.zeros(3))
+    monkeypatch.setattr(calib_run, "_held_back", lambda p, inp: dict(RAISE))
+    checks = calib_run.plausibility(prof, Inp(), calib_run.CalibOptions(plot=False), lambda s: None)
+    assert checks["failed"] == [] and len(checks["within_noise_at_prior"]) == 1, checks
+    monkeypatch.setattr(calib_run, "_held_back", lambda p, inp: dict(RAISE, z_rot=5.0))
+    with pytest.raises(ImplausibleProfileError, match="held_back.rotation"):
+        calib_run.plausibility(profile(np.zeros(3)), Inp(), calib_run.CalibOptions(plot=False), lambda s: None)

@@ -303,9 +303,11 @@ def plausibility(prof: Profile, inp: CalibInputs, options: CalibOptions, progres
     if not found and not options.force:
         errs, kept = keep_unsupported_at_prior(prof, inp, errs)
     held = held_back_findings(errs)
-    at_prior_sensors = {k["sensor"] for k in kept}
-    # a raise within the block's noise for a sensor already at its prior (what is left: the shared time offset)
-    # is no finding: nothing more can be held back, and the block cannot tell it from none
+    # a raise within the block's noise for a sensor at its prior (kept there above, or a level ``offset`` chose no
+    # term: what is left is the shared time offset) is no finding: nothing more can be held back, and the block
+    # cannot tell it from none (BROAD's trial 21 alone: offset / offset, 0.215° against raw 0.215°, was refused)
+    at_prior_sensors = {k["sensor"] for k in kept} | {s for s in ("gyroscope", "accelerometer")
+                                                      if _at_prior_already(prof, s)}
     within = [f for f in held if f.within_noise and HELD_BACK_SENSORS[f.field] in at_prior_sensors]
     found += [f for f in held if f not in within]
     checks = {"limits": LIMITS, "held_back": errs, "failed": [f.line() for f in found], "forced": bool(found),
