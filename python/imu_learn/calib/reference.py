@@ -168,6 +168,11 @@ class FrameFit:
 
 
 LEVER_MAX_STD_M = 0.02  # a reference origin estimated no better than this per axis is not used (zero instead)
+# a joint-fit scale not 3 standard errors above zero is a reference that does not follow the accelerometer where a
+# MEMS accelerometer bias (metric_scale.ACC_BIAS_CLASS) moves it by less than this; beyond, the motion cannot tell
+# (a bias that moves it by a third takes a metric reference to zero at three of its moves; Fetch's steady turns
+# 0.40-0.57, its varied recordings 0.05-0.07, EuRoC's flights at most 0.02)
+MAX_BIAS_LEVERAGE = 1.0 / 3.0
 
 
 def applied_extrinsic(entry: Dict[str, Any]) -> Optional[Tuple[np.ndarray, float, str]]:
@@ -321,14 +326,17 @@ def planar_ratio(rates: Rates) -> float:
 # step 3: gravity, scale, lever arm
 
 
-def _window_rows(s: Segment, r_imu_ref: np.ndarray, gyro_bias: np.ndarray, n: int) -> Tuple[np.ndarray, np.ndarray]:
+def _window_rows(s: Segment, r_imu_ref: np.ndarray, gyro_bias: np.ndarray, n: int
+                 ) -> Tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Rows of step 3's least squares over non-overlapping windows of ``n`` samples of one segment:
-    unknowns (s, r(3), g_up(3))."""
+    unknowns (s, r(3), g_up(3)); and each row's ``∫ R_wi dt`` (3 columns: what an accelerometer bias along
+    each IMU axis adds to it)."""
     dt = np.diff(s.t_ns) * 1e-9
     r_wb = rotation_matrices(s.q_wxyz)
     r_wi = r_wb @ r_imu_ref.T
     f_w = np.einsum("nij,nj->ni", r_wi, s.acc)[:-1] * dt[:, None]
     c_f = np.concatenate([np.zeros((1, 3)), np.cumsum(f_w, 0)])
+    c_r = np.concatenate([np.zeros((1, 3, 3)), np.cumsum(r_wi[:-1] * dt[:, None, None], 0)])
     w_b = (s.gyro - gyro_bias) @ r_imu_ref  # in the reference body frame
     lever_v = r_wb @ _skew(w_b)  # v_lever = R_WB (ω × r) = R_WB [ω]x r
     starts = np.arange(0, len(s) - n, n)
@@ -343,8 +351,8 @@ def _window_rows(s: Segment, r_imu_ref: np.ndarray, gyro_bias: np.ndarray, n: in
         rows.append(a)
         ys.append(c_f[i1] - c_f[i0])
     if not rows:
-        return np.zeros((0, 7)), np.zeros(0)
-    return np.concatenate(rows), np.concatenate(ys)
+        return np.zeros((0, 7)), np.zeros(0), np.zeros((0, 3))
+    return np.concatenate(rows), np.concatenate(ys), (c_r[ends] - c_r[starts]).reshape(-1, 3)
 
 
 def _skew(v: np.ndarray) -> np.ndarray:
@@ -358,14 +366,16 @@ def fit_gravity_scale_lever(recordings: Sequence[Sequence[Segment]], r_imu_ref: 
     """Step 3 (module doc): x = (s, r, g_up of each recording: each has its own world) with standard
     errors, robust (Huber reweighting). The acc bias is left to the floor: on a platform that stays
     near level it is collinear with g_up (body z stays along world up), and |b_a| / g tilts the world
-    by a fraction of a degree at most."""
+    by a fraction of a degree at most. Its leverage on s is measured: ``scale_bias_std``, how far an
+    accelerometer bias of :data:`.metric_scale.ACC_BIAS_CLASS` moves s (a steady turn: 0.5 and more)."""
     k = len(recordings)
-    rows, ys = [], []
+    rows, ys, bias_cols = [], [], []
     for i, segs in enumerate(recordings):
         for s in segs:
             n = int(round(window_s / (np.median(np.diff(s.t_ns)) * 1e-9)))
             if len(s) > n + 1:
-                a, y = _window_rows(s, r_imu_ref, gyro_bias, n)
+                a, y, b = _window_rows(s, r_imu_ref, gyro_bias, n)
+                bias_cols.append(b)
                 wide = np.zeros((len(a), 4 + 3 * k))
                 wide[:, :4] = a[:, :4]
                 wide[:, 4 + 3 * i:7 + 3 * i] = a[:, 4:7]
@@ -391,8 +401,10 @@ def fit_gravity_scale_lever(recordings: Sequence[Sequence[Segment]], r_imu_ref: 
     s2 = float(np.sum(w * res**2) / max(1, len(y) - a.shape[1]))
     cov = s2 * np.linalg.pinv((a * w[:, None]).T @ a)
     se = np.sqrt(np.maximum(np.diag(cov), 0.0))
+    leverage = (np.linalg.pinv((a * w[:, None]).T @ a) @ (a * w[:, None]).T @ np.concatenate(bias_cols))[0]
     return {"scale": x[0], "scale_std": se[0], "lever": x[1:4], "lever_std": se[1:4],
-            "g_up": x[4:].reshape(k, 3)}
+            "g_up": x[4:].reshape(k, 3),
+            "scale_bias_std": metric_scale.ACC_BIAS_CLASS * float(np.linalg.norm(leverage))}
 
 
 def reference_scale(recordings: Sequence[Sequence[Segment]], r_imu_ref: np.ndarray, ref_rate_hz: float,
@@ -405,7 +417,7 @@ def reference_scale(recordings: Sequence[Sequence[Segment]], r_imu_ref: np.ndarr
     :func:`imu_learn.fuse.noise_fit.fit_scale`): a multirotor's specific force lies along its thrust axis
     at about g, so a bias there is nearly the scale's own column (R^2 0.83-0.87 on EuRoC's VO) and took
     the VO's noise into the scale: +9 % on V1_03's ORB-SLAM2 poses, 1.103 against 1.026 without."""
-    parts, stride, span = [], 1, float("nan")
+    parts, bias_rows, stride, span = [], [], 1, float("nan")
     for segs in recordings:
         for s in segs:
             t = (s.t_ns - s.t_ns[0]) * 1e-9
@@ -425,7 +437,11 @@ def reference_scale(recordings: Sequence[Sequence[Segment]], r_imu_ref: np.ndarr
                                              a, stride)
             imu = metric_scale.kernel_integral(metric_scale.running_integrals(t, F), tau, a, stride)
             parts.append((d_vo, imu - arm, 0.5 * (d1 + d2)))
-    return metric_scale.fit(parts, stride, span)
+            # ∫ k R ds of a unit bias along each IMU axis: the leverage of an accelerometer bias on the scale
+            bias_rows.append(np.stack([metric_scale.kernel_integral(metric_scale.running_integrals(
+                t, quat_rotate(s.q_wxyz, np.broadcast_to(r_imu_ref[j], (len(t), 3))) * dt[:, None]), tau, a, stride)
+                for j in range(3)], axis=2))
+    return metric_scale.fit(parts, stride, span, bias_rows)
 
 
 def level_rotation(g_up: np.ndarray) -> np.ndarray:
@@ -528,6 +544,16 @@ def resolve_frame(pairs: Sequence[Tuple[ImuData, GroundTruth]], options: FrameOp
     tilt = max(math.degrees(math.acos(np.clip(g[2] / max(np.linalg.norm(g), 1e-12), -1, 1))) for g in g_up)
     rot_deg = _angle_deg(r_imu_ref)
     if sol["scale"] < 3 * sol["scale_std"] or sol["scale"] <= 0.05:
+        if sol["scale_bias_std"] > MAX_BIAS_LEVERAGE:
+            # a MEMS bias moves the scale (metres per unit) by a third or more: the motion cannot check the
+            # translation (a reference in mm or cm moves it 1000 or 100 times less), and a frame from specific force
+            # is then unchecked too (Fetch's 06_right_turn alone: 6.4° from it, the profile's gyro bias 0.03 rad/s
+            # and acc bias 0.75 m/s² off the other recordings'); refused, naming the cause
+            raise ReferenceFrameError(
+                f"the reference's translation cannot be checked against the accelerometer (scale {sol['scale']:.3f} ± "
+                f"{sol['scale_std']:.3f}; a {metric_scale.ACC_BIAS_CLASS:g} m/s^2 accelerometer bias moves it by "
+                f"±{sol['scale_bias_std']:.2f}): the motion keeps its acceleration fixed in the body (a steady turn) "
+                "or barely accelerates; calibrate on recordings of varied motion together (several --input)")
         unit = _unit_off(float(sol["scale"]), float(sol["scale_std"]))
         if unit:
             raise ReferenceFrameError(

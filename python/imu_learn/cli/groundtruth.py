@@ -82,7 +82,7 @@ def describe(row: Any) -> List[str]:
             f"  lever arm (IMU origin in the GT body frame): {fmt_vec(row.lever_cm, 1)} cm ± {max(row.lever_se_cm):.1f}",
             (f"  scale: the positions are x{row.scale:.4f} (± {row.scale_std:.4f}) the distances the accelerometer "
              f"measures{'' if row.scale_off else ' (metric)'}" if math.isfinite(row.scale) else
-             "  scale: not observed (too little acceleration)"),
+             f"  scale: not observed ({row.scale_not_observed or 'too little acceleration'})"),
             f"  verdict: {row.verdict}"]
 
 

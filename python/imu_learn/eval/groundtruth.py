@@ -346,6 +346,7 @@ class GroundTruthCheck:
     scale: float = math.nan
     scale_std: float = math.nan
     scale_off: bool = False
+    scale_not_observed: str = ""  # why the scale is NaN (calib.metric_scale's reason)
     imu_rate_hz: float = math.nan  # the IMU's: the scores' horizons are IMU samples
 
     @property
@@ -432,6 +433,8 @@ def check(imu: ImuData, gt: GroundTruth, recording: str, label: str,
     metric = reference_scale([segs], off.r_off, gt_rate_hz(gt), np.zeros(3))
     if metric.observed:
         row = replace(row, scale=float(metric.scale), scale_std=float(metric.std), scale_off=bool(metric.off))
+    else:
+        row = replace(row, scale_not_observed=metric.reason or "no estimate")
     if coarse:  # the stamps moved by the coarse lag first: the offset is against the file as read
         off = replace(off, tau_s=off.tau_s + coarse)
         row = replace(row, tau_ms=1e3 * off.tau_s)
