@@ -198,5 +198,11 @@ def fit_scale(p: np.ndarray, R: np.ndarray, prep: Prepared) -> ScaleFit:
     span = float(stride * prep.period) if np.isfinite(prep.period) else float("nan")
     if not len(a):
         return metric_scale.fit([], stride, span)
+    t = prep.S[0]
+    # an accelerometer bias along each IMU axis, turned as the specific force is: its leverage on the scale (a ground
+    # robot's steady turn, whose centripetal acceleration a bias imitates: Fetch's metric 06_right_turn read x0.561)
+    bias = np.stack([metric_scale.to_world(R, prep.C, prep.sample, a + stride, metric_scale.kernel_integral(
+        metric_scale.gyro_frame_integrals(t, prep.C, np.broadcast_to(np.eye(3)[j], (len(t), 3))), prep.tau, a, stride))
+        for j in range(3)], axis=2)
     return metric_scale.fit([metric_scale.pose_terms(prep.S, prep.C, prep.tau, prep.sample, p, R, a, stride)],
-                            stride, span)
+                            stride, span, [bias])
