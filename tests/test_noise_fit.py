@@ -257,3 +257,21 @@ def test_a_profiles_noise_with_gnss_is_raised_to_the_rest_axis_by_axis(tmp_path)
     noise = nav.imu_noise(nav.Sources(imu, pos, profile=tmp_path / "p.json"), opts, None, Quiet(), (t_ns, gyro, acc), sol)
     assert noise.source.startswith("profile ") and "axis by axis" in noise.source, noise.source
     assert noise.gyro_axes[1] == pytest.approx(5e-3, rel=0.2) and noise.gyro_axes[1] > 2 * noise.gyro_axes[0]
+
+
+def test_aiding_a_little_faster_than_the_imu_is_one_run():
+    """Rows of a capture slightly faster than the IMU (Fetch's ~100 Hz motion capture on its 100 Hz IMU),
+    each on its nearest sample (as navigate keeps them, one per sample): one run, so the scale check has its
+    triples (before, the first sample at or after each row put pairs on one sample: 398 runs of 3339 rows,
+    "0 reference triples")."""
+    from imu_learn.fuse.aiding.sampling import snap_to_samples
+    from imu_learn.fuse.noise_fit import prepare
+
+    t_imu = 10 ** 18 + np.arange(4000, dtype=np.int64) * 10_000_000
+    t_aid = 10 ** 18 + 3_000_000 + np.round(np.arange(3900) * 9.9e6).astype(np.int64)
+    nearest = snap_to_samples(t_imu, t_aid)[0]
+    _, first = np.unique(nearest, return_index=True)  # navigate's rows: one per IMU sample
+    rows = t_aid[np.sort(first)]
+    zeros = np.zeros((len(t_imu), 3))
+    prep = prepare(t_imu, zeros, zeros + [0.0, 0.0, G], rows)
+    assert len(np.unique(prep.run)) == 1 and np.all(np.diff(prep.sample) > 0)
