@@ -135,6 +135,8 @@ def test_a_profiles_delay_is_checked_against_the_fixes(caplog):
     for near in (-0.2, -0.19):
         kept = nav.profile_delay(sol, nav.NavigateOptions(imu_delay_s=near, imu_delay_from="profile"), imu_t, acc, prof)
         assert kept["delay_s"] == near and kept["from"] == "the profile's reference.navigator", kept
+    far = nav.profile_delay(sol, nav.NavigateOptions(imu_delay_s=0.8, imu_delay_from="profile"), imu_t, acc, prof)
+    assert far["delay_s"] == 0.8 and far["checked"].startswith("not checked"), far  # beyond the search: kept
     few = nav.profile_delay(sol, nav.NavigateOptions(imu_delay_s=0.0, imu_delay_from="profile"), imu_t[:300], acc[:300],
                             prof)
     assert few["delay_s"] == 0.0 and "not measured" in few["checked"], few

@@ -771,9 +771,12 @@ def profile_delay(sol: RtkSolution, opts: NavigateOptions, t_ns: np.ndarray, acc
     except InvalidInputError as e:
         return {**kept, "checked": f"not measured from the fixes: {e}"}
     at_profile = est.rms_at(float(opts.imu_delay_s))
-    if not est.rms_mps2 <= CLEAR_DELAY_FIT * at_profile:  # NaN (the profile's outside the grid) leaves it out too
-        return {**kept, "measured_s": round(est.delay_s, 4), "rms_mps2": round(est.rms_mps2, 4),
-                "rms_at_profile_mps2": round(at_profile, 4), "checked": "the fixes fit it about as well as the delay they show"}
+    measured = {"measured_s": round(est.delay_s, 4), "rms_mps2": round(est.rms_mps2, 4)}
+    if not math.isfinite(at_profile):
+        return {**kept, **measured, "checked": f"not checked: outside the delays searched {est.grid_s[:2]} s"}
+    if est.rms_mps2 > CLEAR_DELAY_FIT * at_profile:
+        return {**kept, **measured, "rms_at_profile_mps2": round(at_profile, 4),
+                "checked": "the fixes fit it about as well as the delay they show"}
     log.warning(f"{profile}'s IMU delay {float(opts.imu_delay_s):+.3f} s (reference.navigator: the recording it was "
                 f"calibrated on) fits these GNSS fixes clearly worse ({at_profile:.3g} m/s^2) than the {est.delay_s:+.3f} s "
                 f"they show ({est.rms_mps2:.3g}): left out, the delay decided as with none given; --imu-delay-s "
