@@ -132,12 +132,13 @@ def fit(parts: Sequence[Tuple[np.ndarray, ...]], stride: int, span_s: float,
     ww = np.repeat(wt, 3)
     res = y - A @ x
     s2 = float(np.sum(ww * res ** 2) / max(1, len(y) - n))
-    cov = s2 * np.linalg.pinv((A * ww[:, None]).T @ A)
+    normal_inv = np.linalg.pinv((A * ww[:, None]).T @ A)
+    cov = s2 * normal_inv
     inv, inv_std = float(x[0]), float(np.sqrt(max(cov[0, 0], 0.0)) * np.sqrt(2 * stride))
     lever = math.nan  # how far an accelerometer bias of ACC_BIAS_CLASS moves 1/scale
     if bias_rows is not None:
         B = np.concatenate(bias_rows).reshape(-1, 3)  # y moves by B b for an accelerometer bias b
-        lever = ACC_BIAS_CLASS * float(np.linalg.norm((np.linalg.pinv((A * ww[:, None]).T @ A) @ (A * ww[:, None]).T @ B)[0]))
+        lever = ACC_BIAS_CLASS * float(np.linalg.norm((normal_inv @ (A * ww[:, None]).T @ B)[0]))
     cannot = (f"the motion cannot tell it from an accelerometer bias: {ACC_BIAS_CLASS:g} m/s^2 would move 1/scale by "
               "+-{:.2g} (acceleration fixed in the body, e.g. a steady turn)")
     if not inv > SIGMAS * inv_std:

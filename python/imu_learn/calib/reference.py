@@ -399,9 +399,10 @@ def fit_gravity_scale_lever(recordings: Sequence[Sequence[Segment]], r_imu_ref: 
         w = np.repeat(np.minimum(1.0, cap / np.maximum(norm, 1e-12)), 3)
     res = y - a @ x
     s2 = float(np.sum(w * res**2) / max(1, len(y) - a.shape[1]))
-    cov = s2 * np.linalg.pinv((a * w[:, None]).T @ a)
+    normal_inv = np.linalg.pinv((a * w[:, None]).T @ a)
+    cov = s2 * normal_inv
     se = np.sqrt(np.maximum(np.diag(cov), 0.0))
-    leverage = (np.linalg.pinv((a * w[:, None]).T @ a) @ (a * w[:, None]).T @ np.concatenate(bias_cols))[0]
+    leverage = (normal_inv @ (a * w[:, None]).T @ np.concatenate(bias_cols))[0]
     return {"scale": x[0], "scale_std": se[0], "lever": x[1:4], "lever_std": se[1:4],
             "g_up": x[4:].reshape(k, 3),
             "scale_bias_std": metric_scale.ACC_BIAS_CLASS * float(np.linalg.norm(leverage))}

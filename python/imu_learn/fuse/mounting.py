@@ -33,7 +33,8 @@ def forward_mounting(t_ns: np.ndarray, acc: np.ndarray, fix_t_ns: np.ndarray, fi
     "forward_imu", "up_imu", "fit_residual_mps2", "fixes_used"}."""
     t = (np.asarray(t_ns, dtype=np.int64) - int(t_ns[0])) * 1e-9
     tf = (np.asarray(fix_t_ns, dtype=np.int64) - int(t_ns[0])) * 1e-9
-    up = _start_up(t_ns, acc, level_s)
+    up = np.mean(acc[t <= t[0] + level_s], axis=0)
+    up = up / np.linalg.norm(up)
     R_lev = _level_rotation(up)  # IMU -> a gravity-aligned frame (z up)
     # the track: velocity and acceleration by central differences
     v = np.gradient(fix_p, tf, axis=0)
@@ -108,7 +109,7 @@ def track_forward(t_ns: np.ndarray, acc: np.ndarray, fix_t_ns: np.ndarray, fix_p
     fixes faster than ``min_speed``), where the track shows one: a vehicle or walker moving along a body
     axis (gain at least :data:`TRACK_MIN_GAIN`, yaw within :data:`TRACK_MAX_ANGLE_STD_DEG`); a drone
     turning apart from its track shows none. {"shown": bool, "forward": (3,) or None, "why", the
-    estimate's figures}."""
+    estimate's figures; where shown, "estimate": :func:`forward_mounting`'s own}."""
     try:
         est = forward_mounting(t_ns, acc, fix_t_ns, fix_p, gravity, min_speed=min_speed)
     except InvalidInputError as e:
@@ -120,7 +121,8 @@ def track_forward(t_ns: np.ndarray, acc: np.ndarray, fix_t_ns: np.ndarray, fix_p
                 "why": f"the specific force does not follow the track along one body axis (gain {est['gain']:.2f}, "
                        f"at least {TRACK_MIN_GAIN:g}; yaw +-{est['angle_std_deg']:.1f} deg, at most "
                        f"{TRACK_MAX_ANGLE_STD_DEG:g})"}
-    return {"shown": True, "forward": np.asarray(est["forward_imu"], dtype=np.float64), **figures, "why": ""}
+    return {"shown": True, "forward": np.asarray(est["forward_imu"], dtype=np.float64), **figures, "why": "",
+            "estimate": est}
 
 
 def mounting_from_track(t_ns: np.ndarray, acc: np.ndarray, fix_t_ns: np.ndarray, fix_p: np.ndarray,
@@ -136,23 +138,10 @@ def mounting_from_track(t_ns: np.ndarray, acc: np.ndarray, fix_t_ns: np.ndarray,
         return {**forward_mounting(t_ns, acc, fix_t_ns, fix_p, gravity), "from": "estimated from the track (fixes over 3 m/s)"}
     except InvalidInputError as fast:
         slow = track_forward(t_ns, acc, fix_t_ns, fix_p, gravity)
-        figures = {k: v for k, v in slow.items() if k not in ("forward", "shown", "why")}
+        figures = {k: v for k, v in slow.items() if k not in ("forward", "shown", "why", "estimate")}
         if slow["shown"]:
-            up = _start_up(t_ns, acc)
-            fwd = slow["forward"] - (slow["forward"] @ up) * up
-            fwd /= np.linalg.norm(fwd)
-            M = np.stack([fwd, np.cross(up, fwd), up])  # body = M imu: x forward, y left, z up
-            yaw, pitch, roll = Rotation.from_matrix(M.T).as_euler("ZYX", degrees=True)
-            return {**figures, "rpy_deg": [float(roll), float(pitch), float(yaw)], "forward_imu": fwd.tolist(),
-                    "up_imu": up.tolist(), "from": "estimated from the track (fixes over 1 m/s; fewer than 20 over 3)"}
+            return {**slow["estimate"], "from": "estimated from the track (fixes over 1 m/s; fewer than 20 over 3)"}
         if need_forward:
             raise InvalidInputError(f"{fast}; nor over 1 m/s: {slow['why']}") from None
         return {**figures, "rpy_deg": [0.0, 0.0, 0.0], "why": slow["why"],
                 "from": "the IMU's own axes: the track shows no forward axis"}
-
-
-def _start_up(t_ns: np.ndarray, acc: np.ndarray, level_s: float = 2.0) -> np.ndarray:
-    """The IMU's up: its mean specific force over the first ``level_s`` (as :func:`forward_mounting`)."""
-    t = (np.asarray(t_ns, dtype=np.int64) - int(t_ns[0])) * 1e-9
-    up = np.mean(np.asarray(acc, dtype=np.float64)[t <= level_s], axis=0)
-    return up / np.linalg.norm(up)

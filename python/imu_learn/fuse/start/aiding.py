@@ -86,7 +86,7 @@ def forward_axis(t_ns, acc, rows: AidingRows, gravity: float, info: dict) -> Opt
     :data:`..mounting.MOUNT_TOL_DEG` from the body's x-axis (one warning line), else None (the x-axis);
     ``info["forward_axis"]`` says which."""
     shown = track_forward(t_ns, acc, rows.t_ns, rows.p, gravity)
-    entry = {k: v for k, v in shown.items() if k != "forward"}
+    entry = {k: v for k, v in shown.items() if k not in ("forward", "estimate")}
     info["forward_axis"] = entry
     if not shown["shown"]:
         entry["used"] = "the body's x-axis (the track shows no forward axis)"
