@@ -13,6 +13,7 @@ import pytest
 import torch
 
 from imu_learn import _imu_core as core
+from imu_learn.calib.profile import Profile
 from imu_learn.cli import fit as fit_cli
 from imu_learn.cli.checkpoint import main as checkpoint_main
 from imu_learn.cli.refine import main as refine_main
@@ -87,6 +88,43 @@ def test_five_percent_both_ways_and_one_line_naming_both_rates():
         rates.check("rec", 200.0, None, [prof])
     assert rates.check("rec", None, None, made) == rates.check("rec", 100.0, None, [rates.MadeFor("m", None, None)]) == []
     assert len(rates.unchecked(None, [rates.MadeFor("m", None, None)])) == 2
+
+
+def test_a_profile_with_nothing_that_depends_on_the_rate_applies_at_any_rate():
+    """Biases, matrices and noise densities mean the same at any rate: a warning line, not a refusal; a time
+    offset a fit observed or a low-pass is named in the refusal."""
+    free = rates.MadeFor("profile p.json", 166.6, "my-imu", "")
+    (line,) = rates.check("rec", 100.0, None, [free])
+    assert "166.6 Hz" in line and "100 Hz" in line and "nothing in it depends on the rate" in line
+    bound = rates.MadeFor("profile p.json", 200.0, "euroc", "time offset (0.539 samples)")
+    with pytest.raises(InvalidInputError, match=r"its time offset \(0.539 samples\) depend on the rate"):
+        rates.check("rec", 100.0, None, [bound])
+
+
+def test_a_profiles_rate_terms_are_its_observed_time_offset_and_its_low_pass():
+    tumvi = Profile.load(MODELS / "profiles" / "tumvi_bmi160" / "profile.json")  # offset held at its prior (0)
+    euroc = Profile.load(MODELS / "profiles" / "euroc_adis16448" / "profile.json")
+    assert tumvi.rate_terms() == "" and euroc.rate_terms().startswith("time offset (0.5")
+    tumvi.floor = tumvi.floor.with_params(time_offset=0.5)  # an offset, but one no fit observed: the prior's half sample
+    tumvi.observed["time_offset"] = {"observed": False, "why": "positions only"}
+    assert tumvi.rate_terms() == ""
+    tumvi.floor = tumvi.floor.with_params(cutoff_acc=20.0)
+    assert tumvi.rate_terms() == "low-pass (acc 20 Hz)"
+    del tumvi.observed["time_offset"]  # a profile that does not say: taken as observed
+    assert tumvi.rate_terms() == "time offset (0.5 samples) and low-pass (acc 20 Hz)"
+
+
+def test_refine_applies_a_rate_free_profile_to_a_recording_at_another_rate(tmp_path, capsys):
+    """TUM-VI's profile (200 Hz; its time offset held at the prior, no low-pass) on a 100 Hz recording:
+    refined with one warning line for the rate; EuRoC's (an observed offset) refused naming it."""
+    rec = fetch_crop(tmp_path / "fetch_rec")
+    rc, _out, err = refine(["--profile", MODELS / "profiles" / "tumvi_bmi160" / "profile.json", "--input", rec,
+                            "--out", tmp_path / "o", "--quiet"], capsys)
+    assert rc == 0 and (tmp_path / "o" / IMU_REL).is_file(), err
+    assert sum("nothing in it depends on the rate" in ln for ln in rate_or_device_lines(err)) == 1, err
+    rc, _out, err = refine(["--profile", MODELS / "profiles" / "euroc_adis16448" / "profile.json", "--input", rec,
+                            "--out", tmp_path / "o2", "--quiet"], capsys)
+    assert rc == 2 and "its time offset" in err and err.count("\n") == 1 and not (tmp_path / "o2").exists(), err
 
 
 def test_another_device_is_one_warning_line():

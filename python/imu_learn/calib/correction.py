@@ -172,7 +172,7 @@ def build(req: Request) -> Plan:
         plan = Plan()
     if req.noise_profile is not None:
         noise = Profile.load(req.noise_profile)
-        plan.made_for.append(rates.MadeFor(f"profile {req.noise_profile}", noise.sample_rate_hz, noise.device))
+        plan.made_for.append(rates.MadeFor(f"profile {req.noise_profile}", noise.sample_rate_hz, noise.device, ""))
     return plan
 
 
@@ -187,7 +187,7 @@ def from_profile(path: Path, force: bool = False) -> Plan:
         if not force:
             raise ImplausibleProfileError(text + "; --force applies it anyway", field=where)
         logger.warning("%s; applied (--force)", text)
-    made = rates.MadeFor(f"profile {path}", profile.sample_rate_hz, profile.device)
+    made = rates.MadeFor(f"profile {path}", profile.sample_rate_hz, profile.device, profile.rate_terms())
     words = f"the floor of {describe_profile(profile, str(path))}"
     if profile.floor is None:  # calibrate --imu-only: its noise, nothing to correct the readings with
         words = f"no floor: {describe_profile(profile, str(path))} holds noise only (calibrate --imu-only)"

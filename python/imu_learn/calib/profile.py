@@ -348,6 +348,24 @@ class Profile:
         return {k: (unobserved_value(k, self.noise[k].bound)[0] if self.unobserved_noise(k) else _num(self.noise[k].value) if k in self.noise
                     else None) for k in NOISE_KEYS}
 
+    def rate_terms(self) -> str:
+        """What in the floor depends on the rate it was made at, in words ("" where nothing does): a
+        time offset a fit observed (in samples of that rate: an IMU at another rate has its own latency and
+        filter delay; the zero-order hold's half sample that an unobserved one keeps is half a sample at
+        any rate) and a low-pass (chosen against that rate's noise and bandwidth). Biases, matrices, the
+        g-sensitivity and the noise densities do not depend on it."""
+        if self.floor is None:
+            return ""
+        p = self.floor.params
+        terms = []
+        seen = self.observed.get("time_offset", {})
+        if p.time_offset and not (isinstance(seen, dict) and seen.get("observed") is False):
+            terms.append(f"time offset ({float(p.time_offset):.3g} samples)")
+        cut = [f"{k} {c:g} Hz" for k, c in (("gyro", p.cutoff_gyro), ("acc", p.cutoff_acc)) if c is not None]
+        if cut:
+            terms.append("low-pass (" + ", ".join(cut) + ")")
+        return " and ".join(terms)
+
     def unobserved_noise(self, key: str) -> bool:
         """A random walk the profile only bounds (an Allan or residual upper bound)."""
         t = self.noise.get(key)

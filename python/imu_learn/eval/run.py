@@ -315,9 +315,10 @@ def check_profiles(methods: List[str], test_entries: List[str], test: Seq[Segmen
             if rec in seen:
                 continue
             seen.add(rec)
-            # refine's rate rule: a profile's time offset and low-pass are in samples of its rate
-            rates.check(rec, sample_rate_hz(seg.t_ns), None, [rates.MadeFor(f"profile {path}", profile.sample_rate_hz,
-                                                                             profile.device)], forceable=False)
+            # refine's rate rule: a profile's observed time offset and its low-pass belong to its rate
+            for line in rates.check(rec, sample_rate_hz(seg.t_ns), None, [rates.MadeFor(
+                    f"profile {path}", profile.sample_rate_hz, profile.device, profile.rate_terms())], forceable=False):
+                logger.warning(line)
             _entry, warning, _info = guard.verdict(profile.inputs or None, guard.input_stats(seg.t_ns, seg.gyro, seg.acc),
                                                    f"profile {path}", device_only=True)
             if warning:

@@ -4,7 +4,9 @@ A model (:func:`imu_learn.infer.checkpoint.imu_record`) and a device profile rec
 were made from: its sample rate and its device. Applied to a recording whose rate (the one
 sample-rate rule, :func:`imu_learn.data.types.sample_rate_hz`) is more than :data:`TOLERANCE` off,
 :func:`check` stops with one line naming both rates (an :class:`InvalidInputError`: exit 2 from
-the CLI); ``force`` turns that into a warning line. A recording of another device is a warning
+the CLI); ``force`` turns that into a warning line. A profile in which nothing depends on the rate
+(``MadeFor.rate_terms`` empty: biases, matrices and noise densities, no time offset it observed and no
+low-pass) applies at any rate, with a warning line. A recording of another device is a warning
 line. An unknown rate or device on either side is not checked (the caller says so in an info line).
 
 The recording's device is the name the user gives it (``--imu-name``), else the dataset its format
@@ -30,6 +32,9 @@ class MadeFor:
     what: str
     sample_rate_hz: Optional[float]
     device: Optional[str]
+    # what of it depends on the rate, in words (:meth:`imu_learn.calib.profile.Profile.rate_terms`); "": nothing
+    # (a profile of biases and matrices applies at any rate); None: all of it (a model)
+    rate_terms: Optional[str] = None
 
 
 def hz(rate: float) -> str:
@@ -71,10 +76,15 @@ def check(recording: str, rate_hz: Optional[float], device: Optional[str], made_
         if rate_hz and m.sample_rate_hz and abs(rate_hz - m.sample_rate_hz) > TOLERANCE * m.sample_rate_hz:
             line = (f"{recording} is sampled at {hz(rate_hz)} but {m.what} is for {hz(m.sample_rate_hz)} "
                     f"(more than {TOLERANCE * 100:.0f} % off)")
-            if not force:
-                raise InvalidInputError(f"{line}; use a model or profile made at this rate"
+            if m.rate_terms == "":
+                warnings.append(f"{line}; applied: nothing in it depends on the rate (biases, matrices, noise "
+                                "densities; no time offset it observed, no low-pass)")
+            elif not force:
+                raise InvalidInputError(f"{line}" + (f": its {m.rate_terms} depend on the rate" if m.rate_terms else "")
+                                        + "; use a model or profile made at this rate"
                                         + (", or --force to apply it anyway" if forceable else ""))
-            warnings.append(f"{line}; applied anyway (--force)")
+            else:
+                warnings.append(f"{line}; applied anyway (--force)")
         if device and m.device and not same_device(device, m.device):
             warnings.append(f"{recording} is from device {device!r} but {m.what} was made for {m.device!r}; check it "
                             "on your recording first (docs/refine.md)")
