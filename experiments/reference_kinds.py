@@ -11,7 +11,9 @@ cam0's ``T_BS`` (euroc-vo/cam0_sensor.yaml).
 Kinds: ``mocap`` (the ground truth as given), ``mocap20hz`` (its every 10th pose: a 20 Hz reference
 already in the IMU's frame), ``orbslam2``, ``orbslam2+extrinsics`` (cam0's ``T_BS`` given, or ``--extrinsics``'s:
 the rectified left camera's, cam0's composed with ORB-SLAM2's ``LEFT.R``ᵀ), ``rot90``,
-``rot119``, ``rot180`` (the ground truth's body rotated about (1, 2, 3)), ``late100ms``; a ``+select``
+``rot119``, ``rot180`` (the ground truth's body rotated about (1, 2, 3)), ``late100ms``, ``monoS`` /
+``monoSdD`` (ORB-SLAM2's poses with each step of their positions multiplied by S, or by a scale drifting
+linearly from S to S·(1 + D) along the flight: a monocular VO's unknown, drifting scale); a ``+select``
 suffix adds ``calibrate --select`` (the floor's terms chosen on held-out recordings), without it
 ``--no-select`` (every term).
 
@@ -69,6 +71,20 @@ def tum_of_groundtruth(flight: Path, dst: Path) -> Path:
     return dst
 
 
+def monocular_tum(src: Path, dst: Path, scale: float, drift: float) -> Path:
+    """A TUM trajectory whose position steps are multiplied by a scale going linearly from ``scale`` to
+    ``scale * (1 + drift)`` over its span (the first position scaled by ``scale``)."""
+    lines = [ln.split() for ln in src.read_text().splitlines() if ln.strip() and not ln.startswith("#")]
+    rows = np.array([[float(x) for x in ln] for ln in lines])
+    t = rows[:, 0]
+    s = scale * (1.0 + drift * (t - t[0]) / (t[-1] - t[0]))
+    steps = s[1:, None] * np.diff(rows[:, 1:4], axis=0)
+    p = np.vstack([scale * rows[:1, 1:4], scale * rows[:1, 1:4] + np.cumsum(steps, axis=0)])
+    # the stamps and quaternions as written (a stamp printed again moves it by a few ns)
+    dst.write_text("".join(f"{ln[0]} {x:.9f} {y:.9f} {z:.9f} {' '.join(ln[4:8])}\n" for ln, (x, y, z) in zip(lines, p)))
+    return dst
+
+
 def thinned_tum(src: Path, dst: Path, every: int) -> Path:
     """Every ``every``-th pose of a TUM trajectory (the 200 Hz ground truth as a 20 Hz reference)."""
     rows = np.loadtxt(src, comments="#")
@@ -115,6 +131,9 @@ def main() -> int:
                 ref = thinned_tum(tum_of_groundtruth(f, out / f"{flight}_gt.tum"), out / f"{flight}_gt20.tum", 10)
             elif base == "orbslam2":
                 ref = vo / f"{code}.txt"
+            elif base.startswith("mono"):
+                scale, _, drift = base[4:].partition("d")
+                ref = monocular_tum(vo / f"{code}.txt", out / f"{flight}_{base}.tum", float(scale), float(drift or 0))
             elif base.startswith("rot"):
                 ref = rotated_tum(tum_of_groundtruth(f, out / f"{flight}_gt.tum"), out / f"{flight}_{base}.tum",
                                   float(base[3:]), np.array([1.0, 2.0, 3.0]))

@@ -129,6 +129,53 @@ def test_a_20_hz_reference_fits_the_accelerometer_from_its_positions(tmp_path, o
     assert np.all(np.abs(np.asarray(a["bias"])) < 0.3)
 
 
+def monocular(path: Path, drift: float) -> Path:
+    """The 20 Hz poses' position steps x0.4, the scale constant or drifting linearly to x0.4(1 + drift)."""
+    rows = np.loadtxt(path)
+    t = rows[:, 0]
+    s = 0.4 * (1 + drift * (t - t[0]) / (t[-1] - t[0]))
+    start = 0.4 * rows[:1, 1:4]
+    rows[:, 1:4] = np.vstack([start, start + np.cumsum(s[1:, None] * np.diff(rows[:, 1:4], axis=0), axis=0)])
+    np.savetxt(path, rows, fmt="%.9f")
+    return path
+
+
+@pytest.fixture(scope="module")
+def metric(tmp_path_factory):
+    """The profile from the metric poses, every ``every``-th (one calibrate per ``every``)."""
+    done = {}
+
+    def of(every: int) -> dict:
+        if every not in done:
+            tmp = tmp_path_factory.mktemp(f"metric{every}")
+            done[every] = calibrate(tmp / "out", "--groundtruth",
+                                    str(write_reference(tmp / "vo.tum", world_deg=100.0, every=every)))
+        return done[every]
+    return of
+
+
+@pytest.mark.parametrize("every,drift", [(10, 0.0), (10, 0.3), (1, 0.3)])
+def test_a_monocular_scale_leaves_the_accelerometers_matrix_at_its_prior(tmp_path, metric, every, drift):
+    """A monocular VO (a constant or a drifting scale; at 20 Hz, and at 200 Hz, where the velocity resolves
+    accelerations): the scale calibrate estimates from this accelerometer and applies is a few per cent off,
+    and the accelerometer's scales would take that error up, with the bias along the thrust axis (before, every
+    term fitted at 20 Hz: acc x bias -0.10 and -0.55 m/s^2 against the metric poses' -0.01). The matrix is not
+    observed (the identity, said so), the bias is the metric poses'."""
+    ref = monocular(write_reference(tmp_path / "vo.tum", world_deg=100.0, every=every), drift)
+    p = calibrate(tmp_path / "out", "--groundtruth", str(ref), "--no-select")
+    assert p["reference"]["applied"]["scale"]
+    assert np.array_equal(p["accelerometer"]["matrix"], np.eye(3))
+    seen = p["observed"]["accelerometer.matrix"]
+    assert not seen["observed"] and "scale was estimated from this accelerometer" in seen["why"]
+    m = metric(every)
+    a, ma = np.asarray(p["accelerometer"]["bias"]), np.asarray(m["accelerometer"]["bias"])
+    assert np.array_equal(m["accelerometer"]["matrix"], np.eye(3))  # the metric poses' level: bias
+    assert np.all(np.abs(a - ma) < 0.01), (a, ma)
+    if drift and every > 1:  # the default (terms selected): the accelerometer's levels end at its bias
+        p = calibrate(tmp_path / "selected", "--groundtruth", str(ref))
+        assert p["selection"]["levels"]["acc"] == ["offset", "bias"]
+
+
 def test_select_chooses_the_accelerometers_level_on_the_positions_of_each_recording_held_out(tmp_path):
     """`--select` with a 20 Hz reference on two crops: the accelerometer's level is chosen on the
     positions (each crop held out in turn, its residual per world axis recorded), the floor's matrix and

@@ -50,6 +50,7 @@ from imu_learn.data.types import Segment
 # unknowns: vec(M_a) row-major (9), c = M_a b_a (3), lever l (3), then 2 tilt terms per recording
 N_AFFINE = 12
 N_LEVER = 3
+BIAS_TERMS = (9, 10, 11)  # ``free`` of a fit of the bias alone, the matrix at its prior (identity)
 
 
 @dataclass(frozen=True)
@@ -351,14 +352,15 @@ def _rms(res: np.ndarray) -> float:
 
 def recording_spread(recordings: Sequence[Sequence[Segment]], options: AccOptions, tau_samples: float = 0.0,
                      gravity: float = 9.81, gyros: Optional[Sequence[Sequence[np.ndarray]]] = None,
-                     ) -> Optional[Tuple[np.ndarray, np.ndarray, List[AccFit]]]:
+                     free: Optional[Sequence[int]] = None) -> Optional[Tuple[np.ndarray, np.ndarray, List[AccFit]]]:
     """The standard error of (M_a, b_a) as the floor states its own (:func:`imu_learn.calib.fit.spread`):
-    the fit on each recording alone, their spread over sqrt(recordings); None with fewer than two."""
+    the fit on each recording alone (of the ``free`` terms, :func:`fit_acc_from_positions`), their spread over
+    sqrt(recordings); None with fewer than two."""
     fits = []
     for i, segs in enumerate(recordings):
         try:
             fits.append(fit_acc_from_positions([segs], options, tau_samples, gravity,
-                                               None if gyros is None else [gyros[i]]))
+                                               None if gyros is None else [gyros[i]], free))
         except ValueError:
             continue
     if len(fits) < 2:

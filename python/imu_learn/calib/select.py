@@ -682,29 +682,28 @@ def _gyro_only_floor(inp: Any, data: Any, fit: FloorFit, sel: Selection, entry: 
 
 
 def select_acc_from_positions(names: Sequence[str], recs: Sequence[Sequence[Segment]],
-                              gyros: Sequence[Sequence[np.ndarray]], options: AccOptions, tau: float, gravity: float
-                              ) -> Tuple[str, Table, List[Dict[str, Any]]]:
+                              gyros: Sequence[Sequence[np.ndarray]], options: AccOptions, tau: float, gravity: float,
+                              levels: Tuple[str, ...] = POSITION_ACC_LEVELS) -> Tuple[str, Table, List[Dict[str, Any]]]:
     """The accelerometer's level from a reference's positions: each recording held out in turn, every
-    level of :data:`POSITION_ACC_LEVELS` fitted on the others (:func:`fit_acc_from_positions`) and scored by
+    level of ``levels`` (:data:`POSITION_ACC_LEVELS`) fitted on the others (:func:`fit_acc_from_positions`) and scored by
     its second-difference residual on the held-out one (:func:`heldout_rms`, the RMS of the residual
     3-vector's norm); the rule of :func:`choose`. Each segment's rows are built once
     (:func:`recording_rows`: they depend on neither the level nor the fold)."""
     rows = recording_rows(recs, options, tau, gravity, gyros)
     with Split(list(range(len(names)))) as split:  # with the command's helper process where it has one
-        held = split.step(_positions_fold, rows, options)
-    table: Table = {lv: {name: {POSITION_ACC_CELLS[0]: h[lv]} for name, h in zip(names, held)}
-                    for lv in POSITION_ACC_LEVELS}
-    level, steps = choose(POSITION_ACC_LEVELS, table, POSITION_ACC_CELLS)
+        held = split.step(_positions_fold, rows, options, levels)
+    table: Table = {lv: {name: {POSITION_ACC_CELLS[0]: h[lv]} for name, h in zip(names, held)} for lv in levels}
+    level, steps = choose(levels, table, POSITION_ACC_CELLS)
     return level, table, steps
 
 
-def _positions_fold(r: int, state: Dict[str, Any], rows: Sequence[Sequence[Any]], options: AccOptions
-                    ) -> Dict[str, float]:
+def _positions_fold(r: int, state: Dict[str, Any], rows: Sequence[Sequence[Any]], options: AccOptions,
+                    levels: Tuple[str, ...] = POSITION_ACC_LEVELS) -> Dict[str, float]:
     """Recording ``r`` held out: each level's fit on the others' rows, its held-out residual."""
     rest = [x for i, x in enumerate(rows) if i != r]
     with thread_limits(1):
         return {lv: heldout_rms_rows(fit_acc_from_rows(rest, options, free_indices("acc", lv), ATTITUDE[True]), rows[r])
-                for lv in POSITION_ACC_LEVELS}
+                for lv in levels}
 
 
 def _positions_acc_level(inp: Any, fit: FloorFit, entry: Dict[str, Any], progress: Progress) -> FloorFit:
@@ -716,7 +715,11 @@ def _positions_acc_level(inp: Any, fit: FloorFit, entry: Dict[str, Any], progres
     names, recs, gyros = source.positions_data(inp, fit.floor) if acc_full is not None else ([], [], [])
     if acc_full is None:
         refused = getattr(source, "acc_refused", None)
-        entry["acc"] = _source_acc(fit, f"refused, {refused}" if refused else "not fitted")
+        frame = getattr(source, "frame", None)
+        dense = frame is not None and frame.resolves_acceleration  # held for its estimated scale, not its rate
+        entry["acc"] = _source_acc(fit, f"refused, {refused}" if refused else
+                                   "not needed (its velocity resolves accelerations; the matrix is not observed: "
+                                   "its scale was estimated)" if dense else "not fitted")
         return fit
     held = (names, recs, gyros)
     if len(recs) < 2:  # one recording: four time blocks of it held out in turn (the gyroscope's rule)
@@ -726,15 +729,18 @@ def _positions_acc_level(inp: Any, fit: FloorFit, entry: Dict[str, Any], progres
     progress("selection: the accelerometer's levels from the reference's positions (each "
              + ("recording" if len(recs) >= 2 else "time block of the one recording") + " held out)")
     tau, gravity = float(fit.floor.params.time_offset), inp.settings.gravity
+    # a reference whose scale was estimated from this accelerometer: its matrix held at the identity
+    upto = "bias" if source.acc_matrix_unobserved() else POSITION_ACC_LEVELS[-1]
+    levels = POSITION_ACC_LEVELS[:POSITION_ACC_LEVELS.index(upto) + 1]
     try:
-        level, table, steps = select_acc_from_positions(*held, acc_full.options, tau, gravity)
+        level, table, steps = select_acc_from_positions(*held, acc_full.options, tau, gravity, levels)
         acc = fit_acc_from_positions(recs, acc_full.options, tau, gravity, gyros, free_indices("acc", level))
     except ValueError as e:
         entry["acc"] = _source_acc(fit, str(e))
         return fit
     progress(f"selection: accelerometer {level} (from the positions)")
     entry["acc"] = level
-    entry["levels"] = {**entry.get("levels", {}), "acc": list(POSITION_ACC_LEVELS)}
+    entry["levels"] = {**entry.get("levels", {}), "acc": list(levels)}
     entry["cells"] = {**entry.get("cells", {}), "acc": list(POSITION_ACC_CELLS)}
     entry["held_out_figures"] = {**entry.get("held_out_figures", {}), "acc": table}
     entry["steps"] = {**entry.get("steps", {}), "acc": steps}

@@ -37,7 +37,7 @@ import numpy as np
 
 from imu_learn.baselines.base import FitSettings
 from imu_learn.calib import fit as ff
-from imu_learn.calib.acc_positions import AccFit, AccOptions, fit_acc_from_positions, recording_spread
+from imu_learn.calib.acc_positions import BIAS_TERMS, AccFit, AccOptions, fit_acc_from_positions, recording_spread
 from imu_learn.calib.frames import default_gap_s
 from imu_learn.calib.profile import FloorFit
 from imu_learn.calib.reference import (
@@ -405,10 +405,28 @@ class PosesSource(Source):
     def floor_terms(self) -> Dict[str, Any]:
         """Everything, or (a reference that cannot resolve accelerations,
         :func:`imu_learn.calib.reference.resolves_acceleration`) no low-pass and the acc bias only, M_a
-        held at the identity."""
-        if self.frame is None or self.frame.resolves_acceleration:
+        held at the identity; the acc bias only too on a reference whose scale was estimated
+        (:meth:`acc_matrix_unobserved`)."""
+        if self.frame is None or (self.frame.resolves_acceleration and not self.acc_matrix_unobserved()):
             return {}
+        if self.frame.resolves_acceleration:
+            return {"held": ("acc",)}
         return {"cutoffs_hz": (None,), "held": ("acc",)}
+
+    def acc_matrix_unobserved(self) -> str:
+        """Why the accelerometer's matrix cannot be fitted against this reference ("": it can): its metric
+        scale was estimated from this same accelerometer and applied (a monocular VO). The positions'
+        scale then carries the scale estimate's error (1.5-3 % on VO-like references,
+        docs/experiments/references.md), which the accelerometer's scales would take up, and along a
+        multirotor's thrust axis the bias with them (ORB-SLAM2's poses x0.4: acc x scale 0.972, bias
+        -0.26 m/s^2 against -0.03 from the metric poses); the bias alone, the matrix at the identity, averages
+        that error out over the motion."""
+        ref = self.frame
+        if ref is None or not ref.applied.get("scale"):
+            return ""
+        return (f"the reference's scale was estimated from this accelerometer (x{ref.scale:.4g} ± {ref.scale_std:.2g}) "
+                "and applied: the accelerometer's scales and misalignment cannot be told apart from that estimate's "
+                "error; kept at the prior (identity), the bias fitted")
 
     def fit_floor(self, inp: CalibInputs, progress: Progress = lambda s: None, uncertainty: bool = True) -> FloorFit:
         """The affine floor; on a reference whose stamps were moved by its own lag, the time offset kept
@@ -463,9 +481,11 @@ class PosesSource(Source):
         tau = float(fit.floor.params.time_offset)
         opts = self.acc_options
         assert opts is not None
-        progress(f"accelerometer from the reference's positions (second differences over +-{opts.baseline_s:g} s)")
+        progress(f"accelerometer from the reference's positions (second differences over +-{opts.baseline_s:g} s)"
+                 + (", the bias alone: the reference's scale was estimated" if self.acc_matrix_unobserved() else ""))
+        free = BIAS_TERMS if self.acc_matrix_unobserved() else None
         try:
-            acc = fit_acc_from_positions(recs, opts, tau, inp.settings.gravity, gyros)
+            acc = fit_acc_from_positions(recs, opts, tau, inp.settings.gravity, gyros, free)
         except ValueError as e:
             self.acc_refused = str(e)
             return fit
@@ -479,8 +499,10 @@ class PosesSource(Source):
         fit.log["accelerometer_bias_only_fit"] = [{"M_a": fit.floor.params.M_a.tolist(), "b_a": fit.floor.params.b_a.tolist()}]
         fit.floor = fit.floor.with_params(M_a=acc.M_a, b_a=acc.b_a)
         if uncertainty:
-            sp = recording_spread(recs, opts, tau, inp.settings.gravity, gyros)
+            sp = recording_spread(recs, opts, tau, inp.settings.gravity, gyros, free)
             m_std, b_std = (sp[0], sp[1]) if sp is not None else (acc.M_a_std, acc.b_a_std)
+            if free is not None:  # the matrix held at its prior: no spread
+                m_std = np.full((3, 3), np.nan)
             fit.std = replace(fit.std, M_a=m_std, b_a=b_std)
         progress("accelerometer from positions: scales " + ", ".join(f"{x:.4f}" for x in np.diag(acc.M_a))
                  + " (± " + ", ".join(f"{x:.4f}" for x in np.diag(acc.M_a_std)) + "), reference origin ("
@@ -530,6 +552,8 @@ class PosesSource(Source):
             if self.acc_fit.options.fit_tilt:
                 out["accelerometer.bias"] = {"observed": True, "how": how + "; each recording's world tilt fitted "
                                              "with it (told apart from the bias by the attitude's changes of heading)"}
+        if self.acc_matrix_unobserved():
+            out["accelerometer.matrix"] = {"observed": False, "why": self.acc_matrix_unobserved()}
         if ref is not None and ref.applied.get("lag"):
             out["time_offset"] = {"observed": False, "why": f"the reference's stamps were {ref.lag_s * 1e3:+.0f} ms "
                                   "off the IMU's; the IMU's own offset cannot be told apart from the reference's latency: "
